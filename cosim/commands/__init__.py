@@ -1,0 +1,1 @@
+"""One module per ``tespike`` sub-command: ``HELP``, ``add_arguments``, ``run``."""

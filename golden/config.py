@@ -1,0 +1,192 @@
+"""The one configuration type of the project (SPEC section 2).
+
+Every key has a default; some defaults depend on other keys (alpha on b2, the
+clock divider on b1, the threshold on mode, b1, alpha and ml_bits, the
+accumulator width on the threshold). A configuration is validated when it is
+made, and every refusal names the key, the value and the rule.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any, Mapping
+
+from .errors import ConfigError
+
+#: Electrons per readout interval at the brightest designed light I = 1
+#: (0.7 quantum efficiency x 60000 photons, paper section 6 / SPEC section 6).
+DESIGN_ELECTRONS = 42000
+
+#: Longest clock structure SPEC allows: L = F * alpha <= 2^24 pixel clocks.
+MAX_CLOCKS_PER_READOUT = 1 << 24
+
+KEYS = ("mode", "b1", "b2", "alpha", "clocks_per_tick", "threshold",
+        "acc_bits", "input_bits", "ml_bits")
+MODES = ("te", "ml")
+
+
+def _default_threshold(mode: str, b1: int, alpha: int, ml_bits: int) -> int:
+    if mode == "te":
+        return max(1, DESIGN_ELECTRONS // ((1 << b1) * alpha))
+    return max(1, DESIGN_ELECTRONS // (1 << (ml_bits - 1)))
+
+
+@dataclasses.dataclass(frozen=True)
+class SensorConfig:
+    """A TE or ML spike-camera configuration; ``None`` fields take SPEC defaults.
+
+    Construct with keywords (``SensorConfig(mode="ml")``), from a mapping
+    (:meth:`from_dict`), from JSON text or a file (:meth:`from_json`,
+    :func:`load_config`). Instances are immutable and always valid.
+    """
+
+    mode: str = "te"
+    b1: int = 4
+    b2: int = 4
+    alpha: int | None = None
+    clocks_per_tick: int | None = None
+    threshold: int | None = None
+    acc_bits: int | None = None
+    input_bits: int = 16
+    ml_bits: int = 8
+
+    def __post_init__(self) -> None:
+        def need_int(key: str, lo: int, hi: int | None, rule: str) -> int:
+            value = getattr(self, key)
+            if type(value) is not int:          # bool and float are refused
+                raise ConfigError(
+                    f"config key {key!r} = {value!r}: must be a JSON integer ({rule})")
+            if value < lo or (hi is not None and value > hi):
+                raise ConfigError(f"config key {key!r} = {value!r}: must be {rule}")
+            return value
+
+        def fill(key: str, value: int) -> None:
+            if getattr(self, key) is None:
+                object.__setattr__(self, key, value)
+
+        if not isinstance(self.mode, str) or self.mode not in MODES:
+            raise ConfigError(f"config key 'mode' = {self.mode!r}: must be one of \"te\", \"ml\"")
+        b1 = need_int("b1", 1, 16, "in 1..16")
+        b2 = need_int("b2", 1, 16, "in 1..16")
+        ml_bits = need_int("ml_bits", 1, 16, "in 1..16")
+        need_int("input_bits", 1, 32, "in 1..32")
+        fill("alpha", (1 << b2) - 1)
+        alpha = need_int("alpha", 1, (1 << b2) - 1, f"in 1..2^b2 - 1 = {(1 << b2) - 1}")
+        fill("clocks_per_tick", 1 << b1)
+        clocks = need_int("clocks_per_tick", 1, None, ">= 1")
+        if clocks * alpha > MAX_CLOCKS_PER_READOUT:
+            raise ConfigError(
+                f"config key 'clocks_per_tick' = {clocks}: clocks_per_tick * alpha = "
+                f"{clocks * alpha} must be <= 2^24 = {MAX_CLOCKS_PER_READOUT}")
+        fill("threshold", _default_threshold(self.mode, b1, alpha, ml_bits))
+        theta = need_int("threshold", 1, None, ">= 1")
+        fill("acc_bits", theta.bit_length() + 1)
+        acc_bits = need_int("acc_bits", 1, 62, "in 1..62")
+        if (1 << acc_bits) - 1 < theta:
+            raise ConfigError(
+                f"config key 'acc_bits' = {acc_bits}: 2^acc_bits - 1 = {(1 << acc_bits) - 1} "
+                f"must be >= threshold = {theta}")
+
+    # -- construction -------------------------------------------------------
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "SensorConfig":
+        """Build from a mapping of SPEC keys; unknown keys are refused."""
+        if not isinstance(data, Mapping):
+            raise ConfigError(f"configuration must be a JSON object, not {type(data).__name__}")
+        unknown = sorted(set(data) - set(KEYS))
+        if unknown:
+            raise ConfigError(
+                f"config key {unknown[0]!r} = {data[unknown[0]]!r}: unknown key "
+                f"(known keys: {', '.join(KEYS)})")
+        return cls(**dict(data))
+
+    @classmethod
+    def from_json(cls, text: str) -> "SensorConfig":
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ConfigError(f"configuration is not valid JSON: {exc}") from None
+        return cls.from_dict(data)
+
+    @classmethod
+    def preset(cls, name: str) -> "SensorConfig":
+        """The defaults of one mode: ``"te"`` (paper: b1 = b2 = 4) or ``"ml"`` (8 bits)."""
+        if name not in MODES:
+            raise ConfigError(f"unknown preset {name!r}: must be one of \"te\", \"ml\"")
+        return cls(mode=name)
+
+    def check(self) -> "SensorConfig":
+        """Re-validate (instances are validated when made; this is for callers that
+        want the refusal before building anything)."""
+        return SensorConfig.from_dict(self.to_dict())
+
+    # -- serialisation ------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return {key: getattr(self, key) for key in KEYS}
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=False)
+
+    def save(self, path: str | Path) -> None:
+        from .io import atomic_output
+        with atomic_output(path) as tmp:
+            Path(tmp).write_text(self.to_json() + "\n")
+
+    # -- derived quantities (all integers) ----------------------------------
+    @property
+    def is_te(self) -> bool:
+        return self.mode == "te"
+
+    @property
+    def clocks_per_readout(self) -> int:
+        """L = F * alpha pixel clocks per readout interval."""
+        return self.clocks_per_tick * self.alpha
+
+    @property
+    def p_max(self) -> int:
+        """Spikes that overflow the TE spike-firing counter: 2^b1."""
+        return 1 << self.b1
+
+    @property
+    def d(self) -> int:
+        """TE payload bits of the readout word: max(b1, b2)."""
+        return max(self.b1, self.b2)
+
+    @property
+    def word_bits(self) -> int:
+        """Width of one readout word: max(b1, b2) + 1 (TE) or ml_bits (ML)."""
+        return self.d + 1 if self.is_te else self.ml_bits
+
+    @property
+    def acc_max(self) -> int:
+        """Saturation level of the charge accumulator: 2^A - 1."""
+        return (1 << self.acc_bits) - 1
+
+    @property
+    def input_max(self) -> int:
+        """Largest electron count one pixel clock can carry: 2^E - 1."""
+        return (1 << self.input_bits) - 1
+
+    @property
+    def ml_max(self) -> int:
+        return (1 << self.ml_bits) - 1
+
+    def __str__(self) -> str:   # short, for test ids and logs
+        keys = ("b1", "b2", "alpha", "clocks_per_tick", "threshold", "acc_bits", "input_bits")
+        if not self.is_te:
+            keys += ("ml_bits",)
+        return self.mode + "-" + "-".join(f"{k}{getattr(self, k)}" for k in keys)
+
+
+def load_config(spec: str | Path) -> SensorConfig:
+    """``"te"`` / ``"ml"`` name a mode's defaults; anything else is a JSON file path."""
+    if str(spec) in MODES:
+        return SensorConfig.preset(str(spec))
+    path = Path(spec)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError(f"cannot read configuration file {str(path)!r}: {exc.strerror}") from None
+    return SensorConfig.from_json(text)

@@ -1,0 +1,16 @@
+#!/bin/sh
+# Install tespike and the outside tools it drives (Icarus Verilog, Verilator, Yosys).
+# Debian packages need root (or sudo); Python packages go to the active interpreter.
+set -eu
+cd "$(dirname "$0")"
+missing=""
+for tool in iverilog verilator yosys; do
+  command -v "$tool" >/dev/null 2>&1 || missing="$missing $tool"
+done
+if [ -n "$missing" ]; then
+  SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
+  $SUDO env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+  $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $missing >/dev/null
+fi
+python3 -m pip install -q torch==2.13.0          # pinned: the CPU build (a looser pin pulls CUDA)
+python3 -m pip install -q -e '.[test]'

@@ -1,0 +1,59 @@
+import json
+
+import pytest
+
+from golden.config import KEYS, SensorConfig, load_config
+from golden.errors import ConfigError
+
+
+def test_te_defaults_follow_spec():
+    c = SensorConfig()
+    assert c.to_dict() == {"mode": "te", "b1": 4, "b2": 4, "alpha": 15, "clocks_per_tick": 16,
+                           "threshold": 175, "acc_bits": 9, "input_bits": 16, "ml_bits": 8}
+    assert c.clocks_per_readout == 240 and c.word_bits == 5
+
+
+def test_ml_defaults_follow_spec():
+    c = SensorConfig.preset("ml")
+    assert c.threshold == 328 and c.acc_bits == 10 and c.word_bits == 8
+
+
+def test_dependent_defaults():
+    c = SensorConfig(b1=2, b2=3)
+    assert (c.alpha, c.clocks_per_tick, c.threshold) == (7, 4, 42000 // 28)
+    assert SensorConfig(b1=16, b2=16, alpha=65535, clocks_per_tick=1).threshold == 1
+
+
+@pytest.mark.parametrize("changes, key", [
+    ({"b1": 0}, "b1"), ({"b1": 17}, "b1"), ({"b2": 17}, "b2"), ({"alpha": 16}, "alpha"),
+    ({"alpha": 0}, "alpha"), ({"clocks_per_tick": 0}, "clocks_per_tick"),
+    ({"clocks_per_tick": 2 ** 24}, "clocks_per_tick"), ({"threshold": 0}, "threshold"),
+    ({"acc_bits": 63}, "acc_bits"), ({"threshold": 8, "acc_bits": 3}, "acc_bits"),
+    ({"input_bits": 33}, "input_bits"), ({"ml_bits": 0}, "ml_bits"), ({"b1": 4.0}, "b1"),
+    ({"b1": True}, "b1"), ({"mode": "xx"}, "mode"), ({"colour": 1}, "colour"),
+])
+def test_refusals_name_key_and_value(changes, key):
+    with pytest.raises(ConfigError) as info:
+        SensorConfig.from_dict(changes)
+    message = str(info.value)
+    assert repr(key) in message and repr(list(changes.values())[-1]) in message
+
+
+def test_json_round_trip(tmp_path):
+    c = SensorConfig(mode="ml", ml_bits=6, b1=3)
+    path = tmp_path / "c.json"
+    c.save(path)
+    assert load_config(path) == c
+    assert set(json.loads(path.read_text())) == set(KEYS)
+    assert load_config("te") == SensorConfig()
+
+
+def test_bad_json_and_missing_file(tmp_path):
+    (tmp_path / "bad.json").write_text("{nope")
+    with pytest.raises(ConfigError, match="not valid JSON"):
+        load_config(tmp_path / "bad.json")
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_config(tmp_path / "missing.json")
+    (tmp_path / "list.json").write_text("[1]")
+    with pytest.raises(ConfigError, match="JSON object"):
+        load_config(tmp_path / "list.json")
