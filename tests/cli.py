@@ -1,0 +1,23 @@
+"""Run the ``tespike`` command of *this* checkout in a subprocess, as a user would."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def run_tespike(*args, timeout=600) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.run([sys.executable, "-m", "cosim", *map(str, args)], capture_output=True,
+                          text=True, env=env, timeout=timeout)
+
+
+def assert_refused(result: subprocess.CompletedProcess, *words: str) -> None:
+    """Non-zero exit, one line on stderr naming the problem, no traceback."""
+    assert result.returncode != 0, result
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    for word in words:
+        assert word in lines[0], (word, lines[0])

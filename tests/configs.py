@@ -1,0 +1,19 @@
+"""Configurations shared by the tests of every package."""
+
+from golden.config import SensorConfig
+
+#: Configurations at the edges of every valid range of SPEC section 2, both modes.
+EDGE_CONFIGS = [
+    SensorConfig(),                                           # paper TE: b1 = b2 = 4
+    SensorConfig(mode="ml"),                                  # paper ML: 8 bits
+    SensorConfig(b1=1),
+    SensorConfig(b2=1),                                       # alpha = 1
+    SensorConfig(alpha=1, clocks_per_tick=1),                 # L = 1
+    SensorConfig(b1=2, b2=2, threshold=1, acc_bits=1),        # theta = 1, smallest acc
+    SensorConfig(b1=3, b2=3, threshold=5, acc_bits=3),        # smallest legal acc_bits for theta
+    SensorConfig(b1=2, b2=3, input_bits=32, threshold=1000),  # 32-bit input
+    SensorConfig(b1=5, b2=2, clocks_per_tick=3, threshold=7),
+    SensorConfig(mode="ml", ml_bits=1, b1=2, b2=2),           # classic 1-bit spike camera
+    SensorConfig(mode="ml", ml_bits=16, b1=2, b2=2, threshold=1, acc_bits=1),
+    SensorConfig(mode="ml", b1=1, b2=1, clocks_per_tick=1, threshold=3, acc_bits=2, input_bits=1),
+]
