@@ -95,6 +95,19 @@ class SceneSimulator:
         self.path_counts = dict.fromkeys(PATHS + ("fallback",), 0)
         self._window = np.zeros(n)
         self._b_max = np.zeros(n)
+        # path thresholds: every bound used is monotone in the light, so each
+        # test is one comparison with a level found once by bisection
+        cap = min(config.threshold, config.input_max)
+        self._mean_event = _largest_below(lambda m: log_poisson_tail_above(m, cap + 1), self.budget, cap + 1)
+        self._mean_unclipped = _largest_below(lambda m: log_poisson_tail_above(m, config.input_max + 1),
+                                              self.budget, config.input_max + 1)
+        self._lam_bright = np.inf
+        if config.input_max >= config.threshold:
+            self._lam_bright = _smallest_below(lambda m: log_poisson_tail_below(m, config.threshold - 1),
+                                               self.budget, config.threshold)
+        # queue: L exp(-s (acc_max + 2 - theta)) below budget with s = 2 (1 - rho)
+        h = config.acc_max + 2 - config.threshold
+        self._rho_queue = 1.0 - (np.log(config.clocks_per_readout) - self.budget) / (2.0 * h)
         c = config
         if c.is_te:
             ovf_clock = c.p_max - 1                       # spike in every clock
@@ -125,43 +138,17 @@ class SceneSimulator:
             return words.reshape(self.shape)
 
         lam = mu / L                                       # photo-electrons per clock
-        mean = lam + dark / L                              # with dark electrons
+        mean = lam + dark / L if self.dark_model else lam  # with dark electrons
         low = acc < theta
         path = np.full(mu.size, PATHS.index("clock"), np.int8)
-        no_dark = dark == 0
-        # inputs surely below saturation (needed by every path that sums charge)
-        unclipped = log_poisson_tail_above(mean, c.input_max + 1) < self.budget
-        # queue: light below the threshold per clock, the accumulator surely never clips
-        rho = lam / theta
-        s_queue = 2.0 * (1.0 - np.minimum(rho, 1.0))       # Lundberg exponent (see _queue_path)
-        with np.errstate(divide="ignore"):
-            log_l = np.log(L)
-            clip_bound = log_l - s_queue * (c.acc_max + 2 - theta)
-            # P(backlog >= b at the window) <= L exp(-s ((b - 1) theta + 1)): b_max + 1 is unlikely
-            b_max = np.floor(((log_l - self.budget) / np.maximum(s_queue, 1e-300) - 1.0) / theta) + 1.0
-        b_max = np.clip(np.where(np.isfinite(b_max), b_max, 1e9), 0, 1e9)
-        window_q = 2.0 * (b_max + 2.0) / np.maximum(1.0 - rho, 1e-9)
-        queue = (low & no_dark & unclipped & (rho < 1) & (clip_bound < self.budget)
-                 & (b_max <= MAX_BACKLOG))
-        path[queue] = PATHS.index("queue")
-        self._window[queue] = window_q[queue]
-        self._b_max[queue] = b_max[queue]
-        # full: light above the threshold per clock, a spike in every clock surely
-        s_full = 2.0 * np.maximum(lam - theta, 0.0) / np.maximum(lam, 1e-300)
-        fire_bound = np.logaddexp(-s_full * (acc + 1.0), log_l - s_full * (c.acc_max + 1.0))
-        gap = np.maximum(lam - theta, 1e-9)
-        with np.errstate(over="ignore", divide="ignore"):
-            window_f = 1.3 * -self.budget / np.maximum(s_full, 1e-300) / gap + 16.0 * lam / gap ** 2
-        full = no_dark & unclipped & (lam > theta) & (fire_bound < self.budget)
-        path[full] = PATHS.index("full")
-        self._window[full] = window_f[full]
         # event: P(some clock > min(theta, 2^E - 1) electrons) below budget
-        cap = min(theta, c.input_max)
-        path[low & (log_poisson_tail_above(mean, cap + 1) < self.budget)] = PATHS.index("event")
+        path[low & (mean <= self._mean_event)] = PATHS.index("event")
         # bright: every clock >= theta electrons (photo-electrons alone suffice)
-        if c.input_max >= theta:
-            path[log_poisson_tail_below(lam, theta - 1) < self.budget] = PATHS.index("bright")
+        path[lam >= self._lam_bright] = PATHS.index("bright")
         path[low & (mu == 0) & (dark == 0)] = PATHS.index("dark")
+        rest = np.flatnonzero(path == PATHS.index("clock"))
+        if rest.size:
+            self._classify_middle(rest, lam[rest], mean[rest], dark[rest], acc[rest], path)
         for code, name in enumerate(PATHS):
             sel = np.flatnonzero(path == code)
             if not sel.size:
@@ -172,9 +159,9 @@ class SceneSimulator:
             elif name == "bright":
                 self._bright_path(sel, mu, lam, dark, words)
             elif name in ("queue", "full"):
-                # group by window length (powers of two) so each group is one block
+                # group by window length (multiples of MIN_WINDOW) so each group is one block
                 n_w = self._window[sel]
-                size = np.maximum(MIN_WINDOW, 2 ** np.ceil(np.log2(np.maximum(n_w, 1.0))))
+                size = MIN_WINDOW * np.maximum(1.0, np.ceil(n_w / MIN_WINDOW))
                 too_long = size > L // 2
                 if too_long.any():
                     self.path_counts[name] -= int(too_long.sum())
@@ -186,6 +173,36 @@ class SceneSimulator:
             elif name == "clock":
                 self._clock_path(sel, mu, dark, words)
         return words.reshape(self.shape)
+
+    def _classify_middle(self, idx, lam, mean, dark, acc, path):
+        """Queue or full path for pixels near one threshold per clock, where allowed."""
+        c = self.config
+        theta, L = c.threshold, c.clocks_per_readout
+        log_l = np.log(L)
+        ok = (dark == 0) & (mean <= self._mean_unclipped)
+        rho = lam / theta
+        # queue: below the threshold per clock, the accumulator surely never clips
+        queue = ok & (acc < theta) & (rho < self._rho_queue)
+        if queue.any():
+            s_queue = 2.0 * (1.0 - rho[queue])            # Lundberg exponent (see _queue_path)
+            # P(backlog >= b at the window) <= L exp(-s ((b - 1) theta + 1)): b_max + 1 is unlikely
+            b_max = np.floor(((log_l - self.budget) / s_queue - 1.0) / theta) + 1.0
+            b_max = np.maximum(b_max, 0.0)
+            sel = idx[queue]
+            keep = b_max <= MAX_BACKLOG
+            path[sel[keep]] = PATHS.index("queue")
+            self._b_max[sel] = b_max
+            self._window[sel] = 2.0 * (b_max + 2.0) / (1.0 - rho[queue])
+        # full: above the threshold per clock, a spike in every clock surely
+        full = ok & (lam > theta)
+        if full.any():
+            lf, af = lam[full], acc[full]
+            s_full = 2.0 * (lf - theta) / lf
+            fire = np.logaddexp(-s_full * (af + 1.0), log_l - s_full * (c.acc_max + 1.0))
+            sel = idx[full]
+            path[sel[fire < self.budget]] = PATHS.index("full")
+            gap = lf - theta
+            self._window[sel] = 1.3 * -self.budget / s_full / gap + 16.0 * lf / gap ** 2
 
     # -- windows of per-clock electrons at the end of the interval -------------
     def _window_draw(self, sel, w, mu, lam):
@@ -368,6 +385,34 @@ class SceneSimulator:
         w, state = step_reference(c, np.ascontiguousarray(e.T).reshape(L, 1, sel.size), state)
         words[sel] = w[0, 0]
         self.acc[sel] = state.acc[0]
+
+
+def _largest_below(bound, budget, hi):
+    """Largest m in [0, hi] (to 2^-64 of the bracket) with bound(m) < budget, bound increasing."""
+    lo = 0.0
+    if not bound(np.array([lo]))[0] < budget:
+        return -1.0
+    for _ in range(64):
+        mid = 0.5 * (lo + hi)
+        if bound(np.array([mid]))[0] < budget:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def _smallest_below(bound, budget, lo):
+    """Smallest m >= lo with bound(m) < budget (to 2^-64 of the bracket), bound decreasing."""
+    hi = max(2.0 * lo, 1.0)
+    while not bound(np.array([hi]))[0] < budget:
+        hi *= 2.0
+    for _ in range(64):
+        mid = 0.5 * (lo + hi)
+        if bound(np.array([mid]))[0] < budget:
+            hi = mid
+        else:
+            lo = mid
+    return hi
 
 
 def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,

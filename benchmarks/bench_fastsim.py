@@ -1,0 +1,179 @@
+"""Fast simulator vs the naive loop: error and throughput per light level, and whole-process speed.
+
+Usage (from the worktree root):
+
+    python3 benchmarks/bench_fastsim.py [--pixels 2000] [--readouts 4] [--out benchmarks/fastsim.png]
+                                        [--skip-whole] [--whole-shape 64 384 512]
+
+Part 1, per light level from 1e-4 to 10 x design light, paper TE and ML
+configurations: ``simulate_scene`` (fast) against the naive loop (Poisson
+electrons drawn per pixel clock by ``golden.light.poisson_stimulus``, stepped
+by the cycle-exact ``golden.sensor.simulate``) on the same light: bias of the
+mean decoded value (spikes per readout, with its standard error), total
+variation distance (TVD) of the code histograms, and both throughputs
+(pixel-readouts per second). A second, independent naive run gives the TVD
+that sampling noise alone produces (the floor the fast simulator should sit
+on). Part 2: ``tespike simulate`` as a whole process on a K x H x W HDR scene
+(light log-uniform over 1e-4..10 per pixel, drifting slowly in time), against
+the naive loop timed on a crop of the same scene and scaled per pixel-readout.
+Prints tables, writes a PNG. Figures depend on the machine and its load; the
+ratios are measured in the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from golden.config import SensorConfig  # noqa: E402
+from golden.decode import decode_spikes  # noqa: E402
+from golden.fastsim import SceneSimulator, simulate_scene  # noqa: E402
+from golden.light import poisson_stimulus  # noqa: E402
+from golden.sensor import simulate  # noqa: E402
+
+LEVELS = np.logspace(-4, 1, 16)
+
+
+def _histogram(words, config):
+    return np.bincount(words.ravel().astype(np.int64), minlength=1 << config.word_bits) / words.size
+
+
+def _naive(config, scene, seed):
+    return simulate(config, poisson_stimulus(config, scene, seed))
+
+
+def error_table(config, pixels, readouts, seed=0, fast_factor=20):
+    """The fast simulator runs on ``fast_factor`` times more pixels than the naive
+    loop: its throughput is then not dominated by per-call overhead, and its
+    sampling error is negligible next to the naive run's."""
+    rows = []
+    for i, level in enumerate(LEVELS):
+        scene = np.full((readouts, 1, pixels), level)
+        big = np.full((readouts, 1, pixels * fast_factor), level)
+        t0 = time.perf_counter()
+        sim = SceneSimulator(config, (1, big.shape[2]), rng=seed + i, total_pixel_readouts=big.size)
+        fast = np.stack([sim.readout(big[k]) for k in range(readouts)])
+        t1 = time.perf_counter()
+        naive = _naive(config, scene, seed + 1000 + i)
+        t2 = time.perf_counter()
+        naive2 = _naive(config, scene, seed + 2000 + i)
+        a = decode_spikes(fast, config).mean(axis=0)[0]
+        b = decode_spikes(naive, config).mean(axis=0)[0]
+        se = float(np.sqrt(a.var() / a.size + b.var() / b.size))
+        tvd = 0.5 * np.abs(_histogram(fast, config) - _histogram(naive, config)).sum()
+        floor = 0.5 * np.abs(_histogram(naive2, config) - _histogram(naive, config)).sum()
+        main = max(sim.path_counts, key=sim.path_counts.get)
+        rows.append(dict(level=level, mean=float(b.mean()), bias=float(a.mean() - b.mean()), se=se,
+                         tvd=tvd, floor=floor, fast_rate=big.size / (t1 - t0),
+                         naive_rate=scene.size / (t2 - t1), path=main))
+    return rows
+
+
+def print_table(config, rows):
+    print(f"\n{config.mode.upper()} {config}: fast vs naive (cycle-exact model on per-clock Poisson electrons)")
+    print(f"{'light':>9} {'mean':>9} {'bias':>9} {'(se)':>8} {'TVD':>7} {'floor':>7} "
+          f"{'fast px-ro/s':>13} {'naive px-ro/s':>14} {'ratio':>7}  main path")
+    for r in rows:
+        print(f"{r['level']:9.2e} {r['mean']:9.3f} {r['bias']:+9.4f} {r['se']:8.4f} {r['tvd']:7.4f} "
+              f"{r['floor']:7.4f} {r['fast_rate']:13.3g} {r['naive_rate']:14.3g} "
+              f"{r['fast_rate'] / r['naive_rate']:7.1f}  {r['path']}")
+
+
+def hdr_scene(shape, seed=0):
+    """Light log-uniform over 1e-4..10 per pixel, drifting by +-10 % over the readouts."""
+    K, H, W = shape
+    rng = np.random.default_rng(seed)
+    base = 10.0 ** rng.uniform(-4, 1, (H, W))
+    drift = np.exp(0.1 * np.sin(np.arange(K) / 5.0))
+    return (base[None] * drift[:, None, None]).astype(np.float32)
+
+
+def whole_process(shape, crop_readouts=4, crop=(48, 64)):
+    scene = hdr_scene(shape)
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "I.npy"
+        np.save(path, scene)
+        for mode in ("te", "ml"):
+            config = SensorConfig.preset(mode)
+            env = dict(os.environ, PYTHONPATH=str(ROOT))
+            t0 = time.perf_counter()
+            run = subprocess.run([sys.executable, "-m", "cosim", "simulate", "--config", mode, "--scene", path,
+                                  "--out", Path(tmp) / "S.npz", "--seed", "1"], env=env,
+                                 capture_output=True, text=True)
+            fast = time.perf_counter() - t0
+            if run.returncode:
+                raise SystemExit(run.stderr)
+            part = scene[:crop_readouts, :crop[0], :crop[1]]
+            t0 = time.perf_counter()
+            _naive(config, part, 1)
+            naive_per = (time.perf_counter() - t0) / part.size
+            results[mode] = dict(fast=fast, naive=naive_per * scene.size, rate=scene.size / fast,
+                                 naive_rate=1 / naive_per)
+            print(f"{mode.upper()}: tespike simulate on {shape[0]} x {shape[1]} x {shape[2]} "
+                  f"(readouts x rows x cols): {fast:.1f} s = {scene.size / fast:.3g} pixel-readouts/s; "
+                  f"naive loop {1 / naive_per:.3g} pixel-readouts/s (crop {crop_readouts} x {crop[0]} x "
+                  f"{crop[1]}) -> {naive_per * scene.size:.0f} s scaled; speed ratio "
+                  f"{naive_per * scene.size / fast:.1f}x")
+    return results
+
+
+def plot(tables, out):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+    for mode, rows in tables.items():
+        levels = [r["level"] for r in rows]
+        axes[0].errorbar(levels, [r["bias"] for r in rows], yerr=[2 * r["se"] for r in rows],
+                         marker="o", capsize=3, label=f"{mode.upper()} fast - naive (2 se)")
+        axes[1].plot(levels, [r["tvd"] for r in rows], "o-", label=f"{mode.upper()} fast vs naive")
+        axes[1].plot(levels, [r["floor"] for r in rows], "x--", label=f"{mode.upper()} naive vs naive")
+        axes[2].plot(levels, [r["fast_rate"] for r in rows], "o-", label=f"{mode.upper()} fast")
+        axes[2].plot(levels, [r["naive_rate"] for r in rows], "x--", label=f"{mode.upper()} naive")
+    axes[0].axhline(0, color="k", lw=0.5)
+    axes[0].set(xscale="log", xlabel="light (1 = design)", ylabel="bias of mean decoded spikes",
+                title="bias of the mean")
+    axes[1].set(xscale="log", xlabel="light (1 = design)", ylabel="TVD of code histograms",
+                title="code histogram distance")
+    axes[2].set(xscale="log", yscale="log", xlabel="light (1 = design)", ylabel="pixel-readouts / s",
+                title="throughput")
+    for ax in axes:
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    print(f"wrote {out}")
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--pixels", type=int, default=2000)
+    parser.add_argument("--readouts", type=int, default=4)
+    parser.add_argument("--out", default=str(ROOT / "benchmarks" / "fastsim.png"))
+    parser.add_argument("--skip-whole", action="store_true")
+    parser.add_argument("--whole-shape", type=int, nargs=3, default=(64, 384, 512))
+    args = parser.parse_args(argv)
+    tables = {}
+    for mode in ("te", "ml"):
+        config = SensorConfig.preset(mode)
+        tables[mode] = error_table(config, args.pixels, args.readouts)
+        print_table(config, tables[mode])
+    plot(tables, args.out)
+    if not args.skip_whole:
+        print()
+        whole_process(tuple(args.whole_shape))
+
+
+if __name__ == "__main__":
+    main()
