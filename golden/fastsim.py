@@ -192,7 +192,8 @@ class SceneSimulator:
             keep = b_max <= MAX_BACKLOG
             path[sel[keep]] = PATHS.index("queue")
             self._b_max[sel] = b_max
-            self._window[sel] = 2.0 * (b_max + 2.0) / (1.0 - rho[queue])
+            # the Lindley recursion drains b_max in about b_max / (1 - rho) clocks
+            self._window[sel] = (b_max + 3.0) / (1.0 - rho[queue])
         # full: above the threshold per clock, a spike in every clock surely
         full = ok & (lam > theta)
         if full.any():
