@@ -143,7 +143,7 @@ def test_bright_path_accumulator_matches_per_clock_in_distribution():
 
 def test_event_path_accumulator_matches_per_clock_in_distribution():
     config = SensorConfig()
-    light = np.full((1, 20000), 0.013)
+    light = np.full((1, 10000), 0.013)
     fast = SceneSimulator(config, light.shape, rng=6)
     full = SceneSimulator(config, light.shape, rng=7, method="per-clock")
     for sim in (fast, full):
@@ -222,8 +222,8 @@ def test_dark_current_matches_cycle_exact_model():
     (SensorConfig(mode="ml"), [0.7, 0.85, 1.15, 1.3], 3000),
     # a small threshold makes backlogs and dips below full common enough that
     # a wrong backlog or dip shows plainly
-    (SensorConfig(threshold=5, acc_bits=8), [0.4, 0.5, 1.6, 2.0], 8000),
-    (SensorConfig(mode="ml", threshold=5, acc_bits=8), [0.4, 0.5, 1.6, 2.0], 8000),
+    (SensorConfig(threshold=5, acc_bits=8), [0.4, 0.5, 1.6, 2.0], 5000),
+    (SensorConfig(mode="ml", threshold=5, acc_bits=8), [0.4, 0.5, 1.6, 2.0], 5000),
 ], ids=str)
 def test_carried_accumulator_of_queue_and_full_paths_matches_per_clock(config, per_clock, pixels):
     """The accumulator carried out of the queue path (backlog left at readout)
