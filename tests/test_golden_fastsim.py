@@ -150,8 +150,9 @@ def test_event_path_accumulator_matches_per_clock_in_distribution():
         for _ in range(3):
             sim.readout(light)
     assert fast.path_counts["event"] == 3 * light.size
-    ha = np.bincount(fast.acc, minlength=config.threshold) / fast.acc.size
-    hb = np.bincount(full.acc, minlength=config.threshold) / full.acc.size
+    bins = np.arange(0, config.threshold + 8, 8)
+    ha = np.histogram(fast.acc, bins)[0] / fast.acc.size
+    hb = np.histogram(full.acc, bins)[0] / full.acc.size
     assert 0.5 * np.abs(ha - hb).sum() < 0.05
 
 
