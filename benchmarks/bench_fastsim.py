@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT))
 
 from golden.config import SensorConfig  # noqa: E402
 from golden.decode import decode_spikes  # noqa: E402
-from golden.fastsim import SceneSimulator, simulate_scene  # noqa: E402
+from golden.fastsim import SceneSimulator  # noqa: E402
 from golden.light import poisson_stimulus  # noqa: E402
 from golden.sensor import simulate  # noqa: E402
 

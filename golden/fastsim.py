@@ -24,15 +24,25 @@ the choice cannot bias the result); docs/simulator.md has the derivation.
              ``Poisson(mu) + dark`` when no input can saturate, ``L (2^E - 1)``
              when every input surely does, and need not be drawn at all when
              the accumulator surely ends full.
-``clock``    anything else (light near the threshold per clock, where charge
-             backs up and the accumulator can clip, or a carried backlog):
-             per-clock electrons for these pixels only, run through the literal
-             update rule :func:`golden.reference.step_reference`.
+``queue``    light below one threshold per clock, no clipping (Lundberg bound):
+             spikes follow the threshold crossings through a unit-rate queue;
+             the last w clocks are drawn per clock to settle the backlog left
+             at readout, the TE overflow clock comes from Gamma-gap order
+             statistics of the first crossings (:meth:`SceneSimulator._queue_path`).
+``full``     light above one threshold per clock and a spike in every clock
+             sure (Lundberg bound on the walk from the carried charge): word
+             known, accumulator from a window of the last clocks
+             (:meth:`SceneSimulator._full_path`).
+``clock``    anything else (light within about 10 % of one threshold per clock,
+             where charge backs up and the accumulator can clip, or a carried
+             backlog): per-clock electrons for these pixels only, run through
+             the literal update rule :func:`golden.reference.step_reference`.
 
-"Surely" means: the complement has probability below ``2^-64`` summed over
-the whole scene (:func:`golden.light.log_budget`, rigorous tail bounds in
-:mod:`golden.light`), so the law of the whole output differs from the exact
-one by less than 2^-64 in total variation. With ``noise=False`` nothing is
+"Surely" means: each such event fails with probability below
+``2^-64 / (CHECKS x pixel-readouts x L)`` (:func:`golden.light.log_budget`,
+rigorous tail bounds in :mod:`golden.light`); a pixel-readout relies on at
+most CHECKS of them, so the law of the whole output stream differs from the
+exact one by less than 2^-64 in total variation. With ``noise=False`` nothing is
 random and every pixel takes the per-clock path on the deterministic
 stimulus of :func:`golden.light.deterministic_clock_electrons`.
 """
