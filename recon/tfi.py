@@ -44,37 +44,48 @@ def tfi(light: torch.Tensor, nonzero: torch.Tensor, spike_light: float, radius: 
         search: str = "stream") -> torch.Tensor:
     """Spike-interval light of every readout.
 
-    ``light``: decoded light (K, P) in scene units; ``nonzero``: (K, P) bool,
-    the codes that are not 0; ``spike_light``: light of one spike in one
-    readout (threshold / 42000); ``radius``: window radius (used only when
-    ``search == "window"``). Returns float64 (K, P).
+    ``light``: decoded light (K, ...) in scene units, any float dtype (the
+    result has the same); ``nonzero``: same shape, bool, the codes that are
+    not 0; ``spike_light``: light of one spike in one readout (threshold /
+    42000); ``radius``: window radius (used only when ``search == "window"``).
     """
     if search not in ("stream", "window"):
         raise ValueError(f"search = {search!r}: must be 'stream' or 'window'")
     K = light.shape[0]
-    light = light.to(torch.float64)
+    if not light.dtype.is_floating_point:
+        light = light.to(torch.float64)
     if K == 0:
-        return light
-    dev = light.device
+        return light.clone()
+    dev, ftype = light.device, light.dtype
     k = torch.arange(K, device=dev).view((K,) + (1,) * (light.dim() - 1))
-    minus_one = torch.full_like(nonzero[:1], -1, dtype=torch.int64)
-    last = torch.where(nonzero, k, -1).cummax(0).values                  # last non-zero <= k
-    p = torch.cat([minus_one, last[:-1]])                                 # last non-zero < k
-    n = torch.where(nonzero, k, K).flip(0).cummin(0).values.flip(0)       # first non-zero >= k
+    # p: last non-zero code before k (-1: the stream start), by a running maximum
+    p = torch.empty(light.shape, dtype=torch.int64, device=dev)
+    p[0] = -1
+    p[1:] = torch.where(nonzero[:-1], k[:-1], -1).cummax(0).values
+    # n: first non-zero code at or after k (K: none), by a running minimum backwards
+    n = torch.where(nonzero, k, K).flip(0).cummin(0).values.flip(0)
     if search == "window":
-        p = torch.maximum(p, k - radius - 1)
-        found = n <= torch.clamp(k + radius, max=K - 1)
+        p_raw = p
+        p = torch.maximum(p_raw, k - radius - 1)
         end = torch.clamp(k + radius, max=K - 1)
-        p_is_code = p >= k - radius          # p is a real non-zero code inside the window
+        found = n <= end
     else:
-        found = n < K
         end = torch.full_like(k, K - 1)
-        p_is_code = p >= 0
-    p_is_code = p_is_code & (p >= 0)
-    r_n = torch.gather(light, 0, n.clamp(max=K - 1))
-    value = torch.where(found, r_n / (n - p).to(torch.float64), torch.nan)
-    bound = spike_light / (end - p).to(torch.float64)
-    # the estimate at a non-zero code p never needs the end rule (n(p) = p)
-    value_at_p = torch.gather(value, 0, p.clamp(min=0))
-    tail = torch.where(p_is_code, torch.minimum(value_at_p, bound), bound)
+        found = n < K
+    n = n.clamp_(max=K - 1)
+    bound = spike_light / (end - p).to(ftype)    # end rule: at most one spike since p
+    if search == "window":
+        # p depends on k's window: the decoded light at n over n - p(k) readouts
+        value = torch.gather(light, 0, n) / (n - p).to(ftype)
+        p_is_code = (p >= k - radius) & (p >= 0)      # p is a real non-zero code inside the window
+        pc = p.clamp(min=0)                           # the light at p, as p's own window sees it
+        p_before = torch.maximum(torch.gather(p_raw, 0, pc), pc - radius - 1)
+        previous = torch.gather(light, 0, pc) / (pc - p_before).to(ftype)
+    else:
+        # p(k) = p(n) in the whole-stream search: the estimate at the code n, filled back
+        at_code = light / (k - p).to(ftype)
+        value = torch.gather(at_code, 0, n)
+        p_is_code = p >= 0                            # in the tail p is the pixel's last code
+        previous = torch.gather(at_code, 0, p[-1:].clamp(min=0))
+    tail = torch.where(p_is_code, torch.minimum(previous, bound), bound)
     return torch.where(found, value, tail)

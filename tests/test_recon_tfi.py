@@ -76,3 +76,14 @@ def test_stream_mean_is_decoded_mean_when_stream_ends_on_a_code(rng):
 def test_bad_search():
     with pytest.raises(ValueError, match="search"):
         tfi(torch.zeros(3, 1), torch.zeros(3, 1, dtype=torch.bool), 1.0, 1, "both")
+
+
+def test_tail_takes_the_lower_previous_segment_in_both_searches():
+    u = TE.threshold / DESIGN_ELECTRONS
+    # k 1..4: one spike over 4 readouts; k 5 (tail): min(u / 4, one spike over 1 readout)
+    assert run([1, 0, 0, 0, 1, 0], TE).tolist() == approx([1, 1 / 4, 1 / 4, 1 / 4, 1 / 4, 1 / 4], u)
+    out = run([1, 0, 0, 0, 1, 0], TE, search="window", radius=3)
+    assert out.tolist() == approx([1, 1 / 4, 1 / 4, 1 / 4, 1 / 4, 1 / 4], u)
+    # window radius 1: k 5 sees p = 4, whose own window gives u / 2 (p >= 4 - 2)
+    out = run([1, 0, 0, 0, 1, 0], TE, search="window", radius=1)
+    assert out[5].item() == pytest.approx(u / 2, rel=1e-12)
