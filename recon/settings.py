@@ -31,7 +31,7 @@ class ReconSettings:
     """
 
     window: int = 9
-    chunk_elements: int = 1 << 20
+    chunk_elements: int = 1 << 19
     estimator: str = "ratio"
     search: str = "stream"
     device: str = "cpu"
