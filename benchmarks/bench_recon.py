@@ -12,6 +12,7 @@ it is available, else with the cycle-exact :mod:`golden.sensor` on per-clock
 Poisson electrons (slow: progress shown).
 
     python3 benchmarks/bench_recon.py [--mode te|ml] [--frames 16] [--threads 2] [--png out.png]
+                                      [--save-stream S.npz | --stream S.npz]
 """
 
 from __future__ import annotations
@@ -85,6 +86,9 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--png", default="benchmarks/bench_recon.png")
+    parser.add_argument("--save-stream", help="also write the simulated stream to this S.npz")
+    parser.add_argument("--stream", help="use this S.npz (made with --save-stream and the same "
+                                         "--mode/--frames/--height/--width) instead of simulating")
     args = parser.parse_args(argv)
 
     import torch
@@ -95,7 +99,16 @@ def main(argv=None) -> int:
     torch.set_num_threads(args.threads)
     config = SensorConfig.preset(args.mode)
     scene = hdr_scene(args.frames, args.height, args.width)
-    words = simulate(config, scene, args.seed)
+    from golden.io import load_stream, save_stream
+    if args.stream:
+        words, config = load_stream(args.stream)
+        if words.shape != scene.shape or config != SensorConfig.preset(args.mode):
+            raise SystemExit(f"{args.stream}: stream {words.shape} / {config} does not match "
+                             f"the scene {scene.shape} / mode {args.mode}")
+    else:
+        words = simulate(config, scene, args.seed)
+    if args.save_stream:
+        save_stream(args.save_stream, words, config)
     K, H, W = words.shape
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"{config.mode.upper()} stream {K} x {H} x {W}, torch {torch.__version__}, "

@@ -110,3 +110,15 @@ def test_refusals(rng):
         metrics.psnr_mu(pred, gt, peak=0.0)
     with pytest.raises(InputError, match=r"\(K, H, W\)"):
         metrics.psnr_mu(pred[0, 0], gt[0, 0])
+
+
+def test_twelve_decades_and_huge_light(rng):
+    gt = 10 ** rng.uniform(-12, 0, size=(2, 16, 16))
+    pred = gt * 1.01
+    ref_psnr, ref_ssim = skimage_mu(pred, gt)
+    assert np.allclose(metrics.psnr_mu(pred, gt), ref_psnr, rtol=1e-12)
+    assert np.allclose(metrics.ssim_mu(pred, gt), ref_ssim, rtol=1e-10)
+    # scale invariance up to 1e30 x: only the ratio to the peak matters
+    assert np.allclose(metrics.psnr_mu(pred * 1e30, gt * 1e30), ref_psnr, rtol=1e-9)
+    # PU21 clamps at 10000 cd/m^2: two images both far above it are equal
+    assert np.all(np.isinf(metrics.psnr_pu21(pred * 1e30, gt * 1e30)))
