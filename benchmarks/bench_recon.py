@@ -117,7 +117,7 @@ def main(argv=None) -> int:
     base_t, _ = best_time(lambda: decode_light(words, config), args.repeat)
     print(f"baseline golden.decode.decode_light (numpy): {K / base_t:8.1f} fps")
     runs = [("tfp", {"window": w}) for w in (1, 3, 9, 17)] + \
-           [("tfi", {"window": 9}), ("tfi", {"window": 9, "search": "window"}), ("tfi", {"window": 3, "search": "window"})]
+           [("tfi", {"window": 9, "search": "stream"}), ("tfi", {"window": 9, "search": "window"}), ("tfi", {"window": 3, "search": "window"})]
     print(f"{'method':26s} {'fps':>8s} {'ms/frame':>9s} {'x decode':>9s} {'PSNR-mu':>8s} {'SSIM-mu':>8s} {'PU21':>7s}")
     rows = []
     for method, opts in runs:
