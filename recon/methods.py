@@ -88,7 +88,7 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
         return out
     flat = words.reshape(K, H * W)
     out_flat = out.reshape(K, H * W)
-    step = max(1, settings.chunk_elements // K)
+    step = max(1, settings.block_elements() // K)
     starts = range(0, H * W, step)
     if progress:
         from tqdm import tqdm

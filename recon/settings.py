@@ -22,7 +22,8 @@ class ReconSettings:
 
     ``window``: readouts per window, odd, centred on the key moment (paper
     section 6.4 uses 9). ``chunk_elements``: readouts x pixels processed at
-    once (bounds memory; results do not depend on it). ``estimator``: the
+    once (bounds memory; results do not depend on it); ``None`` picks
+    :meth:`block_elements`. ``estimator``: the
     :data:`golden.decode.ESTIMATORS` rule. ``search``: where TFI looks for the
     non-zero codes that bound a spike interval (see :mod:`recon.tfi`).
     ``device``: any torch device string. ``dtype``: the float type of the
@@ -31,7 +32,7 @@ class ReconSettings:
     """
 
     window: int = 9
-    chunk_elements: int = 1 << 19
+    chunk_elements: int | None = None
     estimator: str = "ratio"
     search: str = "stream"
     device: str = "cpu"
@@ -41,7 +42,8 @@ class ReconSettings:
         if type(self.window) is not int or self.window < 1 or self.window % 2 == 0:
             raise InputError(f"window = {self.window!r}: must be an odd integer >= 1 "
                              "(readouts centred on the key moment)")
-        if type(self.chunk_elements) is not int or self.chunk_elements < 1:
+        if self.chunk_elements is not None and (type(self.chunk_elements) is not int
+                                                or self.chunk_elements < 1):
             raise InputError(f"chunk_elements = {self.chunk_elements!r}: must be an integer >= 1")
         if self.estimator not in ESTIMATORS:
             raise InputError(f"estimator = {self.estimator!r}: must be one of {', '.join(ESTIMATORS)}")
@@ -57,6 +59,15 @@ class ReconSettings:
         except (RuntimeError, TypeError, AssertionError) as exc:
             reason = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else type(exc).__name__
             raise InputError(f"device = {self.device!r}: not a usable torch device ({reason})") from None
+
+    def block_elements(self) -> int:
+        """Readouts x pixels per block: ``chunk_elements``, or by default 2^19 on one
+        torch thread (fits the caches) and 2^22 on more (fewer parallel regions,
+        each of which ends in a barrier across the threads)."""
+        if self.chunk_elements is not None:
+            return self.chunk_elements
+        import torch
+        return 1 << 19 if torch.get_num_threads() == 1 else 1 << 22
 
     @property
     def torch_dtype(self):
