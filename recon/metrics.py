@@ -90,6 +90,9 @@ def normalise(pred: torch.Tensor, gt: torch.Tensor, peak=None) -> tuple[torch.Te
     else:
         if not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
             raise InputError(f"peak = {peak!r}: must be a finite number > 0")
+        if gt.numel() and float(gt.max()) > peak:
+            raise InputError(f"peak = {peak!r} is below the ground truth's maximum {float(gt.max())!r}: "
+                             "the ground truth would be clipped")
         scale = torch.tensor(float(peak), dtype=torch.float64, device=gt.device)
     return (pred / scale).clamp(0, 1), (gt / scale).clamp(0, 1)
 

@@ -64,7 +64,8 @@ def test_prediction_clipped_to_ground_truth_peak(rng):
     over = gt.copy()
     over[gt == gt.max()] *= 1e6            # far above the peak: clipped to it
     assert np.all(np.isinf(metrics.psnr_mu(over, gt)))
-    assert np.all(np.isinf(metrics.psnr_mu(np.minimum(gt, 0) - 5, np.zeros_like(gt) + 0 * gt, peak=1.0)))
+    # negative predicted light is clipped to 0: equal to a black ground truth
+    assert np.all(np.isinf(metrics.psnr_mu(np.full_like(gt, -5.0), np.zeros_like(gt), peak=1.0)))
 
 
 def test_hand_worked_psnr_mu():
@@ -108,6 +109,8 @@ def test_refusals(rng):
         metrics.psnr_mu(pred, -gt)
     with pytest.raises(InputError, match="peak"):
         metrics.psnr_mu(pred, gt, peak=0.0)
+    with pytest.raises(InputError, match="ground truth would be clipped"):
+        metrics.ssim_mu(pred, gt, peak=0.5 * float(gt.max()))
     with pytest.raises(InputError, match=r"\(K, H, W\)"):
         metrics.psnr_mu(pred[0, 0], gt[0, 0])
 
