@@ -8,6 +8,9 @@ want one object to pass around (the CLI, the benchmarks, the evaluation).
 from __future__ import annotations
 
 import dataclasses
+import numbers
+
+import numpy as np
 
 from golden.decode import ESTIMATORS
 from golden.errors import InputError
@@ -39,6 +42,10 @@ class ReconSettings:
     dtype: str = "float32"
 
     def __post_init__(self) -> None:
+        for key in ("window", "chunk_elements"):     # numpy integers welcome, bool and float not
+            value = getattr(self, key)
+            if isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)):
+                object.__setattr__(self, key, int(value))
         if type(self.window) is not int or self.window < 1 or self.window % 2 == 0:
             raise InputError(f"window = {self.window!r}: must be an odd integer >= 1 "
                              "(readouts centred on the key moment)")

@@ -1,5 +1,6 @@
 """recon.settings: one validated dataclass of sizes and switches."""
 
+import numpy as np
 import pytest
 
 from golden.errors import InputError
@@ -10,6 +11,8 @@ def test_defaults_and_radius():
     s = ReconSettings()
     assert (s.window, s.radius, s.search, s.device, s.dtype) == (9, 4, "stream", "cpu", "float32")
     assert ReconSettings(window=1).radius == 0
+    s = ReconSettings(window=np.int64(5), chunk_elements=np.uint32(100))
+    assert (type(s.window), s.window, type(s.chunk_elements)) == (int, 5, int)
 
 
 @pytest.mark.parametrize("field,value,words", [
