@@ -1,0 +1,87 @@
+"""Sizes and switches of the training-free reconstruction, in one dataclass.
+
+Nothing in :mod:`recon` keeps global state: every function takes its device and
+its sizes explicitly, and :class:`ReconSettings` gathers them for callers that
+want one object to pass around (the CLI, the benchmarks, the evaluation).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import numbers
+
+import numpy as np
+
+from golden.decode import ESTIMATORS
+from golden.errors import InputError
+
+#: TFI search modes: the whole stream (default) or the window around the key moment.
+TFI_SEARCH = ("stream", "window")
+
+
+@dataclasses.dataclass(frozen=True)
+class ReconSettings:
+    """Everything the training-free methods need besides the stream itself.
+
+    ``window``: readouts per window, odd, centred on the key moment (paper
+    section 6.4 uses 9). ``chunk_elements``: readouts x pixels processed at
+    once (bounds memory; results do not depend on it); ``None`` picks
+    :meth:`block_elements`. ``estimator``: the
+    :data:`golden.decode.ESTIMATORS` rule. ``search``: where TFI looks for the
+    non-zero codes that bound a spike interval (see :mod:`recon.tfi`).
+    ``device``: any torch device string. ``dtype``: the float type of the
+    arithmetic, "float32" (default: the output is float32, windows are short
+    sums, so it costs < 1e-6 relative) or "float64".
+    """
+
+    window: int = 9
+    chunk_elements: int | None = None
+    estimator: str = "ratio"
+    search: str = "stream"
+    device: str = "cpu"
+    dtype: str = "float32"
+
+    def __post_init__(self) -> None:
+        for key in ("window", "chunk_elements"):     # numpy integers welcome, bool and float not
+            value = getattr(self, key)
+            if isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)):
+                object.__setattr__(self, key, int(value))
+        if type(self.window) is not int or self.window < 1 or self.window % 2 == 0:
+            raise InputError(f"window = {self.window!r}: must be an odd integer >= 1 "
+                             "(readouts centred on the key moment)")
+        if self.chunk_elements is not None and (type(self.chunk_elements) is not int
+                                                or self.chunk_elements < 1):
+            raise InputError(f"chunk_elements = {self.chunk_elements!r}: must be an integer >= 1")
+        if self.estimator not in ESTIMATORS:
+            raise InputError(f"estimator = {self.estimator!r}: must be one of {', '.join(ESTIMATORS)}")
+        if self.search not in TFI_SEARCH:
+            raise InputError(f"search = {self.search!r}: must be one of {', '.join(TFI_SEARCH)}")
+        import torch
+        if self.dtype not in ("float32", "float64"):
+            raise InputError(f"dtype = {self.dtype!r}: must be 'float32' or 'float64'")
+        if str(self.device).startswith("meta"):
+            raise InputError(f"device = {self.device!r}: the meta device holds no data")
+        try:
+            torch.empty(0, device=self.device)
+        except (RuntimeError, TypeError, AssertionError) as exc:
+            reason = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else type(exc).__name__
+            raise InputError(f"device = {self.device!r}: not a usable torch device ({reason})") from None
+
+    def block_elements(self) -> int:
+        """Readouts x pixels per block: ``chunk_elements``, or by default 2^19 on one
+        torch thread (fits the caches) and 2^22 on more (fewer parallel regions,
+        each of which ends in a barrier across the threads)."""
+        if self.chunk_elements is not None:
+            return self.chunk_elements
+        import torch
+        return 1 << 19 if torch.get_num_threads() == 1 else 1 << 22
+
+    @property
+    def torch_dtype(self):
+        import torch
+        return getattr(torch, self.dtype)
+
+    @property
+    def radius(self) -> int:
+        """Window radius omega_h of the paper's eq. 4: window = 2 * radius + 1."""
+        return self.window // 2
