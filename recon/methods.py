@@ -1,0 +1,99 @@
+"""Registry of reconstruction methods and the one entry point :func:`reconstruct`.
+
+``reconstruct(words, config, method)`` turns a (K, H, W) stream of readout
+words into (K, H, W) float32 light, in the units of the scene (I = 1 is 42000
+electrons per readout interval), one image per readout interval. The stream is
+processed in blocks of pixels (every method here works along time, pixel by
+pixel), so memory stays bounded and results do not depend on the block size.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable
+
+import numpy as np
+import torch
+
+from golden.config import DESIGN_ELECTRONS, SensorConfig
+from golden.errors import InputError
+
+from .settings import ReconSettings
+from .stream import as_word_tensor, decode_light
+from .tfi import tfi
+from .tfp import tfp
+
+
+def _tfp_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings) -> torch.Tensor:
+    light = decode_light(words, config, estimator=settings.estimator, device=settings.device)
+    return tfp(light, settings.radius)
+
+
+def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings) -> torch.Tensor:
+    light = decode_light(words, config, estimator=settings.estimator, device=settings.device)
+    return tfi(light, words != 0, config.threshold / DESIGN_ELECTRONS, settings.radius, settings.search)
+
+
+@dataclasses.dataclass(frozen=True)
+class Method:
+    """A reconstruction method: a function of a (K, P) block of words -> (K, P) float64 light."""
+
+    name: str
+    summary: str
+    block: Callable[[torch.Tensor, SensorConfig, ReconSettings], torch.Tensor]
+    options: tuple[str, ...]        # ReconSettings fields the method uses
+
+
+#: name -> method; the learned model (``net``) is added by its own module later.
+METHODS: dict[str, Method] = {
+    "tfp": Method("tfp", "mean decoded light over the window (spike-firing rate)", _tfp_block,
+                  ("window", "estimator", "chunk_elements", "device")),
+    "tfi": Method("tfi", "decoded spikes over the spike interval around each readout", _tfi_block,
+                  ("window", "estimator", "search", "chunk_elements", "device")),
+}
+
+
+def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
+                device: str = "cpu", progress: bool = False, **options) -> np.ndarray:
+    """Stream words (K, H, W) -> reconstructed light, float32 (K, H, W), scene units.
+
+    ``method`` is a key of :data:`METHODS`. ``window`` (odd, readouts) and
+    ``device`` (a torch device) apply to every method; further ``options``
+    are fields of :class:`recon.settings.ReconSettings` the method uses
+    (``estimator``, ``search`` for TFI, ``chunk_elements``). Words are checked
+    legal for ``config``; an unknown method or option is refused.
+    """
+    if method not in METHODS:
+        raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(METHODS)})")
+    spec = METHODS[method]
+    unknown = sorted(set(options) - set(spec.options))
+    if unknown:
+        raise InputError(f"option {unknown[0]!r} is not an option of method {method!r} "
+                         f"(its options: {', '.join(spec.options)})")
+    settings = ReconSettings(window=window, device=device, **options)
+    if isinstance(words, torch.Tensor):
+        shape = tuple(words.shape)
+    else:
+        words = np.asarray(words)
+        shape = words.shape
+        if words.dtype.kind not in "iu":
+            raise InputError(f"readout words dtype {words.dtype} is not an integer type")
+    if len(shape) != 3:
+        raise InputError(f"stream words shape {shape} must be (K, H, W)")
+    K, H, W = shape
+    out = np.empty((K, H, W), np.float32)
+    if out.size == 0:
+        return out
+    flat = words.reshape(K, H * W)
+    out_flat = out.reshape(K, H * W)
+    step = max(1, settings.chunk_elements // K)
+    starts = range(0, H * W, step)
+    if progress:
+        from tqdm import tqdm
+        starts = tqdm(starts, desc=f"reconstruct {method}", unit="block")
+    with torch.inference_mode():
+        for start in starts:
+            block = as_word_tensor(flat[:, start:start + step], settings.device)
+            result = spec.block(block, config, settings)
+            out_flat[:, start:start + step] = result.to("cpu", torch.float32).numpy()
+    return out

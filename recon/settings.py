@@ -1,0 +1,56 @@
+"""Sizes and switches of the training-free reconstruction, in one dataclass.
+
+Nothing in :mod:`recon` keeps global state: every function takes its device and
+its sizes explicitly, and :class:`ReconSettings` gathers them for callers that
+want one object to pass around (the CLI, the benchmarks, the evaluation).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from golden.decode import ESTIMATORS
+from golden.errors import InputError
+
+#: TFI search modes: the whole stream (default) or the window around the key moment.
+TFI_SEARCH = ("stream", "window")
+
+
+@dataclasses.dataclass(frozen=True)
+class ReconSettings:
+    """Everything the training-free methods need besides the stream itself.
+
+    ``window``: readouts per window, odd, centred on the key moment (paper
+    section 6.4 uses 9). ``chunk_elements``: readouts x pixels processed at
+    once (bounds memory; results do not depend on it). ``estimator``: the
+    :data:`golden.decode.ESTIMATORS` rule. ``search``: where TFI looks for the
+    non-zero codes that bound a spike interval (see :mod:`recon.tfi`).
+    ``device``: any torch device string.
+    """
+
+    window: int = 9
+    chunk_elements: int = 1 << 22
+    estimator: str = "ratio"
+    search: str = "stream"
+    device: str = "cpu"
+
+    def __post_init__(self) -> None:
+        if type(self.window) is not int or self.window < 1 or self.window % 2 == 0:
+            raise InputError(f"window = {self.window!r}: must be an odd integer >= 1 "
+                             "(readouts centred on the key moment)")
+        if type(self.chunk_elements) is not int or self.chunk_elements < 1:
+            raise InputError(f"chunk_elements = {self.chunk_elements!r}: must be an integer >= 1")
+        if self.estimator not in ESTIMATORS:
+            raise InputError(f"estimator = {self.estimator!r}: must be one of {', '.join(ESTIMATORS)}")
+        if self.search not in TFI_SEARCH:
+            raise InputError(f"search = {self.search!r}: must be one of {', '.join(TFI_SEARCH)}")
+        import torch
+        try:
+            torch.device(self.device)
+        except (RuntimeError, TypeError) as exc:
+            raise InputError(f"device = {self.device!r}: not a torch device ({exc})") from None
+
+    @property
+    def radius(self) -> int:
+        """Window radius omega_h of the paper's eq. 4: window = 2 * radius + 1."""
+        return self.window // 2

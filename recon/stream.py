@@ -1,0 +1,169 @@
+"""Spike streams in torch: loading, decoding by lookup table, sub-streams (paper eq. 4).
+
+Decoding uses exactly :mod:`golden.decode`: for each configuration (and
+estimator) a table over every code a word of ``config.word_bits`` bits can
+hold (at most 2^17) is filled once by calling :func:`golden.decode.decode_light`
+and :func:`golden.decode.decode_spikes` on the legal codes; decoding a stream
+is then one gather on the device. Codes the sensor cannot emit are marked
+illegal in the table and refused, as :func:`golden.decode.check_words` does.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from golden.config import SensorConfig
+from golden.decode import check_words, decode_light as golden_decode_light
+from golden.decode import decode_spikes as golden_decode_spikes
+from golden.errors import InputError
+from golden.io import load_stream as golden_load_stream
+
+#: Edge rules of :func:`substreams` for windows that reach past the stream.
+EDGES = ("shift", "replicate", "error")
+
+
+def legal_codes(config: SensorConfig) -> np.ndarray:
+    """Every word the configured sensor can emit (SPEC section 4), ascending, int64."""
+    if config.is_te:
+        counts = np.arange(config.p_max, dtype=np.int64)                     # flag 0: sfc
+        overflow = (1 << config.d) | np.arange(1, config.alpha + 1, dtype=np.int64)
+        codes = np.concatenate([counts, overflow])
+    else:
+        codes = np.arange(config.ml_max + 1, dtype=np.int64)
+    return check_words(codes, config)      # golden agrees every one is legal
+
+
+@functools.lru_cache(maxsize=64)
+def _tables(config: SensorConfig, estimator: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(light, spikes, legal) over all 2^word_bits codes; illegal entries are NaN / False."""
+    size = 1 << config.word_bits
+    codes = legal_codes(config)
+    light = np.full(size, np.nan)
+    spikes = np.full(size, np.nan)
+    legal = np.zeros(size, bool)
+    light[codes] = golden_decode_light(codes, config, estimator)
+    spikes[codes] = golden_decode_spikes(codes, config, estimator)
+    legal[codes] = True
+    for table in (light, spikes, legal):
+        table.setflags(write=False)
+    return light, spikes, legal
+
+
+def code_tables(config: SensorConfig, estimator: str = "ratio") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lookup tables indexed by the code: light (scene units), spikes, legal (read-only numpy).
+
+    Built once per (configuration, estimator) and cached (configurations are
+    immutable and hashable).
+    """
+    return _tables(config, estimator)
+
+
+def as_word_tensor(words, device: str | torch.device = "cpu") -> torch.Tensor:
+    """Integer words (numpy of any integer dtype, or a tensor) -> int64 tensor on ``device``."""
+    if isinstance(words, torch.Tensor):
+        if words.dtype.is_floating_point or words.dtype.is_complex or words.dtype == torch.bool:
+            raise InputError(f"readout words dtype {words.dtype} is not an integer type")
+        return words.to(device=device, dtype=torch.int64)
+    words = np.asarray(words)
+    if words.dtype.kind not in "iu":
+        raise InputError(f"readout words dtype {words.dtype} is not an integer type")
+    if words.dtype == np.uint64 and words.size and int(words.max()) > np.iinfo(np.int64).max:
+        raise InputError(f"readout word {int(words.max())} does not fit in int64")
+    return torch.from_numpy(words.astype(np.int64, copy=False)).to(device)
+
+
+def _gather(table: np.ndarray, legal: np.ndarray, words, config: SensorConfig,
+            device, dtype: torch.dtype) -> torch.Tensor:
+    w = as_word_tensor(words, device)
+    if w.numel():
+        low, high = int(w.min()), int(w.max())
+        bad = None
+        if low < 0 or high >= table.size:
+            bad = (w < 0) | (w >= table.size)
+        else:
+            ok = torch.from_numpy(legal.copy()).to(device)[w]
+            if not bool(ok.all()):
+                bad = ~ok
+        if bad is not None:
+            index = tuple(int(i) for i in torch.nonzero(bad)[0])
+            raise InputError(f"readout word {int(w[index])} at index {index} is not a legal "
+                             f"{config.mode.upper()} word for this configuration ({config})")
+    return torch.from_numpy(table.copy()).to(device=device, dtype=dtype)[w]
+
+
+def decode_light(words, config: SensorConfig, *, estimator: str = "ratio",
+                 device: str | torch.device = "cpu", dtype: torch.dtype = torch.float64) -> torch.Tensor:
+    """Words -> light per readout (scene units, 1.0 = 42000 electrons), equal to golden's."""
+    light, _, legal = code_tables(config, estimator)
+    return _gather(light, legal, words, config, device, dtype)
+
+
+def decode_spikes(words, config: SensorConfig, *, estimator: str = "ratio",
+                  device: str | torch.device = "cpu", dtype: torch.dtype = torch.float64) -> torch.Tensor:
+    """Words -> spikes per readout interval, equal to :func:`golden.decode.decode_spikes`."""
+    _, spikes, legal = code_tables(config, estimator)
+    return _gather(spikes, legal, words, config, device, dtype)
+
+
+def load_stream(path: str | Path, device: str | torch.device = "cpu") -> tuple[torch.Tensor, SensorConfig]:
+    """Read S.npz with :func:`golden.io.load_stream` (checked legal); words as int64 on ``device``."""
+    words, config = golden_load_stream(path)
+    return as_word_tensor(words, device), config
+
+
+def window_starts(length: int, centres, radius: int, edge: str = "shift") -> torch.Tensor:
+    """First readout of the window ``[t - radius, t + radius]`` around each key moment ``t``.
+
+    Edge rules for windows that reach past either end of a stream of ``length``
+    readouts:
+
+    - ``"shift"``: the window keeps its 2 * radius + 1 readouts and is moved
+      inside the stream, so the key moment is no longer at its centre (near the
+      start it sits left of centre, near the end right of centre). Needs
+      ``length >= 2 * radius + 1``.
+    - ``"replicate"``: handled by :func:`substreams` (indices clamped, so the
+      first / last readout repeats); the start returned here is ``t - radius``
+      and may be negative.
+    - ``"error"``: refuse any window that does not fit.
+    """
+    if edge not in EDGES:
+        raise InputError(f"edge = {edge!r}: must be one of {', '.join(EDGES)}")
+    if type(radius) is not int or radius < 0:
+        raise InputError(f"radius = {radius!r}: must be an integer >= 0")
+    centres = torch.as_tensor(centres, dtype=torch.int64)
+    if centres.numel() and (int(centres.min()) < 0 or int(centres.max()) >= length):
+        raise InputError(f"key moments must lie in 0..{length - 1} (stream of {length} readouts), "
+                         f"got {int(centres.min())}..{int(centres.max())}")
+    starts = centres - radius
+    span = 2 * radius + 1
+    if edge == "shift":
+        if length < span:
+            raise InputError(f"stream of {length} readouts is shorter than one window of "
+                             f"{span} readouts (edge = 'shift' cannot move it inside)")
+        starts = starts.clamp(0, length - span)
+    elif edge == "error" and centres.numel():
+        outside = (starts < 0) | (starts + span > length)
+        if bool(outside.any()):
+            t = int(centres[outside][0])
+            raise InputError(f"window of radius {radius} around key moment {t} reaches past the "
+                             f"stream of {length} readouts (edge = 'error')")
+    return starts
+
+
+def substreams(stream: torch.Tensor, centres, radius: int, edge: str = "shift") -> torch.Tensor:
+    """Sub-streams ``S_i = {S(t)}_{t = t_i - radius}^{t_i + radius}`` (paper eq. 4).
+
+    ``stream`` is (K, ...) along time (words or decoded light); returns
+    (len(centres), 2 * radius + 1, ...). See :func:`window_starts` for the
+    edge rules; every sub-stream has the same length.
+    """
+    length = stream.shape[0]
+    starts = window_starts(length, centres, radius, edge).to(stream.device)
+    index = starts[:, None] + torch.arange(2 * radius + 1, device=stream.device)[None, :]
+    if edge == "replicate":
+        index = index.clamp(0, length - 1)
+    return stream[index]
