@@ -45,10 +45,13 @@ class ReconSettings:
         if self.search not in TFI_SEARCH:
             raise InputError(f"search = {self.search!r}: must be one of {', '.join(TFI_SEARCH)}")
         import torch
+        if str(self.device).startswith("meta"):
+            raise InputError(f"device = {self.device!r}: the meta device holds no data")
         try:
-            torch.device(self.device)
-        except (RuntimeError, TypeError) as exc:
-            raise InputError(f"device = {self.device!r}: not a torch device ({exc})") from None
+            torch.empty(0, device=self.device)
+        except (RuntimeError, TypeError, AssertionError) as exc:
+            reason = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else type(exc).__name__
+            raise InputError(f"device = {self.device!r}: not a usable torch device ({reason})") from None
 
     @property
     def radius(self) -> int:

@@ -1,0 +1,57 @@
+"""tespike reconstruct: S.npz -> R.npy, with refusals of bad input (one line, no file)."""
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.io import save_stream
+from recon.methods import reconstruct
+from tests.cli import assert_refused, run_tespike
+
+
+def make_stream(tmp_path, rng, config=SensorConfig()):
+    from recon.stream import legal_codes
+    words = rng.choice(legal_codes(config), size=(11, 3, 4))
+    path = tmp_path / "S.npz"
+    save_stream(path, words, config)
+    return path, words, config
+
+
+def test_reconstruct_both_methods(tmp_path, rng):
+    stream, words, config = make_stream(tmp_path, rng)
+    for method in ("tfp", "tfi"):
+        out = tmp_path / f"R_{method}.npy"
+        result = run_tespike("reconstruct", "--stream", stream, "--method", method, "--out", out,
+                             "--window", 5, "--device", "cpu", "--threads", 1)
+        assert result.returncode == 0, result.stderr
+        images = np.load(out)
+        assert images.dtype == np.float32 and images.shape == (11, 3, 4)
+        assert np.array_equal(images, reconstruct(words, config, method, window=5))
+    out = tmp_path / "R_w.npy"
+    assert run_tespike("reconstruct", "--stream", stream, "--method", "tfi", "--out", out,
+                       "--search", "window").returncode == 0
+    assert np.array_equal(np.load(out), reconstruct(words, config, "tfi", search="window"))
+
+
+def test_refusals(tmp_path, rng):
+    stream, _, _ = make_stream(tmp_path, rng, SensorConfig(mode="ml"))
+    out = tmp_path / "R.npy"
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip file")
+    cases = [
+        (("--stream", tmp_path / "missing.npz", "--method", "tfp"), ("does not exist",)),
+        (("--stream", bad, "--method", "tfp"), ("not a readable",)),
+        (("--stream", stream, "--method", "net"), ("unknown method 'net'",)),
+        (("--stream", stream, "--method", "tfp", "--window", "4"), ("window = 4",)),
+        (("--stream", stream, "--method", "tfp", "--device", "cuda:7"), ("device",)),
+        (("--stream", stream, "--method", "tfp", "--search", "window"), ("--search",)),
+    ]
+    for args, words in cases:
+        assert_refused(run_tespike("reconstruct", *args, "--out", out), *words)
+        assert not out.exists()
+    illegal = tmp_path / "illegal.npz"
+    np.savez(illegal, words=np.full((2, 2, 2), 40), config=np.array(SensorConfig().to_json()))
+    assert_refused(run_tespike("reconstruct", "--stream", illegal, "--method", "tfi", "--out", out),
+                   "readout word 40")
+    assert not out.exists()
+    assert_refused(run_tespike("reconstruct", "--stream", stream, "--method", "tfi",
+                               "--out", tmp_path / "nodir" / "R.npy"), "does not exist")

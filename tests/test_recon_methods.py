@@ -1,0 +1,131 @@
+"""recon.methods: reconstruct() on hand-made and simulated streams, both modes."""
+
+import numpy as np
+import pytest
+import torch
+
+from golden.config import DESIGN_ELECTRONS, SensorConfig
+from golden.decode import decode_light
+from golden.errors import InputError
+from golden.sensor import simulate
+from recon.methods import METHODS, reconstruct
+from recon.stream import legal_codes
+from tests.configs import EDGE_CONFIGS
+
+TE, ML = SensorConfig(), SensorConfig(mode="ml")
+K, SIDE = 60, 6          # readouts; each light level covers SIDE x SIDE pixels
+
+
+def constant_light_stream(config, levels, rng):
+    """Per-clock Poisson electrons (SPEC section 6) of constant light; one block per level."""
+    L = config.clocks_per_readout
+    lam = np.repeat(np.asarray(levels, float) * DESIGN_ELECTRONS / L, SIDE)
+    mean = np.broadcast_to(lam[None, :, None], (K * L, lam.size, SIDE))
+    stimulus = np.minimum(rng.poisson(mean), config.input_max).astype(np.int64)
+    return simulate(config, stimulus)
+
+
+def level_means(images, count):
+    return images.reshape(K, count, SIDE, SIDE).mean(axis=(0, 2, 3))
+
+
+@pytest.fixture(scope="module")
+def te_low(request):
+    return constant_light_stream(TE, TE_LEVELS, np.random.default_rng(7))
+
+
+TE_LEVELS = [1e-3, 1e-2, 0.05, 0.1, 0.3, 0.6, 1.0]
+ML_LEVELS = [1e-3, 1e-2, 0.1, 0.5, 1.0, 1.5]
+
+
+@pytest.mark.parametrize("method", sorted(METHODS))
+def test_te_constant_light_means(method, te_low):
+    images = reconstruct(te_low, TE, method)
+    assert images.dtype == np.float32 and images.shape == te_low.shape
+    means = level_means(images, len(TE_LEVELS))
+    for level, mean in zip(TE_LEVELS, means):
+        spikes = level * DESIGN_ELECTRONS / TE.threshold * K * SIDE * SIDE
+        noise = 4 / np.sqrt(spikes)                # 4 sigma of Poisson counting over the block
+        # the paper's ratio decoder rounds the overflow time up to whole S_h cycles:
+        # r = 2^b1 alpha / m >= rho / (1 + rho / (2^b1 alpha)) for rho spikes per readout
+        rho = level * DESIGN_ELECTRONS / TE.threshold
+        low = level / (1 + rho / (TE.p_max * TE.alpha)) if rho >= TE.p_max else level
+        assert low * (1 - noise) <= mean <= level * (1 + noise), (level, mean)
+    # in the counting range (below 2^b1 spikes per readout) it is within 5 %
+    assert abs(means[1] / TE_LEVELS[1] - 1) < 0.05 and abs(means[2] / TE_LEVELS[2] - 1) < 0.05
+
+
+@pytest.mark.parametrize("method", sorted(METHODS))
+def test_ml_constant_light_means(method, rng):
+    words = constant_light_stream(ML, ML_LEVELS, rng)
+    means = level_means(reconstruct(words, ML, method), len(ML_LEVELS))
+    for level, mean in zip(ML_LEVELS, means):
+        noise = 4 / np.sqrt(level * DESIGN_ELECTRONS / ML.threshold * K * SIDE * SIDE)
+        assert abs(mean / level - 1) <= max(noise, 0.01), (level, mean)
+
+
+@pytest.mark.parametrize("method", sorted(METHODS))
+@pytest.mark.parametrize("config", [TE, ML], ids=str)
+def test_saturates_above_range(method, config, rng):
+    """10x and 1000x the design light: every word is the top code, light = its decoded value.
+
+    TE: overflow in the first S_h cycle (m = 1), 2^b1 alpha spikes = I 0.9999. ML: one
+    spike per pixel clock at most, so the count stops at L = 240 < 255 = 2^8 - 1 (I 1.874).
+    """
+    words = constant_light_stream(config, [10.0, 1e3], rng)
+    top = (1 << config.d) | 1 if config.is_te else min(config.ml_max, config.clocks_per_readout)
+    assert (words == top).all()
+    expected = decode_light(np.array([top]), config)[0]
+    assert expected == pytest.approx(240 * 175 / 42000 if config.is_te else 240 * 328 / 42000, rel=1e-12)
+    images = reconstruct(words, config, method)
+    assert np.all(images == np.float32(expected))
+
+
+@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+def test_extreme_streams_every_edge_config(config, rng):
+    u = config.threshold / DESIGN_ELECTRONS
+    zeros = np.zeros((7, 2, 3), np.uint16)
+    assert np.all(reconstruct(zeros, config, "tfp") == 0)
+    assert np.allclose(reconstruct(zeros, config, "tfi"), u / 7, rtol=1e-6)
+    top = max(legal_codes(config), key=lambda c: decode_light(np.array([c]), config)[0])
+    full = np.full((7, 2, 3), top)
+    value = np.float32(decode_light(np.array([top]), config)[0])
+    for method in METHODS:
+        assert np.all(reconstruct(full, config, method) == value)
+    words = rng.choice(legal_codes(config), size=(12, 3, 2))
+    a = reconstruct(words, config, "tfi", window=3, search="window")
+    b = reconstruct(torch.from_numpy(words), config, "tfi", window=3, search="window", chunk_elements=5)
+    assert np.array_equal(a, b) and np.isfinite(a).all() and (a >= 0).all()
+
+
+def test_tfp_window_1_is_the_decoded_stream(rng):
+    words = rng.choice(legal_codes(TE), size=(9, 4, 5))
+    assert np.array_equal(reconstruct(words, TE, "tfp", window=1),
+                          decode_light(words, TE).astype(np.float32))
+
+
+def test_block_size_does_not_change_results(rng):
+    words = rng.choice(legal_codes(ML), size=(20, 7, 5))
+    for method in METHODS:
+        ref = reconstruct(words, ML, method)
+        assert np.array_equal(ref, reconstruct(words, ML, method, chunk_elements=1))
+        assert np.array_equal(ref, reconstruct(words, ML, method, chunk_elements=77))
+
+
+def test_refusals():
+    words = np.zeros((3, 2, 2), np.uint8)
+    with pytest.raises(InputError, match="unknown reconstruction method 'net'"):
+        reconstruct(words, TE, "net")
+    with pytest.raises(InputError, match="option 'search' is not an option of method 'tfp'"):
+        reconstruct(words, TE, "tfp", search="window")
+    with pytest.raises(InputError, match="window = 4"):
+        reconstruct(words, TE, "tfp", window=4)
+    with pytest.raises(InputError, match="device"):
+        reconstruct(words, TE, "tfp", device="nonsense")
+    with pytest.raises(InputError, match="not an integer"):
+        reconstruct(words.astype(float), TE, "tfi")
+    with pytest.raises(InputError, match=r"must be \(K, H, W\)"):
+        reconstruct(words[0], TE, "tfi")
+    with pytest.raises(InputError, match="readout word 16 at index"):
+        reconstruct(words + 16, TE, "tfi")
+    assert reconstruct(np.zeros((0, 2, 2), np.uint8), TE, "tfp").shape == (0, 2, 2)

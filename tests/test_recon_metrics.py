@@ -1,0 +1,112 @@
+"""recon.metrics: torch PSNR-mu / SSIM-mu equal scikit-image on the same tone-mapped images."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+from golden.errors import InputError
+from recon import metrics
+
+
+def hdr_pair(rng, shape=(3, 24, 31)):
+    """Ground truth over five decades and a noisy, slightly biased prediction."""
+    gt = 10 ** rng.uniform(-5, 0, size=shape)
+    pred = gt * rng.lognormal(0.05, 0.3, size=shape)
+    return pred, gt
+
+
+def skimage_mu(pred, gt, mu=5000):
+    out_p, out_s = [], []
+    for p, g in zip(pred, gt):
+        peak = g.max()
+        tp = np.log1p(mu * np.clip(p / peak, 0, 1)) / np.log1p(mu)
+        tg = np.log1p(mu * np.clip(g / peak, 0, 1)) / np.log1p(mu)
+        out_p.append(peak_signal_noise_ratio(tg, tp, data_range=1))
+        out_s.append(structural_similarity(tg, tp, gaussian_weights=True, sigma=1.5,
+                                           use_sample_covariance=False, data_range=1))
+    return np.array(out_p), np.array(out_s)
+
+
+def test_equal_to_scikit_image(rng):
+    pred, gt = hdr_pair(rng)
+    ref_psnr, ref_ssim = skimage_mu(pred, gt)
+    assert np.allclose(metrics.psnr_mu(pred, gt), ref_psnr, rtol=1e-12, atol=0)
+    assert np.allclose(metrics.ssim_mu(pred, gt), ref_ssim, rtol=1e-10, atol=1e-12)
+    # torch tensors, float32 and single frames give the same
+    assert np.allclose(metrics.ssim_mu(torch.from_numpy(pred), torch.from_numpy(gt)), ref_ssim, rtol=1e-10)
+    assert metrics.psnr_mu(pred[1], gt[1]).shape == ()
+    assert metrics.psnr_mu(pred[1], gt[1]) == pytest.approx(ref_psnr[1], rel=1e-12)
+
+
+def test_ssim_smallest_frame_equal_to_scikit_image(rng):
+    pred, gt = hdr_pair(rng, (2, 11, 11))
+    assert np.allclose(metrics.ssim_mu(pred, gt), skimage_mu(pred, gt)[1], rtol=1e-10)
+    with pytest.raises(InputError, match="at least 11 x 11"):
+        metrics.ssim_mu(pred[:, :10], gt[:, :10])
+
+
+def test_normalised_by_ground_truth_peak_not_min_max(rng):
+    _, gt = hdr_pair(rng)
+    assert np.all(np.isinf(metrics.psnr_mu(gt, gt)))
+    assert np.allclose(metrics.ssim_mu(gt, gt), 1)
+    # a prediction at half the light is penalised (a min-max normalisation would hide it)
+    assert np.all(metrics.psnr_mu(gt / 2, gt) < 30)
+    # one peak for the whole sequence: scaling both by it changes nothing
+    assert np.allclose(metrics.psnr_mu(gt * 7, gt * 7, peak=7.0 * gt.max()),
+                       metrics.psnr_mu(gt, gt, peak=gt.max()))
+
+
+def test_prediction_clipped_to_ground_truth_peak(rng):
+    _, gt = hdr_pair(rng)
+    over = gt.copy()
+    over[gt == gt.max()] *= 1e6            # far above the peak: clipped to it
+    assert np.all(np.isinf(metrics.psnr_mu(over, gt)))
+    assert np.all(np.isinf(metrics.psnr_mu(np.minimum(gt, 0) - 5, np.zeros_like(gt) + 0 * gt, peak=1.0)))
+
+
+def test_hand_worked_psnr_mu():
+    gt = np.ones((1, 4, 4))
+    pred = np.zeros((1, 4, 4))           # T(0) = 0, T(1) = 1: mse 1 -> 0 dB
+    assert metrics.psnr_mu(pred, gt)[0] == pytest.approx(0.0, abs=1e-12)
+    half = np.full((1, 4, 4), 0.5)
+    t = math.log1p(2500) / math.log1p(5000)
+    assert metrics.psnr_mu(half, gt)[0] == pytest.approx(-20 * math.log10(1 - t), rel=1e-12)
+
+
+def test_pu21():
+    y = torch.tensor([0.005, 100.0, 10000.0, 1e6], dtype=torch.float64)
+    v = metrics.pu21_encode(y)
+    assert v[0].item() == pytest.approx(0, abs=1e-6)
+    assert v[1].item() == pytest.approx(256.4, abs=0.5)       # 100 cd/m^2 ~ 256 by design
+    assert v[3].item() == v[2].item()                         # clamped at 10000 cd/m^2
+    gt = np.full((2, 3, 3), 0.025)                            # 100 cd/m^2 at 4000 per unit
+    pred = gt * 1.1
+    p0, p1, p2, p3, p4, p5, p6 = metrics.PU21_BANDING_GLARE
+    enc = lambda y: p6 * (((p0 + p1 * y ** p3) / (1 + p2 * y ** p3)) ** p4 - p5)
+    expected = 20 * math.log10(256 / abs(enc(110.0) - enc(100.0)))
+    assert np.allclose(metrics.psnr_pu21(pred, gt), expected, rtol=1e-12)
+    # the luminance scale matters: the same relative error at 1000x lower light
+    assert metrics.psnr_pu21(pred, gt, nits_per_unit=4.0)[0] != pytest.approx(expected)
+    with pytest.raises(InputError, match="nits_per_unit"):
+        metrics.psnr_pu21(pred, gt, nits_per_unit=0)
+
+
+def test_refusals(rng):
+    pred, gt = hdr_pair(rng)
+    with pytest.raises(InputError, match="shape"):
+        metrics.psnr_mu(pred[:, 1:], gt)
+    with pytest.raises(InputError, match="frame 1 is all zero"):
+        gt0 = gt.copy(); gt0[1] = 0
+        metrics.psnr_mu(pred, gt0)
+    with pytest.raises(InputError, match="non-finite"):
+        p = pred.copy(); p[0, 0, 0] = np.nan
+        metrics.ssim_mu(p, gt)
+    with pytest.raises(InputError, match="negative"):
+        metrics.psnr_mu(pred, -gt)
+    with pytest.raises(InputError, match="peak"):
+        metrics.psnr_mu(pred, gt, peak=0.0)
+    with pytest.raises(InputError, match=r"\(K, H, W\)"):
+        metrics.psnr_mu(pred[0, 0], gt[0, 0])

@@ -1,0 +1,116 @@
+"""recon.stream: lookup-table decoding equals golden.decode on every code; sub-streams (eq. 4)."""
+
+import numpy as np
+import pytest
+import torch
+
+import golden.decode as gd
+from golden.config import SensorConfig
+from golden.errors import InputError
+from golden.io import save_stream
+from recon import stream
+from tests.configs import EDGE_CONFIGS
+
+WIDE_CONFIGS = [
+    SensorConfig(b1=16, b2=16, clocks_per_tick=1),       # 17-bit words: the largest table
+    SensorConfig(b1=16, b2=1),
+    SensorConfig(b1=1, b2=16, alpha=12345),
+    SensorConfig(mode="ml", ml_bits=16),
+]
+CONFIGS = EDGE_CONFIGS + WIDE_CONFIGS
+
+
+def _golden_legal(code: int, config) -> bool:
+    try:
+        gd.check_words(np.array([code]), config)
+        return True
+    except InputError:
+        return False
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=str)
+def test_table_equals_golden_on_every_code(config):
+    codes = np.arange(1 << config.word_bits)
+    light, spikes, legal = stream.code_tables(config)
+    assert light.shape == spikes.shape == legal.shape == codes.shape
+    ok = codes[legal]
+    assert np.array_equal(light[ok], gd.decode_light(ok, config))          # bit-equal float64
+    assert np.array_equal(spikes[ok], gd.decode_spikes(ok, config))
+    # the torch gather gives the same numbers
+    assert torch.equal(stream.decode_light(ok, config), torch.from_numpy(gd.decode_light(ok, config)))
+    assert torch.equal(stream.decode_spikes(ok, config), torch.from_numpy(gd.decode_spikes(ok, config)))
+    # legality agrees with golden's check_words code by code (all codes on small words,
+    # a random sample of illegal ones on the widest)
+    illegal = codes[~legal]
+    if config.word_bits > 10:
+        illegal = np.random.default_rng(1).choice(illegal, min(500, illegal.size), replace=False) \
+            if illegal.size else illegal
+        sample = np.concatenate([illegal, ok[:: max(1, ok.size // 500)]])
+    else:
+        sample = codes
+    for code in sample:
+        assert _golden_legal(int(code), config) == bool(legal[code]), code
+    assert legal.sum() == (config.p_max + config.alpha if config.is_te else config.ml_max + 1)
+
+
+@pytest.mark.parametrize("config", CONFIGS[:6], ids=str)
+def test_every_illegal_code_refused(config):
+    _, _, legal = stream.code_tables(config)
+    for code in np.flatnonzero(~legal)[:50]:
+        with pytest.raises(InputError, match=f"readout word {code} at index"):
+            stream.decode_light(np.array([[[0, code]]]), config)
+    for code in (-1, 1 << config.word_bits, 1 << 40):
+        with pytest.raises(InputError, match="not a legal"):
+            stream.decode_light(np.array([code], np.int64), config)
+
+
+@pytest.mark.parametrize("config", CONFIGS, ids=str)
+def test_decode_random_stream_equals_golden(config, rng):
+    codes = stream.legal_codes(config)
+    words = rng.choice(codes, size=(5, 3, 4))
+    assert np.array_equal(stream.decode_light(words, config).numpy(), gd.decode_light(words, config))
+    assert stream.decode_light(words, config, dtype=torch.float32).dtype == torch.float32
+
+
+def test_non_integer_words_refused():
+    config = SensorConfig()
+    with pytest.raises(InputError, match="not an integer"):
+        stream.decode_light(np.zeros((2, 2, 2), np.float32), config)
+    with pytest.raises(InputError, match="not an integer"):
+        stream.decode_light(torch.zeros((2, 2, 2)), config)
+
+
+def test_load_stream(tmp_path, rng):
+    config = SensorConfig(mode="ml", ml_bits=3)
+    words = rng.integers(0, 8, size=(4, 2, 3))
+    save_stream(tmp_path / "S.npz", words, config)
+    loaded, cfg = stream.load_stream(tmp_path / "S.npz")
+    assert cfg == config and loaded.dtype == torch.int64 and torch.equal(loaded, torch.from_numpy(words))
+    with pytest.raises(InputError, match="does not exist"):
+        stream.load_stream(tmp_path / "missing.npz")
+
+
+def test_substreams_inside_are_eq4():
+    s = torch.arange(20).view(20, 1, 1) * 10
+    subs = stream.substreams(s, [5, 10], 2)
+    assert subs.shape == (2, 5, 1, 1)
+    assert subs[:, :, 0, 0].tolist() == [[30, 40, 50, 60, 70], [80, 90, 100, 110, 120]]
+
+
+def test_substreams_edges():
+    s = torch.arange(10)
+    assert stream.substreams(s, [0, 1, 9], 2, "shift").tolist() == \
+        [[0, 1, 2, 3, 4], [0, 1, 2, 3, 4], [5, 6, 7, 8, 9]]
+    assert stream.substreams(s, [0, 9], 2, "replicate").tolist() == [[0, 0, 0, 1, 2], [7, 8, 9, 9, 9]]
+    assert stream.substreams(s, [2, 7], 2, "error").tolist() == [[0, 1, 2, 3, 4], [5, 6, 7, 8, 9]]
+    with pytest.raises(InputError, match="key moment 1 reaches past"):
+        stream.substreams(s, [2, 1], 2, "error")
+    with pytest.raises(InputError, match="shorter than one window"):
+        stream.substreams(s[:4], [0], 2, "shift")
+    assert stream.substreams(s[:2], [0, 1], 2, "replicate").tolist() == [[0, 0, 0, 1, 1], [0, 0, 1, 1, 1]]
+    with pytest.raises(InputError, match="key moments must lie in 0..9"):
+        stream.substreams(s, [10], 1)
+    with pytest.raises(InputError, match="edge"):
+        stream.substreams(s, [3], 1, "wrap")
+    with pytest.raises(InputError, match="radius"):
+        stream.substreams(s, [3], -1)

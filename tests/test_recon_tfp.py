@@ -1,0 +1,43 @@
+"""recon.tfp: windowed mean of decoded light, truncated at the stream ends."""
+
+import pytest
+import torch
+
+from recon.tfp import tfp
+
+
+def test_hand_worked_radius_1():
+    light = torch.tensor([1.0, 2.0, 4.0, 8.0, 16.0])
+    assert tfp(light, 1).tolist() == [1.5, 7 / 3, 14 / 3, 28 / 3, 12.0]
+
+
+def test_hand_worked_radius_2_two_pixels():
+    light = torch.tensor([[0.0, 3.0], [0.0, 3.0], [5.0, 3.0], [0.0, 3.0]])
+    out = tfp(light, 2)
+    assert out[:, 0].tolist() == [5 / 3, 5 / 4, 5 / 4, 5 / 3]
+    assert out[:, 1].tolist() == [3.0] * 4
+    assert out.dtype == torch.float64
+
+
+def test_radius_0_is_identity_and_window_wider_than_stream_is_the_mean():
+    light = torch.rand(7, 3, 2, dtype=torch.float64)
+    assert torch.equal(tfp(light, 0), light)
+    assert torch.allclose(tfp(light, 3), tfp(light[:, None], 3)[:, 0])
+    assert torch.allclose(tfp(light, 50), light.mean(0, keepdim=True).expand_as(light))
+
+
+def test_empty_stream():
+    assert tfp(torch.zeros(0, 2, 2), 4).shape == (0, 2, 2)
+
+
+def test_shifted_sums_equal_cumulative_sums():
+    light = torch.rand(80, 5, dtype=torch.float64)
+    for radius in (1, 4, 16, 17, 30):
+        ref = torch.stack([light[max(0, k - radius):k + radius + 1].mean(0) for k in range(80)])
+        assert torch.allclose(tfp(light, radius), ref, rtol=1e-12, atol=0), radius
+
+
+def test_dark_readouts_after_bright_ones_keep_their_precision():
+    light = torch.cat([torch.full((5000, 1), 2.0, dtype=torch.float64),
+                       torch.full((20, 1), 1e-5, dtype=torch.float64)])
+    assert tfp(light, 4)[-1, 0].item() == pytest.approx(1e-5, rel=1e-12)
