@@ -111,7 +111,7 @@ def log_poisson_tail_above(mean: np.ndarray, k: int) -> np.ndarray:
     Bernoulli variables with total ``mean`` (Chernoff: ``-m + k - k log(k / m)``
     for ``k > m``, else 0)."""
     m = np.asarray(mean, np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         bound = -m + k - k * np.log(k / m)
     bound = np.where(m <= 0, -np.inf, bound)
     return np.where(m >= k, 0.0, bound) if k > 0 else np.zeros_like(m)
@@ -125,7 +125,7 @@ def log_poisson_tail_below(mean: np.ndarray, k: int) -> np.ndarray:
     m = np.asarray(mean, np.float64)
     if k < 0:
         return np.full(m.shape, -np.inf)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         log_pmf = -m + (k * np.log(m) if k else 0.0) - math.lgamma(k + 1)
         bound = log_pmf - np.log1p(-k / m)
     return np.where(m > k, bound, 0.0)

@@ -1,0 +1,101 @@
+import json
+
+import numpy as np
+import pytest
+
+from golden.config import SensorConfig
+from golden.decode import check_words
+from golden.fastsim import simulate_scene
+from golden.io import load_stream
+from tests.cli import assert_refused, run_tespike
+
+
+def _no_output(tmp_path):
+    return not list(tmp_path.glob("s.npz*")) and not list(tmp_path.glob(".s.npz*"))
+
+
+def test_simulate_writes_spec_stream_reproducibly(tmp_path):
+    config = SensorConfig(b1=2, b2=2, threshold=30)
+    (tmp_path / "c.json").write_text(json.dumps({"b1": 2, "b2": 2, "threshold": 30}))
+    scene = np.random.default_rng(0).uniform(0, 1.5, (4, 3, 5)).astype(np.float32)
+    np.save(tmp_path / "i.npy", scene)
+    for name, seed in (("a.npz", 5), ("b.npz", 5), ("c.npz", 6)):
+        result = run_tespike("simulate", "--config", tmp_path / "c.json", "--scene", tmp_path / "i.npy",
+                             "--out", tmp_path / name, "--seed", seed)
+        assert result.returncode == 0 and result.stderr == "", result.stderr
+    with np.load(tmp_path / "a.npz") as npz:
+        words = npz["words"]
+        assert json.loads(str(npz["config"])) == config.to_dict()
+    assert words.shape == (4, 3, 5) and words.dtype.kind in "iu"
+    check_words(words, config)
+    assert np.array_equal(words, simulate_scene(config, scene, seed=5))   # the library, same seed
+    assert np.array_equal(words, load_stream(tmp_path / "b.npz")[0])
+    assert not np.array_equal(words, load_stream(tmp_path / "c.npz")[0])
+
+
+def test_simulate_options(tmp_path):
+    np.save(tmp_path / "i.npy", np.full((3, 2, 2), 0.2))
+    for extra in (["--no-noise"], ["--dark-current", "eq12"], ["--dark-current", "eq13"],
+                  ["--method", "per-clock"]):
+        result = run_tespike("simulate", "--config", "ml", "--scene", tmp_path / "i.npy",
+                             "--out", tmp_path / "s.npz", "--seed", "1", *extra)
+        assert result.returncode == 0, (extra, result.stderr)
+        words, config = load_stream(tmp_path / "s.npz")
+        assert config == SensorConfig(mode="ml") and words.shape == (3, 2, 2)
+    # noise-free: 8400 electrons per readout, threshold 328: cumulative 8400,
+    # 16800, 25200 -> 25, 51, 76 spikes, the residual carried
+    run_tespike("simulate", "--config", "ml", "--scene", tmp_path / "i.npy", "--out", tmp_path / "s.npz",
+                "--no-noise")
+    assert load_stream(tmp_path / "s.npz")[0][:, 0, 0].tolist() == [25, 26, 25]
+
+
+@pytest.mark.parametrize("scene, words", [
+    (np.full((2, 2, 2), -1e-3), ["negative"]),
+    (np.full((2, 2, 2), np.nan), ["non-finite"]),
+    (np.full((2, 2, 2), -np.inf), ["non-finite"]),
+    (np.zeros((2, 2)), ["shape"]),
+    (np.zeros((2, 2, 2), bool), ["dtype"]),
+    (np.zeros((2, 2, 2), complex), ["dtype"]),
+])
+def test_simulate_refuses_bad_scene_without_output(tmp_path, scene, words):
+    np.save(tmp_path / "i.npy", scene)
+    result = run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy", "--out", tmp_path / "s.npz")
+    assert_refused(result, *words)
+    assert _no_output(tmp_path)
+
+
+def test_simulate_refuses_bad_files_and_config(tmp_path):
+    np.save(tmp_path / "i.npy", np.zeros((1, 1, 1)))
+    (tmp_path / "c.json").write_text('{"b1": 4, "threshold": 0}')
+    assert_refused(run_tespike("simulate", "--config", tmp_path / "c.json", "--scene", tmp_path / "i.npy",
+                               "--out", tmp_path / "s.npz"), "'threshold'")
+    assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "missing.npy",
+                               "--out", tmp_path / "s.npz"), "missing.npy")
+    (tmp_path / "text.npy").write_text("not an array")
+    assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "text.npy",
+                               "--out", tmp_path / "s.npz"), "text.npy")
+    assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
+                               "--out", tmp_path / "nodir" / "s.npz"), "nodir")
+    assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
+                               "--out", tmp_path / "s.npz", "--seed", "-3"), "--seed")
+    assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
+                               "--out", tmp_path / "s.npz", "--no-noise", "--dark-current", "eq12"), "eq12")
+    assert _no_output(tmp_path)
+
+
+@pytest.mark.parametrize("config", ["te", "ml", "edge"])
+def test_simulate_extreme_light(tmp_path, config):
+    if config == "edge":
+        (tmp_path / "c.json").write_text(json.dumps({"mode": "ml", "b1": 1, "b2": 1, "clocks_per_tick": 1,
+                                                     "threshold": 3, "acc_bits": 2, "input_bits": 1}))
+        config = tmp_path / "c.json"
+    scene = np.zeros((3, 3, 6))
+    scene[:, 0] = [0, 1e-7, 1, 1e3, 1e30, 1e300]
+    scene[:, 1] = np.logspace(-12, 0, 6)                          # twelve decades in one frame
+    scene[:, 2] = np.logspace(-6, 6, 6)
+    np.save(tmp_path / "i.npy", scene)
+    result = run_tespike("simulate", "--config", config, "--scene", tmp_path / "i.npy",
+                         "--out", tmp_path / "s.npz", "--seed", "3")
+    assert result.returncode == 0 and result.stderr == "", result.stderr
+    words, cfg = load_stream(tmp_path / "s.npz")                  # checks every code legal
+    assert words.shape == (3, 3, 6) and not words[:, 0, 0].any()
