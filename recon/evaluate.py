@@ -114,13 +114,16 @@ class Evaluation:
 def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
              methods: Sequence[str] | None = None, modes: Sequence[str] = MODES,
              configs: dict[str, SensorConfig] | None = None, window: int = 9, seed: int = 0,
-             device: str = "cpu", progress: bool = True, keep: bool = False) -> Evaluation:
+             device: str = "cpu", progress: bool = True, keep: bool = False,
+             options: dict[str, dict] | None = None) -> Evaluation:
     """Simulate every sequence in every mode, reconstruct with every method, score.
 
     ``sequences``: (label, light (K, H, W)) pairs; ``methods``: keys of
     :data:`recon.methods.METHODS` (default all); ``seed`` makes the shot
     noise reproducible (one independent stream per sequence and mode);
-    ``keep`` keeps every stream and reconstruction in the result (memory!).
+    ``keep`` keeps every stream and reconstruction in the result (memory!);
+    ``options`` maps a method to extra keywords of :func:`recon.methods.reconstruct`
+    (e.g. ``{"tfi": {"search": "window"}}``).
     """
     from tqdm import tqdm
 
@@ -166,7 +169,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
             for method in methods:
                 bar.set_postfix_str(f"{name} {label(method, mode)}")
                 start = time.perf_counter()
-                images = reconstruct(words, config, method, window=window, device=device)
+                images = reconstruct(words, config, method, window=window, device=device,
+                                     **(options or {}).get(method, {}))
                 seconds = time.perf_counter() - start
                 pred, truth = images[frames], light[frames]
                 evaluation.results.append(Result(

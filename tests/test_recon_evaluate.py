@@ -128,3 +128,13 @@ def test_evaluate_refuses():
         evaluate([("n", -light)], simulate, progress=False)
     with pytest.raises(InputError, match="no sensor configuration"):
         evaluate([("a", light)], simulate, configs={"te": SensorConfig()}, progress=False)
+
+
+def test_method_options_reach_the_method(small_run):
+    sequences, evaluation = small_run
+    windowed = evaluate(sequences[:1], simulate, methods=("tfi",), modes=("ml",), seed=3, progress=False,
+                        options={"tfi": {"search": "window"}})
+    default = [r.psnr_mu for r in evaluation.results if (r.sequence, r.mode, r.method) == ("m", "ml", "tfi")]
+    assert [r.psnr_mu for r in windowed.results] != default
+    with pytest.raises(InputError, match="not an option"):
+        evaluate(sequences[:1], simulate, methods=("tfp",), progress=False, options={"tfp": {"search": "window"}})
