@@ -180,3 +180,20 @@ def test_reads_the_project_panoramas():
     assert rgb.shape == (512, 1024, 3) and rgb.dtype == np.float32
     gray = to_gray(rgb)
     assert gray.min() >= 0 and gray.max() > 1e4 * np.median(gray)
+
+
+def test_folder_crop_and_downscale(tmp_path):
+    image = np.arange(6 * 10, dtype=np.float32).reshape(6, 10) + 1
+    write_exr(tmp_path / "a.exr", image)
+    light = load_hdr_sequence(tmp_path, crop=(4, 6), peak=float(image[1:5, 2:8].max()))
+    assert np.array_equal(light[0], image[1:5, 2:8])
+    shrunk = load_hdr_sequence(tmp_path, downscale=4)
+    assert shrunk.shape == (1, 1, 2)
+    assert np.allclose(shrunk[0] * image[:4, :8].reshape(1, 4, 2, 4).mean(axis=(1, 3)).max(),
+                       image[:4, :8].reshape(1, 4, 2, 4).mean(axis=(1, 3)))
+    with pytest.raises(InputError, match="cannot crop"):
+        load_hdr_sequence(tmp_path, crop=(7, 4))
+    with pytest.raises(InputError, match="smaller than one"):
+        load_hdr_sequence(tmp_path, downscale=7)
+    with pytest.raises(InputError, match="downscale"):
+        load_hdr_sequence(tmp_path, downscale=0)

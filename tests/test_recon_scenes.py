@@ -116,6 +116,13 @@ def test_sun_scene_is_stiff():
     assert light.max() / np.median(light) > 1e5                # a sun in the frame
 
 
+@pytest.mark.parametrize("peak", [1e-7, 1e3, 1e30])
+def test_extreme_peaks(peak):
+    light = make_scene("decades", 2, 8, 64, seed=1, peak=peak)
+    assert np.isfinite(light).all() and light.max() == np.float32(peak) and light.min() == 0
+    check_scene(light)
+
+
 def test_decades_scene_spans_twelve_decades_in_one_frame():
     frame = make_scene("decades", 1, 16, 64, seed=0)[0].astype(np.float64)
     positive = frame[frame > 0]

@@ -310,13 +310,35 @@ def list_frames(folder: str | Path) -> list[Path]:
     return sorted(frames, key=lambda p: _natural_key(p.name))
 
 
+def _crop_and_shrink(gray: np.ndarray, crop: tuple[int, int] | None, downscale: int, what: str) -> np.ndarray:
+    if crop is not None:
+        height, width = crop
+        if height < 1 or width < 1 or height > gray.shape[0] or width > gray.shape[1]:
+            raise InputError(f"{what}: cannot crop {height} x {width} out of "
+                             f"{gray.shape[0]} x {gray.shape[1]}")
+        top, left = (gray.shape[0] - height) // 2, (gray.shape[1] - width) // 2
+        gray = gray[top:top + height, left:left + width]
+    if downscale > 1:
+        height, width = (n // downscale * downscale for n in gray.shape)
+        if height == 0 or width == 0:
+            raise InputError(f"{what}: {gray.shape[0]} x {gray.shape[1]} is smaller than one "
+                             f"{downscale} x {downscale} block")
+        gray = gray[:height, :width].reshape(height // downscale, downscale,
+                                             width // downscale, downscale).mean(axis=(1, 3))
+    return gray
+
+
 def load_hdr_sequence(folder: str | Path, *, weights: str = DEFAULT_WEIGHTS, peak: float = 1.0,
-                      max_frames: int | None = None, progress: bool = False) -> np.ndarray:
+                      max_frames: int | None = None, crop: tuple[int, int] | None = None,
+                      downscale: int = 1, progress: bool = False) -> np.ndarray:
     """A folder of ``.exr`` / ``.hdr`` frames -> light ``I`` float32 (K, H, W), brightest pixel = ``peak``.
 
     Frames are sorted by name, converted to grayscale (:func:`to_gray`, negatives
-    clipped at 0) and the whole sequence is divided by its largest pixel
-    (paper appendix A.2.2). All frames must have the same size.
+    clipped at 0), optionally centre-cropped to ``crop`` = (H, W) (the paper
+    crops its test frames to 512 x 384) and area-averaged over ``downscale``
+    x ``downscale`` blocks (it resizes training frames; rows and columns
+    that do not fill a block are dropped), and the whole sequence is divided by
+    its largest pixel (paper appendix A.2.2). All frames must have the same size.
     """
     from tqdm import tqdm
 
@@ -325,12 +347,17 @@ def load_hdr_sequence(folder: str | Path, *, weights: str = DEFAULT_WEIGHTS, pea
         if max_frames < 1:
             raise InputError(f"max_frames = {max_frames} must be at least 1")
         paths = paths[:max_frames]
+    if type(downscale) is not int or downscale < 1:
+        raise InputError(f"downscale = {downscale!r} must be an integer >= 1")
     frames = []
+    first_shape = None
     for path in tqdm(paths, desc="reading frames", unit="frame", disable=not progress):
         gray = to_gray(read_image(path), weights, what=f"frame {str(path)!r}")
-        if frames and gray.shape != frames[0].shape:
+        if first_shape is None:
+            first_shape = gray.shape
+        elif gray.shape != first_shape:
             raise InputError(f"frame {str(path)!r} is {gray.shape[0]} x {gray.shape[1]}, but "
-                             f"{str(paths[0])!r} is {frames[0].shape[0]} x {frames[0].shape[1]}; "
+                             f"{str(paths[0])!r} is {first_shape[0]} x {first_shape[1]}; "
                              "all frames of a sequence must have the same size")
-        frames.append(gray.astype(np.float32))
+        frames.append(_crop_and_shrink(gray, crop, downscale, f"frame {str(path)!r}").astype(np.float32))
     return normalise_sequence(np.stack(frames), peak, what=f"HDR sequence {str(folder)!r}")
