@@ -25,18 +25,20 @@ from .tfp import tfp
 
 
 def _tfp_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings) -> torch.Tensor:
-    light = decode_light(words, config, estimator=settings.estimator, device=settings.device)
+    light = decode_light(words, config, estimator=settings.estimator, device=settings.device,
+                         dtype=settings.torch_dtype)
     return tfp(light, settings.radius)
 
 
 def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings) -> torch.Tensor:
-    light = decode_light(words, config, estimator=settings.estimator, device=settings.device)
+    light = decode_light(words, config, estimator=settings.estimator, device=settings.device,
+                         dtype=settings.torch_dtype)
     return tfi(light, words != 0, config.threshold / DESIGN_ELECTRONS, settings.radius, settings.search)
 
 
 @dataclasses.dataclass(frozen=True)
 class Method:
-    """A reconstruction method: a function of a (K, P) block of words -> (K, P) float64 light."""
+    """A reconstruction method: a function of a (K, P) block of words -> (K, P) light."""
 
     name: str
     summary: str
@@ -47,9 +49,9 @@ class Method:
 #: name -> method; the learned model (``net``) is added by its own module later.
 METHODS: dict[str, Method] = {
     "tfp": Method("tfp", "mean decoded light over the window (spike-firing rate)", _tfp_block,
-                  ("window", "estimator", "chunk_elements", "device")),
+                  ("window", "estimator", "chunk_elements", "device", "dtype")),
     "tfi": Method("tfi", "decoded spikes over the spike interval around each readout", _tfi_block,
-                  ("window", "estimator", "search", "chunk_elements", "device")),
+                  ("window", "estimator", "search", "chunk_elements", "device", "dtype")),
 }
 
 
@@ -60,7 +62,7 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     ``method`` is a key of :data:`METHODS`. ``window`` (odd, readouts) and
     ``device`` (a torch device) apply to every method; further ``options``
     are fields of :class:`recon.settings.ReconSettings` the method uses
-    (``estimator``, ``search`` for TFI, ``chunk_elements``). Words are checked
+    (``estimator``, ``search`` for TFI, ``chunk_elements``, ``dtype``). Words are checked
     legal for ``config``; an unknown method or option is refused.
     """
     if method not in METHODS:

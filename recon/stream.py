@@ -76,28 +76,38 @@ def as_word_tensor(words, device: str | torch.device = "cpu") -> torch.Tensor:
     return torch.from_numpy(words.astype(np.int64, copy=False)).to(device)
 
 
+def _refuse(w: torch.Tensor, bad: torch.Tensor, config: SensorConfig):
+    index = tuple(int(i) for i in torch.nonzero(bad)[0])
+    raise InputError(f"readout word {int(w[index])} at index {index} is not a legal "
+                     f"{config.mode.upper()} word for this configuration ({config})")
+
+
 def _gather(table: np.ndarray, legal: np.ndarray, words, config: SensorConfig,
             device, dtype: torch.dtype) -> torch.Tensor:
+    """table[words] on ``device``; any illegal word (NaN in the table) or one out of range is refused."""
+    signed = (words.dtype.is_signed if isinstance(words, torch.Tensor)
+              else np.asarray(words).dtype.kind == "i")
     w = as_word_tensor(words, device)
-    if w.numel():
-        low, high = int(w.min()), int(w.max())
-        bad = None
-        if low < 0 or high >= table.size:
-            bad = (w < 0) | (w >= table.size)
-        else:
-            ok = torch.from_numpy(legal.copy()).to(device)[w]
-            if not bool(ok.all()):
-                bad = ~ok
-        if bad is not None:
-            index = tuple(int(i) for i in torch.nonzero(bad)[0])
-            raise InputError(f"readout word {int(w[index])} at index {index} is not a legal "
-                             f"{config.mode.upper()} word for this configuration ({config})")
-    return torch.from_numpy(table.copy()).to(device=device, dtype=dtype)[w]
+    if not w.numel():
+        return torch.zeros(w.shape, dtype=dtype, device=device)
+    if signed and int(w.min()) < 0:          # torch indexing would wrap a negative index
+        _refuse(w, w < 0, config)
+    values = torch.from_numpy(table.copy()).to(device=device, dtype=dtype)
+    try:
+        out = values[w]
+    except IndexError:
+        _refuse(w, w >= table.size, config)
+    if bool(torch.isnan(out).any()):         # the table is NaN exactly at illegal codes
+        _refuse(w, torch.isnan(out), config)
+    return out
 
 
 def decode_light(words, config: SensorConfig, *, estimator: str = "ratio",
                  device: str | torch.device = "cpu", dtype: torch.dtype = torch.float64) -> torch.Tensor:
-    """Words -> light per readout (scene units, 1.0 = 42000 electrons), equal to golden's."""
+    """Words -> light per readout (scene units, 1.0 = 42000 electrons), equal to golden's.
+
+    With ``dtype=torch.float32`` each value is golden's float64 value rounded once.
+    """
     light, _, legal = code_tables(config, estimator)
     return _gather(light, legal, words, config, device, dtype)
 

@@ -4,7 +4,7 @@ The light at readout k is the mean decoded light (the spike-firing rate, in
 scene units) over the window ``[k - r, k + r]``. Near the ends of the stream
 the window is truncated to the readouts that exist (the mean over fewer
 readouts), so every readout k = 0..K-1 gets an estimate and no readout is
-counted twice. Vectorised along time in float64: windows up to
+counted twice. Vectorised along time, in the dtype of the light given: windows up to
 :data:`SHIFTED_SUM_MAX_WINDOW` readouts are summed as shifted slices (each
 output is a sum of its own window only, so a bright past never costs the
 precision of a dark present); wider ones with one cumulative sum.
@@ -19,15 +19,16 @@ SHIFTED_SUM_MAX_WINDOW = 33
 
 
 def tfp(light: torch.Tensor, radius: int) -> torch.Tensor:
-    """Windowed mean of decoded light ``(K, ...)`` along dim 0 -> same shape, float64."""
+    """Windowed mean of decoded light ``(K, ...)`` along dim 0 -> same shape and float dtype."""
     K = light.shape[0]
-    light = light.to(torch.float64)
+    if not light.dtype.is_floating_point:
+        light = light.to(torch.float64)
     if K == 0:
         return light
     k = torch.arange(K, device=light.device)
     lo = (k - radius).clamp(min=0)
     hi = (k + radius + 1).clamp(max=K)
-    count = (hi - lo).to(torch.float64).view((K,) + (1,) * (light.dim() - 1))
+    count = (hi - lo).to(light.dtype).view((K,) + (1,) * (light.dim() - 1))
     r = min(radius, K - 1)
     if 2 * r + 1 <= SHIFTED_SUM_MAX_WINDOW:
         total = light.clone()

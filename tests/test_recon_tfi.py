@@ -1,5 +1,6 @@
 """recon.tfi: spike-interval light, with hand-worked streams and the documented edge rules."""
 
+import numpy as np
 import pytest
 import torch
 
@@ -76,3 +77,60 @@ def test_stream_mean_is_decoded_mean_when_stream_ends_on_a_code(rng):
 def test_bad_search():
     with pytest.raises(ValueError, match="search"):
         tfi(torch.zeros(3, 1), torch.zeros(3, 1, dtype=torch.bool), 1.0, 1, "both")
+
+
+def test_tail_takes_the_lower_previous_segment_in_both_searches():
+    u = TE.threshold / DESIGN_ELECTRONS
+    # k 1..4: one spike over 4 readouts; k 5 (tail): min(u / 4, one spike over 1 readout)
+    assert run([1, 0, 0, 0, 1, 0], TE).tolist() == approx([1, 1 / 4, 1 / 4, 1 / 4, 1 / 4, 1 / 4], u)
+    out = run([1, 0, 0, 0, 1, 0], TE, search="window", radius=3)
+    assert out.tolist() == approx([1, 1 / 4, 1 / 4, 1 / 4, 1 / 4, 1 / 4], u)
+    # window radius 1: k 5 sees p = 4, whose own window gives u / 2 (p >= 4 - 2)
+    out = run([1, 0, 0, 0, 1, 0], TE, search="window", radius=1)
+    assert out[5].item() == pytest.approx(u / 2, rel=1e-12)
+
+
+def reference_tfi(light, nonzero, u, radius, search):
+    """The rule of recon.tfi written as plain loops over one pixel's readouts."""
+    K = len(light)
+    out = []
+    for k in range(K):
+        lo = k - radius - 1 if search == "window" else -1
+        end = min(k + radius, K - 1) if search == "window" else K - 1
+        p = max([j for j in range(k) if nonzero[j]] + [-1, lo])
+        n = next((j for j in range(k, end + 1) if nonzero[j]), None)
+        if n is not None:
+            out.append(light[n] / (n - p))
+            continue
+        bound = u / (end - p)
+        if p >= 0 and (search == "stream" or p >= k - radius):
+            lo_p = p - radius - 1 if search == "window" else -1
+            pp = max([j for j in range(p) if nonzero[j]] + [-1, lo_p])
+            bound = min(bound, light[p] / (p - pp))
+        out.append(bound)
+    return out
+
+
+@pytest.mark.parametrize("search", ["stream", "window"])
+@pytest.mark.parametrize("K,radius,density", [(1, 4, 0.5), (2, 0, 0.5), (30, 2, 0.2), (30, 4, 0.05),
+                                              (25, 40, 0.1), (40000, 4, 0.3)])
+def test_equals_plain_loop_reference(search, K, radius, density, rng):
+    pixels = 1 if K > 1000 else 5
+    nonzero = rng.random((K, pixels)) < density
+    light = np.where(nonzero, rng.uniform(0.01, 2.0, (K, pixels)), 0.0)
+    out = tfi(torch.from_numpy(light), torch.from_numpy(nonzero), 0.004, radius, search).numpy()
+    for j in range(pixels):
+        ref = reference_tfi(light[:, j], nonzero[:, j], 0.004, radius, search) if K <= 1000 else None
+        if ref is None:      # long stream (int32 indices): check a stretch against the reference
+            ref = reference_tfi(light[-300:, j], nonzero[-300:, j], 0.004, radius, search)[100:]
+            got = out[-200:, j]
+        else:
+            got = out[:, j]
+        assert np.allclose(got, ref, rtol=1e-12, atol=0), (j, got, ref)
+
+
+def test_running_scans_equal_torch_cumulative(rng):
+    from recon.tfi import running_max, running_min_reversed
+    x = torch.from_numpy(rng.integers(-5, 100, (37, 4)))
+    assert torch.equal(running_max(x), x.cummax(0).values)
+    assert torch.equal(running_min_reversed(x), x.flip(0).cummin(0).values.flip(0))

@@ -7,12 +7,12 @@ from recon.tfp import tfp
 
 
 def test_hand_worked_radius_1():
-    light = torch.tensor([1.0, 2.0, 4.0, 8.0, 16.0])
+    light = torch.tensor([1.0, 2.0, 4.0, 8.0, 16.0], dtype=torch.float64)
     assert tfp(light, 1).tolist() == [1.5, 7 / 3, 14 / 3, 28 / 3, 12.0]
 
 
 def test_hand_worked_radius_2_two_pixels():
-    light = torch.tensor([[0.0, 3.0], [0.0, 3.0], [5.0, 3.0], [0.0, 3.0]])
+    light = torch.tensor([[0.0, 3.0], [0.0, 3.0], [5.0, 3.0], [0.0, 3.0]], dtype=torch.float64)
     out = tfp(light, 2)
     assert out[:, 0].tolist() == [5 / 3, 5 / 4, 5 / 4, 5 / 3]
     assert out[:, 1].tolist() == [3.0] * 4
@@ -24,6 +24,12 @@ def test_radius_0_is_identity_and_window_wider_than_stream_is_the_mean():
     assert torch.equal(tfp(light, 0), light)
     assert torch.allclose(tfp(light, 3), tfp(light[:, None], 3)[:, 0])
     assert torch.allclose(tfp(light, 50), light.mean(0, keepdim=True).expand_as(light))
+
+
+def test_keeps_float32():
+    light = torch.tensor([1.0, 2.0, 4.0])
+    assert tfp(light, 1).dtype == torch.float32
+    assert tfp(light, 1).tolist() == pytest.approx([1.5, 7 / 3, 3.0], rel=1e-7)
 
 
 def test_empty_stream():
