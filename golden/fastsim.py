@@ -49,7 +49,15 @@ from .light import (as_generator, check_dark_current, clock_electrons, dark_elec
                     log_poisson_tail_above, log_poisson_tail_below)
 from .reference import PixelState, step_reference
 
-PATHS = ("dark", "event", "bright", "clock")
+PATHS = ("dark", "event", "bright", "queue", "full", "clock")
+
+#: Largest backlog bound the queue path accepts, and its shortest window.
+MAX_BACKLOG = 64
+MIN_WINDOW = 8
+
+#: Bounded events a pixel-readout can rely on (input saturation, clipping,
+#: backlog, firing, window certification, ...); each gets 1/CHECKS of the budget.
+CHECKS = 8
 METHODS = ("fast", "per-clock")
 
 #: Pixel clocks x pixels of per-clock electrons held at once (bounds memory).
@@ -82,8 +90,11 @@ class SceneSimulator:
         n = self.shape[0] * self.shape[1]
         self.acc = np.zeros(n, np.int64)
         self.fraction = np.zeros(n)
-        self.budget = log_budget(total_pixel_readouts or n, config.clocks_per_readout)
-        self.path_counts = dict.fromkeys(PATHS, 0)
+        # at most CHECKS bounded events per pixel-readout, each below the budget
+        self.budget = log_budget(total_pixel_readouts or n, config.clocks_per_readout) - np.log(CHECKS)
+        self.path_counts = dict.fromkeys(PATHS + ("fallback",), 0)
+        self._window = np.zeros(n)
+        self._b_max = np.zeros(n)
         c = config
         if c.is_te:
             ovf_clock = c.p_max - 1                       # spike in every clock
@@ -116,26 +127,168 @@ class SceneSimulator:
         lam = mu / L                                       # photo-electrons per clock
         mean = lam + dark / L                              # with dark electrons
         low = acc < theta
-        path = np.full(mu.size, 3, np.int8)                # 3 = clock
+        path = np.full(mu.size, PATHS.index("clock"), np.int8)
+        no_dark = dark == 0
+        # inputs surely below saturation (needed by every path that sums charge)
+        unclipped = log_poisson_tail_above(mean, c.input_max + 1) < self.budget
+        # queue: light below the threshold per clock, the accumulator surely never clips
+        rho = lam / theta
+        s_queue = 2.0 * (1.0 - np.minimum(rho, 1.0))       # Lundberg exponent (see _queue_path)
+        with np.errstate(divide="ignore"):
+            log_l = np.log(L)
+            clip_bound = log_l - s_queue * (c.acc_max + 2 - theta)
+            # P(backlog >= b at the window) <= L exp(-s ((b - 1) theta + 1)): b_max + 1 is unlikely
+            b_max = np.floor(((log_l - self.budget) / np.maximum(s_queue, 1e-300) - 1.0) / theta) + 1.0
+        b_max = np.clip(np.where(np.isfinite(b_max), b_max, 1e9), 0, 1e9)
+        window_q = 2.0 * (b_max + 2.0) / np.maximum(1.0 - rho, 1e-9)
+        queue = (low & no_dark & unclipped & (rho < 1) & (clip_bound < self.budget)
+                 & (b_max <= MAX_BACKLOG))
+        path[queue] = PATHS.index("queue")
+        self._window[queue] = window_q[queue]
+        self._b_max[queue] = b_max[queue]
+        # full: light above the threshold per clock, a spike in every clock surely
+        s_full = 2.0 * np.maximum(lam - theta, 0.0) / np.maximum(lam, 1e-300)
+        fire_bound = np.logaddexp(-s_full * (acc + 1.0), log_l - s_full * (c.acc_max + 1.0))
+        gap = np.maximum(lam - theta, 1e-9)
+        with np.errstate(over="ignore", divide="ignore"):
+            window_f = 1.3 * -self.budget / np.maximum(s_full, 1e-300) / gap + 16.0 * lam / gap ** 2
+        full = no_dark & unclipped & (lam > theta) & (fire_bound < self.budget)
+        path[full] = PATHS.index("full")
+        self._window[full] = window_f[full]
         # event: P(some clock > min(theta, 2^E - 1) electrons) below budget
         cap = min(theta, c.input_max)
-        path[low & (log_poisson_tail_above(mean, cap + 1) < self.budget)] = 1
+        path[low & (log_poisson_tail_above(mean, cap + 1) < self.budget)] = PATHS.index("event")
         # bright: every clock >= theta electrons (photo-electrons alone suffice)
         if c.input_max >= theta:
-            path[log_poisson_tail_below(lam, theta - 1) < self.budget] = 2
-        path[low & (mu == 0) & (dark == 0)] = 0
+            path[log_poisson_tail_below(lam, theta - 1) < self.budget] = PATHS.index("bright")
+        path[low & (mu == 0) & (dark == 0)] = PATHS.index("dark")
         for code, name in enumerate(PATHS):
             sel = np.flatnonzero(path == code)
             if not sel.size:
                 continue
             self.path_counts[name] += sel.size
-            if code == 1:
+            if name == "event":
                 self._event_path(sel, mu, dark, words)
-            elif code == 2:
+            elif name == "bright":
                 self._bright_path(sel, mu, lam, dark, words)
-            elif code == 3:
+            elif name in ("queue", "full"):
+                # group by window length (powers of two) so each group is one block
+                n_w = self._window[sel]
+                size = np.maximum(MIN_WINDOW, 2 ** np.ceil(np.log2(np.maximum(n_w, 1.0))))
+                too_long = size > L // 2
+                if too_long.any():
+                    self.path_counts[name] -= int(too_long.sum())
+                    self.path_counts["clock"] += int(too_long.sum())
+                    self._clock_path(sel[too_long], mu, dark, words)
+                for w in np.unique(size[~too_long]):
+                    group = sel[~too_long & (size == w)]
+                    (self._queue_path if name == "queue" else self._full_path)(group, int(w), mu, lam, words)
+            elif name == "clock":
                 self._clock_path(sel, mu, dark, words)
         return words.reshape(self.shape)
+
+    # -- windows of per-clock electrons at the end of the interval -------------
+    def _window_draw(self, sel, w, mu, lam):
+        """Electrons of the last ``w`` clocks (iid Poisson) and the total of the
+        other ``L - w`` clocks; the order in which independent clocks are drawn
+        does not change their law."""
+        L = self.config.clocks_per_readout
+        window = self.rng.poisson(lam[sel, None], size=(sel.size, w))
+        rest = self.rng.poisson(mu[sel] * ((L - w) / L))
+        return window, rest
+
+    def _fallback(self, sel, window, rest, words):
+        """Per-clock path for pixels whose window did not settle their outcome:
+        the drawn window and rest total are kept (the rest spread as a uniform
+        multinomial, which is its law given the total), so nothing is redrawn."""
+        if not sel.size:
+            return
+        c = self.config
+        L = c.clocks_per_readout
+        w = window.shape[1]
+        head = self.rng.multinomial(rest, np.full(L - w, 1.0 / (L - w)))
+        e = np.minimum(np.concatenate([head, window], axis=1), c.input_max)
+        self.path_counts["fallback"] += sel.size
+        self._run_clocks(sel, e, words)
+
+    def _queue_path(self, sel, w, mu, lam, words):
+        """Light below one threshold per clock and no clipping (bound): spikes
+        follow the crossings of the threshold levels through a unit-rate queue.
+
+        Without clipping, spike j fires at ``s_j = max(c_j, s_{j-1} + 1)``, c_j
+        the clock where the charge reaches ``j theta``; the count at readout is
+        the crossings minus the backlog left at the end. The backlog entering
+        the window is at most ``b_max`` (bound); the Lindley recursion over the
+        window from 0 and from ``b_max`` agreeing settles the end backlog.
+        """
+        c = self.config
+        theta, L = c.threshold, c.clocks_per_readout
+        acc0 = self.acc[sel]
+        window, rest = self._window_draw(sel, w, mu, lam)
+        level0 = acc0 + rest                               # charge before the window
+        levels = level0[:, None] + np.cumsum(window, axis=1)
+        crossings = np.diff(levels // theta, axis=1, prepend=(level0 // theta)[:, None])
+        b_lo = np.zeros(sel.size, np.int64)
+        b_hi = self._b_max[sel].astype(np.int64)
+        for j in range(w):
+            x = crossings[:, j]
+            b_lo = np.maximum(b_lo + x - 1, 0)
+            b_hi = np.maximum(b_hi + x - 1, 0)
+        ok = b_lo == b_hi
+        level_end = levels[:, -1]
+        spikes = level_end // theta - b_lo
+        # TE overflow clock from the first 2^b1 crossings, all before the window
+        p = c.p_max
+        over = ok & (spikes >= p) if c.is_te else np.zeros(sel.size, bool)
+        if c.is_te:
+            ranks_ok = (p * theta - acc0) <= rest
+            self._fallback(sel[over & ~ranks_ok], window[over & ~ranks_ok], rest[over & ~ranks_ok], words)
+            ok &= ~(over & ~ranks_ok)
+            over &= ranks_ok
+        self._fallback(sel[~ok], window[~ok], rest[~ok], words)
+        done = sel[ok]
+        self.acc[done] = level_end[ok] - theta * spikes[ok]
+        if not c.is_te:
+            words[done] = np.minimum(spikes[ok], c.ml_max)
+            return
+        words[done] = spikes[ok]
+        if over.any():
+            a, t = acc0[over], rest[over]
+            shapes = np.empty((a.size, p + 1))
+            shapes[:, 0] = theta - a                       # electron of the first crossing
+            shapes[:, 1:p] = theta
+            shapes[:, p] = t - (p * theta - a) + 1
+            gaps = self.rng.standard_gamma(shapes)
+            position = np.cumsum(gaps[:, :p], axis=1) / gaps.sum(axis=1, keepdims=True)
+            clocks = np.minimum((position * (L - w)).astype(np.int64), L - w - 1)
+            first = (clocks - np.arange(1, p + 1)).max(axis=1) + p   # s_p = max_i (c_i + p - i)
+            words[sel[over]] = (1 << c.d) | (first // c.clocks_per_tick + 1)
+
+    def _full_path(self, sel, w, mu, lam, words):
+        """Light above one threshold per clock, a spike in every clock (bound):
+        the word is known and the accumulator is the walk ``acc + sum(e - theta)``
+        held at or below ``2^A - 1``, i.e. ``min(acc - R, acc_max - M)`` with R the
+        sum of ``theta - e`` over the interval and M its largest suffix sum. M is
+        read from the window when the rest provably cannot exceed it (bound)."""
+        c = self.config
+        theta, L, acc_max = c.threshold, c.clocks_per_readout, c.acc_max
+        acc0 = self.acc[sel]
+        window, rest = self._window_draw(sel, w, mu, lam)
+        deficit = theta - window
+        suffix = np.cumsum(deficit[:, ::-1], axis=1)
+        m_win = np.maximum(suffix.max(axis=1), 0)
+        r_win = suffix[:, -1]
+        lam_s = lam[sel]
+        s = 2.0 * (lam_s - theta) / lam_s
+        ok = -s * (m_win + 1 - r_win) < self.budget
+        self._fallback(sel[~ok], window[~ok], rest[~ok], words)
+        total_deficit = r_win + (L - w) * theta - rest
+        end = np.minimum(acc0 - total_deficit, acc_max - m_win)
+        done = sel[ok]
+        # under the sure event every clock fires, so end >= 0; clip only guards
+        # the 2^-64 failure event against an illegal state
+        self.acc[done] = np.clip(end[ok], 0, acc_max)
+        words[done] = self._bright_word
 
     def _event_path(self, sel, mu, dark, words):
         c = self.config
@@ -204,11 +357,17 @@ class SceneSimulator:
                 e = clock_electrons(c, mu[part], dark[part], self.rng, self.budget)
             else:
                 e, self.fraction[part] = deterministic_clock_electrons(c, mu[part], self.fraction[part])
-            state = PixelState.zeros((1, part.size))
-            state.acc[0] = self.acc[part]
-            w, state = step_reference(c, e.T.reshape(L, 1, part.size), state)
-            words[part] = w[0, 0]
-            self.acc[part] = state.acc[0]
+            self._run_clocks(part, e, words)
+
+    def _run_clocks(self, sel, e, words):
+        """The literal update rule on per-clock electrons ``e`` (n, L) of pixels ``sel``."""
+        c = self.config
+        L = c.clocks_per_readout
+        state = PixelState.zeros((1, sel.size))
+        state.acc[0] = self.acc[sel]
+        w, state = step_reference(c, np.ascontiguousarray(e.T).reshape(L, 1, sel.size), state)
+        words[sel] = w[0, 0]
+        self.acc[sel] = state.acc[0]
 
 
 def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,

@@ -45,8 +45,8 @@ def _compare(config, levels, pixels, readouts, seed):
 
 
 @pytest.mark.parametrize("config, pixels", [
-    (SensorConfig(), 3000),                                           # paper TE, L = 240
-    (SensorConfig(mode="ml"), 3000),                                  # paper ML
+    (SensorConfig(), 2500),                                           # paper TE, L = 240
+    (SensorConfig(mode="ml"), 2500),                                  # paper ML
 ], ids=str)
 def test_paper_configs_match_cycle_exact_model(config, pixels):
     for level, z, tvd in _compare(config, LEVELS, pixels, 3, seed=11):
@@ -83,9 +83,28 @@ def test_light_steps_between_readouts_match():
 
 def test_each_path_is_exercised():
     config = SensorConfig()
-    sim = SceneSimulator(config, (1, 4), rng=0)
-    sim.readout(np.array([[0.0, 0.01, 1.0, 10.0]]))
-    assert sim.path_counts == {"dark": 1, "event": 1, "bright": 1, "clock": 1}
+    sim = SceneSimulator(config, (1, 6), rng=0)
+    sim.readout(np.array([[0.0, 0.01, 10.0, 0.6, 1.0, 10.0]]))
+    assert sim.path_counts == {"dark": 1, "event": 1, "bright": 2, "queue": 1, "full": 0,
+                               "clock": 1, "fallback": 0}
+    sim.readout(np.array([[0.0, 0.01, 10.0, 0.6, 1.0, 1.5]]))     # full after a full accumulator
+    assert sim.path_counts == {"dark": 2, "event": 2, "bright": 3, "queue": 2, "full": 1,
+                               "clock": 2, "fallback": 0}
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"),
+                                    SensorConfig(b1=5, b2=3, acc_bits=12)], ids=str)
+def test_queue_and_full_paths_match_cycle_exact_model(config):
+    """Light within a factor 2 of one threshold per clock, where charge backs up
+    (queue path) or the accumulator stays near full (full path)."""
+    per_clock = np.array([0.45, 0.7, 0.85, 1.15, 1.3, 1.6, 2.5])
+    levels = per_clock * config.threshold * config.clocks_per_readout / 42000
+    for level, z, tvd in _compare(config, levels, 2000, 3, seed=21):
+        assert abs(z) < 4 and tvd < 0.05, (level, z, tvd)
+    sim = SceneSimulator(config, (len(levels), 200), rng=0)
+    for _ in range(3):
+        sim.readout(np.broadcast_to(levels[:, None], (len(levels), 200)))
+    assert sim.path_counts["queue"] > 0 and sim.path_counts["full"] > 0, sim.path_counts
 
 
 @pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
@@ -187,7 +206,7 @@ def test_refuses_bad_input():
 def test_dark_current_matches_cycle_exact_model():
     config = SensorConfig()
     levels = [0.0, 0.005, 0.1]
-    scene = np.broadcast_to(np.asarray(levels)[None, :, None], (4, 3, 4000)).copy()
+    scene = np.broadcast_to(np.asarray(levels)[None, :, None], (3, 3, 2500)).copy()
     for model in ("eq12", "eq13"):
         fast = simulate_scene(config, scene, seed=1, dark_current=model)
         exact = simulate(config, poisson_stimulus(config, scene, 2, dark_current=model))
@@ -196,3 +215,40 @@ def test_dark_current_matches_cycle_exact_model():
             b = decode_spikes(exact[:, i], config).mean(axis=0)
             se = np.sqrt(a.var() / a.size + b.var() / b.size)
             assert abs(a.mean() - b.mean()) < 4 * se + 1e-12, (model, levels[i])
+
+
+@pytest.mark.parametrize("config, per_clock, pixels", [
+    (SensorConfig(), [0.7, 0.85, 1.15, 1.3], 3000),
+    (SensorConfig(mode="ml"), [0.7, 0.85, 1.15, 1.3], 3000),
+    # a small threshold makes backlogs and dips below full common enough that
+    # a wrong backlog or dip shows plainly
+    (SensorConfig(threshold=5, acc_bits=8), [0.4, 0.5, 1.6, 2.0], 8000),
+    (SensorConfig(mode="ml", threshold=5, acc_bits=8), [0.4, 0.5, 1.6, 2.0], 8000),
+], ids=str)
+def test_carried_accumulator_of_queue_and_full_paths_matches_per_clock(config, per_clock, pixels):
+    """The accumulator carried out of the queue path (backlog left at readout)
+    and the full path (dips below full near the end) has the per-clock law:
+    mean, P(backlog), P(full) within 4 standard errors, histogram TVD < 0.05."""
+    theta, acc_max = config.threshold, config.acc_max
+    per_clock = np.asarray(per_clock)
+    levels = per_clock * theta * config.clocks_per_readout / 42000
+    light = np.repeat(levels, pixels)[None, :]
+    fast = SceneSimulator(config, light.shape, rng=31)
+    full = SceneSimulator(config, light.shape, rng=32, method="per-clock")
+    for sim in (fast, full):
+        for _ in range(3):
+            sim.readout(light)
+    assert fast.path_counts["queue"] >= 1.6 * pixels and fast.path_counts["full"] >= pixels, fast.path_counts
+    width = max(1, theta // 8)
+    bins = np.arange(0, acc_max + width + 1, width)
+    for i in range(len(levels)):
+        a = fast.acc[i * pixels:(i + 1) * pixels]
+        b = full.acc[i * pixels:(i + 1) * pixels]
+        se = np.sqrt(a.var() / pixels + b.var() / pixels)
+        assert abs(a.mean() - b.mean()) <= 4 * se, (per_clock[i], a.mean(), b.mean())
+        for event in (lambda x: x >= theta, lambda x: x == acc_max):
+            pa, pb = event(a).mean(), event(b).mean()
+            se = np.sqrt((pa * (1 - pa) + pb * (1 - pb)) / pixels)
+            assert abs(pa - pb) <= 4 * se + 1e-12, (per_clock[i], pa, pb)
+        tvd = 0.5 * np.abs(np.histogram(a, bins)[0] - np.histogram(b, bins)[0]).sum() / pixels
+        assert tvd < 0.05, (per_clock[i], tvd)
