@@ -215,7 +215,22 @@ def test_scene_command_folder(tmp_path):
 
 def test_scene_command_refuses(tmp_path):
     assert_refused(run_tespike("scene", "--name", "nope", "--out", tmp_path / "I.npy"), "nope")
-    assert_refused(run_tespike("scene", "--frames", "-2", "--out", tmp_path / "I.npy"), "frames")
-    assert_refused(run_tespike("scene", "--folder", tmp_path, "--out", tmp_path / "I.npy"), "no frames")
-    assert_refused(run_tespike("scene", "--out", tmp_path / "no" / "I.npy"), "does not exist")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args, word", [
+    (("--frames", "-2"), "frames"),
+    (("--name", "sun", "--motion", "pan"), "takes no options"),
+    (("--sources", "-1"), "sources"),
+    (("--folder", "."), "no frames"),
+    (("--folder", ".", "--crop", "3y4"), "HxW"),
+])
+def test_scene_command_refusals_in_process(tmp_path, capsys, monkeypatch, args, word):
+    from cosim.cli import main
+    monkeypatch.chdir(tmp_path)
+    assert main(["scene", *args, "--out", str(tmp_path / "I.npy")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and word in err[0]
+    assert main(["scene", "--out", str(tmp_path / "no" / "I.npy")]) == 2
+    assert "does not exist" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
