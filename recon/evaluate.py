@@ -152,7 +152,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     bar = tqdm(total=len(sequences) * len(modes) * (1 + len(methods)), desc="evaluate",
                unit="step", disable=not progress)
     for index, (name, light) in enumerate(sequences):
-        light = check_scene(np.asarray(light)).astype(np.float32)
+        light = check_scene(np.asarray(light))          # float64: no overflow of user light
         peak = float(light.max())
         if peak <= 0:
             raise InputError(f"sequence {name!r} is all zero: its peak cannot normalise the metrics")

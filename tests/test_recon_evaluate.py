@@ -138,3 +138,10 @@ def test_method_options_reach_the_method(small_run):
     assert [r.psnr_mu for r in windowed.results] != default
     with pytest.raises(InputError, match="not an option"):
         evaluate(sequences[:1], simulate, methods=("tfp",), progress=False, options={"tfp": {"search": "window"}})
+
+
+def test_light_far_above_float32_is_scored_not_overflowed():
+    light = make_scene("moderate", 4, 24, 24, seed=1).astype(np.float64) * 1e300
+    evaluation = evaluate([("huge", light)], simulate, methods=("tfp",), modes=("te",), progress=False)
+    (result,) = evaluation.results
+    assert np.isfinite(result.psnr_mu) and result.psnr_mu < 10     # saturated codes: far too dark
