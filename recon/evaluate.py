@@ -346,7 +346,12 @@ def write_outputs(evaluation: Evaluation, out: str | Path) -> dict[str, Path]:
     write_text(paths["table.csv"], table_csv(evaluation))
     write_text(paths["results.csv"], results_csv(evaluation))
     plot_quality_vs_time(evaluation, paths["plot"])
+    used: set[str] = set()
     for sequence in evaluation.strips:
-        paths[f"strip:{sequence}"] = out / "strips" / f"{safe_name(sequence)}.png"
+        stem = safe_name(sequence)
+        while stem in used:                       # "a b" and "a_b" must not share a file
+            stem += "_"
+        used.add(stem)
+        paths[f"strip:{sequence}"] = out / "strips" / f"{stem}.png"
         plot_strip(evaluation, sequence, paths[f"strip:{sequence}"])
     return paths
