@@ -24,6 +24,7 @@ COMMANDS = {
     "reconstruct": "reconstruct_cmd",
     "evaluate": "evaluate_cmd",
     "demo": "demo_cmd",
+    "scene": "scene_cmd",
 }
 
 EXIT_BAD_INPUT = 2

@@ -1,0 +1,61 @@
+"""``tespike scene``: write a light sequence I.npy (built-in scene or a folder of HDR frames)."""
+
+HELP = "write a light sequence I.npy: a built-in scene by name, or a folder of .exr/.hdr frames"
+
+
+def add_arguments(parser):
+    parser.add_argument("--name", default="default",
+                        help="built-in scene (see --list); default: the shipped panorama, panned")
+    parser.add_argument("--folder", help="instead of --name: a folder of .exr/.hdr frames, sorted by name")
+    parser.add_argument("--frames", type=int, default=24,
+                        help="readout intervals K (default 24; with --folder: at most this many frames)")
+    parser.add_argument("--height", type=int, default=96, help="rows H (default 96)")
+    parser.add_argument("--width", type=int, default=128, help="columns W (default 128)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--peak", type=float, default=1.0,
+                        help="brightest pixel of the sequence, in design light (default 1.0)")
+    parser.add_argument("--motion", help="camera motion of panorama scenes: pan (default), tilt, rotate, "
+                        "zoom or mixed")
+    parser.add_argument("--sources", type=int, help="moving bright sources added to a panorama scene")
+    parser.add_argument("--weights", default="rec709", help="grayscale weights for --folder: rec709 or rec601")
+    parser.add_argument("--crop", metavar="HxW", help="--folder: centre-crop every frame to H x W (e.g. 384x512)")
+    parser.add_argument("--downscale", type=int, default=1,
+                        help="--folder: area-average N x N blocks after cropping (default 1)")
+    parser.add_argument("--list", action="store_true", help="list the built-in scenes and exit")
+    parser.add_argument("--out", help="I.npy to write: float32 (K, H, W), 1.0 = design light")
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from golden.errors import InputError
+    from golden.io import atomic_output
+    from recon.scenes import SCENES, load_hdr_sequence, make_scene
+
+    if args.list:
+        for name, (_, summary) in SCENES.items():
+            print(f"{name:10s} {summary}")
+        return 0
+    if not args.out:
+        raise InputError("--out is required (the I.npy to write)")
+    if args.folder:
+        crop = None
+        if args.crop:
+            try:
+                crop = tuple(int(n) for n in args.crop.lower().split("x"))
+            except ValueError:
+                crop = ()
+            if len(crop) != 2:
+                raise InputError(f"--crop {args.crop!r} must be HxW, e.g. 384x512")
+        light = load_hdr_sequence(args.folder, weights=args.weights, peak=args.peak,
+                                  max_frames=args.frames, crop=crop, downscale=args.downscale,
+                                  progress=True)
+    else:
+        if args.sources is not None and args.sources < 0:
+            raise InputError(f"--sources = {args.sources} must be >= 0")
+        light = make_scene(args.name, args.frames, args.height, args.width, seed=args.seed,
+                           peak=args.peak, motion=args.motion, sources=args.sources)
+    with atomic_output(args.out) as tmp:
+        with open(tmp, "wb") as handle:
+            np.save(handle, light)
+    return 0

@@ -1,0 +1,357 @@
+"""Evaluation harness: sequences -> TE and ML streams -> every method -> the paper's Table 1.
+
+For each light sequence ``I`` (K, H, W) and each sensor mode (the paper's
+section 6.1 settings: TE with b1 = b2 = 4, ML with an 8-bit counter, both at
+their default thresholds), the stream is simulated once with photon shot
+noise, then reconstructed by every method; each method is timed on the whole
+sequence (wall time / K = run time per frame).
+
+Metrics (paper sections 6.4 and A.2.3): PSNR-mu and SSIM-mu with mu = 5000,
+computed per frame after dividing prediction and ground truth by the ground
+truth's peak over the *whole sequence* (the paper's appendix A.2.2
+normalises each sequence by its maximum; built-in scenes already have peak
+1.0, so this changes nothing for them and keeps user sequences comparable),
+clipping to [0, 1] and mu-law tone mapping. Frames whose window of readouts
+would reach past either end of the sequence are not scored (the first and
+last ``window // 2``; all frames when the sequence is shorter than a window).
+The per-frame values are averaged per sequence, then the sequence means are
+averaged (paper section 6.4).
+
+Simulation is passed in as a function (``simulate(config, light, rng) ->
+words``) because :mod:`recon` does not import the simulator; the command
+line and the benchmarks pass :func:`golden.fastsim.simulate_scene`.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import math
+import time
+from pathlib import Path
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.errors import InputError
+from golden.io import atomic_output, check_scene
+
+#: Column order of the paper's Table 1: ML on the left, TE on the right.
+MODES = ("ml", "te")
+MU = 5000.0
+#: Range of the error maps of the strips (absolute difference of mu-law images).
+ERROR_RANGE = 0.25
+
+Simulate = Callable[[SensorConfig, np.ndarray, np.random.Generator], np.ndarray]
+
+
+def paper_configs() -> dict[str, SensorConfig]:
+    """The paper's section 6.1 sensors: TE b1 = b2 = 4 and ML 8 bits, default thresholds."""
+    return {"ml": SensorConfig(mode="ml"), "te": SensorConfig(mode="te")}
+
+
+def label(method: str, mode: str) -> str:
+    """Paper-style name, e.g. ``TFP_TE``."""
+    return f"{method.upper()}_{mode.upper()}"
+
+
+def tone_map(light: np.ndarray, peak: float, mu: float = MU) -> np.ndarray:
+    """Divide by the ground truth's peak, clip to [0, 1], mu-law (paper eq. 11); float64."""
+    h = np.clip(np.asarray(light, np.float64) / peak, 0.0, 1.0)
+    return np.log1p(mu * h) / math.log1p(mu)
+
+
+def scored_frames(frames: int, window: int) -> slice:
+    """Frames whose whole window of readouts lies inside the sequence (all if too short)."""
+    half = window // 2
+    return slice(half, frames - half) if frames > 2 * half else slice(0, frames)
+
+
+@dataclasses.dataclass(frozen=True)
+class Result:
+    """One sequence x mode x method."""
+
+    sequence: str
+    mode: str
+    method: str
+    psnr_mu: float
+    ssim_mu: float
+    ms_per_frame: float
+    frames_scored: int
+
+
+@dataclasses.dataclass
+class Evaluation:
+    """Every :class:`Result`, plus one tone-mapping-ready frame per sequence for the strips."""
+
+    results: list[Result]
+    methods: tuple[str, ...]
+    modes: tuple[str, ...]
+    window: int
+    strips: dict[str, dict] = dataclasses.field(default_factory=dict)
+    #: with ``keep=True``: (sequence, mode) -> words and (sequence, mode, method) -> images
+    streams: dict[tuple[str, str], np.ndarray] = dataclasses.field(default_factory=dict)
+    images: dict[tuple[str, str, str], np.ndarray] = dataclasses.field(default_factory=dict)
+
+    def summary(self) -> dict[tuple[str, str], dict[str, float]]:
+        """(method, mode) -> mean over sequences of the per-sequence means."""
+        out = {}
+        for method in self.methods:
+            for mode in self.modes:
+                rows = [r for r in self.results if r.method == method and r.mode == mode]
+                if rows:
+                    out[method, mode] = {
+                        "psnr_mu": float(np.mean([r.psnr_mu for r in rows])),
+                        "ssim_mu": float(np.mean([r.ssim_mu for r in rows])),
+                        "ms_per_frame": float(np.mean([r.ms_per_frame for r in rows])),
+                        "sequences": len(rows),
+                    }
+        return out
+
+
+def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
+             methods: Sequence[str] | None = None, modes: Sequence[str] = MODES,
+             configs: dict[str, SensorConfig] | None = None, window: int = 9, seed: int = 0,
+             device: str = "cpu", progress: bool = True, keep: bool = False,
+             options: dict[str, dict] | None = None) -> Evaluation:
+    """Simulate every sequence in every mode, reconstruct with every method, score.
+
+    ``sequences``: (label, light (K, H, W)) pairs; ``methods``: keys of
+    :data:`recon.methods.METHODS` (default all); ``seed`` makes the shot
+    noise reproducible (one independent stream per sequence and mode);
+    ``keep`` keeps every stream and reconstruction in the result (memory!);
+    ``options`` maps a method to extra keywords of :func:`recon.methods.reconstruct`
+    (e.g. ``{"tfi": {"search": "window"}}``).
+    """
+    from tqdm import tqdm
+
+    from .methods import METHODS, reconstruct
+    from .metrics import psnr_mu, ssim_mu
+
+    methods = tuple(METHODS) if methods is None else tuple(methods)
+    for method in methods:
+        if method not in METHODS:
+            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(METHODS)})")
+    configs = dict(paper_configs() if configs is None else configs)
+    for mode in modes:
+        if mode not in configs:
+            raise InputError(f"no sensor configuration for mode {mode!r}")
+    if type(seed) is not int or seed < 0:
+        raise InputError(f"seed = {seed!r} must be an integer >= 0")
+    sequences = list(sequences)
+    if not sequences:
+        raise InputError("no sequences to evaluate")
+    labels = [name for name, _ in sequences]
+    if len(set(labels)) != len(labels):
+        raise InputError(f"sequence labels must be unique, got {labels}")
+
+    evaluation = Evaluation([], methods, tuple(modes), window)
+    warmed: set[tuple[str, str]] = set()
+    bar = tqdm(total=len(sequences) * len(modes) * (1 + len(methods)), desc="evaluate",
+               unit="step", disable=not progress)
+    for index, (name, light) in enumerate(sequences):
+        light = check_scene(np.asarray(light))          # float64: no overflow of user light
+        peak = float(light.max())
+        if peak <= 0:
+            raise InputError(f"sequence {name!r} is all zero: its peak cannot normalise the metrics")
+        frames = scored_frames(light.shape[0], window)
+        middle = (frames.start + frames.stop - 1) // 2
+        strip = {"gt": light[middle], "peak": peak, "frame": middle}
+        for mode_index, mode in enumerate(modes):
+            config = configs[mode]
+            bar.set_postfix_str(f"{name} {mode} simulate")
+            rng = np.random.default_rng([seed, index, mode_index])
+            words = simulate(config, light, rng)
+            if keep:
+                evaluation.streams[name, mode] = words
+            bar.update()
+            for method in methods:
+                bar.set_postfix_str(f"{name} {label(method, mode)}")
+                kwargs = (options or {}).get(method, {})
+                if (mode, method) not in warmed:      # one-time costs (tables, torch) are not timed
+                    reconstruct(words[:, :4, :4], config, method, window=window, device=device, **kwargs)
+                    warmed.add((mode, method))
+                start = time.perf_counter()
+                images = reconstruct(words, config, method, window=window, device=device, **kwargs)
+                seconds = time.perf_counter() - start
+                pred, truth = images[frames], light[frames]
+                evaluation.results.append(Result(
+                    name, mode, method,
+                    float(np.mean(psnr_mu(pred, truth, peak=peak))),
+                    float(np.mean(ssim_mu(pred, truth, peak=peak))),
+                    1e3 * seconds / light.shape[0], int(pred.shape[0])))
+                strip[mode, method] = images[middle]
+                if keep:
+                    evaluation.images[name, mode, method] = images
+                bar.update()
+        evaluation.strips[name] = strip
+    bar.close()
+    return evaluation
+
+
+# ----------------------------------------------------------------- writers
+def _fmt(value: float, digits: int) -> str:
+    return "inf" if math.isinf(value) else f"{value:.{digits}f}"
+
+
+def table_rows(evaluation: Evaluation) -> list[list[str]]:
+    """Table 1 layout: one row per method, the ML columns then the TE columns."""
+    summary = evaluation.summary()
+    rows = []
+    for method in evaluation.methods:
+        row = []
+        for mode in evaluation.modes:
+            s = summary.get((method, mode))
+            row += [label(method, mode)] + ([_fmt(s["psnr_mu"], 2), _fmt(s["ssim_mu"], 3),
+                                             _fmt(s["ms_per_frame"], 2)] if s else ["", "", ""])
+        rows.append(row)
+    return rows
+
+
+def table_markdown(evaluation: Evaluation) -> str:
+    """The paper's Table 1 layout in Markdown (PSNR-mu, SSIM-mu, ms per frame per mode)."""
+    header, align = [], []
+    for mode in evaluation.modes:
+        header += [f"{mode.upper()} reconstruction", "PSNR-μ ↑", "SSIM-μ ↑", "ms / frame ↓"]
+        align += [":---", "---:", "---:", "---:"]
+    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(align) + " |"]
+    lines += ["| " + " | ".join(row) + " |" for row in table_rows(evaluation)]
+    return "\n".join(lines) + "\n"
+
+
+def table_csv(evaluation: Evaluation) -> str:
+    """Table 1 as CSV, one row per method: method, then per mode name, psnr_mu, ssim_mu, ms_per_frame."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    header = ["method"]
+    for mode in evaluation.modes:
+        header += [f"{mode}_name", f"{mode}_psnr_mu", f"{mode}_ssim_mu", f"{mode}_ms_per_frame"]
+    writer.writerow(header)
+    for method, row in zip(evaluation.methods, table_rows(evaluation)):
+        writer.writerow([method] + row)
+    return buffer.getvalue()
+
+
+def results_csv(evaluation: Evaluation) -> str:
+    """Every sequence x mode x method, one row each (full precision)."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    fields = [f.name for f in dataclasses.fields(Result)]
+    writer.writerow(fields)
+    for result in evaluation.results:
+        writer.writerow([getattr(result, f) for f in fields])
+    return buffer.getvalue()
+
+
+def write_text(path: str | Path, text: str) -> None:
+    with atomic_output(path) as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")
+
+
+def _save_figure(fig, path: str | Path) -> None:
+    import matplotlib.pyplot as plt
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=100)
+    plt.close(fig)
+
+
+def plot_quality_vs_time(evaluation: Evaluation, path: str | Path) -> None:
+    """PNG: PSNR-mu and SSIM-mu against run time per frame, every method and mode."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    summary = evaluation.summary()
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
+    markers = "osD^vP*X"
+    colours = {"ml": "tab:blue", "te": "tab:red"}
+    for (method, mode), s in summary.items():
+        marker = markers[evaluation.methods.index(method) % len(markers)]
+        for axis, key in zip(axes, ("psnr_mu", "ssim_mu")):
+            axis.scatter(s["ms_per_frame"], s[key], marker=marker, s=60,
+                         color=colours.get(mode, "tab:gray"), label=label(method, mode))
+            axis.annotate(label(method, mode), (s["ms_per_frame"], s[key]), fontsize=8,
+                          xytext=(4, 4), textcoords="offset points")
+    for axis, name in zip(axes, ("PSNR-μ (dB) ↑", "SSIM-μ ↑")):
+        axis.set_xscale("log")
+        axis.set_xlabel("run time per frame (ms, log)")
+        axis.set_ylabel(name)
+        axis.grid(True, alpha=0.3)
+    count = len({r.sequence for r in evaluation.results})
+    fig.suptitle(f"quality against run time, mean of {count} sequence(s), window {evaluation.window}")
+    fig.tight_layout()
+    _save_figure(fig, path)
+
+
+def plot_strip(evaluation: Evaluation, sequence: str, path: str | Path) -> None:
+    """PNG strip of one frame: ground truth and every method (mu-law, GT-peak normalised),
+    with the error maps |T(method) - T(GT)| beneath, one pair of rows per mode."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    strip = evaluation.strips[sequence]
+    peak = strip["peak"]
+    truth = tone_map(strip["gt"], peak)
+    methods, modes = evaluation.methods, evaluation.modes
+    columns = 1 + len(methods)
+    height, width = truth.shape
+    scale = 2.4 / max(height, width) * max(width, height * 0.75)
+    fig, axes = plt.subplots(2 * len(modes), columns, squeeze=False,
+                             figsize=(columns * scale * width / max(height, width) + 0.6,
+                                      2 * len(modes) * scale * height / max(height, width) + 0.6))
+    error_image = None
+    for m, mode in enumerate(modes):
+        top, bottom = axes[2 * m], axes[2 * m + 1]
+        top[0].imshow(truth, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+        top[0].set_title("ground truth", fontsize=8)
+        bottom[0].axis("off")
+        for c, method in enumerate(methods, start=1):
+            mapped = tone_map(strip[mode, method], peak)
+            psnr = next(r.psnr_mu for r in evaluation.results
+                        if r.sequence == sequence and r.mode == mode and r.method == method)
+            top[c].imshow(mapped, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+            top[c].set_title(f"{label(method, mode)} ({psnr:.1f} dB)", fontsize=8)
+            error_image = bottom[c].imshow(np.abs(mapped - truth), cmap="magma", vmin=0,
+                                           vmax=ERROR_RANGE, interpolation="nearest")
+            bottom[c].set_title(f"|error| {label(method, mode)}", fontsize=8)
+        for axis in list(top) + list(bottom):
+            axis.set_xticks([])
+            axis.set_yticks([])
+    fig.suptitle(f"{sequence}, frame {strip['frame']}: μ-law (μ = 5000) of light / GT peak", fontsize=9)
+    fig.tight_layout()
+    if error_image is not None:          # the colour scale sits in the empty cell left of the errors
+        for m in range(len(modes)):
+            holder = axes[2 * m + 1, 0]
+            bar = fig.colorbar(error_image, cax=holder.inset_axes([0.42, 0.05, 0.12, 0.9]))
+            bar.ax.tick_params(labelsize=7)
+            bar.set_label("|error|", fontsize=7)
+    _save_figure(fig, path)
+
+
+def safe_name(name: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name) or "sequence"
+
+
+def write_outputs(evaluation: Evaluation, out: str | Path) -> dict[str, Path]:
+    """Write table.md, table.csv, results.csv, quality_vs_time.png and strips/<seq>.png into ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "strips").mkdir(exist_ok=True)
+    paths = {"table.md": out / "table.md", "table.csv": out / "table.csv",
+             "results.csv": out / "results.csv", "plot": out / "quality_vs_time.png"}
+    write_text(paths["table.md"], table_markdown(evaluation))
+    write_text(paths["table.csv"], table_csv(evaluation))
+    write_text(paths["results.csv"], results_csv(evaluation))
+    plot_quality_vs_time(evaluation, paths["plot"])
+    used: set[str] = set()
+    for sequence in evaluation.strips:
+        stem = safe_name(sequence)
+        while stem in used:                       # "a b" and "a_b" must not share a file
+            stem += "_"
+        used.add(stem)
+        paths[f"strip:{sequence}"] = out / "strips" / f"{stem}.png"
+        plot_strip(evaluation, sequence, paths[f"strip:{sequence}"])
+    return paths

@@ -1,0 +1,72 @@
+"""Colour to light: grayscale conversion and per-sequence normalisation (paper A.2.2).
+
+The paper converts every frame "to grayscale to simulate external light
+intensity" without naming the weights, then divides a whole sequence by its
+largest pixel so that the brightest pixel is 1.0, the brightest light the
+sensor is designed for (SPEC section 6: I = 1 is 42000 electrons per readout).
+We use Rec. 709 / sRGB luminance weights by default (the primaries of the HDR
+panoramas and of most linear HDR video); Rec. 601 weights (what OpenCV's
+``cvtColor(..., COLOR_BGR2GRAY)`` uses) are available by name.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from golden.errors import InputError
+
+#: Linear-light luminance weights (R, G, B) by name.
+LUMA_WEIGHTS = {
+    "rec709": (0.2126, 0.7152, 0.0722),
+    "rec601": (0.299, 0.587, 0.114),
+}
+DEFAULT_WEIGHTS = "rec709"
+
+
+def to_gray(image: np.ndarray, weights: str = DEFAULT_WEIGHTS, *, what: str = "image") -> np.ndarray:
+    """Linear RGB ``(..., H, W, 3)`` or gray ``(..., H, W)`` -> float64 luminance ``(..., H, W)``.
+
+    Negative values (a few pixels of lossy-compressed HDR files dip just below
+    zero) are clipped at 0 *before* mixing; non-finite values are refused.
+    A trailing axis of 3 is read as RGB, one of 1 as gray.
+    """
+    if weights not in LUMA_WEIGHTS:
+        raise InputError(f"unknown grayscale weights {weights!r} (known: {', '.join(LUMA_WEIGHTS)})")
+    image = np.asarray(image)
+    if image.dtype.kind not in "fiu":
+        raise InputError(f"{what}: dtype {image.dtype} is not numeric")
+    image = image.astype(np.float64, copy=False)
+    if image.size and not np.isfinite(image).all():
+        raise InputError(f"{what}: holds non-finite values (NaN or infinity)")
+    if image.ndim >= 3 and image.shape[-1] == 3:
+        rgb = np.maximum(image, 0.0)
+        return rgb @ np.asarray(LUMA_WEIGHTS[weights], np.float64)
+    if image.ndim >= 3 and image.shape[-1] == 1:
+        return np.maximum(image[..., 0], 0.0)
+    if image.ndim >= 2:
+        return np.maximum(image, 0.0)
+    raise InputError(f"{what}: shape {image.shape} is not an image (H, W) or (H, W, 3)")
+
+
+def normalise_sequence(frames: np.ndarray, peak: float = 1.0, *, what: str = "sequence") -> np.ndarray:
+    """Divide a whole ``(K, H, W)`` sequence by its largest value, times ``peak``.
+
+    One factor for the whole sequence (not per frame), as the paper does, so
+    that brightness changes between frames survive. ``peak = 1`` makes the
+    brightest pixel the design light. An all-zero sequence cannot be
+    normalised and is refused. Returns float32.
+    """
+    frames = np.asarray(frames, dtype=np.float64)
+    if not (np.isfinite(peak) and peak > 0):
+        raise InputError(f"{what}: peak = {peak!r} must be a finite number > 0")
+    if frames.size == 0:
+        raise InputError(f"{what}: is empty (shape {frames.shape})")
+    if not np.isfinite(frames).all():
+        raise InputError(f"{what}: holds non-finite values (NaN or infinity)")
+    if frames.min() < 0:
+        raise InputError(f"{what}: holds negative light ({frames.min()}); clip or fix it first")
+    top = float(frames.max())
+    if top <= 0:
+        raise InputError(f"{what}: every pixel is 0, so it cannot be normalised by its maximum")
+    out = frames * (peak / top)
+    return out.astype(np.float32)

@@ -1,0 +1,363 @@
+"""HDR image files: Radiance RGBE (.hdr) in numpy, OpenEXR (.exr), and frame folders.
+
+HDR video datasets (HDM-HDR-2014, Kalantari13) ship as one ``.exr`` or
+``.hdr`` file per frame. :func:`load_hdr_sequence` turns such a folder into a
+light sequence ``I`` (K, H, W) the way the paper does (appendix A.2.2):
+grayscale, then one division by the sequence's largest pixel.
+
+Radiance RGBE follows Greg Ward's format: a text header (``#?RADIANCE``,
+``FORMAT=32-bit_rle_rgbe``, optional ``EXPOSURE=``), a resolution line such
+as ``-Y 512 +X 768``, then scanlines of 4-byte pixels (R, G, B mantissas and
+a shared exponent E), flat or in "new" run-length encoding. A pixel decodes
+as ``mantissa * 2^(E - 136)`` (E = 0 means black) -- the rule of Bruce
+Walter's ``rgbe.c`` that OpenCV, imageio and most dataset pipelines use
+(Radiance's own ``colr_color`` adds 0.5 to the mantissa; the difference is
+below the format's 1/256 quantisation). ``EXPOSURE=`` values are multipliers
+already applied to the pixels, so the reader divides them out.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from golden.errors import InputError
+from golden.io import atomic_output
+
+from .color import DEFAULT_WEIGHTS, normalise_sequence, to_gray
+
+#: File name endings read as frames (case-insensitive).
+FRAME_SUFFIXES = (".exr", ".hdr", ".pic", ".rgbe")
+
+_RESOLUTION = re.compile(rb"^([+-])([XY]) (\d+) ([+-])([XY]) (\d+)$")
+
+
+# ---------------------------------------------------------------- RGBE codec
+def rgbe_to_float(rgbe: np.ndarray) -> np.ndarray:
+    """uint8 ``(..., 4)`` RGBE pixels -> float32 ``(..., 3)`` linear RGB."""
+    rgbe = np.asarray(rgbe, dtype=np.uint8)
+    exponent = rgbe[..., 3].astype(np.int32)
+    scale = np.where(exponent > 0, np.ldexp(1.0, exponent - 136), 0.0)
+    return (rgbe[..., :3].astype(np.float64) * scale[..., None]).astype(np.float32)
+
+
+def float_to_rgbe(rgb: np.ndarray) -> np.ndarray:
+    """float ``(..., 3)`` linear RGB (finite, >= 0) -> uint8 ``(..., 4)`` RGBE.
+
+    Walter's rule: the largest channel v = f * 2^e with f in [0.5, 1) sets the
+    exponent e + 128; mantissas are ``floor(c * 256 / 2^e)``. Values below
+    1e-32 become black; values at or above 2^127 cannot be stored and are
+    refused.
+    """
+    rgb = np.asarray(rgb, dtype=np.float64)
+    if rgb.shape[-1:] != (3,):
+        raise InputError(f"RGBE encoding needs (..., 3) RGB values, not shape {rgb.shape}")
+    if rgb.size and (not np.isfinite(rgb).all() or rgb.min() < 0):
+        raise InputError("RGBE encoding needs finite, non-negative values")
+    top = rgb.max(axis=-1) if rgb.size else np.zeros(rgb.shape[:-1])
+    if top.size and top.max() >= 2.0 ** 127:
+        raise InputError(f"value {top.max():g} is too large for RGBE (must be < 2^127)")
+    fraction, exponent = np.frexp(top)
+    dark = top < 1e-32
+    safe = np.where(dark, 1.0, top)
+    factor = np.where(dark, 0.0, fraction * 256.0 / safe)
+    out = np.zeros(rgb.shape[:-1] + (4,), np.uint8)
+    out[..., :3] = np.floor(rgb * factor[..., None]).clip(0, 255).astype(np.uint8)
+    out[..., 3] = np.where(dark, 0, exponent + 128).astype(np.uint8)
+    return out
+
+
+# ---------------------------------------------------------------- .hdr reader
+def _parse_header(data: bytes, path: str) -> tuple[int, float, tuple]:
+    """Return (offset of pixel data, exposure, (rows, cols, row-axis info))."""
+    if not data.startswith(b"#?"):
+        raise InputError(f"{path!r} is not a Radiance HDR file (it must start with '#?')")
+    pos = 0
+    exposure = 1.0
+    fmt = None
+    while True:
+        end = data.find(b"\n", pos)
+        if end < 0:
+            raise InputError(f"{path!r}: header never ends (no blank line before the resolution)")
+        line = data[pos:end].rstrip(b"\r")
+        pos = end + 1
+        if not line:
+            break
+        if line.startswith(b"FORMAT="):
+            fmt = line[7:].strip().decode("latin-1")
+        elif line.startswith(b"EXPOSURE="):
+            try:
+                value = float(line[9:])
+            except ValueError:
+                raise InputError(f"{path!r}: bad header line {line.decode('latin-1')!r}") from None
+            if not (np.isfinite(value) and value > 0):
+                raise InputError(f"{path!r}: EXPOSURE={value} must be a finite number > 0")
+            exposure *= value
+    if fmt is not None and fmt != "32-bit_rle_rgbe":
+        raise InputError(f"{path!r}: FORMAT={fmt} is not supported (only 32-bit_rle_rgbe)")
+    end = data.find(b"\n", pos)
+    if end < 0:
+        raise InputError(f"{path!r}: missing resolution line")
+    match = _RESOLUTION.match(data[pos:end].strip())
+    if not match or match.group(2) == match.group(5):
+        raise InputError(f"{path!r}: bad resolution line {data[pos:end][:40]!r} "
+                         "(expected e.g. '-Y 512 +X 768')")
+    sign1, axis1, n1, sign2, axis2, n2 = match.groups()
+    return end + 1, exposure, (sign1, axis1, int(n1), sign2, int(n2))
+
+
+def _decode_scanline(data: bytes, pos: int, width: int, path: str, row: int) -> tuple[bytes, int]:
+    """One scanline -> (width * 4 bytes in pixel order, new offset)."""
+    head = data[pos:pos + 4]
+    if (8 <= width <= 0x7FFF and len(head) == 4 and head[0] == 2 and head[1] == 2
+            and not head[2] & 0x80):
+        if (head[2] << 8) | head[3] != width:
+            raise InputError(f"{path!r}: scanline {row} run-length header says width "
+                             f"{(head[2] << 8) | head[3]}, the file says {width}")
+        pos += 4
+        planes = []
+        for component in range(4):
+            plane = bytearray()
+            while len(plane) < width:
+                if pos >= len(data):
+                    raise InputError(f"{path!r}: data ends inside scanline {row}")
+                count = data[pos]
+                if count > 128:
+                    count -= 128
+                    if pos + 1 >= len(data):
+                        raise InputError(f"{path!r}: data ends inside scanline {row}")
+                    plane += bytes((data[pos + 1],)) * count
+                    pos += 2
+                else:
+                    if count == 0:
+                        raise InputError(f"{path!r}: zero-length run in scanline {row}")
+                    if pos + 1 + count > len(data):
+                        raise InputError(f"{path!r}: data ends inside scanline {row}")
+                    plane += data[pos + 1:pos + 1 + count]
+                    pos += 1 + count
+            if len(plane) != width:
+                raise InputError(f"{path!r}: runs overrun scanline {row} "
+                                 f"(component {component}: {len(plane)} values for width {width})")
+            planes.append(plane)
+        pixels = np.frombuffer(b"".join(planes), np.uint8).reshape(4, width).T
+        return pixels.tobytes(), pos
+    if pos + 4 * width > len(data):
+        raise InputError(f"{path!r}: data ends inside scanline {row}")
+    flat = np.frombuffer(data, np.uint8, 4 * width, pos).reshape(width, 4)
+    if ((flat[:, 0] == 1) & (flat[:, 1] == 1) & (flat[:, 2] == 1)).any():
+        raise InputError(f"{path!r}: scanline {row} uses old-style run-length encoding, "
+                         "which this reader does not support")
+    return data[pos:pos + 4 * width], pos + 4 * width
+
+
+def read_hdr(path: str | Path) -> np.ndarray:
+    """Read a Radiance RGBE file -> float32 (H, W, 3) linear RGB, top row first."""
+    path = str(path)
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read HDR file {path!r}: {exc.strerror}") from None
+    pos, exposure, (sign1, axis1, n1, sign2, n2) = _parse_header(data, path)
+    if n1 < 1 or n2 < 1:
+        raise InputError(f"{path!r}: image size {n1} x {n2} must be at least 1 x 1")
+    rows = []
+    for row in range(n1):
+        line, pos = _decode_scanline(data, pos, n2, path, row)
+        rows.append(line)
+    pixels = np.frombuffer(b"".join(rows), np.uint8).reshape(n1, n2, 4)
+    rgb = rgbe_to_float(pixels)
+    # Standard orientation is "-Y H +X W": scanlines top to bottom, left to right.
+    if axis1 == b"Y":
+        if sign1 == b"+":
+            rgb = rgb[::-1]
+        if sign2 == b"-":
+            rgb = rgb[:, ::-1]
+    else:                                   # scanlines are columns
+        rgb = rgb.transpose(1, 0, 2)
+        if sign1 == b"-":
+            rgb = rgb[:, ::-1]
+        if sign2 == b"+":
+            rgb = rgb[::-1]
+    if exposure != 1.0:
+        rgb = (rgb.astype(np.float64) / exposure).astype(np.float32)
+    return np.ascontiguousarray(rgb)
+
+
+# ---------------------------------------------------------------- .hdr writer
+def _rle_encode(plane: np.ndarray) -> bytes:
+    """New-style Radiance run-length encoding of one component of one scanline."""
+    values = plane.tobytes()
+    n = len(values)
+    out = bytearray()
+    i = 0
+    literal_start = 0
+
+    def flush_literal(start: int, stop: int) -> None:
+        while start < stop:
+            chunk = min(128, stop - start)
+            out.append(chunk)
+            out.extend(values[start:start + chunk])
+            start += chunk
+
+    while i < n:
+        run = 1
+        while i + run < n and run < 127 and values[i + run] == values[i]:
+            run += 1
+        if run >= 4:
+            flush_literal(literal_start, i)
+            out.append(128 + run)
+            out.append(values[i])
+            i += run
+            literal_start = i
+        else:
+            i += run
+    flush_literal(literal_start, n)
+    return bytes(out)
+
+
+def write_hdr(path: str | Path, image: np.ndarray, *, rle: bool = True) -> None:
+    """Write float (H, W, 3) RGB or (H, W) gray as a Radiance RGBE file, atomically.
+
+    ``rle`` selects new-style run-length encoding (used whenever the width
+    allows it, 8..32767) or flat scanlines.
+    """
+    image = np.asarray(image, dtype=np.float64)
+    if image.ndim == 2:
+        image = np.repeat(image[..., None], 3, axis=-1)
+    if image.ndim != 3 or image.shape[-1] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
+        raise InputError(f"write_hdr needs an (H, W, 3) or (H, W) image, not shape {image.shape}")
+    height, width = image.shape[:2]
+    pixels = float_to_rgbe(image)
+    parts = [b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n", f"-Y {height} +X {width}\n".encode()]
+    use_rle = rle and 8 <= width <= 0x7FFF
+    for row in pixels:
+        if use_rle:
+            parts.append(bytes((2, 2, width >> 8, width & 0xFF)))
+            parts.extend(_rle_encode(row[:, c]) for c in range(4))
+        else:
+            parts.append(row.tobytes())
+    with atomic_output(path) as tmp:
+        Path(tmp).write_bytes(b"".join(parts))
+
+
+# ---------------------------------------------------------------- OpenEXR
+def read_exr(path: str | Path) -> np.ndarray:
+    """Read an OpenEXR file -> float32 (H, W, 3) RGB or (H, W) for a luminance-only 'Y' file."""
+    import OpenEXR
+
+    path = str(path)
+    if not Path(path).is_file():
+        raise InputError(f"cannot read EXR file {path!r}: no such file")
+    try:
+        with OpenEXR.File(path) as handle:
+            channels = {name: np.asarray(ch.pixels) for name, ch in handle.channels().items()}
+    except Exception as exc:  # the binding raises plain Exceptions for corrupt files
+        raise InputError(f"cannot read EXR file {path!r}: {exc}") from None
+    for name in ("RGB", "RGBA"):
+        if name in channels:
+            return channels[name][..., :3].astype(np.float32)
+    if all(c in channels for c in "RGB"):
+        return np.stack([channels[c] for c in "RGB"], axis=-1).astype(np.float32)
+    if "Y" in channels:
+        return channels["Y"].astype(np.float32)
+    raise InputError(f"EXR file {path!r} has channels {sorted(channels)}; need R, G, B or Y")
+
+
+def write_exr(path: str | Path, image: np.ndarray) -> None:
+    """Write float32 (H, W, 3) RGB or (H, W) as 'Y' to an OpenEXR file, atomically (tests, examples)."""
+    import OpenEXR
+
+    image = np.ascontiguousarray(np.asarray(image, dtype=np.float32))
+    if image.ndim == 3 and image.shape[-1] == 3:
+        channels = {"RGB": image}
+    elif image.ndim == 2:
+        channels = {"Y": image}
+    else:
+        raise InputError(f"write_exr needs an (H, W, 3) or (H, W) image, not shape {image.shape}")
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with atomic_output(path) as tmp:
+        with OpenEXR.File(header, channels) as handle:
+            handle.write(tmp)
+
+
+# ---------------------------------------------------------------- folders
+def read_image(path: str | Path) -> np.ndarray:
+    """Read one HDR frame by its ending: ``.exr`` or Radiance (``.hdr``, ``.pic``, ``.rgbe``)."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".exr":
+        return read_exr(path)
+    if suffix in FRAME_SUFFIXES:
+        return read_hdr(path)
+    raise InputError(f"{str(path)!r}: unknown HDR file type {suffix!r} "
+                     f"(known: {', '.join(FRAME_SUFFIXES)})")
+
+
+def _natural_key(name: str) -> list:
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", name)]
+
+
+def list_frames(folder: str | Path) -> list[Path]:
+    """The HDR frames of a folder, sorted by name (numbers compared as numbers: 2 < 10)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"HDR sequence folder {str(folder)!r} does not exist or is not a folder")
+    frames = [p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in FRAME_SUFFIXES]
+    if not frames:
+        raise InputError(f"HDR sequence folder {str(folder)!r} holds no frames "
+                         f"(files ending in {', '.join(FRAME_SUFFIXES)})")
+    return sorted(frames, key=lambda p: _natural_key(p.name))
+
+
+def _crop_and_shrink(gray: np.ndarray, crop: tuple[int, int] | None, downscale: int, what: str) -> np.ndarray:
+    if crop is not None:
+        height, width = crop
+        if height < 1 or width < 1 or height > gray.shape[0] or width > gray.shape[1]:
+            raise InputError(f"{what}: cannot crop {height} x {width} out of "
+                             f"{gray.shape[0]} x {gray.shape[1]}")
+        top, left = (gray.shape[0] - height) // 2, (gray.shape[1] - width) // 2
+        gray = gray[top:top + height, left:left + width]
+    if downscale > 1:
+        height, width = (n // downscale * downscale for n in gray.shape)
+        if height == 0 or width == 0:
+            raise InputError(f"{what}: {gray.shape[0]} x {gray.shape[1]} is smaller than one "
+                             f"{downscale} x {downscale} block")
+        gray = gray[:height, :width].reshape(height // downscale, downscale,
+                                             width // downscale, downscale).mean(axis=(1, 3))
+    return gray
+
+
+def load_hdr_sequence(folder: str | Path, *, weights: str = DEFAULT_WEIGHTS, peak: float = 1.0,
+                      max_frames: int | None = None, crop: tuple[int, int] | None = None,
+                      downscale: int = 1, progress: bool = False) -> np.ndarray:
+    """A folder of ``.exr`` / ``.hdr`` frames -> light ``I`` float32 (K, H, W), brightest pixel = ``peak``.
+
+    Frames are sorted by name, converted to grayscale (:func:`to_gray`, negatives
+    clipped at 0), optionally centre-cropped to ``crop`` = (H, W) (the paper
+    crops its test frames to 512 x 384) and area-averaged over ``downscale``
+    x ``downscale`` blocks (it resizes training frames; rows and columns
+    that do not fill a block are dropped), and the whole sequence is divided by
+    its largest pixel (paper appendix A.2.2). All frames must have the same size.
+    """
+    from tqdm import tqdm
+
+    paths = list_frames(folder)
+    if max_frames is not None:
+        if max_frames < 1:
+            raise InputError(f"max_frames = {max_frames} must be at least 1")
+        paths = paths[:max_frames]
+    if type(downscale) is not int or downscale < 1:
+        raise InputError(f"downscale = {downscale!r} must be an integer >= 1")
+    frames = []
+    first_shape = None
+    for path in tqdm(paths, desc="reading frames", unit="frame", disable=not progress):
+        gray = to_gray(read_image(path), weights, what=f"frame {str(path)!r}")
+        if first_shape is None:
+            first_shape = gray.shape
+        elif gray.shape != first_shape:
+            raise InputError(f"frame {str(path)!r} is {gray.shape[0]} x {gray.shape[1]}, but "
+                             f"{str(paths[0])!r} is {first_shape[0]} x {first_shape[1]}; "
+                             "all frames of a sequence must have the same size")
+        frames.append(_crop_and_shrink(gray, crop, downscale, f"frame {str(path)!r}").astype(np.float32))
+    return normalise_sequence(np.stack(frames), peak, what=f"HDR sequence {str(folder)!r}")

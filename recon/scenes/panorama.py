@@ -1,0 +1,162 @@
+"""Moving HDR sequences from equirectangular panoramas.
+
+Sources of a panorama (:func:`load_panorama`):
+
+- ``"default"``: the shipped CC0 panorama ``recon/data/courtyard_128x256.npz``
+  (luminance, 4 x 4 area-averaged from Greg Zaal's "courtyard", see
+  ``recon/data/README.md``); always available, used by ``tespike demo``;
+- ``"city"``, ``"courtyard"``, ``"forest"``, ``"studio"``, ``"sunset"``: the
+  full 512 x 1024 EXR files of the project's data folder (environment
+  variable ``TESPIKE_HDRI_DIR``, else ``../shared/data/hdri`` beside the
+  checkout); an :class:`InputError` says where it looked when they are missing;
+- any path to an ``.exr`` or ``.hdr`` file.
+
+A sequence is a camera window moving over the panorama (see
+:mod:`recon.scenes.warp`): a pan along the longitude (exact sub-pixel motion,
+wrapping round), a tilt, a rotation, a zoom, or all at once, with optional
+moving bright sources added, then normalised so the brightest pixel of the
+whole sequence is ``peak`` (paper appendix A.2.2).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from golden.errors import InputError
+
+from .color import DEFAULT_WEIGHTS, to_gray
+from .procedural import moving_spots
+from .warp import render_window
+
+#: The five panoramas of the project's data folder (CC0, Greg Zaal / HDRI Haven).
+PANORAMAS = ("city", "courtyard", "forest", "studio", "sunset")
+DATA_DIR = Path(__file__).resolve().parent.parent / "data"
+DEFAULT_PANORAMA_FILE = DATA_DIR / "courtyard_128x256.npz"
+MOTIONS = ("pan", "tilt", "rotate", "zoom", "mixed")
+
+
+def hdri_dir() -> Path:
+    """Folder of the full-size panoramas: ``$TESPIKE_HDRI_DIR`` or ``../shared/data/hdri``."""
+    env = os.environ.get("TESPIKE_HDRI_DIR")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parents[3] / "shared" / "data" / "hdri"
+
+
+def load_panorama(source: str | Path = "default", weights: str = DEFAULT_WEIGHTS) -> np.ndarray:
+    """Luminance of a panorama, float64 (H, W), >= 0 (see the module docstring)."""
+    from .hdr_io import read_image
+
+    if str(source) == "default":
+        with np.load(DEFAULT_PANORAMA_FILE, allow_pickle=False) as npz:
+            return npz["luminance"].astype(np.float64)
+    if str(source) in PANORAMAS:
+        path = hdri_dir() / f"{source}.exr"
+        if not path.is_file():
+            raise InputError(f"panorama {str(source)!r} not found at {str(path)!r} "
+                             "(set TESPIKE_HDRI_DIR to the folder holding the five .exr panoramas)")
+        return to_gray(read_image(path), weights, what=str(path))
+    path = Path(source)
+    if not path.is_file():
+        raise InputError(f"panorama {str(source)!r} is neither 'default', one of "
+                         f"{', '.join(PANORAMAS)}, nor an existing .exr/.hdr file")
+    return to_gray(read_image(path), weights, what=str(path))
+
+
+def block_mean(image: np.ndarray, factor: int) -> np.ndarray:
+    """Area-average ``factor x factor`` blocks (linear light: a downsized pixel collects
+    the light of the pixels it covers)."""
+    height, width = image.shape
+    if height % factor or width % factor:
+        raise InputError(f"image {height} x {width} is not divisible into {factor} x {factor} blocks")
+    return image.reshape(height // factor, factor, width // factor, factor).mean(axis=(1, 3))
+
+
+def build_default_panorama(exr_path: str | Path, out: str | Path = DEFAULT_PANORAMA_FILE,
+                           factor: int = 4) -> np.ndarray:
+    """Make the shipped default panorama from a full-size EXR (how recon/data was built)."""
+    from golden.io import atomic_output
+    from .hdr_io import read_image
+
+    luminance = block_mean(to_gray(read_image(exr_path), DEFAULT_WEIGHTS), factor).astype(np.float32)
+    with atomic_output(out) as tmp:
+        with open(tmp, "wb") as handle:
+            np.savez_compressed(handle, luminance=luminance,
+                                source=np.array(f"{Path(exr_path).name}, Rec. 709 luminance, "
+                                                f"{factor}x{factor} area mean"))
+    return luminance
+
+
+@dataclasses.dataclass(frozen=True)
+class CameraPath:
+    """Window centre (cy, cx) in panorama pixels, angle (radians), zoom; each moving
+    linearly per frame (zoom geometrically)."""
+
+    cy: float
+    cx: float
+    angle: float = 0.0
+    zoom: float = 1.0
+    vy: float = 0.0
+    vx: float = 0.0
+    spin: float = 0.0
+    zoom_rate: float = 1.0
+
+    def at(self, k: int) -> tuple[float, float, float, float]:
+        return (self.cy + self.vy * k, self.cx + self.vx * k, self.angle + self.spin * k,
+                self.zoom * self.zoom_rate ** k)
+
+
+def random_path(rng: np.random.Generator, motion: str, pano_shape: tuple[int, int],
+                height: int, width: int, frames: int) -> CameraPath:
+    """A random camera path of the named kind that keeps the window inside the latitudes."""
+    if motion not in MOTIONS:
+        raise InputError(f"unknown motion {motion!r} (known: {', '.join(MOTIONS)})")
+    pano_h, pano_w = pano_shape
+    speed = rng.uniform(0.3, 1.5) * (1 if rng.integers(2) else -1)
+    kw: dict = {"cx": rng.uniform(0, pano_w)}
+    if motion in ("pan", "mixed"):
+        kw["vx"] = speed
+    if motion in ("tilt", "mixed"):
+        kw["vy"] = rng.uniform(0.2, 0.8) * (1 if rng.integers(2) else -1)
+    if motion in ("rotate", "mixed"):
+        kw["spin"] = math.radians(rng.uniform(0.2, 1.0)) * (1 if rng.integers(2) else -1)
+    if motion in ("zoom", "mixed"):
+        kw["zoom_rate"] = math.exp(rng.uniform(0.003, 0.01) * (1 if rng.integers(2) else -1))
+    # keep the (rotated) window and its tilt within the panorama's rows where possible
+    half = 0.5 * math.hypot(height, width) if "spin" in kw else 0.5 * height
+    travel = abs(kw.get("vy", 0.0)) * max(0, frames - 1)
+    low, high = half, pano_h - 1 - half - travel
+    cy = rng.uniform(low, high) if high > low else 0.5 * (pano_h - 1) - 0.5 * travel
+    if kw.get("vy", 0.0) < 0:
+        cy += travel
+    return CameraPath(cy=cy, **kw)
+
+
+def render_path(panorama: np.ndarray, path: CameraPath, frames: int, height: int,
+                width: int) -> np.ndarray:
+    """The camera path's frames, float64 (K, H, W), unnormalised."""
+    out = np.empty((frames, height, width))
+    for k in range(frames):
+        cy, cx, angle, zoom = path.at(k)
+        out[k] = render_window(panorama, height, width, cy, cx, angle, zoom)
+    return out
+
+
+def panorama_sequence(rng: np.random.Generator, frames: int, height: int, width: int, *,
+                      source: str | Path = "default", motion: str = "pan", sources: int = 0,
+                      source_gain: tuple[float, float] = (1e2, 1e4)) -> np.ndarray:
+    """A moving window over a panorama with ``sources`` moving bright spots added,
+    each ``source_gain`` (log-uniform range) x the sequence's median. Float64, unnormalised."""
+    panorama = load_panorama(source)
+    path = random_path(rng, motion, panorama.shape, height, width, frames)
+    scene = render_path(panorama, path, frames, height, width)
+    if sources:
+        low, high = (math.log10(g) for g in source_gain)
+        gains = 10.0 ** rng.uniform(low, high, sources) * np.median(scene)
+        scene += np.tensordot(gains, moving_spots(rng, frames, height, width, sources), axes=1)
+    return scene

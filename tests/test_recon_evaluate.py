@@ -1,0 +1,147 @@
+"""Evaluation harness: frame selection, tone map, Table 1 writers, an end-to-end small run."""
+
+import csv
+import io
+
+import numpy as np
+import pytest
+
+from golden.config import SensorConfig
+from golden.errors import InputError
+from golden.fastsim import simulate_scene
+from recon.evaluate import (Evaluation, Result, evaluate, paper_configs, results_csv, scored_frames,
+                            table_csv, table_markdown, tone_map, write_outputs)
+from recon.metrics import psnr_mu, ssim_mu
+from recon.scenes import make_scene
+
+
+def simulate(config, light, rng):
+    return simulate_scene(config, light, seed=rng)
+
+
+def test_scored_frames_skip_incomplete_windows():
+    assert scored_frames(24, 9) == slice(4, 20)
+    assert scored_frames(9, 9) == slice(4, 5)
+    assert scored_frames(8, 9) == slice(0, 8)
+    assert scored_frames(5, 1) == slice(0, 5)
+
+
+def test_tone_map_divides_by_the_peak_and_clips():
+    out = tone_map(np.array([-1.0, 0.0, 2.0, 4.0, 8.0]), peak=4.0)
+    assert out[0] == 0 and out[1] == 0 and out[3] == 1 and out[4] == 1
+    assert np.isclose(out[2], np.log1p(2500) / np.log1p(5000))
+
+
+def test_paper_configs():
+    configs = paper_configs()
+    assert configs["te"] == SensorConfig() and configs["ml"] == SensorConfig(mode="ml")
+    assert configs["te"].threshold == 175 and configs["ml"].threshold == 328
+
+
+def _hand_made():
+    rows = [Result("a", "ml", "tfp", 20.0, 0.5, 1.0, 3), Result("b", "ml", "tfp", 30.0, 0.7, 3.0, 3),
+            Result("a", "te", "tfp", 25.0, 0.6, 2.0, 3), Result("b", "te", "tfp", 35.0, 0.8, 4.0, 3),
+            Result("a", "ml", "tfi", 10.0, 0.1, 5.0, 3), Result("a", "te", "tfi", 12.5, 0.25, 7.0, 3)]
+    return Evaluation(rows, ("tfp", "tfi"), ("ml", "te"), 9)
+
+
+def test_summary_is_mean_of_sequence_means():
+    summary = _hand_made().summary()
+    assert summary["tfp", "ml"] == {"psnr_mu": 25.0, "ssim_mu": 0.6, "ms_per_frame": 2.0, "sequences": 2}
+    assert summary["tfp", "te"]["psnr_mu"] == 30.0
+    assert summary["tfi", "te"]["sequences"] == 1
+
+
+def test_table_markdown_has_the_paper_layout():
+    lines = table_markdown(_hand_made()).splitlines()
+    assert lines[0] == ("| ML reconstruction | PSNR-μ ↑ | SSIM-μ ↑ | ms / frame ↓ | "
+                        "TE reconstruction | PSNR-μ ↑ | SSIM-μ ↑ | ms / frame ↓ |")
+    assert lines[2] == "| TFP_ML | 25.00 | 0.600 | 2.00 | TFP_TE | 30.00 | 0.700 | 3.00 |"
+    assert lines[3] == "| TFI_ML | 10.00 | 0.100 | 5.00 | TFI_TE | 12.50 | 0.250 | 7.00 |"
+    assert len(lines) == 4
+
+
+def test_table_and_results_csv():
+    rows = list(csv.DictReader(io.StringIO(table_csv(_hand_made()))))
+    assert [r["method"] for r in rows] == ["tfp", "tfi"]
+    assert rows[0]["te_name"] == "TFP_TE" and float(rows[0]["te_psnr_mu"]) == 30.0
+    assert float(rows[1]["ml_ms_per_frame"]) == 5.0
+    full = list(csv.DictReader(io.StringIO(results_csv(_hand_made()))))
+    assert len(full) == 6 and full[1]["sequence"] == "b" and float(full[1]["psnr_mu"]) == 30.0
+
+
+@pytest.fixture(scope="module")
+def small_run():
+    sequences = [("m", make_scene("moderate", 12, 32, 40, seed=5)),
+                 ("s", make_scene("sun", 12, 32, 40, seed=5, peak=30.0))]
+    return sequences, evaluate(sequences, simulate, methods=("tfp", "tfi"), seed=3, progress=False,
+                               keep=True)
+
+
+def test_end_to_end_scores_are_the_metrics_of_the_scored_frames(small_run):
+    sequences, evaluation = small_run
+    assert len(evaluation.results) == 2 * 2 * 2
+    for name, light in sequences:
+        for mode in ("ml", "te"):
+            for method in ("tfp", "tfi"):
+                result = next(r for r in evaluation.results
+                              if (r.sequence, r.mode, r.method) == (name, mode, method))
+                images = evaluation.images[name, mode, method]
+                assert images.shape == light.shape and result.frames_scored == 4
+                peak = float(light.max())
+                assert result.psnr_mu == pytest.approx(psnr_mu(images[4:8], light[4:8], peak=peak).mean())
+                assert result.ssim_mu == pytest.approx(ssim_mu(images[4:8], light[4:8], peak=peak).mean())
+                assert result.ms_per_frame > 0
+
+
+def test_end_to_end_is_reproducible(small_run):
+    sequences, evaluation = small_run
+    again = evaluate(sequences[:1], simulate, methods=("tfp",), seed=3, progress=False)
+    first = [r for r in evaluation.results if r.sequence == "m" and r.method == "tfp"]
+    assert [r.psnr_mu for r in again.results] == [r.psnr_mu for r in first]
+    other = evaluate(sequences[:1], simulate, methods=("tfp",), seed=4, progress=False)
+    assert [r.psnr_mu for r in other.results] != [r.psnr_mu for r in first]
+
+
+def test_write_outputs(small_run, tmp_path):
+    _, evaluation = small_run
+    paths = write_outputs(evaluation, tmp_path / "eval")
+    names = sorted(p.relative_to(tmp_path / "eval").as_posix() for p in (tmp_path / "eval").rglob("*"))
+    assert names == ["quality_vs_time.png", "results.csv", "strips", "strips/m.png", "strips/s.png",
+                     "table.csv", "table.md"]
+    for key in ("plot", "strip:m", "strip:s"):
+        assert paths[key].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "eval" / "table.md").read_text(encoding="utf-8") == table_markdown(evaluation)
+
+
+def test_evaluate_refuses():
+    light = make_scene("moderate", 4, 24, 24)
+    with pytest.raises(InputError, match="unknown reconstruction method"):
+        evaluate([("a", light)], simulate, methods=("magic",), progress=False)
+    with pytest.raises(InputError, match="unique"):
+        evaluate([("a", light), ("a", light)], simulate, progress=False)
+    with pytest.raises(InputError, match="no sequences"):
+        evaluate([], simulate, progress=False)
+    with pytest.raises(InputError, match="all zero"):
+        evaluate([("z", np.zeros((3, 4, 4)))], simulate, progress=False)
+    with pytest.raises(InputError, match="negative"):
+        evaluate([("n", -light)], simulate, progress=False)
+    with pytest.raises(InputError, match="no sensor configuration"):
+        evaluate([("a", light)], simulate, configs={"te": SensorConfig()}, progress=False)
+
+
+def test_method_options_reach_the_method(small_run):
+    sequences, evaluation = small_run
+    windowed = evaluate(sequences[:1], simulate, methods=("tfi",), modes=("ml",), seed=3, progress=False,
+                        options={"tfi": {"search": "window"}})
+    default = [r.psnr_mu for r in evaluation.results if (r.sequence, r.mode, r.method) == ("m", "ml", "tfi")]
+    assert [r.psnr_mu for r in windowed.results] != default
+    with pytest.raises(InputError, match="not an option"):
+        evaluate(sequences[:1], simulate, methods=("tfp",), progress=False, options={"tfp": {"search": "window"}})
+
+
+def test_light_far_above_float32_is_scored_not_overflowed():
+    light = make_scene("moderate", 4, 24, 24, seed=1).astype(np.float64) * 1e300
+    evaluation = evaluate([("huge", light)], simulate, methods=("tfp",), modes=("te",), progress=False)
+    (result,) = evaluation.results
+    assert np.isfinite(result.psnr_mu) and result.psnr_mu < 10     # saturated codes: far too dark

@@ -1,0 +1,199 @@
+"""HDR files: RGBE codec on known bytes, .hdr reader/writer, EXR, frame folders."""
+
+import numpy as np
+import pytest
+
+from golden.errors import InputError
+from recon.scenes import hdr_io
+from recon.scenes.color import normalise_sequence, to_gray
+from recon.scenes.hdr_io import (float_to_rgbe, list_frames, load_hdr_sequence, read_exr, read_hdr,
+                                 rgbe_to_float, write_exr, write_hdr)
+from recon.scenes.panorama import hdri_dir
+
+HEADER = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n"
+
+
+def test_rgbe_known_bytes_decode():
+    pixels = np.array([[128, 64, 32, 129],      # 2^(129-136) = 1/128 per mantissa step
+                       [255, 0, 1, 136],        # exponent 136: mantissa is the value
+                       [200, 100, 50, 0],       # exponent 0 is black whatever the mantissas
+                       [1, 2, 3, 120]], np.uint8)
+    expected = np.array([[1.0, 0.5, 0.25], [255.0, 0.0, 1.0], [0.0, 0.0, 0.0],
+                         [2.0 ** -16, 2.0 ** -15, 3 * 2.0 ** -16]], np.float32)
+    assert np.array_equal(rgbe_to_float(pixels), expected)
+
+
+def test_rgbe_known_values_encode():
+    rgb = np.array([[1.0, 0.5, 0.25], [0.0, 0.0, 0.0], [1e-40, 0, 0], [3.0, 1.0, 0.0]])
+    expected = np.array([[128, 64, 32, 129], [0, 0, 0, 0], [0, 0, 0, 0], [192, 64, 0, 130]], np.uint8)
+    assert np.array_equal(float_to_rgbe(rgb), expected)
+
+
+@pytest.mark.parametrize("bad", [np.array([[-1.0, 0, 0]]), np.array([[np.nan, 0, 0]]),
+                                 np.array([[2.0 ** 128, 0, 0]]), np.zeros((2, 4))])
+def test_rgbe_encode_refuses(bad):
+    with pytest.raises(InputError):
+        float_to_rgbe(bad)
+
+
+def test_reader_hand_built_run_length_scanline(tmp_path):
+    green = bytes(range(10, 18))
+    line = bytes((2, 2, 0, 8)) + bytes((136, 128)) + bytes((8,)) + green + bytes((136, 0)) + bytes((136, 129))
+    path = tmp_path / "rle.hdr"
+    path.write_bytes(HEADER + b"-Y 1 +X 8\n" + line)
+    image = read_hdr(path)
+    assert image.shape == (1, 8, 3) and image.dtype == np.float32
+    assert np.array_equal(image[0, :, 0], np.ones(8))
+    assert np.array_equal(image[0, :, 1], np.arange(10, 18) / 128)
+    assert np.array_equal(image[0, :, 2], np.zeros(8))
+
+
+def test_reader_flat_scanlines_orientation_and_exposure(tmp_path):
+    pixels = np.arange(2 * 3 * 4, dtype=np.uint8).reshape(2, 3, 4) + 120
+    data = pixels.tobytes()
+    (tmp_path / "flat.hdr").write_bytes(HEADER + b"-Y 2 +X 3\n" + data)
+    (tmp_path / "up.hdr").write_bytes(HEADER + b"+Y 2 +X 3\n" + data)
+    (tmp_path / "exp.hdr").write_bytes(b"#?RADIANCE\nEXPOSURE=2\nEXPOSURE=4\n\n-Y 2 +X 3\n" + data)
+    expected = rgbe_to_float(pixels)
+    assert np.array_equal(read_hdr(tmp_path / "flat.hdr"), expected)
+    assert np.array_equal(read_hdr(tmp_path / "up.hdr"), expected[::-1])
+    assert np.allclose(read_hdr(tmp_path / "exp.hdr"), expected / 8, rtol=1e-7)
+
+
+@pytest.mark.parametrize("rle", [True, False])
+def test_writer_round_trip(tmp_path, rng, rle):
+    image = np.exp(rng.normal(0, 4, (13, 37, 3)))
+    image[3:6] = 2.5                                   # long runs for the encoder
+    image[7, :, 1] = 0.0
+    write_hdr(tmp_path / "x.hdr", image, rle=rle)
+    back = read_hdr(tmp_path / "x.hdr").astype(np.float64)
+    top = image.max(axis=-1, keepdims=True)
+    assert np.all(np.abs(back - image) <= top / 128)    # RGBE keeps 8 bits of the largest channel
+    assert np.all(back <= image)                        # mantissas truncate
+    assert np.array_equal(back[3:6], np.full((3, 37, 3), 2.5))
+
+
+def test_writer_rle_is_smaller_and_equal(tmp_path):
+    image = np.ones((4, 200, 3))
+    write_hdr(tmp_path / "r.hdr", image, rle=True)
+    write_hdr(tmp_path / "f.hdr", image, rle=False)
+    assert (tmp_path / "r.hdr").stat().st_size < (tmp_path / "f.hdr").stat().st_size / 10
+    assert np.array_equal(read_hdr(tmp_path / "r.hdr"), read_hdr(tmp_path / "f.hdr"))
+
+
+@pytest.mark.parametrize("content, words", [
+    (b"P6\n", ["not a Radiance"]),
+    (HEADER + b"-Y 2 +X 8\n" + bytes((2, 2, 0, 8, 136)), ["ends inside scanline 0"]),
+    (HEADER + b"-Y 1 +X 3\n" + bytes(8), ["ends inside scanline 0"]),
+    (b"#?RADIANCE\nFORMAT=32-bit_rle_xyze\n\n-Y 1 +X 1\n" + bytes(4), ["xyze"]),
+    (HEADER + b"-Y 1 +X 2\n" + bytes((1, 1, 1, 5, 0, 0, 0, 0)), ["old-style"]),
+    (HEADER + b"-Z 1 +X 2\n", ["resolution"]),
+    (HEADER + b"-Y 1 +X 8\n" + bytes((2, 2, 0, 9)) + bytes(20), ["width 9"]),
+])
+def test_reader_refuses_bad_files(tmp_path, content, words):
+    path = tmp_path / "bad.hdr"
+    path.write_bytes(content)
+    with pytest.raises(InputError) as info:
+        read_hdr(path)
+    assert str(path) in str(info.value) and all(w in str(info.value) for w in words)
+
+
+def test_exr_round_trip(tmp_path, rng):
+    rgb = np.exp(rng.normal(0, 5, (6, 9, 3))).astype(np.float32)
+    write_exr(tmp_path / "c.exr", rgb)
+    write_exr(tmp_path / "y.exr", rgb[..., 0])
+    assert np.array_equal(read_exr(tmp_path / "c.exr"), rgb)
+    assert np.array_equal(read_exr(tmp_path / "y.exr"), rgb[..., 0])
+    (tmp_path / "junk.exr").write_bytes(b"not an exr at all")
+    with pytest.raises(InputError, match="junk.exr"):
+        read_exr(tmp_path / "junk.exr")
+
+
+def test_gray_weights_and_clipping():
+    pixel = np.array([[[1.0, 2.0, 4.0], [-0.5, 1.0, 0.0]]])
+    assert np.allclose(to_gray(pixel), [[0.2126 + 1.4304 + 0.2888, 0.7152]])
+    assert np.allclose(to_gray(pixel, "rec601"), [[0.299 + 1.174 + 0.456, 0.587]])
+    with pytest.raises(InputError, match="weights"):
+        to_gray(pixel, "srgb-ish")
+    with pytest.raises(InputError, match="non-finite"):
+        to_gray(np.array([[np.inf, 0.0]]))
+
+
+def test_normalise_sequence_uses_one_factor():
+    frames = np.array([[[1.0, 2.0]], [[4.0, 0.0]]])
+    out = normalise_sequence(frames)
+    assert out.dtype == np.float32 and np.array_equal(out, frames / 4)
+    assert np.array_equal(normalise_sequence(frames, 1000.0), frames * 250)
+    for bad in (np.zeros((2, 1, 2)), -frames, np.full((1, 1, 1), np.nan)):
+        with pytest.raises(InputError):
+            normalise_sequence(bad)
+
+
+def _frame(value, shape=(4, 10)):
+    return np.full(shape + (3,), value, np.float32)
+
+
+def test_folder_sorted_by_name_numbers_as_numbers(tmp_path):
+    write_exr(tmp_path / "frame10.exr", _frame(8.0))
+    write_hdr(tmp_path / "frame2.hdr", _frame(2.0))
+    write_exr(tmp_path / "frame1.EXR", _frame(1.0))
+    (tmp_path / "notes.txt").write_text("not a frame")
+    assert [p.name for p in list_frames(tmp_path)] == ["frame1.EXR", "frame2.hdr", "frame10.exr"]
+    light = load_hdr_sequence(tmp_path)
+    assert light.shape == (3, 4, 10) and light.dtype == np.float32
+    assert np.allclose(light[:, 0, 0], [1 / 8, 2 / 8, 1.0])
+    assert light.max() == 1.0
+    assert load_hdr_sequence(tmp_path, max_frames=2, peak=3.0).max() == 3.0
+
+
+def test_folder_errors(tmp_path):
+    with pytest.raises(InputError, match="does not exist"):
+        load_hdr_sequence(tmp_path / "missing")
+    with pytest.raises(InputError, match="holds no frames"):
+        load_hdr_sequence(tmp_path)
+    write_exr(tmp_path / "a.exr", _frame(1.0))
+    write_exr(tmp_path / "b.exr", _frame(1.0, (5, 10)))
+    with pytest.raises(InputError, match="b.exr.*same size"):
+        load_hdr_sequence(tmp_path)
+    (tmp_path / "b.exr").unlink()
+    (tmp_path / "c.hdr").write_bytes(b"garbage")
+    with pytest.raises(InputError, match="c.hdr"):
+        load_hdr_sequence(tmp_path)
+    (tmp_path / "c.hdr").unlink()
+    write_exr(tmp_path / "d.exr", _frame(0.0))
+    (tmp_path / "a.exr").unlink()
+    with pytest.raises(InputError, match="every pixel is 0"):
+        load_hdr_sequence(tmp_path)
+
+
+def test_writers_are_atomic(tmp_path):
+    with pytest.raises(InputError):
+        write_hdr(tmp_path / "x.hdr", np.full((2, 2, 3), np.nan))
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(InputError, match="does not exist"):
+        write_hdr(tmp_path / "no" / "x.hdr", np.ones((2, 2)))
+
+
+@pytest.mark.skipif(not (hdri_dir() / "city.exr").is_file(), reason="project HDR panoramas not present")
+def test_reads_the_project_panoramas():
+    rgb = hdr_io.read_image(hdri_dir() / "city.exr")
+    assert rgb.shape == (512, 1024, 3) and rgb.dtype == np.float32
+    gray = to_gray(rgb)
+    assert gray.min() >= 0 and gray.max() > 1e4 * np.median(gray)
+
+
+def test_folder_crop_and_downscale(tmp_path):
+    image = np.arange(6 * 10, dtype=np.float32).reshape(6, 10) + 1
+    write_exr(tmp_path / "a.exr", image)
+    light = load_hdr_sequence(tmp_path, crop=(4, 6), peak=float(image[1:5, 2:8].max()))
+    assert np.array_equal(light[0], image[1:5, 2:8])
+    shrunk = load_hdr_sequence(tmp_path, downscale=4)
+    assert shrunk.shape == (1, 1, 2)
+    assert np.allclose(shrunk[0] * image[:4, :8].reshape(1, 4, 2, 4).mean(axis=(1, 3)).max(),
+                       image[:4, :8].reshape(1, 4, 2, 4).mean(axis=(1, 3)))
+    with pytest.raises(InputError, match="cannot crop"):
+        load_hdr_sequence(tmp_path, crop=(7, 4))
+    with pytest.raises(InputError, match="smaller than one"):
+        load_hdr_sequence(tmp_path, downscale=7)
+    with pytest.raises(InputError, match="downscale"):
+        load_hdr_sequence(tmp_path, downscale=0)
