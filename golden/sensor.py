@@ -1,8 +1,34 @@
-"""Cycle-exact model of a TE or ML pixel array (SPEC sections 3 and 4), run in chunks.
+"""Cycle-exact model of a TE or ML pixel array (SPEC sections 3 and 4), fast and run in chunks.
 
-:class:`PixelArray` carries the state between chunks of any length, so a run
-split anywhere gives the identical stream, and memory stays bounded by the
+:class:`PixelArray` gives the same words, clock for clock, as the literal
+per-clock rule :func:`golden.reference.step_reference`, but advances whole
+blocks of pixel clocks with closed forms instead of a Python step per clock.
+State (acc, sfc, ovf, m and the clock phase) is carried between calls, so a
+run split anywhere gives the identical stream, and memory stays bounded by the
 chunk size however many readouts a run has.
+
+How it works (derivation in docs/golden-model.md). Per pixel, inside a block
+of clocks starting with charge ``acc0`` and with ``Y_t = acc0 + sum_{u<=t}
+(e_u - theta)``:
+
+* without accumulator saturation the cumulative spike count is
+  ``N_t = min(N_{t-1} + 1, floor(R_t / theta))`` (at most one spike per clock),
+  which unrolls to ``N_t = t + 1 + floor(Z_t / theta)`` with
+  ``Z_t = min(0, min_{u<=t} Y_u)``, a running minimum; ``acc_t = Y_t -
+  theta * floor(Z_t / theta)``;
+* saturation throws away charge ``D_t = max_{u<=t} max(0, Y_u - theta f_u - M)``
+  (a running maximum) and the spike rule then reads ``Y_u - D_{u-1}`` instead
+  of ``Y_u``. The pair (D, N) is the unique fixed point of these two causal
+  maps; iterating them from ``D = 0`` increases D monotonically to it, and each
+  iteration settles at least one more saturating stretch. Pixels that saturate
+  are iterated on their own; the few that would need many rounds in a block
+  are split into half blocks (down to single clocks, where two rounds are
+  exact by construction), so no stimulus can make the engine wrong, only slower.
+
+All intermediates are bounded (see :func:`_magnitude_bound`), so the engine
+uses int32 where a block provably fits and int64 otherwise; configurations
+whose accumulator is too wide for any block in int64 (acc_bits >= 61) run the
+literal per-clock rule, which is exact there by construction.
 """
 
 from __future__ import annotations
@@ -18,22 +44,344 @@ from .reference import PixelState, step_reference
 #: Pixel clocks x pixels processed at once by :func:`simulate` (bounds memory).
 DEFAULT_CHUNK_ELEMENTS = 1 << 22
 
+#: Pixel clocks advanced per closed-form block (rows of the working arrays).
+BLOCK_CLOCKS = 32
+
+#: Pixels per block (columns of the working arrays); keeps a block near the L2 cache.
+BLOCK_PIXELS = 16384
+
+#: Below this many pixels a time scan uses numpy's accumulate instead of a row loop.
+ROW_LOOP_MIN_PIXELS = 512
+
+#: Fixed-point rounds tried on saturating pixels before their block is halved.
+MAX_ROUNDS = 4
+
+_INT16_LIMIT = (1 << 15) - 1
+_INT32_LIMIT = (1 << 31) - 1
+_INT64_LIMIT = (1 << 63) - 1
+
+
+def _magnitude_bound(config: SensorConfig, clocks: int, top: int | None = None) -> int:
+    """Largest |value| any intermediate of a block of ``clocks`` clocks can take.
+
+    With c = clocks * (e_max + theta), e_max = ``top`` or 2^E - 1: |Y| <= M + c,
+    0 <= D <= M + c, |Z| <= 2M + 2c, |theta * f| <= 2M + 2c + theta,
+    |Y - theta f| <= 3M + 3c + theta.
+    """
+    c = clocks * ((config.input_max if top is None else top) + config.threshold)
+    return 4 * config.acc_max + 3 * c + config.threshold
+
+
+def _plan(config: SensorConfig) -> tuple[int, np.dtype | None]:
+    """Block length and working dtype; ``(0, None)`` means per-clock literal stepping."""
+    if _magnitude_bound(config, BLOCK_CLOCKS) <= _INT32_LIMIT:
+        return BLOCK_CLOCKS, np.dtype(np.int32)
+    clocks = BLOCK_CLOCKS
+    while clocks >= 1:
+        if _magnitude_bound(config, clocks) <= _INT64_LIMIT:
+            return clocks, np.dtype(np.int64)
+        clocks //= 2
+    return 0, None
+
+
+def _scan(x: np.ndarray, op: np.ufunc, seed: int | None = None, out: np.ndarray | None = None) -> np.ndarray:
+    """Running ``op`` (add, minimum, maximum) of ``x`` along axis 0 into ``out`` (default: in place).
+
+    ``seed`` joins row 0. Wide arrays are scanned by a loop over rows (one
+    vector op per clock over all pixels), several times faster in numpy than
+    ``accumulate`` along axis 0; narrow arrays use ``accumulate``, whose cost
+    does not grow with the Python loop.
+    """
+    out = x if out is None else out
+    if seed is not None:
+        op(x[0], seed, out=out[0])
+    elif out is not x:
+        out[0] = x[0]
+    if x.shape[1] >= ROW_LOOP_MIN_PIXELS:
+        for i in range(1, x.shape[0]):
+            op(out[i - 1], x[i], out=out[i])
+    elif x.shape[0] > 1:
+        if out is not x:
+            out[1:] = x[1:]
+        op.accumulate(out, axis=0, out=out)
+    return out
+
+
+class _Engine:
+    """The closed forms for one configuration (no state; :class:`PixelArray` holds it).
+
+    :meth:`dynamics` returns, per block, an array ``Z`` with the cumulative
+    spike count ``N_t = t + 1 + floor(Z_t / theta)`` (t from 0 at the block
+    start), and the charge after the block.
+    """
+
+    def __init__(self, config: SensorConfig):
+        self.config = config
+        self.theta = config.threshold
+        self.acc_max = config.acc_max
+        self.block_clocks, self.dtype = _plan(config)
+        # Saturation needs a spike with acc + e - theta > M >= acc, so e > theta.
+        self.may_saturate = config.input_max > config.threshold
+
+    def dynamics(self, e: np.ndarray, acc0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Advance pixels over a block: e (T, n) electrons, acc0 (n,) int64 charge -> (Z, acc_end).
+
+        Every pixel is first given the no-saturation closed form; only pixels
+        that could saturate in this block are looked at again: those that are
+        provably calm keep it, those busy on every clock get the reflected-walk
+        form, and the rest (a block where a pixel both saturates and idles) go
+        through the fixed-point rounds of :meth:`_saturating`.
+        """
+        theta, M = self.theta, self.acc_max
+        T, n = e.shape
+        emax = e.max(axis=0)
+        # int16 halves the memory traffic again when this block's own largest input allows it.
+        dt = self.dtype
+        if _magnitude_bound(self.config, T, int(emax.max())) <= _INT16_LIMIT:
+            dt = np.dtype(np.int16)
+        Y = np.empty((T, n), dt)
+        np.subtract(e, theta, out=Y, dtype=dt, casting="unsafe")
+        Y[0] += acc0.astype(dt)
+        _scan(Y, np.add)                                   # Y_t = acc0 + sum (e - theta)
+        Z = _scan(Y, np.minimum, seed=0, out=np.empty_like(Y))
+        acc_end = Y[-1].astype(np.int64) - theta * (Z[-1].astype(np.int64) // theta)
+        # Saturation needs e > theta on some clock. A pixel that never idles under the
+        # closed form (Z = 0: Y_t >= 0) and never holds more than M (Y <= M) is exact.
+        unsure = emax > theta
+        if not unsure.any():
+            return Z, acc_end
+        unsure &= (Z[-1] < 0) | (Y.max(axis=0) > M)
+        if not unsure.any():
+            return Z, acc_end
+        # acc_t = Y_t - theta floor(Z_t / theta) <= Y_t - Z_t + theta - 1, so
+        # max(Y - Z) <= M - theta + 1 proves the block calm.
+        cols = _Columns(unsure)
+        Yu, Zu = cols.take(Y), cols.take(Z)
+        unsure_u = cols.local((Yu - Zu).max(axis=0) > M - theta + 1)
+        if not unsure_u.any():
+            return Z, acc_end
+        cols = cols.narrow(unsure_u)
+        Yu, Zu, eu, acc0u = cols.take(Y), cols.take(Z), cols.take(e), cols.take_vector(acc0)
+        # Charge a pixel busy on every clock would throw away: D_t = Dm_t - M with
+        # Dm_t = max(M, max_{u<=t} Y_u). Busy on every clock iff Y_t >= D_{t-1} for all t.
+        Dm = _scan(Yu, np.maximum, seed=M, out=np.empty_like(Yu))
+        busy = Yu[0] >= 0
+        if T > 1:
+            busy &= (Yu[1:] - Dm[:-1]).min(axis=0) >= -M
+        # Busy pixels: N_t = t + 1 (Z = 0 already, as Y_t >= D_{t-1} >= 0), acc = Y - D.
+        acc_u = np.where(busy, Yu[-1].astype(np.int64) - (Dm[-1].astype(np.int64) - M),
+                         cols.take_vector(acc_end))
+        rest = cols.local(~busy)
+        if rest.any():
+            # Exact test for the others: the closed form holds iff acc_t <= M everywhere.
+            sub = _Columns(rest)
+            Yr, Zr = sub.take(Yu), sub.take(Zu)
+            acc_r = Yr - theta * (Zr // theta)
+            clip = sub.local(acc_r.max(axis=0) > M)
+            if clip.any():
+                sat = _Columns(clip)
+                Zs, acc_s = self._saturating(sat.take(sub.take(eu)), sat.take(Yr),
+                                             sat.take(sub.take(Dm)) - M,
+                                             sat.take_vector(sub.take_vector(acc0u)))
+                sat.put(Zr, Zs)
+                acc_r_end = sub.take_vector(acc_u)
+                sat.put_vector(acc_r_end, acc_s)
+                sub.put(Zu, Zr)
+                sub.put_vector(acc_u, acc_r_end)
+        cols.put(Z, Zu)
+        cols.put_vector(acc_end, acc_u)
+        return Z, acc_end
+
+    def _saturating(self, e, Y, D0, acc0):
+        """Pixels that saturate and idle in one block: iterate the (D, N) fixed point.
+
+        ``D0`` is the charge a pixel busy on every clock would lose, a lower
+        bound of the true loss (N_u <= u + 1), so the rounds increase to the
+        true D (module doc). Returns (Z, acc_end).
+        """
+        theta, M, dt = self.theta, self.acc_max, Y.dtype
+        T, n = Y.shape
+        Z_out = np.empty((T, n), dt)
+        acc_out = np.empty(n, np.int64)
+        # D[u + 1] = charge thrown away up to clock u; D[0] = 0 (before the block).
+        D = np.empty((T + 1, n), dt)
+        D[0] = 0
+        D[1:] = D0
+        live = np.arange(n)
+        for _ in range(MAX_ROUNDS):
+            Z = Y - D[:-1]
+            _scan(Z, np.minimum, seed=0)
+            f = Z // theta
+            # acc_t = Y_t - D_t - theta f_t; the round is the fixed point iff acc_t <= M
+            # everywhere (then the new loss, a running max, equals D).
+            f *= theta
+            np.subtract(Y, f, out=f)                        # Y - theta f = acc + D
+            excess = f - D[1:]
+            excess -= M
+            done = excess.max(axis=0) <= 0
+            if done.any():
+                cols = live[done]
+                Z_out[:, cols] = Z[:, done]
+                acc_out[cols] = f[-1, done].astype(np.int64) - D[-1, done]
+                keep = ~done
+                live, Y, D, e, acc0, f = live[keep], Y[:, keep], D[:, keep], e[:, keep], acc0[keep], f[:, keep]
+                if not live.size:
+                    return Z_out, acc_out
+            np.subtract(f, M, out=D[1:])
+            _scan(D[1:], np.maximum, seed=0)
+        # Too many saturating stretches in this block for these pixels: halve it.
+        # (A one-clock block settles in two rounds, so this always terminates.)
+        assert T > 1, "a one-clock block must settle within two rounds"
+        half = T // 2
+        Z1, acc1 = self.dynamics(e[:half], acc0)
+        Z2, acc2 = self.dynamics(e[half:], acc1)
+        Z_out[:half, live] = Z1
+        Z_out[half:, live] = Z2.astype(dt) + theta * (Z1[-1].astype(dt) // theta)
+        acc_out[live] = acc2
+        return Z_out, acc_out
+
+
+class _Columns:
+    """A subset of pixel columns; gathers only when it is small.
+
+    Fancy-indexing columns of a (T, n) array costs several times a plain pass,
+    so a subset of more than a quarter of the columns is worked on in place
+    at full width (the extra columns are computed and then ignored).
+    """
+
+    def __init__(self, mask: np.ndarray):
+        self.mask = mask
+        self.full = mask.all() or 4 * int(np.count_nonzero(mask)) > mask.size
+        self.index = None if self.full else np.flatnonzero(mask)
+
+    def local(self, mask: np.ndarray) -> np.ndarray:
+        """A mask computed over the taken columns, restricted to this subset's members."""
+        return mask & self.mask if self.full else mask
+
+    def narrow(self, mask: np.ndarray) -> "_Columns":
+        """The members where ``mask`` (over the taken columns) holds, as columns of the original."""
+        if self.full:
+            return _Columns(self.mask & mask)
+        whole = np.zeros_like(self.mask)
+        whole[self.index] = mask
+        return _Columns(whole)
+
+    def take(self, a: np.ndarray) -> np.ndarray:
+        return a if self.full else a[:, self.index]
+
+    def take_vector(self, v: np.ndarray) -> np.ndarray:
+        return v if self.full else v[self.index]
+
+    def put(self, a: np.ndarray, values: np.ndarray) -> None:
+        if self.full:
+            if values is not a:
+                np.copyto(a, values, where=self.mask)
+        else:
+            a[:, self.index] = values
+
+    def put_vector(self, v: np.ndarray, values: np.ndarray) -> None:
+        if self.full:
+            if values is not v:
+                np.copyto(v, values, where=self.mask)
+        else:
+            v[self.index] = values
+
 
 class PixelArray:
-    """An H x W array of TE or ML pixels that consumes per-clock electrons."""
+    """An H x W array of TE or ML pixels that consumes per-clock electrons in chunks."""
 
     def __init__(self, config: SensorConfig, shape: tuple[int, int]):
         self.config = config
         self.shape = tuple(shape)
         self.state = PixelState.zeros(self.shape)
+        self._engine = _Engine(config)
 
     def feed(self, electrons: np.ndarray) -> np.ndarray:
-        """Consume (T, H, W) electrons of any T; return the words of the readouts completed."""
+        """Consume (T, H, W) electrons of any T; return the words (k, H, W) of the readouts completed."""
         check_stimulus(electrons, self.config, whole_readouts=False)
         if electrons.shape[1:] != self.shape:
             raise ValueError(f"chunk shape {electrons.shape[1:]} != array shape {self.shape}")
-        words, self.state = step_reference(self.config, electrons, self.state)
-        return words
+        if self._engine.dtype is None:
+            words, self.state = step_reference(self.config, electrons, self.state)
+            return words
+        config, state = self.config, self.state
+        T = electrons.shape[0]
+        H, W = self.shape
+        P = H * W
+        L = config.clocks_per_readout
+        e = electrons.reshape(T, P)
+        n_words = (state.clock + T) // L - state.clock // L
+        words = np.empty((n_words, P), np.int64)
+        flat = [a.reshape(P) for a in (state.acc, state.sfc, state.ovf, state.m)]
+        block = self._engine.block_clocks
+        word_index = 0
+        for t0 in range(0, T, block):
+            t1 = min(T, t0 + block)
+            segments = self._segments(state.clock + t0, t1 - t0)
+            for p0 in range(0, P, BLOCK_PIXELS):
+                p1 = min(P, p0 + BLOCK_PIXELS)
+                acc, sfc, ovf, m = (a[p0:p1] for a in flat)
+                Z, acc[:] = self._engine.dynamics(e[t0:t1, p0:p1], acc)
+                self._count(Z, segments, sfc, ovf, m, words[word_index:, p0:p1])
+            word_index += sum(1 for seg in segments if seg[3])
+        state.clock += T
+        return words.reshape(n_words, H, W)
+
+    def _segments(self, clock: int, length: int) -> list[tuple[int, int, int, bool]]:
+        """Pieces of a block inside one readout interval: (row a, row b, phase at a, ends interval)."""
+        L = self.config.clocks_per_readout
+        pieces, a = [], 0
+        while a < length:
+            phase = (clock + a) % L
+            b = min(length, a + L - phase)
+            pieces.append((a, b, phase, phase + (b - a) == L))
+            a = b
+        return pieces
+
+    def _count(self, Z, segments, sfc, ovf, m, words) -> None:
+        """Update sfc/ovf/m from the spike counts of a block and emit finished words."""
+        config, theta = self.config, self._engine.theta
+        p_max, F = config.p_max, config.clocks_per_tick
+        before = np.zeros(Z.shape[1], np.int64)       # N_{a-1}, block-relative
+        k = 0
+        for a, b, phase, ends in segments:
+            after = b + Z[b - 1] // theta              # N_{b-1} = (b - 1) + 1 + floor(Z / theta)
+            count = after - before
+            if config.is_te:
+                new = sfc + count
+                over = np.flatnonzero(~ovf & (new >= p_max))
+                if over.size:
+                    # The counter overflows at the first clock t with N_t >= target;
+                    # N is nondecreasing, so bisect per pixel between the earliest
+                    # possible clock (one spike per clock) and b - 1.
+                    target = before[over] + (p_max - sfc[over])
+                    lo = a + (target - before[over]) - 1
+                    hi = np.full(over.size, b - 1, np.int64)
+                    while True:
+                        open_ = lo < hi
+                        if not open_.any():
+                            break
+                        mid = (lo + hi) // 2
+                        reached = mid + 1 + Z[mid, over] // theta >= target
+                        hi = np.where(open_ & reached, mid, hi)
+                        lo = np.where(open_ & ~reached, mid + 1, lo)
+                    m[over] = (phase + lo - a) // F + 1
+                np.copyto(sfc, new, where=~ovf)
+                if over.size:
+                    ovf[over] = True
+                    sfc[over] = p_max
+            else:
+                np.minimum(sfc + count, config.ml_max, out=sfc)
+            if ends:
+                if config.is_te:
+                    words[k] = np.where(ovf, (1 << config.d) | m, sfc)
+                else:
+                    words[k] = sfc
+                k += 1
+                sfc[:] = 0
+                ovf[:] = False
+                m[:] = 0
+            before = after
 
 
 def iter_chunks(stimulus: np.ndarray, config: SensorConfig,
@@ -48,10 +396,20 @@ def iter_chunks(stimulus: np.ndarray, config: SensorConfig,
 
 def simulate(config: SensorConfig, stimulus: np.ndarray,
              chunks: Iterable[np.ndarray] | None = None) -> np.ndarray:
-    """Stimulus (T, H, W), T a multiple of L -> readout words (T / L, H, W), int64."""
-    check_stimulus(stimulus, config)
+    """Stimulus (T, H, W), T a multiple of L -> readout words (T / L, H, W), int64.
+
+    The stimulus is fed in whole-readout chunks (``chunks`` overrides the
+    split), so it may be a memory-mapped file larger than memory; each chunk's
+    values are checked as it is fed.
+    """
+    check_stimulus(stimulus, config, scan_values=False)
     array = PixelArray(config, stimulus.shape[1:])
-    parts = [array.feed(chunk) for chunk in (chunks if chunks is not None else iter_chunks(stimulus, config))]
-    if not parts:
-        return np.zeros((0,) + stimulus.shape[1:], np.int64)
-    return np.concatenate(parts)
+    words = np.empty((stimulus.shape[0] // config.clocks_per_readout,) + stimulus.shape[1:], np.int64)
+    done = 0
+    for chunk in (chunks if chunks is not None else iter_chunks(stimulus, config)):
+        part = array.feed(np.asarray(chunk))
+        words[done:done + len(part)] = part
+        done += len(part)
+    if done != len(words) or array.state.clock != stimulus.shape[0]:
+        raise ValueError(f"chunks covered {array.state.clock} of {stimulus.shape[0]} pixel clocks")
+    return words
