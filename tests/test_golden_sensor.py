@@ -186,3 +186,51 @@ def test_feed_refuses_bad_chunks():
     with pytest.raises(ValueError, match="shape"):
         array.feed(np.zeros((3, 2, 3), np.int64))
     assert array.state.clock == 0
+
+
+# -- extreme cases (docs/golden-model.md) ---------------------------------------------
+
+def test_zero_stimulus_gives_zero_words_and_state():
+    for config in EDGE_CONFIGS:
+        stim = np.zeros((config.clocks_per_readout * 3, 2, 2), np.uint8)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            words, state = run_engine(config, stim, [0, 5 % len(stim), len(stim)])
+        assert not words.any() and not state.acc.any()
+
+
+@pytest.mark.parametrize("config", [SensorConfig(input_bits=32), SensorConfig(mode="ml", input_bits=32),
+                                    SensorConfig(input_bits=32, threshold=(1 << 32) - 1, acc_bits=40),
+                                    SensorConfig(b1=2, b2=3, input_bits=32, threshold=1000)], ids=str)
+def test_max_input_every_clock_at_32_bits(config):
+    """2^32 - 1 electrons every clock: a spike every clock, the accumulator pinned at its top."""
+    stim = np.full((config.clocks_per_readout * 4, 3, 2), config.input_max, np.uint32)
+    check_equal(config, stim, [0, 1, 300, len(stim)])
+    words = simulate(config, stim)
+    if config.is_te:
+        m = (config.p_max - 1) // config.clocks_per_tick + 1     # overflow at clock 2^b1 - 1
+        assert (words == ((1 << config.d) | m)).all()
+    else:
+        assert (words == min(config.ml_max, config.clocks_per_readout)).all()
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), SensorConfig(input_bits=32)], ids=str)
+def test_twelve_decades_in_one_frame(config, rng):
+    """Light from 1e-7 to 1e5 x design light across one frame (and 1e30 clipped to the input's top)."""
+    L = config.clocks_per_readout
+    light = np.append(np.logspace(-7, 5, 47), 1e30).reshape(1, 6, 8)
+    mean = np.minimum(42000.0 * light / L, 1e15)
+    stim = np.minimum(rng.poisson(np.broadcast_to(mean, (L * 3, 6, 8))), config.input_max)
+    stim = stim.astype(np.uint32 if config.input_bits > 16 else np.uint16)
+    check_equal(config, stim, [0, 17, L + 3, len(stim)])
+    words = simulate(config, stim)
+    assert not words[:, 0, 0].any()                                 # 1e-7: no spike in 3 readouts
+    assert (words[:, -1, -1] == words[:, -1, -2]).all()             # 1e30 reads like the next-brightest
+
+
+def test_words_dtype_and_legality_for_every_edge_config(rng):
+    for config in EDGE_CONFIGS:
+        stim = make_stimulus(config, "mixed", (config.clocks_per_readout * 5, 3, 3), rng)
+        words = simulate(config, stim)
+        assert words.dtype == np.int64 and words.shape == (5, 3, 3)
+        check_words(words, config)
