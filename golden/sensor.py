@@ -45,13 +45,16 @@ from .reference import PixelState, step_reference
 DEFAULT_CHUNK_ELEMENTS = 1 << 22
 
 #: Pixel clocks advanced per closed-form block (rows of the working arrays).
-BLOCK_CLOCKS = 32
+BLOCK_CLOCKS = 16
 
 #: Pixels per block (columns of the working arrays); keeps a block near the L2 cache.
 BLOCK_PIXELS = 16384
 
 #: Below this many pixels a time scan uses numpy's accumulate instead of a row loop.
 ROW_LOOP_MIN_PIXELS = 512
+
+#: Column subsets larger than this fraction are processed at full width instead of gathered.
+GATHER_FRACTION = 0.125
 
 #: Fixed-point rounds tried on saturating pixels before their block is halved.
 MAX_ROUNDS = 4
@@ -122,9 +125,23 @@ class _Engine:
         self.block_clocks, self.dtype = _plan(config)
         # Saturation needs a spike with acc + e - theta > M >= acc, so e > theta.
         self.may_saturate = config.input_max > config.threshold
+        self._buffers: dict = {}
 
-    def dynamics(self, e: np.ndarray, acc0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _array(self, name: str, shape: tuple[int, int], dtype: np.dtype, reuse: bool) -> np.ndarray:
+        """A work array; with ``reuse`` the same memory serves every block of this shape
+        (fresh pages cost a page fault each, about a pass over the array)."""
+        if not reuse:
+            return np.empty(shape, dtype)
+        key = (name, shape, np.dtype(dtype))
+        if key not in self._buffers:
+            self._buffers[key] = np.empty(shape, dtype)
+        return self._buffers[key]
+
+    def dynamics(self, e: np.ndarray, acc0: np.ndarray, reuse: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Advance pixels over a block: e (T, n) electrons, acc0 (n,) int64 charge -> (Z, acc_end).
+
+        With ``reuse`` the returned Z lives in a buffer that the next call with
+        ``reuse`` overwrites (the caller consumes it first).
 
         Every pixel is first given the no-saturation closed form; only pixels
         that could saturate in this block are looked at again: those that are
@@ -139,11 +156,11 @@ class _Engine:
         dt = self.dtype
         if _magnitude_bound(self.config, T, int(emax.max())) <= _INT16_LIMIT:
             dt = np.dtype(np.int16)
-        Y = np.empty((T, n), dt)
+        Y = self._array("Y", (T, n), dt, reuse)
         np.subtract(e, theta, out=Y, dtype=dt, casting="unsafe")
         Y[0] += acc0.astype(dt)
         _scan(Y, np.add)                                   # Y_t = acc0 + sum (e - theta)
-        Z = _scan(Y, np.minimum, seed=0, out=np.empty_like(Y))
+        Z = _scan(Y, np.minimum, seed=0, out=self._array("Z", (T, n), dt, reuse))
         acc_end = Y[-1].astype(np.int64) - theta * (Z[-1].astype(np.int64) // theta)
         # Saturation needs e > theta on some clock. A pixel that never idles under the
         # closed form (Z = 0: Y_t >= 0) and never holds more than M (Y <= M) is exact.
@@ -157,17 +174,19 @@ class _Engine:
         # max(Y - Z) <= M - theta + 1 proves the block calm.
         cols = _Columns(unsure)
         Yu, Zu = cols.take(Y), cols.take(Z)
-        unsure_u = cols.local((Yu - Zu).max(axis=0) > M - theta + 1)
+        gap = np.subtract(Yu, Zu, out=self._array("tmp", Yu.shape, dt, reuse and cols.full))
+        unsure_u = cols.local(gap.max(axis=0) > M - theta + 1)
         if not unsure_u.any():
             return Z, acc_end
         cols = cols.narrow(unsure_u)
-        Yu, Zu, eu, acc0u = cols.take(Y), cols.take(Z), cols.take(e), cols.take_vector(acc0)
+        Yu, Zu, acc0u = cols.take(Y), cols.take(Z), cols.take_vector(acc0)
         # Charge a pixel busy on every clock would throw away: D_t = Dm_t - M with
         # Dm_t = max(M, max_{u<=t} Y_u). Busy on every clock iff Y_t >= D_{t-1} for all t.
-        Dm = _scan(Yu, np.maximum, seed=M, out=np.empty_like(Yu))
+        Dm = _scan(Yu, np.maximum, seed=M, out=self._array("Dm", Yu.shape, dt, reuse and cols.full))
         busy = Yu[0] >= 0
         if T > 1:
-            busy &= (Yu[1:] - Dm[:-1]).min(axis=0) >= -M
+            gap = np.subtract(Yu[1:], Dm[:-1], out=self._array("tmp", Yu.shape, dt, reuse and cols.full)[1:])
+            busy &= gap.min(axis=0) >= -M
         # Busy pixels: N_t = t + 1 (Z = 0 already, as Y_t >= D_{t-1} >= 0), acc = Y - D.
         acc_u = np.where(busy, Yu[-1].astype(np.int64) - (Dm[-1].astype(np.int64) - M),
                          cols.take_vector(acc_end))
@@ -180,7 +199,7 @@ class _Engine:
             clip = sub.local(acc_r.max(axis=0) > M)
             if clip.any():
                 sat = _Columns(clip)
-                Zs, acc_s = self._saturating(sat.take(sub.take(eu)), sat.take(Yr),
+                Zs, acc_s = self._saturating(sat.take(sub.take(cols.take(e))), sat.take(Yr),
                                              sat.take(sub.take(Dm)) - M,
                                              sat.take_vector(sub.take_vector(acc0u)))
                 sat.put(Zr, Zs)
@@ -245,13 +264,13 @@ class _Columns:
     """A subset of pixel columns; gathers only when it is small.
 
     Fancy-indexing columns of a (T, n) array costs several times a plain pass,
-    so a subset of more than a quarter of the columns is worked on in place
-    at full width (the extra columns are computed and then ignored).
+    so a subset of more than GATHER_FRACTION of the columns is worked on in
+    place at full width (the extra columns are computed and then ignored).
     """
 
     def __init__(self, mask: np.ndarray):
         self.mask = mask
-        self.full = mask.all() or 4 * int(np.count_nonzero(mask)) > mask.size
+        self.full = mask.all() or GATHER_FRACTION * mask.size < int(np.count_nonzero(mask))
         self.index = None if self.full else np.flatnonzero(mask)
 
     def local(self, mask: np.ndarray) -> np.ndarray:
@@ -321,7 +340,7 @@ class PixelArray:
             for p0 in range(0, P, BLOCK_PIXELS):
                 p1 = min(P, p0 + BLOCK_PIXELS)
                 acc, sfc, ovf, m = (a[p0:p1] for a in flat)
-                Z, acc[:] = self._engine.dynamics(e[t0:t1, p0:p1], acc)
+                Z, acc[:] = self._engine.dynamics(e[t0:t1, p0:p1], acc, reuse=True)
                 self._count(Z, segments, sfc, ovf, m, words[word_index:, p0:p1])
             word_index += sum(1 for seg in segments if seg[3])
         state.clock += T
@@ -357,12 +376,15 @@ class PixelArray:
                     target = before[over] + (p_max - sfc[over])
                     lo = a + (target - before[over]) - 1
                     hi = np.full(over.size, b - 1, np.int64)
+                    flat, width = Z.reshape(-1), Z.shape[1]
+                    # Most overflowing pixels fire on every clock up to it: settle them first.
+                    hi = np.where(lo + 1 + np.take(flat, lo * width + over) // theta >= target, lo, hi)
                     while True:
                         open_ = lo < hi
                         if not open_.any():
                             break
                         mid = (lo + hi) // 2
-                        reached = mid + 1 + Z[mid, over] // theta >= target
+                        reached = mid + 1 + np.take(flat, mid * width + over) // theta >= target
                         hi = np.where(open_ & reached, mid, hi)
                         lo = np.where(open_ & ~reached, mid + 1, lo)
                     m[over] = (phase + lo - a) // F + 1
