@@ -56,6 +56,9 @@ ROW_LOOP_MIN_PIXELS = 512
 #: Column subsets larger than this fraction are processed at full width instead of gathered.
 GATHER_FRACTION = 0.125
 
+#: The same for the pixels that go through the fixed-point rounds.
+SATURATING_GATHER_FRACTION = 0.3
+
 #: Fixed-point rounds tried on saturating pixels before their block is halved.
 MAX_ROUNDS = 4
 
@@ -198,9 +201,14 @@ class _Engine:
             acc_r = Yr - theta * (Zr // theta)
             clip = sub.local(acc_r.max(axis=0) > M)
             if clip.any():
-                sat = _Columns(clip)
-                Zs, acc_s = self._saturating(sat.take(sub.take(cols.take(e))), sat.take(Yr),
-                                             sat.take(sub.take(Dm)) - M,
+                # The rounds cost about ten passes each, so gathering pays for more columns here.
+                sat = _Columns(clip, gather_fraction=SATURATING_GATHER_FRACTION)
+                # Two lower bounds of the true loss: the busy walk's (Dm - M) and the first
+                # round's from D = 0, the running max of (closed-form acc - M); start at both.
+                D0 = sat.take(acc_r) - M
+                _scan(D0, np.maximum, seed=0)
+                np.maximum(D0, sat.take(sub.take(Dm)) - M, out=D0)
+                Zs, acc_s = self._saturating(sat.take(sub.take(cols.take(e))), sat.take(Yr), D0,
                                              sat.take_vector(sub.take_vector(acc0u)))
                 sat.put(Zr, Zs)
                 acc_r_end = sub.take_vector(acc_u)
@@ -220,44 +228,42 @@ class _Engine:
         """
         theta, M, dt = self.theta, self.acc_max, Y.dtype
         T, n = Y.shape
-        Z_out = np.empty((T, n), dt)
-        acc_out = np.empty(n, np.int64)
         # D[u + 1] = charge thrown away up to clock u; D[0] = 0 (before the block).
         D = np.empty((T + 1, n), dt)
         D[0] = 0
         D[1:] = D0
-        live = np.arange(n)
-        for _ in range(MAX_ROUNDS):
-            Z = Y - D[:-1]
+        Z = np.empty((T, n), dt)
+        acc = np.empty((T, n), dt)
+        for round_ in range(MAX_ROUNDS):
+            np.subtract(Y, D[:-1], out=Z)
             _scan(Z, np.minimum, seed=0)
-            f = Z // theta
-            # acc_t = Y_t - D_t - theta f_t; the round is the fixed point iff acc_t <= M
-            # everywhere (then the new loss, a running max, equals D).
-            f *= theta
-            np.subtract(Y, f, out=f)                        # Y - theta f = acc + D
-            excess = f - D[1:]
-            excess -= M
-            done = excess.max(axis=0) <= 0
-            if done.any():
-                cols = live[done]
-                Z_out[:, cols] = Z[:, done]
-                acc_out[cols] = f[-1, done].astype(np.int64) - D[-1, done]
-                keep = ~done
-                live, Y, D, e, acc0, f = live[keep], Y[:, keep], D[:, keep], e[:, keep], acc0[keep], f[:, keep]
-                if not live.size:
-                    return Z_out, acc_out
-            np.subtract(f, M, out=D[1:])
+            np.floor_divide(Z, theta, out=acc)
+            acc *= theta
+            np.subtract(Y, acc, out=acc)                    # Y - theta f = acc + D
+            acc -= D[1:]                                    # acc_t under this round's D
+            # The round is the fixed point iff acc_t <= M everywhere (then the new
+            # loss, a running max, equals D). Settled pixels stay settled, so the
+            # rounds run on all of them until every one is (no column shuffling).
+            done = acc.max(axis=0) <= M
+            if done.all():
+                return Z, acc[-1].astype(np.int64)
+            if round_ == MAX_ROUNDS - 1:
+                break
+            acc += D[1:]
+            np.subtract(acc, M, out=D[1:])
             _scan(D[1:], np.maximum, seed=0)
-        # Too many saturating stretches in this block for these pixels: halve it.
+        # Too many saturating stretches in this block for some pixels: halve it for them.
         # (A one-clock block settles in two rounds, so this always terminates.)
         assert T > 1, "a one-clock block must settle within two rounds"
+        acc_out = acc[-1].astype(np.int64)
+        live = np.flatnonzero(~done)
         half = T // 2
-        Z1, acc1 = self.dynamics(e[:half], acc0)
-        Z2, acc2 = self.dynamics(e[half:], acc1)
-        Z_out[:half, live] = Z1
-        Z_out[half:, live] = Z2.astype(dt) + theta * (Z1[-1].astype(dt) // theta)
+        Z1, acc1 = self.dynamics(e[:half, live], acc0[live])
+        Z2, acc2 = self.dynamics(e[half:, live], acc1)
+        Z[:half, live] = Z1
+        Z[half:, live] = Z2.astype(dt) + theta * (Z1[-1].astype(dt) // theta)
         acc_out[live] = acc2
-        return Z_out, acc_out
+        return Z, acc_out
 
 
 class _Columns:
@@ -268,9 +274,10 @@ class _Columns:
     place at full width (the extra columns are computed and then ignored).
     """
 
-    def __init__(self, mask: np.ndarray):
+    def __init__(self, mask: np.ndarray, gather_fraction: float | None = None):
         self.mask = mask
-        self.full = mask.all() or GATHER_FRACTION * mask.size < int(np.count_nonzero(mask))
+        fraction = GATHER_FRACTION if gather_fraction is None else gather_fraction
+        self.full = mask.all() or fraction * mask.size < int(np.count_nonzero(mask))
         self.index = None if self.full else np.flatnonzero(mask)
 
     def local(self, mask: np.ndarray) -> np.ndarray:
