@@ -163,25 +163,37 @@ class _Engine:
         np.subtract(e, theta, out=Y, dtype=dt, casting="unsafe")
         Y[0] += acc0.astype(dt)
         _scan(Y, np.add)                                   # Y_t = acc0 + sum (e - theta)
-        Z = _scan(Y, np.minimum, seed=0, out=self._array("Z", (T, n), dt, reuse))
+        # A pixel whose Y never drops below 0 fires on every clock under the closed
+        # form: its running minimum is 0, no scan needed (the common case when bright).
+        never_idle = Y.min(axis=0) >= 0
+        Z = self._array("Z", (T, n), dt, reuse)
+        if never_idle.all():
+            Z.fill(0)
+        else:
+            _scan(Y, np.minimum, seed=0, out=Z)
         acc_end = Y[-1].astype(np.int64) - theta * (Z[-1].astype(np.int64) // theta)
         # Saturation needs e > theta on some clock. A pixel that never idles under the
-        # closed form (Z = 0: Y_t >= 0) and never holds more than M (Y <= M) is exact.
+        # closed form (Z = 0: Y_t >= 0) and never holds more than M (Y <= M) is exact;
+        # one that never idles but exceeds M saturates under it for sure.
         unsure = emax > theta
         if not unsure.any():
             return Z, acc_end
-        unsure &= (Z[-1] < 0) | (Y.max(axis=0) > M)
+        unsure &= ~never_idle | (Y.max(axis=0) > M)
         if not unsure.any():
             return Z, acc_end
         # acc_t = Y_t - theta floor(Z_t / theta) <= Y_t - Z_t + theta - 1, so
         # max(Y - Z) <= M - theta + 1 proves the block calm.
+        test = unsure & ~never_idle
+        if test.any():
+            cols = _Columns(test)
+            gap = np.subtract(cols.take(Y), cols.take(Z), out=self._array("tmp", (T, n), dt, reuse and cols.full)
+                              if cols.full else None)
+            failing = np.zeros(n, bool)
+            cols.put_vector(failing, gap.max(axis=0) > M - theta + 1)
+            unsure = (unsure & never_idle) | failing
+            if not unsure.any():
+                return Z, acc_end
         cols = _Columns(unsure)
-        Yu, Zu = cols.take(Y), cols.take(Z)
-        gap = np.subtract(Yu, Zu, out=self._array("tmp", Yu.shape, dt, reuse and cols.full))
-        unsure_u = cols.local(gap.max(axis=0) > M - theta + 1)
-        if not unsure_u.any():
-            return Z, acc_end
-        cols = cols.narrow(unsure_u)
         Yu, Zu, acc0u = cols.take(Y), cols.take(Z), cols.take_vector(acc0)
         # Charge a pixel busy on every clock would throw away: D_t = Dm_t - M with
         # Dm_t = max(M, max_{u<=t} Y_u). Busy on every clock iff Y_t >= D_{t-1} for all t.
