@@ -11,11 +11,14 @@ same stimulus; the engine's words are checked equal to the reference's.
 from __future__ import annotations
 
 import argparse
+import re
 import time
+from pathlib import Path
 
 import numpy as np
 
 from golden.config import DESIGN_ELECTRONS, SensorConfig
+from golden.io import atomic_output
 from golden.reference import step_reference
 from golden.sensor import simulate
 
@@ -60,10 +63,14 @@ def main() -> None:
     parser.add_argument("--readouts", type=int, default=20, help="readout intervals per run")
     parser.add_argument("--reference-readouts", type=int, default=2, help="readouts timed for the reference")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--write-doc", action="store_true",
+                        help="also put the table into docs/golden-model.md (between the bench markers)")
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
     print(f"{args.size}x{args.size} pixels, {args.readouts} readouts per run (reference: "
           f"{args.reference_readouts}); pixel-clock updates per CPU second, best of 3 (reference: 1)")
+    lines = [f"{args.size} x {args.size} pixels, {args.readouts} readouts; pixel-clock updates per CPU second",
+             "", "| config | stimulus | engine | reference | ratio | words equal |", "| --- | --- | --- | --- | --- | --- |"]
     print(f"{'config':<6} {'stimulus':<28} {'engine':>10} {'reference':>10} {'ratio':>7}  words equal")
     for name in ("te", "ml"):
         config = SensorConfig.preset(name)
@@ -74,6 +81,15 @@ def main() -> None:
             slow, ref = rate(lambda s: step_reference(config, s)[0], short)
             equal = np.array_equal(words[:args.reference_readouts], ref)
             print(f"{name:<6} {label:<28} {fast:10.3g} {slow:10.3g} {fast / slow:7.1f}  {equal}")
+            lines.append(f"| {name} | {label} | {fast:.3g} | {slow:.3g} | {fast / slow:.1f} | {equal} |")
+    if args.write_doc:
+        doc = Path(__file__).resolve().parent.parent / "docs" / "golden-model.md"
+        text = doc.read_text()
+        pattern = re.compile(r"(<!-- bench:start -->\n).*?(<!-- bench:end -->)", re.S)
+        text = pattern.sub(lambda m: m.group(1) + "\n".join(lines) + "\n" + m.group(2), text)
+        with atomic_output(doc) as tmp:
+            Path(tmp).write_text(text)
+        print(f"wrote {doc}")
 
 
 if __name__ == "__main__":
