@@ -104,8 +104,10 @@ def _scan(x: np.ndarray, op: np.ufunc, seed: int | None = None, out: np.ndarray 
     elif out is not x:
         out[0] = x[0]
     if x.shape[1] >= ROW_LOOP_MIN_PIXELS:
-        for i in range(1, x.shape[0]):
-            op(out[i - 1], x[i], out=out[i])
+        rows_in = list(x)                               # row views made in one C loop
+        rows_out = rows_in if out is x else list(out)
+        for i in range(1, len(rows_in)):
+            op(rows_out[i - 1], rows_in[i], out=rows_out[i])
     elif x.shape[0] > 1:
         if out is not x:
             out[1:] = x[1:]
@@ -143,7 +145,7 @@ class _Engine:
     def dynamics(self, e: np.ndarray, acc0: np.ndarray, reuse: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Advance pixels over a block: e (T, n) electrons, acc0 (n,) int64 charge -> (Z, acc_end).
 
-        With ``reuse`` the returned Z lives in a buffer that the next call with
+        ``Z`` is None when every pixel fired on every clock (N_t = t + 1). With ``reuse`` the returned Z lives in a buffer that the next call with
         ``reuse`` overwrites (the caller consumes it first).
 
         Every pixel is first given the no-saturation closed form; only pixels
@@ -165,13 +167,14 @@ class _Engine:
         _scan(Y, np.add)                                   # Y_t = acc0 + sum (e - theta)
         # A pixel whose Y never drops below 0 fires on every clock under the closed
         # form: its running minimum is 0, no scan needed (the common case when bright).
+        # Z = None stands for all zeros (every pixel fires on every clock: N_t = t + 1).
         never_idle = Y.min(axis=0) >= 0
-        Z = self._array("Z", (T, n), dt, reuse)
         if never_idle.all():
-            Z.fill(0)
+            Z = None
+            acc_end = Y[-1].astype(np.int64)
         else:
-            _scan(Y, np.minimum, seed=0, out=Z)
-        acc_end = Y[-1].astype(np.int64) - theta * (Z[-1].astype(np.int64) // theta)
+            Z = _scan(Y, np.minimum, seed=0, out=self._array("Z", (T, n), dt, reuse))
+            acc_end = (Y[-1] - theta * (Z[-1] // theta)).astype(np.int64)
         # Saturation needs e > theta on some clock. A pixel that never idles under the
         # closed form (Z = 0: Y_t >= 0) and never holds more than M (Y <= M) is exact;
         # one that never idles but exceeds M saturates under it for sure.
@@ -193,6 +196,9 @@ class _Engine:
             unsure = (unsure & never_idle) | failing
             if not unsure.any():
                 return Z, acc_end
+        if Z is None:
+            Z = self._array("Z", (T, n), dt, reuse)
+            Z.fill(0)
         cols = _Columns(unsure)
         Yu, Zu, acc0u = cols.take(Y), cols.take(Z), cols.take_vector(acc0)
         # Charge a pixel busy on every clock would throw away: D_t = Dm_t - M with
@@ -272,6 +278,8 @@ class _Engine:
         half = T // 2
         Z1, acc1 = self.dynamics(e[:half, live], acc0[live])
         Z2, acc2 = self.dynamics(e[half:, live], acc1)
+        Z1 = np.zeros((half, live.size), dt) if Z1 is None else Z1
+        Z2 = np.zeros((T - half, live.size), dt) if Z2 is None else Z2
         Z[:half, live] = Z1
         Z[half:, live] = Z2.astype(dt) + theta * (Z1[-1].astype(dt) // theta)
         acc_out[live] = acc2
@@ -380,10 +388,11 @@ class PixelArray:
         """Update sfc/ovf/m from the spike counts of a block and emit finished words."""
         config, theta = self.config, self._engine.theta
         p_max, F = config.p_max, config.clocks_per_tick
-        before = np.zeros(Z.shape[1], np.int64)       # N_{a-1}, block-relative
+        before = np.zeros(sfc.shape[0], np.int64)     # N_{a-1}, block-relative
         k = 0
         for a, b, phase, ends in segments:
-            after = b + Z[b - 1] // theta              # N_{b-1} = (b - 1) + 1 + floor(Z / theta)
+            # N_{b-1} = (b - 1) + 1 + floor(Z / theta); Z None: every clock fired
+            after = np.full(sfc.shape[0], b, np.int64) if Z is None else b + Z[b - 1] // theta
             count = after - before
             if config.is_te:
                 new = sfc + count
@@ -395,9 +404,12 @@ class PixelArray:
                     target = before[over] + (p_max - sfc[over])
                     lo = a + (target - before[over]) - 1
                     hi = np.full(over.size, b - 1, np.int64)
-                    flat, width = Z.reshape(-1), Z.shape[1]
-                    # Most overflowing pixels fire on every clock up to it: settle them first.
-                    hi = np.where(lo + 1 + np.take(flat, lo * width + over) // theta >= target, lo, hi)
+                    if Z is None:
+                        hi = lo
+                    else:
+                        flat, width = Z.reshape(-1), Z.shape[1]
+                        # Most overflowing pixels fire on every clock up to it: settle them first.
+                        hi = np.where(lo + 1 + np.take(flat, lo * width + over) // theta >= target, lo, hi)
                     while True:
                         open_ = lo < hi
                         if not open_.any():
