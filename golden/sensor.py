@@ -216,7 +216,9 @@ class _Engine:
             # Exact test for the others: the closed form holds iff acc_t <= M everywhere.
             sub = _Columns(rest)
             Yr, Zr = sub.take(Yu), sub.take(Zu)
-            acc_r = Yr - theta * (Zr // theta)
+            acc_r = np.floor_divide(Zr, theta, out=self._array("acc", Yr.shape, dt, reuse and sub.full and cols.full))
+            acc_r *= theta
+            np.subtract(Yr, acc_r, out=acc_r)
             clip = sub.local(acc_r.max(axis=0) > M)
             if clip.any():
                 # The rounds cost about ten passes each, so gathering pays for more columns here.
