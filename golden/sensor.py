@@ -369,7 +369,9 @@ class PixelArray:
             for p0 in range(0, P, BLOCK_PIXELS):
                 p1 = min(P, p0 + BLOCK_PIXELS)
                 acc, sfc, ovf, m = (a[p0:p1] for a in flat)
-                Z, acc[:] = self._engine.dynamics(e[t0:t1, p0:p1], acc, reuse=True)
+                # Work buffers are kept for full-length blocks only, so odd chunk
+                # lengths do not pile up buffers of every partial length.
+                Z, acc[:] = self._engine.dynamics(e[t0:t1, p0:p1], acc, reuse=t1 - t0 == block)
                 self._count(Z, segments, sfc, ovf, m, words[word_index:, p0:p1])
             word_index += sum(1 for seg in segments if seg[3])
         state.clock += T
