@@ -19,14 +19,16 @@ of clocks starting with charge ``acc0`` and with ``Y_t = acc0 + sum_{u<=t}
 * saturation throws away charge ``D_t = max_{u<=t} max(0, Y_u - theta f_u - M)``
   (a running maximum) and the spike rule then reads ``Y_u - D_{u-1}`` instead
   of ``Y_u``. The pair (D, N) is the unique fixed point of these two causal
-  maps; iterating them from ``D = 0`` increases D monotonically to it, and each
-  iteration settles at least one more saturating stretch. Pixels that saturate
-  are iterated on their own; the few that would need many rounds in a block
+  maps; iterating them from a lower bound of D (the busy walk's loss, or
+  D = 0) increases D monotonically to it, and each iteration settles at least
+  one more saturating stretch. Pixels that saturate and idle in one block
+  are iterated on their own (pixels busy on every clock of the block have the
+  exact top-reflected-walk form, ``acc_t = Y_t - D_t``, ``N_t = t + 1``); the few that would need many rounds in a block
   are split into half blocks (down to single clocks, where two rounds are
   exact by construction), so no stimulus can make the engine wrong, only slower.
 
 All intermediates are bounded (see :func:`_magnitude_bound`), so the engine
-uses int32 where a block provably fits and int64 otherwise; configurations
+uses int16 or int32 where a block provably fits and int64 otherwise; configurations
 whose accumulator is too wide for any block in int64 (acc_bits >= 61) run the
 literal per-clock rule, which is exact there by construction.
 """
@@ -305,14 +307,6 @@ class _Columns:
     def local(self, mask: np.ndarray) -> np.ndarray:
         """A mask computed over the taken columns, restricted to this subset's members."""
         return mask & self.mask if self.full else mask
-
-    def narrow(self, mask: np.ndarray) -> "_Columns":
-        """The members where ``mask`` (over the taken columns) holds, as columns of the original."""
-        if self.full:
-            return _Columns(self.mask & mask)
-        whole = np.zeros_like(self.mask)
-        whole[self.index] = mask
-        return _Columns(whole)
 
     def take(self, a: np.ndarray) -> np.ndarray:
         return a if self.full else a[:, self.index]
