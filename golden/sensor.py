@@ -186,60 +186,83 @@ class _Engine:
         unsure &= ~never_idle | (Y.max(axis=0) > M)
         if not unsure.any():
             return Z, acc_end
-        # acc_t = Y_t - theta floor(Z_t / theta) <= Y_t - Z_t + theta - 1, so
-        # max(Y - Z) <= M - theta + 1 proves the block calm.
-        test = unsure & ~never_idle
-        if test.any():
-            cols = _Columns(test)
-            gap = np.subtract(cols.take(Y), cols.take(Z), out=self._array("tmp", (T, n), dt, reuse and cols.full)
-                              if cols.full else None)
-            failing = np.zeros(n, bool)
-            cols.put_vector(failing, gap.max(axis=0) > M - theta + 1)
-            unsure = (unsure & never_idle) | failing
-            if not unsure.any():
-                return Z, acc_end
         if Z is None:
             Z = self._array("Z", (T, n), dt, reuse)
             Z.fill(0)
-        cols = _Columns(unsure)
-        Yu, Zu, acc0u = cols.take(Y), cols.take(Z), cols.take_vector(acc0)
-        # Charge a pixel busy on every clock would throw away: D_t = Dm_t - M with
-        # Dm_t = max(M, max_{u<=t} Y_u). Busy on every clock iff Y_t >= D_{t-1} for all t.
+        # Two kinds of unsure pixels. Busy on every clock implies Y >= 0 (never idle),
+        # so only never-idle pixels (which exceed M under the closed form) can be busy;
+        # idle ones get the calm bound and, failing it, the exact check.
+        walkers = unsure & never_idle
+        if walkers.any():
+            self._walkers(_Columns(walkers), e, Y, Z, acc0, acc_end, reuse)
+        idlers = unsure & ~never_idle
+        if idlers.any():
+            self._idlers(_Columns(idlers), e, Y, Z, acc0, acc_end, reuse)
+        return Z, acc_end
+
+    def _walkers(self, cols, e, Y, Z, acc0, acc_end, reuse):
+        """Pixels with Y >= 0 throughout and Y > M somewhere: busy walk, else the rounds.
+
+        The charge a pixel busy on every clock throws away is D_t = Dm_t - M with
+        Dm_t = max(M, max_{u<=t} Y_u); it is busy on every clock iff Y_t >= D_{t-1}
+        for all t, and then N_t = t + 1 (Z = 0 already) and acc = Y - D exactly.
+        """
+        theta, M, dt = self.theta, self.acc_max, Y.dtype
+        T = Y.shape[0]
+        Yu = cols.take(Y)
         Dm = _scan(Yu, np.maximum, seed=M, out=self._array("Dm", Yu.shape, dt, reuse and cols.full))
         busy = Yu[0] >= 0
         if T > 1:
             gap = np.subtract(Yu[1:], Dm[:-1], out=self._array("tmp", Yu.shape, dt, reuse and cols.full)[1:])
             busy &= gap.min(axis=0) >= -M
-        # Busy pixels: N_t = t + 1 (Z = 0 already, as Y_t >= D_{t-1} >= 0), acc = Y - D.
-        acc_u = np.where(busy, Yu[-1].astype(np.int64) - (Dm[-1].astype(np.int64) - M),
-                         cols.take_vector(acc_end))
+        busy = cols.local(busy)
+        acc_u = cols.take_vector(acc_end)
+        np.copyto(acc_u, Yu[-1].astype(np.int64) - (Dm[-1].astype(np.int64) - M), where=busy)
         rest = cols.local(~busy)
         if rest.any():
-            # Exact test for the others: the closed form holds iff acc_t <= M everywhere.
-            sub = _Columns(rest)
-            Yr, Zr = sub.take(Yu), sub.take(Zu)
-            acc_r = np.floor_divide(Zr, theta, out=self._array("acc", Yr.shape, dt, reuse and sub.full and cols.full))
-            acc_r *= theta
-            np.subtract(Yr, acc_r, out=acc_r)
-            clip = sub.local(acc_r.max(axis=0) > M)
-            if clip.any():
-                # The rounds cost about ten passes each, so gathering pays for more columns here.
-                sat = _Columns(clip, gather_fraction=SATURATING_GATHER_FRACTION)
-                # Two lower bounds of the true loss: the busy walk's (Dm - M) and the first
-                # round's from D = 0, the running max of (closed-form acc - M); start at both.
-                D0 = sat.take(acc_r) - M
-                _scan(D0, np.maximum, seed=0)
-                np.maximum(D0, sat.take(sub.take(Dm)) - M, out=D0)
-                Zs, acc_s = self._saturating(sat.take(sub.take(cols.take(e))), sat.take(Yr), D0,
-                                             sat.take_vector(sub.take_vector(acc0u)))
-                sat.put(Zr, Zs)
-                acc_r_end = sub.take_vector(acc_u)
-                sat.put_vector(acc_r_end, acc_s)
-                sub.put(Zu, Zr)
-                sub.put_vector(acc_u, acc_r_end)
-        cols.put(Z, Zu)
+            # Not busy: the closed form exceeds M (Y > M with Z = 0), so these saturate
+            # and idle in the block. The busy walk's loss is a lower bound of theirs.
+            sat = _Columns(rest, gather_fraction=SATURATING_GATHER_FRACTION)
+            Zs, acc_s = self._saturating(sat.take(cols.take(e)), sat.take(Yu), sat.take(Dm) - M,
+                                         sat.take_vector(cols.take_vector(acc0)))
+            Zu = cols.take(Z)
+            sat.put(Zu, Zs)
+            sat.put_vector(acc_u, acc_s)
+            cols.put(Z, Zu)
         cols.put_vector(acc_end, acc_u)
-        return Z, acc_end
+
+    def _idlers(self, cols, e, Y, Z, acc0, acc_end, reuse):
+        """Pixels that idle under the closed form and may saturate: bound, exact check, rounds.
+
+        acc_t = Y_t - theta floor(Z_t / theta) <= Y_t - Z_t + theta - 1, so
+        max(Y - Z) <= M - theta + 1 proves the block calm; otherwise the closed
+        form holds iff its acc_t <= M for every t.
+        """
+        theta, M, dt = self.theta, self.acc_max, Y.dtype
+        Yu, Zu = cols.take(Y), cols.take(Z)
+        work = self._array("tmp", Yu.shape, dt, reuse and cols.full)
+        np.subtract(Yu, Zu, out=work)
+        suspect = cols.local(work.max(axis=0) > M - theta + 1)
+        if not suspect.any():
+            return
+        np.floor_divide(Zu, theta, out=work)
+        work *= theta
+        np.subtract(Yu, work, out=work)                     # the closed form's acc
+        clip = cols.local(suspect & (work.max(axis=0) > M))
+        if not clip.any():
+            return
+        # The first round from D = 0, the running max of (closed-form acc - M), is a
+        # lower bound of the true loss; the rounds start there.
+        sat = _Columns(clip, gather_fraction=SATURATING_GATHER_FRACTION)
+        D0 = sat.take(work) - M
+        _scan(D0, np.maximum, seed=0)
+        Zs, acc_s = self._saturating(sat.take(cols.take(e)), sat.take(Yu), D0,
+                                     sat.take_vector(cols.take_vector(acc0)))
+        sat.put(Zu, Zs)
+        cols.put(Z, Zu)
+        acc_u = cols.take_vector(acc_end)
+        sat.put_vector(acc_u, acc_s)
+        cols.put_vector(acc_end, acc_u)
 
     def _saturating(self, e, Y, D0, acc0):
         """Pixels that saturate and idle in one block: iterate the (D, N) fixed point.
