@@ -61,8 +61,19 @@ def _integrator(m: Module, config: SensorConfig, charge, name: str):
     return spike
 
 
-def te_pixel_logic(m: Module, config: SensorConfig, charge, ccc, last, word, name: str = "") -> None:
-    """Add one TE pixel (SPEC sections 3-4) driving the register ``word`` to ``m``."""
+def _drive_word(m: Module, word, value, last, registered: bool) -> None:
+    """Registered: ``word`` loads ``value`` at the edge of the ``last`` clock and holds it.
+    Not registered: ``word`` shows ``value`` combinationally (meaningful only while ``last``)."""
+    if registered:
+        with m.If(last):
+            m.d.sync += word.eq(value)
+    else:
+        m.d.comb += word.eq(value)
+
+
+def te_pixel_logic(m: Module, config: SensorConfig, charge, ccc, last, word, name: str = "",
+                   word_register: bool = True) -> None:
+    """Add one TE pixel (SPEC sections 3-4) driving ``word`` to ``m``."""
     b1, b2, d = config.b1, config.b2, config.d
     spike = _integrator(m, config, charge, name)
     sfc = Signal(b1, name=f"{name}sfc")
@@ -79,13 +90,15 @@ def te_pixel_logic(m: Module, config: SensorConfig, charge, ccc, last, word, nam
     flagged = Cat(m_next, Const(0, d - b2), Const(1, 1))     # (1 << d) | m
     counted = Cat(total[:b1], Const(0, d - b1), Const(0, 1))  # sfc
     m.d.sync += mreg.eq(m_next)
+    _drive_word(m, word, Mux(ovf_next, flagged, counted), last, word_register)
     with m.If(last):
-        m.d.sync += [word.eq(Mux(ovf_next, flagged, counted)), sfc.eq(0), ovf.eq(0)]
+        m.d.sync += [sfc.eq(0), ovf.eq(0)]
     with m.Else():
         m.d.sync += [sfc.eq(total[:b1]), ovf.eq(ovf_next)]
 
 
-def ml_pixel_logic(m: Module, config: SensorConfig, charge, last, word, name: str = "") -> None:
+def ml_pixel_logic(m: Module, config: SensorConfig, charge, last, word, name: str = "",
+                   word_register: bool = True) -> None:
     """Add one ML pixel (saturating ml_bits spike counter) driving ``word`` to ``m``."""
     bits = config.ml_bits
     spike = _integrator(m, config, charge, name)
@@ -93,8 +106,9 @@ def ml_pixel_logic(m: Module, config: SensorConfig, charge, last, word, name: st
     count_next = Signal(bits, name=f"{name}count_next")
     full = count == Const(config.ml_max, bits)
     m.d.comb += count_next.eq(Mux(spike & ~full, (count + 1)[:bits], count))
+    _drive_word(m, word, count_next, last, word_register)
     with m.If(last):
-        m.d.sync += [word.eq(count_next), count.eq(0)]
+        m.d.sync += count.eq(0)
     with m.Else():
         m.d.sync += count.eq(count_next)
 
@@ -106,10 +120,16 @@ class TEPixel(wiring.Component):
     counter, 1..alpha), ``last`` (S_r: last pixel clock of the readout
     interval), ``word`` (registered readout word, loaded at the edge that
     processes the ``last`` clock).
+
+    ``word_register=False`` builds the pixel without its readout word register
+    (``word`` is then the combinational word of the ``last`` clock, to be sampled
+    at that edge): the variant the hardware-cost table uses to show the cost of
+    the buffer. Arrays always use the registered form.
     """
 
-    def __init__(self, config: SensorConfig):
+    def __init__(self, config: SensorConfig, *, word_register: bool = True):
         self.config = check_pixel_config(config, "te", "TEPixel")
+        self.word_register = bool(word_register)
         super().__init__({
             "charge": In(self.config.input_bits),
             "ccc": In(self.config.b2),
@@ -119,18 +139,21 @@ class TEPixel(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        te_pixel_logic(m, self.config, self.charge, self.ccc, self.last, self.word)
+        te_pixel_logic(m, self.config, self.charge, self.ccc, self.last, self.word,
+                       word_register=self.word_register)
         return m
 
 
 class MLPixel(wiring.Component):
     """One multi-level-counter pixel: integrate, fire, count spikes saturating (SPEC §3-4).
 
-    Ports as :class:`TEPixel` without ``ccc`` (an ML pixel never sees the CCC).
+    Ports as :class:`TEPixel` without ``ccc`` (an ML pixel never sees the CCC);
+    ``word_register`` as there.
     """
 
-    def __init__(self, config: SensorConfig):
+    def __init__(self, config: SensorConfig, *, word_register: bool = True):
         self.config = check_pixel_config(config, "ml", "MLPixel")
+        self.word_register = bool(word_register)
         super().__init__({
             "charge": In(self.config.input_bits),
             "last": In(1),
@@ -139,7 +162,8 @@ class MLPixel(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        ml_pixel_logic(m, self.config, self.charge, self.last, self.word)
+        ml_pixel_logic(m, self.config, self.charge, self.last, self.word,
+                       word_register=self.word_register)
         return m
 
 
