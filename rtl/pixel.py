@@ -1,0 +1,179 @@
+"""One TE or ML pixel in Amaranth (SPEC sections 3 and 4).
+
+The pixel logic is written once, as the functions :func:`te_pixel_logic` and
+:func:`ml_pixel_logic` that add it to a module; :class:`TEPixel` and
+:class:`MLPixel` wrap them as components (one Verilog module each, the unit of
+synthesis), and :class:`rtl.array.PixelArray` may inline them into one flat
+module (faster in the Amaranth simulator). Both forms are the same logic.
+
+Shared intermediate values (``q``, the remainder after the spike, the SFC sum,
+next flag and next latch value) are named signals in the components, so the
+generated Verilog computes each once (Amaranth repeats an unnamed expression at
+every use: six copies of ``acc + charge``, twice the Icarus memory per pixel).
+The flat array passes ``named=False``: there every extra comb signal costs the
+Amaranth simulator time per pixel (about 2x for an 8 x 8 array).
+
+Per pixel clock (one rising edge of ``sync``):
+
+* integrator: ``q = acc + charge`` (one bit wider than either operand, so it
+  never wraps), spike ``s = q >= theta``, ``acc <= min(q - theta*s, 2^A - 1)``
+  (subtractive reset, saturating well);
+* TE: the SFC of b1 bits counts spikes while the overflow flag is clear; its
+  carry *is* the overflow flag, and on the carry a b2-bit register latches the
+  shared CCC value;
+* ML: a saturating ml_bits spike counter;
+* on the last clock of a readout interval (``last``) the word register loads
+  the word of SPEC section 4 computed from the state *after* this clock, and
+  SFC and flag restart from zero; ``acc`` keeps its residual.
+
+The latched CCC register is not cleared at readout: the word shows it only
+while the flag is set, and a set flag means it was written in this interval,
+so clearing it would be logic with no observable effect.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from golden.config import SensorConfig
+from golden.errors import ConfigError
+
+
+def check_pixel_config(config: SensorConfig, mode: str, what: str) -> SensorConfig:
+    """Re-validate ``config`` and refuse a mode the block cannot build."""
+    if not isinstance(config, SensorConfig):
+        raise ConfigError(f"{what}: configuration must be a SensorConfig, not {type(config).__name__}")
+    config = config.check()
+    if config.mode != mode:
+        raise ConfigError(f"config key 'mode' = {config.mode!r}: {what} needs mode {mode!r}")
+    return config
+
+
+def _value(m: Module, expr, width: int, name: str, named: bool):
+    """``expr`` as a named comb signal of ``width`` bits, or as the bare expression."""
+    if not named:
+        return expr[:width]
+    signal = Signal(width, name=name)
+    m.d.comb += signal.eq(expr)
+    return signal
+
+
+def _integrator(m: Module, config: SensorConfig, charge, name: str, named: bool):
+    """Charge accumulator with threshold comparator and subtractive reset; returns the spike."""
+    acc = Signal(config.acc_bits, name=f"{name}acc")
+    width = max(config.acc_bits, config.input_bits) + 1        # acc + charge never wraps
+    q = _value(m, acc + charge, width, f"{name}q", named)
+    spike = Signal(name=f"{name}spike")
+    m.d.comb += spike.eq(q >= Const(config.threshold, width))
+    rest = _value(m, q - Mux(spike, Const(config.threshold, width), Const(0, width)), width,
+                  f"{name}rest", named)
+    m.d.sync += acc.eq(Mux(rest > Const(config.acc_max, width),
+                           Const(config.acc_max, config.acc_bits), rest[:config.acc_bits]))
+    return spike
+
+
+def _drive_word(m: Module, word, value, last, registered: bool) -> None:
+    """Registered: ``word`` loads ``value`` at the edge of the ``last`` clock and holds it.
+    Not registered: ``word`` shows ``value`` combinationally (meaningful only while ``last``)."""
+    if registered:
+        with m.If(last):
+            m.d.sync += word.eq(value)
+    else:
+        m.d.comb += word.eq(value)
+
+
+def te_pixel_logic(m: Module, config: SensorConfig, charge, ccc, last, word, name: str = "",
+                   word_register: bool = True, named: bool = True) -> None:
+    """Add one TE pixel (SPEC sections 3-4) driving ``word`` to ``m``."""
+    b1, b2, d = config.b1, config.b2, config.d
+    spike = _integrator(m, config, charge, name, named)
+    sfc = Signal(b1, name=f"{name}sfc")
+    ovf = Signal(name=f"{name}ovf")
+    mreg = Signal(b2, name=f"{name}m")
+    total = _value(m, sfc + (spike & ~ovf), b1 + 1, f"{name}sfc_sum", named)   # bit b1: the carry
+    ovf_next = _value(m, ovf | total[b1], 1, f"{name}ovf_next", named)
+    m_next = _value(m, Mux(total[b1], ccc, mreg), b2, f"{name}m_next", named)
+    flagged = Cat(m_next, Const(0, d - b2), Const(1, 1))     # (1 << d) | m
+    counted = Cat(total[:b1], Const(0, d - b1), Const(0, 1))  # sfc
+    m.d.sync += mreg.eq(m_next)
+    _drive_word(m, word, Mux(ovf_next, flagged, counted), last, word_register)
+    with m.If(last):
+        m.d.sync += [sfc.eq(0), ovf.eq(0)]
+    with m.Else():
+        m.d.sync += [sfc.eq(total[:b1]), ovf.eq(ovf_next)]
+
+
+def ml_pixel_logic(m: Module, config: SensorConfig, charge, last, word, name: str = "",
+                   word_register: bool = True, named: bool = True) -> None:
+    """Add one ML pixel (saturating ml_bits spike counter) driving ``word`` to ``m``."""
+    bits = config.ml_bits
+    spike = _integrator(m, config, charge, name, named)
+    count = Signal(bits, name=f"{name}count")
+    full = count == Const(config.ml_max, bits)
+    count_next = _value(m, Mux(spike & ~full, (count + 1)[:bits], count), bits, f"{name}count_next", named)
+    _drive_word(m, word, count_next, last, word_register)
+    with m.If(last):
+        m.d.sync += count.eq(0)
+    with m.Else():
+        m.d.sync += count.eq(count_next)
+
+
+class TEPixel(wiring.Component):
+    """One time-encoding pixel: integrate, fire, count, latch the CCC on overflow (SPEC §3-4).
+
+    Ports: ``charge`` (electrons this pixel clock), ``ccc`` (shared clock cycle
+    counter, 1..alpha), ``last`` (S_r: last pixel clock of the readout
+    interval), ``word`` (registered readout word, loaded at the edge that
+    processes the ``last`` clock).
+
+    ``word_register=False`` builds the pixel without its readout word register
+    (``word`` is then the combinational word of the ``last`` clock, to be sampled
+    at that edge): the variant the hardware-cost table uses to show the cost of
+    the buffer. Arrays always use the registered form.
+    """
+
+    def __init__(self, config: SensorConfig, *, word_register: bool = True):
+        self.config = check_pixel_config(config, "te", "TEPixel")
+        self.word_register = bool(word_register)
+        super().__init__({
+            "charge": In(self.config.input_bits),
+            "ccc": In(self.config.b2),
+            "last": In(1),
+            "word": Out(self.config.word_bits),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        te_pixel_logic(m, self.config, self.charge, self.ccc, self.last, self.word,
+                       word_register=self.word_register)
+        return m
+
+
+class MLPixel(wiring.Component):
+    """One multi-level-counter pixel: integrate, fire, count spikes saturating (SPEC §3-4).
+
+    Ports as :class:`TEPixel` without ``ccc`` (an ML pixel never sees the CCC);
+    ``word_register`` as there.
+    """
+
+    def __init__(self, config: SensorConfig, *, word_register: bool = True):
+        self.config = check_pixel_config(config, "ml", "MLPixel")
+        self.word_register = bool(word_register)
+        super().__init__({
+            "charge": In(self.config.input_bits),
+            "last": In(1),
+            "word": Out(self.config.word_bits),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        ml_pixel_logic(m, self.config, self.charge, self.last, self.word,
+                       word_register=self.word_register)
+        return m
+
+
+def pixel_class(config: SensorConfig):
+    """:class:`TEPixel` or :class:`MLPixel`, whichever the config's mode needs."""
+    return TEPixel if config.is_te else MLPixel
