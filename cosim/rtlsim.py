@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import time
 from pathlib import Path
 from typing import Iterator
 
@@ -151,6 +152,8 @@ class RtlRun:
     words: np.ndarray       # (K, H, W) int64 readout words
     clocks: np.ndarray      # (K,) pixel clock t of the edge at which readout k was sampled
     latency: int | None     # clocks from the last clock of a readout to its frame_valid (None if K = 0)
+    cycles: int = 0         # rising edges simulated after reset (T plus the latency of the last readout)
+    seconds: float = 0.0    # wall time of those edges (no elaboration, no reset): cycles / seconds = speed
 
 
 def rtl_words(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_path=None,
@@ -183,6 +186,7 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
 
     frames: list[int] = []
     edges: list[int] = []
+    clock = {"cycles": 0, "start": 0.0, "stop": 0.0}
 
     async def testbench(ctx):
         ctx.set(bench.domain.rst, 1)
@@ -194,6 +198,7 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
         charge = iter_packed_charge(stimulus, config.input_bits)
         bar = _progress_bar(T, progress)
         t = 0
+        clock["start"] = time.perf_counter()
         ctx.set(bench.tb_charge, next(charge))
         # Multi-shot wait: cheaper than a fresh one-shot trigger per clock.
         async for _, _, valid, frame in ctx.tick().sample(bench.tb_frame_valid, bench.tb_frame):
@@ -209,6 +214,7 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
             ctx.set(bench.tb_charge, next(charge) if t < T else 0)
             if bar is not None and (t & 1023) == 0:
                 bar.update(1024)
+        clock["stop"], clock["cycles"] = time.perf_counter(), t + 1
         if bar is not None:
             bar.update(min(t + 1, T) - bar.n)
             bar.close()
@@ -226,7 +232,7 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
                                f"within {T + L} clocks (latency must be at most L = {L})")
     words = unpack_frames(frames, n, config.word_bits).reshape(K, H, W)
     latency = edges[0] - (L - 1) if edges else None
-    return RtlRun(words, np.asarray(edges, np.int64), latency)
+    return RtlRun(words, np.asarray(edges, np.int64), latency, clock["cycles"], clock["stop"] - clock["start"])
 
 
 def _check_edge(t: int, k: int, edges: list[int], L: int) -> None:

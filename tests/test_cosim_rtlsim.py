@@ -126,6 +126,7 @@ def test_readouts_come_at_one_fixed_latency_of_at_most_L(rng):
     run = rtl_run(config, threshold_stimulus(config, rng, 5, 1, 2))
     assert 0 <= run.latency <= L
     assert np.array_equal(run.clocks, np.arange(5) * L + L - 1 + run.latency)
+    assert run.cycles == 5 * L + run.latency and run.seconds > 0
 
 
 def test_long_run_keeps_the_residual_across_readouts(request):
