@@ -44,7 +44,7 @@ class ReadoutTiming(wiring.Component):
         m = Module()
         cfg = self.config
         F, alpha, b2 = cfg.clocks_per_tick, cfg.alpha, cfg.b2
-        ccc = Signal(b2, init=1)
+        cycle = Signal(b2, init=1)          # the CCC register
         if F == 1:
             tick = Const(1, 1)
         else:
@@ -53,12 +53,12 @@ class ReadoutTiming(wiring.Component):
             m.d.comb += tick.eq(divider == Const(F - 1, len(divider)))
             m.d.sync += divider.eq(Mux(tick, Const(0, len(divider)), (divider + 1)[:len(divider)]))
         at_alpha = Signal()
-        m.d.comb += at_alpha.eq(ccc == Const(alpha, b2))
+        m.d.comb += at_alpha.eq(cycle == Const(alpha, b2))
         if alpha > 1:
             with m.If(tick):
-                m.d.sync += ccc.eq(Mux(at_alpha, Const(1, b2), (ccc + 1)[:b2]))
+                m.d.sync += cycle.eq(Mux(at_alpha, Const(1, b2), (cycle + 1)[:b2]))
         m.d.comb += self.last.eq(tick & at_alpha)
         m.d.sync += self.frame_valid.eq(self.last)
         if cfg.is_te:
-            m.d.comb += self.ccc.eq(ccc)
+            m.d.comb += self.ccc.eq(cycle)
         return m
