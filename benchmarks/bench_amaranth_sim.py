@@ -48,7 +48,8 @@ def main(argv=None) -> int:
     parser.add_argument("--readouts", type=int, default=4, help="readout intervals (L = 240 clocks) per 1-pixel run; "
                         "larger arrays run proportionally fewer (at least 1)")
     parser.add_argument("--repeat", type=int, default=2, help="runs per figure; the best is reported")
-    parser.add_argument("--png", default=str(Path(__file__).resolve().parent / "results" / "amaranth_sim.png"))
+    parser.add_argument("--png", default=str(Path(__file__).resolve().parent.parent / "out" / "bench" / "amaranth_sim.png"),
+                        help="plot to write (default: out/bench/amaranth_sim.png, git-ignored)")
     args = parser.parse_args(argv)
 
     config = SensorConfig()
