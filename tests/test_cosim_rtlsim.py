@@ -60,7 +60,8 @@ def test_rtl_equals_golden_in_the_papers_settings(config, rng, request):
 
 EXTREMES = [SensorConfig(), SensorConfig(mode="ml"), SensorConfig(b1=2, b2=2, threshold=1, acc_bits=1),
             SensorConfig(b1=2, b2=3, input_bits=32, threshold=1000), SensorConfig(b1=1, b2=1),
-            SensorConfig(mode="ml", ml_bits=1, b1=2, b2=2, input_bits=3, threshold=40)]
+            SensorConfig(mode="ml", ml_bits=1, b1=2, b2=2, input_bits=3, threshold=40),
+            SensorConfig(b1=1, b2=1, clocks_per_tick=2, input_bits=32, threshold=3, acc_bits=62)]   # widest
 
 
 def _extreme(kind, config, rng):
