@@ -20,6 +20,9 @@ def add_arguments(parser):
     parser.add_argument("--gtkw", help="GTKWave save file to write with --vcd (default: the VCD path with .gtkw)")
     parser.add_argument("--backend", choices=("amaranth", *BACKENDS), default="amaranth",
                         help="simulator: amaranth (Python, default), or verilator / icarus on the generated Verilog")
+    parser.add_argument("--check", action="store_true",
+                        help="also run the golden model and exit 1 naming the first word where they differ "
+                             "(S.npz still holds the RTL's stream)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (default: on a terminal)")
 
 
@@ -94,4 +97,23 @@ def run(args) -> int:
     else:
         words = _backend(args.backend)(config, stimulus)
     save_stream(args.out, _check_backend_words(words, config, stimulus, args.backend), config)
+    if args.check:
+        return _compare_with_golden(words, config, stimulus, args.backend)
     return 0
+
+
+def _compare_with_golden(words, config, stimulus, backend) -> int:
+    """One line on stderr: RTL == golden, or where the first difference is."""
+    import numpy as np
+
+    from golden.sensor import simulate
+    expected = simulate(config, stimulus)
+    differ = np.argwhere(np.asarray(words) != expected)
+    if len(differ) == 0:
+        print(f"tespike rtl-sim: {backend} RTL == golden model for {expected.shape[0]} readouts of "
+              f"{expected.shape[1]} x {expected.shape[2]} pixels", file=sys.stderr)
+        return 0
+    k, r, c = (int(i) for i in differ[0])
+    print(f"tespike rtl-sim: {backend} RTL != golden model: {len(differ)} words differ, first at readout {k} "
+          f"pixel ({r}, {c}): RTL {int(words[k, r, c])}, golden {int(expected[k, r, c])}", file=sys.stderr)
+    return 1
