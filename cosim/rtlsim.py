@@ -171,8 +171,12 @@ def rtl_words(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw
 
 
 def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_path=None,
-            progress: bool | None = False, flat: bool = False) -> RtlRun:
-    """:func:`rtl_words`, also returning the clock of every ``frame_valid``."""
+            progress: bool | None = False, flat: bool = False, reset_charge: int = 0) -> RtlRun:
+    """:func:`rtl_words`, also returning the clock of every ``frame_valid``.
+
+    ``reset_charge`` is the value of the whole ``charge`` bus while reset is
+    held (the tests drive all ones: a synchronous reset must ignore it).
+    """
     from amaranth.sim import Simulator
 
     check_stimulus(stimulus, config)
@@ -190,10 +194,12 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
 
     async def testbench(ctx):
         ctx.set(bench.domain.rst, 1)
+        ctx.set(bench.tb_charge, reset_charge)
         for _ in range(RESET_CLOCKS):
             await ctx.tick()
         ctx.set(bench.domain.rst, 0)
         if K == 0:
+            ctx.set(bench.tb_charge, 0)
             return
         charge = iter_packed_charge(stimulus, config.input_bits)
         bar = _progress_bar(T, progress)

@@ -209,3 +209,12 @@ def test_protocol_check_refuses_late_or_doubled_frame_valid(monkeypatch, rng, de
     else:
         with pytest.raises(RTLProtocolError, match="latency"):
             cosim.rtlsim.rtl_words(config, stim)
+
+
+@pytest.mark.parametrize("config", [SensorConfig(b1=2, b2=2, threshold=3), SensorConfig(mode="ml", b1=2, b2=2,
+                                                                                         threshold=3)], ids=str)
+def test_charge_during_reset_is_ignored(config, rng):
+    # all ones on the bus while rst is high: a synchronous reset must leave acc, SFC and CCC at zero
+    stim = threshold_stimulus(config, rng, 3, 2, 2)
+    run = rtl_run(config, stim, reset_charge=(1 << (4 * config.input_bits)) - 1)
+    assert np.array_equal(run.words, golden_words(config, stim))
