@@ -90,7 +90,7 @@ def _plot(rows, png):
             ys = [r for n, f, v, r in rows if f == flat and v == vcd]
             ax.plot(xs, ys, "o-" if not vcd else "s--", label=f"{'flat' if flat else 'hierarchical'}"
                     f"{', VCD' if vcd else ''}")
-    ax.set(xscale="log", yscale="log", xlabel="pixels", ylabel="pixel clocks per second",
+    ax.set(xscale="log", yscale="log", xlabel="pixels", ylabel="clock cycles per second (whole array)",
            title="Amaranth pysim speed of cosim.rtlsim (TE, b1 = b2 = 4)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
