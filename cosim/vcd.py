@@ -177,6 +177,10 @@ def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, shape, *, dumpfile=Non
     pixel = first_pixel_scope(sizes)
     if pixel:
         groups["pixel (0,0)"] = pick(pixel, PIXEL_SIGNALS)
+    else:                   # flat array: pixel (0, 0)'s signals are px_0_0_<name> in the array scope
+        own = set(_scope_vars(sizes, ARRAY_SCOPE))
+        flat = [f"{ARRAY_SCOPE}.px_0_0_{key}" for key in PIXEL_SIGNALS]
+        groups["pixel (0,0)"] = [name for name in flat if name in own]
     groups["output"] = [f"{BENCH_SCOPE}.tb_{k}" for k in ("frame_valid", "frame")]
 
     written = []

@@ -127,3 +127,14 @@ def test_reset_is_held_before_clock_zero(rng, tmp_path):
     rst = vcd["bench.top.tb_rst"].tv
     released = [t for t, v in rst if v == "0"][0]
     assert edges[RESET_CLOCKS - 1] <= released < edges[RESET_CLOCKS]
+
+
+def test_gtkw_of_the_flat_array_shows_pixel_00(rng, tmp_path):
+    config = SensorConfig(b1=2, b2=2, threshold=20)
+    stim = threshold_stimulus(config, rng, 2, 2, 2)
+    run = rtl_run(config, stim, vcd_path=tmp_path / "w.vcd", gtkw_path=tmp_path / "w.gtkw", flat=True)
+    assert np.array_equal(waveform_stream(tmp_path / "w.vcd", config, (2, 2)).words, run.words)
+    text = (tmp_path / "w.gtkw").read_text()
+    for name in ("px_0_0_acc", "px_0_0_sfc", "px_0_0_ovf", "px_0_0_m[", "px_0_0_word"):
+        assert f"bench.top.array.{name}" in text, name
+    assert "px_1_1_" not in text
