@@ -42,10 +42,6 @@ CLOCK_PERIOD_S = 1e-6
 #: Clock period in VCD time units (Amaranth writes a 1 fs timescale).
 CLOCK_PERIOD_FS = round(CLOCK_PERIOD_S * 1e15)
 
-#: Names the wrapper gives its own copies of the array's ports (scope ``bench.top``
-#: of the VCD); :mod:`cosim.vcd` reads the stream back from these.
-TB_SIGNALS = ("tb_clk", "tb_rst", "tb_charge", "tb_frame_valid", "tb_frame")
-
 #: Submodule name of the pixel array under the wrapper (VCD scope ``bench.top.array``).
 ARRAY_SCOPE = "array"
 
@@ -114,7 +110,13 @@ def _refusing(make, config, height, width):
 
 
 def _bench(array):
-    """Wrapper owning the ``sync`` domain, with named copies of the array's ports."""
+    """Wrapper owning the ``sync`` domain, with named copies of the array's ports.
+
+    The copies ``tb_clk``, ``tb_rst``, ``tb_charge``, ``tb_frame_valid`` and
+    ``tb_frame`` live in the wrapper's own VCD scope (``bench.top``), so
+    :mod:`cosim.vcd` reads the stream back from names that do not depend on
+    how the RTL names its signals.
+    """
     from amaranth.hdl import ClockDomain, ClockSignal, Elaboratable, Module, ResetSignal, Signal
 
     class Bench(Elaboratable):

@@ -27,9 +27,11 @@ import numpy as np
 from golden.config import SensorConfig
 from golden.errors import InputError
 
+from . import rtlsim
+
 #: VCD scope of the testbench wrapper and of the pixel array under it.
 BENCH_SCOPE = "bench.top"
-ARRAY_SCOPE = "bench.top.array"
+ARRAY_SCOPE = f"{BENCH_SCOPE}.{rtlsim.ARRAY_SCOPE}"
 
 
 @dataclasses.dataclass
@@ -102,8 +104,7 @@ def waveform_stream(vcd_path, config: SensorConfig, shape: tuple[int, int]) -> W
     if bad:
         raise InputError(f"waveform {str(vcd_path)!r}: frame is undefined ({frame[bad[0]]!r}) "
                          f"at pixel clock {bad[0]} while frame_valid is high")
-    from .rtlsim import unpack_frames
-    words = unpack_frames([int(frame[t], 2) for t in clocks], H * W, config.word_bits)
+    words = rtlsim.unpack_frames([int(frame[t], 2) for t in clocks], H * W, config.word_bits)
     return Waveform(words.reshape(len(clocks), H, W), np.asarray(clocks, np.int64), len(edge_times))
 
 
