@@ -76,10 +76,14 @@ def _check(config) -> SensorConfig:
     return config.check()
 
 
-def pixel_verilog(config: SensorConfig, name: str | None = None) -> str:
-    """Verilog of one TE or ML pixel as its own top module (ports clk, rst, charge, [ccc,] last, word)."""
+def pixel_verilog(config: SensorConfig, name: str | None = None, *, word_register: bool = True) -> str:
+    """Verilog of one TE or ML pixel as its own top module (ports clk, rst, charge, [ccc,] last, word).
+
+    ``word_register=False``: the pixel without its readout word register (cost studies only).
+    """
     config = _check(config)
-    return _convert((pixel_class(config)(config), name or module_names(config)["pixel"]))[0]
+    pixel = pixel_class(config)(config, word_register=word_register)
+    return _convert((pixel, name or module_names(config)["pixel"]))[0]
 
 
 def timing_verilog(config: SensorConfig, name: str | None = None) -> str:
