@@ -53,4 +53,12 @@ def test_synthesized_ml_pixel_has_exactly_its_state_bits():
     config = hw_cost.counting_only(SensorConfig(mode="ml", b1=2, b2=2, ml_bits=5))
     stat = hw_cost.synthesize(pixel_verilog(config), "ml_pixel")
     assert stat["flops"] == hw_cost.state_bits(config) == 1 + 5 + 5
-    assert stat["transistors"] > 16 * stat["flops"]
+    assert 16 * stat["flops"] < stat["transistors"] <= stat["transistors_max"]
+
+
+def test_compare_calls_a_difference_only_when_ranges_do_not_overlap():
+    def est(lo, hi):
+        return {"transistors": lo, "transistors_max": hi}
+    assert hw_cost.compare(est(100, 110), est(120, 130)) == "fewer"
+    assert hw_cost.compare(est(140, 150), est(120, 130)) == "more"
+    assert hw_cost.compare(est(100, 125), est(120, 130)).startswith("about")
