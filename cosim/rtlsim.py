@@ -1,0 +1,275 @@
+"""Co-simulation: run the Amaranth RTL pixel array on a per-clock stimulus (SPEC sections 3, 4, 6).
+
+:func:`rtl_words` is the pure function behind ``tespike rtl-sim`` and the conformance
+tests: stimulus ``(T, H, W)`` in, readout words ``(T / L, H, W)`` out, exactly what
+:func:`golden.sensor.simulate` returns for a correct RTL.
+
+The testbench is one async Amaranth testbench around a small wrapper
+(:class:`Bench`) that owns the ``sync`` clock domain. Per pixel clock it makes
+one ``ctx.set`` of the whole packed ``charge`` bus and waits for the rising edge,
+sampling ``frame_valid`` and ``frame`` *at* that edge (the values the circuit
+shows just before the edge, as a synchronous receiver would latch them).
+
+Timing (SPEC section 6): reset is held high for :data:`RESET_CLOCKS` edges; the
+first rising edge with reset low is pixel clock t = 0 and registers ``e[0]``.
+Readout k ends at clock ``k L + L - 1``; the RTL must show it with
+``frame_valid`` at edge ``k L + L - 1 + latency`` with one fixed latency in
+``0..L``. The testbench drives zero charge for up to L clocks after the
+stimulus so the last readout comes out, and refuses (:class:`RTLProtocolError`)
+any ``frame_valid`` that breaks this rule: early, missing, doubled or drifting.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import time
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.errors import ConfigError
+from golden.io import atomic_output, check_stimulus
+
+#: Rising edges with reset high before pixel clock t = 0.
+RESET_CLOCKS = 2
+
+#: Clock period given to the simulator (1 MHz); only the waveform's time axis sees it.
+CLOCK_PERIOD_S = 1e-6
+
+#: Clock period in VCD time units (Amaranth writes a 1 fs timescale).
+CLOCK_PERIOD_FS = round(CLOCK_PERIOD_S * 1e15)
+
+#: Submodule name of the pixel array under the wrapper (VCD scope ``bench.top.array``).
+ARRAY_SCOPE = "array"
+
+#: Bytes of packed bits materialised at once while packing the stimulus.
+_PACK_CHUNK_BYTES = 1 << 22
+
+
+class RTLProtocolError(RuntimeError):
+    """The RTL broke the output protocol of SPEC section 6 (a bug in rtl/, not bad input)."""
+
+
+# -- packing -----------------------------------------------------------------
+
+def iter_packed_charge(stimulus: np.ndarray, input_bits: int) -> Iterator[int]:
+    """Yield, per pixel clock, the ``charge`` bus as one integer.
+
+    Pixel (r, c) of clock t sits at bits ``[(r W + c) E +: E]``. The bit
+    shuffling is vectorised over pixels and clocks (numpy unpack/pack in
+    chunks); only the final ``int.from_bytes`` is per clock.
+    """
+    T = stimulus.shape[0]
+    flat = stimulus.reshape(T, -1)
+    n = flat.shape[1]
+    E = input_bits
+    shifts = np.arange(E, dtype=np.uint64)
+    rows = max(1, _PACK_CHUNK_BYTES // max(1, n * E))
+    for start in range(0, T, rows):
+        block = flat[start:start + rows].astype(np.uint64)
+        bits = ((block[:, :, None] >> shifts) & np.uint64(1)).astype(np.uint8)
+        packed = np.packbits(bits.reshape(len(block), n * E), axis=1, bitorder="little")
+        for row in packed:
+            yield int.from_bytes(row.tobytes(), "little")
+
+
+def unpack_frames(frames: list[int], n_pixels: int, word_bits: int) -> np.ndarray:
+    """Frame bus integers -> ``(K, n_pixels)`` int64 words (inverse of the bus layout)."""
+    K = len(frames)
+    if K == 0:
+        return np.zeros((0, n_pixels), np.int64)
+    total = n_pixels * word_bits
+    nbytes = (total + 7) // 8
+    raw = np.frombuffer(b"".join(f.to_bytes(nbytes, "little") for f in frames), np.uint8)
+    bits = np.unpackbits(raw.reshape(K, nbytes), axis=1, bitorder="little")[:, :total]
+    weights = np.left_shift(np.int64(1), np.arange(word_bits, dtype=np.int64))
+    return bits.reshape(K, n_pixels, word_bits).astype(np.int64) @ weights
+
+
+# -- the design under test ---------------------------------------------------
+
+def build_array(config: SensorConfig, height: int, width: int, *, flat: bool = False):
+    """``rtl.array.PixelArray(config, height, width, flat=flat)``, the design under test."""
+    from rtl.array import PixelArray
+    return _refusing(lambda: PixelArray(config, height, width, flat=flat), config, height, width)
+
+
+def _refusing(make, config, height, width):
+    """Call ``make()``; turn the RTL's refusal of a configuration into a one-line :class:`ConfigError`."""
+    from golden.errors import TespikeError
+    try:
+        return make()
+    except TespikeError:
+        raise
+    except Exception as exc:            # the RTL's own refusal, whatever its type
+        raise ConfigError(f"the RTL cannot build a {height} x {width} array for config {config}: "
+                          f"{type(exc).__name__}: {exc}") from exc
+
+
+def _bench(array):
+    """Wrapper owning the ``sync`` domain, with named copies of the array's ports.
+
+    The copies ``tb_clk``, ``tb_rst``, ``tb_charge``, ``tb_frame_valid`` and
+    ``tb_frame`` live in the wrapper's own VCD scope (``bench.top``), so
+    :mod:`cosim.vcd` reads the stream back from names that do not depend on
+    how the RTL names its signals.
+    """
+    from amaranth.hdl import ClockDomain, ClockSignal, Elaboratable, Module, ResetSignal, Signal
+
+    class Bench(Elaboratable):
+        def __init__(self):
+            self.array = array
+            self.domain = ClockDomain("sync")
+            self.tb_clk = Signal(name="tb_clk")
+            self.tb_rst = Signal(name="tb_rst")
+            self.tb_charge = Signal(len(array.charge), name="tb_charge")
+            self.tb_frame_valid = Signal(name="tb_frame_valid")
+            self.tb_frame = Signal(len(array.frame), name="tb_frame")
+
+        def elaborate(self, platform):
+            m = Module()
+            m.domains.sync = self.domain
+            m.submodules[ARRAY_SCOPE] = self.array
+            m.d.comb += [
+                self.tb_clk.eq(ClockSignal("sync")),
+                self.tb_rst.eq(ResetSignal("sync")),
+                self.array.charge.eq(self.tb_charge),
+                self.tb_frame_valid.eq(self.array.frame_valid),
+                self.tb_frame.eq(self.array.frame),
+            ]
+            return m
+
+    return Bench()
+
+
+# -- the testbench -----------------------------------------------------------
+
+@dataclasses.dataclass
+class RtlRun:
+    """A co-simulation's result: the words and when ``frame_valid`` showed them."""
+
+    words: np.ndarray       # (K, H, W) int64 readout words
+    clocks: np.ndarray      # (K,) pixel clock t of the edge at which readout k was sampled
+    latency: int | None     # clocks from the last clock of a readout to its frame_valid (None if K = 0)
+    cycles: int = 0         # rising edges simulated after reset (T plus the latency of the last readout)
+    seconds: float = 0.0    # wall time of those edges (no elaboration, no reset): cycles / seconds = speed
+
+
+def rtl_words(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_path=None,
+              progress: bool | None = False, flat: bool = False) -> np.ndarray:
+    """Run the RTL on ``stimulus`` (T, H, W); return the ``(T / L, H, W)`` int64 readout words.
+
+    ``vcd_path`` writes the whole waveform (all signals of the design) and
+    ``gtkw_path`` a GTKWave save file showing the useful ones (see
+    :func:`cosim.vcd.write_gtkw`); both appear only if the run succeeds.
+    ``progress`` shows a tqdm bar (``None``: only on a terminal). ``flat``
+    simulates the array with its pixels inlined into one module (same logic).
+    """
+    return rtl_run(config, stimulus, vcd_path=vcd_path, gtkw_path=gtkw_path,
+                   progress=progress, flat=flat).words
+
+
+def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_path=None,
+            progress: bool | None = False, flat: bool = False, reset_charge: int = 0) -> RtlRun:
+    """:func:`rtl_words`, also returning the clock of every ``frame_valid``.
+
+    ``reset_charge`` is the value of the whole ``charge`` bus while reset is
+    held (the tests drive all ones: a synchronous reset must ignore it).
+    """
+    from amaranth.sim import Simulator
+
+    check_stimulus(stimulus, config)
+    T, H, W = stimulus.shape
+    L = config.clocks_per_readout
+    K = T // L
+    n = H * W
+    if gtkw_path is not None and vcd_path is None:
+        raise ValueError("a GTKWave save file (gtkw_path) needs a waveform (vcd_path)")
+    bench = _bench(build_array(config, H, W, flat=flat))
+
+    frames: list[int] = []
+    edges: list[int] = []
+    clock = {"cycles": 0, "start": 0.0, "stop": 0.0}
+
+    async def testbench(ctx):
+        ctx.set(bench.domain.rst, 1)
+        ctx.set(bench.tb_charge, reset_charge)
+        for _ in range(RESET_CLOCKS):
+            await ctx.tick()
+        ctx.set(bench.domain.rst, 0)
+        if K == 0:
+            ctx.set(bench.tb_charge, 0)
+            return
+        charge = iter_packed_charge(stimulus, config.input_bits)
+        bar = _progress_bar(T, progress)
+        t = 0
+        clock["start"] = time.perf_counter()
+        ctx.set(bench.tb_charge, next(charge))
+        # Multi-shot wait: cheaper than a fresh one-shot trigger per clock.
+        async for _, _, valid, frame in ctx.tick().sample(bench.tb_frame_valid, bench.tb_frame):
+            if valid:
+                _check_edge(t, len(frames), edges, L)
+                frames.append(frame)
+                edges.append(t)
+                if len(frames) == K:
+                    break
+            t += 1
+            if t >= T + L:
+                break
+            ctx.set(bench.tb_charge, next(charge) if t < T else 0)
+            if bar is not None and (t & 1023) == 0:
+                bar.update(1024)
+        clock["stop"], clock["cycles"] = time.perf_counter(), t + 1
+        if bar is not None:
+            bar.update(min(t + 1, T) - bar.n)
+            bar.close()
+
+    sim = _refusing(lambda: Simulator(bench), config, H, W)   # elaborates the array
+    sim.add_clock(CLOCK_PERIOD_S)
+    sim.add_testbench(testbench)
+    if vcd_path is None:
+        sim.run()
+    else:
+        _run_with_vcd(sim, config, (H, W), vcd_path, gtkw_path)
+
+    if len(frames) != K:
+        raise RTLProtocolError(f"RTL gave {len(frames)} frame_valid pulses for {K} readout intervals "
+                               f"within {T + L} clocks (latency must be at most L = {L})")
+    words = unpack_frames(frames, n, config.word_bits).reshape(K, H, W)
+    latency = edges[0] - (L - 1) if edges else None
+    return RtlRun(words, np.asarray(edges, np.int64), latency, clock["cycles"], clock["stop"] - clock["start"])
+
+
+def _check_edge(t: int, k: int, edges: list[int], L: int) -> None:
+    """Refuse a frame_valid at clock ``t`` that is not readout ``k`` at one fixed latency <= L."""
+    latency = t - (k * L + L - 1)
+    if latency < 0 or latency > L:
+        raise RTLProtocolError(f"frame_valid for readout {k} at clock {t}: latency {latency} "
+                               f"outside 0..L = {L} (readout {k} ends at clock {k * L + L - 1})")
+    if edges and latency != edges[0] - (L - 1):
+        raise RTLProtocolError(f"frame_valid for readout {k} at clock {t}: latency {latency} differs "
+                               f"from readout 0's {edges[0] - (L - 1)}")
+
+
+def _progress_bar(total: int, progress: bool | None):
+    if progress is False:
+        return None
+    from tqdm import tqdm
+    return tqdm(total=total, unit="clk", unit_scale=True, desc="rtl-sim",
+                disable=None if progress is None else False, leave=False)
+
+
+def _run_with_vcd(sim, config, shape, vcd_path, gtkw_path) -> None:
+    """Run with a waveform; write VCD and GTKWave files atomically (nothing on failure)."""
+    from .vcd import write_gtkw
+
+    with contextlib.ExitStack() as stack:
+        vcd_tmp = stack.enter_context(atomic_output(vcd_path))
+        gtkw_tmp = stack.enter_context(atomic_output(gtkw_path)) if gtkw_path is not None else None
+        with sim.write_vcd(vcd_tmp):
+            sim.run()
+        if gtkw_tmp is not None:
+            write_gtkw(gtkw_tmp, vcd_tmp, config, shape, dumpfile=Path(vcd_path).resolve())

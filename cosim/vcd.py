@@ -1,0 +1,202 @@
+"""Waveforms of the RTL co-simulation: read a VCD back, write a GTKWave save file.
+
+:func:`waveform_stream` rebuilds the readout stream from the VCD *alone*: it
+finds the rising edges of the clock in the waveform, samples reset,
+``frame_valid`` and ``frame`` at each edge (the last value written strictly
+before the edge's time stamp, which is what a register latching on that edge
+sees), takes pixel clock t = 0 as the first edge with reset low, and collects
+``frame`` wherever ``frame_valid`` is high. It must equal the stream the
+testbench captured live (the tests check this).
+
+Pitfalls handled (see AMARANTH-NOTES.md): the timescale is 1 fs, so time stamps
+are large and vcdvcd's slice form ``sig[a:b]`` (which walks every integer time)
+is never used; several changes can share one time stamp (values are looked up
+with a binary search on the change times, taking the last change before the
+edge); a signal is read from its own scope (``bench.top.tb_*``, the wrapper's
+own copies), never from a parent's ``$N`` re-listing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from pathlib import Path
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.errors import InputError
+
+from . import rtlsim
+
+#: VCD scope of the testbench wrapper and of the pixel array under it.
+BENCH_SCOPE = "bench.top"
+ARRAY_SCOPE = f"{BENCH_SCOPE}.{rtlsim.ARRAY_SCOPE}"
+
+
+@dataclasses.dataclass
+class Waveform:
+    """What :func:`waveform_stream` read: words and the pixel clock of each ``frame_valid``."""
+
+    words: np.ndarray       # (K, H, W) int64
+    clocks: np.ndarray      # (K,) pixel clock t (edge index after reset) of each frame
+    edges: int              # rising clock edges with reset low in the waveform
+
+
+def _load(path, names):
+    from vcdvcd import VCDVCD
+    try:
+        return VCDVCD(str(path), signals=list(names), store_tvs=True)
+    except FileNotFoundError:
+        raise InputError(f"waveform file {str(path)!r} does not exist") from None
+
+
+def _signal(vcd, path, name):
+    try:
+        return vcd[name]
+    except KeyError:
+        raise InputError(f"waveform file {str(path)!r} has no signal {name!r} "
+                         "(not written by cosim.rtlsim?)") from None
+
+
+def _sampler(signal, edge_times: np.ndarray) -> list[str]:
+    """Value of ``signal`` just before each edge time (last change with time < edge)."""
+    times = np.fromiter((t for t, _ in signal.tv), np.int64, len(signal.tv))
+    index = np.searchsorted(times, edge_times, side="left") - 1
+    values = [v for _, v in signal.tv]
+    return [values[i] if i >= 0 else "x" for i in index]
+
+
+def rising_edges(signal) -> np.ndarray:
+    """Time stamps at which a 1-bit signal goes from 0 to 1 (final value per time stamp)."""
+    final = {}
+    for t, v in signal.tv:          # several changes may share a time stamp: keep the last
+        final[t] = v
+    edges, previous = [], None
+    for t in sorted(final):
+        v = final[t]
+        if v == "1" and previous == "0":
+            edges.append(t)
+        previous = v
+    return np.asarray(edges, np.int64)
+
+
+def waveform_stream(vcd_path, config: SensorConfig, shape: tuple[int, int]) -> Waveform:
+    """Rebuild the readout stream of an ``rtl_words(..., vcd_path=...)`` run from its VCD."""
+    H, W = shape
+    names = {key: f"{BENCH_SCOPE}.tb_{key}" for key in ("clk", "rst", "frame_valid", "frame")}
+    vcd = _load(vcd_path, names.values())
+    sig = {key: _signal(vcd, vcd_path, name) for key, name in names.items()}
+    width = int(sig["frame"].size)
+    if width != H * W * config.word_bits:
+        raise InputError(f"waveform {str(vcd_path)!r}: frame is {width} bits, not H * W * word_bits = "
+                         f"{H} * {W} * {config.word_bits}")
+    edge_times = rising_edges(sig["clk"])
+    rst = _sampler(sig["rst"], edge_times)
+    low = [i for i, v in enumerate(rst) if v == "0"]
+    if not low:
+        return Waveform(np.zeros((0, H, W), np.int64), np.zeros(0, np.int64), 0)
+    edge_times = edge_times[low[0]:]            # pixel clock t = 0: first edge with reset low
+    valid = _sampler(sig["frame_valid"], edge_times)
+    frame = _sampler(sig["frame"], edge_times)
+    clocks = [t for t, v in enumerate(valid) if v == "1"]
+    bad = [t for t in clocks if set(frame[t]) - {"0", "1"}]
+    if bad:
+        raise InputError(f"waveform {str(vcd_path)!r}: frame is undefined ({frame[bad[0]]!r}) "
+                         f"at pixel clock {bad[0]} while frame_valid is high")
+    words = rtlsim.unpack_frames([int(frame[t], 2) for t in clocks], H * W, config.word_bits)
+    return Waveform(words.reshape(len(clocks), H, W), np.asarray(clocks, np.int64), len(edge_times))
+
+
+# -- GTKWave save file -------------------------------------------------------
+
+#: Signals of rtl.timing.ReadoutTiming worth showing: S_h divider and tick, CCC, S_r strobe.
+TIMING_SIGNALS = ("divider", "tick", "ccc", "at_alpha", "last", "frame_valid")
+
+#: Signals of rtl.pixel.TEPixel / MLPixel worth showing (TE: SFC, flag, latched m; ML: count).
+PIXEL_SIGNALS = ("charge", "acc", "spike", "sfc", "ovf", "m", "count", "last", "word")
+
+
+def _var_sizes(vcd_path) -> dict[str, int]:
+    """Every variable of the VCD header: full name -> width (vcdvcd drops ``[n:0]``)."""
+    from vcdvcd import VCDVCD
+    header = VCDVCD(str(vcd_path), only_sigs=True)
+    return {ref: int(header.data[code].size) for ref, code in header.references_to_ids.items()}
+
+
+def _scope_vars(sizes, scope):
+    """Variables declared directly in ``scope`` (not in a child), without ``$N`` re-listings."""
+    prefix = scope + "."
+    return [name for name in sizes
+            if name.startswith(prefix) and "." not in name[len(prefix):] and "$" not in name[len(prefix):]]
+
+
+def _child_scopes(sizes, scope):
+    prefix = scope + "."
+    return sorted({name[len(prefix):].split(".")[0] for name in sizes
+                   if name.startswith(prefix) and "." in name[len(prefix):]})
+
+
+def first_pixel_scope(sizes, scope=ARRAY_SCOPE) -> str | None:
+    """The scope of pixel (0, 0): the child scope whose name holds only zero indices."""
+    for child in _child_scopes(sizes, scope):
+        digits = re.findall(r"\d+", child)
+        if digits and all(int(d) == 0 for d in digits):
+            return f"{scope}.{child}"
+    return None
+
+
+def timing_scope(sizes, scope=ARRAY_SCOPE) -> str | None:
+    for child in _child_scopes(sizes, scope):
+        if "timing" in child:
+            return f"{scope}.{child}"
+    return None
+
+
+def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, shape, *, dumpfile=None) -> list[str]:
+    """Write a GTKWave save file for ``vcd_path`` showing the signals worth looking at.
+
+    Groups: testbench (clock, reset, charge), timing (the S_h tick and S_r / last
+    strobes and the CCC), pixel (0, 0) (accumulator, SFC, overflow flag, latched
+    m, word), output (frame_valid, frame). Returns the trace names written.
+    ``dumpfile`` is the VCD path recorded in the save file (default: ``vcd_path``).
+    """
+    from vcd.gtkw import GTKWSave
+
+    sizes = _var_sizes(vcd_path)
+
+    def pick(scope, preferred):
+        """The scope's signals named in ``preferred``, in that order (all of them if none match)."""
+        own = {name.rsplit(".", 1)[1]: name for name in _scope_vars(sizes, scope)}
+        chosen = [own[key] for key in preferred if key in own]
+        return chosen or [name for key, name in own.items() if key not in ("clk", "rst")]
+
+    groups = {"testbench": [f"{BENCH_SCOPE}.tb_{k}" for k in ("clk", "rst", "charge")]}
+    timing = timing_scope(sizes)
+    if timing:
+        groups["timing"] = pick(timing, TIMING_SIGNALS)
+    pixel = first_pixel_scope(sizes)
+    if pixel:
+        groups["pixel (0,0)"] = pick(pixel, PIXEL_SIGNALS)
+    else:                   # flat array: pixel (0, 0)'s signals are px_0_0_<name> in the array scope
+        own = set(_scope_vars(sizes, ARRAY_SCOPE))
+        flat = [f"{ARRAY_SCOPE}.px_0_0_{key}" for key in PIXEL_SIGNALS]
+        groups["pixel (0,0)"] = [name for name in flat if name in own]
+    groups["output"] = [f"{BENCH_SCOPE}.tb_{k}" for k in ("frame_valid", "frame")]
+
+    written = []
+    with open(gtkw_path, "w") as handle:
+        save = GTKWSave(handle)
+        save.dumpfile(str(dumpfile if dumpfile is not None else Path(vcd_path).resolve()))
+        save.treeopen(ARRAY_SCOPE)
+        save.zoom_markers(-24.0)
+        for group, traces in groups.items():
+            with save.group(group, closed=False):
+                for name in traces:
+                    if name not in sizes:
+                        continue
+                    size = sizes[name]
+                    full = name + (f"[{size - 1}:0]" if size > 1 else "")
+                    save.trace(full, datafmt="dec" if size > 1 else "hex")
+                    written.append(full)
+    return written

@@ -1,0 +1,140 @@
+"""Waveforms of the co-simulation: the stream rebuilt from the VCD alone equals the live one."""
+
+import numpy as np
+import pytest
+
+from cosim.rtlsim import CLOCK_PERIOD_FS, RESET_CLOCKS, RTLProtocolError, rtl_run
+from cosim.vcd import rising_edges, waveform_stream, write_gtkw
+from golden.config import SensorConfig
+from golden.errors import InputError
+from tests.cosim_helpers import golden_words, threshold_stimulus
+
+
+def _files(directory):
+    return sorted(p.name for p in directory.iterdir())
+
+
+@pytest.mark.parametrize("config", [SensorConfig(b1=2, b2=2, threshold=20),
+                                    SensorConfig(mode="ml", b1=2, b2=2, threshold=9, ml_bits=3),
+                                    SensorConfig(b1=2, alpha=1, clocks_per_tick=1, threshold=3)], ids=str)
+def test_vcd_round_trip_gives_the_live_stream(config, rng, tmp_path):
+    stim = threshold_stimulus(config, rng, 6, 2, 3)
+    vcd, gtkw = tmp_path / "w.vcd", tmp_path / "w.gtkw"
+    run = rtl_run(config, stim, vcd_path=vcd, gtkw_path=gtkw)
+    assert np.array_equal(run.words, golden_words(config, stim))
+    wave = waveform_stream(vcd, config, (2, 3))
+    assert np.array_equal(wave.words, run.words)
+    assert np.array_equal(wave.clocks, run.clocks)      # sampled at the same edges, not one late
+    assert wave.edges >= stim.shape[0]
+    assert _files(tmp_path) == ["w.gtkw", "w.vcd"]       # no temporary files left
+
+
+def test_gtkw_shows_clock_strobes_ccc_and_pixel_00(rng, tmp_path):
+    config = SensorConfig(b1=2, b2=2, threshold=20)
+    vcd, gtkw = tmp_path / "w.vcd", tmp_path / "w.gtkw"
+    rtl_run(config, threshold_stimulus(config, rng, 1, 2, 2), vcd_path=vcd, gtkw_path=gtkw)
+    text = gtkw.read_text()
+    assert f'[dumpfile] "{vcd.resolve()}"' in text        # the final path, not the temporary one
+    traces = {line.split("[")[0] for line in text.splitlines() if line.startswith("bench.")}
+    for name in ["bench.top.tb_clk", "bench.top.tb_rst", "bench.top.tb_frame_valid", "bench.top.tb_frame",
+                 "bench.top.array.timing.tick", "bench.top.array.timing.last", "bench.top.array.timing.ccc",
+                 "bench.top.array.px_0_0.acc", "bench.top.array.px_0_0.sfc", "bench.top.array.px_0_0.ovf",
+                 "bench.top.array.px_0_0.m", "bench.top.array.px_0_0.word"]:
+        assert name in traces, name
+    assert not any(".px_0_1." in name or ".px_1_0." in name for name in traces)
+
+
+def test_failed_run_leaves_no_waveform(monkeypatch, rng, tmp_path):
+    import rtl.array
+    from tests.test_cosim_rtlsim import _delayed_array
+    config = SensorConfig(b1=2, b2=2, threshold=20)
+    monkeypatch.setattr(rtl.array, "PixelArray", _delayed_array(3, double=True))
+    with pytest.raises(RTLProtocolError):
+        rtl_run(config, threshold_stimulus(config, rng, 2, 1, 1), vcd_path=tmp_path / "w.vcd",
+                gtkw_path=tmp_path / "w.gtkw")
+    assert _files(tmp_path) == []
+
+
+def _hand_vcd(path, frames_before_edge):
+    """A VCD as Amaranth writes it (1 fs, bench.top.tb_*) with several changes per time stamp.
+
+    ``frames_before_edge[n]`` = (valid, frame) held before rising edge n; at every edge the
+    values first glitch to something else and then settle on the next pair, at the same stamp.
+    """
+    from vcd import VCDWriter
+    half = CLOCK_PERIOD_FS // 2
+    with open(path, "w") as handle, VCDWriter(handle, timescale="1 fs") as writer:
+        clk = writer.register_var("bench.top", "tb_clk", "wire", size=1, init=0)
+        rst = writer.register_var("bench.top", "tb_rst", "wire", size=1, init=1)
+        valid = writer.register_var("bench.top", "tb_frame_valid", "wire", size=1,
+                                    init=frames_before_edge[0][0])
+        frame = writer.register_var("bench.top", "tb_frame", "wire", size=4, init=frames_before_edge[0][1])
+        writer.register_var("bench.top.array", "frame_valid", "wire", size=1, init=1)   # decoy scope
+        for n, (v, f) in enumerate(frames_before_edge):
+            time = half + n * CLOCK_PERIOD_FS
+            writer.change(clk, time, 1)
+            writer.change(valid, time, 1 - v)                   # glitch at the edge's stamp ...
+            writer.change(frame, time, 15 - f)
+            if n + 1 < len(frames_before_edge):
+                writer.change(valid, time, frames_before_edge[n + 1][0])   # ... then settle
+                writer.change(frame, time, frames_before_edge[n + 1][1])
+            if n == 0:
+                writer.change(rst, time + half // 2, 0)         # released between edges 0 and 1
+            writer.change(clk, time + half, 0)
+
+
+def test_reader_samples_the_last_value_before_each_edge(tmp_path):
+    config = SensorConfig(mode="ml", b1=1, b2=1, clocks_per_tick=1, threshold=1, ml_bits=2)   # Wd = 2
+    # edge 0: reset still high; then t = 0.. with (valid, frame) before each edge
+    pairs = [(1, 9), (0, 3), (1, 6), (1, 5), (0, 0), (1, 12)]
+    _hand_vcd(tmp_path / "h.vcd", pairs)
+    wave = waveform_stream(tmp_path / "h.vcd", config, (1, 2))
+    # edge 0 had reset high (sampled before the edge), so t = 0 is edge 1
+    assert list(wave.clocks) == [1, 2, 4]
+    assert wave.words.tolist() == [[[2, 1]], [[1, 1]], [[0, 3]]]        # 6, 5, 12 as two 2-bit words
+
+
+def test_rising_edges_ignore_same_stamp_glitches():
+    class Sig:
+        tv = [(0, "0"), (10, "1"), (20, "0"), (30, "1"), (30, "0"), (40, "0"), (50, "1"), (50, "1")]
+    assert list(rising_edges(Sig)) == [10, 50]
+
+
+def test_reader_refuses_a_foreign_vcd(tmp_path):
+    from vcd import VCDWriter
+    with open(tmp_path / "f.vcd", "w") as handle, VCDWriter(handle, timescale="1 ns") as writer:
+        writer.register_var("top", "clk", "wire", size=1, init=0)
+    with pytest.raises(InputError, match="tb_"):
+        waveform_stream(tmp_path / "f.vcd", SensorConfig(), (1, 1))
+    with pytest.raises(InputError, match="does not exist"):
+        waveform_stream(tmp_path / "missing.vcd", SensorConfig(), (1, 1))
+
+
+def test_reader_refuses_a_wrong_shape(rng, tmp_path):
+    config = SensorConfig(b1=2, b2=2, threshold=20)
+    rtl_run(config, threshold_stimulus(config, rng, 1, 2, 2), vcd_path=tmp_path / "w.vcd")
+    with pytest.raises(InputError, match="frame is 12 bits"):
+        waveform_stream(tmp_path / "w.vcd", config, (1, 2))
+
+
+def test_reset_is_held_before_clock_zero(rng, tmp_path):
+    from vcdvcd import VCDVCD
+    config = SensorConfig(b1=2, b2=2, threshold=20)
+    rtl_run(config, threshold_stimulus(config, rng, 1, 1, 1), vcd_path=tmp_path / "w.vcd")
+    vcd = VCDVCD(str(tmp_path / "w.vcd"))
+    edges = rising_edges(vcd["bench.top.tb_clk"])
+    assert edges[0] == CLOCK_PERIOD_FS // 2                # first rising edge at half a period
+    rst = vcd["bench.top.tb_rst"].tv
+    released = [t for t, v in rst if v == "0"][0]
+    assert edges[RESET_CLOCKS - 1] <= released < edges[RESET_CLOCKS]
+
+
+def test_gtkw_of_the_flat_array_shows_pixel_00(rng, tmp_path):
+    config = SensorConfig(b1=2, b2=2, threshold=20)
+    stim = threshold_stimulus(config, rng, 2, 2, 2)
+    run = rtl_run(config, stim, vcd_path=tmp_path / "w.vcd", gtkw_path=tmp_path / "w.gtkw", flat=True)
+    assert np.array_equal(waveform_stream(tmp_path / "w.vcd", config, (2, 2)).words, run.words)
+    text = (tmp_path / "w.gtkw").read_text()
+    for name in ("px_0_0_acc", "px_0_0_sfc", "px_0_0_ovf", "px_0_0_m[", "px_0_0_word"):
+        assert f"bench.top.array.{name}" in text, name
+    assert "px_1_1_" not in text
