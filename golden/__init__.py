@@ -3,7 +3,8 @@
 Depends on numpy alone. The pieces: :mod:`golden.config` (the one configuration
 type), :mod:`golden.sensor` (cycle-exact model), :mod:`golden.reference` (SPEC's
 update rule, literally), :mod:`golden.decode` (the one decoder),
-:mod:`golden.io` (the files of SPEC section 6).
+:mod:`golden.io` (the files of SPEC section 6), :mod:`golden.dynamic_range`
+(formula and measured dynamic range).
 """
 
 from .config import DESIGN_ELECTRONS, SensorConfig, load_config

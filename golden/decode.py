@@ -48,7 +48,44 @@ def _spikes_ratio(words, config):
     return np.where(flag, config.p_max * config.alpha / m, value).astype(np.float64)
 
 
-ESTIMATORS = {"ratio": _spikes_ratio}
+def _spikes_centred(words, config, spikes_at_overflow):
+    """Flag 1 -> alpha * spikes_at_overflow / (m - 1/2), at most L spikes.
+
+    The overflow clock lies somewhere in S_h cycle m, i.e. after (m - 1) F to
+    m F clocks; for light that is not locked to the clock its position is
+    close to uniform there, so the centre (m - 1/2) F is a better guess of the
+    time to overflow than the end m F that the paper's alpha / m assumes (which
+    biases every overflow code low, by a factor up to 2 at m = 1). A pixel fires
+    at most once per clock, so no estimate exceeds L = F * alpha spikes.
+    """
+    if not config.is_te:
+        return words.astype(np.float64)
+    flag, value = _te_fields(words, config)
+    m = np.where(flag, value, 1).astype(np.float64)
+    estimate = np.minimum(config.alpha * spikes_at_overflow / (m - 0.5), config.clocks_per_readout)
+    return np.where(flag, estimate, value).astype(np.float64)
+
+
+def _spikes_midpoint(words, config):
+    """Flag 1 -> 2^b1 * alpha / (m - 1/2), capped at L (overflow in the middle of S_h cycle m)."""
+    return _spikes_centred(words, config, float(config.p_max))
+
+
+def _spikes_residual(words, config):
+    """Flag 1 -> (2^b1 - 1/2) * alpha / (m - 1/2), capped at L.
+
+    As "midpoint", and also for the charge the pixel carried into the
+    interval: with a residual uniform in [0, theta) the 2^b1-th threshold
+    crossing needs on average (2^b1 - 1/2) thresholds of new charge, not 2^b1.
+    """
+    return _spikes_centred(words, config, config.p_max - 0.5)
+
+
+#: Named decoding rules (SPEC section 5): words -> spikes per readout interval.
+#: "ratio" is the paper's eq. 3 and the default everywhere; the others differ
+#: only for TE overflow words (flag 1). See docs/dynamic-range.md for their
+#: measured bias and spread.
+ESTIMATORS = {"ratio": _spikes_ratio, "midpoint": _spikes_midpoint, "residual": _spikes_residual}
 
 
 def decode_spikes(words: np.ndarray, config: SensorConfig, estimator: str = "ratio") -> np.ndarray:

@@ -37,9 +37,9 @@ def atomic_output(path: str | Path) -> Iterator[str]:
             os.unlink(tmp)
 
 
-def _load_npy(path: str | Path, what: str) -> np.ndarray:
+def _load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.ndarray:
     try:
-        array = np.load(path, allow_pickle=False)
+        array = np.load(path, allow_pickle=False, mmap_mode=mmap_mode)
     except FileNotFoundError:
         raise InputError(f"{what} file {str(path)!r} does not exist") from None
     except (OSError, ValueError) as exc:
@@ -49,13 +49,15 @@ def _load_npy(path: str | Path, what: str) -> np.ndarray:
     return array
 
 
-def check_stimulus(stimulus: np.ndarray, config: SensorConfig, *, whole_readouts: bool = True) -> np.ndarray:
+def check_stimulus(stimulus: np.ndarray, config: SensorConfig, *, whole_readouts: bool = True,
+                   scan_values: bool = True) -> np.ndarray:
     """Refuse a per-clock electron array that SPEC section 3 does not allow.
 
     It must be a numpy integer array (a float or bool array is refused even when
     its values are whole) of shape ``(T, H, W)`` with every value in
     ``[0, 2^input_bits - 1]`` and, unless ``whole_readouts`` is false, T a
-    multiple of L. Returns the array unchanged.
+    multiple of L. ``scan_values=False`` checks only dtype and shape (for a
+    caller that checks the values slice by slice). Returns the array unchanged.
     """
     if not isinstance(stimulus, np.ndarray):
         raise InputError(f"stimulus must be a numpy array, not {type(stimulus).__name__}")
@@ -71,8 +73,12 @@ def check_stimulus(stimulus: np.ndarray, config: SensorConfig, *, whole_readouts
     if whole_readouts and clocks % L:
         raise InputError(f"stimulus has T = {clocks} pixel clocks, not a multiple of "
                          f"L = clocks_per_tick * alpha = {L}")
-    if stimulus.size:
-        low, high = int(stimulus.min()), int(stimulus.max())
+    if scan_values and stimulus.size:
+        # A dtype that cannot hold a bad value is not scanned (a pass over a large
+        # stimulus costs as much as simulating part of it).
+        info = np.iinfo(stimulus.dtype)
+        low = 0 if info.min >= 0 else int(stimulus.min())
+        high = 0 if info.max <= config.input_max else int(stimulus.max())
         if low < 0:
             raise InputError(f"stimulus value {low} is negative (electrons per clock must be "
                              f"in 0..2^input_bits - 1 = {config.input_max})")
@@ -83,8 +89,19 @@ def check_stimulus(stimulus: np.ndarray, config: SensorConfig, *, whole_readouts
 
 
 def load_stimulus(path: str | Path, config: SensorConfig) -> np.ndarray:
-    """Read and check ``E.npy``; the array may be memory-mapped by the caller later."""
-    return check_stimulus(_load_npy(path, "stimulus"), config)
+    """Read and check ``E.npy``, memory-mapped read-only so a large file stays on disk.
+
+    The range check streams through the file in slices of about 2^24 values,
+    so it too needs memory bounded by the slice, not by the file.
+    """
+    stimulus = _load_npy(path, "stimulus", mmap_mode="r")
+    if stimulus.ndim != 3 or stimulus.dtype.kind not in "iu":
+        return check_stimulus(stimulus, config)
+    check_stimulus(stimulus, config, scan_values=False)     # dtype, shape and T rules
+    step = max(1, (1 << 24) // max(1, stimulus[0].size))
+    for start in range(0, stimulus.shape[0], step):
+        check_stimulus(stimulus[start:start + step], config, whole_readouts=False)
+    return stimulus
 
 
 def check_scene(scene: np.ndarray) -> np.ndarray:

@@ -1,8 +1,36 @@
-"""Cycle-exact model of a TE or ML pixel array (SPEC sections 3 and 4), run in chunks.
+"""Cycle-exact model of a TE or ML pixel array (SPEC sections 3 and 4), fast and run in chunks.
 
-:class:`PixelArray` carries the state between chunks of any length, so a run
-split anywhere gives the identical stream, and memory stays bounded by the
+:class:`PixelArray` gives the same words, clock for clock, as the literal
+per-clock rule :func:`golden.reference.step_reference`, but advances whole
+blocks of pixel clocks with closed forms instead of a Python step per clock.
+State (acc, sfc, ovf, m and the clock phase) is carried between calls, so a
+run split anywhere gives the identical stream, and memory stays bounded by the
 chunk size however many readouts a run has.
+
+How it works (derivation in docs/golden-model.md). Per pixel, inside a block
+of clocks starting with charge ``acc0`` and with ``Y_t = acc0 + sum_{u<=t}
+(e_u - theta)``:
+
+* without accumulator saturation the cumulative spike count is
+  ``N_t = min(N_{t-1} + 1, floor(R_t / theta))`` (at most one spike per clock),
+  which unrolls to ``N_t = t + 1 + floor(Z_t / theta)`` with
+  ``Z_t = min(0, min_{u<=t} Y_u)``, a running minimum; ``acc_t = Y_t -
+  theta * floor(Z_t / theta)``;
+* saturation throws away charge ``D_t = max_{u<=t} max(0, Y_u - theta f_u - M)``
+  (a running maximum) and the spike rule then reads ``Y_u - D_{u-1}`` instead
+  of ``Y_u``. The pair (D, N) is the unique fixed point of these two causal
+  maps; iterating them from a lower bound of D (the busy walk's loss, or
+  D = 0) increases D monotonically to it, and each iteration settles at least
+  one more saturating stretch. Pixels that saturate and idle in one block
+  are iterated on their own (pixels busy on every clock of the block have the
+  exact top-reflected-walk form, ``acc_t = Y_t - D_t``, ``N_t = t + 1``); the few that would need many rounds in a block
+  are split into half blocks (down to single clocks, where two rounds are
+  exact by construction), so no stimulus can make the engine wrong, only slower.
+
+All intermediates are bounded (see :func:`_magnitude_bound`), so the engine
+uses int16 or int32 where a block provably fits and int64 otherwise; configurations
+whose accumulator is too wide for any block in int64 (acc_bits >= 61) run the
+literal per-clock rule, which is exact there by construction.
 """
 
 from __future__ import annotations
@@ -18,22 +46,416 @@ from .reference import PixelState, step_reference
 #: Pixel clocks x pixels processed at once by :func:`simulate` (bounds memory).
 DEFAULT_CHUNK_ELEMENTS = 1 << 22
 
+#: Pixel clocks advanced per closed-form block (rows of the working arrays).
+BLOCK_CLOCKS = 16
+
+#: Pixels per block (columns of the working arrays); keeps a block near the L2 cache.
+BLOCK_PIXELS = 16384
+
+#: Below this many pixels a time scan uses numpy's accumulate instead of a row loop.
+ROW_LOOP_MIN_PIXELS = 512
+
+#: Column subsets larger than this fraction are processed at full width instead of gathered.
+GATHER_FRACTION = 0.125
+
+#: The same for the pixels that go through the fixed-point rounds.
+SATURATING_GATHER_FRACTION = 0.3
+
+#: Fixed-point rounds tried on saturating pixels before their block is halved.
+MAX_ROUNDS = 4
+
+_INT16_LIMIT = (1 << 15) - 1
+_INT32_LIMIT = (1 << 31) - 1
+_INT64_LIMIT = (1 << 63) - 1
+
+
+def _magnitude_bound(config: SensorConfig, clocks: int, top: int | None = None) -> int:
+    """Largest |value| any intermediate of a block of ``clocks`` clocks can take.
+
+    With c = clocks * (e_max + theta), e_max = ``top`` or 2^E - 1: |Y| <= M + c,
+    0 <= D <= M + c, |Z| <= 2M + 2c, |theta * f| <= 2M + 2c + theta,
+    |Y - theta f| <= 3M + 3c + theta.
+    """
+    c = clocks * ((config.input_max if top is None else top) + config.threshold)
+    return 4 * config.acc_max + 3 * c + config.threshold
+
+
+def _plan(config: SensorConfig) -> tuple[int, np.dtype | None]:
+    """Block length and working dtype; ``(0, None)`` means per-clock literal stepping."""
+    if _magnitude_bound(config, BLOCK_CLOCKS) <= _INT32_LIMIT:
+        return BLOCK_CLOCKS, np.dtype(np.int32)
+    clocks = BLOCK_CLOCKS
+    while clocks >= 1:
+        if _magnitude_bound(config, clocks) <= _INT64_LIMIT:
+            return clocks, np.dtype(np.int64)
+        clocks //= 2
+    return 0, None
+
+
+def _scan(x: np.ndarray, op: np.ufunc, seed: int | None = None, out: np.ndarray | None = None) -> np.ndarray:
+    """Running ``op`` (add, minimum, maximum) of ``x`` along axis 0 into ``out`` (default: in place).
+
+    ``seed`` joins row 0. Wide arrays are scanned by a loop over rows (one
+    vector op per clock over all pixels), several times faster in numpy than
+    ``accumulate`` along axis 0; narrow arrays use ``accumulate``, whose cost
+    does not grow with the Python loop.
+    """
+    out = x if out is None else out
+    if seed is not None:
+        op(x[0], seed, out=out[0])
+    elif out is not x:
+        out[0] = x[0]
+    if x.shape[1] >= ROW_LOOP_MIN_PIXELS:
+        rows_in = list(x)                               # row views made in one C loop
+        rows_out = rows_in if out is x else list(out)
+        for i in range(1, len(rows_in)):
+            op(rows_out[i - 1], rows_in[i], out=rows_out[i])
+    elif x.shape[0] > 1:
+        if out is not x:
+            out[1:] = x[1:]
+        op.accumulate(out, axis=0, out=out)
+    return out
+
+
+class _Engine:
+    """The closed forms for one configuration (no state; :class:`PixelArray` holds it).
+
+    :meth:`dynamics` returns, per block, an array ``Z`` with the cumulative
+    spike count ``N_t = t + 1 + floor(Z_t / theta)`` (t from 0 at the block
+    start), and the charge after the block.
+    """
+
+    def __init__(self, config: SensorConfig):
+        self.config = config
+        self.theta = config.threshold
+        self.acc_max = config.acc_max
+        self.block_clocks, self.dtype = _plan(config)
+        # Saturation needs a spike with acc + e - theta > M >= acc, so e > theta.
+        self.may_saturate = config.input_max > config.threshold
+        self._buffers: dict = {}
+
+    def _array(self, name: str, shape: tuple[int, int], dtype: np.dtype, reuse: bool) -> np.ndarray:
+        """A work array; with ``reuse`` the same memory serves every block of this shape
+        (fresh pages cost a page fault each, about a pass over the array)."""
+        if not reuse:
+            return np.empty(shape, dtype)
+        key = (name, shape, np.dtype(dtype))
+        if key not in self._buffers:
+            self._buffers[key] = np.empty(shape, dtype)
+        return self._buffers[key]
+
+    def dynamics(self, e: np.ndarray, acc0: np.ndarray, reuse: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Advance pixels over a block: e (T, n) electrons, acc0 (n,) int64 charge -> (Z, acc_end).
+
+        ``Z`` is None when every pixel fired on every clock (N_t = t + 1). With ``reuse`` the returned Z lives in a buffer that the next call with
+        ``reuse`` overwrites (the caller consumes it first).
+
+        Every pixel is first given the no-saturation closed form; only pixels
+        that could saturate in this block are looked at again: those that are
+        provably calm keep it, those busy on every clock get the reflected-walk
+        form, and the rest (a block where a pixel both saturates and idles) go
+        through the fixed-point rounds of :meth:`_saturating`.
+        """
+        theta, M = self.theta, self.acc_max
+        T, n = e.shape
+        emax = e.max(axis=0)
+        # int16 halves the memory traffic again when this block's own largest input allows it.
+        dt = self.dtype
+        if _magnitude_bound(self.config, T, int(emax.max())) <= _INT16_LIMIT:
+            dt = np.dtype(np.int16)
+        Y = self._array("Y", (T, n), dt, reuse)
+        np.subtract(e, theta, out=Y, dtype=dt, casting="unsafe")
+        Y[0] += acc0.astype(dt)
+        _scan(Y, np.add)                                   # Y_t = acc0 + sum (e - theta)
+        # A pixel whose Y never drops below 0 fires on every clock under the closed
+        # form: its running minimum is 0, no scan needed (the common case when bright).
+        # Z = None stands for all zeros (every pixel fires on every clock: N_t = t + 1).
+        never_idle = Y.min(axis=0) >= 0
+        if never_idle.all():
+            Z = None
+            acc_end = Y[-1].astype(np.int64)
+        else:
+            Z = _scan(Y, np.minimum, seed=0, out=self._array("Z", (T, n), dt, reuse))
+            acc_end = (Y[-1] - theta * (Z[-1] // theta)).astype(np.int64)
+        # Saturation needs e > theta on some clock. A pixel that never idles under the
+        # closed form (Z = 0: Y_t >= 0) and never holds more than M (Y <= M) is exact;
+        # one that never idles but exceeds M saturates under it for sure.
+        unsure = emax > theta
+        if not unsure.any():
+            return Z, acc_end
+        unsure &= ~never_idle | (Y.max(axis=0) > M)
+        if not unsure.any():
+            return Z, acc_end
+        if Z is None:
+            Z = self._array("Z", (T, n), dt, reuse)
+            Z.fill(0)
+        # Two kinds of unsure pixels. Busy on every clock implies Y >= 0 (never idle),
+        # so only never-idle pixels (which exceed M under the closed form) can be busy;
+        # idle ones get the calm bound and, failing it, the exact check.
+        walkers = unsure & never_idle
+        if walkers.any():
+            self._walkers(_Columns(walkers), e, Y, Z, acc0, acc_end, reuse)
+        idlers = unsure & ~never_idle
+        if idlers.any():
+            self._idlers(_Columns(idlers), e, Y, Z, acc0, acc_end, reuse)
+        return Z, acc_end
+
+    def _walkers(self, cols, e, Y, Z, acc0, acc_end, reuse):
+        """Pixels with Y >= 0 throughout and Y > M somewhere: busy walk, else the rounds.
+
+        The charge a pixel busy on every clock throws away is D_t = Dm_t - M with
+        Dm_t = max(M, max_{u<=t} Y_u); it is busy on every clock iff Y_t >= D_{t-1}
+        for all t, and then N_t = t + 1 (Z = 0 already) and acc = Y - D exactly.
+        """
+        theta, M, dt = self.theta, self.acc_max, Y.dtype
+        T = Y.shape[0]
+        Yu = cols.take(Y)
+        Dm = _scan(Yu, np.maximum, seed=M, out=self._array("Dm", Yu.shape, dt, reuse and cols.full))
+        busy = Yu[0] >= 0
+        if T > 1:
+            gap = np.subtract(Yu[1:], Dm[:-1], out=self._array("tmp", Yu.shape, dt, reuse and cols.full)[1:])
+            busy &= gap.min(axis=0) >= -M
+        busy = cols.local(busy)
+        acc_u = cols.take_vector(acc_end)
+        np.copyto(acc_u, Yu[-1].astype(np.int64) - (Dm[-1].astype(np.int64) - M), where=busy)
+        rest = cols.local(~busy)
+        if rest.any():
+            # Not busy: the closed form exceeds M (Y > M with Z = 0), so these saturate
+            # and idle in the block. The busy walk's loss is a lower bound of theirs.
+            sat = _Columns(rest, gather_fraction=SATURATING_GATHER_FRACTION)
+            Zs, acc_s = self._saturating(sat.take(cols.take(e)), sat.take(Yu), sat.take(Dm) - M,
+                                         sat.take_vector(cols.take_vector(acc0)))
+            Zu = cols.take(Z)
+            sat.put(Zu, Zs)
+            sat.put_vector(acc_u, acc_s)
+            cols.put(Z, Zu)
+        cols.put_vector(acc_end, acc_u)
+
+    def _idlers(self, cols, e, Y, Z, acc0, acc_end, reuse):
+        """Pixels that idle under the closed form and may saturate: bound, exact check, rounds.
+
+        acc_t = Y_t - theta floor(Z_t / theta) <= Y_t - Z_t + theta - 1, so
+        max(Y - Z) <= M - theta + 1 proves the block calm; otherwise the closed
+        form holds iff its acc_t <= M for every t.
+        """
+        theta, M, dt = self.theta, self.acc_max, Y.dtype
+        Yu, Zu = cols.take(Y), cols.take(Z)
+        work = self._array("tmp", Yu.shape, dt, reuse and cols.full)
+        np.subtract(Yu, Zu, out=work)
+        suspect = cols.local(work.max(axis=0) > M - theta + 1)
+        if not suspect.any():
+            return
+        np.floor_divide(Zu, theta, out=work)
+        work *= theta
+        np.subtract(Yu, work, out=work)                     # the closed form's acc
+        clip = cols.local(suspect & (work.max(axis=0) > M))
+        if not clip.any():
+            return
+        # The first round from D = 0, the running max of (closed-form acc - M), is a
+        # lower bound of the true loss; the rounds start there.
+        sat = _Columns(clip, gather_fraction=SATURATING_GATHER_FRACTION)
+        D0 = sat.take(work) - M
+        _scan(D0, np.maximum, seed=0)
+        Zs, acc_s = self._saturating(sat.take(cols.take(e)), sat.take(Yu), D0,
+                                     sat.take_vector(cols.take_vector(acc0)))
+        sat.put(Zu, Zs)
+        cols.put(Z, Zu)
+        acc_u = cols.take_vector(acc_end)
+        sat.put_vector(acc_u, acc_s)
+        cols.put_vector(acc_end, acc_u)
+
+    def _saturating(self, e, Y, D0, acc0):
+        """Pixels that saturate and idle in one block: iterate the (D, N) fixed point.
+
+        ``D0`` is the charge a pixel busy on every clock would lose, a lower
+        bound of the true loss (N_u <= u + 1), so the rounds increase to the
+        true D (module doc). Returns (Z, acc_end).
+        """
+        theta, M, dt = self.theta, self.acc_max, Y.dtype
+        T, n = Y.shape
+        # D[u + 1] = charge thrown away up to clock u; D[0] = 0 (before the block).
+        D = np.empty((T + 1, n), dt)
+        D[0] = 0
+        D[1:] = D0
+        Z = np.empty((T, n), dt)
+        acc = np.empty((T, n), dt)
+        for round_ in range(MAX_ROUNDS):
+            np.subtract(Y, D[:-1], out=Z)
+            _scan(Z, np.minimum, seed=0)
+            np.floor_divide(Z, theta, out=acc)
+            acc *= theta
+            np.subtract(Y, acc, out=acc)                    # Y - theta f = acc + D
+            acc -= D[1:]                                    # acc_t under this round's D
+            # The round is the fixed point iff acc_t <= M everywhere (then the new
+            # loss, a running max, equals D). Settled pixels stay settled, so the
+            # rounds run on all of them until every one is (no column shuffling).
+            done = acc.max(axis=0) <= M
+            if done.all():
+                return Z, acc[-1].astype(np.int64)
+            if round_ == MAX_ROUNDS - 1:
+                break
+            acc += D[1:]
+            np.subtract(acc, M, out=D[1:])
+            _scan(D[1:], np.maximum, seed=0)
+        # Too many saturating stretches in this block for some pixels: halve it for them.
+        # (A one-clock block settles in two rounds, so this always terminates.)
+        assert T > 1, "a one-clock block must settle within two rounds"
+        acc_out = acc[-1].astype(np.int64)
+        live = np.flatnonzero(~done)
+        half = T // 2
+        Z1, acc1 = self.dynamics(e[:half, live], acc0[live])
+        Z2, acc2 = self.dynamics(e[half:, live], acc1)
+        Z1 = np.zeros((half, live.size), dt) if Z1 is None else Z1
+        Z2 = np.zeros((T - half, live.size), dt) if Z2 is None else Z2
+        Z[:half, live] = Z1
+        Z[half:, live] = Z2.astype(dt) + theta * (Z1[-1].astype(dt) // theta)
+        acc_out[live] = acc2
+        return Z, acc_out
+
+
+class _Columns:
+    """A subset of pixel columns; gathers only when it is small.
+
+    Fancy-indexing columns of a (T, n) array costs several times a plain pass,
+    so a subset of more than GATHER_FRACTION of the columns is worked on in
+    place at full width (the extra columns are computed and then ignored).
+    """
+
+    def __init__(self, mask: np.ndarray, gather_fraction: float | None = None):
+        self.mask = mask
+        fraction = GATHER_FRACTION if gather_fraction is None else gather_fraction
+        self.full = mask.all() or fraction * mask.size < int(np.count_nonzero(mask))
+        self.index = None if self.full else np.flatnonzero(mask)
+
+    def local(self, mask: np.ndarray) -> np.ndarray:
+        """A mask computed over the taken columns, restricted to this subset's members."""
+        return mask & self.mask if self.full else mask
+
+    def take(self, a: np.ndarray) -> np.ndarray:
+        return a if self.full else a[:, self.index]
+
+    def take_vector(self, v: np.ndarray) -> np.ndarray:
+        return v if self.full else v[self.index]
+
+    def put(self, a: np.ndarray, values: np.ndarray) -> None:
+        if self.full:
+            if values is not a:
+                np.copyto(a, values, where=self.mask)
+        else:
+            a[:, self.index] = values
+
+    def put_vector(self, v: np.ndarray, values: np.ndarray) -> None:
+        if self.full:
+            if values is not v:
+                np.copyto(v, values, where=self.mask)
+        else:
+            v[self.index] = values
+
 
 class PixelArray:
-    """An H x W array of TE or ML pixels that consumes per-clock electrons."""
+    """An H x W array of TE or ML pixels that consumes per-clock electrons in chunks."""
 
     def __init__(self, config: SensorConfig, shape: tuple[int, int]):
         self.config = config
         self.shape = tuple(shape)
         self.state = PixelState.zeros(self.shape)
+        self._engine = _Engine(config)
 
     def feed(self, electrons: np.ndarray) -> np.ndarray:
-        """Consume (T, H, W) electrons of any T; return the words of the readouts completed."""
+        """Consume (T, H, W) electrons of any T; return the words (k, H, W) of the readouts completed."""
         check_stimulus(electrons, self.config, whole_readouts=False)
         if electrons.shape[1:] != self.shape:
             raise ValueError(f"chunk shape {electrons.shape[1:]} != array shape {self.shape}")
-        words, self.state = step_reference(self.config, electrons, self.state)
-        return words
+        if self._engine.dtype is None:
+            words, self.state = step_reference(self.config, electrons, self.state)
+            return words
+        config, state = self.config, self.state
+        T = electrons.shape[0]
+        H, W = self.shape
+        P = H * W
+        L = config.clocks_per_readout
+        e = electrons.reshape(T, P)
+        n_words = (state.clock + T) // L - state.clock // L
+        words = np.empty((n_words, P), np.int64)
+        flat = [a.reshape(P) for a in (state.acc, state.sfc, state.ovf, state.m)]
+        block = self._engine.block_clocks
+        word_index = 0
+        for t0 in range(0, T, block):
+            t1 = min(T, t0 + block)
+            segments = self._segments(state.clock + t0, t1 - t0)
+            for p0 in range(0, P, BLOCK_PIXELS):
+                p1 = min(P, p0 + BLOCK_PIXELS)
+                acc, sfc, ovf, m = (a[p0:p1] for a in flat)
+                # Work buffers are kept for full-length blocks only, so odd chunk
+                # lengths do not pile up buffers of every partial length.
+                Z, acc[:] = self._engine.dynamics(e[t0:t1, p0:p1], acc, reuse=t1 - t0 == block)
+                self._count(Z, segments, sfc, ovf, m, words[word_index:, p0:p1])
+            word_index += sum(1 for seg in segments if seg[3])
+        state.clock += T
+        return words.reshape(n_words, H, W)
+
+    def _segments(self, clock: int, length: int) -> list[tuple[int, int, int, bool]]:
+        """Pieces of a block inside one readout interval: (row a, row b, phase at a, ends interval)."""
+        L = self.config.clocks_per_readout
+        pieces, a = [], 0
+        while a < length:
+            phase = (clock + a) % L
+            b = min(length, a + L - phase)
+            pieces.append((a, b, phase, phase + (b - a) == L))
+            a = b
+        return pieces
+
+    def _count(self, Z, segments, sfc, ovf, m, words) -> None:
+        """Update sfc/ovf/m from the spike counts of a block and emit finished words."""
+        config, theta = self.config, self._engine.theta
+        p_max, F = config.p_max, config.clocks_per_tick
+        before = np.zeros(sfc.shape[0], np.int64)     # N_{a-1}, block-relative
+        k = 0
+        for a, b, phase, ends in segments:
+            # N_{b-1} = (b - 1) + 1 + floor(Z / theta); Z None: every clock fired
+            after = np.full(sfc.shape[0], b, np.int64) if Z is None else b + Z[b - 1] // theta
+            count = after - before
+            if config.is_te:
+                new = sfc + count
+                over = np.flatnonzero(~ovf & (new >= p_max))
+                if over.size:
+                    # The counter overflows at the first clock t with N_t >= target;
+                    # N is nondecreasing, so bisect per pixel between the earliest
+                    # possible clock (one spike per clock) and b - 1.
+                    target = before[over] + (p_max - sfc[over])
+                    lo = a + (target - before[over]) - 1
+                    hi = np.full(over.size, b - 1, np.int64)
+                    if Z is None:
+                        hi = lo
+                    else:
+                        flat, width = Z.reshape(-1), Z.shape[1]
+                        # Most overflowing pixels fire on every clock up to it: settle them first.
+                        hi = np.where(lo + 1 + np.take(flat, lo * width + over) // theta >= target, lo, hi)
+                    while True:
+                        open_ = lo < hi
+                        if not open_.any():
+                            break
+                        mid = (lo + hi) // 2
+                        reached = mid + 1 + np.take(flat, mid * width + over) // theta >= target
+                        hi = np.where(open_ & reached, mid, hi)
+                        lo = np.where(open_ & ~reached, mid + 1, lo)
+                    m[over] = (phase + lo - a) // F + 1
+                np.copyto(sfc, new, where=~ovf)
+                if over.size:
+                    ovf[over] = True
+                    sfc[over] = p_max
+            else:
+                np.minimum(sfc + count, config.ml_max, out=sfc)
+            if ends:
+                if config.is_te:
+                    words[k] = np.where(ovf, (1 << config.d) | m, sfc)
+                else:
+                    words[k] = sfc
+                k += 1
+                sfc[:] = 0
+                ovf[:] = False
+                m[:] = 0
+            before = after
 
 
 def iter_chunks(stimulus: np.ndarray, config: SensorConfig,
@@ -48,10 +470,20 @@ def iter_chunks(stimulus: np.ndarray, config: SensorConfig,
 
 def simulate(config: SensorConfig, stimulus: np.ndarray,
              chunks: Iterable[np.ndarray] | None = None) -> np.ndarray:
-    """Stimulus (T, H, W), T a multiple of L -> readout words (T / L, H, W), int64."""
-    check_stimulus(stimulus, config)
+    """Stimulus (T, H, W), T a multiple of L -> readout words (T / L, H, W), int64.
+
+    The stimulus is fed in whole-readout chunks (``chunks`` overrides the
+    split), so it may be a memory-mapped file larger than memory; each chunk's
+    values are checked as it is fed.
+    """
+    check_stimulus(stimulus, config, scan_values=False)
     array = PixelArray(config, stimulus.shape[1:])
-    parts = [array.feed(chunk) for chunk in (chunks if chunks is not None else iter_chunks(stimulus, config))]
-    if not parts:
-        return np.zeros((0,) + stimulus.shape[1:], np.int64)
-    return np.concatenate(parts)
+    words = np.empty((stimulus.shape[0] // config.clocks_per_readout,) + stimulus.shape[1:], np.int64)
+    done = 0
+    for chunk in (chunks if chunks is not None else iter_chunks(stimulus, config)):
+        part = array.feed(np.asarray(chunk))
+        words[done:done + len(part)] = part
+        done += len(part)
+    if done != len(words) or array.state.clock != stimulus.shape[0]:
+        raise ValueError(f"chunks covered {array.state.clock} of {stimulus.shape[0]} pixel clocks")
+    return words

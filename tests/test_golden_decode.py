@@ -26,3 +26,39 @@ def test_ml_decode_and_refusal():
     assert np.array_equal(decode_spikes(np.arange(256), c), np.arange(256))
     with pytest.raises(InputError):
         decode_spikes(np.array([256]), c)
+
+
+def test_estimators_on_hand_worked_words():
+    """TE b1 = b2 = 4 (alpha 15, F 16, L 240): flag-1 words decode by the centred rules."""
+    from golden.decode import ESTIMATORS
+    c = SensorConfig()
+    words = np.array([0, 7, 15, 16 | 1, 16 | 2, 16 | 3, 16 | 15])
+    assert list(ESTIMATORS)[0] == "ratio"
+    assert np.allclose(decode_spikes(words, c, "ratio"), [0, 7, 15, 240, 120, 80, 16])
+    # midpoint: 16 * 15 / (m - 1/2), at most L = 240
+    assert np.allclose(decode_spikes(words, c, "midpoint"), [0, 7, 15, 240, 160, 96, 240 / 14.5])
+    # residual: 15.5 * 15 / (m - 1/2), at most 240
+    assert np.allclose(decode_spikes(words, c, "residual"), [0, 7, 15, 240, 155, 93, 232.5 / 14.5])
+    # a clock divider longer than 2^b1 lets m = 1 go beyond 2^b1 alpha, still capped at L
+    wide = SensorConfig(b1=2, b2=2, clocks_per_tick=16)                # alpha 3, L 48
+    assert decode_spikes(np.array([4 | 1]), wide, "midpoint")[0] == 24.0
+    assert decode_spikes(np.array([4 | 1]), wide, "ratio")[0] == 12.0
+    ml = SensorConfig(mode="ml")
+    for name in ("ratio", "midpoint", "residual"):
+        assert np.array_equal(decode_spikes(np.arange(256), ml, name), np.arange(256))
+
+
+def test_unknown_estimator_refused():
+    with pytest.raises(InputError, match="unknown estimator 'best'"):
+        decode_spikes(np.array([1]), SensorConfig(), "best")
+
+
+def test_residual_estimator_less_biased_than_ratio_on_constant_light():
+    """Seeded constant Poisson light over the TE overflow range, through the cycle-exact engine."""
+    from golden.dynamic_range import estimator_error
+    c = SensorConfig()
+    light = np.logspace(np.log10(16 * 175 / 42000), 0, 25)      # 2^b1 .. 2^b1 alpha spikes per readout
+    ratio_bias, _ = estimator_error(c, "ratio", light, readouts=30, replicas=2, seed=3)
+    residual_bias, _ = estimator_error(c, "residual", light, readouts=30, replicas=2, seed=3)
+    assert np.abs(residual_bias).mean() < 0.8 * np.abs(ratio_bias).mean()
+    assert (ratio_bias < 0.01).all()          # the paper's rule reads every overflow code low

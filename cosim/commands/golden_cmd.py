@@ -1,20 +1,55 @@
-"""``tespike golden``: the cycle-exact golden model on an explicit per-clock stimulus."""
+"""``tespike golden``: the cycle-exact golden model on an explicit per-clock stimulus.
+
+The stimulus file is memory-mapped and streamed through the engine in
+whole-readout chunks, so a file larger than memory runs in memory bounded by
+the chunk size plus the words (1/L of the stimulus, in the smallest word
+dtype). A progress bar on stderr appears for runs of more than a few chunks.
+"""
 
 HELP = "run the bit-exact golden model on a per-clock electron stimulus E.npy"
+
+#: Runs with more chunks than this show a progress bar on stderr.
+PROGRESS_MIN_CHUNKS = 4
 
 
 def add_arguments(parser):
     parser.add_argument("--config", required=True, help="JSON config file, or 'te' / 'ml' for a mode's defaults")
     parser.add_argument("--stimulus", required=True, help="E.npy: integer (T, H, W) electrons per pixel clock")
     parser.add_argument("--out", required=True, help="S.npz to write: readout words and the full config")
+    parser.add_argument("--chunk-elements", type=int, default=None, metavar="N",
+                        help="pixel clocks x pixels per chunk (bounds memory; default 2^22)")
+    parser.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
+                        help="progress bar on stderr (auto: only for runs of more than a few chunks)")
 
 
 def run(args) -> int:
+    import numpy as np
+
     from golden.config import load_config
-    from golden.io import load_stimulus, save_stream
-    from golden.sensor import simulate
+    from golden.errors import InputError
+    from golden.io import load_stimulus, save_stream, word_dtype
+    from golden.sensor import DEFAULT_CHUNK_ELEMENTS, PixelArray, iter_chunks
 
     config = load_config(args.config)
+    chunk_elements = DEFAULT_CHUNK_ELEMENTS if args.chunk_elements is None else args.chunk_elements
+    if chunk_elements < 1:
+        raise InputError(f"--chunk-elements {chunk_elements}: must be >= 1")
     stimulus = load_stimulus(args.stimulus, config)
-    save_stream(args.out, simulate(config, stimulus), config)
+    T, H, W = stimulus.shape
+    L = config.clocks_per_readout
+    words = np.empty((T // L, H, W), word_dtype(config))
+    chunks = iter_chunks(stimulus, config, chunk_elements)
+    clocks_per_chunk = max(1, chunk_elements // max(1, H * W * L)) * L
+    n_chunks = -(-T // clocks_per_chunk)
+    show = args.progress == "on" or (args.progress == "auto" and n_chunks > PROGRESS_MIN_CHUNKS)
+    array = PixelArray(config, (H, W))
+    done = 0
+    from tqdm import tqdm
+    with tqdm(total=T // L, unit="readout", desc="golden", disable=not show, leave=False) as bar:
+        for chunk in chunks:
+            part = array.feed(np.asarray(chunk))
+            words[done:done + len(part)] = part
+            done += len(part)
+            bar.update(len(part))
+    save_stream(args.out, words, config)
     return 0

@@ -1,0 +1,53 @@
+import math
+
+import numpy as np
+import pytest
+
+from golden.config import SensorConfig
+from golden.dynamic_range import constant_light_words, formula_db, light_grid, measure
+from golden.reference import step_reference
+
+
+def test_formula_paper_settings():
+    te, ml = SensorConfig(), SensorConfig(mode="ml")
+    assert formula_db(te, 1) == pytest.approx(20 * math.log10(240))
+    assert formula_db(ml, 1) == pytest.approx(20 * math.log10(255))
+    assert formula_db(te, 100) - formula_db(te, 1) == pytest.approx(40)
+    # alpha below 2^b2 - 1: the configured alpha bounds the code, the paper's formula does not see it
+    small = SensorConfig(alpha=5)
+    assert formula_db(small, 1) == pytest.approx(20 * math.log10(16 * 5))
+    assert formula_db(small, 1, paper_alpha=True) == pytest.approx(20 * math.log10(16 * 15))
+    with pytest.raises(ValueError):
+        formula_db(te, 0)
+
+
+def test_constant_light_words_are_the_engine_on_that_stimulus():
+    c = SensorConfig(b1=2, b2=2, threshold=50)
+    light = np.array([0.0, 0.01, 0.3, 5.0])
+    words = constant_light_words(c, light, 7, chunk_readouts=3)
+    L = c.clocks_per_readout
+    t = np.arange(7 * L)[:, None]
+    lam = 42000 * light / L
+    stim = np.minimum(np.floor((t + 1) * lam) - np.floor(t * lam), c.input_max).astype(np.int64)
+    assert np.array_equal(words, step_reference(c, stim[:, None, :])[0][:, 0, :])
+    noisy = constant_light_words(c, light, 7, seed=5)
+    assert np.array_equal(noisy, constant_light_words(c, light, 7, seed=5)) and noisy.shape == (7, 4)
+
+
+def test_measured_range_ml_noise_free():
+    """ML 8-bit: passes from the counting limit up to the one-spike-per-clock / 8-bit saturation."""
+    c = SensorConfig(mode="ml")
+    light = light_grid(1e-4, 1e2, 10)
+    r = measure(c, 8, windows=4, light=light)
+    # 5 % needs about 20 spikes per window of 8 readouts: r >= 2.5 spikes -> I >= 2.5 * 328 / 42000
+    assert 0.5 * 2.5 * 328 / 42000 <= r.low <= 2 * 2.5 * 328 / 42000
+    # the count saturates at L = 240 spikes = 240 * 328 / 42000 = 1.87
+    assert 1.0 <= r.high <= 1.87
+    assert r.passing.sum() >= (np.log10(r.high / r.low) * 10)
+    looser = measure(c, 8, windows=4, light=light, tolerance=0.2)
+    assert looser.db >= r.db
+
+
+def test_measure_refuses_words_of_the_wrong_shape():
+    with pytest.raises(ValueError, match="shape"):
+        measure(SensorConfig(), 4, windows=2, light=np.array([0.1, 1.0]), words=np.zeros((5, 2), np.int64))
