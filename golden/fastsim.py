@@ -36,7 +36,7 @@ the choice cannot bias the result); docs/simulator.md has the derivation.
 ``clock``    anything else (light within about 10 % of one threshold per clock,
              where charge backs up and the accumulator can clip, or a carried
              backlog): per-clock electrons for these pixels only, run through
-             the literal update rule :func:`golden.reference.step_reference`.
+             the cycle-exact model :class:`golden.sensor.PixelArray`.
 
 "Surely" means: each such event fails with probability below
 ``2^-64 / (CHECKS x pixel-readouts x L)`` (:func:`golden.light.log_budget`,
@@ -54,10 +54,10 @@ import numpy as np
 from .config import SensorConfig
 from .errors import InputError
 from .io import check_scene, word_dtype
-from .light import (as_generator, check_dark_current, clock_electrons, dark_electrons,
+from .light import (as_generator, check_dark_current, dark_electrons,
                     deterministic_clock_electrons, electrons_per_readout, log_budget,
                     log_poisson_tail_above, log_poisson_tail_below)
-from .reference import PixelState, step_reference
+from .sensor import PixelArray
 
 PATHS = ("dark", "event", "bright", "queue", "full", "clock")
 
@@ -237,7 +237,7 @@ class SceneSimulator:
         head = self.rng.multinomial(rest, np.full(L - w, 1.0 / (L - w)))
         e = np.minimum(np.concatenate([head, window], axis=1), c.input_max)
         self.path_counts["fallback"] += sel.size
-        self._run_clocks(sel, e, words)
+        self._run_clocks(sel, np.ascontiguousarray(e.T), words)
 
     def _queue_path(self, sel, w, mu, lam, words):
         """Light below one threshold per clock and no clipping (bound): spikes
@@ -375,27 +375,53 @@ class SceneSimulator:
         self.acc[sel[keep]] = end[keep]
 
     def _clock_path(self, sel, mu, dark, words):
-        """Exact per-clock simulation of the pixels ``sel`` (flat indices)."""
+        """Exact per-clock simulation of the pixels ``sel`` (flat indices).
+
+        Electrons are drawn straight into the clock-major layout the engine
+        steps through (iid clocks: the layout does not change their law)."""
         c = self.config
         L = c.clocks_per_readout
         step = max(1, CLOCK_CHUNK_ELEMENTS // L)
         for start in range(0, sel.size, step):
             part = sel[start:start + step]
             if self.noise:
-                e = clock_electrons(c, mu[part], dark[part], self.rng, self.budget)
+                e = self._clock_electrons(mu[part], dark[part])
             else:
                 e, self.fraction[part] = deterministic_clock_electrons(c, mu[part], self.fraction[part])
+                e = np.ascontiguousarray(e.T)
             self._run_clocks(part, e, words)
 
-    def _run_clocks(self, sel, e, words):
-        """The literal update rule on per-clock electrons ``e`` (n, L) of pixels ``sel``."""
+    def _clock_electrons(self, mu, dark):
+        """Random electrons ``(L, n)`` of one interval, the law of
+        :func:`golden.light.clock_electrons` (Poisson per clock, dark electrons
+        multinomial over the clocks, saturated at ``2^E - 1``; no draw where
+        every clock surely saturates)."""
         c = self.config
-        L = c.clocks_per_readout
-        state = PixelState.zeros((1, sel.size))
-        state.acc[0] = self.acc[sel]
-        w, state = step_reference(c, np.ascontiguousarray(e.T).reshape(L, 1, sel.size), state)
+        L, top = c.clocks_per_readout, c.input_max
+        lam = mu / L
+        sure = log_poisson_tail_below(lam, top - 1) < self.budget
+        if sure.all():
+            return np.full((L, mu.size), top, np.int64)
+        draw = np.flatnonzero(~sure)
+        e = self.rng.poisson(lam[draw][None, :], size=(L, draw.size))
+        d = dark[draw]
+        if d.any():
+            e += self.rng.multinomial(d, np.full(L, 1.0 / L)).T
+        np.minimum(e, top, out=e)
+        if draw.size == mu.size:
+            return e
+        out = np.full((L, mu.size), top, np.int64)
+        out[:, draw] = e
+        return out
+
+    def _run_clocks(self, sel, e, words):
+        """The cycle-exact model (:class:`golden.sensor.PixelArray`, clock for clock
+        the literal rule of SPEC section 3) on electrons ``e`` (L, n) of pixels ``sel``."""
+        array = PixelArray(self.config, (1, sel.size))
+        array.state.acc[0] = self.acc[sel]
+        w = array.feed(e.reshape(e.shape[0], 1, sel.size))
         words[sel] = w[0, 0]
-        self.acc[sel] = state.acc[0]
+        self.acc[sel] = array.state.acc[0]
 
 
 def _largest_below(bound, budget, hi):
