@@ -100,6 +100,7 @@ class SceneSimulator:
         n = self.shape[0] * self.shape[1]
         self.acc = np.zeros(n, np.int64)
         self.fraction = np.zeros(n)
+        self._no_dark = np.zeros(n, np.int64)              # read only
         # at most CHECKS bounded events per pixel-readout, each below the budget
         self.budget = log_budget(total_pixel_readouts or n, config.clocks_per_readout) - np.log(CHECKS)
         self.path_counts = dict.fromkeys(PATHS + ("fallback",), 0)
@@ -132,7 +133,8 @@ class SceneSimulator:
         c = self.config
         theta, L = c.threshold, c.clocks_per_readout
         mu = electrons_per_readout(np.asarray(light).reshape(-1))
-        dark = dark_electrons(self.dark_model, mu.shape, self.rng)
+        dark = (dark_electrons(self.dark_model, mu.shape, self.rng) if self.dark_model
+                else self._no_dark)
         words = np.zeros(mu.shape, np.int64)
         acc = self.acc
 
@@ -155,15 +157,23 @@ class SceneSimulator:
         path[low & (mean <= self._mean_event)] = PATHS.index("event")
         # bright: every clock >= theta electrons (photo-electrons alone suffice)
         path[lam >= self._lam_bright] = PATHS.index("bright")
-        path[low & (mu == 0) & (dark == 0)] = PATHS.index("dark")
-        rest = np.flatnonzero(path == PATHS.index("clock"))
-        if rest.size:
+        unlit = low & (mu == 0)
+        path[unlit & (dark == 0) if self.dark_model else unlit] = PATHS.index("dark")
+        counts = np.bincount(path, minlength=len(PATHS))
+        if counts[PATHS.index("clock")]:
+            rest = np.flatnonzero(path == PATHS.index("clock"))
             self._classify_middle(rest, lam[rest], mean[rest], dark[rest], acc[rest], path)
+            counts = np.bincount(path, minlength=len(PATHS))
         for code, name in enumerate(PATHS):
-            sel = np.flatnonzero(path == code)
-            if not sel.size:
+            if not counts[code]:
                 continue
-            self.path_counts[name] += sel.size
+            self.path_counts[name] += int(counts[code])
+            if name == "dark":
+                continue                                   # word 0, accumulator unchanged
+            if name == "event" and counts[code] == mu.size:
+                sel = slice(None)                          # the whole frame: no gather / scatter
+            else:
+                sel = np.flatnonzero(path == code)
             if name == "event":
                 self._event_path(sel, mu, dark, words)
             elif name == "bright":
@@ -319,25 +329,27 @@ class SceneSimulator:
         words[done] = self._bright_word
 
     def _event_path(self, sel, mu, dark, words):
+        """``sel``: flat indices, or ``slice(None)`` for the whole frame."""
         c = self.config
         theta, L = c.threshold, c.clocks_per_readout
         acc0 = self.acc[sel]
-        total = self.rng.poisson(mu[sel]) + dark[sel]
-        level = acc0 + total
-        spikes = level // theta
-        self.acc[sel] = level - spikes * theta
+        total = self.rng.poisson(mu[sel])
+        if self.dark_model:
+            total += dark[sel]
+        spikes, residual = np.divmod(acc0 + total, theta)
         if not c.is_te:
+            self.acc[sel] = residual
             words[sel] = np.minimum(spikes, c.ml_max)
             return
-        over = spikes >= c.p_max
-        w = spikes.copy()
-        if over.any():
+        over = np.flatnonzero(spikes >= c.p_max)
+        if over.size:
             n = c.p_max * theta - acc0[over]               # electron that makes the 2^b1-th spike
             t = total[over]
             position = self.rng.beta(n, t - n + 1)         # n-th of t uniform order statistics
             clock = np.minimum((position * L).astype(np.int64), L - 1)
-            w[over] = (1 << c.d) | (clock // c.clocks_per_tick + 1)
-        words[sel] = w
+            spikes[over] = (1 << c.d) | (clock // c.clocks_per_tick + 1)
+        self.acc[sel] = residual                           # after acc0 (maybe a view) is used
+        words[sel] = spikes
 
     def _bright_path(self, sel, mu, lam, dark, words):
         c = self.config
@@ -462,7 +474,7 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     paths are tested against). ``progress`` shows a tqdm bar on stderr for runs
     longer than a few seconds.
     """
-    scene = check_scene(scene)
+    scene = check_scene(scene, scan_values=False)       # values: one readout at a time
     K, H, W = scene.shape
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
                          method=method, total_pixel_readouts=scene.size)
@@ -472,5 +484,5 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
         from tqdm import tqdm
         readouts = tqdm(readouts, desc="simulate", unit="readout", delay=2.0, leave=False)
     for k in readouts:
-        words[k] = sim.readout(scene[k])
+        words[k] = sim.readout(check_scene(np.asarray(scene[k:k + 1]))[0])
     return words

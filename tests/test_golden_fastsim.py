@@ -198,6 +198,12 @@ def test_refuses_bad_input():
         simulate_scene(SensorConfig(), np.full((1, 1, 1), -1.0))
     with pytest.raises(InputError, match="non-finite"):
         simulate_scene(SensorConfig(), np.full((1, 1, 1), np.inf))
+    late = np.ones((3, 2, 2), np.float32)                 # values are checked readout by readout
+    late[2, 1, 1] = np.nan
+    with pytest.raises(InputError, match="non-finite"):
+        simulate_scene(SensorConfig(), late)
+    with pytest.raises(InputError, match="must be \\(K, H, W\\)"):
+        simulate_scene(SensorConfig(), np.ones((2, 2)))
     with pytest.raises(InputError, match="method"):
         simulate_scene(SensorConfig(), np.zeros((1, 1, 1)), method="magic")
     with pytest.raises(InputError, match="noise"):
