@@ -259,3 +259,19 @@ def test_carried_accumulator_of_queue_and_full_paths_matches_per_clock(config, p
             assert abs(pa - pb) <= 4 * se + 1e-12, (per_clock[i], pa, pb)
         tvd = 0.5 * np.abs(np.histogram(a, bins)[0] - np.histogram(b, bins)[0]).sum() / pixels
         assert tvd < 0.05, (per_clock[i], tvd)
+
+
+@pytest.mark.parametrize("model", ["eq12", "eq13"])
+def test_per_clock_path_spreads_dark_electrons_like_the_stimulus(model):
+    # L = 12, theta = 100, acc_max = 255: ~400 dark electrons per readout are
+    # ~33 per clock; bunched into few clocks they would back up, clip and
+    # overflow at other clocks, so where they fall shows in the code histogram
+    config = SensorConfig(b1=2, b2=2, threshold=100)
+    scene = np.full((4, 1, 4000), 0.002)
+    fast = simulate_scene(config, scene, seed=7, dark_current=model, method="per-clock")
+    exact = simulate(config, poisson_stimulus(config, scene, 8, dark_current=model))
+    tvd = 0.5 * np.abs(_histogram(fast, config) - _histogram(exact, config)).sum()
+    a = decode_spikes(fast, config).mean(axis=0)
+    b = decode_spikes(exact, config).mean(axis=0)
+    se = np.sqrt(a.var() / a.size + b.var() / b.size)
+    assert abs(a.mean() - b.mean()) < 4 * se and tvd < 0.05, (a.mean(), b.mean(), se, tvd)
