@@ -266,12 +266,8 @@ class SceneSimulator:
         level0 = acc0 + rest                               # charge before the window
         levels = level0[:, None] + np.cumsum(window, axis=1)
         crossings = np.diff(levels // theta, axis=1, prepend=(level0 // theta)[:, None])
-        b_lo = np.zeros(sel.size, np.int64)
-        b_hi = self._b_max[sel].astype(np.int64)
-        for j in range(w):
-            x = crossings[:, j]
-            b_lo = np.maximum(b_lo + x - 1, 0)
-            b_hi = np.maximum(b_hi + x - 1, 0)
+        b_lo = lindley_end(np.zeros(sel.size, np.int64), crossings)
+        b_hi = lindley_end(self._b_max[sel].astype(np.int64), crossings)
         ok = b_lo == b_hi
         level_end = levels[:, -1]
         spikes = level_end // theta - b_lo
@@ -336,7 +332,9 @@ class SceneSimulator:
         total = self.rng.poisson(mu[sel])
         if self.dark_model:
             total += dark[sel]
-        spikes, residual = np.divmod(acc0 + total, theta)
+        level = acc0 + total
+        spikes = level // theta                            # (np.divmod is 3x slower on int64)
+        residual = level - spikes * theta
         if not c.is_te:
             self.acc[sel] = residual
             words[sel] = np.minimum(spikes, c.ml_max)
@@ -434,6 +432,16 @@ class SceneSimulator:
         w = array.feed(e.reshape(e.shape[0], 1, sel.size))
         words[sel] = w[0, 0]
         self.acc[sel] = array.state.acc[0]
+
+
+def lindley_end(b0: np.ndarray, arrivals: np.ndarray) -> np.ndarray:
+    """Backlog after the unit-rate queue ``b <- max(b + x_j - 1, 0)`` over the
+    columns of ``arrivals`` (n, w), from backlog ``b0`` (n,), in closed form:
+    with ``W_k = sum_{j<=k} (x_j - 1)``, ``b_w = max(b0 + W_w, W_w - min_{1<=k<=w} W_k)``
+    (Lindley), i.e. ``W_w - min(-b0, min_k W_k)``; two reductions instead of a
+    Python step per column."""
+    walk = np.cumsum(arrivals - 1, axis=1)
+    return walk[:, -1] - np.minimum(-b0, walk.min(axis=1))
 
 
 def _largest_below(bound, budget, hi):

@@ -275,3 +275,14 @@ def test_per_clock_path_spreads_dark_electrons_like_the_stimulus(model):
     b = decode_spikes(exact, config).mean(axis=0)
     se = np.sqrt(a.var() / a.size + b.var() / b.size)
     assert abs(a.mean() - b.mean()) < 4 * se and tvd < 0.05, (a.mean(), b.mean(), se, tvd)
+
+
+def test_lindley_closed_form_equals_the_step_by_step_queue(rng):
+    from golden.fastsim import lindley_end
+    for w in (1, 2, 7, 40):
+        x = rng.poisson(rng.uniform(0.2, 1.8, (500, 1)), (500, w))
+        b0 = rng.integers(0, 6, 500)
+        b = b0.copy()
+        for j in range(w):
+            b = np.maximum(b + x[:, j] - 1, 0)
+        assert np.array_equal(lindley_end(b0, x), b), w
