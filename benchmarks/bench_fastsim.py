@@ -3,7 +3,8 @@
 Usage (from the worktree root):
 
     python3 benchmarks/bench_fastsim.py [--pixels 2000] [--readouts 4] [--out benchmarks/fastsim.png]
-                                        [--skip-whole] [--whole-shape 64 384 512]
+                                        [--skip-whole] [--skip-levels] [--whole-shape 64 384 512]
+                                        [--scene I.npy ...] [--crops 6]
 
 Part 1, per light level from 1e-4 to 10 x design light, paper TE and ML
 configurations: ``simulate_scene`` (fast) against the naive loop (Poisson
@@ -14,8 +15,9 @@ variation distance (TVD) of the code histograms, and both throughputs
 (pixel-readouts per second). A second, independent naive run gives the TVD
 that sampling noise alone produces (the floor the fast simulator should sit
 on). Part 2: ``tespike simulate`` as a whole process on a K x H x W HDR scene
-(light log-uniform over 1e-4..10 per pixel, drifting slowly in time), against
-the naive loop timed on a crop of the same scene and scaled per pixel-readout.
+(light log-uniform over 1e-4..10 per pixel, drifting slowly in time) and on
+any ``--scene`` files, against the naive loop timed on several random crops of
+the same scene and scaled per pixel-readout.
 Prints tables, writes a PNG. Figures depend on the machine and its load; the
 ratios are measured in the same run.
 """
@@ -98,33 +100,48 @@ def hdr_scene(shape, seed=0):
     return (base[None] * drift[:, None, None]).astype(np.float32)
 
 
-def whole_process(shape, crop_readouts=4, crop=(48, 64)):
-    scene = hdr_scene(shape)
+def naive_rate(config, scene, crops=6, crop=(2, 32, 48), seed=0):
+    """Naive-loop throughput (pixel-readouts/s) over ``crops`` random crops of
+    ``scene`` (readouts x rows x cols each): a corner alone can be all dark or
+    all bright and would misstate the cost of a scene that mixes both."""
+    rng = np.random.default_rng(seed)
+    K, H, W = scene.shape
+    k, h, w = min(crop[0], K), min(crop[1], H), min(crop[2], W)
+    elapsed = size = 0
+    for i in range(crops):
+        k0, y0, x0 = rng.integers(0, K - k + 1), rng.integers(0, H - h + 1), rng.integers(0, W - w + 1)
+        part = np.array(scene[k0:k0 + k, y0:y0 + h, x0:x0 + w], np.float64)
+        t0 = time.perf_counter()
+        _naive(config, part, seed + i)
+        elapsed += time.perf_counter() - t0
+        size += part.size
+    return size / elapsed
+
+
+def whole_process(name, path, crops=6):
+    """``tespike simulate`` as a whole process (start, read, simulate, write) on
+    the scene file ``path`` against the naive loop on random crops of it."""
+    scene = np.load(path, mmap_mode="r")
+    K, H, W = scene.shape
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "I.npy"
-        np.save(path, scene)
         for mode in ("te", "ml"):
             config = SensorConfig.preset(mode)
             env = dict(os.environ, PYTHONPATH=str(ROOT))
             t0 = time.perf_counter()
-            run = subprocess.run([sys.executable, "-m", "cosim", "simulate", "--config", mode, "--scene", path,
-                                  "--out", Path(tmp) / "S.npz", "--seed", "1"], env=env,
+            run = subprocess.run([sys.executable, "-m", "cosim", "simulate", "--config", mode, "--scene", str(path),
+                                  "--out", str(Path(tmp) / "S.npz"), "--seed", "1"], env=env,
                                  capture_output=True, text=True)
             fast = time.perf_counter() - t0
             if run.returncode:
                 raise SystemExit(run.stderr)
-            part = scene[:crop_readouts, :crop[0], :crop[1]]
-            t0 = time.perf_counter()
-            _naive(config, part, 1)
-            naive_per = (time.perf_counter() - t0) / part.size
-            results[mode] = dict(fast=fast, naive=naive_per * scene.size, rate=scene.size / fast,
-                                 naive_rate=1 / naive_per)
-            print(f"{mode.upper()}: tespike simulate on {shape[0]} x {shape[1]} x {shape[2]} "
-                  f"(readouts x rows x cols): {fast:.1f} s = {scene.size / fast:.3g} pixel-readouts/s; "
-                  f"naive loop {1 / naive_per:.3g} pixel-readouts/s (crop {crop_readouts} x {crop[0]} x "
-                  f"{crop[1]}) -> {naive_per * scene.size:.0f} s scaled; speed ratio "
-                  f"{naive_per * scene.size / fast:.1f}x")
+            naive = naive_rate(config, scene, crops)
+            results[mode] = dict(fast=fast, rate=scene.size / fast, naive_rate=naive,
+                                 ratio=scene.size / fast / naive)
+            print(f"{name} {mode.upper()}: tespike simulate on {K} x {H} x {W} (readouts x rows x cols): "
+                  f"{fast:.1f} s = {scene.size / fast:.3g} pixel-readouts/s; naive loop {naive:.3g} "
+                  f"pixel-readouts/s ({crops} random 2 x 32 x 48 crops) -> {scene.size / naive:.0f} s scaled; "
+                  f"speed ratio {scene.size / fast / naive:.1f}x", flush=True)
     return results
 
 
@@ -162,17 +179,28 @@ def main(argv=None):
     parser.add_argument("--readouts", type=int, default=4)
     parser.add_argument("--out", default=str(ROOT / "benchmarks" / "fastsim.png"))
     parser.add_argument("--skip-whole", action="store_true")
+    parser.add_argument("--skip-levels", action="store_true", help="only the whole-process part")
     parser.add_argument("--whole-shape", type=int, nargs=3, default=(64, 384, 512))
+    parser.add_argument("--scene", action="append", default=[],
+                        help="I.npy to time the whole process on as well (repeatable), e.g. from "
+                             "'python -m cosim scene --name city --frames 64 --height 384 --width 512'")
+    parser.add_argument("--crops", type=int, default=6, help="random crops the naive loop is timed on")
     args = parser.parse_args(argv)
-    tables = {}
-    for mode in ("te", "ml"):
-        config = SensorConfig.preset(mode)
-        tables[mode] = error_table(config, args.pixels, args.readouts)
-        print_table(config, tables[mode])
-    plot(tables, args.out)
+    if not args.skip_levels:
+        tables = {}
+        for mode in ("te", "ml"):
+            config = SensorConfig.preset(mode)
+            tables[mode] = error_table(config, args.pixels, args.readouts)
+            print_table(config, tables[mode])
+        plot(tables, args.out)
     if not args.skip_whole:
-        print()
-        whole_process(tuple(args.whole_shape))
+        print(f"\nwhole process (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "I.npy"
+            np.save(path, hdr_scene(tuple(args.whole_shape)))
+            whole_process("log-uniform 1e-4..10", path, args.crops)
+        for scene in args.scene:
+            whole_process(Path(scene).name, scene, args.crops)
 
 
 if __name__ == "__main__":

@@ -36,7 +36,7 @@ the choice cannot bias the result); docs/simulator.md has the derivation.
 ``clock``    anything else (light within about 10 % of one threshold per clock,
              where charge backs up and the accumulator can clip, or a carried
              backlog): per-clock electrons for these pixels only, run through
-             the literal update rule :func:`golden.reference.step_reference`.
+             the cycle-exact model :class:`golden.sensor.PixelArray`.
 
 "Surely" means: each such event fails with probability below
 ``2^-64 / (CHECKS x pixel-readouts x L)`` (:func:`golden.light.log_budget`,
@@ -54,10 +54,10 @@ import numpy as np
 from .config import SensorConfig
 from .errors import InputError
 from .io import check_scene, word_dtype
-from .light import (as_generator, check_dark_current, clock_electrons, dark_electrons,
+from .light import (as_generator, check_dark_current, dark_electrons,
                     deterministic_clock_electrons, electrons_per_readout, log_budget,
                     log_poisson_tail_above, log_poisson_tail_below)
-from .reference import PixelState, step_reference
+from .sensor import PixelArray
 
 PATHS = ("dark", "event", "bright", "queue", "full", "clock")
 
@@ -100,6 +100,7 @@ class SceneSimulator:
         n = self.shape[0] * self.shape[1]
         self.acc = np.zeros(n, np.int64)
         self.fraction = np.zeros(n)
+        self._no_dark = np.zeros(n, np.int64)              # read only
         # at most CHECKS bounded events per pixel-readout, each below the budget
         self.budget = log_budget(total_pixel_readouts or n, config.clocks_per_readout) - np.log(CHECKS)
         self.path_counts = dict.fromkeys(PATHS + ("fallback",), 0)
@@ -132,7 +133,8 @@ class SceneSimulator:
         c = self.config
         theta, L = c.threshold, c.clocks_per_readout
         mu = electrons_per_readout(np.asarray(light).reshape(-1))
-        dark = dark_electrons(self.dark_model, mu.shape, self.rng)
+        dark = (dark_electrons(self.dark_model, mu.shape, self.rng) if self.dark_model
+                else self._no_dark)
         words = np.zeros(mu.shape, np.int64)
         acc = self.acc
 
@@ -155,15 +157,23 @@ class SceneSimulator:
         path[low & (mean <= self._mean_event)] = PATHS.index("event")
         # bright: every clock >= theta electrons (photo-electrons alone suffice)
         path[lam >= self._lam_bright] = PATHS.index("bright")
-        path[low & (mu == 0) & (dark == 0)] = PATHS.index("dark")
-        rest = np.flatnonzero(path == PATHS.index("clock"))
-        if rest.size:
+        unlit = low & (mu == 0)
+        path[unlit & (dark == 0) if self.dark_model else unlit] = PATHS.index("dark")
+        counts = np.bincount(path, minlength=len(PATHS))
+        if counts[PATHS.index("clock")]:
+            rest = np.flatnonzero(path == PATHS.index("clock"))
             self._classify_middle(rest, lam[rest], mean[rest], dark[rest], acc[rest], path)
+            counts = np.bincount(path, minlength=len(PATHS))
         for code, name in enumerate(PATHS):
-            sel = np.flatnonzero(path == code)
-            if not sel.size:
+            if not counts[code]:
                 continue
-            self.path_counts[name] += sel.size
+            self.path_counts[name] += int(counts[code])
+            if name == "dark":
+                continue                                   # word 0, accumulator unchanged
+            if name == "event" and counts[code] == mu.size:
+                sel = slice(None)                          # the whole frame: no gather / scatter
+            else:
+                sel = np.flatnonzero(path == code)
             if name == "event":
                 self._event_path(sel, mu, dark, words)
             elif name == "bright":
@@ -237,7 +247,7 @@ class SceneSimulator:
         head = self.rng.multinomial(rest, np.full(L - w, 1.0 / (L - w)))
         e = np.minimum(np.concatenate([head, window], axis=1), c.input_max)
         self.path_counts["fallback"] += sel.size
-        self._run_clocks(sel, e, words)
+        self._run_clocks(sel, np.ascontiguousarray(e.T), words)
 
     def _queue_path(self, sel, w, mu, lam, words):
         """Light below one threshold per clock and no clipping (bound): spikes
@@ -256,12 +266,8 @@ class SceneSimulator:
         level0 = acc0 + rest                               # charge before the window
         levels = level0[:, None] + np.cumsum(window, axis=1)
         crossings = np.diff(levels // theta, axis=1, prepend=(level0 // theta)[:, None])
-        b_lo = np.zeros(sel.size, np.int64)
-        b_hi = self._b_max[sel].astype(np.int64)
-        for j in range(w):
-            x = crossings[:, j]
-            b_lo = np.maximum(b_lo + x - 1, 0)
-            b_hi = np.maximum(b_hi + x - 1, 0)
+        b_lo = lindley_end(np.zeros(sel.size, np.int64), crossings)
+        b_hi = lindley_end(self._b_max[sel].astype(np.int64), crossings)
         ok = b_lo == b_hi
         level_end = levels[:, -1]
         spikes = level_end // theta - b_lo
@@ -319,25 +325,29 @@ class SceneSimulator:
         words[done] = self._bright_word
 
     def _event_path(self, sel, mu, dark, words):
+        """``sel``: flat indices, or ``slice(None)`` for the whole frame."""
         c = self.config
         theta, L = c.threshold, c.clocks_per_readout
         acc0 = self.acc[sel]
-        total = self.rng.poisson(mu[sel]) + dark[sel]
+        total = self.rng.poisson(mu[sel])
+        if self.dark_model:
+            total += dark[sel]
         level = acc0 + total
-        spikes = level // theta
-        self.acc[sel] = level - spikes * theta
+        spikes = level // theta                            # (np.divmod is 3x slower on int64)
+        residual = level - spikes * theta
         if not c.is_te:
+            self.acc[sel] = residual
             words[sel] = np.minimum(spikes, c.ml_max)
             return
-        over = spikes >= c.p_max
-        w = spikes.copy()
-        if over.any():
+        over = np.flatnonzero(spikes >= c.p_max)
+        if over.size:
             n = c.p_max * theta - acc0[over]               # electron that makes the 2^b1-th spike
             t = total[over]
             position = self.rng.beta(n, t - n + 1)         # n-th of t uniform order statistics
             clock = np.minimum((position * L).astype(np.int64), L - 1)
-            w[over] = (1 << c.d) | (clock // c.clocks_per_tick + 1)
-        words[sel] = w
+            spikes[over] = (1 << c.d) | (clock // c.clocks_per_tick + 1)
+        self.acc[sel] = residual                           # after acc0 (maybe a view) is used
+        words[sel] = spikes
 
     def _bright_path(self, sel, mu, lam, dark, words):
         c = self.config
@@ -375,27 +385,63 @@ class SceneSimulator:
         self.acc[sel[keep]] = end[keep]
 
     def _clock_path(self, sel, mu, dark, words):
-        """Exact per-clock simulation of the pixels ``sel`` (flat indices)."""
+        """Exact per-clock simulation of the pixels ``sel`` (flat indices).
+
+        Electrons are drawn straight into the clock-major layout the engine
+        steps through (iid clocks: the layout does not change their law)."""
         c = self.config
         L = c.clocks_per_readout
         step = max(1, CLOCK_CHUNK_ELEMENTS // L)
         for start in range(0, sel.size, step):
             part = sel[start:start + step]
             if self.noise:
-                e = clock_electrons(c, mu[part], dark[part], self.rng, self.budget)
+                e = self._clock_electrons(mu[part], dark[part])
             else:
                 e, self.fraction[part] = deterministic_clock_electrons(c, mu[part], self.fraction[part])
+                e = np.ascontiguousarray(e.T)
             self._run_clocks(part, e, words)
 
-    def _run_clocks(self, sel, e, words):
-        """The literal update rule on per-clock electrons ``e`` (n, L) of pixels ``sel``."""
+    def _clock_electrons(self, mu, dark):
+        """Random electrons ``(L, n)`` of one interval, the law of
+        :func:`golden.light.clock_electrons` (Poisson per clock, dark electrons
+        multinomial over the clocks, saturated at ``2^E - 1``; no draw where
+        every clock surely saturates)."""
         c = self.config
-        L = c.clocks_per_readout
-        state = PixelState.zeros((1, sel.size))
-        state.acc[0] = self.acc[sel]
-        w, state = step_reference(c, np.ascontiguousarray(e.T).reshape(L, 1, sel.size), state)
+        L, top = c.clocks_per_readout, c.input_max
+        lam = mu / L
+        sure = log_poisson_tail_below(lam, top - 1) < self.budget
+        if sure.all():
+            return np.full((L, mu.size), top, np.int64)
+        draw = np.flatnonzero(~sure)
+        e = self.rng.poisson(lam[draw][None, :], size=(L, draw.size))
+        d = dark[draw]
+        if d.any():
+            e += self.rng.multinomial(d, np.full(L, 1.0 / L)).T
+        np.minimum(e, top, out=e)
+        if draw.size == mu.size:
+            return e
+        out = np.full((L, mu.size), top, np.int64)
+        out[:, draw] = e
+        return out
+
+    def _run_clocks(self, sel, e, words):
+        """The cycle-exact model (:class:`golden.sensor.PixelArray`, clock for clock
+        the literal rule of SPEC section 3) on electrons ``e`` (L, n) of pixels ``sel``."""
+        array = PixelArray(self.config, (1, sel.size))
+        array.state.acc[0] = self.acc[sel]
+        w = array.feed(e.reshape(e.shape[0], 1, sel.size))
         words[sel] = w[0, 0]
-        self.acc[sel] = state.acc[0]
+        self.acc[sel] = array.state.acc[0]
+
+
+def lindley_end(b0: np.ndarray, arrivals: np.ndarray) -> np.ndarray:
+    """Backlog after the unit-rate queue ``b <- max(b + x_j - 1, 0)`` over the
+    columns of ``arrivals`` (n, w), from backlog ``b0`` (n,), in closed form:
+    with ``W_k = sum_{j<=k} (x_j - 1)``, ``b_w = max(b0 + W_w, W_w - min_{1<=k<=w} W_k)``
+    (Lindley), i.e. ``W_w - min(-b0, min_k W_k)``; two reductions instead of a
+    Python step per column."""
+    walk = np.cumsum(arrivals - 1, axis=1)
+    return walk[:, -1] - np.minimum(-b0, walk.min(axis=1))
 
 
 def _largest_below(bound, budget, hi):
@@ -436,7 +482,7 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     paths are tested against). ``progress`` shows a tqdm bar on stderr for runs
     longer than a few seconds.
     """
-    scene = check_scene(scene)
+    scene = check_scene(scene, scan_values=False)       # values: one readout at a time
     K, H, W = scene.shape
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
                          method=method, total_pixel_readouts=scene.size)
@@ -446,5 +492,5 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
         from tqdm import tqdm
         readouts = tqdm(readouts, desc="simulate", unit="readout", delay=2.0, leave=False)
     for k in readouts:
-        words[k] = sim.readout(scene[k])
+        words[k] = sim.readout(check_scene(np.asarray(scene[k:k + 1]))[0])
     return words

@@ -104,8 +104,12 @@ def load_stimulus(path: str | Path, config: SensorConfig) -> np.ndarray:
     return stimulus
 
 
-def check_scene(scene: np.ndarray) -> np.ndarray:
-    """Refuse a light array that SPEC section 6 does not allow; return it as float64."""
+def check_scene(scene: np.ndarray, *, scan_values: bool = True) -> np.ndarray:
+    """Refuse a light array that SPEC section 6 does not allow; return it as float64.
+
+    ``scan_values=False`` checks only type and shape and returns the array
+    unchanged (for a caller that checks and converts it slice by slice).
+    """
     if not isinstance(scene, np.ndarray):
         raise InputError(f"scene must be a numpy array, not {type(scene).__name__}")
     if scene.dtype.kind not in "fiu":
@@ -114,6 +118,8 @@ def check_scene(scene: np.ndarray) -> np.ndarray:
         raise InputError(f"scene shape {scene.shape} must be (K, H, W)")
     if scene.shape[1] < 1 or scene.shape[2] < 1:
         raise InputError(f"scene shape {scene.shape}: H and W must be at least 1")
+    if not scan_values:
+        return scene
     scene = scene.astype(np.float64, copy=False)
     if scene.size:
         if not np.isfinite(scene).all():
@@ -125,9 +131,20 @@ def check_scene(scene: np.ndarray) -> np.ndarray:
     return scene
 
 
-def load_scene(path: str | Path) -> np.ndarray:
-    """Read and check ``I.npy`` (light per readout interval, 1.0 = design light)."""
-    return check_scene(_load_npy(path, "scene"))
+def load_scene(path: str | Path, *, memory_map: bool = False) -> np.ndarray:
+    """Read and check ``I.npy`` (light per readout interval, 1.0 = design light).
+
+    ``memory_map=True`` leaves the file on disk (read-only memory map, in the
+    file's own dtype) and checks the values one slice of readouts at a time,
+    so memory stays bounded by the slice; the caller converts what it reads.
+    """
+    if not memory_map:
+        return check_scene(_load_npy(path, "scene"))
+    scene = check_scene(_load_npy(path, "scene", mmap_mode="r"), scan_values=False)
+    step = max(1, (1 << 22) // max(1, scene[0].size))
+    for start in range(0, scene.shape[0], step):
+        check_scene(np.asarray(scene[start:start + step]))
+    return scene
 
 
 def word_dtype(config: SensorConfig) -> np.dtype:

@@ -198,6 +198,12 @@ def test_refuses_bad_input():
         simulate_scene(SensorConfig(), np.full((1, 1, 1), -1.0))
     with pytest.raises(InputError, match="non-finite"):
         simulate_scene(SensorConfig(), np.full((1, 1, 1), np.inf))
+    late = np.ones((3, 2, 2), np.float32)                 # values are checked readout by readout
+    late[2, 1, 1] = np.nan
+    with pytest.raises(InputError, match="non-finite"):
+        simulate_scene(SensorConfig(), late)
+    with pytest.raises(InputError, match="must be \\(K, H, W\\)"):
+        simulate_scene(SensorConfig(), np.ones((2, 2)))
     with pytest.raises(InputError, match="method"):
         simulate_scene(SensorConfig(), np.zeros((1, 1, 1)), method="magic")
     with pytest.raises(InputError, match="noise"):
@@ -253,3 +259,30 @@ def test_carried_accumulator_of_queue_and_full_paths_matches_per_clock(config, p
             assert abs(pa - pb) <= 4 * se + 1e-12, (per_clock[i], pa, pb)
         tvd = 0.5 * np.abs(np.histogram(a, bins)[0] - np.histogram(b, bins)[0]).sum() / pixels
         assert tvd < 0.05, (per_clock[i], tvd)
+
+
+@pytest.mark.parametrize("model", ["eq12", "eq13"])
+def test_per_clock_path_spreads_dark_electrons_like_the_stimulus(model):
+    # L = 12, theta = 100, acc_max = 255: ~400 dark electrons per readout are
+    # ~33 per clock; bunched into few clocks they would back up, clip and
+    # overflow at other clocks, so where they fall shows in the code histogram
+    config = SensorConfig(b1=2, b2=2, threshold=100)
+    scene = np.full((4, 1, 4000), 0.002)
+    fast = simulate_scene(config, scene, seed=7, dark_current=model, method="per-clock")
+    exact = simulate(config, poisson_stimulus(config, scene, 8, dark_current=model))
+    tvd = 0.5 * np.abs(_histogram(fast, config) - _histogram(exact, config)).sum()
+    a = decode_spikes(fast, config).mean(axis=0)
+    b = decode_spikes(exact, config).mean(axis=0)
+    se = np.sqrt(a.var() / a.size + b.var() / b.size)
+    assert abs(a.mean() - b.mean()) < 4 * se and tvd < 0.05, (a.mean(), b.mean(), se, tvd)
+
+
+def test_lindley_closed_form_equals_the_step_by_step_queue(rng):
+    from golden.fastsim import lindley_end
+    for w in (1, 2, 7, 40):
+        x = rng.poisson(rng.uniform(0.2, 1.8, (500, 1)), (500, w))
+        b0 = rng.integers(0, 6, 500)
+        b = b0.copy()
+        for j in range(w):
+            b = np.maximum(b + x[:, j] - 1, 0)
+        assert np.array_equal(lindley_end(b0, x), b), w

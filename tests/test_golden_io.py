@@ -5,7 +5,7 @@ import pytest
 
 from golden.config import SensorConfig
 from golden.errors import InputError
-from golden.io import check_stimulus, load_stimulus
+from golden.io import check_stimulus, load_scene, load_stimulus
 
 
 def test_load_stimulus_is_memory_mapped(tmp_path):
@@ -44,3 +44,25 @@ def test_dtype_that_cannot_hold_a_bad_value_is_not_scanned():
         check_stimulus(stim, SensorConfig(input_bits=12))                  # uint16 can exceed 2^12 - 1
     with pytest.raises(AssertionError, match="scanned"):
         check_stimulus(np.zeros((240, 1, 1), np.int16).view(Exploding), SensorConfig())   # may be negative
+
+
+def test_load_scene_memory_mapped_keeps_dtype_and_values(tmp_path):
+    light = np.random.default_rng(0).random((5, 3, 4)).astype(np.float32)
+    np.save(tmp_path / "i.npy", light)
+    scene = load_scene(tmp_path / "i.npy", memory_map=True)
+    assert isinstance(scene, np.memmap) and scene.dtype == np.float32
+    assert np.array_equal(np.asarray(scene), light)
+    assert np.array_equal(load_scene(tmp_path / "i.npy"), light.astype(np.float64))
+
+
+@pytest.mark.parametrize("bad, message", [(np.nan, "non-finite"), (-0.5, "negative")])
+def test_load_scene_memory_mapped_finds_a_bad_value_in_a_late_slice(tmp_path, bad, message):
+    # 2^22 values per slice: a 1 x 2048 x 2048 frame is one slice, so the bad value sits in the 3rd
+    light = np.zeros((3, 2048, 2048), np.float32)
+    light[2, -1, -1] = bad
+    np.save(tmp_path / "i.npy", light)
+    with pytest.raises(InputError, match=message):
+        load_scene(tmp_path / "i.npy", memory_map=True)
+    with pytest.raises(InputError, match="must be \\(K, H, W\\)"):
+        np.save(tmp_path / "j.npy", np.zeros((2, 2), np.float32))
+        load_scene(tmp_path / "j.npy", memory_map=True)

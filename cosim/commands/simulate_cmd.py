@@ -27,7 +27,7 @@ def run(args) -> int:
     from golden.io import load_scene, save_stream
 
     config = load_config(args.config)
-    scene = load_scene(args.scene)
+    scene = load_scene(args.scene, memory_map=True)     # read one readout at a time
     if args.seed is not None and args.seed < 0:
         raise InputError(f"--seed {args.seed}: must be >= 0")
     words = simulate_scene(config, scene, seed=args.seed, dark_current=args.dark_current,
