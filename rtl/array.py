@@ -1,0 +1,95 @@
+"""An H x W pixel array with one shared timing block (SPEC section 6 top-level ports).
+
+Ports (clock domain ``sync``: ``clk``, synchronous active-high ``rst``):
+
+* ``charge``: In(H*W*E), e[t] of pixel (r, c) at bits ``[(r*W + c)*E +: E]``;
+* ``frame_valid``: Out(1), high for exactly one clock per readout interval;
+* ``frame``: Out(H*W*Wd), word[k] of pixel (r, c) at ``[(r*W + c)*Wd +: Wd]``.
+
+Latency: the words of interval k are loaded at the edge that processes its
+last pixel clock t = (k+1)L - 1, so ``frame_valid`` and ``frame`` are sampled
+high/valid at the next rising edge (1 clock). With L = 1, ``frame_valid`` is
+high on every clock after the first edge out of reset.
+
+By default every pixel is a :class:`rtl.pixel.TEPixel` / :class:`MLPixel`
+submodule (the structure a sensor has, and what the Verilog top mirrors);
+``flat=True`` inlines the same pixel logic into one module, which the
+Amaranth simulator runs several times faster for large arrays.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from golden.config import SensorConfig
+from golden.errors import ConfigError
+
+from .pixel import ml_pixel_logic, pixel_class, te_pixel_logic
+from .timing import ReadoutTiming
+
+
+def check_array_size(height, width) -> tuple[int, int]:
+    """Refuse an array height or width that is not an integer >= 1."""
+    for name, value in (("height", height), ("width", width)):
+        if type(value) is not int or value < 1:
+            raise ConfigError(f"array {name} = {value!r}: must be an integer >= 1")
+    return height, width
+
+
+class PixelArray(wiring.Component):
+    """H x W TE or ML pixels wired to one :class:`ReadoutTiming` (SPEC section 6 ports)."""
+
+    def __init__(self, config: SensorConfig, height: int, width: int, *, flat: bool = False):
+        if not isinstance(config, SensorConfig):
+            raise ConfigError(f"PixelArray: configuration must be a SensorConfig, not {type(config).__name__}")
+        self.config = config.check()
+        self.height, self.width = check_array_size(height, width)
+        self.flat = bool(flat)
+        n = height * width
+        super().__init__({
+            "charge": In(n * self.config.input_bits),
+            "frame_valid": Out(1),
+            "frame": Out(n * self.config.word_bits),
+        })
+
+    @property
+    def pixels(self) -> int:
+        return self.height * self.width
+
+    def charge_slice(self, row: int, col: int):
+        """The bits of ``charge`` that carry pixel (row, col)."""
+        e = self.config.input_bits
+        i = row * self.width + col
+        return self.charge[i * e:(i + 1) * e]
+
+    def word_slice(self, row: int, col: int):
+        """The bits of ``frame`` that carry the word of pixel (row, col)."""
+        wd = self.config.word_bits
+        i = row * self.width + col
+        return self.frame[i * wd:(i + 1) * wd]
+
+    def elaborate(self, platform):
+        m = Module()
+        cfg = self.config
+        m.submodules.timing = timing = ReadoutTiming(cfg)
+        m.d.comb += self.frame_valid.eq(timing.frame_valid)
+        for r in range(self.height):
+            for c in range(self.width):
+                charge, word = self.charge_slice(r, c), self.word_slice(r, c)
+                if self.flat:
+                    name = f"px_{r}_{c}_"
+                    reg = Signal(cfg.word_bits, name=f"{name}word")
+                    if cfg.is_te:
+                        te_pixel_logic(m, cfg, charge, timing.ccc, timing.last, reg, name)
+                    else:
+                        ml_pixel_logic(m, cfg, charge, timing.last, reg, name)
+                    m.d.comb += word.eq(reg)
+                else:
+                    pixel = pixel_class(cfg)(cfg)
+                    m.submodules[f"px_{r}_{c}"] = pixel
+                    m.d.comb += [pixel.charge.eq(charge), pixel.last.eq(timing.last), word.eq(pixel.word)]
+                    if cfg.is_te:
+                        m.d.comb += pixel.ccc.eq(timing.ccc)
+        return m

@@ -1,0 +1,64 @@
+"""The timing shared by every pixel of an array (SPEC section 1): one block per array.
+
+* the S_h divider counts pixel clocks 0..F-1; its wrap is the S_h tick;
+* the clock cycle counter (CCC) shows ``c = j + 1`` during S_h cycle j of the
+  readout interval, running 1..alpha and back to 1 after the interval;
+* ``last`` (S_r) is high on the last pixel clock of every readout interval:
+  divider at F - 1 and CCC at alpha;
+* ``frame_valid`` is ``last`` delayed by one clock: the pixels' word registers
+  load at the edge that processes the last clock, so their words are on the
+  frame output exactly while ``frame_valid`` is high (latency 1 clock).
+
+After a synchronous reset the divider is 0 and the CCC is 1, so the first
+rising edge with ``rst`` low processes pixel clock t = 0.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Const, Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import Out
+
+from golden.config import SensorConfig
+from golden.errors import ConfigError
+
+
+class ReadoutTiming(wiring.Component):
+    """S_h divider, CCC and S_r strobe of SPEC section 1.
+
+    Ports: ``ccc`` (b2 bits, TE only: an ML pixel never uses it, so the ML
+    timing keeps the counter internal), ``last`` (S_r strobe, combinational
+    from the counters), ``frame_valid`` (``last`` registered).
+    """
+
+    def __init__(self, config: SensorConfig):
+        if not isinstance(config, SensorConfig):
+            raise ConfigError(f"ReadoutTiming: configuration must be a SensorConfig, not {type(config).__name__}")
+        self.config = config.check()
+        ports = {"last": Out(1), "frame_valid": Out(1)}
+        if self.config.is_te:
+            ports = {"ccc": Out(self.config.b2), **ports}
+        super().__init__(ports)
+
+    def elaborate(self, platform):
+        m = Module()
+        cfg = self.config
+        F, alpha, b2 = cfg.clocks_per_tick, cfg.alpha, cfg.b2
+        cycle = Signal(b2, init=1)          # the CCC register
+        if F == 1:
+            tick = Const(1, 1)
+        else:
+            divider = Signal(range(F))
+            tick = Signal()
+            m.d.comb += tick.eq(divider == Const(F - 1, len(divider)))
+            m.d.sync += divider.eq(Mux(tick, Const(0, len(divider)), (divider + 1)[:len(divider)]))
+        at_alpha = Signal()
+        m.d.comb += at_alpha.eq(cycle == Const(alpha, b2))
+        if alpha > 1:
+            with m.If(tick):
+                m.d.sync += cycle.eq(Mux(at_alpha, Const(1, b2), (cycle + 1)[:b2]))
+        m.d.comb += self.last.eq(tick & at_alpha)
+        m.d.sync += self.frame_valid.eq(self.last)
+        if cfg.is_te:
+            m.d.comb += self.ccc.eq(cycle)
+        return m

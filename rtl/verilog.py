@@ -1,0 +1,140 @@
+"""Verilog for one pixel and for an H x W array (SPEC section 6: ``tespike verilog``).
+
+The pixel and the timing block are generated once each from their Amaranth
+components (``amaranth.back.verilog.convert``); the array top is a small
+hand-written structural module that instantiates the timing block once and the
+pixel module H x W times in a ``generate`` loop. Its text does not grow with
+the array, so a 128 x 128 array is generated as fast as a 2 x 2 one, and the
+same pixel module is what :func:`pixel_verilog` hands to synthesis.
+
+Lint: Amaranth's RTLIL backend deliberately trims the zero extension of
+unsigned operands (``a + b`` with a 9-bit ``a`` and a 16-bit ``b`` into a
+17-bit result is written exactly like that), and arithmetic results carry a
+top bit that the truncating assignment drops. Verilog's own rules give these
+expressions the same value as Amaranth's (all operands are unsigned, widths
+are context-determined), so the generated modules are wrapped in
+``verilator lint_off WIDTH`` / ``UNUSEDSIGNAL`` comments; the hand-written top
+has no waiver except DECLFILENAME (the user names the file). See docs/rtl.md.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+from golden.config import SensorConfig
+from golden.errors import ConfigError
+
+from .array import check_array_size
+from .pixel import pixel_class
+from .timing import ReadoutTiming
+
+#: Verilator warnings waived inside the Amaranth-generated modules (reason above).
+WAIVED_LINT = ("WIDTH", "UNUSEDSIGNAL")
+
+
+def module_names(config: SensorConfig) -> dict[str, str]:
+    """Verilog module names: ``top``, ``pixel`` and ``timing``, prefixed by the mode."""
+    mode = config.mode
+    return {"top": f"{mode}_pixel_array", "pixel": f"{mode}_pixel", "timing": f"{mode}_readout_timing"}
+
+
+def _waive(text: str) -> str:
+    """Wrap one Amaranth-generated module in the lint waivers of :data:`WAIVED_LINT`."""
+    offs = "".join(f"/* verilator lint_off {rule} */\n" for rule in WAIVED_LINT)
+    ons = "".join(f"/* verilator lint_on {rule} */\n" for rule in WAIVED_LINT)
+    reason = ("// Generated from Amaranth. Waived: operand widths trimmed by Amaranth's backend and\n"
+              "// dropped carry bits; Verilog zero-extension gives the Amaranth values (docs/rtl.md).\n")
+    return reason + offs + text.strip() + "\n" + ons
+
+
+def _convert(*named_components) -> list[str]:
+    """Verilog text of each (component, module name), one module each, in the given order.
+
+    The components are lowered to RTLIL separately and handed to Yosys in ONE run when
+    Amaranth's internal helper is there (each Yosys start of the packaged WebAssembly
+    build costs about 2 s); otherwise one public ``verilog.convert`` per component.
+    """
+    from amaranth.back import rtlil, verilog
+
+    run_rtlil = getattr(verilog, "_convert_rtlil_text", None)
+    if run_rtlil is None:    # pragma: no cover - other Amaranth versions
+        return [_waive(verilog.convert(c, name=n, emit_src=False, strip_internal_attrs=True))
+                for c, n in named_components]
+    text = run_rtlil("\n".join(rtlil.convert(c, name=n, emit_src=False) for c, n in named_components),
+                     strip_internal_attrs=True)
+    header, *modules = re.split(r"(?m)^(?=module )", text)
+    if len(modules) != len(named_components):
+        raise RuntimeError(f"expected {len(named_components)} Verilog modules from Yosys, got {len(modules)}")
+    by_name = {re.match(r"module (\S+?)\(", mod).group(1): mod for mod in modules}
+    return [_waive(header.strip() + "\n\n" + by_name[n]) for _, n in named_components]
+
+
+def _check(config) -> SensorConfig:
+    if not isinstance(config, SensorConfig):
+        raise ConfigError(f"configuration must be a SensorConfig, not {type(config).__name__}")
+    return config.check()
+
+
+def pixel_verilog(config: SensorConfig, name: str | None = None) -> str:
+    """Verilog of one TE or ML pixel as its own top module (ports clk, rst, charge, [ccc,] last, word)."""
+    config = _check(config)
+    return _convert((pixel_class(config)(config), name or module_names(config)["pixel"]))[0]
+
+
+def timing_verilog(config: SensorConfig, name: str | None = None) -> str:
+    """Verilog of the shared readout timing block (ports clk, rst, [ccc,] last, frame_valid)."""
+    config = _check(config)
+    return _convert((ReadoutTiming(config), name or module_names(config)["timing"]))[0]
+
+
+def top_verilog(config: SensorConfig, height: int, width: int) -> str:
+    """The hand-written structural top of an H x W array with exactly the SPEC section 6 ports."""
+    config = _check(config)
+    height, width = check_array_size(height, width)
+    names = module_names(config)
+    e, wd, b2 = config.input_bits, config.word_bits, config.b2
+    te = config.is_te
+    ccc_wire = f"  wire [{b2 - 1}:0] ccc;  // shared clock cycle counter, 1..alpha\n" if te else ""
+    ccc_pin = ".ccc(ccc), " if te else ""
+    return f"""\
+// The user names the output file (tespike verilog --out A.v): waive Verilator's file-name style check.
+/* verilator lint_off DECLFILENAME */
+// {names['top']}: {height} x {width} {'time-encoding' if te else 'multi-level counter'} pixels and one
+// readout timing block (tespike, SPEC section 6). Latency: frame_valid and frame
+// are valid one clock after the last pixel clock of each readout interval.
+// config: {json.dumps(config.to_dict())}
+module {names['top']} (
+  input  wire clk,                           // pixel clock, rising edge
+  input  wire rst,                           // synchronous, active high
+  input  wire [{height * width * e - 1}:0] charge,  // pixel (r, c) at [(r*W + c)*{e} +: {e}]
+  output wire frame_valid,                   // one clock per readout interval
+  output wire [{height * width * wd - 1}:0] frame    // pixel (r, c) at [(r*W + c)*{wd} +: {wd}]
+);
+  localparam integer PIXELS = {height * width};
+  localparam integer E = {e};
+  localparam integer WD = {wd};
+{ccc_wire}  wire last;  // S_r: last pixel clock of the readout interval
+
+  {names['timing']} timing (.clk(clk), .rst(rst), {ccc_pin}.last(last), .frame_valid(frame_valid));
+
+  genvar i;
+  generate
+    for (i = 0; i < PIXELS; i = i + 1) begin : px
+      {names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge[i*E +: E]), {ccc_pin}.last(last),
+        .word(frame[i*WD +: WD]));
+    end
+  endgenerate
+endmodule
+"""
+
+
+def array_verilog(config: SensorConfig, height: int, width: int) -> str:
+    """Verilog text of an H x W array: top ``te_pixel_array`` / ``ml_pixel_array``, the
+    pixel module (instantiated H x W times) and the timing module (once)."""
+    config = _check(config)
+    top = top_verilog(config, height, width)       # refuses a bad size before any conversion
+    names = module_names(config)
+    pixel, timing = _convert((pixel_class(config)(config), names["pixel"]),
+                             (ReadoutTiming(config), names["timing"]))
+    return "\n".join([top, pixel, timing])

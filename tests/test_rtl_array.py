@@ -1,0 +1,59 @@
+# amaranth: UnusedElaboratable=no
+import numpy as np
+import pytest
+
+from golden.config import SensorConfig
+from golden.errors import ConfigError
+from golden.reference import step_reference
+from rtl.array import PixelArray
+from tests.configs import EDGE_CONFIGS
+from tests.rtl_helpers import mixed_stimulus, rtl_array_words
+
+
+@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+def test_array_equals_golden(config, rng):
+    readouts = 3 if config.clocks_per_readout > 1 else 12
+    stim = mixed_stimulus(config, rng, readouts, 2, 3)
+    words, times = rtl_array_words(config, stim)
+    golden = step_reference(config, stim)[0]
+    assert np.array_equal(words, golden)
+    L = config.clocks_per_readout
+    # frame_valid is sampled high one clock after the last clock of each interval, only then
+    assert times == [(k + 1) * L for k in range(readouts)]
+
+
+@pytest.mark.parametrize("config", [EDGE_CONFIGS[0], EDGE_CONFIGS[1], EDGE_CONFIGS[8]], ids=str)
+def test_flat_array_equals_golden(config, rng):
+    stim = mixed_stimulus(config, rng, 2, 3, 2)
+    words, _ = rtl_array_words(config, stim, flat=True)
+    assert np.array_equal(words, step_reference(config, stim)[0])
+
+
+def test_array_stimulus_is_not_trivial(rng):
+    """The mixed stimulus reaches flag 0, flag 1 and several CCC values (else the test proves little)."""
+    config = SensorConfig()
+    stim = mixed_stimulus(config, rng, 3, 4, 4)
+    words = step_reference(config, stim)[0]
+    flagged = words >> config.d
+    assert flagged.any() and not flagged.all()
+    assert len(np.unique(words)) >= 5
+
+
+@pytest.mark.parametrize("height, width", [(0, 1), (1, 0), (-2, 3), (2.0, 2), (True, 2)])
+def test_array_refuses_bad_size(height, width):
+    with pytest.raises(ConfigError, match="height|width"):
+        PixelArray(SensorConfig(), height, width)
+
+
+def test_array_ports_follow_spec():
+    config = SensorConfig(b1=3, b2=5, input_bits=7)
+    dut = PixelArray(config, 2, 3)
+    assert len(dut.charge) == 2 * 3 * 7
+    assert len(dut.frame) == 2 * 3 * (5 + 1)
+    assert len(dut.frame_valid) == 1
+    assert dut.word_slice(1, 2).start == (1 * 3 + 2) * 6
+
+
+def test_array_refuses_non_config():
+    with pytest.raises(ConfigError, match="SensorConfig"):
+        PixelArray({"mode": "te"}, 2, 2)
