@@ -36,7 +36,7 @@ _CAPTURES = "captures.txt"
 _HALF_PERIOD = 5
 
 
-def testbench_verilog(top: str, charge_bits: int, frame_bits: int) -> str:
+def icarus_testbench(top: str, charge_bits: int, frame_bits: int) -> str:
     """Verilog-2005 testbench of the SPEC section 6 ports; CLOCKS, READOUTS, FLUSH are parameters."""
     return f"""// tespike Icarus testbench for {top}: SPEC section 6 ports only (generated).
 `timescale 1ns / 1ns
@@ -135,7 +135,7 @@ def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Pa
         if not work.is_dir():
             raise SimulatorRunError(f"work_dir {str(work)!r} is not an existing directory")
         (work / "array.v").write_text(verilog)
-        (work / "tb.v").write_text(testbench_verilog(top, N * E, N * Wd))
+        (work / "tb.v").write_text(icarus_testbench(top, N * E, N * Wd))
         with atomic_output(work / _STIMULUS) as tmp:
             Path(tmp).write_text("\n".join(rows_to_hex(pack_rows(stimulus.reshape(T, N), E), N * E)) + "\n")
         (work / _CAPTURES).unlink(missing_ok=True)

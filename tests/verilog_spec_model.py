@@ -5,14 +5,16 @@ tested on their own, independently of the Amaranth-generated Verilog: the same
 ports and bit layout, the SPEC section 3 pixel rule written directly, one
 generate loop over pixels. ``latency`` picks how the frame reaches the ports
 (0: combinational in the interval's last clock, 1: registered, 2: one more
-register). ``bug`` plants a known fault so tests can prove they notice it.
+register). ``bug`` plants a known fault so tests can prove they notice it: a wrong
+latched CCC value, a second ``frame_valid`` per interval, a syntax error, an X
+on ``frame`` or on ``frame_valid``.
 """
 
 from __future__ import annotations
 
 from golden.config import SensorConfig
 
-BUGS = (None, "m_plus_one", "double_valid", "syntax")
+BUGS = (None, "m_plus_one", "double_valid", "syntax", "x_frame", "x_valid")
 
 
 def _zext(expr: str, width: int, to: int) -> str:
@@ -21,7 +23,7 @@ def _zext(expr: str, width: int, to: int) -> str:
 
 def spec_model_verilog(config: SensorConfig, height: int, width: int, *,
                        latency: int = 1, bug: str | None = None) -> str:
-    if latency not in (0, 1, 2) or bug not in BUGS:
+    if latency not in (0, 1, 2) or bug not in BUGS or (bug and bug.startswith("x_") and latency != 1):
         raise ValueError((latency, bug))
     c = config
     N, E, A, WD = height * width, c.input_bits, c.acc_bits, c.word_bits
@@ -65,16 +67,21 @@ def spec_model_verilog(config: SensorConfig, height: int, width: int, *,
         out = f"""
   reg valid_r; reg [{N * WD - 1}:0] frame_r;
   always @(posedge clk)
-    if (rst) valid_r <= 1'b0;
+    if (rst) begin valid_r <= 1'b0; frame_r <= {N * WD}'d0; end
     else begin valid_r <= {valid_now}; if (last) frame_r <= word_all; end
 """
-        if latency == 1:
+        if latency == 1 and bug == "x_frame":
+            out += f"  assign frame_valid = valid_r;\n  assign frame = {{frame_r[{N * WD - 1}:1], 1'bx}};\n" \
+                if N * WD > 1 else "  assign frame_valid = valid_r;\n  assign frame = 1'bx;\n"
+        elif latency == 1 and bug == "x_valid":
+            out += "  assign frame_valid = valid_r ? 1'bx : 1'b0;\n  assign frame = frame_r;\n"
+        elif latency == 1:
             out += "  assign frame_valid = valid_r;\n  assign frame = frame_r;\n"
         else:
             out += f"""
   reg valid_d; reg [{N * WD - 1}:0] frame_d;
   always @(posedge clk)
-    if (rst) valid_d <= 1'b0;
+    if (rst) begin valid_d <= 1'b0; frame_d <= {N * WD}'d0; end
     else begin valid_d <= valid_r; frame_d <= frame_r; end
   assign frame_valid = valid_d;
   assign frame = frame_d;
