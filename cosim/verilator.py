@@ -198,13 +198,25 @@ def build_jobs() -> int:
     return max(1, min(4, cores))
 
 
-def build_flags(top: str) -> list[str]:
-    return [*VERILATOR_FLAGS, *LINT_WAIVERS, "--top-module", top, "--prefix", "Varray",
-            "-o", _EXECUTABLE, "-MAKEFLAGS", f"OPT_FAST={CXX_OPT}"]
+def build_flags(top: str, inline: bool = True) -> list[str]:
+    """``inline=False`` adds ``-fno-inline`` (keep the pixel modules apart): for large
+    arrays a build several times cheaper, a simulation several times slower
+    (docs/outside-simulators.md)."""
+    return [*VERILATOR_FLAGS, *([] if inline else ["-fno-inline"]), *LINT_WAIVERS,
+            "--top-module", top, "--prefix", "Varray", "-o", _EXECUTABLE,
+            "-MAKEFLAGS", f"OPT_FAST={CXX_OPT}"]
 
 
 def _runtime_dir(root: Path) -> Path:
-    return root / ("runtime-" + content_hash(" ".join(VERILATOR_FLAGS), CXX_OPT, verilator_version()))
+    """Where the runtime objects live: in the user's cache whatever ``build_dir`` is
+    (they depend only on Verilator and the flags), else beside the builds."""
+    name = "runtime-" + content_hash(" ".join(VERILATOR_FLAGS), CXX_OPT, verilator_version())
+    shared = default_cache_root() / "verilator"
+    try:
+        shared.mkdir(parents=True, exist_ok=True)
+        return shared / name
+    except OSError:
+        return root / name
 
 
 def _reuse_runtime(runtime: Path, obj: Path) -> list[str]:
@@ -259,7 +271,7 @@ def _keep_runtime(obj: Path, runtime: Path) -> None:
 
 
 def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
-          build_dir: str | Path | None = None, progress: bool = False) -> Path:
+          build_dir: str | Path | None = None, progress: bool = False, inline: bool = True) -> Path:
     """Build (or find in the cache) the simulation executable; return its path.
 
     The cache key is a hash of the Verilog, the harness, the flags and the
@@ -268,7 +280,7 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
     """
     exe = require_tool("verilator", "verilator")
     harness = harness_cpp(top, charge_bits, frame_bits)
-    flags = build_flags(top)
+    flags = build_flags(top, inline)
     root = Path(build_dir) if build_dir is not None else default_cache_root() / "verilator"
     key = content_hash(verilog, harness, " ".join(flags), verilator_version())
     with cache_entry(root, key) as (final, done):
@@ -319,13 +331,16 @@ def read_captures(path: str | Path, frame_words: int) -> tuple[np.ndarray, np.nd
 
 
 def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str | Path | None = None,
-                  progress: bool = False, verilog: str | None = None) -> np.ndarray:
+                  progress: bool = False, verilog: str | None = None, inline: bool = True
+                  ) -> np.ndarray:
     """Simulate the generated Verilog of a (T, H, W) stimulus in Verilator; return words (K, H, W).
 
     ``build_dir`` is the root of the build cache (default: ``$TESPIKE_CACHE`` or
     ``~/.cache/tespike``, then ``verilator/``). ``verilog`` replaces the array
     Verilog (tests use a hand-written model of the same ports); by default it
-    is ``rtl.verilog.array_verilog(config, H, W)``. The words are int64, equal
+    is ``rtl.verilog.array_verilog(config, H, W)``. ``inline=False`` builds with
+    Verilator's ``-fno-inline`` (cheaper build, slower run; see
+    :func:`build_flags`). The words are int64, equal
     bit for bit to ``golden.sensor.simulate`` for a correct array.
     """
     check_stimulus(stimulus, config)
@@ -339,7 +354,8 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
     if verilog is None:
         from rtl.verilog import array_verilog
         verilog = array_verilog(config, H, W)
-    executable = build(verilog, top, N * E, N * Wd, build_dir=build_dir, progress=progress)
+    executable = build(verilog, top, N * E, N * Wd, build_dir=build_dir, progress=progress,
+                       inline=inline)
     frame_words = words_per_row(N, Wd)
     flush = L + 1
     with tempfile.TemporaryDirectory(prefix="tespike-verilator-") as scratch:
