@@ -299,9 +299,11 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
             result = subprocess.run(argv, cwd=work, capture_output=True, text=True)
             (work / "build.log").write_text(" ".join(argv) + "\n" + result.stdout + result.stderr)
             if result.returncode != 0 or not (work / "obj" / _EXECUTABLE).is_file():
+                failed_log = root / f"{key}.failed.log"
+                shutil.copyfile(work / "build.log", failed_log)
                 raise SimulatorBuildError(
                     f"Verilator build of {top} failed (exit {result.returncode}): "
-                    f"{first_error_line(result.stderr + result.stdout)}")
+                    f"{first_error_line(result.stderr + result.stdout)} (full log: {failed_log})")
             shutil.move(str(work / "obj" / _EXECUTABLE), work / _EXECUTABLE)
             _keep_runtime(work / "obj", runtime)
             shutil.rmtree(work / "obj")
