@@ -14,7 +14,8 @@ high on every clock after the first edge out of reset.
 By default every pixel is a :class:`rtl.pixel.TEPixel` / :class:`MLPixel`
 submodule (the structure a sensor has, and what the Verilog top mirrors);
 ``flat=True`` inlines the same pixel logic into one module, which the
-Amaranth simulator runs several times faster for large arrays.
+Amaranth simulator runs faster (measured on 2 loaded cores: 16 x 16 TE array,
+113 cycles/s with submodules, 184 flat).
 """
 
 from __future__ import annotations

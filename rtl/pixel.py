@@ -45,56 +45,65 @@ def check_pixel_config(config: SensorConfig, mode: str, what: str) -> SensorConf
 
 
 def _integrator(m: Module, config: SensorConfig, charge, name: str):
-    """Charge accumulator with threshold comparator and subtractive reset; returns the spike."""
+    """Charge accumulator with threshold comparator and subtractive reset; returns the spike.
+
+    Only registers and the spike are named signals: every extra comb signal costs the
+    Amaranth simulator time per pixel (about 2x for an 8 x 8 array), while Verilog and
+    synthesis see the same logic either way.
+    """
     acc = Signal(config.acc_bits, name=f"{name}acc")
     width = max(config.acc_bits, config.input_bits) + 1        # acc + charge never wraps
-    q = Signal(width, name=f"{name}q")
+    q = acc + charge                                          # width bits
     spike = Signal(name=f"{name}spike")
-    rest = Signal(width, name=f"{name}rest")
-    m.d.comb += [
-        q.eq(acc + charge),
-        spike.eq(q >= Const(config.threshold, width)),
-        rest.eq(q - Mux(spike, Const(config.threshold, width), Const(0, width))),
-    ]
+    m.d.comb += spike.eq(q >= Const(config.threshold, width))
+    rest = (q - Mux(spike, Const(config.threshold, width), Const(0, width)))[:width]
     m.d.sync += acc.eq(Mux(rest > Const(config.acc_max, width),
                            Const(config.acc_max, config.acc_bits), rest[:config.acc_bits]))
     return spike
 
 
-def te_pixel_logic(m: Module, config: SensorConfig, charge, ccc, last, word, name: str = "") -> None:
-    """Add one TE pixel (SPEC sections 3-4) driving the register ``word`` to ``m``."""
+def _drive_word(m: Module, word, value, last, registered: bool) -> None:
+    """Registered: ``word`` loads ``value`` at the edge of the ``last`` clock and holds it.
+    Not registered: ``word`` shows ``value`` combinationally (meaningful only while ``last``)."""
+    if registered:
+        with m.If(last):
+            m.d.sync += word.eq(value)
+    else:
+        m.d.comb += word.eq(value)
+
+
+def te_pixel_logic(m: Module, config: SensorConfig, charge, ccc, last, word, name: str = "",
+                   word_register: bool = True) -> None:
+    """Add one TE pixel (SPEC sections 3-4) driving ``word`` to ``m``."""
     b1, b2, d = config.b1, config.b2, config.d
     spike = _integrator(m, config, charge, name)
     sfc = Signal(b1, name=f"{name}sfc")
     ovf = Signal(name=f"{name}ovf")
     mreg = Signal(b2, name=f"{name}m")
-    total = Signal(b1 + 1, name=f"{name}sfc_sum")     # SFC + spike; bit b1 is the carry
-    ovf_next = Signal(name=f"{name}ovf_next")
-    m_next = Signal(b2, name=f"{name}m_next")
-    m.d.comb += [
-        total.eq(sfc + (spike & ~ovf)),
-        ovf_next.eq(ovf | total[b1]),
-        m_next.eq(Mux(total[b1], ccc, mreg)),
-    ]
+    total = sfc + (spike & ~ovf)
+    ovf_next = ovf | total[b1]
+    m_next = Mux(total[b1], ccc, mreg)
     flagged = Cat(m_next, Const(0, d - b2), Const(1, 1))     # (1 << d) | m
     counted = Cat(total[:b1], Const(0, d - b1), Const(0, 1))  # sfc
     m.d.sync += mreg.eq(m_next)
+    _drive_word(m, word, Mux(ovf_next, flagged, counted), last, word_register)
     with m.If(last):
-        m.d.sync += [word.eq(Mux(ovf_next, flagged, counted)), sfc.eq(0), ovf.eq(0)]
+        m.d.sync += [sfc.eq(0), ovf.eq(0)]
     with m.Else():
         m.d.sync += [sfc.eq(total[:b1]), ovf.eq(ovf_next)]
 
 
-def ml_pixel_logic(m: Module, config: SensorConfig, charge, last, word, name: str = "") -> None:
+def ml_pixel_logic(m: Module, config: SensorConfig, charge, last, word, name: str = "",
+                   word_register: bool = True) -> None:
     """Add one ML pixel (saturating ml_bits spike counter) driving ``word`` to ``m``."""
     bits = config.ml_bits
     spike = _integrator(m, config, charge, name)
     count = Signal(bits, name=f"{name}count")
-    count_next = Signal(bits, name=f"{name}count_next")
     full = count == Const(config.ml_max, bits)
-    m.d.comb += count_next.eq(Mux(spike & ~full, (count + 1)[:bits], count))
+    count_next = Mux(spike & ~full, (count + 1)[:bits], count)
+    _drive_word(m, word, count_next, last, word_register)
     with m.If(last):
-        m.d.sync += [word.eq(count_next), count.eq(0)]
+        m.d.sync += count.eq(0)
     with m.Else():
         m.d.sync += count.eq(count_next)
 
@@ -106,10 +115,16 @@ class TEPixel(wiring.Component):
     counter, 1..alpha), ``last`` (S_r: last pixel clock of the readout
     interval), ``word`` (registered readout word, loaded at the edge that
     processes the ``last`` clock).
+
+    ``word_register=False`` builds the pixel without its readout word register
+    (``word`` is then the combinational word of the ``last`` clock, to be sampled
+    at that edge): the variant the hardware-cost table uses to show the cost of
+    the buffer. Arrays always use the registered form.
     """
 
-    def __init__(self, config: SensorConfig):
+    def __init__(self, config: SensorConfig, *, word_register: bool = True):
         self.config = check_pixel_config(config, "te", "TEPixel")
+        self.word_register = bool(word_register)
         super().__init__({
             "charge": In(self.config.input_bits),
             "ccc": In(self.config.b2),
@@ -119,18 +134,21 @@ class TEPixel(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        te_pixel_logic(m, self.config, self.charge, self.ccc, self.last, self.word)
+        te_pixel_logic(m, self.config, self.charge, self.ccc, self.last, self.word,
+                       word_register=self.word_register)
         return m
 
 
 class MLPixel(wiring.Component):
     """One multi-level-counter pixel: integrate, fire, count spikes saturating (SPEC §3-4).
 
-    Ports as :class:`TEPixel` without ``ccc`` (an ML pixel never sees the CCC).
+    Ports as :class:`TEPixel` without ``ccc`` (an ML pixel never sees the CCC);
+    ``word_register`` as there.
     """
 
-    def __init__(self, config: SensorConfig):
+    def __init__(self, config: SensorConfig, *, word_register: bool = True):
         self.config = check_pixel_config(config, "ml", "MLPixel")
+        self.word_register = bool(word_register)
         super().__init__({
             "charge": In(self.config.input_bits),
             "last": In(1),
@@ -139,7 +157,8 @@ class MLPixel(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        ml_pixel_logic(m, self.config, self.charge, self.last, self.word)
+        ml_pixel_logic(m, self.config, self.charge, self.last, self.word,
+                       word_register=self.word_register)
         return m
 
 

@@ -76,10 +76,14 @@ def _check(config) -> SensorConfig:
     return config.check()
 
 
-def pixel_verilog(config: SensorConfig, name: str | None = None) -> str:
-    """Verilog of one TE or ML pixel as its own top module (ports clk, rst, charge, [ccc,] last, word)."""
+def pixel_verilog(config: SensorConfig, name: str | None = None, *, word_register: bool = True) -> str:
+    """Verilog of one TE or ML pixel as its own top module (ports clk, rst, charge, [ccc,] last, word).
+
+    ``word_register=False``: the pixel without its readout word register (cost studies only).
+    """
     config = _check(config)
-    return _convert((pixel_class(config)(config), name or module_names(config)["pixel"]))[0]
+    pixel = pixel_class(config)(config, word_register=word_register)
+    return _convert((pixel, name or module_names(config)["pixel"]))[0]
 
 
 def timing_verilog(config: SensorConfig, name: str | None = None) -> str:
@@ -88,8 +92,38 @@ def timing_verilog(config: SensorConfig, name: str | None = None) -> str:
     return _convert((ReadoutTiming(config), name or module_names(config)["timing"]))[0]
 
 
+#: Longest generate loop written out: Verilator 5.006 refuses to unroll a generate loop of
+#: some thousands of iterations (4096 failed, 3000 passed), so longer rows or columns
+#: are split into blocks of this many, each guarded by an ``if``.
+LOOP_BLOCK = 1024
+
+
+def _genvars(var: str, count: int) -> list[str]:
+    return [var] if count <= LOOP_BLOCK else [f"{var}_block", f"{var}_in_block"]
+
+
+def _loop(var: str, count: int, bound: str, label: str, body, indent: str) -> str:
+    """A generate loop over ``var`` = 0..count-1 (``bound``: the localparam holding count)
+    around ``body(expr, indent)``."""
+    if count <= LOOP_BLOCK:
+        return (f"{indent}for ({var} = 0; {var} < {bound}; {var} = {var} + 1) begin : {label}\n"
+                + body(var, indent + "  ") + f"{indent}end\n")
+    blocks = -(-count // LOOP_BLOCK)
+    hi, lo = f"{var}_block", f"{var}_in_block"
+    expr = f"({hi}*{LOOP_BLOCK} + {lo})"
+    return (f"{indent}for ({hi} = 0; {hi} < {blocks}; {hi} = {hi} + 1) begin : {label}_block\n"
+            f"{indent}  for ({lo} = 0; {lo} < {LOOP_BLOCK}; {lo} = {lo} + 1) begin : {label}\n"
+            f"{indent}    if ({expr} < {bound}) begin : in_range\n"
+            + body(expr, indent + "      ")
+            + f"{indent}    end\n{indent}  end\n{indent}end\n")
+
+
 def top_verilog(config: SensorConfig, height: int, width: int) -> str:
-    """The hand-written structural top of an H x W array with exactly the SPEC section 6 ports."""
+    """The hand-written structural top of an H x W array with exactly the SPEC section 6 ports.
+
+    Pixel (r, c) is the instance ``row[r].col[c].pixel`` (rows or columns longer than
+    :data:`LOOP_BLOCK` add a block level, see :func:`_loop`).
+    """
     config = _check(config)
     height, width = check_array_size(height, width)
     names = module_names(config)
@@ -97,6 +131,15 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
     te = config.is_te
     ccc_wire = f"  wire [{b2 - 1}:0] ccc;  // shared clock cycle counter, 1..alpha\n" if te else ""
     ccc_pin = ".ccc(ccc), " if te else ""
+
+    def pixel(r, c, indent):
+        index = f"({r}*W + {c})"
+        return (f"{indent}{names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge[{index}*E +: E]), "
+                f"{ccc_pin}.last(last),\n{indent}  .word(frame[{index}*WD +: WD]));\n")
+
+    loops = _loop("r", height, "H", "row",
+                  lambda r, ind: _loop("c", width, "W", "col", lambda c, i: pixel(r, c, i), ind), "    ")
+    genvars = ", ".join(_genvars("r", height) + _genvars("c", width))
     return f"""\
 // The user names the output file (tespike verilog --out A.v): waive Verilator's file-name style check.
 /* verilator lint_off DECLFILENAME */
@@ -111,20 +154,17 @@ module {names['top']} (
   output wire frame_valid,                   // one clock per readout interval
   output wire [{height * width * wd - 1}:0] frame    // pixel (r, c) at [(r*W + c)*{wd} +: {wd}]
 );
-  localparam integer PIXELS = {height * width};
+  localparam integer H = {height};
+  localparam integer W = {width};
   localparam integer E = {e};
   localparam integer WD = {wd};
 {ccc_wire}  wire last;  // S_r: last pixel clock of the readout interval
 
   {names['timing']} timing (.clk(clk), .rst(rst), {ccc_pin}.last(last), .frame_valid(frame_valid));
 
-  genvar i;
+  genvar {genvars};
   generate
-    for (i = 0; i < PIXELS; i = i + 1) begin : px
-      {names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge[i*E +: E]), {ccc_pin}.last(last),
-        .word(frame[i*WD +: WD]));
-    end
-  endgenerate
+{loops}  endgenerate
 endmodule
 """
 

@@ -57,3 +57,13 @@ def test_array_ports_follow_spec():
 def test_array_refuses_non_config():
     with pytest.raises(ConfigError, match="SensorConfig"):
         PixelArray({"mode": "te"}, 2, 2)
+
+
+def test_array_widest_datapath_equals_golden(rng):
+    """A = 62 and E = 32 (q is 63 bits): no wrap anywhere, against the reference."""
+    config = SensorConfig(b1=2, b2=2, acc_bits=62, threshold=(1 << 33) + 5, input_bits=32)
+    stim = rng.integers(0, 1 << 32, size=(config.clocks_per_readout * 3, 1, 3), dtype=np.int64)
+    stim[:, 0, 2] = (1 << 32) - 1
+    words, _ = rtl_array_words(config, stim)
+    golden = step_reference(config, stim)[0]
+    assert np.array_equal(words, golden) and golden.any()

@@ -11,13 +11,14 @@ from tests.configs import EDGE_CONFIGS
 from tests.rtl_helpers import mixed_stimulus
 
 
-def run_pixel(config, charges):
+def run_pixel(config, charges, word_register=True):
     """Drive one pixel alone with SPEC timing computed here (no timing block).
 
-    Returns the word sampled one edge after every ``last`` clock, and every word the
-    pixel showed while ``last`` was low (it must hold the previous readout).
+    Returns the word sampled one edge after every ``last`` clock (at the ``last`` edge
+    itself without the word register), and for every other edge whether the pixel
+    still showed the previous readout's word.
     """
-    dut = pixel_class(config)(config)
+    dut = pixel_class(config)(config, word_register=word_register)
     L, F = config.clocks_per_readout, config.clocks_per_tick
     words, held = [], []
 
@@ -29,6 +30,10 @@ def run_pixel(config, charges):
             if config.is_te:
                 ctx.set(dut.ccc, (t % L) // F + 1)
             _, _, word = await ctx.tick().sample(dut.word)
+            if not word_register:
+                if t < len(charges) and t % L == L - 1:
+                    words.append(word)
+                continue
             if t > 0 and (t - 1) % L == L - 1:
                 words.append(word)
                 previous = word
@@ -50,6 +55,14 @@ def test_pixel_equals_golden(config, rng):
         words, held = run_pixel(config, stim[:, 0, col])
         assert np.array_equal(words, step_reference(config, stim[:, :, col:col + 1])[0][:, 0, 0])
         assert all(held)
+
+
+@pytest.mark.parametrize("config", [EDGE_CONFIGS[0], EDGE_CONFIGS[1], EDGE_CONFIGS[4]], ids=str)
+def test_pixel_without_word_register_shows_the_word_at_last(config, rng):
+    stim = mixed_stimulus(config, rng, 4 if config.clocks_per_readout > 1 else 20, 1, 2)
+    for col in range(2):
+        words, _ = run_pixel(config, stim[:, 0, col], word_register=False)
+        assert np.array_equal(words, step_reference(config, stim[:, :, col:col + 1])[0][:, 0, 0])
 
 
 def test_te_pixel_edge_cases_by_hand():
