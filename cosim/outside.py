@@ -25,7 +25,6 @@ import hashlib
 import os
 import shutil
 import subprocess
-import tempfile
 from pathlib import Path
 from typing import Iterator, Sequence
 
@@ -211,7 +210,3 @@ def cache_entry(root: Path, key: str) -> Iterator[tuple[Path, bool]]:
 def run_process(argv: list[str], *, cwd: Path | None = None, timeout: float | None = None
                 ) -> subprocess.CompletedProcess:
     return subprocess.run(argv, cwd=cwd, capture_output=True, text=True, timeout=timeout)
-
-
-def scratch_dir(prefix: str) -> tempfile.TemporaryDirectory:
-    return tempfile.TemporaryDirectory(prefix=prefix)
