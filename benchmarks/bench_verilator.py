@@ -6,13 +6,18 @@ model in a fresh cache directory (wall and CPU seconds of the build; the
 runtime objects of the user's cache are reused, as in normal use) and runs
 ``--readouts`` readout intervals of Poisson light through the harness alone
 (cycles per second of the simulation, stimulus packing excluded), then checks
-the words against the golden model. Icarus runs the small sizes. The baseline
+the words against the golden model. Icarus runs the small sizes. For comparison the same harness runs a
+hand-written model of the same ports written as one procedural ``for`` loop
+over register arrays (tests/verilog_spec_model.py, ``style="loop"``): it shows
+what the generated array's one-instance-per-pixel structure costs in
+Verilator. The baseline
 measured in the same run is the literal golden model
 (``golden.reference.step_reference``) on the same stimulus; the table prints
 each simulator's speed as a ratio to it. Writes ``benchmarks/bench_verilator.png``.
 
 Run from the repository root:
-``python3 benchmarks/bench_verilator.py [--sizes 32 64] [--icarus-sizes 4 8] [--readouts 20] [--no-inline]``
+``python3 benchmarks/bench_verilator.py [--sizes 32 64] [--loop-sizes 32 64] [--icarus-sizes 4 8]
+[--readouts 20] [--no-inline]``
 """
 
 from __future__ import annotations
@@ -52,13 +57,17 @@ def golden_rate(config, stim) -> tuple[float, np.ndarray]:
     return stim.shape[0] / (time.perf_counter() - start), words
 
 
-def bench_verilator(config, side, stim, inline: bool):
+def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False):
     import cosim.verilator as cv
     from cosim.outside import check_captures, unpack_rows, words_per_row
     from rtl.verilog import array_verilog
+    from tests.verilog_spec_model import spec_model_verilog
 
     start = time.perf_counter()
-    verilog = array_verilog(config, side, side)
+    if loop_model:
+        verilog = spec_model_verilog(config, side, side, style="loop")
+    else:
+        verilog = array_verilog(config, side, side)
     gen = time.perf_counter() - start
     N = side * side
     with tempfile.TemporaryDirectory(prefix="bench-verilator-") as tmp:
@@ -97,6 +106,9 @@ def main(argv=None) -> int:
     parser.add_argument("--readouts", type=int, default=20, help="readout intervals of L = 240 clocks")
     parser.add_argument("--icarus-readouts", type=int, default=2)
     parser.add_argument("--no-inline", action="store_true", help="build with Verilator -fno-inline")
+    parser.add_argument("--loop-sizes", type=int, nargs="*", default=[32, 64],
+                        help="sides for the hand-written procedural-loop model of the same ports "
+                             "(tests/verilog_spec_model.py): what the array's structure costs")
     parser.add_argument("--png", default=str(ROOT / "benchmarks" / "bench_verilator.png"))
     args = parser.parse_args(argv)
     config = SensorConfig()
@@ -107,6 +119,11 @@ def main(argv=None) -> int:
         base, golden_words = golden_rate(config, stim)
         r = bench_verilator(config, side, stim, inline=not args.no_inline)
         rows.append(("verilator", side, r, base, np.array_equal(r["words"], golden_words)))
+    for side in args.loop_sizes:
+        stim = stimulus(config, side, args.readouts, rng)
+        base, golden_words = golden_rate(config, stim)
+        r = bench_verilator(config, side, stim, inline=not args.no_inline, loop_model=True)
+        rows.append(("loop model", side, r, base, np.array_equal(r["words"], golden_words)))
     for side in args.icarus_sizes:
         stim = stimulus(config, side, args.icarus_readouts, rng)
         base, golden_words = golden_rate(config, stim)
@@ -131,7 +148,7 @@ def main(argv=None) -> int:
         from golden.io import atomic_output
 
         fig, ax = plt.subplots(figsize=(5.5, 3.5))
-        for name, marker in (("verilator", "o"), ("icarus", "s")):
+        for name, marker in (("verilator", "o"), ("loop model", "^"), ("icarus", "s")):
             pts = [(side * side, r["rate"]) for n, side, r, _, _ in rows if n == name]
             if pts:
                 ax.loglog(*zip(*pts), marker=marker, label=name)

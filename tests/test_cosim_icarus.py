@@ -57,6 +57,15 @@ def test_testbench_follows_any_fixed_latency(config, latency, rng):
         assert np.array_equal(run_icarus(config, stim, verilog=model), reference_words(config, stim))
 
 
+@pytest.mark.parametrize("config", [PAPER_TE, PAPER_ML, EDGE_CONFIGS[4], EDGE_CONFIGS[5], EDGE_CONFIGS[11]],
+                         ids=str)
+def test_loop_style_model_equals_reference(config, rng):
+    """The procedural-loop model the benchmark compares against is itself exact."""
+    stim = make_stimulus("random", config, rng, readouts=4)
+    words = run_icarus(config, stim, verilog=spec_model_verilog(config, *SHAPE, style="loop"))
+    assert np.array_equal(words, reference_words(config, stim))
+
+
 def test_a_wrong_word_is_noticed(rng):
     """The comparison can fail: a model latching m one too high differs from the reference."""
     stim = make_stimulus("random", PAPER_TE, rng, readouts=4)

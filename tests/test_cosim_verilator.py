@@ -87,6 +87,14 @@ def test_harness_follows_any_fixed_latency(latency, rng):
     assert np.array_equal(run_verilator(PAPER_TE, stim, verilog=model), reference_words(PAPER_TE, stim))
 
 
+@pytest.mark.parametrize("config", [PAPER_TE, PAPER_ML], ids=str)
+def test_loop_style_model_equals_golden(config, rng):
+    """The procedural-loop model of benchmarks/bench_verilator.py, 16 x 16, bit-exact."""
+    stim = make_stimulus("random", config, rng, shape=(16, 16), readouts=3)
+    words = run_verilator(config, stim, verilog=spec_model_verilog(config, 16, 16, style="loop"))
+    assert np.array_equal(words, simulate(config, stim))
+
+
 def test_double_frame_valid_is_refused(rng):
     stim = make_stimulus("random", PAPER_ML, rng, readouts=4)
     with pytest.raises(SimulatorRunError, match=r"frame_valid was high \d+ times in the run, expected 4"):
