@@ -17,7 +17,7 @@ each simulator's speed as a ratio to it. Writes ``benchmarks/bench_verilator.png
 
 Run from the repository root:
 ``python3 benchmarks/bench_verilator.py [--sizes 32 64] [--loop-sizes 32 64] [--icarus-sizes 4 8]
-[--readouts 20] [--no-inline]``
+[--readouts 20] [--inline]``
 """
 
 from __future__ import annotations
@@ -105,7 +105,8 @@ def main(argv=None) -> int:
     parser.add_argument("--icarus-sizes", type=int, nargs="*", default=[4, 8], help="Icarus array sides")
     parser.add_argument("--readouts", type=int, default=20, help="readout intervals of L = 240 clocks")
     parser.add_argument("--icarus-readouts", type=int, default=2)
-    parser.add_argument("--no-inline", action="store_true", help="build with Verilator -fno-inline")
+    parser.add_argument("--inline", action="store_true",
+                        help="Verilator's default module inlining instead of -fno-inline")
     parser.add_argument("--loop-sizes", type=int, nargs="*", default=[32, 64],
                         help="sides for the hand-written procedural-loop model of the same ports "
                              "(tests/verilog_spec_model.py): what the array's structure costs")
@@ -117,12 +118,12 @@ def main(argv=None) -> int:
     for side in args.sizes:
         stim = stimulus(config, side, args.readouts, rng)
         base, golden_words = golden_rate(config, stim)
-        r = bench_verilator(config, side, stim, inline=not args.no_inline)
+        r = bench_verilator(config, side, stim, inline=args.inline)
         rows.append(("verilator", side, r, base, np.array_equal(r["words"], golden_words)))
     for side in args.loop_sizes:
         stim = stimulus(config, side, args.readouts, rng)
         base, golden_words = golden_rate(config, stim)
-        r = bench_verilator(config, side, stim, inline=not args.no_inline, loop_model=True)
+        r = bench_verilator(config, side, stim, inline=args.inline, loop_model=True)
         rows.append(("loop model", side, r, base, np.array_equal(r["words"], golden_words)))
     for side in args.icarus_sizes:
         stim = stimulus(config, side, args.icarus_readouts, rng)
@@ -132,7 +133,7 @@ def main(argv=None) -> int:
 
     load = os.getloadavg()[0]
     print(f"paper TE (L = 240), load average {load:.1f} on {os.cpu_count()} cores; "
-          f"Verilator {'-fno-inline' if args.no_inline else 'default inlining'}")
+          f"Verilator {'default inlining' if args.inline else '-fno-inline'}")
     print(f"{'simulator':>10} {'pixels':>7} {'gen s':>6} {'build s':>8} {'build cpu':>9} "
           f"{'cycles/s':>9} {'cyc/cpu-s':>9} {'golden c/s':>10} {'x golden':>8} {'equal':>5}")
     for name, side, r, base, equal in rows:

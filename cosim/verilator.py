@@ -198,10 +198,11 @@ def build_jobs() -> int:
     return max(1, min(4, cores))
 
 
-def build_flags(top: str, inline: bool = True) -> list[str]:
-    """``inline=False`` adds ``-fno-inline`` (keep the pixel modules apart): for large
-    arrays a build several times cheaper, a simulation several times slower
-    (docs/outside-simulators.md)."""
+def build_flags(top: str, inline: bool = False) -> list[str]:
+    """Verilator options of a build. By default with ``-fno-inline`` (pixel modules
+    kept apart): for 1024 pixels it built in 49 CPU-s instead of 233 and ran as
+    fast (about 7200 cycles per CPU-second either way; docs/outside-simulators.md).
+    ``inline=True`` gives Verilator's default module inlining."""
     return [*VERILATOR_FLAGS, *([] if inline else ["-fno-inline"]), *LINT_WAIVERS,
             "--top-module", top, "--prefix", "Varray", "-o", _EXECUTABLE,
             "-MAKEFLAGS", f"OPT_FAST={CXX_OPT}"]
@@ -271,7 +272,7 @@ def _keep_runtime(obj: Path, runtime: Path) -> None:
 
 
 def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
-          build_dir: str | Path | None = None, progress: bool = False, inline: bool = True) -> Path:
+          build_dir: str | Path | None = None, progress: bool = False, inline: bool = False) -> Path:
     """Build (or find in the cache) the simulation executable; return its path.
 
     The cache key is a hash of the Verilog, the harness, the flags and the
@@ -333,15 +334,15 @@ def read_captures(path: str | Path, frame_words: int) -> tuple[np.ndarray, np.nd
 
 
 def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str | Path | None = None,
-                  progress: bool = False, verilog: str | None = None, inline: bool = True
+                  progress: bool = False, verilog: str | None = None, inline: bool = False
                   ) -> np.ndarray:
     """Simulate the generated Verilog of a (T, H, W) stimulus in Verilator; return words (K, H, W).
 
     ``build_dir`` is the root of the build cache (default: ``$TESPIKE_CACHE`` or
     ``~/.cache/tespike``, then ``verilator/``). ``verilog`` replaces the array
     Verilog (tests use a hand-written model of the same ports); by default it
-    is ``rtl.verilog.array_verilog(config, H, W)``. ``inline=False`` builds with
-    Verilator's ``-fno-inline`` (cheaper build, slower run; see
+    is ``rtl.verilog.array_verilog(config, H, W)``. ``inline=True`` builds with
+    Verilator's default module inlining instead of ``-fno-inline`` (see
     :func:`build_flags`). The words are int64, equal
     bit for bit to ``golden.sensor.simulate`` for a correct array.
     """
