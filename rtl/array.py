@@ -83,9 +83,9 @@ class PixelArray(wiring.Component):
                     name = f"px_{r}_{c}_"
                     reg = Signal(cfg.word_bits, name=f"{name}word")
                     if cfg.is_te:
-                        te_pixel_logic(m, cfg, charge, timing.ccc, timing.last, reg, name)
+                        te_pixel_logic(m, cfg, charge, timing.ccc, timing.last, reg, name, named=False)
                     else:
-                        ml_pixel_logic(m, cfg, charge, timing.last, reg, name)
+                        ml_pixel_logic(m, cfg, charge, timing.last, reg, name, named=False)
                     m.d.comb += word.eq(reg)
                 else:
                     pixel = pixel_class(cfg)(cfg)

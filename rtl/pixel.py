@@ -6,6 +6,13 @@ The pixel logic is written once, as the functions :func:`te_pixel_logic` and
 synthesis), and :class:`rtl.array.PixelArray` may inline them into one flat
 module (faster in the Amaranth simulator). Both forms are the same logic.
 
+Shared intermediate values (``q``, the remainder after the spike, the SFC sum,
+next flag and next latch value) are named signals in the components, so the
+generated Verilog computes each once (Amaranth repeats an unnamed expression at
+every use: six copies of ``acc + charge``, twice the Icarus memory per pixel).
+The flat array passes ``named=False``: there every extra comb signal costs the
+Amaranth simulator time per pixel (about 2x for an 8 x 8 array).
+
 Per pixel clock (one rising edge of ``sync``):
 
 * integrator: ``q = acc + charge`` (one bit wider than either operand, so it
@@ -44,19 +51,24 @@ def check_pixel_config(config: SensorConfig, mode: str, what: str) -> SensorConf
     return config
 
 
-def _integrator(m: Module, config: SensorConfig, charge, name: str):
-    """Charge accumulator with threshold comparator and subtractive reset; returns the spike.
+def _value(m: Module, expr, width: int, name: str, named: bool):
+    """``expr`` as a named comb signal of ``width`` bits, or as the bare expression."""
+    if not named:
+        return expr[:width]
+    signal = Signal(width, name=name)
+    m.d.comb += signal.eq(expr)
+    return signal
 
-    Only registers and the spike are named signals: every extra comb signal costs the
-    Amaranth simulator time per pixel (about 2x for an 8 x 8 array), while Verilog and
-    synthesis see the same logic either way.
-    """
+
+def _integrator(m: Module, config: SensorConfig, charge, name: str, named: bool):
+    """Charge accumulator with threshold comparator and subtractive reset; returns the spike."""
     acc = Signal(config.acc_bits, name=f"{name}acc")
     width = max(config.acc_bits, config.input_bits) + 1        # acc + charge never wraps
-    q = acc + charge                                          # width bits
+    q = _value(m, acc + charge, width, f"{name}q", named)
     spike = Signal(name=f"{name}spike")
     m.d.comb += spike.eq(q >= Const(config.threshold, width))
-    rest = (q - Mux(spike, Const(config.threshold, width), Const(0, width)))[:width]
+    rest = _value(m, q - Mux(spike, Const(config.threshold, width), Const(0, width)), width,
+                  f"{name}rest", named)
     m.d.sync += acc.eq(Mux(rest > Const(config.acc_max, width),
                            Const(config.acc_max, config.acc_bits), rest[:config.acc_bits]))
     return spike
@@ -73,16 +85,16 @@ def _drive_word(m: Module, word, value, last, registered: bool) -> None:
 
 
 def te_pixel_logic(m: Module, config: SensorConfig, charge, ccc, last, word, name: str = "",
-                   word_register: bool = True) -> None:
+                   word_register: bool = True, named: bool = True) -> None:
     """Add one TE pixel (SPEC sections 3-4) driving ``word`` to ``m``."""
     b1, b2, d = config.b1, config.b2, config.d
-    spike = _integrator(m, config, charge, name)
+    spike = _integrator(m, config, charge, name, named)
     sfc = Signal(b1, name=f"{name}sfc")
     ovf = Signal(name=f"{name}ovf")
     mreg = Signal(b2, name=f"{name}m")
-    total = sfc + (spike & ~ovf)
-    ovf_next = ovf | total[b1]
-    m_next = Mux(total[b1], ccc, mreg)
+    total = _value(m, sfc + (spike & ~ovf), b1 + 1, f"{name}sfc_sum", named)   # bit b1: the carry
+    ovf_next = _value(m, ovf | total[b1], 1, f"{name}ovf_next", named)
+    m_next = _value(m, Mux(total[b1], ccc, mreg), b2, f"{name}m_next", named)
     flagged = Cat(m_next, Const(0, d - b2), Const(1, 1))     # (1 << d) | m
     counted = Cat(total[:b1], Const(0, d - b1), Const(0, 1))  # sfc
     m.d.sync += mreg.eq(m_next)
@@ -94,13 +106,13 @@ def te_pixel_logic(m: Module, config: SensorConfig, charge, ccc, last, word, nam
 
 
 def ml_pixel_logic(m: Module, config: SensorConfig, charge, last, word, name: str = "",
-                   word_register: bool = True) -> None:
+                   word_register: bool = True, named: bool = True) -> None:
     """Add one ML pixel (saturating ml_bits spike counter) driving ``word`` to ``m``."""
     bits = config.ml_bits
-    spike = _integrator(m, config, charge, name)
+    spike = _integrator(m, config, charge, name, named)
     count = Signal(bits, name=f"{name}count")
     full = count == Const(config.ml_max, bits)
-    count_next = Mux(spike & ~full, (count + 1)[:bits], count)
+    count_next = _value(m, Mux(spike & ~full, (count + 1)[:bits], count), bits, f"{name}count_next", named)
     _drive_word(m, word, count_next, last, word_register)
     with m.If(last):
         m.d.sync += count.eq(0)

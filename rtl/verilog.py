@@ -3,9 +3,10 @@
 The pixel and the timing block are generated once each from their Amaranth
 components (``amaranth.back.verilog.convert``); the array top is a small
 hand-written structural module that instantiates the timing block once and the
-pixel module H x W times in a ``generate`` loop. Its text does not grow with
-the array, so a 128 x 128 array is generated as fast as a 2 x 2 one, and the
-same pixel module is what :func:`pixel_verilog` hands to synthesis.
+pixel module H x W times in nested ``generate`` loops over rows and columns. Its
+text does not grow with the array, so a 128 x 128 array is generated as fast as
+a 2 x 2 one, and the same pixel module is what :func:`pixel_verilog` hands to
+synthesis.
 
 Lint: Amaranth's RTLIL backend deliberately trims the zero extension of
 unsigned operands (``a + b`` with a 9-bit ``a`` and a 16-bit ``b`` into a
