@@ -47,7 +47,8 @@ VERILATOR_FLAGS = ("--cc", "--exe", "--build", "-O3", "--x-assign", "fast",
 LINT_WAIVERS: dict[str, str] = {}
 
 #: C++ optimisation of the model's code (verilated.mk's ``OPT_FAST``; its
-#: default is ``-Os``). See docs/outside-simulators.md for the measured choice.
+#: default is ``-Os``). ``-O1`` is a common choice for large generated code; it
+#: was not benchmarked against ``-Os`` here.
 CXX_OPT = "-O1"
 
 #: Verilator's runtime objects and precompiled verilated.h; the first build
@@ -200,8 +201,8 @@ def build_jobs() -> int:
 
 def build_flags(top: str, inline: bool = False) -> list[str]:
     """Verilator options of a build. By default with ``-fno-inline`` (pixel modules
-    kept apart): for 1024 pixels it built in 49 CPU-s instead of 233 and ran as
-    fast (about 7200 cycles per CPU-second either way; docs/outside-simulators.md).
+    kept apart): for 1024 pixels it built in 41-49 CPU-s instead of 233 and ran as
+    fast (about 7300 cycles per CPU-second either way; docs/outside-simulators.md).
     ``inline=True`` gives Verilator's default module inlining."""
     return [*VERILATOR_FLAGS, *([] if inline else ["-fno-inline"]), *LINT_WAIVERS,
             "--top-module", top, "--prefix", "Varray", "-o", _EXECUTABLE,
