@@ -1,0 +1,175 @@
+"""Outside simulators on the generated array Verilog: Verilator build time and cycles/s, Icarus cycles/s.
+
+For each array size (paper TE configuration, square arrays) the benchmark
+generates the Verilog (``rtl.verilog.array_verilog``), builds the Verilator
+model in a fresh cache directory (wall and CPU seconds of the build; the
+runtime objects of the user's cache are reused, as in normal use) and runs
+``--readouts`` readout intervals of Poisson light through the harness alone
+(cycles per second of the simulation, stimulus packing excluded), then checks
+the words against the golden model. Icarus runs the small sizes. For comparison the same harness runs a
+hand-written model of the same ports written as one procedural ``for`` loop
+over register arrays (tests/verilog_spec_model.py, ``style="loop"``): it shows
+what the generated array's one-instance-per-pixel structure costs in
+Verilator. The baseline
+measured in the same run is the literal golden model
+(``golden.reference.step_reference``) on the same stimulus; the table prints
+each simulator's speed as a ratio to it. Writes ``benchmarks/bench_verilator.png``.
+
+Run from the repository root:
+``python3 benchmarks/bench_verilator.py [--sizes 32 64] [--loop-sizes 32 64] [--icarus-sizes 4 8]
+[--readouts 20] [--inline]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from golden.config import SensorConfig  # noqa: E402
+from golden.reference import step_reference  # noqa: E402
+
+
+def children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def stimulus(config: SensorConfig, side: int, readouts: int, rng) -> np.ndarray:
+    light = rng.uniform(0.0, 1.5, size=(side, side))
+    mean = 42000.0 * light / config.clocks_per_readout
+    return rng.poisson(mean, size=(readouts * config.clocks_per_readout, side, side)).astype(np.int64)
+
+
+def golden_rate(config, stim) -> tuple[float, np.ndarray]:
+    start = time.perf_counter()
+    words = step_reference(config, stim)[0]
+    return stim.shape[0] / (time.perf_counter() - start), words
+
+
+def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False):
+    import cosim.verilator as cv
+    from cosim.outside import check_captures, unpack_rows, words_per_row
+    from rtl.verilog import array_verilog
+    from tests.verilog_spec_model import spec_model_verilog
+
+    start = time.perf_counter()
+    if loop_model:
+        verilog = spec_model_verilog(config, side, side, style="loop")
+    else:
+        verilog = array_verilog(config, side, side)
+    gen = time.perf_counter() - start
+    N = side * side
+    with tempfile.TemporaryDirectory(prefix="bench-verilator-") as tmp:
+        cpu0, start = children_cpu(), time.perf_counter()
+        exe = cv.build(verilog, "te_pixel_array", N * config.input_bits, N * config.word_bits,
+                       build_dir=tmp, progress=True, inline=inline)
+        build_wall, build_cpu = time.perf_counter() - start, children_cpu() - cpu0
+        T, L = stim.shape[0], config.clocks_per_readout
+        stim_path, cap_path = Path(tmp) / "stim.bin", Path(tmp) / "cap.bin"
+        cv.write_stimulus_file(stim_path, stim, config.input_bits)
+        cpu0, start = children_cpu(), time.perf_counter()
+        subprocess.run([str(exe), str(stim_path), str(T), str(T // L), str(L + 1), str(cap_path), "0"],
+                       check=True)
+        run_wall, run_cpu = time.perf_counter() - start, children_cpu() - cpu0
+        clocks, frames = cv.read_captures(cap_path, words_per_row(N, config.word_bits))
+        check_captures(clocks, config, T // L, "bench")
+        words = unpack_rows(frames, N, config.word_bits).reshape(-1, side, side)
+    return dict(gen=gen, build_wall=build_wall, build_cpu=build_cpu, rate=T / run_wall,
+                rate_cpu=T / max(run_cpu, 1e-9), words=words)
+
+
+def bench_icarus(config, side, stim):
+    from cosim.icarus import run_icarus
+    from rtl.verilog import array_verilog
+
+    verilog = array_verilog(config, side, side)
+    start = time.perf_counter()
+    words = run_icarus(config, stim, verilog=verilog)
+    return dict(rate=stim.shape[0] / (time.perf_counter() - start), words=words)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="*", default=[32, 64], help="Verilator array sides")
+    parser.add_argument("--icarus-sizes", type=int, nargs="*", default=[4, 8], help="Icarus array sides")
+    parser.add_argument("--readouts", type=int, default=20, help="readout intervals of L = 240 clocks")
+    parser.add_argument("--icarus-readouts", type=int, default=2)
+    parser.add_argument("--inline", action="store_true",
+                        help="Verilator's default module inlining instead of -fno-inline")
+    parser.add_argument("--loop-sizes", type=int, nargs="*", default=[32, 64],
+                        help="sides for the hand-written procedural-loop model of the same ports "
+                             "(tests/verilog_spec_model.py): what the array's structure costs")
+    parser.add_argument("--png", default=str(ROOT / "benchmarks" / "bench_verilator.png"))
+    args = parser.parse_args(argv)
+    config = SensorConfig()
+    rng = np.random.default_rng(2024)
+    rows = []
+    for side in args.sizes:
+        stim = stimulus(config, side, args.readouts, rng)
+        base, golden_words = golden_rate(config, stim)
+        r = bench_verilator(config, side, stim, inline=args.inline)
+        rows.append(("verilator", side, r, base, np.array_equal(r["words"], golden_words)))
+    for side in args.loop_sizes:
+        stim = stimulus(config, side, args.readouts, rng)
+        base, golden_words = golden_rate(config, stim)
+        r = bench_verilator(config, side, stim, inline=args.inline, loop_model=True)
+        rows.append(("loop model", side, r, base, np.array_equal(r["words"], golden_words)))
+    for side in args.icarus_sizes:
+        stim = stimulus(config, side, args.icarus_readouts, rng)
+        base, golden_words = golden_rate(config, stim)
+        r = bench_icarus(config, side, stim)
+        rows.append(("icarus", side, r, base, np.array_equal(r["words"], golden_words)))
+
+    load = os.getloadavg()[0]
+    print(f"paper TE (L = 240), load average {load:.1f} on {os.cpu_count()} cores; "
+          f"Verilator {'default inlining' if args.inline else '-fno-inline'}")
+    print(f"{'simulator':>10} {'pixels':>7} {'gen s':>6} {'build s':>8} {'build cpu':>9} "
+          f"{'cycles/s':>9} {'cyc/cpu-s':>9} {'golden c/s':>10} {'x golden':>8} {'equal':>5}")
+    for name, side, r, base, equal in rows:
+        gen = f"{r['gen']:6.1f}" if "gen" in r else f"{'':>6}"
+        build = f"{r['build_wall']:8.1f} {r['build_cpu']:9.1f}" if "build_wall" in r else f"{'':>8} {'':>9}"
+        cpu_rate = f"{r['rate_cpu']:9.0f}" if "rate_cpu" in r else f"{'':>9}"
+        print(f"{name:>10} {side * side:7d} {gen} {build} {r['rate']:9.0f} {cpu_rate} {base:10.0f} "
+              f"{r['rate'] / base:8.1f} {str(equal):>5}")
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        from golden.io import atomic_output
+
+        fig, ax = plt.subplots(figsize=(5.5, 3.5))
+        for name, marker in (("verilator", "o"), ("loop model", "^"), ("icarus", "s")):
+            pts = [(side * side, r["rate"]) for n, side, r, _, _ in rows if n == name]
+            if pts:
+                ax.loglog(*zip(*pts), marker=marker, label=name)
+        by_size = {}
+        for _, side, _, base, _ in rows:          # one point per size: the median of its runs
+            by_size.setdefault(side * side, []).append(base)
+        pts = sorted((n, float(np.median(v))) for n, v in by_size.items())
+        ax.loglog(*zip(*pts), "k--", marker="x", label="golden step_reference")
+        ax.set_xlabel("pixels")
+        ax.set_ylabel("pixel clocks per second")
+        ax.set_title("generated Verilog in outside simulators (paper TE)")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        with atomic_output(args.png) as tmp_png:
+            fig.savefig(tmp_png, format="png", dpi=100)
+        print(f"wrote {args.png}")
+    except ImportError:
+        pass
+    return 0 if all(equal for *_, equal in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,155 @@
+"""Run the generated array Verilog in Icarus Verilog: an independent, outside check.
+
+:func:`run_icarus` writes the array Verilog (``rtl.verilog.array_verilog``) and
+a Verilog-2005 testbench that drives only the SPEC section 6 ports: it reads
+the stimulus rows with ``$readmemh``, holds ``rst`` for
+:data:`~cosim.outside.RESET_CLOCKS` clocks, then per pixel clock puts the row
+on ``charge``, waits for the logic to settle, samples ``frame_valid`` /
+``frame`` and gives the rising edge. Every capture is written with
+``$fwrite("%h")``; an X or Z on ``frame_valid`` or ``frame`` is reported, never
+read as a number. Compiled with ``iverilog -g2005`` (``-g2012`` would give
+Amaranth's initialisers SystemVerilog semantics), run with ``vvp``.
+
+Icarus is slow (tens of cycles per second at 1024 pixels): use it on small
+arrays; use :mod:`cosim.verilator` for scale.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.io import atomic_output, check_stimulus
+
+from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, check_captures,
+                      first_error_line, hex_to_rows, pack_rows, require_tool, rows_to_hex,
+                      run_process, top_module, unpack_rows)
+
+TESTBENCH_TOP = "tespike_tb"
+_STIMULUS = "stimulus.hex"
+_CAPTURES = "captures.txt"
+
+#: Half a pixel clock in ns (the testbench samples 1 ns after the inputs change).
+_HALF_PERIOD = 5
+
+
+def icarus_testbench(top: str, charge_bits: int, frame_bits: int) -> str:
+    """Verilog-2005 testbench of the SPEC section 6 ports; CLOCKS, READOUTS, FLUSH are parameters."""
+    return f"""// tespike Icarus testbench for {top}: SPEC section 6 ports only (generated).
+`timescale 1ns / 1ns
+module {TESTBENCH_TOP};
+  parameter CLOCKS = 1;     // stimulus rows (pixel clocks)
+  parameter READOUTS = 1;   // frames expected
+  parameter FLUSH = 1;      // clocks of zero charge allowed after the stimulus
+  reg clk;
+  reg rst;
+  reg [{charge_bits - 1}:0] charge;
+  wire frame_valid;
+  wire [{frame_bits - 1}:0] frame;
+  reg [{charge_bits - 1}:0] stimulus [0:CLOCKS - 1];
+  integer t, captured, out, i;
+
+  {top} dut(.clk(clk), .rst(rst), .charge(charge), .frame_valid(frame_valid), .frame(frame));
+
+  initial begin
+    $readmemh("{_STIMULUS}", stimulus);
+    out = $fopen("{_CAPTURES}", "w");
+    clk = 1'b0;
+    rst = 1'b1;
+    charge = {charge_bits}'d0;
+    for (i = 0; i < {RESET_CLOCKS}; i = i + 1) begin
+      #{_HALF_PERIOD} clk = 1'b1;
+      #{_HALF_PERIOD} clk = 1'b0;
+    end
+    rst = 1'b0;
+    captured = 0;
+    t = 0;
+    while (t < CLOCKS + FLUSH && !(t >= CLOCKS && captured >= READOUTS)) begin
+      if (t < CLOCKS) charge = stimulus[t];
+      else charge = {charge_bits}'d0;
+      #1;                                   // inputs of clock t settle; sample before the edge
+      if (frame_valid === 1'b1) begin
+        $fwrite(out, "%0d %h\\n", t, frame);
+        captured = captured + 1;
+      end else if (frame_valid !== 1'b0)
+        $fwrite(out, "%0d frame_valid=%b\\n", t, frame_valid);
+      #{_HALF_PERIOD - 1} clk = 1'b1;       // rising edge t
+      #{_HALF_PERIOD} clk = 1'b0;
+      t = t + 1;
+    end
+    $fwrite(out, "end %0d\\n", t);
+    $fclose(out);
+    $finish;
+  end
+endmodule
+"""
+
+
+def _parse_captures(path: Path, what: str) -> tuple[np.ndarray, list[str]]:
+    try:
+        lines = path.read_text().splitlines()
+    except FileNotFoundError:
+        raise SimulatorRunError(f"{what}: the testbench wrote no captures file") from None
+    if not lines or not lines[-1].startswith("end "):
+        raise SimulatorRunError(f"{what}: the testbench stopped before the end of the run")
+    clocks, frames = [], []
+    for line in lines[:-1]:
+        clock, value = line.split(" ", 1)
+        if not all(ch in "0123456789abcdefABCDEF" for ch in value):
+            raise SimulatorRunError(
+                f"{what}: at pixel clock {clock} {'frame_valid' if '=' in value else 'frame'} "
+                f"holds X or Z bits ({value[:40]}); SPEC section 6 outputs must be defined")
+        clocks.append(int(clock))
+        frames.append(value)
+    return np.asarray(clocks, np.int64), frames
+
+
+def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Path | None = None,
+               verilog: str | None = None) -> np.ndarray:
+    """Simulate the generated Verilog of a (T, H, W) stimulus in Icarus; return words (K, H, W).
+
+    ``work_dir`` keeps the Verilog, testbench, stimulus and captures there (an
+    existing directory); by default a temporary directory is used and removed.
+    ``verilog`` replaces ``rtl.verilog.array_verilog(config, H, W)`` (tests use
+    a hand-written model of the same ports).
+    """
+    check_stimulus(stimulus, config)
+    T, H, W = stimulus.shape
+    L = config.clocks_per_readout
+    K = T // L
+    if K == 0:
+        return np.zeros((0, H, W), np.int64)
+    iverilog = require_tool("iverilog", "iverilog")
+    vvp = require_tool("vvp", "iverilog")
+    N, E, Wd = H * W, config.input_bits, config.word_bits
+    top = top_module(config)
+    if verilog is None:
+        from rtl.verilog import array_verilog
+        verilog = array_verilog(config, H, W)
+    what = f"Icarus run of {top} ({H} x {W})"
+    with tempfile.TemporaryDirectory(prefix="tespike-icarus-") as scratch:
+        work = Path(work_dir) if work_dir is not None else Path(scratch)
+        if not work.is_dir():
+            raise SimulatorRunError(f"work_dir {str(work)!r} is not an existing directory")
+        (work / "array.v").write_text(verilog)
+        (work / "tb.v").write_text(icarus_testbench(top, N * E, N * Wd))
+        with atomic_output(work / _STIMULUS) as tmp:
+            Path(tmp).write_text("\n".join(rows_to_hex(pack_rows(stimulus.reshape(T, N), E), N * E)) + "\n")
+        (work / _CAPTURES).unlink(missing_ok=True)
+        compiled = run_process([iverilog, "-g2005", "-o", "sim.vvp", "-s", TESTBENCH_TOP,
+                                f"-P{TESTBENCH_TOP}.CLOCKS={T}", f"-P{TESTBENCH_TOP}.READOUTS={K}",
+                                f"-P{TESTBENCH_TOP}.FLUSH={L + 1}", "tb.v", "array.v"], cwd=work)
+        if compiled.returncode != 0:
+            raise SimulatorBuildError(
+                f"iverilog -g2005 could not compile {top} (exit {compiled.returncode}): "
+                f"{first_error_line(compiled.stderr + compiled.stdout)}")
+        ran = run_process([vvp, "-n", "sim.vvp"], cwd=work)
+        if ran.returncode != 0:
+            raise SimulatorRunError(f"{what}: vvp failed (exit {ran.returncode}): "
+                                    f"{first_error_line(ran.stderr + ran.stdout)}")
+        clocks, frames = _parse_captures(work / _CAPTURES, what)
+    check_captures(clocks, config, K, what)
+    return unpack_rows(hex_to_rows(frames, N * Wd), N, Wd).reshape(K, H, W)

@@ -1,0 +1,387 @@
+"""Run the generated array Verilog in Verilator, for scale (SPEC section 6 ports only).
+
+:func:`run_verilator` writes the Verilog of an H x W array
+(``rtl.verilog.array_verilog``) and a C++ harness that knows nothing but the
+SPEC section 6 ports: it holds ``rst`` for :data:`~cosim.outside.RESET_CLOCKS`
+clocks, then applies one stimulus row per pixel clock, samples ``frame`` before
+every rising edge at which ``frame_valid`` is high, and writes what it saw to a
+binary file. The build (``verilator --cc --exe --build -O3``) is cached under a
+hash of the Verilog, the harness, the flags and the Verilator version, so a
+second run of the same array skips it.
+
+Files between Python and the harness (little-endian):
+
+- stimulus: T rows of ``ceil(H*W*E / 32)`` uint32 words, the ``charge`` port's
+  bits exactly as Verilator stores a wide port (word 0 = bits 31..0);
+- captures: records of one uint64 sample clock and ``ceil(H*W*Wd / 32)``
+  uint32 words of ``frame``.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.io import atomic_output, check_stimulus
+
+from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, cache_entry,
+                      check_captures, content_hash, default_cache_root, first_error_line,
+                      pack_rows, require_tool, top_module, unpack_rows, words_per_row)
+
+#: Verilator options of every build. ``-O3``: Verilator's own optimisation;
+#: ``--x-assign/--x-initial fast``: X is irrelevant after the synchronous reset.
+VERILATOR_FLAGS = ("--cc", "--exe", "--build", "-O3", "--x-assign", "fast",
+                   "--x-initial", "fast", "--noassert")
+
+#: Lint categories waived on the command line. None are needed: Verilator's
+#: default warnings are fatal, and the generated Verilog carries its own
+#: ``verilator lint_off`` comments, with reasons, around the Amaranth-generated
+#: modules (see rtl/verilog.py). A new warning therefore fails the build loudly.
+LINT_WAIVERS: dict[str, str] = {}
+
+#: C++ optimisation of the model's code (verilated.mk's ``OPT_FAST``; its
+#: default is ``-Os``). ``-O1`` is a common choice for large generated code; it
+#: was not benchmarked against ``-Os`` here.
+CXX_OPT = "-O1"
+
+#: Verilator's runtime objects and precompiled verilated.h; the first build
+#: makes them (about 30 s on a loaded machine), later builds reuse them.
+_RUNTIME_OBJECTS = ("verilated.o", "verilated_threads.o")
+
+#: Stimulus rows the harness reads at once.
+_READ_ROWS = 4096
+
+#: Rows packed and written at once.
+_WRITE_ROWS = 4096
+
+_EXECUTABLE = "tespike_sim"
+
+
+def _ctype(bits: int) -> str:
+    return "uint8_t" if bits <= 8 else "uint16_t" if bits <= 16 else "uint32_t" if bits <= 32 else "uint64_t"
+
+
+def harness_cpp(top: str, charge_bits: int, frame_bits: int) -> str:
+    """C++ ``main`` driving only ``clk``, ``rst``, ``charge`` and reading ``frame_valid``, ``frame``.
+
+    Verilator stores a port of up to 64 bits in an integer (CData/SData/IData/
+    QData) and a wider one in ``VlWide`` (32-bit words, word 0 least
+    significant); both cases are generated here.
+    """
+    in_words = (charge_bits + 31) // 32
+    out_words = (frame_bits + 31) // 32
+    if charge_bits > 64:
+        set_charge = f"std::memcpy(top->charge.data(), w, sizeof(uint32_t) * {in_words});"
+    elif charge_bits > 32:
+        set_charge = "top->charge = (uint64_t)w[0] | ((uint64_t)w[1] << 32);"
+    else:
+        set_charge = f"top->charge = ({_ctype(charge_bits)})w[0];"
+    if frame_bits > 64:
+        get_frame = f"std::memcpy(w, top->frame.data(), sizeof(uint32_t) * {out_words});"
+    elif frame_bits > 32:
+        get_frame = "uint64_t v = top->frame; w[0] = (uint32_t)v; w[1] = (uint32_t)(v >> 32);"
+    else:
+        get_frame = "w[0] = (uint32_t)top->frame;"
+    return f"""// tespike Verilator harness for {top}: SPEC section 6 ports only (generated).
+#include "Varray.h"
+#include "verilated.h"
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <vector>
+
+static const size_t IN_WORDS = {in_words};
+static const size_t OUT_WORDS = {out_words};
+static const size_t READ_ROWS = {_READ_ROWS};
+static const int RESET_CLOCKS = {RESET_CLOCKS};
+
+static inline void set_charge(Varray* top, const uint32_t* w) {{ {set_charge} }}
+static inline void get_frame(const Varray* top, uint32_t* w) {{ {get_frame} }}
+
+static int fail(const char* what, const char* path) {{
+    std::fprintf(stderr, "tespike_sim: %s %s\\n", what, path);
+    return 3;
+}}
+
+int main(int argc, char** argv) {{
+    if (argc != 7) {{
+        std::fprintf(stderr, "usage: %s STIMULUS CLOCKS READOUTS FLUSH CAPTURES PROGRESS_EVERY\\n", argv[0]);
+        return 2;
+    }}
+    const char* stim_path = argv[1];
+    const uint64_t clocks = std::strtoull(argv[2], nullptr, 10);
+    const uint64_t readouts = std::strtoull(argv[3], nullptr, 10);
+    const uint64_t flush = std::strtoull(argv[4], nullptr, 10);
+    const char* out_path = argv[5];
+    const uint64_t progress = std::strtoull(argv[6], nullptr, 10);
+
+    std::FILE* in = std::fopen(stim_path, "rb");
+    if (!in) return fail("cannot open stimulus", stim_path);
+    std::FILE* out = std::fopen(out_path, "wb");
+    if (!out) return fail("cannot open captures", out_path);
+
+    const std::unique_ptr<VerilatedContext> context{{new VerilatedContext}};
+    const std::unique_ptr<Varray> top{{new Varray{{context.get()}}}};
+    std::vector<uint32_t> rows(READ_ROWS * IN_WORDS), zero(IN_WORDS, 0), frame(OUT_WORDS, 0);
+
+    top->clk = 0;
+    top->rst = 1;
+    set_charge(top.get(), zero.data());
+    top->eval();
+    for (int i = 0; i < RESET_CLOCKS; ++i) {{
+        top->clk = 1; top->eval();
+        top->clk = 0; top->eval();
+    }}
+    top->rst = 0;
+
+    uint64_t captured = 0;
+    size_t have = 0, next = 0;
+    for (uint64_t t = 0; t < clocks + flush; ++t) {{
+        if (t >= clocks && captured >= readouts) break;
+        const uint32_t* row = zero.data();
+        if (t < clocks) {{
+            if (next == have) {{
+                const uint64_t left = clocks - t;
+                const size_t want = left < READ_ROWS ? (size_t)left : READ_ROWS;
+                if (std::fread(rows.data(), sizeof(uint32_t) * IN_WORDS, want, in) != want)
+                    return fail("stimulus file too short:", stim_path);
+                have = want;
+                next = 0;
+            }}
+            row = &rows[next++ * IN_WORDS];
+        }}
+        set_charge(top.get(), row);
+        top->clk = 0;
+        top->eval();                      // inputs of clock t settle; sample before the edge
+        if (top->frame_valid) {{
+            get_frame(top.get(), frame.data());
+            if (std::fwrite(&t, sizeof t, 1, out) != 1 ||
+                std::fwrite(frame.data(), sizeof(uint32_t), OUT_WORDS, out) != OUT_WORDS)
+                return fail("cannot write captures", out_path);
+            ++captured;
+        }}
+        top->clk = 1;
+        top->eval();                      // rising edge t
+        if (progress && (t + 1) % progress == 0) {{
+            std::printf("%llu\\n", (unsigned long long)(t + 1));
+            std::fflush(stdout);
+        }}
+    }}
+    top->final();
+    std::fclose(in);
+    if (std::fclose(out) != 0) return fail("cannot write captures", out_path);
+    return 0;
+}}
+"""
+
+
+def verilator_version() -> str:
+    exe = require_tool("verilator", "verilator")
+    result = subprocess.run([exe, "--version"], capture_output=True, text=True)
+    return result.stdout.strip()
+
+
+def build_jobs() -> int:
+    """Parallel compile jobs: the cores this process may use, at most 4."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count() or 1
+    return max(1, min(4, cores))
+
+
+def build_flags(top: str, inline: bool = False) -> list[str]:
+    """Verilator options of a build. By default with ``-fno-inline`` (pixel modules
+    kept apart): for 1024 pixels it built in 41-49 CPU-s instead of 233 and ran as
+    fast (about 7300 cycles per CPU-second either way; docs/outside-simulators.md).
+    ``inline=True`` gives Verilator's default module inlining."""
+    return [*VERILATOR_FLAGS, *([] if inline else ["-fno-inline"]), *LINT_WAIVERS,
+            "--top-module", top, "--prefix", "Varray", "-o", _EXECUTABLE,
+            "-MAKEFLAGS", f"OPT_FAST={CXX_OPT}"]
+
+
+def _runtime_dir(root: Path) -> Path:
+    """Where the runtime objects live: in the user's cache whatever ``build_dir`` is
+    (they depend only on Verilator and the flags), else beside the builds."""
+    name = "runtime-" + content_hash(" ".join(VERILATOR_FLAGS), CXX_OPT, verilator_version())
+    shared = default_cache_root() / "verilator"
+    try:
+        shared.mkdir(parents=True, exist_ok=True)
+        return shared / name
+    except OSError:
+        return root / name
+
+
+def _reuse_runtime(runtime: Path, obj: Path) -> list[str]:
+    """Put the cached runtime objects into ``obj``; return the Verilator flags that use them.
+
+    The objects are copied and marked with make's ``--old-file`` (use, never
+    remake: they depend on nothing the model changes). The precompiled
+    verilated.h is used through ``-include`` (g++ then skips parsing the header,
+    4-5 s per file on a loaded machine; it silently parses it after all if the
+    flags ever differ).
+    """
+    if not all((runtime / name).is_file() for name in _RUNTIME_OBJECTS):
+        return []
+    obj.mkdir()
+    flags = []
+    for name in _RUNTIME_OBJECTS:
+        shutil.copyfile(runtime / name, obj / name)
+        flags += ["-MAKEFLAGS", f"--old-file={name}"]
+    header = runtime / "pch" / "verilated.h"
+    if Path(str(header) + ".gch").is_file():
+        flags += ["-CFLAGS", f"-include {header}"]
+    return flags
+
+
+def _keep_runtime(obj: Path, runtime: Path) -> None:
+    """After the first successful build: save its runtime objects and precompile verilated.h.
+
+    The header is compiled by make with the model's own variables (an include of
+    the generated ``Varray.mk``), so its flags are those of every later compile.
+    Saved atomically; a failure to precompile only costs speed.
+    """
+    if runtime.is_dir() or not all((obj / name).is_file() for name in _RUNTIME_OBJECTS):
+        return
+    staging = Path(tempfile.mkdtemp(prefix=f".{runtime.name}-", dir=runtime.parent))
+    for name in _RUNTIME_OBJECTS:
+        shutil.copyfile(obj / name, staging / name)
+    pch_tmp = obj / "pch"
+    pch_tmp.mkdir()
+    (obj / "pch.mk").write_text(
+        "include Varray.mk\n"
+        "pch/verilated.h.gch:\n"
+        "\tln -sf $(VERILATOR_ROOT)/include/verilated.h pch/verilated.h\n"
+        "\t$(CXX) $(CXXFLAGS) $(CPPFLAGS) $(OPT_FAST) -x c++-header pch/verilated.h -o $@\n")
+    made = subprocess.run(["make", "-f", "pch.mk", f"OPT_FAST={CXX_OPT}", "pch/verilated.h.gch"],
+                          cwd=obj, capture_output=True, text=True)
+    if made.returncode == 0 and (pch_tmp / "verilated.h.gch").is_file():
+        shutil.move(str(pch_tmp), staging / "pch")
+    try:
+        os.rename(staging, runtime)
+    except OSError:                              # another process saved them first
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
+          build_dir: str | Path | None = None, progress: bool = False, inline: bool = False) -> Path:
+    """Build (or find in the cache) the simulation executable; return its path.
+
+    The cache key is a hash of the Verilog, the harness, the flags and the
+    Verilator version. A build runs in a temporary directory renamed into
+    place on success, under a lock, so concurrent runs never see half a build.
+    """
+    exe = require_tool("verilator", "verilator")
+    harness = harness_cpp(top, charge_bits, frame_bits)
+    flags = build_flags(top, inline)
+    root = Path(build_dir) if build_dir is not None else default_cache_root() / "verilator"
+    key = content_hash(verilog, harness, " ".join(flags), verilator_version())
+    with cache_entry(root, key) as (final, done):
+        if done:
+            return final / _EXECUTABLE
+        if progress:
+            print(f"tespike: building the Verilator model of {top} in {final} ...", file=sys.stderr)
+        work = Path(tempfile.mkdtemp(prefix=f".{key}.build-", dir=root))
+        try:
+            (work / "array.v").write_text(verilog)
+            (work / "harness.cpp").write_text(harness)
+            runtime = _runtime_dir(root)
+            reuse = _reuse_runtime(runtime, work / "obj")
+            argv = [exe, *flags, *reuse, "-j", str(build_jobs()), "-Mdir", "obj", "array.v",
+                    "harness.cpp"]
+            result = subprocess.run(argv, cwd=work, capture_output=True, text=True)
+            (work / "build.log").write_text(" ".join(argv) + "\n" + result.stdout + result.stderr)
+            if result.returncode != 0 or not (work / "obj" / _EXECUTABLE).is_file():
+                failed_log = root / f"{key}.failed.log"
+                shutil.copyfile(work / "build.log", failed_log)
+                raise SimulatorBuildError(
+                    f"Verilator build of {top} failed (exit {result.returncode}): "
+                    f"{first_error_line(result.stderr + result.stdout)} (full log: {failed_log})")
+            shutil.move(str(work / "obj" / _EXECUTABLE), work / _EXECUTABLE)
+            _keep_runtime(work / "obj", runtime)
+            shutil.rmtree(work / "obj")
+            (work / "done").write_text(key + "\n")
+            if final.exists():
+                shutil.rmtree(final)             # a stale entry without its "done" mark
+            os.rename(work, final)
+        finally:
+            if work.exists():
+                shutil.rmtree(work, ignore_errors=True)
+    return final / _EXECUTABLE
+
+
+def write_stimulus_file(path: str | Path, stimulus: np.ndarray, bits: int) -> None:
+    """(T, H, W) checked stimulus -> the harness's binary rows, written atomically in chunks."""
+    T = stimulus.shape[0]
+    flat = stimulus.reshape(T, -1)
+    with atomic_output(path) as tmp, open(tmp, "wb") as handle:
+        for a in range(0, T, _WRITE_ROWS):
+            handle.write(pack_rows(flat[a:a + _WRITE_ROWS], bits).tobytes())
+
+
+def read_captures(path: str | Path, frame_words: int) -> tuple[np.ndarray, np.ndarray]:
+    record = np.dtype([("clock", "<u8"), ("frame", "<u4", (frame_words,))])
+    data = np.fromfile(path, dtype=record)
+    return data["clock"].astype(np.int64), data["frame"].reshape(len(data), frame_words)
+
+
+def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str | Path | None = None,
+                  progress: bool = False, verilog: str | None = None, inline: bool = False
+                  ) -> np.ndarray:
+    """Simulate the generated Verilog of a (T, H, W) stimulus in Verilator; return words (K, H, W).
+
+    ``build_dir`` is the root of the build cache (default: ``$TESPIKE_CACHE`` or
+    ``~/.cache/tespike``, then ``verilator/``). ``verilog`` replaces the array
+    Verilog (tests use a hand-written model of the same ports); by default it
+    is ``rtl.verilog.array_verilog(config, H, W)``. ``inline=True`` builds with
+    Verilator's default module inlining instead of ``-fno-inline`` (see
+    :func:`build_flags`). The words are int64, equal
+    bit for bit to ``golden.sensor.simulate`` for a correct array.
+    """
+    check_stimulus(stimulus, config)
+    T, H, W = stimulus.shape
+    L = config.clocks_per_readout
+    K = T // L
+    if K == 0:
+        return np.zeros((0, H, W), np.int64)
+    N, E, Wd = H * W, config.input_bits, config.word_bits
+    top = top_module(config)
+    if verilog is None:
+        from rtl.verilog import array_verilog
+        verilog = array_verilog(config, H, W)
+    executable = build(verilog, top, N * E, N * Wd, build_dir=build_dir, progress=progress,
+                       inline=inline)
+    frame_words = words_per_row(N, Wd)
+    flush = L + 1
+    with tempfile.TemporaryDirectory(prefix="tespike-verilator-") as scratch:
+        stim_path, cap_path = Path(scratch) / "stimulus.bin", Path(scratch) / "captures.bin"
+        write_stimulus_file(stim_path, stimulus, E)
+        every = max(1, min(1 << 16, T // 100)) if progress else 0
+        argv = [str(executable), str(stim_path), str(T), str(K), str(flush), str(cap_path), str(every)]
+        process = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        if progress:
+            from tqdm import tqdm
+            with tqdm(total=T, unit="clk", desc="verilator", file=sys.stderr) as bar:
+                done = 0
+                for line in process.stdout:
+                    clock = min(int(line), T)
+                    bar.update(clock - done)
+                    done = clock
+        _, err = process.communicate()
+        if process.returncode != 0:
+            raise SimulatorRunError(
+                f"Verilator simulation of {top} failed (exit {process.returncode}): "
+                f"{first_error_line(err)}")
+        clocks, frames = read_captures(cap_path, frame_words)
+    what = f"Verilator run of {top} ({H} x {W})"
+    check_captures(clocks, config, K, what)
+    return unpack_rows(frames[:K], N, Wd).reshape(K, H, W)

@@ -1,0 +1,107 @@
+"""Port bit packing, hex rows, the capture check and the cache helpers of cosim/outside.py."""
+
+import numpy as np
+import pytest
+
+from golden.config import SensorConfig
+from golden.errors import TespikeError
+from cosim.outside import (SimulatorRunError, cache_entry, check_captures, content_hash,
+                           first_error_line, hex_to_rows, pack_rows, rows_to_hex, top_module,
+                           unpack_rows, words_per_row)
+
+
+def as_int(row_words) -> int:
+    return sum(int(w) << (32 * i) for i, w in enumerate(row_words))
+
+
+@pytest.mark.parametrize("bits", [1, 3, 5, 8, 13, 16, 17, 31, 32])
+@pytest.mark.parametrize("pixels", [1, 2, 6, 7, 33])
+def test_pack_puts_pixel_i_at_bits_i_times_width(bits, pixels, rng):
+    values = rng.integers(0, 1 << bits, size=(4, pixels), dtype=np.int64)
+    values[0] = (1 << bits) - 1                           # all ones: any spill into a neighbour shows
+    words = pack_rows(values, bits)
+    assert words.dtype == np.uint32 and words.shape == (4, words_per_row(pixels, bits))
+    for row, packed in zip(values, words):
+        expected = sum(int(v) << (i * bits) for i, v in enumerate(row))
+        assert as_int(packed) == expected                 # bits above N * width are zero too
+    assert np.array_equal(unpack_rows(words, pixels, bits), values)
+
+
+def test_pack_accepts_any_integer_dtype(rng):
+    values = rng.integers(0, 200, size=(5, 9))
+    expected = pack_rows(values.astype(np.int64), 8)
+    for dtype in (np.uint8, np.int16, np.uint32, np.int64):
+        assert np.array_equal(pack_rows(values.astype(dtype), 8), expected)
+
+
+def test_pack_large_chunks_match_small(rng, monkeypatch):
+    import cosim.outside as outside
+    values = rng.integers(0, 1 << 11, size=(300, 50), dtype=np.int64)
+    whole = pack_rows(values, 11)
+    monkeypatch.setattr(outside, "_PACK_CHUNK_BITS", 50 * 32 * 7)   # 7 rows per chunk
+    assert np.array_equal(pack_rows(values, 11), whole)
+
+
+def test_pack_refuses_bad_widths():
+    with pytest.raises(ValueError):
+        pack_rows(np.zeros((2, 2), np.int64), 33)
+    with pytest.raises(ValueError):
+        unpack_rows(np.zeros((2, 5), np.uint32), 2, 16)
+
+
+@pytest.mark.parametrize("bits", [1, 4, 30, 32, 33, 96, 97])
+def test_hex_round_trip_matches_verilog_h_format(bits, rng):
+    nw = (bits + 31) // 32
+    rows = rng.integers(0, 1 << 32, size=(3, nw), dtype=np.uint64).astype(np.uint32)
+    if bits % 32:
+        rows[:, -1] &= (1 << (bits % 32)) - 1
+    text = rows_to_hex(rows, bits)
+    for row, line in zip(rows, text):
+        assert line == format(as_int(row), "x").rjust((bits + 3) // 4, "0")   # as $fwrite("%h") prints
+    assert np.array_equal(hex_to_rows(text, bits), rows)
+
+
+def test_check_captures_accepts_a_fixed_latency():
+    c = SensorConfig(b1=2, b2=2)                          # L = 12
+    for latency in (0, 1, 12):
+        clocks = np.arange(4) * 12 + 11 + latency
+        assert check_captures(clocks, c, 4, "x") == latency
+
+
+@pytest.mark.parametrize("clocks, words", [
+    ([12, 24], "2 times"),                                # one missing
+    ([12, 24, 36, 40], "4 times"),                        # one extra
+    ([12, 25, 36], "not fixed"),                          # jitter
+    ([24, 36, 48], "outside 0..L"),                       # latency 13 > L
+    ([10, 22, 34], "outside 0..L"),                       # before the interval ended
+])
+def test_check_captures_refuses_broken_contracts(clocks, words):
+    with pytest.raises(SimulatorRunError, match=words):
+        check_captures(np.array(clocks), SensorConfig(b1=2, b2=2), 3, "run")
+    assert issubclass(SimulatorRunError, TespikeError)
+
+
+def test_first_error_line_prefers_error_lines():
+    text = "%Warning-WIDTH: a.v:3: meh\n%Error: a.v:7:3: syntax error, unexpected IDENTIFIER\nmore"
+    assert first_error_line(text) == "%Error: a.v:7:3: syntax error, unexpected IDENTIFIER"
+    assert first_error_line("x\n\nlast words\n") == "last words"
+    assert first_error_line("") == "(no output)"
+
+
+def test_content_hash_separates_parts():
+    assert content_hash("ab", "c") != content_hash("a", "bc")
+    assert content_hash("ab", "c") == content_hash(b"ab", "c")
+
+
+def test_cache_entry_reports_done(tmp_path):
+    with cache_entry(tmp_path, "k") as (final, done):
+        assert final == tmp_path / "k" and not done
+        final.mkdir()
+        (final / "done").write_text("k")
+    with cache_entry(tmp_path, "k") as (_, done):
+        assert done
+
+
+def test_top_module_names():
+    assert top_module(SensorConfig()) == "te_pixel_array"
+    assert top_module(SensorConfig(mode="ml")) == "ml_pixel_array"
