@@ -58,11 +58,12 @@ ROW_LOOP_MIN_PIXELS = 512
 #: Column subsets larger than this fraction are processed at full width instead of gathered.
 GATHER_FRACTION = 0.125
 
-#: The same for the pixels that go through the fixed-point rounds.
-SATURATING_GATHER_FRACTION = 0.3
+#: The same for the pixels stepped by the literal rule (a gather costs less than
+#: stepping the extra columns).
+LITERAL_GATHER_FRACTION = 0.5
 
-#: Fixed-point rounds tried on saturating pixels before their block is halved.
-MAX_ROUNDS = 4
+#: Stands for "no pixel fires in this block" in place of the Z array.
+NO_SPIKES = "no spikes"
 
 _INT16_LIMIT = (1 << 15) - 1
 _INT32_LIMIT = (1 << 31) - 1
@@ -159,10 +160,25 @@ class _Engine:
         theta, M = self.theta, self.acc_max
         T, n = e.shape
         emax = e.max(axis=0)
+        top = int(emax.max())
         # int16 halves the memory traffic again when this block's own largest input allows it.
         dt = self.dtype
-        if _magnitude_bound(self.config, T, int(emax.max())) <= _INT16_LIMIT:
+        if _magnitude_bound(self.config, T, top) <= _INT16_LIMIT:
             dt = np.dtype(np.int16)
+        # Exact shortcuts. No input and acc0 < theta everywhere: no pixel fires, acc stays.
+        if top == 0 and int(acc0.max()) < theta:
+            return NO_SPIKES, acc0.copy()
+        # Every input >= theta: acc >= 0 gives q >= theta, so every pixel fires on every
+        # clock (N_t = t + 1) and acc is the capped walk min(acc + e - theta, M).
+        if int(e.min()) >= theta:
+            if int(e.min()) - theta >= M:
+                return None, np.full(n, M, np.int64)
+            acc = acc0.astype(dt)
+            for row in e:
+                np.add(acc, row, out=acc, dtype=dt, casting="unsafe")
+                acc -= theta
+                np.minimum(acc, M, out=acc)
+            return None, acc.astype(np.int64)
         Y = self._array("Y", (T, n), dt, reuse)
         np.subtract(e, theta, out=Y, dtype=dt, casting="unsafe")
         Y[0] += acc0.astype(dt)
@@ -221,22 +237,19 @@ class _Engine:
         rest = cols.local(~busy)
         if rest.any():
             # Not busy: the closed form exceeds M (Y > M with Z = 0), so these saturate
-            # and idle in the block. The busy walk's loss is a lower bound of theirs.
-            sat = _Columns(rest, gather_fraction=SATURATING_GATHER_FRACTION)
-            Zs, acc_s = self._saturating(sat.take(cols.take(e)), sat.take(Yu), sat.take(Dm) - M,
-                                         sat.take_vector(cols.take_vector(acc0)))
-            Zu = cols.take(Z)
-            sat.put(Zu, Zs)
-            sat.put_vector(acc_u, acc_s)
-            cols.put(Z, Zu)
+            # and idle in the block; they are stepped by the literal rule.
+            self._step_subset(_Columns(rest, gather_fraction=LITERAL_GATHER_FRACTION), cols.take(e),
+                              cols.take_vector(acc0), cols, Z, acc_u)
         cols.put_vector(acc_end, acc_u)
 
     def _idlers(self, cols, e, Y, Z, acc0, acc_end, reuse):
-        """Pixels that idle under the closed form and may saturate: bound, exact check, rounds.
+        """Pixels that idle under the closed form and may saturate: a bound, else the literal rule.
 
         acc_t = Y_t - theta floor(Z_t / theta) <= Y_t - Z_t + theta - 1, so
-        max(Y - Z) <= M - theta + 1 proves the block calm; otherwise the closed
-        form holds iff its acc_t <= M for every t.
+        max(Y - Z) <= M - theta + 1 proves the block calm. The others are
+        stepped clock by clock: that costs about five row operations per clock
+        on the subset, less than checking the closed form (four passes) and then
+        iterating the saturation fixed point on the pixels that fail it.
         """
         theta, M, dt = self.theta, self.acc_max, Y.dtype
         Yu, Zu = cols.take(Y), cols.take(Z)
@@ -245,72 +258,43 @@ class _Engine:
         suspect = cols.local(work.max(axis=0) > M - theta + 1)
         if not suspect.any():
             return
-        np.floor_divide(Zu, theta, out=work)
-        work *= theta
-        np.subtract(Yu, work, out=work)                     # the closed form's acc
-        clip = cols.local(suspect & (work.max(axis=0) > M))
-        if not clip.any():
-            return
-        # The first round from D = 0, the running max of (closed-form acc - M), is a
-        # lower bound of the true loss; the rounds start there.
-        sat = _Columns(clip, gather_fraction=SATURATING_GATHER_FRACTION)
-        D0 = sat.take(work) - M
-        _scan(D0, np.maximum, seed=0)
-        Zs, acc_s = self._saturating(sat.take(cols.take(e)), sat.take(Yu), D0,
-                                     sat.take_vector(cols.take_vector(acc0)))
-        sat.put(Zu, Zs)
-        cols.put(Z, Zu)
         acc_u = cols.take_vector(acc_end)
-        sat.put_vector(acc_u, acc_s)
+        self._step_subset(_Columns(suspect, gather_fraction=LITERAL_GATHER_FRACTION), cols.take(e),
+                          cols.take_vector(acc0), cols, Z, acc_u)
         cols.put_vector(acc_end, acc_u)
 
-    def _saturating(self, e, Y, D0, acc0):
-        """Pixels that saturate and idle in one block: iterate the (D, N) fixed point.
+    def _step_subset(self, sub, e, acc0, cols, Z, acc_out):
+        """Overwrite Z and the end charge of the pixels in ``sub`` (within ``cols``) by literal steps."""
+        Zs, acc_s = self.literal(sub.take(e), sub.take_vector(acc0), Z.dtype)
+        Zu = cols.take(Z)
+        sub.put(Zu, Zs)
+        cols.put(Z, Zu)
+        sub.put_vector(acc_out, acc_s)
 
-        ``D0`` is the charge a pixel busy on every clock would lose, a lower
-        bound of the true loss (N_u <= u + 1), so the rounds increase to the
-        true D (module doc). Returns (Z, acc_end).
+    def literal(self, e, acc0, dt):
+        """SPEC section 3 clock by clock on (T, k) pixels in ``dt``: -> (Z = theta (N_t - t - 1), acc_end).
+
+        Exact for any pixel (the magnitude bound of the block covers acc + e and
+        theta T); used where the closed form would need correcting.
         """
-        theta, M, dt = self.theta, self.acc_max, Y.dtype
-        T, n = Y.shape
-        # D[u + 1] = charge thrown away up to clock u; D[0] = 0 (before the block).
-        D = np.empty((T + 1, n), dt)
-        D[0] = 0
-        D[1:] = D0
-        Z = np.empty((T, n), dt)
-        acc = np.empty((T, n), dt)
-        for round_ in range(MAX_ROUNDS):
-            np.subtract(Y, D[:-1], out=Z)
-            _scan(Z, np.minimum, seed=0)
-            np.floor_divide(Z, theta, out=acc)
-            acc *= theta
-            np.subtract(Y, acc, out=acc)                    # Y - theta f = acc + D
-            acc -= D[1:]                                    # acc_t under this round's D
-            # The round is the fixed point iff acc_t <= M everywhere (then the new
-            # loss, a running max, equals D). Settled pixels stay settled, so the
-            # rounds run on all of them until every one is (no column shuffling).
-            done = acc.max(axis=0) <= M
-            if done.all():
-                return Z, acc[-1].astype(np.int64)
-            if round_ == MAX_ROUNDS - 1:
-                break
-            acc += D[1:]
-            np.subtract(acc, M, out=D[1:])
-            _scan(D[1:], np.maximum, seed=0)
-        # Too many saturating stretches in this block for some pixels: halve it for them.
-        # (A one-clock block settles in two rounds, so this always terminates.)
-        assert T > 1, "a one-clock block must settle within two rounds"
-        acc_out = acc[-1].astype(np.int64)
-        live = np.flatnonzero(~done)
-        half = T // 2
-        Z1, acc1 = self.dynamics(e[:half, live], acc0[live])
-        Z2, acc2 = self.dynamics(e[half:, live], acc1)
-        Z1 = np.zeros((half, live.size), dt) if Z1 is None else Z1
-        Z2 = np.zeros((T - half, live.size), dt) if Z2 is None else Z2
-        Z[:half, live] = Z1
-        Z[half:, live] = Z2.astype(dt) + theta * (Z1[-1].astype(dt) // theta)
-        acc_out[live] = acc2
-        return Z, acc_out
+        theta, M = self.theta, self.acc_max
+        T, k = e.shape
+        acc = acc0.astype(dt)
+        q = np.empty(k, dt)
+        spike = np.empty(k, bool)
+        counts = np.empty((T + 1, k), dt)            # N_{t-1}, block-relative
+        counts[0] = 0
+        rows = list(counts)
+        for t in range(T):
+            np.add(acc, e[t], out=q, dtype=dt, casting="unsafe")
+            np.greater_equal(q, theta, out=spike)
+            np.subtract(q, theta, out=q, where=spike)
+            np.minimum(q, M, out=acc)
+            np.add(rows[t], spike, out=rows[t + 1], dtype=dt)
+        Z = counts[1:]
+        Z -= np.arange(1, T + 1, dtype=dt)[:, None]
+        Z *= theta
+        return Z, acc.astype(np.int64)
 
 
 class _Columns:
@@ -412,11 +396,16 @@ class PixelArray:
         before = np.zeros(sfc.shape[0], np.int64)     # N_{a-1}, block-relative
         k = 0
         for a, b, phase, ends in segments:
-            # N_{b-1} = (b - 1) + 1 + floor(Z / theta); Z None: every clock fired
-            after = np.full(sfc.shape[0], b, np.int64) if Z is None else b + Z[b - 1] // theta
-            count = after - before
-            if config.is_te:
-                new = sfc + count
+            if Z is NO_SPIKES:
+                after = before                    # no pixel fired: sfc, ovf, m unchanged
+            elif Z is None:                       # every pixel fired on every clock
+                after = np.full(sfc.shape[0], b, np.int64)
+            else:                                 # N_{b-1} = (b - 1) + 1 + floor(Z / theta)
+                after = b + Z[b - 1] // theta
+            if Z is NO_SPIKES:
+                pass
+            elif config.is_te:
+                new = sfc + (after - before)
                 over = np.flatnonzero(~ovf & (new >= p_max))
                 if over.size:
                     # The counter overflows at the first clock t with N_t >= target;
@@ -445,7 +434,7 @@ class PixelArray:
                     ovf[over] = True
                     sfc[over] = p_max
             else:
-                np.minimum(sfc + count, config.ml_max, out=sfc)
+                np.minimum(sfc + (after - before), config.ml_max, out=sfc)
             if ends:
                 if config.is_te:
                     words[k] = np.where(ovf, (1 << config.d) | m, sfc)
