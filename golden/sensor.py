@@ -145,6 +145,16 @@ class _Engine:
             self._buffers[key] = np.empty(shape, dtype)
         return self._buffers[key]
 
+    def _row(self, value: int, n: int, dtype: np.dtype) -> np.ndarray:
+        """A read-only vector of n copies of ``value`` (a view of one kept per value and dtype)."""
+        key = ("row", value, np.dtype(dtype))
+        row = self._buffers.get(key)
+        if row is None or row.size < n:
+            row = np.full(max(n, BLOCK_PIXELS), value, dtype)
+            row.flags.writeable = False
+            self._buffers[key] = row
+        return row[:n]
+
     def dynamics(self, e: np.ndarray, acc0: np.ndarray, reuse: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Advance pixels over a block: e (T, n) electrons, acc0 (n,) int64 charge -> (Z, acc_end).
 
@@ -174,10 +184,11 @@ class _Engine:
             if int(e.min()) - theta >= M:
                 return None, np.full(n, M, np.int64)
             acc = acc0.astype(dt)
+            theta_row, M_row = self._row(theta, n, dt), self._row(M, n, dt)
             for row in e:
                 np.add(acc, row, out=acc, dtype=dt, casting="unsafe")
-                acc -= theta
-                np.minimum(acc, M, out=acc)
+                np.subtract(acc, theta_row, out=acc)
+                np.minimum(acc, M_row, out=acc)
             return None, acc.astype(np.int64)
         Y = self._array("Y", (T, n), dt, reuse)
         np.subtract(e, theta, out=Y, dtype=dt, casting="unsafe")
@@ -191,7 +202,7 @@ class _Engine:
             Z = None
             acc_end = Y[-1].astype(np.int64)
         else:
-            Z = _scan(Y, np.minimum, seed=0, out=self._array("Z", (T, n), dt, reuse))
+            Z = _scan(Y, np.minimum, seed=self._row(0, n, dt), out=self._array("Z", (T, n), dt, reuse))
             acc_end = (Y[-1] - theta * (Z[-1] // theta)).astype(np.int64)
         # Saturation needs e > theta on some clock. A pixel that never idles under the
         # closed form (Z = 0: Y_t >= 0) and never holds more than M (Y <= M) is exact;
@@ -226,14 +237,16 @@ class _Engine:
         theta, M, dt = self.theta, self.acc_max, Y.dtype
         T = Y.shape[0]
         Yu = cols.take(Y)
-        Dm = _scan(Yu, np.maximum, seed=M, out=self._array("Dm", Yu.shape, dt, reuse and cols.full))
+        Dm = _scan(Yu, np.maximum, seed=self._row(M, Yu.shape[1], dt), out=self._array("Dm", Yu.shape, dt, reuse and cols.full))
         busy = Yu[0] >= 0
         if T > 1:
             gap = np.subtract(Yu[1:], Dm[:-1], out=self._array("tmp", Yu.shape, dt, reuse and cols.full)[1:])
             busy &= gap.min(axis=0) >= -M
         busy = cols.local(busy)
         acc_u = cols.take_vector(acc_end)
-        np.copyto(acc_u, Yu[-1].astype(np.int64) - (Dm[-1].astype(np.int64) - M), where=busy)
+        walk_end = np.subtract(Yu[-1], Dm[-1])                  # in dt: |Y - Dm| <= the bound
+        walk_end += M
+        np.copyto(acc_u, walk_end, where=busy)
         rest = cols.local(~busy)
         if rest.any():
             # Not busy: the closed form exceeds M (Y > M with Z = 0), so these saturate
@@ -280,16 +293,20 @@ class _Engine:
         theta, M = self.theta, self.acc_max
         T, k = e.shape
         acc = acc0.astype(dt)
-        q = np.empty(k, dt)
+        q, cut = np.empty(k, dt), np.empty(k, dt)
         spike = np.empty(k, bool)
         counts = np.empty((T + 1, k), dt)            # N_{t-1}, block-relative
         counts[0] = 0
         rows = list(counts)
+        # Constant rows instead of scalars: numpy's minimum with a scalar is several
+        # times slower than with an array, and a masked subtract slower than two ops.
+        theta_row, M_row = self._row(theta, k, dt), self._row(M, k, dt)
         for t in range(T):
-            np.add(acc, e[t], out=q, dtype=dt, casting="unsafe")
-            np.greater_equal(q, theta, out=spike)
-            np.subtract(q, theta, out=q, where=spike)
-            np.minimum(q, M, out=acc)
+            np.add(acc, e[t], out=q, dtype=dt, casting="unsafe")     # q = acc + e
+            np.greater_equal(q, theta_row, out=spike)
+            np.multiply(spike, theta_row, out=cut)
+            np.subtract(q, cut, out=q)                              # q - theta * spike
+            np.minimum(q, M_row, out=acc)
             np.add(rows[t], spike, out=rows[t + 1], dtype=dt)
         Z = counts[1:]
         Z -= np.arange(1, T + 1, dtype=dt)[:, None]
