@@ -62,6 +62,10 @@ GATHER_FRACTION = 0.125
 #: stepping the extra columns).
 LITERAL_GATHER_FRACTION = 0.5
 
+#: Quiet or pinned pixels (see _Engine.dynamics) above this fraction of a block are
+#: split off, and only the others are gathered for the general closed form.
+SHORTCUT_FRACTION = 0.5
+
 #: Stands for "no pixel fires in this block" in place of the Z array.
 NO_SPIKES = "no spikes"
 
@@ -175,21 +179,56 @@ class _Engine:
         dt = self.dtype
         if _magnitude_bound(self.config, T, top) <= _INT16_LIMIT:
             dt = np.dtype(np.int16)
-        # Exact shortcuts. No input and acc0 < theta everywhere: no pixel fires, acc stays.
-        if top == 0 and int(acc0.max()) < theta:
+        # Exact shortcuts, per pixel. Quiet: no input and acc0 < theta, so no spike and acc
+        # stays. Firing: every input >= theta; acc >= 0 gives q >= theta, so the pixel fires
+        # on every clock (N_t = t + 1) and acc is the capped walk min(acc + e - theta, M);
+        # pinned: every input >= theta + M, so acc = M after the block.
+        quiet = (emax == 0) & (acc0 < theta)
+        if quiet.all():
             return NO_SPIKES, acc0.copy()
-        # Every input >= theta: acc >= 0 gives q >= theta, so every pixel fires on every
-        # clock (N_t = t + 1) and acc is the capped walk min(acc + e - theta, M).
-        if int(e.min()) >= theta:
-            if int(e.min()) - theta >= M:
-                return None, np.full(n, M, np.int64)
-            acc = acc0.astype(dt)
-            theta_row, M_row = self._row(theta, n, dt), self._row(M, n, dt)
-            for row in e:
-                np.add(acc, row, out=acc, dtype=dt, casting="unsafe")
-                np.subtract(acc, theta_row, out=acc)
-                np.minimum(acc, M_row, out=acc)
-            return None, acc.astype(np.int64)
+        pinned = firing = None
+        if top >= theta:
+            emin = e.min(axis=0)
+            firing = emin >= theta
+            if firing.all():
+                if int(emin.min()) - theta >= M:
+                    return None, np.full(n, M, np.int64)
+                acc = acc0.astype(dt)
+                theta_row, M_row = self._row(theta, n, dt), self._row(M, n, dt)
+                for row in e:
+                    np.add(acc, row, out=acc, dtype=dt, casting="unsafe")
+                    np.subtract(acc, theta_row, out=acc)
+                    np.minimum(acc, M_row, out=acc)
+                return None, acc.astype(np.int64)
+            pinned = emin >= theta + M if top >= theta + M else None
+        special = quiet if pinned is None else quiet | pinned
+        n_special = int(np.count_nonzero(special))
+        if n_special <= SHORTCUT_FRACTION * n:
+            return self._general(e, acc0, emax, dt, reuse)
+        # Enough quiet or pinned pixels to pay for gathering the others (a column gather
+        # costs about two passes): only they get the general closed form.
+        rest = np.flatnonzero(~special)
+        Z = self._array("Zout", (T, n), dt, reuse)
+        Z[:] = self._quiet_column(T, dt)                     # quiet: N_t = 0
+        acc_end = acc0.copy()
+        if pinned is not None and pinned.any():
+            pin = np.flatnonzero(pinned)
+            Z[:, pin] = 0                                    # pinned: N_t = t + 1
+            acc_end[pin] = M
+        Zr, acc_r = self._general(e[:, rest], acc0[rest], emax[rest], dt, False)
+        # (Never NO_SPIKES: a pixel that is not quiet has input or acc0 >= theta.)
+        Z[:, rest] = 0 if Zr is None else Zr
+        acc_end[rest] = acc_r
+        return Z, acc_end
+
+    def _quiet_column(self, T: int, dt: np.dtype) -> np.ndarray:
+        """Z of a pixel that does not fire in a block of T clocks: theta * (0 - t - 1), as (T, 1)."""
+        return (-self.theta * np.arange(1, T + 1, dtype=np.int64)).astype(dt)[:, None]
+
+    def _general(self, e, acc0, emax, dt, reuse):
+        """:meth:`dynamics` for any pixels: the closed form, corrected where it may saturate."""
+        theta, M = self.theta, self.acc_max
+        T, n = e.shape
         Y = self._array("Y", (T, n), dt, reuse)
         np.subtract(e, theta, out=Y, dtype=dt, casting="unsafe")
         Y[0] += acc0.astype(dt)

@@ -169,6 +169,31 @@ def test_every_input_at_least_theta_shortcut(config, rng):
         check_equal(config, stim, split_points(T, rng, 3))
 
 
+@pytest.mark.parametrize("fraction", [0.0, 0.5, 1.0])
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
+                         ids=str)
+def test_quiet_and_pinned_pixels_split_off(config, fraction, rng, monkeypatch):
+    """Blocks mixing dark (quiet), pinned (e >= theta + M), firing and other pixels, split or not."""
+    monkeypatch.setattr(sensor, "SHORTCUT_FRACTION", fraction)
+    widths = []
+    original = sensor._Engine._general
+    monkeypatch.setattr(sensor._Engine, "_general", lambda self, e, *a: widths.append(e.shape[1]) or
+                        original(self, e, *a))
+    theta, M, top = config.threshold, config.acc_max, config.input_max
+    T, shape = config.clocks_per_readout * 3, (24, 24)
+    kind = rng.integers(0, 5, size=shape)
+    kind[0, :4] = [0, 1, 2, 3]
+    zero = np.zeros((T,) + shape, np.int64)
+    pinned = np.full((T,) + shape, top) if top >= theta + M else zero
+    firing = rng.integers(min(theta, top), min(top, theta + M), size=(T,) + shape, endpoint=True)
+    dark_then_bright = np.where(np.arange(T)[:, None, None] < T // 2, 0, top)
+    mixed = make_stimulus(config, "mixed", (T,) + shape, rng)
+    stim = np.choose(kind, [zero, pinned, firing, dark_then_bright, mixed])
+    check_equal(config, stim, split_points(T, rng, 3))
+    if fraction == 0.0:
+        assert min(widths) < shape[0] * shape[1], "no block was split"
+
+
 @pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(acc_bits=14), EDGE_CONFIGS[6]], ids=str)
 def test_zero_input_after_bright_drains_the_residual(config, rng):
     """Zero input with acc0 >= theta must still fire: the no-spike shortcut needs acc0 < theta."""
