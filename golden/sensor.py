@@ -186,11 +186,11 @@ class _Engine:
         quiet = (emax == 0) & (acc0 < theta)
         if quiet.all():
             return NO_SPIKES, acc0.copy()
-        pinned = firing = None
-        if top >= theta:
+        pinned = None
+        # (Row 0 rules out "every pixel fires" cheaply; pinned needs top >= theta + M.)
+        if top >= theta + M or (top >= theta and int(e[0].min()) >= theta):
             emin = e.min(axis=0)
-            firing = emin >= theta
-            if firing.all():
+            if int(emin.min()) >= theta:
                 if int(emin.min()) - theta >= M:
                     return None, np.full(n, M, np.int64)
                 acc = acc0.astype(dt)
@@ -204,7 +204,7 @@ class _Engine:
         special = quiet if pinned is None else quiet | pinned
         n_special = int(np.count_nonzero(special))
         if n_special <= SHORTCUT_FRACTION * n:
-            return self._general(e, acc0, emax, dt, reuse)
+            return self._general(e, acc0, emax, dt, reuse, pinned)
         # Enough quiet or pinned pixels to pay for gathering the others (a column gather
         # costs about two passes): only they get the general closed form.
         rest = np.flatnonzero(~special)
@@ -225,8 +225,12 @@ class _Engine:
         """Z of a pixel that does not fire in a block of T clocks: theta * (0 - t - 1), as (T, 1)."""
         return (-self.theta * np.arange(1, T + 1, dtype=np.int64)).astype(dt)[:, None]
 
-    def _general(self, e, acc0, emax, dt, reuse):
-        """:meth:`dynamics` for any pixels: the closed form, corrected where it may saturate."""
+    def _general(self, e, acc0, emax, dt, reuse, pinned=None):
+        """:meth:`dynamics` for any pixels: the closed form, corrected where it may saturate.
+
+        ``pinned`` (optional) marks pixels known to fire on every clock and end at M;
+        they skip the busy-walk test.
+        """
         theta, M = self.theta, self.acc_max
         T, n = e.shape
         Y = self._array("Y", (T, n), dt, reuse)
@@ -250,6 +254,10 @@ class _Engine:
         if not unsure.any():
             return Z, acc_end
         unsure &= ~never_idle | (Y.max(axis=0) > M)
+        if pinned is not None:
+            # Y >= 0 there (Z = 0: N_t = t + 1 is right already); only acc needs its cap.
+            unsure &= ~pinned
+            np.copyto(acc_end, M, where=pinned)
         if not unsure.any():
             return Z, acc_end
         if Z is None:
