@@ -11,11 +11,15 @@ same stimulus; the engine's words are checked equal to the reference's.
 from __future__ import annotations
 
 import argparse
+import os
 import re
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))    # measure this checkout's golden/
 
 from golden.config import DESIGN_ELECTRONS, SensorConfig
 from golden.io import atomic_output
@@ -67,9 +71,13 @@ def main() -> None:
                         help="also put the table into docs/golden-model.md (between the bench markers)")
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
+    load = os.getloadavg()
+    print(f"golden from {Path(sys.modules['golden'].__file__).parent}; load average "
+          f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores")
     print(f"{args.size}x{args.size} pixels, {args.readouts} readouts per run (reference: "
           f"{args.reference_readouts}); pixel-clock updates per CPU second, best of 3 (reference: 1)")
-    lines = [f"{args.size} x {args.size} pixels, {args.readouts} readouts; pixel-clock updates per CPU second",
+    lines = [f"{args.size} x {args.size} pixels, {args.readouts} readouts; pixel-clock updates per CPU second; "
+             f"load average {load[0]:.1f} on {os.cpu_count()} cores",
              "", "| config | stimulus | engine | reference | ratio | words equal |", "| --- | --- | --- | --- | --- | --- |"]
     print(f"{'config':<6} {'stimulus':<28} {'engine':>10} {'reference':>10} {'ratio':>7}  words equal")
     for name in ("te", "ml"):

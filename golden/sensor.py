@@ -201,13 +201,17 @@ class _Engine:
                     np.minimum(acc, M_row, out=acc)
                 return None, acc.astype(np.int64)
             pinned = emin >= theta + M if top >= theta + M else None
-        special = quiet if pinned is None else quiet | pinned
+        # Pixels that surely saturate (an input > theta + M) and may idle (an input < theta)
+        # would fail the closed form and be stepped anyway: step them at once.
+        direct = None
+        if pinned is not None:
+            direct = (emax > theta + M) & (emin < theta)
+        special = quiet if pinned is None else quiet | pinned | direct
         n_special = int(np.count_nonzero(special))
         if n_special <= SHORTCUT_FRACTION * n:
             return self._general(e, acc0, emax, dt, reuse, pinned)
-        # Enough quiet or pinned pixels to pay for gathering the others (a column gather
-        # costs about two passes): only they get the general closed form.
-        rest = np.flatnonzero(~special)
+        # Enough quiet, pinned or stepped pixels to pay for gathering the others (a column
+        # gather costs about two passes): only those get the general closed form.
         Z = self._array("Zout", (T, n), dt, reuse)
         Z[:] = self._quiet_column(T, dt)                     # quiet: N_t = 0
         acc_end = acc0.copy()
@@ -215,10 +219,15 @@ class _Engine:
             pin = np.flatnonzero(pinned)
             Z[:, pin] = 0                                    # pinned: N_t = t + 1
             acc_end[pin] = M
-        Zr, acc_r = self._general(e[:, rest], acc0[rest], emax[rest], dt, False)
-        # (Never NO_SPIKES: a pixel that is not quiet has input or acc0 >= theta.)
-        Z[:, rest] = 0 if Zr is None else Zr
-        acc_end[rest] = acc_r
+        if direct is not None and direct.any():
+            step = np.flatnonzero(direct)
+            Z[:, step], acc_end[step] = self.literal(e[:, step], acc0[step], dt)
+        rest = np.flatnonzero(~special)
+        if rest.size:
+            Zr, acc_r = self._general(e[:, rest], acc0[rest], emax[rest], dt, False)
+            # (Never NO_SPIKES: a pixel that is not quiet has input or acc0 >= theta.)
+            Z[:, rest] = 0 if Zr is None else Zr
+            acc_end[rest] = acc_r
         return Z, acc_end
 
     def _quiet_column(self, T: int, dt: np.dtype) -> np.ndarray:
