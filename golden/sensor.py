@@ -16,16 +16,14 @@ of clocks starting with charge ``acc0`` and with ``Y_t = acc0 + sum_{u<=t}
   which unrolls to ``N_t = t + 1 + floor(Z_t / theta)`` with
   ``Z_t = min(0, min_{u<=t} Y_u)``, a running minimum; ``acc_t = Y_t -
   theta * floor(Z_t / theta)``;
-* saturation throws away charge ``D_t = max_{u<=t} max(0, Y_u - theta f_u - M)``
-  (a running maximum) and the spike rule then reads ``Y_u - D_{u-1}`` instead
-  of ``Y_u``. The pair (D, N) is the unique fixed point of these two causal
-  maps; iterating them from a lower bound of D (the busy walk's loss, or
-  D = 0) increases D monotonically to it, and each iteration settles at least
-  one more saturating stretch. Pixels that saturate and idle in one block
-  are iterated on their own (pixels busy on every clock of the block have the
-  exact top-reflected-walk form, ``acc_t = Y_t - D_t``, ``N_t = t + 1``); the few that would need many rounds in a block
-  are split into half blocks (down to single clocks, where two rounds are
-  exact by construction), so no stimulus can make the engine wrong, only slower.
+* a pixel busy on every clock of the block (N_t = t + 1) throws away
+  ``D_t = max(0, max_{u<=t} Y_u - M)`` and holds ``acc_t = Y_t - D_t``
+  (the top-reflected walk);
+* per pixel, exact shortcuts come first (no input and acc0 < theta: no spike;
+  every input >= theta: a spike every clock, acc a capped walk, pinned at M
+  when every input >= theta + M), and the pixels that both saturate and idle
+  in a block, for which no closed form is cheap, are stepped by the literal
+  rule restricted to them (five row operations per clock on the subset).
 
 All intermediates are bounded (see :func:`_magnitude_bound`), so the engine
 uses int16 or int32 where a block provably fits and int64 otherwise; configurations
@@ -162,14 +160,16 @@ class _Engine:
     def dynamics(self, e: np.ndarray, acc0: np.ndarray, reuse: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Advance pixels over a block: e (T, n) electrons, acc0 (n,) int64 charge -> (Z, acc_end).
 
-        ``Z`` is None when every pixel fired on every clock (N_t = t + 1). With ``reuse`` the returned Z lives in a buffer that the next call with
-        ``reuse`` overwrites (the caller consumes it first).
+        ``Z`` is None when every pixel fired on every clock (N_t = t + 1) and
+        NO_SPIKES when none fired. With ``reuse`` the returned Z lives in a
+        buffer that the next call with ``reuse`` overwrites (the caller
+        consumes it first).
 
-        Every pixel is first given the no-saturation closed form; only pixels
-        that could saturate in this block are looked at again: those that are
-        provably calm keep it, those busy on every clock get the reflected-walk
-        form, and the rest (a block where a pixel both saturates and idles) go
-        through the fixed-point rounds of :meth:`_saturating`.
+        Quiet, firing and pinned pixels take their shortcuts; the others get the
+        no-saturation closed form, and only pixels that could saturate in this
+        block are looked at again (:meth:`_general`): those provably calm keep
+        it, those busy on every clock get the reflected-walk form, and the rest
+        (a pixel that both saturates and idles) are stepped by :meth:`literal`.
         """
         theta, M = self.theta, self.acc_max
         T, n = e.shape
@@ -284,7 +284,7 @@ class _Engine:
         return Z, acc_end
 
     def _walkers(self, cols, e, Y, Z, acc0, acc_end, reuse):
-        """Pixels with Y >= 0 throughout and Y > M somewhere: busy walk, else the rounds.
+        """Pixels with Y >= 0 throughout and Y > M somewhere: busy walk, else the literal rule.
 
         The charge a pixel busy on every clock throws away is D_t = Dm_t - M with
         Dm_t = max(M, max_{u<=t} Y_u); it is busy on every clock iff Y_t >= D_{t-1}
