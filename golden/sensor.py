@@ -502,10 +502,11 @@ class PixelArray:
                         hi = np.where(open_ & reached, mid, hi)
                         lo = np.where(open_ & ~reached, mid + 1, lo)
                     m[over] = (phase + lo - a) // F + 1
-                np.copyto(sfc, new, where=~ovf)
+                # sfc stays at p_max once overflowed and is below it otherwise, so
+                # min(new, p_max) freezes overflowed counters and latches new ones.
+                np.minimum(new, self._engine._row(p_max, new.size, np.int64), out=sfc)
                 if over.size:
                     ovf[over] = True
-                    sfc[over] = p_max
             else:
                 np.minimum(sfc + (after - before), config.ml_max, out=sfc)
             if ends:
