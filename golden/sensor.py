@@ -16,16 +16,14 @@ of clocks starting with charge ``acc0`` and with ``Y_t = acc0 + sum_{u<=t}
   which unrolls to ``N_t = t + 1 + floor(Z_t / theta)`` with
   ``Z_t = min(0, min_{u<=t} Y_u)``, a running minimum; ``acc_t = Y_t -
   theta * floor(Z_t / theta)``;
-* saturation throws away charge ``D_t = max_{u<=t} max(0, Y_u - theta f_u - M)``
-  (a running maximum) and the spike rule then reads ``Y_u - D_{u-1}`` instead
-  of ``Y_u``. The pair (D, N) is the unique fixed point of these two causal
-  maps; iterating them from a lower bound of D (the busy walk's loss, or
-  D = 0) increases D monotonically to it, and each iteration settles at least
-  one more saturating stretch. Pixels that saturate and idle in one block
-  are iterated on their own (pixels busy on every clock of the block have the
-  exact top-reflected-walk form, ``acc_t = Y_t - D_t``, ``N_t = t + 1``); the few that would need many rounds in a block
-  are split into half blocks (down to single clocks, where two rounds are
-  exact by construction), so no stimulus can make the engine wrong, only slower.
+* a pixel busy on every clock of the block (N_t = t + 1) throws away
+  ``D_t = max(0, max_{u<=t} Y_u - M)`` and holds ``acc_t = Y_t - D_t``
+  (the top-reflected walk);
+* per pixel, exact shortcuts come first (no input and acc0 < theta: no spike;
+  every input >= theta: a spike every clock, acc a capped walk, pinned at M
+  when every input >= theta + M), and the pixels that both saturate and idle
+  in a block, for which no closed form is cheap, are stepped by the literal
+  rule restricted to them (five row operations per clock on the subset).
 
 All intermediates are bounded (see :func:`_magnitude_bound`), so the engine
 uses int16 or int32 where a block provably fits and int64 otherwise; configurations
@@ -58,11 +56,16 @@ ROW_LOOP_MIN_PIXELS = 512
 #: Column subsets larger than this fraction are processed at full width instead of gathered.
 GATHER_FRACTION = 0.125
 
-#: The same for the pixels that go through the fixed-point rounds.
-SATURATING_GATHER_FRACTION = 0.3
+#: The same for the pixels stepped by the literal rule (a gather costs less than
+#: stepping the extra columns).
+LITERAL_GATHER_FRACTION = 0.5
 
-#: Fixed-point rounds tried on saturating pixels before their block is halved.
-MAX_ROUNDS = 4
+#: Quiet or pinned pixels (see _Engine.dynamics) above this fraction of a block are
+#: split off, and only the others are gathered for the general closed form.
+SHORTCUT_FRACTION = 0.5
+
+#: Stands for "no pixel fires in this block" in place of the Z array.
+NO_SPIKES = "no spikes"
 
 _INT16_LIMIT = (1 << 15) - 1
 _INT32_LIMIT = (1 << 31) - 1
@@ -144,25 +147,101 @@ class _Engine:
             self._buffers[key] = np.empty(shape, dtype)
         return self._buffers[key]
 
+    def _row(self, value: int, n: int, dtype: np.dtype) -> np.ndarray:
+        """A read-only vector of n copies of ``value`` (a view of one kept per value and dtype)."""
+        key = ("row", value, np.dtype(dtype))
+        row = self._buffers.get(key)
+        if row is None or row.size < n:
+            row = np.full(max(n, BLOCK_PIXELS), value, dtype)
+            row.flags.writeable = False
+            self._buffers[key] = row
+        return row[:n]
+
     def dynamics(self, e: np.ndarray, acc0: np.ndarray, reuse: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Advance pixels over a block: e (T, n) electrons, acc0 (n,) int64 charge -> (Z, acc_end).
 
-        ``Z`` is None when every pixel fired on every clock (N_t = t + 1). With ``reuse`` the returned Z lives in a buffer that the next call with
-        ``reuse`` overwrites (the caller consumes it first).
+        ``Z`` is None when every pixel fired on every clock (N_t = t + 1) and
+        NO_SPIKES when none fired. With ``reuse`` the returned Z lives in a
+        buffer that the next call with ``reuse`` overwrites (the caller
+        consumes it first).
 
-        Every pixel is first given the no-saturation closed form; only pixels
-        that could saturate in this block are looked at again: those that are
-        provably calm keep it, those busy on every clock get the reflected-walk
-        form, and the rest (a block where a pixel both saturates and idles) go
-        through the fixed-point rounds of :meth:`_saturating`.
+        Quiet, firing and pinned pixels take their shortcuts; the others get the
+        no-saturation closed form, and only pixels that could saturate in this
+        block are looked at again (:meth:`_general`): those provably calm keep
+        it, those busy on every clock get the reflected-walk form, and the rest
+        (a pixel that both saturates and idles) are stepped by :meth:`literal`.
         """
         theta, M = self.theta, self.acc_max
         T, n = e.shape
         emax = e.max(axis=0)
+        top = int(emax.max())
         # int16 halves the memory traffic again when this block's own largest input allows it.
         dt = self.dtype
-        if _magnitude_bound(self.config, T, int(emax.max())) <= _INT16_LIMIT:
+        if _magnitude_bound(self.config, T, top) <= _INT16_LIMIT:
             dt = np.dtype(np.int16)
+        # Exact shortcuts, per pixel. Quiet: no input and acc0 < theta, so no spike and acc
+        # stays. Firing: every input >= theta; acc >= 0 gives q >= theta, so the pixel fires
+        # on every clock (N_t = t + 1) and acc is the capped walk min(acc + e - theta, M);
+        # pinned: every input >= theta + M, so acc = M after the block.
+        quiet = (emax == 0) & (acc0 < theta)
+        if quiet.all():
+            return NO_SPIKES, acc0.copy()
+        pinned = None
+        # (Row 0 rules out "every pixel fires" cheaply; pinned needs top >= theta + M.)
+        if top >= theta + M or (top >= theta and int(e[0].min()) >= theta):
+            emin = e.min(axis=0)
+            if int(emin.min()) >= theta:
+                if int(emin.min()) - theta >= M:
+                    return None, np.full(n, M, np.int64)
+                acc = acc0.astype(dt)
+                theta_row, M_row = self._row(theta, n, dt), self._row(M, n, dt)
+                for row in e:
+                    np.add(acc, row, out=acc, dtype=dt, casting="unsafe")
+                    np.subtract(acc, theta_row, out=acc)
+                    np.minimum(acc, M_row, out=acc)
+                return None, acc.astype(np.int64)
+            pinned = emin >= theta + M if top >= theta + M else None
+        # Pixels that surely saturate (an input > theta + M) and may idle (an input < theta)
+        # would fail the closed form and be stepped anyway: step them at once.
+        direct = None
+        if pinned is not None:
+            direct = (emax > theta + M) & (emin < theta)
+        special = quiet if pinned is None else quiet | pinned | direct
+        n_special = int(np.count_nonzero(special))
+        if n_special <= SHORTCUT_FRACTION * n:
+            return self._general(e, acc0, emax, dt, reuse, pinned)
+        # Enough quiet, pinned or stepped pixels to pay for gathering the others (a column
+        # gather costs about two passes): only those get the general closed form.
+        Z = self._array("Zout", (T, n), dt, reuse)
+        Z[:] = self._quiet_column(T, dt)                     # quiet: N_t = 0
+        acc_end = acc0.copy()
+        if pinned is not None and pinned.any():
+            pin = np.flatnonzero(pinned)
+            Z[:, pin] = 0                                    # pinned: N_t = t + 1
+            acc_end[pin] = M
+        if direct is not None and direct.any():
+            step = np.flatnonzero(direct)
+            Z[:, step], acc_end[step] = self.literal(e[:, step], acc0[step], dt)
+        rest = np.flatnonzero(~special)
+        if rest.size:
+            Zr, acc_r = self._general(e[:, rest], acc0[rest], emax[rest], dt, False)
+            # (Never NO_SPIKES: a pixel that is not quiet has input or acc0 >= theta.)
+            Z[:, rest] = 0 if Zr is None else Zr
+            acc_end[rest] = acc_r
+        return Z, acc_end
+
+    def _quiet_column(self, T: int, dt: np.dtype) -> np.ndarray:
+        """Z of a pixel that does not fire in a block of T clocks: theta * (0 - t - 1), as (T, 1)."""
+        return (-self.theta * np.arange(1, T + 1, dtype=np.int64)).astype(dt)[:, None]
+
+    def _general(self, e, acc0, emax, dt, reuse, pinned=None):
+        """:meth:`dynamics` for any pixels: the closed form, corrected where it may saturate.
+
+        ``pinned`` (optional) marks pixels known to fire on every clock and end at M;
+        they skip the busy-walk test.
+        """
+        theta, M = self.theta, self.acc_max
+        T, n = e.shape
         Y = self._array("Y", (T, n), dt, reuse)
         np.subtract(e, theta, out=Y, dtype=dt, casting="unsafe")
         Y[0] += acc0.astype(dt)
@@ -175,7 +254,7 @@ class _Engine:
             Z = None
             acc_end = Y[-1].astype(np.int64)
         else:
-            Z = _scan(Y, np.minimum, seed=0, out=self._array("Z", (T, n), dt, reuse))
+            Z = _scan(Y, np.minimum, seed=self._row(0, n, dt), out=self._array("Z", (T, n), dt, reuse))
             acc_end = (Y[-1] - theta * (Z[-1] // theta)).astype(np.int64)
         # Saturation needs e > theta on some clock. A pixel that never idles under the
         # closed form (Z = 0: Y_t >= 0) and never holds more than M (Y <= M) is exact;
@@ -184,6 +263,10 @@ class _Engine:
         if not unsure.any():
             return Z, acc_end
         unsure &= ~never_idle | (Y.max(axis=0) > M)
+        if pinned is not None:
+            # Y >= 0 there (Z = 0: N_t = t + 1 is right already); only acc needs its cap.
+            unsure &= ~pinned
+            np.copyto(acc_end, M, where=pinned)
         if not unsure.any():
             return Z, acc_end
         if Z is None:
@@ -201,7 +284,7 @@ class _Engine:
         return Z, acc_end
 
     def _walkers(self, cols, e, Y, Z, acc0, acc_end, reuse):
-        """Pixels with Y >= 0 throughout and Y > M somewhere: busy walk, else the rounds.
+        """Pixels with Y >= 0 throughout and Y > M somewhere: busy walk, else the literal rule.
 
         The charge a pixel busy on every clock throws away is D_t = Dm_t - M with
         Dm_t = max(M, max_{u<=t} Y_u); it is busy on every clock iff Y_t >= D_{t-1}
@@ -210,33 +293,32 @@ class _Engine:
         theta, M, dt = self.theta, self.acc_max, Y.dtype
         T = Y.shape[0]
         Yu = cols.take(Y)
-        Dm = _scan(Yu, np.maximum, seed=M, out=self._array("Dm", Yu.shape, dt, reuse and cols.full))
+        Dm = _scan(Yu, np.maximum, seed=self._row(M, Yu.shape[1], dt), out=self._array("Dm", Yu.shape, dt, reuse and cols.full))
         busy = Yu[0] >= 0
         if T > 1:
             gap = np.subtract(Yu[1:], Dm[:-1], out=self._array("tmp", Yu.shape, dt, reuse and cols.full)[1:])
             busy &= gap.min(axis=0) >= -M
         busy = cols.local(busy)
         acc_u = cols.take_vector(acc_end)
-        np.copyto(acc_u, Yu[-1].astype(np.int64) - (Dm[-1].astype(np.int64) - M), where=busy)
+        walk_end = np.subtract(Yu[-1], Dm[-1])                  # in dt: |Y - Dm| <= the bound
+        walk_end += M
+        np.copyto(acc_u, walk_end, where=busy)
         rest = cols.local(~busy)
         if rest.any():
             # Not busy: the closed form exceeds M (Y > M with Z = 0), so these saturate
-            # and idle in the block. The busy walk's loss is a lower bound of theirs.
-            sat = _Columns(rest, gather_fraction=SATURATING_GATHER_FRACTION)
-            Zs, acc_s = self._saturating(sat.take(cols.take(e)), sat.take(Yu), sat.take(Dm) - M,
-                                         sat.take_vector(cols.take_vector(acc0)))
-            Zu = cols.take(Z)
-            sat.put(Zu, Zs)
-            sat.put_vector(acc_u, acc_s)
-            cols.put(Z, Zu)
+            # and idle in the block; they are stepped by the literal rule.
+            self._step_subset(_Columns(rest, gather_fraction=LITERAL_GATHER_FRACTION), cols.take(e),
+                              cols.take_vector(acc0), cols, Z, acc_u)
         cols.put_vector(acc_end, acc_u)
 
     def _idlers(self, cols, e, Y, Z, acc0, acc_end, reuse):
-        """Pixels that idle under the closed form and may saturate: bound, exact check, rounds.
+        """Pixels that idle under the closed form and may saturate: a bound, else the literal rule.
 
         acc_t = Y_t - theta floor(Z_t / theta) <= Y_t - Z_t + theta - 1, so
-        max(Y - Z) <= M - theta + 1 proves the block calm; otherwise the closed
-        form holds iff its acc_t <= M for every t.
+        max(Y - Z) <= M - theta + 1 proves the block calm. The others are
+        stepped clock by clock: that costs about five row operations per clock
+        on the subset, less than checking the closed form (four passes) and then
+        iterating the saturation fixed point on the pixels that fail it.
         """
         theta, M, dt = self.theta, self.acc_max, Y.dtype
         Yu, Zu = cols.take(Y), cols.take(Z)
@@ -245,72 +327,47 @@ class _Engine:
         suspect = cols.local(work.max(axis=0) > M - theta + 1)
         if not suspect.any():
             return
-        np.floor_divide(Zu, theta, out=work)
-        work *= theta
-        np.subtract(Yu, work, out=work)                     # the closed form's acc
-        clip = cols.local(suspect & (work.max(axis=0) > M))
-        if not clip.any():
-            return
-        # The first round from D = 0, the running max of (closed-form acc - M), is a
-        # lower bound of the true loss; the rounds start there.
-        sat = _Columns(clip, gather_fraction=SATURATING_GATHER_FRACTION)
-        D0 = sat.take(work) - M
-        _scan(D0, np.maximum, seed=0)
-        Zs, acc_s = self._saturating(sat.take(cols.take(e)), sat.take(Yu), D0,
-                                     sat.take_vector(cols.take_vector(acc0)))
-        sat.put(Zu, Zs)
-        cols.put(Z, Zu)
         acc_u = cols.take_vector(acc_end)
-        sat.put_vector(acc_u, acc_s)
+        self._step_subset(_Columns(suspect, gather_fraction=LITERAL_GATHER_FRACTION), cols.take(e),
+                          cols.take_vector(acc0), cols, Z, acc_u)
         cols.put_vector(acc_end, acc_u)
 
-    def _saturating(self, e, Y, D0, acc0):
-        """Pixels that saturate and idle in one block: iterate the (D, N) fixed point.
+    def _step_subset(self, sub, e, acc0, cols, Z, acc_out):
+        """Overwrite Z and the end charge of the pixels in ``sub`` (within ``cols``) by literal steps."""
+        Zs, acc_s = self.literal(sub.take(e), sub.take_vector(acc0), Z.dtype)
+        Zu = cols.take(Z)
+        sub.put(Zu, Zs)
+        cols.put(Z, Zu)
+        sub.put_vector(acc_out, acc_s)
 
-        ``D0`` is the charge a pixel busy on every clock would lose, a lower
-        bound of the true loss (N_u <= u + 1), so the rounds increase to the
-        true D (module doc). Returns (Z, acc_end).
+    def literal(self, e, acc0, dt):
+        """SPEC section 3 clock by clock on (T, k) pixels in ``dt``: -> (Z = theta (N_t - t - 1), acc_end).
+
+        Exact for any pixel (the magnitude bound of the block covers acc + e and
+        theta T); used where the closed form would need correcting.
         """
-        theta, M, dt = self.theta, self.acc_max, Y.dtype
-        T, n = Y.shape
-        # D[u + 1] = charge thrown away up to clock u; D[0] = 0 (before the block).
-        D = np.empty((T + 1, n), dt)
-        D[0] = 0
-        D[1:] = D0
-        Z = np.empty((T, n), dt)
-        acc = np.empty((T, n), dt)
-        for round_ in range(MAX_ROUNDS):
-            np.subtract(Y, D[:-1], out=Z)
-            _scan(Z, np.minimum, seed=0)
-            np.floor_divide(Z, theta, out=acc)
-            acc *= theta
-            np.subtract(Y, acc, out=acc)                    # Y - theta f = acc + D
-            acc -= D[1:]                                    # acc_t under this round's D
-            # The round is the fixed point iff acc_t <= M everywhere (then the new
-            # loss, a running max, equals D). Settled pixels stay settled, so the
-            # rounds run on all of them until every one is (no column shuffling).
-            done = acc.max(axis=0) <= M
-            if done.all():
-                return Z, acc[-1].astype(np.int64)
-            if round_ == MAX_ROUNDS - 1:
-                break
-            acc += D[1:]
-            np.subtract(acc, M, out=D[1:])
-            _scan(D[1:], np.maximum, seed=0)
-        # Too many saturating stretches in this block for some pixels: halve it for them.
-        # (A one-clock block settles in two rounds, so this always terminates.)
-        assert T > 1, "a one-clock block must settle within two rounds"
-        acc_out = acc[-1].astype(np.int64)
-        live = np.flatnonzero(~done)
-        half = T // 2
-        Z1, acc1 = self.dynamics(e[:half, live], acc0[live])
-        Z2, acc2 = self.dynamics(e[half:, live], acc1)
-        Z1 = np.zeros((half, live.size), dt) if Z1 is None else Z1
-        Z2 = np.zeros((T - half, live.size), dt) if Z2 is None else Z2
-        Z[:half, live] = Z1
-        Z[half:, live] = Z2.astype(dt) + theta * (Z1[-1].astype(dt) // theta)
-        acc_out[live] = acc2
-        return Z, acc_out
+        theta, M = self.theta, self.acc_max
+        T, k = e.shape
+        acc = acc0.astype(dt)
+        q, cut = np.empty(k, dt), np.empty(k, dt)
+        spike = np.empty(k, bool)
+        counts = np.empty((T + 1, k), dt)            # N_{t-1}, block-relative
+        counts[0] = 0
+        rows = list(counts)
+        # Constant rows instead of scalars: numpy's minimum with a scalar is several
+        # times slower than with an array, and a masked subtract slower than two ops.
+        theta_row, M_row = self._row(theta, k, dt), self._row(M, k, dt)
+        for t in range(T):
+            np.add(acc, e[t], out=q, dtype=dt, casting="unsafe")     # q = acc + e
+            np.greater_equal(q, theta_row, out=spike)
+            np.multiply(spike, theta_row, out=cut)
+            np.subtract(q, cut, out=q)                              # q - theta * spike
+            np.minimum(q, M_row, out=acc)
+            np.add(rows[t], spike, out=rows[t + 1], dtype=dt)
+        Z = counts[1:]
+        Z -= np.arange(1, T + 1, dtype=dt)[:, None]
+        Z *= theta
+        return Z, acc.astype(np.int64)
 
 
 class _Columns:
@@ -412,11 +469,16 @@ class PixelArray:
         before = np.zeros(sfc.shape[0], np.int64)     # N_{a-1}, block-relative
         k = 0
         for a, b, phase, ends in segments:
-            # N_{b-1} = (b - 1) + 1 + floor(Z / theta); Z None: every clock fired
-            after = np.full(sfc.shape[0], b, np.int64) if Z is None else b + Z[b - 1] // theta
-            count = after - before
-            if config.is_te:
-                new = sfc + count
+            if Z is NO_SPIKES:
+                after = before                    # no pixel fired: sfc, ovf, m unchanged
+            elif Z is None:                       # every pixel fired on every clock
+                after = np.full(sfc.shape[0], b, np.int64)
+            else:                                 # N_{b-1} = (b - 1) + 1 + floor(Z / theta)
+                after = b + Z[b - 1] // theta
+            if Z is NO_SPIKES:
+                pass
+            elif config.is_te:
+                new = sfc + (after - before)
                 over = np.flatnonzero(~ovf & (new >= p_max))
                 if over.size:
                     # The counter overflows at the first clock t with N_t >= target;
@@ -440,12 +502,13 @@ class PixelArray:
                         hi = np.where(open_ & reached, mid, hi)
                         lo = np.where(open_ & ~reached, mid + 1, lo)
                     m[over] = (phase + lo - a) // F + 1
-                np.copyto(sfc, new, where=~ovf)
+                # sfc stays at p_max once overflowed and is below it otherwise, so
+                # min(new, p_max) freezes overflowed counters and latches new ones.
+                np.minimum(new, self._engine._row(p_max, new.size, np.int64), out=sfc)
                 if over.size:
                     ovf[over] = True
-                    sfc[over] = p_max
             else:
-                np.minimum(sfc + count, config.ml_max, out=sfc)
+                np.minimum(sfc + (after - before), config.ml_max, out=sfc)
             if ends:
                 if config.is_te:
                     words[k] = np.where(ovf, (1 << config.d) | m, sfc)

@@ -115,13 +115,95 @@ def test_wide_array_row_loop_path(config, rng):
     check_equal(config, stim, split_points(len(stim), rng, 3))
 
 
-@pytest.mark.parametrize("config", [SensorConfig(), EDGE_CONFIGS[6], EDGE_CONFIGS[8]], ids=str)
-def test_block_halving_path(config, rng, monkeypatch):
-    """With one fixed-point round allowed, saturating blocks are halved down to single clocks."""
-    monkeypatch.setattr(sensor, "MAX_ROUNDS", 1)
+@pytest.mark.parametrize("fraction", [0.0, 1.0])
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
+                         ids=str)
+def test_literal_subset_path_full_width_and_gathered(config, fraction, rng, monkeypatch):
+    """Pixels that saturate and idle in a block are stepped literally, at full width or gathered."""
+    monkeypatch.setattr(sensor, "LITERAL_GATHER_FRACTION", fraction)
+    calls = []
+    original = sensor._Engine.literal
+    monkeypatch.setattr(sensor._Engine, "literal", lambda self, *a: calls.append(a[0].shape) or original(self, *a))
     for kind in ("near-threshold", "bursts", "sparse-huge", "mixed"):
-        stim = make_stimulus(config, kind, (config.clocks_per_readout * 3, 4, 5), rng)
+        stim = make_stimulus(config, kind, (config.clocks_per_readout * 3, 24, 24), rng)
         check_equal(config, stim, split_points(len(stim), rng, 3))
+    assert calls, "the literal subset path was not exercised"
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
+                         ids=str)
+def test_literal_step_equals_reference_clock_by_clock(config, rng):
+    """_Engine.literal: acc and the spike count after every clock equal the reference's."""
+    engine = sensor._Engine(config)
+    if engine.dtype is None:
+        pytest.skip("literal-rule configuration")
+    T = engine.block_clocks
+    stim = make_stimulus(config, "mixed", (T, 5, 7), rng)
+    acc0 = rng.integers(0, config.acc_max, size=35, endpoint=True)
+    Z, acc = engine.literal(stim.reshape(T, 35), acc0, engine.dtype)
+    state = PixelState.zeros((5, 7))
+    state.acc = acc0.reshape(5, 7).copy()
+    free = SensorConfig(mode="ml", b1=config.b1, b2=config.b2, alpha=config.alpha,
+                        clocks_per_tick=config.clocks_per_tick, threshold=config.threshold,
+                        acc_bits=config.acc_bits, input_bits=config.input_bits, ml_bits=16)
+    read = np.zeros((5, 7), np.int64)                        # spikes in readouts already emitted
+    for t in range(T):
+        words, state = step_reference(free, stim[t:t + 1], state)
+        read += words.sum(axis=0)
+        N = t + 1 + Z[t].astype(np.int64) // config.threshold
+        assert np.array_equal(N, (read + state.sfc).reshape(35)), t
+    assert np.array_equal(acc, state.acc.reshape(35))
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
+                         ids=str)
+def test_every_input_at_least_theta_shortcut(config, rng):
+    """Blocks with e >= theta everywhere: every pixel fires every clock; capped walk and pinned top."""
+    theta, M, top = config.threshold, config.acc_max, config.input_max
+    if top < theta:
+        pytest.skip("input cannot reach theta")
+    T = config.clocks_per_readout * 3
+    walk = rng.integers(theta, min(top, theta + M), size=(T, 4, 5), endpoint=True)
+    pinned = rng.integers(min(top, theta + M), top, size=(T, 4, 5), endpoint=True)
+    for stim in (walk, pinned, np.concatenate([pinned[:T // 2], walk[T // 2:]])):
+        check_equal(config, stim, split_points(T, rng, 3))
+
+
+@pytest.mark.parametrize("fraction", [0.0, 0.5, 1.0])
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
+                         ids=str)
+def test_quiet_and_pinned_pixels_split_off(config, fraction, rng, monkeypatch):
+    """Blocks mixing dark (quiet), pinned (e >= theta + M), firing and other pixels, split or not."""
+    monkeypatch.setattr(sensor, "SHORTCUT_FRACTION", fraction)
+    widths = []
+    original = sensor._Engine._general
+    monkeypatch.setattr(sensor._Engine, "_general", lambda self, e, *a: widths.append(e.shape[1]) or
+                        original(self, e, *a))
+    theta, M, top = config.threshold, config.acc_max, config.input_max
+    T, shape = config.clocks_per_readout * 3, (24, 24)
+    kind = rng.integers(0, 5, size=shape)
+    kind[0, :4] = [0, 1, 2, 3]
+    zero = np.zeros((T,) + shape, np.int64)
+    pinned = np.full((T,) + shape, top) if top >= theta + M else zero
+    firing = rng.integers(min(theta, top), min(top, theta + M), size=(T,) + shape, endpoint=True)
+    dark_then_bright = np.where(np.arange(T)[:, None, None] < T // 2, 0, top)
+    mixed = make_stimulus(config, "mixed", (T,) + shape, rng)
+    stim = np.choose(kind, [zero, pinned, firing, dark_then_bright, mixed])
+    check_equal(config, stim, split_points(T, rng, 3))
+    if fraction == 0.0:
+        assert min(widths) < shape[0] * shape[1], "no block was split"
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(acc_bits=14), EDGE_CONFIGS[6]], ids=str)
+def test_zero_input_after_bright_drains_the_residual(config, rng):
+    """Zero input with acc0 >= theta must still fire: the no-spike shortcut needs acc0 < theta."""
+    L = config.clocks_per_readout
+    stim = np.zeros((L * 3, 4, 4), np.int64)
+    stim[L - 3:L] = config.input_max                     # fill the accumulator, then darkness
+    stim[:, 0, 0] = 0
+    check_equal(config, stim, split_points(len(stim), rng, 3))
+    if config.acc_max >= 2 * config.threshold and config.input_max > config.threshold:
+        assert step_reference(config, stim)[1].acc.max() < config.threshold   # it did drain
 
 
 def test_chunks_of_one_clock(rng):
