@@ -175,3 +175,12 @@ def test_no_whole_readout_gives_no_words(monkeypatch):
 def test_harness_handles_each_port_storage(charge_bits, frame_bits, set_line, get_line):
     text = harness_cpp("ml_pixel_array", charge_bits, frame_bits)
     assert set_line in text and get_line in text
+
+
+def test_unknown_cxx_opt_is_refused_before_building(monkeypatch, rng):
+    monkeypatch.setattr(cv, "build", lambda *a, **k: pytest.fail("built with a bad cxx_opt"))
+    with pytest.raises(InputError, match=r"cxx_opt '-O9'.*one of -O0, -O1"):
+        run_verilator(PAPER_TE, make_stimulus("zero", PAPER_TE, rng, readouts=1), cxx_opt="-O9")
+    assert "OPT_FAST=-O1" in cv.build_flags("te_pixel_array")
+    assert "OPT_FAST=-O2" in cv.build_flags("te_pixel_array", cxx_opt="-O2")
+    assert cv.build_flags("te_pixel_array", extra=("-fno-dfg",))[-1] == "-fno-dfg"
