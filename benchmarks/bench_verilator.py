@@ -20,9 +20,10 @@ Run from the repository root:
 [--readouts 20] [--inline] [--variants O1 O0 O2 O1:-fno-dfg]``
 
 ``--variants`` builds and runs the generated array once per variant in the same
-run: ``O<n>`` is the C++ optimisation (``cxx_opt``), anything after ``:`` more
-Verilator options (space separated), e.g. ``O1:-fno-dfg`` or
-``O1:-MAKEFLAGS OPT_SLOW=-O0``.
+run: ``O<n>`` is the C++ optimisation (``cxx_opt``) of the backend's default
+view (``cosim.verilator.shared_pixel_view``), ``plain-O<n>`` the Verilog
+exactly as generated, anything after ``:`` more Verilator options (space
+separated), e.g. ``O1:-fno-dfg`` or ``O1:-MAKEFLAGS OPT_SLOW=-O0``.
 """
 
 from __future__ import annotations
@@ -62,9 +63,10 @@ def golden_rate(config, stim) -> tuple[float, np.ndarray]:
     return stim.shape[0] / (time.perf_counter() - start), words
 
 
-def parse_variant(text: str) -> tuple[str, tuple[str, ...]]:
+def parse_variant(text: str) -> tuple[bool, str, tuple[str, ...]]:
     opt, _, extra = text.partition(":")
-    return "-" + opt, tuple(extra.split())
+    plain = opt.startswith("plain-")
+    return not plain, "-" + opt.removeprefix("plain-"), tuple(extra.split())
 
 
 def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False,
@@ -79,11 +81,13 @@ def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False,
         verilog = spec_model_verilog(config, side, side, style="loop")
     else:
         verilog = array_verilog(config, side, side)
+    shared, cxx_opt, extra = parse_variant(variant)
+    if shared and not loop_model:
+        verilog = cv.shared_pixel_view(verilog, "te_pixel")
     gen = time.perf_counter() - start
     N = side * side
     with tempfile.TemporaryDirectory(prefix="bench-verilator-") as tmp:
         cpu0, start = children_cpu(), time.perf_counter()
-        cxx_opt, extra = parse_variant(variant)
         exe = cv.build(verilog, "te_pixel_array", N * config.input_bits, N * config.word_bits,
                        build_dir=tmp, progress=True, inline=inline, cxx_opt=cxx_opt,
                        extra_flags=extra)

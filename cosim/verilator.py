@@ -20,6 +20,7 @@ Files between Python and the harness (little-endian):
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -51,7 +52,8 @@ LINT_WAIVERS: dict[str, str] = {}
 #: default is ``-Os``). Measured on the paper-TE 32 x 32 array in one session
 #: (docs/outside-simulators.md): ``-O1`` built in 42 CPU-s and ran at about 7200
 #: cycles per CPU-second; ``-O2`` built in 56 CPU-s and ran no faster; ``-O0``
-#: built in 32 CPU-s (about half the wall time) but ran 2.8x slower.
+#: built in 32 CPU-s but ran 2.8x slower (at 4096 pixels 7x slower, and
+#: built no faster).
 CXX_OPT = "-O1"
 
 #: The C++ optimisation levels a build may ask for (``cxx_opt=``).
@@ -68,6 +70,36 @@ _READ_ROWS = 4096
 _WRITE_ROWS = 4096
 
 _EXECUTABLE = "tespike_sim"
+
+
+#: Verilator-only comment that keeps a pixel's ``charge`` input a variable of
+#: the instance (see :func:`shared_pixel_view`).
+_KEEP_PORT = "/* verilator public_flat_rd */"
+
+
+def shared_pixel_view(verilog: str, pixel_module: str) -> str:
+    """The same Verilog with the pixel module's ``charge`` input marked ``public_flat_rd``.
+
+    Verilator 5.006 otherwise replaces the port by its connection
+    (``charge[i*E +: E]`` of the array), so every instance gets its own copy
+    of the pixel's code. Marked, the port stays a variable of the instance, the
+    per-instance functions become identical and Verilator merges them into one:
+    for 32 x 32 pixels 3.1 MB of C++ instead of 7.7 MB (docs/outside-simulators.md).
+    A comment only: the logic, the ports and every other line are unchanged.
+    Raises ``ValueError`` if the module or its one ``charge`` declaration is
+    not found (the Verilog is then not the generated array).
+    """
+    start = re.search(rf"^module {re.escape(pixel_module)}\(.*$", verilog, re.M)
+    if start is None:
+        raise ValueError(f"module {pixel_module} not found in the Verilog")
+    end = verilog.index("\nendmodule", start.end())
+    body = verilog[start.end():end]
+    body, count = re.subn(r"^(  wire (?:\[\d+:0\] )?charge);$", rf"\1 {_KEEP_PORT};", body,
+                          flags=re.M)
+    if count != 1:
+        raise ValueError(f"module {pixel_module}: expected one 'wire charge;' declaration, "
+                         f"found {count}")
+    return verilog[:start.end()] + body + verilog[end:]
 
 
 def _ctype(bits: int) -> str:
@@ -353,7 +385,7 @@ def read_captures(path: str | Path, frame_words: int) -> tuple[np.ndarray, np.nd
 
 def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str | Path | None = None,
                   progress: bool = False, verilog: str | None = None, inline: bool = False,
-                  cxx_opt: str = CXX_OPT) -> np.ndarray:
+                  cxx_opt: str = CXX_OPT, shared: bool = True) -> np.ndarray:
     """Simulate the generated Verilog of a (T, H, W) stimulus in Verilator; return words (K, H, W).
 
     ``build_dir`` is the root of the build cache (default: ``$TESPIKE_CACHE`` or
@@ -362,8 +394,11 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
     is ``rtl.verilog.array_verilog(config, H, W)``. ``inline=True`` builds with
     Verilator's default module inlining instead of ``-fno-inline`` (see
     :func:`build_flags`); ``cxx_opt`` is g++'s optimisation of the model
-    (:data:`CXX_OPT`; ``"-O0"`` halves a large build and runs about 3x slower,
-    the better choice for a large array run for few clocks). The words are int64, equal
+    (:data:`CXX_OPT`). ``shared=True``
+    builds :func:`shared_pixel_view` of Verilog that has the ``<te|ml>_pixel``
+    module (the generated array; a hand-written model without it is built as
+    given); ``shared=False`` builds the text exactly as given. The words are
+    int64, equal
     bit for bit to ``golden.sensor.simulate`` for a correct array.
     """
     check_stimulus(stimulus, config)
@@ -378,6 +413,9 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
     if verilog is None:
         from rtl.verilog import array_verilog
         verilog = array_verilog(config, H, W)
+    pixel = top.replace("_array", "")
+    if shared and re.search(rf"^module {pixel}\(", verilog, re.M):
+        verilog = shared_pixel_view(verilog, pixel)
     executable = build(verilog, top, N * E, N * Wd, build_dir=build_dir, progress=progress,
                        inline=inline, cxx_opt=cxx_opt)
     frame_words = words_per_row(N, Wd)
