@@ -17,7 +17,13 @@ each simulator's speed as a ratio to it. Writes ``benchmarks/bench_verilator.png
 
 Run from the repository root:
 ``python3 benchmarks/bench_verilator.py [--sizes 32 64] [--loop-sizes 32 64] [--icarus-sizes 4 8]
-[--readouts 20] [--inline]``
+[--readouts 20] [--inline] [--variants O1 O0 O2 O1:-fno-dfg]``
+
+``--variants`` builds and runs the generated array once per variant in the same
+run: ``O<n>`` is the C++ optimisation (``cxx_opt``) of the backend's default
+view (``cosim.verilator.shared_pixel_view``), ``plain-O<n>`` the Verilog
+exactly as generated, anything after ``:`` more Verilator options (space
+separated), e.g. ``O1:-fno-dfg`` or ``O1:-MAKEFLAGS OPT_SLOW=-O0``.
 """
 
 from __future__ import annotations
@@ -57,7 +63,14 @@ def golden_rate(config, stim) -> tuple[float, np.ndarray]:
     return stim.shape[0] / (time.perf_counter() - start), words
 
 
-def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False):
+def parse_variant(text: str) -> tuple[bool, str, tuple[str, ...]]:
+    opt, _, extra = text.partition(":")
+    plain = opt.startswith("plain-")
+    return not plain, "-" + opt.removeprefix("plain-"), tuple(extra.split())
+
+
+def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False,
+                    variant: str = "O1"):
     import cosim.verilator as cv
     from cosim.outside import check_captures, unpack_rows, words_per_row
     from rtl.verilog import array_verilog
@@ -68,12 +81,16 @@ def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False):
         verilog = spec_model_verilog(config, side, side, style="loop")
     else:
         verilog = array_verilog(config, side, side)
+    shared, cxx_opt, extra = parse_variant(variant)
+    if shared and not loop_model:
+        verilog = cv.shared_pixel_view(verilog, "te_pixel")
     gen = time.perf_counter() - start
     N = side * side
     with tempfile.TemporaryDirectory(prefix="bench-verilator-") as tmp:
         cpu0, start = children_cpu(), time.perf_counter()
         exe = cv.build(verilog, "te_pixel_array", N * config.input_bits, N * config.word_bits,
-                       build_dir=tmp, progress=True, inline=inline)
+                       build_dir=tmp, progress=True, inline=inline, cxx_opt=cxx_opt,
+                       extra_flags=extra)
         build_wall, build_cpu = time.perf_counter() - start, children_cpu() - cpu0
         T, L = stim.shape[0], config.clocks_per_readout
         stim_path, cap_path = Path(tmp) / "stim.bin", Path(tmp) / "cap.bin"
@@ -110,6 +127,8 @@ def main(argv=None) -> int:
     parser.add_argument("--loop-sizes", type=int, nargs="*", default=[32, 64],
                         help="sides for the hand-written procedural-loop model of the same ports "
                              "(tests/verilog_spec_model.py): what the array's structure costs")
+    parser.add_argument("--variants", nargs="*", default=["O1"],
+                        help="builds of the generated array to compare: O<n>[:verilator options]")
     parser.add_argument("--png", default=str(ROOT / "benchmarks" / "bench_verilator.png"))
     args = parser.parse_args(argv)
     config = SensorConfig()
@@ -118,8 +137,10 @@ def main(argv=None) -> int:
     for side in args.sizes:
         stim = stimulus(config, side, args.readouts, rng)
         base, golden_words = golden_rate(config, stim)
-        r = bench_verilator(config, side, stim, inline=args.inline)
-        rows.append(("verilator", side, r, base, np.array_equal(r["words"], golden_words)))
+        for variant in args.variants:
+            r = bench_verilator(config, side, stim, inline=args.inline, variant=variant)
+            name = "verilator" if variant == "O1" else variant
+            rows.append((name, side, r, base, np.array_equal(r["words"], golden_words)))
     for side in args.loop_sizes:
         stim = stimulus(config, side, args.readouts, rng)
         base, golden_words = golden_rate(config, stim)
@@ -134,13 +155,13 @@ def main(argv=None) -> int:
     load = os.getloadavg()[0]
     print(f"paper TE (L = 240), load average {load:.1f} on {os.cpu_count()} cores; "
           f"Verilator {'default inlining' if args.inline else '-fno-inline'}")
-    print(f"{'simulator':>10} {'pixels':>7} {'gen s':>6} {'build s':>8} {'build cpu':>9} "
+    print(f"{'simulator':>24} {'pixels':>7} {'gen s':>6} {'build s':>8} {'build cpu':>9} "
           f"{'cycles/s':>9} {'cyc/cpu-s':>9} {'golden c/s':>10} {'x golden':>8} {'equal':>5}")
     for name, side, r, base, equal in rows:
         gen = f"{r['gen']:6.1f}" if "gen" in r else f"{'':>6}"
         build = f"{r['build_wall']:8.1f} {r['build_cpu']:9.1f}" if "build_wall" in r else f"{'':>8} {'':>9}"
         cpu_rate = f"{r['rate_cpu']:9.0f}" if "rate_cpu" in r else f"{'':>9}"
-        print(f"{name:>10} {side * side:7d} {gen} {build} {r['rate']:9.0f} {cpu_rate} {base:10.0f} "
+        print(f"{name:>24} {side * side:7d} {gen} {build} {r['rate']:9.0f} {cpu_rate} {base:10.0f} "
               f"{r['rate'] / base:8.1f} {str(equal):>5}")
     try:
         import matplotlib
@@ -149,7 +170,9 @@ def main(argv=None) -> int:
         from golden.io import atomic_output
 
         fig, ax = plt.subplots(figsize=(5.5, 3.5))
-        for name, marker in (("verilator", "o"), ("loop model", "^"), ("icarus", "s")):
+        names = list(dict.fromkeys(n for n, *_ in rows))
+        for name in names:
+            marker = {"loop model": "^", "icarus": "s"}.get(name, "o")
             pts = [(side * side, r["rate"]) for n, side, r, _, _ in rows if n == name]
             if pts:
                 ax.loglog(*zip(*pts), marker=marker, label=name)

@@ -20,6 +20,7 @@ Files between Python and the harness (little-endian):
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -29,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from golden.config import SensorConfig
+from golden.errors import InputError
 from golden.io import atomic_output, check_stimulus
 
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, cache_entry,
@@ -47,9 +49,15 @@ VERILATOR_FLAGS = ("--cc", "--exe", "--build", "-O3", "--x-assign", "fast",
 LINT_WAIVERS: dict[str, str] = {}
 
 #: C++ optimisation of the model's code (verilated.mk's ``OPT_FAST``; its
-#: default is ``-Os``). ``-O1`` is a common choice for large generated code; it
-#: was not benchmarked against ``-Os`` here.
+#: default is ``-Os``). Measured on the paper-TE 32 x 32 array in one session
+#: (docs/outside-simulators.md): ``-O1`` built in 42 CPU-s and ran at about 7200
+#: cycles per CPU-second; ``-O2`` built in 56 CPU-s and ran no faster; ``-O0``
+#: built in 32 CPU-s but ran 2.8x slower (at 4096 pixels 7x slower, and
+#: built no faster).
 CXX_OPT = "-O1"
+
+#: The C++ optimisation levels a build may ask for (``cxx_opt=``).
+CXX_OPTS = ("-O0", "-O1", "-O2", "-O3", "-Os")
 
 #: Verilator's runtime objects and precompiled verilated.h; the first build
 #: makes them (about 30 s on a loaded machine), later builds reuse them.
@@ -62,6 +70,36 @@ _READ_ROWS = 4096
 _WRITE_ROWS = 4096
 
 _EXECUTABLE = "tespike_sim"
+
+
+#: Verilator-only comment that keeps a pixel's ``charge`` input a variable of
+#: the instance (see :func:`shared_pixel_view`).
+_KEEP_PORT = "/* verilator public_flat_rd */"
+
+
+def shared_pixel_view(verilog: str, pixel_module: str) -> str:
+    """The same Verilog with the pixel module's ``charge`` input marked ``public_flat_rd``.
+
+    Verilator 5.006 otherwise replaces the port by its connection
+    (``charge[i*E +: E]`` of the array), so every instance gets its own copy
+    of the pixel's code. Marked, the port stays a variable of the instance, the
+    per-instance functions become identical and Verilator merges them into one:
+    for 32 x 32 pixels 3.1 MB of C++ instead of 7.7 MB (docs/outside-simulators.md).
+    A comment only: the logic, the ports and every other line are unchanged.
+    Raises ``ValueError`` if the module or its one ``charge`` declaration is
+    not found (the Verilog is then not the generated array).
+    """
+    start = re.search(rf"^module {re.escape(pixel_module)}\(.*$", verilog, re.M)
+    if start is None:
+        raise ValueError(f"module {pixel_module} not found in the Verilog")
+    end = verilog.index("\nendmodule", start.end())
+    body = verilog[start.end():end]
+    body, count = re.subn(r"^(  wire (?:\[\d+:0\] )?charge);$", rf"\1 {_KEEP_PORT};", body,
+                          flags=re.M)
+    if count != 1:
+        raise ValueError(f"module {pixel_module}: expected one 'wire charge;' declaration, "
+                         f"found {count}")
+    return verilog[:start.end()] + body + verilog[end:]
 
 
 def _ctype(bits: int) -> str:
@@ -199,20 +237,30 @@ def build_jobs() -> int:
     return max(1, min(4, cores))
 
 
-def build_flags(top: str, inline: bool = False) -> list[str]:
+def _check_cxx_opt(cxx_opt: str) -> str:
+    if cxx_opt not in CXX_OPTS:
+        raise InputError(f"cxx_opt {cxx_opt!r}: the C++ optimisation must be one of "
+                         f"{', '.join(CXX_OPTS)}")
+    return cxx_opt
+
+
+def build_flags(top: str, inline: bool = False, cxx_opt: str = CXX_OPT,
+                extra: tuple[str, ...] = ()) -> list[str]:
     """Verilator options of a build. By default with ``-fno-inline`` (pixel modules
     kept apart): for 1024 pixels it built in 41-49 CPU-s instead of 233 and ran as
     fast (about 7300 cycles per CPU-second either way; docs/outside-simulators.md).
-    ``inline=True`` gives Verilator's default module inlining."""
+    ``inline=True`` gives Verilator's default module inlining; ``cxx_opt`` is g++'s
+    optimisation of the model (:data:`CXX_OPT`); ``extra`` are more Verilator
+    options (the benchmark's experiments, e.g. ``-fno-dfg``), part of the cache key."""
     return [*VERILATOR_FLAGS, *([] if inline else ["-fno-inline"]), *LINT_WAIVERS,
             "--top-module", top, "--prefix", "Varray", "-o", _EXECUTABLE,
-            "-MAKEFLAGS", f"OPT_FAST={CXX_OPT}"]
+            "-MAKEFLAGS", f"OPT_FAST={_check_cxx_opt(cxx_opt)}", *extra]
 
 
-def _runtime_dir(root: Path) -> Path:
+def _runtime_dir(root: Path, cxx_opt: str = CXX_OPT) -> Path:
     """Where the runtime objects live: in the user's cache whatever ``build_dir`` is
     (they depend only on Verilator and the flags), else beside the builds."""
-    name = "runtime-" + content_hash(" ".join(VERILATOR_FLAGS), CXX_OPT, verilator_version())
+    name = "runtime-" + content_hash(" ".join(VERILATOR_FLAGS), cxx_opt, verilator_version())
     shared = default_cache_root() / "verilator"
     try:
         shared.mkdir(parents=True, exist_ok=True)
@@ -243,7 +291,7 @@ def _reuse_runtime(runtime: Path, obj: Path) -> list[str]:
     return flags
 
 
-def _keep_runtime(obj: Path, runtime: Path) -> None:
+def _keep_runtime(obj: Path, runtime: Path, cxx_opt: str = CXX_OPT) -> None:
     """After the first successful build: save its runtime objects and precompile verilated.h.
 
     The header is compiled by make with the model's own variables (an include of
@@ -262,7 +310,7 @@ def _keep_runtime(obj: Path, runtime: Path) -> None:
         "pch/verilated.h.gch:\n"
         "\tln -sf $(VERILATOR_ROOT)/include/verilated.h pch/verilated.h\n"
         "\t$(CXX) $(CXXFLAGS) $(CPPFLAGS) $(OPT_FAST) -x c++-header pch/verilated.h -o $@\n")
-    made = subprocess.run(["make", "-f", "pch.mk", f"OPT_FAST={CXX_OPT}", "pch/verilated.h.gch"],
+    made = subprocess.run(["make", "-f", "pch.mk", f"OPT_FAST={cxx_opt}", "pch/verilated.h.gch"],
                           cwd=obj, capture_output=True, text=True)
     if made.returncode == 0 and (pch_tmp / "verilated.h.gch").is_file():
         shutil.move(str(pch_tmp), staging / "pch")
@@ -273,7 +321,8 @@ def _keep_runtime(obj: Path, runtime: Path) -> None:
 
 
 def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
-          build_dir: str | Path | None = None, progress: bool = False, inline: bool = False) -> Path:
+          build_dir: str | Path | None = None, progress: bool = False, inline: bool = False,
+          cxx_opt: str = CXX_OPT, extra_flags: tuple[str, ...] = ()) -> Path:
     """Build (or find in the cache) the simulation executable; return its path.
 
     The cache key is a hash of the Verilog, the harness, the flags and the
@@ -282,7 +331,7 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
     """
     exe = require_tool("verilator", "verilator")
     harness = harness_cpp(top, charge_bits, frame_bits)
-    flags = build_flags(top, inline)
+    flags = build_flags(top, inline, cxx_opt, tuple(extra_flags))
     root = Path(build_dir) if build_dir is not None else default_cache_root() / "verilator"
     key = content_hash(verilog, harness, " ".join(flags), verilator_version())
     with cache_entry(root, key) as (final, done):
@@ -294,7 +343,7 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
         try:
             (work / "array.v").write_text(verilog)
             (work / "harness.cpp").write_text(harness)
-            runtime = _runtime_dir(root)
+            runtime = _runtime_dir(root, cxx_opt)
             reuse = _reuse_runtime(runtime, work / "obj")
             argv = [exe, *flags, *reuse, "-j", str(build_jobs()), "-Mdir", "obj", "array.v",
                     "harness.cpp"]
@@ -307,7 +356,7 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
                     f"Verilator build of {top} failed (exit {result.returncode}): "
                     f"{first_error_line(result.stderr + result.stdout)} (full log: {failed_log})")
             shutil.move(str(work / "obj" / _EXECUTABLE), work / _EXECUTABLE)
-            _keep_runtime(work / "obj", runtime)
+            _keep_runtime(work / "obj", runtime, cxx_opt)
             shutil.rmtree(work / "obj")
             (work / "done").write_text(key + "\n")
             if final.exists():
@@ -335,8 +384,8 @@ def read_captures(path: str | Path, frame_words: int) -> tuple[np.ndarray, np.nd
 
 
 def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str | Path | None = None,
-                  progress: bool = False, verilog: str | None = None, inline: bool = False
-                  ) -> np.ndarray:
+                  progress: bool = False, verilog: str | None = None, inline: bool = False,
+                  cxx_opt: str = CXX_OPT, shared: bool = True) -> np.ndarray:
     """Simulate the generated Verilog of a (T, H, W) stimulus in Verilator; return words (K, H, W).
 
     ``build_dir`` is the root of the build cache (default: ``$TESPIKE_CACHE`` or
@@ -344,10 +393,16 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
     Verilog (tests use a hand-written model of the same ports); by default it
     is ``rtl.verilog.array_verilog(config, H, W)``. ``inline=True`` builds with
     Verilator's default module inlining instead of ``-fno-inline`` (see
-    :func:`build_flags`). The words are int64, equal
+    :func:`build_flags`); ``cxx_opt`` is g++'s optimisation of the model
+    (:data:`CXX_OPT`). ``shared=True``
+    builds :func:`shared_pixel_view` of Verilog that has the ``<te|ml>_pixel``
+    module (the generated array; a hand-written model without it is built as
+    given); ``shared=False`` builds the text exactly as given. The words are
+    int64, equal
     bit for bit to ``golden.sensor.simulate`` for a correct array.
     """
     check_stimulus(stimulus, config)
+    _check_cxx_opt(cxx_opt)
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
     K = T // L
@@ -358,8 +413,11 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
     if verilog is None:
         from rtl.verilog import array_verilog
         verilog = array_verilog(config, H, W)
+    pixel = top.replace("_array", "")
+    if shared and re.search(rf"^module {pixel}\(", verilog, re.M):
+        verilog = shared_pixel_view(verilog, pixel)
     executable = build(verilog, top, N * E, N * Wd, build_dir=build_dir, progress=progress,
-                       inline=inline)
+                       inline=inline, cxx_opt=cxx_opt)
     frame_words = words_per_row(N, Wd)
     flush = L + 1
     with tempfile.TemporaryDirectory(prefix="tespike-verilator-") as scratch:
