@@ -112,8 +112,10 @@ def check_scene(scene: np.ndarray, *, scan_values: bool = True) -> np.ndarray:
     """
     if not isinstance(scene, np.ndarray):
         raise InputError(f"scene must be a numpy array, not {type(scene).__name__}")
-    if scene.dtype.kind not in "fiu":
-        raise InputError(f"scene dtype {scene.dtype} is not numeric (light must be a float array)")
+    if scene.dtype.kind != "f":
+        raise InputError(f"scene dtype {scene.dtype} is not a float type (light per readout interval "
+                         "must be a float array, SPEC section 6; an integer array is refused "
+                         "like a float stimulus is)")
     if scene.ndim != 3:
         raise InputError(f"scene shape {scene.shape} must be (K, H, W)")
     if scene.shape[1] < 1 or scene.shape[2] < 1:

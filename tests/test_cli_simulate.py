@@ -56,6 +56,7 @@ def test_simulate_options(tmp_path):
     (np.zeros((2, 2)), ["shape"]),
     (np.zeros((2, 2, 2), bool), ["dtype"]),
     (np.zeros((2, 2, 2), complex), ["dtype"]),
+    (np.zeros((2, 2, 2), np.int32), ["dtype int32", "float"]),
 ])
 def test_simulate_refuses_bad_scene_without_output(tmp_path, scene, words):
     np.save(tmp_path / "i.npy", scene)
