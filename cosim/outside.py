@@ -100,7 +100,8 @@ def unpack_rows(words: np.ndarray, pixels: int, bits: int) -> np.ndarray:
     if not 1 <= bits <= 32:
         raise ValueError(f"unpack_rows handles 1..32 bits per value, not {bits}")
     K = words.shape[0]
-    bitplanes = np.unpackbits(words.view(np.uint8).reshape(K, -1), axis=1, bitorder="little")
+    bitplanes = np.unpackbits(words.view(np.uint8).reshape(K, 4 * words.shape[1]), axis=1,
+                              bitorder="little")
     fields = bitplanes[:, :pixels * bits].reshape(K, pixels, bits).astype(np.int64)
     return fields @ (np.int64(1) << np.arange(bits, dtype=np.int64))
 

@@ -33,6 +33,8 @@ from golden.config import SensorConfig
 from golden.errors import ConfigError
 from golden.io import atomic_output, check_stimulus
 
+from .outside import pack_rows, unpack_rows, words_per_row
+
 #: Rising edges with reset high before pixel clock t = 0.
 RESET_CLOCKS = 2
 
@@ -58,35 +60,23 @@ class RTLProtocolError(RuntimeError):
 def iter_packed_charge(stimulus: np.ndarray, input_bits: int) -> Iterator[int]:
     """Yield, per pixel clock, the ``charge`` bus as one integer.
 
-    Pixel (r, c) of clock t sits at bits ``[(r W + c) E +: E]``. The bit
-    shuffling is vectorised over pixels and clocks (numpy unpack/pack in
-    chunks); only the final ``int.from_bytes`` is per clock.
+    Pixel (r, c) of clock t sits at bits ``[(r W + c) E +: E]``: the bus layout
+    of :func:`cosim.outside.pack_rows` (one implementation for every backend),
+    packed in chunks of clocks; only the final ``int.from_bytes`` is per clock.
     """
     T = stimulus.shape[0]
     flat = stimulus.reshape(T, -1)
-    n = flat.shape[1]
-    E = input_bits
-    shifts = np.arange(E, dtype=np.uint64)
-    rows = max(1, _PACK_CHUNK_BYTES // max(1, n * E))
+    rows = max(1, _PACK_CHUNK_BYTES // max(1, flat.shape[1] * input_bits // 8 + 1))
     for start in range(0, T, rows):
-        block = flat[start:start + rows].astype(np.uint64)
-        bits = ((block[:, :, None] >> shifts) & np.uint64(1)).astype(np.uint8)
-        packed = np.packbits(bits.reshape(len(block), n * E), axis=1, bitorder="little")
-        for row in packed:
+        for row in pack_rows(flat[start:start + rows], input_bits):
             yield int.from_bytes(row.tobytes(), "little")
 
 
 def unpack_frames(frames: list[int], n_pixels: int, word_bits: int) -> np.ndarray:
-    """Frame bus integers -> ``(K, n_pixels)`` int64 words (inverse of the bus layout)."""
-    K = len(frames)
-    if K == 0:
-        return np.zeros((0, n_pixels), np.int64)
-    total = n_pixels * word_bits
-    nbytes = (total + 7) // 8
-    raw = np.frombuffer(b"".join(f.to_bytes(nbytes, "little") for f in frames), np.uint8)
-    bits = np.unpackbits(raw.reshape(K, nbytes), axis=1, bitorder="little")[:, :total]
-    weights = np.left_shift(np.int64(1), np.arange(word_bits, dtype=np.int64))
-    return bits.reshape(K, n_pixels, word_bits).astype(np.int64) @ weights
+    """Frame bus integers -> ``(K, n_pixels)`` int64 words (:func:`cosim.outside.unpack_rows`)."""
+    nbytes = 4 * words_per_row(n_pixels, word_bits)
+    raw = b"".join(f.to_bytes(nbytes, "little") for f in frames)
+    return unpack_rows(np.frombuffer(raw, "<u4").reshape(len(frames), nbytes // 4), n_pixels, word_bits)
 
 
 # -- the design under test ---------------------------------------------------
