@@ -149,10 +149,14 @@ def load_scene(path: str | Path, *, memory_map: bool = False) -> np.ndarray:
     return scene
 
 
+def unsigned_dtype(bits: int) -> np.dtype:
+    """Smallest unsigned dtype that holds ``bits`` bits (at most 32)."""
+    return np.dtype(np.uint8 if bits <= 8 else np.uint16 if bits <= 16 else np.uint32)
+
+
 def word_dtype(config: SensorConfig) -> np.dtype:
     """Smallest unsigned dtype that holds a readout word."""
-    bits = config.word_bits
-    return np.dtype(np.uint8 if bits <= 8 else np.uint16 if bits <= 16 else np.uint32)
+    return unsigned_dtype(config.word_bits)
 
 
 def save_stream(path: str | Path, words: np.ndarray, config: SensorConfig) -> None:

@@ -35,7 +35,7 @@ import numpy as np
 
 from .config import DESIGN_ELECTRONS, SensorConfig
 from .errors import InputError
-from .io import check_scene
+from .io import check_scene, unsigned_dtype
 
 #: Dark-current models of the paper's appendix A.2.5.
 DARK_CURRENT_MODELS = ("eq12", "eq13")
@@ -135,8 +135,7 @@ def log_poisson_tail_below(mean: np.ndarray, k: int) -> np.ndarray:
 
 def stimulus_dtype(config: SensorConfig) -> np.dtype:
     """Smallest unsigned dtype that holds ``2^input_bits - 1``."""
-    bits = config.input_bits
-    return np.dtype(np.uint8 if bits <= 8 else np.uint16 if bits <= 16 else np.uint32)
+    return unsigned_dtype(config.input_bits)
 
 
 def clock_electrons(config: SensorConfig, mean_per_readout: np.ndarray, dark: np.ndarray,
