@@ -23,8 +23,12 @@ DESIGN_ELECTRONS = 42000
 MAX_CLOCKS_PER_READOUT = 1 << 24
 
 KEYS = ("mode", "b1", "b2", "alpha", "clocks_per_tick", "threshold",
-        "acc_bits", "input_bits", "ml_bits")
+        "acc_bits", "input_bits", "ml_bits", "ml_readout")
 MODES = ("te", "ml")
+#: What an ML readout takes from the counter (SPEC section 3): all of it, or its msb's worth.
+ML_READOUTS = ("count", "msb")
+#: Named presets of ``--config``: each mode's defaults, and the paper's msb ML camera.
+PRESETS = {"te": {"mode": "te"}, "ml": {"mode": "ml"}, "ml-msb": {"mode": "ml", "ml_readout": "msb"}}
 
 
 def _default_threshold(mode: str, b1: int, alpha: int, ml_bits: int) -> int:
@@ -51,6 +55,7 @@ class SensorConfig:
     acc_bits: int | None = None
     input_bits: int = 16
     ml_bits: int = 8
+    ml_readout: str = "count"
 
     def __post_init__(self) -> None:
         def need_int(key: str, lo: int, hi: int | None, rule: str) -> int:
@@ -68,6 +73,12 @@ class SensorConfig:
 
         if not isinstance(self.mode, str) or self.mode not in MODES:
             raise ConfigError(f"config key 'mode' = {self.mode!r}: must be one of \"te\", \"ml\"")
+        if not isinstance(self.ml_readout, str) or self.ml_readout not in ML_READOUTS:
+            raise ConfigError(f"config key 'ml_readout' = {self.ml_readout!r}: "
+                              f"must be one of \"count\", \"msb\"")
+        if self.ml_readout == "msb" and self.mode != "ml":
+            raise ConfigError(f"config key 'ml_readout' = 'msb': only with mode = \"ml\" "
+                              f"(mode is {self.mode!r})")
         b1 = need_int("b1", 1, 16, "in 1..16")
         b2 = need_int("b2", 1, 16, "in 1..16")
         ml_bits = need_int("ml_bits", 1, 16, "in 1..16")
@@ -112,10 +123,12 @@ class SensorConfig:
 
     @classmethod
     def preset(cls, name: str) -> "SensorConfig":
-        """The defaults of one mode: ``"te"`` (paper: b1 = b2 = 4) or ``"ml"`` (8 bits)."""
-        if name not in MODES:
-            raise ConfigError(f"unknown preset {name!r}: must be one of \"te\", \"ml\"")
-        return cls(mode=name)
+        """A named preset: ``"te"`` (paper: b1 = b2 = 4), ``"ml"`` (8-bit count) or
+        ``"ml-msb"`` (8-bit counter, most-significant-bit readout: the paper's eq. 10)."""
+        if name not in PRESETS:
+            raise ConfigError(f"unknown preset {name!r}: must be one of "
+                              + ", ".join(f'"{p}"' for p in PRESETS))
+        return cls(**PRESETS[name])
 
     def check(self) -> "SensorConfig":
         """Re-validate (instances are validated when made; this is for callers that
@@ -140,6 +153,11 @@ class SensorConfig:
         return self.mode == "te"
 
     @property
+    def is_msb(self) -> bool:
+        """ML camera with the most-significant-bit readout (paper eq. 10)."""
+        return self.ml_readout == "msb"
+
+    @property
     def clocks_per_readout(self) -> int:
         """L = F * alpha pixel clocks per readout interval."""
         return self.clocks_per_tick * self.alpha
@@ -156,8 +174,11 @@ class SensorConfig:
 
     @property
     def word_bits(self) -> int:
-        """Width of one readout word: max(b1, b2) + 1 (TE) or ml_bits (ML)."""
-        return self.d + 1 if self.is_te else self.ml_bits
+        """Width of one readout word: max(b1, b2) + 1 (TE), ml_bits (ML count) or
+        bit_length(ml_bits) (ML msb: the word is an msb index 0..ml_bits)."""
+        if self.is_te:
+            return self.d + 1
+        return self.ml_bits.bit_length() if self.is_msb else self.ml_bits
 
     @property
     def acc_max(self) -> int:
@@ -177,12 +198,13 @@ class SensorConfig:
         keys = ("b1", "b2", "alpha", "clocks_per_tick", "threshold", "acc_bits", "input_bits")
         if not self.is_te:
             keys += ("ml_bits",)
-        return self.mode + "-" + "-".join(f"{k}{getattr(self, k)}" for k in keys)
+        mode = self.mode + ("-msb" if self.is_msb else "")
+        return mode + "-" + "-".join(f"{k}{getattr(self, k)}" for k in keys)
 
 
 def load_config(spec: str | Path) -> SensorConfig:
-    """``"te"`` / ``"ml"`` name a mode's defaults; anything else is a JSON file path."""
-    if str(spec) in MODES:
+    """``"te"`` / ``"ml"`` / ``"ml-msb"`` name presets; anything else is a JSON file path."""
+    if str(spec) in PRESETS:
         return SensorConfig.preset(str(spec))
     path = Path(spec)
     try:

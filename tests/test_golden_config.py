@@ -9,13 +9,38 @@ from golden.errors import ConfigError
 def test_te_defaults_follow_spec():
     c = SensorConfig()
     assert c.to_dict() == {"mode": "te", "b1": 4, "b2": 4, "alpha": 15, "clocks_per_tick": 16,
-                           "threshold": 175, "acc_bits": 9, "input_bits": 16, "ml_bits": 8}
+                           "threshold": 175, "acc_bits": 9, "input_bits": 16, "ml_bits": 8,
+                           "ml_readout": "count"}
     assert c.clocks_per_readout == 240 and c.word_bits == 5
 
 
 def test_ml_defaults_follow_spec():
     c = SensorConfig.preset("ml")
     assert c.threshold == 328 and c.acc_bits == 10 and c.word_bits == 8
+
+
+def test_ml_msb_preset_follows_spec():
+    c = load_config("ml-msb")
+    assert c == SensorConfig(mode="ml", ml_readout="msb") and c.is_msb
+    assert c.threshold == 328 and c.word_bits == 4          # bit_length(8)
+    assert SensorConfig(mode="ml", ml_readout="msb", ml_bits=1).word_bits == 1
+    assert SensorConfig(mode="ml", ml_readout="msb", ml_bits=16).word_bits == 5
+    assert SensorConfig.from_json(c.to_json()) == c
+
+
+def test_ml_readout_refusals_name_the_key():
+    with pytest.raises(ConfigError, match="ml_readout.*mode"):
+        SensorConfig(mode="te", ml_readout="msb")
+    with pytest.raises(ConfigError, match="ml_readout"):
+        SensorConfig.from_dict({"mode": "ml", "ml_readout": "lsb"})
+    with pytest.raises(ConfigError, match="ml_readout"):
+        SensorConfig.from_dict({"mode": "ml", "ml_readout": 1})
+
+
+def test_config_without_ml_readout_reads_as_count():
+    old = {"mode": "ml", "b1": 4, "b2": 4, "alpha": 15, "clocks_per_tick": 16, "threshold": 328,
+           "acc_bits": 10, "input_bits": 16, "ml_bits": 8}
+    assert SensorConfig.from_dict(old).ml_readout == "count"
 
 
 def test_dependent_defaults():
