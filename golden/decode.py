@@ -25,6 +25,8 @@ def check_words(words: np.ndarray, config: SensorConfig) -> np.ndarray:
         value = w & ((1 << config.d) - 1)
         bad = (w < 0) | (flag > 1) | ((flag == 0) & (value >= config.p_max)) | \
               ((flag == 1) & ((value < 1) | (value > config.alpha)))
+    elif config.is_msb:
+        bad = (w < 0) | (w > config.ml_bits)
     else:
         bad = (w < 0) | (w > config.ml_max)
     if bad.any():
@@ -39,10 +41,18 @@ def _te_fields(words: np.ndarray, config: SensorConfig) -> tuple[np.ndarray, np.
     return (w >> config.d).astype(bool), w & ((1 << config.d) - 1)
 
 
+def _spikes_ml(words, config):
+    """ML count: the word; ML msb: 0 for word 0, else 2^(word - 1) (SPEC section 5, eq. 10)."""
+    w = words.astype(np.int64)
+    if config.is_msb:
+        return np.where(w > 0, np.ldexp(1.0, np.maximum(w - 1, 0)), 0.0)
+    return w.astype(np.float64)
+
+
 def _spikes_ratio(words, config):
     """Default estimator: flag 0 -> b, flag 1 -> 2^b1 * alpha / m (paper eq. 3)."""
     if not config.is_te:
-        return words.astype(np.float64)
+        return _spikes_ml(words, config)
     flag, value = _te_fields(words, config)
     m = np.where(flag, value, 1)
     return np.where(flag, config.p_max * config.alpha / m, value).astype(np.float64)
@@ -59,7 +69,7 @@ def _spikes_centred(words, config, spikes_at_overflow):
     at most once per clock, so no estimate exceeds L = F * alpha spikes.
     """
     if not config.is_te:
-        return words.astype(np.float64)
+        return _spikes_ml(words, config)
     flag, value = _te_fields(words, config)
     m = np.where(flag, value, 1).astype(np.float64)
     estimate = np.minimum(config.alpha * spikes_at_overflow / (m - 0.5), config.clocks_per_readout)

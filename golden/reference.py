@@ -22,7 +22,7 @@ class PixelState:
 
     clock: int              # global pixel clock t of the next input
     acc: np.ndarray         # int64 charge residual, never reset by readout
-    sfc: np.ndarray         # int64 spike-firing counter of the current interval
+    sfc: np.ndarray         # int64 spike-firing counter (ML msb: keeps its remainder across readouts)
     ovf: np.ndarray         # bool overflow flag (TE)
     m: np.ndarray           # int64 latched CCC value (TE), 0 until overflow
 
@@ -35,10 +35,20 @@ class PixelState:
         return PixelState(self.clock, self.acc.copy(), self.sfc.copy(), self.ovf.copy(), self.m.copy())
 
 
+def msb_index(sfc: np.ndarray) -> np.ndarray:
+    """bit_length of each count: 0 for 0, else j with 2^(j-1) <= sfc < 2^j (SPEC section 4)."""
+    sfc = np.asarray(sfc, np.int64)
+    # frexp is exact for integers below 2^53: sfc = f * 2^e with 0.5 <= f < 1, so e = bit_length
+    return np.where(sfc > 0, np.frexp(sfc.astype(np.float64))[1], 0).astype(np.int64)
+
+
 def readout_word(config: SensorConfig, sfc: np.ndarray, ovf: np.ndarray, m: np.ndarray) -> np.ndarray:
-    """SPEC section 4: TE ``(1 << d) | m`` on overflow else ``sfc``; ML ``sfc``."""
+    """SPEC section 4: TE ``(1 << d) | m`` on overflow else ``sfc``; ML ``sfc`` (count)
+    or ``bit_length(sfc)`` (msb)."""
     if config.is_te:
         return np.where(ovf, (1 << config.d) | m, sfc).astype(np.int64)
+    if config.is_msb:
+        return msb_index(sfc)
     return sfc.astype(np.int64)
 
 
@@ -69,7 +79,11 @@ def step_reference(config: SensorConfig, stimulus: np.ndarray,
         else:
             state.sfc = np.minimum(state.sfc + spike, config.ml_max)
         if t % L == L - 1:
-            words.append(readout_word(config, state.sfc, state.ovf, state.m))
+            word = readout_word(config, state.sfc, state.ovf, state.m)
+            words.append(word)
+            if config.is_msb:       # that power of two leaves; the remainder counts on
+                state.sfc -= np.where(word > 0, np.left_shift(1, np.maximum(word - 1, 0)), 0)
+                continue
             state.sfc[:] = 0
             state.ovf[:] = False
             state.m[:] = 0
