@@ -46,10 +46,11 @@ def run(args) -> int:
             save_images(out / f"R_{method}_{mode}.npy", evaluation.images["default", mode, method])
     paths = write_outputs(evaluation, out)
     print(f"scene: shipped CC0 panorama 'courtyard', panned; {args.frames} readouts of "
-          f"{args.height} x {args.width}; TE b1 = b2 = 4 and ML 8-bit sensors, shot noise, seed {args.seed}")
+          f"{args.height} x {args.width}; TE b1 = b2 = 4, ML 8-bit msb (the paper's ML, eq. 10) and ML 8-bit "
+          f"full-count sensors, shot noise, seed {args.seed}")
     print(table_markdown(evaluation), end="")
     print(f"PSNR-mu / SSIM-mu: mu-law (mu = 5000) after division by the ground truth's peak; "
           f"frames {evaluation.window // 2}..{args.frames - 1 - evaluation.window // 2} scored")
-    print(f"wrote {out}/: I.npy, S_te.npz, S_ml.npz, R_<method>_<mode>.npy, table.md, table.csv, "
+    print(f"wrote {out}/: I.npy, S_ml-msb.npz, S_te.npz, S_ml.npz, R_<method>_<mode>.npy, table.md, table.csv, "
           f"results.csv, {paths['plot'].name}, strips/default.png ({time.perf_counter() - start:.1f} s)")
     return 0
