@@ -5,6 +5,7 @@ import csv
 import pytest
 import torch
 
+from golden.config import SensorConfig
 from golden.errors import InputError
 from recon.net.infer import load_weights
 from recon.net.train import TrainOptions, train, training_loss
@@ -61,3 +62,23 @@ def test_cli_refusals(tmp_path):
     assert_refused(run_tespike("train", "--config", "te", "--loss", "l9", "--out", tmp_path / "w.pt",
                                "--steps", "1"), "loss")
     assert not (tmp_path / "w.pt").exists()
+
+
+def test_user_hdr_folders_join_the_training_set(tmp_path):
+    import numpy as np
+
+    from recon.net.data import DataRecipe, training_set
+    from recon.scenes import write_hdr
+    folder = tmp_path / "seq"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(64):
+        write_hdr(folder / f"f{k:03d}.hdr", rng.uniform(0.01, 3.0, (40, 36, 3)).astype(np.float32))
+    recipe = DataRecipe(**{**RECIPE, "folders": (str(folder),)})
+    light, words = training_set(SensorConfig(), recipe, cache=tmp_path / "cache")
+    assert light.shape == words.shape == (3, 64, 32, 32)
+    assert float(light[2].max()) == 1.0                      # normalised per sequence
+    assert recipe.key() != DataRecipe(**RECIPE).key()
+    with pytest.raises(InputError, match="less than"):
+        training_set(SensorConfig(), DataRecipe(**{**RECIPE, "folders": (str(folder),), "height": 48}),
+                     cache=tmp_path / "cache")

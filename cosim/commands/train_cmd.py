@@ -16,6 +16,9 @@ def add_arguments(parser):
     parser.add_argument("--steps", type=int, default=None, help="step budget")
     parser.add_argument("--minutes", type=float, default=None, help="wall-time budget in minutes")
     parser.add_argument("--sequences", type=int, default=48, help="training sequences simulated (default 48)")
+    parser.add_argument("--hdr", action="append", default=[], metavar="DIR",
+                        help="also train on this folder of .exr/.hdr frames (one sequence; repeatable)")
+    parser.add_argument("--downscale", type=int, default=1, help="area-average factor for --hdr frames")
     parser.add_argument("--seed", type=int, default=0, help="seed of the draws and of the initial weights")
     parser.add_argument("--device", default="cpu", help="torch device (default cpu; cuda where there is one)")
     parser.add_argument("--threads", type=int, default=1,
@@ -39,6 +42,9 @@ def run(args) -> int:
         raise InputError("give a budget: --steps N or --minutes M")
     if args.threads is not None and not 1 <= args.threads <= 1024:
         raise InputError(f"--threads {args.threads}: must be in 1..1024")
+    for folder in args.hdr:
+        if not Path(folder).is_dir():
+            raise InputError(f"--hdr {folder!r}: not a folder of .exr/.hdr frames")
     out = Path(args.out)
     if not out.parent.is_dir():
         raise InputError(f"cannot write {args.out!r}: directory {str(out.parent)!r} does not exist")
@@ -49,7 +55,8 @@ def run(args) -> int:
                            size=args.size, loss=args.loss, lr=args.lr, halve_every=args.halve_every,
                            steps_per_epoch=args.steps_per_epoch, batch=args.batch, crop=args.crop,
                            steps=args.steps, minutes=args.minutes, seed=args.seed, device=args.device,
-                           threads=args.threads, recipe={"sequences": args.sequences})
+                           threads=args.threads, recipe={"sequences": args.sequences, "folders": tuple(args.hdr),
+                                   "downscale": args.downscale})
     command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     train(options, out, resume=args.resume, cache=args.cache,
           progress=True if args.progress else None, command=command)

@@ -51,6 +51,8 @@ class DataRecipe:
     procedural: float = 0.25            # fraction of procedural (moderate / lights) sequences
     ratio_range: tuple[float, float] = (20.0, 1000.0)
     seed: int = 0
+    folders: tuple[str, ...] = ()       # user .exr/.hdr sequences, one folder each, added to the set
+    downscale: int = 1                  # area-average factor for the folders' frames
 
     def __post_init__(self) -> None:
         for key in ("sequences", "frames", "height", "width"):
@@ -59,13 +61,27 @@ class DataRecipe:
         if HELDOUT_PANORAMA in self.panoramas:
             raise InputError(f"data recipe: panorama {HELDOUT_PANORAMA!r} is held out for evaluation")
         object.__setattr__(self, "panoramas", tuple(self.panoramas))
+        object.__setattr__(self, "folders", tuple(str(Path(f).resolve()) for f in self.folders))
         object.__setattr__(self, "ratio_range", tuple(float(r) for r in self.ratio_range))
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
     def key(self) -> str:
-        return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True).encode()).hexdigest()[:16]
+        """Hash of the recipe and of the user folders' file names and sizes (their content changes it)."""
+        from ..scenes.hdr_io import list_frames
+        fields = self.to_dict()
+        if not self.folders and self.downscale == 1:    # generated sequences only: the fields they use
+            del fields["folders"], fields["downscale"]
+            return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]
+        files = [[(p.name, p.stat().st_size) for p in list_frames(f)] for f in self.folders]
+        text = json.dumps([fields, files], sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    @property
+    def total(self) -> int:
+        """Sequences in the set: the generated ones, then one per user folder."""
+        return self.sequences + len(self.folders)
 
 
 def reach_ratio(light: np.ndarray, rng: np.random.Generator, ratio: float) -> np.ndarray:
@@ -77,8 +93,22 @@ def reach_ratio(light: np.ndarray, rng: np.random.Generator, ratio: float) -> np
     return light + (ratio * median) * spot
 
 
+def folder_sequence(recipe: DataRecipe, folder: str) -> np.ndarray:
+    """The first ``frames`` frames of a user folder, centre-cropped to height x width, peak 1."""
+    from ..scenes.hdr_io import load_hdr_sequence
+    light = load_hdr_sequence(folder, max_frames=recipe.frames, downscale=recipe.downscale)
+    k, h, w = light.shape
+    if k < recipe.frames or h < recipe.height or w < recipe.width:
+        raise InputError(f"training folder {folder!r} gives {k} x {h} x {w} (frames x rows x columns), "
+                         f"less than the recipe's {recipe.frames} x {recipe.height} x {recipe.width}")
+    y, x = (h - recipe.height) // 2, (w - recipe.width) // 2
+    return normalise_sequence(light[:, y:y + recipe.height, x:x + recipe.width], 1.0, what=folder)
+
+
 def training_sequence(recipe: DataRecipe, index: int) -> np.ndarray:
     """Sequence ``index`` of the recipe: float32 light (K, H, W), peak 1 (public seed domain)."""
+    if index >= recipe.sequences:
+        return folder_sequence(recipe, recipe.folders[index - recipe.sequences])
     rng = scene_rng("net-train", recipe.seed * 1_000_003 + index)
     shape = (recipe.frames, recipe.height, recipe.width)
     if rng.uniform() < recipe.procedural:
@@ -121,7 +151,7 @@ def training_set(config: SensorConfig, recipe: DataRecipe = DataRecipe(), *,
                  cache: str | Path | None = None, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(light float32 (N, K, H, W), words (N, K, H, W)), from the cache or made and cached."""
     folder = cache_dir(cache)
-    indices = range(recipe.sequences)
+    indices = range(recipe.total)
 
     def bar(what):
         if not progress:
@@ -129,10 +159,11 @@ def training_set(config: SensorConfig, recipe: DataRecipe = DataRecipe(), *,
         from tqdm import tqdm
         return tqdm(indices, desc=what, unit="sequence")
 
-    light = _cached(folder / f"light-{recipe.key()}.npy",
+    key = recipe.key()
+    light = _cached(folder / f"light-{key}.npy",
                     lambda: np.stack([training_sequence(recipe, i) for i in bar("training light")]))
     config_key = hashlib.sha256(config.to_json().encode()).hexdigest()[:12]
-    words = _cached(folder / f"words-{recipe.key()}-{config_key}.npy",
+    words = _cached(folder / f"words-{key}-{config_key}.npy",
                     lambda: np.stack([simulate_scene(config, np.asarray(light[i]),
                                                      seed=np.random.default_rng(stream_seed(recipe, config, i)))
                                       for i in bar(f"simulate {config.mode}")]))
