@@ -137,18 +137,29 @@ def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, 
 
 
 def reconstruct_net(words, config: SensorConfig, *, weights: str | Path | None = None, tile: int | None = 256,
-                    device: str = "cpu", progress: bool = False) -> np.ndarray:
-    """Stream words (K, H, W) -> float32 light (K, H, W), one image per readout."""
+                    device: str = "cpu", progress: bool = False, out: np.ndarray | None = None) -> np.ndarray:
+    """Stream words (K, H, W) -> float32 light (K, H, W), one image per readout.
+
+    ``words`` may be a memory map: only the readouts and pixels of one tile are
+    read at a time. ``out``: a float32 (K, H, W) array to fill (e.g. a memory map
+    of the output file); it is returned.
+    """
     path = Path(weights) if weights is not None else weights_path(config)
     model, trained_for, _ = load_weights(path)
     if trained_for != config:
         raise InputError(f"network weights {str(path)!r} were trained for {trained_for}, "
                          f"the stream is {config}")
-    words = np.asarray(words)
+    if isinstance(words, torch.Tensor):
+        words = words.cpu().numpy()
+    if not isinstance(words, np.ndarray):
+        words = np.asarray(words)
     if words.ndim != 3:
         raise InputError(f"stream words shape {words.shape} must be (K, H, W)")
     K, H, W = words.shape
-    out = np.empty((K, H, W), np.float32)
+    if out is None:
+        out = np.empty((K, H, W), np.float32)
+    elif out.shape != (K, H, W) or out.dtype != np.float32:
+        raise InputError(f"out must be float32 {(K, H, W)}, not {out.dtype} {out.shape}")
     if out.size == 0:
         return out
     model = model.to(device)
