@@ -35,6 +35,14 @@ def test_msfeg_alone():
     assert MSFEG(3, 8, 1, gradient=False)(torch.rand(1, 3, 5, 7)).shape == (1, 8, 5, 7)
 
 
+@pytest.mark.parametrize("unshuffle", [1, 2, 4])
+def test_msfeg_fast_path_equals_its_definition(unshuffle):
+    torch.manual_seed(unshuffle)
+    enc = MSFEG(window=3, channels=8, unshuffle=unshuffle).double()
+    x = torch.rand(2, 3, 8 * unshuffle, 4 * unshuffle, dtype=torch.float64)
+    assert torch.allclose(enc(x), enc.folded_forward(x), atol=1e-12)
+
+
 def test_level_alignment_starts_as_plain_convolution():
     """Zero-initialised offsets: the DCN is a convolution with masks 1/2."""
     level = LevelAlignment(8, SMALL, coarsest=True)

@@ -65,9 +65,37 @@ class MSFEG(nn.Module):
         self.fuse = nn.Conv2d(branch * len(self.KERNELS) + grad_channels, channels, 3, padding=1)
         self.act = nn.LeakyReLU(0.1)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def folded_forward(self, x: torch.Tensor) -> torch.Tensor:
+        """The definition, step by step: gradients, pixel-unshuffle, 1 x 1 convolutions."""
         embedded = self.act(self.embed(channels_last(self.fold(x))))
         parts = [scale(embedded) for scale in self.scales]
         if self.gradient is not None:
             parts.append(self.gradient_proj(channels_last(self.fold(self.gradient(x)))))
+        return self.act(self.fuse(self.act(torch.cat(parts, dim=1))))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """:meth:`folded_forward` computed without its full-resolution intermediates.
+
+        A pixel-unshuffle by u followed by a 1 x 1 convolution is a u x u convolution
+        of stride u; a 3 x 3 filter followed by that is a (u + 2) x (u + 2) convolution
+        of stride u with padding 1, whose kernel is composed here from the frozen
+        eq. 8 kernels and the trained projection. Same function, same parameters,
+        no 3 x window full-resolution gradient images to write and fold.
+        """
+        u = self.fold.downscale_factor
+        window = x.shape[1]
+        c = self.embed.out_channels
+        embed = self.embed.weight.reshape(c, window, u, u)
+        embedded = self.act(nn.functional.conv2d(channels_last(x), embed, self.embed.bias, stride=u))
+        parts = [scale(embedded) for scale in self.scales]
+        if self.gradient is not None:
+            g = self.gradient_proj.out_channels
+            proj = self.gradient_proj.weight.reshape(g, window, 3, u, u)    # (out, readout, kernel, i, j)
+            kernels = self.gradient.weight.reshape(window, 3, 3, 3)[0].to(proj.dtype)   # (kernel, dy, dx)
+            composed = proj.new_zeros(g, window, u + 2, u + 2)
+            for dy in range(3):
+                for dx in range(3):
+                    composed[:, :, dy:dy + u, dx:dx + u] += torch.einsum("ockij,k->ocij", proj, kernels[:, dy, dx])
+            parts.append(nn.functional.conv2d(channels_last(x), composed, self.gradient_proj.bias,
+                                              stride=u, padding=1))
         return self.act(self.fuse(self.act(torch.cat(parts, dim=1))))
