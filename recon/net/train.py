@@ -205,7 +205,9 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
         state = torch.load(checkpoint, map_location=options.device, weights_only=True)
         saved = TrainOptions(**{**state["options"], "steps": options.steps, "minutes": options.minutes,
                                 "device": options.device, "threads": options.threads})
-        if dataclasses.replace(saved, checkpoint_seconds=0) != dataclasses.replace(options, checkpoint_seconds=0):
+        def same(o: TrainOptions) -> TrainOptions:    # the recipe compared as resolved, not as typed
+            return dataclasses.replace(o, checkpoint_seconds=0, recipe=o.data_recipe().to_dict())
+        if same(saved) != same(options):
             raise InputError(f"checkpoint {str(checkpoint)!r} was made with other options; "
                              "resume with the same sensor, size, loss, recipe and seed")
         model.load_state_dict(state["model"])
