@@ -23,13 +23,17 @@ def run(args) -> int:
 
     import numpy as np
 
+    from cosim.cli import progress_wanted
     from golden.fastsim import simulate_scene
     from golden.io import atomic_output, save_images, save_stream
-    from recon.evaluate import evaluate, paper_configs, table_markdown, write_outputs
+    from golden.paths import check_output_dir
+    from recon.evaluate import OUTPUT_FILES, evaluate, paper_configs, table_markdown, write_outputs
     from recon.scenes import make_scene
 
     start = time.perf_counter()
-    out = Path(args.out)
+    files = OUTPUT_FILES + ("I.npy",) + tuple(f"S_{m}.npz" for m in ("te", "ml")) + tuple(
+        f"R_{method}_{m}.npy" for method in ("tfp", "tfi") for m in ("te", "ml"))
+    out = check_output_dir(args.out, "--out", files)
     light = make_scene("default", args.frames, args.height, args.width, seed=args.seed)
     out.mkdir(parents=True, exist_ok=True)
     with atomic_output(out / "I.npy") as tmp:
@@ -39,12 +43,15 @@ def run(args) -> int:
     methods = ("tfp", "tfi")
     evaluation = evaluate([("default", light)],
                           lambda config, scene, rng: simulate_scene(config, scene, seed=rng),
-                          methods=methods, configs=configs, seed=args.seed, keep=True)
+                          methods=methods, configs=configs, seed=args.seed, keep=True,
+                          progress=progress_wanted(args))
     for mode, config in configs.items():
         save_stream(out / f"S_{mode}.npz", evaluation.streams["default", mode], config)
         for method in methods:
             save_images(out / f"R_{method}_{mode}.npy", evaluation.images["default", mode, method])
     paths = write_outputs(evaluation, out)
+    if args.quiet:
+        return 0
     print(f"scene: shipped CC0 panorama 'courtyard', panned; {args.frames} readouts of "
           f"{args.height} x {args.width}; TE b1 = b2 = 4 and ML 8-bit sensors, shot noise, seed {args.seed}")
     print(table_markdown(evaluation), end="")
