@@ -112,12 +112,25 @@ def _raise_terminated(signum, frame):
     raise Terminated(signum)
 
 
-def _install_signal_handlers() -> None:
+def _install_signal_handlers() -> dict:
+    """SIGTERM / SIGHUP raise :class:`Terminated` (if nobody else handles them); returns
+    the previous handlers for :func:`_restore_signal_handlers`."""
     import signal
+    import threading
+    previous = {}
+    if threading.current_thread() is not threading.main_thread():
+        return previous
     for name in CLEANUP_SIGNALS:
         number = getattr(signal, name, None)
         if number is not None and signal.getsignal(number) in (signal.SIG_DFL, None):
-            signal.signal(number, _raise_terminated)
+            previous[number] = signal.signal(number, _raise_terminated)
+    return previous
+
+
+def _restore_signal_handlers(previous: dict) -> None:
+    import signal
+    for number, handler in previous.items():
+        signal.signal(number, handler if handler is not None else signal.SIG_DFL)
 
 
 def _one_line(exc: BaseException, limit: int = 300) -> str:
@@ -127,6 +140,7 @@ def _one_line(exc: BaseException, limit: int = 300) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    whole_process = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
     if not argv:
         parser.print_help()
@@ -135,15 +149,18 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:          # only top-level options, e.g. "tespike -q"
         parser.print_help()
         return 0
-    _install_signal_handlers()
+    previous = _install_signal_handlers()
     import warnings
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        code, ok = _run(args)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            code, ok = _run(args)
+    finally:              # main() called in-process (tests) leaves the caller's handlers as they were
+        _restore_signal_handlers(previous)
     if ok:            # only a run that succeeded shows its warnings; a refusal stays one line
         for warning in caught:
             warnings.showwarning(warning.message, warning.category, warning.filename, warning.lineno)
-    else:             # ... also at interpreter exit (e.g. a coroutine the interruption left)
+    elif whole_process:   # ... also at interpreter exit (e.g. a coroutine the interruption left)
         warnings.simplefilter("ignore")
     return code
 

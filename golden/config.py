@@ -241,7 +241,7 @@ def load_config(spec: str | Path) -> SensorConfig:
     from .paths import check_input_file
     path = Path(spec)
     try:
-        check_input_file(path, "configuration")
+        check_input_file(str(spec) if not isinstance(spec, Path) else spec, "configuration")
         data = path.read_bytes()
     except OSError as exc:
         raise ConfigError(f"cannot read configuration file {str(path)!r}: {exc.strerror}") from None

@@ -15,6 +15,7 @@ import sys
 import threading
 import time
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -34,7 +35,7 @@ def snapshot(folder):
         for name in dirnames + filenames:
             path = os.path.join(dirpath, name)
             info = os.lstat(path)
-            data = open(path, "rb").read() if stat.S_ISREG(info.st_mode) else None
+            data = Path(path).read_bytes() if stat.S_ISREG(info.st_mode) else None
             out[os.path.relpath(path, folder)] = (stat.S_IFMT(info.st_mode), data)
     return out
 
@@ -133,7 +134,7 @@ def test_fifo_output_is_written_through_or_refused_without_reader(files):
     fifo = files / "pipe"
     os.mkfifo(fifo)
     received = []
-    reader = threading.Thread(target=lambda: received.append(open(fifo, "rb").read()))
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()))
     reader.start()
     result = run_tespike(*golden_args(files, fifo), timeout=60)
     reader.join(timeout=60)
@@ -224,7 +225,7 @@ def test_stale_temporary_of_a_live_process_is_kept(tmp_path):
     for path in (live, dead, other):
         path.write_bytes(b"x")
     with atomic_output(tmp_path / "o.npy") as tmp:
-        open(tmp, "wb").write(b"new")
+        Path(tmp).write_bytes(b"new")
     assert live.exists() and other.exists() and not dead.exists()
     assert (tmp_path / "o.npy").read_bytes() == b"new"
 
@@ -467,3 +468,36 @@ def test_refusal_after_a_warning_is_still_one_line(monkeypatch, capsys):
     assert cli.main(["fake"]) == 1
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "out of memory" in err
+
+
+# ------------------------------------------------------------------ bounded memory
+def test_metrics_in_small_bands_equal_whole_frames(monkeypatch, rng):
+    from recon import metrics
+    gt = rng.uniform(0.01, 1, size=(3, 23, 19))
+    pred = gt * rng.uniform(0.8, 1.2, size=gt.shape)
+    whole = {name: fn(pred, gt) for name, fn in metrics.METRICS.items()}
+    whole_peak = metrics.ssim_mu(pred, gt, peak=2.0)
+    monkeypatch.setattr(metrics, "CHUNK_PIXELS", 40)          # bands of 2 rows, one frame at a time
+    for name, fn in metrics.METRICS.items():
+        assert np.allclose(fn(pred, gt), whole[name], rtol=1e-12, atol=1e-14), name
+    assert np.allclose(metrics.ssim_mu(pred, gt, peak=2.0), whole_peak, rtol=1e-12)
+    assert np.allclose(metrics.ssim_mu(pred[1], gt[1]), whole["ssim_mu"][1], rtol=1e-12)
+
+
+def test_evaluate_refuses_up_front_when_memory_is_short(files, monkeypatch):
+    from golden import resources
+    from recon.evaluate import evaluate
+    monkeypatch.setattr(resources, "available_memory", lambda: 1 << 20)
+    with pytest.raises(InputError, match=r"needs about .* of memory, but only 1 MB is available"):
+        evaluate([("x", np.ones((4, 16, 16)))], lambda config, light, rng: None, methods=["tfp"],
+                 progress=False)
+
+
+def test_reconstruct_streams_words_and_images_through_memory_maps(files):
+    from golden.io import load_stream
+    from recon.methods import reconstruct
+    words, config = load_stream(files / "s.npz", memory_map=True)
+    assert isinstance(words, np.memmap)
+    assert run_tespike("reconstruct", "--stream", files / "s.npz", "--method", "tfi",
+                       "--out", files / "r.npy").returncode == 0
+    assert np.array_equal(np.load(files / "r.npy"), reconstruct(np.array(words), config, "tfi"))
