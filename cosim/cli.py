@@ -87,7 +87,8 @@ def _add_common_arguments(command: argparse.ArgumentParser) -> None:
     """--quiet and --progress on every sub-command (unless it defines its own)."""
     flags = command._option_string_actions
     if "--quiet" not in flags:
-        command.add_argument("--quiet", "-q", action="store_true",
+        names = ("--quiet",) if "-q" in flags else ("--quiet", "-q")
+        command.add_argument(*names, action="store_true",
                              help="print nothing on stdout on success (errors still go to stderr)")
     if "--progress" not in flags:
         command.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
