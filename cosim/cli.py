@@ -25,6 +25,7 @@ COMMANDS = {
     "evaluate": "evaluate_cmd",
     "demo": "demo_cmd",
     "scene": "scene_cmd",
+    "train": "train_cmd",
 }
 
 EXIT_BAD_INPUT = 2
@@ -98,6 +99,8 @@ def _add_common_arguments(command: argparse.ArgumentParser) -> None:
 def progress_wanted(args) -> bool:
     """Draw progress bars? ``--progress on``/``off``, else only when stderr is a terminal."""
     choice = getattr(args, "progress", "auto")
+    if choice is True:                  # a command's own --progress switch
+        return True
     if choice in ("on", "off"):
         return choice == "on"
     return sys.stderr.isatty()

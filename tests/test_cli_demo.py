@@ -19,17 +19,18 @@ def test_demo_with_defaults(tmp_path):
     assert result.returncode == 0, result.stderr
     assert "Traceback" not in result.stderr
     out = tmp_path / "demo"
-    for name in ("TFP_ML", "TFI_ML", "TFP_TE", "TFI_TE"):
+    for name in ("TFP_ML", "TFI_ML", "TFP_TE", "TFI_TE", "TFP_ML-count", "TFI_ML-count"):
         assert f"| {name} |" in result.stdout
     light = load_scene(out / "I.npy")
     assert light.shape == (32, 96, 128) and light.max() == 1.0
-    for mode in ("te", "ml"):
+    for mode in ("te", "ml", "ml-msb"):
         words, config = load_stream(out / f"S_{mode}.npz")
-        assert config.mode == mode and words.shape == light.shape
+        assert config.mode == mode.split("-")[0] and config.is_msb == (mode == "ml-msb")
+        assert words.shape == light.shape
         for method in ("tfp", "tfi"):
             images = np.load(out / f"R_{method}_{mode}.npy")
             assert images.shape == light.shape and images.dtype == np.float32
-    assert (out / "table.md").read_text(encoding="utf-8").count("\n") == 4
+    assert (out / "table.md").read_text(encoding="utf-8").count("\n") == 6
     assert (out / "strips" / "default.png").read_bytes()[:4] == b"\x89PNG"
     assert not list(out.rglob("*.part"))
 

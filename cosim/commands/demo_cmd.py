@@ -31,16 +31,16 @@ def run(args) -> int:
     from recon.scenes import make_scene
 
     start = time.perf_counter()
-    files = OUTPUT_FILES + ("I.npy",) + tuple(f"S_{m}.npz" for m in ("te", "ml")) + tuple(
-        f"R_{method}_{m}.npy" for method in ("tfp", "tfi") for m in ("te", "ml"))
-    out = check_output_dir(args.out, "--out", files)
+    configs = paper_configs()
+    methods = ("tfp", "tfi")
+    files = OUTPUT_FILES + ("I.npy",) + tuple(f"S_{m}.npz" for m in configs) + tuple(
+        f"R_{method}_{m}.npy" for method in methods for m in configs)
+    out = check_output_dir(args.out, "--out", files)      # every file checked before any is written
     light = make_scene("default", args.frames, args.height, args.width, seed=args.seed)
     out.mkdir(parents=True, exist_ok=True)
     with atomic_output(out / "I.npy") as tmp:
         with open(tmp, "wb") as handle:
             np.save(handle, light)
-    configs = paper_configs()
-    methods = ("tfp", "tfi")
     evaluation = evaluate([("default", light)],
                           lambda config, scene, rng: simulate_scene(config, scene, seed=rng),
                           methods=methods, configs=configs, seed=args.seed, keep=True,
@@ -53,10 +53,11 @@ def run(args) -> int:
     if args.quiet:
         return 0
     print(f"scene: shipped CC0 panorama 'courtyard', panned; {args.frames} readouts of "
-          f"{args.height} x {args.width}; TE b1 = b2 = 4 and ML 8-bit sensors, shot noise, seed {args.seed}")
+          f"{args.height} x {args.width}; TE b1 = b2 = 4, ML 8-bit msb (the paper's ML, eq. 10) and ML 8-bit "
+          f"full-count sensors, shot noise, seed {args.seed}")
     print(table_markdown(evaluation), end="")
     print(f"PSNR-mu / SSIM-mu: mu-law (mu = 5000) after division by the ground truth's peak; "
           f"frames {evaluation.window // 2}..{args.frames - 1 - evaluation.window // 2} scored")
-    print(f"wrote {out}/: I.npy, S_te.npz, S_ml.npz, R_<method>_<mode>.npy, table.md, table.csv, "
+    print(f"wrote {out}/: I.npy, S_ml-msb.npz, S_te.npz, S_ml.npz, R_<method>_<mode>.npy, table.md, table.csv, "
           f"results.csv, {paths['plot'].name}, strips/default.png ({time.perf_counter() - start:.1f} s)")
     return 0
