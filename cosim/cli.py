@@ -29,6 +29,33 @@ COMMANDS = {
 }
 
 EXIT_BAD_INPUT = 2
+#: Signals that end a run like Ctrl-C does: temporaries are removed on the way out.
+CLEANUP_SIGNALS = ("SIGTERM", "SIGHUP")
+
+
+class Terminated(BaseException):
+    """Raised in the main thread by SIGTERM / SIGHUP so ``finally`` blocks clean up."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``tespike CMD: error: argument --x: ... (see tespike CMD --help)``."""
+
+    def error(self, message):
+        text = " ".join(message.split())
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {text} (see {self.prog} --help)\n")
+
+
+def version() -> str:
+    """The installed package's version, or the checkout's when not installed."""
+    from importlib import metadata
+    try:
+        return metadata.version("tespike")
+    except metadata.PackageNotFoundError:
+        return "0.1.0+checkout"
 
 
 def _available_commands() -> dict[str, object]:
@@ -43,35 +70,132 @@ def _available_commands() -> dict[str, object]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="tespike",
-        description="Time-encoding spike camera: golden model, RTL, co-simulation and reconstruction.")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+        description="Time-encoding spike camera: golden model, RTL, co-simulation and reconstruction.",
+        epilog="Run 'tespike COMMAND --help' for a command's flags. Bare 'tespike' prints this help.")
+    parser.add_argument("--version", action="version", version=f"tespike {version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in _available_commands().items():
         command = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(command)
+        _add_common_arguments(command)
         command.set_defaults(run=module.run)
     return parser
 
 
+def _add_common_arguments(command: argparse.ArgumentParser) -> None:
+    """--quiet and --progress on every sub-command (unless it defines its own)."""
+    flags = command._option_string_actions
+    if "--quiet" not in flags:
+        names = ("--quiet",) if "-q" in flags else ("--quiet", "-q")
+        command.add_argument(*names, action="store_true",
+                             help="print nothing on stdout on success (errors still go to stderr)")
+    if "--progress" not in flags:
+        command.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
+                             help="progress bars on stderr: auto (only when stderr is a terminal), on, off")
+
+
+def progress_wanted(args) -> bool:
+    """Draw progress bars? ``--progress on``/``off``, else only when stderr is a terminal."""
+    choice = getattr(args, "progress", "auto")
+    if choice is True:                  # a command's own --progress switch
+        return True
+    if choice in ("on", "off"):
+        return choice == "on"
+    return sys.stderr.isatty()
+
+
+def report(args, message: str) -> None:
+    """The one line a command prints on stdout on success (silenced by ``--quiet``)."""
+    if not getattr(args, "quiet", False):
+        print(message, flush=True)
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated(signum)
+
+
+def _install_signal_handlers() -> dict:
+    """SIGTERM / SIGHUP raise :class:`Terminated` (if nobody else handles them); returns
+    the previous handlers for :func:`_restore_signal_handlers`."""
+    import signal
+    import threading
+    previous = {}
+    if threading.current_thread() is not threading.main_thread():
+        return previous
+    for name in CLEANUP_SIGNALS:
+        number = getattr(signal, name, None)
+        if number is not None and signal.getsignal(number) in (signal.SIG_DFL, None):
+            previous[number] = signal.signal(number, _raise_terminated)
+    return previous
+
+
+def _restore_signal_handlers(previous: dict) -> None:
+    import signal
+    for number, handler in previous.items():
+        signal.signal(number, handler if handler is not None else signal.SIG_DFL)
+
+
+def _one_line(exc: BaseException, limit: int = 300) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    whole_process = argv is None
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if not argv:
+        parser.print_help()
+        return 0
     args = parser.parse_args(argv)
+    if args.command is None:          # only top-level options, e.g. "tespike -q"
+        parser.print_help()
+        return 0
+    previous = _install_signal_handlers()
+    import warnings
     try:
-        return int(args.run(args) or 0)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            code, ok = _run(args)
+    finally:              # main() called in-process (tests) leaves the caller's handlers as they were
+        _restore_signal_handlers(previous)
+    if ok:            # only a run that succeeded shows its warnings; a refusal stays one line
+        for warning in caught:
+            warnings.showwarning(warning.message, warning.category, warning.filename, warning.lineno)
+    elif whole_process:   # ... also at interpreter exit (e.g. a coroutine the interruption left)
+        warnings.simplefilter("ignore")
+    return code
+
+
+def _run(args) -> tuple[int, bool]:
+    """Run a sub-command; return (exit code, whether it ended normally)."""
+    prefix = f"tespike {args.command}"
+    try:
+        return int(args.run(args) or 0), True
     except TespikeError as exc:
-        print(f"tespike {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        print(f"{prefix}: error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_BAD_INPUT, False
     except OSError as exc:
-        where = f" {exc.filename!r}" if exc.filename else ""
-        print(f"tespike {args.command}: error:{where} {exc.strerror or exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        where = f" {exc.filename!r}:" if exc.filename else ""
+        print(f"{prefix}: error:{where} {_one_line(exc.strerror or exc)}", file=sys.stderr)
+        return EXIT_BAD_INPUT, False
     except MemoryError:
-        print(f"tespike {args.command}: error: out of memory", file=sys.stderr)
-        return 1
+        print(f"{prefix}: error: out of memory", file=sys.stderr)
+        return 1, False
+    except RuntimeError as exc:
+        if "can't allocate memory" in str(exc) or "not enough memory" in str(exc):
+            print(f"{prefix}: error: out of memory ({_one_line(exc, 160)})", file=sys.stderr)
+            return 1, False
+        raise
     except KeyboardInterrupt:
-        print(f"tespike {args.command}: interrupted", file=sys.stderr)
-        return 130
+        print(f"{prefix}: interrupted", file=sys.stderr)
+        return 130, False
+    except Terminated as exc:
+        import signal
+        print(f"{prefix}: terminated by {signal.Signals(exc.signum).name}", file=sys.stderr)
+        return 128 + exc.signum, False
 
 
 if __name__ == "__main__":

@@ -425,16 +425,20 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
         write_stimulus_file(stim_path, stimulus, E)
         every = max(1, min(1 << 16, T // 100)) if progress else 0
         argv = [str(executable), str(stim_path), str(T), str(K), str(flush), str(cap_path), str(every)]
-        process = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        if progress:
-            from tqdm import tqdm
-            with tqdm(total=T, unit="clk", desc="verilator", file=sys.stderr) as bar:
-                done = 0
-                for line in process.stdout:
-                    clock = min(int(line), T)
-                    bar.update(clock - done)
-                    done = clock
-        _, err = process.communicate()
+        with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as process:
+            try:
+                if progress:
+                    from tqdm import tqdm
+                    with tqdm(total=T, unit="clk", desc="verilator", file=sys.stderr) as bar:
+                        done = 0
+                        for line in process.stdout:
+                            clock = min(int(line), T)
+                            bar.update(clock - done)
+                            done = clock
+                _, err = process.communicate()
+            except BaseException:          # interrupted (Ctrl-C, SIGTERM): no simulator left running
+                process.kill()
+                raise
         if process.returncode != 0:
             raise SimulatorRunError(
                 f"Verilator simulation of {top} failed (exit {process.returncode}): "

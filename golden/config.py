@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 from typing import Any, Mapping
 
-from .errors import ConfigError
+from .errors import ConfigError, TespikeError
 
 #: Electrons per readout interval at the brightest designed light I = 1
 #: (0.7 quantum efficiency x 60000 photons, paper section 6 / SPEC section 6).
@@ -22,6 +22,9 @@ DESIGN_ELECTRONS = 42000
 #: Longest clock structure SPEC allows: L = F * alpha <= 2^24 pixel clocks.
 MAX_CLOCKS_PER_READOUT = 1 << 24
 
+#: A configuration file larger than this is refused unread (ten keys fit in a few hundred bytes).
+MAX_CONFIG_BYTES = 1 << 20
+
 KEYS = ("mode", "b1", "b2", "alpha", "clocks_per_tick", "threshold",
         "acc_bits", "input_bits", "ml_bits", "ml_readout")
 MODES = ("te", "ml")
@@ -29,6 +32,22 @@ MODES = ("te", "ml")
 ML_READOUTS = ("count", "msb")
 #: Named presets of ``--config``: each mode's defaults, and the paper's msb ML camera.
 PRESETS = {"te": {"mode": "te"}, "ml": {"mode": "ml"}, "ml-msb": {"mode": "ml", "ml_readout": "msb"}}
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """repr of a value cut short, so a message about a 5000-digit number stays one short line."""
+    text = "null" if value is None else repr(value)
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """object_pairs_hook of json.loads: a key given twice is refused, not silently overwritten."""
+    data: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in data:
+            raise ConfigError(f"config key {key!r} is given twice")
+        data[key] = value
+    return data
 
 
 def _default_threshold(mode: str, b1: int, alpha: int, ml_bits: int) -> int:
@@ -62,9 +81,9 @@ class SensorConfig:
             value = getattr(self, key)
             if type(value) is not int:          # bool and float are refused
                 raise ConfigError(
-                    f"config key {key!r} = {value!r}: must be a JSON integer ({rule})")
+                    f"config key {key!r} = {_short(value)}: must be a JSON integer ({rule})")
             if value < lo or (hi is not None and value > hi):
-                raise ConfigError(f"config key {key!r} = {value!r}: must be {rule}")
+                raise ConfigError(f"config key {key!r} = {_short(value)}: must be {rule}")
             return value
 
         def fill(key: str, value: int) -> None:
@@ -72,9 +91,9 @@ class SensorConfig:
                 object.__setattr__(self, key, value)
 
         if not isinstance(self.mode, str) or self.mode not in MODES:
-            raise ConfigError(f"config key 'mode' = {self.mode!r}: must be one of \"te\", \"ml\"")
+            raise ConfigError(f"config key 'mode' = {_short(self.mode)}: must be one of \"te\", \"ml\"")
         if not isinstance(self.ml_readout, str) or self.ml_readout not in ML_READOUTS:
-            raise ConfigError(f"config key 'ml_readout' = {self.ml_readout!r}: "
+            raise ConfigError(f"config key 'ml_readout' = {_short(self.ml_readout)}: "
                               f"must be one of \"count\", \"msb\"")
         if self.ml_readout == "msb" and self.mode != "ml":
             raise ConfigError(f"config key 'ml_readout' = 'msb': only with mode = \"ml\" "
@@ -106,19 +125,32 @@ class SensorConfig:
         """Build from a mapping of SPEC keys; unknown keys are refused."""
         if not isinstance(data, Mapping):
             raise ConfigError(f"configuration must be a JSON object, not {type(data).__name__}")
-        unknown = sorted(set(data) - set(KEYS))
+        unknown = sorted(set(data) - set(KEYS), key=str)
         if unknown:
             raise ConfigError(
-                f"config key {unknown[0]!r} = {data[unknown[0]]!r}: unknown key "
+                f"config key {unknown[0]!r} = {_short(data[unknown[0]])}: unknown key "
                 f"(known keys: {', '.join(KEYS)})")
+        for key in KEYS:       # JSON null is not "use the default": every value is an integer or string
+            if key in data and data[key] is None:
+                raise ConfigError(f"config key {key!r} = null: must be a JSON "
+                                  f"{'string' if key in ('mode', 'ml_readout') else 'integer'} "
+                                  "(leave the key out to take its default)")
         return cls(**dict(data))
 
     @classmethod
     def from_json(cls, text: str) -> "SensorConfig":
+        """Parse JSON text; refuse duplicate keys, deep nesting and huge numbers in one line."""
         try:
-            data = json.loads(text)
+            data = json.loads(text, object_pairs_hook=_unique_keys)
         except json.JSONDecodeError as exc:
             raise ConfigError(f"configuration is not valid JSON: {exc}") from None
+        except ConfigError:
+            raise
+        except RecursionError:
+            raise ConfigError("configuration JSON is nested too deeply") from None
+        except ValueError as exc:        # an integer of more than sys.get_int_max_str_digits() digits
+            reason = str(exc).split(";")[0].split(":")[-1].strip() if "digits" in str(exc) else str(exc)
+            raise ConfigError(f"configuration JSON holds a number too long to read ({reason})") from None
         return cls.from_dict(data)
 
     @classmethod
@@ -206,9 +238,24 @@ def load_config(spec: str | Path) -> SensorConfig:
     """``"te"`` / ``"ml"`` / ``"ml-msb"`` name presets; anything else is a JSON file path."""
     if str(spec) in PRESETS:
         return SensorConfig.preset(str(spec))
+    from .paths import check_input_file
     path = Path(spec)
     try:
-        text = path.read_text()
+        check_input_file(str(spec) if not isinstance(spec, Path) else spec, "configuration")
+        data = path.read_bytes()
     except OSError as exc:
         raise ConfigError(f"cannot read configuration file {str(path)!r}: {exc.strerror}") from None
-    return SensorConfig.from_json(text)
+    except TespikeError as exc:
+        raise ConfigError(str(exc)) from None
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"configuration file {str(path)!r} is {len(data)} bytes; "
+                          f"a configuration is at most {MAX_CONFIG_BYTES} bytes")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"configuration file {str(path)!r} is not UTF-8 text "
+                          f"(byte {exc.start}: {data[exc.start:exc.start + 1]!r})") from None
+    try:
+        return SensorConfig.from_json(text)
+    except ConfigError as exc:
+        raise ConfigError(f"configuration file {str(path)!r}: {exc}") from None

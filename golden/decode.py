@@ -12,13 +12,33 @@ from .config import DESIGN_ELECTRONS, SensorConfig
 from .errors import InputError
 
 
+#: Words checked at once by :func:`check_words` (bounds its int64 temporaries).
+CHECK_CHUNK_WORDS = 1 << 22
+
+
 def check_words(words: np.ndarray, config: SensorConfig) -> np.ndarray:
-    """Refuse any word that the configured sensor cannot emit (SPEC section 4)."""
+    """Refuse any word that the configured sensor cannot emit (SPEC section 4).
+
+    Checked in slices of about :data:`CHECK_CHUNK_WORDS` words along the first
+    axis, so the memory it needs is bounded whatever the stream's size.
+    """
     words = np.asarray(words)
     if words.dtype.kind not in "iu":
         raise InputError(f"readout words dtype {words.dtype} is not an integer type")
     if not words.size:
         return words
+    if words.ndim == 0:
+        _check_word_block(words.reshape(1), config, lambda i: ())
+        return words
+    row = max(1, words[0].size)
+    step = max(1, CHECK_CHUNK_WORDS // row)
+    for start in range(0, words.shape[0], step):
+        _check_word_block(words[start:start + step], config,
+                          lambda index, start=start: (index[0] + start,) + index[1:])
+    return words
+
+
+def _check_word_block(words: np.ndarray, config: SensorConfig, where) -> None:
     w = words.astype(np.int64)
     if config.is_te:
         flag = w >> config.d
@@ -31,9 +51,8 @@ def check_words(words: np.ndarray, config: SensorConfig) -> np.ndarray:
         bad = (w < 0) | (w > config.ml_max)
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise InputError(f"readout word {int(w[index])} at index {index} is not a legal "
+        raise InputError(f"readout word {int(w[index])} at index {where(index)} is not a legal "
                          f"{config.mode.upper()} word for this configuration ({config})")
-    return words
 
 
 def _te_fields(words: np.ndarray, config: SensorConfig) -> tuple[np.ndarray, np.ndarray]:

@@ -8,45 +8,151 @@ never leaves a half-written file; every reader refuses bad input with an
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
+import re
+import shutil
+import stat
 import tempfile
+import zipfile
+import zlib
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
 from .config import SensorConfig
-from .errors import InputError
+from .errors import InputError, TespikeError
+from .paths import check_input_file, check_output_file
+
+
+#: Hidden temporaries are named ``.<name>.<pid>.<random>.part`` beside the output;
+#: the pid lets the next run at that path remove one a killed run left behind.
+_PART_NAME = 100          # characters of the output's name kept in the temporary's name
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _remove_stale_parts(directory: Path, stem: str) -> None:
+    """Remove ``.<stem>.<pid>.<random>.part`` files whose process is gone (killed runs)."""
+    pattern = re.compile(r"\." + re.escape(stem) + r"\.(\d+)\.[A-Za-z0-9_]{8}\.part")
+    try:
+        entries = [e for e in os.scandir(directory) if e.name.startswith("." + stem + ".")]
+    except OSError:
+        return
+    for entry in entries:
+        match = pattern.fullmatch(entry.name)
+        if not match or not entry.is_file(follow_symlinks=False):
+            continue
+        pid = int(match.group(1))
+        if pid == os.getpid():
+            continue
+        try:
+            os.kill(pid, 0)
+            continue                        # its writer is still running
+        except ProcessLookupError:
+            pass
+        except (PermissionError, OverflowError):
+            continue
+        with contextlib.suppress(OSError):
+            os.unlink(entry.path)
+
+
+def _write_error(path: str, exc: OSError) -> InputError:
+    """An OSError of writing, as one line naming the user's path (never the temporary)."""
+    if exc.errno is None and "requested" in str(exc):          # numpy's short write: a full disk
+        reason = f"short write ({exc}); is the disk full?"
+    else:
+        reason = exc.strerror or str(exc) or type(exc).__name__
+    return InputError(f"cannot write {path!r}: {reason}")
 
 
 @contextlib.contextmanager
-def atomic_output(path: str | Path) -> Iterator[str]:
-    """Yield a temporary path beside ``path``; move it into place only on success."""
-    path = Path(path)
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise InputError(f"cannot write {str(path)!r}: directory {str(directory)!r} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=directory)
-    os.close(fd)
+def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
+    """Yield a temporary path to write; on success move it to ``path``, else remove it.
+
+    ``path`` is checked with :func:`golden.paths.check_output_file` first. A
+    symlink's target is replaced (the link stays); a character device or FIFO
+    (``/dev/null``, a pipe) is written through once the temporary is complete,
+    never replaced. The file gets the mode the user's umask gives (an existing
+    file keeps its mode). Temporaries are ``.<name>.<pid>.<random>.part`` beside
+    the target; one left by a killed run is removed by the next run at that path.
+    Any OSError while writing becomes an :class:`InputError` naming ``path``.
+    """
+    shown = os.fspath(path)
+    target = check_output_file(path, what)
     try:
-        yield tmp
-        os.replace(tmp, path)
+        info = os.stat(target)
+    except OSError:
+        info = None
+    through = info is not None and (stat.S_ISCHR(info.st_mode) or stat.S_ISFIFO(info.st_mode))
+    if through:
+        directory = Path(tempfile.gettempdir())
+        prefix = f".tespike.{os.getpid()}."
+    else:
+        directory = target.parent
+        stem = target.name[:_PART_NAME]
+        _remove_stale_parts(directory, stem)
+        prefix = f".{stem}.{os.getpid()}."
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=".part", dir=directory)
+        os.close(fd)
+    except OSError as exc:
+        raise _write_error(shown, exc) from None
+    try:
+        try:
+            yield tmp
+            if through:
+                _write_through(tmp, target, shown)
+            else:
+                mode = (info.st_mode & 0o777) if info is not None else (0o666 & ~_umask())
+                os.chmod(tmp, mode)
+                os.replace(tmp, target)
+        except OSError as exc:
+            if exc.filename not in (None, tmp, str(target)):
+                raise                              # about another file: the caller names it
+            raise _write_error(shown, exc) from None
     finally:
-        if os.path.exists(tmp):
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
 
 
+def _write_through(tmp: str, target: Path, shown: str) -> None:
+    """Copy a finished temporary into a character device or FIFO (never replacing it)."""
+    try:
+        fd = os.open(target, os.O_WRONLY | os.O_NONBLOCK)
+    except OSError as exc:
+        if exc.errno == errno.ENXIO:
+            raise InputError(f"cannot write {shown!r}: the FIFO has no reader") from None
+        raise
+    os.set_blocking(fd, True)
+    with os.fdopen(fd, "wb") as out, open(tmp, "rb") as source:
+        shutil.copyfileobj(source, out, 1 << 20)
+
+
 def _load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.ndarray:
+    check_input_file(path, what)
     try:
         array = np.load(path, allow_pickle=False, mmap_mode=mmap_mode)
-    except FileNotFoundError:
-        raise InputError(f"{what} file {str(path)!r} does not exist") from None
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{what} file {str(path)!r} is not a readable .npy array: {exc}") from None
+    except (OSError, ValueError, EOFError) as exc:
+        raise InputError(f"{what} file {str(path)!r} is not a readable .npy array: "
+                         f"{_first_line(exc)}") from None
     if not isinstance(array, np.ndarray):
+        if hasattr(array, "close"):
+            array.close()
         raise InputError(f"{what} file {str(path)!r} holds an archive, not one .npy array")
     return array
+
+
+def _first_line(exc: BaseException, limit: int = 200) -> str:
+    """An exception's message cut to one short line (for messages about bad files)."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def check_stimulus(stimulus: np.ndarray, config: SensorConfig, *, whole_readouts: bool = True,
@@ -95,6 +201,8 @@ def load_stimulus(path: str | Path, config: SensorConfig) -> np.ndarray:
     so it too needs memory bounded by the slice, not by the file.
     """
     stimulus = _load_npy(path, "stimulus", mmap_mode="r")
+    if stimulus.ndim == 3 and stimulus.shape[0] == 0:
+        raise InputError(f"stimulus file {str(path)!r} has T = 0 pixel clocks (no readout to make)")
     if stimulus.ndim != 3 or stimulus.dtype.kind not in "iu":
         return check_stimulus(stimulus, config)
     check_stimulus(stimulus, config, scan_values=False)     # dtype, shape and T rules
@@ -140,9 +248,11 @@ def load_scene(path: str | Path, *, memory_map: bool = False) -> np.ndarray:
     file's own dtype) and checks the values one slice of readouts at a time,
     so memory stays bounded by the slice; the caller converts what it reads.
     """
-    if not memory_map:
-        return check_scene(_load_npy(path, "scene"))
     scene = check_scene(_load_npy(path, "scene", mmap_mode="r"), scan_values=False)
+    if scene.shape[0] == 0:
+        raise InputError(f"scene file {str(path)!r} has K = 0 readout intervals (nothing to simulate)")
+    if not memory_map:
+        return check_scene(np.array(scene))
     step = max(1, (1 << 22) // max(1, scene[0].size))
     for start in range(0, scene.shape[0], step):
         check_scene(np.asarray(scene[start:start + step]))
@@ -170,26 +280,86 @@ def save_stream(path: str | Path, words: np.ndarray, config: SensorConfig) -> No
                      config=np.array(config.to_json()))
 
 
-def load_stream(path: str | Path) -> tuple[np.ndarray, SensorConfig]:
-    """Read ``S.npz``; return ``(words, config)`` with the words checked legal."""
+def _stored_member(path: str | Path, name: str) -> np.ndarray | None:
+    """A read-only memory map of an uncompressed (``np.savez``) ``.npy`` member, after its
+    CRC is verified by streaming through it; ``None`` if the member is compressed."""
+    with zipfile.ZipFile(path) as archive:
+        info = archive.getinfo(name)
+        if info.compress_type != zipfile.ZIP_STORED or info.flag_bits & 0x1:
+            return None
+        with archive.open(info) as member:            # reading to the end checks the CRC
+            version = np.lib.format.read_magic(member)
+            read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                           else np.lib.format.read_array_header_2_0)
+            shape, fortran, dtype = read_header(member)
+            header = member.tell() if hasattr(member, "tell") else None
+            while member.read(1 << 22):
+                pass
+    if header is None or dtype.hasobject:
+        return None
+    with open(path, "rb") as handle:               # the member's data starts after its local header
+        handle.seek(info.header_offset)
+        local = handle.read(30)
+        if len(local) < 30 or local[:4] != b"PK\x03\x04":
+            raise zipfile.BadZipFile(f"bad local header of member {name!r}")
+        start = info.header_offset + 30 + int.from_bytes(local[26:28], "little") + \
+            int.from_bytes(local[28:30], "little")
+    count = int(np.prod(shape, dtype=np.int64))
+    if header + count * dtype.itemsize > info.file_size:
+        raise ValueError(f"member {name!r} is shorter than its header's shape {shape}")
+    if count == 0:
+        return np.zeros(shape, dtype)
+    return np.memmap(path, dtype=dtype, mode="r", offset=start + header, shape=shape,
+                     order="F" if fortran else "C")
+
+
+def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarray, SensorConfig]:
+    """Read ``S.npz``; return ``(words, config)`` with the words checked legal.
+
+    Anything but a readable zip archive holding ``words`` and ``config`` is
+    refused in one line: a ``.npy`` array, a truncated or corrupt archive (bad
+    CRC, unknown compression, an encrypted member), a stream with K, H or W = 0.
+    ``memory_map=True`` leaves uncompressed words (as ``np.savez`` writes them)
+    on disk as a read-only memory map; compressed words are read into memory.
+    """
     from .decode import check_words
+    shown = str(path)
+    check_input_file(path, "stream")
+    with open(path, "rb") as handle:
+        magic = handle.read(6)
+    if magic == b"\x93NUMPY":
+        raise InputError(f"stream file {shown!r} is a .npy array, not an .npz archive "
+                         "holding 'words' and 'config'")
+    if not magic.startswith(b"PK"):
+        raise InputError(f"stream file {shown!r} is not a readable .npz archive (no zip header)")
     try:
         with np.load(path, allow_pickle=False) as npz:
-            if "words" not in npz or "config" not in npz:
-                raise InputError(f"stream file {str(path)!r} must hold 'words' and 'config'")
-            words = npz["words"]
-            config_text = str(npz["config"])
-    except FileNotFoundError:
-        raise InputError(f"stream file {str(path)!r} does not exist") from None
-    except (OSError, ValueError) as exc:
-        raise InputError(f"stream file {str(path)!r} is not a readable .npz archive: {exc}") from None
+            if "words" not in npz.files or "config" not in npz.files:
+                raise InputError(f"stream file {shown!r} must hold 'words' and 'config' "
+                                 f"(it holds {', '.join(npz.files) or 'nothing'})")
+            config_text = npz["config"]
+            words = _stored_member(path, "words.npy") if memory_map else None
+            if words is None:
+                words = npz["words"]
+    except InputError:
+        raise
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error,
+            NotImplementedError, RuntimeError) as exc:
+        raise InputError(f"stream file {shown!r} is not a readable .npz archive: "
+                         f"{_first_line(exc)}") from None
+    if config_text.ndim != 0 or config_text.dtype.kind not in "US":
+        raise InputError(f"stream file {shown!r}: 'config' must be a 0-d string, "
+                         f"not {config_text.dtype} {config_text.shape}")
     try:
-        config = SensorConfig.from_dict(json.loads(config_text))
-    except json.JSONDecodeError as exc:
-        raise InputError(f"stream file {str(path)!r}: 'config' is not JSON: {exc}") from None
+        config = SensorConfig.from_json(str(config_text))
+    except TespikeError as exc:
+        raise InputError(f"stream file {shown!r}: {exc}") from None
     if words.dtype.kind not in "iu" or words.ndim != 3:
-        raise InputError(f"stream file {str(path)!r}: 'words' must be an integer (K, H, W) array, "
+        raise InputError(f"stream file {shown!r}: 'words' must be an integer (K, H, W) array, "
                          f"not {words.dtype} {words.shape}")
+    if 0 in words.shape:
+        raise InputError(f"stream file {shown!r}: 'words' shape {words.shape} is empty "
+                         "(K, H and W must be at least 1)")
     check_words(words, config)
     return words, config
 

@@ -44,6 +44,7 @@ import numpy as np
 from golden.config import SensorConfig
 from golden.errors import InputError
 from golden.io import atomic_output, check_scene
+from golden.resources import require_memory
 
 #: Sensors evaluated by default: the paper's Table 1 columns (ML = the msb camera
 #: of its eq. 10 on the left, TE on the right), then the full-count ML camera.
@@ -53,8 +54,14 @@ COLUMNS = ("ml-msb", "te")
 #: Names in tables and plots: the paper's names for its two cameras.
 NAMES = {"ml-msb": "ML", "te": "TE", "ml": "ML-count"}
 MU = 5000.0
+#: Memory of one sequence's work besides its words and images (reconstruction
+#: blocks, metric bands, torch), for the up-front check of :func:`evaluate`.
+WORKING_BYTES = 512 << 20
 #: Range of the error maps of the strips (absolute difference of mu-law images).
 ERROR_RANGE = 0.25
+
+#: Files :func:`write_outputs` writes into its folder (besides strips/<sequence>.png).
+OUTPUT_FILES = ("table.md", "table.csv", "results.csv", "quality_vs_time.png", "strips/")
 
 Simulate = Callable[[SensorConfig, np.ndarray, np.random.Generator], np.ndarray]
 
@@ -170,13 +177,18 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     bar = tqdm(total=len(sequences) * len(modes) * (1 + len(methods)), desc="evaluate",
                unit="step", disable=not progress)
     for index, (name, light) in enumerate(sequences):
-        light = check_scene(np.asarray(light))          # float64: no overflow of user light
-        peak = float(light.max())
+        light, peak = _checked_sequence(name, light)   # checked slice by slice, never copied whole
         if peak <= 0:
             raise InputError(f"sequence {name!r} is all zero: its peak cannot normalise the metrics")
+        K, H, W = light.shape
+        word_bytes = max(np.dtype(np.uint16 if configs[m].word_bits > 8 else np.uint8).itemsize
+                         for m in modes)
+        kept = len(modes) * (word_bytes + 4 * len(methods)) if keep else 0
+        require_memory(K * H * W * (word_bytes + 4 + kept) + WORKING_BYTES,
+                       f"evaluating sequence {name!r} ({K} x {H} x {W})")
         frames = scored_frames(light.shape[0], window)
         middle = (frames.start + frames.stop - 1) // 2
-        strip = {"gt": light[middle], "peak": peak, "frame": middle}
+        strip = {"gt": np.array(light[middle], np.float64), "peak": peak, "frame": middle}
         for mode_index, mode in enumerate(modes):
             config = configs[mode]
             bar.set_postfix_str(f"{name} {mode} simulate")
@@ -200,13 +212,26 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
                     float(np.mean(psnr_mu(pred, truth, peak=peak))),
                     float(np.mean(ssim_mu(pred, truth, peak=peak))),
                     1e3 * seconds / light.shape[0], int(pred.shape[0])))
-                strip[mode, method] = images[middle]
+                strip[mode, method] = np.array(images[middle])     # a copy: the images can go
                 if keep:
                     evaluation.images[name, mode, method] = images
                 bar.update()
         evaluation.strips[name] = strip
     bar.close()
     return evaluation
+
+
+def _checked_sequence(name: str, light) -> tuple[np.ndarray, float]:
+    """Check a (K, H, W) light sequence slice by slice (memory maps stay on disk); return it and its peak."""
+    light = light if isinstance(light, np.ndarray) else np.asarray(light)
+    check_scene(light, scan_values=False)
+    if light.shape[0] == 0:
+        raise InputError(f"sequence {name!r} has no frames (K = 0)")
+    step = max(1, (1 << 22) // light[0].size)
+    peak = 0.0
+    for start in range(0, light.shape[0], step):
+        peak = max(peak, float(check_scene(np.asarray(light[start:start + step])).max()))
+    return light, peak
 
 
 # ----------------------------------------------------------------- writers

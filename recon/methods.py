@@ -56,14 +56,17 @@ METHODS: dict[str, Method] = {
 
 
 def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
-                device: str = "cpu", progress: bool = False, **options) -> np.ndarray:
+                device: str = "cpu", progress: bool = False, out: np.ndarray | None = None,
+                **options) -> np.ndarray:
     """Stream words (K, H, W) -> reconstructed light, float32 (K, H, W), scene units.
 
     ``method`` is a key of :data:`METHODS`. ``window`` (odd, readouts) and
     ``device`` (a torch device) apply to every method; further ``options``
     are fields of :class:`recon.settings.ReconSettings` the method uses
     (``estimator``, ``search`` for TFI, ``chunk_elements``, ``dtype``). Words are checked
-    legal for ``config``; an unknown method or option is refused.
+    legal for ``config``; an unknown method or option is refused. ``out``: a
+    float32 (K, H, W) array to fill (e.g. a memory map of the output file, so
+    the images never need to fit in memory); it is returned.
     """
     if method not in METHODS:
         raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(METHODS)})")
@@ -83,7 +86,10 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     if len(shape) != 3:
         raise InputError(f"stream words shape {shape} must be (K, H, W)")
     K, H, W = shape
-    out = np.empty((K, H, W), np.float32)
+    if out is None:
+        out = np.empty((K, H, W), np.float32)
+    elif out.shape != (K, H, W) or out.dtype != np.float32:
+        raise InputError(f"out must be float32 {(K, H, W)}, not {out.dtype} {out.shape}")
     if out.size == 0:
         return out
     flat = words.reshape(K, H * W)

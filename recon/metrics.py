@@ -51,7 +51,11 @@ DEFAULT_NITS_PER_UNIT = 4000.0
 
 
 def _frames(x, name: str, device) -> torch.Tensor:
-    t = torch.as_tensor(np.asarray(x) if not isinstance(x, torch.Tensor) else x)
+    if not isinstance(x, torch.Tensor):
+        x = np.asarray(x)
+        if not x.flags.writeable:          # a read-only memory map: copy the (small) band
+            x = x.copy()
+    t = torch.as_tensor(x)
     if t.dtype.is_complex or t.dtype == torch.bool:
         raise InputError(f"{name} dtype {t.dtype} is not a real number type")
     t = t.to(device=device, dtype=torch.float64)
@@ -62,16 +66,6 @@ def _frames(x, name: str, device) -> torch.Tensor:
     if t.numel() and not bool(torch.isfinite(t).all()):
         raise InputError(f"{name} holds a non-finite value")
     return t
-
-
-def _pair(pred, gt, device) -> tuple[torch.Tensor, torch.Tensor, bool]:
-    single = np.ndim(pred) == 2 if not isinstance(pred, torch.Tensor) else pred.dim() == 2
-    p, g = _frames(pred, "prediction", device), _frames(gt, "ground truth", device)
-    if p.shape != g.shape:
-        raise InputError(f"prediction shape {tuple(p.shape)} != ground truth shape {tuple(g.shape)}")
-    if g.numel() and float(g.min()) < 0:
-        raise InputError(f"ground truth holds a negative light value ({float(g.min())})")
-    return p, g, single
 
 
 def _out(values: torch.Tensor, single: bool) -> np.ndarray:
@@ -123,6 +117,12 @@ def ssim(x: torch.Tensor, y: torch.Tensor, data_range: float = 1.0, sigma: float
     the filter radius; the pixels it keeps see no padding, so a valid
     (unpadded) separable convolution gives the same numbers.
     """
+    return ssim_map(x, y, data_range, sigma, truncate).mean(dim=(1, 2))
+
+
+def ssim_map(x: torch.Tensor, y: torch.Tensor, data_range: float = 1.0, sigma: float = SSIM_SIGMA,
+             truncate: float = SSIM_TRUNCATE) -> torch.Tensor:
+    """SSIM of every valid pixel (K, H - 2r, W - 2r) of (K, H, W) float64 tensors (r = window radius)."""
     kernel = _gaussian_kernel(sigma, truncate, x.device)
     win = kernel.numel()
     K, H, W = x.shape
@@ -138,22 +138,115 @@ def ssim(x: torch.Tensor, y: torch.Tensor, data_range: float = 1.0, sigma: float
     ux, uy, uxx, uyy, uxy = filt(stack)[:, 0].split(K)
     vx, vy, vxy = uxx - ux * ux, uyy - uy * uy, uxy - ux * uy
     c1, c2 = (SSIM_K1 * data_range) ** 2, (SSIM_K2 * data_range) ** 2
-    s = ((2 * ux * uy + c1) * (2 * vxy + c2)) / ((ux ** 2 + uy ** 2 + c1) * (vx + vy + c2))
-    return s.mean(dim=(1, 2))
+    return ((2 * ux * uy + c1) * (2 * vxy + c2)) / ((ux ** 2 + uy ** 2 + c1) * (vx + vy + c2))
+
+
+#: Pixels (frames x rows x columns) one band of a metric converts to float64 at once:
+#: the metrics run frame by frame and row band by row band, so their memory is
+#: bounded whatever the size of the sequence or of one frame.
+CHUNK_PIXELS = 1 << 20
+
+
+def _shape(x) -> tuple[int, ...]:
+    return tuple(x.shape) if isinstance(x, torch.Tensor) else np.shape(x)
+
+
+def _frame_peaks(gt, K: int, H: int, W: int, device) -> torch.Tensor:
+    """Per-frame maximum of the ground truth, computed band by band."""
+    peaks = torch.empty(K, dtype=torch.float64, device=device)
+    for k in range(K):
+        rows = max(1, CHUNK_PIXELS // max(1, W))
+        top = -math.inf
+        for r in range(0, H, rows):
+            band = _frames(gt[k:k + 1, r:r + rows], "ground truth", device)
+            if band.numel():
+                if float(band.min()) < 0:
+                    raise InputError(f"ground truth holds a negative light value ({float(band.min())})")
+                top = max(top, float(band.max()))
+        peaks[k] = top
+    return peaks
+
+
+def _banded(pred, gt, stat, *, halo: int = 0, peak=None, normalised: bool = True,
+            device="cpu") -> np.ndarray:
+    """Per-frame mean of ``stat(p, g)`` over the valid pixels, band by band.
+
+    ``pred`` and ``gt`` are (K, H, W) or (H, W) numpy arrays (memory maps welcome)
+    or tensors; each band of at most :data:`CHUNK_PIXELS` output pixels is
+    converted to float64, checked, normalised by the peak (when ``normalised``)
+    and passed to ``stat``, which returns the per-pixel values of the band's
+    valid region (its input carries ``halo`` extra rows on each side).
+    """
+    pshape, gshape = _shape(pred), _shape(gt)
+    single = len(pshape) == 2
+    if len(pshape) == 2:
+        pred = pred[None]
+    if len(gshape) == 2:
+        gt = gt[None]
+    pshape, gshape = _shape(pred), _shape(gt)
+    for name, shape in (("prediction", pshape), ("ground truth", gshape)):
+        if len(shape) != 3:
+            raise InputError(f"{name} shape {shape if not single else shape[1:]} must be (K, H, W) or (H, W)")
+    if pshape != gshape:
+        raise InputError(f"prediction shape {pshape} != ground truth shape {gshape}")
+    K, H, W = gshape
+    if normalised:
+        if peak is None:
+            scales = _frame_peaks(gt, K, H, W, device)
+            if K and bool((scales <= 0).any()):
+                frame = int(torch.nonzero(scales <= 0)[0])
+                raise InputError(f"ground-truth frame {frame} is all zero: its peak cannot normalise "
+                                 "(pass peak= explicitly)")
+        else:
+            if not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
+                raise InputError(f"peak = {peak!r}: must be a finite number > 0")
+            scales = torch.full((K,), float(peak), dtype=torch.float64, device=device)
+    out_rows = H - 2 * halo
+    frames_per = max(1, CHUNK_PIXELS // max(1, out_rows * W))
+    rows_per = out_rows if frames_per > 1 else max(1, CHUNK_PIXELS // max(1, W))
+    sums = torch.zeros(K, dtype=torch.float64, device=device)
+    count = 0
+    for k0 in range(0, K, frames_per):
+        k1 = min(K, k0 + frames_per)
+        for r0 in range(0, max(out_rows, 0), rows_per):
+            r1 = min(out_rows, r0 + rows_per)
+            p = _frames(pred[k0:k1, r0:r1 + 2 * halo], "prediction", device)
+            g = _frames(gt[k0:k1, r0:r1 + 2 * halo], "ground truth", device)
+            if g.numel() and float(g.min()) < 0:
+                raise InputError(f"ground truth holds a negative light value ({float(g.min())})")
+            if normalised:
+                if peak is not None and g.numel() and float(g.max()) > peak:
+                    raise InputError(f"peak = {peak!r} is below the ground truth's maximum "
+                                     f"{float(g.max())!r}: the ground truth would be clipped")
+                scale = scales[k0:k1].view(-1, 1, 1)
+                p, g = (p / scale).clamp(0, 1), (g / scale).clamp(0, 1)
+            values = stat(p, g)
+            sums[k0:k1] += values.sum(dim=(1, 2))
+            if k0 == 0:
+                count += values.shape[1] * values.shape[2]
+    return _out(sums / count if count else sums * math.nan, single)
+
+
+def _ssim_stat(mu: float):
+    def stat(p, g):
+        return ssim_map(mu_law(p, mu), mu_law(g, mu))
+    return stat
 
 
 def psnr_mu(pred, gt, *, mu: float = MU, peak=None, device="cpu") -> np.ndarray:
     """PSNR-mu per frame (dB): normalise by the GT peak, clip, mu-law, PSNR with range 1."""
-    p, g, single = _pair(pred, gt, device)
-    p, g = normalise(p, g, peak)
-    return _out(psnr(mu_law(p, mu), mu_law(g, mu)), single)
+    mse = _banded(pred, gt, lambda p, g: (mu_law(p, mu) - mu_law(g, mu)) ** 2, peak=peak, device=device)
+    with np.errstate(divide="ignore"):
+        return 10 * np.log10(1.0 / mse)
 
 
 def ssim_mu(pred, gt, *, mu: float = MU, peak=None, device="cpu") -> np.ndarray:
     """SSIM-mu per frame: normalise by the GT peak, clip, mu-law, Gaussian SSIM with range 1."""
-    p, g, single = _pair(pred, gt, device)
-    p, g = normalise(p, g, peak)
-    return _out(ssim(mu_law(p, mu), mu_law(g, mu)), single)
+    win = _gaussian_kernel(SSIM_SIGMA, SSIM_TRUNCATE, "cpu").numel()
+    shape = _shape(gt)
+    if len(shape) in (2, 3) and (shape[-2] < win or shape[-1] < win):
+        raise InputError(f"SSIM needs frames of at least {win} x {win} pixels, got {shape[-2]} x {shape[-1]}")
+    return _banded(pred, gt, _ssim_stat(mu), halo=win // 2, peak=peak, device=device)
 
 
 def pu21_encode(luminance: torch.Tensor, params=PU21_BANDING_GLARE) -> torch.Tensor:
@@ -172,8 +265,10 @@ def psnr_pu21(pred, gt, *, nits_per_unit: float = DEFAULT_NITS_PER_UNIT, device=
     """
     if not (isinstance(nits_per_unit, (int, float)) and math.isfinite(nits_per_unit) and nits_per_unit > 0):
         raise InputError(f"nits_per_unit = {nits_per_unit!r}: must be a finite number > 0")
-    p, g, single = _pair(pred, gt, device)
-    return _out(psnr(pu21_encode(p * nits_per_unit), pu21_encode(g * nits_per_unit), PU21_PEAK), single)
+    mse = _banded(pred, gt, lambda p, g: (pu21_encode(p * nits_per_unit) - pu21_encode(g * nits_per_unit)) ** 2,
+                  normalised=False, device=device)
+    with np.errstate(divide="ignore"):
+        return 10 * np.log10(PU21_PEAK ** 2 / mse)
 
 
 #: name -> per-frame metric function (higher is better for all).

@@ -28,7 +28,7 @@ def test_evaluate_user_scene_and_builtin_set(tmp_path, capsys):
                          "--scene", tmp_path / "mine.npy", "--methods", "tfp", "--out", tmp_path / "ev")
     assert code == 0, stderr
     assert "| TFP_ML |" in stdout and "| TFP_TE |" in stdout and "| TFP_ML-count |" in stdout
-    rows = list(csv.DictReader(open(tmp_path / "ev" / "results.csv")))
+    rows = list(csv.DictReader((tmp_path / "ev" / "results.csv").read_text().splitlines()))
     assert sorted({r["sequence"] for r in rows}) == ["default", "mine"] and len(rows) == 6
     assert sorted({r["mode"] for r in rows}) == ["ml", "ml-msb", "te"]
     assert (tmp_path / "ev" / "strips" / "mine.png").is_file()
@@ -54,5 +54,5 @@ def test_evaluate_without_the_count_camera(tmp_path, capsys):
                                     "--ml-config", tmp_path / "msb.json", "--out", tmp_path / "ev")
     assert code == 0, stderr
     assert "| TFI_ML |" in stdout and "ML-count" not in stdout
-    rows = list(csv.DictReader(open(tmp_path / "ev" / "results.csv")))
+    rows = list(csv.DictReader((tmp_path / "ev" / "results.csv").read_text().splitlines()))
     assert sorted(r["mode"] for r in rows) == ["ml-msb", "te"]

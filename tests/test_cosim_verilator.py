@@ -12,6 +12,7 @@ so only the first run of the suite pays for them.
 
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -138,7 +139,7 @@ def test_build_error_names_the_first_error(tmp_path, rng):
                       verilog=spec_model_verilog(PAPER_TE, *SHAPE, bug="syntax"))
     assert not [p for p in tmp_path.iterdir() if p.is_dir() and not p.name.startswith("runtime-")]
     log = str(info.value).rsplit("full log: ", 1)[1].rstrip(")")
-    assert "syntax error" in open(log).read()
+    assert "syntax error" in Path(log).read_text()
 
 
 def test_missing_verilator_is_a_clear_error(monkeypatch, rng):

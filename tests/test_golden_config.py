@@ -77,7 +77,7 @@ def test_bad_json_and_missing_file(tmp_path):
     (tmp_path / "bad.json").write_text("{nope")
     with pytest.raises(ConfigError, match="not valid JSON"):
         load_config(tmp_path / "bad.json")
-    with pytest.raises(ConfigError, match="cannot read"):
+    with pytest.raises(ConfigError, match="missing.json.*does not exist"):
         load_config(tmp_path / "missing.json")
     (tmp_path / "list.json").write_text("[1]")
     with pytest.raises(ConfigError, match="JSON object"):

@@ -23,28 +23,35 @@ def run(args) -> int:
 
     import numpy as np
 
+    from cosim.cli import progress_wanted
     from golden.fastsim import simulate_scene
     from golden.io import atomic_output, save_images, save_stream
-    from recon.evaluate import evaluate, paper_configs, table_markdown, write_outputs
+    from golden.paths import check_output_dir
+    from recon.evaluate import OUTPUT_FILES, evaluate, paper_configs, table_markdown, write_outputs
     from recon.scenes import make_scene
 
     start = time.perf_counter()
-    out = Path(args.out)
+    configs = paper_configs()
+    methods = ("tfp", "tfi")
+    files = OUTPUT_FILES + ("I.npy",) + tuple(f"S_{m}.npz" for m in configs) + tuple(
+        f"R_{method}_{m}.npy" for method in methods for m in configs)
+    out = check_output_dir(args.out, "--out", files)      # every file checked before any is written
     light = make_scene("default", args.frames, args.height, args.width, seed=args.seed)
     out.mkdir(parents=True, exist_ok=True)
     with atomic_output(out / "I.npy") as tmp:
         with open(tmp, "wb") as handle:
             np.save(handle, light)
-    configs = paper_configs()
-    methods = ("tfp", "tfi")
     evaluation = evaluate([("default", light)],
                           lambda config, scene, rng: simulate_scene(config, scene, seed=rng),
-                          methods=methods, configs=configs, seed=args.seed, keep=True)
+                          methods=methods, configs=configs, seed=args.seed, keep=True,
+                          progress=progress_wanted(args))
     for mode, config in configs.items():
         save_stream(out / f"S_{mode}.npz", evaluation.streams["default", mode], config)
         for method in methods:
             save_images(out / f"R_{method}_{mode}.npy", evaluation.images["default", mode, method])
     paths = write_outputs(evaluation, out)
+    if args.quiet:
+        return 0
     print(f"scene: shipped CC0 panorama 'courtyard', panned; {args.frames} readouts of "
           f"{args.height} x {args.width}; TE b1 = b2 = 4, ML 8-bit msb (the paper's ML, eq. 10) and ML 8-bit "
           f"full-count sensors, shot noise, seed {args.seed}")

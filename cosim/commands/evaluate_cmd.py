@@ -40,14 +40,22 @@ def add_arguments(parser):
 def run(args) -> int:
     from pathlib import Path
 
+    from cosim.cli import progress_wanted
     from golden.config import load_config
     from golden.errors import ConfigError, InputError
     from golden.fastsim import simulate_scene
     from golden.io import load_scene
-    from recon.evaluate import evaluate, table_markdown, write_outputs
+    from golden.paths import check_output_dir
+    from recon.evaluate import OUTPUT_FILES, evaluate, table_markdown, write_outputs
     from recon.scenes import load_hdr_sequence
     from recon.scenes.heldout import sequence_set
 
+    methods = None
+    if args.methods is not None:
+        methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+        if not methods:
+            raise InputError(f"--methods {args.methods!r} names no method (give e.g. tfp,tfi)")
+    check_output_dir(args.out, "--out", OUTPUT_FILES)
     # option, value, sensor key, (mode, ml_readout) it must have
     wanted = [("--ml-config", args.ml_config, "ml-msb", ("ml", "msb")),
               ("--te-config", args.te_config, "te", ("te", "count"))]
@@ -60,17 +68,19 @@ def run(args) -> int:
             raise ConfigError(f"{option} {value!r} has mode {config.mode!r}, ml_readout {config.ml_readout!r}; "
                               f"expected mode {kind!r}" + (f", ml_readout {readout!r}" if kind == "ml" else ""))
     sequences = [] if args.set == "none" else sequence_set(args.set, args.frames, args.height, args.width)
-    for path in args.scene:
-        sequences.append((Path(path).stem, load_scene(path)))
+    for path in args.scene:          # memory-mapped: read one slice at a time
+        sequences.append((Path(path).stem, load_scene(path, memory_map=True)))
     for folder in args.folder:
-        sequences.append((Path(folder).name or str(folder), load_hdr_sequence(folder, progress=True)))
+        sequences.append((Path(folder).name or str(folder),
+                          load_hdr_sequence(folder, progress=progress_wanted(args))))
     if not sequences:
         raise InputError("nothing to evaluate: --set none and no --scene or --folder")
-    methods = None if args.methods is None else [m.strip() for m in args.methods.split(",") if m.strip()]
     evaluation = evaluate(sequences, lambda config, light, rng: simulate_scene(config, light, seed=rng),
                           methods=methods, modes=tuple(configs), configs=configs, window=args.window, seed=args.seed,
-                          device=args.device)
+                          device=args.device, progress=progress_wanted(args))
     paths = write_outputs(evaluation, args.out)
+    if args.quiet:
+        return 0
     print(table_markdown(evaluation), end="")
     print(f"wrote {paths['table.md']}, {paths['table.csv']}, {paths['results.csv']}, {paths['plot']} "
           f"and {len(evaluation.strips)} strip(s) in {Path(args.out) / 'strips'}")

@@ -3,7 +3,8 @@
 The stimulus file is memory-mapped and streamed through the engine in
 whole-readout chunks, so a file larger than memory runs in memory bounded by
 the chunk size plus the words (1/L of the stimulus, in the smallest word
-dtype). A progress bar on stderr appears for runs of more than a few chunks.
+dtype). A progress bar on stderr appears for runs of more than a few chunks
+when stderr is a terminal (``--progress on`` forces it).
 """
 
 HELP = "run the bit-exact golden model on a per-clock electron stimulus E.npy"
@@ -19,17 +20,22 @@ def add_arguments(parser):
     parser.add_argument("--chunk-elements", type=int, default=None, metavar="N",
                         help="pixel clocks x pixels per chunk (bounds memory; default 2^22)")
     parser.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
-                        help="progress bar on stderr (auto: only for runs of more than a few chunks)")
+                        help="progress bar on stderr (auto: on a terminal, for runs of more than a few chunks)")
 
 
 def run(args) -> int:
     import numpy as np
 
+    import sys
+
+    from cosim.cli import report
     from golden.config import load_config
     from golden.errors import InputError
     from golden.io import load_stimulus, save_stream, word_dtype
+    from golden.paths import check_outputs
     from golden.sensor import DEFAULT_CHUNK_ELEMENTS, PixelArray, iter_chunks
 
+    check_outputs({"--out": args.out}, {"--stimulus": args.stimulus, "--config": args.config})
     config = load_config(args.config)
     chunk_elements = DEFAULT_CHUNK_ELEMENTS if args.chunk_elements is None else args.chunk_elements
     if chunk_elements < 1:
@@ -41,7 +47,8 @@ def run(args) -> int:
     chunks = iter_chunks(stimulus, config, chunk_elements)
     clocks_per_chunk = max(1, chunk_elements // max(1, H * W * L)) * L
     n_chunks = -(-T // clocks_per_chunk)
-    show = args.progress == "on" or (args.progress == "auto" and n_chunks > PROGRESS_MIN_CHUNKS)
+    show = args.progress == "on" or (args.progress == "auto" and n_chunks > PROGRESS_MIN_CHUNKS
+                                     and sys.stderr.isatty())
     array = PixelArray(config, (H, W))
     done = 0
     from tqdm import tqdm
@@ -52,4 +59,5 @@ def run(args) -> int:
             done += len(part)
             bar.update(len(part))
     save_stream(args.out, words, config)
+    report(args, f"wrote {args.out}: {T // L} readouts of {H} x {W} {config.mode.upper()} words")
     return 0

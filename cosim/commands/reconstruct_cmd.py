@@ -5,6 +5,9 @@ HELP = "reconstruct light images R.npy from a TE or ML stream S.npz (tfp, tfi)"
 #: Offered here; the learned model ('net') joins when its weights ship.
 METHOD_CHOICES = ("tfp", "tfi")
 
+#: Most torch CPU threads ``--threads`` accepts.
+MAX_THREADS = 256
+
 
 def add_arguments(parser):
     parser.add_argument("--stream", required=True, help="S.npz: readout words and the full config")
@@ -15,29 +18,27 @@ def add_arguments(parser):
     parser.add_argument("--device", default="cpu", help="torch device (default cpu)")
     parser.add_argument("--search", choices=("stream", "window"), default="stream",
                         help="tfi only: look for the spike interval in the whole stream (default) or the window")
-    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--threads", type=int, default=None,
+                        help=f"torch CPU threads, 1..{MAX_THREADS} (default: torch's choice)")
 
 
 def run(args) -> int:
-    import sys
-    from pathlib import Path
-
+    from cosim.cli import progress_wanted, report
     from golden.errors import InputError
-    from golden.io import load_stream, save_images
+    from golden.io import atomic_output, load_stream
+    from golden.paths import check_outputs
 
     # every check that needs no torch comes first, so a refusal is quick
     if args.method not in METHOD_CHOICES:
         raise InputError(f"unknown method {args.method!r} (offered: {', '.join(METHOD_CHOICES)})")
     if args.window < 1 or args.window % 2 == 0:
         raise InputError(f"--window {args.window}: window = {args.window} must be an odd integer >= 1")
-    if args.threads is not None and args.threads < 1:
-        raise InputError(f"--threads {args.threads}: must be >= 1")
+    if args.threads is not None and not 1 <= args.threads <= MAX_THREADS:
+        raise InputError(f"--threads {args.threads}: must be in 1..{MAX_THREADS}")
     if args.method != "tfi" and args.search != "stream":
         raise InputError(f"--search applies to method 'tfi' only, not {args.method!r}")
-    out_dir = Path(args.out).parent
-    if not out_dir.is_dir():
-        raise InputError(f"cannot write {args.out!r}: directory {str(out_dir)!r} does not exist")
-    words, config = load_stream(args.stream)
+    check_outputs({"--out": args.out}, {"--stream": args.stream})
+    words, config = load_stream(args.stream, memory_map=True)     # stays on disk
 
     import torch
 
@@ -46,7 +47,15 @@ def run(args) -> int:
     if args.threads is not None:
         torch.set_num_threads(args.threads)
     options = {"search": args.search} if args.method == "tfi" else {}
-    images = reconstruct(words, config, args.method, window=args.window, device=args.device,
-                         progress=sys.stderr.isatty(), **options)
-    save_images(args.out, images)
+    import numpy as np
+    K, H, W = words.shape
+    with atomic_output(args.out, "--out") as tmp:
+        # R.npy is filled block by block through a memory map of the output file,
+        # so neither the words nor the images need to fit in memory
+        images = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(K, H, W))
+        reconstruct(words, config, args.method, window=args.window, device=args.device,
+                    progress=progress_wanted(args), out=images, **options)
+        images.flush()
+        del images
+    report(args, f"wrote {args.out}: {K} {args.method} images of {H} x {W} pixels")
     return 0

@@ -23,16 +23,7 @@ def add_arguments(parser):
     parser.add_argument("--check", action="store_true",
                         help="also run the golden model and exit 1 naming the first word where they differ "
                              "(S.npz still holds the RTL's stream)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar (default: on a terminal)")
-
-
-def _check_writable(path, flag):
-    from pathlib import Path
-
-    from golden.errors import InputError
-    directory = Path(path).parent
-    if not directory.is_dir():
-        raise InputError(f"{flag} {str(path)!r}: directory {str(directory)!r} does not exist")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar (same as --progress off)")
 
 
 def _backend(name):
@@ -68,28 +59,31 @@ def _check_backend_words(words, config, stimulus, backend):
 def run(args) -> int:
     from pathlib import Path
 
+    from cosim.cli import progress_wanted, report
     from golden.config import load_config
     from golden.errors import InputError
     from golden.io import load_stimulus, save_stream
+    from golden.paths import check_outputs
 
-    config = load_config(args.config)
-    stimulus = load_stimulus(args.stimulus, config)
-    _check_writable(args.out, "--out")
     gtkw = args.gtkw
     if args.vcd is not None:
         if args.backend != "amaranth":
             raise InputError(f"--vcd is only written by the amaranth backend, not {args.backend!r}")
-        _check_writable(args.vcd, "--vcd")
         gtkw = gtkw if gtkw is not None else str(Path(args.vcd).with_suffix(".gtkw"))
-        _check_writable(gtkw, "--gtkw")
     elif gtkw is not None:
         raise InputError("--gtkw needs --vcd (a save file describes a waveform)")
+    # every output checked, and kept apart from the inputs, before anything is written
+    check_outputs({"--out": args.out, "--vcd": args.vcd, "--gtkw": gtkw},
+                  {"--stimulus": args.stimulus, "--config": args.config})
+    config = load_config(args.config)
+    stimulus = load_stimulus(args.stimulus, config)
+    progress = False if args.no_progress else progress_wanted(args)
 
     if args.backend == "amaranth":
         from cosim.rtlsim import RTLProtocolError, rtl_words
         try:
             words = rtl_words(config, stimulus, vcd_path=args.vcd, gtkw_path=gtkw,
-                              progress=False if args.no_progress else None)
+                              progress=progress)
         except RTLProtocolError as exc:
             print(f"tespike rtl-sim: internal error: the RTL broke the output protocol: {exc}",
                   file=sys.stderr)
@@ -97,6 +91,9 @@ def run(args) -> int:
     else:
         words = _backend(args.backend)(config, stimulus)
     save_stream(args.out, _check_backend_words(words, config, stimulus, args.backend), config)
+    K, H, W = words.shape
+    report(args, f"wrote {args.out}: {K} readouts of {H} x {W} {config.mode.upper()} words "
+                 f"({args.backend} RTL)" + (f", {args.vcd} and {gtkw}" if args.vcd else ""))
     if args.check:
         return _compare_with_golden(words, config, stimulus, args.backend)
     return 0

@@ -26,10 +26,14 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
+    import math
+
     import numpy as np
 
+    from cosim.cli import progress_wanted, report
     from golden.errors import InputError
     from golden.io import atomic_output
+    from golden.paths import check_outputs
     from recon.scenes import SCENES, load_hdr_sequence, make_scene
 
     if args.list:
@@ -38,6 +42,15 @@ def run(args) -> int:
         return 0
     if not args.out:
         raise InputError("--out is required (the I.npy to write)")
+    if not args.folder:
+        for flag, given in (("--crop", args.crop is not None), ("--downscale", args.downscale != 1),
+                            ("--weights", args.weights != "rec709")):
+            if given:
+                raise InputError(f"{flag} applies to --folder only (a built-in scene is made at "
+                                 "--height x --width)")
+    if not (math.isfinite(args.peak) and args.peak > 0):
+        raise InputError(f"--peak {args.peak!r}: must be a finite number > 0")
+    check_outputs({"--out": args.out})
     if args.folder:
         crop = None
         if args.crop:
@@ -49,7 +62,7 @@ def run(args) -> int:
                 raise InputError(f"--crop {args.crop!r} must be HxW, e.g. 384x512")
         light = load_hdr_sequence(args.folder, weights=args.weights, peak=args.peak,
                                   max_frames=args.frames, crop=crop, downscale=args.downscale,
-                                  progress=True)
+                                  progress=progress_wanted(args))
     else:
         if args.sources is not None and args.sources < 0:
             raise InputError(f"--sources = {args.sources} must be >= 0")
@@ -58,4 +71,6 @@ def run(args) -> int:
     with atomic_output(args.out) as tmp:
         with open(tmp, "wb") as handle:
             np.save(handle, light)
+    K, H, W = light.shape
+    report(args, f"wrote {args.out}: {K} frames of {H} x {W} light, peak {float(light.max()):.6g}")
     return 0

@@ -19,19 +19,22 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    import sys
-
+    from cosim.cli import progress_wanted, report
     from golden.config import load_config
     from golden.errors import InputError
     from golden.fastsim import simulate_scene
     from golden.io import load_scene, save_stream
+    from golden.paths import check_outputs
 
+    check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config})
     config = load_config(args.config)
     scene = load_scene(args.scene, memory_map=True)     # read one readout at a time
     if args.seed is not None and args.seed < 0:
         raise InputError(f"--seed {args.seed}: must be >= 0")
     words = simulate_scene(config, scene, seed=args.seed, dark_current=args.dark_current,
                            noise=not args.no_noise, method=args.method,
-                           progress=sys.stderr.isatty())
+                           progress=progress_wanted(args))
     save_stream(args.out, words, config)
+    K, H, W = words.shape
+    report(args, f"wrote {args.out}: {K} readouts of {H} x {W} {config.mode.upper()} words")
     return 0

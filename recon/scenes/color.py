@@ -59,6 +59,11 @@ def normalise_sequence(frames: np.ndarray, peak: float = 1.0, *, what: str = "se
     frames = np.asarray(frames, dtype=np.float64)
     if not (np.isfinite(peak) and peak > 0):
         raise InputError(f"{what}: peak = {peak!r} must be a finite number > 0")
+    f32 = np.finfo(np.float32)
+    if not float(f32.tiny) <= peak <= float(f32.max):     # the sequence is stored as float32
+        raise InputError(f"{what}: peak = {peak!r} is outside float32's normal range "
+                         f"{float(f32.tiny):.3g}..{float(f32.max):.3g} (it would become "
+                         f"{'infinity' if peak > 1 else 'zero'})")
     if frames.size == 0:
         raise InputError(f"{what}: is empty (shape {frames.shape})")
     if not np.isfinite(frames).all():

@@ -25,6 +25,7 @@ import numpy as np
 
 from golden.errors import InputError
 from golden.io import atomic_output
+from golden.paths import check_input_file
 
 from .color import DEFAULT_WEIGHTS, normalise_sequence, to_gray
 
@@ -285,6 +286,7 @@ def write_exr(path: str | Path, image: np.ndarray) -> None:
 # ---------------------------------------------------------------- folders
 def read_image(path: str | Path) -> np.ndarray:
     """Read one HDR frame by its ending: ``.exr`` or Radiance (``.hdr``, ``.pic``, ``.rgbe``)."""
+    check_input_file(path, "HDR frame")         # a FIFO or device would block or mislead
     suffix = Path(path).suffix.lower()
     if suffix == ".exr":
         return read_exr(path)

@@ -1,0 +1,184 @@
+"""Path checks shared by every reader, writer and command (standard library only).
+
+A command refuses a bad path before it reads or writes anything, in one line
+that names the path the user gave (never a hidden temporary):
+
+- :func:`check_input_file`: an input must be an existing, non-empty regular
+  file (a FIFO would block for ever, a device or a directory is not data);
+- :func:`check_output_file`: an output may be a new or existing regular file
+  (through a symlink: the target is written), or an existing character device
+  or FIFO (``/dev/null``, a pipe: written through, never replaced); a directory,
+  a block device, a socket, a missing or read-only directory is refused;
+- :func:`check_distinct`: no output may be the same file as an input (compared
+  by resolved path and by inode, so hard links count) or as another output;
+- :func:`check_outputs`: all of the above for one command, before any work.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+from typing import Mapping
+
+from .errors import InputError
+
+#: Kinds of file, for messages.
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def kind(mode: int) -> str:
+    """'a directory', 'a FIFO', ... or 'a regular file' for an ``st_mode``."""
+    for test, name in _KINDS:
+        if test(mode):
+            return name
+    return "a regular file"
+
+
+def _reason(exc: OSError) -> str:
+    return exc.strerror or str(exc) or type(exc).__name__
+
+
+def check_input_file(path: str | os.PathLike, what: str = "input") -> Path:
+    """Refuse an input that is missing, unreadable, empty or not a regular file; return it.
+
+    ``what`` names the input in the message (``"stimulus"``, ``"--config"``...).
+    A FIFO is refused rather than opened: opening one with no writer blocks.
+    """
+    text = os.fspath(path)
+    if not text:
+        raise InputError(f"{what}: empty path")
+    try:
+        info = os.stat(text)
+    except FileNotFoundError:
+        raise InputError(f"{what} file {text!r} does not exist") from None
+    except OSError as exc:
+        raise InputError(f"{what} file {text!r}: {_reason(exc)}") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise InputError(f"{what} file {text!r} is {kind(info.st_mode)}, not a regular file")
+    if info.st_size == 0:
+        raise InputError(f"{what} file {text!r} is empty (0 bytes)")
+    if not os.access(text, os.R_OK):
+        raise InputError(f"{what} file {text!r}: permission denied")
+    return Path(text)
+
+
+def resolve_output(path: str | os.PathLike) -> Path:
+    """The file an output path names: symlinks (also dangling ones) followed to their target."""
+    return Path(os.path.realpath(os.fspath(path)))
+
+
+def check_output_file(path: str | os.PathLike, what: str | None = None) -> Path:
+    """Refuse an output path that cannot be written safely; return the resolved target.
+
+    Accepted: a new file in an existing writable directory, an existing writable
+    regular file (replaced atomically), an existing character device or FIFO
+    (written through by :func:`golden.io.atomic_output`, never replaced).
+    """
+    text = os.fspath(path)
+    label = f"{what} {text!r}" if what else repr(text)
+    if not text:
+        raise InputError(f"{what or 'output'}: empty path")
+    target = resolve_output(text)
+    try:
+        info = os.stat(target)
+    except FileNotFoundError:
+        info = None
+    except OSError as exc:
+        raise InputError(f"cannot write {label}: {_reason(exc)}") from None
+    if info is not None:
+        if stat.S_ISCHR(info.st_mode) or stat.S_ISFIFO(info.st_mode):
+            if not os.access(target, os.W_OK):
+                raise InputError(f"cannot write {label}: permission denied")
+            return target
+        if not stat.S_ISREG(info.st_mode):
+            raise InputError(f"cannot write {label}: it is {kind(info.st_mode)}"
+                             + (" (name a file inside it)" if stat.S_ISDIR(info.st_mode) else ""))
+        if not os.access(target, os.W_OK):
+            raise InputError(f"cannot write {label}: the file is read-only")
+    directory = target.parent
+    if not directory.is_dir():
+        shown = os.path.dirname(text) or "."
+        raise InputError(f"cannot write {label}: directory {shown!r} does not exist")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        shown = os.path.dirname(text) or "."
+        raise InputError(f"cannot write {label}: directory {shown!r} is not writable")
+    return target
+
+
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """True if two paths name one file: equal once resolved, or one inode (hard links)."""
+    ra, rb = resolve_output(a), resolve_output(b)
+    if ra == rb:
+        return True
+    try:
+        return os.path.samefile(ra, rb)
+    except OSError:
+        return False
+
+
+def check_distinct(inputs: Mapping[str, str | os.PathLike | None],
+                   outputs: Mapping[str, str | os.PathLike | None]) -> None:
+    """Refuse an output that is an input file or another output, naming both.
+
+    Keys are the flags (``"--stimulus"``), values the paths (``None`` skipped).
+    An input that is not an existing file (a preset name such as ``--config te``)
+    cannot be overwritten and is skipped.
+    """
+    outs = [(flag, os.fspath(p)) for flag, p in outputs.items() if p is not None]
+    ins = [(flag, os.fspath(p)) for flag, p in inputs.items()
+           if p is not None and os.path.lexists(os.fspath(p))]
+    for i, (oflag, out) in enumerate(outs):
+        for iflag, inp in ins:
+            if same_file(out, inp):
+                raise InputError(f"{oflag} {out!r} is the same file as {iflag} {inp!r}: "
+                                 "refusing to overwrite an input")
+        for oflag2, out2 in outs[:i]:
+            if same_file(out, out2):
+                raise InputError(f"{oflag} {out!r} is the same file as {oflag2} {out2!r}: "
+                                 "two outputs cannot share a file")
+
+
+def check_outputs(outputs: Mapping[str, str | os.PathLike | None],
+                  inputs: Mapping[str, str | os.PathLike | None] | None = None) -> None:
+    """Every output path of a command checked (:func:`check_output_file`) and kept apart
+    from the inputs (:func:`check_distinct`), before any output is written."""
+    for flag, path in outputs.items():
+        if path is not None:
+            check_output_file(path, flag)
+    check_distinct(inputs or {}, outputs)
+
+
+def check_output_dir(path: str | os.PathLike, what: str = "--out",
+                     files: tuple[str, ...] = ()) -> Path:
+    """An output folder: existing directory or creatable (parent exists); ``files``
+    (relative names written inside it) are checked like single outputs, and a
+    name ending in ``/`` must be a directory or absent."""
+    text = os.fspath(path)
+    folder = Path(text)
+    if os.path.lexists(text) and not folder.is_dir():
+        raise InputError(f"cannot write {what} {text!r}: it exists and is not a directory")
+    if not folder.is_dir():
+        parent = folder.resolve().parent
+        if not parent.is_dir():
+            raise InputError(f"cannot write {what} {text!r}: directory "
+                             f"{os.path.dirname(text.rstrip('/')) or '.'!r} does not exist")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise InputError(f"cannot create {what} {text!r}: its parent directory is not writable")
+        return folder
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"cannot write {what} {text!r}: directory is not writable")
+    for name in files:
+        inside = folder / name
+        if name.endswith("/"):
+            if os.path.lexists(inside) and not inside.is_dir():
+                raise InputError(f"cannot write {what} {text!r}: {str(inside)!r} exists and is "
+                                 "not a directory")
+            continue
+        if os.path.lexists(inside) or inside.parent.is_dir():
+            check_output_file(inside, what)
+        elif os.path.lexists(inside.parent):
+            raise InputError(f"cannot write {what} {str(inside)!r}: "
+                             f"{str(inside.parent)!r} is not a directory")
+    return folder

@@ -1,0 +1,70 @@
+"""Memory a run may use, so a command can refuse up front instead of being killed.
+
+:func:`available_memory` is the least of the kernel's ``MemAvailable``, the
+cgroup's ``memory.max`` minus its ``memory.current`` and the address-space
+limit (``ulimit -v``) minus what the process has mapped; :func:`require_memory`
+refuses, naming both sizes, a job whose estimate is larger.
+"""
+
+from __future__ import annotations
+
+import resource
+from pathlib import Path
+
+from .errors import InputError
+
+
+def _read_int(path: str) -> int | None:
+    try:
+        text = Path(path).read_text().strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None
+
+
+def _meminfo(key: str) -> int | None:
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith(key + ":"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def _mapped_bytes() -> int:
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmSize:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
+
+
+def available_memory() -> int | None:
+    """Bytes this process can still allocate (best estimate), or None if unknown."""
+    limits = []
+    free = _meminfo("MemAvailable")
+    if free is not None:
+        limits.append(free)
+    high, current = _read_int("/sys/fs/cgroup/memory.max"), _read_int("/sys/fs/cgroup/memory.current")
+    if high is not None and current is not None:
+        limits.append(max(0, high - current))
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft != resource.RLIM_INFINITY:
+        limits.append(max(0, soft - _mapped_bytes()))
+    return min(limits) if limits else None
+
+
+def gigabytes(n: int) -> str:
+    return f"{n / 2 ** 30:.1f} GB" if n >= 2 ** 28 else f"{n / 2 ** 20:.0f} MB"
+
+
+def require_memory(needed: int, what: str) -> None:
+    """Refuse ``what`` (e.g. "evaluating sequence 'x' (24 x 4000 x 6000)") if it needs
+    more memory than is available, in one line naming both sizes."""
+    free = available_memory()
+    if free is not None and needed > free:
+        raise InputError(f"{what} needs about {gigabytes(needed)} of memory, "
+                         f"but only {gigabytes(free)} is available")

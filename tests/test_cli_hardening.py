@@ -1,0 +1,503 @@
+"""Classes of fault every sub-command must survive (issue 12), one test per class.
+
+Each refusal: exactly one line on stderr, non-zero exit, no traceback, no new
+file (hidden temporaries included) and no existing file changed. Paths:
+devices, FIFOs, symlinks, hard links, directories, an output equal to an input;
+signals; stale temporaries; corrupt and hostile files; argument errors.
+"""
+
+import json
+import os
+import signal
+import stat
+import subprocess
+import sys
+import threading
+import time
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from golden.config import SensorConfig
+from golden.errors import InputError
+from tests.cli import ROOT, assert_refused, run_tespike
+
+TINY = SensorConfig(b1=1, b2=1, threshold=3, acc_bits=3)          # L = 2
+TINY_JSON = json.dumps({"b1": 1, "b2": 1, "threshold": 3, "acc_bits": 3})
+
+
+def snapshot(folder):
+    """Every entry under ``folder`` (hidden ones too) with its bytes, for "nothing changed"."""
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(folder):
+        for name in dirnames + filenames:
+            path = os.path.join(dirpath, name)
+            info = os.lstat(path)
+            data = Path(path).read_bytes() if stat.S_ISREG(info.st_mode) else None
+            out[os.path.relpath(path, folder)] = (stat.S_IFMT(info.st_mode), data)
+    return out
+
+
+@pytest.fixture
+def files(tmp_path):
+    """A config, stimulus, scene and stream in tmp_path."""
+    (tmp_path / "c.json").write_text(TINY_JSON)
+    rng = np.random.default_rng(3)
+    np.save(tmp_path / "e.npy", rng.integers(0, 6, size=(TINY.clocks_per_readout * 5, 3, 4)).astype(np.uint8))
+    np.save(tmp_path / "i.npy", rng.uniform(0, 1, size=(5, 3, 4)))
+    result = run_tespike("golden", "--config", tmp_path / "c.json", "--stimulus", tmp_path / "e.npy",
+                         "--out", tmp_path / "s.npz", "--quiet")
+    assert result.returncode == 0 and result.stdout == "", result
+    return tmp_path
+
+
+def refused_without_change(folder, args, *words):
+    before = snapshot(folder)
+    result = run_tespike(*args)
+    assert_refused(result, *words)
+    assert snapshot(folder) == before
+    return result
+
+
+# ------------------------------------------------------------------ output paths
+def golden_args(folder, out, stimulus=None, config=None):
+    return ("golden", "--config", config or folder / "c.json", "--stimulus", stimulus or folder / "e.npy",
+            "--out", out)
+
+
+@pytest.mark.parametrize("flag", ["--stimulus", "--config"])
+def test_output_equal_to_an_input_is_refused_naming_both(files, flag):
+    target = files / ("e.npy" if flag == "--stimulus" else "c.json")
+    os.symlink(target, files / "link")
+    os.link(target, files / "hard")
+    for out in (target, files / "link", files / "hard", files / "sub" / ".." / target.name):
+        (files / "sub").mkdir(exist_ok=True)
+        refused_without_change(files, golden_args(files, out), flag, "--out", "same file")
+
+
+def test_output_equal_to_input_in_every_command(files):
+    cases = [
+        ("simulate", "--config", "te", "--scene", files / "i.npy", "--out", files / "i.npy"),
+        ("simulate", "--config", files / "c.json", "--scene", files / "i.npy", "--out", files / "c.json"),
+        ("reconstruct", "--stream", files / "s.npz", "--method", "tfp", "--out", files / "s.npz"),
+        ("rtl-sim", "--config", files / "c.json", "--stimulus", files / "e.npy", "--out", files / "e.npy"),
+        ("rtl-sim", "--config", files / "c.json", "--stimulus", files / "e.npy", "--out", files / "w.npz",
+         "--vcd", files / "w.vcd", "--gtkw", files / "c.json"),
+        ("rtl-sim", "--config", "te", "--stimulus", files / "e.npy", "--out", files / "w.vcd",
+         "--vcd", files / "w.vcd"),
+        ("verilog", "--config", files / "c.json", "--height", 2, "--width", 2, "--out", files / "c.json"),
+    ]
+    for args in cases:
+        refused_without_change(files, args, "same file")
+
+
+def test_output_directory_refused_before_any_file_is_written(files):
+    (files / "d.vcd").mkdir()
+    (files / "d").mkdir()
+    refused_without_change(files, golden_args(files, files / "d"), "directory")
+    # rtl-sim --vcd DIR used to write DIR.gtkw before refusing
+    refused_without_change(files, ("rtl-sim", "--config", files / "c.json", "--stimulus", files / "e.npy",
+                                   "--out", files / "x.npz", "--vcd", files / "d.vcd"), "--vcd", "directory")
+    refused_without_change(files, ("rtl-sim", "--config", files / "c.json", "--stimulus", files / "e.npy",
+                                   "--out", files / "x.npz", "--vcd", files / "w.vcd", "--gtkw", files / "d"),
+                           "--gtkw", "directory")
+    refused_without_change(files, golden_args(files, files / "missing" / "s.npz"), "does not exist")
+    (files / "table.md").mkdir()
+    refused_without_change(files, ("evaluate", "--set", "none", "--scene", files / "i.npy", "--out", files),
+                           "table.md")
+    refused_without_change(files, ("evaluate", "--set", "none", "--scene", files / "i.npy",
+                                   "--out", files / "i.npy"), "not a directory")
+
+
+def test_symlinked_output_writes_the_target(files):
+    os.symlink("real.npz", files / "link.npz")                   # dangling until written
+    result = run_tespike(*golden_args(files, files / "link.npz"))
+    assert result.returncode == 0, result.stderr
+    assert os.path.islink(files / "link.npz") and (files / "real.npz").is_file()
+    with np.load(files / "real.npz") as a, np.load(files / "s.npz") as b:
+        assert np.array_equal(a["words"], b["words"])
+
+
+def test_character_device_output_is_written_through_never_replaced(files):
+    result = run_tespike(*golden_args(files, "/dev/null"))
+    assert result.returncode == 0, result.stderr
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
+    # /dev/full: the device is written to, and the full disk is named
+    result = run_tespike(*golden_args(files, "/dev/full"))
+    assert_refused(result, "/dev/full", "No space left")
+    assert stat.S_ISCHR(os.stat("/dev/full").st_mode)
+
+
+def test_fifo_output_is_written_through_or_refused_without_reader(files):
+    fifo = files / "pipe"
+    os.mkfifo(fifo)
+    received = []
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()))
+    reader.start()
+    result = run_tespike(*golden_args(files, fifo), timeout=60)
+    reader.join(timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+    assert received and received[0] == (files / "s.npz").read_bytes()
+    result = run_tespike(*golden_args(files, fifo), timeout=60)       # no reader: refused, no hang
+    assert_refused(result, "pipe", "no reader")
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+
+
+def test_outputs_get_the_mode_of_the_umask(files):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    for mask, mode in ((0o022, 0o644), (0o077, 0o600), (0o002, 0o664)):
+        out = files / f"m{mask:o}.npz"
+        subprocess.run([sys.executable, "-m", "cosim", *map(str, golden_args(files, out))], env=env,
+                       check=True, capture_output=True, preexec_fn=lambda mask=mask: os.umask(mask))
+        assert stat.S_IMODE(os.stat(out).st_mode) == mode
+    (files / "keep.npz").write_bytes(b"old")
+    os.chmod(files / "keep.npz", 0o640)                  # an existing file keeps its mode
+    assert run_tespike(*golden_args(files, files / "keep.npz")).returncode == 0
+    assert stat.S_IMODE(os.stat(files / "keep.npz").st_mode) == 0o640
+
+
+def test_read_only_output_and_directory_named_not_the_temporary(files):
+    if os.geteuid() == 0:
+        pytest.skip("root writes read-only files and directories")
+    (files / "ro").mkdir()
+    os.chmod(files / "ro", 0o555)
+    result = run_tespike(*golden_args(files, files / "ro" / "s.npz"))
+    assert_refused(result, "ro", "not writable")
+    assert ".part" not in result.stderr
+
+
+# ------------------------------------------------------------------ signals and stale temporaries
+def long_rtl_run(folder):
+    """An rtl-sim run with a VCD, long enough to be interrupted while writing."""
+    np.save(folder / "long.npy", np.full((TINY.clocks_per_readout * 4000, 2, 2), 3, np.uint8))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.Popen([sys.executable, "-m", "cosim", "rtl-sim", "--config", str(folder / "c.json"),
+                             "--stimulus", str(folder / "long.npy"), "--out", str(folder / "w.npz"),
+                             "--vcd", str(folder / "w.vcd")], env=env, stderr=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+
+
+def wait_for_part(folder, process, timeout=120):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if any(name.endswith(".part") for name in os.listdir(folder)):
+            return
+        assert process.poll() is None, process.communicate()
+        time.sleep(0.05)
+    pytest.fail("no temporary appeared")
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_termination_signals_remove_the_temporaries(files, signum):
+    before = set(os.listdir(files))
+    process = long_rtl_run(files)
+    wait_for_part(files, process)
+    process.send_signal(signum)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 128 + signum
+    assert len(stderr.strip().splitlines()) == 1 and "Traceback" not in stderr, stderr
+    assert set(os.listdir(files)) == before | {"long.npy"}
+
+
+def test_temporary_left_by_sigkill_is_removed_by_the_next_run(files):
+    process = long_rtl_run(files)
+    wait_for_part(files, process)
+    process.kill()
+    process.communicate()
+    parts = [name for name in os.listdir(files) if name.endswith(".part")]
+    assert parts and all(name.startswith((".w.vcd.", ".w.gtkw.")) for name in parts)
+    assert not (files / "w.vcd").exists()                        # never mistaken for output
+    np.save(files / "short.npy", np.zeros((TINY.clocks_per_readout, 1, 1), np.uint8))
+    result = run_tespike("rtl-sim", "--config", files / "c.json", "--stimulus", files / "short.npy",
+                         "--out", files / "w.npz", "--vcd", files / "w.vcd")
+    assert result.returncode == 0, result.stderr
+    assert not [name for name in os.listdir(files) if name.endswith(".part")]
+
+
+def test_stale_temporary_of_a_live_process_is_kept(tmp_path):
+    from golden.io import atomic_output
+    live = tmp_path / f".o.npy.{os.getppid()}.abcdefgh.part"
+    dead = tmp_path / ".o.npy.999999999.abcdefgh.part"
+    other = tmp_path / ".other.npy.999999999.abcdefgh.part"
+    for path in (live, dead, other):
+        path.write_bytes(b"x")
+    with atomic_output(tmp_path / "o.npy") as tmp:
+        Path(tmp).write_bytes(b"new")
+    assert live.exists() and other.exists() and not dead.exists()
+    assert (tmp_path / "o.npy").read_bytes() == b"new"
+
+
+# ------------------------------------------------------------------ full disk, in-process
+def test_full_disk_names_the_users_path(tmp_path, monkeypatch):
+    from golden.io import atomic_output, save_images
+
+    def full(*args, **kwargs):
+        raise OSError("655360 requested and 522208 written")
+    monkeypatch.setattr(np, "save", full)
+    with pytest.raises(InputError, match=r"cannot write '.*r\.npy': short write .*disk full"):
+        save_images(tmp_path / "r.npy", np.zeros((1, 2, 2)))
+    import errno
+    with pytest.raises(InputError, match=r"cannot write '.*o\.txt': No space left on device"):
+        with atomic_output(tmp_path / "o.txt") as tmp:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), tmp)
+    assert os.listdir(tmp_path) == []
+
+
+def test_small_tmpfs_full_disk(tmp_path, files):
+    mount = tmp_path / "small"
+    mount.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16k", "tmpfs", str(mount)], capture_output=True)
+    if done.returncode != 0:
+        pytest.skip("cannot mount a tmpfs here")
+    try:
+        np.save(files / "big.npy", np.zeros((TINY.clocks_per_readout * 20000, 2, 2), np.uint8))
+        result = run_tespike(*golden_args(files, mount / "s.npz", stimulus=files / "big.npy"))
+        assert_refused(result, str(mount / "s.npz"))
+        assert ".part" not in result.stderr
+        assert os.listdir(mount) == []
+    finally:
+        subprocess.run(["umount", str(mount)], check=True)
+
+
+# ------------------------------------------------------------------ bad inputs: one line each
+@pytest.mark.parametrize("text, words", [
+    ("[" * 100000 + "]" * 100000, ["nested too deeply"]),
+    ('{"b1": ' + "9" * 5000 + "}", ["too long"]),
+    ('{"b1": 1' + "0" * 3000 + "}", ["'b1'", "characters"]),
+    ('{"alpha": null}', ["'alpha'", "null"]),
+    ('{"threshold": null}', ["'threshold'", "null"]),
+    ('{"acc_bits": null, "b1": 4}', ["'acc_bits'", "null"]),
+    ('{"clocks_per_tick": null}', ["'clocks_per_tick'", "null"]),
+    ('{"mode": null}', ["'mode'", "null"]),
+    ('{"b1": 2, "b1": 3}', ["'b1'", "twice"]),
+    (b'{"mode": "te\xff"}', ["UTF-8"]),
+    ("", ["empty"]),
+], ids=["nested", "5000-digits", "3000-digits", "null-alpha", "null-threshold", "null-acc_bits",
+        "null-clocks_per_tick", "null-mode", "duplicate", "not-utf8", "empty"])
+def test_bad_configuration_files(files, text, words):
+    path = files / "bad.json"
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    refused_without_change(files, golden_args(files, files / "o.npz", config=path), *words)
+
+
+def test_fifo_device_and_directory_inputs_are_refused_not_read(files):
+    fifo = files / "fifo"
+    os.mkfifo(fifo)
+    cases = [
+        (golden_args(files, files / "o.npz", config=fifo), ["fifo", "FIFO"]),
+        (golden_args(files, files / "o.npz", stimulus=fifo), ["fifo", "FIFO"]),
+        (("simulate", "--config", "te", "--scene", fifo, "--out", files / "o.npz"), ["FIFO"]),
+        (("reconstruct", "--stream", fifo, "--method", "tfp", "--out", files / "o.npy"), ["FIFO"]),
+        (("evaluate", "--set", "none", "--scene", fifo, "--out", files / "ev"), ["FIFO"]),
+        (golden_args(files, files / "o.npz", stimulus="/dev/null"), ["/dev/null", "character device"]),
+        (golden_args(files, files / "o.npz", config="/dev/null"), ["/dev/null"]),
+        (("reconstruct", "--stream", "/dev/null", "--method", "tfp", "--out", files / "o.npy"), ["/dev/null"]),
+        (golden_args(files, files / "o.npz", stimulus=files), ["directory"]),
+    ]
+    for args, words in cases:
+        refused_without_change(files, args, *words)
+
+
+def test_empty_arrays_and_zero_sizes(files):
+    (files / "empty.npy").write_bytes(b"")
+    np.save(files / "t0.npy", np.zeros((0, 2, 2), np.uint8))
+    np.save(files / "k0.npy", np.zeros((0, 2, 2), np.float32))
+    np.savez(files / "k0.npz", words=np.zeros((0, 2, 2), np.uint8), config=np.array(TINY.to_json()))
+    np.savez(files / "h0.npz", words=np.zeros((3, 0, 2), np.uint8), config=np.array(TINY.to_json()))
+    cases = [
+        (golden_args(files, files / "o.npz", stimulus=files / "empty.npy"), ["empty"]),
+        (golden_args(files, files / "o.npz", stimulus=files / "t0.npy"), ["T = 0"]),
+        (("rtl-sim", "--config", files / "c.json", "--stimulus", files / "t0.npy", "--out", files / "o.npz"),
+         ["T = 0"]),
+        (("simulate", "--config", "te", "--scene", files / "k0.npy", "--out", files / "o.npz"), ["K = 0"]),
+        (("evaluate", "--set", "none", "--scene", files / "k0.npy", "--out", files / "ev"), ["K = 0"]),
+        (("reconstruct", "--stream", files / "k0.npz", "--method", "tfp", "--out", files / "o.npy"), ["empty"]),
+        (("reconstruct", "--stream", files / "h0.npz", "--method", "tfi", "--out", files / "o.npy"), ["empty"]),
+    ]
+    for args, words in cases:
+        refused_without_change(files, args, *words)
+
+
+def corrupt_streams(folder):
+    """name -> bytes of a broken S.npz: truncated, bad CRC, unknown compression, encrypted, a .npy."""
+    good = (folder / "s.npz").read_bytes()
+    with zipfile.ZipFile(folder / "s.npz") as archive:
+        info = archive.getinfo("words.npy")
+    local = info.header_offset
+    start = local + 30 + int.from_bytes(good[local + 26:local + 28], "little") + \
+        int.from_bytes(good[local + 28:local + 30], "little")
+    out = {"truncated": good[:len(good) // 2]}
+    crc = bytearray(good)
+    crc[start + info.file_size - 1] ^= 0xFF                     # last data byte of 'words.npy'
+    out["bad-crc"] = bytes(crc)
+    for name, offset_local, offset_central, value in (("compression", 8, 10, 99), ("encrypted", 6, 8, 1)):
+        data = bytearray(good)
+        for header in (local, *[i for i in range(len(good)) if good.startswith(b"PK\x01\x02", i)]):
+            offset = offset_local if header == local else offset_central
+            data[header + offset:header + offset + 2] = value.to_bytes(2, "little")
+        out[name] = bytes(data)
+    np.save(folder / "plain.npy", np.zeros((2, 2, 2), np.uint8))
+    out["npy"] = (folder / "plain.npy").read_bytes()
+    return out
+
+
+@pytest.mark.parametrize("kind", ["truncated", "bad-crc", "compression", "encrypted", "npy"])
+def test_corrupt_stream_files(files, kind):
+    (files / "bad.npz").write_bytes(corrupt_streams(files)[kind])
+    refused_without_change(files, ("reconstruct", "--stream", files / "bad.npz", "--method", "tfp",
+                                   "--out", files / "o.npy"), "bad.npz")
+
+
+@pytest.mark.parametrize("args, words", [
+    (("reconstruct", "--method", "tfp", "--threads", "0"), ["--threads", "1.."]),
+    (("reconstruct", "--method", "tfp", "--threads", str(10 ** 30)), ["--threads"]),
+    (("reconstruct", "--method", "tfp", "--threads", "-3"), ["--threads"]),
+    (("scene", "--peak", "1e39"), ["peak", "float32"]),
+    (("scene", "--peak", "1e-50"), ["peak", "float32"]),
+    (("scene", "--peak", "nan"), ["--peak"]),
+    (("scene", "--peak", "-1"), ["--peak"]),
+    (("scene", "--crop", "8x8"), ["--crop", "--folder"]),
+    (("scene", "--downscale", "2"), ["--downscale", "--folder"]),
+    (("verilog", "--config", "te", "--height", "100000", "--width", "100000"), ["65536"]),
+    (("verilog", "--config", "te", "--height", "257", "--width", "256"), ["65536"]),
+    (("evaluate", "--set", "none", "--methods", ""), ["--methods"]),
+    (("evaluate", "--set", "none", "--methods", " , "), ["--methods"]),
+    (("golden", "--config", "te", "--stimulus"), ["--stimulus", "--help"]),
+    (("golden", "--config", "te"), ["required", "--help"]),
+    (("simulate", "--seed", "abc"), ["--seed", "--help"]),
+    (("nonsense",), ["nonsense", "--help"]),
+])
+def test_argument_errors_are_one_line(files, args, words):
+    extra = {"reconstruct": ("--stream", files / "s.npz", "--out", files / "o.npy"),
+             "scene": ("--out", files / "o.npy"), "verilog": ("--out", files / "o.v"),
+             "evaluate": ("--scene", files / "i.npy", "--out", files / "ev")}.get(args[0], ())
+    result = refused_without_change(files, (*args, *extra), *words)
+    assert "usage:" not in result.stderr
+
+
+def test_reconstruct_refuses_stream_with_zero_height_like_the_others(files):
+    np.savez(files / "h0.npz", words=np.zeros((3, 0, 2), np.uint8), config=np.array(TINY.to_json()))
+    for method in ("tfp", "tfi"):
+        refused_without_change(files, ("reconstruct", "--stream", files / "h0.npz", "--method", method,
+                                       "--out", files / "o.npy"), "h0.npz")
+
+
+# ------------------------------------------------------------------ what still works
+def test_pickles_never_loaded(files):
+    np.save(files / "obj.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    refused_without_change(files, golden_args(files, files / "o.npz", stimulus=files / "obj.npy"), "obj.npy")
+    np.savez(files / "obj.npz", words=np.array([None], dtype=object), config=np.array(TINY.to_json()))
+    refused_without_change(files, ("reconstruct", "--stream", files / "obj.npz", "--method", "tfp",
+                                   "--out", files / "o.npy"), "obj.npz")
+
+
+def test_big_endian_and_fortran_inputs_equal_native(files):
+    native = np.load(files / "e.npy")
+    np.save(files / "be.npy", native.astype(">u2"))
+    np.save(files / "f.npy", np.asfortranarray(native.astype(np.int32)))
+    for name in ("be", "f"):
+        assert run_tespike(*golden_args(files, files / f"{name}.npz",
+                                        stimulus=files / f"{name}.npy")).returncode == 0
+        assert (files / f"{name}.npz").read_bytes() == (files / "s.npz").read_bytes()
+    with np.load(files / "s.npz") as npz:
+        words = npz["words"]
+    np.savez(files / "sbe.npz", words=np.asfortranarray(words.astype(">u2")), config=np.array(TINY.to_json()))
+    for stream in ("s", "sbe"):
+        assert run_tespike("reconstruct", "--stream", files / f"{stream}.npz", "--method", "tfi",
+                           "--out", files / f"r_{stream}.npy").returncode == 0
+    assert (files / "r_s.npy").read_bytes() == (files / "r_sbe.npy").read_bytes()
+
+
+def test_equal_seeds_give_byte_identical_outputs(files):
+    for name in ("a", "b"):
+        assert run_tespike("simulate", "--config", "te", "--scene", files / "i.npy", "--seed", 5,
+                           "--out", files / f"{name}.npz").returncode == 0
+    assert (files / "a.npz").read_bytes() == (files / "b.npz").read_bytes()
+
+
+# ------------------------------------------------------------------ the command line itself
+def test_version_help_quiet_and_the_wrote_line(files):
+    result = run_tespike("--version")
+    assert result.returncode == 0 and result.stdout.startswith("tespike ")
+    result = run_tespike()
+    assert result.returncode == 0 and "COMMAND" in result.stdout and result.stderr == ""
+    result = run_tespike(*golden_args(files, files / "o.npz"))
+    assert result.returncode == 0 and result.stderr == ""
+    assert result.stdout.strip().splitlines() == [f"wrote {files / 'o.npz'}: 5 readouts of 3 x 4 TE words"]
+    result = run_tespike("reconstruct", "--stream", files / "s.npz", "--method", "tfp", "--out", files / "r.npy")
+    assert result.returncode == 0 and len(result.stdout.splitlines()) == 1 and "r.npy" in result.stdout
+    for args in (golden_args(files, files / "o.npz"),
+                 ("reconstruct", "--stream", files / "s.npz", "--method", "tfp", "--out", files / "r.npy"),
+                 ("simulate", "--config", "te", "--scene", files / "i.npy", "--out", files / "o.npz", "--seed", 1),
+                 ("scene", "--frames", 2, "--height", 8, "--width", 8, "--out", files / "sc.npy")):
+        result = run_tespike(*args, "--quiet")
+        assert result.returncode == 0 and result.stdout == "" and result.stderr == "", result
+
+
+def test_progress_bars_only_on_a_terminal_or_when_asked(files):
+    np.save(files / "long.npy", np.ones((TINY.clocks_per_readout * 400, 3, 4), np.uint8))
+    args = golden_args(files, files / "o.npz", stimulus=files / "long.npy") + ("--chunk-elements", 96)
+    result = run_tespike(*args)
+    assert result.returncode == 0 and result.stderr == ""             # stderr is a pipe here
+    result = run_tespike(*args, "--progress", "on")
+    assert result.returncode == 0 and "golden" in result.stderr
+
+
+def test_refusal_after_a_warning_is_still_one_line(monkeypatch, capsys):
+    import warnings
+    import types
+
+    from cosim import cli
+
+    def run(args):
+        warnings.warn("divide by zero", RuntimeWarning)
+        raise InputError("shape (2, 3) must be (K, H, W)")
+    fake = types.SimpleNamespace(HELP="fake", add_arguments=lambda parser: None, run=run)
+    monkeypatch.setattr(cli, "_available_commands", lambda: {"fake": fake})
+    assert cli.main(["fake"]) == cli.EXIT_BAD_INPUT
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == ["tespike fake: error: shape (2, 3) must be (K, H, W)"]
+
+    def run_oom(args):
+        raise RuntimeError("[enforce fail at alloc_cpu.cpp:117] DefaultCPUAllocator: can't allocate memory: "
+                           "you tried to allocate 21474836480 bytes.")
+    fake.run = run_oom
+    assert cli.main(["fake"]) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "out of memory" in err
+
+
+# ------------------------------------------------------------------ bounded memory
+def test_metrics_in_small_bands_equal_whole_frames(monkeypatch, rng):
+    from recon import metrics
+    gt = rng.uniform(0.01, 1, size=(3, 23, 19))
+    pred = gt * rng.uniform(0.8, 1.2, size=gt.shape)
+    whole = {name: fn(pred, gt) for name, fn in metrics.METRICS.items()}
+    whole_peak = metrics.ssim_mu(pred, gt, peak=2.0)
+    monkeypatch.setattr(metrics, "CHUNK_PIXELS", 40)          # bands of 2 rows, one frame at a time
+    for name, fn in metrics.METRICS.items():
+        assert np.allclose(fn(pred, gt), whole[name], rtol=1e-12, atol=1e-14), name
+    assert np.allclose(metrics.ssim_mu(pred, gt, peak=2.0), whole_peak, rtol=1e-12)
+    assert np.allclose(metrics.ssim_mu(pred[1], gt[1]), whole["ssim_mu"][1], rtol=1e-12)
+
+
+def test_evaluate_refuses_up_front_when_memory_is_short(files, monkeypatch):
+    from golden import resources
+    from recon.evaluate import evaluate
+    monkeypatch.setattr(resources, "available_memory", lambda: 1 << 20)
+    with pytest.raises(InputError, match=r"needs about .* of memory, but only 1 MB is available"):
+        evaluate([("x", np.ones((4, 16, 16)))], lambda config, light, rng: None, methods=["tfp"],
+                 progress=False)
+
+
+def test_reconstruct_streams_words_and_images_through_memory_maps(files):
+    from golden.io import load_stream
+    from recon.methods import reconstruct
+    words, config = load_stream(files / "s.npz", memory_map=True)
+    assert isinstance(words, np.memmap)
+    assert run_tespike("reconstruct", "--stream", files / "s.npz", "--method", "tfi",
+                       "--out", files / "r.npy").returncode == 0
+    assert np.array_equal(np.load(files / "r.npy"), reconstruct(np.array(words), config, "tfi"))
