@@ -77,3 +77,19 @@ def test_refusals(tmp_path):
     assert_refused(run_tespike("stimulus", "--config", "te", "--scene", tmp_path / "i.npy",
                                "--out", tmp_path / "no" / "e.npy"), "does not exist")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["i.npy"]
+
+
+def test_crop_and_readouts_keep_the_full_stimulus_electrons(tmp_path):
+    scene = np.random.default_rng(5).uniform(0, 1.5, (4, 6, 8))
+    scene[1, 2, 3] = 1e9                                     # saturating: the budget must be the full scene's
+    np.save(tmp_path / "i.npy", scene)
+    full = scene_stimulus(SensorConfig(), scene, seed=9)
+    result = run_tespike("stimulus", "--config", "te", "--scene", tmp_path / "i.npy", "--seed", 9,
+                         "--crop", "1,2,3,4", "--readouts", 2, "--out", tmp_path / "e.npy")
+    assert result.returncode == 0, result.stderr
+    assert np.array_equal(np.load(tmp_path / "e.npy"), full[:2 * 240, 1:4, 2:6])
+    for crop in ("1,2,3", "4,0,3,1", "0,0,0,1"):
+        assert_refused(run_tespike("stimulus", "--config", "te", "--scene", tmp_path / "i.npy",
+                                   "--crop", crop, "--out", tmp_path / "f.npy"), "--crop")
+    assert_refused(run_tespike("stimulus", "--config", "te", "--scene", tmp_path / "i.npy",
+                               "--readouts", 5, "--out", tmp_path / "f.npy"), "--readouts")
