@@ -46,6 +46,8 @@ RTL_SENSOR = "te"
 BACKENDS = ("amaranth", "verilator", "icarus")
 #: Smallest crop and readouts the README's demo uses (the options may ask for less, e.g. in tests).
 DEFAULT_CROP, DEFAULT_RTL_READOUTS = 16, 16
+#: Smallest crop: SSIM's 11 x 11 Gaussian window must fit.
+MIN_CROP = 11
 
 
 @dataclasses.dataclass
@@ -236,7 +238,7 @@ def plot_rtl_crop(truth: np.ndarray, rtl_images: dict, golden_images: dict, peak
 def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed: int = 0,
              crop: int = DEFAULT_CROP, rtl_readouts: int = DEFAULT_RTL_READOUTS,
              backend: str = "amaranth", repeats: int = 3, window: int = 9, hw_cost: bool = True,
-             quiet: bool = False) -> int:
+             sensors=tuple(SENSORS), quiet: bool = False) -> int:
     """Run every stage into folder ``out``; 0 if the RTL stream is bit-identical to golden, else 1."""
     from golden.config import load_config
     from golden.fastsim import iter_scene_stimulus, simulate_scene
@@ -249,6 +251,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                             ("--seed", seed, 0)):
         if value < low:
             raise InputError(f"{key} {value}: must be >= {low}")
+    if crop < MIN_CROP:
+        raise InputError(f"--crop {crop}: must be >= {MIN_CROP} (SSIM-mu of the crop needs {MIN_CROP} x {MIN_CROP})")
     if crop > min(height, width):
         raise InputError(f"--crop {crop}: larger than the {height} x {width} frame")
     if rtl_readouts > frames:
@@ -260,7 +264,12 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     progress = Progress(6, quiet)
-    configs = {label: load_config(preset) for label, preset in SENSORS.items()}
+    sensors = tuple(sensors)
+    unknown = [name for name in sensors if name not in SENSORS]
+    if unknown or not sensors or RTL_SENSOR not in sensors or len(set(sensors)) != len(sensors):
+        raise InputError(f"--sensors {','.join(sensors)!r}: a list of distinct sensors among "
+                         f"{', '.join(SENSORS)}, with {RTL_SENSOR!r} (the RTL's)")
+    configs = {label: load_config(SENSORS[label]) for label in sensors}
     te = configs[RTL_SENSOR]
     L = te.clocks_per_readout
 
@@ -379,15 +388,14 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     started = progress.begin("dynamic range (formula and measured)" + (" and hardware cost (Yosys)"
                                                                        if hw_cost else ""))
     ranges = dynamic_ranges(configs)
-    hardware = hardware_cost({"te": te, "ml": configs["ml"]}) if hw_cost else "not computed (--no-hw-cost)"
+    hardware = hardware_cost({k: c for k, c in configs.items() if k in ("te", "ml")}) if hw_cost else "not computed (--no-hw-cost)"
     progress.end("dynamic range and hardware cost", started,
                  ["python3 benchmarks/dynamic_range.py   # the full table, from a clone",
                   "python3 benchmarks/hw_cost.py          # the full cost table, from a clone"])
 
     # 6. pictures and report
     started = progress.begin("pictures and report.md")
-    strip_frame = evaluation.strips["default"]["frame"]
-    plot_frame(light, strip_frame, (y, x, crop), out / "frame.png")
+    plot_frame(light, middle, (y, x, crop), out / "frame.png")
     plot_rtl_crop(truth[middle], rtl_images, golden_images, peak, middle, out / "rtl_crop.png")
     progress.end("pictures and report", started, [
         "tespike view --input I.npy --out I.png",

@@ -295,13 +295,14 @@ def plot_quality_vs_time(evaluation: Evaluation, path: str | Path) -> None:
                           xytext=(4, 4), textcoords="offset points")
     for axis, name in zip(axes, ("PSNR-μ (dB) ↑", "SSIM-μ ↑")):
         axis.set_xscale("log")
-        axis.set_xlabel(f"run time per frame (ms, log; median of {evaluation.repeats} runs, "
-                        f"{evaluation.threads} torch thread{'s' if evaluation.threads != 1 else ''})")
+        axis.set_xlabel("run time per frame (ms, log)")
         axis.set_ylabel(name)
         axis.grid(True, alpha=0.3)
     axes[0].legend(fontsize=7, loc="best")
     count = len({r.sequence for r in evaluation.results})
-    fig.suptitle(f"quality against run time, mean of {count} sequence(s), window {evaluation.window}")
+    fig.suptitle(f"quality against run time, mean of {count} sequence(s), window {evaluation.window}; "
+                 f"run time: median of {evaluation.repeats} runs, {evaluation.threads} torch "
+                 f"thread{'s' if evaluation.threads != 1 else ''}", fontsize=10)
     fig.tight_layout()
     _save_figure(fig, path)
 

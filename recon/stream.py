@@ -32,6 +32,8 @@ def legal_codes(config: SensorConfig) -> np.ndarray:
         counts = np.arange(config.p_max, dtype=np.int64)                     # flag 0: sfc
         overflow = (1 << config.d) | np.arange(1, config.alpha + 1, dtype=np.int64)
         codes = np.concatenate([counts, overflow])
+    elif config.is_msb:
+        codes = np.arange(config.ml_bits + 1, dtype=np.int64)                 # msb index 0..B
     else:
         codes = np.arange(config.ml_max + 1, dtype=np.int64)
     return check_words(codes, config)      # golden agrees every one is legal

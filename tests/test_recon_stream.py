@@ -16,6 +16,8 @@ WIDE_CONFIGS = [
     SensorConfig(b1=16, b2=1),
     SensorConfig(b1=1, b2=16, alpha=12345),
     SensorConfig(mode="ml", ml_bits=16),
+    SensorConfig(mode="ml", ml_readout="msb"),           # msb words: the msb index 0..B
+    SensorConfig(mode="ml", ml_bits=16, ml_readout="msb"),
 ]
 CONFIGS = EDGE_CONFIGS + WIDE_CONFIGS
 
@@ -50,7 +52,8 @@ def test_table_equals_golden_on_every_code(config):
         sample = codes
     for code in sample:
         assert _golden_legal(int(code), config) == bool(legal[code]), code
-    assert legal.sum() == (config.p_max + config.alpha if config.is_te else config.ml_max + 1)
+    assert legal.sum() == (config.p_max + config.alpha if config.is_te
+                           else config.ml_bits + 1 if config.is_msb else config.ml_max + 1)
 
 
 @pytest.mark.parametrize("config", CONFIGS[:6], ids=str)

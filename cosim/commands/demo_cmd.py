@@ -22,6 +22,8 @@ def add_arguments(parser):
     parser.add_argument("--rtl-readouts", type=int, default=16, help="readouts the RTL runs (default 16)")
     parser.add_argument("--seed", type=int, default=0, help="scene and shot-noise seed (default 0)")
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per method, median (default 3)")
+    parser.add_argument("--sensors", default="ml,ml-msb,te",
+                        help="golden sensors: comma list of ml, ml-msb, te (default all; te is the RTL's)")
     parser.add_argument("--no-hw-cost", action="store_true", help="skip the Yosys hardware cost table")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr, no table on stdout")
 
@@ -30,4 +32,5 @@ def run(args) -> int:
     from cosim.demo import run_demo
     return run_demo(args.out, frames=args.frames, height=args.height, width=args.width, seed=args.seed,
                     crop=args.crop, rtl_readouts=args.rtl_readouts, backend=args.backend,
-                    repeats=args.repeats, hw_cost=not args.no_hw_cost, quiet=args.quiet)
+                    repeats=args.repeats, sensors=[s.strip() for s in args.sensors.split(",") if s.strip()],
+                    hw_cost=not args.no_hw_cost, quiet=args.quiet)
