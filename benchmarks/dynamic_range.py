@@ -1,4 +1,4 @@
-"""Dynamic range of the paper's TE (b1 = b2 = 4) and ML (8-bit) settings: formula and measured.
+"""Dynamic range of the paper's TE (b1 = b2 = 4) and ML (8-bit, count and msb readout) settings: formula and measured.
 
 Prints two tables and draws a PNG of decoded vs true light over 1e-6..1e3
 (out/bench/dynamic-range.png); ``--docs`` writes the tables into
@@ -17,10 +17,13 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))    # measure this checkout's golden/
 
 from golden.config import DESIGN_ELECTRONS, SensorConfig
 from golden.decode import ESTIMATORS, decode_light
@@ -51,9 +54,9 @@ def range_table(n_s: int, windows: int, seed: int):
               + " | ".join(f"measured {int(t * 100)} %: darkest .. brightest light (dB)" for t in TOLERANCES)
               + " |\n|" + " --- |" * (5 + len(TOLERANCES)) + "\n")
     rows, curves = [], {}
-    for name in ("te", "ml"):
+    for name in ("te", "ml", "ml-msb"):
         config = SensorConfig.preset(name)
-        label = "TE b1 = b2 = 4" if config.is_te else "ML 8-bit"
+        label = {"te": "TE b1 = b2 = 4", "ml": "ML 8-bit count", "ml-msb": "ML 8-bit msb (eq. 10)"}[name]
         for noise, seed_or_none in (("noise-free", None), ("Poisson", seed)):
             start = time.perf_counter()
             words = constant_light_words(config, light, n_s * (windows + 1), seed=seed_or_none)

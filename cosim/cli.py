@@ -27,6 +27,7 @@ COMMANDS = {
     "demo": "demo_cmd",
     "scene": "scene_cmd",
     "view": "view_cmd",
+    "train": "train_cmd",
 }
 
 EXIT_BAD_INPUT = 2

@@ -39,8 +39,9 @@ import numpy as np
 from golden.config import SensorConfig
 from golden.errors import InputError
 
-#: Sensors of the golden full frame: file label -> config preset (paper section 6.1 and eq. 10).
-SENSORS = {"ml": "ml", "ml-msb": "ml-msb", "te": "te"}
+#: Sensors of the golden full frame: file label -> config preset (paper section 6.1 and eq. 10),
+#: in :data:`recon.evaluate.MODES` order: the paper's ML (msb) camera, TE, the full-count ML camera.
+SENSORS = {"ml-msb": "ml-msb", "te": "te", "ml": "ml"}
 #: The sensor the RTL runs (the paper's subject).
 RTL_SENSOR = "te"
 BACKENDS = ("amaranth", "verilator", "icarus")
@@ -473,7 +474,9 @@ def report_markdown(*, configs, frames, height, width, seed, crop, rtl_readouts,
              "| --- | --- | ---: | ---: |"]
     for name, config in configs.items():
         lines.append(f"| {name} | `{config.to_json()}` | {config.clocks_per_readout} | {config.word_bits} |")
-    lines += ["", "## RTL against the golden model", "",
+    lines += ["", "`ml-msb` is the paper's ML camera (its eq. 10; Table 1's ML column, `TFP_ML`, `TFI_ML`), "
+              "`ml` the full-count ML camera (rows `TFP_ML-count`, ...), `te` the TE camera.",
+              "", "## RTL against the golden model", "",
               f"**{verdict}**", "",
               f"- crop: rows {y}..{y + size - 1}, columns {x}..{x + size - 1} of the frame (marked in "
               f"`frame.png`), readouts 0..{rtl_readouts - 1} ({rtl_readouts * te.clocks_per_readout} pixel "

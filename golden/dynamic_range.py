@@ -3,7 +3,9 @@
 Formula (SPEC section 5, paper section 4.3), with N_s the longest accepted
 spike interval in readouts: the darkest representable light is one spike in
 N_s readouts, the brightest is the top code, 2^b1 * alpha spikes per readout
-(TE, overflow in the first S_h cycle) or 2^B - 1 (ML). The paper writes
+(TE, overflow in the first S_h cycle), 2^B - 1 (ML count) or 2^(B - 1) (ML
+msb, eq. 10: its top word B decodes to 2^(B - 1), and a steady count above it
+only fills the counter's remainder until it saturates). The paper writes
 alpha = 2^b2 - 1 (its only setting); SPEC also allows a smaller alpha.
 
 Measurement: constant light on a log grid is run through the cycle-exact
@@ -26,7 +28,8 @@ from .sensor import PixelArray
 
 
 def formula_db(config: SensorConfig, n_s: float = 1, *, paper_alpha: bool = False) -> float:
-    """20 log10(top code * N_s) in dB: TE top = 2^b1 * alpha, ML top = 2^B - 1.
+    """20 log10(top code * N_s) in dB: TE top = 2^b1 * alpha, ML count top = 2^B - 1,
+    ML msb top = 2^(B - 1) (SPEC section 5).
 
     ``paper_alpha=True`` gives the paper's D_TE = 20 log10(2^b1 (2^b2 - 1) N_s)
     whatever alpha is configured; by default the configured alpha is used
@@ -37,6 +40,8 @@ def formula_db(config: SensorConfig, n_s: float = 1, *, paper_alpha: bool = Fals
     if config.is_te:
         alpha = (1 << config.b2) - 1 if paper_alpha else config.alpha
         top = config.p_max * alpha
+    elif config.is_msb:
+        top = 1 << (config.ml_bits - 1)
     else:
         top = config.ml_max
     return 20 * math.log10(top * n_s)

@@ -38,6 +38,13 @@ the choice cannot bias the result); docs/simulator.md has the derivation.
              backlog): per-clock electrons for these pixels only, run through
              the cycle-exact model :class:`golden.sensor.PixelArray`.
 
+ML msb (SPEC section 3): every path finds the spikes of the interval as for
+the count readout; the counter is then ``min(sfc + spikes, 2^ml_bits - 1)``
+from the carried remainder ``sfc``, the word its bit_length, and the new
+remainder what is left below that bit (:meth:`SceneSimulator._ml_words`). The
+remainder is a function of past spike counts, so each path stays exact in
+distribution; dark pixels still read out their remainder.
+
 "Surely" means: each such event fails with probability below
 ``2^-64 / (CHECKS x pixel-readouts x L)`` (:func:`golden.light.log_budget`,
 rigorous tail bounds in :mod:`golden.light`); a pixel-readout relies on at
@@ -57,6 +64,7 @@ from .io import check_scene, word_dtype
 from .light import (as_generator, check_dark_current, dark_electrons,
                     deterministic_clock_electrons, electrons_per_readout, log_budget,
                     log_poisson_tail_above, log_poisson_tail_below)
+from .reference import msb_index
 from .sensor import PixelArray
 
 PATHS = ("dark", "event", "bright", "queue", "full", "clock")
@@ -77,8 +85,9 @@ CLOCK_CHUNK_ELEMENTS = 1 << 21
 class SceneSimulator:
     """An H x W array of pixels lit by a scene, one readout interval at a time.
 
-    Holds the carried accumulator (``acc``, int64, flat) and, for ``noise=False``,
-    the carried charge fraction. ``method="per-clock"`` sends every pixel down
+    Holds the carried accumulator (``acc``, int64, flat), the ML msb counter
+    remainder (``sfc``, int64, flat; 0 otherwise) and, for ``noise=False``, the
+    carried charge fraction. ``method="per-clock"`` sends every pixel down
     the per-clock path (the full path the shortcuts are tested against).
     ``path_counts`` counts pixel-readouts per path.
     """
@@ -99,6 +108,7 @@ class SceneSimulator:
         self.rng = as_generator(rng)
         n = self.shape[0] * self.shape[1]
         self.acc = np.zeros(n, np.int64)
+        self.sfc = np.zeros(n, np.int64)                   # msb: remainder left in the counter
         self.fraction = np.zeros(n)
         self._no_dark = np.zeros(n, np.int64)              # read only
         # at most CHECKS bounded events per pixel-readout, each below the budget
@@ -126,6 +136,11 @@ class SceneSimulator:
                                  if c.p_max <= c.clocks_per_readout else c.clocks_per_readout)
         else:
             self._bright_word = min(c.clocks_per_readout, c.ml_max)
+        if c.is_msb:
+            # word and remainder of every counter value 0..2^ml_bits - 1 (at most 64 Ki entries)
+            count = np.arange(c.ml_max + 1, dtype=np.int64)
+            self._msb_word = msb_index(count)
+            self._msb_rest = count - np.where(count > 0, np.left_shift(1, np.maximum(self._msb_word - 1, 0)), 0)
 
     # -- one readout interval -------------------------------------------------
     def readout(self, light: np.ndarray) -> np.ndarray:
@@ -168,8 +183,10 @@ class SceneSimulator:
             if not counts[code]:
                 continue
             self.path_counts[name] += int(counts[code])
-            if name == "dark":
-                continue                                   # word 0, accumulator unchanged
+            if name == "dark":                             # no spike, accumulator unchanged:
+                if c.is_msb:                               # msb reads out the remainder
+                    self._ml_words(np.flatnonzero(path == code), 0, words)
+                continue                                   # (count: word 0)
             if name == "event" and counts[code] == mu.size:
                 sel = slice(None)                          # the whole frame: no gather / scatter
             else:
@@ -283,7 +300,7 @@ class SceneSimulator:
         done = sel[ok]
         self.acc[done] = level_end[ok] - theta * spikes[ok]
         if not c.is_te:
-            words[done] = np.minimum(spikes[ok], c.ml_max)
+            self._ml_words(done, spikes[ok], words)
             return
         words[done] = spikes[ok]
         if over.any():
@@ -322,7 +339,7 @@ class SceneSimulator:
         # under the sure event every clock fires, so end >= 0; clip only guards
         # the 2^-64 failure event against an illegal state
         self.acc[done] = np.clip(end[ok], 0, acc_max)
-        words[done] = self._bright_word
+        self._firing_words(done, words)
 
     def _event_path(self, sel, mu, dark, words):
         """``sel``: flat indices, or ``slice(None)`` for the whole frame."""
@@ -337,7 +354,7 @@ class SceneSimulator:
         residual = level - spikes * theta
         if not c.is_te:
             self.acc[sel] = residual
-            words[sel] = np.minimum(spikes, c.ml_max)
+            self._ml_words(sel, spikes, words)
             return
         over = np.flatnonzero(spikes >= c.p_max)
         if over.size:
@@ -352,7 +369,6 @@ class SceneSimulator:
     def _bright_path(self, sel, mu, lam, dark, words):
         c = self.config
         theta, L, top, acc_max = c.threshold, c.clocks_per_readout, c.input_max, c.acc_max
-        words[sel] = self._bright_word
         acc0 = self.acc[sel]
         lam_s = lam[sel]
         end = np.full(sel.size, acc_max, np.int64)
@@ -383,6 +399,27 @@ class SceneSimulator:
             # 2^-64 failure event against an illegal negative state
             end[need] = np.clip(acc0[need] + total - L * theta, 0, acc_max)
         self.acc[sel[keep]] = end[keep]
+        self._firing_words(sel[keep], words)
+
+    def _firing_words(self, sel, words):
+        """Words of pixels ``sel`` that fired on every clock of the interval (L spikes)."""
+        if self.config.is_msb:
+            self._ml_words(sel, self.config.clocks_per_readout, words)
+        else:
+            words[sel] = self._bright_word
+
+    def _ml_words(self, sel, spikes, words):
+        """ML words of pixels ``sel`` (flat indices or a slice) from their spike
+        counts in the interval: the counter ``min(sfc + spikes, 2^ml_bits - 1)``
+        (it saturates one spike at a time, so the clipped sum is exact); count
+        reads it all, msb reads its top bit's index and keeps the remainder."""
+        c = self.config
+        if not c.is_msb:
+            words[sel] = np.minimum(spikes, c.ml_max)
+            return
+        count = np.minimum(self.sfc[sel] + spikes, c.ml_max)
+        words[sel] = self._msb_word[count]
+        self.sfc[sel] = self._msb_rest[count]
 
     def _clock_path(self, sel, mu, dark, words):
         """Exact per-clock simulation of the pixels ``sel`` (flat indices).
@@ -452,9 +489,12 @@ class SceneSimulator:
         the literal rule of SPEC section 3) on electrons ``e`` (L, n) of pixels ``sel``."""
         array = PixelArray(self.config, (1, sel.size))
         array.state.acc[0] = self.acc[sel]
+        array.state.sfc[0] = self.sfc[sel]                 # 0 except the msb remainder
         w = array.feed(e.reshape(e.shape[0], 1, sel.size))
         words[sel] = w[0, 0]
         self.acc[sel] = array.state.acc[0]
+        if self.config.is_msb:
+            self.sfc[sel] = array.state.sfc[0]
 
 
 def lindley_end(b0: np.ndarray, arrivals: np.ndarray) -> np.ndarray:

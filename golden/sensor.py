@@ -3,7 +3,8 @@
 :class:`PixelArray` gives the same words, clock for clock, as the literal
 per-clock rule :func:`golden.reference.step_reference`, but advances whole
 blocks of pixel clocks with closed forms instead of a Python step per clock.
-State (acc, sfc, ovf, m and the clock phase) is carried between calls, so a
+State (acc, sfc, ovf, m and the clock phase; with the ML msb readout, sfc
+keeps its remainder across readouts) is carried between calls, so a
 run split anywhere gives the identical stream, and memory stays bounded by the
 chunk size however many readouts a run has.
 
@@ -39,7 +40,7 @@ import numpy as np
 
 from .config import SensorConfig
 from .io import check_stimulus
-from .reference import PixelState, step_reference
+from .reference import PixelState, msb_index, step_reference
 
 #: Pixel clocks x pixels processed at once by :func:`simulate` (bounds memory).
 DEFAULT_CHUNK_ELEMENTS = 1 << 22
@@ -423,7 +424,7 @@ class PixelArray:
         check_stimulus(electrons, self.config, whole_readouts=False)
         if electrons.shape[1:] != self.shape:
             raise ValueError(f"chunk shape {electrons.shape[1:]} != array shape {self.shape}")
-        if self._engine.dtype is None or self.config.is_msb:   # msb: literal until the engine has it
+        if self._engine.dtype is None:
             words, self.state = step_reference(self.config, electrons, self.state)
             return words
         config, state = self.config, self.state
@@ -510,11 +511,16 @@ class PixelArray:
             else:
                 np.minimum(sfc + (after - before), config.ml_max, out=sfc)
             if ends:
-                if config.is_te:
-                    words[k] = np.where(ovf, (1 << config.d) | m, sfc)
-                else:
-                    words[k] = sfc
                 k += 1
+                if config.is_msb:                 # that power of two leaves; the rest counts on
+                    words[k - 1] = msb_index(sfc)
+                    sfc -= np.where(sfc > 0, np.left_shift(1, np.maximum(words[k - 1] - 1, 0)), 0)
+                    before = after
+                    continue
+                if config.is_te:
+                    words[k - 1] = np.where(ovf, (1 << config.d) | m, sfc)
+                else:
+                    words[k - 1] = sfc
                 sfc[:] = 0
                 ovf[:] = False
                 m[:] = 0

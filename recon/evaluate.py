@@ -1,7 +1,7 @@
 """Evaluation harness: sequences -> TE and ML streams -> every method -> the paper's Table 1.
 
 For each light sequence ``I`` (K, H, W) and each sensor mode (the paper's
-section 6.1 settings: TE with b1 = b2 = 4, ML with an 8-bit counter, both at
+section 6.1 settings: TE with b1 = b2 = 4, ML with an 8-bit counter (see below), both at
 their default thresholds), the stream is simulated once with photon shot
 noise, then reconstructed by every method; each method is timed on the whole
 sequence, ``repeats`` times, and the median wall time / K is its run time per
@@ -22,6 +22,13 @@ averaged (paper section 6.4).
 Simulation is passed in as a function (``simulate(config, light, rng) ->
 words``) because :mod:`recon` does not import the simulator; the command
 line and the benchmarks pass :func:`golden.fastsim.simulate_scene`.
+
+Sensors (keys are ``--config`` presets): ``"ml-msb"`` is the ML camera the
+paper's Tables 1 and 2 compare against, the dual-buffer camera that reads
+only the counter's most significant bit (its appendix A.2.1, eq. 10), so it
+is the table's ML column (``TFP_ML``, ``TFI_ML``); ``"te"`` the TE column;
+``"ml"``, the full-count ML camera (a stronger, wider-output sensor than the
+paper's), is added below the table as extra rows (``TFP_ML-count``, ...).
 """
 
 from __future__ import annotations
@@ -40,8 +47,13 @@ from golden.config import SensorConfig
 from golden.errors import InputError
 from golden.io import atomic_output, check_scene
 
-#: Column order of the paper's Table 1: ML on the left, TE on the right.
-MODES = ("ml", "te")
+#: Sensors evaluated by default: the paper's Table 1 columns (ML = the msb camera
+#: of its eq. 10 on the left, TE on the right), then the full-count ML camera.
+MODES = ("ml-msb", "te", "ml")
+#: Sensors that get a column of Table 1; any other evaluated sensor gets extra rows.
+COLUMNS = ("ml-msb", "te")
+#: Names in tables and plots: the paper's names for its two cameras.
+NAMES = {"ml-msb": "ML", "te": "TE", "ml": "ML-count"}
 MU = 5000.0
 #: Range of the error maps of the strips (absolute difference of mu-law images).
 ERROR_RANGE = 0.25
@@ -50,13 +62,19 @@ Simulate = Callable[[SensorConfig, np.ndarray, np.random.Generator], np.ndarray]
 
 
 def paper_configs() -> dict[str, SensorConfig]:
-    """The paper's section 6.1 sensors: TE b1 = b2 = 4 and ML 8 bits, default thresholds."""
-    return {"ml": SensorConfig(mode="ml"), "te": SensorConfig(mode="te")}
+    """The paper's section 6.1 sensors at default thresholds: ML 8 bits with the msb
+    readout (eq. 10), TE b1 = b2 = 4, and the full-count ML camera (extra rows)."""
+    return {mode: SensorConfig.preset(mode) for mode in MODES}
+
+
+def name(mode: str) -> str:
+    """Table name of a sensor: ``ML`` (msb, the paper's), ``TE``, ``ML-count``; else the key in capitals."""
+    return NAMES.get(mode, mode.upper())
 
 
 def label(method: str, mode: str) -> str:
-    """Paper-style name, e.g. ``TFP_TE``."""
-    return f"{method.upper()}_{mode.upper()}"
+    """Paper-style name, e.g. ``TFP_TE``, ``TFI_ML`` (msb camera), ``TFP_ML-count``."""
+    return f"{method.upper()}_{name(mode)}"
 
 
 def tone_map(light: np.ndarray, peak: float, mu: float = MU) -> np.ndarray:
@@ -209,17 +227,29 @@ def _fmt(value: float, digits: int) -> str:
     return "inf" if math.isinf(value) else f"{value:.{digits}f}"
 
 
+def _cells(summary: dict, method: str, mode: str) -> list[str]:
+    """Name, PSNR-mu, SSIM-mu, ms per frame of one method on one sensor (blank if not run)."""
+    s = summary.get((method, mode))
+    return [label(method, mode)] + ([_fmt(s["psnr_mu"], 2), _fmt(s["ssim_mu"], 3),
+                                     _fmt(s["ms_per_frame"], 2)] if s else ["", "", ""])
+
+
+def table_layout(evaluation: Evaluation) -> tuple[list[str], list[str]]:
+    """(column sensors, extra-row sensors): the evaluated sensors of :data:`COLUMNS`
+    get columns, in evaluation order; the others get rows under the first column.
+    An evaluation without any of them gives every sensor a column."""
+    columns = [mode for mode in evaluation.modes if mode in COLUMNS] or list(evaluation.modes)
+    return columns, [mode for mode in evaluation.modes if mode not in columns]
+
+
 def table_rows(evaluation: Evaluation) -> list[list[str]]:
-    """Table 1 layout: one row per method, the ML columns then the TE columns."""
+    """Table 1 layout: one row per method with the column sensors (ML msb, then TE),
+    then one row per method of each extra sensor (ML-count) in the first column."""
     summary = evaluation.summary()
-    rows = []
-    for method in evaluation.methods:
-        row = []
-        for mode in evaluation.modes:
-            s = summary.get((method, mode))
-            row += [label(method, mode)] + ([_fmt(s["psnr_mu"], 2), _fmt(s["ssim_mu"], 3),
-                                             _fmt(s["ms_per_frame"], 2)] if s else ["", "", ""])
-        rows.append(row)
+    columns, extra = table_layout(evaluation)
+    rows = [[cell for mode in columns for cell in _cells(summary, method, mode)] for method in evaluation.methods]
+    blank = [""] * 4 * (len(columns) - 1)
+    rows += [_cells(summary, method, mode) + blank for mode in extra for method in evaluation.methods]
     return rows
 
 
@@ -230,10 +260,11 @@ def timing_label(evaluation: Evaluation) -> str:
 
 
 def table_markdown(evaluation: Evaluation) -> str:
-    """The paper's Table 1 layout in Markdown (PSNR-mu, SSIM-mu, ms per frame per mode)."""
+    """The paper's Table 1 layout in Markdown (PSNR-mu, SSIM-mu, ms per frame per sensor):
+    ML (msb) and TE columns, the full-count ML camera's rows beneath."""
     header, align = [], []
-    for mode in evaluation.modes:
-        header += [f"{mode.upper()} reconstruction", "PSNR-μ ↑", "SSIM-μ ↑", timing_label(evaluation)]
+    for mode in table_layout(evaluation)[0]:
+        header += [f"{name(mode)} reconstruction", "PSNR-μ ↑", "SSIM-μ ↑", timing_label(evaluation)]
         align += [":---", "---:", "---:", "---:"]
     lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(align) + " |"]
     lines += ["| " + " | ".join(row) + " |" for row in table_rows(evaluation)]
@@ -241,15 +272,17 @@ def table_markdown(evaluation: Evaluation) -> str:
 
 
 def table_csv(evaluation: Evaluation) -> str:
-    """Table 1 as CSV, one row per method: method, then per mode name, psnr_mu, ssim_mu, ms_per_frame."""
+    """Table 1 as CSV, one row per method: method, then per sensor (key as in
+    :data:`MODES`: ``ml-msb``, ``te``, ``ml``) name, psnr_mu, ssim_mu, ms_per_frame."""
+    summary = evaluation.summary()
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     header = ["method"]
     for mode in evaluation.modes:
         header += [f"{mode}_name", f"{mode}_psnr_mu", f"{mode}_ssim_mu", f"{mode}_ms_per_frame"]
     writer.writerow(header)
-    for method, row in zip(evaluation.methods, table_rows(evaluation)):
-        writer.writerow([method] + row)
+    for method in evaluation.methods:
+        writer.writerow([method] + [cell for mode in evaluation.modes for cell in _cells(summary, method, mode)])
     return buffer.getvalue()
 
 
@@ -285,7 +318,7 @@ def plot_quality_vs_time(evaluation: Evaluation, path: str | Path) -> None:
     summary = evaluation.summary()
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.8))
     markers = "osD^vP*X"
-    colours = {"ml": "tab:blue", "te": "tab:red"}
+    colours = {"ml-msb": "tab:blue", "te": "tab:red", "ml": "tab:cyan"}
     for (method, mode), s in summary.items():
         marker = markers[evaluation.methods.index(method) % len(markers)]
         for axis, key in zip(axes, ("psnr_mu", "ssim_mu")):

@@ -33,7 +33,7 @@ def legal_codes(config: SensorConfig) -> np.ndarray:
         overflow = (1 << config.d) | np.arange(1, config.alpha + 1, dtype=np.int64)
         codes = np.concatenate([counts, overflow])
     elif config.is_msb:
-        codes = np.arange(config.ml_bits + 1, dtype=np.int64)                 # msb index 0..B
+        codes = np.arange(config.ml_bits + 1, dtype=np.int64)                # msb index 0..B
     else:
         codes = np.arange(config.ml_max + 1, dtype=np.int64)
     return check_words(codes, config)      # golden agrees every one is legal

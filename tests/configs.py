@@ -17,3 +17,16 @@ EDGE_CONFIGS = [
     SensorConfig(mode="ml", ml_bits=16, b1=2, b2=2, threshold=1, acc_bits=1),
     SensorConfig(mode="ml", b1=1, b2=1, clocks_per_tick=1, threshold=3, acc_bits=2, input_bits=1),
 ]
+
+#: The ML camera with the most-significant-bit readout (SPEC sections 3-5) at the
+#: same edges: its own list, so suites of parts without msb support are unchanged.
+MSB_EDGE_CONFIGS = [
+    SensorConfig(mode="ml", ml_readout="msb"),                # paper eq. 10 camera: 8 bits
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=1, b1=2, b2=2),
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=16, b1=2, b2=2, threshold=1, acc_bits=1),
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=3, b1=2, b2=2, threshold=5),   # saturates, L = 12
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=2, b1=1, b2=1, clocks_per_tick=1,
+                 threshold=3, acc_bits=2, input_bits=1),      # L = 1, 1-bit input
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=5, b1=5, b2=2, clocks_per_tick=3,
+                 threshold=7, input_bits=32),                 # odd clocks, 32-bit input
+]

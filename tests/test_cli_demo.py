@@ -38,7 +38,7 @@ def test_small_demo_closes_the_loop(tmp_path):
     assert result.returncode == 0, result.stderr
     assert "Traceback" not in result.stderr and "[6/6]" in result.stderr      # progress shown
     assert "RTL: bit-identical" in result.stdout
-    for name in ("TFP_ML", "TFI_ML", "TFP_TE", "TFI_TE"):
+    for name in ("TFP_ML-count", "TFI_ML-count", "TFP_TE", "TFI_TE"):
         assert f"| {name} |" in result.stdout
     light = load_scene(out / "I.npy")
     assert light.shape == (10, 24, 32) and light.max() == 1.0
@@ -70,7 +70,7 @@ def test_demo_with_every_sensor_and_the_hardware_cost(tmp_path, capsys):
     code, out, err = run_here(capsys, "demo", *SMALL, "--quiet", "--out", tmp_path / "d")
     assert code == 0, err
     report = (tmp_path / "d" / "report.md").read_text(encoding="utf-8")
-    assert "TFP_ML-MSB" in report and "| ml-msb |" in report
+    assert "| TFP_ML |" in report and "| TFP_ML-count |" in report and "| ml-msb |" in report
     assert "| te | " in report.split("## Hardware cost")[1]
     assert load_stream(tmp_path / "d" / "S_ml-msb.npz")[1].is_msb
 

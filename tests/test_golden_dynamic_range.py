@@ -21,6 +21,16 @@ def test_formula_paper_settings():
         formula_db(te, 0)
 
 
+def test_formula_msb_readout():
+    """Eq. 10: 20 log10(2^(B-1) N_s); one bit gives the classic 1-bit camera's 20 log10(N_s)."""
+    msb = SensorConfig.preset("ml-msb")
+    assert formula_db(msb, 1) == pytest.approx(20 * math.log10(128))
+    assert formula_db(msb, 16) == pytest.approx(20 * math.log10(128 * 16))
+    assert formula_db(SensorConfig(mode="ml", ml_readout="msb", ml_bits=16), 1) == pytest.approx(20 * math.log10(2 ** 15))
+    assert formula_db(SensorConfig(mode="ml", ml_readout="msb", ml_bits=1), 100) == pytest.approx(40)
+    assert formula_db(SensorConfig(mode="ml", ml_bits=1), 100) == pytest.approx(40)
+
+
 def test_constant_light_words_are_the_engine_on_that_stimulus():
     c = SensorConfig(b1=2, b2=2, threshold=50)
     light = np.array([0.0, 0.01, 0.3, 5.0])
@@ -51,3 +61,27 @@ def test_measured_range_ml_noise_free():
 def test_measure_refuses_words_of_the_wrong_shape():
     with pytest.raises(ValueError, match="shape"):
         measure(SensorConfig(), 4, windows=2, light=np.array([0.1, 1.0]), words=np.zeros((5, 2), np.int64))
+
+
+def test_measured_range_msb_noise_free():
+    """ML msb 8-bit: the dark end of the count readout (the remainder carries what
+    a readout leaves, so nothing is lost over a run), the bright end at a count of
+    2^(B-1) = 128 per readout, the design light I = 1 (6 dB below the count's
+    one-spike-per-clock limit), and windows of N_s readouts less exact than the
+    count's: a window's total is off by the remainder it leaves, up to half a
+    readout's count."""
+    msb, count = SensorConfig.preset("ml-msb"), SensorConfig(mode="ml")
+    light = light_grid(1e-4, 1e2, 10)
+    r = measure(msb, 8, windows=4, light=light, tolerance=0.2)
+    c = measure(count, 8, windows=4, light=light, tolerance=0.2)
+    assert r.low == c.low and r.high == 1.0 and c.high > 1.9
+    assert r.db == pytest.approx(c.db - 6.0)
+    # above the top, every word is 8: the decoded light is stuck at 128 spikes per readout
+    bright = light > 1.3
+    assert np.allclose(r.mean_decoded[bright], 128 * 328 / 42000)
+    # over the 32 scored readouts the remainder left at the end is all that is missing
+    mid = (light > 0.05) & (light <= 1.0)
+    assert np.all(np.abs(r.mean_decoded[mid] / light[mid] - 1) < 0.04)
+    # at 5 % the msb windows fail where the count's pass
+    strict = measure(msb, 8, windows=4, light=light, words=constant_light_words(msb, light, 40))
+    assert strict.db < measure(count, 8, windows=4, light=light).db

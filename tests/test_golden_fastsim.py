@@ -18,9 +18,10 @@ from golden.errors import InputError
 from golden.fastsim import SceneSimulator, simulate_scene
 from golden.light import poisson_stimulus
 from golden.sensor import simulate
-from tests.configs import EDGE_CONFIGS
+from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
 LEVELS = [1e-4, 1e-3, 1e-2, 0.05, 0.2, 0.5, 1.0, 2.0, 10.0]
+MSB = SensorConfig.preset("ml-msb")
 
 
 def _histogram(words, config):
@@ -47,13 +48,15 @@ def _compare(config, levels, pixels, readouts, seed):
 @pytest.mark.parametrize("config, pixels", [
     (SensorConfig(), 2000),                                           # paper TE, L = 240
     (SensorConfig(mode="ml"), 2000),                                  # paper ML
+    (MSB, 2000),                                                      # paper eq. 10 ML (msb)
 ], ids=str)
 def test_paper_configs_match_cycle_exact_model(config, pixels):
     for level, z, tvd in _compare(config, LEVELS, pixels, 3, seed=11):
         assert abs(z) < 4 and tvd < 0.05, (level, z, tvd)
 
 
-@pytest.mark.parametrize("config", [EDGE_CONFIGS[i] for i in (2, 3, 4, 5, 6, 8, 9, 10, 11)], ids=str)
+@pytest.mark.parametrize("config", [EDGE_CONFIGS[i] for i in (2, 3, 4, 5, 6, 8, 9, 10, 11)]
+                         + MSB_EDGE_CONFIGS[1:], ids=str)
 def test_edge_configs_match_cycle_exact_model(config):
     for level, z, tvd in _compare(config, LEVELS, 4000, 4, seed=5):
         assert abs(z) < 4 and tvd < 0.05, (level, z, tvd)
@@ -67,9 +70,10 @@ def test_carried_residual_matches_over_many_readouts():
         assert abs(z) < 4 and tvd < 0.05, (level, z, tvd)
 
 
-def test_light_steps_between_readouts_match():
-    # bright after dark and dark after bright: backlogged and full accumulators carried
-    config = SensorConfig()
+@pytest.mark.parametrize("config", [SensorConfig(), MSB], ids=str)
+def test_light_steps_between_readouts_match(config):
+    # bright after dark and dark after bright: backlogged and full accumulators
+    # (and msb counter remainders, read out in the dark) carried
     rng = np.random.default_rng(0)
     pixels = 4000
     sequence = np.array([0.0, 3.0, 0.0, 1.0, 0.4, 2.0, 0.02, 0.0])
@@ -92,7 +96,7 @@ def test_each_path_is_exercised():
                                "clock": 2, "fallback": 0}
 
 
-@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"),
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB,
                                     SensorConfig(b1=5, b2=3, acc_bits=12)], ids=str)
 def test_queue_and_full_paths_match_cycle_exact_model(config):
     """Light within a factor 2 of one threshold per clock, where charge backs up
@@ -107,20 +111,26 @@ def test_queue_and_full_paths_match_cycle_exact_model(config):
     assert sim.path_counts["queue"] > 0 and sim.path_counts["full"] > 0, sim.path_counts
 
 
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_EDGE_CONFIGS, ids=str)
 def test_deterministic_shortcuts_equal_per_clock_path(config):
     """No light, and light far above saturation: same words and same carried
-    accumulator as the per-clock path, for any seed (nothing random is left)."""
+    accumulator (and msb counter remainder) as the per-clock path, for any
+    seed (nothing random is left)."""
     light = np.array([[0.0, 10.0, 1e3, 1e30, 1e308, 0.0]])
     fast = SceneSimulator(config, light.shape, rng=1)
     full = SceneSimulator(config, light.shape, rng=2, method="per-clock")
-    # start from non-trivial carried charge: one readout at design light first
+    # start from non-trivial carried charge (and counter remainder, below the
+    # msb's worth a readout leaves: 2^(word - 1) - 1 at most)
+    rest = (1 << (config.ml_bits - 1)) - 1
     for sim in (fast, full):
         sim.acc[:] = [0, 0, 1, config.acc_max, 0, min(config.threshold - 1, config.acc_max)]
+        if config.is_msb:
+            sim.sfc[:] = [rest, 0, rest, 1 % (rest + 1), rest // 2, rest]
     for _ in range(3):
         a, b = fast.readout(light), full.readout(light)
         assert np.array_equal(a[0, [0, 2, 3, 4, 5]], b[0, [0, 2, 3, 4, 5]])
         assert np.array_equal(fast.acc[[0, 2, 3, 4, 5]], full.acc[[0, 2, 3, 4, 5]])
+        assert np.array_equal(fast.sfc[[0, 2, 3, 4, 5]], full.sfc[[0, 2, 3, 4, 5]])
     assert fast.path_counts["clock"] <= 3 * light.size
 
 
@@ -156,7 +166,7 @@ def test_event_path_accumulator_matches_per_clock_in_distribution():
     assert 0.5 * np.abs(ha - hb).sum() < 0.05
 
 
-@pytest.mark.parametrize("config", [EDGE_CONFIGS[i] for i in (0, 1, 5, 11)], ids=str)
+@pytest.mark.parametrize("config", [EDGE_CONFIGS[i] for i in (0, 1, 5, 11)] + MSB_EDGE_CONFIGS, ids=str)
 def test_noise_free_equals_cycle_exact_model_on_noise_free_stimulus(config):
     scene = np.zeros((5, 2, 6))
     scene[:, 0] = [0, 1e-3, 0.07, 0.5, 1.3, 1e30]
@@ -165,7 +175,7 @@ def test_noise_free_equals_cycle_exact_model_on_noise_free_stimulus(config):
     assert np.array_equal(simulate_scene(config, scene, noise=False), expected)
 
 
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_EDGE_CONFIGS, ids=str)
 def test_extreme_light_gives_legal_codes_without_warnings(config):
     scene = np.zeros((3, 3, 7))
     scene[:, 0] = [0, 1e-7, 1, 1e3, 1e30, 1e308, 5e-324]
@@ -231,6 +241,7 @@ def test_dark_current_matches_cycle_exact_model():
     # a wrong backlog or dip shows plainly
     (SensorConfig(threshold=5, acc_bits=8), [0.4, 0.5, 1.6, 2.0], 5000),
     (SensorConfig(mode="ml", threshold=5, acc_bits=8), [0.4, 0.5, 1.6, 2.0], 5000),
+    (SensorConfig(mode="ml", ml_readout="msb", threshold=5, acc_bits=8), [0.4, 0.5, 1.6, 2.0], 5000),
 ], ids=str)
 def test_carried_accumulator_of_queue_and_full_paths_matches_per_clock(config, per_clock, pixels):
     """The accumulator carried out of the queue path (backlog left at readout)
@@ -286,3 +297,62 @@ def test_lindley_closed_form_equals_the_step_by_step_queue(rng):
         for j in range(w):
             b = np.maximum(b + x[:, j] - 1, 0)
         assert np.array_equal(lindley_end(b0, x), b), w
+
+
+def _msb_path_levels(config):
+    """Light per pixel group sending an msb pixel down each path: dark, event,
+    bright, event (0.02 theta per clock), queue (0.7), full (1.3), per-clock (1.02)."""
+    per_clock = np.array([0.02, 0.7, 1.3, 1.02]) * config.threshold * config.clocks_per_readout / 42000
+    return np.concatenate([[0.0, 1e3], per_clock])
+
+
+@pytest.mark.parametrize("config", [MSB, SensorConfig(mode="ml", ml_readout="msb", ml_bits=5, threshold=30, acc_bits=12)],
+                         ids=str)
+def test_msb_paths_equal_the_per_clock_path_in_distribution(config):
+    """Every path against the full (per-clock) path on msb streams: the words of
+    each readout and the counter remainder carried out of it have the same law
+    over readouts in which the remainder builds up and drains (light that
+    changes: the dark group reads out what earlier light left)."""
+    levels = _msb_path_levels(config)
+    pixels = 2500
+    fast = SceneSimulator(config, (len(levels), pixels), rng=41)
+    full = SceneSimulator(config, (len(levels), pixels), rng=42, method="per-clock")
+    bins = np.arange(config.ml_max + 2)
+    for k in range(8):
+        # the first two readouts at 0.75 x the levels, then the levels: remainders
+        # left at one light are carried into another; the dark group was lit before
+        light = np.broadcast_to(levels[:, None], (len(levels), pixels)) * (0.75 if k < 2 else 1.0)
+        if k < 2:
+            light = light.copy()
+            light[0] = 0.6
+        a, b = fast.readout(light), full.readout(light)
+        for i in range(len(levels)):
+            ha, hb = (np.bincount(w[i], minlength=config.ml_bits + 1) / pixels for w in (a, b))
+            assert 0.5 * np.abs(ha - hb).sum() < 0.05, (k, levels[i], ha, hb)
+            ra, rb = (np.histogram(s.sfc.reshape(len(levels), pixels)[i], bins)[0] / pixels for s in (fast, full))
+            assert 0.5 * np.abs(ra - rb).sum() < 0.05, (k, levels[i])
+            da, db = (decode_spikes(w[i], config).astype(float) for w in (a, b))
+            se = np.sqrt(da.var() / pixels + db.var() / pixels)
+            assert abs(da.mean() - db.mean()) <= 4 * se + 1e-12, (k, levels[i], da.mean(), db.mean())
+    for name in ("dark", "event", "bright", "queue", "full", "clock"):
+        assert fast.path_counts[name] > 0, fast.path_counts
+    assert full.path_counts["clock"] == 8 * levels.size * pixels
+
+
+def test_msb_remainder_is_read_out_in_the_dark():
+    """After a bright readout leaves a remainder, the dark path drains it one
+    msb at a time, as the per-clock path does (deterministic: no light)."""
+    config = MSB
+    fast = SceneSimulator(config, (1, 4), rng=0)
+    full = SceneSimulator(config, (1, 4), rng=1, method="per-clock")
+    for sim in (fast, full):
+        sim.sfc[:] = [0, 1, 100, 127]
+    dark = np.zeros((1, 4))
+    seen = []
+    for _ in range(8):
+        a, b = fast.readout(dark), full.readout(dark)
+        assert np.array_equal(a, b) and np.array_equal(fast.sfc, full.sfc)
+        seen.append(a[0].tolist())
+    assert seen[:3] == [[0, 1, 7, 7], [0, 0, 6, 6], [0, 0, 3, 5]]
+    assert seen[-1] == [0, 0, 0, 0] and not fast.sfc.any()
+    assert fast.path_counts["dark"] == 32

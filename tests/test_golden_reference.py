@@ -50,3 +50,25 @@ def test_split_anywhere_gives_same_stream(rng):
         words, state = step_reference(c, stim[a:b], state)
         parts.append(words)
     assert np.array_equal(np.concatenate(parts), whole)
+
+
+def test_ml_msb_reads_the_top_bit_and_keeps_the_remainder():
+    c = SensorConfig(mode="ml", ml_readout="msb", ml_bits=3, b1=2, b2=1, threshold=1)   # L = 4, max 7
+    # 3 spikes: word 2 (2^1 leaves), remainder 1; +3 -> 4: word 3, remainder 0; then dark: 0
+    assert run(c, [1, 1, 1, 0] * 2 + [0] * 4) == [2, 3, 0]
+    # 4 -> word 3, remainder 0; 3 -> word 2, remainder 1, read out in the dark: word 1, then 0
+    assert run(c, [1, 1, 1, 1, 1, 1, 1, 0] + [0] * 12) == [3, 2, 1, 0, 0]
+
+
+def test_ml_msb_counter_saturates_with_its_remainder():
+    c = SensorConfig(mode="ml", ml_readout="msb", ml_bits=2, b1=2, b2=1, threshold=1)   # L = 4, max 3
+    # 4 spikes saturate at 3: word 2, remainder 1; 1 + 4 saturates again; then 1 drains
+    words, state = step_reference(c, np.ones((8, 1, 1), np.int64))
+    assert words[:, 0, 0].tolist() == [2, 2] and state.sfc[0, 0] == 1
+    assert run(c, [1] * 8 + [0] * 8) == [2, 2, 1, 0]
+
+
+def test_ml_msb_with_one_bit_is_the_count():
+    for stim in ([1, 0, 0, 0] * 3, [1] * 12, [0] * 12):
+        msb = SensorConfig(mode="ml", ml_readout="msb", ml_bits=1, b1=2, b2=1, threshold=1)
+        assert run(msb, stim) == run(SensorConfig(mode="ml", ml_bits=1, b1=2, b2=1, threshold=1), stim)

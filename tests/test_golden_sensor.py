@@ -13,7 +13,9 @@ from golden.decode import check_words
 from golden.errors import InputError
 from golden.reference import PixelState, step_reference
 from golden.sensor import PixelArray, simulate
-from tests.configs import EDGE_CONFIGS
+from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
+
+MSB = SensorConfig.preset("ml-msb")
 
 STIMULUS_KINDS = ("uniform", "near-threshold", "bursts", "sparse-huge", "zero", "max", "mixed")
 
@@ -82,9 +84,10 @@ def configs(draw):
                            st.sampled_from([(1 << 31) - 1, 1 << 31, (1 << 32) - 1, 1 << 32])))
     acc_bits = draw(st.integers(max(1, theta.bit_length()), min(62, theta.bit_length() + draw(
         st.sampled_from([0, 1, 2, 8, 62])))))
+    readout = draw(st.sampled_from(["count", "msb"])) if mode == "ml" else "count"
     return SensorConfig(mode=mode, b1=b1, b2=b2, alpha=alpha, clocks_per_tick=clocks, threshold=theta,
                         acc_bits=acc_bits, input_bits=draw(st.integers(1, 32)),
-                        ml_bits=draw(st.integers(1, 16)))
+                        ml_bits=draw(st.integers(1, 16)), ml_readout=readout)
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -98,14 +101,14 @@ def test_engine_equals_reference_random_configs(config, kind, seed, readouts, pi
 
 
 @pytest.mark.parametrize("kind", STIMULUS_KINDS)
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_EDGE_CONFIGS, ids=str)
 def test_engine_equals_reference_edge_configs(config, kind, rng):
     T = config.clocks_per_readout * max(2, 300 // config.clocks_per_readout)
     stim = make_stimulus(config, kind, (T, 3, 4), rng)
     check_equal(config, stim, split_points(T, rng, 4))
 
 
-@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), EDGE_CONFIGS[6], EDGE_CONFIGS[7]],
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[6], EDGE_CONFIGS[7]],
                          ids=str)
 def test_wide_array_row_loop_path(config, rng):
     """>= ROW_LOOP_MIN_PIXELS pixels: scans run as row loops, subsets as masks or gathers."""
@@ -116,7 +119,7 @@ def test_wide_array_row_loop_path(config, rng):
 
 
 @pytest.mark.parametrize("fraction", [0.0, 1.0])
-@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
                          ids=str)
 def test_literal_subset_path_full_width_and_gathered(config, fraction, rng, monkeypatch):
     """Pixels that saturate and idle in a block are stepped literally, at full width or gathered."""
@@ -130,7 +133,7 @@ def test_literal_subset_path_full_width_and_gathered(config, fraction, rng, monk
     assert calls, "the literal subset path was not exercised"
 
 
-@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
                          ids=str)
 def test_literal_step_equals_reference_clock_by_clock(config, rng):
     """_Engine.literal: acc and the spike count after every clock equal the reference's."""
@@ -155,7 +158,7 @@ def test_literal_step_equals_reference_clock_by_clock(config, rng):
     assert np.array_equal(acc, state.acc.reshape(35))
 
 
-@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
                          ids=str)
 def test_every_input_at_least_theta_shortcut(config, rng):
     """Blocks with e >= theta everywhere: every pixel fires every clock; capped walk and pinned top."""
@@ -170,7 +173,7 @@ def test_every_input_at_least_theta_shortcut(config, rng):
 
 
 @pytest.mark.parametrize("fraction", [0.0, 0.5, 1.0])
-@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
                          ids=str)
 def test_quiet_and_pinned_pixels_split_off(config, fraction, rng, monkeypatch):
     """Blocks mixing dark (quiet), pinned (e >= theta + M), firing and other pixels, split or not."""
@@ -194,7 +197,8 @@ def test_quiet_and_pinned_pixels_split_off(config, fraction, rng, monkeypatch):
         assert min(widths) < shape[0] * shape[1], "no block was split"
 
 
-@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(acc_bits=14), EDGE_CONFIGS[6]], ids=str)
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(acc_bits=14), EDGE_CONFIGS[6], MSB_EDGE_CONFIGS[3]],
+                         ids=str)
 def test_zero_input_after_bright_drains_the_residual(config, rng):
     """Zero input with acc0 >= theta must still fire: the no-spike shortcut needs acc0 < theta."""
     L = config.clocks_per_readout
@@ -206,14 +210,18 @@ def test_zero_input_after_bright_drains_the_residual(config, rng):
         assert step_reference(config, stim)[1].acc.max() < config.threshold   # it did drain
 
 
-def test_chunks_of_one_clock(rng):
-    config = SensorConfig(b1=2, b2=2, threshold=9, acc_bits=5)
+@pytest.mark.parametrize("config", [SensorConfig(b1=2, b2=2, threshold=9, acc_bits=5),
+                                    SensorConfig(mode="ml", ml_readout="msb", ml_bits=4, b1=2, b2=2, threshold=9,
+                                                 acc_bits=5)], ids=str)
+def test_chunks_of_one_clock(config, rng):
     stim = make_stimulus(config, "mixed", (config.clocks_per_readout * 4, 3, 3), rng)
     check_equal(config, stim, list(range(len(stim) + 1)))
 
 
-def test_long_run_of_thousands_of_readouts_in_chunks(rng):
-    config = SensorConfig(b1=2, b2=1, clocks_per_tick=2, threshold=5, acc_bits=4)   # L = 2
+@pytest.mark.parametrize("config", [SensorConfig(b1=2, b2=1, clocks_per_tick=2, threshold=5, acc_bits=4),  # L = 2
+                                    SensorConfig(mode="ml", ml_readout="msb", ml_bits=6, b1=2, b2=1,
+                                                 clocks_per_tick=2, threshold=5, acc_bits=4)], ids=str)
+def test_long_run_of_thousands_of_readouts_in_chunks(config, rng):
     stim = make_stimulus(config, "mixed", (config.clocks_per_readout * 3000, 2, 3), rng)
     bounds = [0]
     while bounds[-1] < len(stim):
@@ -222,8 +230,8 @@ def test_long_run_of_thousands_of_readouts_in_chunks(rng):
     assert len(simulate(config, stim)) == 3000
 
 
-def test_simulate_chunking_gives_identical_stream(rng):
-    config = SensorConfig()
+@pytest.mark.parametrize("config", [SensorConfig(), MSB], ids=str)
+def test_simulate_chunking_gives_identical_stream(config, rng):
     stim = make_stimulus(config, "near-threshold", (config.clocks_per_readout * 6, 5, 4), rng).astype(np.uint16)
     whole = simulate(config, stim)
     pieces = simulate(config, stim, chunks=(stim[a:b] for a, b in [(0, 1), (1, 500), (500, 1440)]))
@@ -238,16 +246,18 @@ def test_engine_does_not_step_clock_by_clock_for_normal_configs(rng, monkeypatch
     def refuse(*args, **kwargs):
         raise AssertionError("step_reference called")
     monkeypatch.setattr(sensor, "step_reference", refuse)
-    for config in (SensorConfig(), SensorConfig(mode="ml"), EDGE_CONFIGS[7]):
+    for config in (SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[7], MSB_EDGE_CONFIGS[5]):
         simulate(config, make_stimulus(config, "mixed", (config.clocks_per_readout, 2, 2), rng))
 
 
 @pytest.mark.parametrize("acc_bits, theta", [(62, 1), (61, 3), (60, (1 << 59) + 5), (62, (1 << 62) - 1)])
 def test_widest_accumulators(acc_bits, theta, rng):
-    config = SensorConfig(b1=2, b2=2, clocks_per_tick=2, threshold=theta, acc_bits=acc_bits, input_bits=32)
-    for kind in ("max", "sparse-huge", "uniform"):
-        stim = make_stimulus(config, kind, (config.clocks_per_readout * 3, 2, 2), rng)
-        check_equal(config, stim, split_points(len(stim), rng, 2))
+    for mode in ({"mode": "te"}, {"mode": "ml", "ml_readout": "msb", "ml_bits": 3}):
+        config = SensorConfig(b1=2, b2=2, clocks_per_tick=2, threshold=theta, acc_bits=acc_bits, input_bits=32,
+                              **mode)
+        for kind in ("max", "sparse-huge", "uniform"):
+            stim = make_stimulus(config, kind, (config.clocks_per_readout * 3, 2, 2), rng)
+            check_equal(config, stim, split_points(len(stim), rng, 2))
 
 
 def test_working_dtype_follows_the_bound():
@@ -273,7 +283,7 @@ def test_feed_refuses_bad_chunks():
 # -- extreme cases (docs/golden-model.md) ---------------------------------------------
 
 def test_zero_stimulus_gives_zero_words_and_state():
-    for config in EDGE_CONFIGS:
+    for config in EDGE_CONFIGS + MSB_EDGE_CONFIGS:
         stim = np.zeros((config.clocks_per_readout * 3, 2, 2), np.uint8)
         with warnings.catch_warnings():
             warnings.simplefilter("error")
@@ -282,6 +292,7 @@ def test_zero_stimulus_gives_zero_words_and_state():
 
 
 @pytest.mark.parametrize("config", [SensorConfig(input_bits=32), SensorConfig(mode="ml", input_bits=32),
+                                    SensorConfig(mode="ml", ml_readout="msb", input_bits=32),
                                     SensorConfig(input_bits=32, threshold=(1 << 32) - 1, acc_bits=40),
                                     SensorConfig(b1=2, b2=3, input_bits=32, threshold=1000)], ids=str)
 def test_max_input_every_clock_at_32_bits(config):
@@ -292,11 +303,15 @@ def test_max_input_every_clock_at_32_bits(config):
     if config.is_te:
         m = (config.p_max - 1) // config.clocks_per_tick + 1     # overflow at clock 2^b1 - 1
         assert (words == ((1 << config.d) | m)).all()
+    elif config.is_msb:      # L = 240 spikes: msb 8 each time (the counter tops out at 255)
+        assert (words == min(config.ml_max, config.clocks_per_readout).bit_length()).all()
     else:
         assert (words == min(config.ml_max, config.clocks_per_readout)).all()
 
 
-@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), SensorConfig(input_bits=32)], ids=str)
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), SensorConfig(input_bits=32), MSB,
+                                    SensorConfig(mode="ml", ml_readout="msb", ml_bits=16, input_bits=32),
+                                    SensorConfig(mode="ml", ml_readout="msb", ml_bits=1)], ids=str)
 def test_twelve_decades_in_one_frame(config, rng):
     """Light from 1e-7 to 1e5 x design light across one frame (and 1e30 clipped to the input's top)."""
     L = config.clocks_per_readout
@@ -311,7 +326,7 @@ def test_twelve_decades_in_one_frame(config, rng):
 
 
 def test_words_dtype_and_legality_for_every_edge_config(rng):
-    for config in EDGE_CONFIGS:
+    for config in EDGE_CONFIGS + MSB_EDGE_CONFIGS:
         stim = make_stimulus(config, "mixed", (config.clocks_per_readout * 5, 3, 3), rng)
         words = simulate(config, stim)
         assert words.dtype == np.int64 and words.shape == (5, 3, 3)

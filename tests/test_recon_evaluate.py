@@ -34,20 +34,23 @@ def test_tone_map_divides_by_the_peak_and_clips():
 
 def test_paper_configs():
     configs = paper_configs()
+    assert list(configs) == ["ml-msb", "te", "ml"]
     assert configs["te"] == SensorConfig() and configs["ml"] == SensorConfig(mode="ml")
-    assert configs["te"].threshold == 175 and configs["ml"].threshold == 328
+    assert configs["ml-msb"] == SensorConfig(mode="ml", ml_readout="msb")
+    assert configs["te"].threshold == 175 and configs["ml"].threshold == configs["ml-msb"].threshold == 328
 
 
-def _hand_made():
-    rows = [Result("a", "ml", "tfp", 20.0, 0.5, 1.0, 3), Result("b", "ml", "tfp", 30.0, 0.7, 3.0, 3),
+def _hand_made(modes=("ml-msb", "te")):
+    rows = [Result("a", "ml-msb", "tfp", 20.0, 0.5, 1.0, 3), Result("b", "ml-msb", "tfp", 30.0, 0.7, 3.0, 3),
             Result("a", "te", "tfp", 25.0, 0.6, 2.0, 3), Result("b", "te", "tfp", 35.0, 0.8, 4.0, 3),
-            Result("a", "ml", "tfi", 10.0, 0.1, 5.0, 3), Result("a", "te", "tfi", 12.5, 0.25, 7.0, 3)]
-    return Evaluation(rows, ("tfp", "tfi"), ("ml", "te"), 9)
+            Result("a", "ml-msb", "tfi", 10.0, 0.1, 5.0, 3), Result("a", "te", "tfi", 12.5, 0.25, 7.0, 3),
+            Result("a", "ml", "tfp", 22.0, 0.55, 1.5, 3), Result("a", "ml", "tfi", 11.0, 0.15, 4.5, 3)]
+    return Evaluation([r for r in rows if r.mode in modes], ("tfp", "tfi"), modes, 9)
 
 
 def test_summary_is_mean_of_sequence_means():
     summary = _hand_made().summary()
-    assert summary["tfp", "ml"] == {"psnr_mu": 25.0, "ssim_mu": 0.6, "ms_per_frame": 2.0, "sequences": 2}
+    assert summary["tfp", "ml-msb"] == {"psnr_mu": 25.0, "ssim_mu": 0.6, "ms_per_frame": 2.0, "sequences": 2}
     assert summary["tfp", "te"]["psnr_mu"] == 30.0
     assert summary["tfi", "te"]["sequences"] == 1
 
@@ -62,11 +65,25 @@ def test_table_markdown_has_the_paper_layout():
     assert len(lines) == 4
 
 
+def test_table_markdown_puts_the_full_count_camera_in_extra_rows():
+    """The msb camera is the paper's ML column; the full-count camera gets rows beneath it."""
+    lines = table_markdown(_hand_made(("ml-msb", "te", "ml"))).splitlines()
+    assert lines[0].startswith("| ML reconstruction |") and lines[0].count("reconstruction") == 2
+    assert lines[2] == "| TFP_ML | 25.00 | 0.600 | 2.00 | TFP_TE | 30.00 | 0.700 | 3.00 |"
+    assert lines[4] == "| TFP_ML-count | 22.00 | 0.550 | 1.50 |  |  |  |  |"
+    assert lines[5] == "| TFI_ML-count | 11.00 | 0.150 | 4.50 |  |  |  |  |"
+    assert len(lines) == 6
+    # without a column sensor, every sensor is a column
+    only = table_markdown(_hand_made(("ml",))).splitlines()
+    assert only[0].startswith("| ML-count reconstruction |") and only[2].startswith("| TFP_ML-count | 22.00 |")
+
+
 def test_table_and_results_csv():
-    rows = list(csv.DictReader(io.StringIO(table_csv(_hand_made()))))
+    rows = list(csv.DictReader(io.StringIO(table_csv(_hand_made(("ml-msb", "te", "ml"))))))
     assert [r["method"] for r in rows] == ["tfp", "tfi"]
     assert rows[0]["te_name"] == "TFP_TE" and float(rows[0]["te_psnr_mu"]) == 30.0
-    assert float(rows[1]["ml_ms_per_frame"]) == 5.0
+    assert rows[1]["ml-msb_name"] == "TFI_ML" and float(rows[1]["ml-msb_ms_per_frame"]) == 5.0
+    assert rows[0]["ml_name"] == "TFP_ML-count" and float(rows[0]["ml_psnr_mu"]) == 22.0
     full = list(csv.DictReader(io.StringIO(results_csv(_hand_made()))))
     assert len(full) == 6 and full[1]["sequence"] == "b" and float(full[1]["psnr_mu"]) == 30.0
 
@@ -81,9 +98,9 @@ def small_run():
 
 def test_end_to_end_scores_are_the_metrics_of_the_scored_frames(small_run):
     sequences, evaluation = small_run
-    assert len(evaluation.results) == 2 * 2 * 2
+    assert len(evaluation.results) == 2 * 3 * 2
     for name, light in sequences:
-        for mode in ("ml", "te"):
+        for mode in ("ml-msb", "te", "ml"):
             for method in ("tfp", "tfi"):
                 result = next(r for r in evaluation.results
                               if (r.sequence, r.mode, r.method) == (name, mode, method))
@@ -151,9 +168,9 @@ def test_evaluate_refuses():
 
 def test_method_options_reach_the_method(small_run):
     sequences, evaluation = small_run
-    windowed = evaluate(sequences[:1], simulate, methods=("tfi",), modes=("ml",), seed=3, progress=False,
+    windowed = evaluate(sequences[:1], simulate, methods=("tfi",), modes=("ml-msb",), seed=3, progress=False,
                         options={"tfi": {"search": "window"}})
-    default = [r.psnr_mu for r in evaluation.results if (r.sequence, r.mode, r.method) == ("m", "ml", "tfi")]
+    default = [r.psnr_mu for r in evaluation.results if (r.sequence, r.mode, r.method) == ("m", "ml-msb", "tfi")]
     assert [r.psnr_mu for r in windowed.results] != default
     with pytest.raises(InputError, match="not an option"):
         evaluate(sequences[:1], simulate, methods=("tfp",), progress=False, options={"tfp": {"search": "window"}})
@@ -164,3 +181,12 @@ def test_light_far_above_float32_is_scored_not_overflowed():
     evaluation = evaluate([("huge", light)], simulate, methods=("tfp",), modes=("te",), progress=False)
     (result,) = evaluation.results
     assert np.isfinite(result.psnr_mu) and result.psnr_mu < 10     # saturated codes: far too dark
+
+
+def test_msb_and_count_cameras_see_the_same_light_and_differ(small_run):
+    """The three sensors are simulated on the same light; the msb words are
+    msb indices (0..8) and its reconstruction is not the count camera's."""
+    sequences, evaluation = small_run
+    msb, count = evaluation.streams["m", "ml-msb"], evaluation.streams["m", "ml"]
+    assert msb.shape == count.shape and int(msb.max()) <= 8 < int(count.max())
+    assert not np.array_equal(evaluation.images["m", "ml-msb", "tfp"], evaluation.images["m", "ml", "tfp"])

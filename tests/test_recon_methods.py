@@ -10,9 +10,9 @@ from golden.errors import InputError
 from golden.sensor import simulate
 from recon.methods import METHODS, reconstruct
 from recon.stream import legal_codes
-from tests.configs import EDGE_CONFIGS
+from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
-TE, ML = SensorConfig(), SensorConfig(mode="ml")
+TE, ML, MSB = SensorConfig(), SensorConfig(mode="ml"), SensorConfig.preset("ml-msb")
 K, SIDE = 60, 6          # readouts; each light level covers SIDE x SIDE pixels
 
 
@@ -65,24 +65,41 @@ def test_ml_constant_light_means(method, rng):
 
 
 @pytest.mark.parametrize("method", sorted(METHODS))
-@pytest.mark.parametrize("config", [TE, ML], ids=str)
+def test_msb_constant_light_means(method, rng):
+    """The msb readout keeps what it does not read, so over 60 readouts the mean
+    is the light's up to the remainder left at the end (at most half a readout's
+    count over K readouts: 1 / (2 K) relative) and counting noise."""
+    levels = [1e-3, 1e-2, 0.1, 0.5, 0.75, 1.0]
+    words = constant_light_stream(MSB, levels, rng)
+    assert set(np.unique(words)) <= set(range(9))
+    means = level_means(reconstruct(words, MSB, method), len(levels))
+    for level, mean in zip(levels, means):
+        noise = 4 / np.sqrt(level * DESIGN_ELECTRONS / MSB.threshold * K * SIDE * SIDE)
+        assert -max(noise, 0.01) - 1 / (2 * K) <= mean / level - 1 <= max(noise, 0.01), (level, mean)
+
+
+@pytest.mark.parametrize("method", sorted(METHODS))
+@pytest.mark.parametrize("config", [TE, ML, MSB], ids=str)
 def test_saturates_above_range(method, config, rng):
     """10x and 1000x the design light: every word is the top code, light = its decoded value.
 
     TE: overflow in the first S_h cycle (m = 1), 2^b1 alpha spikes = I 0.9999. ML: one
     spike per pixel clock at most, so the count stops at L = 240 < 255 = 2^8 - 1 (I 1.874).
+    ML msb: 240 spikes have bit_length 8, read as 2^7 = 128 (I 0.9996), the rest fills the counter.
     """
     words = constant_light_stream(config, [10.0, 1e3], rng)
-    top = (1 << config.d) | 1 if config.is_te else min(config.ml_max, config.clocks_per_readout)
+    top = ((1 << config.d) | 1 if config.is_te else 8 if config.is_msb
+           else min(config.ml_max, config.clocks_per_readout))
     assert (words == top).all()
     expected = decode_light(np.array([top]), config)[0]
-    assert expected == pytest.approx(240 * 175 / 42000 if config.is_te else 240 * 328 / 42000, rel=1e-12)
+    assert expected == pytest.approx(240 * 175 / 42000 if config.is_te else 128 * 328 / 42000 if config.is_msb
+                                     else 240 * 328 / 42000, rel=1e-12)
     images = reconstruct(words, config, method)
     assert np.allclose(images, expected, rtol=1e-6, atol=0)
     assert np.all(reconstruct(words, config, method, dtype="float64") == np.float32(expected))
 
 
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_EDGE_CONFIGS, ids=str)
 def test_extreme_streams_every_edge_config(config, rng):
     u = config.threshold / DESIGN_ELECTRONS
     zeros = np.zeros((7, 2, 3), np.uint16)

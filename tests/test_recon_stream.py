@@ -9,7 +9,7 @@ from golden.config import SensorConfig
 from golden.errors import InputError
 from golden.io import save_stream
 from recon import stream
-from tests.configs import EDGE_CONFIGS
+from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
 WIDE_CONFIGS = [
     SensorConfig(b1=16, b2=16, clocks_per_tick=1),       # 17-bit words: the largest table
@@ -19,7 +19,7 @@ WIDE_CONFIGS = [
     SensorConfig(mode="ml", ml_readout="msb"),           # msb words: the msb index 0..B
     SensorConfig(mode="ml", ml_bits=16, ml_readout="msb"),
 ]
-CONFIGS = EDGE_CONFIGS + WIDE_CONFIGS
+CONFIGS = EDGE_CONFIGS + WIDE_CONFIGS + MSB_EDGE_CONFIGS
 
 
 def _golden_legal(code: int, config) -> bool:
@@ -56,7 +56,7 @@ def test_table_equals_golden_on_every_code(config):
                            else config.ml_bits + 1 if config.is_msb else config.ml_max + 1)
 
 
-@pytest.mark.parametrize("config", CONFIGS[:6], ids=str)
+@pytest.mark.parametrize("config", CONFIGS[:6] + MSB_EDGE_CONFIGS[:3], ids=str)
 def test_every_illegal_code_refused(config):
     _, _, legal = stream.code_tables(config)
     for code in np.flatnonzero(~legal)[:50]:
@@ -117,3 +117,12 @@ def test_substreams_edges():
         stream.substreams(s, [3], 1, "wrap")
     with pytest.raises(InputError, match="radius"):
         stream.substreams(s, [3], -1)
+
+
+def test_msb_table_is_the_msb_worth():
+    """ML msb (eq. 10): codes 0..B only, code j > 0 is 2^(j - 1) spikes; 9 and up are refused."""
+    config = SensorConfig.preset("ml-msb")
+    assert stream.legal_codes(config).tolist() == list(range(9))
+    assert stream.decode_spikes(np.arange(9), config).tolist() == [0, 1, 2, 4, 8, 16, 32, 64, 128]
+    with pytest.raises(InputError, match="readout word 9 at index"):
+        stream.decode_light(np.array([3, 9]), config)

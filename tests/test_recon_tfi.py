@@ -10,6 +10,7 @@ from recon.tfi import tfi
 
 TE = SensorConfig()                 # theta 175, d = 4
 ML = SensorConfig(mode="ml")        # theta 328
+MSB = SensorConfig.preset("ml-msb")  # theta 328, words 0..8 (2^(word - 1) spikes)
 
 
 def run(words, config, search="stream", radius=4):
@@ -44,7 +45,7 @@ def test_tail_bound_below_previous_segment():
 
 
 def test_all_zero_gives_documented_floor():
-    for config in (TE, ML):
+    for config in (TE, ML, MSB):
         u = config.threshold / DESIGN_ELECTRONS
         assert run([0] * 5, config).tolist() == approx([1 / 5] * 5, u)
 
@@ -134,3 +135,45 @@ def test_running_scans_equal_torch_cumulative(rng):
     x = torch.from_numpy(rng.integers(-5, 100, (37, 4)))
     assert torch.equal(running_max(x), x.cummax(0).values)
     assert torch.equal(running_min_reversed(x), x.flip(0).cummin(0).values.flip(0))
+
+
+def test_msb_hand_worked():
+    u = MSB.threshold / DESIGN_ELECTRONS
+    # word 3 = 4 spikes since the stream start, word 1 = 1 spike over 2 readouts, then dense codes
+    assert run([0, 0, 3, 0, 1, 8, 7], MSB).tolist() == approx([4 / 3] * 3 + [1 / 2] * 2 + [128, 64], u)
+
+
+def test_msb_zero_word_means_no_spike_fired_in_its_interval(rng):
+    """TFI reads a 0 code as "no spike in this interval" and a segment ending at a
+    non-zero code n after zeros as spikes fired in p+1..n. With the msb readout a
+    zero word means the counter is empty at readout: no remainder was left and no
+    spike fired, so both hold; a non-zero word may carry spikes of earlier
+    intervals only when the previous word was non-zero too (dense codes). Checked
+    against the spike counts of the same stimulus (the count readout, 16 bits)."""
+    from golden.sensor import simulate
+    msb = SensorConfig(mode="ml", ml_readout="msb", ml_bits=16, b1=2, b2=2, threshold=6)
+    count = SensorConfig(mode="ml", ml_bits=16, b1=2, b2=2, threshold=6)
+    L = msb.clocks_per_readout
+    lam = np.exp(rng.uniform(np.log(0.05), np.log(20.0), (1, 8, 8))) * 6 / L   # 0.05..20 spikes per readout
+    stim = rng.poisson(np.broadcast_to(lam, (L * 60, 8, 8)))
+    words, spikes = simulate(msb, stim), simulate(count, stim)
+    assert (spikes[words == 0] == 0).all()
+    after_zero = np.zeros_like(words, bool)
+    after_zero[0] = True
+    after_zero[1:] = words[:-1] == 0
+    hit = (words > 0) & after_zero                       # remainder 0 before: all its spikes are new
+    assert hit.sum() > 100
+    read = np.where(words > 0, 1 << np.maximum(words - 1, 0), 0)
+    assert (read[hit] <= spikes[hit]).all() and (spikes[hit] < 2 * read[hit]).all()
+    # nothing is lost: every spike is read out but the remainder left in the counter,
+    # below the last word's 2^(word - 1) (none after a 0 word)
+    left = spikes.sum(0) - read.sum(0)
+    assert (left >= 0).all() and (left < (1 << np.maximum(words[-1] - 1, 0))).all() and left.any()
+
+
+def test_msb_equals_count_where_no_readout_holds_two_spikes():
+    """Dim light (at most one spike per interval): msb words are the counts, so TFI agrees."""
+    u = MSB.threshold / DESIGN_ELECTRONS
+    words = [0, 1, 0, 0, 1, 0, 0, 0, 1, 0]
+    assert run(words, MSB).tolist() == run(words, ML).tolist() == approx(
+        [1 / 2] * 2 + [1 / 3] * 3 + [1 / 4] * 4 + [1 / 4], u)

@@ -22,8 +22,8 @@ def add_arguments(parser):
     parser.add_argument("--rtl-readouts", type=int, default=16, help="readouts the RTL runs (default 16)")
     parser.add_argument("--seed", type=int, default=0, help="scene and shot-noise seed (default 0)")
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per method, median (default 3)")
-    parser.add_argument("--sensors", default="ml,ml-msb,te",
-                        help="golden sensors: comma list of ml, ml-msb, te (default all; te is the RTL's)")
+    parser.add_argument("--sensors", default="ml-msb,te,ml",
+                        help="golden sensors: comma list of ml-msb, te, ml (default all; te is the RTL's)")
     parser.add_argument("--no-hw-cost", action="store_true", help="skip the Yosys hardware cost table")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr, no table on stdout")
 

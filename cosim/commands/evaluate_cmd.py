@@ -1,7 +1,13 @@
-"""``tespike evaluate``: every sequence x {ML, TE} x method -> the paper's Table 1, plots, strips."""
+"""``tespike evaluate``: every sequence x {ML (msb), TE, ML-count} x method -> the paper's Table 1, plots, strips.
 
-HELP = ("simulate sequences with the paper's TE and ML sensors, reconstruct with every method, "
-        "write Table 1 (Markdown, CSV), a quality-against-run-time plot and image strips")
+The ML column is the paper's ML camera, the msb readout of its eq. 10; the
+full-count ML camera is reported as extra rows beneath (``--ml-count-config none``
+leaves it out).
+"""
+
+HELP = ("simulate sequences with the paper's TE and ML (msb readout) sensors and the full-count ML "
+        "camera, reconstruct with every method, write Table 1 (Markdown, CSV), a quality-against-run-time "
+        "plot and image strips")
 
 
 def add_arguments(parser):
@@ -22,7 +28,11 @@ def add_arguments(parser):
                         help="comma-separated reconstruction methods (default: every method)")
     parser.add_argument("--window", type=int, default=9, help="readouts per window (default 9, paper 6.4)")
     parser.add_argument("--te-config", default="te", help="TE sensor: JSON file or 'te' (paper b1 = b2 = 4)")
-    parser.add_argument("--ml-config", default="ml", help="ML sensor: JSON file or 'ml' (paper 8 bits)")
+    parser.add_argument("--ml-config", default="ml-msb",
+                        help="ML sensor of the table's ML column, msb readout: JSON file or 'ml-msb' "
+                             "(paper 8 bits, eq. 10)")
+    parser.add_argument("--ml-count-config", default="ml",
+                        help="full-count ML sensor of the extra rows: JSON file, 'ml' (8 bits) or 'none'")
     parser.add_argument("--seed", type=int, default=0, help="shot-noise seed (default 0)")
     parser.add_argument("--device", default="cpu", help="torch device for reconstruction (default cpu)")
 
@@ -38,11 +48,17 @@ def run(args) -> int:
     from recon.scenes import load_hdr_sequence
     from recon.scenes.heldout import sequence_set
 
-    configs = {"te": load_config(args.te_config), "ml": load_config(args.ml_config)}
-    for mode, config in configs.items():
-        if config.mode != mode:
-            raise ConfigError(f"--{mode}-config {args.te_config if mode == 'te' else args.ml_config!r} "
-                              f"has mode {config.mode!r}, expected {mode!r}")
+    # option, value, sensor key, (mode, ml_readout) it must have
+    wanted = [("--ml-config", args.ml_config, "ml-msb", ("ml", "msb")),
+              ("--te-config", args.te_config, "te", ("te", "count"))]
+    if args.ml_count_config != "none":
+        wanted.append(("--ml-count-config", args.ml_count_config, "ml", ("ml", "count")))
+    configs = {}
+    for option, value, mode, (kind, readout) in wanted:
+        config = configs[mode] = load_config(value)
+        if (config.mode, config.ml_readout) != (kind, readout):
+            raise ConfigError(f"{option} {value!r} has mode {config.mode!r}, ml_readout {config.ml_readout!r}; "
+                              f"expected mode {kind!r}" + (f", ml_readout {readout!r}" if kind == "ml" else ""))
     sequences = [] if args.set == "none" else sequence_set(args.set, args.frames, args.height, args.width)
     for path in args.scene:
         sequences.append((Path(path).stem, load_scene(path)))
@@ -52,7 +68,7 @@ def run(args) -> int:
         raise InputError("nothing to evaluate: --set none and no --scene or --folder")
     methods = None if args.methods is None else [m.strip() for m in args.methods.split(",") if m.strip()]
     evaluation = evaluate(sequences, lambda config, light, rng: simulate_scene(config, light, seed=rng),
-                          methods=methods, configs=configs, window=args.window, seed=args.seed,
+                          methods=methods, modes=tuple(configs), configs=configs, window=args.window, seed=args.seed,
                           device=args.device)
     paths = write_outputs(evaluation, args.out)
     print(table_markdown(evaluation), end="")

@@ -1,0 +1,64 @@
+"""``tespike train``: train the reconstruction network on simulated streams (paper section 6.3)."""
+
+HELP = "train the reconstruction network for one sensor configuration (resumable, CPU or GPU)"
+
+
+def add_arguments(parser):
+    parser.add_argument("--config", default="te", help="sensor: te, ml, ml-msb or a JSON file (default te)")
+    parser.add_argument("--out", required=True, help="weights file to write (.pt); its run folder is OUT.run/")
+    parser.add_argument("--size", default="cpu", help="network size: cpu (the shipped default) or paper")
+    parser.add_argument("--loss", default="l1", help="l1 (paper eq. 7, default) or mu-l1 (after the mu-law)")
+    parser.add_argument("--lr", type=float, default=1e-4, help="initial learning rate (default 1e-4)")
+    parser.add_argument("--steps-per-epoch", type=int, default=250, help="steps per epoch (default 250)")
+    parser.add_argument("--halve-every", type=int, default=10, help="epochs between learning-rate halvings")
+    parser.add_argument("--batch", type=int, default=4, help="batch size (default 4)")
+    parser.add_argument("--crop", type=int, default=96, help="random crop side (default 96)")
+    parser.add_argument("--steps", type=int, default=None, help="step budget")
+    parser.add_argument("--minutes", type=float, default=None, help="wall-time budget in minutes")
+    parser.add_argument("--sequences", type=int, default=48, help="training sequences simulated (default 48)")
+    parser.add_argument("--hdr", action="append", default=[], metavar="DIR",
+                        help="also train on this folder of .exr/.hdr frames (one sequence; repeatable)")
+    parser.add_argument("--downscale", type=int, default=1, help="area-average factor for --hdr frames")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the draws and of the initial weights")
+    parser.add_argument("--device", default="cpu", help="torch device (default cpu; cuda where there is one)")
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch CPU threads (default 1: two runs share two cores better than one run)")
+    parser.add_argument("--cache", default=None, help="folder of the simulated training data "
+                                                      "(default $TESPIKE_CACHE/net-data or ~/.cache/tespike/net-data)")
+    parser.add_argument("--resume", action="store_true", help="continue from OUT.run/checkpoint.pt")
+    parser.add_argument("--progress", action="store_true", help="draw a progress bar even when stderr is not a terminal")
+
+
+def run(args) -> int:
+    import shlex
+    import sys
+    from pathlib import Path
+
+    from golden.config import load_config
+    from golden.errors import InputError
+
+    config = load_config(args.config)
+    if args.steps is None and args.minutes is None:
+        raise InputError("give a budget: --steps N or --minutes M")
+    if args.threads is not None and not 1 <= args.threads <= 1024:
+        raise InputError(f"--threads {args.threads}: must be in 1..1024")
+    for folder in args.hdr:
+        if not Path(folder).is_dir():
+            raise InputError(f"--hdr {folder!r}: not a folder of .exr/.hdr frames")
+    out = Path(args.out)
+    if not out.parent.is_dir():
+        raise InputError(f"cannot write {args.out!r}: directory {str(out.parent)!r} does not exist")
+
+    from recon.net.train import TrainOptions, train
+
+    options = TrainOptions(sensor=config.to_json() if args.config not in ("te", "ml", "ml-msb") else args.config,
+                           size=args.size, loss=args.loss, lr=args.lr, halve_every=args.halve_every,
+                           steps_per_epoch=args.steps_per_epoch, batch=args.batch, crop=args.crop,
+                           steps=args.steps, minutes=args.minutes, seed=args.seed, device=args.device,
+                           threads=args.threads, recipe={"sequences": args.sequences, "folders": tuple(args.hdr),
+                                   "downscale": args.downscale})
+    command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    train(options, out, resume=args.resume, cache=args.cache,
+          progress=True if args.progress else None, command=command)
+    print(f"wrote {out} (run log, loss curve and checkpoint in {out.with_suffix('.run')})")
+    return 0

@@ -1,0 +1,173 @@
+"""The network on whole streams: every readout gets an image, any frame size, bounded memory.
+
+For key moment k the network sees readouts k - span/2 .. k + span/2; past
+either end of the stream the first or last readout is repeated (so a stream
+shorter than the span works, down to one readout). Frames are padded (edge
+values repeated) to a multiple of the network's pyramid factor and cut into
+tiles with an overlap of :func:`tile_margin` pixels on every side, more than
+the network's receptive field, so a tiled result equals the whole-frame one
+to float rounding (``tests/test_recon_net_infer.py``). The shipped weights
+(``recon/net/weights/<preset>.pt``) are chosen by the stream's configuration;
+a configuration no weights were trained for is refused, naming both.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import pickle
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from golden.config import PRESETS, SensorConfig
+from golden.errors import InputError
+
+from ..stream import decode_light
+from .model import TESpikeNet
+from .sizes import NetSizes
+
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+
+
+def weights_path(config: SensorConfig) -> Path:
+    """The shipped weights for ``config``: the preset it equals, else a refusal naming both."""
+    for name, keys in PRESETS.items():
+        if SensorConfig(**keys) == config:
+            path = WEIGHTS_DIR / f"{name}.pt"
+            if not path.is_file():
+                raise InputError(f"no network weights shipped for preset {name!r} (looked for {str(path)!r})")
+            return path
+    shipped = ", ".join(f"{name} ({SensorConfig(**keys)})" for name, keys in PRESETS.items())
+    raise InputError(f"the network's weights were trained for the presets {shipped}; "
+                     f"this stream's configuration {config} is none of them "
+                     "(train weights for it with 'tespike train --config C.json')")
+
+
+@functools.lru_cache(maxsize=8)
+def _load_cached(path: str, mtime: float) -> tuple[TESpikeNet, SensorConfig, dict]:
+    payload = torch.load(path, map_location="cpu", weights_only=True)
+    model = TESpikeNet(NetSizes.from_dict(payload["sizes"]))
+    model.load_state_dict(payload["state_dict"])
+    model.eval().to(memory_format=torch.channels_last)
+    return model, SensorConfig.from_dict(payload["config"]), payload.get("meta", {})
+
+
+def load_weights(path: str | Path) -> tuple[TESpikeNet, SensorConfig, dict]:
+    """(model in eval mode, the sensor configuration it was trained for, how it was made)."""
+    path = Path(path)
+    try:
+        return _load_cached(str(path), path.stat().st_mtime)
+    except OSError as exc:
+        raise InputError(f"cannot read network weights {str(path)!r}: {exc.strerror}") from None
+    except (RuntimeError, KeyError, TypeError, ValueError, EOFError, pickle.UnpicklingError,
+            zipfile.BadZipFile) as exc:
+        raise InputError(f"network weights {str(path)!r} are not a tespike weights file "
+                         f"({str(exc).splitlines()[0][:100] if str(exc) else type(exc).__name__})") from None
+
+
+def receptive_radius(sizes: NetSizes) -> int:
+    """An upper bound, in frame pixels, on how far an output pixel's inputs can lie.
+
+    Summed over the layers at each resolution (a 3 x 3 convolution reaches one
+    pixel of its level, a pixel of level l being u 2^l frame pixels; a DCN tap
+    reaches at most ``max_offset`` further), plus LIR's attention window.
+    """
+    u = sizes.unshuffle
+    reach = 3 * u + u * (3 + 2)                 # MSFEG (7 x 7 then 3 x 3) and the fold
+    if sizes.dcn:
+        for level in range(sizes.levels):
+            scale = u << level
+            per_level = 2 + 1 + 1 + 1 + 2 + 2 + 1    # offsets (3 convs + out), DCN, SP, merge, MBP
+            reach += scale * (per_level + sizes.dcn_kernel // 2 + math.ceil(sizes.max_offset)) + 2 * scale
+    reach += u * 2                               # fusion
+    if sizes.refine:
+        reach += u * (2 + sizes.attention_window // 2 + 1)
+    return reach + u                             # the output convolution
+
+
+def tile_margin(sizes: NetSizes) -> int:
+    """Overlap added on every side of a tile: the receptive radius rounded up to the pyramid factor."""
+    f = sizes.pyramid_factor
+    return -(-receptive_radius(sizes) // f) * f
+
+
+def tiles(height: int, width: int, sizes: NetSizes, tile: int | None) -> list[tuple[int, int, int, int]]:
+    """Tile cores (y, x, h, w) covering the frame padded to the pyramid factor."""
+    f = sizes.pyramid_factor
+    hp, wp = -(-height // f) * f, -(-width // f) * f
+    if tile is None:
+        return [(0, 0, hp, wp)]
+    if type(tile) is not int or tile < f or tile % f:
+        raise InputError(f"tile = {tile!r}: must be a multiple of the pyramid factor {f}")
+    return [(y, x, min(tile, hp - y), min(tile, wp - x)) for y in range(0, hp, tile) for x in range(0, wp, tile)]
+
+
+def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, *,
+          tile: int | None = None, device: str = "cpu") -> torch.Tensor:
+    """The network's image (H, W) at readout ``key`` of the stream ``words`` (K, H, W).
+
+    Only the readouts and pixels one tile needs are decoded at a time, so memory
+    is bounded by the tile, not the frame. Readouts past either end and pixels
+    past the bottom or right edge (padding to the pyramid factor) repeat the
+    last one; with ``tile=None`` the whole frame is one tile.
+    """
+    sizes = model.sizes
+    K, H, W = words.shape
+    times = np.clip(np.arange(sizes.span) + key - sizes.span // 2, 0, K - 1)
+    hp, wp = -(-H // sizes.pyramid_factor) * sizes.pyramid_factor, -(-W // sizes.pyramid_factor) * sizes.pyramid_factor
+    boxes = tiles(H, W, sizes, tile)
+    margin = 0 if len(boxes) == 1 else tile_margin(sizes)
+    out = torch.empty((H, W), dtype=torch.float32)
+    for y, x, h, w in boxes:
+        if y >= H or x >= W:
+            continue                     # a tile of padding only
+        y0, x0 = max(0, y - margin), max(0, x - margin)
+        y1, x1 = min(hp, y + h + margin), min(wp, x + w + margin)
+        rows = np.clip(np.arange(y0, y1), 0, H - 1)
+        cols = np.clip(np.arange(x0, x1), 0, W - 1)
+        block = words[times[:, None, None], rows[None, :, None], cols[None, None, :]]
+        light = decode_light(block, config, device=device, dtype=torch.float32)
+        result = model(light[None])[0, 0]
+        yh, xw = min(y + h, H), min(x + w, W)
+        out[y:yh, x:xw] = result[y - y0:yh - y0, x - x0:xw - x0].float().cpu()
+    return out
+
+
+def reconstruct_net(words, config: SensorConfig, *, weights: str | Path | None = None, tile: int | None = 256,
+                    device: str = "cpu", progress: bool = False, out: np.ndarray | None = None) -> np.ndarray:
+    """Stream words (K, H, W) -> float32 light (K, H, W), one image per readout.
+
+    ``words`` may be a memory map: only the readouts and pixels of one tile are
+    read at a time. ``out``: a float32 (K, H, W) array to fill (e.g. a memory map
+    of the output file); it is returned.
+    """
+    path = Path(weights) if weights is not None else weights_path(config)
+    model, trained_for, _ = load_weights(path)
+    if trained_for != config:
+        raise InputError(f"network weights {str(path)!r} were trained for {trained_for}, "
+                         f"the stream is {config}")
+    if isinstance(words, torch.Tensor):
+        words = words.cpu().numpy()
+    if not isinstance(words, np.ndarray):
+        words = np.asarray(words)
+    if words.ndim != 3:
+        raise InputError(f"stream words shape {words.shape} must be (K, H, W)")
+    K, H, W = words.shape
+    if out is None:
+        out = np.empty((K, H, W), np.float32)
+    elif out.shape != (K, H, W) or out.dtype != np.float32:
+        raise InputError(f"out must be float32 {(K, H, W)}, not {out.dtype} {out.shape}")
+    if out.size == 0:
+        return out
+    model = model.to(device)
+    keys = range(K)
+    if progress:
+        from tqdm import tqdm
+        keys = tqdm(keys, desc="reconstruct net", unit="frame")
+    with torch.inference_mode():
+        for k in keys:
+            out[k] = frame(model, words, config, k, tile=tile, device=device).numpy()
+    return out
