@@ -402,7 +402,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         "tespike view --input I.npy --out I.png",
         "tespike view --input S_te.npz --out S_te.png",
         "tespike view --input R_tfi_te.npy --out R_tfi_te.png --peak 1",
-        "gtkwave W.gtkw" if backend == "amaranth" else "(no waveform: only the amaranth backend writes one)"])
+        "gtkwave W.gtkw" if backend == "amaranth" else "# no waveform: only the amaranth backend writes one"])
     report = report_markdown(
         configs=configs, frames=frames, height=height, width=width, seed=seed, crop=(y, x, crop),
         rtl_readouts=rtl_readouts, rtl_info=rtl_info, verdict=verdict, evaluation=evaluation,

@@ -1,5 +1,7 @@
 """``tespike demo``: circuit to image on a small crop (the README's job, sized for a test)."""
 
+import shutil
+
 import numpy as np
 import pytest
 
@@ -92,6 +94,16 @@ def test_demo_reports_the_first_difference(tmp_path, capsys, monkeypatch):
     verdict = (tmp_path / "d" / "verdict.txt").read_text()
     assert verdict.startswith("DIFFERENT: 1 of 363 words differ; first at readout 1, crop pixel (2, 3)")
     assert "RTL word" in verdict and "golden word" in verdict and verdict.strip() in out
+
+
+@pytest.mark.skipif(shutil.which("iverilog") is None, reason="Icarus Verilog not installed")
+def test_demo_on_the_generated_verilog(tmp_path, capsys):
+    code, out, err = run_here(capsys, "demo", *SMALL, "--sensors", "te", "--no-hw-cost", "--quiet",
+                              "--backend", "icarus", "--out", tmp_path / "d")
+    assert code == 0, err
+    assert "RTL: bit-identical: icarus RTL == golden model" in out
+    assert not (tmp_path / "d" / "W.vcd").exists()
+    assert "--backend icarus" in (tmp_path / "d" / "report.md").read_text(encoding="utf-8")
 
 
 def test_demo_is_deterministic(tmp_path, capsys):
