@@ -243,7 +243,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     """Run every stage into folder ``out``; 0 if the RTL stream is bit-identical to golden, else 1."""
     from golden.config import load_config
     from golden.fastsim import iter_scene_stimulus, simulate_scene
-    from golden.io import save_stream
+    from golden.io import save_images, save_stream
     from golden.sensor import PixelArray, simulate
     from recon.scenes import make_scene
 
@@ -358,7 +358,6 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                           progress=not quiet, keep=True, repeats=repeats)
     paths = write_outputs(evaluation, out)
     for (_, mode, method), images in evaluation.images.items():
-        from golden.io import save_images
         save_images(out / f"R_{method}_{mode}.npy", images)
     peak = float(light.max())
     truth = light[:rtl_readouts, y:y + crop, x:x + crop]
@@ -367,7 +366,6 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     middle = (scored.start + scored.stop - 1) // 2
     for method in METHODS:
         seconds, images = median_seconds(lambda: reconstruct(rtl_words, te, method, window=window), repeats)
-        from golden.io import save_images
         save_images(out / f"R_{method}_rtl.npy", images)
         full = evaluation.images["default", RTL_SENSOR, method][:rtl_readouts, y:y + crop, x:x + crop]
         rtl_images[method], golden_images[method] = images[middle], full[middle]
