@@ -13,7 +13,7 @@ what the generated array's one-instance-per-pixel structure costs in
 Verilator. The baseline
 measured in the same run is the literal golden model
 (``golden.reference.step_reference``) on the same stimulus; the table prints
-each simulator's speed as a ratio to it. Writes ``benchmarks/bench_verilator.png``.
+each simulator's speed as a ratio to it. Writes ``out/bench/bench_verilator.png`` (``--docs``: ``benchmarks/bench_verilator.png``).
 
 Run from the repository root:
 ``python3 benchmarks/bench_verilator.py [--sizes 32 64] [--loop-sizes 32 64] [--icarus-sizes 4 8]
@@ -129,8 +129,14 @@ def main(argv=None) -> int:
                              "(tests/verilog_spec_model.py): what the array's structure costs")
     parser.add_argument("--variants", nargs="*", default=["O1"],
                         help="builds of the generated array to compare: O<n>[:verilator options]")
-    parser.add_argument("--png", default=str(ROOT / "benchmarks" / "bench_verilator.png"))
+    parser.add_argument("--png", default=str(ROOT / "out" / "bench" / "bench_verilator.png"),
+                        help="plot to write (default out/bench/bench_verilator.png, git-ignored)")
+    parser.add_argument("--docs", action="store_true",
+                        help="write the plot the docs show, benchmarks/bench_verilator.png (regenerate it on purpose)")
     args = parser.parse_args(argv)
+    if args.docs:
+        args.png = str(ROOT / "benchmarks" / "bench_verilator.png")
+    Path(args.png).parent.mkdir(parents=True, exist_ok=True)
     config = SensorConfig()
     rng = np.random.default_rng(2024)
     rows = []

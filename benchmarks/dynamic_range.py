@@ -1,7 +1,8 @@
 """Dynamic range of the paper's TE (b1 = b2 = 4) and ML (8-bit, count and msb readout) settings: formula and measured.
 
-Prints two tables and writes them into docs/dynamic-range.md (between the
-marker comments), plus a PNG of decoded vs true light over 1e-6..1e3:
+Prints two tables and draws a PNG of decoded vs true light over 1e-6..1e3
+(out/bench/dynamic-range.png); ``--docs`` writes the tables into
+docs/dynamic-range.md (between the marker comments) and the PNG beside it:
 
 1. dynamic range: SPEC/paper formula and the measurement of golden.dynamic_range
    (constant light through the cycle-exact engine, noise-free and Poisson);
@@ -9,7 +10,7 @@ marker comments), plus a PNG of decoded vs true light over 1e-6..1e3:
    constant Poisson light over the overflow range, each named estimator of
    golden.decode.ESTIMATORS against the default "ratio".
 
-    python3 benchmarks/dynamic_range.py [--n-s 16] [--windows 20] [--no-write]
+    python3 benchmarks/dynamic_range.py [--n-s 16] [--windows 20] [--no-write | --docs]
 """
 
 from __future__ import annotations
@@ -126,7 +127,10 @@ def main() -> None:
     parser.add_argument("--windows", type=int, default=20, help="scored windows of N_s readouts per light")
     parser.add_argument("--estimator-readouts", type=int, default=300)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--no-write", action="store_true", help="print only; leave docs/ alone")
+    parser.add_argument("--no-write", action="store_true", help="print only; write no file")
+    parser.add_argument("--docs", action="store_true",
+                        help="write the tables into docs/dynamic-range.md and its PNG (regenerate them on purpose); "
+                             "default: the PNG goes to out/bench/dynamic-range.png (git-ignored)")
     args = parser.parse_args()
     print(f"Dynamic range, N_s = {args.n_s}, {args.windows} windows; a light passes when the mean decoded "
           f"light of >= 90 % of its windows is within the tolerance")
@@ -134,7 +138,12 @@ def main() -> None:
     print(table)
     est = estimator_table(args.seed, args.estimator_readouts)
     print(est)
-    if not args.no_write:
+    if not args.no_write and not args.docs:
+        png = ROOT / "out" / "bench" / "dynamic-range.png"
+        png.parent.mkdir(parents=True, exist_ok=True)
+        plot(light, curves, png)
+        print(f"wrote {png} (docs unchanged: --docs rewrites them)")
+    elif args.docs and not args.no_write:
         text = DOC.read_text()
         text = replace_section(text, "dr-table", table)
         text = replace_section(text, "estimator-table", est)

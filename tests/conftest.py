@@ -7,3 +7,21 @@ import pytest
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def _full_size_hdri():
+    """The full-size CC0 panoramas, for the tests that check the shipped copies against them:
+    ``$TESPIKE_HDRI_DIR``, else a ``shared/data/hdri`` folder beside the checkout (or beside the
+    folder of its worktrees). The product itself never looks there."""
+    import os
+    from pathlib import Path
+    if os.environ.get("TESPIKE_HDRI_DIR"):
+        return Path(os.environ["TESPIKE_HDRI_DIR"])
+    root = Path(__file__).resolve().parent.parent
+    for base in (root.parent, root.parent.parent):
+        if (base / "shared" / "data" / "hdri").is_dir():
+            return base / "shared" / "data" / "hdri"
+    return root / "no-full-size-hdri"
+
+
+FULL_SIZE_HDRI = _full_size_hdri()

@@ -42,6 +42,16 @@ def test_gtkw_shows_clock_strobes_ccc_and_pixel_00(rng, tmp_path):
                  "bench.top.array.px_0_0.m", "bench.top.array.px_0_0.word"]:
         assert name in traces, name
     assert not any(".px_0_1." in name or ".px_1_0." in name for name in traces)
+    # it opens on one readout interval: GTKWave's view spans 200 px per 2^-zoom fs
+    start = int(next(line for line in text.splitlines() if line.startswith("[timestart]")).split()[1])
+    zoom, marker = next(line for line in text.splitlines() if line.startswith("*"))[1:].split()[:2]
+    period, L = CLOCK_PERIOD_FS, config.clocks_per_readout
+    span = 2.0 ** -float(zoom) * 1000 / 200
+    assert (L + 2) * period < span < (L + 8) * period
+    edges = rising_edges(__import__("vcdvcd").VCDVCD(str(vcd), signals=["bench.top.tb_clk"],
+                                                      store_tvs=True)["bench.top.tb_clk"])
+    t0 = edges[RESET_CLOCKS]                                # the reset clocks, then pixel clock 0
+    assert start == t0 - period and int(marker) == t0 + (L - 1) * period
 
 
 def test_failed_run_leaves_no_waveform(monkeypatch, rng, tmp_path):

@@ -57,8 +57,9 @@ def test_summary_is_mean_of_sequence_means():
 
 def test_table_markdown_has_the_paper_layout():
     lines = table_markdown(_hand_made()).splitlines()
-    assert lines[0] == ("| ML reconstruction | PSNR-μ ↑ | SSIM-μ ↑ | ms / frame ↓ | "
-                        "TE reconstruction | PSNR-μ ↑ | SSIM-μ ↑ | ms / frame ↓ |")
+    timing = "ms / frame ↓ (median of 1, 1 thread)"
+    assert lines[0] == (f"| ML reconstruction | PSNR-μ ↑ | SSIM-μ ↑ | {timing} | "
+                        f"TE reconstruction | PSNR-μ ↑ | SSIM-μ ↑ | {timing} |")
     assert lines[2] == "| TFP_ML | 25.00 | 0.600 | 2.00 | TFP_TE | 30.00 | 0.700 | 3.00 |"
     assert lines[3] == "| TFI_ML | 10.00 | 0.100 | 5.00 | TFI_TE | 12.50 | 0.250 | 7.00 |"
     assert len(lines) == 4
@@ -118,6 +119,24 @@ def test_end_to_end_is_reproducible(small_run):
     assert [r.psnr_mu for r in again.results] == [r.psnr_mu for r in first]
     other = evaluate(sequences[:1], simulate, methods=("tfp",), seed=4, progress=False)
     assert [r.psnr_mu for r in other.results] != [r.psnr_mu for r in first]
+
+
+def test_run_time_is_the_median_of_repeats(small_run, monkeypatch):
+    """Each method runs ``repeats`` times; the table says how many and with how many threads."""
+    import torch
+
+    import recon.methods
+    sequences, _ = small_run
+    calls = []
+    real = recon.methods.reconstruct
+    monkeypatch.setattr(recon.methods, "reconstruct", lambda *a, **k: calls.append(a[0].shape) or real(*a, **k))
+    evaluation = evaluate(sequences[:1], simulate, methods=("tfp",), modes=("te",), seed=3,
+                          progress=False, repeats=5)
+    assert calls.count(sequences[0][1].shape) == 5            # plus one small warm-up call
+    assert evaluation.repeats == 5 and evaluation.threads == torch.get_num_threads()
+    assert f"median of 5, {torch.get_num_threads()} thread" in table_markdown(evaluation)
+    with pytest.raises(InputError, match="repeats"):
+        evaluate(sequences[:1], simulate, methods=("tfp",), repeats=0, progress=False)
 
 
 def test_write_outputs(small_run, tmp_path):

@@ -8,7 +8,7 @@ from recon.scenes import hdr_io
 from recon.scenes.color import normalise_sequence, to_gray
 from recon.scenes.hdr_io import (float_to_rgbe, list_frames, load_hdr_sequence, read_exr, read_hdr,
                                  rgbe_to_float, write_exr, write_hdr)
-from recon.scenes.panorama import hdri_dir
+from tests.conftest import FULL_SIZE_HDRI
 
 HEADER = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n"
 
@@ -174,9 +174,20 @@ def test_writers_are_atomic(tmp_path):
         write_hdr(tmp_path / "no" / "x.hdr", np.ones((2, 2)))
 
 
-@pytest.mark.skipif(not (hdri_dir() / "city.exr").is_file(), reason="project HDR panoramas not present")
-def test_reads_the_project_panoramas():
-    rgb = hdr_io.read_image(hdri_dir() / "city.exr")
+def test_reads_a_panorama_written_as_exr(tmp_path):
+    """The shipped city panorama (HDR, 4e3 : 1 peak to median) survives an EXR round trip."""
+    from recon.scenes.panorama import load_panorama
+    luminance = load_panorama("city").astype(np.float32)
+    write_exr(tmp_path / "city.exr", np.repeat(luminance[:, :, None], 3, axis=2))
+    rgb = hdr_io.read_image(tmp_path / "city.exr")
+    assert rgb.shape == (128, 256, 3) and rgb.dtype == np.float32
+    gray = to_gray(rgb)
+    assert np.allclose(gray, luminance, rtol=1e-6) and gray.max() > 1e3 * np.median(gray)
+
+
+@pytest.mark.skipif(not (FULL_SIZE_HDRI / "city.exr").is_file(), reason="full-size HDR panoramas not present")
+def test_reads_the_full_size_panoramas():
+    rgb = hdr_io.read_image(FULL_SIZE_HDRI / "city.exr")
     assert rgb.shape == (512, 1024, 3) and rgb.dtype == np.float32
     gray = to_gray(rgb)
     assert gray.min() >= 0 and gray.max() > 1e4 * np.median(gray)

@@ -82,3 +82,12 @@ def test_user_hdr_folders_join_the_training_set(tmp_path):
     with pytest.raises(InputError, match="less than"):
         training_set(SensorConfig(), DataRecipe(**{**RECIPE, "folders": (str(folder),), "height": 48}),
                      cache=tmp_path / "cache")
+
+
+def test_cache_key_tells_shipped_from_full_size_panoramas(monkeypatch, tmp_path):
+    """Light from the shipped 128 x 256 copies differs from the full-size files': other cache files."""
+    from recon.net.data import DataRecipe
+    monkeypatch.delenv("TESPIKE_HDRI_DIR", raising=False)
+    shipped = DataRecipe(**RECIPE).key()
+    monkeypatch.setenv("TESPIKE_HDRI_DIR", str(tmp_path))
+    assert DataRecipe(**RECIPE).key() != shipped

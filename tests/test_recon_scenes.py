@@ -9,13 +9,22 @@ from golden.errors import InputError
 from golden.io import check_scene
 from recon.scenes import SCENES, make_scene, scene_rng
 from recon.scenes.heldout import EVALUATION_SET, MODERATE_SET, sequence_set
-from recon.scenes.panorama import (DEFAULT_PANORAMA_FILE, PANORAMAS, CameraPath, block_mean,
-                                   build_default_panorama, hdri_dir, load_panorama, render_path)
+from recon.scenes.panorama import (DATA_DIR, DEFAULT_PANORAMA_FILE, PANORAMAS, CameraPath, block_mean,
+                                   build_default_panorama, load_panorama, render_path,
+                                   shipped_panorama_file)
 from recon.scenes.warp import render_window, sample_bilinear
 from tests.cli import assert_refused, run_tespike
+from tests.conftest import FULL_SIZE_HDRI
 
-SHARED = (hdri_dir() / "courtyard.exr").is_file()
-LOCAL = [name for name in SCENES if name not in PANORAMAS]
+SHARED = (FULL_SIZE_HDRI / "courtyard.exr").is_file()
+#: Every built-in scene works from a clone (the panoramas from their shipped copies).
+LOCAL = list(SCENES)
+
+
+@pytest.fixture(autouse=True)
+def _shipped_panoramas(monkeypatch):
+    """Built-in scenes as a clone has them: no full-size folder asked for."""
+    monkeypatch.delenv("TESPIKE_HDRI_DIR", raising=False)
 
 
 # ------------------------------------------------------------------ sampling
@@ -159,14 +168,37 @@ def test_shipped_panorama():
     assert pano.max() / np.median(pano) > 100                   # HDR
 
 
-@pytest.mark.skipif(not SHARED, reason="project HDR panoramas not present")
-def test_shipped_panorama_is_rebuilt_from_the_exr(tmp_path):
-    rebuilt = build_default_panorama(hdri_dir() / "courtyard.exr", tmp_path / "p.npz")
-    assert np.array_equal(rebuilt, load_panorama("default").astype(np.float32))
+def test_the_five_panoramas_ship_small_and_hdr():
+    """Every named panorama loads from the package (a clone has no data folder), HDR, small."""
+    sizes = 0
+    for name in PANORAMAS:
+        path = shipped_panorama_file(name)
+        sizes += path.stat().st_size if name != "courtyard" else 0
+        pano = load_panorama(name)
+        assert pano.shape == (128, 256) and np.isfinite(pano).all() and pano.min() > 0, name
+        assert pano.max() / np.median(pano) > 300, name                # 4e2 .. 2e4 : 1
+        light = make_scene(name, 3, 32, 40, seed=1)
+        assert light.shape == (3, 32, 40) and light.max() == 1.0
+    assert np.array_equal(load_panorama("courtyard"), load_panorama("default"))
+    assert sizes + DEFAULT_PANORAMA_FILE.stat().st_size < 400_000
+    assert sorted(p.name for p in DATA_DIR.glob("*.npz")) == sorted(f"{n}_128x256.npz" for n in PANORAMAS)
+    assert "CC0" in (DATA_DIR / "README.md").read_text() and all(
+        n in (DATA_DIR / "README.md").read_text() for n in PANORAMAS)
 
 
-@pytest.mark.skipif(not SHARED, reason="project HDR panoramas not present")
-def test_full_size_panorama_scene():
+@pytest.mark.skipif(not SHARED, reason="full-size HDR panoramas not present (set TESPIKE_HDRI_DIR)")
+@pytest.mark.parametrize("name", PANORAMAS)
+def test_shipped_panoramas_are_rebuilt_from_the_exr(tmp_path, name):
+    dtype = np.float32 if name == "courtyard" else np.float16
+    rebuilt = build_default_panorama(FULL_SIZE_HDRI / f"{name}.exr", tmp_path / "p.npz", dtype=dtype)
+    with np.load(shipped_panorama_file(name)) as npz:
+        assert npz["luminance"].dtype == dtype and np.array_equal(rebuilt, npz["luminance"])
+
+
+@pytest.mark.skipif(not SHARED, reason="full-size HDR panoramas not present (set TESPIKE_HDRI_DIR)")
+def test_full_size_panorama_scene_on_request(monkeypatch):
+    monkeypatch.setenv("TESPIKE_HDRI_DIR", str(FULL_SIZE_HDRI))
+    assert load_panorama("courtyard").shape == (512, 1024)
     light = make_scene("courtyard", 3, 32, 40, seed=1)
     assert light.shape == (3, 32, 40) and light.max() == 1.0
 

@@ -16,6 +16,8 @@ WIDE_CONFIGS = [
     SensorConfig(b1=16, b2=1),
     SensorConfig(b1=1, b2=16, alpha=12345),
     SensorConfig(mode="ml", ml_bits=16),
+    SensorConfig(mode="ml", ml_readout="msb"),           # msb words: the msb index 0..B
+    SensorConfig(mode="ml", ml_bits=16, ml_readout="msb"),
 ]
 CONFIGS = EDGE_CONFIGS + WIDE_CONFIGS + MSB_EDGE_CONFIGS
 

@@ -31,7 +31,7 @@ from golden.fastsim import simulate_scene
 from golden.io import atomic_output
 
 from ..scenes import make_scene, normalise_sequence, scene_rng
-from ..scenes.panorama import PANORAMAS, load_panorama, panorama_sequence
+from ..scenes.panorama import PANORAMAS, hdri_dir, load_panorama, panorama_sequence
 from ..scenes.procedural import moving_spots
 
 #: The panorama kept out of training: evaluation uses only it (and held-out seeds).
@@ -71,6 +71,8 @@ class DataRecipe:
         """Hash of the recipe and of the user folders' file names and sizes (their content changes it)."""
         from ..scenes.hdr_io import list_frames
         fields = self.to_dict()
+        if hdri_dir() is None:      # the shipped 128 x 256 panoramas, not full-size files: other light
+            fields["panorama_copies"] = "shipped-128x256"
         if not self.folders and self.downscale == 1:    # generated sequences only: the fields they use
             del fields["folders"], fields["downscale"]
             return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]

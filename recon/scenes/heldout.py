@@ -9,12 +9,10 @@ sequences are for tuning and examples only, as the data folder's README asks.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from . import make_scene
-from .panorama import PANORAMAS, hdri_dir
+from .panorama import PANORAMAS
 
 #: (label, scene name, held-out seed): three moderately HDR scenes and one of each stiff kind.
 EVALUATION_SET = (
@@ -35,8 +33,8 @@ def sequence_set(name: str, frames: int, height: int, width: int) -> list[tuple[
     """The named set of (label, light (K, H, W)) sequences.
 
     ``heldout``: :data:`EVALUATION_SET`; ``moderate``: its moderately HDR part;
-    ``panoramas``: a mixed-motion camera over each full-size panorama present
-    (tuning and examples; falls back to the shipped one); ``default``: the demo scene.
+    ``panoramas``: a mixed-motion camera over each of the five panoramas
+    (tuning and examples); ``default``: the demo scene.
     """
     from golden.errors import InputError
 
@@ -45,10 +43,7 @@ def sequence_set(name: str, frames: int, height: int, width: int) -> list[tuple[
         return [(label, make_scene(scene, frames, height, width, seed=seed, heldout=True))
                 for label, scene, seed in entries]
     if name == "panoramas":
-        present = [p for p in PANORAMAS if (Path(hdri_dir()) / f"{p}.exr").is_file()]
-        if not present:
-            return [("default-mixed", make_scene("default", frames, height, width, motion="mixed"))]
-        return [(p, make_scene(p, frames, height, width, motion="mixed")) for p in present]
+        return [(p, make_scene(p, frames, height, width, motion="mixed")) for p in PANORAMAS]
     if name == "default":
         return [("default", make_scene("default", frames, height, width))]
     raise InputError(f"unknown sequence set {name!r} (known: {', '.join(SETS)})")

@@ -6,9 +6,12 @@ Sources of a panorama (:func:`load_panorama`):
   (luminance, 4 x 4 area-averaged from Greg Zaal's "courtyard", see
   ``recon/data/README.md``); always available, used by ``tespike demo``;
 - ``"city"``, ``"courtyard"``, ``"forest"``, ``"studio"``, ``"sunset"``: the
-  full 512 x 1024 EXR files of the project's data folder (environment
-  variable ``TESPIKE_HDRI_DIR``, else ``../shared/data/hdri`` beside the
-  checkout); an :class:`InputError` says where it looked when they are missing;
+  five CC0 panoramas, shipped downsized to 128 x 256 (4 x 4 area means of the
+  512 x 1024 originals; ``recon/data/<name>_128x256.npz``, float16, and for
+  courtyard the default file itself), so every built-in scene works from a
+  clone. With the environment variable ``TESPIKE_HDRI_DIR`` set, the full-size
+  ``<name>.exr`` files of that folder are used instead (an :class:`InputError`
+  names the folder when one is missing);
 - any path to an ``.exr`` or ``.hdr`` file.
 
 A sequence is a camera window moving over the panorama (see
@@ -40,20 +43,27 @@ DEFAULT_PANORAMA_FILE = DATA_DIR / "courtyard_128x256.npz"
 MOTIONS = ("pan", "tilt", "rotate", "zoom", "mixed")
 
 
-def hdri_dir() -> Path:
-    """Folder of the full-size panoramas: ``$TESPIKE_HDRI_DIR`` or ``../shared/data/hdri``."""
+#: Downsizing factor of the shipped copies (512 x 1024 -> 128 x 256).
+SHIPPED_FACTOR = 4
+
+
+def hdri_dir() -> Path | None:
+    """Folder of full-size panoramas the user asked for (``$TESPIKE_HDRI_DIR``), else ``None``."""
     env = os.environ.get("TESPIKE_HDRI_DIR")
-    if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[3] / "shared" / "data" / "hdri"
+    return Path(env) if env else None
+
+
+def shipped_panorama_file(name: str) -> Path:
+    """The shipped downsized copy of panorama ``name`` (courtyard's is the default scene's file)."""
+    return DEFAULT_PANORAMA_FILE if name in ("default", "courtyard") else DATA_DIR / f"{name}_128x256.npz"
 
 
 def load_panorama(source: str | Path = "default", weights: str = DEFAULT_WEIGHTS) -> np.ndarray:
     """Luminance of a panorama, float64 (H, W), >= 0 (see the module docstring)."""
     from .hdr_io import read_image
 
-    if str(source) == "default":
-        with np.load(DEFAULT_PANORAMA_FILE, allow_pickle=False) as npz:
+    if str(source) == "default" or (str(source) in PANORAMAS and hdri_dir() is None):
+        with np.load(shipped_panorama_file(str(source)), allow_pickle=False) as npz:
             return npz["luminance"].astype(np.float64)
     if str(source) in PANORAMAS:
         path = hdri_dir() / f"{source}.exr"
@@ -78,12 +88,16 @@ def block_mean(image: np.ndarray, factor: int) -> np.ndarray:
 
 
 def build_default_panorama(exr_path: str | Path, out: str | Path = DEFAULT_PANORAMA_FILE,
-                           factor: int = 4) -> np.ndarray:
-    """Make the shipped default panorama from a full-size EXR (how recon/data was built)."""
+                           factor: int = SHIPPED_FACTOR, dtype=np.float32) -> np.ndarray:
+    """Make a shipped panorama from a full-size EXR (how recon/data was built): the default
+    (courtyard) in float32, the other four with ``dtype=np.float16`` (their luminance lies
+    within float16's normal range, relative step 2^-11; half the size)."""
     from golden.io import atomic_output
     from .hdr_io import read_image
 
-    luminance = block_mean(to_gray(read_image(exr_path), DEFAULT_WEIGHTS), factor).astype(np.float32)
+    luminance = block_mean(to_gray(read_image(exr_path), DEFAULT_WEIGHTS), factor).astype(dtype)
+    if not np.isfinite(luminance).all() or (luminance[luminance != 0] < np.finfo(dtype).tiny).any():
+        raise InputError(f"{str(exr_path)!r}: its luminance does not fit {np.dtype(dtype).name}'s normal range")
     with atomic_output(out) as tmp:
         with open(tmp, "wb") as handle:
             np.savez_compressed(handle, luminance=luminance,

@@ -1,0 +1,105 @@
+"""``tespike stimulus``: scene light I.npy -> per-clock electrons E.npy (SPEC section 6).
+
+The electrons are those ``tespike simulate --method per-clock`` draws with the
+same ``--seed``, ``--dark-current`` and ``--no-noise`` (photon shot noise,
+Poisson per pixel clock; :func:`golden.fastsim.iter_scene_stimulus`), so
+
+    tespike stimulus --seed N ... --out E.npy
+    tespike golden --stimulus E.npy ...        (or tespike rtl-sim)
+
+gives the stream ``tespike simulate --method per-clock --seed N`` gives, bit for
+bit, and the law of the default fast ``simulate`` (which draws other random
+numbers per readout interval, hence other words for the same seed).
+``--crop`` and ``--readouts`` keep a window of pixels and the first readouts:
+the electrons are still drawn for the whole frame, so the window holds exactly
+the electrons of those pixels in the full stimulus (what ``tespike demo``
+gives the RTL). E.npy holds
+K * L * H * W values, so the command refuses sizes above ``--max-bytes``;
+it is written one readout interval at a time into a memory-mapped file.
+"""
+
+HELP = "turn a light scene I.npy into the per-clock electron stimulus E.npy of golden / rtl-sim"
+
+#: Largest E.npy written unless --max-bytes says otherwise (1 GiB).
+MAX_BYTES = 1 << 30
+
+
+def add_arguments(parser):
+    parser.add_argument("--config", required=True, help="JSON config file, or 'te' / 'ml' / 'ml-msb'")
+    parser.add_argument("--scene", required=True,
+                        help="I.npy: float (K, H, W) light per readout interval, 1.0 = design light")
+    parser.add_argument("--out", required=True, help="E.npy to write: unsigned (K * L, H, W) electrons per clock")
+    parser.add_argument("--seed", type=int, default=None,
+                        help="seed of the random generator, as in 'simulate' (default: fresh entropy)")
+    parser.add_argument("--dark-current", choices=("none", "eq12", "eq13"), default="none",
+                        help="dark current model of the paper's eq. 12 or 13 (default: none)")
+    parser.add_argument("--no-noise", action="store_true",
+                        help="no shot noise: the expected electrons, spread deterministically")
+    parser.add_argument("--max-bytes", type=int, default=MAX_BYTES,
+                        help=f"refuse a stimulus larger than this (default {MAX_BYTES} = 1 GiB)")
+    parser.add_argument("--crop", metavar="Y,X,H,W",
+                        help="keep only rows Y..Y+H-1 and columns X..X+W-1 (same electrons as the full stimulus)")
+    parser.add_argument("--readouts", type=int, help="keep only the first K readout intervals")
+    parser.add_argument("--quiet", action="store_true", help="print nothing on success")
+
+
+def run(args) -> int:
+    import itertools
+    import sys
+
+    import numpy as np
+
+    from golden.config import load_config
+    from golden.errors import InputError
+    from golden.fastsim import iter_scene_stimulus
+    from golden.io import atomic_output, load_scene
+    from golden.light import stimulus_dtype
+
+    config = load_config(args.config)
+    if args.seed is not None and args.seed < 0:
+        raise InputError(f"--seed {args.seed}: must be >= 0")
+    if args.no_noise and args.dark_current != "none":
+        raise InputError(f"--dark-current {args.dark_current} is random; it cannot be combined with --no-noise")
+    scene = load_scene(args.scene, memory_map=True)
+    K, H, W = scene.shape
+    rows, cols = slice(0, H), slice(0, W)
+    if args.crop is not None:
+        try:
+            y, x, h, w = (int(v) for v in args.crop.split(","))
+        except ValueError:
+            raise InputError(f"--crop {args.crop!r} must be four integers Y,X,H,W") from None
+        if min(y, x) < 0 or min(h, w) < 1 or y + h > H or x + w > W:
+            raise InputError(f"--crop {args.crop!r}: rows {y}..{y + h - 1}, columns {x}..{x + w - 1} "
+                             f"are not inside the {H} x {W} scene")
+        rows, cols, H, W = slice(y, y + h), slice(x, x + w), h, w
+    if args.readouts is not None:
+        if not 1 <= args.readouts <= K:
+            raise InputError(f"--readouts {args.readouts}: must be in 1..K = {K}")
+        K = args.readouts
+    L = config.clocks_per_readout
+    dtype = stimulus_dtype(config)
+    size = K * L * H * W * dtype.itemsize
+    if args.max_bytes < 1:
+        raise InputError(f"--max-bytes {args.max_bytes}: must be >= 1")
+    if size > args.max_bytes:
+        raise InputError(f"stimulus of K * L x H x W = {K} * {L} x {H} x {W} {dtype} values is "
+                         f"{size} bytes, above --max-bytes {args.max_bytes}: crop the scene, "
+                         "or simulate it with 'tespike simulate'")
+    # the whole scene sets the generator's budget, so the first K readouts are those of the full stimulus
+    stream = itertools.islice(iter_scene_stimulus(config, scene, seed=args.seed, dark_current=args.dark_current,
+                                                  noise=not args.no_noise), K)
+    if sys.stderr.isatty() and K > 1:
+        from tqdm import tqdm
+        stream = tqdm(stream, total=K, desc="stimulus", unit="readout", delay=2.0, leave=False)
+    with atomic_output(args.out) as tmp:
+        out = np.lib.format.open_memmap(tmp, mode="w+", dtype=dtype, shape=(K * L, H, W))
+        try:
+            for k, electrons in enumerate(stream):
+                out[k * L:(k + 1) * L] = electrons[:, rows, cols]
+            out.flush()
+        finally:
+            del out
+    if not args.quiet:
+        print(f"wrote {args.out}: {K * L} x {H} x {W} {dtype} electrons per pixel clock "
+              f"(K = {K} readouts of L = {L} clocks, seed {args.seed})")
+    return 0

@@ -1,0 +1,168 @@
+"""``tespike view``: look at a scene, stream, reconstruction or stimulus as tone-mapped PNGs.
+
+Input by content: ``S.npz`` (a stream: words decoded to light per readout with
+:func:`golden.decode.decode_light`), a float ``.npy`` (a scene ``I.npy`` or a
+reconstruction ``R.npy``: light, 1.0 = design light), an integer ``.npy`` (a
+stimulus ``E.npy``: electrons per readout interval, summed over its L clocks
+with ``--config``, shown in design-light units). Tone mapping is the project's
+(:func:`recon.evaluate.tone_map`): divide by the peak (default: the largest
+value of the frames shown; give ``--peak`` to compare files on one scale),
+clip to [0, 1], mu-law with mu = 5000. Writes a contact sheet (one PNG, frame
+numbers as titles) or, with ``--each``, one grayscale PNG per frame at the
+array's own resolution.
+"""
+
+HELP = "write tone-mapped PNGs (contact sheet or one per frame) of I.npy, S.npz, R.npy or E.npy"
+
+#: Frames on a contact sheet unless --frames says otherwise (evenly spaced).
+DEFAULT_SHEET_FRAMES = 12
+
+
+def add_arguments(parser):
+    parser.add_argument("--input", required=True, help="I.npy / R.npy (light), S.npz (stream) or E.npy "
+                                                       "(stimulus, needs --config)")
+    parser.add_argument("--out", required=True,
+                        help="PNG contact sheet to write, or with --each the folder for frame_NNNN.png")
+    parser.add_argument("--frames", help="frames to show: 'all', 'a:b' (b excluded) or a comma list "
+                                         f"(default: {DEFAULT_SHEET_FRAMES} evenly spaced; --each: all)")
+    parser.add_argument("--each", action="store_true", help="one PNG per frame instead of a contact sheet")
+    parser.add_argument("--peak", type=float, help="light mapped to white (default: the frames' maximum)")
+    parser.add_argument("--mu", type=float, default=5000.0, help="mu of the mu-law (default 5000)")
+    parser.add_argument("--columns", type=int, default=6, help="frames per row of the sheet (default 6)")
+    parser.add_argument("--config", help="config of a stimulus E.npy (its clocks per readout L)")
+    parser.add_argument("--quiet", action="store_true", help="print nothing on success")
+    parser.add_argument("--estimator", default="ratio", help="decoder estimator for a stream (default ratio)")
+
+
+def load_light(path, config_spec=None, estimator="ratio"):
+    """(light (K, H, W) float64, what) from any of the project's array files."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from golden.config import DESIGN_ELECTRONS, load_config
+    from golden.decode import decode_light
+    from golden.errors import InputError
+    from golden.io import load_scene, load_stimulus, load_stream
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"--input {str(path)!r} does not exist")
+    if path.suffix == ".npz":
+        words, config = load_stream(path)
+        return decode_light(words, config, estimator).astype(np.float64), f"stream ({config}), decoded"
+    try:
+        header = np.load(path, mmap_mode="r", allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"--input {str(path)!r} is not a readable .npy or .npz file: {exc}") from None
+    if not isinstance(header, np.ndarray):
+        raise InputError(f"--input {str(path)!r} is an archive without 'words': not a stream S.npz")
+    if header.dtype.kind in "iu":
+        if config_spec is None:
+            raise InputError(f"--input {str(path)!r} holds integers (a stimulus E.npy): give --config "
+                             "so its clocks per readout are known")
+        config = load_config(config_spec)
+        stimulus = load_stimulus(path, config)
+        T, H, W = stimulus.shape
+        L = config.clocks_per_readout
+        per_readout = stimulus.reshape(T // L, L, H, W).sum(axis=1, dtype=np.int64)
+        return per_readout / DESIGN_ELECTRONS, f"stimulus, electrons per readout / {DESIGN_ELECTRONS}"
+    if config_spec is not None:
+        raise InputError("--config applies to a stimulus E.npy only (a light file carries no config)")
+    return load_scene(path), "light"
+
+
+def pick_frames(spec, count, each):
+    """Frame indices from ``--frames`` (see its help)."""
+    import numpy as np
+
+    from golden.errors import InputError
+    if count == 0:
+        raise InputError("--input has no frames (K = 0)")
+    if spec is None:
+        if each:
+            return list(range(count))
+        return sorted({int(i) for i in np.linspace(0, count - 1, min(count, DEFAULT_SHEET_FRAMES))})
+    if spec == "all":
+        return list(range(count))
+    try:
+        if ":" in spec:
+            a, b = (int(x) if x else None for x in spec.split(":"))
+            frames = list(range(count))[slice(a, b)]
+        else:
+            frames = [int(x) for x in spec.split(",")]
+    except ValueError:
+        raise InputError(f"--frames {spec!r}: must be 'all', 'a:b' or a comma list of integers") from None
+    bad = [f for f in frames if not 0 <= f < count]
+    if bad:
+        raise InputError(f"--frames {spec!r}: frame {bad[0]} outside 0..{count - 1}")
+    if not frames:
+        raise InputError(f"--frames {spec!r} selects no frame of 0..{count - 1}")
+    return frames
+
+
+def run(args) -> int:
+    import math
+    from pathlib import Path
+
+    import numpy as np
+
+    from golden.errors import InputError
+    from golden.io import atomic_output
+
+    if args.peak is not None and not (math.isfinite(args.peak) and args.peak > 0):
+        raise InputError(f"--peak {args.peak}: must be a finite number > 0")
+    if not (math.isfinite(args.mu) and args.mu > 0):
+        raise InputError(f"--mu {args.mu}: must be a finite number > 0")
+    if args.columns < 1:
+        raise InputError(f"--columns {args.columns}: must be >= 1")
+    out = Path(args.out)
+    if args.each:
+        if out.exists() and not out.is_dir():
+            raise InputError(f"--out {str(out)!r} exists and is not a folder (--each writes a folder)")
+    elif out.suffix.lower() != ".png":
+        raise InputError(f"--out {str(out)!r}: a contact sheet is a .png file (or give --each and a folder)")
+    elif not (out.parent if str(out.parent) else Path(".")).is_dir():
+        raise InputError(f"--out {str(out)!r}: directory {str(out.parent)!r} does not exist")
+    light, what = load_light(args.input, args.config, args.estimator)
+    frames = pick_frames(args.frames, light.shape[0], args.each)
+    shown = light[frames]
+    peak = args.peak if args.peak is not None else float(shown.max())
+    if peak <= 0:
+        raise InputError(f"--input {args.input!r}: every frame shown is 0 (give --peak to map it anyway)")
+
+    from recon.evaluate import tone_map
+    mapped = tone_map(shown, peak, args.mu)
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if args.each:
+        out.mkdir(exist_ok=True)
+        for k, image in zip(frames, mapped):
+            with atomic_output(out / f"frame_{k:04d}.png") as tmp:
+                plt.imsave(tmp, image, cmap="gray", vmin=0.0, vmax=1.0, format="png")
+        if not args.quiet:
+            print(f"wrote {len(frames)} frame(s) to {out}/frame_NNNN.png ({what}, peak {peak:.4g}, mu {args.mu:g})")
+        return 0
+    K, H, W = mapped.shape
+    columns = min(args.columns, K)
+    rows = -(-K // columns)
+    size = 2.2 / max(H, W)
+    fig, axes = plt.subplots(rows, columns, squeeze=False,
+                             figsize=(columns * W * size + 0.4, rows * (H * size + 0.25) + 0.5))
+    for axis in axes.flat:
+        axis.axis("off")
+    for axis, k, image in zip(axes.flat, frames, mapped):
+        axis.imshow(image, cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest")
+        axis.set_title(f"frame {k}", fontsize=8)
+    fig.suptitle(f"{Path(args.input).name}: {what}; mu-law (mu = {args.mu:g}) of light / {peak:.4g}",
+                 fontsize=8)
+    fig.tight_layout()
+    with atomic_output(out) as tmp:
+        fig.savefig(tmp, format="png", dpi=100)
+    plt.close(fig)
+    if not args.quiet:
+        print(f"wrote {out}: {len(frames)} frame(s) of {Path(args.input).name} ({what})")
+    return 0

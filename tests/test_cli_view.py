@@ -1,0 +1,55 @@
+"""``tespike view``: tone-mapped PNGs of scenes, streams, reconstructions and stimuli."""
+
+import numpy as np
+from matplotlib.image import imread
+
+from golden.config import SensorConfig
+from golden.fastsim import scene_stimulus, simulate_scene
+from golden.io import save_stream
+from recon.evaluate import tone_map
+from tests.cli import assert_refused, run_tespike
+
+
+def _files(tmp_path):
+    light = np.random.default_rng(0).uniform(0.01, 1.0, (5, 12, 16)).astype(np.float32)
+    np.save(tmp_path / "I.npy", light)
+    config = SensorConfig()
+    save_stream(tmp_path / "S.npz", simulate_scene(config, light, seed=0), config)
+    np.save(tmp_path / "E.npy", scene_stimulus(config, light[:2], seed=0))
+    return light
+
+
+def test_contact_sheets_of_every_kind(tmp_path):
+    _files(tmp_path)
+    for name, extra in (("I.npy", []), ("S.npz", ["--frames", "0:3"]), ("E.npy", ["--config", "te"])):
+        out = tmp_path / f"{name}.png"
+        result = run_tespike("view", "--input", tmp_path / name, "--out", out, *extra)
+        assert result.returncode == 0, result.stderr
+        assert result.stdout.startswith(f"wrote {out}")
+        assert out.read_bytes()[:4] == b"\x89PNG"
+        image = imread(out)
+        assert image.ndim == 3 and image.shape[0] > 50
+
+
+def test_one_png_per_frame_is_the_tone_mapped_light(tmp_path):
+    light = _files(tmp_path)
+    result = run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "frames", "--each",
+                         "--peak", 2.0, "--quiet")
+    assert result.returncode == 0 and result.stdout == "", result.stderr
+    names = sorted(p.name for p in (tmp_path / "frames").iterdir())
+    assert names == [f"frame_{k:04d}.png" for k in range(5)]
+    image = imread(tmp_path / "frames" / "frame_0003.png")
+    assert image.shape[:2] == (12, 16)
+    assert np.allclose(image[..., 0], tone_map(light[3], 2.0), atol=1.5 / 255)
+
+
+def test_refusals(tmp_path):
+    _files(tmp_path)
+    assert_refused(run_tespike("view", "--input", tmp_path / "E.npy", "--out", tmp_path / "e.png"), "--config")
+    assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.png",
+                               "--frames", "7"), "frame 7")
+    assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.jpg"), ".png")
+    assert_refused(run_tespike("view", "--input", tmp_path / "x.npy", "--out", tmp_path / "i.png"), "x.npy")
+    assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.png",
+                               "--peak", "-1"), "--peak")
+    assert not list(tmp_path.glob("*.png")) and not list(tmp_path.glob(".*"))
