@@ -25,6 +25,7 @@ COMMANDS = {
     "evaluate": "evaluate_cmd",
     "demo": "demo_cmd",
     "scene": "scene_cmd",
+    "synth": "synth_cmd",
 }
 
 EXIT_BAD_INPUT = 2

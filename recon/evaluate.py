@@ -193,7 +193,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
 
 # ----------------------------------------------------------------- writers
 def _fmt(value: float, digits: int) -> str:
-    return "inf" if math.isinf(value) else f"{value:.{digits}f}"
+    """``inf`` for a perfect PSNR, empty for a figure not measured (nan: run time over a store)."""
+    return "" if math.isnan(value) else "inf" if math.isinf(value) else f"{value:.{digits}f}"
 
 
 def table_rows(evaluation: Evaluation) -> list[list[str]]:

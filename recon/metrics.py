@@ -123,6 +123,13 @@ def ssim(x: torch.Tensor, y: torch.Tensor, data_range: float = 1.0, sigma: float
     the filter radius; the pixels it keeps see no padding, so a valid
     (unpadded) separable convolution gives the same numbers.
     """
+    return ssim_map(x, y, data_range, sigma, truncate).mean(dim=(1, 2))
+
+
+def ssim_map(x: torch.Tensor, y: torch.Tensor, data_range: float = 1.0, sigma: float = SSIM_SIGMA,
+             truncate: float = SSIM_TRUNCATE) -> torch.Tensor:
+    """SSIM of every window centre at least the filter radius from the border: (K, H - 2r, W - 2r)
+    (:func:`ssim` is its mean; tiles of a large frame sum their share of it)."""
     kernel = _gaussian_kernel(sigma, truncate, x.device)
     win = kernel.numel()
     K, H, W = x.shape
@@ -138,8 +145,7 @@ def ssim(x: torch.Tensor, y: torch.Tensor, data_range: float = 1.0, sigma: float
     ux, uy, uxx, uyy, uxy = filt(stack)[:, 0].split(K)
     vx, vy, vxy = uxx - ux * ux, uyy - uy * uy, uxy - ux * uy
     c1, c2 = (SSIM_K1 * data_range) ** 2, (SSIM_K2 * data_range) ** 2
-    s = ((2 * ux * uy + c1) * (2 * vxy + c2)) / ((ux ** 2 + uy ** 2 + c1) * (vx + vy + c2))
-    return s.mean(dim=(1, 2))
+    return ((2 * ux * uy + c1) * (2 * vxy + c2)) / ((ux ** 2 + uy ** 2 + c1) * (vx + vy + c2))
 
 
 def psnr_mu(pred, gt, *, mu: float = MU, peak=None, device="cpu") -> np.ndarray:

@@ -25,6 +25,12 @@ def add_arguments(parser):
     parser.add_argument("--ml-config", default="ml", help="ML sensor: JSON file or 'ml' (paper 8 bits)")
     parser.add_argument("--seed", type=int, default=0, help="shot-noise seed (default 0)")
     parser.add_argument("--device", default="cpu", help="torch device for reconstruction (default cpu)")
+    parser.add_argument("--store", metavar="STORE",
+                        help="instead of simulating: score the streams of a dataset store (tespike synth), "
+                             "one task per sequence x sensor x method (docs/distributed.md)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="with --store: worker processes on this machine (default 1, in this process)")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="with --store: a running Dask scheduler")
 
 
 def run(args) -> int:
@@ -38,6 +44,9 @@ def run(args) -> int:
     from recon.scenes import load_hdr_sequence
     from recon.scenes.heldout import sequence_set
 
+    if args.store or args.workers is not None or args.scheduler:
+        from cosim.dataset.evaluate import run_store
+        return run_store(args)
     configs = {"te": load_config(args.te_config), "ml": load_config(args.ml_config)}
     for mode, config in configs.items():
         if config.mode != mode:
