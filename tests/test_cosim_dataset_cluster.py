@@ -177,7 +177,8 @@ def test_a_worker_killed_mid_run_costs_only_a_retry(serial, tmp_path):
         cluster.close()
 
 
-def test_unreachable_scheduler_is_refused_in_one_line(tmp_path):
+def test_unreachable_scheduler_is_refused_in_one_line(tmp_path, monkeypatch):
+    monkeypatch.setenv("DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT", "2s")
     result = run_tespike("synth", "--scene", "sun", "--config", "te", "--out", tmp_path / "s.zarr",
                          "--scheduler", "tcp://127.0.0.1:9", timeout=120)
     assert result.returncode == 2, result

@@ -23,8 +23,6 @@ from golden.errors import InputError
 
 #: Extra attempts for a task that raised (a worker that dies is handled by the scheduler).
 RETRIES = 2
-#: Seconds to wait for a scheduler before giving up.
-CONNECT_TIMEOUT = 30
 
 
 def check_workers(workers: int | None, scheduler: str | None) -> None:
@@ -57,9 +55,10 @@ class Runner:
 
     def __enter__(self) -> "Runner":
         if self.address:
+            import dask
             from distributed import Client
-            try:
-                self.client = Client(self.address, timeout=CONNECT_TIMEOUT)
+            try:                 # Dask's own connect timeout (distributed.comm.timeouts.connect, 30 s)
+                self.client = Client(self.address, timeout=dask.config.get("distributed.comm.timeouts.connect"))
             except (OSError, TimeoutError, ValueError) as exc:
                 first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
                 raise InputError(f"cannot reach the Dask scheduler {self.address!r}: {first}") from None
