@@ -198,12 +198,13 @@ def finish_sequence(url: str, sequence: str, *after) -> str:
 
 # ---------------------------------------------------------------- graph
 def sequence_graph(store: DatasetStore, source: Source):
-    """The delayed task that completes one sequence (None when it is already complete)."""
+    """The delayed task that completes one sequence (None when it is already complete) and the
+    number of streams it simulates."""
     from dask import delayed
 
     done = store.prepare_sequence(source.name, source.shape, source.description)
     if done["sequence"]:
-        return None
+        return None, 0
     url, name = store.url, source.name
     K, H, W = source.shape
     light_done = None
@@ -233,7 +234,7 @@ def sequence_graph(store: DatasetStore, source: Source):
         streams.append(delayed(finish_array, pure=False)(url, f"{name}/streams/{sensor}", *parts,
                                                          dask_key_name=f"stream-done-{name}-{sensor}"))
     return delayed(finish_sequence, pure=False)(url, name, light_done, *streams,
-                                                dask_key_name=f"sequence-done-{name}")
+                                                dask_key_name=f"sequence-done-{name}"), len(streams)
 
 
 def synthesise(url: str, sources: Sequence[Source], configs: dict[str, SensorConfig], seed: int, run, *,
@@ -242,8 +243,8 @@ def synthesise(url: str, sources: Sequence[Source], configs: dict[str, SensorCon
 
     ``run`` is a :class:`cosim.dataset.cluster.Runner`; ``report(name)`` is
     called as each sequence completes. Returns counts: ``done`` (sequences
-    written now), ``skipped`` (already complete), ``pixel_readouts`` (of the
-    streams written now, per configuration summed).
+    written now), ``skipped`` (already complete), ``pixel_readouts`` (simulated
+    now, summed over the streams).
     """
     if type(seed) is not int or seed < 0:
         raise InputError(f"--seed {seed!r} must be an integer >= 0")
@@ -262,16 +263,16 @@ def synthesise(url: str, sources: Sequence[Source], configs: dict[str, SensorCon
                                           chunk_frames=chunk_frames)
     graphs, skipped, pixel_readouts = [], 0, 0
     for source in sources:
-        graph = sequence_graph(store, source)
+        graph, streams = sequence_graph(store, source)
         if graph is None:
             skipped += 1
         else:
             graphs.append(graph)
-            pixel_readouts += int(np.prod(source.shape))
+            pixel_readouts += int(np.prod(source.shape)) * streams
     done = 0
     for _, name in run(graphs):
         done += 1
         if report is not None:
             report(name)
-    return {"done": done, "skipped": skipped, "pixel_readouts": pixel_readouts * len(configs),
+    return {"done": done, "skipped": skipped, "pixel_readouts": pixel_readouts,
             "store": os.fspath(url)}
