@@ -28,6 +28,7 @@ COMMANDS = {
     "scene": "scene_cmd",
     "view": "view_cmd",
     "train": "train_cmd",
+    "synth": "synth_cmd",
 }
 
 EXIT_BAD_INPUT = 2

@@ -249,7 +249,8 @@ def _checked_sequence(name: str, light) -> tuple[np.ndarray, float]:
 
 # ----------------------------------------------------------------- writers
 def _fmt(value: float, digits: int) -> str:
-    return "inf" if math.isinf(value) else f"{value:.{digits}f}"
+    """``inf`` for a perfect PSNR, empty for a figure not measured (nan: run time over a store)."""
+    return "" if math.isnan(value) else "inf" if math.isinf(value) else f"{value:.{digits}f}"
 
 
 def _cells(summary: dict, method: str, mode: str) -> list[str]:

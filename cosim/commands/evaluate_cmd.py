@@ -35,6 +35,12 @@ def add_arguments(parser):
                         help="full-count ML sensor of the extra rows: JSON file, 'ml' (8 bits) or 'none'")
     parser.add_argument("--seed", type=int, default=0, help="shot-noise seed (default 0)")
     parser.add_argument("--device", default="cpu", help="torch device for reconstruction (default cpu)")
+    parser.add_argument("--store", metavar="STORE",
+                        help="instead of simulating: score the streams of a dataset store (tespike synth), "
+                             "one task per sequence x sensor x method (docs/distributed.md)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="with --store: worker processes on this machine (default 1, in this process)")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="with --store: a running Dask scheduler")
 
 
 def run(args) -> int:
@@ -50,6 +56,9 @@ def run(args) -> int:
     from recon.scenes import load_hdr_sequence
     from recon.scenes.heldout import sequence_set
 
+    if args.store or args.workers is not None or args.scheduler:
+        from cosim.dataset.evaluate import run_store
+        return run_store(args)
     methods = None
     if args.methods is not None:
         methods = [m.strip() for m in args.methods.split(",") if m.strip()]

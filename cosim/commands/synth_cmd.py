@@ -1,0 +1,84 @@
+"""``tespike synth``: HDR frame folders and built-in scenes -> a dataset store of light and streams."""
+
+HELP = ("simulate every sequence of a folder of HDR frame folders (and/or built-in scenes) with "
+        "every sensor configuration into a Zarr dataset store, locally or on a Dask cluster")
+
+
+def add_arguments(parser):
+    parser.add_argument("--hdr", metavar="DIR", action="append", default=[],
+                        help="folder with one sub-folder of .exr/.hdr frames per sequence "
+                             "(grayscale, normalised per sequence to peak 1; repeatable)")
+    parser.add_argument("--scene", metavar="NAME", action="append", default=[],
+                        help="also a built-in scene (see tespike scene --list; repeatable)")
+    parser.add_argument("--frames", type=int, default=None,
+                        help="built-in scenes: readouts (default 24); HDR folders: at most this many "
+                             "frames (default all)")
+    parser.add_argument("--height", type=int, default=96, help="rows of built-in scenes (default 96)")
+    parser.add_argument("--width", type=int, default=128, help="columns of built-in scenes (default 128)")
+    parser.add_argument("--weights", default="rec709", help="grayscale weights of HDR frames: rec709 "
+                                                            "(default) or rec601")
+    parser.add_argument("--config", metavar="C", action="append", default=[],
+                        help="sensor: te, ml, ml-msb or a JSON file (repeatable; streams are named "
+                             "after the preset or the file's stem)")
+    parser.add_argument("--out", required=True, metavar="STORE",
+                        help="dataset store (Zarr folder) to make, or to resume if it exists")
+    parser.add_argument("--seed", type=int, default=0, help="root seed of the shot noise (default 0)")
+    parser.add_argument("--chunk-frames", type=int, default=16,
+                        help="readouts per chunk and per task along time (default 16)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="worker processes on this machine (default 1: in this process, no server)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="address of a running Dask scheduler (e.g. tcp://10.0.0.1:8786)")
+
+
+def sensor_configs(specs):
+    """``--config`` values -> {stream name: SensorConfig}, names unique, configurations distinct."""
+    from pathlib import Path
+
+    from golden.config import PRESETS, load_config
+    from golden.errors import InputError
+    from recon.dataset.store import check_name
+
+    configs = {}
+    for spec in specs:
+        name = spec if spec in PRESETS else Path(spec).stem
+        check_name(name, f"sensor configuration {spec!r}:")
+        if name in configs:
+            raise InputError(f"--config {spec!r}: a sensor named {name!r} is already given")
+        config = load_config(spec)
+        same = [other for other, c in configs.items() if c == config]
+        if same:
+            raise InputError(f"--config {spec!r} is the same sensor as {same[0]!r}")
+        configs[name] = config
+    return configs
+
+
+def run(args) -> int:
+    import time
+
+    from cosim.dataset.cluster import Runner, check_workers
+    from cosim.dataset.synth import hdr_sources, scene_sources, synthesise
+    from golden.errors import InputError
+
+    check_workers(args.workers, args.scheduler)
+    if not args.config:
+        raise InputError("--config is required (te, ml, ml-msb or a JSON file; repeatable)")
+    if args.frames is not None and args.frames < 1:
+        raise InputError(f"--frames {args.frames} must be >= 1")
+    configs = sensor_configs(args.config)
+    sources = []
+    for folder in args.hdr:
+        sources += hdr_sources(folder, weights=args.weights, max_frames=args.frames)
+    sources += scene_sources(args.scene, args.frames or 24, args.height, args.width)
+    if not sources:
+        raise InputError("nothing to synthesise: give --hdr DIR and/or --scene NAME")
+    start = time.perf_counter()
+    with Runner(args.workers, args.scheduler) as runner:
+        print(f"synth: {len(sources)} sequence(s) x {len(configs)} sensor(s) on {runner.where}",
+              flush=True)
+        counts = synthesise(args.out, sources, configs, args.seed, runner, chunk_frames=args.chunk_frames,
+                            report=lambda name: print(f"synth: {name} complete", flush=True))
+    seconds = time.perf_counter() - start
+    print(f"wrote {counts['done']} sequence(s) to {args.out} ({counts['skipped']} already complete), "
+          f"{counts['pixel_readouts']} pixel-readouts in {seconds:.1f} s")
+    return 0

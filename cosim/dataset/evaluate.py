@@ -1,0 +1,37 @@
+"""``tespike evaluate --store STORE``: the command-line side of :mod:`recon.dataset.evaluate`."""
+
+from __future__ import annotations
+
+#: Options of ``tespike evaluate`` that pick or simulate sequences, with their defaults:
+#: a store already holds its sequences and streams, so any other value is refused.
+SIMULATION_OPTIONS = {"set": "heldout", "scene": [], "folder": [], "frames": 24, "height": 96,
+                      "width": 128, "te_config": "te", "ml_config": "ml", "seed": 0}
+
+
+def run_store(args) -> int:
+    from pathlib import Path
+
+    from golden.errors import InputError
+    from recon.dataset.evaluate import evaluate_store, write_store_outputs
+    from recon.evaluate import table_markdown
+
+    from .cluster import Runner, check_workers
+
+    if not args.store:
+        raise InputError("--workers and --scheduler need --store (the serial evaluation simulates "
+                         "in this process)")
+    for key, default in SIMULATION_OPTIONS.items():
+        if getattr(args, key) != default:
+            raise InputError(f"--{key.replace('_', '-')} cannot be combined with --store "
+                             "(the store holds the sequences and their streams)")
+    check_workers(args.workers, args.scheduler)
+    methods = None if args.methods is None else [m.strip() for m in args.methods.split(",") if m.strip()]
+    with Runner(args.workers, args.scheduler) as runner:
+        print(f"evaluate: {args.store} on {runner.where}", flush=True)
+        evaluation = evaluate_store(args.store, runner, methods=methods, window=args.window,
+                                    device=args.device)
+    paths = write_store_outputs(evaluation, args.out)
+    print(table_markdown(evaluation), end="")
+    print(f"wrote {paths['table.md']}, {paths['table.csv']}, {paths['results.csv']} "
+          f"and {len(evaluation.strips)} strip(s) in {Path(args.out) / 'strips'}")
+    return 0

@@ -1,0 +1,278 @@
+"""Dataset synthesis: HDR frame folders and built-in scenes -> light and sensor streams in a store.
+
+Per sequence, the work is a small Dask graph (every task idempotent: the
+same inputs write the same bytes, so a retry after a lost worker is harmless):
+
+1. HDR folders: one task per ``chunk_frames`` frames reads them (grayscale,
+   :func:`recon.scenes.to_gray`) and returns their maximum; the sequence peak is
+   the maximum of those. Then one task per chunk reads the frames again and
+   writes ``light = frame * (1 / peak)`` as float32, exactly what
+   :func:`recon.scenes.load_hdr_sequence` returns (paper appendix A.2.2),
+   without ever holding the whole sequence. A built-in scene is one task
+   (:func:`recon.scenes.make_scene`, public seed 0, as ``tespike scene``).
+2. Per sensor configuration, one task per simulation tile (:data:`TILE`) runs
+   :class:`golden.fastsim.SceneSimulator` (the code of ``tespike simulate``)
+   readout after readout over the whole sequence, reading and writing
+   ``chunk_frames`` readouts at a time: the simulator carries charge across
+   readouts, so time is walked in order inside a task and tiles are the
+   parallel axis. Memory per task: chunk_frames x tile.
+3. Each array, then the sequence, is marked complete (the sequence last).
+
+Seeds: tile (r, c) of sequence s with configuration C draws from
+:func:`recon.dataset.tile_seed` (root seed, SHA-256 of s and C's JSON, r, c),
+never from the order of completion, and the simulator's error budget counts the
+whole sequence's pixel-readouts (as ``tespike simulate`` on the whole frame), so
+a frame that fits in one tile gives exactly ``simulate_scene(config, light,
+seed=default_rng(tile_seed(seed, s, C, 0, 0)))``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.errors import InputError
+from recon.dataset.store import (CHUNK_FRAMES, TILE, DatasetStore, check_name, mark_complete,
+                                 open_array, tile_seed, tiles)
+
+
+@dataclasses.dataclass(frozen=True)
+class Source:
+    """One sequence to synthesise: an HDR frame folder or a built-in scene."""
+
+    name: str
+    shape: tuple[int, int, int]
+    description: str                        # the sequence's ``source`` attribute
+    frames: tuple[str, ...] = ()            # HDR frame files, in order
+    weights: str = "rec709"                 # grayscale weights of HDR frames
+    scene: tuple[str, int, int, int] | None = None     # built-in: (name, frames, height, width)
+
+
+def read_gray(path: str, weights: str) -> np.ndarray:
+    """One HDR frame -> float32 grayscale (H, W), as :func:`recon.scenes.load_hdr_sequence` reads it."""
+    from recon.scenes import read_image, to_gray
+    return to_gray(read_image(path), weights, what=f"frame {path!r}").astype(np.float32)
+
+
+def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int | None = None) -> list[Source]:
+    """Every sub-folder of ``folder`` holding HDR frames is one sequence, named after it.
+
+    Hidden sub-folders (``.name``) are skipped; a sub-folder without frames is
+    refused, as is a folder without sub-folders. The first frame of each
+    sequence is read for its size (the tasks check every other frame).
+    """
+    from recon.scenes import LUMA_WEIGHTS
+    from recon.scenes.hdr_io import list_frames
+
+    folder = Path(folder)
+    if weights not in LUMA_WEIGHTS:
+        raise InputError(f"unknown grayscale weights {weights!r} (known: {', '.join(LUMA_WEIGHTS)})")
+    if not folder.is_dir():
+        raise InputError(f"--hdr {str(folder)!r} does not exist or is not a folder")
+    subfolders = sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))
+    if not subfolders:
+        raise InputError(f"--hdr {str(folder)!r} holds no sub-folders (one folder of frames per sequence)")
+    sources = []
+    for sub in subfolders:
+        check_name(sub.name, "sequence (HDR sub-folder)")
+        paths = list_frames(sub)
+        if max_frames is not None:
+            paths = paths[:max_frames]
+        height, width = read_gray(str(paths[0]), weights).shape
+        sources.append(Source(sub.name, (len(paths), height, width), f"hdr:{sub.name} ({weights})",
+                              frames=tuple(str(p) for p in paths), weights=weights))
+    return sources
+
+
+def scene_sources(names: Sequence[str], frames: int, height: int, width: int) -> list[Source]:
+    """Built-in scenes (public seed 0, peak 1), each named after its scene."""
+    from recon.scenes import SCENES
+
+    out = []
+    for name in names:
+        if name not in SCENES:
+            raise InputError(f"unknown scene {name!r} (known: {', '.join(SCENES)})")
+        for key, value in (("frames", frames), ("height", height), ("width", width)):
+            if value < 1:
+                raise InputError(f"--{key} {value} must be >= 1")
+        out.append(Source(name, (frames, height, width), f"scene:{name} seed 0",
+                          scene=(name, frames, height, width)))
+    return out
+
+
+# ---------------------------------------------------------------- tasks
+def frames_peak(source: Source, start: int, stop: int) -> float:
+    """Largest grayscale value of frames [start, stop) (checks their size)."""
+    top = 0.0
+    for path in source.frames[start:stop]:
+        gray = read_gray(path, source.weights)
+        if gray.shape != source.shape[1:]:
+            raise InputError(f"frame {path!r} is {gray.shape[0]} x {gray.shape[1]}, but the first frame "
+                             f"of sequence {source.name!r} is {source.shape[1]} x {source.shape[2]}; "
+                             "all frames of a sequence must have the same size")
+        top = max(top, float(gray.max()))
+    return top
+
+
+def write_hdr_light(url: str, source: Source, start: int, stop: int, top: float) -> float:
+    """Write light[start:stop] = gray / top (float64 product, stored float32); return its maximum."""
+    if not top > 0:
+        raise InputError(f"HDR sequence {source.name!r}: every pixel is 0, so it cannot be "
+                         "normalised by its maximum")
+    scale = 1.0 / top
+    out = np.empty((stop - start,) + source.shape[1:], np.float32)
+    for k, path in enumerate(source.frames[start:stop]):
+        out[k] = read_gray(path, source.weights).astype(np.float64) * scale
+    open_array(url, f"{source.name}/light", "r+")[start:stop] = out
+    return float(out.max())
+
+
+def write_scene_light(url: str, source: Source) -> float:
+    """Make a built-in scene and write it whole (scenes are bounded by recon.scenes.MAX_VOXELS)."""
+    from recon.scenes import make_scene
+    name, frames, height, width = source.scene
+    light = make_scene(name, frames, height, width, seed=0)
+    open_array(url, f"{source.name}/light", "r+")[...] = light
+    return float(light.max())
+
+
+def simulate_tile(url: str, sequence: str, sensor: str, config_json: str, seed: int,
+                  row: int, col: int, rows: slice, cols: slice, *after) -> int:
+    """Simulate one tile of one stream over the whole sequence; return its pixel-readouts.
+
+    ``after`` only orders the task after the light is written.
+    """
+    from golden.decode import check_words
+    from golden.fastsim import SceneSimulator
+    from golden.io import word_dtype
+
+    config = SensorConfig.from_json(config_json)
+    light = open_array(url, f"{sequence}/light")
+    words = open_array(url, f"{sequence}/streams/{sensor}", "r+")
+    K, H, W = light.shape
+    shape = (rows.stop - rows.start, cols.stop - cols.start)
+    sim = SceneSimulator(config, shape, rng=np.random.default_rng(tile_seed(seed, sequence, config, row, col)),
+                         total_pixel_readouts=K * H * W)
+    step = light.chunks[0]
+    out = np.empty((step,) + shape, word_dtype(config))
+    for start in range(0, K, step):
+        stop = min(K, start + step)
+        chunk = light[start:stop, rows, cols]
+        for k in range(stop - start):
+            out[k] = sim.readout(chunk[k].astype(np.float64))
+        check_words(out[:stop - start], config)          # a store never holds an illegal word
+        words[start:stop, rows, cols] = out[:stop - start]
+    return K * shape[0] * shape[1]
+
+
+def finish_array(url: str, path: str, *after, **attrs) -> bool:
+    """Mark one array complete (after every task that writes it)."""
+    mark_complete(url, path, **attrs)
+    return True
+
+
+def finish_light(url: str, path: str, peaks: list, top: float | None = None) -> float:
+    """Mark the light complete with its peak (and the source maximum it was divided by)."""
+    peak = max(peaks)
+    mark_complete(url, path, peak=peak, **({} if top is None else {"source_max": top}))
+    return peak
+
+
+def finish_sequence(url: str, sequence: str, *after) -> str:
+    """Last write of a sequence: copy the light's peak up, drop files a killed writer left
+    (``*.partial``, local stores), and set ``complete: true``."""
+    import zarr
+
+    peak = zarr.open_array(url, path=f"{sequence}/light", mode="r").attrs["peak"]
+    if "://" not in url:
+        for stray in Path(url, sequence).rglob("*.partial"):
+            stray.unlink(missing_ok=True)
+    mark_complete(url, sequence, peak=peak)
+    return sequence
+
+
+# ---------------------------------------------------------------- graph
+def sequence_graph(store: DatasetStore, source: Source):
+    """The delayed task that completes one sequence (None when it is already complete) and the
+    number of streams it simulates."""
+    from dask import delayed
+
+    done = store.prepare_sequence(source.name, source.shape, source.description)
+    if done["sequence"]:
+        return None, 0
+    url, name = store.url, source.name
+    K, H, W = source.shape
+    light_done = None
+    if not done["light"]:
+        step = store.chunk_frames
+        if source.scene is not None:
+            peaks = [delayed(write_scene_light, pure=False)(url, source, dask_key_name=f"light-{name}")]
+            top = None
+        else:
+            chunks = [(s, min(K, s + step)) for s in range(0, K, step)]
+            maxima = [delayed(frames_peak, pure=False)(source, s, e, dask_key_name=f"peak-{name}-{s}")
+                      for s, e in chunks]
+            top = delayed(max, pure=False)(maxima, dask_key_name=f"top-{name}")
+            peaks = [delayed(write_hdr_light, pure=False)(url, source, s, e, top,
+                                                          dask_key_name=f"light-{name}-{s}")
+                     for s, e in chunks]
+        light_done = delayed(finish_light, pure=False)(url, f"{name}/light", peaks, top,
+                                                       dask_key_name=f"light-done-{name}")
+    streams = []
+    for sensor, config in store.configs.items():
+        if done[sensor]:
+            continue
+        parts = [delayed(simulate_tile, pure=False)(url, name, sensor, config.to_json(), store.seed,
+                                                    r, c, rows, cols, light_done,
+                                                    dask_key_name=f"sim-{name}-{sensor}-{r}-{c}")
+                 for r, c, rows, cols in tiles(H, W, store.tile)]
+        streams.append(delayed(finish_array, pure=False)(url, f"{name}/streams/{sensor}", *parts,
+                                                         dask_key_name=f"stream-done-{name}-{sensor}"))
+    return delayed(finish_sequence, pure=False)(url, name, light_done, *streams,
+                                                dask_key_name=f"sequence-done-{name}"), len(streams)
+
+
+def synthesise(url: str, sources: Sequence[Source], configs: dict[str, SensorConfig], seed: int, run, *,
+               chunk_frames: int = CHUNK_FRAMES, tile: tuple[int, int] = TILE, report=None) -> dict:
+    """Write every source into the store at ``url`` (made or resumed) with every configuration.
+
+    ``run`` is a :class:`cosim.dataset.cluster.Runner`; ``report(name)`` is
+    called as each sequence completes. Returns counts: ``done`` (sequences
+    written now), ``skipped`` (already complete), ``pixel_readouts`` (simulated
+    now, summed over the streams).
+    """
+    if type(seed) is not int or seed < 0:
+        raise InputError(f"--seed {seed!r} must be an integer >= 0")
+    if type(chunk_frames) is not int or chunk_frames < 1:
+        raise InputError(f"--chunk-frames {chunk_frames!r} must be an integer >= 1")
+    names = [s.name for s in sources]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise InputError(f"sequence name {repeated[0]!r} is given twice (HDR sub-folders and "
+                         "--scene names share one namespace)")
+    if not sources:
+        raise InputError("nothing to synthesise: give --hdr DIR and/or --scene NAME")
+    if not configs:
+        raise InputError("no sensor configuration: give --config at least once")
+    store = DatasetStore.create_or_resume(url, seed=seed, configs=configs, tile=tile,
+                                          chunk_frames=chunk_frames)
+    graphs, skipped, pixel_readouts = [], 0, 0
+    for source in sources:
+        graph, streams = sequence_graph(store, source)
+        if graph is None:
+            skipped += 1
+        else:
+            graphs.append(graph)
+            pixel_readouts += int(np.prod(source.shape)) * streams
+    done = 0
+    for _, name in run(graphs):
+        done += 1
+        if report is not None:
+            report(name)
+    return {"done": done, "skipped": skipped, "pixel_readouts": pixel_readouts,
+            "store": os.fspath(url)}

@@ -1,0 +1,234 @@
+"""Evaluation over a dataset store: one task per sequence x sensor x method (x tile).
+
+The measures are those of :func:`recon.evaluate.evaluate` (paper Table 1:
+PSNR-mu and SSIM-mu per frame after dividing by the sequence's peak, frames
+whose window reaches past the sequence not scored, frame means averaged per
+sequence, then over sequences), on the streams already in the store instead
+of freshly simulated ones, and the output files are those of ``tespike
+evaluate`` (:func:`recon.evaluate.table_markdown`, ``table_csv``,
+``results_csv``, ``plot_strip``).
+
+A frame that fits in one :data:`EVAL_TILE` is scored by one task with
+:func:`recon.metrics.psnr_mu` / ``ssim_mu`` on whole frames, exactly as the
+serial evaluation does. A larger frame is cut into tiles; each task
+reconstructs its tile plus a halo of the SSIM window radius (every method
+works pixel by pixel along time, so the halo makes the tile exact) and
+returns per-frame sums of squared mu-law error and of the SSIM map over its
+own pixels; the driver adds them in tile order. Tiles depend only on the frame
+size, and torch runs single-threaded in every task, so the numbers are the
+same whatever the number of workers or the order in which tasks finish.
+
+Run time per frame is not measured here (tasks share machines and cores with
+each other): the ``ms / frame`` cells are left empty and ``results.csv`` has
+``nan``; ``quality_vs_time.png`` is not written. Use ``tespike evaluate``
+without ``--store`` or ``benchmarks/bench_recon.py`` for timing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.errors import InputError
+
+from .store import DatasetStore, open_array, tiles
+
+#: Largest frame (rows, cols) scored whole by one task; larger frames are tiled.
+EVAL_TILE = (256, 256)
+#: Readouts of float64 mu-law work held at once per tiled task.
+METRIC_FRAMES = 16
+
+
+def _halo() -> int:
+    from recon.metrics import SSIM_SIGMA, SSIM_TRUNCATE
+    return int(SSIM_TRUNCATE * SSIM_SIGMA + 0.5)
+
+
+@contextlib.contextmanager
+def _one_thread():
+    """torch on one thread inside a task: no oversubscription, and reductions that do
+    not depend on the machine's core count."""
+    import torch
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+def score_whole(url: str, sequence: str, sensor: str, method: str, window: int, device: str,
+                peak: float, frames: tuple[int, int], middle: int, options: dict) -> dict:
+    """Reconstruct and score whole frames (as :func:`recon.evaluate.evaluate`)."""
+    from recon.methods import reconstruct
+    from recon.metrics import psnr_mu, ssim_mu
+
+    stream = open_array(url, f"{sequence}/streams/{sensor}")
+    config = SensorConfig.from_json(stream.attrs["config"])
+    with _one_thread():
+        images = reconstruct(stream[...], config, method, window=window, device=device, **options)
+        scored = slice(*frames)
+        truth = open_array(url, f"{sequence}/light")[scored]
+        pred = images[scored]
+        return {"psnr": psnr_mu(pred, truth, peak=peak), "ssim": ssim_mu(pred, truth, peak=peak),
+                "strip": images[middle]}
+
+
+def score_tile(url: str, sequence: str, sensor: str, method: str, window: int, device: str,
+               peak: float, frames: tuple[int, int], middle: int, options: dict,
+               rows: slice, cols: slice) -> dict:
+    """One tile of a large frame: per scored frame, the sum of squared mu-law errors and
+    of the SSIM map over the tile's own pixels (window centres), and its strip pixels."""
+    import torch
+
+    from recon.methods import reconstruct
+    from recon.metrics import mu_law, normalise, ssim_map
+
+    stream = open_array(url, f"{sequence}/streams/{sensor}")
+    config = SensorConfig.from_json(stream.attrs["config"])
+    K, H, W = stream.shape
+    h = _halo()
+    r0, r1, c0, c1 = rows.start, rows.stop, cols.start, cols.stop
+    R0, R1, C0, C1 = max(0, r0 - h), min(H, r1 + h), max(0, c0 - h), min(W, c1 + h)
+    # window centres of the whole frame's SSIM map that are this tile's pixels
+    y0, y1, x0, x1 = max(r0, h), min(r1, H - h), max(c0, h), min(c1, W - h)
+    core = (slice(None), slice(r0 - R0, r1 - R0), slice(c0 - C0, c1 - C0))
+    centres = (slice(None), slice(y0 - R0 - h, y1 - R0 - h), slice(x0 - C0 - h, x1 - C0 - h))
+    light = open_array(url, f"{sequence}/light")
+    sse, ssum = [], []
+    with _one_thread():
+        images = reconstruct(stream[:, R0:R1, C0:C1], config, method, window=window, device=device,
+                             **options)
+        for start in range(frames[0], frames[1], METRIC_FRAMES):
+            stop = min(frames[1], start + METRIC_FRAMES)
+            pred = torch.as_tensor(images[start:stop], dtype=torch.float64)
+            truth = torch.as_tensor(light[start:stop, R0:R1, C0:C1], dtype=torch.float64)
+            p, g = normalise(pred, truth, peak)
+            tp, tg = mu_law(p), mu_law(g)
+            sse.append(((tp - tg) ** 2)[core].sum(dim=(1, 2)).numpy())
+            if y1 > y0 and x1 > x0:
+                ssum.append(ssim_map(tp, tg)[centres].sum(dim=(1, 2)).numpy())
+            else:
+                ssum.append(np.zeros(stop - start))
+    return {"sse": np.concatenate(sse), "ssim_sum": np.concatenate(ssum),
+            "strip": images[middle, r0 - R0:r1 - R0, c0 - C0:c1 - C0]}
+
+
+def _combine(parts: list[dict], height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Tile sums (in tile order) -> per-frame PSNR-mu and SSIM-mu of the whole frames."""
+    h = _halo()
+    sse = np.sum([p["sse"] for p in parts], axis=0)
+    ssum = np.sum([p["ssim_sum"] for p in parts], axis=0)
+    with np.errstate(divide="ignore"):
+        psnr = 10 * np.log10(1.0 / (sse / (height * width)))
+    return psnr, ssum / ((height - 2 * h) * (width - 2 * h))
+
+
+def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, window: int = 9,
+                   device: str = "cpu", tile: tuple[int, int] = EVAL_TILE,
+                   options: dict[str, dict] | None = None):
+    """Score every complete sequence x sensor x method of the store -> :class:`recon.evaluate.Evaluation`.
+
+    ``run`` runs ``dask.delayed`` tasks (:class:`cosim.dataset.cluster.Runner`);
+    sensors are the store's configurations, in its order (they are the table's
+    column groups); ``options`` as in :func:`recon.evaluate.evaluate`.
+    """
+    from dask import delayed
+
+    from recon.evaluate import Evaluation, Result, scored_frames
+    from recon.methods import METHODS
+    from recon.settings import ReconSettings
+
+    store = DatasetStore.open(url)
+    methods = tuple(METHODS) if methods is None else tuple(methods)
+    for method in methods:
+        if method not in METHODS:
+            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(METHODS)})")
+    if not methods:
+        raise InputError("no reconstruction method to evaluate")
+    ReconSettings(window=window, device=device)          # refuse a bad window or device here
+    sequences = store.sequences()
+    if not sequences:
+        raise InputError(f"dataset store {store.url!r} holds no complete sequence")
+    h = _halo()
+    tasks, keys, plan = [], [], {}
+    for sequence in sequences:
+        info = store.info(sequence)
+        K, H, W, peak = info["frames"], info["height"], info["width"], float(info["peak"])
+        if not peak > 0:
+            raise InputError(f"sequence {sequence!r} is all zero: its peak cannot normalise the metrics")
+        if min(H, W) < 2 * h + 1:
+            raise InputError(f"sequence {sequence!r} is {H} x {W}: SSIM needs frames of at least "
+                             f"{2 * h + 1} x {2 * h + 1} pixels")
+        frames = scored_frames(K, window)
+        span = (frames.start, frames.stop)
+        middle = (frames.start + frames.stop - 1) // 2
+        whole = H <= tile[0] and W <= tile[1]
+        plan[sequence] = (H, W, peak, middle, span)
+        for sensor in store.configs:
+            for method in methods:
+                kwargs = dict((options or {}).get(method, {}))
+                args = (store.url, sequence, sensor, method, window, device, peak, span, middle, kwargs)
+                name = f"score-{sequence}-{sensor}-{method}"
+                if whole:
+                    tasks.append(delayed(score_whole, pure=False)(*args, dask_key_name=name))
+                    keys.append((sequence, sensor, method, None))
+                else:
+                    for r, c, rows, cols in tiles(H, W, tile):
+                        tasks.append(delayed(score_tile, pure=False)(*args, rows, cols,
+                                                                     dask_key_name=f"{name}-{r}-{c}"))
+                        keys.append((sequence, sensor, method, (rows, cols)))
+    outputs: list = [None] * len(tasks)
+    for index, result in run(tasks):
+        outputs[index] = result
+    by_cell: dict[tuple, list] = {}
+    for key, result in zip(keys, outputs):
+        by_cell.setdefault(key[:3], []).append((key[3], result))
+
+    evaluation = Evaluation([], methods, tuple(store.configs), window)
+    for sequence in sequences:
+        H, W, peak, middle, span = plan[sequence]
+        strip = {"gt": np.asarray(store.array(sequence, "light")[middle]), "peak": peak, "frame": middle}
+        for sensor in store.configs:
+            for method in methods:
+                parts = by_cell[sequence, sensor, method]
+                if parts[0][0] is None:
+                    result = parts[0][1]
+                    psnr, ssim, image = result["psnr"], result["ssim"], result["strip"]
+                else:
+                    psnr, ssim = _combine([p for _, p in parts], H, W)
+                    image = np.zeros((H, W), np.float32)
+                    for (rows, cols), p in parts:
+                        image[rows, cols] = p["strip"]
+                evaluation.results.append(Result(sequence, sensor, method, float(np.mean(psnr)),
+                                                 float(np.mean(ssim)), math.nan, int(span[1] - span[0])))
+                strip[sensor, method] = image
+        evaluation.strips[sequence] = strip
+    return evaluation
+
+
+def write_store_outputs(evaluation, out: str | Path) -> dict[str, Path]:
+    """table.md, table.csv, results.csv and strips/<sequence>.png (no timing plot: see the module)."""
+    from recon.evaluate import plot_strip, results_csv, safe_name, table_csv, table_markdown, write_text
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "strips").mkdir(exist_ok=True)
+    paths = {"table.md": out / "table.md", "table.csv": out / "table.csv", "results.csv": out / "results.csv"}
+    write_text(paths["table.md"], table_markdown(evaluation))
+    write_text(paths["table.csv"], table_csv(evaluation))
+    write_text(paths["results.csv"], results_csv(evaluation))
+    used: set[str] = set()
+    for sequence in evaluation.strips:
+        stem = safe_name(sequence)
+        while stem in used:
+            stem += "_"
+        used.add(stem)
+        paths[f"strip:{sequence}"] = out / "strips" / f"{stem}.png"
+        plot_strip(evaluation, sequence, paths[f"strip:{sequence}"])
+    return paths

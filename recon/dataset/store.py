@@ -1,0 +1,275 @@
+"""The dataset store: one Zarr (v3) store of light sequences and their sensor streams.
+
+Layout (every name below is a Zarr group or array; ``STORE`` is a folder, or
+any URL Zarr opens, shared by every machine that writes or reads it)::
+
+    STORE/                        attrs: format, version, seed, configs {name: SPEC dict},
+                                         tile [rows, cols], chunk_frames
+      <sequence>/                 attrs: source, frames, height, width, peak, scale, complete
+        light                     float32 (K, H, W): the ground-truth light, as the scene
+                                  (1.0 = design light, peak 1 per sequence, paper A.2.2)
+        streams/<config>          uint8/uint16 (K, H, W): readout words (golden.io.word_dtype)
+                                  attrs: config (JSON), seed, seed_key, complete
+
+Arrays are chunked as (``chunk_frames``, ``tile``) and compressed (Blosc zstd,
+bit shuffle). The simulation tile (default 256 x 256) is part of the format:
+each tile of each stream is simulated with its own random stream, seeded by
+:func:`tile_seed` from the root seed, a SHA-256 of the sequence name and the
+configuration JSON, and the tile's position, so a store is bit-identical
+whatever the number of workers or the order in which tasks finish.
+
+Atomicity: a sequence is visible to readers (:meth:`DatasetStore.sequences`)
+only once its group carries ``complete: true``, an attribute written last,
+after every array of the sequence is written and itself marked complete (Zarr
+writes a ``zarr.json`` by temporary file and rename, so the flag appears whole
+or not at all). Incomplete groups are ignored by readers and finished (or
+redone) by the next synthesis run; chunk writes are idempotent (the same bytes
+every time), so a task that is retried after its worker died rewrites exactly
+what it wrote before.
+
+This module needs numpy, zarr and dask only (no simulator, no torch), so the
+evaluation and the training read the store through it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.errors import InputError
+from golden.io import word_dtype
+
+FORMAT = "tespike-dataset"
+VERSION = 1
+#: Simulation tile (rows, cols): the unit of parallel work and of random streams.
+TILE = (256, 256)
+#: Readouts per chunk along time (memory of one task: chunk_frames x tile).
+CHUNK_FRAMES = 16
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+
+
+def check_name(name: str, what: str) -> str:
+    """Sequence and sensor names become Zarr node names: letters, digits, ``_ . + -``."""
+    if not isinstance(name, str) or not _NAME.match(name) or name.startswith("__"):
+        raise InputError(f"{what} name {name!r} must start with a letter or digit and hold only "
+                         "letters, digits and _ . + -")
+    return name
+
+
+def seed_key(sequence: str, config: SensorConfig) -> list[int]:
+    """Eight 32-bit words of SHA-256(sequence name, NUL, configuration JSON): stable across
+    runs, machines and Python versions (unlike ``hash()``)."""
+    digest = hashlib.sha256(f"{sequence}\0{config.to_json()}".encode()).digest()
+    return [int.from_bytes(digest[i:i + 4], "little") for i in range(0, 32, 4)]
+
+
+def tile_seed(seed: int, sequence: str, config: SensorConfig, row: int, col: int) -> np.random.SeedSequence:
+    """The random stream of tile (row, col) (tile indices, not pixels) of one stream."""
+    return np.random.SeedSequence([int(seed), *seed_key(sequence, config), int(row), int(col)])
+
+
+def tiles(height: int, width: int, tile: tuple[int, int] = TILE) -> list[tuple[int, int, slice, slice]]:
+    """(row, col, rows, cols) of every tile of an H x W frame, row-major; edge tiles are smaller."""
+    th, tw = tile
+    return [(r, c, slice(r * th, min(height, (r + 1) * th)), slice(c * tw, min(width, (c + 1) * tw)))
+            for r in range(-(-height // th)) for c in range(-(-width // tw))]
+
+
+def _compressor():
+    from zarr.codecs import BloscCodec
+    return BloscCodec(cname="zstd", clevel=3, shuffle="bitshuffle")
+
+
+def _zarr_open_group(url: str, mode: str):
+    import zarr
+    try:
+        return zarr.open_group(url, mode=mode)
+    except FileNotFoundError:
+        raise InputError(f"dataset store {url!r} does not exist") from None
+    except (ValueError, TypeError, KeyError) as exc:      # not a Zarr v3 group, bad JSON
+        raise InputError(f"{url!r} is not a readable Zarr store: {exc}") from None
+
+
+class DatasetStore:
+    """A dataset store (layout in the module docstring): create, check, read lazily."""
+
+    def __init__(self, url: str, group, attrs: dict):
+        self.url = str(url)
+        self.group = group
+        self.seed = int(attrs["seed"])
+        self.configs = {name: SensorConfig.from_dict(d) for name, d in attrs["configs"].items()}
+        self.tile = tuple(attrs["tile"])
+        self.chunk_frames = int(attrs["chunk_frames"])
+
+    # -- opening --------------------------------------------------------------
+    @classmethod
+    def open(cls, url: str, mode: str = "r") -> "DatasetStore":
+        """Open an existing store (``mode`` "r" or "r+"); refuse anything else."""
+        group = _zarr_open_group(str(url), mode)
+        attrs = group.attrs.asdict()
+        if attrs.get("format") != FORMAT:
+            raise InputError(f"{str(url)!r} is a Zarr store but not a tespike dataset store")
+        if attrs.get("version") != VERSION:
+            raise InputError(f"dataset store {str(url)!r} has version {attrs.get('version')!r}; "
+                             f"this tespike reads version {VERSION}")
+        return cls(url, group, attrs)
+
+    @classmethod
+    def create_or_resume(cls, url: str, *, seed: int, configs: dict[str, SensorConfig],
+                         tile: tuple[int, int] = TILE, chunk_frames: int = CHUNK_FRAMES) -> "DatasetStore":
+        """A new store, or an existing one made with the same seed, configurations,
+        tile and chunking (anything else is refused: the streams would not match)."""
+        import zarr
+
+        url = str(url)
+        for name in configs:
+            check_name(name, "sensor configuration")
+        attrs = {"format": FORMAT, "version": VERSION, "seed": int(seed),
+                 "configs": {name: c.to_dict() for name, c in configs.items()},
+                 "tile": [int(t) for t in tile], "chunk_frames": int(chunk_frames)}
+        try:
+            group = zarr.open_group(url, mode="r+")
+        except FileNotFoundError:
+            group = None
+        except (ValueError, TypeError, KeyError) as exc:
+            raise InputError(f"{url!r} exists and is not a readable Zarr store: {exc}") from None
+        if group is None:
+            import os
+            if "://" not in url and os.path.exists(url) and (not os.path.isdir(url) or os.listdir(url)):
+                raise InputError(f"--out {url!r} exists and is not a dataset store; "
+                                 "it is left untouched")
+            group = zarr.open_group(url, mode="w-")
+            group.attrs.update(attrs)
+            return cls(url, group, attrs)
+        old = group.attrs.asdict()
+        if old.get("format") != FORMAT:
+            raise InputError(f"--out {url!r} is a Zarr store but not a tespike dataset store")
+        for key in ("version", "seed", "configs", "tile", "chunk_frames"):
+            if json.dumps(old.get(key), sort_keys=True) != json.dumps(attrs[key], sort_keys=True):
+                raise InputError(f"dataset store {url!r} was made with {key} = {old.get(key)!r}, "
+                                 f"not {attrs[key]!r}: resume with the same settings or use a new --out")
+        return cls(url, group, old)
+
+    # -- layout ---------------------------------------------------------------
+    def chunks(self, height: int, width: int) -> tuple[int, int, int]:
+        return (self.chunk_frames, min(self.tile[0], height), min(self.tile[1], width))
+
+    def prepare_sequence(self, name: str, shape: tuple[int, int, int], source: str) -> dict[str, bool]:
+        """Make (or keep) the group and arrays of one sequence; return which parts are
+        already complete: ``{"sequence": ..., "light": ..., <config>: ...}``.
+
+        A complete sequence must match ``shape`` and ``source``; unfinished arrays
+        are made anew (their chunks are rewritten by the synthesis anyway).
+        """
+        check_name(name, "sequence")
+        K, H, W = (int(n) for n in shape)
+        info = {"source": source, "frames": K, "height": H, "width": W}
+        if name in self.group:
+            group = self.group[name]
+            old = group.attrs.asdict()
+            mismatch = [k for k, v in info.items() if old.get(k) != v]
+            if mismatch:
+                if old.get("complete"):
+                    raise InputError(f"sequence {name!r} in {self.url!r} was made with "
+                                     f"{mismatch[0]} = {old.get(mismatch[0])!r}, not {info[mismatch[0]]!r}")
+                del self.group[name]                        # an unfinished different sequence
+        if name not in self.group:
+            group = self.group.create_group(name)
+            group.attrs.update({**info, "complete": False})
+        group = self.group[name]
+        done = {"sequence": bool(group.attrs.get("complete", False))}
+        chunks = self.chunks(H, W)
+        arrays = {"light": np.dtype(np.float32),
+                  **{f"streams/{c}": word_dtype(config) for c, config in self.configs.items()}}
+        for path, dtype in arrays.items():
+            key = path.split("/")[-1]
+            complete = path in group and bool(group[path].attrs.get("complete", False))
+            if not complete:
+                array = group.create_array(path, shape=(K, H, W), chunks=chunks, dtype=dtype,
+                                           compressors=_compressor(), fill_value=0, overwrite=True)
+                if key in self.configs:
+                    config = self.configs[key]
+                    array.attrs.update({"config": config.to_json(), "seed": self.seed,
+                                        "seed_key": seed_key(name, config), "tile": list(self.tile),
+                                        "complete": False})
+                else:
+                    array.attrs.update({"complete": False})
+            done[key] = complete
+        return done
+
+    # -- reading --------------------------------------------------------------
+    def sequences(self, *, complete: bool = True) -> list[str]:
+        """Sequence names, sorted; only complete ones unless ``complete=False``."""
+        names = sorted(self.group.group_keys())
+        return [n for n in names if not complete or self.group[n].attrs.get("complete", False)]
+
+    def info(self, sequence: str) -> dict:
+        """Attributes of one sequence (source, frames, height, width, peak, scale, complete)."""
+        if sequence not in self.group:
+            raise InputError(f"dataset store {self.url!r} has no sequence {sequence!r}")
+        return self.group[sequence].attrs.asdict()
+
+    def light(self, sequence: str):
+        """The ground-truth light of one sequence as a lazy dask array (K, H, W) float32."""
+        import dask.array as da
+        return da.from_zarr(self.group[f"{sequence}/light"])
+
+    def words(self, sequence: str, config: str):
+        """The readout words of one sequence and sensor as a lazy dask array (K, H, W)."""
+        import dask.array as da
+        if config not in self.configs:
+            raise InputError(f"dataset store {self.url!r} has no sensor {config!r} "
+                             f"(it has {', '.join(self.configs)})")
+        return da.from_zarr(self.group[f"{sequence}/streams/{config}"])
+
+    def array(self, sequence: str, part: str):
+        """The Zarr array ``light`` or ``streams/<config>`` of one sequence (for tasks)."""
+        return self.group[f"{sequence}/{part}"]
+
+
+def open_array(url: str, path: str, mode: str = "r"):
+    """One Zarr array of a store, opened in a task (workers open by URL, not by object)."""
+    import zarr
+    return zarr.open_array(str(url), path=path, mode=mode)
+
+
+def mark_complete(url: str, path: str, **attrs) -> None:
+    """Write ``complete: true`` (and ``attrs``) on a group or array: the last write of a part."""
+    import zarr
+    node = zarr.open(str(url), path=path, mode="r+")
+    node.attrs.update({**attrs, "complete": True})
+
+
+def compare_stores(a: str, b: str) -> list[str]:
+    """Differences between two stores (attributes, sequence names, every array bit for bit);
+    an empty list when they are identical. For tests and for checking a rerun."""
+    import zarr
+
+    left, right = zarr.open_group(str(a), mode="r"), zarr.open_group(str(b), mode="r")
+    out: list[str] = []
+
+    def walk(x, y, where: str) -> None:
+        if x.attrs.asdict() != y.attrs.asdict():
+            out.append(f"{where or '/'}: attributes differ")
+        xa, ya = sorted(x.array_keys()), sorted(y.array_keys())
+        xg, yg = sorted(x.group_keys()), sorted(y.group_keys())
+        if xa != ya or xg != yg:
+            out.append(f"{where or '/'}: members differ ({xa + xg} vs {ya + yg})")
+        for key in set(xa) & set(ya):
+            p, q = x[key], y[key]
+            if p.dtype != q.dtype or p.shape != q.shape:
+                out.append(f"{where}/{key}: {p.dtype} {p.shape} vs {q.dtype} {q.shape}")
+            elif p.attrs.asdict() != q.attrs.asdict():
+                out.append(f"{where}/{key}: attributes differ")
+            else:
+                step = max(1, p.chunks[0])              # chunk by chunk over time: bounded memory
+                if any(not np.array_equal(p[t:t + step], q[t:t + step]) for t in range(0, p.shape[0], step)):
+                    out.append(f"{where}/{key}: values differ")
+        for key in set(xg) & set(yg):
+            walk(x[key], y[key], f"{where}/{key}")
+
+    walk(left, right, "")
+    return out

@@ -1,0 +1,186 @@
+"""Synthesis and store evaluation on real Dask clusters on 127.0.0.1: a LocalCluster of two
+worker processes (``--workers 2``), and ``dask scheduler`` + ``dask worker`` processes started
+here, one of which is killed in the middle of a run. Every result must be bit-identical to
+the in-process run."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from recon.dataset import compare_stores
+from recon.scenes.hdr_io import write_exr
+
+from .cli import ROOT, run_tespike
+
+pytest.importorskip("distributed")
+
+#: Built-in scenes of the runs: 2 tiles per frame (300 > 256 columns), so both
+#: synthesis and evaluation have several tasks per sequence.
+SCENES = ("moderate", "lights", "sun", "decades")
+SIZE = ("--frames", "40", "--height", "24", "--width", "300")
+
+
+def hdr_root(root):
+    rng = np.random.default_rng(4)
+    for name in ("clip-a", "clip-b"):
+        (root / name).mkdir(parents=True)
+        for k in range(12):
+            write_exr(root / name / f"{k:04d}.exr", (rng.random((20, 270, 3)) ** 5 * 50).astype(np.float32))
+    return root
+
+
+def synth_args(hdr, out, *extra):
+    scenes = [a for s in SCENES for a in ("--scene", s)]
+    return ("synth", "--hdr", hdr, *scenes, *SIZE, "--config", "te", "--config", "ml",
+            "--out", out, "--seed", "11", *extra)
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    """The in-process run everything is compared with: the store and its table."""
+    base = tmp_path_factory.mktemp("serial")
+    hdr = hdr_root(base / "hdr")
+    result = run_tespike(*synth_args(hdr, base / "s.zarr"), timeout=600)
+    assert result.returncode == 0, result.stderr
+    result = run_tespike("evaluate", "--store", base / "s.zarr", "--methods", "tfp,tfi", "--out",
+                         base / "ev", timeout=600)
+    assert result.returncode == 0, result.stderr
+    return {"hdr": hdr, "store": base / "s.zarr", "table": (base / "ev" / "table.csv").read_text(),
+            "results": (base / "ev" / "results.csv").read_text()}
+
+
+def test_local_cluster_of_two_workers_gives_the_same_store_and_table(serial, tmp_path):
+    result = run_tespike(*synth_args(serial["hdr"], tmp_path / "s.zarr", "--workers", "2"), timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert "local cluster of 2 worker processes" in result.stdout
+    assert compare_stores(serial["store"], tmp_path / "s.zarr") == []
+    result = run_tespike("evaluate", "--store", tmp_path / "s.zarr", "--methods", "tfp,tfi", "--workers", "2",
+                         "--out", tmp_path / "ev", timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "ev" / "table.csv").read_text() == serial["table"]
+    assert (tmp_path / "ev" / "results.csv").read_text() == serial["results"]
+
+
+class Cluster:
+    """``dask scheduler`` and ``dask worker`` processes on 127.0.0.1, stopped by :meth:`close`."""
+
+    def __init__(self, folder):
+        self.folder = folder
+        self.file = folder / "scheduler.json"
+        self.env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+        self.processes = []
+        self.scheduler = self._start("scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                                     "--scheduler-file", self.file)
+        deadline = time.monotonic() + 60
+        while not self.file.is_file():
+            assert time.monotonic() < deadline and self.scheduler.poll() is None, "no scheduler"
+            time.sleep(0.1)
+        time.sleep(0.2)                               # the file is written whole, then read
+        self.address = json.loads(self.file.read_text())["address"]
+        from distributed import Client
+        self.client = Client(self.address, timeout=60)
+
+    def _start(self, *args):
+        log = open(self.folder / f"{args[0]}-{len(self.processes)}.log", "w")
+        process = subprocess.Popen([sys.executable, "-m", "dask", *map(str, args)], stdout=log,
+                                   stderr=subprocess.STDOUT, env=self.env, cwd=self.folder)
+        self.processes.append(process)
+        return process
+
+    def add_worker(self, count=1):
+        """Start ``count`` worker processes (no nanny: a killed worker stays dead)."""
+        before = len(self.client.scheduler_info()["workers"])
+        started = [self._start("worker", self.address, "--nthreads", "1", "--no-nanny", "--no-dashboard",
+                               "--host", "127.0.0.1") for _ in range(count)]
+        self.client.wait_for_workers(before + count, timeout=120)
+        return started
+
+    def wait_until_busy(self, prefix, run, timeout=300):
+        """Wait until every worker runs a task whose key starts with ``prefix``."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            assert run.poll() is None, "the run ended before every worker was busy"
+            processing = self.client.processing()
+            if processing and all(any(str(k).startswith(prefix) for k in keys) for keys in processing.values()):
+                return
+            time.sleep(0.02)
+        raise AssertionError(f"workers never all ran {prefix!r} tasks")
+
+    def close(self):
+        try:
+            self.client.close()
+        finally:
+            for process in reversed(self.processes):
+                if process.poll() is None:
+                    process.terminate()
+            for process in self.processes:
+                try:
+                    process.wait(timeout=20)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait()
+
+
+def tespike_process(*args):
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.Popen([sys.executable, "-m", "cosim", *map(str, args)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+
+
+def finish(process, timeout=600):
+    try:
+        out, err = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.communicate()
+        raise
+    assert process.returncode == 0, err
+    return out
+
+
+def test_a_worker_killed_mid_run_costs_only_a_retry(serial, tmp_path):
+    cluster = Cluster(tmp_path)
+    runs = []
+    try:
+        doomed, _ = cluster.add_worker(2)
+        run = tespike_process(*synth_args(serial["hdr"], tmp_path / "s.zarr", "--scheduler", cluster.address))
+        runs.append(run)
+        cluster.wait_until_busy("sim-", run)
+        os.kill(doomed.pid, signal.SIGKILL)
+        doomed.wait(timeout=30)
+        finish(run)
+        assert compare_stores(serial["store"], tmp_path / "s.zarr") == []
+        assert not list((tmp_path / "s.zarr").rglob("*.partial"))
+
+        cluster.add_worker()                           # two workers again, then kill one mid-evaluation
+        run = tespike_process("evaluate", "--store", tmp_path / "s.zarr", "--methods", "tfp,tfi",
+                              "--scheduler", cluster.address, "--out", tmp_path / "ev")
+        runs.append(run)
+        cluster.wait_until_busy("score-", run)
+        victim = next(p for p in cluster.processes[1:] if p.poll() is None)
+        os.kill(victim.pid, signal.SIGKILL)
+        victim.wait(timeout=30)
+        finish(run)
+        assert (tmp_path / "ev" / "table.csv").read_text() == serial["table"]
+        assert (tmp_path / "ev" / "results.csv").read_text() == serial["results"]
+    finally:
+        for run in runs:
+            if run.poll() is None:
+                run.kill()
+                run.communicate()
+        cluster.close()
+
+
+def test_unreachable_scheduler_is_refused_in_one_line(tmp_path, monkeypatch):
+    monkeypatch.setenv("DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT", "2s")
+    result = run_tespike("synth", "--scene", "sun", "--config", "te", "--out", tmp_path / "s.zarr",
+                         "--scheduler", "tcp://127.0.0.1:9", timeout=120)
+    assert result.returncode == 2, result
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "cannot reach the Dask scheduler" in lines[0], result.stderr

@@ -1,0 +1,197 @@
+"""The dataset store, synthesis into it and evaluation over it, in this process (no cluster)."""
+
+import csv
+
+import numpy as np
+import pytest
+import zarr
+
+from cosim.cli import main
+from cosim.dataset.cluster import Runner
+from cosim.dataset.synth import hdr_sources, scene_sources, synthesise
+from golden.config import SensorConfig
+from golden.errors import InputError
+from golden.fastsim import simulate_scene
+from recon.dataset import DatasetStore, compare_stores, tile_seed
+from recon.dataset.evaluate import evaluate_store
+from recon.scenes import load_hdr_sequence, make_scene
+from recon.scenes.hdr_io import write_exr, write_hdr
+
+CONFIGS = {"te": SensorConfig(mode="te"), "ml": SensorConfig(mode="ml")}
+
+
+def hdr_folder(root, rng, sequences=(("alpha", 5, 20, 28), ("beta", 3, 18, 22))):
+    """Sub-folders of random HDR frames (EXR RGB, and one Radiance file) with a wide range."""
+    for name, frames, height, width in sequences:
+        (root / name).mkdir(parents=True)
+        for k in range(frames):
+            rgb = (rng.random((height, width, 3)) ** 6 * 1e3).astype(np.float32)
+            if k == 1:
+                write_hdr(root / name / f"f{k:03d}.hdr", rgb)
+            else:
+                write_exr(root / name / f"f{k:03d}.exr", rgb)
+    return root
+
+
+def synth(url, sources, seed=7, configs=CONFIGS, **kwargs):
+    with Runner() as run:
+        return synthesise(str(url), sources, configs, seed, run, **kwargs)
+
+
+def test_single_tile_stream_is_simulate_scene_with_the_tile_seed(tmp_path):
+    counts = synth(tmp_path / "s.zarr", scene_sources(["moderate"], 10, 24, 32), seed=5)
+    assert counts == {"done": 1, "skipped": 0, "pixel_readouts": 2 * 10 * 24 * 32,
+                      "store": str(tmp_path / "s.zarr")}
+    store = DatasetStore.open(tmp_path / "s.zarr")
+    light = make_scene("moderate", 10, 24, 32, seed=0)
+    assert store.light("moderate").dtype == np.float32
+    assert np.array_equal(store.light("moderate").compute(), light)
+    for name, config in CONFIGS.items():
+        words = store.words("moderate", name)
+        assert words.dtype == np.uint8
+        expected = simulate_scene(config, light, seed=np.random.default_rng(tile_seed(5, "moderate", config, 0, 0)))
+        assert np.array_equal(words.compute(), expected)
+        attrs = store.array("moderate", f"streams/{name}").attrs.asdict()
+        assert SensorConfig.from_json(attrs["config"]) == config and attrs["seed"] == 5 and attrs["complete"]
+    assert store.info("moderate")["complete"] and store.info("moderate")["peak"] == 1.0
+
+
+def test_hdr_light_equals_load_hdr_sequence_across_chunks_and_tiles(tmp_path, rng):
+    root = hdr_folder(tmp_path / "hdr", rng)
+    sources = hdr_sources(root)
+    assert [(s.name, s.shape) for s in sources] == [("alpha", (5, 20, 28)), ("beta", (3, 18, 22))]
+    synth(tmp_path / "a.zarr", sources, chunk_frames=2, tile=(8, 8))
+    synth(tmp_path / "b.zarr", sources, chunk_frames=3, tile=(8, 8))
+    store = DatasetStore.open(tmp_path / "a.zarr")
+    assert store.sequences() == ["alpha", "beta"]
+    for name in ("alpha", "beta"):
+        assert np.array_equal(store.light(name).compute(), load_hdr_sequence(root / name))
+    # the time chunking is storage only: the streams do not change with it
+    other = DatasetStore.open(tmp_path / "b.zarr")
+    for name in ("alpha", "beta"):
+        for sensor in CONFIGS:
+            assert np.array_equal(store.words(name, sensor).compute(), other.words(name, sensor).compute())
+    # tiles draw different random streams (they are independent tiles)
+    words = store.words("alpha", "te").compute()
+    assert not np.array_equal(words[:, :8, :8], words[:, :8, 8:16])
+
+
+def test_resume_redoes_only_unfinished_parts_and_readers_ignore_them(tmp_path, rng):
+    root = hdr_folder(tmp_path / "hdr", rng)
+    sources = hdr_sources(root) + scene_sources(["sun"], 6, 16, 16)
+    synth(tmp_path / "ref.zarr", sources, tile=(8, 8))
+    synth(tmp_path / "cut.zarr", sources, tile=(8, 8))
+    # an interrupted run: one sequence never marked complete, one stream half-written
+    group = zarr.open_group(str(tmp_path / "cut.zarr"), mode="r+")
+    group["beta"].attrs.update(complete=False)
+    group["beta/streams/ml"].attrs.update(complete=False)
+    group["beta/streams/ml"][:, :8, :8] = 0
+    assert DatasetStore.open(tmp_path / "cut.zarr").sequences() == ["alpha", "sun"]
+    assert DatasetStore.open(tmp_path / "cut.zarr").sequences(complete=False) == ["alpha", "beta", "sun"]
+    done = []
+    with Runner() as run:
+        counts = synthesise(str(tmp_path / "cut.zarr"), sources, CONFIGS, 7, run, tile=(8, 8),
+                            report=done.append)
+    assert done == ["beta"] and counts["skipped"] == 2
+    assert compare_stores(tmp_path / "ref.zarr", tmp_path / "cut.zarr") == []
+    # a different seed, sensor list or tile would not match the streams already there
+    for kwargs in ({"seed": 8}, {"configs": {"te": CONFIGS["te"]}}, {"tile": (16, 16)}):
+        with pytest.raises(InputError, match="resume with the same settings"):
+            synth(tmp_path / "cut.zarr", sources, **{"tile": (8, 8), **kwargs})
+
+
+def test_tiled_scores_equal_whole_frame_scores(tmp_path):
+    synth(tmp_path / "s.zarr", scene_sources(["lights", "decades"], 12, 30, 41), tile=(8, 8))
+    with Runner() as run:
+        whole = evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp", "tfi"])
+        tiled = evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp", "tfi"], tile=(16, 16))
+    assert len(whole.results) == 2 * 2 * 2
+    for a, b in zip(whole.results, tiled.results):
+        assert (a.sequence, a.mode, a.method) == (b.sequence, b.mode, b.method)
+        assert a.psnr_mu == pytest.approx(b.psnr_mu, rel=1e-12)
+        assert a.ssim_mu == pytest.approx(b.ssim_mu, rel=1e-12)
+        assert np.isnan(a.ms_per_frame) and a.frames_scored == 4
+    for sequence in ("lights", "decades"):
+        for key, image in whole.strips[sequence].items():
+            if isinstance(key, tuple):
+                assert np.array_equal(image, tiled.strips[sequence][key])
+
+
+def test_store_scores_equal_the_serial_evaluation(tmp_path):
+    """On the same light and words, the store path gives recon.evaluate's numbers exactly."""
+    from recon.evaluate import evaluate
+
+    synth(tmp_path / "s.zarr", scene_sources(["moderate"], 12, 24, 32), seed=3)
+    store = DatasetStore.open(tmp_path / "s.zarr")
+    streams = {m: store.words("moderate", m).compute() for m in CONFIGS}
+    serial = evaluate([("moderate", store.light("moderate").compute())],
+                      lambda config, light, rng: streams[config.mode], methods=["tfp", "tfi"],
+                      modes=("te", "ml"), configs=CONFIGS, progress=False)
+    with Runner() as run:
+        stored = evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp", "tfi"])
+    assert [(r.sequence, r.mode, r.method, r.psnr_mu, r.ssim_mu) for r in serial.results] == \
+           [(r.sequence, r.mode, r.method, r.psnr_mu, r.ssim_mu) for r in stored.results]
+
+
+def run_here(capsys, *args):
+    code = main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_cli_synth_and_evaluate_store(tmp_path, capsys):
+    store = tmp_path / "s.zarr"
+    SensorConfig(mode="ml", ml_bits=6).save(tmp_path / "ml6.json")
+    code, out, err = run_here(capsys, "synth", "--scene", "lights", "--scene", "sun", "--frames", 10,
+                              "--height", 16, "--width", 20, "--config", "te", "--config", tmp_path / "ml6.json",
+                              "--out", store, "--seed", 2)
+    assert code == 0, err
+    assert "wrote 2 sequence(s)" in out and "sun complete" in out
+    assert zarr.open_group(str(store), mode="r")["sun/streams/ml6"].dtype == np.uint8
+    code, out, err = run_here(capsys, "synth", "--scene", "lights", "--scene", "sun", "--frames", 10,
+                              "--height", 16, "--width", 20, "--config", "te", "--config", tmp_path / "ml6.json",
+                              "--out", store, "--seed", 2)
+    assert code == 0 and "(2 already complete)" in out, err
+    code, out, err = run_here(capsys, "evaluate", "--store", store, "--methods", "tfp", "--out", tmp_path / "ev")
+    assert code == 0, err
+    assert "| TFP_TE |" in out and "| TFP_ML6 |" in out
+    rows = list(csv.DictReader(open(tmp_path / "ev" / "table.csv")))
+    assert rows[0]["te_name"] == "TFP_TE" and rows[0]["te_ms_per_frame"] == ""
+    assert (tmp_path / "ev" / "strips" / "sun.png").is_file()
+    assert not list((tmp_path / "ev").rglob("*.part"))
+
+
+def refused(capsys, *args_and_word):
+    *args, word = args_and_word
+    code, _, err = run_here(capsys, *args)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and word in lines[0], err
+
+
+def test_cli_refusals(tmp_path, capsys, rng):
+    out = tmp_path / "s.zarr"
+    refused(capsys, "synth", "--scene", "sun", "--out", out, "--config")
+    refused(capsys, "synth", "--config", "te", "--out", out, "nothing to synthesise")
+    refused(capsys, "synth", "--scene", "sun", "--config", "te", "--config", "te", "--out", out, "already given")
+    refused(capsys, "synth", "--scene", "magic", "--config", "te", "--out", out, "magic")
+    refused(capsys, "synth", "--scene", "sun", "--config", "te", "--workers", 0, "--out", out, "--workers")
+    refused(capsys, "synth", "--scene", "sun", "--config", "te", "--workers", 2, "--scheduler",
+            "tcp://127.0.0.1:1", "--out", out, "exclude")
+    refused(capsys, "synth", "--hdr", tmp_path / "none", "--config", "te", "--out", out, "none")
+    (tmp_path / "empty" / "seq").mkdir(parents=True)
+    refused(capsys, "synth", "--hdr", tmp_path / "empty", "--config", "te", "--out", out, "no frames")
+    assert not out.exists()
+    (tmp_path / "taken").mkdir()
+    (tmp_path / "taken" / "keep.txt").write_text("mine")
+    refused(capsys, "synth", "--scene", "sun", "--config", "te", "--out", tmp_path / "taken", "not a dataset store")
+    assert (tmp_path / "taken" / "keep.txt").read_text() == "mine"
+    # frames of different sizes in one sequence: refused by the task that reads them
+    root = hdr_folder(tmp_path / "hdr", rng, sequences=(("odd", 2, 12, 12),))
+    write_exr(root / "odd" / "f009.exr", np.ones((12, 13, 3), np.float32))
+    refused(capsys, "synth", "--hdr", root, "--config", "te", "--out", tmp_path / "o.zarr", "same size")
+    assert DatasetStore.open(tmp_path / "o.zarr").sequences() == []
+    refused(capsys, "evaluate", "--store", tmp_path / "o.zarr", "--out", tmp_path / "ev", "no complete sequence")
+    refused(capsys, "evaluate", "--store", tmp_path / "nope.zarr", "--out", tmp_path / "ev", "does not exist")
+    refused(capsys, "evaluate", "--store", tmp_path / "o.zarr", "--set", "moderate", "--out", tmp_path / "ev", "--set")
+    refused(capsys, "evaluate", "--workers", 2, "--out", tmp_path / "ev", "--store")
+    assert not (tmp_path / "ev").exists()
