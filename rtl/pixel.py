@@ -24,7 +24,9 @@ Per pixel clock (one rising edge of ``sync``):
 * ML: a saturating ml_bits spike counter;
 * on the last clock of a readout interval (``last``) the word register loads
   the word of SPEC section 4 computed from the state *after* this clock, and
-  SFC and flag restart from zero; ``acc`` keeps its residual.
+  SFC and flag restart from zero; ``acc`` keeps its residual. With the ML msb
+  readout the word is the index of the count's most significant bit (a priority
+  encoder) and the counter keeps the count minus that power of two.
 
 The latched CCC register is not cleared at readout: the word shows it only
 while the flag is set, and a set flag means it was written in this interval,
@@ -105,17 +107,44 @@ def te_pixel_logic(m: Module, config: SensorConfig, charge, ccc, last, word, nam
         m.d.sync += [sfc.eq(total[:b1]), ovf.eq(ovf_next)]
 
 
+def _msb_readout(m: Module, count, bits: int, name: str, named: bool):
+    """The msb readout of SPEC sections 3-4: ``(index, remainder)`` of a ``bits``-bit count.
+
+    ``index`` is bit_length(count) (a priority encoder: the highest set bit wins);
+    ``remainder`` is the count minus 2^(index - 1), built as the subtraction it is
+    here: bit j survives iff some higher bit is set (``count[j] & |count[j+1:]``), which
+    clears exactly the most significant set bit (nothing when the count is 0). That is
+    bits - 1 AND gates on an OR suffix chain, cheaper than a decoder and a subtractor.
+    """
+    index = Const(0, bits.bit_length())
+    for j in range(bits):                       # later (higher) bits take priority
+        index = Mux(count[j], Const(j + 1, bits.bit_length()), index)
+    index = _value(m, index, bits.bit_length(), f"{name}msb", named)
+    kept = [count[j] & count[j + 1:].any() for j in range(bits - 1)]
+    remainder = _value(m, Cat(*kept, Const(0, 1)), bits, f"{name}remainder", named)
+    return index, remainder
+
+
 def ml_pixel_logic(m: Module, config: SensorConfig, charge, last, word, name: str = "",
                    word_register: bool = True, named: bool = True) -> None:
-    """Add one ML pixel (saturating ml_bits spike counter) driving ``word`` to ``m``."""
+    """Add one ML pixel (saturating ml_bits spike counter) driving ``word`` to ``m``.
+
+    Readout ``"count"``: the word is the count and the counter restarts from 0.
+    Readout ``"msb"``: the word is bit_length of the count (:func:`_msb_readout`) and
+    the counter keeps the remainder, counting on (saturating) in the next interval.
+    """
     bits = config.ml_bits
     spike = _integrator(m, config, charge, name, named)
     count = Signal(bits, name=f"{name}count")
     full = count == Const(config.ml_max, bits)
     count_next = _value(m, Mux(spike & ~full, (count + 1)[:bits], count), bits, f"{name}count_next", named)
-    _drive_word(m, word, count_next, last, word_register)
+    if config.is_msb:
+        value, after_readout = _msb_readout(m, count_next, bits, name, named)
+    else:
+        value, after_readout = count_next, Const(0, bits)
+    _drive_word(m, word, value, last, word_register)
     with m.If(last):
-        m.d.sync += count.eq(0)
+        m.d.sync += count.eq(after_readout)
     with m.Else():
         m.d.sync += count.eq(count_next)
 
@@ -155,7 +184,8 @@ class MLPixel(wiring.Component):
     """One multi-level-counter pixel: integrate, fire, count spikes saturating (SPEC §3-4).
 
     Ports as :class:`TEPixel` without ``ccc`` (an ML pixel never sees the CCC);
-    ``word_register`` as there.
+    ``word_register`` as there. ``word`` is ml_bits wide with the count readout and
+    bit_length(ml_bits) wide with the msb readout (``config.word_bits``).
     """
 
     def __init__(self, config: SensorConfig, *, word_register: bool = True):

@@ -30,3 +30,19 @@ MSB_EDGE_CONFIGS = [
     SensorConfig(mode="ml", ml_readout="msb", ml_bits=5, b1=5, b2=2, clocks_per_tick=3,
                  threshold=7, input_bits=32),                 # odd clocks, 32-bit input
 ]
+
+#: ML configurations with the msb readout (SPEC sections 3-4: the count's remainder stays in
+#: the counter), at the edges of ml_bits (word width bit_length(ml_bits): 1, 2, 3, 4, 5 bits)
+#: and of the clock structure. Kept apart from EDGE_CONFIGS so each package adds them where
+#: it models the msb readout.
+MSB_CONFIGS = [
+    SensorConfig(mode="ml", ml_readout="msb"),                                     # paper: 8 bits, L = 240
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=1, b1=2, b2=2),              # 1-bit counter
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=16, b1=2, b2=2, threshold=1, acc_bits=1),
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=3, alpha=1, clocks_per_tick=1, threshold=2),  # L = 1
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=2, b1=3, b2=2, clocks_per_tick=5, threshold=7),
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=4, b1=1, b2=1, clocks_per_tick=7, threshold=1,
+                 acc_bits=1, input_bits=1),                                        # L = 7, 1-bit input
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=15, b1=5, b2=3, clocks_per_tick=3, input_bits=32,
+                 threshold=1000),                                                  # 32-bit input, L = 21
+]

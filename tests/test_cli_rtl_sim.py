@@ -50,6 +50,21 @@ def test_rtl_sim_preset_config(tmp_path, rng):
         assert np.array_equal(npz["words"], golden_words(config, stim))
 
 
+def test_rtl_sim_ml_msb_preset_with_vcd(tmp_path, rng):
+    """``--config ml-msb``: the msb readout's stream, and the same words read back from the VCD."""
+    config = SensorConfig.preset("ml-msb")
+    stim = threshold_stimulus(config, rng, 3, 1, 2)
+    np.save(tmp_path / "e.npy", stim)
+    result = run_tespike("rtl-sim", "--config", "ml-msb", "--stimulus", tmp_path / "e.npy",
+                         "--out", tmp_path / "s.npz", "--vcd", tmp_path / "w.vcd")
+    assert result.returncode == 0, result.stderr
+    with np.load(tmp_path / "s.npz") as npz:
+        words = npz["words"]
+        assert json.loads(str(npz["config"]))["ml_readout"] == "msb"
+    assert np.array_equal(words, golden_words(config, stim)) and words.max() <= config.ml_bits
+    assert np.array_equal(waveform_stream(tmp_path / "w.vcd", config, (1, 2)).words, words)
+
+
 def test_rtl_sim_vcd_and_gtkw(tmp_path, rng):
     config, stim = _inputs(tmp_path, rng, readouts=2, shape=(1, 2))
     result = run_tespike("rtl-sim", "--config", tmp_path / "c.json", "--stimulus", tmp_path / "e.npy",

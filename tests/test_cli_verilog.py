@@ -19,6 +19,19 @@ def test_verilog_command_writes_array(tmp_path):
         assert build.returncode == 0, build.stderr
 
 
+def test_verilog_command_ml_msb_preset(tmp_path):
+    """The msb camera's array: ml_pixel_array with bit_length(ml_bits) = 4-bit words."""
+    result = run_tespike("verilog", "--config", "ml-msb", "--height", 2, "--width", 3, "--out", tmp_path / "A.v")
+    assert result.returncode == 0, result.stderr
+    text = (tmp_path / "A.v").read_text()
+    assert "module ml_pixel_array (" in text and "output wire [23:0] frame" in text   # 2*3*4
+    assert '"ml_readout": "msb"' in text
+    if shutil.which("verilator"):
+        lint = subprocess.run(["verilator", "--lint-only", "-Wall", str(tmp_path / "A.v")],
+                              capture_output=True, text=True)
+        assert lint.returncode == 0 and "%Warning" not in lint.stderr, lint.stderr
+
+
 @pytest.mark.parametrize("height, width, words", [(0, 2, ["height", "0"]), (2, -3, ["width", "-3"])])
 def test_verilog_refuses_bad_size_without_output(tmp_path, height, width, words):
     result = run_tespike("verilog", "--config", "te", "--height", height, "--width", width, "--out", tmp_path / "A.v")

@@ -18,7 +18,7 @@ from golden.errors import InputError
 from golden.sensor import simulate
 from cosim.icarus import run_icarus, icarus_testbench
 from cosim.outside import SimulatorBuildError, SimulatorMissingError, SimulatorRunError
-from tests.configs import EDGE_CONFIGS
+from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.outside_helpers import KINDS, SHAPE, generated_verilog, make_stimulus, reference_words
 from tests.verilog_spec_model import spec_model_verilog
 
@@ -29,7 +29,7 @@ PAPER_TE, PAPER_ML = SensorConfig(), SensorConfig(mode="ml")
 
 
 @pytest.mark.parametrize("kind", KINDS)
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_CONFIGS, ids=str)
 def test_generated_verilog_equals_reference(config, kind, rng):
     stim = make_stimulus(kind, config, rng)
     words = run_icarus(config, stim, verilog=generated_verilog(config, *SHAPE))
@@ -46,7 +46,8 @@ def test_default_verilog_is_the_generated_array(rng):
 
 
 @pytest.mark.parametrize("latency", [0, 1, 2])
-@pytest.mark.parametrize("config", [PAPER_TE, PAPER_ML, EDGE_CONFIGS[7], EDGE_CONFIGS[11]], ids=str)
+@pytest.mark.parametrize("config", [PAPER_TE, PAPER_ML, EDGE_CONFIGS[7], EDGE_CONFIGS[11], MSB_CONFIGS[0],
+                                    MSB_CONFIGS[3]], ids=str)
 def test_testbench_follows_any_fixed_latency(config, latency, rng):
     stim = make_stimulus("random", config, rng, readouts=4)
     model = spec_model_verilog(config, *SHAPE, latency=latency)
@@ -57,8 +58,8 @@ def test_testbench_follows_any_fixed_latency(config, latency, rng):
         assert np.array_equal(run_icarus(config, stim, verilog=model), reference_words(config, stim))
 
 
-@pytest.mark.parametrize("config", [PAPER_TE, PAPER_ML, EDGE_CONFIGS[4], EDGE_CONFIGS[5], EDGE_CONFIGS[11]],
-                         ids=str)
+@pytest.mark.parametrize("config", [PAPER_TE, PAPER_ML, EDGE_CONFIGS[4], EDGE_CONFIGS[5], EDGE_CONFIGS[11]]
+                         + MSB_CONFIGS, ids=str)
 def test_loop_style_model_equals_reference(config, rng):
     """The procedural-loop model the benchmark compares against is itself exact."""
     stim = make_stimulus("random", config, rng, readouts=4)

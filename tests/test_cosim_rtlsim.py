@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from cosim.rtlsim import (RTLProtocolError, iter_packed_charge, rtl_run, rtl_words, unpack_frames)
 from golden.config import SensorConfig
 from golden.errors import ConfigError, InputError
-from tests.configs import EDGE_CONFIGS
+from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.cosim_helpers import assert_rtl_matches_golden, golden_words, light_stimulus, threshold_stimulus
 
 
@@ -38,7 +38,7 @@ def test_unpack_frames_inverts_the_frame_layout(rng):
 
 # -- RTL == golden -----------------------------------------------------------
 
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_CONFIGS, ids=str)
 def test_rtl_equals_golden_on_edge_configs(config, rng, request):
     readouts = max(2, min(4, 1500 // config.clocks_per_readout))
     stim = threshold_stimulus(config, rng, readouts, 2, 4)

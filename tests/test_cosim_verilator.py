@@ -23,7 +23,7 @@ from golden.errors import InputError
 from golden.sensor import simulate
 from cosim.outside import SimulatorBuildError, SimulatorMissingError, SimulatorRunError
 from cosim.verilator import harness_cpp, run_verilator
-from tests.configs import EDGE_CONFIGS
+from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.outside_helpers import KINDS, SHAPE, generated_verilog, make_stimulus, reference_words
 from tests.verilog_spec_model import spec_model_verilog
 
@@ -32,7 +32,7 @@ pytestmark = pytest.mark.skipif(not shutil.which("verilator"), reason="Verilator
 PAPER_TE, PAPER_ML = SensorConfig(), SensorConfig(mode="ml")
 
 
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_CONFIGS, ids=str)
 def test_generated_verilog_equals_reference(config, rng):
     """One build per configuration, one run per stimulus kind."""
     verilog = generated_verilog(config, *SHAPE)
@@ -185,7 +185,7 @@ def test_unknown_cxx_opt_is_refused_before_building(monkeypatch, rng):
     assert cv.build_flags("te_pixel_array", extra=("-fno-dfg",))[-1] == "-fno-dfg"
 
 
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_CONFIGS, ids=str)
 def test_shared_view_adds_one_comment(config):
     """The backend's view of the generated array differs by a Verilator comment on one line."""
     verilog = generated_verilog(config, *SHAPE)

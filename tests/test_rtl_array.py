@@ -6,11 +6,11 @@ from golden.config import SensorConfig
 from golden.errors import ConfigError
 from golden.reference import step_reference
 from rtl.array import PixelArray
-from tests.configs import EDGE_CONFIGS
+from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.rtl_helpers import mixed_stimulus, rtl_array_words
 
 
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_CONFIGS, ids=str)
 def test_array_equals_golden(config, rng):
     readouts = 3 if config.clocks_per_readout > 1 else 12
     stim = mixed_stimulus(config, rng, readouts, 2, 3)
@@ -22,7 +22,7 @@ def test_array_equals_golden(config, rng):
     assert times == [(k + 1) * L for k in range(readouts)]
 
 
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_CONFIGS, ids=str)
 def test_flat_array_equals_golden(config, rng):
     """The flat form (unnamed intermediates, one module) is the same logic."""
     stim = mixed_stimulus(config, rng, 2 if config.clocks_per_readout > 1 else 10, 3, 2)

@@ -7,7 +7,7 @@ from golden.config import SensorConfig
 from golden.errors import ConfigError
 from golden.reference import step_reference
 from rtl.pixel import MLPixel, TEPixel, pixel_class
-from tests.configs import EDGE_CONFIGS
+from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.rtl_helpers import mixed_stimulus
 
 
@@ -47,7 +47,7 @@ def run_pixel(config, charges, word_register=True):
     return np.array(words, np.int64), held
 
 
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_CONFIGS, ids=str)
 def test_pixel_equals_golden(config, rng):
     readouts = 4 if config.clocks_per_readout > 1 else 20
     stim = mixed_stimulus(config, rng, readouts, 1, 4)
@@ -99,3 +99,22 @@ def test_pixel_ports():
     assert (len(te.charge), len(te.ccc), len(te.last), len(te.word)) == (5, 6, 1, 7)
     ml = MLPixel(SensorConfig(mode="ml", ml_bits=11))
     assert len(ml.word) == 11 and "ccc" not in ml.signature.members
+
+
+def test_ml_msb_pixel_keeps_the_remainder_by_hand():
+    """ml_bits = 3, theta = 1 (one spike per unit of charge), L = 12: the msb readout by hand.
+
+    counts 5 -> word 3, 1 stays; 1 + 2 = 3 -> word 2, 1 stays; 1 + 12 saturates at 7 -> word 3,
+    3 stays; 3 -> word 2, 1 stays; 1 -> word 1, 0 stays; 0 -> word 0.
+    """
+    config = SensorConfig(mode="ml", ml_readout="msb", ml_bits=3, b1=2, b2=2, threshold=1, acc_bits=1)
+    charges = [1] * 5 + [0] * 7 + [1] * 2 + [0] * 10 + [1] * 12 + [0] * 36
+    words, held = run_pixel(config, charges)
+    assert words.tolist() == [3, 2, 3, 2, 1, 0] and all(held)
+    assert step_reference(config, np.array(charges).reshape(-1, 1, 1))[0][:, 0, 0].tolist() == words.tolist()
+
+
+def test_msb_pixel_word_is_the_msb_index_width():
+    for bits, width in ((1, 1), (2, 2), (3, 2), (8, 4), (15, 4), (16, 5)):
+        pixel = MLPixel(SensorConfig(mode="ml", ml_readout="msb", ml_bits=bits))
+        assert len(pixel.word) == width

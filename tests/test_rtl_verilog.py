@@ -11,7 +11,7 @@ from golden.config import SensorConfig
 from golden.errors import ConfigError
 from golden.reference import step_reference
 from rtl.verilog import array_verilog, pixel_verilog, top_verilog
-from tests.configs import EDGE_CONFIGS
+from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.rtl_helpers import mixed_stimulus
 
 needs = {tool: pytest.mark.skipif(shutil.which(tool) is None, reason=f"{tool} not installed")
@@ -29,7 +29,7 @@ def run(cmd, cwd):
 
 
 @needs["verilator"]
-@pytest.mark.parametrize("config", EDGE_CONFIGS, ids=str)
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_CONFIGS, ids=str)
 def test_array_verilog_lints_clean_and_compiles(config, tmp_path):
     (tmp_path / "A.v").write_text(generated(config, 2, 3))
     lint = run(["verilator", "--lint-only", "-Wall", "A.v"], tmp_path)
@@ -144,7 +144,8 @@ def iverilog_words(config, stimulus, pre, tmp_path, verilog=None):
 
 
 @needs["iverilog"]
-@pytest.mark.parametrize("config", [EDGE_CONFIGS[i] for i in (0, 1, 4, 8)], ids=str)
+@pytest.mark.parametrize("config", [EDGE_CONFIGS[i] for i in (0, 1, 4, 8)] + [MSB_CONFIGS[i] for i in (0, 3, 4)],
+                         ids=str)
 def test_iverilog_run_equals_golden(config, tmp_path, rng):
     stim = mixed_stimulus(config, rng, 3, 2, 3)
     pre = mixed_stimulus(config, rng, 1, 2, 3)[:37]       # junk before the reset, mid-interval

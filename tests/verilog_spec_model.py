@@ -3,7 +3,8 @@
 It lets the outside-simulator harnesses (cosim/verilator.py, cosim/icarus.py) be
 tested on their own, independently of the Amaranth-generated Verilog: the same
 ports and bit layout, the SPEC section 3 pixel rule written directly, one
-generate loop over pixels. ``latency`` picks how the frame reaches the ports
+generate loop over pixels (the ML msb readout as SPEC section 3 states it: a
+bit_length scan and a subtraction of that power of two). ``latency`` picks how the frame reaches the ports
 (0: combinational in the interval's last clock, 1: registered, 2: one more
 register). ``bug`` plants a known fault so tests can prove they notice it: a wrong
 latched CCC value, a second ``frame_valid`` per interval, a syntax error, an X
@@ -19,6 +20,11 @@ BUGS = (None, "m_plus_one", "double_valid", "syntax", "x_frame", "x_valid")
 
 def _zext(expr: str, width: int, to: int) -> str:
     return expr if to == width else f"{{{{{to - width}{{1'b0}}}}, {expr}}}"
+
+
+def _msb_scan(count: str, bits: int, word_bits: int, indent: str, target: str = "word_n") -> str:
+    """Procedural bit_length of ``count``: one ``if`` per bit, the highest set bit assigned last."""
+    return "".join(f"{indent}if ({count}[{j}]) {target} = {word_bits}'d{j + 1};\n" for j in range(bits))
 
 
 def spec_model_verilog(config: SensorConfig, height: int, width: int, *,
@@ -52,6 +58,21 @@ def spec_model_verilog(config: SensorConfig, height: int, width: int, *,
       else begin sfc <= sfc_inc; ovf <= ovf_n; m <= m_n; end
 """
         pixel_regs = f"reg [{SB - 1}:0] sfc; reg ovf; reg [{c.b2 - 1}:0] m;"
+    elif c.is_msb:
+        SB = c.ml_bits
+        pixel_count = f"""
+    wire [{SB - 1}:0] cnt_n = (s && sfc != {SB}'d{c.ml_max}) ? sfc + {SB}'d1 : sfc;
+    reg [{WD - 1}:0] word_n;   // bit_length(cnt_n): the last set bit wins
+    always @* begin
+      word_n = {WD}'d0;
+{_msb_scan("cnt_n", SB, WD, "      ")}    end
+    wire [{SB - 1}:0] top_bit = (word_n == {WD}'d0) ? {SB}'d0 : ({SB}'d1 << (word_n - {WD}'d1));
+    always @(posedge clk)
+      if (rst) sfc <= {SB}'d0;
+      else if (last) sfc <= cnt_n - top_bit;   // the rest of the count stays
+      else sfc <= cnt_n;
+"""
+        pixel_regs = f"reg [{SB - 1}:0] sfc;"
     else:
         SB = c.ml_bits
         pixel_count = f"""
@@ -159,6 +180,17 @@ def _loop_verilog(config: SensorConfig, height: int, width: int) -> str:
       if (rst | last) begin sfc[i] = {SB}'d0; ovf[i] = 1'b0; m[i] = {c.b2}'d0; end
       else begin sfc[i] = sfc_inc; ovf[i] = ovf_n; m[i] = m_n; end
       if (~rst & last) frame_r[i * {WD} +: {WD}] = ovf_n ? {{1'b1, m_wide}} : {{1'b0, sfc_wide}};"""
+    elif c.is_msb:
+        SB = c.ml_bits
+        regs = f"""  reg [{SB - 1}:0] sfc [0:{N - 1}];
+  reg [{SB - 1}:0] sfc_n;
+  reg [{WD - 1}:0] w_n;"""
+        count = f"""      sfc_n = (s && sfc[i] != {SB}'d{c.ml_max}) ? sfc[i] + {SB}'d1 : sfc[i];
+      w_n = {WD}'d0;
+{_msb_scan("sfc_n", SB, WD, "      ", "w_n")}      if (rst) sfc[i] = {SB}'d0;
+      else if (last) sfc[i] = sfc_n - ((w_n == {WD}'d0) ? {SB}'d0 : ({SB}'d1 << (w_n - {WD}'d1)));
+      else sfc[i] = sfc_n;
+      if (~rst & last) frame_r[i * {WD} +: {WD}] = w_n;"""
     else:
         SB = c.ml_bits
         regs = f"""  reg [{SB - 1}:0] sfc [0:{N - 1}];
