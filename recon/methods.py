@@ -36,22 +36,33 @@ def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSetting
     return tfi(light, words != 0, config.threshold / DESIGN_ELECTRONS, settings.radius, settings.search)
 
 
+def _net_frames(words, config: SensorConfig, settings: ReconSettings, progress: bool,
+                out: np.ndarray) -> np.ndarray:
+    from .net.infer import reconstruct_net
+    return reconstruct_net(words, config, device=settings.device, progress=progress, out=out)
+
+
 @dataclasses.dataclass(frozen=True)
 class Method:
-    """A reconstruction method: a function of a (K, P) block of words -> (K, P) light."""
+    """A reconstruction method: a function of a (K, P) block of words -> (K, P) light
+    (``block``, methods that work pixel by pixel along time), or of the whole
+    (K, H, W) stream (``frames``, spatial methods that bound their memory themselves)."""
 
     name: str
     summary: str
-    block: Callable[[torch.Tensor, SensorConfig, ReconSettings], torch.Tensor]
+    block: Callable[[torch.Tensor, SensorConfig, ReconSettings], torch.Tensor] | None
     options: tuple[str, ...]        # ReconSettings fields the method uses
+    frames: Callable | None = None
 
 
-#: name -> method; the learned model (``net``) is added by its own module later.
+#: name -> method. ``net`` ignores ``window``: it sees the span its sizes fix (61 readouts).
 METHODS: dict[str, Method] = {
     "tfp": Method("tfp", "mean decoded light over the window (spike-firing rate)", _tfp_block,
                   ("window", "estimator", "chunk_elements", "device", "dtype")),
     "tfi": Method("tfi", "decoded spikes over the spike interval around each readout", _tfi_block,
                   ("window", "estimator", "search", "chunk_elements", "device", "dtype")),
+    "net": Method("net", "the paper's network (section 5) with the shipped weights; sees 61 readouts",
+                  None, ("device",), frames=_net_frames),
 }
 
 
@@ -92,6 +103,8 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
         raise InputError(f"out must be float32 {(K, H, W)}, not {out.dtype} {out.shape}")
     if out.size == 0:
         return out
+    if spec.frames is not None:
+        return spec.frames(words, config, settings, progress, out)
     flat = words.reshape(K, H * W)
     out_flat = out.reshape(K, H * W)
     step = max(1, settings.block_elements() // K)

@@ -90,7 +90,7 @@ def test_stiff_streams_are_finite_without_warnings(te_weights, name):
 def test_weights_for_another_configuration_are_refused(te_weights):
     with pytest.raises(InputError, match="trained for.*te-.*the stream is ml-"):
         reconstruct_net(np.zeros((2, 3, 3), np.uint8), SensorConfig(mode="ml"), weights=te_weights)
-    with pytest.raises(InputError, match="none of them"):
+    with pytest.raises(InputError, match="none of the presets"):
         weights_path(SensorConfig(b1=3))
 
 
@@ -99,3 +99,32 @@ def test_not_a_weights_file_is_refused(tmp_path):
     bad.write_bytes(b"not a torch file")
     with pytest.raises(InputError, match="not a tespike weights file"):
         load_weights(bad)
+
+
+# -- the shipped weights, through the command line ---------------------------------------------
+from tests.cli import assert_refused, run_tespike  # noqa: E402
+
+
+@pytest.mark.parametrize("preset", ["te", "ml", "ml-msb"])
+def test_shipped_weights_match_their_preset(preset):
+    config = SensorConfig.preset(preset)
+    model, trained_for, meta = load_weights(weights_path(config))
+    assert trained_for == config and meta["steps"] > 0 and "tespike train" in meta["command"]
+
+
+def test_cli_reconstruct_net(tmp_path):
+    from golden.io import save_stream
+    config = SensorConfig()
+    light = np.random.default_rng(4).uniform(0.001, 0.5, (5, 9, 11)).astype(np.float32)
+    save_stream(tmp_path / "S.npz", simulate_scene(config, light, seed=1), config)
+    result = run_tespike("reconstruct", "--stream", tmp_path / "S.npz", "--method", "net", "--out", tmp_path / "R.npy")
+    assert result.returncode == 0, result.stderr
+    images = np.load(tmp_path / "R.npy")
+    assert images.shape == (5, 9, 11) and images.dtype == np.float32 and np.isfinite(images).all()
+    other = SensorConfig(b1=3, b2=3)
+    save_stream(tmp_path / "O.npz", np.zeros((2, 3, 3), np.uint8), other)
+    assert_refused(run_tespike("reconstruct", "--stream", tmp_path / "O.npz", "--method", "net",
+                               "--out", tmp_path / "O.npy"), "none of the presets")
+    assert not (tmp_path / "O.npy").exists()
+    assert_refused(run_tespike("reconstruct", "--stream", tmp_path / "S.npz", "--method", "net", "--window", "5",
+                               "--out", tmp_path / "W.npy"), "--window")

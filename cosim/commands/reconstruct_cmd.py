@@ -1,9 +1,8 @@
-"""``tespike reconstruct``: a stream S.npz to reconstructed light R.npy (training-free methods)."""
+"""``tespike reconstruct``: a stream S.npz to reconstructed light R.npy (TFP, TFI, the network)."""
 
-HELP = "reconstruct light images R.npy from a TE or ML stream S.npz (tfp, tfi)"
+HELP = "reconstruct light images R.npy from a TE or ML stream S.npz (tfp, tfi, net)"
 
-#: Offered here; the learned model ('net') joins when its weights ship.
-METHOD_CHOICES = ("tfp", "tfi")
+METHOD_CHOICES = ("tfp", "tfi", "net")
 
 #: Most torch CPU threads ``--threads`` accepts.
 MAX_THREADS = 256
@@ -12,9 +11,11 @@ MAX_THREADS = 256
 def add_arguments(parser):
     parser.add_argument("--stream", required=True, help="S.npz: readout words and the full config")
     parser.add_argument("--method", required=True,
-                        help="tfp (mean decoded light over the window) or tfi (spike interval)")
+                        help="tfp (mean decoded light over the window), tfi (spike interval) or net "
+                             "(the paper's network, shipped weights for the te, ml and ml-msb presets)")
     parser.add_argument("--out", required=True, help="R.npy to write: float32 (K, H, W) light, I = 1 is 42000 e-")
-    parser.add_argument("--window", type=int, default=9, help="readouts per window, odd (default 9, paper 6.4)")
+    parser.add_argument("--window", type=int, default=None,
+                        help="tfp/tfi: readouts per window, odd (default 9, paper 6.4); net sees 61 readouts")
     parser.add_argument("--device", default="cpu", help="torch device (default cpu)")
     parser.add_argument("--search", choices=("stream", "window"), default="stream",
                         help="tfi only: look for the spike interval in the whole stream (default) or the window")
@@ -31,14 +32,21 @@ def run(args) -> int:
     # every check that needs no torch comes first, so a refusal is quick
     if args.method not in METHOD_CHOICES:
         raise InputError(f"unknown method {args.method!r} (offered: {', '.join(METHOD_CHOICES)})")
-    if args.window < 1 or args.window % 2 == 0:
-        raise InputError(f"--window {args.window}: window = {args.window} must be an odd integer >= 1")
+    if args.method == "net" and args.window is not None:
+        raise InputError(f"--window applies to methods 'tfp' and 'tfi'; 'net' sees the 61 readouts it was "
+                         "trained on")
+    window = 9 if args.window is None else args.window
+    if window < 1 or window % 2 == 0:
+        raise InputError(f"--window {window}: window = {window} must be an odd integer >= 1")
     if args.threads is not None and not 1 <= args.threads <= MAX_THREADS:
         raise InputError(f"--threads {args.threads}: must be in 1..{MAX_THREADS}")
     if args.method != "tfi" and args.search != "stream":
         raise InputError(f"--search applies to method 'tfi' only, not {args.method!r}")
     check_outputs({"--out": args.out}, {"--stream": args.stream})
     words, config = load_stream(args.stream, memory_map=True)     # stays on disk
+    if args.method == "net":
+        from recon.net.infer import load_weights, weights_path
+        load_weights(weights_path(config))      # refuse a configuration without weights before writing
 
     import torch
 
@@ -53,7 +61,7 @@ def run(args) -> int:
         # R.npy is filled block by block through a memory map of the output file,
         # so neither the words nor the images need to fit in memory
         images = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(K, H, W))
-        reconstruct(words, config, args.method, window=args.window, device=args.device,
+        reconstruct(words, config, args.method, window=window, device=args.device,
                     progress=progress_wanted(args), out=images, **options)
         images.flush()
         del images

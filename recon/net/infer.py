@@ -40,9 +40,8 @@ def weights_path(config: SensorConfig) -> Path:
             if not path.is_file():
                 raise InputError(f"no network weights shipped for preset {name!r} (looked for {str(path)!r})")
             return path
-    shipped = ", ".join(f"{name} ({SensorConfig(**keys)})" for name, keys in PRESETS.items())
-    raise InputError(f"the network's weights were trained for the presets {shipped}; "
-                     f"this stream's configuration {config} is none of them "
+    raise InputError(f"the stream's configuration {config} is none of the presets "
+                     f"{', '.join(PRESETS)} the network's weights were trained for "
                      "(train weights for it with 'tespike train --config C.json')")
 
 
