@@ -26,7 +26,6 @@ def add_arguments(parser):
     parser.add_argument("--cache", default=None, help="folder of the simulated training data "
                                                       "(default $TESPIKE_CACHE/net-data or ~/.cache/tespike/net-data)")
     parser.add_argument("--resume", action="store_true", help="continue from OUT.run/checkpoint.pt")
-    parser.add_argument("--progress", action="store_true", help="draw a progress bar even when stderr is not a terminal")
 
 
 def run(args) -> int:
@@ -35,7 +34,9 @@ def run(args) -> int:
     from pathlib import Path
 
     from golden.config import load_config
+    from cosim.cli import progress_wanted, report
     from golden.errors import InputError
+    from golden.paths import check_output_dir, check_outputs
 
     config = load_config(args.config)
     if args.steps is None and args.minutes is None:
@@ -46,8 +47,9 @@ def run(args) -> int:
         if not Path(folder).is_dir():
             raise InputError(f"--hdr {folder!r}: not a folder of .exr/.hdr frames")
     out = Path(args.out)
-    if not out.parent.is_dir():
-        raise InputError(f"cannot write {args.out!r}: directory {str(out.parent)!r} does not exist")
+    config_input = {} if args.config in ("te", "ml", "ml-msb") else {"--config": args.config}
+    check_outputs({"--out": args.out}, config_input)
+    check_output_dir(out.with_suffix(".run"), "--out's run folder")
 
     from recon.net.train import TrainOptions, train
 
@@ -58,7 +60,6 @@ def run(args) -> int:
                            threads=args.threads, recipe={"sequences": args.sequences, "folders": tuple(args.hdr),
                                    "downscale": args.downscale})
     command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
-    train(options, out, resume=args.resume, cache=args.cache,
-          progress=True if args.progress else None, command=command)
-    print(f"wrote {out} (run log, loss curve and checkpoint in {out.with_suffix('.run')})")
+    train(options, out, resume=args.resume, cache=args.cache, progress=progress_wanted(args), command=command)
+    report(args, f"wrote {out} (run log, loss curve and checkpoint in {out.with_suffix('.run')})")
     return 0
