@@ -23,7 +23,12 @@ Run from the repository root:
 run: ``O<n>`` is the C++ optimisation (``cxx_opt``) of the backend's default
 view (``cosim.verilator.shared_pixel_view``), ``plain-O<n>`` the Verilog
 exactly as generated, anything after ``:`` more Verilator options (space
-separated), e.g. ``O1:-fno-dfg`` or ``O1:-MAKEFLAGS OPT_SLOW=-O0``.
+separated), e.g. ``O1:-fno-dfg``, ``O1:--threads 2`` or ``O1:-MAKEFLAGS OPT_SLOW=-O0``;
+``default`` is the Verilog exactly as generated built with Verilator's default
+options only (``--cc --exe --build``) and the same plain C++ harness. The loop
+model runs on the same stimulus, built like the backend (and, with ``default``
+among the variants, with default options too); the last lines print each build's
+cycles/s as a ratio to the loop model's in the same run.
 """
 
 from __future__ import annotations
@@ -69,6 +74,22 @@ def parse_variant(text: str) -> tuple[bool, str, tuple[str, ...]]:
     return not plain, "-" + opt.removeprefix("plain-"), tuple(extra.split())
 
 
+def build_default_options(verilog: str, top: str, charge_bits: int, frame_bits: int, tmp) -> Path:
+    """Build with Verilator's default options only (``--cc --exe --build``: its default inlining,
+    no ``-O3``, make's default ``OPT_FAST``) and the same plain C++ harness: what a user who
+    takes the Verilog into their own Verilator flow gets. Returns the executable."""
+    import cosim.verilator as cv
+
+    work = Path(tmp) / "default-options"
+    work.mkdir()
+    (work / "array.v").write_text(verilog)
+    (work / "harness.cpp").write_text(cv.harness_cpp(top, charge_bits, frame_bits))
+    subprocess.run(["verilator", "--cc", "--exe", "--build", "-j", str(cv.build_jobs()),
+                    "--top-module", top, "--prefix", "Varray", "-o", "sim", "-Mdir", "obj",
+                    "array.v", "harness.cpp"], cwd=work, check=True, capture_output=True)
+    return work / "obj" / "sim"
+
+
 def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False,
                     variant: str = "O1"):
     import cosim.verilator as cv
@@ -81,16 +102,21 @@ def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False,
         verilog = spec_model_verilog(config, side, side, style="loop")
     else:
         verilog = array_verilog(config, side, side)
-    shared, cxx_opt, extra = parse_variant(variant)
+    default = variant == "default"
+    shared, cxx_opt, extra = parse_variant("plain-O1" if default else variant)
     if shared and not loop_model:
         verilog = cv.shared_pixel_view(verilog, "te_pixel")
     gen = time.perf_counter() - start
     N = side * side
     with tempfile.TemporaryDirectory(prefix="bench-verilator-") as tmp:
         cpu0, start = children_cpu(), time.perf_counter()
-        exe = cv.build(verilog, "te_pixel_array", N * config.input_bits, N * config.word_bits,
-                       build_dir=tmp, progress=True, inline=inline, cxx_opt=cxx_opt,
-                       extra_flags=extra)
+        if default:
+            exe = build_default_options(verilog, "te_pixel_array", N * config.input_bits,
+                                        N * config.word_bits, tmp)
+        else:
+            exe = cv.build(verilog, "te_pixel_array", N * config.input_bits, N * config.word_bits,
+                           build_dir=tmp, progress=True, inline=inline, cxx_opt=cxx_opt,
+                           extra_flags=extra)
         build_wall, build_cpu = time.perf_counter() - start, children_cpu() - cpu0
         T, L = stim.shape[0], config.clocks_per_readout
         stim_path, cap_path = Path(tmp) / "stim.bin", Path(tmp) / "cap.bin"
@@ -114,6 +140,22 @@ def bench_icarus(config, side, stim):
     start = time.perf_counter()
     words = run_icarus(config, stim, verilog=verilog)
     return dict(rate=stim.shape[0] / (time.perf_counter() - start), words=words)
+
+
+def ratio_lines(rows) -> list[str]:
+    """Cycles/s of each generated-array build over the loop model's at the same size
+    (the "default" build against the loop model's "default" build, every other against "loop model")."""
+    loops = {(name, side): r for name, side, r, _, _ in rows if name.startswith("loop model")}
+    out = []
+    for name, side, r, _, _ in rows:
+        if name.startswith(("loop model", "icarus")):
+            continue
+        loop = loops.get(("loop model default" if name == "default" else "loop model", side))
+        if loop is not None:
+            out.append(f"{name:>24} {side * side:7d} pixels: {r['rate'] / loop['rate']:.2f} of the loop "
+                       f"model's cycles/s ({r['rate_cpu'] / loop['rate_cpu']:.2f} per CPU-second), "
+                       f"build {r['build_wall']:.1f} s wall / {r['build_cpu']:.1f} CPU-s")
+    return out
 
 
 def main(argv=None) -> int:
@@ -140,18 +182,24 @@ def main(argv=None) -> int:
     config = SensorConfig()
     rng = np.random.default_rng(2024)
     rows = []
+    stimuli = {}
+    for side in sorted(set(args.sizes) | set(args.loop_sizes)):
+        stimuli[side] = stimulus(config, side, args.readouts, rng)
     for side in args.sizes:
-        stim = stimulus(config, side, args.readouts, rng)
+        stim = stimuli[side]
         base, golden_words = golden_rate(config, stim)
         for variant in args.variants:
             r = bench_verilator(config, side, stim, inline=args.inline, variant=variant)
             name = "verilator" if variant == "O1" else variant
             rows.append((name, side, r, base, np.array_equal(r["words"], golden_words)))
+    loop_variants = sorted({"default" if v == "default" else "O1" for v in args.variants})
     for side in args.loop_sizes:
-        stim = stimulus(config, side, args.readouts, rng)
+        stim = stimuli[side]
         base, golden_words = golden_rate(config, stim)
-        r = bench_verilator(config, side, stim, inline=args.inline, loop_model=True)
-        rows.append(("loop model", side, r, base, np.array_equal(r["words"], golden_words)))
+        for variant in loop_variants:
+            r = bench_verilator(config, side, stim, inline=args.inline, loop_model=True, variant=variant)
+            name = "loop model" if variant == "O1" else f"loop model {variant}"
+            rows.append((name, side, r, base, np.array_equal(r["words"], golden_words)))
     for side in args.icarus_sizes:
         stim = stimulus(config, side, args.icarus_readouts, rng)
         base, golden_words = golden_rate(config, stim)
@@ -169,6 +217,10 @@ def main(argv=None) -> int:
         cpu_rate = f"{r['rate_cpu']:9.0f}" if "rate_cpu" in r else f"{'':>9}"
         print(f"{name:>24} {side * side:7d} {gen} {build} {r['rate']:9.0f} {cpu_rate} {base:10.0f} "
               f"{r['rate'] / base:8.1f} {str(equal):>5}")
+    ratios = ratio_lines(rows)
+    if ratios:
+        print("\ngenerated array against the loop model of the same ports, same stimulus and options:")
+        print("\n".join(ratios))
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -178,7 +230,7 @@ def main(argv=None) -> int:
         fig, ax = plt.subplots(figsize=(5.5, 3.5))
         names = list(dict.fromkeys(n for n, *_ in rows))
         for name in names:
-            marker = {"loop model": "^", "icarus": "s"}.get(name, "o")
+            marker = "^" if name.startswith("loop model") else {"icarus": "s"}.get(name, "o")
             pts = [(side * side, r["rate"]) for n, side, r, _, _ in rows if n == name]
             if pts:
                 ax.loglog(*zip(*pts), marker=marker, label=name)

@@ -6,10 +6,25 @@ Ports (clock domain ``sync``: ``clk``, synchronous active-high ``rst``):
 * ``frame_valid``: Out(1), high for exactly one clock per readout interval;
 * ``frame``: Out(H*W*Wd), word[k] of pixel (r, c) at ``[(r*W + c)*Wd +: Wd]``.
 
-Latency: the words of interval k are loaded at the edge that processes its
-last pixel clock t = (k+1)L - 1, so ``frame_valid`` and ``frame`` are sampled
-high/valid at the next rising edge (1 clock). With L = 1, ``frame_valid`` is
-high on every clock after the first edge out of reset.
+Structure: every rising edge samples ``charge`` into an input register
+(``charge_sample``, E bits per pixel: the sampled charge of a modelled
+photodiode) and ``rst`` into ``rst_sample``, which drives every pixel's
+``clear``. Each pixel computes its next state from these registers, the timing
+block's registers and its own state: registers only. The edge that samples e[t]
+processes clock t - 1, so pixel clock t is fully processed one edge later (the
+timing block counts in step, see :mod:`rtl.timing`), and a reset clears the
+pixels at the edge after it (that edge would otherwise process the clock the
+reset edge sampled). The pixels' words are combinational from the same registers
+(pixels built with ``word_register=False``) and are on ``frame`` in the clock
+after the edge that sampled the interval's last charge. Why: nothing in a pixel
+depends combinationally on a top-level input, so a cycle-based simulator
+(Verilator) evaluates each pixel once per clock instead of once per input change
+and once more after the edge (docs/outside-simulators.md).
+
+Latency: the words of interval k are on ``frame`` with ``frame_valid`` high
+after the edge that samples its last charge, t = (k+1)L - 1, so they are sampled
+valid at the next rising edge (1 clock), as SPEC section 6 counts it. With L = 1,
+``frame_valid`` is high on every clock after the first edge out of reset.
 
 By default every pixel is a :class:`rtl.pixel.TEPixel` / :class:`MLPixel`
 submodule (the structure a sensor has, and what the Verilog top mirrors);
@@ -20,7 +35,7 @@ Amaranth simulator runs faster (measured on 2 loaded cores: 16 x 16 TE array,
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Signal
+from amaranth.hdl import Module, ResetSignal, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -76,21 +91,30 @@ class PixelArray(wiring.Component):
         cfg = self.config
         m.submodules.timing = timing = ReadoutTiming(cfg)
         m.d.comb += self.frame_valid.eq(timing.frame_valid)
+        e = cfg.input_bits
+        # the input registers: charge, and the reset that clears the pixels one edge later
+        sample = Signal(len(self.charge), name="charge_sample", reset_less=True)
+        clear = Signal(name="rst_sample", reset_less=True)
+        m.d.sync += [sample.eq(self.charge), clear.eq(ResetSignal("sync"))]
         for r in range(self.height):
             for c in range(self.width):
-                charge, word = self.charge_slice(r, c), self.word_slice(r, c)
+                i = r * self.width + c
+                charge, word = sample[i * e:(i + 1) * e], self.word_slice(r, c)
                 if self.flat:
                     name = f"px_{r}_{c}_"
-                    reg = Signal(cfg.word_bits, name=f"{name}word")
+                    shown = Signal(cfg.word_bits, name=f"{name}word")   # named for the waveform
                     if cfg.is_te:
-                        te_pixel_logic(m, cfg, charge, timing.ccc, timing.last, reg, name, named=False)
+                        te_pixel_logic(m, cfg, charge, timing.ccc, timing.last, shown, name,
+                                       word_register=False, named=False, clear=clear)
                     else:
-                        ml_pixel_logic(m, cfg, charge, timing.last, reg, name, named=False)
-                    m.d.comb += word.eq(reg)
+                        ml_pixel_logic(m, cfg, charge, timing.last, shown, name,
+                                       word_register=False, named=False, clear=clear)
+                    m.d.comb += word.eq(shown)
                 else:
-                    pixel = pixel_class(cfg)(cfg)
+                    pixel = pixel_class(cfg)(cfg, word_register=False)
                     m.submodules[f"px_{r}_{c}"] = pixel
-                    m.d.comb += [pixel.charge.eq(charge), pixel.last.eq(timing.last), word.eq(pixel.word)]
+                    m.d.comb += [pixel.charge.eq(charge), pixel.last.eq(timing.last), pixel.clear.eq(clear),
+                                 word.eq(pixel.word)]
                     if cfg.is_te:
                         m.d.comb += pixel.ccc.eq(timing.ccc)
         return m

@@ -23,10 +23,18 @@ Per pixel clock (one rising edge of ``sync``):
   shared CCC value;
 * ML: a saturating ml_bits spike counter;
 * on the last clock of a readout interval (``last``) the word register loads
-  the word of SPEC section 4 computed from the state *after* this clock, and
-  SFC and flag restart from zero; ``acc`` keeps its residual. With the ML msb
+  the word of SPEC section 4 computed from the state *after* this clock (or,
+  built with ``word_register=False`` as the array does, ``word`` shows it
+  combinationally during that clock), and SFC and flag restart from zero;
+  ``acc`` keeps its residual. With the ML msb
   readout the word is the index of the count's most significant bit (a priority
   encoder) and the counter keeps the count minus that power of two.
+
+Reset: every state register is ``reset_less`` and cleared by the pixel's own
+``clear`` input (synchronous), not by the clock domain's reset. The array drives
+``clear`` from a register (``rst`` sampled one edge earlier, see
+:mod:`rtl.array`), so no pixel logic depends combinationally on an input port and
+a cycle-based simulator evaluates each pixel once per clock.
 
 The latched CCC register is not cleared at readout: the word shows it only
 while the flag is set, and a set flag means it was written in this interval,
@@ -62,49 +70,63 @@ def _value(m: Module, expr, width: int, name: str, named: bool):
     return signal
 
 
-def _integrator(m: Module, config: SensorConfig, charge, name: str, named: bool):
+def _state(width: int, name: str) -> Signal:
+    """A pixel state register: reset only through the pixel's ``clear`` input (module docstring)."""
+    return Signal(width, name=name, reset_less=True)
+
+
+def _integrator(m: Module, config: SensorConfig, charge, clear, name: str, named: bool):
     """Charge accumulator with threshold comparator and subtractive reset; returns the spike."""
-    acc = Signal(config.acc_bits, name=f"{name}acc")
+    acc = _state(config.acc_bits, f"{name}acc")
     width = max(config.acc_bits, config.input_bits) + 1        # acc + charge never wraps
     q = _value(m, acc + charge, width, f"{name}q", named)
     spike = Signal(name=f"{name}spike")
     m.d.comb += spike.eq(q >= Const(config.threshold, width))
     rest = _value(m, q - Mux(spike, Const(config.threshold, width), Const(0, width)), width,
                   f"{name}rest", named)
-    m.d.sync += acc.eq(Mux(rest > Const(config.acc_max, width),
-                           Const(config.acc_max, config.acc_bits), rest[:config.acc_bits]))
+    with m.If(clear):
+        m.d.sync += acc.eq(0)
+    with m.Else():
+        m.d.sync += acc.eq(Mux(rest > Const(config.acc_max, width),
+                               Const(config.acc_max, config.acc_bits), rest[:config.acc_bits]))
     return spike
 
 
-def _drive_word(m: Module, word, value, last, registered: bool) -> None:
-    """Registered: ``word`` loads ``value`` at the edge of the ``last`` clock and holds it.
-    Not registered: ``word`` shows ``value`` combinationally (meaningful only while ``last``)."""
+def _drive_word(m: Module, word, value, last, clear, registered: bool, name: str) -> None:
+    """Registered: ``word`` shows a register that loads ``value`` at the edge of the ``last``
+    clock and holds it. Not registered: ``word`` shows ``value`` combinationally (meaningful
+    only while ``last``)."""
     if registered:
-        with m.If(last):
-            m.d.sync += word.eq(value)
+        register = _state(len(word), f"{name}word_reg")
+        with m.If(clear):
+            m.d.sync += register.eq(0)
+        with m.Elif(last):
+            m.d.sync += register.eq(value)
+        m.d.comb += word.eq(register)
     else:
         m.d.comb += word.eq(value)
 
 
 def te_pixel_logic(m: Module, config: SensorConfig, charge, ccc, last, word, name: str = "",
-                   word_register: bool = True, named: bool = True) -> None:
-    """Add one TE pixel (SPEC sections 3-4) driving ``word`` to ``m``."""
+                   word_register: bool = True, named: bool = True, clear=Const(0, 1)) -> None:
+    """Add one TE pixel (SPEC sections 3-4) driving ``word`` to ``m``; ``clear`` zeroes its state."""
     b1, b2, d = config.b1, config.b2, config.d
-    spike = _integrator(m, config, charge, name, named)
-    sfc = Signal(b1, name=f"{name}sfc")
-    ovf = Signal(name=f"{name}ovf")
-    mreg = Signal(b2, name=f"{name}m")
+    spike = _integrator(m, config, charge, clear, name, named)
+    sfc = _state(b1, f"{name}sfc")
+    ovf = _state(1, f"{name}ovf")
+    mreg = _state(b2, f"{name}m")
     total = _value(m, sfc + (spike & ~ovf), b1 + 1, f"{name}sfc_sum", named)   # bit b1: the carry
     ovf_next = _value(m, ovf | total[b1], 1, f"{name}ovf_next", named)
     m_next = _value(m, Mux(total[b1], ccc, mreg), b2, f"{name}m_next", named)
     flagged = Cat(m_next, Const(0, d - b2), Const(1, 1))     # (1 << d) | m
     counted = Cat(total[:b1], Const(0, d - b1), Const(0, 1))  # sfc
-    m.d.sync += mreg.eq(m_next)
-    _drive_word(m, word, Mux(ovf_next, flagged, counted), last, word_register)
-    with m.If(last):
-        m.d.sync += [sfc.eq(0), ovf.eq(0)]
+    _drive_word(m, word, Mux(ovf_next, flagged, counted), last, clear, word_register, name)
+    with m.If(clear):
+        m.d.sync += [sfc.eq(0), ovf.eq(0), mreg.eq(0)]
+    with m.Elif(last):
+        m.d.sync += [sfc.eq(0), ovf.eq(0), mreg.eq(m_next)]
     with m.Else():
-        m.d.sync += [sfc.eq(total[:b1]), ovf.eq(ovf_next)]
+        m.d.sync += [sfc.eq(total[:b1]), ovf.eq(ovf_next), mreg.eq(m_next)]
 
 
 def _msb_readout(m: Module, count, bits: int, name: str, named: bool):
@@ -126,24 +148,27 @@ def _msb_readout(m: Module, count, bits: int, name: str, named: bool):
 
 
 def ml_pixel_logic(m: Module, config: SensorConfig, charge, last, word, name: str = "",
-                   word_register: bool = True, named: bool = True) -> None:
+                   word_register: bool = True, named: bool = True, clear=Const(0, 1)) -> None:
     """Add one ML pixel (saturating ml_bits spike counter) driving ``word`` to ``m``.
 
     Readout ``"count"``: the word is the count and the counter restarts from 0.
     Readout ``"msb"``: the word is bit_length of the count (:func:`_msb_readout`) and
     the counter keeps the remainder, counting on (saturating) in the next interval.
+    ``clear`` zeroes the pixel's state.
     """
     bits = config.ml_bits
-    spike = _integrator(m, config, charge, name, named)
-    count = Signal(bits, name=f"{name}count")
+    spike = _integrator(m, config, charge, clear, name, named)
+    count = _state(bits, f"{name}count")
     full = count == Const(config.ml_max, bits)
     count_next = _value(m, Mux(spike & ~full, (count + 1)[:bits], count), bits, f"{name}count_next", named)
     if config.is_msb:
         value, after_readout = _msb_readout(m, count_next, bits, name, named)
     else:
         value, after_readout = count_next, Const(0, bits)
-    _drive_word(m, word, value, last, word_register)
-    with m.If(last):
+    _drive_word(m, word, value, last, clear, word_register, name)
+    with m.If(clear):
+        m.d.sync += count.eq(0)
+    with m.Elif(last):
         m.d.sync += count.eq(after_readout)
     with m.Else():
         m.d.sync += count.eq(count_next)
@@ -154,13 +179,15 @@ class TEPixel(wiring.Component):
 
     Ports: ``charge`` (electrons this pixel clock), ``ccc`` (shared clock cycle
     counter, 1..alpha), ``last`` (S_r: last pixel clock of the readout
-    interval), ``word`` (registered readout word, loaded at the edge that
+    interval), ``clear`` (synchronous clear of all pixel state, see the module
+    docstring), ``word`` (registered readout word, loaded at the edge that
     processes the ``last`` clock).
 
     ``word_register=False`` builds the pixel without its readout word register
     (``word`` is then the combinational word of the ``last`` clock, to be sampled
-    at that edge): the variant the hardware-cost table uses to show the cost of
-    the buffer. Arrays always use the registered form.
+    at that edge). :class:`rtl.array.PixelArray` uses this form behind its input
+    register (the word is then valid for the clock after the edge that sampled the
+    interval's last charge, see there); the hardware-cost table shows both forms.
     """
 
     def __init__(self, config: SensorConfig, *, word_register: bool = True):
@@ -170,13 +197,14 @@ class TEPixel(wiring.Component):
             "charge": In(self.config.input_bits),
             "ccc": In(self.config.b2),
             "last": In(1),
+            "clear": In(1),
             "word": Out(self.config.word_bits),
         })
 
     def elaborate(self, platform):
         m = Module()
         te_pixel_logic(m, self.config, self.charge, self.ccc, self.last, self.word,
-                       word_register=self.word_register)
+                       word_register=self.word_register, clear=self.clear)
         return m
 
 
@@ -194,13 +222,14 @@ class MLPixel(wiring.Component):
         super().__init__({
             "charge": In(self.config.input_bits),
             "last": In(1),
+            "clear": In(1),
             "word": Out(self.config.word_bits),
         })
 
     def elaborate(self, platform):
         m = Module()
         ml_pixel_logic(m, self.config, self.charge, self.last, self.word,
-                       word_register=self.word_register)
+                       word_register=self.word_register, clear=self.clear)
         return m
 
 

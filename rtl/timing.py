@@ -5,12 +5,16 @@
   readout interval, running 1..alpha and back to 1 after the interval;
 * ``last`` (S_r) is high on the last pixel clock of every readout interval:
   divider at F - 1 and CCC at alpha;
-* ``frame_valid`` is ``last`` delayed by one clock: the pixels' word registers
-  load at the edge that processes the last clock, so their words are on the
-  frame output exactly while ``frame_valid`` is high (latency 1 clock).
+* ``frame_valid`` is ``last`` once the first clock has been sampled
+  (``primed``).
 
-After a synchronous reset the divider is 0 and the CCC is 1, so the first
-rising edge with ``rst`` low processes pixel clock t = 0.
+The counters describe the pixel clock whose charge the array's input register
+holds, which the next rising edge processes (see :mod:`rtl.array`). A
+synchronous reset puts them at clock -1, the last clock of an interval
+(divider F - 1, CCC alpha) with an empty input register, and clears
+``primed``: the first rising edge with ``rst`` low processes that empty clock
+(no charge, nothing to count) and samples e[0], so t = 0 is that edge, and
+no frame is shown for the empty clock.
 """
 
 from __future__ import annotations
@@ -28,7 +32,8 @@ class ReadoutTiming(wiring.Component):
 
     Ports: ``ccc`` (b2 bits, TE only: an ML pixel never uses it, so the ML
     timing keeps the counter internal), ``last`` (S_r strobe, combinational
-    from the counters), ``frame_valid`` (``last`` registered).
+    from the counters), ``frame_valid`` (``last`` after the first clock out of
+    reset, combinational from registers).
     """
 
     def __init__(self, config: SensorConfig):
@@ -44,11 +49,11 @@ class ReadoutTiming(wiring.Component):
         m = Module()
         cfg = self.config
         F, alpha, b2 = cfg.clocks_per_tick, cfg.alpha, cfg.b2
-        cycle = Signal(b2, init=1)          # the CCC register
+        cycle = Signal(b2, init=alpha)      # the CCC register; reset: clock -1, the interval's last
         if F == 1:
             tick = Const(1, 1)
         else:
-            divider = Signal(range(F))
+            divider = Signal(range(F), init=F - 1)
             tick = Signal()
             m.d.comb += tick.eq(divider == Const(F - 1, len(divider)))
             m.d.sync += divider.eq(Mux(tick, Const(0, len(divider)), (divider + 1)[:len(divider)]))
@@ -58,7 +63,9 @@ class ReadoutTiming(wiring.Component):
             with m.If(tick):
                 m.d.sync += cycle.eq(Mux(at_alpha, Const(1, b2), (cycle + 1)[:b2]))
         m.d.comb += self.last.eq(tick & at_alpha)
-        m.d.sync += self.frame_valid.eq(self.last)
+        primed = Signal()                   # low only for the empty clock -1 after reset
+        m.d.sync += primed.eq(1)
+        m.d.comb += self.frame_valid.eq(self.last & primed)
         if cfg.is_te:
             m.d.comb += self.ccc.eq(cycle)
         return m

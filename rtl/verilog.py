@@ -2,11 +2,12 @@
 
 The pixel and the timing block are generated once each from their Amaranth
 components (``amaranth.back.verilog.convert``); the array top is a small
-hand-written structural module that instantiates the timing block once and the
-pixel module H x W times in nested ``generate`` loops over rows and columns. Its
-text does not grow with the array, so a 128 x 128 array is generated as fast as
-a 2 x 2 one, and the same pixel module is what :func:`pixel_verilog` hands to
-synthesis.
+hand-written structural module, the Verilog form of :class:`rtl.array.PixelArray`:
+the input register ``charge_sample``, the timing block once and the pixel module
+H x W times in nested ``generate`` loops over rows and columns. Its text does not
+grow with the array, so a 128 x 128 array is generated as fast as a 2 x 2 one. The
+array's pixel module is the pixel without its word register
+(``pixel_verilog(config, word_register=False)``, see :mod:`rtl.array`).
 
 Lint: Amaranth's RTLIL backend deliberately trims the zero extension of
 unsigned operands (``a + b`` with a 9-bit ``a`` and a 16-bit ``b`` into a
@@ -135,8 +136,8 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
 
     def pixel(r, c, indent):
         index = f"({r}*W + {c})"
-        return (f"{indent}{names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge[{index}*E +: E]), "
-                f"{ccc_pin}.last(last),\n{indent}  .word(frame[{index}*WD +: WD]));\n")
+        return (f"{indent}{names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge_sample[{index}*E +: E]), "
+                f"{ccc_pin}.last(last),\n{indent}  .clear(rst_sample), .word(frame[{index}*WD +: WD]));\n")
 
     loops = _loop("r", height, "H", "row",
                   lambda r, ind: _loop("c", width, "W", "col", lambda c, i: pixel(r, c, i), ind), "    ")
@@ -147,6 +148,8 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
 // {names['top']}: {height} x {width} {'time-encoding' if te else 'multi-level counter'} pixels and one
 // readout timing block (tespike, SPEC section 6). Latency: frame_valid and frame
 // are valid one clock after the last pixel clock of each readout interval.
+// Every rising edge samples charge and rst into charge_sample and rst_sample; the
+// pixels compute from these registers and their own state (docs/rtl.md).
 // config: {json.dumps(config.to_dict())}
 module {names['top']} (
   input  wire clk,                           // pixel clock, rising edge
@@ -160,6 +163,14 @@ module {names['top']} (
   localparam integer E = {e};
   localparam integer WD = {wd};
 {ccc_wire}  wire last;  // S_r: last pixel clock of the readout interval
+  // The input registers: the pixels compute from these, never from an input port.
+  reg [{height * width * e - 1}:0] charge_sample = {height * width * e}'d0;
+  reg rst_sample = 1'b0;  // clears the pixels at the edge after a reset edge
+
+  always @(posedge clk) begin
+    charge_sample <= charge;
+    rst_sample <= rst;
+  end
 
   {names['timing']} timing (.clk(clk), .rst(rst), {ccc_pin}.last(last), .frame_valid(frame_valid));
 
@@ -171,11 +182,12 @@ endmodule
 
 
 def array_verilog(config: SensorConfig, height: int, width: int) -> str:
-    """Verilog text of an H x W array: top ``te_pixel_array`` / ``ml_pixel_array``, the
-    pixel module (instantiated H x W times) and the timing module (once)."""
+    """Verilog text of an H x W array: top ``te_pixel_array`` / ``ml_pixel_array`` with the
+    input register, the pixel module (instantiated H x W times; its word is combinational
+    from the input register and its state, see :mod:`rtl.array`) and the timing module (once)."""
     config = _check(config)
     top = top_verilog(config, height, width)       # refuses a bad size before any conversion
     names = module_names(config)
-    pixel, timing = _convert((pixel_class(config)(config), names["pixel"]),
+    pixel, timing = _convert((pixel_class(config)(config, word_register=False), names["pixel"]),
                              (ReadoutTiming(config), names["timing"]))
     return "\n".join([top, pixel, timing])

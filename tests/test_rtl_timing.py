@@ -12,6 +12,9 @@ from tests.configs import EDGE_CONFIGS
 def run_timing(config, clocks, reset_at=None):
     """(ccc, last, frame_valid) as sampled by each edge t = 0..clocks-1.
 
+    The counters describe the clock the array's input register holds: sampled by
+    edge t, they show clock t - 1 (clock -1, the last of an interval, at edge 0).
+
     With ``reset_at = r``, ``rst`` is high for the edge r and the count restarts at the next edge.
     ``ccc`` is None for ML (the ML timing has no CCC port).
     """
@@ -46,13 +49,13 @@ def test_timing_follows_spec_clocks(config):
     clocks = 3 * L + 2 if L > 1 else 6
     seen = run_timing(config, clocks)
     for t, (ccc, last, valid) in enumerate(seen):
-        c, s_r = expected(config, t)
+        c, s_r = expected(config, t - 1)
         assert last == s_r, t
         if config.is_te:
             assert ccc == c, t
         # frame_valid seen by edge t is the S_r strobe of clock t - 1 (latency 1)
         assert valid == (expected(config, t - 1)[1] if t > 0 else 0), t
-    assert sum(last for _, last, _ in seen) == clocks // L
+    assert sum(last for _, last, _ in seen) == (clocks - 1) // L + 1
 
 
 def test_timing_restarts_after_synchronous_reset():
@@ -61,7 +64,7 @@ def test_timing_restarts_after_synchronous_reset():
     seen = run_timing(config, 40, reset_at=r)
     for t in range(r + 1, 40):
         ccc, last, _ = seen[t]
-        assert (ccc, last) == expected(config, t - r - 1), t
+        assert (ccc, last) == expected(config, t - r - 2), t
     assert seen[r + 1][2] == 0                                # frame_valid cleared by the reset
     assert seen[r][0] != 1                                    # (the count was really mid-way)
 

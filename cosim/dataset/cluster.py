@@ -4,8 +4,8 @@
 finish. ``workers=1`` (the default) runs them one after another in this
 process with Dask's synchronous scheduler: no server, no extra process.
 ``workers=N > 1`` starts a :class:`distributed.LocalCluster` of N worker
-processes, one thread each, listening on 127.0.0.1 only, and stops it at the
-end. ``scheduler=ADDRESS`` (or Dask's own ``scheduler-address`` setting, e.g.
+processes, one thread each, listening on 127.0.0.1 only (their HTTP status
+servers too, on free ports), and stops it at the end. ``scheduler=ADDRESS`` (or Dask's own ``scheduler-address`` setting, e.g.
 ``DASK_SCHEDULER_ADDRESS``) sends the same tasks to a running cluster started
 with ``dask scheduler`` / ``dask worker`` (docs/distributed.md).
 
@@ -65,7 +65,8 @@ class Runner:
         elif self.workers > 1:
             from distributed import Client, LocalCluster
             self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                        host="127.0.0.1", dashboard_address=None,
+                                        host="127.0.0.1", dashboard_address="127.0.0.1:0",
+                                        worker_dashboard_address="127.0.0.1:0",
                                         silence_logs=logging.ERROR)
             self.client = Client(self.cluster)
         return self
