@@ -22,6 +22,7 @@ COMMANDS = {
     "stimulus": "stimulus_cmd",
     "rtl-sim": "rtl_sim_cmd",
     "verilog": "verilog_cmd",
+    "cocotb": "cocotb_cmd",
     "reconstruct": "reconstruct_cmd",
     "evaluate": "evaluate_cmd",
     "demo": "demo_cmd",

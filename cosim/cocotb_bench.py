@@ -1,0 +1,210 @@
+"""cocotb testbench of the generated array Verilog: SPEC section 6 ports only, golden model as scoreboard.
+
+cocotb loads this module inside the simulator (Icarus, Verilator, or any
+simulator cocotb supports). The test :func:`spec_ports_equal_golden` drives
+only ``clk``, ``rst`` and ``charge`` and reads only ``frame_valid`` and
+``frame``, so it checks any Verilog with the ports of SPEC section 6, not only
+the generated one:
+
+1. ``rst`` high for :data:`cosim.outside.RESET_CLOCKS` rising edges;
+2. for pixel clock t = 0, 1, ...: at the falling edge, ``rst`` low and stimulus
+   row t on ``charge``; one simulator step later (the logic has settled) ``frame_valid`` and,
+   when it is high, ``frame`` are sampled: the values the rising edge t sees;
+   then the rising edge;
+3. after the stimulus, zero charge for up to L + 1 clocks until every readout
+   has been seen.
+
+The scoreboard is the literal SPEC rule, :func:`golden.reference.step_reference`,
+on the same stimulus. The test fails, naming what went wrong, on an X or Z on
+``frame_valid`` or on a sampled ``frame``, on a ``frame_valid`` count or latency
+that breaks SPEC section 6 (:func:`cosim.outside.check_captures`: one pulse per
+interval, one fixed latency in 0..L), or on the first word that differs.
+
+Settings come from environment variables, which :mod:`cosim.cocotb_run` (and so
+``tespike cocotb`` and the tests) sets, and which a designer sets by hand in a
+cocotb Makefile flow (docs/outside-simulators.md):
+
+``TESPIKE_CONFIG``
+    a preset name (``te``, ``ml``, ``ml-msb``), a JSON file or JSON text (default ``te``);
+``TESPIKE_HEIGHT``, ``TESPIKE_WIDTH``
+    the array's size (required: the port widths are checked against them);
+``TESPIKE_STIMULUS``
+    an ``E.npy`` file (T, H, W) of electrons per pixel clock; without it
+    :func:`default_stimulus` makes ``TESPIKE_READOUTS`` (default 3) intervals of
+    it from ``TESPIKE_SEED`` (default 0).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from golden.config import SensorConfig, load_config
+from golden.errors import InputError
+from golden.io import check_stimulus, load_stimulus
+from golden.reference import step_reference
+
+from .outside import RESET_CLOCKS, check_captures, pack_rows, top_module, unpack_rows, words_per_row
+
+#: Pixel clock period in simulator steps (its time precision, whatever the Verilog's timescale):
+#: low for 2 steps (inputs change at the falling edge, sampled 1 step later), high for 2.
+PERIOD_STEPS = 4
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """What the test runs: configuration, array size, stimulus source."""
+
+    config: SensorConfig
+    height: int
+    width: int
+    readouts: int = 3
+    seed: int = 0
+    stimulus_path: str | None = None
+
+    @classmethod
+    def from_env(cls, env=os.environ) -> "Settings":
+        text = env.get("TESPIKE_CONFIG", "te").strip()
+        config = SensorConfig.from_json(text) if text.startswith("{") else load_config(text)
+
+        def integer(name, default=None):
+            raw = env.get(name)
+            if raw is None:
+                if default is None:
+                    raise InputError(f"environment variable {name} is not set (the array's size)")
+                return default
+            try:
+                value = int(raw)
+            except ValueError:
+                raise InputError(f"environment variable {name} = {raw!r}: not an integer") from None
+            if value < 1:
+                raise InputError(f"environment variable {name} = {value}: must be >= 1")
+            return value
+
+        return cls(config, integer("TESPIKE_HEIGHT"), integer("TESPIKE_WIDTH"),
+                   integer("TESPIKE_READOUTS", 3), int(env.get("TESPIKE_SEED", "0")),
+                   env.get("TESPIKE_STIMULUS") or None)
+
+    def to_env(self) -> dict[str, str]:
+        env = {"TESPIKE_CONFIG": self.config.to_json(), "TESPIKE_HEIGHT": str(self.height),
+               "TESPIKE_WIDTH": str(self.width), "TESPIKE_READOUTS": str(self.readouts),
+               "TESPIKE_SEED": str(self.seed)}
+        if self.stimulus_path is not None:
+            env["TESPIKE_STIMULUS"] = str(Path(self.stimulus_path).resolve())
+        return env
+
+    def stimulus(self) -> np.ndarray:
+        if self.stimulus_path is None:
+            return default_stimulus(self.config, np.random.default_rng(self.seed), self.readouts,
+                                    self.height, self.width)
+        stim = load_stimulus(self.stimulus_path, self.config)
+        if stim.shape[1:] != (self.height, self.width):
+            raise InputError(f"stimulus {self.stimulus_path!r} has pixels {stim.shape[1:]}, "
+                             f"the array is {self.height} x {self.width}")
+        return stim
+
+
+def default_stimulus(config: SensorConfig, rng: np.random.Generator, readouts: int,
+                     height: int, width: int) -> np.ndarray:
+    """Poisson electrons with each pixel at its own level, from dark to 50x the top code, plus bursts.
+
+    Levels are in spikes per readout relative to the top code (TE: 2^b1 alpha; ML: 2^B - 1),
+    so every configuration sees pixels below, near and far above overflow or saturation;
+    about 2% of the clocks carry the largest input 2^E - 1 (saturated accumulator, every
+    bit of ``charge``).
+    """
+    L = config.clocks_per_readout
+    top = config.p_max * config.alpha if config.is_te else config.ml_max
+    levels = np.array([0.0, 0.05, 0.4, 0.9, 1.0, 1.3, 4.0, 50.0]) * top
+    level = np.resize(rng.permutation(levels), height * width).reshape(height, width)
+    mean = level * config.threshold / L
+    stim = rng.poisson(np.broadcast_to(mean, (readouts * L, height, width)))
+    stim = np.where(rng.random(stim.shape) < 0.02, config.input_max, stim)
+    stim = np.minimum(stim, config.input_max).astype(np.int64)
+    return check_stimulus(stim, config)
+
+
+def first_difference(expected: np.ndarray, got: np.ndarray) -> str:
+    """Where two (K, H, W) word arrays first differ, in words."""
+    k, r, c = (int(i) for i in np.argwhere(expected != got)[0])
+    count = int((expected != got).sum())
+    return (f"{count} of {expected.size} words differ; first at readout {k}, pixel (row {r}, col {c}): "
+            f"RTL {int(got[k, r, c])}, golden {int(expected[k, r, c])}")
+
+
+def _as_int(value, what: str) -> int:
+    """A sampled port value as an integer; an X or Z is an error naming the port and clock."""
+    if not value.is_resolvable:
+        raise AssertionError(f"{what} is {value.binstr!r}: X or Z on a SPEC port")
+    return int(value)
+
+
+async def run_bench(dut, settings: Settings) -> dict:
+    """Drive ``dut`` through ``settings``'s stimulus; return captures, words and latency.
+
+    Raises ``AssertionError`` (the test fails) on X/Z, on wrong port widths, and
+    :class:`cosim.outside.SimulatorRunError` on a frame_valid that breaks SPEC section 6.
+    """
+    from cocotb.clock import Clock
+    from cocotb.triggers import FallingEdge, RisingEdge, Timer
+
+    config, H, W = settings.config, settings.height, settings.width
+    N, E, Wd, L = H * W, config.input_bits, config.word_bits, config.clocks_per_readout
+    for port, bits in (("charge", N * E), ("frame", N * Wd)):
+        width = len(getattr(dut, port))
+        assert width == bits, (f"port {port} is {width} bits, SPEC section 6 wants {bits} for "
+                               f"{H} x {W} pixels of {config}")
+    stim = settings.stimulus()
+    T = stim.shape[0]
+    K = T // L
+    packed = pack_rows(stim.reshape(T, N), E)
+    rows = [int.from_bytes(row.tobytes(), "little") for row in packed]
+
+    cocotb_clock = Clock(dut.clk, PERIOD_STEPS, units="step")
+    clock_task = __import__("cocotb").start_soon(cocotb_clock.start(start_high=False))
+    dut.rst.value = 1
+    dut.charge.value = 0
+    for _ in range(RESET_CLOCKS):
+        await RisingEdge(dut.clk)
+    clocks, frames = [], []
+    for t in range(T + L + 1):
+        if t >= T and len(clocks) >= K:
+            break
+        await FallingEdge(dut.clk)
+        dut.rst.value = 0
+        dut.charge.value = rows[t] if t < T else 0
+        await Timer(1, units="step")                # inputs of clock t settled; rising edge t next
+        if _as_int(dut.frame_valid.value, f"frame_valid before rising edge {t}"):
+            clocks.append(t)
+            frames.append(_as_int(dut.frame.value, f"frame before rising edge {t}"))
+    clock_task.kill()
+    latency = check_captures(np.array(clocks, np.int64), config, K, f"cocotb run of {top_module(config)}")
+    nbytes = 4 * words_per_row(N, Wd)
+    raw = np.frombuffer(b"".join(f.to_bytes(nbytes, "little") for f in frames[:K]), "<u4")
+    words = unpack_rows(raw.reshape(len(frames[:K]), nbytes // 4), N, Wd).reshape(K, H, W)
+    return {"stimulus": stim, "words": words, "clocks": clocks, "latency": latency}
+
+
+try:
+    import cocotb as _cocotb
+except ImportError:          # importable without cocotb (settings and stimulus for the runner)
+    _cocotb = None
+
+if _cocotb is not None:
+    @_cocotb.test()
+    async def spec_ports_equal_golden(dut):
+        """The array's words equal the golden model's on the stimulus of TESPIKE_* (module docstring)."""
+        settings = Settings.from_env()
+        run = await run_bench(dut, settings)
+        expected = step_reference(settings.config, run["stimulus"])[0]
+        dut._log.info(f"{settings.config}: {settings.height} x {settings.width}, "
+                      f"{expected.shape[0]} readouts, latency {run['latency']} clock(s)")
+        if not np.array_equal(run["words"], expected):
+            raise AssertionError("RTL != golden model: " + first_difference(expected, run["words"]))
+        summary = {"readouts": int(expected.shape[0]), "latency": run["latency"],
+                   "distinct_words": int(len(np.unique(expected)))}
+        dut._log.info("RTL == golden model " + json.dumps(summary))

@@ -1,0 +1,203 @@
+"""Run the cocotb testbench (:mod:`cosim.cocotb_bench`) under Icarus, Verilator or another simulator.
+
+:func:`run_cocotb` writes the array Verilog (``rtl.verilog.array_verilog``, or
+a file the caller names: a designer's own Verilog with the SPEC section 6
+ports), builds it with cocotb's runner (``cocotb.runner.get_runner``) and runs
+the test module in the simulator. The build is cached under a hash of the
+Verilog, the simulator, its version and cocotb's version
+(``<cache>/cocotb/``), so a second run of the same array only simulates.
+``tespike cocotb`` is the command line of it.
+
+Simulators: whatever cocotb's runner knows (``icarus``, ``verilator``,
+``questa``, ``xcelium``, ``vcs``, ``riviera``, ...); the project tests Icarus
+(Debian's 11) and Verilator (Debian's 5.006) with cocotb 1.9 (cocotb 2 wants
+Verilator 5.036 or newer). Icarus is built with ``-g2005`` after cocotb's own
+``-g2012``: the generated Verilog is Verilog-2005 (docs/rtl.md).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from golden.errors import InputError
+
+from .cocotb_bench import Settings
+from .outside import (SimulatorBuildError, SimulatorMissingError, cache_entry, content_hash,
+                      default_cache_root, first_error_line, top_module)
+
+#: The test module cocotb loads in the simulator.
+TEST_MODULE = "cosim.cocotb_bench"
+
+#: Simulators the project runs in its own tests, with the executables each needs.
+TESTED_SIMULATORS = {"icarus": ("iverilog", "vvp"), "verilator": ("verilator",)}
+
+#: Extra build options per simulator (see the module docstring).
+BUILD_ARGS = {"icarus": ["-g2005"], "verilator": []}
+
+#: Where this package's root is, so the simulator's embedded Python imports ``cosim`` and ``golden``.
+_ROOT = str(Path(__file__).resolve().parent.parent)
+
+
+@dataclasses.dataclass
+class CocotbResult:
+    """One simulator's verdict."""
+
+    simulator: str
+    passed: bool
+    message: str            # one line: the failure, or a summary of the pass
+    log: Path               # the simulation log (kept)
+
+
+def cocotb_version() -> str:
+    try:
+        import cocotb
+    except ImportError:
+        raise SimulatorMissingError("cocotb is not installed (pip install 'cocotb>=1.8,<2')") from None
+    return cocotb.__version__
+
+
+def _simulator_version(simulator: str) -> str:
+    tools = TESTED_SIMULATORS.get(simulator)
+    if tools is None:
+        return ""
+    for tool in tools:
+        if shutil.which(tool) is None:
+            package = "iverilog" if simulator == "icarus" else simulator
+            raise SimulatorMissingError(f"{tool!r} is not on PATH; install it (Debian/Ubuntu: "
+                                        f"apt-get install {package})")
+    flag = "-V" if simulator == "icarus" else "--version"
+    result = subprocess.run([tools[0], flag], capture_output=True, text=True)
+    return (result.stdout or result.stderr).splitlines()[0] if (result.stdout or result.stderr) else ""
+
+
+@contextlib.contextmanager
+def _quiet(path: Path):
+    """The runner's own ``print``s (the commands it runs) go to ``path``, not to our stdout."""
+    buffer = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(buffer):
+            yield
+    finally:
+        with open(path, "a") as handle:
+            handle.write(buffer.getvalue())
+
+
+@contextlib.contextmanager
+def _outside_pytest():
+    """cocotb's runner changes its result handling when it sees ``PYTEST_CURRENT_TEST``
+    (it raises on failure and refuses a results file name); this module reads the
+    results itself the same way under pytest and on the command line."""
+    saved = os.environ.pop("PYTEST_CURRENT_TEST", None)
+    try:
+        yield
+    finally:
+        if saved is not None:
+            os.environ["PYTEST_CURRENT_TEST"] = saved
+
+
+def _runner(simulator: str):
+    import warnings
+    with warnings.catch_warnings():      # "Python runners ... are an experimental feature"
+        warnings.simplefilter("ignore", UserWarning)
+        from cocotb.runner import get_runner
+    try:
+        return get_runner(simulator)
+    except (ValueError, SystemExit) as exc:
+        raise InputError(f"simulator {simulator!r}: cocotb's runner does not know it ({exc})") from None
+
+
+def _failure_line(log: Path) -> str:
+    """The failure cocotb logged: the test's AssertionError or error line, else the log's last line."""
+    text = log.read_text(errors="replace") if log.is_file() else ""
+    errors = re.findall(r"^\s*(\w*(?:Error|Exception): .+)$", text, re.M)
+    return errors[-1].strip() if errors else first_error_line(text)
+
+
+def build(verilog_path: Path, top: str, simulator: str, cache_root: Path | None = None) -> Path:
+    """Build (or find in the cache) the simulation of ``verilog_path``; return its build directory."""
+    text = verilog_path.read_text()
+    key = content_hash(text, top, simulator, _simulator_version(simulator), cocotb_version(),
+                       " ".join(BUILD_ARGS.get(simulator, [])))
+    root = (cache_root or default_cache_root()) / "cocotb"
+    with cache_entry(root, key) as (final, done):
+        if done:
+            return final
+        if final.exists():
+            shutil.rmtree(final)
+        final.mkdir(parents=True)
+        log = final / "build.log"
+        source = final / "array.v"
+        source.write_text(text)
+        try:
+            with _outside_pytest(), _quiet(final / "commands.txt"):
+                _runner(simulator).build(verilog_sources=[source], hdl_toplevel=top, build_dir=final,
+                                         build_args=BUILD_ARGS.get(simulator, []), always=True,
+                                         log_file=log)
+        except SystemExit:
+            failed = root / f"{key}.failed.log"
+            shutil.copyfile(log, failed)
+            shutil.rmtree(final, ignore_errors=True)
+            raise SimulatorBuildError(f"cocotb {simulator} build of {top} failed: "
+                                      f"{first_error_line(failed.read_text(errors='replace'))} "
+                                      f"(full log: {failed})") from None
+        (final / "done").write_text(key + "\n")
+    return final
+
+
+def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: str | Path | None = None,
+               work_dir: str | Path | None = None, cache_root: Path | None = None) -> CocotbResult:
+    """Run :func:`cosim.cocotb_bench.spec_ports_equal_golden` on one simulator.
+
+    ``verilog_path``: the Verilog to test (default: the generated array of
+    ``settings``); ``work_dir``: where the run's log and results go (default: a
+    temporary directory, the log copied to ``<cache>/cocotb/last-<simulator>.log``).
+    """
+    cocotb_version()
+    _runner(simulator)                     # refuse an unknown simulator,
+    top = top_module(settings.config)
+    settings.stimulus()                    # and a bad stimulus, before building anything
+    with tempfile.TemporaryDirectory(prefix="tespike-cocotb-") as scratch:
+        if verilog_path is None:
+            from rtl.verilog import array_verilog
+            verilog_path = Path(scratch) / "array.v"
+            verilog_path.write_text(array_verilog(settings.config, settings.height, settings.width))
+        verilog_path = Path(verilog_path)
+        if not verilog_path.is_file():
+            raise InputError(f"Verilog file {str(verilog_path)!r} does not exist")
+        build_dir = build(verilog_path, top, simulator, cache_root)
+        test_dir = Path(work_dir) if work_dir is not None else Path(scratch) / "run"
+        test_dir.mkdir(parents=True, exist_ok=True)
+        log, results = test_dir / f"{simulator}.log", test_dir / f"{simulator}-results.xml"
+        if _ROOT not in sys.path:
+            sys.path.insert(0, _ROOT)      # the runner passes sys.path on as PYTHONPATH
+        runner = _runner(simulator)
+        from cocotb.runner import get_results
+        try:
+            with _outside_pytest(), _quiet(test_dir / f"{simulator}-commands.txt"):
+                runner.test(test_module=TEST_MODULE, hdl_toplevel=top, hdl_toplevel_lang="verilog",
+                            build_dir=build_dir,
+                            test_dir=test_dir, results_xml=str(results), extra_env=settings.to_env(),
+                            log_file=log)
+            tests, failed = get_results(results)
+        except SystemExit:
+            tests, failed = 0, 1
+        passed = tests >= 1 and failed == 0
+        text = log.read_text(errors="replace") if log.is_file() else ""
+        summary = re.search(r"RTL == golden model (\{.*\})", text)
+        message = (f"RTL == golden model {summary.group(1)}" if passed and summary else
+                   "passed" if passed else _failure_line(log))
+        if work_dir is None:
+            kept = (cache_root or default_cache_root()) / "cocotb" / f"last-{simulator}.log"
+            kept.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(log, kept) if log.is_file() else kept.write_text("(no log)\n")
+            log = kept
+        return CocotbResult(simulator, passed, message, log)

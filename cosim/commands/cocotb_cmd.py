@@ -1,0 +1,46 @@
+"""``tespike cocotb``: the cocotb testbench of the array Verilog under one or more simulators.
+
+Drives only the SPEC section 6 ports and compares every word with the golden
+model (:mod:`cosim.cocotb_bench`); one line per simulator, exit 1 if any fails.
+"""
+
+HELP = "check the array Verilog with the cocotb testbench (golden model as scoreboard) in Icarus / Verilator / ..."
+
+
+def add_arguments(parser):
+    parser.add_argument("--config", required=True,
+                        help="JSON config file, or 'te' / 'ml' / 'ml-msb' for the presets")
+    parser.add_argument("--height", required=True, type=int, help="pixel rows H >= 1")
+    parser.add_argument("--width", required=True, type=int, help="pixel columns W >= 1")
+    parser.add_argument("--simulator", nargs="+", default=["icarus", "verilator"],
+                        help="cocotb simulator names (default: icarus verilator; any cocotb knows, "
+                             "e.g. questa, xcelium, vcs)")
+    parser.add_argument("--verilog", help="Verilog to test instead of the generated array "
+                                          "(must have the SPEC section 6 ports)")
+    parser.add_argument("--stimulus", help="E.npy (T, H, W) electrons per pixel clock "
+                                           "(default: --readouts intervals of a mixed Poisson stimulus)")
+    parser.add_argument("--readouts", type=int, default=3, help="readout intervals of the default stimulus")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the default stimulus")
+    parser.add_argument("--work-dir", help="keep each simulator's log and results here")
+
+
+def run(args) -> int:
+    from golden.config import load_config
+    from golden.errors import InputError
+    from rtl.array import check_array_size
+
+    from cosim.cocotb_bench import Settings
+    from cosim.cocotb_run import run_cocotb
+
+    config = load_config(args.config)
+    check_array_size(args.height, args.width)
+    if args.readouts < 1:
+        raise InputError(f"--readouts {args.readouts}: must be >= 1")
+    settings = Settings(config, args.height, args.width, args.readouts, args.seed, args.stimulus)
+    failed = 0
+    for simulator in args.simulator:
+        result = run_cocotb(settings, simulator, verilog_path=args.verilog, work_dir=args.work_dir)
+        verdict = "pass" if result.passed else "FAIL"
+        print(f"tespike cocotb: {simulator}: {verdict}: {result.message} (log: {result.log})")
+        failed += not result.passed
+    return 1 if failed else 0

@@ -1,0 +1,134 @@
+"""The cocotb testbench (cosim/cocotb_bench.py) on the generated Verilog: TE, ML count, ML msb.
+
+Each camera's 2 x 3 array under Icarus and Verilator, scoreboarded by the golden
+model; the testbench notices a planted wrong word and an X on ``frame``
+(hand-written models of the ports, tests/verilog_spec_model.py); ``tespike
+cocotb`` runs both simulators from one command; bad input is refused in one line.
+Builds are cached (``<cache>/cocotb``), so only the first run pays for them.
+"""
+
+import shutil
+
+import numpy as np
+import pytest
+
+from cosim.cocotb_bench import Settings, default_stimulus, first_difference
+from cosim.cocotb_run import run_cocotb
+from golden.config import SensorConfig
+from golden.reference import step_reference
+from tests.cli import assert_refused, run_tespike
+from tests.verilog_spec_model import spec_model_verilog
+
+cocotb = pytest.importorskip("cocotb")
+
+HAVE = {"icarus": bool(shutil.which("iverilog") and shutil.which("vvp")),
+        "verilator": bool(shutil.which("verilator"))}
+
+#: One camera of each kind, with short readout intervals where the preset's L = 240 is not needed.
+CAMERAS = [
+    SensorConfig.preset("te"),                                                         # L = 240
+    SensorConfig(mode="ml", ml_bits=3, b1=2, b2=2, clocks_per_tick=3, threshold=20),   # L = 9
+    SensorConfig.preset("ml-msb"),                                                     # L = 240
+    SensorConfig(mode="ml", ml_readout="msb", ml_bits=5, b1=2, b2=2, threshold=9),    # L = 12
+]
+
+
+def needs(simulator):
+    return pytest.mark.skipif(not HAVE[simulator], reason=f"{simulator} is not installed")
+
+
+@pytest.mark.parametrize("simulator", [pytest.param("icarus", marks=needs("icarus")),
+                                       pytest.param("verilator", marks=needs("verilator"))])
+@pytest.mark.parametrize("config", CAMERAS, ids=str)
+def test_generated_verilog_passes_the_cocotb_bench(config, simulator, tmp_path):
+    settings = Settings(config, 2, 3, readouts=3, seed=7)
+    result = run_cocotb(settings, simulator, work_dir=tmp_path)
+    assert result.passed, result.message + "\n" + result.log.read_text()[-3000:]
+    assert "RTL == golden model" in result.message and '"readouts": 3' in result.message
+    assert result.log == tmp_path / f"{simulator}.log"
+
+
+def test_default_stimulus_reaches_many_codes(rng):
+    """Else the bench would prove little: dark, mid and saturated pixels, and several words."""
+    for config in CAMERAS:
+        stim = default_stimulus(config, np.random.default_rng(7), 3, 2, 3)
+        words = step_reference(config, stim)[0]
+        assert stim.max() == config.input_max and len(np.unique(words)) >= 3, config
+
+
+@needs("icarus")
+def test_cocotb_bench_notices_a_wrong_word(tmp_path):
+    """A model latching the CCC one too high fails, naming the first differing word."""
+    config = SensorConfig(b1=2, b2=2, clocks_per_tick=3, threshold=30)
+    (tmp_path / "bad.v").write_text(spec_model_verilog(config, 2, 3, bug="m_plus_one"))
+    result = run_cocotb(Settings(config, 2, 3, readouts=4), "icarus", verilog_path=tmp_path / "bad.v",
+                        work_dir=tmp_path)
+    assert not result.passed
+    assert "RTL != golden model" in result.message and "first at readout" in result.message
+
+
+@needs("icarus")
+def test_cocotb_bench_refuses_x_on_frame(tmp_path):
+    config = SensorConfig(b1=2, b2=2, clocks_per_tick=3, threshold=30)
+    (tmp_path / "x.v").write_text(spec_model_verilog(config, 2, 3, bug="x_frame"))
+    result = run_cocotb(Settings(config, 2, 3), "icarus", verilog_path=tmp_path / "x.v", work_dir=tmp_path)
+    assert not result.passed and "X or Z" in result.message and "frame" in result.message
+
+
+@needs("icarus")
+def test_cocotb_bench_accepts_any_fixed_latency(tmp_path):
+    """Latency 2 (two output registers) is legal for L >= 2: the bench follows it."""
+    config = SensorConfig(mode="ml", ml_readout="msb", ml_bits=5, b1=2, b2=2, threshold=9)
+    (tmp_path / "late.v").write_text(spec_model_verilog(config, 2, 3, latency=2))
+    result = run_cocotb(Settings(config, 2, 3), "icarus", verilog_path=tmp_path / "late.v",
+                        work_dir=tmp_path)
+    assert result.passed and '"latency": 2' in result.message, result.message
+
+
+def test_first_difference_names_readout_and_pixel():
+    expected = np.zeros((2, 2, 3), np.int64)
+    got = expected.copy()
+    got[1, 0, 2] = 5
+    assert first_difference(expected, got) == ("1 of 12 words differ; first at readout 1, "
+                                                "pixel (row 0, col 2): RTL 5, golden 0")
+
+
+@pytest.mark.skipif(not (HAVE["icarus"] and HAVE["verilator"]), reason="needs Icarus and Verilator")
+def test_cocotb_command_runs_both_simulators(tmp_path):
+    """One command, both simulators (the builds of the test above are reused)."""
+    result = run_tespike("cocotb", "--config", "ml-msb", "--height", 2, "--width", 3, "--readouts", 2,
+                         "--seed", 3, "--work-dir", tmp_path / "logs")
+    assert result.returncode == 0, result.stdout + result.stderr
+    lines = result.stdout.splitlines()
+    assert [line.split(":")[1].strip() for line in lines] == ["icarus", "verilator"], lines
+    assert all(": pass: RTL == golden model" in line for line in lines)
+    assert sorted(p.name for p in (tmp_path / "logs").glob("*.log")) == ["icarus.log", "verilator.log"]
+
+
+@needs("icarus")
+def test_cocotb_command_takes_a_stimulus_file(tmp_path):
+    config = SensorConfig.preset("ml-msb")
+    np.save(tmp_path / "e.npy", default_stimulus(config, np.random.default_rng(3), 2, 2, 3).astype(np.uint16))
+    result = run_tespike("cocotb", "--config", "ml-msb", "--height", 2, "--width", 3,
+                         "--stimulus", tmp_path / "e.npy", "--simulator", "icarus")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert '"readouts": 2' in result.stdout
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--config", "te", "--height", 0, "--width", 2], ["height", "0"]),
+    (["--config", "te", "--height", 2, "--width", 2, "--verilog", "/nonexistent/a.v",
+      "--simulator", "icarus"], ["/nonexistent/a.v", "does not exist"]),
+    (["--config", "te", "--height", 2, "--width", 2, "--simulator", "no-such-sim"], ["no-such-sim"]),
+    (["--config", "te", "--height", 2, "--width", 2, "--readouts", 0], ["--readouts", "0"]),
+])
+def test_cocotb_command_refuses_bad_input(argv, words, tmp_path):
+    assert_refused(run_tespike("cocotb", *argv), *words)
+
+
+@needs("icarus")
+def test_cocotb_command_refuses_a_stimulus_of_another_size(tmp_path):
+    np.save(tmp_path / "e.npy", np.zeros((240, 3, 3), np.int64))
+    result = run_tespike("cocotb", "--config", "te", "--height", 2, "--width", 2, "--simulator", "icarus",
+                         "--stimulus", tmp_path / "e.npy")
+    assert_refused(result, "3, 3", "2 x 2")
