@@ -46,22 +46,22 @@ def serial(tmp_path_factory):
     """The in-process run everything is compared with: the store and its table."""
     base = tmp_path_factory.mktemp("serial")
     hdr = hdr_root(base / "hdr")
-    result = run_tespike(*synth_args(hdr, base / "s.zarr"), timeout=600)
+    result = run_tespike(*synth_args(hdr, base / "s.zarr"), timeout=1800)
     assert result.returncode == 0, result.stderr
     result = run_tespike("evaluate", "--store", base / "s.zarr", "--methods", "tfp,tfi", "--out",
-                         base / "ev", timeout=600)
+                         base / "ev", timeout=1800)
     assert result.returncode == 0, result.stderr
     return {"hdr": hdr, "store": base / "s.zarr", "table": (base / "ev" / "table.csv").read_text(),
             "results": (base / "ev" / "results.csv").read_text()}
 
 
 def test_local_cluster_of_two_workers_gives_the_same_store_and_table(serial, tmp_path):
-    result = run_tespike(*synth_args(serial["hdr"], tmp_path / "s.zarr", "--workers", "2"), timeout=600)
+    result = run_tespike(*synth_args(serial["hdr"], tmp_path / "s.zarr", "--workers", "2"), timeout=1800)
     assert result.returncode == 0, result.stderr
     assert "local cluster of 2 worker processes" in result.stdout
     assert compare_stores(serial["store"], tmp_path / "s.zarr") == []
     result = run_tespike("evaluate", "--store", tmp_path / "s.zarr", "--methods", "tfp,tfi", "--workers", "2",
-                         "--out", tmp_path / "ev", timeout=600)
+                         "--out", tmp_path / "ev", timeout=1800)
     assert result.returncode == 0, result.stderr
     assert (tmp_path / "ev" / "table.csv").read_text() == serial["table"]
     assert (tmp_path / "ev" / "results.csv").read_text() == serial["results"]
@@ -134,7 +134,7 @@ def tespike_process(*args, **environ):
                             stderr=subprocess.PIPE, text=True, env=env)
 
 
-def finish(process, timeout=600):
+def finish(process, timeout=1800):
     try:
         out, err = process.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
