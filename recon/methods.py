@@ -19,7 +19,7 @@ from golden.config import DESIGN_ELECTRONS, SensorConfig
 from golden.errors import InputError
 
 from .settings import ReconSettings
-from .stream import as_word_tensor, decode_light
+from .stream import as_word_tensor, decode_light, output_images
 from .tfi import tfi
 from .tfp import tfp
 
@@ -97,10 +97,7 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     if len(shape) != 3:
         raise InputError(f"stream words shape {shape} must be (K, H, W)")
     K, H, W = shape
-    if out is None:
-        out = np.empty((K, H, W), np.float32)
-    elif out.shape != (K, H, W) or out.dtype != np.float32:
-        raise InputError(f"out must be float32 {(K, H, W)}, not {out.dtype} {out.shape}")
+    out = output_images((K, H, W), out)
     if out.size == 0:
         return out
     if spec.frames is not None:

@@ -121,6 +121,15 @@ def decode_spikes(words, config: SensorConfig, *, estimator: str = "ratio",
     return _gather(spikes, legal, words, config, device, dtype)
 
 
+def output_images(shape: tuple[int, int, int], out: np.ndarray | None = None) -> np.ndarray:
+    """The float32 (K, H, W) array a reconstruction fills: ``out`` checked, or a new one."""
+    if out is None:
+        return np.empty(shape, np.float32)
+    if out.shape != tuple(shape) or out.dtype != np.float32:
+        raise InputError(f"out must be float32 {tuple(shape)}, not {out.dtype} {out.shape}")
+    return out
+
+
 def load_stream(path: str | Path, device: str | torch.device = "cpu") -> tuple[torch.Tensor, SensorConfig]:
     """Read S.npz with :func:`golden.io.load_stream` (checked legal); words as int64 on ``device``."""
     words, config = golden_load_stream(path)

@@ -25,7 +25,7 @@ import torch
 from golden.config import PRESETS, SensorConfig
 from golden.errors import InputError
 
-from ..stream import decode_light
+from ..stream import decode_light, output_images
 from .model import TESpikeNet
 from .sizes import NetSizes
 
@@ -155,10 +155,7 @@ def reconstruct_net(words, config: SensorConfig, *, weights: str | Path | None =
     if words.ndim != 3:
         raise InputError(f"stream words shape {words.shape} must be (K, H, W)")
     K, H, W = words.shape
-    if out is None:
-        out = np.empty((K, H, W), np.float32)
-    elif out.shape != (K, H, W) or out.dtype != np.float32:
-        raise InputError(f"out must be float32 {(K, H, W)}, not {out.dtype} {out.shape}")
+    out = output_images((K, H, W), out)
     if out.size == 0:
         return out
     model = model.to(device)
