@@ -4,12 +4,13 @@ Drives only the SPEC section 6 ports and compares every word with the golden
 model (:mod:`cosim.cocotb_bench`); one line per simulator, exit 1 if any fails.
 """
 
+from .common import add_config_argument
+
 HELP = "check the array Verilog with the cocotb testbench (golden model as scoreboard) in Icarus / Verilator / ..."
 
 
 def add_arguments(parser):
-    parser.add_argument("--config", required=True,
-                        help="JSON config file, or 'te' / 'ml' / 'ml-msb' for the presets")
+    add_config_argument(parser)
     parser.add_argument("--height", required=True, type=int, help="pixel rows H >= 1")
     parser.add_argument("--width", required=True, type=int, help="pixel columns W >= 1")
     parser.add_argument("--simulator", nargs="+", default=["icarus", "verilator"],

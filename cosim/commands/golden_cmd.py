@@ -7,6 +7,8 @@ dtype). A progress bar on stderr appears for runs of more than a few chunks
 when stderr is a terminal (``--progress on`` forces it).
 """
 
+from .common import add_config_argument
+
 HELP = "run the bit-exact golden model on a per-clock electron stimulus E.npy"
 
 #: Runs with more chunks than this show a progress bar on stderr.
@@ -14,7 +16,7 @@ PROGRESS_MIN_CHUNKS = 4
 
 
 def add_arguments(parser):
-    parser.add_argument("--config", required=True, help="JSON config file, or 'te' / 'ml' for a mode's defaults")
+    add_config_argument(parser)
     parser.add_argument("--stimulus", required=True, help="E.npy: integer (T, H, W) electrons per pixel clock")
     parser.add_argument("--out", required=True, help="S.npz to write: readout words and the full config")
     parser.add_argument("--chunk-elements", type=int, default=None, metavar="N",

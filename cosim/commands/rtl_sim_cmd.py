@@ -2,6 +2,8 @@
 
 import sys
 
+from .common import add_config_argument
+
 HELP = "simulate the Amaranth RTL pixel array on a per-clock electron stimulus E.npy"
 
 #: backend -> (module, function(config, stimulus) -> words); imported only when chosen.
@@ -12,7 +14,7 @@ BACKENDS = {
 
 
 def add_arguments(parser):
-    parser.add_argument("--config", required=True, help="JSON config file, or 'te' / 'ml' for a mode's defaults")
+    add_config_argument(parser)
     parser.add_argument("--stimulus", required=True, help="E.npy: integer (T, H, W) electrons per pixel clock")
     parser.add_argument("--out", required=True, help="S.npz to write: readout words and the full config")
     parser.add_argument("--vcd", help="also write the waveform W.vcd (amaranth backend; about 5x slower) "

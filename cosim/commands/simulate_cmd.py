@@ -1,19 +1,14 @@
 """``tespike simulate``: scene light I.npy -> readout stream S.npz, with photon shot noise."""
 
+from .common import add_light_arguments
+
 HELP = "simulate the sensor on a light scene I.npy (photon shot noise; fast, exact in distribution)"
 
 
 def add_arguments(parser):
-    parser.add_argument("--config", required=True, help="JSON config file, or 'te' / 'ml' for a mode's defaults")
-    parser.add_argument("--scene", required=True,
-                        help="I.npy: float (K, H, W) light per readout interval, 1.0 = design light")
-    parser.add_argument("--out", required=True, help="S.npz to write: readout words and the full config")
-    parser.add_argument("--seed", type=int, default=None,
-                        help="seed of the random generator (default: fresh entropy)")
-    parser.add_argument("--dark-current", choices=("none", "eq12", "eq13"), default="none",
-                        help="dark current model of the paper's eq. 12 or 13 (default: none)")
-    parser.add_argument("--no-noise", action="store_true",
-                        help="no shot noise: deliver the expected electrons deterministically")
+    add_light_arguments(parser, out_help="S.npz to write: readout words and the full config",
+                        seed_help="seed of the random generator (default: fresh entropy)",
+                        no_noise_help="no shot noise: deliver the expected electrons deterministically")
     parser.add_argument("--method", choices=("fast", "per-clock"), default="fast",
                         help="'per-clock' draws electrons every pixel clock (slow; for checking)")
 

@@ -18,6 +18,8 @@ K * L * H * W values, so the command refuses sizes above ``--max-bytes``;
 it is written one readout interval at a time into a memory-mapped file.
 """
 
+from .common import add_light_arguments
+
 HELP = "turn a light scene I.npy into the per-clock electron stimulus E.npy of golden / rtl-sim"
 
 #: Largest E.npy written unless --max-bytes says otherwise (1 GiB).
@@ -25,16 +27,9 @@ MAX_BYTES = 1 << 30
 
 
 def add_arguments(parser):
-    parser.add_argument("--config", required=True, help="JSON config file, or 'te' / 'ml' / 'ml-msb'")
-    parser.add_argument("--scene", required=True,
-                        help="I.npy: float (K, H, W) light per readout interval, 1.0 = design light")
-    parser.add_argument("--out", required=True, help="E.npy to write: unsigned (K * L, H, W) electrons per clock")
-    parser.add_argument("--seed", type=int, default=None,
-                        help="seed of the random generator, as in 'simulate' (default: fresh entropy)")
-    parser.add_argument("--dark-current", choices=("none", "eq12", "eq13"), default="none",
-                        help="dark current model of the paper's eq. 12 or 13 (default: none)")
-    parser.add_argument("--no-noise", action="store_true",
-                        help="no shot noise: the expected electrons, spread deterministically")
+    add_light_arguments(parser, out_help="E.npy to write: unsigned (K * L, H, W) electrons per clock",
+                        seed_help="seed of the random generator, as in 'simulate' (default: fresh entropy)",
+                        no_noise_help="no shot noise: the expected electrons, spread deterministically")
     parser.add_argument("--max-bytes", type=int, default=MAX_BYTES,
                         help=f"refuse a stimulus larger than this (default {MAX_BYTES} = 1 GiB)")
     parser.add_argument("--crop", metavar="Y,X,H,W",

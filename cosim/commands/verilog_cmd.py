@@ -1,5 +1,7 @@
 """``tespike verilog``: Verilog of an H x W TE or ML pixel array (SPEC section 6)."""
 
+from .common import add_config_argument
+
 HELP = "write the Verilog of an H x W pixel array (top te_pixel_array / ml_pixel_array)"
 
 #: Largest array written: 65536 pixels. The charge and frame ports are H * W * E
@@ -9,7 +11,7 @@ MAX_PIXELS = 1 << 16
 
 
 def add_arguments(parser):
-    parser.add_argument("--config", required=True, help="JSON config file, or 'te' / 'ml' for a mode's defaults")
+    add_config_argument(parser)
     parser.add_argument("--height", required=True, type=int, help="pixel rows H >= 1 (H x W <= 65536)")
     parser.add_argument("--width", required=True, type=int, help="pixel columns W >= 1 (H x W <= 65536)")
     parser.add_argument("--out", required=True, help="A.v to write")

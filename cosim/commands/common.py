@@ -1,0 +1,23 @@
+"""Argument blocks several sub-commands share, so their names and help read the same everywhere."""
+
+from golden.config import PRESETS
+
+CONFIG_HELP = "JSON config file, or a preset: " + " / ".join(PRESETS)
+
+
+def add_config_argument(parser, *, required: bool = True, default: str | None = None) -> None:
+    """``--config``: a JSON file or one of SPEC's presets."""
+    parser.add_argument("--config", required=required, default=default,
+                        help=CONFIG_HELP + (f" (default {default})" if default else ""))
+
+
+def add_light_arguments(parser, *, out_help: str, seed_help: str, no_noise_help: str) -> None:
+    """The light front end of ``simulate`` and ``stimulus``: config, scene, out, seed, dark current, noise."""
+    add_config_argument(parser)
+    parser.add_argument("--scene", required=True,
+                        help="I.npy: float (K, H, W) light per readout interval, 1.0 = design light")
+    parser.add_argument("--out", required=True, help=out_help)
+    parser.add_argument("--seed", type=int, default=None, help=seed_help)
+    parser.add_argument("--dark-current", choices=("none", "eq12", "eq13"), default="none",
+                        help="dark current model of the paper's eq. 12 or 13 (default: none)")
+    parser.add_argument("--no-noise", action="store_true", help=no_noise_help)
