@@ -13,7 +13,7 @@ and scaled by 4 to 384 x 512: every layer's cost is proportional to the pixel
 count) and CPU latency at 384 x 512 (median of repeats, per thread count) for
 the CPU default and the paper size; and the plain-torch DCN against conv2d.
 
-    python3 benchmarks/bench_net.py [--quality] [--complexity] [--weights-dir DIR] [--out DIR]
+    python3 benchmarks/bench_net.py [--quality] [--complexity] [--weights-dir DIR] [--ablation-dir DIR]
 """
 
 from __future__ import annotations
@@ -71,9 +71,11 @@ def quality(args) -> None:
         for index, (label, preset) in enumerate(SENSORS):
             config = SensorConfig.preset(preset)
             words = simulate_scene(config, light, seed=np.random.default_rng([args.seed, index, len(name)]))
-            for method in ("tfp", "tfi", "net"):
-                if method == "net":
-                    path = Path(args.weights_dir) / f"{preset}.pt"
+            methods = {"tfp": None, "tfi": None, "net": Path(args.weights_dir) / f"{preset}.pt"}
+            if preset == "te" and args.ablation_dir:
+                methods |= {f"case {case}": Path(args.ablation_dir) / f"case{case}.pt" for case in range(1, 7)}
+            for method, path in methods.items():
+                if path is not None:
                     if not path.is_file():
                         continue
                     model = load_weights(path)[0]
@@ -94,6 +96,14 @@ def quality(args) -> None:
         mean[label, method] = p
         print(f"| {label} | {method} | {p:.2f} | {s:.3f} | {1e3 * t:.1f} |")
     print()
+    cases = [m for (label, m) in mean if m.startswith("case ")]
+    if cases:
+        print("Ablation (paper Table 3), TE: PSNR-mu of each case and its gain over the case before")
+        for m in sorted(cases):
+            before = f"case {int(m.split()[1]) - 1}"
+            gain = f"{mean['TE', m] - mean['TE', before]:+.2f} dB" if ("TE", before) in mean else ""
+            print(f"  {m}: {mean['TE', m]:.2f} dB  {gain}")
+        print()
     for a, b, target in ((("TE", "net"), ("TE", "tfp"), ">= 6 dB (issue); >= 3 dB (hidden check)"),
                          (("TE", "net"), ("ML-msb", "net"), "> 0"),
                          (("TE", "net"), ("ML-count", "net"), "as measured"),
@@ -139,6 +149,8 @@ def main() -> None:
     parser.add_argument("--quality", action="store_true", help="held-out quality (default: both parts)")
     parser.add_argument("--complexity", action="store_true", help="parameters, FLOPs, latency")
     parser.add_argument("--weights-dir", default=str(WEIGHTS_DIR), help="folder of te.pt, ml.pt, ml-msb.pt")
+    parser.add_argument("--ablation-dir", default=None,
+                        help="also score the TE ablation weights case1.pt .. case6.pt in this folder (Table 3)")
     parser.add_argument("--sequences", type=int, default=4, help="held-out panorama paths (default 4)")
     parser.add_argument("--frames", type=int, default=72)
     parser.add_argument("--height", type=int, default=128)

@@ -55,12 +55,23 @@ def test_losses():
         TrainOptions()
 
 
+def test_ablation_case_trains_the_switched_network(tmp_path):
+    out = train(options(steps=1, ablation=4), tmp_path / "a.pt", cache=tmp_path / "cache")
+    sizes = load_weights(out)[0].sizes
+    assert (sizes.gradient, sizes.dcn, sizes.similarity, sizes.motion_bias, sizes.refine) == \
+        (True, True, True, False, False)
+    with pytest.raises(InputError, match="ablation case 7"):
+        options(ablation=7)
+
+
 def test_cli_refusals(tmp_path):
     assert_refused(run_tespike("train", "--config", "te", "--out", tmp_path / "w.pt"), "budget")
     assert_refused(run_tespike("train", "--config", "te", "--out", tmp_path / "no" / "w.pt", "--steps", "1"),
                    "does not exist")
     assert_refused(run_tespike("train", "--config", "te", "--loss", "l9", "--out", tmp_path / "w.pt",
                                "--steps", "1"), "loss")
+    assert_refused(run_tespike("train", "--config", "te", "--ablation", "0", "--out", tmp_path / "w.pt",
+                               "--steps", "1"), "ablation case 0")
     assert not (tmp_path / "w.pt").exists()
 
 

@@ -7,6 +7,8 @@ def add_arguments(parser):
     parser.add_argument("--config", default="te", help="sensor: te, ml, ml-msb or a JSON file (default te)")
     parser.add_argument("--out", required=True, help="weights file to write (.pt); its run folder is OUT.run/")
     parser.add_argument("--size", default="cpu", help="network size: cpu (the shipped default) or paper")
+    parser.add_argument("--ablation", type=int, default=None, metavar="CASE",
+                        help="train the paper's Table 3 ablation case 1..6 instead of the whole network")
     parser.add_argument("--loss", default="l1", help="l1 (paper eq. 7, default) or mu-l1 (after the mu-law)")
     parser.add_argument("--lr", type=float, default=1e-4, help="initial learning rate (default 1e-4)")
     parser.add_argument("--steps-per-epoch", type=int, default=250, help="steps per epoch (default 250)")
@@ -54,7 +56,8 @@ def run(args) -> int:
     from recon.net.train import TrainOptions, train
 
     options = TrainOptions(sensor=config.to_json() if args.config not in ("te", "ml", "ml-msb") else args.config,
-                           size=args.size, loss=args.loss, lr=args.lr, halve_every=args.halve_every,
+                           size=args.size, ablation=args.ablation, loss=args.loss, lr=args.lr,
+                           halve_every=args.halve_every,
                            steps_per_epoch=args.steps_per_epoch, batch=args.batch, crop=args.crop,
                            steps=args.steps, minutes=args.minutes, seed=args.seed, device=args.device,
                            threads=args.threads, recipe={"sequences": args.sequences, "folders": tuple(args.hdr),

@@ -43,6 +43,7 @@ class TrainOptions:
 
     sensor: str = "te"                  # preset name or the JSON text of a configuration
     size: str = "cpu"
+    ablation: int | None = None         # the paper's Table 3 case 1..6 (None: the whole network)
     loss: str = "l1"
     lr: float = 1e-4
     halve_every: int = 10               # epochs
@@ -67,6 +68,7 @@ class TrainOptions:
                 raise InputError(f"{key} = {getattr(self, key)!r}: must be an integer >= 1")
         if self.steps is None and self.minutes is None:
             raise InputError("give a budget: steps or minutes")
+        self.sizes()                    # an unknown size or ablation case is refused here
         if self.steps is not None and (type(self.steps) is not int or self.steps < 1):
             raise InputError(f"steps = {self.steps!r}: must be an integer >= 1")
         if self.minutes is not None and not (self.minutes > 0 and math.isfinite(self.minutes)):
@@ -79,7 +81,8 @@ class TrainOptions:
         return SensorConfig.from_json(self.sensor)
 
     def sizes(self) -> NetSizes:
-        return NetSizes.preset(self.size)
+        sizes = NetSizes.preset(self.size)
+        return sizes if self.ablation is None else sizes.ablation(self.ablation)
 
     def data_recipe(self) -> DataRecipe:
         return DataRecipe(**self.recipe)
