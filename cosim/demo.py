@@ -239,8 +239,12 @@ def plot_rtl_crop(truth: np.ndarray, rtl_images: dict, golden_images: dict, peak
 def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed: int = 0,
              crop: int = DEFAULT_CROP, rtl_readouts: int = DEFAULT_RTL_READOUTS,
              backend: str = "amaranth", repeats: int = 3, window: int = 9, hw_cost: bool = True,
-             sensors=tuple(SENSORS), quiet: bool = False) -> int:
-    """Run every stage into folder ``out``; 0 if the RTL stream is bit-identical to golden, else 1."""
+             sensors=tuple(SENSORS), quiet: bool = False, bars: bool | None = None) -> int:
+    """Run every stage into folder ``out``; 0 if the RTL stream is bit-identical to golden, else 1.
+
+    ``quiet``: no stage lines and no table; ``bars``: progress bars within the stages
+    (default: when not quiet and stderr is a terminal).
+    """
     from golden.config import load_config
     from golden.fastsim import iter_scene_stimulus, simulate_scene
     from golden.io import save_images, save_stream
@@ -265,6 +269,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     progress = Progress(6, quiet)
+    if bars is None:
+        bars = not quiet and sys.stderr.isatty()
     sensors = tuple(sensors)
     unknown = [name for name in sensors if name not in SENSORS]
     if unknown or not sensors or RTL_SENSOR not in sensors or len(set(sensors)) != len(sensors):
@@ -290,7 +296,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     words_te = np.empty((frames, height, width), np.int64)
     crop_stimulus = np.empty((rtl_readouts * L, crop, crop), np.uint16)
     electrons = iter_scene_stimulus(te, light, seed=seed)
-    if not quiet:
+    if bars:
         from tqdm import tqdm
         electrons = tqdm(electrons, total=frames, desc="golden te", unit="readout", leave=False)
     for k, e in enumerate(electrons):
@@ -322,7 +328,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         from cosim.rtlsim import rtl_run
         from cosim.vcd import waveform_stream
         run = rtl_run(te, crop_stimulus, vcd_path=out / "W.vcd", gtkw_path=out / "W.gtkw", flat=True,
-                      progress=None if not quiet else False)
+                      progress=bars)
         read_started = time.perf_counter()
         wave = waveform_stream(out / "W.vcd", te, (crop, crop))
         rtl_info.update(vcd="W.vcd", gtkw="W.gtkw", latency=run.latency, cycles=run.cycles,
@@ -355,7 +361,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     by_config = {configs[name]: streams[name] for name in configs}
     evaluation = evaluate([("default", light)], lambda config, scene, rng: by_config[config],
                           modes=tuple(configs), configs=configs, window=window, seed=seed,
-                          progress=not quiet, keep=True, repeats=repeats)
+                          progress=bars, keep=True, repeats=repeats)
     paths = write_outputs(evaluation, out)
     for (_, mode, method), images in evaluation.images.items():
         save_images(out / f"R_{method}_{mode}.npy", images)

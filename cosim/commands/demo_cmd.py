@@ -29,8 +29,10 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
+    from cosim.cli import progress_wanted
     from cosim.demo import run_demo
     return run_demo(args.out, frames=args.frames, height=args.height, width=args.width, seed=args.seed,
                     crop=args.crop, rtl_readouts=args.rtl_readouts, backend=args.backend,
                     repeats=args.repeats, sensors=[s.strip() for s in args.sensors.split(",") if s.strip()],
-                    hw_cost=not args.no_hw_cost, quiet=args.quiet)
+                    hw_cost=not args.no_hw_cost, quiet=args.quiet,
+                    bars=not args.quiet and progress_wanted(args))
