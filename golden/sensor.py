@@ -264,14 +264,13 @@ class PixelArray:
                             cols, goal = over[late], target[late]
                             low = lo[late] + 1                  # N_{low - 1} < target <= N_{b-1}
                             high = np.full(late.size, b - 1, np.int64)
-                            while True:
-                                open_ = np.flatnonzero(low < high)
-                                if not open_.size:
-                                    break
-                                mid = (low[open_] + high[open_]) // 2
-                                reached = mid + 1 + np.take(flat, mid * width + cols[open_]) >= goal[open_]
-                                high[open_] = np.where(reached, mid, high[open_])
-                                low[open_] = np.where(reached, low[open_], mid + 1)
+                            # A fixed number of halvings for all: a settled pixel (low = high)
+                            # stays put, and no per-round compaction is paid.
+                            for _ in range(int(high[0] - low.min()).bit_length()):
+                                mid = (low + high) >> 1
+                                reached = np.take(flat, mid * width + cols) + (mid + 1) >= goal
+                                np.copyto(high, mid, where=reached)
+                                np.copyto(low, mid + 1, where=~reached)
                             lo[late] = low
                     m[over] = (phase + lo - a) // F + 1
                 # sfc stays at p_max once overflowed and is below it otherwise, so
