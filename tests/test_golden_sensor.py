@@ -110,40 +110,29 @@ def test_engine_equals_reference_edge_configs(config, kind, rng):
 
 @pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[6], EDGE_CONFIGS[7]],
                          ids=str)
-def test_wide_array_row_loop_path(config, rng):
-    """>= ROW_LOOP_MIN_PIXELS pixels: scans run as row loops, subsets as masks or gathers."""
-    assert 24 * 24 >= sensor.ROW_LOOP_MIN_PIXELS
+def test_wide_array_in_pixel_blocks(config, rng, monkeypatch):
+    """More pixels than one block: columns are cut into blocks of BLOCK_PIXELS (forced small here)."""
+    monkeypatch.setattr(sensor, "BLOCK_PIXELS", 100)
     L = config.clocks_per_readout
     stim = make_stimulus(config, "mixed", (2 * L + 37, 24, 24), rng)
     check_equal(config, stim, split_points(len(stim), rng, 3))
 
 
-@pytest.mark.parametrize("fraction", [0.0, 1.0])
-@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[6], EDGE_CONFIGS[8],
+                                    SensorConfig(acc_bits=20), SensorConfig(threshold=(1 << 61) - 1, acc_bits=62,
+                                                                            input_bits=32)],
                          ids=str)
-def test_literal_subset_path_full_width_and_gathered(config, fraction, rng, monkeypatch):
-    """Pixels that saturate and idle in a block are stepped literally, at full width or gathered."""
-    monkeypatch.setattr(sensor, "LITERAL_GATHER_FRACTION", fraction)
-    calls = []
-    original = sensor._Engine.literal
-    monkeypatch.setattr(sensor._Engine, "literal", lambda self, *a: calls.append(a[0].shape) or original(self, *a))
-    for kind in ("near-threshold", "bursts", "sparse-huge", "mixed"):
-        stim = make_stimulus(config, kind, (config.clocks_per_readout * 3, 24, 24), rng)
-        check_equal(config, stim, split_points(len(stim), rng, 3))
-    assert calls, "the literal subset path was not exercised"
-
-
-@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
-                         ids=str)
-def test_literal_step_equals_reference_clock_by_clock(config, rng):
-    """_Engine.literal: acc and the spike count after every clock equal the reference's."""
+def test_step_equals_reference_clock_by_clock(config, rng):
+    """_Engine.step: acc and the spike count after every clock equal the reference's, random acc0."""
     engine = sensor._Engine(config)
-    if engine.dtype is None:
-        pytest.skip("literal-rule configuration")
     T = engine.block_clocks
     stim = make_stimulus(config, "mixed", (T, 5, 7), rng)
+    stim[:, 0, :3] = [0, config.input_max, min(config.input_max, config.threshold + config.acc_max)]
     acc0 = rng.integers(0, config.acc_max, size=35, endpoint=True)
-    Z, acc = engine.literal(stim.reshape(T, 35), acc0, engine.dtype)
+    acc0[:3] = [config.acc_max, config.acc_max, 0]
+    e = stim.reshape(T, 35)
+    C, acc = engine.step(engine._inputs(e, int(e.max()), False), acc0)
+    assert C.dtype == engine.dtype
     state = PixelState.zeros((5, 7))
     state.acc = acc0.reshape(5, 7).copy()
     free = SensorConfig(mode="ml", b1=config.b1, b2=config.b2, alpha=config.alpha,
@@ -153,7 +142,7 @@ def test_literal_step_equals_reference_clock_by_clock(config, rng):
     for t in range(T):
         words, state = step_reference(free, stim[t:t + 1], state)
         read += words.sum(axis=0)
-        N = t + 1 + Z[t].astype(np.int64) // config.threshold
+        N = t + 1 + C[t].astype(np.int64)
         assert np.array_equal(N, (read + state.sfc).reshape(35)), t
     assert np.array_equal(acc, state.acc.reshape(35))
 
@@ -172,16 +161,14 @@ def test_every_input_at_least_theta_shortcut(config, rng):
         check_equal(config, stim, split_points(T, rng, 3))
 
 
-@pytest.mark.parametrize("fraction", [0.0, 0.5, 1.0])
 @pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[6], EDGE_CONFIGS[8]],
                          ids=str)
-def test_quiet_and_pinned_pixels_split_off(config, fraction, rng, monkeypatch):
-    """Blocks mixing dark (quiet), pinned (e >= theta + M), firing and other pixels, split or not."""
-    monkeypatch.setattr(sensor, "SHORTCUT_FRACTION", fraction)
-    widths = []
-    original = sensor._Engine._general
-    monkeypatch.setattr(sensor._Engine, "_general", lambda self, e, *a: widths.append(e.shape[1]) or
-                        original(self, e, *a))
+def test_quiet_pinned_and_firing_pixels_mixed(config, rng, monkeypatch):
+    """Blocks mixing dark, pinned (e >= theta + M), firing and other pixels; whole-block shortcuts taken."""
+    steps = []
+    original = sensor._Engine.step
+    monkeypatch.setattr(sensor._Engine, "step", lambda self, ep, *a: steps.append(ep.shape) or
+                        original(self, ep, *a))
     theta, M, top = config.threshold, config.acc_max, config.input_max
     T, shape = config.clocks_per_readout * 3, (24, 24)
     kind = rng.integers(0, 5, size=shape)
@@ -193,8 +180,11 @@ def test_quiet_and_pinned_pixels_split_off(config, fraction, rng, monkeypatch):
     mixed = make_stimulus(config, "mixed", (T,) + shape, rng)
     stim = np.choose(kind, [zero, pinned, firing, dark_then_bright, mixed])
     check_equal(config, stim, split_points(T, rng, 3))
-    if fraction == 0.0:
-        assert min(widths) < shape[0] * shape[1], "no block was split"
+    assert steps, "the stepping path was not taken"
+    for whole in (zero, firing, pinned):                     # one kind everywhere: no stepping
+        steps.clear()
+        check_equal(config, whole, split_points(T, rng, 2))
+        assert not steps or (whole is not zero and top < theta), "a whole-block shortcut was not taken"
 
 
 @pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(acc_bits=14), EDGE_CONFIGS[6], MSB_EDGE_CONFIGS[3]],
@@ -241,15 +231,6 @@ def test_simulate_chunking_gives_identical_stream(config, rng):
         simulate(config, stim, chunks=[stim[:240]])
 
 
-def test_engine_does_not_step_clock_by_clock_for_normal_configs(rng, monkeypatch):
-    """The paper configs must run the closed forms, not the literal rule in disguise."""
-    def refuse(*args, **kwargs):
-        raise AssertionError("step_reference called")
-    monkeypatch.setattr(sensor, "step_reference", refuse)
-    for config in (SensorConfig(), SensorConfig(mode="ml"), MSB, EDGE_CONFIGS[7], MSB_EDGE_CONFIGS[5]):
-        simulate(config, make_stimulus(config, "mixed", (config.clocks_per_readout, 2, 2), rng))
-
-
 @pytest.mark.parametrize("acc_bits, theta", [(62, 1), (61, 3), (60, (1 << 59) + 5), (62, (1 << 62) - 1)])
 def test_widest_accumulators(acc_bits, theta, rng):
     for mode in ({"mode": "te"}, {"mode": "ml", "ml_readout": "msb", "ml_bits": 3}):
@@ -261,12 +242,14 @@ def test_widest_accumulators(acc_bits, theta, rng):
 
 
 def test_working_dtype_follows_the_bound():
-    assert sensor._plan(SensorConfig())[1] == np.int32
-    assert sensor._plan(SensorConfig(input_bits=32, threshold=1000, b1=2, b2=3))[1] == np.int64
-    assert sensor._plan(SensorConfig(threshold=1, acc_bits=62, input_bits=32)) == (0, None)
-    block, dtype = sensor._plan(SensorConfig(threshold=(1 << 59) + 5, acc_bits=60, input_bits=32))
-    assert dtype == np.int64 and block >= 1
-    assert sensor._magnitude_bound(SensorConfig(), block) <= np.iinfo(np.int64).max
+    """The narrowest dtype holding max(2M, theta + M): the paper configs run in int16."""
+    assert sensor._plan(SensorConfig()) == np.int16
+    assert sensor._plan(SensorConfig(mode="ml")) == np.int16
+    assert sensor._plan(SensorConfig(acc_bits=14)) == np.int16          # 2M = 32766
+    assert sensor._plan(SensorConfig(acc_bits=15)) == np.int32
+    assert sensor._plan(SensorConfig(input_bits=32, threshold=1000, b1=2, b2=3, acc_bits=30)) == np.int32
+    assert sensor._plan(SensorConfig(input_bits=32, threshold=1000, b1=2, b2=3, acc_bits=31)) == np.int64
+    assert sensor._plan(SensorConfig(threshold=(1 << 62) - 1, acc_bits=62, input_bits=32)) == np.int64
 
 
 def test_feed_refuses_bad_chunks():
