@@ -4,7 +4,8 @@ The pixel and the timing block are generated once each from their Amaranth
 components (``amaranth.back.verilog.convert``); the array top is a small
 hand-written structural module, the Verilog form of :class:`rtl.array.PixelArray`:
 the input register ``charge_sample``, the timing block once and the pixel module
-H x W times in nested ``generate`` loops over rows and columns. Its text does not
+H x W times in nested ``generate`` loops over rows and columns, their words gathered
+into ``frame`` by one ``always @*`` loop (see :func:`top_verilog`). Its text does not
 grow with the array, so a 128 x 128 array is generated as fast as a 2 x 2 one. The
 array's pixel module is the pixel without its word register
 (``pixel_verilog(config, word_register=False)``, see :mod:`rtl.array`).
@@ -124,7 +125,10 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
     """The hand-written structural top of an H x W array with exactly the SPEC section 6 ports.
 
     Pixel (r, c) is the instance ``row[r].col[c].pixel`` (rows or columns longer than
-    :data:`LOOP_BLOCK` add a block level, see :func:`_loop`).
+    :data:`LOOP_BLOCK` add a block level, see :func:`_loop`); its word goes to
+    ``word[r*W + c]``, which one combinational loop copies to ``frame``: connected to
+    slices of ``frame`` directly, the words become, in Verilator 5.006, one chain of
+    H*W wide concatenations per clock (quadratic in the pixel count).
     """
     config = _check(config)
     height, width = check_array_size(height, width)
@@ -137,7 +141,7 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
     def pixel(r, c, indent):
         index = f"({r}*W + {c})"
         return (f"{indent}{names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge_sample[{index}*E +: E]), "
-                f"{ccc_pin}.last(last),\n{indent}  .clear(rst_sample), .word(frame[{index}*WD +: WD]));\n")
+                f"{ccc_pin}.last(last),\n{indent}  .clear(rst_sample), .word(word[{index}]));\n")
 
     loops = _loop("r", height, "H", "row",
                   lambda r, ind: _loop("c", width, "W", "col", lambda c, i: pixel(r, c, i), ind), "    ")
@@ -173,6 +177,15 @@ module {names['top']} (
   end
 
   {names['timing']} timing (.clk(clk), .rst(rst), {ccc_pin}.last(last), .frame_valid(frame_valid));
+
+  // The pixels' words, copied into frame by one loop. (With the word ports connected to
+  // slices of frame, Verilator 5 builds frame as a chain of H*W concatenations per clock,
+  // a cost quadratic in H*W; docs/rtl.md.)
+  wire [WD-1:0] word [0:H*W-1];  // pixel (r, c) at word[r*W + c]
+  reg [{height * width * wd - 1}:0] words;
+  integer i;
+  always @* for (i = 0; i < H*W; i = i + 1) words[i*WD +: WD] = word[i];
+  assign frame = words;
 
   genvar {genvars};
   generate
