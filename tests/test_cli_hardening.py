@@ -170,6 +170,13 @@ def test_read_only_output_and_directory_named_not_the_temporary(files):
 
 
 # ------------------------------------------------------------------ signals and stale temporaries
+def _default_signal_dispositions():
+    """In the child: SIGTERM / SIGHUP as a shell would give them (a test runner started under
+    ``nohup`` passes SIGHUP on ignored, and tespike rightly leaves an ignored signal ignored)."""
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, signal.SIG_DFL)
+
+
 def long_rtl_run(folder):
     """An rtl-sim run with a VCD, long enough to be interrupted while writing."""
     np.save(folder / "long.npy", np.full((TINY.clocks_per_readout * 4000, 2, 2), 3, np.uint8))
@@ -177,7 +184,7 @@ def long_rtl_run(folder):
     return subprocess.Popen([sys.executable, "-m", "cosim", "rtl-sim", "--config", str(folder / "c.json"),
                              "--stimulus", str(folder / "long.npy"), "--out", str(folder / "w.npz"),
                              "--vcd", str(folder / "w.vcd")], env=env, stderr=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, text=True, preexec_fn=_default_signal_dispositions)
 
 
 def wait_for_part(folder, process, timeout=120):
