@@ -1,10 +1,12 @@
 """``tespike train``: train the reconstruction network on simulated streams (paper section 6.3)."""
 
+from .common import add_config_argument
+
 HELP = "train the reconstruction network for one sensor configuration (resumable, CPU or GPU)"
 
 
 def add_arguments(parser):
-    parser.add_argument("--config", default="te", help="sensor: te, ml, ml-msb or a JSON file (default te)")
+    add_config_argument(parser, required=False, default="te")
     parser.add_argument("--out", required=True, help="weights file to write (.pt); its run folder is OUT.run/")
     parser.add_argument("--size", default="cpu", help="network size: cpu (the shipped default) or paper")
     parser.add_argument("--ablation", type=int, default=None, metavar="CASE",
@@ -35,7 +37,7 @@ def run(args) -> int:
     import sys
     from pathlib import Path
 
-    from golden.config import load_config
+    from golden.config import PRESETS, load_config
     from cosim.cli import progress_wanted, report
     from golden.errors import InputError
     from golden.paths import check_output_dir, check_outputs
@@ -49,13 +51,14 @@ def run(args) -> int:
         if not Path(folder).is_dir():
             raise InputError(f"--hdr {folder!r}: not a folder of .exr/.hdr frames")
     out = Path(args.out)
-    config_input = {} if args.config in ("te", "ml", "ml-msb") else {"--config": args.config}
+    preset = args.config in PRESETS
+    config_input = {} if preset else {"--config": args.config}
     check_outputs({"--out": args.out}, config_input)
     check_output_dir(out.with_suffix(".run"), "--out's run folder")
 
     from recon.net.train import TrainOptions, train
 
-    options = TrainOptions(sensor=config.to_json() if args.config not in ("te", "ml", "ml-msb") else args.config,
+    options = TrainOptions(sensor=args.config if preset else config.to_json(),
                            size=args.size, ablation=args.ablation, loss=args.loss, lr=args.lr,
                            halve_every=args.halve_every,
                            steps_per_epoch=args.steps_per_epoch, batch=args.batch, crop=args.crop,
