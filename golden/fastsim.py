@@ -33,9 +33,13 @@ the choice cannot bias the result); docs/simulator.md has the derivation.
              sure (Lundberg bound on the walk from the carried charge): word
              known, accumulator from a window of the last clocks
              (:meth:`SceneSimulator._full_path`).
+``head``     a carried backlog under dim light, or light above one threshold
+             per clock on an accumulator too low for the full path's bound:
+             the first h clocks per clock (cycle-exact), then the rest of the
+             interval by the event, queue or full path from the state reached,
+             chosen from that state (:meth:`SceneSimulator._head_path`).
 ``clock``    anything else (light within about 10 % of one threshold per clock,
-             where charge backs up and the accumulator can clip, or a carried
-             backlog): per-clock electrons for these pixels only, run through
+             where charge backs up and the accumulator can clip): per-clock electrons for these pixels only, run through
              the cycle-exact model :class:`golden.sensor.PixelArray`.
 
 ML msb (SPEC section 3): every path finds the spikes of the interval as for
@@ -67,7 +71,7 @@ from .light import (as_generator, check_dark_current, dark_electrons,
 from .reference import msb_index
 from .sensor import PixelArray
 
-PATHS = ("dark", "event", "bright", "queue", "full", "clock")
+PATHS = ("dark", "event", "bright", "queue", "full", "head", "clock")
 
 #: Largest backlog bound the queue path accepts, and its shortest window.
 MAX_BACKLOG = 64
@@ -178,6 +182,9 @@ class SceneSimulator:
         if counts[PATHS.index("clock")]:
             rest = np.flatnonzero(path == PATHS.index("clock"))
             self._classify_middle(rest, lam[rest], mean[rest], dark[rest], acc[rest], path)
+            rest = rest[path[rest] == PATHS.index("clock")]
+            if rest.size:
+                self._classify_head(rest, lam[rest], mean[rest], dark[rest], acc[rest], path)
             counts = np.bincount(path, minlength=len(PATHS))
         for code, name in enumerate(PATHS):
             if not counts[code]:
@@ -207,6 +214,10 @@ class SceneSimulator:
                 for w in np.unique(size[~too_long]):
                     group = sel[~too_long & (size == w)]
                     (self._queue_path if name == "queue" else self._full_path)(group, int(w), mu, lam, words)
+            elif name == "head":
+                heads = self._window[sel]
+                for h, group in [(h, sel[heads == h]) for h in np.unique(heads)]:
+                    self._head_path(group, int(h), mu, lam, words)
             elif name == "clock":
                 self._clock_path(sel, mu, dark, words)
         return words.reshape(self.shape)
@@ -221,16 +232,9 @@ class SceneSimulator:
         # queue: below the threshold per clock, the accumulator surely never clips
         queue = ok & (acc < theta) & (rho < self._rho_queue)
         if queue.any():
-            s_queue = 2.0 * (1.0 - rho[queue])            # Lundberg exponent (see _queue_path)
-            # P(backlog >= b at the window) <= L exp(-s ((b - 1) theta + 1)): b_max + 1 is unlikely
-            b_max = np.floor(((log_l - self.budget) / s_queue - 1.0) / theta) + 1.0
-            b_max = np.maximum(b_max, 0.0)
             sel = idx[queue]
-            keep = b_max <= MAX_BACKLOG
+            keep = self._queue_plan(sel, rho[queue])
             path[sel[keep]] = PATHS.index("queue")
-            self._b_max[sel] = b_max
-            # the Lindley recursion drains b_max in about b_max / (1 - rho) clocks
-            self._window[sel] = (b_max + 3.0) / (1.0 - rho[queue])
         # full: above the threshold per clock, a spike in every clock surely
         full = ok & (lam > theta)
         if full.any():
@@ -242,44 +246,208 @@ class SceneSimulator:
             gap = lf - theta
             self._window[sel] = 1.3 * -self.budget / s_full / gap + 16.0 * lf / gap ** 2
 
+    def _queue_plan(self, sel, rho):
+        """Backlog bound ``b_max`` and window length of the queue path for pixels
+        ``sel`` at ``rho`` thresholds per clock (stored in ``self._b_max`` and
+        ``self._window``) -> where the bound allows the path (b_max <= MAX_BACKLOG)."""
+        theta, L = self.config.threshold, self.config.clocks_per_readout
+        s_queue = 2.0 * (1.0 - rho)                        # Lundberg exponent (see _queue_walk)
+        # P(backlog >= b at the window) <= L exp(-s ((b - 1) theta + 1)): b_max + 1 is unlikely
+        b_max = np.floor(((np.log(L) - self.budget) / s_queue - 1.0) / theta) + 1.0
+        b_max = np.maximum(b_max, 0.0)
+        self._b_max[sel] = b_max
+        # the Lindley recursion drains b_max in about b_max / (1 - rho) clocks
+        self._window[sel] = (b_max + 3.0) / (1.0 - rho)
+        return b_max <= MAX_BACKLOG
+
+    def _classify_head(self, idx, lam, mean, dark, acc, path):
+        """Head path for pixels a few clocks away from a cheap path: a carried
+        backlog (``acc >= theta``) under light that surely drains it, then the
+        event path; or light above one threshold per clock with too little
+        charge yet for the full path's bound, which a few clocks supply.
+        ``self._window`` gets the head's length (a multiple of MIN_WINDOW)."""
+        c = self.config
+        theta, L = c.threshold, c.clocks_per_readout
+        ok = dark == 0
+        # drain: while acc >= theta every clock fires and acc falls by theta - e
+        drain = ok & (acc >= theta) & ((mean <= self._mean_event)
+                                       | ((mean <= self._mean_unclipped) & (lam < self._rho_queue * theta)))
+        clocks = np.zeros(idx.size)
+        clocks[drain] = 2.0 * (acc[drain] - theta + 1) / (theta - lam[drain]) + 4.0
+        # charge: the full path's bound needs acc >= a_full (each of its two
+        # terms below budget - log 2), reached at about lam - theta per clock
+        charge = ok & (lam > theta) & (mean <= self._mean_unclipped)
+        if charge.any():
+            lc = lam[charge]
+            s_full = 2.0 * (lc - theta) / lc
+            a_full = np.ceil((np.log(2.0) - self.budget) / s_full)
+            top_ok = np.log(2.0 * L) - s_full * (c.acc_max + 1.0) < self.budget
+            clocks[charge] = 1.5 * np.maximum(a_full - acc[charge], 0.0) / (lc - theta) + 8.0
+            charge[charge] = top_ok & (a_full <= c.acc_max)
+        size = MIN_WINDOW * np.maximum(1.0, np.ceil(clocks / MIN_WINDOW))
+        head = (drain | charge) & (size <= L // 2)
+        path[idx[head]] = PATHS.index("head")
+        self._window[idx[head]] = size[head]
+
+    def _head_path(self, sel, h, mu, lam, words):
+        """The first ``h`` clocks per clock through the cycle-exact model, then
+        the rest of the interval by the cheapest path the state reached allows:
+        event (``acc < theta`` and light below the event level), full (its bound
+        holds from the charge reached), else per clock from that state. The
+        choice depends on the head only, never on the rest's electrons, which
+        are independent of it, so each outcome keeps its exact law; spikes and
+        the TE overflow clock of the rest are shifted by the head's."""
+        c = self.config
+        theta, L = c.threshold, c.clocks_per_readout
+        n, rest = sel.size, L - h
+        e = np.minimum(self.rng.poisson(lam[sel][None, :], size=(h, n)), c.input_max)
+        array = PixelArray(c, (1, n))
+        array.state.acc[0] = self.acc[sel]
+        array.state.sfc[0] = self.sfc[sel]
+        array.feed(e.reshape(h, 1, n))
+        st = array.state
+        acc_h, sfc_h, ovf, m = st.acc[0], st.sfc[0], st.ovf[0], st.m[0]
+        lam_s = lam[sel]
+        # the rest's path, from the state after the head and the light only
+        event = (acc_h < theta) & (lam_s <= self._mean_event)
+        queue = ~event & (acc_h < theta) & (lam_s < self._rho_queue * theta)
+        if queue.any():
+            queue[queue] = self._queue_plan(sel[queue], lam_s[queue] / theta)
+            queue &= self._window_size(sel) <= rest // 2
+        full = ~event & (lam_s > theta)
+        if full.any():
+            lf, af = lam_s[full], acc_h[full]
+            s_full = 2.0 * (lf - theta) / lf
+            fire = np.logaddexp(-s_full * (af + 1.0), np.log(L) - s_full * (c.acc_max + 1.0))
+            gap = lf - theta
+            self._window[sel[full]] = 1.3 * -self.budget / s_full / gap + 16.0 * lf / gap ** 2
+            full[full] = fire < self.budget
+            full &= self._window_size(sel) <= rest // 2
+        spikes = np.zeros(n, np.int64)                      # spikes of the rest
+        at = np.full(n, -1, np.int64)                       # TE: clock of the overflow in the rest
+        # TE: spikes still needed to overflow (none once it has: a count never reached)
+        need = np.where(ovf, L + 1, c.p_max - sfc_h) if c.is_te else np.full(n, L + 1, np.int64)
+        settled = np.ones(n, bool)                          # False: words written per clock
+        if event.any():
+            i = np.flatnonzero(event)
+            total = self.rng.poisson(mu[sel[i]] * (rest / L))
+            level = acc_h[i] + total
+            spikes[i] = level // theta
+            self.acc[sel[i]] = level - spikes[i] * theta
+            over = spikes[i] >= need[i]
+            if over.any():
+                k = need[i[over]] * theta - acc_h[i[over]]  # electron that makes the overflow spike
+                position = self.rng.beta(k, total[over] - k + 1)
+                at[i[over]] = h + np.minimum((position * rest).astype(np.int64), rest - 1)
+        for tail in (queue, full):
+            i = np.flatnonzero(tail)
+            size = self._window_size(sel[i])
+            for w in np.unique(size):
+                j = i[size == w]
+                if tail is queue:
+                    ok, got, end, clock, window, drawn = self._queue_walk(sel[j], int(w), lam, acc_h[j],
+                                                                          rest, need[j])
+                    at[j[ok & (clock >= 0)]] = h + clock[ok & (clock >= 0)]
+                else:
+                    ok, end, window, drawn = self._full_walk(sel[j], int(w), lam, acc_h[j], rest)
+                    got = np.full(j.size, rest, np.int64)   # a spike in every clock of the rest
+                    hit = ok & (rest >= need[j])
+                    at[j[hit]] = h + need[j[hit]] - 1
+                self.acc[sel[j[ok]]] = end[ok]
+                spikes[j[ok]] = got[ok]
+                bad = j[~ok]
+                if bad.size:
+                    self._fallback(sel[bad], window[~ok], drawn[~ok], words, self._head_state(st, bad, h))
+                    settled[bad] = False
+        slow = np.flatnonzero(~event & ~queue & ~full)
+        if slow.size:
+            e = np.minimum(self.rng.poisson(lam_s[slow][None, :], size=(rest, slow.size)), c.input_max)
+            self.path_counts["fallback"] += slow.size
+            self._run_clocks(sel[slow], e, words, self._head_state(st, slow, h))
+            settled[slow] = False
+        done = np.flatnonzero(settled)
+        if c.is_te:
+            word = np.minimum(sfc_h[done] + spikes[done], c.p_max)
+            late = at[done] >= 0
+            word[late] = (1 << c.d) | (at[done][late] // c.clocks_per_tick + 1)
+            early = ovf[done]
+            word[early] = (1 << c.d) | m[done][early]
+            words[sel[done]] = word
+        elif c.is_msb:
+            self.sfc[sel[done]] = sfc_h[done]
+            self._ml_words(sel[done], spikes[done], words)
+        else:
+            self._ml_words(sel[done], sfc_h[done] + spikes[done], words)
+
+    def _window_size(self, sel):
+        """Window lengths of pixels ``sel`` rounded up to multiples of MIN_WINDOW
+        (pixels of one length are one block)."""
+        return MIN_WINDOW * np.maximum(1.0, np.ceil(self._window[sel] / MIN_WINDOW))
+
+    @staticmethod
+    def _head_state(state, i, h):
+        """The state of pixels ``i`` of a head's (1, n) array, at clock ``h``."""
+        from .reference import PixelState
+        return PixelState(h, state.acc[:, i].copy(), state.sfc[:, i].copy(),
+                          state.ovf[:, i].copy(), state.m[:, i].copy())
+
     # -- windows of per-clock electrons at the end of the interval -------------
-    def _window_draw(self, sel, w, mu, lam):
-        """Electrons of the last ``w`` clocks (iid Poisson) and the total of the
-        other ``L - w`` clocks; the order in which independent clocks are drawn
-        does not change their law."""
-        L = self.config.clocks_per_readout
+    def _window_draw(self, sel, w, lam, clocks=None):
+        """Electrons of the last ``w`` of ``clocks`` clocks (default L; iid Poisson)
+        and the total of the other ``clocks - w``; the order in which independent
+        clocks are drawn does not change their law."""
+        clocks = self.config.clocks_per_readout if clocks is None else clocks
         window = self.rng.poisson(lam[sel, None], size=(sel.size, w))
-        rest = self.rng.poisson(mu[sel] * ((L - w) / L))
+        rest = self.rng.poisson(lam[sel] * (clocks - w))
         return window, rest
 
-    def _fallback(self, sel, window, rest, words):
+    def _fallback(self, sel, window, rest, words, start=None):
         """Per-clock path for pixels whose window did not settle their outcome:
         the drawn window and rest total are kept (the rest spread as a uniform
-        multinomial, which is its law given the total), so nothing is redrawn."""
+        multinomial, which is its law given the total), so nothing is redrawn.
+        ``start``: the pixels' state part-way through the interval (after a
+        head, :meth:`_head_path`); by default the start of the interval."""
         if not sel.size:
             return
         c = self.config
-        L = c.clocks_per_readout
+        clocks = c.clocks_per_readout - (start.clock if start is not None else 0)
         w = window.shape[1]
-        head = self.rng.multinomial(rest, np.full(L - w, 1.0 / (L - w)))
+        head = self.rng.multinomial(rest, np.full(clocks - w, 1.0 / (clocks - w)))
         e = np.minimum(np.concatenate([head, window], axis=1), c.input_max)
         self.path_counts["fallback"] += sel.size
-        self._run_clocks(sel, np.ascontiguousarray(e.T), words)
+        self._run_clocks(sel, np.ascontiguousarray(e.T), words, start)
 
     def _queue_path(self, sel, w, mu, lam, words):
         """Light below one threshold per clock and no clipping (bound): spikes
-        follow the crossings of the threshold levels through a unit-rate queue.
+        and the accumulator from :meth:`_queue_walk` over the whole interval."""
+        c = self.config
+        ok, spikes, end, at, window, rest = self._queue_walk(
+            sel, w, lam, self.acc[sel], c.clocks_per_readout, np.full(sel.size, c.p_max, np.int64))
+        self._fallback(sel[~ok], window[~ok], rest[~ok], words)
+        done = sel[ok]
+        self.acc[done] = end[ok]
+        if not c.is_te:
+            self._ml_words(done, spikes[ok], words)
+            return
+        words[done] = np.where(at[ok] >= 0, (1 << c.d) | (at[ok] // c.clocks_per_tick + 1), spikes[ok])
+
+    def _queue_walk(self, sel, w, lam, acc0, clocks, need):
+        """``clocks`` clocks of light below one threshold per clock from charge
+        ``acc0 < theta``, no clipping (bound): spikes follow the crossings of the
+        threshold levels through a unit-rate queue.
 
         Without clipping, spike j fires at ``s_j = max(c_j, s_{j-1} + 1)``, c_j
-        the clock where the charge reaches ``j theta``; the count at readout is
-        the crossings minus the backlog left at the end. The backlog entering
-        the window is at most ``b_max`` (bound); the Lindley recursion over the
-        window from 0 and from ``b_max`` agreeing settles the end backlog.
-        """
+        the clock where the charge reaches ``j theta``; the count at the end is
+        the crossings minus the backlog left. The backlog entering the window
+        of the last ``w`` clocks is at most ``b_max`` (bound); the Lindley
+        recursion over the window from 0 and from ``b_max`` agreeing settles the
+        end backlog. TE: the clock of spike ``need`` (per pixel) when it fires,
+        from the first ``need`` crossings, all before the window.
+        -> (ok, spikes, end accumulator, that clock or -1, window, rest total);
+        pixels not ``ok`` go per clock with the window and rest drawn."""
         c = self.config
-        theta, L = c.threshold, c.clocks_per_readout
-        acc0 = self.acc[sel]
-        window, rest = self._window_draw(sel, w, mu, lam)
+        theta = c.threshold
+        window, rest = self._window_draw(sel, w, lam, clocks)
         level0 = acc0 + rest                               # charge before the window
         levels = level0[:, None] + np.cumsum(window, axis=1)
         crossings = np.diff(levels // theta, axis=1, prepend=(level0 // theta)[:, None])
@@ -288,43 +456,45 @@ class SceneSimulator:
         ok = b_lo == b_hi
         level_end = levels[:, -1]
         spikes = level_end // theta - b_lo
-        # TE overflow clock from the first 2^b1 crossings, all before the window
-        p = c.p_max
-        over = ok & (spikes >= p) if c.is_te else np.zeros(sel.size, bool)
-        if c.is_te:
-            ranks_ok = (p * theta - acc0) <= rest
-            self._fallback(sel[over & ~ranks_ok], window[over & ~ranks_ok], rest[over & ~ranks_ok], words)
-            ok &= ~(over & ~ranks_ok)
-            over &= ranks_ok
-        self._fallback(sel[~ok], window[~ok], rest[~ok], words)
-        done = sel[ok]
-        self.acc[done] = level_end[ok] - theta * spikes[ok]
+        at = np.full(sel.size, -1, np.int64)
         if not c.is_te:
-            self._ml_words(done, spikes[ok], words)
-            return
-        words[done] = spikes[ok]
-        if over.any():
-            a, t = acc0[over], rest[over]
-            shapes = np.empty((a.size, p + 1))
+            return ok, spikes, level_end - theta * spikes, at, window, rest
+        over = ok & (spikes >= need)
+        ok &= ~over | ((need * theta - acc0) <= rest)       # the crossings' ranks lie in the rest
+        over &= ok
+        span = clocks - w
+        for p in np.unique(need[over]):
+            i = np.flatnonzero(over & (need == p))
+            a, t = acc0[i], rest[i]
+            shapes = np.empty((i.size, p + 1))
             shapes[:, 0] = theta - a                       # electron of the first crossing
             shapes[:, 1:p] = theta
             shapes[:, p] = t - (p * theta - a) + 1
             gaps = self.rng.standard_gamma(shapes)
             position = np.cumsum(gaps[:, :p], axis=1) / gaps.sum(axis=1, keepdims=True)
-            clocks = np.minimum((position * (L - w)).astype(np.int64), L - w - 1)
-            first = (clocks - np.arange(1, p + 1)).max(axis=1) + p   # s_p = max_i (c_i + p - i)
-            words[sel[over]] = (1 << c.d) | (first // c.clocks_per_tick + 1)
+            cross = np.minimum((position * span).astype(np.int64), span - 1)
+            at[i] = (cross - np.arange(1, p + 1)).max(axis=1) + p   # s_p = max_i (c_i + p - i)
+        return ok, spikes, level_end - theta * spikes, at, window, rest
 
     def _full_path(self, sel, w, mu, lam, words):
         """Light above one threshold per clock, a spike in every clock (bound):
-        the word is known and the accumulator is the walk ``acc + sum(e - theta)``
-        held at or below ``2^A - 1``, i.e. ``min(acc - R, acc_max - M)`` with R the
-        sum of ``theta - e`` over the interval and M its largest suffix sum. M is
-        read from the window when the rest provably cannot exceed it (bound)."""
+        the word is known and the accumulator comes from :meth:`_full_walk`."""
+        ok, end, window, rest = self._full_walk(sel, w, lam, self.acc[sel], self.config.clocks_per_readout)
+        self._fallback(sel[~ok], window[~ok], rest[~ok], words)
+        done = sel[ok]
+        self.acc[done] = end[ok]
+        self._firing_words(done, words)
+
+    def _full_walk(self, sel, w, lam, acc0, clocks):
+        """End accumulator of ``clocks`` clocks that surely all fire (bound): the
+        walk ``acc0 + sum(e - theta)`` held at or below ``2^A - 1`` ends at
+        ``min(acc0 - R, acc_max - M)``, R the sum of ``theta - e`` and M its
+        largest suffix sum. M is read from a window of the last ``w`` clocks
+        where the rest provably cannot exceed it (bound) -> (ok, end, window, rest):
+        pixels not ``ok`` go per clock with the window and rest drawn."""
         c = self.config
-        theta, L, acc_max = c.threshold, c.clocks_per_readout, c.acc_max
-        acc0 = self.acc[sel]
-        window, rest = self._window_draw(sel, w, mu, lam)
+        theta, acc_max = c.threshold, c.acc_max
+        window, rest = self._window_draw(sel, w, lam, clocks)
         deficit = theta - window
         suffix = np.cumsum(deficit[:, ::-1], axis=1)
         m_win = np.maximum(suffix.max(axis=1), 0)
@@ -332,14 +502,11 @@ class SceneSimulator:
         lam_s = lam[sel]
         s = 2.0 * (lam_s - theta) / lam_s
         ok = -s * (m_win + 1 - r_win) < self.budget
-        self._fallback(sel[~ok], window[~ok], rest[~ok], words)
-        total_deficit = r_win + (L - w) * theta - rest
+        total_deficit = r_win + (clocks - w) * theta - rest
         end = np.minimum(acc0 - total_deficit, acc_max - m_win)
-        done = sel[ok]
         # under the sure event every clock fires, so end >= 0; clip only guards
         # the 2^-64 failure event against an illegal state
-        self.acc[done] = np.clip(end[ok], 0, acc_max)
-        self._firing_words(done, words)
+        return ok, np.clip(end, 0, acc_max), window, rest
 
     def _event_path(self, sel, mu, dark, words):
         """``sel``: flat indices, or ``slice(None)`` for the whole frame."""
@@ -484,12 +651,17 @@ class SceneSimulator:
         out[:, draw] = e
         return out
 
-    def _run_clocks(self, sel, e, words):
+    def _run_clocks(self, sel, e, words, start=None):
         """The cycle-exact model (:class:`golden.sensor.PixelArray`, clock for clock
-        the literal rule of SPEC section 3) on electrons ``e`` (L, n) of pixels ``sel``."""
+        the literal rule of SPEC section 3) on electrons ``e`` (clocks, n) of pixels
+        ``sel``, from the start of the interval or from ``start`` (a
+        :class:`golden.reference.PixelState` of shape (1, n) part-way through it)."""
         array = PixelArray(self.config, (1, sel.size))
-        array.state.acc[0] = self.acc[sel]
-        array.state.sfc[0] = self.sfc[sel]                 # 0 except the msb remainder
+        if start is None:
+            array.state.acc[0] = self.acc[sel]
+            array.state.sfc[0] = self.sfc[sel]             # 0 except the msb remainder
+        else:
+            array.state = start
         w = array.feed(e.reshape(e.shape[0], 1, sel.size))
         words[sel] = w[0, 0]
         self.acc[sel] = array.state.acc[0]

@@ -17,6 +17,7 @@ from golden.decode import check_words, decode_spikes
 from golden.errors import InputError
 from golden.fastsim import SceneSimulator, simulate_scene
 from golden.light import poisson_stimulus
+from golden.reference import msb_index
 from golden.sensor import simulate
 from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
@@ -87,12 +88,15 @@ def test_light_steps_between_readouts_match(config):
 
 def test_each_path_is_exercised():
     config = SensorConfig()
-    sim = SceneSimulator(config, (1, 6), rng=0)
-    sim.readout(np.array([[0.0, 0.01, 10.0, 0.6, 1.0, 10.0]]))
-    assert sim.path_counts == {"dark": 1, "event": 1, "bright": 2, "queue": 1, "full": 0,
+    sim = SceneSimulator(config, (1, 7), rng=0)
+    # the last pixel: light 1.5 from an empty accumulator (a head charges it
+    # for the full path), then dim light on the full accumulator (a head drains it)
+    sim.readout(np.array([[0.0, 0.01, 10.0, 0.6, 1.0, 10.0, 1.5]]))
+    assert sim.path_counts == {"dark": 1, "event": 1, "bright": 2, "queue": 1, "full": 0, "head": 1,
                                "clock": 1, "fallback": 0}
-    sim.readout(np.array([[0.0, 0.01, 10.0, 0.6, 1.0, 1.5]]))     # full after a full accumulator
-    assert sim.path_counts == {"dark": 2, "event": 2, "bright": 3, "queue": 2, "full": 1,
+    assert sim.acc[6] == config.acc_max
+    sim.readout(np.array([[0.0, 0.01, 10.0, 0.6, 1.0, 1.5, 0.01]]))     # full after a full accumulator
+    assert sim.path_counts == {"dark": 2, "event": 2, "bright": 3, "queue": 2, "full": 1, "head": 2,
                                "clock": 2, "fallback": 0}
 
 
@@ -356,3 +360,57 @@ def test_msb_remainder_is_read_out_in_the_dark():
     assert seen[:3] == [[0, 1, 7, 7], [0, 0, 6, 6], [0, 0, 3, 5]]
     assert seen[-1] == [0, 0, 0, 0] and not fast.sfc.any()
     assert fast.path_counts["dark"] == 32
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB,
+                                    SensorConfig(b1=5, b2=3, acc_bits=12),
+                                    SensorConfig(b1=2, b2=4, threshold=40, acc_bits=9),
+                                    SensorConfig(mode="ml", ml_readout="msb", ml_bits=5, threshold=30, acc_bits=9)],
+                         ids=str)
+def test_head_path_matches_per_clock_from_carried_charge(config, monkeypatch):
+    """A carried backlog drained under dim light (the rest by the event or the
+    queue path) and light above one threshold per clock on a low accumulator
+    (charged by the head, the rest by the full path): words, decoded mean and
+    the carried accumulator (and msb remainder) have the per-clock law, and the
+    rest of the interval takes each of the event, queue and full paths."""
+    theta, acc_max, L = config.threshold, config.acc_max, config.clocks_per_readout
+    per_clock = np.array([0.0, 0.05, 0.3, 0.6, 0.8, 1.3, 1.6, 2.0])
+    levels = per_clock * theta * L / 42000
+    pixels = 2500
+    light = np.repeat(levels, pixels)[None, :]
+    backlog = acc_max - np.arange(light.size) % (acc_max - theta + 1)     # theta .. acc_max
+    low = np.arange(light.size) % theta                                    # 0 .. theta - 1
+    acc0 = np.where(np.repeat(per_clock, pixels) > 1, low, backlog)
+    tails = {}
+    for name in ("_queue_walk", "_full_walk"):
+        original = getattr(SceneSimulator, name)
+
+        def spy(self, sel, w, lam, acc0, clocks, *rest, _name=name, _original=original):
+            if clocks < L:
+                tails[_name] = tails.get(_name, 0) + sel.size
+            return _original(self, sel, w, lam, acc0, clocks, *rest)
+        monkeypatch.setattr(SceneSimulator, name, spy)
+    fast = SceneSimulator(config, light.shape, rng=51)
+    full = SceneSimulator(config, light.shape, rng=52, method="per-clock")
+    for sim in (fast, full):
+        sim.acc[:] = acc0
+        if config.is_msb:
+            sim.sfc[:] = np.arange(light.size) % (1 << (config.ml_bits - 1))
+    a, b = fast.readout(light)[0], full.readout(light)[0]
+    assert fast.path_counts["head"] >= 3 * pixels, fast.path_counts
+    assert fast.path_counts["fallback"] < fast.path_counts["head"] / 2, fast.path_counts
+    assert tails.get("_queue_walk", 0) > pixels // 2 and tails.get("_full_walk", 0) > pixels // 2, tails
+    width = max(1, theta // 4)                     # a few bins below theta: sampling noise well under 0.05
+    bins = np.arange(0, acc_max + width + 1, width)
+    for i in range(len(levels)):
+        part = slice(i * pixels, (i + 1) * pixels)
+        tvd = 0.5 * np.abs(_histogram(a[part], config) - _histogram(b[part], config)).sum()
+        da, db = (decode_spikes(w[part], config).astype(float) for w in (a, b))
+        se = np.sqrt(da.var() / pixels + db.var() / pixels)
+        assert tvd < 0.05 and abs(da.mean() - db.mean()) <= 4 * se + 1e-12, (per_clock[i], tvd, da.mean(), db.mean())
+        ha, hb = (np.histogram(s.acc[part], bins)[0] / pixels for s in (fast, full))
+        assert 0.5 * np.abs(ha - hb).sum() < 0.05, per_clock[i]
+        if config.is_msb:
+            ra, rb = (np.bincount(msb_index(s.sfc[part]), minlength=config.ml_bits + 1) / pixels
+                      for s in (fast, full))
+            assert 0.5 * np.abs(ra - rb).sum() < 0.05, per_clock[i]
