@@ -8,7 +8,10 @@ dynamics allow. Each pixel-readout takes one of these paths, chosen from its
 light and its carried charge only (never from a random draw of its own, so
 the choice cannot bias the result); docs/simulator.md has the derivation.
 
-``dark``     no light, no dark electrons, ``acc < theta``: nothing changes, word 0.
+``lazy``     dim light (interval mean at most theta / 4), no dark electrons,
+             ``acc < theta``: no draw until the next threshold crossing, whose
+             light-time is Gamma(theta - acc); an interval only subtracts its
+             mean from what remains (:meth:`SceneSimulator._lazy_path`).
 ``event``    ``acc < theta`` and no clock can get more than ``min(theta, 2^E - 1)``
              electrons (bound below). Then no clock holds two threshold
              crossings, so every crossing is a spike in its own clock and no
@@ -47,7 +50,7 @@ the count readout; the counter is then ``min(sfc + spikes, 2^ml_bits - 1)``
 from the carried remainder ``sfc``, the word its bit_length, and the new
 remainder what is left below that bit (:meth:`SceneSimulator._ml_words`). The
 remainder is a function of past spike counts, so each path stays exact in
-distribution; dark pixels still read out their remainder.
+distribution; lazy pixels still read out their remainder.
 
 "Surely" means: each such event fails with probability below
 ``2^-64 / (CHECKS x pixel-readouts x L)`` (:func:`golden.light.log_budget`,
@@ -71,7 +74,7 @@ from .light import (as_generator, check_dark_current, dark_electrons,
 from .reference import msb_index
 from .sensor import PixelArray
 
-PATHS = ("dark", "event", "bright", "queue", "full", "head", "clock")
+PATHS = ("lazy", "event", "bright", "queue", "full", "head", "clock")
 
 #: Largest backlog bound the queue path accepts, and its shortest window.
 MAX_BACKLOG = 64
@@ -111,7 +114,12 @@ class SceneSimulator:
         self.method = method
         self.rng = as_generator(rng)
         n = self.shape[0] * self.shape[1]
-        self.acc = np.zeros(n, np.int64)
+        self._acc = np.zeros(n, np.int64)                  # carried charge (lazy pixels: at their last sync)
+        # lazy pixels (dim light, see _lazy_path): light-time still to the next
+        # threshold crossing, and light-time since the last sync
+        self._lazy = np.zeros(n, bool)
+        self._remaining = np.zeros(n)
+        self._elapsed = np.zeros(n)
         self.sfc = np.zeros(n, np.int64)                   # msb: remainder left in the counter
         self.fraction = np.zeros(n)
         self._no_dark = np.zeros(n, np.int64)              # read only
@@ -124,6 +132,14 @@ class SceneSimulator:
         # test is one comparison with a level found once by bisection
         cap = min(config.threshold, config.input_max)
         self._mean_event = _largest_below(lambda m: log_poisson_tail_above(m, cap + 1), self.budget, cap + 1)
+        # lazy: an interval mean of at most theta / 4 (about a crossing in four
+        # readouts or fewer) that surely cannot fire the 2^b1 spikes of a TE
+        # overflow in one interval, and event light per clock
+        self._mean_lazy = min(config.threshold / 4.0, self._mean_event * config.clocks_per_readout)
+        if config.is_te:
+            self._mean_lazy = min(self._mean_lazy, _largest_below(
+                lambda m: log_poisson_tail_above(m, (config.p_max - 1) * config.threshold),
+                self.budget, (config.p_max - 1) * config.threshold))
         self._mean_unclipped = _largest_below(lambda m: log_poisson_tail_above(m, config.input_max + 1),
                                               self.budget, config.input_max + 1)
         self._lam_bright = np.inf
@@ -146,6 +162,14 @@ class SceneSimulator:
             self._msb_word = msb_index(count)
             self._msb_rest = count - np.where(count > 0, np.left_shift(1, np.maximum(self._msb_word - 1, 0)), 0)
 
+    @property
+    def acc(self) -> np.ndarray:
+        """The carried charge of every pixel (flat int64; writable). Lazy pixels
+        are synced first (their charge drawn from its law given the light-time
+        elapsed and the next crossing's), which keeps every law exact."""
+        self._sync(np.flatnonzero(self._lazy))
+        return self._acc
+
     # -- one readout interval -------------------------------------------------
     def readout(self, light: np.ndarray) -> np.ndarray:
         """Light of one interval (H, W), checked >= 0 and finite -> words (H, W) int64."""
@@ -155,7 +179,7 @@ class SceneSimulator:
         dark = (dark_electrons(self.dark_model, mu.shape, self.rng) if self.dark_model
                 else self._no_dark)
         words = np.zeros(mu.shape, np.int64)
-        acc = self.acc
+        acc = self._acc
 
         if not self.noise:
             idx = np.arange(mu.size)
@@ -168,6 +192,7 @@ class SceneSimulator:
             self.path_counts["clock"] += idx.size
             return words.reshape(self.shape)
 
+        lazy = self._lazy_path(mu, dark, words)
         lam = mu / L                                       # photo-electrons per clock
         mean = lam + dark / L if self.dark_model else lam  # with dark electrons
         low = acc < theta
@@ -176,8 +201,7 @@ class SceneSimulator:
         path[low & (mean <= self._mean_event)] = PATHS.index("event")
         # bright: every clock >= theta electrons (photo-electrons alone suffice)
         path[lam >= self._lam_bright] = PATHS.index("bright")
-        unlit = low & (mu == 0)
-        path[unlit & (dark == 0) if self.dark_model else unlit] = PATHS.index("dark")
+        path[lazy] = PATHS.index("lazy")
         counts = np.bincount(path, minlength=len(PATHS))
         if counts[PATHS.index("clock")]:
             rest = np.flatnonzero(path == PATHS.index("clock"))
@@ -190,10 +214,8 @@ class SceneSimulator:
             if not counts[code]:
                 continue
             self.path_counts[name] += int(counts[code])
-            if name == "dark":                             # no spike, accumulator unchanged:
-                if c.is_msb:                               # msb reads out the remainder
-                    self._ml_words(np.flatnonzero(path == code), 0, words)
-                continue                                   # (count: word 0)
+            if name == "lazy":                             # done by _lazy_path
+                continue
             if name == "event" and counts[code] == mu.size:
                 sel = slice(None)                          # the whole frame: no gather / scatter
             else:
@@ -221,6 +243,67 @@ class SceneSimulator:
             elif name == "clock":
                 self._clock_path(sel, mu, dark, words)
         return words.reshape(self.shape)
+
+    def _lazy_path(self, mu, dark, words):
+        """Dim light (interval mean at most ``_mean_lazy``, no dark electrons,
+        ``acc < theta``): no random draw until the next threshold crossing.
+
+        In light-time (tau grows by mu per interval) the electrons are a
+        unit-rate Poisson process, so the crossing, ``n = theta - acc``
+        electrons after a sync, comes ``Gamma(n)`` later. Each interval only
+        subtracts mu from the light-time remaining; an interval that reaches
+        it fires that spike (a crossing is a spike in its own clock, as on the
+        event path) and draws the electrons after it, ``Poisson(-remaining)``
+        (memoryless), which give the further spikes and the new charge; the
+        next crossing is drawn from there. A pixel that leaves this path is
+        synced (:meth:`_sync`). TE overflow needs ``(2^b1 - 1) theta`` electrons
+        after a crossing in one interval, surely not at this light (bound).
+        -> the pixels on this path (flat indices)."""
+        c = self.config
+        theta = c.threshold
+        eligible = (mu <= self._mean_lazy) & (self._acc < theta)
+        if self.dark_model:
+            eligible &= dark == 0
+        self._sync(np.flatnonzero(self._lazy & ~eligible))
+        enter = np.flatnonzero(eligible & ~self._lazy)
+        if enter.size:
+            self._remaining[enter] = self.rng.standard_gamma(theta - self._acc[enter])
+            self._elapsed[enter] = 0.0
+        self._lazy = eligible
+        sel = np.flatnonzero(eligible)
+        if not sel.size:
+            return sel
+        left = self._remaining[sel] - mu[sel]
+        self._remaining[sel] = left
+        self._elapsed[sel] += mu[sel]
+        hit = left <= 0.0
+        if c.is_msb:                                       # msb reads out the remainder too
+            self._ml_words(sel[~hit], 0, words)
+        cross = sel[hit]
+        if cross.size:
+            level = theta + self.rng.poisson(-left[hit])   # charge after the interval, from the crossing
+            spikes = level // theta
+            rest = level - spikes * theta
+            self._acc[cross] = rest
+            if c.is_te:
+                words[cross] = spikes
+            else:
+                self._ml_words(cross, spikes, words)
+            self._remaining[cross] = self.rng.standard_gamma(theta - rest)
+            self._elapsed[cross] = 0.0
+        return sel
+
+    def _sync(self, sel):
+        """Lazy pixels ``sel`` -> their charge now: given the crossing at light-time
+        ``elapsed + remaining`` after the sync, the ``n - 1`` electrons before it
+        are iid uniform over that span, so ``Binomial(n - 1, elapsed / span)``
+        of them have come."""
+        if not sel.size:
+            return
+        n = self.config.threshold - self._acc[sel]
+        span = self._elapsed[sel] + self._remaining[sel]
+        self._acc[sel] += self.rng.binomial(n - 1, np.where(span > 0, self._elapsed[sel] / span, 0.0))
+        self._lazy[sel] = False
 
     def _classify_middle(self, idx, lam, mean, dark, acc, path):
         """Queue or full path for pixels near one threshold per clock, where allowed."""
@@ -302,7 +385,7 @@ class SceneSimulator:
         n, rest = sel.size, L - h
         e = np.minimum(self.rng.poisson(lam[sel][None, :], size=(h, n)), c.input_max)
         array = PixelArray(c, (1, n))
-        array.state.acc[0] = self.acc[sel]
+        array.state.acc[0] = self._acc[sel]
         array.state.sfc[0] = self.sfc[sel]
         array.feed(e.reshape(h, 1, n))
         st = array.state
@@ -333,7 +416,7 @@ class SceneSimulator:
             total = self.rng.poisson(mu[sel[i]] * (rest / L))
             level = acc_h[i] + total
             spikes[i] = level // theta
-            self.acc[sel[i]] = level - spikes[i] * theta
+            self._acc[sel[i]] = level - spikes[i] * theta
             over = spikes[i] >= need[i]
             if over.any():
                 k = need[i[over]] * theta - acc_h[i[over]]  # electron that makes the overflow spike
@@ -353,7 +436,7 @@ class SceneSimulator:
                     got = np.full(j.size, rest, np.int64)   # a spike in every clock of the rest
                     hit = ok & (rest >= need[j])
                     at[j[hit]] = h + need[j[hit]] - 1
-                self.acc[sel[j[ok]]] = end[ok]
+                self._acc[sel[j[ok]]] = end[ok]
                 spikes[j[ok]] = got[ok]
                 bad = j[~ok]
                 if bad.size:
@@ -422,10 +505,10 @@ class SceneSimulator:
         and the accumulator from :meth:`_queue_walk` over the whole interval."""
         c = self.config
         ok, spikes, end, at, window, rest = self._queue_walk(
-            sel, w, lam, self.acc[sel], c.clocks_per_readout, np.full(sel.size, c.p_max, np.int64))
+            sel, w, lam, self._acc[sel], c.clocks_per_readout, np.full(sel.size, c.p_max, np.int64))
         self._fallback(sel[~ok], window[~ok], rest[~ok], words)
         done = sel[ok]
-        self.acc[done] = end[ok]
+        self._acc[done] = end[ok]
         if not c.is_te:
             self._ml_words(done, spikes[ok], words)
             return
@@ -479,10 +562,10 @@ class SceneSimulator:
     def _full_path(self, sel, w, mu, lam, words):
         """Light above one threshold per clock, a spike in every clock (bound):
         the word is known and the accumulator comes from :meth:`_full_walk`."""
-        ok, end, window, rest = self._full_walk(sel, w, lam, self.acc[sel], self.config.clocks_per_readout)
+        ok, end, window, rest = self._full_walk(sel, w, lam, self._acc[sel], self.config.clocks_per_readout)
         self._fallback(sel[~ok], window[~ok], rest[~ok], words)
         done = sel[ok]
-        self.acc[done] = end[ok]
+        self._acc[done] = end[ok]
         self._firing_words(done, words)
 
     def _full_walk(self, sel, w, lam, acc0, clocks):
@@ -512,7 +595,7 @@ class SceneSimulator:
         """``sel``: flat indices, or ``slice(None)`` for the whole frame."""
         c = self.config
         theta, L = c.threshold, c.clocks_per_readout
-        acc0 = self.acc[sel]
+        acc0 = self._acc[sel]
         total = self.rng.poisson(mu[sel])
         if self.dark_model:
             total += dark[sel]
@@ -520,7 +603,7 @@ class SceneSimulator:
         spikes = level // theta                            # (np.divmod is 3x slower on int64)
         residual = level - spikes * theta
         if not c.is_te:
-            self.acc[sel] = residual
+            self._acc[sel] = residual
             self._ml_words(sel, spikes, words)
             return
         over = np.flatnonzero(spikes >= c.p_max)
@@ -530,13 +613,13 @@ class SceneSimulator:
             position = self.rng.beta(n, t - n + 1)         # n-th of t uniform order statistics
             clock = np.minimum((position * L).astype(np.int64), L - 1)
             spikes[over] = (1 << c.d) | (clock // c.clocks_per_tick + 1)
-        self.acc[sel] = residual                           # after acc0 (maybe a view) is used
+        self._acc[sel] = residual                           # after acc0 (maybe a view) is used
         words[sel] = spikes
 
     def _bright_path(self, sel, mu, lam, dark, words):
         c = self.config
         theta, L, top, acc_max = c.threshold, c.clocks_per_readout, c.input_max, c.acc_max
-        acc0 = self.acc[sel]
+        acc0 = self._acc[sel]
         lam_s = lam[sel]
         end = np.full(sel.size, acc_max, np.int64)
         # every clock saturated at 2^E - 1: a deterministic sum
@@ -565,7 +648,7 @@ class SceneSimulator:
             # under the sure event total >= L theta; max(.., 0) only guards the
             # 2^-64 failure event against an illegal negative state
             end[need] = np.clip(acc0[need] + total - L * theta, 0, acc_max)
-        self.acc[sel[keep]] = end[keep]
+        self._acc[sel[keep]] = end[keep]
         self._firing_words(sel[keep], words)
 
     def _firing_words(self, sel, words):
@@ -658,13 +741,13 @@ class SceneSimulator:
         :class:`golden.reference.PixelState` of shape (1, n) part-way through it)."""
         array = PixelArray(self.config, (1, sel.size))
         if start is None:
-            array.state.acc[0] = self.acc[sel]
+            array.state.acc[0] = self._acc[sel]
             array.state.sfc[0] = self.sfc[sel]             # 0 except the msb remainder
         else:
             array.state = start
         w = array.feed(e.reshape(e.shape[0], 1, sel.size))
         words[sel] = w[0, 0]
-        self.acc[sel] = array.state.acc[0]
+        self._acc[sel] = array.state.acc[0]
         if self.config.is_msb:
             self.sfc[sel] = array.state.sfc[0]
 

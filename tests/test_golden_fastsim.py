@@ -92,11 +92,11 @@ def test_each_path_is_exercised():
     # the last pixel: light 1.5 from an empty accumulator (a head charges it
     # for the full path), then dim light on the full accumulator (a head drains it)
     sim.readout(np.array([[0.0, 0.01, 10.0, 0.6, 1.0, 10.0, 1.5]]))
-    assert sim.path_counts == {"dark": 1, "event": 1, "bright": 2, "queue": 1, "full": 0, "head": 1,
+    assert sim.path_counts == {"lazy": 1, "event": 1, "bright": 2, "queue": 1, "full": 0, "head": 1,
                                "clock": 1, "fallback": 0}
     assert sim.acc[6] == config.acc_max
     sim.readout(np.array([[0.0, 0.01, 10.0, 0.6, 1.0, 1.5, 0.01]]))     # full after a full accumulator
-    assert sim.path_counts == {"dark": 2, "event": 2, "bright": 3, "queue": 2, "full": 1, "head": 2,
+    assert sim.path_counts == {"lazy": 2, "event": 2, "bright": 3, "queue": 2, "full": 1, "head": 2,
                                "clock": 2, "fallback": 0}
 
 
@@ -304,9 +304,10 @@ def test_lindley_closed_form_equals_the_step_by_step_queue(rng):
 
 
 def _msb_path_levels(config):
-    """Light per pixel group sending an msb pixel down each path: dark, event,
-    bright, event (0.02 theta per clock), queue (0.7), full (1.3), per-clock (1.02)."""
-    per_clock = np.array([0.02, 0.7, 1.3, 1.02]) * config.threshold * config.clocks_per_readout / 42000
+    """Light per pixel group sending an msb pixel down each path: lazy (dark and
+    0.0004 theta per clock), bright, event (0.02 theta per clock), queue (0.7),
+    full (1.3), per-clock (1.02)."""
+    per_clock = np.array([0.0004, 0.02, 0.7, 1.3, 1.02]) * config.threshold * config.clocks_per_readout / 42000
     return np.concatenate([[0.0, 1e3], per_clock])
 
 
@@ -338,7 +339,7 @@ def test_msb_paths_equal_the_per_clock_path_in_distribution(config):
             da, db = (decode_spikes(w[i], config).astype(float) for w in (a, b))
             se = np.sqrt(da.var() / pixels + db.var() / pixels)
             assert abs(da.mean() - db.mean()) <= 4 * se + 1e-12, (k, levels[i], da.mean(), db.mean())
-    for name in ("dark", "event", "bright", "queue", "full", "clock"):
+    for name in ("lazy", "event", "bright", "queue", "full", "clock"):
         assert fast.path_counts[name] > 0, fast.path_counts
     assert full.path_counts["clock"] == 8 * levels.size * pixels
 
@@ -359,7 +360,7 @@ def test_msb_remainder_is_read_out_in_the_dark():
         seen.append(a[0].tolist())
     assert seen[:3] == [[0, 1, 7, 7], [0, 0, 6, 6], [0, 0, 3, 5]]
     assert seen[-1] == [0, 0, 0, 0] and not fast.sfc.any()
-    assert fast.path_counts["dark"] == 32
+    assert fast.path_counts["lazy"] == 32
 
 
 @pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB,
@@ -414,3 +415,69 @@ def test_head_path_matches_per_clock_from_carried_charge(config, monkeypatch):
             ra, rb = (np.bincount(msb_index(s.sfc[part]), minlength=config.ml_bits + 1) / pixels
                       for s in (fast, full))
             assert 0.5 * np.abs(ra - rb).sum() < 0.05, per_clock[i]
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB, SensorConfig(b1=1, b2=2),
+                                    SensorConfig(b1=3, b2=3, threshold=5, acc_bits=3),
+                                    SensorConfig(mode="ml", ml_readout="msb", ml_bits=3, b1=2, b2=2, threshold=5)],
+                         ids=str)
+def test_lazy_path_matches_per_clock_over_readouts(config):
+    """Dim light on the lazy path (a draw only at threshold crossings) over 12
+    readouts, with pixel groups that leave it for brighter light and come back
+    (a sync draws their charge) and start dark: words of every readout,
+    decoded means and the carried charge (read mid-way, which syncs, and at
+    the end) have the per-clock law."""
+    theta, L = config.threshold, config.clocks_per_readout
+    K, pixels = 12, 3000
+    lazy_mean = SceneSimulator(config, (6, pixels), total_pixel_readouts=K * 6 * pixels)._mean_lazy
+    assert lazy_mean > 0                             # the largest interval mean the path takes
+    dim = np.array([0.05, 0.3, 0.9]) * lazy_mean / 42000
+    bright = 0.25 * theta * L / 42000                # brighter: the lazy pixels leave
+    scene = np.zeros((K, 6, pixels))
+    scene[:, :3] = dim[None, :, None]                           # steady dim light
+    scene[:, 3] = np.where(np.arange(K) % 4 == 2, bright, dim[1])[:, None]   # leaves and returns
+    scene[:, 4] = np.where(np.arange(K) < 5, 0.0, dim[2])[:, None]           # dark, then dim
+    scene[:, 5] = np.where(np.arange(K) % 3 == 0, dim[0], dim[2])[:, None]   # dim, changing
+    fast = SceneSimulator(config, (6, pixels), rng=61, total_pixel_readouts=scene.size)
+    full = SceneSimulator(config, (6, pixels), rng=62, method="per-clock")
+    width = max(1, theta // 4)
+    bins = np.arange(0, config.acc_max + width + 1, width)
+    for k in range(K):
+        a, b = fast.readout(scene[k]), full.readout(scene[k])
+        for g in range(6):
+            tvd = 0.5 * np.abs(_histogram(a[g], config) - _histogram(b[g], config)).sum()
+            da, db = (decode_spikes(w[g], config).astype(float) for w in (a, b))
+            se = np.sqrt(da.var() / pixels + db.var() / pixels)
+            assert tvd < 0.05 and abs(da.mean() - db.mean()) <= 4 * se + 1e-12, (k, g, tvd)
+        if k in (6, K - 1):                                   # reading acc syncs the lazy pixels
+            for g in range(6):
+                ca, cb = (s.acc.reshape(6, pixels)[g].astype(float) for s in (fast, full))
+                ha, hb = (np.histogram(c, bins)[0] / pixels for c in (ca, cb))
+                se = np.sqrt(ca.var() / pixels + cb.var() / pixels)
+                assert 0.5 * np.abs(ha - hb).sum() < 0.05, (k, g)
+                assert abs(ca.mean() - cb.mean()) <= 4 * se + 1e-12, (k, g, ca.mean(), cb.mean())
+                if config.is_msb:
+                    ra, rb = (np.bincount(msb_index(s.sfc.reshape(6, pixels)[g]), minlength=config.ml_bits + 1)
+                              / pixels for s in (fast, full))
+                    assert 0.5 * np.abs(ra - rb).sum() < 0.05, (k, g)
+    assert fast.path_counts["lazy"] > 0.6 * K * 6 * pixels, fast.path_counts
+
+
+@pytest.mark.parametrize("readouts", [1, 3])
+def test_lazy_sync_draws_the_charge_with_its_law(readouts):
+    """The charge a sync draws (Binomial of the electrons before the next
+    crossing): a threshold of 12 makes the charge's law sharp enough that one
+    electron too many or too few shows in the mean."""
+    config = SensorConfig(threshold=12)
+    pixels = 20000
+    fast = SceneSimulator(config, (1, pixels), rng=71, total_pixel_readouts=readouts * pixels)
+    full = SceneSimulator(config, (1, pixels), rng=72, method="per-clock")
+    light = np.full((1, pixels), 0.8 * fast._mean_lazy / 42000)
+    for _ in range(readouts):
+        fast.readout(light), full.readout(light)
+    assert fast.path_counts["lazy"] == readouts * pixels
+    a, b = fast.acc.astype(float), full.acc.astype(float)
+    se = np.sqrt(a.var() / pixels + b.var() / pixels)
+    assert abs(a.mean() - b.mean()) <= 4 * se, (a.mean(), b.mean(), se)
+    ha, hb = (np.bincount(x.astype(np.int64), minlength=config.threshold) / pixels for x in (a, b))
+    assert 0.5 * np.abs(ha - hb).sum() < 0.03
