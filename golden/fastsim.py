@@ -8,7 +8,7 @@ dynamics allow. Each pixel-readout takes one of these paths, chosen from its
 light and its carried charge only (never from a random draw of its own, so
 the choice cannot bias the result); docs/simulator.md has the derivation.
 
-``lazy``     dim light (interval mean at most theta / 4), no dark electrons,
+``lazy``     dim light (interval mean at most theta / 2), no dark electrons,
              ``acc < theta``: no draw until the next threshold crossing, whose
              light-time is Gamma(theta - acc); an interval only subtracts its
              mean from what remains (:meth:`SceneSimulator._lazy_path`).
@@ -132,10 +132,11 @@ class SceneSimulator:
         # test is one comparison with a level found once by bisection
         cap = min(config.threshold, config.input_max)
         self._mean_event = _largest_below(lambda m: log_poisson_tail_above(m, cap + 1), self.budget, cap + 1)
-        # lazy: an interval mean of at most theta / 4 (about a crossing in four
-        # readouts or fewer) that surely cannot fire the 2^b1 spikes of a TE
+        # lazy: an interval mean of at most theta / 2 (a crossing in two readouts
+        # or fewer: there a draw per crossing, about 70 ns, costs what the event
+        # path's draw per readout does) that surely cannot fire the 2^b1 spikes of a TE
         # overflow in one interval, and event light per clock
-        self._mean_lazy = min(config.threshold / 4.0, self._mean_event * config.clocks_per_readout)
+        self._mean_lazy = min(config.threshold / 2.0, self._mean_event * config.clocks_per_readout)
         if config.is_te:
             self._mean_lazy = min(self._mean_lazy, _largest_below(
                 lambda m: log_poisson_tail_above(m, (config.p_max - 1) * config.threshold),
