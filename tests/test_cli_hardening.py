@@ -463,7 +463,7 @@ def test_refusal_after_a_warning_is_still_one_line(monkeypatch, capsys):
         warnings.warn("divide by zero", RuntimeWarning)
         raise InputError("shape (2, 3) must be (K, H, W)")
     fake = types.SimpleNamespace(HELP="fake", add_arguments=lambda parser: None, run=run)
-    monkeypatch.setattr(cli, "_available_commands", lambda: {"fake": fake})
+    monkeypatch.setattr(cli, "_available_commands", lambda only=None: {"fake": fake})
     assert cli.main(["fake"]) == cli.EXIT_BAD_INPUT
     err = capsys.readouterr().err
     assert err.strip().splitlines() == ["tespike fake: error: shape (2, 3) must be (K, H, W)"]
