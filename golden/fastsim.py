@@ -194,15 +194,28 @@ class SceneSimulator:
             return words.reshape(self.shape)
 
         lazy = self._lazy_path(mu, dark, words)
+        n_lazy = int(np.count_nonzero(lazy))
+        if n_lazy == mu.size:                              # a dark frame: nothing else to do
+            self.path_counts["lazy"] += n_lazy
+            return words.reshape(self.shape)
         lam = mu / L                                       # photo-electrons per clock
         mean = lam + dark / L if self.dark_model else lam  # with dark electrons
-        low = acc < theta
-        path = np.full(mu.size, PATHS.index("clock"), np.int8)
+        # the other pixels' paths: on them alone where they are few (gathers),
+        # else on the whole frame (whole-array passes are cheaper than gathers)
+        few = 2 * n_lazy > mu.size
+        idx = np.flatnonzero(~lazy) if few else slice(None)
+        code = np.full(mu.size - n_lazy if few else mu.size, PATHS.index("clock"), np.int8)
         # event: P(some clock > min(theta, 2^E - 1) electrons) below budget
-        path[low & (mean <= self._mean_event)] = PATHS.index("event")
+        code[(acc[idx] < theta) & (mean[idx] <= self._mean_event)] = PATHS.index("event")
         # bright: every clock >= theta electrons (photo-electrons alone suffice)
-        path[lam >= self._lam_bright] = PATHS.index("bright")
-        path[lazy] = PATHS.index("lazy")
+        code[lam[idx] >= self._lam_bright] = PATHS.index("bright")
+        if few:
+            path = np.full(mu.size, PATHS.index("lazy"), np.int8)
+            path[idx] = code
+        else:
+            path = code
+            if n_lazy:
+                path[lazy] = PATHS.index("lazy")
         counts = np.bincount(path, minlength=len(PATHS))
         if counts[PATHS.index("clock")]:
             rest = np.flatnonzero(path == PATHS.index("clock"))
@@ -259,30 +272,30 @@ class SceneSimulator:
         next crossing is drawn from there. A pixel that leaves this path is
         synced (:meth:`_sync`). TE overflow needs ``(2^b1 - 1) theta`` electrons
         after a crossing in one interval, surely not at this light (bound).
-        -> the pixels on this path (flat indices)."""
+        -> the pixels on this path (a flat mask)."""
         c = self.config
         theta = c.threshold
         eligible = (mu <= self._mean_lazy) & (self._acc < theta)
         if self.dark_model:
             eligible &= dark == 0
-        self._sync(np.flatnonzero(self._lazy & ~eligible))
+        leave = self._lazy & ~eligible
+        if leave.any():
+            self._sync(np.flatnonzero(leave))
         enter = np.flatnonzero(eligible & ~self._lazy)
         if enter.size:
             self._remaining[enter] = self.rng.standard_gamma(theta - self._acc[enter])
             self._elapsed[enter] = 0.0
         self._lazy = eligible
-        sel = np.flatnonzero(eligible)
-        if not sel.size:
-            return sel
-        left = self._remaining[sel] - mu[sel]
-        self._remaining[sel] = left
-        self._elapsed[sel] += mu[sel]
-        hit = left <= 0.0
+        # whole-frame passes, no gather: the other pixels' values are never read
+        np.subtract(self._remaining, mu, out=self._remaining)
+        np.add(self._elapsed, mu, out=self._elapsed)
+        hit = eligible & (self._remaining <= 0.0)
+        cross = np.flatnonzero(hit)
         if c.is_msb:                                       # msb reads out the remainder too
-            self._ml_words(sel[~hit], 0, words)
-        cross = sel[hit]
+            self._ml_words(np.flatnonzero(eligible & ~hit), 0, words)
         if cross.size:
-            level = theta + self.rng.poisson(-left[hit])   # charge after the interval, from the crossing
+            # charge after the interval, from the crossing on
+            level = theta + self.rng.poisson(-self._remaining[cross])
             spikes = level // theta
             rest = level - spikes * theta
             self._acc[cross] = rest
@@ -292,7 +305,7 @@ class SceneSimulator:
                 self._ml_words(cross, spikes, words)
             self._remaining[cross] = self.rng.standard_gamma(theta - rest)
             self._elapsed[cross] = 0.0
-        return sel
+        return eligible
 
     def _sync(self, sel):
         """Lazy pixels ``sel`` -> their charge now: given the crossing at light-time
