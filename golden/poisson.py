@@ -51,6 +51,9 @@ ONE = 1 << 53
 #: 2): about 3 % of draws land in a bucket holding a CDF step.
 GUIDE_PER_SD = 128
 
+#: Draws per block of the table lookup: its arrays (512 KiB each) stay in cache.
+CHUNK = 1 << 16
+
 #: Bit generators whose ``random_raw`` yields 64 random bits (MT19937 gives 32).
 _RAW64 = ("PCG64", "PCG64DXSM", "Philox", "SFC64")
 
@@ -357,14 +360,30 @@ class PoissonSampler:
         return rng.integers(0, np.iinfo(np.uint64).max, size=size, dtype=np.uint64, endpoint=True)
 
     def _draw_integer(self, rng, g: np.ndarray, L: int, n: int) -> np.ndarray:
-        """Poisson(g) per column from one 64-bit word per draw."""
-        return self.invert(g, self._uniform64(rng, L * n).reshape(L, n))
+        """Poisson(g) per column from one 64-bit word per draw, in blocks of about
+        ``CHUNK`` draws (rows, or columns when L = 1) so that the passes run in
+        cache; the words are drawn in the same order as in one call."""
+        out = np.empty((L, n), np.int64)
+        if not out.size:
+            return out
+        if L > 1:
+            rows = max(1, CHUNK // n)
+            for r0 in range(0, L, rows):
+                r1 = min(L, r0 + rows)
+                self.invert(g, self._uniform64(rng, (r1 - r0) * n).reshape(r1 - r0, n), out[r0:r1])
+        else:
+            for c0 in range(0, n, CHUNK):
+                c1 = min(n, c0 + CHUNK)
+                self.invert(g[c0:c1], self._uniform64(rng, c1 - c0).reshape(1, -1), out[:, c0:c1])
+        return out
 
-    def invert(self, g: np.ndarray, u: np.ndarray) -> np.ndarray:
+    def invert(self, g: np.ndarray, u: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """``lo + #{k : cdf[k] <= u >> 11}`` for 64-bit words u ``(L, n)`` (uint64),
-        column j against the cached table of mean ``g[j]``: the guide table gives
-        the draw, except where a CDF step falls inside the bucket (a few %):
-        one step, then bisection up to the next bucket's first candidate."""
+        column j against the table of mean ``g[j]`` (built if missing; means up to
+        ``max_tabled`` whose tables fit the cache): the guide table gives the draw,
+        except where a CDF step falls inside the bucket (a few %): one step, then
+        bisection up to the next bucket's first candidate. ``out``: a C-contiguous
+        int64 ``(L, n)`` array to fill."""
         L, n = u.shape
         if not self._built[g].all():
             self._ensure(np.flatnonzero(np.bincount(g)))
@@ -372,7 +391,8 @@ class PoissonSampler:
         bucket = work.reshape(L, n)
         np.right_shift(u, self._shift[g], out=bucket.view(np.uint64))
         bucket += self._gbase[g]
-        out = np.empty((L, n), np.int64)
+        if out is None:
+            out = np.empty((L, n), np.int64)
         self._value.take(bucket, out=out, mode="clip")   # clip: unbuffered; indices are in range
         slow = np.flatnonzero(out < 0)
         if slow.size:
