@@ -168,8 +168,8 @@ def build_table(g: int, log_tail: float, lo: int | None = None, hi: int | None =
 
 def table_bytes(g: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Cache bytes of the tables of means g on ``[lo, hi]`` (guide: 12 bytes per
-    bucket, CDF: 8 bytes per entry)."""
-    return 12 * ((1 << guide_bits(g)) + 1) + 8 * (hi - lo + 1)
+    bucket, CDF and draw values: 16 bytes per entry)."""
+    return 12 * ((1 << guide_bits(g)) + 1) + 16 * (hi - lo + 1)
 
 
 # -- the fractional part ---------------------------------------------------------
@@ -215,6 +215,8 @@ class PoissonSampler:
             raise InputError(f"log_tail must be finite and negative (got {log_tail!r})")
         if not (isinstance(max_tabled, (int, np.integer)) and 0 <= max_tabled <= 1 << 20):
             raise InputError(f"max_tabled must be an integer in 0..2^20 (got {max_tabled!r})")
+        if not (isinstance(max_cache_bytes, (int, np.integer)) and 0 < max_cache_bytes <= 1 << 34):
+            raise InputError(f"max_cache_bytes must be an integer in 1..2^34 (got {max_cache_bytes!r})")
         self.log_tail = float(log_tail)
         self.max_tabled = int(max_tabled)
         self.max_cache_bytes = int(max_cache_bytes)
@@ -238,7 +240,8 @@ class PoissonSampler:
         self._coff = np.zeros(size, np.int64)      # start of the table's CDF
         self._clen = np.zeros(size, np.int64)      # entries of the table's CDF
         self._value = np.zeros(0, np.int64)
-        self._first = np.zeros(0, np.int32)
+        self._first = np.zeros(0, np.int32)       # per bucket: first candidate, index into _cdf
+        self._kval = np.zeros(0, np.int64)         # per CDF entry: the draw it stands for
         self._cdf = np.zeros(0, np.int64)
         self._work = np.zeros(0, np.int64)
         self._mask = np.zeros(0, bool)
@@ -247,7 +250,7 @@ class PoissonSampler:
     @property
     def cache_bytes(self) -> int:
         """Bytes held by the cached tables."""
-        return self._value.nbytes + self._first.nbytes + self._cdf.nbytes
+        return self._value.nbytes + self._first.nbytes + self._cdf.nbytes + self._kval.nbytes
 
     def table(self, g: int) -> dict:
         """The cached table of Poisson(g) (built if missing): lo, cdf, bits, value, first."""
@@ -256,9 +259,9 @@ class PoissonSampler:
         self._ensure(np.array([g]))
         gb, co, n = int(self._gbase[g]), int(self._coff[g]), int(self._clen[g])
         bits = 64 - int(self._shift[g])
+        value = self._value[gb:gb + (1 << bits) + 1]
         return {"lo": int(self._lo[g]), "cdf": self._cdf[co:co + n], "bits": bits,
-                "value": self._value[gb:gb + (1 << bits) + 1],
-                "first": self._first[gb:gb + (1 << bits) + 1]}
+                "value": np.maximum(value, -1), "first": self._first[gb:gb + (1 << bits) + 1] - co}
 
     def _sizes(self, gs: np.ndarray) -> np.ndarray:
         """Table bytes of the means gs (supports computed once per mean)."""
@@ -281,18 +284,23 @@ class PoissonSampler:
             self.clear()
             self._work, self._mask, self.build_seconds = work, mask, spent
             missing = gs
-        value, first, cdf = [self._value], [self._first], [self._cdf]
+        value, first, cdf, kval = [self._value], [self._first], [self._cdf], [self._kval]
         gbase, coff = self._value.size, self._cdf.size
         for g in missing.tolist():
             t = build_table(g, self.log_tail, int(self._lo[g]), int(self._hi[g]))
             self._built[g] = True
             self._gbase[g], self._coff[g], self._clen[g] = gbase, coff, t["cdf"].size
             self._shift[g] = 64 - t["bits"]
-            value.append(t["value"]), first.append(t["first"]), cdf.append(t["cdf"])
+            f = t["first"].astype(np.int64) + coff
+            # a bucket holding a CDF step says where its search starts: -1 - (index into _cdf)
+            value.append(np.where(t["value"] < 0, -1 - f, t["value"]))
+            first.append(f.astype(np.int32))
+            cdf.append(t["cdf"])
+            kval.append(np.arange(t["lo"], t["lo"] + t["cdf"].size, dtype=np.int64))
             gbase += t["value"].size
             coff += t["cdf"].size
-        self._value, self._first, self._cdf = (np.concatenate(value), np.concatenate(first),
-                                               np.concatenate(cdf))
+        self._value, self._first, self._cdf, self._kval = (
+            np.concatenate(value), np.concatenate(first), np.concatenate(cdf), np.concatenate(kval))
         self.build_seconds += time.perf_counter() - t0
 
     def draw(self, rng: np.random.Generator, lam, clocks: int | None = None) -> np.ndarray:
@@ -360,66 +368,73 @@ class PoissonSampler:
         return rng.integers(0, np.iinfo(np.uint64).max, size=size, dtype=np.uint64, endpoint=True)
 
     def _draw_integer(self, rng, g: np.ndarray, L: int, n: int) -> np.ndarray:
-        """Poisson(g) per column from one 64-bit word per draw, in blocks of about
-        ``CHUNK`` draws (rows, or columns when L = 1) so that the passes run in
-        cache; the words are drawn in the same order as in one call."""
+        """Poisson(g) per column from one 64-bit word per draw, looked up in blocks
+        of about ``CHUNK`` draws (rows, or columns when L = 1) so that the passes
+        run in cache (the words are drawn in the same order as in one call); the
+        few draws whose bucket holds a CDF step are settled together at the end."""
         out = np.empty((L, n), np.int64)
         if not out.size:
             return out
+        flat, pending = out.reshape(-1), []
         if L > 1:
             rows = max(1, CHUNK // n)
             for r0 in range(0, L, rows):
                 r1 = min(L, r0 + rows)
-                self.invert(g, self._uniform64(rng, (r1 - r0) * n).reshape(r1 - r0, n), out[r0:r1])
+                u = self._uniform64(rng, (r1 - r0) * n).reshape(r1 - r0, n)
+                slow, a, x, b = self._lookup(g, u, out[r0:r1])
+                pending.append((slow + r0 * n, a, x, b))
         else:
             for c0 in range(0, n, CHUNK):
                 c1 = min(n, c0 + CHUNK)
-                self.invert(g[c0:c1], self._uniform64(rng, c1 - c0).reshape(1, -1), out[:, c0:c1])
+                slow, a, x, b = self._lookup(g[c0:c1], self._uniform64(rng, c1 - c0).reshape(1, -1),
+                                             out[:, c0:c1])
+                pending.append((slow + c0, a, x, b))
+        slow, a, x, b = (np.concatenate(p) for p in zip(*pending))
+        flat[slow] = self._settle(a, x, b)
         return out
 
     def invert(self, g: np.ndarray, u: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """``lo + #{k : cdf[k] <= u >> 11}`` for 64-bit words u ``(L, n)`` (uint64),
         column j against the table of mean ``g[j]`` (built if missing; means up to
-        ``max_tabled`` whose tables fit the cache): the guide table gives the draw,
-        except where a CDF step falls inside the bucket (a few %): one step, then
-        bisection up to the next bucket's first candidate. ``out``: a C-contiguous
-        int64 ``(L, n)`` array to fill."""
-        L, n = u.shape
+        ``max_tabled`` whose tables fit the cache). ``out``: a C-contiguous int64
+        ``(L, n)`` array to fill."""
         if not self._built[g].all():
             self._ensure(np.flatnonzero(np.bincount(g)))
+        if out is None:
+            out = np.empty(u.shape, np.int64)
+        slow, a, x, b = self._lookup(g, u, out)
+        out.reshape(-1)[slow] = self._settle(a, x, b)
+        return out
+
+    def _lookup(self, g: np.ndarray, u: np.ndarray, out: np.ndarray):
+        """Guide-table pass: fills out ``(L, n)`` where the bucket of ``u >> 11``
+        lies inside one CDF step; returns the other draws (flat indices into out)
+        with their search range ``[a, b]`` (indices into the CDF bank) and value."""
+        L, n = u.shape
         work, _ = self._buffers(L * n)
         bucket = work.reshape(L, n)
         np.right_shift(u, self._shift[g], out=bucket.view(np.uint64))
         bucket += self._gbase[g]
-        if out is None:
-            out = np.empty((L, n), np.int64)
         self._value.take(bucket, out=out, mode="clip")   # clip: unbuffered; indices are in range
         slow = np.flatnonzero(out < 0)
-        if slow.size:
-            bk = work[slow]
-            col = slow % n if L > 1 else slow
-            gc = g[col]
-            coff = self._coff[gc]
-            a = self._first[bk] + coff
-            x = (u.reshape(-1)[slow] >> np.uint64(11)).view(np.int64)
-            step = self._cdf[a] <= x           # most buckets hold a single CDF step
-            a += step
-            more = np.flatnonzero(step)
-            if more.size:                      # the rest: bisection up to the next bucket's first
-                am, xm = a[more], x[more]
-                bm = self._first[bk[more] + 1] + coff[more]
-                while True:                    # smallest k in [am, bm] with cdf[k] > x
-                    open_ = np.flatnonzero(am < bm)
-                    if not open_.size:
-                        break
-                    lo, hi = am[open_], bm[open_]
-                    mid = (lo + hi) >> 1
-                    below = self._cdf[mid] <= xm[open_]
-                    am[open_] = np.where(below, mid + 1, lo)
-                    bm[open_] = np.where(below, hi, mid)
-                a[more] = am
-            out.reshape(-1)[slow] = a - coff + self._lo[gc]
-        return out
+        a = -1 - out.reshape(-1)[slow]         # a bucket's first candidate, coded in its value
+        b = self._first[work[slow] + 1].astype(np.int64)
+        x = (u.reshape(-1)[slow] >> np.uint64(11)).view(np.int64)
+        return slow, a, x, b
+
+    def _settle(self, a: np.ndarray, x: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """The draw for value x with candidates ``[a, b]`` (``cdf[b] > x``): the smallest
+        k there with ``cdf[k] > x``; one step settles most, bisection the rest."""
+        a = a + (self._cdf[a] <= x)
+        open_ = np.flatnonzero(a < b)
+        while open_.size:
+            lo, hi, xo = a[open_], b[open_], x[open_]
+            mid = (lo + hi) >> 1
+            below = self._cdf[mid] <= xo
+            a[open_] = np.where(below, mid + 1, lo)
+            b[open_] = np.where(below, hi, mid)
+            open_ = open_[a[open_] < b[open_]]
+        return self._kval[a]
 
     def _add_fraction(self, rng, r: np.ndarray, out: np.ndarray) -> None:
         """Add Poisson(r) per column to out ``(L, n)`` by inversion of one uniform
