@@ -54,6 +54,9 @@ GUIDE_PER_SD = 128
 #: Draws per block of the table lookup: its arrays (512 KiB each) stay in cache.
 CHUNK = 1 << 16
 
+#: Guide bytes of the tables of one call above which columns are drawn sorted by mean.
+LOCAL_BYTES = 1 << 20
+
 #: Bit generators whose ``random_raw`` yields 64 random bits (MT19937 gives 32).
 _RAW64 = ("PCG64", "PCG64DXSM", "Philox", "SFC64")
 
@@ -354,9 +357,25 @@ class PoissonSampler:
         return self._work[:size], self._mask[:size]
 
     def _draw_tabled(self, rng, lam: np.ndarray, g: np.ndarray, L: int) -> np.ndarray:
-        """``Poisson(g) + Poisson(r)`` for columns whose tables are cached."""
+        """``Poisson(g) + Poisson(r)`` for columns whose tables are cached. When the
+        tables in use are too large to stay in cache together (``LOCAL_BYTES``) and
+        there are several clocks, the columns are drawn sorted by mean, in blocks of
+        columns sharing few tables, and put back in place at the end (a gather pass
+        costs less than a cache miss per draw)."""
         n = lam.size
-        out = self._draw_integer(rng, g, L, n) if g.any() else np.zeros((L, n), np.int64)
+        if L > 1 and n > 1:
+            gs = np.flatnonzero(np.bincount(g))
+            if gs.size > 1 and int((12 << guide_bits(gs)).sum()) > LOCAL_BYTES:
+                perm = np.argsort(g, kind="stable")
+                res = self._draw_tabled_in_order(rng, lam[perm], g[perm], L, by_columns=True)
+                inv = np.empty_like(perm)
+                inv[perm] = np.arange(n)
+                return np.take(res, inv, axis=1, out=np.empty_like(res), mode="clip")
+        return self._draw_tabled_in_order(rng, lam, g, L)
+
+    def _draw_tabled_in_order(self, rng, lam, g, L, by_columns: bool = False) -> np.ndarray:
+        n = lam.size
+        out = self._draw_integer(rng, g, L, n, by_columns) if g.any() else np.zeros((L, n), np.int64)
         r = lam - g
         if r.any():
             (self._add_fraction if L == 1 else self._add_fraction_split)(rng, r, out)
@@ -367,16 +386,27 @@ class PoissonSampler:
             return rng.bit_generator.random_raw(size)
         return rng.integers(0, np.iinfo(np.uint64).max, size=size, dtype=np.uint64, endpoint=True)
 
-    def _draw_integer(self, rng, g: np.ndarray, L: int, n: int) -> np.ndarray:
+    def _draw_integer(self, rng, g: np.ndarray, L: int, n: int, by_columns: bool = False) -> np.ndarray:
         """Poisson(g) per column from one 64-bit word per draw, looked up in blocks
-        of about ``CHUNK`` draws (rows, or columns when L = 1) so that the passes
-        run in cache (the words are drawn in the same order as in one call); the
-        few draws whose bucket holds a CDF step are settled together at the end."""
+        of about ``CHUNK`` draws so that the passes run in cache: rows (all columns),
+        or with ``by_columns`` blocks of columns (all rows), or columns when L = 1;
+        within a block the words are drawn row by row. The few draws whose bucket
+        holds a CDF step are settled together at the end."""
         out = np.empty((L, n), np.int64)
         if not out.size:
             return out
         flat, pending = out.reshape(-1), []
-        if L > 1:
+        if L > 1 and by_columns:
+            cols = max(1, CHUNK // L)
+            block = np.empty((L, cols), np.int64)
+            for c0 in range(0, n, cols):
+                c1 = min(n, c0 + cols)
+                part = block[:, :c1 - c0] if c1 - c0 == cols else np.empty((L, c1 - c0), np.int64)
+                slow, a, x, b = self._lookup(g[c0:c1], self._uniform64(rng, L * (c1 - c0)).reshape(L, -1),
+                                             part)
+                out[:, c0:c1] = part
+                pending.append((slow // (c1 - c0) * n + slow % (c1 - c0) + c0, a, x, b))
+        elif L > 1:
             rows = max(1, CHUNK // n)
             for r0 in range(0, L, rows):
                 r1 = min(L, r0 + rows)

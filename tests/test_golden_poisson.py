@@ -256,3 +256,45 @@ def test_bad_input(call, match):
 def test_bad_construction(kwargs, match):
     with pytest.raises(InputError, match=match):
         PoissonSampler(**kwargs)
+
+
+@pytest.mark.parametrize("local_bytes", [0, 1 << 40])
+def test_sorted_columns_stream(monkeypatch, local_bytes):
+    """With many tables (forced by LOCAL_BYTES = 0) columns are drawn sorted by
+    mean in blocks of columns, row by row within a block; otherwise row blocks.
+    Either way each draw is the plain inversion of its word, put in its column."""
+    import golden.poisson as gp
+    monkeypatch.setattr(gp, "LOCAL_BYTES", local_bytes)
+    monkeypatch.setattr(gp, "CHUNK", 1000)              # several blocks, a ragged last one
+    L, n = 37, 101
+    g = np.random.default_rng(3).integers(0, 300, n)
+    sampler = PoissonSampler(LOG_TAIL)
+    got = sampler.draw(np.random.default_rng(21), g.astype(np.float64), clocks=L)
+    raw = np.random.default_rng(21).bit_generator.random_raw(L * n)
+    order = np.argsort(g, kind="stable") if local_bytes == 0 else np.arange(n)
+    words = np.empty((L, n), np.uint64)
+    if local_bytes == 0:
+        cols, used = 1000 // L, 0
+        for c0 in range(0, n, cols):
+            c1 = min(n, c0 + cols)
+            words[:, order[c0:c1]] = raw[used:used + L * (c1 - c0)].reshape(L, c1 - c0)
+            used += L * (c1 - c0)
+    else:
+        words[:] = raw.reshape(L, n)
+    want = np.empty((L, n), np.int64)
+    for j in range(n):
+        t = sampler.table(int(g[j]))
+        want[:, j] = t["lo"] + np.searchsorted(t["cdf"], (words[:, j] >> np.uint64(11)).astype(np.int64),
+                                               side="right")
+    np.testing.assert_array_equal(got, want)
+
+
+def test_sorted_columns_law():
+    """Many distinct means per column (the sorted path): per-mean mean and variance."""
+    lam = np.repeat(np.linspace(30.25, 3000.5, 40), 25)
+    x = PoissonSampler(LOG_TAIL).draw(np.random.default_rng(6), lam, clocks=200)
+    xs = x.reshape(200, 40, 25)
+    N = 200 * 25
+    m, v, lams = xs.mean(axis=(0, 2)), xs.var(axis=(0, 2)), lam[::25]
+    assert np.all(np.abs(m - lams) <= 4 * np.sqrt(lams / N)), m - lams
+    assert np.all(np.abs(v - lams) <= 4 * np.sqrt((lams + 2 * lams ** 2) / N)), v - lams
