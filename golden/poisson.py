@@ -467,23 +467,36 @@ class PoissonSampler:
         return self._kval[a]
 
     def _add_fraction(self, rng, r: np.ndarray, out: np.ndarray) -> None:
-        """Add Poisson(r) per column to out ``(L, n)`` by inversion of one uniform
-        per draw against the thresholds of :func:`fraction_cdf`: the first as a
-        pass over all draws, the next ones carried per draw still above them."""
-        L, n = out.shape
-        work, mask = self._buffers(L * n)
-        u = rng.random(out=work.view(np.float64)).reshape(L, n)
-        p = np.exp(-r)
-        np.greater_equal(u, p, out=mask.reshape(L, n))
-        np.add(out, mask.view(np.uint8).reshape(L, n), out=out, casting="unsafe")
-        f = p + p * r                          # F_1, as fraction_cdf computes it
-        idx = np.flatnonzero(u >= f)
-        if not idx.size:
-            return
+        """Add Poisson(r) to out ``(1, n)`` by inversion of one uniform per draw
+        against the thresholds of :func:`fraction_cdf`: the first two as passes
+        over blocks of ``CHUNK`` draws (``rng.random`` in the same order as one
+        call), the next ones carried per draw still above them."""
+        n = r.size
         flat = out.reshape(-1)
+        work, mask = self._buffers(3 * min(n, CHUNK))
+        buf = work.view(np.float64)
+        tails = []
+        for c0 in range(0, n, CHUNK):
+            c1 = min(n, c0 + CHUNK)
+            k = c1 - c0
+            u, p, f = buf[:k], buf[k:2 * k], buf[2 * k:3 * k]
+            rng.random(out=u)
+            rc = r[c0:c1]
+            np.negative(rc, out=p)
+            np.exp(p, out=p)                                   # F_0 = P(0)
+            np.greater_equal(u, p, out=mask[:k])
+            np.add(flat[c0:c1], mask[:k].view(np.uint8), out=flat[c0:c1], casting="unsafe")
+            np.multiply(p, rc, out=f)
+            np.add(f, p, out=f)                                # F_1 = p + p r, as fraction_cdf
+            idx = np.flatnonzero(u >= f)
+            if idx.size:
+                pi = p[idx]
+                tails.append((idx + c0, pi * rc[idx], f[idx], u[idx]))
+        if not tails:
+            return
+        idx, p, f, uu = (np.concatenate(t) for t in zip(*tails))
         flat[idx] += 1
-        col = idx % n if L > 1 else idx
-        rr, p, f, uu = r[col], (p * r)[col], f[col], u.reshape(-1)[idx]
+        rr = r[idx]
         for k in range(2, self.kmax):
             p = p * rr / k
             f = f + p
