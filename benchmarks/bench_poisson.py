@@ -50,7 +50,8 @@ def main(argv=None) -> None:
     rng = np.random.default_rng(2026)
     print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f}, "
           f"numpy {np.__version__}, log_tail {args.log_tail}")
-    print(f"{'case':36s} {'numpy ns':>9s} {'table ns':>9s} {'ratio':>6s} {'wall ratio':>10s} {'build ms':>9s}")
+    print(f"{'case':36s} {'numpy ns':>9s} {'table ns':>9s} {'ratio':>6s} {'wall ratio':>10s} "
+          f"{'build ms':>9s}")
     L, n = 240, 20000
     cases = [(f"lam {b}", np.full(n, float(b))) for b in (88, 175, 350, 700)]
     cases += [(f"lam {b}+U(0,1)", b + rng.random(n)) for b in (88, 700)]
