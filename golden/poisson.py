@@ -43,7 +43,9 @@ arrays stay in cache, and a call whose tables do not fit in cache together
 ``benchmarks/bench_poisson.py``.
 
 Means above ``max_tabled`` go to ``rng.poisson`` (a table there would be large
-and rarely reused). Output is deterministic for a given generator state and
+and rarely reused), and so do the least used means of a call whose tables
+would not fit ``max_cache_bytes`` together (rebuilding tables every call would
+cost far more than it saves). Output is deterministic for a given generator state and
 input, whatever the cache holds.
 """
 
@@ -218,9 +220,10 @@ class PoissonSampler:
 
     ``log_tail``: natural log of the mass each table may leave out on each side
     (the simulator's per-clock budget). ``max_tabled``: means above it go to
-    ``rng.poisson``. ``max_cache_bytes``: the tables kept between calls; a call
-    needing more is done in groups of means (ascending), each group's tables
-    built in turn, so the output never depends on what was cached before.
+    ``rng.poisson``. ``max_cache_bytes``: the tables kept between calls; when a
+    call needs more, the means with the most columns are tabled and the others
+    go to ``rng.poisson`` (a choice made from lam alone, so the output never
+    depends on what was cached before).
     Work buffers for one block of draws (about ``CHUNK`` draws, or a row of a
     call with more columns) are kept for reuse: fresh pages cost about as much
     as a pass. :meth:`clear` drops them with the tables.
@@ -334,35 +337,36 @@ class PoissonSampler:
         return self._draw(rng, lam, int(clocks))
 
     def _draw(self, rng, lam: np.ndarray, L: int) -> np.ndarray:
-        tab = lam <= self.max_tabled
+        tab = self._tabled(lam)
         if tab.all():
-            return self._draw_groups(rng, lam, L)
+            return self._draw_tabled(rng, lam, lam.astype(np.int64), L)
         out = np.empty((L, lam.size), np.int64)
         cols = np.flatnonzero(tab)
-        out[:, cols] = self._draw_groups(rng, lam[cols], L)
+        if cols.size:
+            out[:, cols] = self._draw_tabled(rng, lam[cols], lam[cols].astype(np.int64), L)
         big = np.flatnonzero(~tab)
         out[:, big] = rng.poisson(lam[big][None, :], size=(L, big.size))
         return out
 
-    def _draw_groups(self, rng, lam: np.ndarray, L: int) -> np.ndarray:
-        """Tabled columns, in groups of means whose tables fit the cache together."""
-        g = lam.astype(np.int64)
-        gs = np.flatnonzero(np.bincount(g, minlength=1))
+    def _tabled(self, lam: np.ndarray) -> np.ndarray:
+        """Which columns use tables (their tables then cached): means up to
+        ``max_tabled``, and when their tables do not fit ``max_cache_bytes``
+        together, those of the means with the most columns that do (ties to the
+        smaller mean); the rest go to ``rng.poisson``, never a rebuild per call."""
+        tab = lam <= self.max_tabled
+        g = lam[tab].astype(np.int64)
+        counts = np.bincount(g, minlength=1)
+        gs = np.flatnonzero(counts)
         sizes = self._sizes(gs)
-        if sizes.sum() <= self.max_cache_bytes:
-            self._ensure(gs)
-            return self._draw_tabled(rng, lam, g, L)
-        out = np.empty((L, lam.size), np.int64)
-        total = np.cumsum(sizes)
-        start = 0
-        while start < gs.size:
-            base = total[start - 1] if start else 0
-            stop = int(np.searchsorted(total, base + self.max_cache_bytes, side="right"))
-            self._ensure(gs[start:stop])
-            cols = np.flatnonzero((g >= gs[start]) & (g <= gs[stop - 1]))
-            out[:, cols] = self._draw_tabled(rng, lam[cols], g[cols], L)
-            start = stop
-        return out
+        if sizes.sum() > self.max_cache_bytes:
+            order = np.argsort(-counts[gs], kind="stable")
+            keep = gs[order[np.cumsum(sizes[order]) <= self.max_cache_bytes]]
+            tabled = np.zeros(self.max_tabled + 1, bool)
+            tabled[keep] = True
+            tab[tab] = tabled[g]
+            gs = np.sort(keep)
+        self._ensure(gs)
+        return tab
 
     def _buffers(self, size: int) -> tuple[np.ndarray, np.ndarray]:
         if self._work.size < size:
