@@ -298,3 +298,35 @@ def test_sorted_columns_law():
     m, v, lams = xs.mean(axis=(0, 2)), xs.var(axis=(0, 2)), lam[::25]
     assert np.all(np.abs(m - lams) <= 4 * np.sqrt(lams / N)), m - lams
     assert np.all(np.abs(v - lams) <= 4 * np.sqrt((lams + 2 * lams ** 2) / N)), v - lams
+
+
+class _FixedUniforms:
+    """Stands in for a Generator whose ``random(out=...)`` returns given values."""
+
+    def __init__(self, values):
+        self.values, self.used = np.asarray(values, np.float64), 0
+
+    def random(self, out):
+        out[:] = self.values[self.used:self.used + out.size]
+        self.used += out.size
+        return out
+
+
+def test_fraction_thresholds_exactly(monkeypatch):
+    """Per element, u exactly at a threshold F_k counts it, the float just below
+    does not; across several blocks (CHUNK patched small)."""
+    import golden.poisson as gp
+    monkeypatch.setattr(gp, "CHUNK", 64)
+    sampler = PoissonSampler(LOG_TAIL)
+    r = np.repeat([0.3, 0.5, 0.999, 1e-9], 50)                # 1e-9: F_1 rounds to 1, u never reaches it
+    f = fraction_cdf(r, sampler.kmax)
+    k = np.tile(np.arange(5), 40) * (r > 1e-3)
+    at = f[k, np.arange(r.size)]
+    u = np.concatenate([at, np.nextafter(at, 0.0)])
+    rr = np.concatenate([r, r])
+    out = np.zeros((1, rr.size), np.int64)
+    sampler._add_fraction(_FixedUniforms(u), rr, out)
+    want = (u[None, :] >= fraction_cdf(rr, sampler.kmax)).sum(axis=0)
+    np.testing.assert_array_equal(out[0], want)
+    assert np.array_equal(out[0, :r.size], k + 1) and np.array_equal(out[0, r.size:], k)
+    assert np.all(u < 1.0)
