@@ -535,7 +535,8 @@ class PoissonSampler:
         events = int(total.sum())
         if not events:
             return
-        pos = rng.integers(0, L, size=events)
+        index = np.int32 if L * n < 1 << 31 else np.int64   # int32 indices: a third faster
+        pos = rng.integers(0, L, size=events, dtype=index)
         pos *= n
-        pos += np.repeat(np.arange(n), total)
+        pos += np.repeat(np.arange(n, dtype=index), total)
         np.add.at(out.reshape(-1), pos, 1)
