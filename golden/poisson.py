@@ -71,6 +71,9 @@ CHUNK = 1 << 16
 #: Guide bytes of the tables of one call above which columns are drawn sorted by mean.
 LOCAL_BYTES = 1 << 20
 
+#: Largest mean ``Generator.poisson`` accepts (numpy's POISSON_LAM_MAX).
+LAM_MAX = float(np.iinfo(np.int64).max - np.sqrt(np.iinfo(np.int64).max) * 10)
+
 #: Bit generators whose ``random_raw`` yields 64 random bits (MT19937 gives 32).
 _RAW64 = ("PCG64", "PCG64DXSM", "Philox", "SFC64")
 
@@ -326,8 +329,9 @@ class PoissonSampler:
         """Independent Poisson draws (int64): ``(clocks, n)`` with column j of mean
         ``lam[j]`` when ``clocks`` is given (lam 1-D), else one per element of lam."""
         lam = np.asarray(lam, np.float64)
-        if not np.all(np.isfinite(lam) & (lam >= 0)):
-            raise InputError("Poisson means must be finite and >= 0")
+        if lam.size and not (lam.min() >= 0 and lam.max() <= LAM_MAX):   # NaN fails both
+            raise InputError(f"Poisson means must be finite, >= 0 and <= {LAM_MAX:.6g} "
+                             f"(numpy's limit); got {lam.min()!r}..{lam.max()!r}")
         if clocks is None:
             return self._draw(rng, lam.reshape(-1), 1).reshape(lam.shape)
         if lam.ndim != 1:
