@@ -62,7 +62,7 @@ from .errors import InputError
 ONE = 1 << 53
 
 #: Guide buckets per standard deviation of the table (rounded up to a power of
-#: 2): about 3 % of draws land in a bucket holding a CDF step.
+#: 2): about 4 % of draws land in a bucket holding a CDF step (settled apart).
 GUIDE_PER_SD = 128
 
 #: Draws per block of the table lookup: its arrays (512 KiB each) stay in cache.
