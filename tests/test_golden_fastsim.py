@@ -293,14 +293,16 @@ def test_per_clock_path_spreads_dark_electrons_like_the_stimulus(model):
 
 
 def test_lindley_closed_form_equals_the_step_by_step_queue(rng):
-    from golden.fastsim import lindley_end
+    from golden.fastsim import lindley_ends
     for w in (1, 2, 7, 40):
-        x = rng.poisson(rng.uniform(0.2, 1.8, (500, 1)), (500, w))
+        x = rng.poisson(rng.uniform(0.2, 1.8, (1, 500)), (w, 500))
         b0 = rng.integers(0, 6, 500)
         b = b0.copy()
         for j in range(w):
-            b = np.maximum(b + x[:, j] - 1, 0)
-        assert np.array_equal(lindley_end(b0, x), b), w
+            b = np.maximum(b + x[j] - 1, 0)
+        ends = lindley_ends(np.cumsum(x - 1, axis=0), b0, np.zeros(500, np.int64))
+        assert np.array_equal(ends[0], b), w
+        assert np.array_equal(ends[1], np.maximum(np.cumsum(x - 1, axis=0)[-1] - np.minimum(0, np.cumsum(x - 1, axis=0).min(axis=0)), 0)), w
 
 
 def _msb_path_levels(config):
