@@ -86,6 +86,12 @@ MIN_WINDOW = 8
 CHECKS = 8
 METHODS = ("fast", "per-clock")
 
+#: Pixels of one path processed as one group whatever their window lengths.
+SMALL_GROUP = 256
+
+#: Per-clock draws of one call below which numpy's sampler is used (no table).
+SMALL_DRAW = 4096
+
 #: Pixel clocks x pixels of per-clock electrons held at once (bounds memory).
 CLOCK_CHUNK_ELEMENTS = 1 << 21
 
@@ -249,16 +255,24 @@ class SceneSimulator:
                     self.path_counts[name] -= int(too_long.sum())
                     self.path_counts["clock"] += int(too_long.sum())
                     self._clock_path(sel[too_long], mu, dark, words)
-                for w in np.unique(size[~too_long]):
-                    group = sel[~too_long & (size == w)]
-                    (self._queue_path if name == "queue" else self._full_path)(group, int(w), mu, lam, words)
+                for w, group in self._groups(sel[~too_long], size[~too_long]):
+                    (self._queue_path if name == "queue" else self._full_path)(group, w, mu, lam, words)
             elif name == "head":
-                heads = self._window[sel]
-                for h, group in [(h, sel[heads == h]) for h in np.unique(heads)]:
-                    self._head_path(group, int(h), mu, lam, words)
+                for h, group in self._groups(sel, self._window[sel]):
+                    self._head_path(group, h, mu, lam, words)
             elif name == "clock":
                 self._clock_path(sel, mu, dark, words)
         return words.reshape(self.shape)
+
+    @staticmethod
+    def _groups(sel, size):
+        """Pixels ``sel`` grouped by window (or head) length ``size``, one block per
+        length; a few pixels go together at their longest length (a longer
+        window or head is as exact, only dearer, and one call costs less than
+        several small ones) -> [(length, pixels)]."""
+        if sel.size <= SMALL_GROUP:
+            return [(int(size.max()), sel)] if sel.size else []
+        return [(int(w), sel[size == w]) for w in np.unique(size)]
 
     def _lazy_path(self, mu, dark, words):
         """Dim light (interval mean at most ``_mean_lazy``, no dark electrons,
@@ -760,8 +774,9 @@ class SceneSimulator:
         sampler per draw; same law to float64 precision, tables cut where the
         tail is below the per-clock budget); ``method="per-clock"``, the
         reference the shortcuts are tested against, and :meth:`clock_stimulus`
-        keep numpy's ``Generator.poisson``."""
-        if self.method == "per-clock":
+        keep numpy's ``Generator.poisson``, as do calls of fewer than SMALL_DRAW
+        draws (a table costs about 0.25 ms to build, 10^4 draws' worth)."""
+        if self.method == "per-clock" or lam.size * clocks < SMALL_DRAW:
             return self.rng.poisson(lam[None, :], size=(clocks, lam.size))
         if self.sampler is None:
             self.sampler = PoissonSampler(self.budget)

@@ -379,7 +379,7 @@ def test_head_path_matches_per_clock_from_carried_charge(config, monkeypatch):
     theta, acc_max, L = config.threshold, config.acc_max, config.clocks_per_readout
     per_clock = np.array([0.0, 0.05, 0.3, 0.6, 0.8, 1.3, 1.6, 2.0])
     levels = per_clock * theta * L / 42000
-    pixels = 2500
+    pixels = 4000
     light = np.repeat(levels, pixels)[None, :]
     backlog = acc_max - np.arange(light.size) % (acc_max - theta + 1)     # theta .. acc_max
     low = np.arange(light.size) % theta                                    # 0 .. theta - 1
@@ -403,7 +403,7 @@ def test_head_path_matches_per_clock_from_carried_charge(config, monkeypatch):
     assert fast.path_counts["head"] >= 3 * pixels, fast.path_counts
     assert fast.path_counts["fallback"] < fast.path_counts["head"] / 2, fast.path_counts
     assert tails.get("_queue_walk", 0) > pixels // 2 and tails.get("_full_walk", 0) > pixels // 2, tails
-    width = max(1, theta // 4)                     # a few bins below theta: sampling noise well under 0.05
+    width = max(1, theta // 2)                     # two bins below theta: sampling noise well under 0.05
     bins = np.arange(0, acc_max + width + 1, width)
     for i in range(len(levels)):
         part = slice(i * pixels, (i + 1) * pixels)
@@ -411,8 +411,11 @@ def test_head_path_matches_per_clock_from_carried_charge(config, monkeypatch):
         da, db = (decode_spikes(w[part], config).astype(float) for w in (a, b))
         se = np.sqrt(da.var() / pixels + db.var() / pixels)
         assert tvd < 0.05 and abs(da.mean() - db.mean()) <= 4 * se + 1e-12, (per_clock[i], tvd, da.mean(), db.mean())
-        ha, hb = (np.histogram(s.acc[part], bins)[0] / pixels for s in (fast, full))
+        ca, cb = (s.acc[part].astype(float) for s in (fast, full))
+        ha, hb = (np.histogram(x, bins)[0] / pixels for x in (ca, cb))
         assert 0.5 * np.abs(ha - hb).sum() < 0.05, per_clock[i]
+        se = np.sqrt(ca.var() / pixels + cb.var() / pixels)
+        assert abs(ca.mean() - cb.mean()) <= 4 * se + 1e-12, (per_clock[i], ca.mean(), cb.mean())
         if config.is_msb:
             ra, rb = (np.bincount(msb_index(s.sfc[part]), minlength=config.ml_bits + 1) / pixels
                       for s in (fast, full))
