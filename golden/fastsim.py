@@ -63,6 +63,8 @@ stimulus of :func:`golden.light.deterministic_clock_electrons`.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from .config import SensorConfig
@@ -94,6 +96,13 @@ SMALL_DRAW = 4096
 
 #: Pixel clocks x pixels of per-clock electrons held at once (bounds memory).
 CLOCK_CHUNK_ELEMENTS = 1 << 21
+
+#: Horizontal stripes of a noisy fast simulation (:class:`StripedSimulator`): a
+#: power of two, at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a
+#: stripe's readout has a fixed Python cost, which holds the GIL) and STRIPE_ROWS rows.
+STRIPE_PIXELS = 1 << 15
+STRIPE_ROWS = 16
+MAX_STRIPES = 8
 
 
 class SceneSimulator:
@@ -838,25 +847,140 @@ def _smallest_below(bound, budget, lo):
     return hi
 
 
+def stripe_slices(height: int, width: int) -> list[slice]:
+    """Row slices of the horizontal stripes of a ``height`` x ``width`` frame: a function
+    of the shape only (never of the thread count), so a seed gives one result. A
+    power of two, so that 2, 4 or 8 threads get equal shares; a frame of fewer
+    than 2 x STRIPE_PIXELS pixels (e.g. 128 x 256) or 2 x STRIPE_ROWS rows is one stripe."""
+    most = min(MAX_STRIPES, height // STRIPE_ROWS, height * width // STRIPE_PIXELS)
+    n = 1 << (most.bit_length() - 1) if most > 1 else 1
+    bounds = [height * i // n for i in range(n + 1)]
+    return [slice(bounds[i], bounds[i + 1]) for i in range(n)]
+
+
+def spawn_generators(seed, n: int) -> list[np.random.Generator]:
+    """``n`` independent generators from ``seed`` (int, None, SeedSequence, BitGenerator
+    or Generator): ``Generator.spawn`` for a generator, ``SeedSequence(seed).spawn``
+    otherwise. The parent generator's own stream is not advanced."""
+    if isinstance(seed, np.random.BitGenerator):
+        seed = np.random.Generator(seed)
+    if isinstance(seed, np.random.Generator):
+        return seed.spawn(n)
+    if not isinstance(seed, np.random.SeedSequence):
+        seed = np.random.SeedSequence(seed)
+    return [np.random.default_rng(child) for child in seed.spawn(n)]
+
+
+def check_threads(threads, limit: int) -> int:
+    """Worker threads: ``None`` -> the cores this process may run on, at most ``limit``;
+    otherwise a positive integer (capped at ``limit``: more would idle)."""
+    if threads is None:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        return max(1, min(cores, limit))
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise InputError(f"threads {threads!r}: must be a positive integer")
+    return min(int(threads), limit)
+
+
+class StripedSimulator:
+    """A noisy fast :class:`SceneSimulator` per horizontal stripe (:func:`stripe_slices`),
+    each with its own generator (:func:`spawn_generators`), the stripes of a readout
+    run on ``threads`` worker threads (numpy's random draws and array operations
+    release the GIL, so they run in parallel).
+
+    Pixels are independent given the light, so stripes with independent
+    generators have the law of one simulator over the frame; each stripe's error
+    budget counts ``total_pixel_readouts`` (the whole scene), so the 2^-64 bound
+    for the whole stream is unchanged. The words depend on the seed and the
+    frame's shape only, not on ``threads``. A single stripe (small frames,
+    :func:`stripe_slices`) is one simulator on the seed's own generator, exactly as
+    ``SceneSimulator(rng=seed)``. Use as a context manager (it owns a thread pool).
+    """
+
+    def __init__(self, config: SensorConfig, shape: tuple[int, int], *, seed=None,
+                 dark_current: str | None = None, total_pixel_readouts: int | None = None,
+                 threads: int | None = None):
+        H, W = shape
+        self.shape = (H, W)
+        self.rows = stripe_slices(H, W)
+        rngs = [seed] if len(self.rows) == 1 else spawn_generators(seed, len(self.rows))
+        self.stripes = [SceneSimulator(config, (r.stop - r.start, W), rng=rng, dark_current=dark_current,
+                                       total_pixel_readouts=total_pixel_readouts or H * W)
+                        for r, rng in zip(self.rows, rngs)]
+        self.threads = check_threads(threads, len(self.rows))
+        self._pool = None
+        if self.threads > 1:
+            from concurrent.futures import ThreadPoolExecutor
+            self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="fastsim")
+
+    @property
+    def path_counts(self) -> dict[str, int]:
+        """Pixel-readouts per path, summed over the stripes."""
+        return {name: sum(s.path_counts[name] for s in self.stripes) for name in self.stripes[0].path_counts}
+
+    def readout(self, light: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Light of one interval (H, W), checked >= 0 and finite -> words (H, W), written
+        into ``out`` if given (any integer dtype that holds the words)."""
+        out = np.empty(self.shape, np.int64) if out is None else out
+
+        def run(i):
+            out[self.rows[i]] = self.stripes[i].readout(light[self.rows[i]])
+
+        if self._pool is None:
+            for i in range(len(self.rows)):
+                run(i)
+        else:
+            for future in [self._pool.submit(run, i) for i in range(len(self.rows))]:
+                future.result()
+        return out
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
 def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
                    dark_current: str | None = None, noise: bool = True,
-                   progress: bool = False, method: str = "fast") -> np.ndarray:
+                   progress: bool = False, method: str = "fast",
+                   threads: int | None = None) -> np.ndarray:
     """Scene light ``(K, H, W)`` -> readout words ``(K, H, W)`` (smallest word dtype).
 
     ``seed``: int, numpy Generator or ``None`` (fresh entropy). ``method="per-clock"``
     draws electrons per pixel clock everywhere (slow; the reference the fast
     paths are tested against). ``progress`` shows a tqdm bar on stderr for runs
-    longer than a few seconds.
+    longer than a few seconds. The noisy fast method runs horizontal stripes on
+    ``threads`` worker threads (:class:`StripedSimulator`; ``None``: the cores
+    available, at most the stripe count); the words do not depend on ``threads``.
+    ``method="per-clock"`` and ``noise=False`` run one :class:`SceneSimulator` in
+    this thread (the per-clock electrons of :func:`iter_scene_stimulus`).
     """
     scene = check_scene(scene, scan_values=False)       # values: one readout at a time
     K, H, W = scene.shape
-    sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
-                         method=method, total_pixel_readouts=scene.size)
+    if method not in METHODS:
+        raise InputError(f"simulation method {method!r} unknown (known: {', '.join(METHODS)})")
+    if noise and method == "fast":
+        sim = StripedSimulator(config, (H, W), seed=seed, dark_current=dark_current,
+                               total_pixel_readouts=scene.size, threads=threads)
+    else:
+        check_threads(threads, 1)
+        sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
+                             method=method, total_pixel_readouts=scene.size)
     words = np.empty((K, H, W), word_dtype(config))
     readouts = range(K)
     if progress:
         from tqdm import tqdm
         readouts = tqdm(readouts, desc="simulate", unit="readout", delay=2.0, leave=False)
+    if isinstance(sim, StripedSimulator):
+        with sim:
+            for k in readouts:
+                sim.readout(check_scene(np.asarray(scene[k:k + 1]))[0], out=words[k])
+        return words
     for k in readouts:
         words[k] = sim.readout(check_scene(np.asarray(scene[k:k + 1]))[0])
     return words

@@ -1,0 +1,166 @@
+"""Horizontal stripes and worker threads of the fast simulator (golden.fastsim.StripedSimulator).
+
+The words depend on the seed and the frame's shape, never on the thread count;
+a striped frame has the law of the cycle-exact model (same tests as
+tests/test_golden_fastsim.py: mean decoded value within 4 combined standard
+errors, code histogram TVD < 0.05); per-clock and noise-free runs are not
+striped (they are the electrons of ``tespike stimulus``).
+"""
+
+import numpy as np
+import pytest
+
+from golden.config import SensorConfig
+from golden.decode import decode_spikes
+from golden.errors import InputError
+from golden.fastsim import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, SceneSimulator, StripedSimulator,
+                            scene_stimulus, simulate_scene, stripe_slices)
+from golden.io import load_stream
+from golden.light import poisson_stimulus
+from golden.sensor import simulate
+from tests.cli import assert_refused, run_tespike
+
+SMALL = SensorConfig(b1=2, b2=2, threshold=100)                            # L = 12, one threshold/clock at I = 0.029
+SMALL_MSB = SensorConfig(mode="ml", ml_readout="msb", ml_bits=3, b1=2, b2=2, threshold=5)   # saturates, L = 12
+
+
+def _log_uniform(shape, seed):
+    """Light log-uniform over 1e-4 .. 10 x design (every path of the fast simulator)."""
+    return (10.0 ** np.random.default_rng(seed).uniform(-4, 1, shape)).astype(np.float32)
+
+
+@pytest.mark.parametrize("height, width, count", [
+    (384, 512, 4), (1080, 1920, 8), (4096, 4096, MAX_STRIPES), (128, 128, 1), (128, 256, 1),
+    (256, 256, 2), (31, 10 ** 6, 1), (40, 4096, 2), (1, 1, 1), (1000, 100, 2),
+])
+def test_stripes_depend_on_the_shape_only(height, width, count):
+    rows = stripe_slices(height, width)
+    assert len(rows) == count
+    assert rows[0].start == 0 and rows[-1].stop == height
+    assert all(a.stop == b.start for a, b in zip(rows, rows[1:]))
+    sizes = [r.stop - r.start for r in rows]
+    assert max(sizes) - min(sizes) <= 1
+    if count > 1:
+        assert min(sizes) >= STRIPE_ROWS and min(sizes) * width >= STRIPE_PIXELS
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig.preset("ml-msb"), SMALL], ids=str)
+def test_thread_count_does_not_change_the_words(config):
+    # log-uniform light: every path (paper configs: event, bright, queue, full, per clock)
+    scene = _log_uniform((2, 128, 1024), 0)                              # 4 stripes of 32 rows
+    assert len(stripe_slices(128, 1024)) == 4
+    one = simulate_scene(config, scene, seed=3, threads=1)
+    assert np.array_equal(one, simulate_scene(config, scene, seed=3, threads=2))
+    assert np.array_equal(one, simulate_scene(config, scene, seed=3))     # default: the cores available
+    assert not np.array_equal(one, simulate_scene(config, scene, seed=4, threads=2))
+    if config != SMALL:
+        return
+    assert np.array_equal(one, simulate_scene(config, scene, seed=3, threads=4))
+    dark = simulate_scene(config, scene, seed=3, threads=1, dark_current="eq13")
+    assert np.array_equal(dark, simulate_scene(config, scene, seed=3, threads=2, dark_current="eq13"))
+    # a Generator as the seed: its spawned children, the same for any thread count
+    a = simulate_scene(config, scene, seed=np.random.default_rng(8), threads=1)
+    assert np.array_equal(a, simulate_scene(config, scene, seed=np.random.default_rng(8), threads=2))
+
+
+def test_stripes_draw_independent_numbers():
+    scene = np.full((2, 128, 1024), 0.3)
+    words = simulate_scene(SensorConfig(), scene, seed=1)
+    stripes = [words[:, r] for r in stripe_slices(128, 1024)]
+    assert len(stripes) == 4
+    assert all(not np.array_equal(a, b) for i, a in enumerate(stripes) for b in stripes[i + 1:])
+    # the children are spawned: the parent generator's own stream is not used up
+    rng = np.random.default_rng(5)
+    simulate_scene(SensorConfig(), scene, seed=rng)
+    assert rng.random() == np.random.default_rng(5).random()
+
+
+def test_one_stripe_is_one_simulator_on_the_seed():
+    # small frames are not split: exactly SceneSimulator(rng=seed), as before striping
+    config = SensorConfig()
+    scene = _log_uniform((3, 40, 30), 1)
+    assert len(stripe_slices(40, 30)) == 1
+    for seed in (7, np.random.default_rng(7)):
+        words = simulate_scene(config, scene, seed=seed, threads=2)
+        sim = SceneSimulator(config, (40, 30), rng=np.random.default_rng(7), total_pixel_readouts=scene.size)
+        assert np.array_equal(words, np.stack([sim.readout(scene[k].astype(np.float64)) for k in range(3)]))
+
+
+def test_every_stripe_keeps_the_whole_scene_budget():
+    config = SensorConfig()
+    total = 64 * 384 * 512
+    with StripedSimulator(config, (384, 512), seed=0, total_pixel_readouts=total, threads=2) as sim:
+        assert len(sim.stripes) == 4 and sim.threads == 2
+        whole = SceneSimulator(config, (384, 512), total_pixel_readouts=total).budget
+        assert all(s.budget == whole for s in sim.stripes)
+        sim.readout(np.full((384, 512), 0.1))            # event path everywhere
+        assert sim.path_counts["event"] == 384 * 512 and sum(sim.path_counts.values()) == 384 * 512
+
+
+def _histogram(words, config):
+    return np.bincount(words.ravel().astype(np.int64), minlength=1 << config.word_bits) / words.size
+
+
+@pytest.mark.parametrize("config", [SMALL, SMALL_MSB], ids=str)
+def test_striped_frame_has_the_law_of_the_cycle_exact_model(config):
+    # seven levels laid diagonally ((3 row + col) mod 7), so a stripe fed its
+    # neighbour's rows, or words written one stripe off, would change the law;
+    # light steps in time carry backlogged, full and msb-remainder states
+    levels = np.array([0.0, 7e-4, 4e-3, 0.02, 0.028, 0.035, 0.3])
+    H, W = 64, 1024
+    rows, cols = np.mgrid[0:H, 0:W]
+    level = (3 * rows + cols) % len(levels)
+    steps = np.array([1.0, 1.0, 3.0, 0.0, 1.0, 0.5])
+    scene = steps[:, None, None] * levels[level][None]
+    assert len(stripe_slices(H, W)) == 2
+    fast = simulate_scene(config, scene, seed=21, threads=2)
+    exact = simulate(config, poisson_stimulus(config, scene, 22))
+    a_all, b_all = decode_spikes(fast, config).mean(axis=0), decode_spikes(exact, config).mean(axis=0)
+    for i in range(len(levels)):
+        for half in (slice(0, H // 2), slice(H // 2, H)):               # each stripe on its own
+            mask = level[half] == i
+            a, b = a_all[half][mask], b_all[half][mask]
+            se = np.sqrt(a.var() / a.size + b.var() / b.size)
+            diff = a.mean() - b.mean()
+            z = 0.0 if diff == 0 else diff / max(se, 1e-12)
+            tvd = 0.5 * np.abs(_histogram(fast[:, half][:, mask], config)
+                               - _histogram(exact[:, half][:, mask], config)).sum()
+            assert abs(z) < 4 and tvd < 0.05, (levels[i], half, z, tvd)
+
+
+def test_per_clock_and_noise_free_are_not_striped():
+    # the electrons of `tespike stimulus --seed N` are those `simulate --method per-clock --seed N` draws
+    scene = _log_uniform((2, 64, 1024), 2) * 0.03
+    assert len(stripe_slices(64, 1024)) == 2
+    per_clock = simulate_scene(SMALL, scene, seed=4, method="per-clock", threads=2)
+    assert np.array_equal(per_clock, simulate(SMALL, scene_stimulus(SMALL, scene, seed=4)))
+    noise_free = simulate_scene(SMALL, scene, noise=False, threads=2)
+    assert np.array_equal(noise_free, simulate(SMALL, poisson_stimulus(SMALL, scene, noise=False)))
+
+
+@pytest.mark.parametrize("threads", [0, -1, 1.5, True, "2"])
+def test_bad_thread_counts_are_refused(threads):
+    for method in ("fast", "per-clock"):
+        with pytest.raises(InputError, match="threads"):
+            simulate_scene(SensorConfig(), np.zeros((1, 2, 2)), seed=0, method=method, threads=threads)
+
+
+def test_cli_threads_give_the_same_file(tmp_path):
+    np.save(tmp_path / "i.npy", _log_uniform((2, 64, 1024), 3))
+    for threads in (1, 2):
+        result = run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
+                             "--out", tmp_path / f"s{threads}.npz", "--seed", 6, "--threads", threads)
+        assert result.returncode == 0 and result.stderr == "", result.stderr
+    assert (tmp_path / "s1.npz").read_bytes() == (tmp_path / "s2.npz").read_bytes()
+    assert np.array_equal(load_stream(tmp_path / "s1.npz")[0],
+                          simulate_scene(SensorConfig(), np.load(tmp_path / "i.npy"), seed=6))
+
+
+@pytest.mark.parametrize("value, words", [("0", ["--threads 0", "1.."]), ("-2", ["--threads -2"]),
+                                          (str(10 ** 30), ["--threads"]), ("two", ["--threads"])])
+def test_cli_bad_threads_refused_in_one_line(tmp_path, value, words):
+    np.save(tmp_path / "i.npy", np.zeros((1, 2, 2)))
+    result = run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
+                         "--out", tmp_path / "s.npz", "--threads", value)
+    assert_refused(result, *words)
+    assert not list(tmp_path.glob("*s.npz*"))
