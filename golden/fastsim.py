@@ -100,7 +100,7 @@ CLOCK_CHUNK_ELEMENTS = 1 << 21
 #: Horizontal stripes of a noisy fast simulation (:class:`StripedSimulator`): a
 #: power of two, at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a
 #: stripe's readout has a fixed Python cost, which holds the GIL) and STRIPE_ROWS rows.
-STRIPE_PIXELS = 1 << 15
+STRIPE_PIXELS = 1 << 16
 STRIPE_ROWS = 16
 MAX_STRIPES = 8
 
@@ -851,7 +851,7 @@ def stripe_slices(height: int, width: int) -> list[slice]:
     """Row slices of the horizontal stripes of a ``height`` x ``width`` frame: a function
     of the shape only (never of the thread count), so a seed gives one result. A
     power of two, so that 2, 4 or 8 threads get equal shares; a frame of fewer
-    than 2 x STRIPE_PIXELS pixels (e.g. 128 x 256) or 2 x STRIPE_ROWS rows is one stripe."""
+    than 2 x STRIPE_PIXELS pixels (e.g. 256 x 256) or 2 x STRIPE_ROWS rows is one stripe."""
     most = min(MAX_STRIPES, height // STRIPE_ROWS, height * width // STRIPE_PIXELS)
     n = 1 << (most.bit_length() - 1) if most > 1 else 1
     bounds = [height * i // n for i in range(n + 1)]

@@ -22,9 +22,9 @@ Seeds: tile (r, c) of sequence s with configuration C draws from
 :func:`recon.dataset.tile_seed` (root seed, SHA-256 of s and C's JSON, r, c),
 never from the order of completion, and the simulator's error budget counts the
 whole sequence's pixel-readouts (as ``tespike simulate`` on the whole frame), so
-a frame that fits in one tile and is one stripe of ``simulate_scene``
-(:func:`golden.fastsim.stripe_slices`: fewer than 65536 pixels) gives exactly
-``simulate_scene(config, light, seed=default_rng(tile_seed(seed, s, C, 0, 0)))``.
+a frame that fits in one tile gives exactly ``simulate_scene(config, light,
+seed=default_rng(tile_seed(seed, s, C, 0, 0)))`` (a tile is below the size
+:func:`golden.fastsim.simulate_scene` splits into stripes).
 Tiles run one simulator each in their task's thread (Dask workers are the
 parallel axis), never ``simulate_scene``'s worker threads.
 """
