@@ -64,6 +64,7 @@ stimulus of :func:`golden.light.deterministic_clock_electrons`.
 from __future__ import annotations
 
 import os
+import queue
 
 import numpy as np
 
@@ -852,7 +853,7 @@ def stripe_slices(height: int, width: int) -> list[slice]:
     of the shape only (never of the thread count), so a seed gives one result. A
     power of two, so that 2, 4 or 8 threads get equal shares; a frame of fewer
     than 2 x STRIPE_PIXELS pixels (e.g. 256 x 256) or 2 x STRIPE_ROWS rows is one stripe."""
-    most = min(MAX_STRIPES, height // STRIPE_ROWS, height * width // STRIPE_PIXELS)
+    most = int(min(MAX_STRIPES, height // STRIPE_ROWS, height * width // STRIPE_PIXELS))
     n = 1 << (most.bit_length() - 1) if most > 1 else 1
     bounds = [height * i // n for i in range(n + 1)]
     return [slice(bounds[i], bounds[i + 1]) for i in range(n)]
@@ -886,7 +887,8 @@ class StripedSimulator:
     """A noisy fast :class:`SceneSimulator` per horizontal stripe (:func:`stripe_slices`),
     each with its own generator (:func:`spawn_generators`), the stripes of a readout
     run on ``threads`` worker threads (numpy's random draws and array operations
-    release the GIL, so they run in parallel).
+    release the GIL, so they run in parallel): this thread and ``threads - 1``
+    pool threads take the stripes one by one from a queue.
 
     Pixels are independent given the light, so stripes with independent
     generators have the law of one simulator over the frame; each stripe's error
@@ -911,7 +913,7 @@ class StripedSimulator:
         self._pool = None
         if self.threads > 1:
             from concurrent.futures import ThreadPoolExecutor
-            self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="fastsim")
+            self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="fastsim")
 
     @property
     def path_counts(self) -> dict[str, int]:
@@ -923,15 +925,24 @@ class StripedSimulator:
         into ``out`` if given (any integer dtype that holds the words)."""
         out = np.empty(self.shape, np.int64) if out is None else out
 
-        def run(i):
-            out[self.rows[i]] = self.stripes[i].readout(light[self.rows[i]])
+        todo = queue.SimpleQueue()
+        for i in range(len(self.rows)):
+            todo.put(i)
 
-        if self._pool is None:
-            for i in range(len(self.rows)):
-                run(i)
-        else:
-            for future in [self._pool.submit(run, i) for i in range(len(self.rows))]:
-                future.result()
+        def drain():
+            while True:
+                try:
+                    i = todo.get_nowait()
+                except queue.Empty:
+                    return
+                out[self.rows[i]] = self.stripes[i].readout(light[self.rows[i]])
+
+        helpers = [self._pool.submit(drain) for _ in range(self.threads - 1)] if self._pool else []
+        try:
+            drain()
+        finally:
+            for helper in helpers:
+                helper.result()
         return out
 
     def close(self) -> None:
