@@ -5,7 +5,7 @@ Usage (from the worktree root):
     python3 benchmarks/bench_fastsim.py [--pixels 2000] [--readouts 4] [--out PNG | --docs]
                                         [--skip-whole] [--skip-levels] [--whole-shape 64 384 512]
                                         [--scene I.npy ...] [--crops 6] [--repeats 3]
-                                        [--threads N [N ...]]
+                                        [--workers N [N ...]]
 
 Part 1, per light level from 1e-4 to 10 x design light, paper TE, ML (count
 readout) and ML msb (eq. 10) configurations: ``simulate_scene`` (fast) against the naive loop (Poisson
@@ -21,7 +21,7 @@ any ``--scene`` files, against the naive loop timed on several random crops of
 the same scene and scaled per pixel-readout, for each of the three cameras,
 with the msb camera's time over the ML-count camera's in the same run (wall
 and child-process CPU time; the issue's target is within 10 %), and with
-``--threads 1 2`` each camera at each thread count (interleaved) and the
+``--workers 1 2`` each camera at each worker count (interleaved) and the
 wall-time ratio of the first count over the others.
 Prints tables, writes a PNG. Figures depend on the machine and its load; the
 ratios are measured in the same run.
@@ -127,27 +127,27 @@ def naive_rate(config, scene, crops=6, crop=(2, 32, 48), seed=0):
     return size / elapsed
 
 
-def whole_process(name, path, crops=6, repeats=3, threads=(None,)):
+def whole_process(name, path, crops=6, repeats=3, workers=(None,)):
     """``tespike simulate`` as a whole process (start, read, simulate, write) on
     the scene file ``path`` against the naive loop on random crops of it.
 
-    Each camera's process runs ``repeats`` times at each of ``threads``
-    (``--threads``; ``None``: the command's default), cameras and thread counts
+    Each camera's process runs ``repeats`` times at each of ``workers``
+    (``--workers``; ``None``: the command's default), cameras and worker counts
     interleaved, and the fastest run counts (wall and CPU time separately): on a
     shared machine the slower runs measure the other processes."""
     scene = np.load(path, mmap_mode="r")
     K, H, W = scene.shape
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    times = {(mode, t): [] for mode in MODES for t in threads}
+    times = {(mode, t): [] for mode in MODES for t in workers}
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(repeats):
             for mode in MODES:
-                for t in threads:
+                for t in workers:
                     cpu0 = _child_cpu()
                     t0 = time.perf_counter()
                     run = subprocess.run([sys.executable, "-m", "cosim", "simulate", "--config", mode, "--scene",
                                           str(path), "--out", str(Path(tmp) / "S.npz"), "--seed", "1",
-                                          *(() if t is None else ("--threads", str(t)))],
+                                          *(() if t is None else ("--workers", str(t)))],
                                          env=env, capture_output=True, text=True)
                     wall = time.perf_counter() - t0
                     if run.returncode:
@@ -157,24 +157,24 @@ def whole_process(name, path, crops=6, repeats=3, threads=(None,)):
     for mode in MODES:
         config = SensorConfig.preset(mode)
         naive = naive_rate(config, scene, crops)
-        for t in threads:
+        for t in workers:
             fast = min(wall for wall, _ in times[mode, t])
             cpu = min(cpu for _, cpu in times[mode, t])
             results[mode, t] = dict(fast=fast, cpu=cpu, rate=scene.size / fast, naive_rate=naive,
                                     ratio=scene.size / fast / naive)
-            tag = "" if t is None else f" --threads {t}"
+            tag = "" if t is None else f" --workers {t}"
             print(f"{name} {MODES[mode]}{tag}: tespike simulate on {K} x {H} x {W} (readouts x rows x cols): "
                   f"{fast:.1f} s = {scene.size / fast:.3g} pixel-readouts/s (best of {repeats}; CPU {cpu:.1f} s); "
                   f"naive loop {naive:.3g} pixel-readouts/s ({crops} random 2 x 32 x 48 crops) -> "
                   f"{scene.size / naive:.0f} s scaled; speed ratio {scene.size / fast / naive:.1f}x", flush=True)
-        first = results[mode, threads[0]]
-        for t in threads[1:]:
+        first = results[mode, workers[0]]
+        for t in workers[1:]:
             other = results[mode, t]
-            print(f"{name} {MODES[mode]}: --threads {threads[0]} / --threads {t} in this run: wall "
+            print(f"{name} {MODES[mode]}: --workers {workers[0]} / --workers {t} in this run: wall "
                   f"{first['fast'] / other['fast']:.2f}x, CPU {first['cpu'] / other['cpu']:.2f}x", flush=True)
-    for t in threads:
+    for t in workers:
         msb, count = results["ml-msb", t], results["ml", t]
-        tag = "" if t is None else f" (--threads {t})"
+        tag = "" if t is None else f" (--workers {t})"
         print(f"{name}: ML-MSB / ML-count whole-process time in this run{tag}: wall "
               f"{msb['fast'] / count['fast']:.3f}, CPU {msb['cpu'] / count['cpu']:.3f} (target: within 1.10)",
               flush=True)
@@ -233,8 +233,8 @@ def main(argv=None):
     parser.add_argument("--crops", type=int, default=6, help="random crops the naive loop is timed on")
     parser.add_argument("--repeats", type=int, default=3,
                         help="whole-process runs per camera, interleaved; the fastest counts")
-    parser.add_argument("--threads", type=int, nargs="+", default=[None],
-                        help="whole process: tespike simulate --threads values to time, interleaved "
+    parser.add_argument("--workers", type=int, nargs="+", default=[None],
+                        help="whole process: tespike simulate --workers values to time, interleaved "
                              "(e.g. 1 2; default: the command's default)")
     args = parser.parse_args(argv)
     if args.docs:
@@ -252,9 +252,9 @@ def main(argv=None):
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "I.npy"
             np.save(path, hdr_scene(tuple(args.whole_shape)))
-            whole_process("log-uniform 1e-4..10", path, args.crops, args.repeats, tuple(args.threads))
+            whole_process("log-uniform 1e-4..10", path, args.crops, args.repeats, tuple(args.workers))
         for scene in args.scene:
-            whole_process(Path(scene).name, scene, args.crops, args.repeats, tuple(args.threads))
+            whole_process(Path(scene).name, scene, args.crops, args.repeats, tuple(args.workers))
 
 
 if __name__ == "__main__":

@@ -111,7 +111,7 @@ def main() -> None:
         light = make_scene("default", args.frames, args.height, args.width, seed=0)
         for name, config in configs.items():
             start = time.process_time()
-            simulate_scene(config, light, seed=0, threads=1)       # one core, like a worker's task
+            simulate_scene(config, light, seed=0, workers=1)       # one core, like a worker's task
             print(f"simulation alone, {name}: {1e6 * (time.process_time() - start) / light.size:.3f} CPU us "
                   "per pixel-readout")
         frame = tmp / "frame.exr"

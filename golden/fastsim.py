@@ -64,7 +64,6 @@ stimulus of :func:`golden.light.deterministic_clock_electrons`.
 from __future__ import annotations
 
 import os
-import queue
 
 import numpy as np
 
@@ -98,7 +97,7 @@ SMALL_DRAW = 4096
 #: Pixel clocks x pixels of per-clock electrons held at once (bounds memory).
 CLOCK_CHUNK_ELEMENTS = 1 << 21
 
-#: Horizontal stripes of a noisy fast simulation (:class:`StripedSimulator`): a
+#: Horizontal stripes of a noisy fast simulation (:func:`stripe_simulators`): a
 #: power of two, at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a
 #: stripe's readout has a fixed Python cost, which holds the GIL) and STRIPE_ROWS rows.
 STRIPE_PIXELS = 1 << 16
@@ -850,8 +849,8 @@ def _smallest_below(bound, budget, lo):
 
 def stripe_slices(height: int, width: int) -> list[slice]:
     """Row slices of the horizontal stripes of a ``height`` x ``width`` frame: a function
-    of the shape only (never of the thread count), so a seed gives one result. A
-    power of two, so that 2, 4 or 8 threads get equal shares; a frame of fewer
+    of the shape only (never of the worker count), so a seed gives one result. A
+    power of two, so that 2, 4 or 8 workers get equal shares; a frame of fewer
     than 2 x STRIPE_PIXELS pixels (e.g. 256 x 256) or 2 x STRIPE_ROWS rows is one stripe."""
     most = int(min(MAX_STRIPES, height // STRIPE_ROWS, height * width // STRIPE_PIXELS))
     n = 1 << (most.bit_length() - 1) if most > 1 else 1
@@ -872,126 +871,126 @@ def spawn_generators(seed, n: int) -> list[np.random.Generator]:
     return [np.random.default_rng(child) for child in seed.spawn(n)]
 
 
-def check_threads(threads, limit: int) -> int:
-    """Worker threads: ``None`` -> the cores this process may run on, at most ``limit``;
+def check_workers(workers, limit: int) -> int:
+    """Worker processes: ``None`` -> the cores this process may run on, at most ``limit``;
     otherwise a positive integer (capped at ``limit``: more would idle)."""
-    if threads is None:
+    if workers is None:
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
         return max(1, min(cores, limit))
-    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
-        raise InputError(f"threads {threads!r}: must be a positive integer")
-    return min(int(threads), limit)
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise InputError(f"workers {workers!r}: must be a positive integer")
+    return min(int(workers), limit)
 
 
-class StripedSimulator:
-    """A noisy fast :class:`SceneSimulator` per horizontal stripe (:func:`stripe_slices`),
-    each with its own generator (:func:`spawn_generators`), the stripes of a readout
-    run on ``threads`` worker threads (numpy's random draws and array operations
-    release the GIL, so they run in parallel): this thread and ``threads - 1``
-    pool threads take the stripes one by one from a queue.
+def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None,
+                      dark_current: str | None = None, total_pixel_readouts: int | None = None):
+    """(row slices, one noisy fast :class:`SceneSimulator` per stripe) of an H x W frame.
 
-    Pixels are independent given the light, so stripes with independent
-    generators have the law of one simulator over the frame; each stripe's error
-    budget counts ``total_pixel_readouts`` (the whole scene), so the 2^-64 bound
-    for the whole stream is unchanged. The words depend on the seed and the
-    frame's shape only, not on ``threads``. A single stripe (small frames,
-    :func:`stripe_slices`) is one simulator on the seed's own generator, exactly as
-    ``SceneSimulator(rng=seed)``. Use as a context manager (it owns a thread pool).
+    Stripe i draws from child i of ``seed`` (:func:`spawn_generators`); a single
+    stripe is one simulator on the seed's own generator, exactly
+    ``SceneSimulator(rng=seed)``. Pixels are independent given the light, so
+    the stripes have the law of one simulator over the frame; each stripe's
+    error budget counts ``total_pixel_readouts`` (the whole scene), so the
+    2^-64 bound for the whole stream is unchanged.
     """
+    H, W = shape
+    rows = stripe_slices(H, W)
+    rngs = [seed] if len(rows) == 1 else spawn_generators(seed, len(rows))
+    return rows, [SceneSimulator(config, (r.stop - r.start, W), rng=rng, dark_current=dark_current,
+                                 total_pixel_readouts=total_pixel_readouts or H * W)
+                  for r, rng in zip(rows, rngs)]
 
-    def __init__(self, config: SensorConfig, shape: tuple[int, int], *, seed=None,
-                 dark_current: str | None = None, total_pixel_readouts: int | None = None,
-                 threads: int | None = None):
-        H, W = shape
-        self.shape = (H, W)
-        self.rows = stripe_slices(H, W)
-        rngs = [seed] if len(self.rows) == 1 else spawn_generators(seed, len(self.rows))
-        self.stripes = [SceneSimulator(config, (r.stop - r.start, W), rng=rng, dark_current=dark_current,
-                                       total_pixel_readouts=total_pixel_readouts or H * W)
-                        for r, rng in zip(self.rows, rngs)]
-        self.threads = check_threads(threads, len(self.rows))
-        self._pool = None
-        if self.threads > 1:
-            from concurrent.futures import ThreadPoolExecutor
-            self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix="fastsim")
 
-    @property
-    def path_counts(self) -> dict[str, int]:
-        """Pixel-readouts per path, summed over the stripes."""
-        return {name: sum(s.path_counts[name] for s in self.stripes) for name in self.stripes[0].path_counts}
+def _simulate_stripes(config, scene, *, seed, dark_current, workers, progress) -> np.ndarray:
+    """The noisy fast method of :func:`simulate_scene`: stripes, each walked through
+    the readouts in order; with several workers, ``workers - 1`` forked processes
+    take stripes ``j, j + workers, ...`` and write their words into a shared
+    anonymous memory map (processes, not threads: the simulator's Python work
+    holds the GIL for a large share of its time)."""
+    import mmap
+    K, H, W = scene.shape
+    rows, sims = stripe_simulators(config, (H, W), seed=seed, dark_current=dark_current,
+                                   total_pixel_readouts=scene.size)
+    workers = check_workers(workers, len(rows)) if hasattr(os, "fork") else 1
+    dtype = np.dtype(word_dtype(config))
+    if workers == 1:
+        words = np.empty((K, H, W), dtype)
+    else:
+        for k in range(K):                              # refuse bad light before any worker starts
+            check_scene(np.asarray(scene[k:k + 1]))
+        words = np.frombuffer(mmap.mmap(-1, max(1, K * H * W * dtype.itemsize)), dtype,
+                              count=K * H * W).reshape(K, H, W)
 
-    def readout(self, light: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """Light of one interval (H, W), checked >= 0 and finite -> words (H, W), written
-        into ``out`` if given (any integer dtype that holds the words)."""
-        out = np.empty(self.shape, np.int64) if out is None else out
+    def run(mine, readouts):
+        for k in readouts:
+            if workers == 1:
+                light = check_scene(np.asarray(scene[k:k + 1]))[0]
+            for i in mine:
+                part = light[rows[i]] if workers == 1 else np.asarray(scene[k, rows[i]], np.float64)
+                words[k, rows[i]] = sims[i].readout(part)
 
-        todo = queue.SimpleQueue()
-        for i in range(len(self.rows)):
-            todo.put(i)
-
-        def drain():
-            while True:
+    children = {}
+    try:
+        for j in range(1, workers):
+            pid = os.fork()
+            if pid == 0:                                 # worker: its stripes, then leave at once
+                status = 1
                 try:
-                    i = todo.get_nowait()
-                except queue.Empty:
-                    return
-                out[self.rows[i]] = self.stripes[i].readout(light[self.rows[i]])
-
-        helpers = [self._pool.submit(drain) for _ in range(self.threads - 1)] if self._pool else []
-        try:
-            drain()
-        finally:
-            for helper in helpers:
-                helper.result()
-        return out
-
-    def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+                    run(range(j, len(rows), workers), range(K))
+                    status = 0
+                except BaseException:
+                    import traceback
+                    traceback.print_exc()
+                finally:
+                    os._exit(status)
+            children[pid] = j
+        readouts = range(K)
+        if progress:                                     # (after the fork: tqdm starts a thread)
+            from tqdm import tqdm
+            readouts = tqdm(readouts, desc="simulate", unit="readout", delay=2.0, leave=False)
+        run(range(0, len(rows), workers), readouts)
+    except BaseException:
+        for pid in children:
+            os.kill(pid, 9)
+        raise
+    finally:
+        failed = [j for pid, j in children.items() if os.waitpid(pid, 0)[1] != 0]
+    if failed:
+        raise RuntimeError(f"simulation worker(s) {failed} failed (their stripes have no words)")
+    return words
 
 
 def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
                    dark_current: str | None = None, noise: bool = True,
                    progress: bool = False, method: str = "fast",
-                   threads: int | None = None) -> np.ndarray:
+                   workers: int | None = None) -> np.ndarray:
     """Scene light ``(K, H, W)`` -> readout words ``(K, H, W)`` (smallest word dtype).
 
     ``seed``: int, numpy Generator or ``None`` (fresh entropy). ``method="per-clock"``
     draws electrons per pixel clock everywhere (slow; the reference the fast
     paths are tested against). ``progress`` shows a tqdm bar on stderr for runs
-    longer than a few seconds. The noisy fast method runs horizontal stripes on
-    ``threads`` worker threads (:class:`StripedSimulator`; ``None``: the cores
-    available, at most the stripe count); the words do not depend on ``threads``.
+    longer than a few seconds. The noisy fast method simulates horizontal
+    stripes (:func:`stripe_simulators`) on ``workers`` processes (this one and
+    forked ones; ``None``: the cores available, at most the stripe count); the
+    words depend on the seed and the frame's shape, not on ``workers``.
     ``method="per-clock"`` and ``noise=False`` run one :class:`SceneSimulator` in
-    this thread (the per-clock electrons of :func:`iter_scene_stimulus`).
+    this process (the per-clock electrons of :func:`iter_scene_stimulus`).
     """
     scene = check_scene(scene, scan_values=False)       # values: one readout at a time
     K, H, W = scene.shape
     if method not in METHODS:
         raise InputError(f"simulation method {method!r} unknown (known: {', '.join(METHODS)})")
     if noise and method == "fast":
-        sim = StripedSimulator(config, (H, W), seed=seed, dark_current=dark_current,
-                               total_pixel_readouts=scene.size, threads=threads)
-    else:
-        check_threads(threads, 1)
-        sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
-                             method=method, total_pixel_readouts=scene.size)
+        return _simulate_stripes(config, scene, seed=seed, dark_current=dark_current, workers=workers,
+                                 progress=progress)
+    check_workers(workers, 1)
+    sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
+                         method=method, total_pixel_readouts=scene.size)
     words = np.empty((K, H, W), word_dtype(config))
     readouts = range(K)
     if progress:
         from tqdm import tqdm
         readouts = tqdm(readouts, desc="simulate", unit="readout", delay=2.0, leave=False)
-    if isinstance(sim, StripedSimulator):
-        with sim:
-            for k in readouts:
-                sim.readout(check_scene(np.asarray(scene[k:k + 1]))[0], out=words[k])
-        return words
     for k in readouts:
         words[k] = sim.readout(check_scene(np.asarray(scene[k:k + 1]))[0])
     return words

@@ -23,17 +23,12 @@ def add_light_arguments(parser, *, out_help: str, seed_help: str, no_noise_help:
     parser.add_argument("--no-noise", action="store_true", help=no_noise_help)
 
 
-#: Most worker threads a ``--threads`` option accepts.
-MAX_THREADS = 256
+#: Most worker processes ``simulate --workers`` accepts.
+MAX_WORKERS = 256
 
 
-def add_threads_argument(parser, *, help: str) -> None:
-    """``--threads N``: worker threads, checked by :func:`check_threads_argument`."""
-    parser.add_argument("--threads", type=int, default=None, help=f"{help}, 1..{MAX_THREADS}")
-
-
-def check_threads_argument(threads: int | None) -> None:
-    """Refuse a ``--threads`` outside 1..MAX_THREADS with one line."""
+def check_workers_argument(workers: int | None) -> None:
+    """Refuse a ``--workers`` outside 1..MAX_WORKERS with one line."""
     from golden.errors import InputError
-    if threads is not None and not 1 <= threads <= MAX_THREADS:
-        raise InputError(f"--threads {threads}: must be in 1..{MAX_THREADS}")
+    if workers is not None and not 1 <= workers <= MAX_WORKERS:
+        raise InputError(f"--workers {workers}: must be in 1..{MAX_WORKERS}")

@@ -1,6 +1,6 @@
 """``tespike simulate``: scene light I.npy -> readout stream S.npz, with photon shot noise."""
 
-from .common import add_light_arguments, add_threads_argument, check_threads_argument
+from .common import MAX_WORKERS, add_light_arguments, check_workers_argument
 
 HELP = "simulate the sensor on a light scene I.npy (photon shot noise; fast, exact in distribution)"
 
@@ -11,8 +11,9 @@ def add_arguments(parser):
                         no_noise_help="no shot noise: deliver the expected electrons deterministically")
     parser.add_argument("--method", choices=("fast", "per-clock"), default="fast",
                         help="'per-clock' draws electrons every pixel clock (slow; for checking)")
-    add_threads_argument(parser, help="worker threads of the fast noisy simulation (default: the cores "
-                                      "available; the stream does not depend on it)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help=f"processes simulating the frame's stripes, 1..{MAX_WORKERS} (default: the "
+                             "cores available; the stream does not depend on it)")
 
 
 def run(args) -> int:
@@ -23,7 +24,7 @@ def run(args) -> int:
     from golden.io import load_scene, save_stream
     from golden.paths import check_outputs
 
-    check_threads_argument(args.threads)                # before the scene is read and scanned
+    check_workers_argument(args.workers)                # before the scene is read and scanned
     check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config})
     config = load_config(args.config)
     scene = load_scene(args.scene, memory_map=True)     # read one readout at a time
@@ -31,7 +32,7 @@ def run(args) -> int:
         raise InputError(f"--seed {args.seed}: must be >= 0")
     words = simulate_scene(config, scene, seed=args.seed, dark_current=args.dark_current,
                            noise=not args.no_noise, method=args.method,
-                           progress=progress_wanted(args), threads=args.threads)
+                           progress=progress_wanted(args), workers=args.workers)
     save_stream(args.out, words, config)
     K, H, W = words.shape
     report(args, f"wrote {args.out}: {K} readouts of {H} x {W} {config.mode.upper()} words")

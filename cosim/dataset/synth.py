@@ -25,8 +25,8 @@ whole sequence's pixel-readouts (as ``tespike simulate`` on the whole frame), so
 a frame that fits in one tile gives exactly ``simulate_scene(config, light,
 seed=default_rng(tile_seed(seed, s, C, 0, 0)))`` (a tile is below the size
 :func:`golden.fastsim.simulate_scene` splits into stripes).
-Tiles run one simulator each in their task's thread (Dask workers are the
-parallel axis), never ``simulate_scene``'s worker threads.
+Tiles run one simulator each in their task (Dask workers are the parallel
+axis), never ``simulate_scene``'s forked workers.
 """
 
 from __future__ import annotations

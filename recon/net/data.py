@@ -166,7 +166,7 @@ def training_set(config: SensorConfig, recipe: DataRecipe = DataRecipe(), *,
                     lambda: np.stack([training_sequence(recipe, i) for i in bar("training light")]))
     config_key = hashlib.sha256(config.to_json().encode()).hexdigest()[:12]
     words = _cached(folder / f"words-{key}-{config_key}.npy",
-                    lambda: np.stack([simulate_scene(config, np.asarray(light[i]), threads=1,   # runs share cores
+                    lambda: np.stack([simulate_scene(config, np.asarray(light[i]), workers=1,   # runs share cores
                                                      seed=np.random.default_rng(stream_seed(recipe, config, i)))
                                       for i in bar(f"simulate {config.mode}")]))
     return light, words

@@ -1,6 +1,6 @@
-"""Horizontal stripes and worker threads of the fast simulator (golden.fastsim.StripedSimulator).
+"""Horizontal stripes and worker processes of the fast simulator (golden.fastsim.simulate_scene).
 
-The words depend on the seed and the frame's shape, never on the thread count;
+The words depend on the seed and the frame's shape, never on the worker count;
 a striped frame has the law of the cycle-exact model (same tests as
 tests/test_golden_fastsim.py: mean decoded value within 4 combined standard
 errors, code histogram TVD < 0.05); per-clock and noise-free runs are not
@@ -13,8 +13,8 @@ import pytest
 from golden.config import SensorConfig
 from golden.decode import decode_spikes
 from golden.errors import InputError
-from golden.fastsim import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, SceneSimulator, StripedSimulator,
-                            scene_stimulus, simulate_scene, stripe_slices)
+from golden.fastsim import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, SceneSimulator, scene_stimulus,
+                            simulate_scene, stripe_simulators, stripe_slices)
 from golden.io import load_stream
 from golden.light import poisson_stimulus
 from golden.sensor import simulate
@@ -46,23 +46,23 @@ def test_stripes_depend_on_the_shape_only(height, width, count):
 
 @pytest.mark.parametrize("config, height", [(SensorConfig(), 128), (SensorConfig.preset("ml-msb"), 128),
                                             (SMALL, 256)], ids=str)
-def test_thread_count_does_not_change_the_words(config, height):
+def test_worker_count_does_not_change_the_words(config, height):
     # log-uniform light: every path (paper configs: lazy, event, bright, queue, full, head, per clock)
     scene = _log_uniform((2, height, 1024), 0)                           # 2 or 4 stripes
     assert len(stripe_slices(height, 1024)) == height // 64
-    one = simulate_scene(config, scene, seed=3, threads=1)
-    assert np.array_equal(one, simulate_scene(config, scene, seed=3, threads=2))
+    one = simulate_scene(config, scene, seed=3, workers=1)
+    assert np.array_equal(one, simulate_scene(config, scene, seed=3, workers=2))
     assert np.array_equal(one, simulate_scene(config, scene, seed=3))     # default: the cores available
-    assert not np.array_equal(one, simulate_scene(config, scene, seed=4, threads=2))
+    assert not np.array_equal(one, simulate_scene(config, scene, seed=4, workers=2))
     if config != SMALL:
         return
-    assert np.array_equal(one, simulate_scene(config, scene, seed=3, threads=3))
-    assert np.array_equal(one, simulate_scene(config, scene, seed=3, threads=4))
-    dark = simulate_scene(config, scene, seed=3, threads=1, dark_current="eq13")
-    assert np.array_equal(dark, simulate_scene(config, scene, seed=3, threads=2, dark_current="eq13"))
-    # a Generator as the seed: its spawned children, the same for any thread count
-    a = simulate_scene(config, scene, seed=np.random.default_rng(8), threads=1)
-    assert np.array_equal(a, simulate_scene(config, scene, seed=np.random.default_rng(8), threads=2))
+    assert np.array_equal(one, simulate_scene(config, scene, seed=3, workers=3))
+    assert np.array_equal(one, simulate_scene(config, scene, seed=3, workers=4))
+    dark = simulate_scene(config, scene, seed=3, workers=1, dark_current="eq13")
+    assert np.array_equal(dark, simulate_scene(config, scene, seed=3, workers=2, dark_current="eq13"))
+    # a Generator as the seed: its spawned children, the same for any worker count
+    a = simulate_scene(config, scene, seed=np.random.default_rng(8), workers=1)
+    assert np.array_equal(a, simulate_scene(config, scene, seed=np.random.default_rng(8), workers=2))
 
 
 def test_stripes_draw_independent_numbers():
@@ -83,7 +83,7 @@ def test_one_stripe_is_one_simulator_on_the_seed():
     scene = _log_uniform((3, 40, 30), 1)
     assert len(stripe_slices(40, 30)) == 1
     for seed in (7, np.random.default_rng(7)):
-        words = simulate_scene(config, scene, seed=seed, threads=2)
+        words = simulate_scene(config, scene, seed=seed, workers=2)
         sim = SceneSimulator(config, (40, 30), rng=np.random.default_rng(7), total_pixel_readouts=scene.size)
         assert np.array_equal(words, np.stack([sim.readout(scene[k].astype(np.float64)) for k in range(3)]))
 
@@ -91,12 +91,10 @@ def test_one_stripe_is_one_simulator_on_the_seed():
 def test_every_stripe_keeps_the_whole_scene_budget():
     config = SensorConfig()
     total = 64 * 384 * 512
-    with StripedSimulator(config, (384, 512), seed=0, total_pixel_readouts=total, threads=2) as sim:
-        assert len(sim.stripes) == 2 and sim.threads == 2
-        whole = SceneSimulator(config, (384, 512), total_pixel_readouts=total).budget
-        assert all(s.budget == whole for s in sim.stripes)
-        sim.readout(np.full((384, 512), 0.1))            # event path everywhere
-        assert sim.path_counts["event"] == 384 * 512 and sum(sim.path_counts.values()) == 384 * 512
+    rows, sims = stripe_simulators(config, (384, 512), seed=0, total_pixel_readouts=total)
+    assert rows == stripe_slices(384, 512) and [s.shape for s in sims] == [(192, 512)] * 2
+    whole = SceneSimulator(config, (384, 512), total_pixel_readouts=total).budget
+    assert all(s.budget == whole for s in sims)
 
 
 def _histogram(words, config):
@@ -115,7 +113,7 @@ def test_striped_frame_has_the_law_of_the_cycle_exact_model(config):
     steps = np.array([1.0, 1.0, 3.0, 0.0, 1.0, 0.5])
     scene = steps[:, None, None] * levels[level][None]
     assert len(stripe_slices(H, W)) == 2
-    fast = simulate_scene(config, scene, seed=21, threads=2)
+    fast = simulate_scene(config, scene, seed=21, workers=2)
     exact = simulate(config, poisson_stimulus(config, scene, 22))
     a_all, b_all = decode_spikes(fast, config).mean(axis=0), decode_spikes(exact, config).mean(axis=0)
     for i in range(len(levels)):
@@ -134,35 +132,43 @@ def test_per_clock_and_noise_free_are_not_striped():
     # the electrons of `tespike stimulus --seed N` are those `simulate --method per-clock --seed N` draws
     scene = _log_uniform((2, 64, 2048), 2) * 0.03
     assert len(stripe_slices(64, 2048)) == 2
-    per_clock = simulate_scene(SMALL, scene, seed=4, method="per-clock", threads=2)
+    per_clock = simulate_scene(SMALL, scene, seed=4, method="per-clock", workers=2)
     assert np.array_equal(per_clock, simulate(SMALL, scene_stimulus(SMALL, scene, seed=4)))
-    noise_free = simulate_scene(SMALL, scene, noise=False, threads=2)
+    noise_free = simulate_scene(SMALL, scene, noise=False, workers=2)
     assert np.array_equal(noise_free, simulate(SMALL, poisson_stimulus(SMALL, scene, noise=False)))
 
 
-@pytest.mark.parametrize("threads", [0, -1, 1.5, True, "2"])
-def test_bad_thread_counts_are_refused(threads):
+@pytest.mark.parametrize("workers", [0, -1, 1.5, True, "2"])
+def test_bad_worker_counts_are_refused(workers):
     for method in ("fast", "per-clock"):
-        with pytest.raises(InputError, match="threads"):
-            simulate_scene(SensorConfig(), np.zeros((1, 2, 2)), seed=0, method=method, threads=threads)
+        with pytest.raises(InputError, match="workers"):
+            simulate_scene(SensorConfig(), np.zeros((1, 2, 2)), seed=0, method=method, workers=workers)
 
 
-def test_cli_threads_give_the_same_file(tmp_path):
+def test_bad_light_refused_before_workers_start():
+    scene = np.full((3, 64, 2048), 0.2)
+    scene[2, 40, 7] = np.nan                                              # in the second stripe
+    for workers in (1, 2):
+        with pytest.raises(InputError, match="non-finite"):
+            simulate_scene(SensorConfig(), scene, seed=0, workers=workers)
+
+
+def test_cli_workers_give_the_same_file(tmp_path):
     np.save(tmp_path / "i.npy", _log_uniform((2, 64, 2048), 3))            # 2 stripes
-    for threads in (1, 2):
+    for workers in (1, 2):
         result = run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
-                             "--out", tmp_path / f"s{threads}.npz", "--seed", 6, "--threads", threads)
+                             "--out", tmp_path / f"s{workers}.npz", "--seed", 6, "--workers", workers)
         assert result.returncode == 0 and result.stderr == "", result.stderr
     assert (tmp_path / "s1.npz").read_bytes() == (tmp_path / "s2.npz").read_bytes()
     assert np.array_equal(load_stream(tmp_path / "s1.npz")[0],
                           simulate_scene(SensorConfig(), np.load(tmp_path / "i.npy"), seed=6))
 
 
-@pytest.mark.parametrize("value, words", [("0", ["--threads 0", "1.."]), ("-2", ["--threads -2"]),
-                                          (str(10 ** 30), ["--threads"]), ("two", ["--threads"])])
-def test_cli_bad_threads_refused_in_one_line(tmp_path, value, words):
+@pytest.mark.parametrize("value, words", [("0", ["--workers 0", "1.."]), ("-2", ["--workers -2"]),
+                                          (str(10 ** 30), ["--workers"]), ("two", ["--workers"])])
+def test_cli_bad_workers_refused_in_one_line(tmp_path, value, words):
     np.save(tmp_path / "i.npy", np.zeros((1, 2, 2)))
     result = run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
-                         "--out", tmp_path / "s.npz", "--threads", value)
+                         "--out", tmp_path / "s.npz", "--workers", value)
     assert_refused(result, *words)
     assert not list(tmp_path.glob("*s.npz*"))
