@@ -99,7 +99,7 @@ CLOCK_CHUNK_ELEMENTS = 1 << 21
 
 #: Horizontal stripes of a noisy fast simulation (:func:`stripe_simulators`): a
 #: power of two, at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a
-#: stripe's readout has a fixed Python cost, which holds the GIL) and STRIPE_ROWS rows.
+#: stripe's readout has a fixed cost) and STRIPE_ROWS rows.
 STRIPE_PIXELS = 1 << 16
 STRIPE_ROWS = 16
 MAX_STRIPES = 8
@@ -911,7 +911,7 @@ def _simulate_stripes(config, scene, *, seed, dark_current, workers, progress) -
     K, H, W = scene.shape
     rows, sims = stripe_simulators(config, (H, W), seed=seed, dark_current=dark_current,
                                    total_pixel_readouts=scene.size)
-    workers = check_workers(workers, len(rows)) if hasattr(os, "fork") else 1
+    workers = check_workers(workers, len(rows)) if hasattr(os, "fork") else check_workers(workers, 1)
     dtype = np.dtype(word_dtype(config))
     if workers == 1:
         words = np.empty((K, H, W), dtype)
@@ -938,7 +938,7 @@ def _simulate_stripes(config, scene, *, seed, dark_current, workers, progress) -
                 try:
                     run(range(j, len(rows), workers), range(K))
                     status = 0
-                except BaseException:
+                except Exception:                        # (an interrupt: exit 1 quietly)
                     import traceback
                     traceback.print_exc()
                 finally:

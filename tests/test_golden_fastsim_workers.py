@@ -7,6 +7,8 @@ errors, code histogram TVD < 0.05); per-clock and noise-free runs are not
 striped (they are the electrons of ``tespike stimulus``).
 """
 
+import os
+
 import numpy as np
 import pytest
 
@@ -151,6 +153,20 @@ def test_bad_light_refused_before_workers_start():
     for workers in (1, 2):
         with pytest.raises(InputError, match="non-finite"):
             simulate_scene(SensorConfig(), scene, seed=0, workers=workers)
+
+
+def test_a_failed_worker_is_an_error(monkeypatch):
+    parent, readout = os.getpid(), SceneSimulator.readout
+
+    def broken_in_workers(self, light):
+        if os.getpid() != parent:
+            raise ValueError("broken on purpose")
+        return readout(self, light)
+
+    monkeypatch.setattr(SceneSimulator, "readout", broken_in_workers)
+    with pytest.raises(RuntimeError, match=r"worker\(s\) \[1\] failed"):
+        simulate_scene(SensorConfig(), np.full((2, 64, 2048), 0.1), seed=0, workers=2)
+    assert simulate_scene(SensorConfig(), np.full((2, 64, 2048), 0.1), seed=0, workers=1).shape == (2, 64, 2048)
 
 
 def test_cli_workers_give_the_same_file(tmp_path):
