@@ -963,7 +963,7 @@ def _simulate_stripes(config, scene, *, seed, dark_current, workers, progress) -
 def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
                    dark_current: str | None = None, noise: bool = True,
                    progress: bool = False, method: str = "fast",
-                   workers: int | None = None) -> np.ndarray:
+                   workers: int | None = 1) -> np.ndarray:
     """Scene light ``(K, H, W)`` -> readout words ``(K, H, W)`` (smallest word dtype).
 
     ``seed``: int, numpy Generator or ``None`` (fresh entropy). ``method="per-clock"``
@@ -971,8 +971,10 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     paths are tested against). ``progress`` shows a tqdm bar on stderr for runs
     longer than a few seconds. The noisy fast method simulates horizontal
     stripes (:func:`stripe_simulators`) on ``workers`` processes (this one and
-    forked ones; ``None``: the cores available, at most the stripe count); the
-    words depend on the seed and the frame's shape, not on ``workers``.
+    forked ones; ``None``: the cores available, at most the stripe count; 1 by
+    default, so a library caller that runs threads of its own, e.g. torch,
+    never forks unless it asks to; ``tespike simulate`` asks for the cores);
+    the words depend on the seed and the frame's shape, not on ``workers``.
     ``method="per-clock"`` and ``noise=False`` run one :class:`SceneSimulator` in
     this process (the per-clock electrons of :func:`iter_scene_stimulus`).
     """
