@@ -5,7 +5,7 @@ Usage (from the worktree root):
     python3 benchmarks/bench_fastsim.py [--pixels 2000] [--readouts 4] [--out PNG | --docs]
                                         [--skip-whole] [--skip-levels] [--whole-shape 64 384 512]
                                         [--scene I.npy ...] [--crops 6] [--repeats 3]
-                                        [--workers N [N ...]]
+                                        [--workers N [N ...]] [--skip-synthetic]
 
 Part 1, per light level from 1e-4 to 10 x design light, paper TE, ML (count
 readout) and ML msb (eq. 10) configurations: ``simulate_scene`` (fast) against the naive loop (Poisson
@@ -15,8 +15,9 @@ mean decoded value (spikes per readout, with its standard error), total
 variation distance (TVD) of the code histograms, and both throughputs
 (pixel-readouts per second). A second, independent naive run gives the TVD
 that sampling noise alone produces (the floor the fast simulator should sit
-on). Part 2: ``tespike simulate`` as a whole process on a K x H x W HDR scene
-(light log-uniform over 1e-4..10 per pixel, drifting slowly in time) and on
+on). Part 2: ``tespike simulate`` as a whole process on two K x H x W HDR
+scenes (light log-uniform over 1e-4..10 per pixel, drifting slowly in time,
+and drawn anew every readout; ``--skip-synthetic`` leaves them out) and on
 any ``--scene`` files, against the naive loop timed on several random crops of
 the same scene and scaled per pixel-readout, for each of the three cameras,
 with the msb camera's time over the ML-count camera's in the same run (wall
@@ -107,6 +108,13 @@ def hdr_scene(shape, seed=0):
     base = 10.0 ** rng.uniform(-4, 1, (H, W))
     drift = np.exp(0.1 * np.sin(np.arange(K) / 5.0))
     return (base[None] * drift[:, None, None]).astype(np.float32)
+
+
+def redrawn_scene(shape, seed=0):
+    """Light log-uniform over 1e-4..10 drawn anew for every pixel and readout: bright
+    and dark alternate, so charge carried from the last readout (backlogs, full
+    or empty accumulators) meets other light everywhere."""
+    return (10.0 ** np.random.default_rng(seed).uniform(-4, 1, shape)).astype(np.float32)
 
 
 def naive_rate(config, scene, crops=6, crop=(2, 32, 48), seed=0):
@@ -233,6 +241,8 @@ def main(argv=None):
     parser.add_argument("--crops", type=int, default=6, help="random crops the naive loop is timed on")
     parser.add_argument("--repeats", type=int, default=3,
                         help="whole-process runs per camera, interleaved; the fastest counts")
+    parser.add_argument("--skip-synthetic", action="store_true",
+                        help="whole process: only the --scene files, not the two log-uniform scenes")
     parser.add_argument("--workers", type=int, nargs="+", default=[None],
                         help="whole process: tespike simulate --workers values to time, interleaved "
                              "(e.g. 1 2; default: the command's default)")
@@ -250,9 +260,13 @@ def main(argv=None):
     if not args.skip_whole:
         print(f"\nwhole process (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
         with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "I.npy"
-            np.save(path, hdr_scene(tuple(args.whole_shape)))
-            whole_process("log-uniform 1e-4..10", path, args.crops, args.repeats, tuple(args.workers))
+            for name, make in (("log-uniform 1e-4..10", hdr_scene),
+                               ("log-uniform 1e-4..10 redrawn every readout", redrawn_scene)):
+                if args.skip_synthetic:
+                    break
+                path = Path(tmp) / "I.npy"
+                np.save(path, make(tuple(args.whole_shape)))
+                whole_process(name, path, args.crops, args.repeats, tuple(args.workers))
         for scene in args.scene:
             whole_process(Path(scene).name, scene, args.crops, args.repeats, tuple(args.workers))
 
