@@ -316,8 +316,8 @@ class SceneSimulator:
         np.add(self._elapsed, mu, out=self._elapsed)
         hit = eligible & (self._remaining <= 0.0)
         cross = np.flatnonzero(hit)
-        if c.is_msb:                                       # msb reads out the remainder too
-            self._ml_words(np.flatnonzero(eligible & ~hit), 0, words)
+        if c.is_msb:                                       # msb reads out a remainder left
+            self._ml_words(np.flatnonzero(eligible & ~hit & (self.sfc > 0)), 0, words)
         if cross.size:
             # charge after the interval, from the crossing on
             level = theta + self.rng.poisson(-self._remaining[cross])
