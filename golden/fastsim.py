@@ -932,7 +932,10 @@ def _simulate_stripes(config, scene, *, seed, dark_current, workers, progress) -
     children = {}
     try:
         for j in range(1, workers):
-            pid = os.fork()
+            try:
+                pid = os.fork()
+            except OSError:                              # no more processes: this one does the rest
+                break
             if pid == 0:                                 # worker: its stripes, then leave at once
                 status = 1
                 try:
@@ -948,7 +951,8 @@ def _simulate_stripes(config, scene, *, seed, dark_current, workers, progress) -
         if progress:                                     # (after the fork: tqdm starts a thread)
             from tqdm import tqdm
             readouts = tqdm(readouts, desc="simulate", unit="readout", delay=2.0, leave=False)
-        run(range(0, len(rows), workers), readouts)
+        taken = set(children.values())
+        run([i for i in range(len(rows)) if i % workers not in taken], readouts)
     except BaseException:
         for pid in children:
             os.kill(pid, 9)

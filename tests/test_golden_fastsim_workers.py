@@ -188,3 +188,20 @@ def test_cli_bad_workers_refused_in_one_line(tmp_path, value, words):
                          "--out", tmp_path / "s.npz", "--workers", value)
     assert_refused(result, *words)
     assert not list(tmp_path.glob("*s.npz*"))
+
+
+def test_a_worker_that_cannot_be_forked_leaves_its_stripes_to_this_process(monkeypatch):
+    """No more processes (fork fails): the stripes it would have taken are run
+    here, and the words are those of any other worker count."""
+    scene = _log_uniform((2, 256, 1024), 4)                               # 4 stripes
+    expected = simulate_scene(SensorConfig(), scene, seed=2, workers=1)
+    real_fork, forks = os.fork, []
+
+    def fork_once():
+        if forks:
+            raise OSError(11, "Resource temporarily unavailable")
+        forks.append(1)
+        return real_fork()
+    monkeypatch.setattr(os, "fork", fork_once)
+    assert np.array_equal(simulate_scene(SensorConfig(), scene, seed=2, workers=4), expected)
+    assert forks == [1]
