@@ -2,11 +2,12 @@
 
 For each array size (paper TE configuration, square arrays) the benchmark
 generates the Verilog (``rtl.verilog.array_verilog``), builds the Verilator
-model in a fresh cache directory (wall and CPU seconds of the build; the
-runtime objects of the user's cache are reused, as in normal use) and runs
-``--readouts`` readout intervals of Poisson light through the harness alone
-(cycles per second of the simulation, stimulus packing excluded), then checks
-the words against the golden model. Icarus runs the small sizes. For comparison the same harness runs a
+model in a fresh cache directory (wall and CPU seconds of the build, and the
+peak resident memory of its largest process; the runtime objects of the user's
+cache are reused, as in normal use) and runs ``--readouts`` readout intervals
+of Poisson light through the harness alone (cycles per second of the
+simulation, stimulus packing excluded), then checks the words against the
+golden model. Icarus runs the small sizes. For comparison the same harness runs a
 hand-written model of the same ports written as one procedural ``for`` loop
 over register arrays (tests/verilog_spec_model.py, ``style="loop"``): it shows
 what the generated array's one-instance-per-pixel structure costs in
@@ -54,6 +55,26 @@ from golden.reference import step_reference  # noqa: E402
 def children_cpu() -> float:
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
     return usage.ru_utime + usage.ru_stime
+
+
+def _build_and_peak(build, args, kwargs) -> tuple[Path, float]:
+    """Run ``build(*args, **kwargs)`` in this (forked) process; return its result and the
+    peak resident memory in MB of the largest process it waited for."""
+    exe = build(*args, **kwargs)
+    return exe, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
+
+
+def measured_build(build, *args, **kwargs) -> tuple[Path, float]:
+    """Build in a forked child so the kernel's peak-memory record covers this build alone
+    (``ru_maxrss`` of waited-for processes only ever grows within one process): returns
+    the executable and the peak resident MB of the build's largest process (Verilator or
+    one C++ compiler; parallel jobs add up beyond it). The child's CPU time reaches this
+    process's ``children_cpu()`` when it is waited for."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
+        return pool.submit(_build_and_peak, build, args, kwargs).result()
 
 
 def stimulus(config: SensorConfig, side: int, readouts: int, rng) -> np.ndarray:
@@ -111,12 +132,13 @@ def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False,
     with tempfile.TemporaryDirectory(prefix="bench-verilator-") as tmp:
         cpu0, start = children_cpu(), time.perf_counter()
         if default:
-            exe = build_default_options(verilog, "te_pixel_array", N * config.input_bits,
-                                        N * config.word_bits, tmp)
+            exe, build_mb = measured_build(build_default_options, verilog, "te_pixel_array",
+                                           N * config.input_bits, N * config.word_bits, tmp)
         else:
-            exe = cv.build(verilog, "te_pixel_array", N * config.input_bits, N * config.word_bits,
-                           build_dir=tmp, progress=True, inline=inline, cxx_opt=cxx_opt,
-                           extra_flags=extra)
+            exe, build_mb = measured_build(cv.build, verilog, "te_pixel_array",
+                                           N * config.input_bits, N * config.word_bits,
+                                           build_dir=tmp, progress=True, inline=inline,
+                                           cxx_opt=cxx_opt, extra_flags=extra)
         build_wall, build_cpu = time.perf_counter() - start, children_cpu() - cpu0
         T, L = stim.shape[0], config.clocks_per_readout
         stim_path, cap_path = Path(tmp) / "stim.bin", Path(tmp) / "cap.bin"
@@ -128,8 +150,8 @@ def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False,
         clocks, frames = cv.read_captures(cap_path, words_per_row(N, config.word_bits))
         check_captures(clocks, config, T // L, "bench")
         words = unpack_rows(frames, N, config.word_bits).reshape(-1, side, side)
-    return dict(gen=gen, build_wall=build_wall, build_cpu=build_cpu, rate=T / run_wall,
-                rate_cpu=T / max(run_cpu, 1e-9), words=words)
+    return dict(gen=gen, build_wall=build_wall, build_cpu=build_cpu, build_mb=build_mb,
+                rate=T / run_wall, rate_cpu=T / max(run_cpu, 1e-9), words=words)
 
 
 def bench_icarus(config, side, stim):
@@ -154,7 +176,8 @@ def ratio_lines(rows) -> list[str]:
         if loop is not None:
             out.append(f"{name:>24} {side * side:7d} pixels: {r['rate'] / loop['rate']:.2f} of the loop "
                        f"model's cycles/s ({r['rate_cpu'] / loop['rate_cpu']:.2f} per CPU-second), "
-                       f"build {r['build_wall']:.1f} s wall / {r['build_cpu']:.1f} CPU-s")
+                       f"build {r['build_wall']:.1f} s wall / {r['build_cpu']:.1f} CPU-s / "
+                       f"{r['build_mb']:.0f} MB peak")
     return out
 
 
@@ -180,6 +203,7 @@ def main(argv=None) -> int:
         args.png = str(ROOT / "benchmarks" / "bench_verilator.png")
     Path(args.png).parent.mkdir(parents=True, exist_ok=True)
     config = SensorConfig()
+    load_start = os.getloadavg()[0]
     rng = np.random.default_rng(2024)
     rows = []
     stimuli = {}
@@ -207,7 +231,8 @@ def main(argv=None) -> int:
         rows.append(("icarus", side, r, base, np.array_equal(r["words"], golden_words)))
 
     load = os.getloadavg()[0]
-    print(f"paper TE (L = 240), load average {load:.1f} on {os.cpu_count()} cores; "
+    print(f"paper TE (L = 240), load average {load:.1f} on {os.cpu_count()} cores "
+          f"({load_start:.1f} at the start); "
           f"Verilator {'default inlining' if args.inline else '-fno-inline'}")
     print(f"{'simulator':>24} {'pixels':>7} {'gen s':>6} {'build s':>8} {'build cpu':>9} "
           f"{'cycles/s':>9} {'cyc/cpu-s':>9} {'golden c/s':>10} {'x golden':>8} {'equal':>5}")
