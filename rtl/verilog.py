@@ -3,7 +3,7 @@
 The pixel and the timing block are generated once each from their Amaranth
 components (``amaranth.back.verilog.convert``); the array top is a small
 hand-written structural module, the Verilog form of :class:`rtl.array.PixelArray`:
-the input register ``charge_sample``, the timing block once and the pixel module
+the input registers (``charge_sample``, one per pixel), the timing block once and the pixel module
 H x W times in nested ``generate`` loops over rows and columns, their words gathered
 into ``frame`` by one ``always @*`` loop (see :func:`top_verilog`). Its text does not
 grow with the array, so a 128 x 128 array is generated as fast as a 2 x 2 one. The
@@ -140,7 +140,9 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
 
     def pixel(r, c, indent):
         index = f"({r}*W + {c})"
-        return (f"{indent}{names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge_sample[{index}*E +: E]), "
+        return (f"{indent}reg [E-1:0] charge_sample = {e}'d0;  // this pixel's input register\n"
+                f"{indent}always @(posedge clk) charge_sample <= charge[{index}*E +: E];\n"
+                f"{indent}{names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge_sample), "
                 f"{ccc_pin}.last(last),\n{indent}  .clear(rst_sample), .word(word[{index}]));\n")
 
     loops = _loop("r", height, "H", "row",
@@ -168,13 +170,13 @@ module {names['top']} (
   localparam integer WD = {wd};
 {ccc_wire}  wire last;  // S_r: last pixel clock of the readout interval
   // The input registers: the pixels compute from these, never from an input port.
-  reg [{height * width * e - 1}:0] charge_sample = {height * width * e}'d0;
+  // charge_sample is one E-bit register per pixel (in the pixel's generate block):
+  // one H*W*E-bit register would need an H*W*E-bit initial value, and above 4096
+  // paper pixels that is wider than the default --max-num-width (65536 bits) of
+  // the Verilator simulator.
   reg rst_sample = 1'b0;  // clears the pixels at the edge after a reset edge
 
-  always @(posedge clk) begin
-    charge_sample <= charge;
-    rst_sample <= rst;
-  end
+  always @(posedge clk) rst_sample <= rst;
 
   {names['timing']} timing (.clk(clk), .rst(rst), {ccc_pin}.last(last), .frame_valid(frame_valid));
 

@@ -170,3 +170,21 @@ def test_blocked_generate_loops_equal_golden(tmp_path, rng, monkeypatch):
     if shutil.which("verilator"):
         lint = run(["verilator", "--lint-only", "-Wall", "A.v"], tmp_path)
         assert lint.returncode == 0, lint.stderr
+
+
+def test_array_verilog_has_no_number_wider_than_verilators_default_limit():
+    """Verilator refuses a number wider than its --max-num-width (65536 bits by
+    default): an H*W*E-bit initial value broke every paper TE array above 4096
+    pixels. No literal in the text may grow with the array."""
+    for height, width in ((128, 128), (256, 512)):
+        text = array_verilog(SensorConfig(), height, width)
+        widths = [int(w) for w in re.findall(r"\b(\d+)'[bdhoBDHO]", text)]
+        assert widths and max(widths) <= 64, max(widths)
+
+
+@needs["verilator"]
+def test_array_above_4096_pixels_lints_under_verilators_defaults(tmp_path):
+    # 64 x 128 paper TE pixels: 131072 input bits (about 30 s, 1.1 GB)
+    (tmp_path / "A.v").write_text(array_verilog(SensorConfig(), 64, 128))
+    lint = run(["verilator", "--lint-only", "-Wall", "A.v"], tmp_path)
+    assert lint.returncode == 0 and "%Warning" not in lint.stderr, lint.stderr[:2000]
