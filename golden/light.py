@@ -106,29 +106,33 @@ def log_budget(pixel_intervals: int, clocks: int) -> float:
     return LOG_SCENE_FAILURE - math.log(max(1, pixel_intervals)) - math.log(max(1, clocks))
 
 
-def log_poisson_tail_above(mean: np.ndarray, k: int) -> np.ndarray:
+def log_poisson_tail_above(mean: np.ndarray, k) -> np.ndarray:
     """Upper bound on ``log P(X >= k)`` for X a sum of independent Poisson and
     Bernoulli variables with total ``mean`` (Chernoff: ``-m + k - k log(k / m)``
-    for ``k > m``, else 0)."""
-    m = np.asarray(mean, np.float64)
+    for ``k > m``, else 0); ``k`` an int or an array, elementwise with mean."""
+    m, k = np.broadcast_arrays(np.asarray(mean, np.float64), np.asarray(k, np.float64))
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         bound = -m + k - k * np.log(k / m)
     bound = np.where(m <= 0, -np.inf, bound)
-    return np.where(m >= k, 0.0, bound) if k > 0 else np.zeros_like(m)
+    return np.where(k <= 0, 0.0, np.where(m >= k, 0.0, bound))
 
 
-def log_poisson_tail_below(mean: np.ndarray, k: int) -> np.ndarray:
+def log_poisson_tail_below(mean: np.ndarray, k) -> np.ndarray:
     """Upper bound on ``log P(X <= k)`` for ``X ~ Poisson(mean)``:
     ``log P(X = k) - log(1 - k / m)`` for ``k < m`` (the pmf ratio
     ``P(j - 1) / P(j) = j / m <= k / m`` bounds the rest by a geometric series);
-    ``-inf`` for ``k < 0``; 0 (no information) for ``k >= m``."""
-    m = np.asarray(mean, np.float64)
-    if k < 0:
-        return np.full(m.shape, -np.inf)
+    ``-inf`` for ``k < 0``; 0 (no information) for ``k >= m``. ``k`` an int or
+    an array, elementwise with mean."""
+    k = np.asarray(k, np.float64)
+    if k.ndim == 0:                                     # one k (the usual call): one lgamma
+        log_factorial = math.lgamma(max(float(k), 0.0) + 1.0)
+    else:
+        log_factorial = np.vectorize(math.lgamma, otypes=[np.float64])(np.maximum(k, 0.0) + 1.0)
+    m, k = np.broadcast_arrays(np.asarray(mean, np.float64), k)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        log_pmf = -m + (k * np.log(m) if k else 0.0) - math.lgamma(k + 1)
+        log_pmf = -m + np.where(k > 0, k * np.log(m), 0.0) - log_factorial
         bound = log_pmf - np.log1p(-k / m)
-    return np.where(m > k, bound, 0.0)
+    return np.where(k < 0, -np.inf, np.where(m > k, bound, 0.0))
 
 
 # -- electrons per pixel clock ------------------------------------------------

@@ -57,6 +57,7 @@ import time
 import numpy as np
 
 from .errors import InputError
+from .light import log_poisson_tail_above, log_poisson_tail_below
 
 #: CDF scale: table entries are integers out of 2^53.
 ONE = 1 << 53
@@ -78,29 +79,6 @@ LAM_MAX = float(np.iinfo(np.int64).max - np.sqrt(np.iinfo(np.int64).max) * 10)
 _RAW64 = ("PCG64", "PCG64DXSM", "Philox", "SFC64")
 
 
-# -- tail bounds vectorised over k (the formulas of golden.light) --------------
-
-def log_tail_below(m: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """Upper bound on ``log P(X <= k)``, X ~ Poisson(m), elementwise in m and k:
-    :func:`golden.light.log_poisson_tail_below` with an array k."""
-    m, k = np.broadcast_arrays(np.asarray(m, np.float64), np.asarray(k, np.float64))
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        kl = np.where(k > 0, k * np.log(m), 0.0)
-        lg = np.vectorize(math.lgamma, otypes=[np.float64])(np.maximum(k, 0.0) + 1.0) if k.size else k
-        bound = -m + kl - lg - np.log1p(-k / m)
-    return np.where(k < 0, -np.inf, np.where(m > k, bound, 0.0))
-
-
-def log_tail_above(m: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """Upper bound on ``log P(X >= k)``, X ~ Poisson(m), elementwise in m and k:
-    :func:`golden.light.log_poisson_tail_above` (Chernoff) with an array k."""
-    m, k = np.broadcast_arrays(np.asarray(m, np.float64), np.asarray(k, np.float64))
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        bound = -m + k - k * np.log(k / m)
-    bound = np.where(m <= 0, -np.inf, bound)
-    return np.where(k <= 0, 0.0, np.where(m >= k, 0.0, bound))
-
-
 # -- one table --------------------------------------------------------------------
 
 def support(g: np.ndarray, log_tail: float) -> tuple[np.ndarray, np.ndarray]:
@@ -112,21 +90,21 @@ def support(g: np.ndarray, log_tail: float) -> tuple[np.ndarray, np.ndarray]:
     a, b = np.zeros_like(g), g + 1           # ok(a), not ok(b) (or b = a + 1 when g = 0)
     while np.any(b - a > 1):
         mid = (a + b) // 2
-        ok = log_tail_below(g, mid - 1) < log_tail
+        ok = log_poisson_tail_below(g, mid - 1) < log_tail
         a, b = np.where(ok, mid, a), np.where(ok, b, mid)
     lo = np.where(g > 0, a, 0)
     # hi: bound(hi + 1) < log_tail fails at hi = g - 1, holds far enough up
     span = np.ceil(4.0 * np.sqrt(-log_tail * (g + 1.0)) - 2.0 * log_tail).astype(np.int64) + 2
     top = g + span
     while True:
-        bad = ~(log_tail_above(g, top + 1) < log_tail) & (g > 0)
+        bad = ~(log_poisson_tail_above(g, top + 1) < log_tail) & (g > 0)
         if not bad.any():
             break
         top = np.where(bad, g + 2 * (top - g), top)
     a, b = g - 1, top                        # not ok(a), ok(b)
     while np.any(b - a > 1):
         mid = (a + b) // 2
-        ok = log_tail_above(g, mid + 1) < log_tail
+        ok = log_poisson_tail_above(g, mid + 1) < log_tail
         a, b = np.where(ok, a, mid), np.where(ok, mid, b)
     hi = np.where(g > 0, b, 0)
     return lo, hi
@@ -198,7 +176,7 @@ def fraction_kmax(r_max: float, log_tail: float) -> int:
     """Largest count the ``Poisson(r)`` inversion returns: ``P(X > kmax)`` is
     below ``exp(log_tail)`` for every ``r <= r_max`` (Chernoff bound)."""
     k = 1
-    while not log_tail_above(r_max, k + 1) < log_tail:
+    while not log_poisson_tail_above(r_max, k + 1) < log_tail:
         k += 1
     return k
 
