@@ -73,7 +73,7 @@ from .io import check_scene, word_dtype
 from .light import (as_generator, check_dark_current, dark_electrons,
                     deterministic_clock_electrons, electrons_per_readout, log_budget,
                     log_poisson_tail_above, log_poisson_tail_below)
-from .reference import msb_index
+from .reference import PixelState, msb_index
 from .poisson import PoissonSampler
 from .sensor import PixelArray
 
@@ -257,8 +257,7 @@ class SceneSimulator:
                 self._bright_path(sel, mu, lam, dark, words)
             elif name in ("queue", "full"):
                 # group by window length (multiples of MIN_WINDOW) so each group is one block
-                n_w = self._window[sel]
-                size = MIN_WINDOW * np.maximum(1.0, np.ceil(n_w / MIN_WINDOW))
+                size = self._window_size(sel)
                 too_long = size > L // 2
                 if too_long.any():
                     self.path_counts[name] -= int(too_long.sum())
@@ -347,8 +346,7 @@ class SceneSimulator:
     def _classify_middle(self, idx, lam, mean, dark, acc, path):
         """Queue or full path for pixels near one threshold per clock, where allowed."""
         c = self.config
-        theta, L = c.threshold, c.clocks_per_readout
-        log_l = np.log(L)
+        theta = c.threshold
         ok = (dark == 0) & (mean <= self._mean_unclipped)
         rho = lam / theta
         # queue: below the threshold per clock, the accumulator surely never clips
@@ -360,13 +358,22 @@ class SceneSimulator:
         # full: above the threshold per clock, a spike in every clock surely
         full = ok & (lam > theta)
         if full.any():
-            lf, af = lam[full], acc[full]
-            s_full = 2.0 * (lf - theta) / lf
-            fire = np.logaddexp(-s_full * (af + 1.0), log_l - s_full * (c.acc_max + 1.0))
             sel = idx[full]
-            path[sel[fire < self.budget]] = PATHS.index("full")
-            gap = lf - theta
-            self._window[sel] = 1.3 * -self.budget / s_full / gap + 16.0 * lf / gap ** 2
+            path[sel[self._full_plan(sel, lam[full], acc[full])]] = PATHS.index("full")
+
+    def _full_plan(self, sel, lam, acc):
+        """Window length of the full path for pixels ``sel`` at ``lam`` > theta
+        electrons per clock (stored in ``self._window``) -> where the bound makes
+        a spike in every clock sure from charge ``acc``: the walk held at
+        ``acc_max`` never goes below 0 (Lundberg, ``s = 2 (lam - theta) / lam``:
+        ``exp(-s (acc + 1)) + L exp(-s (acc_max + 1))`` below budget)."""
+        c = self.config
+        theta = c.threshold
+        s_full = 2.0 * (lam - theta) / lam
+        fire = np.logaddexp(-s_full * (acc + 1.0), np.log(c.clocks_per_readout) - s_full * (c.acc_max + 1.0))
+        gap = lam - theta
+        self._window[sel] = 1.3 * -self.budget / s_full / gap + 16.0 * lam / gap ** 2
+        return fire < self.budget
 
     def _queue_plan(self, sel, rho):
         """Backlog bound ``b_max`` and window length of the queue path for pixels
@@ -406,7 +413,7 @@ class SceneSimulator:
             top_ok = np.log(2.0 * L) - s_full * (c.acc_max + 1.0) < self.budget
             clocks[charge] = 1.5 * np.maximum(a_full - acc[charge], 0.0) / (lc - theta) + 8.0
             charge[charge] = top_ok & (a_full <= c.acc_max)
-        size = MIN_WINDOW * np.maximum(1.0, np.ceil(clocks / MIN_WINDOW))
+        size = _round_window(clocks)
         head = (drain | charge) & (size <= L // 2)
         path[idx[head]] = PATHS.index("head")
         self._window[idx[head]] = size[head]
@@ -438,12 +445,7 @@ class SceneSimulator:
             queue &= self._window_size(sel) <= rest // 2
         full = ~event & (lam_s > theta)
         if full.any():
-            lf, af = lam_s[full], acc_h[full]
-            s_full = 2.0 * (lf - theta) / lf
-            fire = np.logaddexp(-s_full * (af + 1.0), np.log(L) - s_full * (c.acc_max + 1.0))
-            gap = lf - theta
-            self._window[sel[full]] = 1.3 * -self.budget / s_full / gap + 16.0 * lf / gap ** 2
-            full[full] = fire < self.budget
+            full[full] = self._full_plan(sel[full], lam_s[full], acc_h[full])
             full &= self._window_size(sel) <= rest // 2
         spikes = np.zeros(n, np.int64)                      # spikes of the rest
         at = np.full(n, -1, np.int64)                       # TE: clock of the overflow in the rest
@@ -502,14 +504,12 @@ class SceneSimulator:
             self._ml_words(sel[done], sfc_h[done] + spikes[done], words)
 
     def _window_size(self, sel):
-        """Window lengths of pixels ``sel`` rounded up to multiples of MIN_WINDOW
-        (pixels of one length are one block)."""
-        return MIN_WINDOW * np.maximum(1.0, np.ceil(self._window[sel] / MIN_WINDOW))
+        """Window lengths of pixels ``sel``, rounded (:func:`_round_window`)."""
+        return _round_window(self._window[sel])
 
     @staticmethod
     def _head_state(state, i, h):
         """The state of pixels ``i`` of a head's (1, n) array, at clock ``h``."""
-        from .reference import PixelState
         return PixelState(h, state.acc[:, i].copy(), state.sfc[:, i].copy(),
                           state.ovf[:, i].copy(), state.m[:, i].copy())
 
@@ -807,6 +807,12 @@ class SceneSimulator:
         self._acc[sel] = array.state.acc[0]
         if self.config.is_msb:
             self.sfc[sel] = array.state.sfc[0]
+
+
+def _round_window(clocks: np.ndarray) -> np.ndarray:
+    """Window or head lengths rounded up to multiples of MIN_WINDOW, at least
+    MIN_WINDOW: pixels of one length are one block, and few lengths mean few blocks."""
+    return MIN_WINDOW * np.maximum(1.0, np.ceil(clocks / MIN_WINDOW))
 
 
 def lindley_ends(walk: np.ndarray, *b0s: np.ndarray) -> list[np.ndarray]:
