@@ -274,7 +274,7 @@ class SceneSimulator:
 
     @staticmethod
     def _groups(sel, size):
-        """Pixels ``sel`` grouped by window (or head) length ``size``, one block per
+        """Pixels ``sel`` (any index array) grouped by window (or head) length ``size``, one block per
         length; a few pixels go together at their longest length (a longer
         window or head is as exact, only dearer, and one call costs less than
         several small ones) -> [(length, pixels)]."""
@@ -465,15 +465,13 @@ class SceneSimulator:
                 at[i[over]] = h + np.minimum((position * rest).astype(np.int64), rest - 1)
         for tail in (queue, full):
             i = np.flatnonzero(tail)
-            size = self._window_size(sel[i])
-            for w in np.unique(size):
-                j = i[size == w]
+            for w, j in self._groups(i, self._window_size(sel[i])):
                 if tail is queue:
-                    ok, got, end, clock, window, drawn = self._queue_walk(sel[j], int(w), lam, acc_h[j],
+                    ok, got, end, clock, window, drawn = self._queue_walk(sel[j], w, lam, acc_h[j],
                                                                           rest, need[j])
                     at[j[ok & (clock >= 0)]] = h + clock[ok & (clock >= 0)]
                 else:
-                    ok, end, window, drawn = self._full_walk(sel[j], int(w), lam, acc_h[j], rest)
+                    ok, end, window, drawn = self._full_walk(sel[j], w, lam, acc_h[j], rest)
                     got = np.full(j.size, rest, np.int64)   # a spike in every clock of the rest
                     hit = ok & (rest >= need[j])
                     at[j[hit]] = h + need[j[hit]] - 1
