@@ -175,6 +175,15 @@ def window_starts(length: int, centres, radius: int, edge: str = "shift") -> tor
     return starts
 
 
+def key_span(length: int, key: int, span: int) -> np.ndarray:
+    """Readout indices of the ``span`` readouts centred on ``key`` in a stream of ``length``,
+    the first or last readout repeated past either end (so a stream of one readout works).
+
+    The one rule of every learned method, in training and at inference alike.
+    """
+    return np.clip(np.arange(span) + key - span // 2, 0, length - 1)
+
+
 def substreams(stream: torch.Tensor, centres, radius: int, edge: str = "shift") -> torch.Tensor:
     """Sub-streams ``S_i = {S(t)}_{t = t_i - radius}^{t_i + radius}`` (paper eq. 4).
 

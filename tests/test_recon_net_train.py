@@ -11,38 +11,64 @@ from recon.net.infer import load_weights
 from recon.net.train import TrainOptions, train, training_loss
 from tests.cli import assert_refused, run_tespike
 
-RECIPE = {"sequences": 2, "frames": 64, "height": 32, "width": 32}
+RECIPE = {"height": 32, "width": 32, "long": (8, 20), "short": (1, 7)}
 
 
 def options(**kw):
-    base = dict(steps=4, crop=32, batch=2, recipe=RECIPE, checkpoint_seconds=1e9, threads=1)
+    base = dict(steps=4, crop=32, batch=2, recipe=RECIPE, checkpoint_seconds=1e9, threads=1, workers=0,
+                pool=2, refresh=2, validate_every=0)
     return TrainOptions(**{**base, **kw})
 
 
 def test_a_few_steps_write_weights_log_and_plot(tmp_path):
-    out = train(options(), tmp_path / "w.pt", cache=tmp_path / "cache")
+    out = train(options(), tmp_path / "w.pt")
     model, config, meta = load_weights(out)
     assert config.mode == "te" and meta["steps"] == 4 and meta["parameters"] > 0
     with open(tmp_path / "w.run" / "log.csv") as handle:
         rows = list(csv.DictReader(handle))
     assert [int(r["step"]) for r in rows] == [1, 2, 3, 4]
-    assert (tmp_path / "w.run" / "loss.png").stat().st_size > 1000
+    assert (tmp_path / "w.run" / "curves.png").stat().st_size > 1000
+
+
+def test_validation_keeps_the_best_weights(tmp_path, monkeypatch):
+    """The weights written are those of the best validation score, recorded with it."""
+    import recon.net.train as train_module
+    scores = iter([20.0, 25.0, 22.0])
+    monkeypatch.setattr(train_module, "validate", lambda model, cases, config, device: {"a": (v := next(scores)),
+                                                                                        "mean": v})
+    monkeypatch.setattr("recon.engine.validation.validation_set", lambda config: [])
+    out = train(options(steps=3, validate_every=1), tmp_path / "v.pt")
+    meta = load_weights(out)[2]
+    assert meta["steps"] == 2 and meta["validation"]["mean"] == 25.0 and meta["final_step"] == 3
+    with open(tmp_path / "v.run" / "validation.csv") as handle:
+        assert [float(r["mean"]) for r in csv.DictReader(handle)] == [20.0, 25.0, 22.0]
+
+
+def test_validation_scores_every_held_out_case():
+    from recon.engine.validation import CASES, score, validation_set
+    cases = validation_set(SensorConfig(), 16, 24)
+    assert [c.label for c in cases] == [c.label for c in CASES]
+    assert all(c.words.shape == c.light.shape for c in cases)
+    perfect = score(lambda words: next(c.light for c in cases if c.words is words), cases)
+    assert all(v == float("inf") for v in perfect.values())
+    rough = score(lambda words: next(c.light for c in cases if c.words is words) * 1.5, cases)
+    assert all(10 < v < 60 for v in rough.values())
 
 
 def test_resume_continues_exactly(tmp_path):
     cache = tmp_path / "cache"
-    straight = train(options(steps=4), tmp_path / "a.pt", cache=cache)
-    train(options(steps=2), tmp_path / "b.pt", cache=cache)
-    resumed = train(options(steps=4), tmp_path / "b.pt", cache=cache, resume=True)
+    straight = train(options(steps=4), tmp_path / "a.pt")
+    train(options(steps=2), tmp_path / "b.pt")
+    resumed = train(options(steps=4), tmp_path / "b.pt", resume=True)
     a, b = (load_weights(p)[0].state_dict() for p in (straight, resumed))
     assert all(torch.equal(a[k], b[k]) for k in a)
 
 
 def test_resume_refuses_other_options(tmp_path):
     cache = tmp_path / "cache"
-    train(options(steps=1), tmp_path / "c.pt", cache=cache)
+    train(options(steps=1), tmp_path / "c.pt")
     with pytest.raises(InputError, match="other options"):
-        train(options(steps=2, loss="mu-l1"), tmp_path / "c.pt", cache=cache, resume=True)
+        train(options(steps=2, loss="mu-l1"), tmp_path / "c.pt", resume=True)
 
 
 def test_losses():
@@ -56,7 +82,7 @@ def test_losses():
 
 
 def test_ablation_case_trains_the_switched_network(tmp_path):
-    out = train(options(steps=1, ablation=4), tmp_path / "a.pt", cache=tmp_path / "cache")
+    out = train(options(steps=1, ablation=4), tmp_path / "a.pt")
     sizes = load_weights(out)[0].sizes
     assert (sizes.gradient, sizes.dcn, sizes.similarity, sizes.motion_bias, sizes.refine) == \
         (True, True, True, False, False)
@@ -75,30 +101,10 @@ def test_cli_refusals(tmp_path):
     assert not (tmp_path / "w.pt").exists()
 
 
-def test_user_hdr_folders_join_the_training_set(tmp_path):
-    import numpy as np
-
-    from recon.net.data import DataRecipe, training_set
-    from recon.scenes import write_hdr
-    folder = tmp_path / "seq"
-    folder.mkdir()
-    rng = np.random.default_rng(0)
-    for k in range(64):
-        write_hdr(folder / f"f{k:03d}.hdr", rng.uniform(0.01, 3.0, (40, 36, 3)).astype(np.float32))
-    recipe = DataRecipe(**{**RECIPE, "folders": (str(folder),)})
-    light, words = training_set(SensorConfig(), recipe, cache=tmp_path / "cache")
-    assert light.shape == words.shape == (3, 64, 32, 32)
-    assert float(light[2].max()) == 1.0                      # normalised per sequence
-    assert recipe.key() != DataRecipe(**RECIPE).key()
-    with pytest.raises(InputError, match="less than"):
-        training_set(SensorConfig(), DataRecipe(**{**RECIPE, "folders": (str(folder),), "height": 48}),
-                     cache=tmp_path / "cache")
-
-
-def test_cache_key_tells_shipped_from_full_size_panoramas(monkeypatch, tmp_path):
-    """Light from the shipped 128 x 256 copies differs from the full-size files': other cache files."""
-    from recon.net.data import DataRecipe
-    monkeypatch.delenv("TESPIKE_HDRI_DIR", raising=False)
-    shipped = DataRecipe(**RECIPE).key()
-    monkeypatch.setenv("TESPIKE_HDRI_DIR", str(tmp_path))
-    assert DataRecipe(**RECIPE).key() != shipped
+def test_method_and_crop_checked():
+    with pytest.raises(InputError, match="unknown learned method"):
+        options(method="nope")
+    with pytest.raises(InputError, match="crop = 40"):
+        options(crop=40)
+    with pytest.raises(InputError, match="larger than the engine"):
+        options(crop=64)

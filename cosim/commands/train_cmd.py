@@ -1,14 +1,15 @@
-"""``tespike train``: train the reconstruction network on simulated streams (paper section 6.3)."""
+"""``tespike train``: train a learned reconstruction method on the data engine's clips (paper section 6.3)."""
 
 from .common import add_config_argument
 
-HELP = "train the reconstruction network for one sensor configuration (resumable, CPU or GPU)"
+HELP = "train a learned reconstruction method for one sensor configuration (resumable, CPU or GPU)"
 
 
 def add_arguments(parser):
     add_config_argument(parser, required=False, default="te")
     parser.add_argument("--out", required=True, help="weights file to write (.pt); its run folder is OUT.run/")
-    parser.add_argument("--size", default="cpu", help="network size: cpu (the shipped default) or paper")
+    parser.add_argument("--method", default="net", help="learned method: net (default) or a baseline")
+    parser.add_argument("--size", default="cpu", help="method size: cpu (the shipped default) or paper")
     parser.add_argument("--ablation", type=int, default=None, metavar="CASE",
                         help="train the paper's Table 3 ablation case 1..6 instead of the whole network")
     parser.add_argument("--loss", default="l1", help="l1 (paper eq. 7, default) or mu-l1 (after the mu-law)")
@@ -19,16 +20,19 @@ def add_arguments(parser):
     parser.add_argument("--crop", type=int, default=96, help="random crop side (default 96)")
     parser.add_argument("--steps", type=int, default=None, help="step budget")
     parser.add_argument("--minutes", type=float, default=None, help="wall-time budget in minutes")
-    parser.add_argument("--sequences", type=int, default=48, help="training sequences simulated (default 48)")
     parser.add_argument("--hdr", action="append", default=[], metavar="DIR",
-                        help="also train on this folder of .exr/.hdr frames (one sequence; repeatable)")
-    parser.add_argument("--downscale", type=int, default=1, help="area-average factor for --hdr frames")
+                        help="also train on this folder of .exr/.hdr frames (a quarter of the clips; repeatable)")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="data-engine processes making clips ahead (default 1; 0: in this process)")
+    parser.add_argument("--pool", type=int, default=48, help="clips a step draws from (default 48)")
+    parser.add_argument("--refresh", type=int, default=4,
+                        help="steps between two new clips entering the pool (default 4)")
+    parser.add_argument("--validate-every", type=int, default=1000,
+                        help="steps between validations on the held-out set (default 1000; 0: never)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the draws and of the initial weights")
     parser.add_argument("--device", default="cpu", help="torch device (default cpu; cuda where there is one)")
     parser.add_argument("--threads", type=int, default=1,
                         help="torch CPU threads (default 1: two runs share two cores better than one run)")
-    parser.add_argument("--cache", default=None, help="folder of the simulated training data "
-                                                      "(default $TESPIKE_CACHE/net-data or ~/.cache/tespike/net-data)")
     parser.add_argument("--resume", action="store_true", help="continue from OUT.run/checkpoint.pt")
 
 
@@ -59,13 +63,13 @@ def run(args) -> int:
     from recon.net.train import TrainOptions, train
 
     options = TrainOptions(sensor=args.config if preset else config.to_json(),
-                           size=args.size, ablation=args.ablation, loss=args.loss, lr=args.lr,
+                           method=args.method, size=args.size, ablation=args.ablation, loss=args.loss, lr=args.lr,
                            halve_every=args.halve_every,
                            steps_per_epoch=args.steps_per_epoch, batch=args.batch, crop=args.crop,
                            steps=args.steps, minutes=args.minutes, seed=args.seed, device=args.device,
-                           threads=args.threads, recipe={"sequences": args.sequences, "folders": tuple(args.hdr),
-                                   "downscale": args.downscale})
+                           threads=args.threads, workers=args.workers, pool=args.pool, refresh=args.refresh,
+                           validate_every=args.validate_every, recipe={"folders": tuple(args.hdr)})
     command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
-    train(options, out, resume=args.resume, cache=args.cache, progress=progress_wanted(args), command=command)
+    train(options, out, resume=args.resume, progress=progress_wanted(args), command=command)
     report(args, f"wrote {out} (run log, loss curve and checkpoint in {out.with_suffix('.run')})")
     return 0

@@ -25,7 +25,7 @@ import torch
 from golden.config import PRESETS, SensorConfig
 from golden.errors import InputError
 
-from ..stream import decode_light, output_images
+from ..stream import decode_light, key_span, output_images
 from .model import TESpikeNet
 from .sizes import NetSizes
 
@@ -46,15 +46,17 @@ def weights_path(config: SensorConfig) -> Path:
 
 
 @functools.lru_cache(maxsize=8)
-def _load_cached(path: str, mtime: float) -> tuple[TESpikeNet, SensorConfig, dict]:
+def _load_cached(path: str, mtime: float) -> tuple[torch.nn.Module, SensorConfig, dict]:
+    from ..learned import method_classes
     payload = torch.load(path, map_location="cpu", weights_only=True)
-    model = TESpikeNet(NetSizes.from_dict(payload["sizes"]))
+    module, sizes_class = method_classes(payload.get("method", "net"))
+    model = module(sizes_class.from_dict(payload["sizes"]))
     model.load_state_dict(payload["state_dict"])
     model.eval().to(memory_format=torch.channels_last)
     return model, SensorConfig.from_dict(payload["config"]), payload.get("meta", {})
 
 
-def load_weights(path: str | Path) -> tuple[TESpikeNet, SensorConfig, dict]:
+def load_weights(path: str | Path) -> tuple[torch.nn.Module, SensorConfig, dict]:
     """(model in eval mode, the sensor configuration it was trained for, how it was made)."""
     path = Path(path)
     try:
@@ -115,7 +117,7 @@ def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, 
     """
     sizes = model.sizes
     K, H, W = words.shape
-    times = np.clip(np.arange(sizes.span) + key - sizes.span // 2, 0, K - 1)
+    times = key_span(K, key, sizes.span)
     hp, wp = -(-H // sizes.pyramid_factor) * sizes.pyramid_factor, -(-W // sizes.pyramid_factor) * sizes.pyramid_factor
     boxes = tiles(H, W, sizes, tile)
     margin = 0 if len(boxes) == 1 else tile_margin(sizes)
@@ -148,6 +150,12 @@ def reconstruct_net(words, config: SensorConfig, *, weights: str | Path | None =
     if trained_for != config:
         raise InputError(f"network weights {str(path)!r} were trained for {trained_for}, "
                          f"the stream is {config}")
+    return reconstruct_model(model, words, config, tile=tile, device=device, progress=progress, out=out)
+
+
+def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, tile: int | None = 256,
+                      device: str = "cpu", progress: bool = False, out: np.ndarray | None = None) -> np.ndarray:
+    """Any learned method's module (in eval mode) on a whole stream: float32 light (K, H, W)."""
     if isinstance(words, torch.Tensor):
         words = words.cpu().numpy()
     if not isinstance(words, np.ndarray):

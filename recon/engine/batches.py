@@ -1,0 +1,140 @@
+"""Training batches from an endless, deterministic stream of clips made in worker processes.
+
+:class:`ClipSource` makes clips ``0, 1, 2, ...`` of a recipe in order, on
+``workers`` processes (spawned, numpy only), at most ``prefetch`` ahead, so the
+trainer never waits while the workers keep up; ``workers=0`` makes them in
+this process (tests, debugging).
+
+:class:`ClipPool` holds ``capacity`` clips. Before step ``s`` of a run, clip
+``capacity + s // refresh - 1`` replaces the oldest every ``refresh`` steps:
+which clips a step can draw from depends only on the step, never on how fast
+the workers were, so a run is a pure function of its seed and resumes
+exactly (the pool is re-made from the step). Each sample is a key moment drawn
+anywhere in a clip (its span padded at the stream's ends by repeating the
+first or last readout, exactly as inference does: :func:`recon.stream.key_span`),
+a random crop and random flips.
+"""
+
+from __future__ import annotations
+
+import collections
+import multiprocessing
+import os
+
+import numpy as np
+import torch
+
+from golden.config import SensorConfig
+
+from ..stream import decode_light, key_span
+from .clips import Clip, EngineRecipe, make_clip
+
+
+def _make(args) -> Clip:
+    recipe, config, index = args
+    return make_clip(recipe, config, index)
+
+
+def _worker_init() -> None:
+    try:
+        os.nice(5)              # the trainer keeps priority on a shared machine
+    except OSError:
+        pass
+
+
+class ClipSource:
+    """Clips ``start, start + 1, ...`` in order, made ahead on worker processes."""
+
+    def __init__(self, recipe: EngineRecipe, config: SensorConfig, *, start: int = 0,
+                 workers: int = 1, prefetch: int = 8):
+        self.recipe, self.config, self.next_index = recipe, config, start
+        self.prefetch = max(1, prefetch)
+        self.pool = None
+        if workers > 0:
+            self.pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_worker_init)
+        self.pending: collections.deque = collections.deque()
+        self.submitted = start
+        self.waited = 0.0
+
+    def _fill(self) -> None:
+        while self.pool is not None and len(self.pending) < self.prefetch:
+            args = (self.recipe, self.config, self.submitted)
+            self.pending.append(self.pool.apply_async(_make, (args,)))
+            self.submitted += 1
+
+    def __next__(self) -> Clip:
+        if self.pool is None:
+            clip = make_clip(self.recipe, self.config, self.next_index)
+        else:
+            self._fill()
+            import time
+            start = time.monotonic()
+            clip = self.pending.popleft().get()
+            self.waited += time.monotonic() - start
+            self._fill()
+        self.next_index += 1
+        return clip
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.terminate()
+            self.pool.join()
+            self.pool = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class ClipPool:
+    """The clips a step may draw from; see the module's docstring for the schedule."""
+
+    def __init__(self, recipe: EngineRecipe, config: SensorConfig, *, capacity: int = 48,
+                 refresh: int = 4, step: int = 0, workers: int = 1, progress: bool = False):
+        if capacity < 1 or refresh < 1:
+            raise ValueError("capacity and refresh must be >= 1")
+        self.capacity, self.refresh = capacity, refresh
+        first = step // refresh                   # clips that already left the pool
+        self.source = ClipSource(recipe, config, start=first, workers=workers, prefetch=capacity + 4)
+        indices = range(capacity)
+        if progress:
+            from tqdm import tqdm
+            indices = tqdm(indices, desc="fill the clip pool", unit="clip", leave=False)
+        clips = [next(self.source) for _ in indices]
+        # clip i lives in slot i % capacity, whatever step the pool was made at
+        self.clips: list[Clip] = [clips[(slot - first) % capacity] for slot in range(capacity)]
+        self.made = first + capacity              # index of the next clip to enter
+
+    def advance_to(self, step: int) -> None:
+        """Let in every clip scheduled up to ``step``."""
+        while self.made < self.capacity + step // self.refresh:
+            self.clips[self.made % self.capacity] = next(self.source)
+            self.made += 1
+
+    def close(self) -> None:
+        self.source.close()
+
+
+def draw_sample(clip: Clip, span: int, crop: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(words (span, c, c), truth (1, c, c)) at a random key moment, crop and flip of ``clip``."""
+    K, H, W = clip.words.shape
+    key = int(rng.integers(K))
+    times = key_span(K, key, span)
+    y, x = int(rng.integers(H - crop + 1)), int(rng.integers(W - crop + 1))
+    words = clip.words[times, y:y + crop, x:x + crop]
+    truth = clip.light[key, y:y + crop, x:x + crop][None]
+    flips = [axis for axis in (-1, -2) if rng.integers(2)]
+    if flips:
+        words, truth = np.flip(words, flips), np.flip(truth, flips)
+    return np.ascontiguousarray(words), np.ascontiguousarray(truth)
+
+
+def draw_batch(pool: ClipPool, config: SensorConfig, span: int, crop: int, batch: int,
+               rng: np.random.Generator, device: str = "cpu") -> tuple[torch.Tensor, torch.Tensor]:
+    """(decoded light (B, span, c, c), truth (B, 1, c, c)) from random clips of the pool."""
+    pairs = [draw_sample(pool.clips[int(rng.integers(len(pool.clips)))], span, crop, rng)
+             for _ in range(batch)]
+    light = decode_light(np.stack([w for w, _ in pairs]), config, device=device, dtype=torch.float32)
+    return light, torch.from_numpy(np.stack([t for _, t in pairs])).to(device)

@@ -1,0 +1,199 @@
+"""One training clip: a light sequence from a named family, its peak and length drawn, and its stream.
+
+A clip is a pure function of (recipe, sensor configuration, index): the same
+triple always gives the same light and the same words, and two indices never
+share a random number (``np.random.SeedSequence([domain, seed, index])``). The
+light is simulated by golden's fast simulator with fresh shot noise, so the
+network sees a new noise draw with every clip.
+
+Families (:data:`FAMILIES`), each a documented generator:
+
+- ``deadleaves``: :func:`recon.engine.deadleaves.dead_leaves`, procedural HDR
+  video built for generalisation (occlusion, power-law sizes, log-uniform
+  radiance over up to six decades, textures, soft and sharp edges, object and
+  camera motion, small bright and flickering sources);
+- ``panorama``: a camera path (pan, tilt, rotate, zoom or all) over one of the
+  training panoramas (never the held-out ``courtyard``), with 0..2 moving
+  bright sources;
+- ``folder``: a random window and time span of a user folder of .exr/.hdr
+  frames (``recipe.folders``), played forwards or backwards.
+
+Brightness: the clip's peak (its brightest pixel over all readouts) is drawn
+log-uniformly in ``recipe.peak`` (0.01 .. 3 x the design light by default);
+the network sees light in scene units, as at inference. Length: with
+probability ``recipe.short_fraction`` the stream is short (log-uniform in
+``recipe.short``, down to one readout), else uniform in ``recipe.long``;
+key moments are drawn anywhere in it by :mod:`recon.engine.batches`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.errors import InputError
+from golden.fastsim import simulate_scene
+
+from .deadleaves import DeadLeavesParams, dead_leaves
+
+#: The panorama kept out of training: validation uses it.
+HELDOUT_PANORAMA = "courtyard"
+TRAIN_PANORAMAS = ("city", "forest", "studio", "sunset")
+FAMILIES = ("deadleaves", "panorama", "folder")
+#: Seed domains: training clips and validation clips never share a seed.
+TRAIN_DOMAIN, VALIDATION_DOMAIN = 17, 23
+
+
+@dataclasses.dataclass(frozen=True)
+class EngineRecipe:
+    """What the training clips are made of (every field is recorded with the weights)."""
+
+    weights: tuple[tuple[str, float], ...] = (("deadleaves", 0.6), ("panorama", 0.4))
+    height: int = 128
+    width: int = 128
+    long: tuple[int, int] = (48, 112)        # readouts of a long stream (uniform)
+    short: tuple[int, int] = (1, 47)         # readouts of a short stream (log-uniform)
+    short_fraction: float = 0.3
+    peak: tuple[float, float] = (0.01, 3.0)  # x the design light, log-uniform
+    panoramas: tuple[str, ...] = TRAIN_PANORAMAS
+    folders: tuple[str, ...] = ()            # user .exr/.hdr frame folders (family "folder")
+    folder_weight: float = 0.25              # share of folder clips when folders are given
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "weights", tuple((str(n), float(w)) for n, w in self.weights))
+        object.__setattr__(self, "panoramas", tuple(self.panoramas))
+        object.__setattr__(self, "folders", tuple(str(Path(f).resolve()) for f in self.folders))
+        for name, weight in self.weights:
+            if name not in FAMILIES or name == "folder":
+                raise InputError(f"engine family {name!r} unknown (known: deadleaves, panorama; "
+                                 "folders are given as folders)")
+            if not weight >= 0:
+                raise InputError(f"engine family {name!r} weight {weight!r}: must be >= 0")
+        if HELDOUT_PANORAMA in self.panoramas:
+            raise InputError(f"engine recipe: panorama {HELDOUT_PANORAMA!r} is held out for validation")
+        for key in ("height", "width"):
+            if type(getattr(self, key)) is not int or getattr(self, key) < 8:
+                raise InputError(f"engine recipe {key} = {getattr(self, key)!r}: must be an integer >= 8")
+        for key in ("long", "short"):
+            lo, hi = getattr(self, key)
+            if not (type(lo) is int and type(hi) is int and 1 <= lo <= hi):
+                raise InputError(f"engine recipe {key} = {(lo, hi)!r}: need integers 1 <= low <= high")
+        if not 0 < self.peak[0] <= self.peak[1] or not math.isfinite(self.peak[1]):
+            raise InputError(f"engine recipe peak = {self.peak!r}: need 0 < low <= high, finite")
+        if not 0 <= self.short_fraction <= 1 or not 0 <= self.folder_weight <= 1:
+            raise InputError("engine recipe short_fraction and folder_weight must lie in [0, 1]")
+        if sum(w for _, w in self.weights) <= 0 and not self.folders:
+            raise InputError("engine recipe: every family weight is 0 and no folder is given")
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "EngineRecipe":
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise InputError(f"unknown engine recipe key {unknown[0]!r}")
+        fields = dict(data)
+        for key in ("long", "short", "peak"):
+            if key in fields:
+                fields[key] = tuple(fields[key])
+        if "weights" in fields:
+            fields["weights"] = tuple(tuple(w) for w in fields["weights"])
+        return cls(**fields)
+
+    def family_table(self) -> tuple[tuple[str, ...], np.ndarray]:
+        names = [n for n, _ in self.weights]
+        weights = np.array([w for _, w in self.weights], np.float64)
+        if weights.sum() > 0:
+            weights = weights / weights.sum()
+        if self.folders:
+            share = self.folder_weight if weights.sum() > 0 else 1.0
+            weights = np.append(weights * (1 - share), share)
+            names.append("folder")
+        return tuple(names), weights
+
+
+@dataclasses.dataclass(frozen=True)
+class Clip:
+    """A stream and its ground truth: light float32 (K, H, W) and words (K, H, W)."""
+
+    light: np.ndarray
+    words: np.ndarray
+    family: str
+    index: int
+
+
+def clip_rng(recipe: EngineRecipe, index: int, domain: int = TRAIN_DOMAIN) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([domain, recipe.seed, index]))
+
+
+def draw_length(rng: np.random.Generator, recipe: EngineRecipe) -> int:
+    if rng.uniform() < recipe.short_fraction:
+        lo, hi = recipe.short
+        return int(min(hi, math.floor(math.exp(rng.uniform(math.log(lo), math.log(hi + 1))))))
+    return int(rng.integers(recipe.long[0], recipe.long[1] + 1))
+
+
+def panorama_light(rng: np.random.Generator, frames: int, height: int, width: int,
+                   sources: tuple[str, ...]) -> np.ndarray:
+    """A camera path over one of ``sources`` with 0..2 moving bright sources (unnormalised)."""
+    from ..scenes.panorama import MOTIONS, panorama_sequence
+    source = sources[int(rng.integers(len(sources)))]
+    motion = MOTIONS[int(rng.integers(len(MOTIONS)))]
+    return panorama_sequence(rng, frames, height, width, source=source, motion=motion,
+                             sources=int(rng.integers(0, 3)))
+
+
+def folder_light(rng: np.random.Generator, folder: str, frames: int, height: int, width: int) -> np.ndarray:
+    """A random window and time span of a folder of HDR frames (repeated to length if short)."""
+    from ..scenes.hdr_io import load_hdr_sequence
+    light = load_hdr_sequence(folder)
+    k, h, w = light.shape
+    if h < height or w < width:
+        raise InputError(f"training folder {folder!r} frames are {h} x {w}, smaller than the "
+                         f"engine's {height} x {width}")
+    y, x = int(rng.integers(h - height + 1)), int(rng.integers(w - width + 1))
+    start = int(rng.integers(k))
+    order = np.arange(start, start + frames) % k
+    if rng.uniform() < 0.5:
+        order = order[::-1]
+    return np.asarray(light[order, y:y + height, x:x + width], np.float64)
+
+
+def clip_light(recipe: EngineRecipe, index: int, *, domain: int = TRAIN_DOMAIN,
+               deadleaves: DeadLeavesParams = DeadLeavesParams()) -> tuple[np.ndarray, str, np.random.Generator]:
+    """(light float64 (K, H, W) with its drawn peak, family, the clip's generator for the noise)."""
+    rng = clip_rng(recipe, index, domain)
+    names, weights = recipe.family_table()
+    family = names[int(rng.choice(len(names), p=weights))]
+    frames = draw_length(rng, recipe)
+    h, w = recipe.height, recipe.width
+    if family == "deadleaves":
+        light = dead_leaves(rng, frames, h, w, deadleaves)
+    elif family == "panorama":
+        light = panorama_light(rng, frames, h, w, recipe.panoramas)
+    else:
+        light = folder_light(rng, recipe.folders[int(rng.integers(len(recipe.folders)))], frames, h, w)
+    peak = math.exp(rng.uniform(math.log(recipe.peak[0]), math.log(recipe.peak[1])))
+    top = float(light.max())
+    if not top > 0:
+        light = np.full_like(light, peak)      # a black folder frame: flat light at the peak
+    else:
+        light = light * (peak / top)
+    if rng.uniform() < 0.5:                    # mirror: no left/right bias from the sources
+        light = light[:, :, ::-1]
+    return np.ascontiguousarray(light), family, rng
+
+
+def make_clip(recipe: EngineRecipe, config: SensorConfig, index: int, *, domain: int = TRAIN_DOMAIN,
+              deadleaves: DeadLeavesParams = DeadLeavesParams()) -> Clip:
+    """Clip ``index`` of the recipe for ``config``: light (float32) and its simulated words."""
+    light, family, rng = clip_light(recipe, index, domain=domain, deadleaves=deadleaves)
+    words = simulate_scene(config, light, seed=rng, workers=1)
+    return Clip(light.astype(np.float32), words, family, index)

@@ -1,0 +1,95 @@
+"""The held-out validation set: domains training never sees, scored while a network trains.
+
+Every case is made from the validation seed domain (never a training seed):
+
+- camera paths over the held-out panorama (``courtyard``): a long pan at the
+  design light, a mixed path at 0.3 of it, a zoom at 0.03 (dim), and a short
+  pan of 32 readouts;
+- dead leaves with held-out generator parameters (steeper size law, fewer and
+  harder-edged objects, five to six decades): a long clip and a short one of
+  16 readouts, twice the design light.
+
+:func:`validation_set` returns light and words for one sensor configuration;
+:func:`score` gives PSNR-mu (mu = 5000, each frame divided by the ground
+truth's peak) of every case over all its frames (the ends of each stream,
+where inference repeats the first or last readout, included) and their mean.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Callable
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.fastsim import simulate_scene
+
+from .clips import HELDOUT_PANORAMA, VALIDATION_DOMAIN
+from .deadleaves import DeadLeavesParams, dead_leaves
+
+#: Held-out generator parameters of the dead-leaves family (none of training's ranges' corners).
+HELDOUT_DEADLEAVES = DeadLeavesParams(objects=(40, 90), size_exponent=(3.2, 3.6), decades=(5.0, 6.0),
+                                      soft_fraction=0.1, object_speed=(1.0, 2.5))
+
+
+@dataclasses.dataclass(frozen=True)
+class Case:
+    label: str
+    family: str          # "panorama" or "deadleaves"
+    motion: str
+    frames: int
+    peak: float
+
+
+CASES = (
+    Case("courtyard-pan", "panorama", "pan", 48, 1.0),
+    Case("courtyard-mixed-0.3", "panorama", "mixed", 48, 0.3),
+    Case("courtyard-zoom-0.03", "panorama", "zoom", 48, 0.03),
+    Case("courtyard-short-32", "panorama", "pan", 32, 1.0),
+    Case("deadleaves-heldout", "deadleaves", "", 48, 2.0),
+    Case("deadleaves-short-16", "deadleaves", "", 16, 2.0),
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class ValidationCase:
+    label: str
+    light: np.ndarray        # float32 (K, H, W)
+    words: np.ndarray
+
+
+def case_light(case: Case, index: int, height: int, width: int) -> np.ndarray:
+    """The light of ``case`` (number ``index`` of the set), float64, its peak set."""
+    from ..scenes.panorama import panorama_sequence
+    rng = np.random.default_rng(np.random.SeedSequence([VALIDATION_DOMAIN, index]))
+    if case.family == "panorama":
+        light = panorama_sequence(rng, case.frames, height, width, source=HELDOUT_PANORAMA,
+                                  motion=case.motion, sources=1)
+    else:
+        light = dead_leaves(rng, case.frames, height, width, HELDOUT_DEADLEAVES)
+    return light * (case.peak / float(light.max()))
+
+
+def validation_set(config: SensorConfig, height: int = 96, width: int = 128) -> list[ValidationCase]:
+    """Every case of :data:`CASES` with its stream for ``config`` (validation seeds)."""
+    out = []
+    for index, case in enumerate(CASES):
+        light = case_light(case, index, height, width)
+        noise = np.random.default_rng(np.random.SeedSequence([VALIDATION_DOMAIN, index, 1]))
+        words = simulate_scene(config, light, seed=noise, workers=1)
+        out.append(ValidationCase(case.label, light.astype(np.float32), words))
+    return out
+
+
+def score(reconstruct: Callable[[np.ndarray], np.ndarray],
+          cases: list[ValidationCase]) -> dict[str, float]:
+    """PSNR-mu (dB) of ``reconstruct(words) -> light`` on every case, and ``mean``."""
+    from ..metrics import psnr_mu
+    out = {}
+    for case in cases:
+        values = psnr_mu(reconstruct(case.words), case.light)
+        out[case.label] = float(np.mean(values[np.isfinite(values)])) if np.isfinite(values).any() else math.inf
+    out["mean"] = float(np.mean([out[c.label] for c in cases]))
+    return out

@@ -1,0 +1,144 @@
+"""recon.engine: dead leaves, clips (families, peak, length), the pool's schedule, samples' edge padding."""
+
+import math
+
+import numpy as np
+import pytest
+
+from golden.config import SensorConfig
+from golden.errors import InputError
+from recon.engine.batches import ClipPool, draw_batch, draw_sample
+from recon.engine.clips import Clip, EngineRecipe, clip_light, draw_length, make_clip
+from recon.engine.deadleaves import DeadLeavesParams, _power_law, dead_leaves
+from recon.stream import key_span
+
+SMALL = EngineRecipe(height=24, width=24, long=(6, 12), short=(1, 5))
+
+
+def test_dead_leaves_is_positive_finite_moving_and_deterministic():
+    a = dead_leaves(np.random.default_rng(3), 6, 40, 48)
+    b = dead_leaves(np.random.default_rng(3), 6, 40, 48)
+    assert a.shape == (6, 40, 48) and np.array_equal(a, b)
+    assert np.isfinite(a).all() and a.min() > 0
+    assert not np.array_equal(a[0], a[-1])                  # objects or camera moved
+
+
+def test_dead_leaves_radiance_spans_the_decades_asked_for():
+    params = DeadLeavesParams(decades=(5.0, 5.0), sources=(0, 0), texture=(0.0, 0.0), objects=(200, 200))
+    light = dead_leaves(np.random.default_rng(0), 1, 96, 96, params)
+    decades = math.log10(np.percentile(light, 99.5) / np.percentile(light, 0.5))
+    assert 3.5 < decades < 5.5
+
+
+def test_power_law_sizes_follow_their_law():
+    r = _power_law(np.random.default_rng(1), 3.0, 1.0, 100.0, 200_000)
+    assert r.min() >= 1.0 and r.max() <= 100.0
+    # p(r) ~ r^-3 on [1, 100]: P(r > 2) = (2^-2 - 100^-2) / (1 - 100^-2)
+    expected = (0.25 - 1e-4) / (1 - 1e-4)
+    assert abs(np.mean(r > 2) - expected) < 4 * math.sqrt(expected * (1 - expected) / r.size)
+
+
+def test_clip_is_a_pure_function_of_recipe_config_and_index():
+    config = SensorConfig()
+    a, b, c = make_clip(SMALL, config, 5), make_clip(SMALL, config, 5), make_clip(SMALL, config, 6)
+    assert np.array_equal(a.words, b.words) and np.array_equal(a.light, b.light)
+    assert a.light.shape != c.light.shape or not np.array_equal(a.light, c.light)
+    other_seed = make_clip(EngineRecipe(**{**SMALL.to_dict(), "seed": 1}), config, 5)
+    assert other_seed.light.shape != a.light.shape or not np.array_equal(other_seed.light, a.light)
+
+
+def test_peaks_lengths_and_families_are_drawn_in_their_ranges():
+    recipe = EngineRecipe(height=16, width=16, long=(30, 40), short=(1, 9), short_fraction=0.5,
+                          peak=(0.01, 3.0))
+    families, peaks, lengths = set(), [], []
+    for i in range(40):
+        light, family, _ = clip_light(recipe, i)
+        families.add(family)
+        peaks.append(float(light.max()))
+        lengths.append(light.shape[0])
+    assert families == {"deadleaves", "panorama"}
+    assert min(peaks) >= 0.01 * (1 - 1e-12) and max(peaks) <= 3.0 * (1 + 1e-12)
+    assert min(peaks) < 0.1 and max(peaks) > 0.5            # spread over the range
+    assert all(1 <= k <= 9 or 30 <= k <= 40 for k in lengths)
+    assert 1 <= sum(k <= 9 for k in lengths) <= 39
+    rng = np.random.default_rng(0)
+    assert {draw_length(rng, EngineRecipe(short=(1, 1), short_fraction=1.0)) for _ in range(5)} == {1}
+
+
+def test_user_folder_family(tmp_path):
+    from recon.scenes import write_hdr
+    folder = tmp_path / "seq"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(5):
+        write_hdr(folder / f"f{k:03d}.hdr", rng.uniform(0.01, 3.0, (30, 28, 3)).astype(np.float32))
+    recipe = EngineRecipe(height=24, width=24, long=(8, 8), short_fraction=0.0, weights=(("deadleaves", 0.0),),
+                          folders=(str(folder),))
+    light, family, _ = clip_light(recipe, 0)
+    assert family == "folder" and light.shape == (8, 24, 24)
+    with pytest.raises(InputError, match="smaller than"):
+        clip_light(EngineRecipe(**{**recipe.to_dict(), "height": 40}), 0)
+
+
+def test_recipe_refusals():
+    with pytest.raises(InputError, match="held out"):
+        EngineRecipe(panoramas=("courtyard",))
+    with pytest.raises(InputError, match="unknown"):
+        EngineRecipe(weights=(("clouds", 1.0),))
+    with pytest.raises(InputError, match="peak"):
+        EngineRecipe(peak=(0.0, 1.0))
+    with pytest.raises(InputError, match="unknown engine recipe key"):
+        EngineRecipe.from_dict({"frames": 3})
+
+
+def test_key_span_repeats_the_ends_as_inference_does():
+    assert key_span(1, 0, 5).tolist() == [0, 0, 0, 0, 0]
+    assert key_span(10, 1, 5).tolist() == [0, 0, 1, 2, 3]
+    assert key_span(10, 9, 5).tolist() == [7, 8, 9, 9, 9]
+    assert key_span(10, 5, 5).tolist() == [3, 4, 5, 6, 7]
+
+
+def test_sample_is_the_padded_span_around_its_key():
+    K, H, W = 7, 10, 12
+    words = np.arange(K * H * W, dtype=np.int64).reshape(K, H, W)
+    clip = Clip(words.astype(np.float32), words, "test", 0)
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        state = rng.bit_generator.state
+        sample, truth = draw_sample(clip, 5, 8, rng)
+        replay = np.random.default_rng()
+        replay.bit_generator.state = state
+        key = int(replay.integers(K))
+        y, x = int(replay.integers(H - 7)), int(replay.integers(W - 7))
+        expected = words[key_span(K, key, 5), y:y + 8, x:x + 8]
+        flips = [axis for axis in (-1, -2) if replay.integers(2)]
+        if flips:
+            expected = np.flip(expected, flips)
+        assert np.array_equal(sample, expected)
+        assert np.array_equal(truth[0], expected[2])       # the key moment sits in the middle
+
+
+def test_pool_schedule_depends_on_the_step_only():
+    config = SensorConfig()
+    straight = ClipPool(SMALL, config, capacity=3, refresh=2, workers=0)
+    straight.advance_to(7)
+    late = ClipPool(SMALL, config, capacity=3, refresh=2, step=7, workers=0)
+    assert [c.index for c in straight.clips] == [c.index for c in late.clips]
+    assert sorted(c.index for c in late.clips) == [3, 4, 5]
+    a = draw_batch(straight, config, 5, 16, 3, np.random.default_rng(0))
+    b = draw_batch(late, config, 5, 16, 3, np.random.default_rng(0))
+    assert all(np.array_equal(x.numpy(), y.numpy()) for x, y in zip(a, b))
+    assert a[0].shape == (3, 5, 16, 16) and a[1].shape == (3, 1, 16, 16)
+
+
+def test_worker_processes_make_the_same_clips():
+    config = SensorConfig()
+    local = ClipPool(SMALL, config, capacity=2, refresh=1, workers=0)
+    remote = ClipPool(SMALL, config, capacity=2, refresh=1, workers=1)
+    try:
+        local.advance_to(2)
+        remote.advance_to(2)
+        for a, b in zip(local.clips, remote.clips):
+            assert a.index == b.index and np.array_equal(a.words, b.words)
+    finally:
+        remote.close()
