@@ -68,7 +68,7 @@ import numpy as np
 from .config import SensorConfig
 from .errors import InputError
 from .fastsim_classify import (BRIGHT, CLOCK, EVENT, FULL, HEAD, LAZY, MAX_BACKLOG, MIN_WINDOW, QUEUE,
-                               SIMULATION_PATHS, PathLevels, groups, round_window)
+                               SIMULATION_PATHS, groups, path_levels, round_window)
 from .fastsim_stripes import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, check_workers, run_stripes,
                               spawn_generators, stripe_slices)
 from .io import check_scene, word_dtype
@@ -76,6 +76,7 @@ from .light import (as_generator, check_dark_current, dark_electrons,
                     deterministic_clock_electrons, electrons_per_readout, log_budget,
                     log_poisson_tail_above, log_poisson_tail_below)
 from .reference import PixelState
+from .resources import keep_freed_memory
 from .poisson import PoissonSampler
 from .sensor import PixelArray
 
@@ -139,7 +140,7 @@ class SceneSimulator:
         # at most CHECKS bounded events per pixel-readout, each below the budget
         self.budget = log_budget(total_pixel_readouts or n, config.clocks_per_readout) - np.log(CHECKS)
         self.path_counts = dict.fromkeys(SIMULATION_PATHS + ("fallback",), 0)
-        self.levels = PathLevels(config, self.budget)
+        self.levels = path_levels(config, float(self.budget))
         self._peek_rng = None                              # draws of lazy pixels' charge when read
 
     @property
@@ -263,13 +264,16 @@ class SceneSimulator:
         eligible = (expected <= self.levels.mean_lazy) & (self._acc < theta)
         if self.dark_model:
             eligible &= dark == 0
-        leave = self._lazy & ~eligible
-        if leave.any():
-            self._sync(np.flatnonzero(leave))
-        enter = np.flatnonzero(eligible & ~self._lazy)
-        if enter.size:
-            self._remaining[enter] = self.rng.standard_gamma(theta - self._acc[enter])
-            self._elapsed[enter] = 0.0
+        changed = np.flatnonzero(eligible != self._lazy)   # (one pass; few pixels change)
+        if changed.size:
+            was = self._lazy[changed]
+            leave = changed[was]
+            if leave.size:
+                self._sync(leave)
+            enter = changed[~was]
+            if enter.size:
+                self._remaining[enter] = self.rng.standard_gamma(theta - self._acc[enter])
+                self._elapsed[enter] = 0.0
         self._lazy = eligible
         # whole-frame passes, no gather: the other pixels' values are never read
         np.subtract(self._remaining, expected, out=self._remaining)
@@ -749,6 +753,7 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     scene = check_scene(scene, scan_values=False)       # values: one readout at a time
     K, H, W = scene.shape
     _check_method(method)
+    keep_freed_memory()                                 # (speed only: see golden.resources)
     if noise and method == "fast":
         rows, sims = stripe_simulators(config, (H, W), seed=seed, dark_current=dark_current,
                                        total_pixel_readouts=scene.size)

@@ -11,6 +11,7 @@ and the queue's backlog bound. Nothing is stored between calls.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import numpy as np
@@ -43,7 +44,8 @@ class Plan(NamedTuple):
 
 class PathLevels:
     """The light levels and bounds that decide the paths of one configuration
-    at one error budget (log probability per bounded event)."""
+    at one error budget (log probability per bounded event). Read-only once
+    made; :func:`path_levels` shares one between the stripes of a scene."""
 
     def __init__(self, config: SensorConfig, budget: float):
         c = self.config = config
@@ -80,6 +82,7 @@ class PathLevels:
             count = np.arange(c.ml_max + 1, dtype=np.int64)
             self.msb_word = msb_index(count)
             self.msb_rest = count - np.where(count > 0, np.left_shift(1, np.maximum(self.msb_word - 1, 0)), 0)
+            self.msb_word.flags.writeable = self.msb_rest.flags.writeable = False
 
     def classify(self, lazy, n_lazy, lam, mean, dark, acc) -> Plan:
         """Paths of one readout: ``lazy`` the lazy pixels' mask (``n_lazy`` of
@@ -192,6 +195,13 @@ class PathLevels:
 
 
 _NONE = np.zeros(0)
+
+
+@functools.lru_cache(maxsize=16)
+def path_levels(config: SensorConfig, budget: float) -> PathLevels:
+    """:class:`PathLevels` of ``config`` at ``budget``, made once per process
+    (its bisections cost about 10 ms; the stripes of a scene share one budget)."""
+    return PathLevels(config, budget)
 
 
 def round_window(clocks: np.ndarray) -> np.ndarray:

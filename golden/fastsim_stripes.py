@@ -13,7 +13,7 @@ import os
 import numpy as np
 
 from .errors import InputError
-from .io import check_scene
+from .io import check_scene, scan_light
 
 #: Horizontal stripes of a noisy fast simulation (:func:`stripe_slices`): a
 #: power of two, at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a
@@ -72,7 +72,7 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
         words = np.empty((K, H, W), dtype)
     else:
         for k in range(K):                              # refuse bad light before any worker starts
-            check_scene(np.asarray(scene[k:k + 1]))
+            scan_light(np.asarray(scene[k:k + 1]))
         words = np.frombuffer(mmap.mmap(-1, max(1, K * H * W * dtype.itemsize)), dtype,
                               count=K * H * W).reshape(K, H, W)
 

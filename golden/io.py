@@ -20,7 +20,7 @@ from .errors import InputError, TespikeError
 from .paths import check_input_file
 
 __all__ = ["atomic_output", "check_scene", "check_stimulus", "load_scene", "load_stimulus",
-           "load_stream", "save_images", "save_stream", "unsigned_dtype", "word_dtype"]
+           "load_stream", "save_images", "save_stream", "scan_light", "unsigned_dtype", "word_dtype"]
 
 
 def _load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.ndarray:
@@ -119,14 +119,25 @@ def check_scene(scene: np.ndarray, *, scan_values: bool = True) -> np.ndarray:
     if not scan_values:
         return scene
     scene = scene.astype(np.float64, copy=False)
-    if scene.size:
-        if not np.isfinite(scene).all():
-            bad = scene[~np.isfinite(scene)][0]
-            raise InputError(f"scene holds a non-finite light value ({bad}); light must be finite")
-        low = float(scene.min())
-        if low < 0:
-            raise InputError(f"scene holds a negative light value ({low}); light must be >= 0")
+    scan_light(scene)
     return scene
+
+
+def scan_light(light: np.ndarray) -> None:
+    """Refuse a non-finite or negative value of a float light array, in its own
+    dtype (nothing converted: two reductions, no temporary; a NaN anywhere makes
+    the minimum NaN). The values are those float64 would hold, so the message
+    is the one :func:`check_scene` gives after converting."""
+    if not light.size:
+        return
+    low, high = light.min(), light.max()
+    if low >= 0 and high < np.inf:
+        return
+    finite = np.isfinite(light)
+    if not finite.all():
+        bad = np.float64(light[~finite][0])
+        raise InputError(f"scene holds a non-finite light value ({bad}); light must be finite")
+    raise InputError(f"scene holds a negative light value ({float(low)}); light must be >= 0")
 
 
 def load_scene(path: str | Path, *, memory_map: bool = False) -> np.ndarray:
@@ -143,7 +154,7 @@ def load_scene(path: str | Path, *, memory_map: bool = False) -> np.ndarray:
         return check_scene(np.array(scene))
     step = max(1, (1 << 22) // max(1, scene[0].size))
     for start in range(0, scene.shape[0], step):
-        check_scene(np.asarray(scene[start:start + step]))
+        scan_light(np.asarray(scene[start:start + step]))
     return scene
 
 
