@@ -13,7 +13,7 @@ import os
 import numpy as np
 
 from .errors import InputError
-from .io import check_scene, scan_light
+from .io import scan_light
 
 #: Horizontal stripes of a noisy fast simulation (:func:`stripe_slices`): a
 #: power of two, at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a
@@ -77,12 +77,13 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
                               count=K * H * W).reshape(K, H, W)
 
     def run(mine, readouts):
+        # light in the scene's own dtype: readout converts it to float64 once (electrons_per_readout)
         for k in readouts:
+            light = np.asarray(scene[k])
             if workers == 1:
-                light = check_scene(np.asarray(scene[k:k + 1]))[0]
+                scan_light(light)
             for i in mine:
-                part = light[rows[i]] if workers == 1 else np.asarray(scene[k, rows[i]], np.float64)
-                words[k, rows[i]] = sims[i].readout(part)
+                words[k, rows[i]] = sims[i].readout(light[rows[i]])
 
     children = {}
     try:
