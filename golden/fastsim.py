@@ -59,6 +59,12 @@ most CHECKS of them, so the law of the whole output stream differs from the
 exact one by less than 2^-64 in total variation. With ``noise=False`` nothing is
 random and every pixel takes the per-clock path on the deterministic
 stimulus of :func:`golden.light.deterministic_clock_electrons`.
+
+Where the ideas live: this module holds the simulator (its state and the
+paths) and the public API; :mod:`golden.fastsim_classify` decides each
+pixel-readout's path and returns what the paths need (no state kept between
+calls); :mod:`golden.fastsim_stripes` splits a frame into stripes and runs
+them on worker processes.
 """
 
 from __future__ import annotations
