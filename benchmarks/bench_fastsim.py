@@ -5,7 +5,7 @@ Usage (from the worktree root):
     python3 benchmarks/bench_fastsim.py [--pixels 2000] [--readouts 4] [--out PNG | --docs]
                                         [--skip-whole] [--skip-levels] [--whole-shape 64 384 512]
                                         [--scene I.npy ...] [--crops 6] [--repeats 3]
-                                        [--workers N [N ...]] [--skip-synthetic]
+                                        [--workers N [N ...]] [--skip-synthetic] [--baseline DIR]
 
 Part 1, per light level from 1e-4 to 10 x design light, paper TE, ML (count
 readout) and ML msb (eq. 10) configurations: ``simulate_scene`` (fast) against the naive loop (Poisson
@@ -23,7 +23,10 @@ the same scene and scaled per pixel-readout, for each of the three cameras,
 with the msb camera's time over the ML-count camera's in the same run (wall
 and child-process CPU time; the issue's target is within 10 %), and with
 ``--workers 1 2`` each camera at each worker count (interleaved) and the
-wall-time ratio of the first count over the others.
+wall-time ratio of the first count over the others. ``--baseline DIR`` times
+another checkout's ``tespike simulate`` (e.g. ``git archive <commit> | tar -x -C
+DIR``) interleaved with this one's, against the same naive rate: before/after
+ratios from one run, under one load.
 Prints tables, writes a PNG. Figures depend on the machine and its load; the
 ratios are measured in the same run.
 """
@@ -135,36 +138,61 @@ def naive_rate(config, scene, crops=6, crop=(2, 32, 48), seed=0):
     return size / elapsed
 
 
-def whole_process(name, path, crops=6, repeats=3, workers=(None,)):
+def whole_process(name, path, crops=6, repeats=3, workers=(None,), baseline=None):
     """``tespike simulate`` as a whole process (start, read, simulate, write) on
     the scene file ``path`` against the naive loop on random crops of it.
 
     Each camera's process runs ``repeats`` times at each of ``workers``
     (``--workers``; ``None``: the command's default), cameras and worker counts
     interleaved, and the fastest run counts (wall and CPU time separately): on a
-    shared machine the slower runs measure the other processes."""
+    shared machine the slower runs measure the other processes. ``baseline``:
+    another checkout's command, run after each of this one's."""
     scene = np.load(path, mmap_mode="r")
     K, H, W = scene.shape
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    times = {(mode, t): [] for mode in MODES for t in workers}
+    trees = {"": ROOT} if baseline is None else {"": ROOT, "baseline": Path(baseline).resolve()}
+    times = {(tree, mode, t): [] for tree in trees for mode in MODES for t in workers}
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(repeats):
             for mode in MODES:
                 for t in workers:
-                    cpu0 = _child_cpu()
-                    t0 = time.perf_counter()
-                    run = subprocess.run([sys.executable, "-m", "cosim", "simulate", "--config", mode, "--scene",
-                                          str(path), "--out", str(Path(tmp) / "S.npz"), "--seed", "1",
-                                          *(() if t is None else ("--workers", str(t)))],
-                                         env=env, capture_output=True, text=True)
-                    wall = time.perf_counter() - t0
-                    if run.returncode:
-                        raise SystemExit(run.stderr)
-                    times[mode, t].append((wall, _child_cpu() - cpu0))
+                    for tree, root in trees.items():
+                        cpu0 = _child_cpu()
+                        t0 = time.perf_counter()
+                        run = subprocess.run([sys.executable, "-m", "cosim", "simulate", "--config", mode,
+                                              "--scene", str(Path(path).resolve()), "--out",
+                                              str(Path(tmp) / "S.npz"), "--seed", "1",
+                                              *(() if t is None else ("--workers", str(t)))],
+                                             env=dict(os.environ, PYTHONPATH=str(root)), cwd=root,
+                                             capture_output=True, text=True)
+                        wall = time.perf_counter() - t0
+                        if run.returncode:
+                            raise SystemExit(run.stderr)
+                        times[tree, mode, t].append((wall, _child_cpu() - cpu0))
+    naive = {mode: naive_rate(SensorConfig.preset(mode), scene, crops) for mode in MODES}
+    if baseline is None:
+        return _report(name, scene, {key[1:]: value for key, value in times.items()}, naive, repeats, workers)
+    for mode in MODES:
+        for t in workers:
+            new, old = (min(wall for wall, _ in times[tree, mode, t]) for tree in trees)
+            cpu_new, cpu_old = (min(cpu for _, cpu in times[tree, mode, t]) for tree in trees)
+            tag = "" if t is None else f" --workers {t}"
+            print(f"{name} {MODES[mode]}{tag}: baseline {old:.2f} s (CPU {cpu_old:.2f} s), this tree "
+                  f"{new:.2f} s (CPU {cpu_new:.2f} s): wall {old / new:.2f}x, CPU {cpu_old / cpu_new:.2f}x "
+                  f"(best of {repeats}, interleaved)", flush=True)
+    print(f"{name}: the baseline ({baseline}) against the naive loop:", flush=True)
+    _report(name, scene, {key[1:]: value for key, value in times.items() if key[0] == "baseline"},
+            naive, repeats, workers)
+    print(f"{name}: this tree against the same naive rates:", flush=True)
+    return _report(name, scene, {key[1:]: value for key, value in times.items() if key[0] == ""},
+                   naive, repeats, workers)
+
+
+def _report(name, scene, times, naive_rates, repeats, workers):
+    """Print each camera's whole-process ratio against the naive loop's rate ``naive_rates[mode]``."""
+    K, H, W = scene.shape
     results = {}
     for mode in MODES:
-        config = SensorConfig.preset(mode)
-        naive = naive_rate(config, scene, crops)
+        naive = naive_rates[mode]
         for t in workers:
             fast = min(wall for wall, _ in times[mode, t])
             cpu = min(cpu for _, cpu in times[mode, t])
@@ -173,7 +201,7 @@ def whole_process(name, path, crops=6, repeats=3, workers=(None,)):
             tag = "" if t is None else f" --workers {t}"
             print(f"{name} {MODES[mode]}{tag}: tespike simulate on {K} x {H} x {W} (readouts x rows x cols): "
                   f"{fast:.1f} s = {scene.size / fast:.3g} pixel-readouts/s (best of {repeats}; CPU {cpu:.1f} s); "
-                  f"naive loop {naive:.3g} pixel-readouts/s ({crops} random 2 x 32 x 48 crops) -> "
+                  f"naive loop {naive:.3g} pixel-readouts/s (random 2 x 32 x 48 crops) -> "
                   f"{scene.size / naive:.0f} s scaled; speed ratio {scene.size / fast / naive:.1f}x", flush=True)
         first = results[mode, workers[0]]
         for t in workers[1:]:
@@ -246,6 +274,9 @@ def main(argv=None):
     parser.add_argument("--workers", type=int, nargs="+", default=[None],
                         help="whole process: tespike simulate --workers values to time, interleaved "
                              "(e.g. 1 2; default: the command's default)")
+    parser.add_argument("--baseline", metavar="DIR",
+                        help="whole process: another checkout whose tespike simulate is timed interleaved "
+                             "with this one's (before/after in one run)")
     args = parser.parse_args(argv)
     if args.docs:
         args.out = str(ROOT / "benchmarks" / "fastsim.png")
@@ -266,9 +297,10 @@ def main(argv=None):
                     break
                 path = Path(tmp) / "I.npy"
                 np.save(path, make(tuple(args.whole_shape)))
-                whole_process(name, path, args.crops, args.repeats, tuple(args.workers))
+                whole_process(name, path, args.crops, args.repeats, tuple(args.workers), args.baseline)
         for scene in args.scene:
-            whole_process(Path(scene).name, scene, args.crops, args.repeats, tuple(args.workers))
+            whole_process(Path(scene).name, scene, args.crops, args.repeats, tuple(args.workers),
+                          args.baseline)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,9 @@ import json
 from pathlib import Path
 from typing import Any, Mapping
 
+from .atomic import atomic_output
 from .errors import ConfigError, TespikeError
+from .paths import check_input_file
 
 #: Electrons per readout interval at the brightest designed light I = 1
 #: (0.7 quantum efficiency x 60000 photons, paper section 6 / SPEC section 6).
@@ -175,7 +177,6 @@ class SensorConfig:
         return json.dumps(self.to_dict(), sort_keys=False)
 
     def save(self, path: str | Path) -> None:
-        from .io import atomic_output
         with atomic_output(path) as tmp:
             Path(tmp).write_text(self.to_json() + "\n")
 
@@ -238,7 +239,6 @@ def load_config(spec: str | Path) -> SensorConfig:
     """``"te"`` / ``"ml"`` / ``"ml-msb"`` name presets; anything else is a JSON file path."""
     if str(spec) in PRESETS:
         return SensorConfig.preset(str(spec))
-    from .paths import check_input_file
     path = Path(spec)
     try:
         check_input_file(str(spec) if not isinstance(spec, Path) else spec, "configuration")

@@ -15,7 +15,7 @@ the choice cannot bias the result); docs/simulator.md has the derivation.
 ``event``    ``acc < theta`` and no clock can get more than ``min(theta, 2^E - 1)``
              electrons (bound below). Then no clock holds two threshold
              crossings, so every crossing is a spike in its own clock and no
-             input saturates: the interval total ``T ~ Poisson(mu) + dark``
+             input saturates: the interval total ``T ~ Poisson(expected) + dark``
              fixes the spike count ``floor((acc + T) / theta)`` and the residual
              ``(acc + T) mod theta``; given T the electrons sit in iid uniform
              positions over the L clocks, so the clock of the ``2^b1``-th spike
@@ -24,7 +24,7 @@ the choice cannot bias the result); docs/simulator.md has the derivation.
 ``bright``   every clock surely gets at least ``theta`` electrons: a spike in every
              clock (word known), the accumulator only grows, so it ends at
              ``min(acc + sum(e) - L theta, 2^A - 1)``; ``sum(e)`` is
-             ``Poisson(mu) + dark`` when no input can saturate, ``L (2^E - 1)``
+             ``Poisson(expected) + dark`` when no input can saturate, ``L (2^E - 1)``
              when every input surely does, and need not be drawn at all when
              the accumulator surely ends full.
 ``queue``    light below one threshold per clock, no clipping (Lundberg bound):
@@ -59,50 +59,54 @@ most CHECKS of them, so the law of the whole output stream differs from the
 exact one by less than 2^-64 in total variation. With ``noise=False`` nothing is
 random and every pixel takes the per-clock path on the deterministic
 stimulus of :func:`golden.light.deterministic_clock_electrons`.
+
+Where the ideas live: this module holds the simulator (its state and the
+paths) and the public API; :mod:`golden.fastsim_classify` decides each
+pixel-readout's path and returns what the paths need (no state kept between
+calls); :mod:`golden.fastsim_stripes` splits a frame into stripes and runs
+them on worker processes.
 """
 
 from __future__ import annotations
-
-import os
 
 import numpy as np
 
 from .config import SensorConfig
 from .errors import InputError
+from .fastsim_classify import (BRIGHT, CLOCK, EVENT, FULL, HEAD, LAZY, MAX_BACKLOG, MIN_WINDOW, QUEUE,
+                               SIMULATION_PATHS, groups, path_levels, round_window)
+from .fastsim_stripes import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, check_workers, run_stripes,
+                              spawn_generators, stripe_slices)
 from .io import check_scene, word_dtype
 from .light import (as_generator, check_dark_current, dark_electrons,
                     deterministic_clock_electrons, electrons_per_readout, log_budget,
                     log_poisson_tail_above, log_poisson_tail_below)
-from .reference import PixelState, msb_index
+from .reference import PixelState
+from .resources import keep_freed_memory
 from .poisson import PoissonSampler
 from .sensor import PixelArray
 
-PATHS = ("lazy", "event", "bright", "queue", "full", "head", "clock")
-
-#: Largest backlog bound the queue path accepts, and its shortest window.
-MAX_BACKLOG = 64
-MIN_WINDOW = 8
+__all__ = ["CHECKS", "MAX_BACKLOG", "MAX_STRIPES", "MIN_WINDOW", "SIMULATION_METHODS", "SIMULATION_PATHS",
+           "STRIPE_PIXELS", "STRIPE_ROWS", "SceneSimulator", "check_workers", "iter_scene_stimulus",
+           "lindley_ends", "scene_stimulus", "simulate_scene", "spawn_generators", "stripe_simulators",
+           "stripe_slices"]
 
 #: Bounded events a pixel-readout can rely on (input saturation, clipping,
 #: backlog, firing, window certification, ...); each gets 1/CHECKS of the budget.
 CHECKS = 8
-METHODS = ("fast", "per-clock")
 
-#: Pixels of one path processed as one group whatever their window lengths.
-SMALL_GROUP = 256
+#: Spawn key of the generator that draws lazy pixels' charge when :attr:`SceneSimulator.acc`
+#: is read (beyond any child index a caller spawns in practice).
+PEEK_KEY = 0x7065656B
+
+#: How :class:`SceneSimulator` draws electrons: the fast paths, or per pixel clock everywhere.
+SIMULATION_METHODS = ("fast", "per-clock")
 
 #: Per-clock draws of one call below which numpy's sampler is used (no table).
 SMALL_DRAW = 4096
 
 #: Pixel clocks x pixels of per-clock electrons held at once (bounds memory).
 CLOCK_CHUNK_ELEMENTS = 1 << 21
-
-#: Horizontal stripes of a noisy fast simulation (:func:`stripe_simulators`): a
-#: power of two, at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a
-#: stripe's readout has a fixed cost) and STRIPE_ROWS rows.
-STRIPE_PIXELS = 1 << 16
-STRIPE_ROWS = 16
-MAX_STRIPES = 8
 
 
 class SceneSimulator:
@@ -118,8 +122,7 @@ class SceneSimulator:
     def __init__(self, config: SensorConfig, shape: tuple[int, int], *, rng=None,
                  dark_current: str | None = None, noise: bool = True,
                  method: str = "fast", total_pixel_readouts: int | None = None):
-        if method not in METHODS:
-            raise InputError(f"simulation method {method!r} unknown (known: {', '.join(METHODS)})")
+        _check_method(method)
         self.config = config
         self.shape = tuple(shape)
         self.dark_model = check_dark_current(dark_current)
@@ -142,154 +145,119 @@ class SceneSimulator:
         self._no_dark = np.zeros(n, np.int64)              # read only
         # at most CHECKS bounded events per pixel-readout, each below the budget
         self.budget = log_budget(total_pixel_readouts or n, config.clocks_per_readout) - np.log(CHECKS)
-        self.path_counts = dict.fromkeys(PATHS + ("fallback",), 0)
-        self._window = np.zeros(n)
-        self._b_max = np.zeros(n)
-        # path thresholds: every bound used is monotone in the light, so each
-        # test is one comparison with a level found once by bisection
-        cap = min(config.threshold, config.input_max)
-        self._mean_event = _largest_below(lambda m: log_poisson_tail_above(m, cap + 1), self.budget, cap + 1)
-        # lazy: an interval mean of at most theta / 2 (a crossing in two readouts
-        # or fewer: there a draw per crossing, about 70 ns, costs what the event
-        # path's draw per readout does) that surely cannot fire the 2^b1 spikes of a TE
-        # overflow in one interval, and event light per clock
-        self._mean_lazy = min(config.threshold / 2.0, self._mean_event * config.clocks_per_readout)
-        if config.is_te:
-            self._mean_lazy = min(self._mean_lazy, _largest_below(
-                lambda m: log_poisson_tail_above(m, (config.p_max - 1) * config.threshold),
-                self.budget, (config.p_max - 1) * config.threshold))
-        self._mean_unclipped = _largest_below(lambda m: log_poisson_tail_above(m, config.input_max + 1),
-                                              self.budget, config.input_max + 1)
-        self._lam_bright = np.inf
-        if config.input_max >= config.threshold:
-            self._lam_bright = _smallest_below(lambda m: log_poisson_tail_below(m, config.threshold - 1),
-                                               self.budget, config.threshold)
-        # queue: L exp(-s (acc_max + 2 - theta)) below budget with s = 2 (1 - rho)
-        h = config.acc_max + 2 - config.threshold
-        self._rho_queue = 1.0 - (np.log(config.clocks_per_readout) - self.budget) / (2.0 * h)
-        c = config
-        if c.is_te:
-            ovf_clock = c.p_max - 1                       # spike in every clock
-            self._bright_word = ((1 << c.d) | (ovf_clock // c.clocks_per_tick + 1)
-                                 if c.p_max <= c.clocks_per_readout else c.clocks_per_readout)
-        else:
-            self._bright_word = min(c.clocks_per_readout, c.ml_max)
-        if c.is_msb:
-            # word and remainder of every counter value 0..2^ml_bits - 1 (at most 64 Ki entries)
-            count = np.arange(c.ml_max + 1, dtype=np.int64)
-            self._msb_word = msb_index(count)
-            self._msb_rest = count - np.where(count > 0, np.left_shift(1, np.maximum(self._msb_word - 1, 0)), 0)
+        self.path_counts = dict.fromkeys(SIMULATION_PATHS + ("fallback",), 0)
+        self.levels = path_levels(config, float(self.budget))
+        self._peek_rng = None                              # draws of lazy pixels' charge when read
 
     @property
     def acc(self) -> np.ndarray:
-        """The carried charge of every pixel (flat int64; writable). Lazy pixels
-        are synced first (their charge drawn from its law given the light-time
-        elapsed and the next crossing's), which keeps every law exact."""
-        self._sync(np.flatnonzero(self._lazy))
-        return self._acc
+        """The carried charge of every pixel (flat int64). Reading it changes no
+        state and draws nothing from the simulator's generator, so later words
+        are those of a run without the read. With no lazy pixel it is the
+        simulator's own array (writes set the charge the next readout starts
+        from); otherwise a read-only copy in which each lazy pixel's charge is
+        drawn from its law given everything simulated so far (:meth:`_lazy_charge`)
+        from a generator of its own: two reads may differ there. To set charges
+        while pixels are lazy, assign the whole array (``sim.acc = values``)."""
+        lazy = np.flatnonzero(self._lazy)
+        if not lazy.size:
+            return self._acc
+        acc = self._acc.copy()
+        acc[lazy] += self._lazy_charge(lazy, self._peek_generator())
+        acc.flags.writeable = False
+        return acc
+
+    @acc.setter
+    def acc(self, values) -> None:
+        """Set every pixel's carried charge (lazy pixels leave their path: their
+        charge is now known, and what follows depends on it alone)."""
+        self._acc[:] = values
+        self._lazy[:] = False
+
+    def _peek_generator(self) -> np.random.Generator:
+        """The generator of :attr:`acc`'s draws: a child of the simulator's seed
+        sequence made without spawning (its counter is untouched), so reading is
+        reproducible for a seed and never moves the simulator's own stream."""
+        if self._peek_rng is None:
+            seq = getattr(self.rng.bit_generator, "seed_seq", None)
+            if isinstance(seq, np.random.SeedSequence):
+                seq = np.random.SeedSequence(seq.entropy, spawn_key=tuple(seq.spawn_key) + (PEEK_KEY,),
+                                             pool_size=seq.pool_size)
+            else:
+                seq = None                                 # a seedless generator: fresh entropy
+            self._peek_rng = np.random.default_rng(seq)
+        return self._peek_rng
 
     # -- one readout interval -------------------------------------------------
     def readout(self, light: np.ndarray) -> np.ndarray:
         """Light of one interval (H, W), checked >= 0 and finite -> words (H, W) int64."""
-        c = self.config
-        theta, L = c.threshold, c.clocks_per_readout
-        mu = electrons_per_readout(np.asarray(light).reshape(-1))
-        dark = (dark_electrons(self.dark_model, mu.shape, self.rng) if self.dark_model
+        L = self.config.clocks_per_readout
+        expected = electrons_per_readout(np.asarray(light).reshape(-1))
+        dark = (dark_electrons(self.dark_model, expected.shape, self.rng) if self.dark_model
                 else self._no_dark)
-        words = np.zeros(mu.shape, np.int64)
-        acc = self._acc
-
+        words = np.zeros(expected.shape, np.int64)
         if not self.noise:
-            idx = np.arange(mu.size)
-            self._clock_path(idx, mu, dark, words)
+            idx = np.arange(expected.size)
+            self._clock_path(idx, expected, dark, words)
             self.path_counts["clock"] += idx.size
             return words.reshape(self.shape)
         if self.method == "per-clock":
-            idx = np.arange(mu.size)
-            self._clock_path(idx, mu, dark, words)
+            idx = np.arange(expected.size)
+            self._clock_path(idx, expected, dark, words)
             self.path_counts["clock"] += idx.size
             return words.reshape(self.shape)
 
-        lazy = self._lazy_path(mu, dark, words)
+        lazy = self._lazy_path(expected, dark, words)
         n_lazy = int(np.count_nonzero(lazy))
-        if n_lazy == mu.size:                              # a dark frame: nothing else to do
+        if n_lazy == expected.size:                        # a dark frame: nothing else to do
             self.path_counts["lazy"] += n_lazy
             return words.reshape(self.shape)
-        lam = mu / L                                       # photo-electrons per clock
+        lam = expected / L                                 # photo-electrons per clock
         mean = lam + dark / L if self.dark_model else lam  # with dark electrons
-        # the other pixels' paths: on them alone where they are few (gathers),
-        # else on the whole frame (whole-array passes are cheaper than gathers)
-        few = 2 * n_lazy > mu.size
-        idx = np.flatnonzero(~lazy) if few else slice(None)
-        code = np.full(mu.size - n_lazy if few else mu.size, PATHS.index("clock"), np.int8)
-        # event: P(some clock > min(theta, 2^E - 1) electrons) below budget
-        code[(acc[idx] < theta) & (mean[idx] <= self._mean_event)] = PATHS.index("event")
-        # bright: every clock >= theta electrons (photo-electrons alone suffice)
-        code[lam[idx] >= self._lam_bright] = PATHS.index("bright")
-        if few:
-            path = np.full(mu.size, PATHS.index("lazy"), np.int8)
-            path[idx] = code
-        else:
-            path = code
-            if n_lazy:
-                path[lazy] = PATHS.index("lazy")
-        counts = np.bincount(path, minlength=len(PATHS))
-        if counts[PATHS.index("clock")]:
-            rest = np.flatnonzero(path == PATHS.index("clock"))
-            self._classify_middle(rest, lam[rest], mean[rest], dark[rest], acc[rest], path)
-            rest = rest[path[rest] == PATHS.index("clock")]
-            if rest.size:
-                self._classify_head(rest, lam[rest], mean[rest], dark[rest], acc[rest], path)
-            counts = np.bincount(path, minlength=len(PATHS))
-        for code, name in enumerate(PATHS):
+        plan = self.levels.classify(lazy, n_lazy, lam, mean, dark, self._acc)
+        counts = np.bincount(plan.path, minlength=len(SIMULATION_PATHS))
+        for code, name in enumerate(SIMULATION_PATHS):
             if not counts[code]:
                 continue
             self.path_counts[name] += int(counts[code])
-            if name == "lazy":                             # done by _lazy_path
+            if code == LAZY:                               # done by _lazy_path
                 continue
-            if name == "event" and counts[code] == mu.size:
+            if code == EVENT and counts[code] == expected.size:
                 sel = slice(None)                          # the whole frame: no gather / scatter
             else:
-                sel = np.flatnonzero(path == code)
-            if name == "event":
-                self._event_path(sel, mu, dark, words)
-            elif name == "bright":
-                self._bright_path(sel, mu, lam, dark, words)
-            elif name in ("queue", "full"):
-                # group by window length (multiples of MIN_WINDOW) so each group is one block
-                size = self._window_size(sel)
+                sel = np.flatnonzero(plan.path == code)
+            if code == EVENT:
+                self._event_path(sel, expected, dark, words)
+            elif code == BRIGHT:
+                self._bright_path(sel, expected, lam, dark, words)
+            elif code in (QUEUE, FULL):
+                # grouped by window length (multiples of MIN_WINDOW) so each group is one block
+                size = plan.length[sel]
                 too_long = size > L // 2
                 if too_long.any():
                     self.path_counts[name] -= int(too_long.sum())
                     self.path_counts["clock"] += int(too_long.sum())
-                    self._clock_path(sel[too_long], mu, dark, words)
-                for w, group in self._groups(sel[~too_long], size[~too_long]):
-                    (self._queue_path if name == "queue" else self._full_path)(group, w, mu, lam, words)
-            elif name == "head":
-                for h, group in self._groups(sel, self._window[sel]):
-                    self._head_path(group, h, mu, lam, words)
-            elif name == "clock":
-                self._clock_path(sel, mu, dark, words)
+                    self._clock_path(sel[too_long], expected, dark, words)
+                for w, group in groups(sel[~too_long], size[~too_long]):
+                    if code == QUEUE:
+                        self._queue_path(group, w, plan.b_max[group], lam, words)
+                    else:
+                        self._full_path(group, w, lam, words)
+            elif code == HEAD:
+                for h, group in groups(sel, plan.length[sel]):
+                    self._head_path(group, h, expected, lam, words)
+            elif code == CLOCK:
+                self._clock_path(sel, expected, dark, words)
         return words.reshape(self.shape)
 
-    @staticmethod
-    def _groups(sel, size):
-        """Pixels ``sel`` (any index array) grouped by window (or head) length ``size``, one block per
-        length; a few pixels go together at their longest length (a longer
-        window or head is as exact, only dearer, and one call costs less than
-        several small ones) -> [(length, pixels)]."""
-        if sel.size <= SMALL_GROUP:
-            return [(int(size.max()), sel)] if sel.size else []
-        return [(int(w), sel[size == w]) for w in np.unique(size)]
-
-    def _lazy_path(self, mu, dark, words):
-        """Dim light (interval mean at most ``_mean_lazy``, no dark electrons,
+    def _lazy_path(self, expected, dark, words):
+        """Dim light (interval mean at most ``levels.mean_lazy``, no dark electrons,
         ``acc < theta``): no random draw until the next threshold crossing.
 
-        In light-time (tau grows by mu per interval) the electrons are a
+        In light-time (tau grows by expected per interval) the electrons are a
         unit-rate Poisson process, so the crossing, ``n = theta - acc``
         electrons after a sync, comes ``Gamma(n)`` later. Each interval only
-        subtracts mu from the light-time remaining; an interval that reaches
+        subtracts expected from the light-time remaining; an interval that reaches
         it fires that spike (a crossing is a spike in its own clock, as on the
         event path) and draws the electrons after it, ``Poisson(-remaining)``
         (memoryless), which give the further spikes and the new charge; the
@@ -299,20 +267,23 @@ class SceneSimulator:
         -> the pixels on this path (a flat mask)."""
         c = self.config
         theta = c.threshold
-        eligible = (mu <= self._mean_lazy) & (self._acc < theta)
+        eligible = (expected <= self.levels.mean_lazy) & (self._acc < theta)
         if self.dark_model:
             eligible &= dark == 0
-        leave = self._lazy & ~eligible
-        if leave.any():
-            self._sync(np.flatnonzero(leave))
-        enter = np.flatnonzero(eligible & ~self._lazy)
-        if enter.size:
-            self._remaining[enter] = self.rng.standard_gamma(theta - self._acc[enter])
-            self._elapsed[enter] = 0.0
+        changed = np.flatnonzero(eligible != self._lazy)   # (one pass; few pixels change)
+        if changed.size:
+            was = self._lazy[changed]
+            leave = changed[was]
+            if leave.size:
+                self._sync(leave)
+            enter = changed[~was]
+            if enter.size:
+                self._remaining[enter] = self.rng.standard_gamma(theta - self._acc[enter])
+                self._elapsed[enter] = 0.0
         self._lazy = eligible
         # whole-frame passes, no gather: the other pixels' values are never read
-        np.subtract(self._remaining, mu, out=self._remaining)
-        np.add(self._elapsed, mu, out=self._elapsed)
+        np.subtract(self._remaining, expected, out=self._remaining)
+        np.add(self._elapsed, expected, out=self._elapsed)
         hit = eligible & (self._remaining <= 0.0)
         cross = np.flatnonzero(hit)
         if c.is_msb:                                       # msb reads out a remainder left
@@ -332,93 +303,22 @@ class SceneSimulator:
         return eligible
 
     def _sync(self, sel):
-        """Lazy pixels ``sel`` -> their charge now: given the crossing at light-time
-        ``elapsed + remaining`` after the sync, the ``n - 1`` electrons before it
-        are iid uniform over that span, so ``Binomial(n - 1, elapsed / span)``
-        of them have come."""
+        """Lazy pixels ``sel`` leave the path with their charge drawn (:meth:`_lazy_charge`)."""
         if not sel.size:
             return
-        n = self.config.threshold - self._acc[sel]
-        span = self._elapsed[sel] + self._remaining[sel]
-        self._acc[sel] += self.rng.binomial(n - 1, np.where(span > 0, self._elapsed[sel] / span, 0.0))
+        self._acc[sel] += self._lazy_charge(sel, self.rng)
         self._lazy[sel] = False
 
-    def _classify_middle(self, idx, lam, mean, dark, acc, path):
-        """Queue or full path for pixels near one threshold per clock, where allowed."""
-        c = self.config
-        theta = c.threshold
-        ok = (dark == 0) & (mean <= self._mean_unclipped)
-        rho = lam / theta
-        # queue: below the threshold per clock, the accumulator surely never clips
-        queue = ok & (acc < theta) & (rho < self._rho_queue)
-        if queue.any():
-            sel = idx[queue]
-            keep = self._queue_plan(sel, rho[queue])
-            path[sel[keep]] = PATHS.index("queue")
-        # full: above the threshold per clock, a spike in every clock surely
-        full = ok & (lam > theta)
-        if full.any():
-            sel = idx[full]
-            path[sel[self._full_plan(sel, lam[full], acc[full])]] = PATHS.index("full")
+    def _lazy_charge(self, sel, rng):
+        """Electrons lazy pixels ``sel`` have gathered since their sync, drawn with
+        ``rng``: given the crossing at light-time ``elapsed + remaining`` after the
+        sync, the ``n - 1`` electrons before it are iid uniform over that span, so
+        ``Binomial(n - 1, elapsed / span)`` of them have come."""
+        n = self.config.threshold - self._acc[sel]
+        span = self._elapsed[sel] + self._remaining[sel]
+        return rng.binomial(n - 1, np.where(span > 0, self._elapsed[sel] / span, 0.0))
 
-    def _full_plan(self, sel, lam, acc):
-        """Window length of the full path for pixels ``sel`` at ``lam`` > theta
-        electrons per clock (stored in ``self._window``) -> where the bound makes
-        a spike in every clock sure from charge ``acc``: the walk held at
-        ``acc_max`` never goes below 0 (Lundberg, ``s = 2 (lam - theta) / lam``:
-        ``exp(-s (acc + 1)) + L exp(-s (acc_max + 1))`` below budget)."""
-        c = self.config
-        theta = c.threshold
-        s_full = 2.0 * (lam - theta) / lam
-        fire = np.logaddexp(-s_full * (acc + 1.0), np.log(c.clocks_per_readout) - s_full * (c.acc_max + 1.0))
-        gap = lam - theta
-        self._window[sel] = 1.3 * -self.budget / s_full / gap + 16.0 * lam / gap ** 2
-        return fire < self.budget
-
-    def _queue_plan(self, sel, rho):
-        """Backlog bound ``b_max`` and window length of the queue path for pixels
-        ``sel`` at ``rho`` thresholds per clock (stored in ``self._b_max`` and
-        ``self._window``) -> where the bound allows the path (b_max <= MAX_BACKLOG)."""
-        theta, L = self.config.threshold, self.config.clocks_per_readout
-        s_queue = 2.0 * (1.0 - rho)                        # Lundberg exponent (see _queue_walk)
-        # P(backlog >= b at the window) <= L exp(-s ((b - 1) theta + 1)): b_max + 1 is unlikely
-        b_max = np.floor(((np.log(L) - self.budget) / s_queue - 1.0) / theta) + 1.0
-        b_max = np.maximum(b_max, 0.0)
-        self._b_max[sel] = b_max
-        # the Lindley recursion drains b_max in about b_max / (1 - rho) clocks
-        self._window[sel] = (b_max + 3.0) / (1.0 - rho)
-        return b_max <= MAX_BACKLOG
-
-    def _classify_head(self, idx, lam, mean, dark, acc, path):
-        """Head path for pixels a few clocks away from a cheap path: a carried
-        backlog (``acc >= theta``) under light that surely drains it, then the
-        event path; or light above one threshold per clock with too little
-        charge yet for the full path's bound, which a few clocks supply.
-        ``self._window`` gets the head's length (a multiple of MIN_WINDOW)."""
-        c = self.config
-        theta, L = c.threshold, c.clocks_per_readout
-        ok = dark == 0
-        # drain: while acc >= theta every clock fires and acc falls by theta - e
-        drain = ok & (acc >= theta) & ((mean <= self._mean_event)
-                                       | ((mean <= self._mean_unclipped) & (lam < self._rho_queue * theta)))
-        clocks = np.zeros(idx.size)
-        clocks[drain] = 2.0 * (acc[drain] - theta + 1) / (theta - lam[drain]) + 4.0
-        # charge: the full path's bound needs acc >= a_full (each of its two
-        # terms below budget - log 2), reached at about lam - theta per clock
-        charge = ok & (lam > theta) & (mean <= self._mean_unclipped)
-        if charge.any():
-            lc = lam[charge]
-            s_full = 2.0 * (lc - theta) / lc
-            a_full = np.ceil((np.log(2.0) - self.budget) / s_full)
-            top_ok = np.log(2.0 * L) - s_full * (c.acc_max + 1.0) < self.budget
-            clocks[charge] = 1.5 * np.maximum(a_full - acc[charge], 0.0) / (lc - theta) + 8.0
-            charge[charge] = top_ok & (a_full <= c.acc_max)
-        size = _round_window(clocks)
-        head = (drain | charge) & (size <= L // 2)
-        path[idx[head]] = PATHS.index("head")
-        self._window[idx[head]] = size[head]
-
-    def _head_path(self, sel, h, mu, lam, words):
+    def _head_path(self, sel, h, expected, lam, words):
         """The first ``h`` clocks per clock through the cycle-exact model, then
         the rest of the interval by the cheapest path the state reached allows:
         event (``acc < theta`` and light below the event level), full (its bound
@@ -438,15 +338,20 @@ class SceneSimulator:
         acc_h, sfc_h, ovf, m = st.acc[0], st.sfc[0], st.ovf[0], st.m[0]
         lam_s = lam[sel]
         # the rest's path, from the state after the head and the light only
-        event = (acc_h < theta) & (lam_s <= self._mean_event)
-        queue = ~event & (acc_h < theta) & (lam_s < self._rho_queue * theta)
+        levels = self.levels
+        event = (acc_h < theta) & (lam_s <= levels.mean_event)
+        queue = ~event & (acc_h < theta) & (lam_s < levels.rho_queue * theta)
+        size, b_max = np.zeros(n), np.zeros(n)              # the rest's window lengths, backlog bounds
         if queue.any():
-            queue[queue] = self._queue_plan(sel[queue], lam_s[queue] / theta)
-            queue &= self._window_size(sel) <= rest // 2
+            i = np.flatnonzero(queue)
+            queue[i], b_max[i], size[i] = levels.queue_plan(lam_s[i] / theta)
         full = ~event & (lam_s > theta)
         if full.any():
-            full[full] = self._full_plan(sel[full], lam_s[full], acc_h[full])
-            full &= self._window_size(sel) <= rest // 2
+            i = np.flatnonzero(full)
+            full[i], size[i] = levels.full_plan(lam_s[i], acc_h[i])
+        size = round_window(size)
+        queue &= size <= rest // 2
+        full &= size <= rest // 2
         spikes = np.zeros(n, np.int64)                      # spikes of the rest
         at = np.full(n, -1, np.int64)                       # TE: clock of the overflow in the rest
         # TE: spikes still needed to overflow (none once it has: a count never reached)
@@ -454,7 +359,7 @@ class SceneSimulator:
         settled = np.ones(n, bool)                          # False: words written per clock
         if event.any():
             i = np.flatnonzero(event)
-            total = self.rng.poisson(mu[sel[i]] * (rest / L))
+            total = self.rng.poisson(expected[sel[i]] * (rest / L))
             level = acc_h[i] + total
             spikes[i] = level // theta
             self._acc[sel[i]] = level - spikes[i] * theta
@@ -465,10 +370,10 @@ class SceneSimulator:
                 at[i[over]] = h + np.minimum((position * rest).astype(np.int64), rest - 1)
         for tail in (queue, full):
             i = np.flatnonzero(tail)
-            for w, j in self._groups(i, self._window_size(sel[i])):
+            for w, j in groups(i, size[i]):
                 if tail is queue:
                     ok, got, end, clock, window, drawn = self._queue_walk(sel[j], w, lam, acc_h[j],
-                                                                          rest, need[j])
+                                                                          rest, need[j], b_max[j])
                     at[j[ok & (clock >= 0)]] = h + clock[ok & (clock >= 0)]
                 else:
                     ok, end, window, drawn = self._full_walk(sel[j], w, lam, acc_h[j], rest)
@@ -500,10 +405,6 @@ class SceneSimulator:
             self._ml_words(sel[done], spikes[done], words)
         else:
             self._ml_words(sel[done], sfc_h[done] + spikes[done], words)
-
-    def _window_size(self, sel):
-        """Window lengths of pixels ``sel``, rounded (:func:`_round_window`)."""
-        return _round_window(self._window[sel])
 
     @staticmethod
     def _head_state(state, i, h):
@@ -537,12 +438,13 @@ class SceneSimulator:
         self.path_counts["fallback"] += sel.size
         self._run_clocks(sel, e, words, start)
 
-    def _queue_path(self, sel, w, mu, lam, words):
+    def _queue_path(self, sel, w, b_max, lam, words):
         """Light below one threshold per clock and no clipping (bound): spikes
-        and the accumulator from :meth:`_queue_walk` over the whole interval."""
+        and the accumulator from :meth:`_queue_walk` over the whole interval
+        (window ``w`` clocks, backlog bounds ``b_max``)."""
         c = self.config
         ok, spikes, end, at, window, rest = self._queue_walk(
-            sel, w, lam, self._acc[sel], c.clocks_per_readout, np.full(sel.size, c.p_max, np.int64))
+            sel, w, lam, self._acc[sel], c.clocks_per_readout, np.full(sel.size, c.p_max, np.int64), b_max)
         self._fallback(sel[~ok], window[:, ~ok], rest[~ok], words)
         done = sel[ok]
         self._acc[done] = end[ok]
@@ -551,7 +453,7 @@ class SceneSimulator:
             return
         words[done] = np.where(at[ok] >= 0, (1 << c.d) | (at[ok] // c.clocks_per_tick + 1), spikes[ok])
 
-    def _queue_walk(self, sel, w, lam, acc0, clocks, need):
+    def _queue_walk(self, sel, w, lam, acc0, clocks, need, b_max):
         """``clocks`` clocks of light below one threshold per clock from charge
         ``acc0 < theta``, no clipping (bound): spikes follow the crossings of the
         threshold levels through a unit-rate queue.
@@ -559,7 +461,7 @@ class SceneSimulator:
         Without clipping, spike j fires at ``s_j = max(c_j, s_{j-1} + 1)``, c_j
         the clock where the charge reaches ``j theta``; the count at the end is
         the crossings minus the backlog left. The backlog entering the window
-        of the last ``w`` clocks is at most ``b_max`` (bound); the Lindley
+        of the last ``w`` clocks is at most ``b_max`` (per pixel, bound); the Lindley
         recursion over the window from 0 and from ``b_max`` agreeing settles the
         end backlog. TE: the clock of spike ``need`` (per pixel) when it fires,
         from the first ``need`` crossings, all before the window.
@@ -574,7 +476,7 @@ class SceneSimulator:
         # the queue's walk W_k = crossings up to window clock k, minus k
         walk = levels // theta
         walk -= (level0 // theta + 1) + np.arange(w)[:, None]
-        b_lo, b_hi = lindley_ends(walk, np.zeros(sel.size, np.int64), self._b_max[sel].astype(np.int64))
+        b_lo, b_hi = lindley_ends(walk, np.zeros(sel.size, np.int64), b_max.astype(np.int64))
         ok = b_lo == b_hi
         level_end = levels[-1]
         spikes = level_end // theta - b_lo
@@ -598,7 +500,7 @@ class SceneSimulator:
             at[i] = (cross - np.arange(1, p + 1)).max(axis=1) + p   # s_p = max_i (c_i + p - i)
         return ok, spikes, level_end - theta * spikes, at, window, rest
 
-    def _full_path(self, sel, w, mu, lam, words):
+    def _full_path(self, sel, w, lam, words):
         """Light above one threshold per clock, a spike in every clock (bound):
         the word is known and the accumulator comes from :meth:`_full_walk`."""
         ok, end, window, rest = self._full_walk(sel, w, lam, self._acc[sel], self.config.clocks_per_readout)
@@ -630,12 +532,12 @@ class SceneSimulator:
         # the 2^-64 failure event against an illegal state
         return ok, np.clip(end, 0, acc_max), window, rest
 
-    def _event_path(self, sel, mu, dark, words):
+    def _event_path(self, sel, expected, dark, words):
         """``sel``: flat indices, or ``slice(None)`` for the whole frame."""
         c = self.config
         theta, L = c.threshold, c.clocks_per_readout
         acc0 = self._acc[sel]
-        total = self.rng.poisson(mu[sel])
+        total = self.rng.poisson(expected[sel])
         if self.dark_model:
             total += dark[sel]
         level = acc0 + total
@@ -655,7 +557,7 @@ class SceneSimulator:
         self._acc[sel] = residual                           # after acc0 (maybe a view) is used
         words[sel] = spikes
 
-    def _bright_path(self, sel, mu, lam, dark, words):
+    def _bright_path(self, sel, expected, lam, dark, words):
         c = self.config
         theta, L, top, acc_max = c.threshold, c.clocks_per_readout, c.input_max, c.acc_max
         acc0 = self._acc[sel]
@@ -667,7 +569,7 @@ class SceneSimulator:
         full = np.zeros(sel.size, bool)
         if top >= theta + acc_max:
             full = log_poisson_tail_below(lam_s, theta + acc_max - 1) < self.budget
-        # no input can saturate: the sum is Poisson(mu) + dark
+        # no input can saturate: the sum is Poisson(expected) + dark
         unclipped = log_poisson_tail_above(lam_s + dark[sel] / L, top + 1) < self.budget
         need = ~full & ~all_top
         if (need & ~unclipped).any():
@@ -675,7 +577,7 @@ class SceneSimulator:
             mixed = need & ~unclipped
             self.path_counts["bright"] -= int(mixed.sum())
             self.path_counts["clock"] += int(mixed.sum())
-            self._clock_path(sel[mixed], mu, dark, words)
+            self._clock_path(sel[mixed], expected, dark, words)
             need &= unclipped
             keep = ~mixed
         else:
@@ -683,7 +585,7 @@ class SceneSimulator:
         top_sel = all_top & ~full
         end[top_sel] = np.minimum(acc0[top_sel] + L * (top - theta), acc_max)
         if need.any():
-            total = self.rng.poisson(mu[sel][need]) + dark[sel][need]
+            total = self.rng.poisson(expected[sel][need]) + dark[sel][need]
             # under the sure event total >= L theta; max(.., 0) only guards the
             # 2^-64 failure event against an illegal negative state
             end[need] = np.clip(acc0[need] + total - L * theta, 0, acc_max)
@@ -695,7 +597,7 @@ class SceneSimulator:
         if self.config.is_msb:
             self._ml_words(sel, self.config.clocks_per_readout, words)
         else:
-            words[sel] = self._bright_word
+            words[sel] = self.levels.bright_word
 
     def _ml_words(self, sel, spikes, words):
         """ML words of pixels ``sel`` (flat indices or a slice) from their spike
@@ -707,18 +609,18 @@ class SceneSimulator:
             words[sel] = np.minimum(spikes, c.ml_max)
             return
         count = np.minimum(self.sfc[sel] + spikes, c.ml_max)
-        words[sel] = self._msb_word[count]
-        self.sfc[sel] = self._msb_rest[count]
+        words[sel] = self.levels.msb_word[count]
+        self.sfc[sel] = self.levels.msb_rest[count]
 
-    def _clock_path(self, sel, mu, dark, words):
+    def _clock_path(self, sel, expected, dark, words):
         """Exact per-clock simulation of the pixels ``sel`` (flat indices).
 
         Electrons are drawn straight into the clock-major layout the engine
         steps through (iid clocks: the layout does not change their law)."""
-        for part, e in self._clock_chunks(sel, mu, dark):
+        for part, e in self._clock_chunks(sel, expected, dark):
             self._run_clocks(part, e, words)
 
-    def _clock_chunks(self, sel, mu, dark):
+    def _clock_chunks(self, sel, expected, dark):
         """Per-clock electrons ``(L, n)`` of the pixels ``sel``, chunk by chunk: the
         one place the per-clock path draws them (:meth:`clock_stimulus` reuses it)."""
         c = self.config
@@ -727,9 +629,9 @@ class SceneSimulator:
         for start in range(0, sel.size, step):
             part = sel[start:start + step]
             if self.noise:
-                e = self._clock_electrons(mu[part], dark[part])
+                e = self._clock_electrons(expected[part], dark[part])
             else:
-                e, self.fraction[part] = deterministic_clock_electrons(c, mu[part], self.fraction[part])
+                e, self.fraction[part] = deterministic_clock_electrons(c, expected[part], self.fraction[part])
                 e = np.ascontiguousarray(e.T)
             yield part, e
 
@@ -742,34 +644,34 @@ class SceneSimulator:
         if self.noise and self.method != "per-clock":
             raise InputError("clock_stimulus needs method='per-clock' (or noise switched off)")
         L = self.config.clocks_per_readout
-        mu = electrons_per_readout(np.asarray(light).reshape(-1))
-        dark = (dark_electrons(self.dark_model, mu.shape, self.rng) if self.dark_model
+        expected = electrons_per_readout(np.asarray(light).reshape(-1))
+        dark = (dark_electrons(self.dark_model, expected.shape, self.rng) if self.dark_model
                 else self._no_dark)
-        out = np.empty((L, mu.size), stimulus_dtype(self.config))
-        for part, e in self._clock_chunks(np.arange(mu.size), mu, dark):
+        out = np.empty((L, expected.size), stimulus_dtype(self.config))
+        for part, e in self._clock_chunks(np.arange(expected.size), expected, dark):
             out[:, part] = e
         return out.reshape((L,) + self.shape)
 
-    def _clock_electrons(self, mu, dark):
+    def _clock_electrons(self, expected, dark):
         """Random electrons ``(L, n)`` of one interval, the law of
         :func:`golden.light.clock_electrons` (Poisson per clock, dark electrons
         multinomial over the clocks, saturated at ``2^E - 1``; no draw where
         every clock surely saturates)."""
         c = self.config
         L, top = c.clocks_per_readout, c.input_max
-        lam = mu / L
+        lam = expected / L
         sure = log_poisson_tail_below(lam, top - 1) < self.budget
         if sure.all():
-            return np.full((L, mu.size), top, np.int64)
+            return np.full((L, expected.size), top, np.int64)
         draw = np.flatnonzero(~sure)
         e = self._clock_draws(lam[draw], L)
         d = dark[draw]
         if d.any():
             e += self.rng.multinomial(d, np.full(L, 1.0 / L)).T
         np.minimum(e, top, out=e)
-        if draw.size == mu.size:
+        if draw.size == expected.size:
             return e
-        out = np.full((L, mu.size), top, np.int64)
+        out = np.full((L, expected.size), top, np.int64)
         out[:, draw] = e
         return out
 
@@ -807,12 +709,6 @@ class SceneSimulator:
             self.sfc[sel] = array.state.sfc[0]
 
 
-def _round_window(clocks: np.ndarray) -> np.ndarray:
-    """Window or head lengths rounded up to multiples of MIN_WINDOW, at least
-    MIN_WINDOW: pixels of one length are one block, and few lengths mean few blocks."""
-    return MIN_WINDOW * np.maximum(1.0, np.ceil(clocks / MIN_WINDOW))
-
-
 def lindley_ends(walk: np.ndarray, *b0s: np.ndarray) -> list[np.ndarray]:
     """Backlogs after the unit-rate queue ``b <- max(b + x_j - 1, 0)`` over the
     rows of a window, from each start backlog in ``b0s`` (n,), given the walk
@@ -821,69 +717,6 @@ def lindley_ends(walk: np.ndarray, *b0s: np.ndarray) -> list[np.ndarray]:
     one reduction for all starts instead of a Python step per clock."""
     low = walk.min(axis=0)
     return [walk[-1] - np.minimum(-b0, low) for b0 in b0s]
-
-
-def _largest_below(bound, budget, hi):
-    """Largest m in [0, hi] (to 2^-64 of the bracket) with bound(m) < budget, bound increasing."""
-    lo = 0.0
-    if not bound(np.array([lo]))[0] < budget:
-        return -1.0
-    for _ in range(64):
-        mid = 0.5 * (lo + hi)
-        if bound(np.array([mid]))[0] < budget:
-            lo = mid
-        else:
-            hi = mid
-    return lo
-
-
-def _smallest_below(bound, budget, lo):
-    """Smallest m >= lo with bound(m) < budget (to 2^-64 of the bracket), bound decreasing."""
-    hi = max(2.0 * lo, 1.0)
-    while not bound(np.array([hi]))[0] < budget:
-        hi *= 2.0
-    for _ in range(64):
-        mid = 0.5 * (lo + hi)
-        if bound(np.array([mid]))[0] < budget:
-            hi = mid
-        else:
-            lo = mid
-    return hi
-
-
-def stripe_slices(height: int, width: int) -> list[slice]:
-    """Row slices of the horizontal stripes of a ``height`` x ``width`` frame: a function
-    of the shape only (never of the worker count), so a seed gives one result. A
-    power of two, so that 2, 4 or 8 workers get equal shares; a frame of fewer
-    than 2 x STRIPE_PIXELS pixels (e.g. 256 x 256) or 2 x STRIPE_ROWS rows is one stripe."""
-    most = int(min(MAX_STRIPES, height // STRIPE_ROWS, height * width // STRIPE_PIXELS))
-    n = 1 << (most.bit_length() - 1) if most > 1 else 1
-    bounds = [height * i // n for i in range(n + 1)]
-    return [slice(bounds[i], bounds[i + 1]) for i in range(n)]
-
-
-def spawn_generators(seed, n: int) -> list[np.random.Generator]:
-    """``n`` independent generators from ``seed`` (int, None, SeedSequence, BitGenerator
-    or Generator): ``Generator.spawn`` for a generator, ``SeedSequence(seed).spawn``
-    otherwise. The parent generator's own stream is not advanced."""
-    if isinstance(seed, np.random.BitGenerator):
-        seed = np.random.Generator(seed)
-    if isinstance(seed, np.random.Generator):
-        return seed.spawn(n)
-    if not isinstance(seed, np.random.SeedSequence):
-        seed = np.random.SeedSequence(seed)
-    return [np.random.default_rng(child) for child in seed.spawn(n)]
-
-
-def check_workers(workers, limit: int) -> int:
-    """Worker processes: ``None`` -> the cores this process may run on, at most ``limit``;
-    otherwise a positive integer (capped at ``limit``: more would idle)."""
-    if workers is None:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-        return max(1, min(cores, limit))
-    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
-        raise InputError(f"workers {workers!r}: must be a positive integer")
-    return min(int(workers), limit)
 
 
 def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None,
@@ -903,69 +736,6 @@ def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None
     return rows, [SceneSimulator(config, (r.stop - r.start, W), rng=rng, dark_current=dark_current,
                                  total_pixel_readouts=total_pixel_readouts or H * W)
                   for r, rng in zip(rows, rngs)]
-
-
-def _simulate_stripes(config, scene, *, seed, dark_current, workers, progress) -> np.ndarray:
-    """The noisy fast method of :func:`simulate_scene`: stripes, each walked through
-    the readouts in order; with several workers, ``workers - 1`` forked processes
-    take stripes ``j, j + workers, ...`` and write their words into a shared
-    anonymous memory map (processes, not threads: the simulator's Python work
-    holds the GIL for a large share of its time)."""
-    import mmap
-    K, H, W = scene.shape
-    rows, sims = stripe_simulators(config, (H, W), seed=seed, dark_current=dark_current,
-                                   total_pixel_readouts=scene.size)
-    workers = check_workers(workers, len(rows)) if hasattr(os, "fork") else check_workers(workers, 1)
-    dtype = np.dtype(word_dtype(config))
-    if workers == 1:
-        words = np.empty((K, H, W), dtype)
-    else:
-        for k in range(K):                              # refuse bad light before any worker starts
-            check_scene(np.asarray(scene[k:k + 1]))
-        words = np.frombuffer(mmap.mmap(-1, max(1, K * H * W * dtype.itemsize)), dtype,
-                              count=K * H * W).reshape(K, H, W)
-
-    def run(mine, readouts):
-        for k in readouts:
-            if workers == 1:
-                light = check_scene(np.asarray(scene[k:k + 1]))[0]
-            for i in mine:
-                part = light[rows[i]] if workers == 1 else np.asarray(scene[k, rows[i]], np.float64)
-                words[k, rows[i]] = sims[i].readout(part)
-
-    children = {}
-    try:
-        for j in range(1, workers):
-            try:
-                pid = os.fork()
-            except OSError:                              # no more processes: this one does the rest
-                break
-            if pid == 0:                                 # worker: its stripes, then leave at once
-                status = 1
-                try:
-                    run(range(j, len(rows), workers), range(K))
-                    status = 0
-                except Exception:                        # (an interrupt: exit 1 quietly)
-                    import traceback
-                    traceback.print_exc()
-                finally:
-                    os._exit(status)
-            children[pid] = j
-        readouts = range(K)
-        if progress:                                     # (after the fork: tqdm starts a thread)
-            from tqdm import tqdm
-            readouts = tqdm(readouts, desc="simulate", unit="readout", delay=2.0, leave=False)
-        taken = set(children.values())
-        run([i for i in range(len(rows)) if i % workers not in taken], readouts)
-    except BaseException:
-        for pid in children:
-            os.kill(pid, 9)
-        raise
-    finally:
-        failed = [j for pid, j in children.items() if os.waitpid(pid, 0)[1] != 0]
-    if failed:
-        raise RuntimeError(f"simulation worker(s) {failed} failed (their stripes have no words)")
-    return words
 
 
 def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
@@ -988,11 +758,12 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     """
     scene = check_scene(scene, scan_values=False)       # values: one readout at a time
     K, H, W = scene.shape
-    if method not in METHODS:
-        raise InputError(f"simulation method {method!r} unknown (known: {', '.join(METHODS)})")
+    _check_method(method)
+    keep_freed_memory()                                 # (speed only: see golden.resources)
     if noise and method == "fast":
-        return _simulate_stripes(config, scene, seed=seed, dark_current=dark_current, workers=workers,
-                                 progress=progress)
+        rows, sims = stripe_simulators(config, (H, W), seed=seed, dark_current=dark_current,
+                                       total_pixel_readouts=scene.size)
+        return run_stripes(rows, sims, scene, word_dtype(config), workers=workers, progress=progress)
     check_workers(workers, 1)
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
                          method=method, total_pixel_readouts=scene.size)
@@ -1036,3 +807,8 @@ def scene_stimulus(config: SensorConfig, scene: np.ndarray, **options) -> np.nda
     for k, e in enumerate(iter_scene_stimulus(config, scene, **options)):
         out[k * L:(k + 1) * L] = e
     return out
+
+
+def _check_method(method) -> None:
+    if method not in SIMULATION_METHODS:
+        raise InputError(f"simulation method {method!r} unknown (known: {', '.join(SIMULATION_METHODS)})")

@@ -7,132 +7,20 @@ never leaves a half-written file; every reader refuses bad input with an
 
 from __future__ import annotations
 
-import contextlib
-import errno
-import json
-import os
-import re
-import shutil
-import stat
-import tempfile
 import zipfile
 import zlib
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
+from .atomic import atomic_output
 from .config import SensorConfig
+from .decode import check_words
 from .errors import InputError, TespikeError
-from .paths import check_input_file, check_output_file
+from .paths import check_input_file
 
-
-#: Hidden temporaries are named ``.<name>.<pid>.<random>.part`` beside the output;
-#: the pid lets the next run at that path remove one a killed run left behind.
-_PART_NAME = 100          # characters of the output's name kept in the temporary's name
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def _remove_stale_parts(directory: Path, stem: str) -> None:
-    """Remove ``.<stem>.<pid>.<random>.part`` files whose process is gone (killed runs)."""
-    pattern = re.compile(r"\." + re.escape(stem) + r"\.(\d+)\.[A-Za-z0-9_]{8}\.part")
-    try:
-        entries = [e for e in os.scandir(directory) if e.name.startswith("." + stem + ".")]
-    except OSError:
-        return
-    for entry in entries:
-        match = pattern.fullmatch(entry.name)
-        if not match or not entry.is_file(follow_symlinks=False):
-            continue
-        pid = int(match.group(1))
-        if pid == os.getpid():
-            continue
-        try:
-            os.kill(pid, 0)
-            continue                        # its writer is still running
-        except ProcessLookupError:
-            pass
-        except (PermissionError, OverflowError):
-            continue
-        with contextlib.suppress(OSError):
-            os.unlink(entry.path)
-
-
-def _write_error(path: str, exc: OSError) -> InputError:
-    """An OSError of writing, as one line naming the user's path (never the temporary)."""
-    if exc.errno is None and "requested" in str(exc):          # numpy's short write: a full disk
-        reason = f"short write ({exc}); is the disk full?"
-    else:
-        reason = exc.strerror or str(exc) or type(exc).__name__
-    return InputError(f"cannot write {path!r}: {reason}")
-
-
-@contextlib.contextmanager
-def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
-    """Yield a temporary path to write; on success move it to ``path``, else remove it.
-
-    ``path`` is checked with :func:`golden.paths.check_output_file` first. A
-    symlink's target is replaced (the link stays); a character device or FIFO
-    (``/dev/null``, a pipe) is written through once the temporary is complete,
-    never replaced. The file gets the mode the user's umask gives (an existing
-    file keeps its mode). Temporaries are ``.<name>.<pid>.<random>.part`` beside
-    the target; one left by a killed run is removed by the next run at that path.
-    Any OSError while writing becomes an :class:`InputError` naming ``path``.
-    """
-    shown = os.fspath(path)
-    target = check_output_file(path, what)
-    try:
-        info = os.stat(target)
-    except OSError:
-        info = None
-    through = info is not None and (stat.S_ISCHR(info.st_mode) or stat.S_ISFIFO(info.st_mode))
-    if through:
-        directory = Path(tempfile.gettempdir())
-        prefix = f".tespike.{os.getpid()}."
-    else:
-        directory = target.parent
-        stem = target.name[:_PART_NAME]
-        _remove_stale_parts(directory, stem)
-        prefix = f".{stem}.{os.getpid()}."
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=".part", dir=directory)
-        os.close(fd)
-    except OSError as exc:
-        raise _write_error(shown, exc) from None
-    try:
-        try:
-            yield tmp
-            if through:
-                _write_through(tmp, target, shown)
-            else:
-                mode = (info.st_mode & 0o777) if info is not None else (0o666 & ~_umask())
-                os.chmod(tmp, mode)
-                os.replace(tmp, target)
-        except OSError as exc:
-            if exc.filename not in (None, tmp, str(target)):
-                raise                              # about another file: the caller names it
-            raise _write_error(shown, exc) from None
-    finally:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-
-
-def _write_through(tmp: str, target: Path, shown: str) -> None:
-    """Copy a finished temporary into a character device or FIFO (never replacing it)."""
-    try:
-        fd = os.open(target, os.O_WRONLY | os.O_NONBLOCK)
-    except OSError as exc:
-        if exc.errno == errno.ENXIO:
-            raise InputError(f"cannot write {shown!r}: the FIFO has no reader") from None
-        raise
-    os.set_blocking(fd, True)
-    with os.fdopen(fd, "wb") as out, open(tmp, "rb") as source:
-        shutil.copyfileobj(source, out, 1 << 20)
+__all__ = ["atomic_output", "check_scene", "check_stimulus", "load_scene", "load_stimulus",
+           "load_stream", "save_images", "save_stream", "scan_light", "unsigned_dtype", "word_dtype"]
 
 
 def _load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.ndarray:
@@ -231,14 +119,25 @@ def check_scene(scene: np.ndarray, *, scan_values: bool = True) -> np.ndarray:
     if not scan_values:
         return scene
     scene = scene.astype(np.float64, copy=False)
-    if scene.size:
-        if not np.isfinite(scene).all():
-            bad = scene[~np.isfinite(scene)][0]
-            raise InputError(f"scene holds a non-finite light value ({bad}); light must be finite")
-        low = float(scene.min())
-        if low < 0:
-            raise InputError(f"scene holds a negative light value ({low}); light must be >= 0")
+    scan_light(scene)
     return scene
+
+
+def scan_light(light: np.ndarray) -> None:
+    """Refuse a non-finite or negative value of a float light array, in its own
+    dtype (nothing converted: two reductions, no temporary; a NaN anywhere makes
+    the minimum NaN). The values are those float64 would hold, so the message
+    is the one :func:`check_scene` gives after converting."""
+    if not light.size:
+        return
+    low, high = light.min(), light.max()
+    if low >= 0 and high < np.inf:
+        return
+    finite = np.isfinite(light)
+    if not finite.all():
+        bad = np.float64(light[~finite][0])
+        raise InputError(f"scene holds a non-finite light value ({bad}); light must be finite")
+    raise InputError(f"scene holds a negative light value ({float(low)}); light must be >= 0")
 
 
 def load_scene(path: str | Path, *, memory_map: bool = False) -> np.ndarray:
@@ -255,7 +154,7 @@ def load_scene(path: str | Path, *, memory_map: bool = False) -> np.ndarray:
         return check_scene(np.array(scene))
     step = max(1, (1 << 22) // max(1, scene[0].size))
     for start in range(0, scene.shape[0], step):
-        check_scene(np.asarray(scene[start:start + step]))
+        scan_light(np.asarray(scene[start:start + step]))
     return scene
 
 
@@ -322,7 +221,6 @@ def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarr
     ``memory_map=True`` leaves uncompressed words (as ``np.savez`` writes them)
     on disk as a read-only memory map; compressed words are read into memory.
     """
-    from .decode import check_words
     shown = str(path)
     check_input_file(path, "stream")
     with open(path, "rb") as handle:

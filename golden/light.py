@@ -172,13 +172,13 @@ def deterministic_clock_electrons(config: SensorConfig, mean_per_readout: np.nda
                                   fraction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Noise-free electrons of one readout interval for n pixels: ``(n, L)`` int64.
 
-    Clock t gets ``floor(f + mu (t + 1) / L) - floor(f + mu t / L)`` electrons,
+    Clock t gets ``floor(f + expected (t + 1) / L) - floor(f + expected t / L)`` electrons,
     f the fraction carried in (``fraction``, in [0, 1)), saturated at
     ``2^input_bits - 1``. Returns the electrons and the fraction carried out.
     """
     L, top = config.clocks_per_readout, config.input_max
-    mu = np.asarray(mean_per_readout, np.float64)
-    level = fraction[:, None] + mu[:, None] * (np.arange(L + 1, dtype=np.float64) / L)
+    expected = np.asarray(mean_per_readout, np.float64)
+    level = fraction[:, None] + expected[:, None] * (np.arange(L + 1, dtype=np.float64) / L)
     whole = np.floor(level)
     e = np.minimum(np.diff(whole, axis=1), top)
     fraction_out = level[:, -1] - whole[:, -1]
@@ -208,10 +208,10 @@ def poisson_stimulus(config: SensorConfig, scene: np.ndarray, rng=None, *,
     out = np.empty((K * L, H, W), stimulus_dtype(config))
     fraction = np.zeros(H * W)
     for k in range(K):
-        mu = electrons_per_readout(scene[k].reshape(-1))
+        expected = electrons_per_readout(scene[k].reshape(-1))
         if noise:
-            e = clock_electrons(config, mu, dark_electrons(model, mu.shape, rng), rng, budget)
+            e = clock_electrons(config, expected, dark_electrons(model, expected.shape, rng), rng, budget)
         else:
-            e, fraction = deterministic_clock_electrons(config, mu, fraction)
+            e, fraction = deterministic_clock_electrons(config, expected, fraction)
         out[k * L:(k + 1) * L] = e.T.reshape(L, H, W)
     return out

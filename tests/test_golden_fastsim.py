@@ -430,11 +430,11 @@ def test_lazy_path_matches_per_clock_over_readouts(config):
     """Dim light on the lazy path (a draw only at threshold crossings) over 12
     readouts, with pixel groups that leave it for brighter light and come back
     (a sync draws their charge) and start dark: words of every readout,
-    decoded means and the carried charge (read mid-way, which syncs, and at
+    decoded means and the carried charge (read mid-way, a draw for lazy pixels, and at
     the end) have the per-clock law."""
     theta, L = config.threshold, config.clocks_per_readout
     K, pixels = 12, 3000
-    lazy_mean = SceneSimulator(config, (6, pixels), total_pixel_readouts=K * 6 * pixels)._mean_lazy
+    lazy_mean = SceneSimulator(config, (6, pixels), total_pixel_readouts=K * 6 * pixels).levels.mean_lazy
     assert lazy_mean > 0                             # the largest interval mean the path takes
     dim = np.array([0.05, 0.3, 0.9]) * lazy_mean / 42000
     bright = 0.25 * theta * L / 42000                # brighter: the lazy pixels leave
@@ -454,7 +454,7 @@ def test_lazy_path_matches_per_clock_over_readouts(config):
             da, db = (decode_spikes(w[g], config).astype(float) for w in (a, b))
             se = np.sqrt(da.var() / pixels + db.var() / pixels)
             assert tvd < 0.05 and abs(da.mean() - db.mean()) <= 4 * se + 1e-12, (k, g, tvd)
-        if k in (6, K - 1):                                   # reading acc syncs the lazy pixels
+        if k in (6, K - 1):                                   # reading acc draws the lazy pixels' charge
             for g in range(6):
                 ca, cb = (s.acc.reshape(6, pixels)[g].astype(float) for s in (fast, full))
                 ha, hb = (np.histogram(c, bins)[0] / pixels for c in (ca, cb))
@@ -477,7 +477,7 @@ def test_lazy_sync_draws_the_charge_with_its_law(readouts):
     pixels = 20000
     fast = SceneSimulator(config, (1, pixels), rng=71, total_pixel_readouts=readouts * pixels)
     full = SceneSimulator(config, (1, pixels), rng=72, method="per-clock")
-    light = np.full((1, pixels), 0.8 * fast._mean_lazy / 42000)
+    light = np.full((1, pixels), 0.8 * fast.levels.mean_lazy / 42000)
     for _ in range(readouts):
         fast.readout(light), full.readout(light)
     assert fast.path_counts["lazy"] == readouts * pixels
@@ -486,3 +486,30 @@ def test_lazy_sync_draws_the_charge_with_its_law(readouts):
     assert abs(a.mean() - b.mean()) <= 4 * se, (a.mean(), b.mean(), se)
     ha, hb = (np.bincount(x.astype(np.int64), minlength=config.threshold) / pixels for x in (a, b))
     assert 0.5 * np.abs(ha - hb).sum() < 0.03
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), MSB], ids=str)
+def test_reading_acc_changes_no_later_word(config):
+    """Reading ``acc`` between readouts (lazy pixels' charge drawn on a generator
+    of its own) leaves every later word and the carried state as in a run
+    without the reads, also for pixels that leave the lazy path afterwards;
+    the value read is read-only and lies between the charge at the pixel's
+    last sync and theta - 1; assigning ``acc`` still sets the charge."""
+    theta = config.threshold
+    probe = SceneSimulator(config, (2, 500), total_pixel_readouts=6 * 1000)
+    dim = 0.5 * probe.levels.mean_lazy / 42000
+    scene = np.full((6, 2, 500), dim)
+    scene[3:, 1] = 0.3 * theta * config.clocks_per_readout / 42000     # row 1 leaves the lazy path
+    quiet = SceneSimulator(config, (2, 500), rng=81, total_pixel_readouts=scene.size)
+    read = SceneSimulator(config, (2, 500), rng=81, total_pixel_readouts=scene.size)
+    for k in range(6):
+        assert np.array_equal(quiet.readout(scene[k]), read.readout(scene[k])), k
+        if k < 3:
+            before = read._acc.copy()
+            seen = read.acc
+            assert read._lazy.any() and not seen.flags.writeable
+            assert np.all(seen >= before) and np.all(seen[read._lazy] < theta)
+    assert quiet.path_counts == read.path_counts and quiet.path_counts["lazy"] > 0
+    assert np.array_equal(quiet._acc, read._acc) and np.array_equal(quiet.sfc, read.sfc)
+    read.acc = np.arange(1000) % theta                      # a write: no pixel is lazy any more
+    assert np.array_equal(read.acc, np.arange(1000) % theta) and read.acc.flags.writeable

@@ -5,7 +5,7 @@ import pytest
 
 from golden.config import SensorConfig
 from golden.errors import InputError
-from golden.io import check_stimulus, load_scene, load_stimulus
+from golden.io import check_scene, check_stimulus, load_scene, load_stimulus, scan_light
 
 
 def test_load_stimulus_is_memory_mapped(tmp_path):
@@ -66,3 +66,21 @@ def test_load_scene_memory_mapped_finds_a_bad_value_in_a_late_slice(tmp_path, ba
     with pytest.raises(InputError, match="must be \\(K, H, W\\)"):
         np.save(tmp_path / "j.npy", np.zeros((2, 2), np.float32))
         load_scene(tmp_path / "j.npy", memory_map=True)
+
+
+@pytest.mark.parametrize("dtype", [np.float16, np.float32, np.float64])
+@pytest.mark.parametrize("values", [[0.5, np.nan, -1.0], [0.5, -np.inf, 2.0], [np.inf, 0.5, 0.0],
+                                    [0.5, -0.1, 3.0], [0.5, -0.0, 1e4]])
+def test_scan_light_refuses_as_check_scene_does_without_converting(dtype, values):
+    """scan_light (two reductions in the array's own dtype) gives check_scene's
+    message, the non-finite value before a negative one; -0.0 is light 0."""
+    light = np.array(values, dtype).reshape(1, 1, 3)
+    try:
+        check_scene(light)
+    except InputError as exc:
+        with pytest.raises(InputError) as caught:
+            scan_light(light)
+        assert str(caught.value) == str(exc)
+    else:
+        assert np.all(light >= 0)
+        scan_light(light)

@@ -1,0 +1,120 @@
+"""Horizontal stripes of a frame and the worker processes that simulate them.
+
+The noisy fast simulator (:func:`golden.fastsim.simulate_scene`) splits a frame
+into stripes that depend on its shape only, gives each its own generator
+(children of the seed) and simulator, and runs them on forked processes;
+docs/simulator.md ("Stripes and worker processes") has the measurements.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .errors import InputError
+from .io import scan_light
+
+#: Horizontal stripes of a noisy fast simulation (:func:`stripe_slices`): a
+#: power of two, at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a
+#: stripe's readout has a fixed cost) and STRIPE_ROWS rows.
+STRIPE_PIXELS = 1 << 16
+STRIPE_ROWS = 16
+MAX_STRIPES = 8
+
+
+def stripe_slices(height: int, width: int) -> list[slice]:
+    """Row slices of the horizontal stripes of a ``height`` x ``width`` frame: a function
+    of the shape only (never of the worker count), so a seed gives one result. A
+    power of two, so that 2, 4 or 8 workers get equal shares; a frame of fewer
+    than 2 x STRIPE_PIXELS pixels (e.g. 256 x 256) or 2 x STRIPE_ROWS rows is one stripe."""
+    most = int(min(MAX_STRIPES, height // STRIPE_ROWS, height * width // STRIPE_PIXELS))
+    n = 1 << (most.bit_length() - 1) if most > 1 else 1
+    bounds = [height * i // n for i in range(n + 1)]
+    return [slice(bounds[i], bounds[i + 1]) for i in range(n)]
+
+
+def spawn_generators(seed, n: int) -> list[np.random.Generator]:
+    """``n`` independent generators from ``seed`` (int, None, SeedSequence, BitGenerator
+    or Generator): ``Generator.spawn`` for a generator, ``SeedSequence(seed).spawn``
+    otherwise. The parent generator's own stream is not advanced."""
+    if isinstance(seed, np.random.BitGenerator):
+        seed = np.random.Generator(seed)
+    if isinstance(seed, np.random.Generator):
+        return seed.spawn(n)
+    if not isinstance(seed, np.random.SeedSequence):
+        seed = np.random.SeedSequence(seed)
+    return [np.random.default_rng(child) for child in seed.spawn(n)]
+
+
+def check_workers(workers, limit: int) -> int:
+    """Worker processes: ``None`` -> the cores this process may run on, at most ``limit``;
+    otherwise a positive integer (capped at ``limit``: more would idle)."""
+    if workers is None:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        return max(1, min(cores, limit))
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+        raise InputError(f"workers {workers!r}: must be a positive integer")
+    return min(int(workers), limit)
+
+
+def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
+    """Words ``(K, H, W)`` of ``scene`` from one simulator per stripe (``sims[i]``
+    reads out rows ``rows[i]``), each walked through the readouts in order; with
+    several workers, ``workers - 1`` forked processes take stripes ``j, j + workers,
+    ...`` and write their words into a shared anonymous memory map (processes, not
+    threads: the simulator's Python work holds the GIL for a large share of its time)."""
+    import mmap
+    K, H, W = scene.shape
+    workers = check_workers(workers, len(rows)) if hasattr(os, "fork") else check_workers(workers, 1)
+    dtype = np.dtype(dtype)
+    if workers == 1:
+        words = np.empty((K, H, W), dtype)
+    else:
+        for k in range(K):                              # refuse bad light before any worker starts
+            scan_light(np.asarray(scene[k:k + 1]))
+        words = np.frombuffer(mmap.mmap(-1, max(1, K * H * W * dtype.itemsize)), dtype,
+                              count=K * H * W).reshape(K, H, W)
+
+    def run(mine, readouts):
+        # light in the scene's own dtype: readout converts it to float64 once (electrons_per_readout)
+        for k in readouts:
+            light = np.asarray(scene[k])
+            if workers == 1:
+                scan_light(light)
+            for i in mine:
+                words[k, rows[i]] = sims[i].readout(light[rows[i]])
+
+    children = {}
+    try:
+        for j in range(1, workers):
+            try:
+                pid = os.fork()
+            except OSError:                              # no more processes: this one does the rest
+                break
+            if pid == 0:                                 # worker: its stripes, then leave at once
+                status = 1
+                try:
+                    run(range(j, len(rows), workers), range(K))
+                    status = 0
+                except Exception:                        # (an interrupt: exit 1 quietly)
+                    import traceback
+                    traceback.print_exc()
+                finally:
+                    os._exit(status)
+            children[pid] = j
+        readouts = range(K)
+        if progress:                                     # (after the fork: tqdm starts a thread)
+            from tqdm import tqdm
+            readouts = tqdm(readouts, desc="simulate", unit="readout", delay=2.0, leave=False)
+        taken = set(children.values())
+        run([i for i in range(len(rows)) if i % workers not in taken], readouts)
+    except BaseException:
+        for pid in children:
+            os.kill(pid, 9)
+        raise
+    finally:
+        failed = [j for pid, j in children.items() if os.waitpid(pid, 0)[1] != 0]
+    if failed:
+        raise RuntimeError(f"simulation worker(s) {failed} failed (their stripes have no words)")
+    return words
