@@ -19,9 +19,7 @@ the CPU default and the paper size; and the plain-torch DCN against conv2d.
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import torch  # noqa: E402
 
+from cosim.timing import median_seconds  # noqa: E402
 from golden.config import SensorConfig  # noqa: E402
 from golden.fastsim import simulate_scene  # noqa: E402
 from recon.methods import reconstruct  # noqa: E402
@@ -40,16 +39,6 @@ from recon.net.model import TESpikeNet, parameter_count  # noqa: E402
 from recon.net.sizes import NetSizes  # noqa: E402
 
 SENSORS = (("TE", "te"), ("ML-msb", "ml-msb"), ("ML-count", "ml"))
-
-
-def median_seconds(fn, repeats: int) -> float:
-    fn()                                       # warm-up (tables, allocator) is not timed
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def net_images(model, words, config, keys) -> np.ndarray:
@@ -79,12 +68,10 @@ def quality(args) -> None:
                     if not path.is_file():
                         continue
                     model = load_weights(path)[0]
-                    start = time.perf_counter()
-                    images = net_images(model, words, config, keys)
+                    seconds, images = median_seconds(lambda: net_images(model, words, config, keys), 1)
                 else:
-                    start = time.perf_counter()
-                    images = reconstruct(words, config, method)[list(keys)]
-                seconds = (time.perf_counter() - start) / len(keys)
+                    seconds, images = median_seconds(lambda: reconstruct(words, config, method)[list(keys)], 1)
+                seconds /= len(keys)
                 p = float(np.mean(psnr_mu(images, truth, peak=float(light.max()))))
                 s = float(np.mean(ssim_mu(images, truth, peak=float(light.max()))))
                 scores.setdefault((label, method), []).append((p, s, seconds))
@@ -129,7 +116,7 @@ def complexity(args) -> None:
             for threads in args.threads:
                 torch.set_num_threads(threads)
                 repeats = args.repeat if name == "cpu" else 1
-                seconds = median_seconds(lambda: model(light), repeats)
+                seconds = median_seconds(lambda: model(light), repeats, warm_up=True)[0]
                 print(f"| {name} | {parameter_count(model):,} | {flops / 1e9:.1f} | {threads} | {seconds:.2f} |",
                       flush=True)
     from recon.net.deform import deform_conv2d
@@ -138,8 +125,8 @@ def complexity(args) -> None:
     weight = torch.rand(16, 16, 3, 3)
     offset = torch.randn(4, 18, 96, 128)
     mask = torch.rand(4, 9, 96, 128)
-    dcn = median_seconds(lambda: deform_conv2d(x, offset, weight, padding=1, mask=mask), args.repeat)
-    conv = median_seconds(lambda: torch.nn.functional.conv2d(x, weight, padding=1), args.repeat)
+    dcn = median_seconds(lambda: deform_conv2d(x, offset, weight, padding=1, mask=mask), args.repeat, warm_up=True)[0]
+    conv = median_seconds(lambda: torch.nn.functional.conv2d(x, weight, padding=1), args.repeat, warm_up=True)[0]
     print(f"\nDCN 3 x 3, 16 -> 16 channels, 4 x 96 x 128: {1e3 * dcn:.1f} ms; conv2d {1e3 * conv:.1f} ms "
           f"({dcn / conv:.1f}x)")
 

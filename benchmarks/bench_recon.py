@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +28,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from cosim.timing import median_seconds  # noqa: E402
 from golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
 from golden.decode import decode_light  # noqa: E402
 
@@ -67,16 +67,6 @@ def simulate(config: SensorConfig, scene: np.ndarray, seed: int) -> np.ndarray:
         electrons = rng.poisson(np.broadcast_to(light * DESIGN_ELECTRONS / L, (L,) + light.shape))
         words.append(array.feed(np.minimum(electrons, config.input_max).astype(np.int64)))
     return np.concatenate(words)
-
-
-def best_time(fn, repeat: int) -> tuple[float, object]:
-    """Median wall time of ``repeat`` runs (robust to a busy shared machine), and the result."""
-    times, result = [], None
-    for _ in range(repeat):
-        start = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times)), result
 
 
 def main(argv=None) -> int:
@@ -123,14 +113,14 @@ def main(argv=None) -> int:
     print(f"{config.mode.upper()} stream {K} x {H} x {W}, torch {torch.__version__}, "
           f"{torch.get_num_threads()} threads, {os.cpu_count()} CPUs, load average {load:.1f}")
 
-    base_t, _ = best_time(lambda: decode_light(words, config), args.repeat)
+    base_t, _ = median_seconds(lambda: decode_light(words, config), args.repeat)
     print(f"baseline golden.decode.decode_light (numpy): {K / base_t:8.1f} fps")
     runs = [("tfp", {"window": w}) for w in (1, 3, 9, 17)] + \
            [("tfi", {"window": 9, "search": "stream"}), ("tfi", {"window": 9, "search": "window"}), ("tfi", {"window": 3, "search": "window"})]
     print(f"{'method':26s} {'fps':>8s} {'ms/frame':>9s} {'x decode':>9s} {'PSNR-mu':>8s} {'SSIM-mu':>8s} {'PU21':>7s}")
     rows = []
     for method, opts in runs:
-        seconds, images = best_time(lambda: reconstruct(words, config, method, **opts), args.repeat)
+        seconds, images = median_seconds(lambda: reconstruct(words, config, method, **opts), args.repeat)
         p = float(np.mean(psnr_mu(images, scene, peak=float(scene.max()))))
         s = float(np.mean(ssim_mu(images, scene, peak=float(scene.max()))))
         u = float(np.mean(psnr_pu21(images, scene)))
