@@ -182,7 +182,7 @@ def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, 
     disk = (4 * values + word_bytes * values + images + stimulus_dtype(te).itemsize * crop_clocks
             + (VCD_BYTES_PER_PIXEL_CLOCK * crop_clocks if vcd else 0))
     memory = WORKING_BYTES + (4 + 8) * values + word_bytes * values + images   # light, TE words, streams
-    require(f"tespike demo of {frames} x {height} x {width}", memory=memory,
+    require(f"the demo of {frames} x {height} x {width} pixel-readouts", memory=memory,
             disk={Path(out) / "report.md": disk})
 
 

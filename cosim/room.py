@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Mapping
 
 from golden.errors import InputError
-from golden.resources import gigabytes, require_memory
+from golden.resources import require_memory
 
 
 def _existing_folder(path: str | os.PathLike) -> Path:
@@ -31,9 +31,13 @@ def free_disk(path: str | os.PathLike) -> tuple[int, int] | None:
     None where it cannot be told (e.g. a permission error: the write will say so)."""
     folder = _existing_folder(path)
     try:
-        return os.stat(folder).st_dev, shutil.disk_usage(folder).free
+        usage = shutil.disk_usage(folder)
+        device = os.stat(folder).st_dev
     except OSError:
         return None
+    if usage.total == 0:            # /proc, /sys: no blocks to count; the write will say what is wrong
+        return None
+    return device, usage.free
 
 
 def require_disk(outputs: Mapping[str | os.PathLike, int], what: str) -> None:
@@ -51,8 +55,16 @@ def require_disk(outputs: Mapping[str | os.PathLike, int], what: str) -> None:
         entry[0] += int(size)
     for needed, free, path in needs.values():
         if needed > free:
-            raise InputError(f"{what} writes about {gigabytes(needed)} to {str(_existing_folder(path))!r}, "
-                             f"but only {gigabytes(free)} is free there")
+            raise InputError(f"cannot write {os.fspath(path)!r}: {what} needs about {size_text(needed)}, "
+                             f"but only {size_text(free)} is free on its file system")
+
+
+def size_text(n: int) -> str:
+    """Bytes for people: '512 B', '3.2 kB', '983.0 kB', '1.2 GB' (powers of 1024)."""
+    for unit, scale in (("GB", 1 << 30), ("MB", 1 << 20), ("kB", 1 << 10)):
+        if n >= scale:
+            return f"{n / scale:.1f} {unit}"
+    return f"{n} B"
 
 
 def _is_stream(path) -> bool:

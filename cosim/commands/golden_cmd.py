@@ -47,7 +47,7 @@ def run(args) -> int:
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
     size = (T // L) * H * W * word_dtype(config).itemsize      # the words, in memory and in S.npz
-    require_room(f"{T // L} readouts of {H} x {W} words", memory=size, disk={args.out: size})
+    require_room(f"the stream of {T // L} readouts of {H} x {W} words", memory=size, disk={args.out: size})
     words = np.empty((T // L, H, W), word_dtype(config))
     chunks = iter_chunks(stimulus, config, chunk_elements)
     clocks_per_chunk = max(1, chunk_elements // max(1, H * W * L)) * L

@@ -46,7 +46,7 @@ def run(args) -> int:
     check_outputs({"--out": args.out}, {"--stream": args.stream})
     words, config = load_stream(args.stream, memory_map=True)     # stays on disk
     K, H, W = words.shape
-    require_room(f"reconstructing {K} x {H} x {W} images", disk={args.out: 4 * K * H * W})
+    require_room(f"the {K} images of {H} x {W} pixels", disk={args.out: 4 * K * H * W})
     if args.method == "net":
         from recon.net.infer import load_weights, weights_path
         load_weights(weights_path(config))      # refuse a configuration without weights before writing

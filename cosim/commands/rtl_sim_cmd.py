@@ -50,7 +50,7 @@ def run(args) -> int:
     T, H, W = stimulus.shape
     size = (T // config.clocks_per_readout) * H * W * word_dtype(config).itemsize
     outputs = {args.out: size} | ({args.vcd: VCD_BYTES_PER_PIXEL_CLOCK * T * H * W} if args.vcd else {})
-    require_room(f"{T} clocks of {H} x {W} pixels", memory=size, disk=outputs)
+    require_room(f"the RTL run of {T} clocks of {H} x {W} pixels", memory=size, disk=outputs)
     progress = False if args.no_progress else progress_wanted(args)
 
     if args.backend == "amaranth":

@@ -33,7 +33,7 @@ def run(args) -> int:
         raise InputError(f"--seed {args.seed}: must be >= 0")
     K, H, W = scene.shape
     size = K * H * W * word_dtype(config).itemsize          # the words, in memory and in S.npz
-    require_room(f"simulating {K} x {H} x {W} words", memory=size, disk={args.out: size})
+    require_room(f"the stream of {K} readouts of {H} x {W} words", memory=size, disk={args.out: size})
     words = simulate_scene(config, scene, seed=args.seed, dark_current=args.dark_current,
                            noise=not args.no_noise, method=args.method,
                            progress=progress_wanted(args), workers=args.workers)

@@ -87,7 +87,7 @@ def run(args) -> int:
     if sys.stderr.isatty() and K > 1:
         from tqdm import tqdm
         stream = tqdm(stream, total=K, desc="stimulus", unit="readout", delay=2.0, leave=False)
-    require_room(f"a stimulus of {K * L} x {H} x {W} {dtype}", disk={args.out: size})
+    require_room(f"the stimulus of {K * L} x {H} x {W} {dtype} values", disk={args.out: size})
     with atomic_output(args.out) as tmp:
         out = reserved_memmap(tmp, dtype, (K * L, H, W))
         try:

@@ -45,9 +45,8 @@ def load_light(path, config_spec=None, estimator="ratio"):
     from golden.errors import InputError
     from golden.io import load_scene, load_stimulus, load_stream
 
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"--input {str(path)!r} does not exist")
+    from golden.paths import check_input_file
+    path = check_input_file(path, "--input")        # exists, and is a regular file
     if path.suffix == ".npz":
         words, config = load_stream(path)
         return decode_light(words, config, estimator).astype(np.float64), f"stream ({config}), decoded"
