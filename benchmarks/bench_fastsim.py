@@ -49,6 +49,8 @@ from golden.decode import decode_spikes  # noqa: E402
 from golden.fastsim import SceneSimulator  # noqa: E402
 from golden.light import poisson_stimulus  # noqa: E402
 from golden.sensor import simulate  # noqa: E402
+from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
+from recon.display import save_figure  # noqa: E402
 
 LEVELS = np.logspace(-4, 1, 16)
 
@@ -220,7 +222,7 @@ def plot(tables, out):
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    save_figure(fig, out, dpi=110)
     print(f"wrote {out}")
 
 
@@ -228,10 +230,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--pixels", type=int, default=2000)
     parser.add_argument("--readouts", type=int, default=4)
-    parser.add_argument("--out", default=str(ROOT / "out" / "bench" / "fastsim.png"),
-                        help="plot to write (default out/bench/fastsim.png, git-ignored)")
-    parser.add_argument("--docs", action="store_true",
-                        help="write the plot the docs show, benchmarks/fastsim.png (regenerate it on purpose)")
+    add_png_arguments(parser, "fastsim.png", "--out")
     parser.add_argument("--skip-whole", action="store_true")
     parser.add_argument("--skip-levels", action="store_true", help="only the whole-process part")
     parser.add_argument("--whole-shape", type=int, nargs=3, default=(64, 384, 512))
@@ -247,9 +246,7 @@ def main(argv=None):
                         help="whole process: tespike simulate --workers values to time, interleaved "
                              "(e.g. 1 2; default: the command's default)")
     args = parser.parse_args(argv)
-    if args.docs:
-        args.out = str(ROOT / "benchmarks" / "fastsim.png")
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    png_path(args, "fastsim.png", "--out")
     if not args.skip_levels:
         tables = {}
         for mode in MODES:

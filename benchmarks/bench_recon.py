@@ -31,6 +31,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from cosim.timing import median_seconds  # noqa: E402
 from golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
 from golden.decode import decode_light  # noqa: E402
+from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
+from recon.display import save_figure  # noqa: E402
 
 
 def hdr_scene(frames: int, height: int, width: int, seed: int = 0) -> np.ndarray:
@@ -78,17 +80,12 @@ def main(argv=None) -> int:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--png", default=str(ROOT / "out" / "bench" / "bench_recon.png"),
-                        help="plot to write (default out/bench/bench_recon.png, git-ignored)")
-    parser.add_argument("--docs", action="store_true",
-                        help="write the plot the docs show, benchmarks/bench_recon.png (regenerate it on purpose)")
+    add_png_arguments(parser, "bench_recon.png")
     parser.add_argument("--save-stream", help="also write the simulated stream to this S.npz")
     parser.add_argument("--stream", help="use this S.npz (made with --save-stream and the same "
                                          "--mode/--frames/--height/--width) instead of simulating")
     args = parser.parse_args(argv)
-    if args.docs:
-        args.png = str(ROOT / "benchmarks" / "bench_recon.png")
-    Path(args.png).parent.mkdir(parents=True, exist_ok=True)
+    png_path(args, "bench_recon.png")
 
     import torch
 
@@ -141,9 +138,7 @@ def main(argv=None) -> int:
     ax.set_title(f"training-free reconstruction, {config.mode.upper()} stream")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    from golden.io import atomic_output
-    with atomic_output(args.png) as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
+    save_figure(fig, args.png, dpi=120)
     print(f"wrote {args.png}")
     return 0
 
