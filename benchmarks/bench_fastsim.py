@@ -74,6 +74,7 @@ def error_table(config, pixels, readouts, seed=0, fast_factor=20):
     for i, level in enumerate(LEVELS):
         scene = np.full((readouts, 1, pixels), level)
         big = np.full((readouts, 1, pixels * fast_factor), level)
+        # hand-written timing: numpy simulators (no torch), timed once per light level (seconds each)
         t0 = time.perf_counter()
         sim = SceneSimulator(config, (1, big.shape[2]), rng=seed + i, total_pixel_readouts=big.size)
         fast = np.stack([sim.readout(big[k]) for k in range(readouts)])

@@ -131,6 +131,7 @@ def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False,
     gen = time.perf_counter() - start
     N = side * side
     with tempfile.TemporaryDirectory(prefix="bench-verilator-") as tmp:
+        # hand-written timing: builds and runs of child processes, wall and their CPU (not torch code)
         cpu0, start = children_cpu(), time.perf_counter()
         if default:
             exe, build_mb = measured_build(build_default_options, verilog, "te_pixel_array",

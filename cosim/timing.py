@@ -5,6 +5,9 @@ the caller's torch thread count (``num_threads``; its default of 1 would time
 another setting than the one reported). Each repeat is one ``timeit(1)``: the
 callers time whole reconstructions (0.01-10 s), where one call is the unit the
 reports speak of and a shared machine's load makes the median the robust figure.
+Measured here (2 shared cores): an empty call reads 0.4 us (0.14 us by a bare
+``perf_counter`` pair), and each repeat costs about 14 ms outside the measurement
+(the Timer's set-up), nothing against the 3 ms - 2 s being timed.
 """
 
 from __future__ import annotations
