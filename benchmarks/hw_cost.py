@@ -186,7 +186,9 @@ def report(rows: list[tuple[str, dict, list[dict]]], yosys_version: str) -> str:
            "this estimate; the same logic written with fewer named intermediate signals once moved a "
            "full-pixel estimate by 9%. A TE/ML difference counts only when the ranges do not overlap. "
            "A rough static-CMOS figure, not a layout; real pixel counters often use ripple counters "
-           "and dynamic latches.",
+           "and dynamic latches. The flow is `cosim/synthesis.py` (shared with `tespike demo`); an "
+           "estimate Yosys marks incomplete (\"1574+\": a cell type without a CMOS cost) is refused, "
+           "never read as a number.",
            "- **timing block**: S_h divider, CCC and S_r strobe, one per array; "
            f"'per pixel' divides its smallest estimate by a {ARRAY_PIXELS}-pixel (128 x 128) array. "
            "TE also routes the b2-bit CCC bus to every pixel (wiring, not counted).",
