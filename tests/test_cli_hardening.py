@@ -6,6 +6,7 @@ devices, FIFOs, symlinks, hard links, directories, an output equal to an input;
 signals; stale temporaries; corrupt and hostile files; argument errors.
 """
 
+import contextlib
 import json
 import os
 import signal
@@ -253,20 +254,27 @@ def test_full_disk_names_the_users_path(tmp_path, monkeypatch):
     assert os.listdir(tmp_path) == []
 
 
-def test_small_tmpfs_full_disk(tmp_path, files):
-    mount = tmp_path / "small"
-    mount.mkdir()
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16k", "tmpfs", str(mount)], capture_output=True)
+@contextlib.contextmanager
+def small_tmpfs(folder, size):
+    """A tmpfs of ``size`` mounted at ``folder`` (skips the test where mounting is not permitted)."""
+    folder.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)],
+                          capture_output=True)
     if done.returncode != 0:
         pytest.skip("cannot mount a tmpfs here")
     try:
+        yield folder
+    finally:
+        subprocess.run(["umount", str(folder)], check=True)
+
+
+def test_small_tmpfs_full_disk(tmp_path, files):
+    with small_tmpfs(tmp_path / "small", "16k") as mount:
         np.save(files / "big.npy", np.zeros((TINY.clocks_per_readout * 20000, 2, 2), np.uint8))
         result = run_tespike(*golden_args(files, mount / "s.npz", stimulus=files / "big.npy"))
         assert_refused(result, str(mount / "s.npz"))
         assert ".part" not in result.stderr
         assert os.listdir(mount) == []
-    finally:
-        subprocess.run(["umount", str(mount)], check=True)
 
 
 # ------------------------------------------------------------------ bad inputs: one line each
@@ -598,15 +606,10 @@ def test_memory_mapped_output_on_a_full_disk_is_one_line_and_leaves_nothing(file
         assert snapshot(files) == before
 
 
-def test_reconstruct_into_a_small_tmpfs(files):
+def test_reconstruct_into_a_small_tmpfs(files, capsys, monkeypatch):
     """A real full file system: the up-front check refuses, and past it (the output's old copy
     takes the room) the reservation does; never SIGBUS, never a .part left."""
-    mount = files / "small"
-    mount.mkdir()
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1M", "tmpfs", str(mount)], capture_output=True)
-    if done.returncode != 0:
-        pytest.skip("cannot mount a tmpfs here")
-    try:
+    with small_tmpfs(files / "small", "1M") as mount:
         light = np.random.default_rng(1).uniform(0, 1, (20, 96, 128)).astype(np.float32)
         np.save(files / "big.npy", light)
         assert run_tespike("simulate", "--config", "te", "--scene", files / "big.npy", "--out",
@@ -616,8 +619,13 @@ def test_reconstruct_into_a_small_tmpfs(files):
                              "--out", mount / "r.npy")
         assert_refused(result, str(mount / "r.npy"), "is free on its file system")
         assert sorted(os.listdir(mount)) == ["filler"]
-    finally:
-        subprocess.run(["umount", str(mount)], check=True)
+        from cosim import room          # past the estimate: the reservation refuses (no SIGBUS)
+        monkeypatch.setattr(room, "require_disk", lambda *args, **kwargs: None)
+        code, out, err = run_in_process(capsys, "reconstruct", "--stream", files / "big.npz", "--method",
+                                        "tfp", "--out", mount / "r.npy")
+        assert code == 2 and out == "" and err.strip().splitlines() == [
+            f"tespike reconstruct: error: cannot write {str(mount / 'r.npy')!r}: No space left on device"]
+        assert sorted(os.listdir(mount)) == ["filler"]
 
 
 def test_stimulus_never_overwrites_its_scene(files):
