@@ -650,3 +650,10 @@ def test_synth_checks_its_options_before_printing_or_creating_the_store(files):
         assert result.stdout == ""
     refused_without_change(files, ("synth", "--config", "te", "--scene", "default", "--frames", 2,
                                    "--out", files / "c.json"), "not a directory")
+
+
+def test_train_refuses_before_making_its_run_folder(files):
+    common = ("train", "--config", "te", "--out", files / "w.pt", "--steps", 1)
+    refused_without_change(files, (*common, "--crop", 100000), "--crop 100000", "training sequences")
+    refused_without_change(files, (*common, "--cache", files / "c.json"), "--cache", "not a directory")
+    refused_without_change(files, (*common, "--sequences", 10 ** 8), "of memory")

@@ -65,6 +65,17 @@ def run(args) -> int:
                            steps=args.steps, minutes=args.minutes, seed=args.seed, device=args.device,
                            threads=args.threads, recipe={"sequences": args.sequences, "folders": tuple(args.hdr),
                                    "downscale": args.downscale})
+    # before the run folder is made: what cannot work or fit is one line
+    recipe = options.data_recipe()
+    if args.crop > min(recipe.height, recipe.width):
+        raise InputError(f"--crop {args.crop}: larger than the {recipe.height} x {recipe.width} training sequences")
+    if args.cache is not None:
+        check_output_dir(args.cache, "--cache")
+    from cosim.room import require_room
+    from golden.io import word_dtype
+    values = recipe.sequences * recipe.frames * recipe.height * recipe.width
+    require_room(f"the training set of {recipe.sequences} sequences of {recipe.frames} x {recipe.height} x "
+                 f"{recipe.width}", memory=values * (4 + word_dtype(config).itemsize))   # light and words
     command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     train(options, out, resume=args.resume, cache=args.cache, progress=progress_wanted(args), command=command)
     report(args, f"wrote {out} (run log, loss curve and checkpoint in {out.with_suffix('.run')})")
