@@ -47,7 +47,9 @@ def run(args) -> int:
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
     size = (T // L) * H * W * word_dtype(config).itemsize      # the words, in memory and in S.npz
-    require_room(f"the stream of {T // L} readouts of {H} x {W} words", memory=size, disk={args.out: size})
+    chunk = min(T, max(1, chunk_elements // max(1, H * W * L)) * L) * H * W * stimulus.itemsize
+    require_room(f"the stream of {T // L} readouts of {H} x {W} words", memory=size + chunk,
+                 disk={args.out: size})     # one chunk of the stimulus is read into memory at a time
     words = np.empty((T // L, H, W), word_dtype(config))
     chunks = iter_chunks(stimulus, config, chunk_elements)
     clocks_per_chunk = max(1, chunk_elements // max(1, H * W * L)) * L
