@@ -50,7 +50,7 @@ from golden.fastsim import SceneSimulator  # noqa: E402
 from golden.light import poisson_stimulus  # noqa: E402
 from golden.sensor import simulate  # noqa: E402
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
-from recon.display import save_figure  # noqa: E402
+from recon.pictures import save_figure  # noqa: E402
 
 LEVELS = np.logspace(-4, 1, 16)
 

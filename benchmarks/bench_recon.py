@@ -32,7 +32,7 @@ from cosim.timing import median_seconds  # noqa: E402
 from golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
 from golden.decode import decode_light  # noqa: E402
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
-from recon.display import save_figure  # noqa: E402
+from recon.pictures import save_figure  # noqa: E402
 
 
 def hdr_scene(frames: int, height: int, width: int, seed: int = 0) -> np.ndarray:

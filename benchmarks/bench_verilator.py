@@ -247,7 +247,7 @@ def main(argv=None) -> int:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        from recon.display import save_figure
+        from recon.pictures import save_figure
 
         fig, ax = plt.subplots(figsize=(5.5, 3.5))
         names = list(dict.fromkeys(n for n, *_ in rows))

@@ -69,7 +69,7 @@ def main(argv=None) -> int:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        from recon.display import save_figure
+        from recon.pictures import save_figure
 
         fig, ax = plt.subplots(figsize=(5, 3.2))
         ax.bar([f"{s}x{s}" for s in SIZES], [results[s][0] for s in SIZES], color="#4a7ab5")

@@ -29,7 +29,7 @@ from golden.config import DESIGN_ELECTRONS, SensorConfig
 from golden.decode import ESTIMATORS, decode_light
 from golden.dynamic_range import constant_light_words, estimator_error, formula_db, light_grid, measure
 from golden.io import atomic_output
-from recon.display import save_figure
+from recon.pictures import save_figure
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "dynamic-range.md"

@@ -202,7 +202,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     from golden.fastsim import iter_scene_stimulus, simulate_scene
     from golden.io import save_images, save_stream
     from golden.sensor import PixelArray, simulate
-    from recon.display import write_text
+    from recon.pictures import write_text
     from recon.scenes import make_scene
 
     from .backends import backend as run_backend, checked_words

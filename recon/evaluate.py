@@ -48,7 +48,7 @@ from golden.errors import InputError
 from golden.io import check_scene
 from golden.resources import require_memory
 
-from .display import ERROR_RANGE, save_figure, tone_map, write_text
+from .pictures import ERROR_RANGE, save_figure, tone_map, write_text
 
 #: Sensors evaluated by default: the paper's Table 1 columns (ML = the msb camera
 #: of its eq. 10 on the left, TE on the right), then the full-count ML camera.

@@ -5,7 +5,7 @@ Input by content: ``S.npz`` (a stream: words decoded to light per readout with
 reconstruction ``R.npy``: light, 1.0 = design light), an integer ``.npy`` (a
 stimulus ``E.npy``: electrons per readout interval, summed over its L clocks
 with ``--config``, shown in design-light units). Tone mapping is the project's
-(:func:`recon.display.tone_map`): divide by the peak (default: the largest
+(:func:`recon.pictures.tone_map`): divide by the peak (default: the largest
 value of the frames shown; give ``--peak`` to compare files on one scale),
 clip to [0, 1], mu-law with mu = 5000. Writes a contact sheet (one PNG, frame
 numbers as titles) or, with ``--each``, one grayscale PNG per frame at the
@@ -128,7 +128,7 @@ def run(args) -> int:
     if peak <= 0:
         raise InputError(f"--input {args.input!r}: every frame shown is 0 (give --peak to map it anyway)")
 
-    from recon.display import save_figure, tone_map
+    from recon.pictures import save_figure, tone_map
     mapped = tone_map(shown, peak, args.mu)
 
     import matplotlib

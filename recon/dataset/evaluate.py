@@ -214,7 +214,7 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
 
 def write_store_outputs(evaluation, out: str | Path) -> dict[str, Path]:
     """table.md, table.csv, results.csv and strips/<sequence>.png (no timing plot: see the module)."""
-    from recon.display import write_text
+    from recon.pictures import write_text
     from recon.evaluate import plot_strip, results_csv, safe_name, table_csv, table_markdown
 
     out = Path(out)

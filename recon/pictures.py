@@ -1,4 +1,4 @@
-"""What people look at: the mu-law tone map of light images, PNG figures and text reports.
+"""Pictures and reports people look at: the mu-law tone map of light images, PNG figures, text.
 
 numpy and matplotlib only (no torch), so ``tespike view``, the demo's pictures and
 the benchmarks' plots share one tone map and one way of saving a figure without
