@@ -4,7 +4,7 @@ Drives only the SPEC section 6 ports and compares every word with the golden
 model (:mod:`cosim.cocotb_bench`); one line per simulator, exit 1 if any fails.
 """
 
-from .common import add_config_argument, check_generated_array
+from .common import add_config_argument
 
 HELP = "check the array Verilog with the cocotb testbench (golden model as scoreboard) in Icarus / Verilator / ..."
 
@@ -28,14 +28,19 @@ def add_arguments(parser):
 def run(args) -> int:
     from golden.config import load_config
     from golden.errors import InputError
+    from rtl.array import check_array_size
 
     from cosim.cocotb_bench import Settings
     from cosim.cocotb_run import run_cocotb
 
     config = load_config(args.config)
-    check_generated_array(args.height, args.width)
+    check_array_size(args.height, args.width)
     if args.readouts < 1:
         raise InputError(f"--readouts {args.readouts}: must be >= 1")
+    from .verilog_cmd import MAX_PIXELS           # the array cocotb tests is tespike verilog's
+    if args.height * args.width > MAX_PIXELS:
+        raise InputError(f"--height {args.height} x --width {args.width}: the array is tespike verilog's, "
+                         f"at most {MAX_PIXELS} pixels")
     if args.stimulus is None:           # the default stimulus, int64 electrons per pixel clock
         from cosim.room import require_room
         clocks = args.readouts * config.clocks_per_readout

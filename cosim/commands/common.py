@@ -32,19 +32,3 @@ def check_workers_argument(workers: int | None) -> None:
     from golden.errors import InputError
     if workers is not None and not 1 <= workers <= MAX_WORKERS:
         raise InputError(f"--workers {workers}: must be in 1..{MAX_WORKERS}")
-
-
-#: Largest generated array (``verilog``, ``cocotb``): 65536 pixels. The charge and frame ports
-#: are H * W * E and H * W * Wd bits wide (up to 2^21 bits at E = 32); larger arrays take
-#: minutes to convert and give ports beyond what the simulators here read well.
-MAX_PIXELS = 1 << 16
-
-
-def check_generated_array(height: int, width: int) -> None:
-    """Refuse an array of Verilog that is not H, W >= 1 or has more than MAX_PIXELS pixels."""
-    from golden.errors import InputError
-    from rtl.array import check_array_size
-    check_array_size(height, width)     # before the slow import and conversion
-    if height * width > MAX_PIXELS:
-        raise InputError(f"--height {height} x --width {width} = {height * width} "
-                         f"pixels: at most {MAX_PIXELS} (e.g. 256 x 256) are supported")
