@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from cosim.rtlsim import rtl_run                     # noqa: E402
 from golden.config import SensorConfig               # noqa: E402
-from golden.io import atomic_output                  # noqa: E402
+from recon.pictures import save_figure                # noqa: E402
 from tests.cosim_helpers import light_stimulus       # noqa: E402
 
 SHAPES = {1: (1, 1), 16: (4, 4), 64: (8, 8)}
@@ -95,9 +95,7 @@ def _plot(rows, png):
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     Path(png).parent.mkdir(parents=True, exist_ok=True)
-    with atomic_output(png) as tmp:
-        fig.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    save_figure(fig, png, dpi=120, bbox_inches="tight")
 
 
 if __name__ == "__main__":

@@ -52,6 +52,8 @@ from golden.decode import decode_spikes  # noqa: E402
 from golden.fastsim import SceneSimulator  # noqa: E402
 from golden.light import poisson_stimulus  # noqa: E402
 from golden.sensor import simulate  # noqa: E402
+from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
+from recon.pictures import save_figure  # noqa: E402
 
 LEVELS = np.logspace(-4, 1, 16)
 
@@ -75,6 +77,7 @@ def error_table(config, pixels, readouts, seed=0, fast_factor=20):
     for i, level in enumerate(LEVELS):
         scene = np.full((readouts, 1, pixels), level)
         big = np.full((readouts, 1, pixels * fast_factor), level)
+        # hand-written timing: numpy simulators (no torch), timed once per light level (seconds each)
         t0 = time.perf_counter()
         sim = SceneSimulator(config, (1, big.shape[2]), rng=seed + i, total_pixel_readouts=big.size)
         fast = np.stack([sim.readout(big[k]) for k in range(readouts)])
@@ -248,7 +251,7 @@ def plot(tables, out):
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    save_figure(fig, out, dpi=110)
     print(f"wrote {out}")
 
 
@@ -256,10 +259,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--pixels", type=int, default=2000)
     parser.add_argument("--readouts", type=int, default=4)
-    parser.add_argument("--out", default=str(ROOT / "out" / "bench" / "fastsim.png"),
-                        help="plot to write (default out/bench/fastsim.png, git-ignored)")
-    parser.add_argument("--docs", action="store_true",
-                        help="write the plot the docs show, benchmarks/fastsim.png (regenerate it on purpose)")
+    add_png_arguments(parser, "fastsim.png", "--out")
     parser.add_argument("--skip-whole", action="store_true")
     parser.add_argument("--skip-levels", action="store_true", help="only the whole-process part")
     parser.add_argument("--whole-shape", type=int, nargs=3, default=(64, 384, 512))
@@ -278,9 +278,7 @@ def main(argv=None):
                         help="whole process: another checkout whose tespike simulate is timed interleaved "
                              "with this one's (before/after in one run)")
     args = parser.parse_args(argv)
-    if args.docs:
-        args.out = str(ROOT / "benchmarks" / "fastsim.png")
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    png_path(args, "fastsim.png", "--out")
     if not args.skip_levels:
         tables = {}
         for mode in MODES:

@@ -56,6 +56,7 @@ def rate(fn, stimulus, repeat=1):
     """
     best = float("inf")
     for _ in range(repeat):
+        # hand-written timing: numpy code (no torch) and CPU seconds, which torch.utils.benchmark does not report
         start = time.process_time()
         out = fn(stimulus)
         best = min(best, time.process_time() - start)

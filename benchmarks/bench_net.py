@@ -36,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import torch  # noqa: E402
 
+from cosim.timing import median_seconds  # noqa: E402
 from golden.config import SensorConfig  # noqa: E402
 from golden.fastsim import simulate_scene  # noqa: E402
 from recon.methods import reconstruct  # noqa: E402
@@ -47,13 +48,6 @@ from recon.net.model import TESpikeNet, parameter_count  # noqa: E402
 from recon.net.sizes import NetSizes  # noqa: E402
 
 SENSORS = (("TE", "te"), ("ML-msb", "ml-msb"), ("ML-count", "ml"))
-
-
-def median_seconds(fn, repeats: int) -> float:
-    """Median wall time of ``fn`` (torch.utils.benchmark: warm-up and thread settings handled)."""
-    from torch.utils import benchmark
-    timer = benchmark.Timer(stmt="fn()", globals={"fn": fn}, num_threads=torch.get_num_threads())
-    return timer.blocked_autorange(min_run_time=0.0).median if repeats > 1 else timer.timeit(1).median
 
 
 def heldout_pans(count: int, frames: int, height: int, width: int) -> list[tuple[str, np.ndarray]]:

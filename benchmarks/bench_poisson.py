@@ -35,6 +35,7 @@ def best_ns(fn, draws: int, repeats: int) -> tuple[float, float]:
     """Best CPU and best wall time of ``repeats`` calls, in ns per draw."""
     cpu = wall = float("inf")
     for _ in range(repeats):
+        # hand-written timing: numpy code (no torch) and CPU seconds beside wall time (torch.utils.benchmark gives wall only)
         t0, c0 = time.perf_counter(), time.process_time()
         fn()
         cpu = min(cpu, time.process_time() - c0)

@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +28,11 @@ ROOT = Path(__file__).resolve().parent.parent
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from cosim.timing import median_seconds  # noqa: E402
 from golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
 from golden.decode import decode_light  # noqa: E402
+from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
+from recon.pictures import save_figure  # noqa: E402
 
 
 def hdr_scene(frames: int, height: int, width: int, seed: int = 0) -> np.ndarray:
@@ -69,16 +71,6 @@ def simulate(config: SensorConfig, scene: np.ndarray, seed: int) -> np.ndarray:
     return np.concatenate(words)
 
 
-def best_time(fn, repeat: int) -> tuple[float, object]:
-    """Median wall time of ``repeat`` runs (robust to a busy shared machine), and the result."""
-    times, result = [], None
-    for _ in range(repeat):
-        start = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times)), result
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--mode", choices=("te", "ml"), default="te")
@@ -88,17 +80,12 @@ def main(argv=None) -> int:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--png", default=str(ROOT / "out" / "bench" / "bench_recon.png"),
-                        help="plot to write (default out/bench/bench_recon.png, git-ignored)")
-    parser.add_argument("--docs", action="store_true",
-                        help="write the plot the docs show, benchmarks/bench_recon.png (regenerate it on purpose)")
+    add_png_arguments(parser, "bench_recon.png")
     parser.add_argument("--save-stream", help="also write the simulated stream to this S.npz")
     parser.add_argument("--stream", help="use this S.npz (made with --save-stream and the same "
                                          "--mode/--frames/--height/--width) instead of simulating")
     args = parser.parse_args(argv)
-    if args.docs:
-        args.png = str(ROOT / "benchmarks" / "bench_recon.png")
-    Path(args.png).parent.mkdir(parents=True, exist_ok=True)
+    png_path(args, "bench_recon.png")
 
     import torch
 
@@ -123,14 +110,14 @@ def main(argv=None) -> int:
     print(f"{config.mode.upper()} stream {K} x {H} x {W}, torch {torch.__version__}, "
           f"{torch.get_num_threads()} threads, {os.cpu_count()} CPUs, load average {load:.1f}")
 
-    base_t, _ = best_time(lambda: decode_light(words, config), args.repeat)
+    base_t, _ = median_seconds(lambda: decode_light(words, config), args.repeat)
     print(f"baseline golden.decode.decode_light (numpy): {K / base_t:8.1f} fps")
     runs = [("tfp", {"window": w}) for w in (1, 3, 9, 17)] + \
            [("tfi", {"window": 9, "search": "stream"}), ("tfi", {"window": 9, "search": "window"}), ("tfi", {"window": 3, "search": "window"})]
     print(f"{'method':26s} {'fps':>8s} {'ms/frame':>9s} {'x decode':>9s} {'PSNR-mu':>8s} {'SSIM-mu':>8s} {'PU21':>7s}")
     rows = []
     for method, opts in runs:
-        seconds, images = best_time(lambda: reconstruct(words, config, method, **opts), args.repeat)
+        seconds, images = median_seconds(lambda: reconstruct(words, config, method, **opts), args.repeat)
         p = float(np.mean(psnr_mu(images, scene, peak=float(scene.max()))))
         s = float(np.mean(ssim_mu(images, scene, peak=float(scene.max()))))
         u = float(np.mean(psnr_pu21(images, scene)))
@@ -151,9 +138,7 @@ def main(argv=None) -> int:
     ax.set_title(f"training-free reconstruction, {config.mode.upper()} stream")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    from golden.io import atomic_output
-    with atomic_output(args.png) as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
+    save_figure(fig, args.png, dpi=120)
     print(f"wrote {args.png}")
     return 0
 

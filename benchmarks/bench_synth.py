@@ -93,6 +93,7 @@ def main() -> None:
         for workers in (1, 2):
             url = str(tmp / f"w{workers}.zarr")
             with Runner(workers) as run:
+                # hand-written timing: CPU seconds of worker processes (torch.utils.benchmark sees this process's wall time only)
                 cpu, start = cpu_seconds(run), time.perf_counter()
                 synthesise(url, sources, configs, 0, run)
                 s_wall, s_cpu = time.perf_counter() - start, cpu_seconds(run) - cpu

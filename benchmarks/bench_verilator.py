@@ -50,6 +50,7 @@ import numpy as np  # noqa: E402
 
 from golden.config import SensorConfig  # noqa: E402
 from golden.reference import step_reference  # noqa: E402
+from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
 
 
 def children_cpu() -> float:
@@ -130,6 +131,7 @@ def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False,
     gen = time.perf_counter() - start
     N = side * side
     with tempfile.TemporaryDirectory(prefix="bench-verilator-") as tmp:
+        # hand-written timing: builds and runs of child processes, wall and their CPU (not torch code)
         cpu0, start = children_cpu(), time.perf_counter()
         if default:
             exe, build_mb = measured_build(build_default_options, verilog, "te_pixel_array",
@@ -194,14 +196,9 @@ def main(argv=None) -> int:
                              "(tests/verilog_spec_model.py): what the array's structure costs")
     parser.add_argument("--variants", nargs="*", default=["O1"],
                         help="builds of the generated array to compare: O<n>[:verilator options]")
-    parser.add_argument("--png", default=str(ROOT / "out" / "bench" / "bench_verilator.png"),
-                        help="plot to write (default out/bench/bench_verilator.png, git-ignored)")
-    parser.add_argument("--docs", action="store_true",
-                        help="write the plot the docs show, benchmarks/bench_verilator.png (regenerate it on purpose)")
+    add_png_arguments(parser, "bench_verilator.png")
     args = parser.parse_args(argv)
-    if args.docs:
-        args.png = str(ROOT / "benchmarks" / "bench_verilator.png")
-    Path(args.png).parent.mkdir(parents=True, exist_ok=True)
+    png_path(args, "bench_verilator.png")
     config = SensorConfig()
     load_start = os.getloadavg()[0]
     rng = np.random.default_rng(2024)
@@ -250,7 +247,7 @@ def main(argv=None) -> int:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        from golden.io import atomic_output
+        from recon.pictures import save_figure
 
         fig, ax = plt.subplots(figsize=(5.5, 3.5))
         names = list(dict.fromkeys(n for n, *_ in rows))
@@ -269,8 +266,7 @@ def main(argv=None) -> int:
         ax.set_title("generated Verilog in outside simulators (paper TE)")
         ax.legend(fontsize=8)
         fig.tight_layout()
-        with atomic_output(args.png) as tmp_png:
-            fig.savefig(tmp_png, format="png", dpi=100)
+        save_figure(fig, args.png)
         print(f"wrote {args.png}")
     except ImportError:
         pass

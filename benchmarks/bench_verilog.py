@@ -20,6 +20,10 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
+
 ROOT = Path(__file__).resolve().parent.parent
 SIZES = [8, 32, 128]
 
@@ -40,14 +44,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", default="te", help="config file or 'te' / 'ml'")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--png", default=str(ROOT / "out" / "bench" / "bench_verilog.png"),
-                        help="plot to write (default out/bench/bench_verilog.png, git-ignored)")
-    parser.add_argument("--docs", action="store_true",
-                        help="write the plot the docs show, benchmarks/bench_verilog.png (regenerate it on purpose)")
+    add_png_arguments(parser, "bench_verilog.png")
     args = parser.parse_args(argv)
-    if args.docs:
-        args.png = str(ROOT / "benchmarks" / "bench_verilog.png")
-    Path(args.png).parent.mkdir(parents=True, exist_ok=True)
+    png_path(args, "bench_verilog.png")
     from tqdm import tqdm
 
     results = {}
@@ -70,15 +69,14 @@ def main(argv=None) -> int:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        from golden.io import atomic_output
+        from recon.pictures import save_figure
 
         fig, ax = plt.subplots(figsize=(5, 3.2))
         ax.bar([f"{s}x{s}" for s in SIZES], [results[s][0] for s in SIZES], color="#4a7ab5")
         ax.set_ylabel("seconds (whole process)")
         ax.set_title(f"tespike verilog --config {args.config}")
         fig.tight_layout()
-        with atomic_output(args.png) as tmp_png:
-            fig.savefig(tmp_png, format="png", dpi=100)
+        save_figure(fig, args.png)
         print(f"wrote {args.png}")
     except ImportError:
         pass

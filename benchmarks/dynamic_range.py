@@ -29,6 +29,7 @@ from golden.config import DESIGN_ELECTRONS, SensorConfig
 from golden.decode import ESTIMATORS, decode_light
 from golden.dynamic_range import constant_light_words, estimator_error, formula_db, light_grid, measure
 from golden.io import atomic_output
+from recon.pictures import save_figure
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "dynamic-range.md"
@@ -116,9 +117,7 @@ def plot(light, curves, path):
     axes[0].legend(fontsize=8)
     fig.suptitle("Decoded vs true constant light: mean (line) and 10-90 % of single readouts (band)")
     fig.tight_layout()
-    with atomic_output(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def main() -> None:

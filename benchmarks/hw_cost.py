@@ -30,16 +30,15 @@ Run from the repository root: ``python3 benchmarks/hw_cost.py [--out FILE | --do
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import shutil
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from cosim.synthesis import ABC_GATE_SETS, span, synthesize  # noqa: E402
 from golden.config import SensorConfig  # noqa: E402
 
 #: Pixels per array used to amortise the timing block.
@@ -88,66 +87,6 @@ def counting_only(config: SensorConfig) -> SensorConfig:
     return SensorConfig.from_dict(data)
 
 
-def parse_stat(json_text: str) -> dict:
-    """Read one ``stat -json`` (optionally ``-tech cmos``) report of Yosys 0.23+.
-
-    Returns cells, flops (cell types containing DFF/DLATCH) and transistors
-    (``None`` without ``-tech cmos``). A transistor estimate Yosys marks
-    incomplete (``"1574+"``: some cell type has no entry in its table) is refused.
-    """
-    data = json.loads(json_text)
-    design = data.get("design")
-    if design is None:
-        modules = data.get("modules") or {}
-        if len(modules) != 1:
-            raise ValueError(f"Yosys stat report has no 'design' and {len(modules)} modules")
-        design = next(iter(modules.values()))
-    by_type = design.get("num_cells_by_type", {})
-    flops = sum(n for kind, n in by_type.items() if "DFF" in kind or "DLATCH" in kind)
-    transistors = design.get("estimated_num_transistors")
-    if transistors is not None:
-        text = str(transistors)
-        if not text.isdigit():
-            raise ValueError(f"Yosys transistor estimate {text!r} is incomplete (a cell type has no CMOS cost)")
-        transistors = int(text)
-    return {"cells": int(design["num_cells"]), "flops": flops, "transistors": transistors,
-            "by_type": dict(by_type)}
-
-
-#: ABC gate sets tried for the transistor estimate (all have entries in Yosys's CMOS table).
-#: ABC is heuristic: the same logic can map a few percent larger or smaller, so the table
-#: reports the smallest result and the spread over these mappings.
-ABC_GATE_SETS = ("cmos2", "cmos3", "cmos4", "gates")
-
-
-def synthesize(verilog_text: str, top: str, yosys: str = "yosys") -> dict:
-    """Synthesize one module; return generic cells/flops and CMOS transistor estimates.
-
-    ``transistors`` is the smallest estimate over :data:`ABC_GATE_SETS`,
-    ``transistors_max`` the largest (their gap is the mapping noise).
-    """
-    with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / "design.v"
-        src.write_text(verilog_text)
-        steps = [f"read_verilog {src}", f"synth -top {top}", f"tee -q -o {tmp}/generic.json stat -json",
-                 "dfflegalize -cell $_DFF_P_ 01", "opt_clean", "design -save legal"]
-        for gates in ABC_GATE_SETS:
-            steps += ["design -load legal", f"abc -g {gates}", "opt_clean",
-                      f"tee -q -o {tmp}/{gates}.json stat -json -tech cmos"]
-        result = subprocess.run([yosys, "-q", "-p", "; ".join(steps)], capture_output=True, text=True)
-        if result.returncode != 0:
-            raise RuntimeError(f"yosys failed on {top}: {result.stderr.strip() or result.stdout[-2000:]}")
-        generic = parse_stat((Path(tmp) / "generic.json").read_text())
-        mapped = {g: parse_stat((Path(tmp) / f"{g}.json").read_text()) for g in ABC_GATE_SETS}
-    for gates, stat in mapped.items():
-        if stat["flops"] != generic["flops"]:
-            raise RuntimeError(f"{top}: flip-flop count changed in the {gates} mapping "
-                               f"({generic['flops']} -> {stat['flops']})")
-    estimates = [stat["transistors"] for stat in mapped.values()]
-    return {"cells": generic["cells"], "flops": generic["flops"],
-            "transistors": min(estimates), "transistors_max": max(estimates)}
-
-
 def state_bits(config: SensorConfig, word_register: bool = True) -> int:
     """Flip-flops the pixel's architecture needs: acc + counters (+ flag + CCC latch) (+ word)."""
     counters = config.b1 + 1 + config.b2 if config.is_te else config.ml_bits
@@ -182,12 +121,6 @@ def config_text(c: SensorConfig) -> str:
 
 def pct(a: float, b: float) -> str:
     return f"{100.0 * a / b:.0f}%"
-
-
-def span(stat: dict) -> str:
-    """Transistor estimate as 'min' or 'min-max' over the ABC mappings."""
-    lo, hi = stat["transistors"], stat["transistors_max"]
-    return f"{lo}" if lo == hi else f"{lo}-{hi}"
 
 
 def compare(te: dict, ml: dict) -> str:
@@ -253,7 +186,9 @@ def report(rows: list[tuple[str, dict, list[dict]]], yosys_version: str) -> str:
            "this estimate; the same logic written with fewer named intermediate signals once moved a "
            "full-pixel estimate by 9%. A TE/ML difference counts only when the ranges do not overlap. "
            "A rough static-CMOS figure, not a layout; real pixel counters often use ripple counters "
-           "and dynamic latches.",
+           "and dynamic latches. The flow is `cosim/synthesis.py` (shared with `tespike demo`); an "
+           "estimate Yosys marks incomplete (\"1574+\": a cell type without a CMOS cost) is refused, "
+           "never read as a number.",
            "- **timing block**: S_h divider, CCC and S_r strobe, one per array; "
            f"'per pixel' divides its smallest estimate by a {ARRAY_PIXELS}-pixel (128 x 128) array. "
            "TE also routes the b2-bit CCC bus to every pixel (wiring, not counted).",

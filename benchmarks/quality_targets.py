@@ -26,7 +26,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from golden.fastsim import simulate_scene  # noqa: E402
-from recon.evaluate import evaluate, label, table_markdown, tone_map, write_outputs, scored_frames  # noqa: E402
+from recon.pictures import tone_map  # noqa: E402
+from recon.evaluate import evaluate, label, table_markdown, write_outputs, scored_frames  # noqa: E402
 from recon.scenes.heldout import sequence_set  # noqa: E402
 
 TARGET_TFP_TE = 28.0

@@ -15,6 +15,8 @@ import sys
 
 from golden.errors import TespikeError
 
+from .console import progress_wanted, report  # noqa: F401  (what command modules print)
+
 #: sub-command -> module under cosim.commands
 COMMANDS = {
     "golden": "golden_cmd",
@@ -103,22 +105,6 @@ def _add_common_arguments(command: argparse.ArgumentParser) -> None:
     if "--progress" not in flags:
         command.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
                              help="progress bars on stderr: auto (only when stderr is a terminal), on, off")
-
-
-def progress_wanted(args) -> bool:
-    """Draw progress bars? ``--progress on``/``off``, else only when stderr is a terminal."""
-    choice = getattr(args, "progress", "auto")
-    if choice is True:                  # a command's own --progress switch
-        return True
-    if choice in ("on", "off"):
-        return choice == "on"
-    return sys.stderr.isatty()
-
-
-def report(args, message: str) -> None:
-    """The one line a command prints on stdout on success (silenced by ``--quiet``)."""
-    if not getattr(args, "quiet", False):
-        print(message, flush=True)
 
 
 def _raise_terminated(signum, frame):

@@ -48,6 +48,7 @@ from golden.errors import InputError
 from golden.io import check_stimulus, load_stimulus
 from golden.reference import step_reference
 
+from .compare import first_difference
 from .outside import RESET_CLOCKS, check_captures, pack_rows, top_module, unpack_rows, words_per_row
 
 #: Pixel clock period in simulator steps (its time precision, whatever the Verilog's timescale):
@@ -128,14 +129,6 @@ def default_stimulus(config: SensorConfig, rng: np.random.Generator, readouts: i
     return check_stimulus(stim, config)
 
 
-def first_difference(expected: np.ndarray, got: np.ndarray) -> str:
-    """Where two (K, H, W) word arrays first differ, in words."""
-    k, r, c = (int(i) for i in np.argwhere(expected != got)[0])
-    count = int((expected != got).sum())
-    return (f"{count} of {expected.size} words differ; first at readout {k}, pixel (row {r}, col {c}): "
-            f"RTL {int(got[k, r, c])}, golden {int(expected[k, r, c])}")
-
-
 def _as_int(value, what: str) -> int:
     """A sampled port value as an integer; an X or Z is an error naming the port and clock."""
     if not value.is_resolvable:
@@ -204,7 +197,7 @@ if _cocotb is not None:
         dut._log.info(f"{settings.config}: {settings.height} x {settings.width}, "
                       f"{expected.shape[0]} readouts, latency {run['latency']} clock(s)")
         if not np.array_equal(run["words"], expected):
-            raise AssertionError("RTL != golden model: " + first_difference(expected, run["words"]))
+            raise AssertionError("RTL != golden model: " + first_difference(run["words"], expected).text())
         summary = {"readouts": int(expected.shape[0]), "latency": run["latency"],
                    "distinct_words": int(len(np.unique(expected)))}
         dut._log.info("RTL == golden model " + json.dumps(summary))

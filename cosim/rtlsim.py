@@ -25,7 +25,6 @@ import contextlib
 import dataclasses
 import time
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
@@ -33,50 +32,12 @@ from golden.config import SensorConfig
 from golden.errors import ConfigError
 from golden.io import atomic_output, check_stimulus
 
-from .outside import pack_rows, unpack_rows, words_per_row
-
-#: Rising edges with reset high before pixel clock t = 0.
-RESET_CLOCKS = 2
-
-#: Clock period given to the simulator (1 MHz); only the waveform's time axis sees it.
-CLOCK_PERIOD_S = 1e-6
-
-#: Clock period in VCD time units (Amaranth writes a 1 fs timescale).
-CLOCK_PERIOD_FS = round(CLOCK_PERIOD_S * 1e15)
-
-#: Submodule name of the pixel array under the wrapper (VCD scope ``bench.top.array``).
-ARRAY_SCOPE = "array"
-
-#: Bytes of packed bits materialised at once while packing the stimulus.
-_PACK_CHUNK_BYTES = 1 << 22
-
+from .benchbus import (ARRAY_SCOPE, CLOCK_PERIOD_FS, CLOCK_PERIOD_S, RESET_CLOCKS,  # noqa: F401
+                       iter_packed_charge, unpack_frames)
+from .vcd import write_gtkw
 
 class RTLProtocolError(RuntimeError):
     """The RTL broke the output protocol of SPEC section 6 (a bug in rtl/, not bad input)."""
-
-
-# -- packing -----------------------------------------------------------------
-
-def iter_packed_charge(stimulus: np.ndarray, input_bits: int) -> Iterator[int]:
-    """Yield, per pixel clock, the ``charge`` bus as one integer.
-
-    Pixel (r, c) of clock t sits at bits ``[(r W + c) E +: E]``: the bus layout
-    of :func:`cosim.outside.pack_rows` (one implementation for every backend),
-    packed in chunks of clocks; only the final ``int.from_bytes`` is per clock.
-    """
-    T = stimulus.shape[0]
-    flat = stimulus.reshape(T, -1)
-    rows = max(1, _PACK_CHUNK_BYTES // max(1, flat.shape[1] * input_bits // 8 + 1))
-    for start in range(0, T, rows):
-        for row in pack_rows(flat[start:start + rows], input_bits):
-            yield int.from_bytes(row.tobytes(), "little")
-
-
-def unpack_frames(frames: list[int], n_pixels: int, word_bits: int) -> np.ndarray:
-    """Frame bus integers -> ``(K, n_pixels)`` int64 words (:func:`cosim.outside.unpack_rows`)."""
-    nbytes = 4 * words_per_row(n_pixels, word_bits)
-    raw = b"".join(f.to_bytes(nbytes, "little") for f in frames)
-    return unpack_rows(np.frombuffer(raw, "<u4").reshape(len(frames), nbytes // 4), n_pixels, word_bits)
 
 
 # -- the design under test ---------------------------------------------------
@@ -254,8 +215,6 @@ def _progress_bar(total: int, progress: bool | None):
 
 def _run_with_vcd(sim, config, shape, vcd_path, gtkw_path) -> None:
     """Run with a waveform; write VCD and GTKWave files atomically (nothing on failure)."""
-    from .vcd import write_gtkw
-
     with contextlib.ExitStack() as stack:
         vcd_tmp = stack.enter_context(atomic_output(vcd_path))
         gtkw_tmp = stack.enter_context(atomic_output(gtkw_path)) if gtkw_path is not None else None

@@ -27,11 +27,16 @@ import numpy as np
 from golden.config import SensorConfig
 from golden.errors import InputError
 
-from . import rtlsim
+from . import benchbus
+from .benchbus import BENCH_SCOPE
 
-#: VCD scope of the testbench wrapper and of the pixel array under it.
-BENCH_SCOPE = "bench.top"
-ARRAY_SCOPE = f"{BENCH_SCOPE}.{rtlsim.ARRAY_SCOPE}"
+#: Bytes of VCD per pixel per clock, a lower bound for checking the disk before a run: a VCD
+#: holds changes, so it depends on the light (measured on an 8 x 8 TE array: 2.8 with no
+#: light, 143 with random charge; 78 on the default demo's crop).
+VCD_BYTES_PER_PIXEL_CLOCK = 2
+
+#: VCD scope of the pixel array under the testbench wrapper.
+ARRAY_SCOPE = f"{BENCH_SCOPE}.{benchbus.ARRAY_SCOPE}"
 
 
 @dataclasses.dataclass
@@ -104,7 +109,7 @@ def waveform_stream(vcd_path, config: SensorConfig, shape: tuple[int, int]) -> W
     if bad:
         raise InputError(f"waveform {str(vcd_path)!r}: frame is undefined ({frame[bad[0]]!r}) "
                          f"at pixel clock {bad[0]} while frame_valid is high")
-    words = rtlsim.unpack_frames([int(frame[t], 2) for t in clocks], H * W, config.word_bits)
+    words = benchbus.unpack_frames([int(frame[t], 2) for t in clocks], H * W, config.word_bits)
     return Waveform(words.reshape(len(clocks), H, W), np.asarray(clocks, np.int64), len(edge_times))
 
 
@@ -174,7 +179,7 @@ def gtkw_view(vcd_path, config: SensorConfig, readout: int = 0) -> tuple[int, in
     names = [f"{BENCH_SCOPE}.tb_clk", f"{BENCH_SCOPE}.tb_rst"]
     vcd = _load(vcd_path, names)
     edges = rising_edges(_signal(vcd, vcd_path, names[0]))
-    period = int(np.median(np.diff(edges))) if len(edges) > 1 else rtlsim.CLOCK_PERIOD_FS
+    period = int(np.median(np.diff(edges))) if len(edges) > 1 else benchbus.CLOCK_PERIOD_FS
     rst = _sampler(_signal(vcd, vcd_path, names[1]), edges)
     low = [i for i, v in enumerate(rst) if v == "0"]
     first = int(edges[low[0]]) if low else 0

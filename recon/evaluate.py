@@ -45,8 +45,10 @@ import numpy as np
 
 from golden.config import SensorConfig
 from golden.errors import InputError
-from golden.io import atomic_output, check_scene
+from golden.io import check_scene
 from golden.resources import require_memory
+
+from .pictures import ERROR_RANGE, save_figure, tone_map, write_text
 
 #: Sensors evaluated by default: the paper's Table 1 columns (ML = the msb camera
 #: of its eq. 10 on the left, TE on the right), then the full-count ML camera.
@@ -55,12 +57,9 @@ MODES = ("ml-msb", "te", "ml")
 COLUMNS = ("ml-msb", "te")
 #: Names in tables and plots: the paper's names for its two cameras.
 NAMES = {"ml-msb": "ML", "te": "TE", "ml": "ML-count"}
-MU = 5000.0
 #: Memory of one sequence's work besides its words and images (reconstruction
 #: blocks, metric bands, torch), for the up-front check of :func:`evaluate`.
 WORKING_BYTES = 512 << 20
-#: Range of the error maps of the strips (absolute difference of mu-law images).
-ERROR_RANGE = 0.25
 
 #: Files :func:`write_outputs` writes into its folder (besides strips/<sequence>.png).
 OUTPUT_FILES = ("table.md", "table.csv", "results.csv", "quality_vs_time.png", "strips/")
@@ -82,12 +81,6 @@ def name(mode: str) -> str:
 def label(method: str, mode: str) -> str:
     """Paper-style name, e.g. ``TFP_TE``, ``TFI_ML`` (msb camera), ``TFP_ML-count``."""
     return f"{method.upper()}_{name(mode)}"
-
-
-def tone_map(light: np.ndarray, peak: float, mu: float = MU) -> np.ndarray:
-    """Divide by the ground truth's peak, clip to [0, 1], mu-law (paper eq. 11); float64."""
-    h = np.clip(np.asarray(light, np.float64) / peak, 0.0, 1.0)
-    return np.log1p(mu * h) / math.log1p(mu)
 
 
 def scored_frames(frames: int, window: int) -> slice:
@@ -323,18 +316,6 @@ def results_csv(evaluation: Evaluation) -> str:
     return buffer.getvalue()
 
 
-def write_text(path: str | Path, text: str) -> None:
-    with atomic_output(path) as tmp:
-        Path(tmp).write_text(text, encoding="utf-8")
-
-
-def _save_figure(fig, path: str | Path) -> None:
-    import matplotlib.pyplot as plt
-    with atomic_output(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=100)
-    plt.close(fig)
-
-
 def plot_quality_vs_time(evaluation: Evaluation, path: str | Path) -> None:
     """PNG: PSNR-mu and SSIM-mu against run time per frame, every method and mode."""
     import matplotlib
@@ -363,7 +344,7 @@ def plot_quality_vs_time(evaluation: Evaluation, path: str | Path) -> None:
                  f"run time: median of {evaluation.repeats} runs, {evaluation.threads} torch "
                  f"thread{'s' if evaluation.threads != 1 else ''}", fontsize=10)
     fig.tight_layout()
-    _save_figure(fig, path)
+    save_figure(fig, path)
 
 
 def plot_strip(evaluation: Evaluation, sequence: str, path: str | Path) -> None:
@@ -409,7 +390,7 @@ def plot_strip(evaluation: Evaluation, sequence: str, path: str | Path) -> None:
             bar = fig.colorbar(error_image, cax=holder.inset_axes([0.42, 0.05, 0.12, 0.9]))
             bar.ax.tick_params(labelsize=7)
             bar.set_label("|error|", fontsize=7)
-    _save_figure(fig, path)
+    save_figure(fig, path)
 
 
 def safe_name(name: str) -> str:

@@ -69,12 +69,10 @@ def golden_words(config: SensorConfig, stimulus: np.ndarray) -> np.ndarray:
 
 
 def first_difference(expected: np.ndarray, got: np.ndarray) -> str:
+    from cosim.compare import first_difference as first
     if expected.shape != got.shape:
         return f"shape {got.shape} != golden {expected.shape}"
-    k, r, c = np.argwhere(expected != got)[0]
-    count = int((expected != got).sum())
-    return (f"{count} words differ; first: readout {k} pixel ({r}, {c}) RTL word {got[k, r, c]} "
-            f"!= golden {expected[k, r, c]}")
+    return first(got, expected).text()
 
 
 def assert_rtl_matches_golden(config: SensorConfig, stimulus: np.ndarray, name: str, **kwargs) -> np.ndarray:

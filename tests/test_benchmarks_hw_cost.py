@@ -1,4 +1,4 @@
-"""Cheap checks of benchmarks/hw_cost.py: the Yosys report parser and one real synthesis."""
+"""Cheap checks of benchmarks/hw_cost.py and cosim/synthesis.py: the Yosys report parser and one real synthesis."""
 
 import importlib.util
 import json
@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from cosim.synthesis import parse_stat
 from golden.config import SensorConfig
 
 spec = importlib.util.spec_from_file_location(
@@ -28,7 +29,7 @@ REPORT = {
 
 
 def test_parse_stat_reads_yosys_json():
-    stat = hw_cost.parse_stat(json.dumps(REPORT))
+    stat = parse_stat(json.dumps(REPORT))
     assert (stat["cells"], stat["flops"], stat["transistors"]) == (254, 23, 1306)
 
 
@@ -37,9 +38,9 @@ def test_parse_stat_counts_all_flip_flop_kinds_and_refuses_incomplete_estimate()
     report["design"]["num_cells_by_type"] = {"$_SDFF_PP0_": 18, "$_SDFFE_PP0P_": 5, "$_XOR_": 37}
     report["design"]["estimated_num_transistors"] = "1574+"
     with pytest.raises(ValueError, match="incomplete"):
-        hw_cost.parse_stat(json.dumps(report))
+        parse_stat(json.dumps(report))
     del report["design"]["estimated_num_transistors"]
-    assert hw_cost.parse_stat(json.dumps(report))["flops"] == 23
+    assert parse_stat(json.dumps(report))["flops"] == 23
 
 
 def test_dynamic_range_matches_spec_section_5():

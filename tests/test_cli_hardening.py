@@ -6,6 +6,7 @@ devices, FIFOs, symlinks, hard links, directories, an output equal to an input;
 signals; stale temporaries; corrupt and hostile files; argument errors.
 """
 
+import contextlib
 import json
 import os
 import signal
@@ -253,20 +254,27 @@ def test_full_disk_names_the_users_path(tmp_path, monkeypatch):
     assert os.listdir(tmp_path) == []
 
 
-def test_small_tmpfs_full_disk(tmp_path, files):
-    mount = tmp_path / "small"
-    mount.mkdir()
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16k", "tmpfs", str(mount)], capture_output=True)
+@contextlib.contextmanager
+def small_tmpfs(folder, size):
+    """A tmpfs of ``size`` mounted at ``folder`` (skips the test where mounting is not permitted)."""
+    folder.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)],
+                          capture_output=True)
     if done.returncode != 0:
         pytest.skip("cannot mount a tmpfs here")
     try:
+        yield folder
+    finally:
+        subprocess.run(["umount", str(folder)], check=True)
+
+
+def test_small_tmpfs_full_disk(tmp_path, files):
+    with small_tmpfs(tmp_path / "small", "16k") as mount:
         np.save(files / "big.npy", np.zeros((TINY.clocks_per_readout * 20000, 2, 2), np.uint8))
         result = run_tespike(*golden_args(files, mount / "s.npz", stimulus=files / "big.npy"))
         assert_refused(result, str(mount / "s.npz"))
         assert ".part" not in result.stderr
         assert os.listdir(mount) == []
-    finally:
-        subprocess.run(["umount", str(mount)], check=True)
 
 
 # ------------------------------------------------------------------ bad inputs: one line each
@@ -508,3 +516,144 @@ def test_reconstruct_streams_words_and_images_through_memory_maps(files):
     assert run_tespike("reconstruct", "--stream", files / "s.npz", "--method", "tfi",
                        "--out", files / "r.npy").returncode == 0
     assert np.array_equal(np.load(files / "r.npy"), reconstruct(np.array(words), config, "tfi"))
+
+
+# ------------------------------------------------------------------ issue 20: defaults, room, full disks
+def run_in_process(capsys, *args):
+    from cosim.cli import main
+    code = main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_demo_defaults_follow_the_flags_they_depend_on(tmp_path):
+    """--frames 12 alone is a valid demo (--rtl-readouts follows it); an explicit conflict is refused."""
+    from cosim.demo import check_options
+    common = dict(seed=0, backend="amaranth", repeats=1, window=9, sensors=("te",))
+    assert check_options(tmp_path / "d", frames=12, height=96, width=128, crop=None, rtl_readouts=None,
+                         **common) == (16, 12)
+    assert check_options(tmp_path / "d", frames=40, height=12, width=128, crop=None, rtl_readouts=None,
+                         **common) == (12, 16)
+    with pytest.raises(InputError, match="--height 10"):
+        check_options(tmp_path / "d", frames=4, height=10, width=128, crop=None, rtl_readouts=None, **common)
+    result = run_tespike("demo", "--frames", 12, "--rtl-readouts", 13, "--out", tmp_path / "d")
+    assert_refused(result, "--rtl-readouts 13", "12 frames")
+    assert result.stdout == "" and os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("args, words", [
+    (("--frames", 10000000), ["--frames 10000000", "limit"]),
+    (("--repeats", 10 ** 9), ["--repeats"]),
+    (("--out", "missing/d"), ["does not exist"]),
+])
+def test_demo_refuses_what_cannot_run_before_any_work(tmp_path, args, words):
+    os.chdir(tmp_path)
+    result = run_tespike("demo", *args)
+    assert_refused(result, *words)
+    assert result.stdout == "" and os.listdir(tmp_path) == []
+
+
+def test_demo_refuses_up_front_when_memory_or_disk_is_short(tmp_path, capsys, monkeypatch):
+    import shutil as shutil_module
+
+    from golden import resources
+    monkeypatch.setattr(resources, "available_memory", lambda: 1 << 20)
+    code, out, err = run_in_process(capsys, "demo", "--frames", 4, "--out", tmp_path / "d")
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
+    assert "needs about" in err and "of memory" in err and not (tmp_path / "d").exists()
+    monkeypatch.setattr(resources, "available_memory", lambda: None)
+    usage = shutil_module.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil_module, "disk_usage", lambda path: usage._replace(free=1000))
+    code, out, err = run_in_process(capsys, "demo", "--frames", 4, "--out", tmp_path / "d")
+    assert code == 2 and out == "" and "but only 1000 B is free on its file system" in err
+    assert not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize("command", ["simulate", "golden", "stimulus", "reconstruct", "rtl-sim", "scene"])
+def test_commands_refuse_outputs_the_disk_cannot_hold(files, capsys, monkeypatch, command):
+    import shutil as shutil_module
+    usage = shutil_module.disk_usage(files)
+    monkeypatch.setattr(shutil_module, "disk_usage", lambda path: usage._replace(free=10))
+    args = {"simulate": ("--config", files / "c.json", "--scene", files / "i.npy"),
+            "golden": ("--config", files / "c.json", "--stimulus", files / "e.npy"),
+            "stimulus": ("--config", files / "c.json", "--scene", files / "i.npy"),
+            "reconstruct": ("--stream", files / "s.npz", "--method", "tfp"),
+            "rtl-sim": ("--config", files / "c.json", "--stimulus", files / "e.npy"),
+            "scene": ("--name", "default", "--frames", 2, "--height", 12, "--width", 16)}[command]
+    before = snapshot(files)
+    code, out, err = run_in_process(capsys, command, *args, "--out", files / "o.npy")
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1, err
+    assert "but only 10 B is free on its file system" in err and "o.npy" in err
+    assert snapshot(files) == before
+
+
+def test_memory_mapped_output_on_a_full_disk_is_one_line_and_leaves_nothing(files, capsys, monkeypatch):
+    """The reservation fails (ENOSPC) before any write through the map (which would die of SIGBUS)."""
+    import errno
+
+    from cosim import room
+
+    def full(fd, offset, length):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    monkeypatch.setattr(os, "posix_fallocate", full)
+    monkeypatch.setattr(room, "require_disk", lambda *args, **kwargs: None)     # past the estimate
+    before = snapshot(files)
+    for args in (("reconstruct", "--stream", files / "s.npz", "--method", "tfi"),
+                 ("stimulus", "--config", files / "c.json", "--scene", files / "i.npy")):
+        code, out, err = run_in_process(capsys, *args, "--out", files / "o.npy")
+        assert code == 2 and out == "" and err.strip().splitlines() == [
+            f"tespike {args[0]}: error: cannot write {str(files / 'o.npy')!r}: No space left on device"]
+        assert snapshot(files) == before
+
+
+def test_reconstruct_into_a_small_tmpfs(files, capsys, monkeypatch):
+    """A real full file system: the up-front check refuses, and past it (the output's old copy
+    takes the room) the reservation does; never SIGBUS, never a .part left."""
+    with small_tmpfs(files / "small", "1M") as mount:
+        light = np.random.default_rng(1).uniform(0, 1, (20, 96, 128)).astype(np.float32)
+        np.save(files / "big.npy", light)
+        assert run_tespike("simulate", "--config", "te", "--scene", files / "big.npy", "--out",
+                           files / "big.npz").returncode == 0
+        (mount / "filler").write_bytes(b"\0" * (600 << 10))
+        result = run_tespike("reconstruct", "--stream", files / "big.npz", "--method", "tfp",
+                             "--out", mount / "r.npy")
+        assert_refused(result, str(mount / "r.npy"), "is free on its file system")
+        assert sorted(os.listdir(mount)) == ["filler"]
+        from cosim import room          # past the estimate: the reservation refuses (no SIGBUS)
+        monkeypatch.setattr(room, "require_disk", lambda *args, **kwargs: None)
+        code, out, err = run_in_process(capsys, "reconstruct", "--stream", files / "big.npz", "--method",
+                                        "tfp", "--out", mount / "r.npy")
+        assert code == 2 and out == "" and err.strip().splitlines() == [
+            f"tespike reconstruct: error: cannot write {str(mount / 'r.npy')!r}: No space left on device"]
+        assert sorted(os.listdir(mount)) == ["filler"]
+
+
+def test_stimulus_never_overwrites_its_scene(files):
+    refused_without_change(files, ("stimulus", "--config", files / "c.json", "--scene", files / "i.npy",
+                                   "--out", files / "i.npy"), "--scene", "same file")
+
+
+def test_generated_arrays_and_their_stimuli_are_bounded_up_front(files):
+    refused_without_change(files, ("cocotb", "--config", "te", "--height", 100000, "--width", 100000),
+                           "at most 65536")
+    refused_without_change(files, ("cocotb", "--config", "te", "--height", 2, "--width", 2,
+                                   "--readouts", 10 ** 12), "of memory")
+    refused_without_change(files, ("view", "--input", "/dev/zero", "--out", files / "v.png"),
+                           "character device")
+
+
+def test_synth_checks_its_options_before_printing_or_creating_the_store(files):
+    for args, word in ((("--chunk-frames", 0), "--chunk-frames"), (("--frames", 10 ** 8), "limit"),
+                       (("--seed", -1), "--seed")):
+        result = refused_without_change(files, ("synth", "--config", "te", "--scene", "default",
+                                                "--out", files / "store", *args), word)
+        assert result.stdout == ""
+    refused_without_change(files, ("synth", "--config", "te", "--scene", "default", "--frames", 2,
+                                   "--out", files / "c.json"), "not a directory")
+
+
+def test_train_refuses_before_making_its_run_folder(files):
+    common = ("train", "--config", "te", "--out", files / "w.pt", "--steps", 1)
+    refused_without_change(files, (*common, "--crop", 100000), "--crop 100000", "training sequences")
+    refused_without_change(files, (*common, "--cache", files / "c.json"), "--cache", "not a directory")
+    refused_without_change(files, (*common, "--sequences", 10 ** 8), "of memory")

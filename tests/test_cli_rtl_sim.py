@@ -184,9 +184,9 @@ def test_rtl_sim_refuses_a_backend_result_of_the_wrong_shape(monkeypatch, capsys
 
 
 def test_rtl_sim_names_a_missing_backend_module(monkeypatch, capsys, tmp_path, rng):
-    from cosim.commands import rtl_sim_cmd
+    from cosim import backends
     _inputs(tmp_path, rng)
-    monkeypatch.setitem(rtl_sim_cmd.BACKENDS, "verilator", ("cosim._no_such_backend", "run_verilator"))
+    monkeypatch.setitem(backends.VERILOG_BACKENDS, "verilator", ("cosim._no_such_backend", "run_verilator"))
     code, err = _main(capsys, tmp_path, "--backend", "verilator")
     assert code != 0 and len(err.strip().splitlines()) == 1
     assert "'verilator' is not available" in err and "cosim._no_such_backend" in err
@@ -206,7 +206,7 @@ def test_rtl_sim_check_names_the_first_difference(monkeypatch, capsys, tmp_path,
     wrong[1, 1, 2] = 1 if wrong[1, 1, 2] == 0 else 0     # still a legal word, not the golden one
     monkeypatch.setitem(sys.modules, "cosim.icarus", types.SimpleNamespace(run_icarus=lambda c, s, **k: wrong))
     code, err = _main(capsys, tmp_path, "--backend", "icarus", "--check")
-    assert code == 1 and "1 words differ, first at readout 1 pixel (1, 2)" in err
+    assert code == 1 and "1 of 18 words differ; first at readout 1, pixel (1, 2)" in err
     with np.load(tmp_path / "s.npz") as npz:
         assert np.array_equal(npz["words"], wrong)
 

@@ -12,7 +12,8 @@ import shutil
 import numpy as np
 import pytest
 
-from cosim.cocotb_bench import Settings, default_stimulus, first_difference
+from cosim.cocotb_bench import Settings, default_stimulus
+from cosim.compare import first_difference
 from cosim.cocotb_run import run_cocotb
 from golden.config import SensorConfig
 from golden.reference import step_reference
@@ -89,8 +90,9 @@ def test_first_difference_names_readout_and_pixel():
     expected = np.zeros((2, 2, 3), np.int64)
     got = expected.copy()
     got[1, 0, 2] = 5
-    assert first_difference(expected, got) == ("1 of 12 words differ; first at readout 1, "
-                                                "pixel (row 0, col 2): RTL 5, golden 0")
+    assert first_difference(got, expected).text() == ("1 of 12 words differ; first at readout 1, "
+                                                      "pixel (0, 2): RTL word 5, golden word 0")
+    assert first_difference(expected, expected) is None
 
 
 @pytest.mark.skipif(not (HAVE["icarus"] and HAVE["verilator"]), reason="needs Icarus and Verilator")

@@ -35,6 +35,15 @@ def run(args) -> int:
 
     config = load_config(args.config)
     check_array_size(args.height, args.width)
+    from .verilog_cmd import MAX_PIXELS           # the array cocotb tests is tespike verilog's
+    if args.height * args.width > MAX_PIXELS:
+        raise InputError(f"--height {args.height} x --width {args.width}: the array is tespike verilog's, "
+                         f"at most {MAX_PIXELS} pixels")
+    if args.stimulus is None:           # the default stimulus, int64 electrons per pixel clock
+        from cosim.room import require_room
+        clocks = args.readouts * config.clocks_per_readout
+        require_room(f"the stimulus of {clocks} clocks of {args.height} x {args.width} pixels",
+                     memory=8 * clocks * args.height * args.width)
     if args.readouts < 1:
         raise InputError(f"--readouts {args.readouts}: must be >= 1")
     settings = Settings(config, args.height, args.width, args.readouts, args.seed, args.stimulus)

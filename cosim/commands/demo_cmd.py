@@ -7,21 +7,25 @@ stream and on the RTL's own -> pictures and report.md. Exit 1 when the RTL and
 the golden model differ (after writing everything).
 """
 
+from cosim.backends import NAMES as BACKEND_NAMES
+
 HELP = ("circuit to image on the built-in HDR scene: golden model, RTL on a crop (VCD, bit-exact "
         "check), reconstruction, pictures and report.md")
 
 
 def add_arguments(parser):
     parser.add_argument("--out", default="demo", help="output folder (default ./demo)")
-    parser.add_argument("--backend", choices=("amaranth", "verilator", "icarus"), default="amaranth",
+    parser.add_argument("--backend", choices=BACKEND_NAMES, default=BACKEND_NAMES[0],
                         help="RTL simulator of the crop (default amaranth: no build step, writes the VCD)")
     parser.add_argument("--frames", type=int, default=32, help="readout intervals (default 32)")
     parser.add_argument("--height", type=int, default=96, help="rows (default 96)")
     parser.add_argument("--width", type=int, default=128, help="columns (default 128)")
-    parser.add_argument("--crop", type=int, default=16, help="RTL crop size in pixels, square (default 16)")
-    parser.add_argument("--rtl-readouts", type=int, default=16, help="readouts the RTL runs (default 16)")
+    parser.add_argument("--crop", type=int, default=None,
+                        help="RTL crop size in pixels, square (default 16, or the frame's shorter side if smaller)")
+    parser.add_argument("--rtl-readouts", type=int, default=None,
+                        help="readouts the RTL runs (default 16, or --frames if fewer)")
     parser.add_argument("--seed", type=int, default=0, help="scene and shot-noise seed (default 0)")
-    parser.add_argument("--repeats", type=int, default=3, help="timed runs per method, median (default 3)")
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs per method, median, 1..100 (default 3)")
     parser.add_argument("--sensors", default="ml-msb,te,ml",
                         help="golden sensors: comma list of ml-msb, te, ml (default all; te is the RTL's)")
     parser.add_argument("--no-hw-cost", action="store_true", help="skip the Yosys hardware cost table")
@@ -29,7 +33,7 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from cosim.cli import progress_wanted
+    from cosim.console import progress_wanted
     from cosim.demo import run_demo
     return run_demo(args.out, frames=args.frames, height=args.height, width=args.width, seed=args.seed,
                     crop=args.crop, rtl_readouts=args.rtl_readouts, backend=args.backend,

@@ -46,7 +46,7 @@ def add_arguments(parser):
 def run(args) -> int:
     from pathlib import Path
 
-    from cosim.cli import progress_wanted
+    from cosim.console import progress_wanted
     from golden.config import load_config
     from golden.errors import ConfigError, InputError
     from golden.fastsim import simulate_scene

@@ -30,11 +30,12 @@ def run(args) -> int:
 
     import sys
 
-    from cosim.cli import report
+    from cosim.console import report
     from golden.config import load_config
     from golden.errors import InputError
     from golden.io import load_stimulus, save_stream, word_dtype
     from golden.paths import check_outputs
+    from cosim.room import require_room
     from golden.sensor import DEFAULT_CHUNK_ELEMENTS, PixelArray, iter_chunks
 
     check_outputs({"--out": args.out}, {"--stimulus": args.stimulus, "--config": args.config})
@@ -45,6 +46,10 @@ def run(args) -> int:
     stimulus = load_stimulus(args.stimulus, config)
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
+    size = (T // L) * H * W * word_dtype(config).itemsize      # the words, in memory and in S.npz
+    chunk = min(T, max(1, chunk_elements // max(1, H * W * L)) * L) * H * W * stimulus.itemsize
+    require_room(f"the stream of {T // L} readouts of {H} x {W} words", memory=size + chunk,
+                 disk={args.out: size})     # one chunk of the stimulus is read into memory at a time
     words = np.empty((T // L, H, W), word_dtype(config))
     chunks = iter_chunks(stimulus, config, chunk_elements)
     clocks_per_chunk = max(1, chunk_elements // max(1, H * W * L)) * L

@@ -24,10 +24,11 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from cosim.cli import progress_wanted, report
+    from cosim.console import progress_wanted, report
     from golden.errors import InputError
     from golden.io import atomic_output, load_stream
     from golden.paths import check_outputs
+    from cosim.room import require_room, reserved_memmap
 
     # every check that needs no torch comes first, so a refusal is quick
     if args.method not in METHOD_CHOICES:
@@ -44,6 +45,8 @@ def run(args) -> int:
         raise InputError(f"--search applies to method 'tfi' only, not {args.method!r}")
     check_outputs({"--out": args.out}, {"--stream": args.stream})
     words, config = load_stream(args.stream, memory_map=True)     # stays on disk
+    K, H, W = words.shape
+    require_room(f"the {K} images of {H} x {W} pixels", disk={args.out: 4 * K * H * W})
     if args.method == "net":
         from recon.net.infer import load_weights, weights_path
         load_weights(weights_path(config))      # refuse a configuration without weights before writing
@@ -56,11 +59,10 @@ def run(args) -> int:
         torch.set_num_threads(args.threads)
     options = {"search": args.search} if args.method == "tfi" else {}
     import numpy as np
-    K, H, W = words.shape
     with atomic_output(args.out, "--out") as tmp:
-        # R.npy is filled block by block through a memory map of the output file,
-        # so neither the words nor the images need to fit in memory
-        images = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(K, H, W))
+        # R.npy is filled block by block through a memory map of the output file (its blocks
+        # reserved first), so neither the words nor the images need to fit in memory
+        images = reserved_memmap(tmp, np.float32, (K, H, W))
         reconstruct(words, config, args.method, window=window, device=args.device,
                     progress=progress_wanted(args), out=images, **options)
         images.flush()

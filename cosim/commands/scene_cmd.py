@@ -30,10 +30,11 @@ def run(args) -> int:
 
     import numpy as np
 
-    from cosim.cli import progress_wanted, report
+    from cosim.console import progress_wanted, report
     from golden.errors import InputError
     from golden.io import atomic_output
     from golden.paths import check_outputs
+    from cosim.room import require_room
     from recon.scenes import SCENES, load_hdr_sequence, make_scene
 
     if args.list:
@@ -66,6 +67,9 @@ def run(args) -> int:
     else:
         if args.sources is not None and args.sources < 0:
             raise InputError(f"--sources = {args.sources} must be >= 0")
+        values = args.frames * args.height * args.width
+        require_room(f"the scene of {args.frames} x {args.height} x {args.width} values", memory=8 * values,
+                     disk={args.out: 4 * values})     # float32 light, and the generator's own copy
         light = make_scene(args.name, args.frames, args.height, args.width, seed=args.seed,
                            peak=args.peak, motion=args.motion, sources=args.sources)
     with atomic_output(args.out) as tmp:

@@ -17,11 +17,12 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from cosim.cli import progress_wanted, report
+    from cosim.console import progress_wanted, report
     from golden.config import load_config
     from golden.errors import InputError
     from golden.fastsim import simulate_scene
-    from golden.io import load_scene, save_stream
+    from golden.io import load_scene, save_stream, word_dtype
+    from cosim.room import require_room
     from golden.paths import check_outputs
 
     check_workers_argument(args.workers)                # before the scene is read and scanned
@@ -30,6 +31,9 @@ def run(args) -> int:
     scene = load_scene(args.scene, memory_map=True)     # read one readout at a time
     if args.seed is not None and args.seed < 0:
         raise InputError(f"--seed {args.seed}: must be >= 0")
+    K, H, W = scene.shape
+    size = K * H * W * word_dtype(config).itemsize          # the words, in memory and in S.npz
+    require_room(f"the stream of {K} readouts of {H} x {W} words", memory=size, disk={args.out: size})
     words = simulate_scene(config, scene, seed=args.seed, dark_current=args.dark_current,
                            noise=not args.no_noise, method=args.method,
                            progress=progress_wanted(args), workers=args.workers)

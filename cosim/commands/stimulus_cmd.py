@@ -42,14 +42,15 @@ def run(args) -> int:
     import itertools
     import sys
 
-    import numpy as np
-
     from golden.config import load_config
     from golden.errors import InputError
     from golden.fastsim import iter_scene_stimulus
     from golden.io import atomic_output, load_scene
     from golden.light import stimulus_dtype
+    from cosim.room import require_room, reserved_memmap
 
+    from golden.paths import check_outputs
+    check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config})
     config = load_config(args.config)
     if args.seed is not None and args.seed < 0:
         raise InputError(f"--seed {args.seed}: must be >= 0")
@@ -86,8 +87,9 @@ def run(args) -> int:
     if sys.stderr.isatty() and K > 1:
         from tqdm import tqdm
         stream = tqdm(stream, total=K, desc="stimulus", unit="readout", delay=2.0, leave=False)
+    require_room(f"the stimulus of {K * L} x {H} x {W} {dtype} values", disk={args.out: size})
     with atomic_output(args.out) as tmp:
-        out = np.lib.format.open_memmap(tmp, mode="w+", dtype=dtype, shape=(K * L, H, W))
+        out = reserved_memmap(tmp, dtype, (K * L, H, W))
         try:
             for k, electrons in enumerate(stream):
                 out[k * L:(k + 1) * L] = electrons[:, rows, cols]

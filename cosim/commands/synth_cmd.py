@@ -65,6 +65,13 @@ def run(args) -> int:
         raise InputError("--config is required (te, ml, ml-msb or a JSON file; repeatable)")
     if args.frames is not None and args.frames < 1:
         raise InputError(f"--frames {args.frames} must be >= 1")
+    if args.chunk_frames < 1:
+        raise InputError(f"--chunk-frames {args.chunk_frames} must be an integer >= 1")
+    if args.seed < 0:
+        raise InputError(f"--seed {args.seed!r} must be an integer >= 0")
+    if "://" not in args.out:          # a local store: its folder can be checked before any work
+        from golden.paths import check_output_dir
+        check_output_dir(args.out, "--out")
     configs = sensor_configs(args.config)
     sources = []
     for folder in args.hdr:

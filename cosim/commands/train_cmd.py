@@ -42,7 +42,7 @@ def run(args) -> int:
     from pathlib import Path
 
     from golden.config import PRESETS, load_config
-    from cosim.cli import progress_wanted, report
+    from cosim.console import progress_wanted, report
     from golden.errors import InputError
     from golden.paths import check_output_dir, check_outputs
 

@@ -5,7 +5,7 @@ Input by content: ``S.npz`` (a stream: words decoded to light per readout with
 reconstruction ``R.npy``: light, 1.0 = design light), an integer ``.npy`` (a
 stimulus ``E.npy``: electrons per readout interval, summed over its L clocks
 with ``--config``, shown in design-light units). Tone mapping is the project's
-(:func:`recon.evaluate.tone_map`): divide by the peak (default: the largest
+(:func:`recon.pictures.tone_map`): divide by the peak (default: the largest
 value of the frames shown; give ``--peak`` to compare files on one scale),
 clip to [0, 1], mu-law with mu = 5000. Writes a contact sheet (one PNG, frame
 numbers as titles) or, with ``--each``, one grayscale PNG per frame at the
@@ -45,9 +45,8 @@ def load_light(path, config_spec=None, estimator="ratio"):
     from golden.errors import InputError
     from golden.io import load_scene, load_stimulus, load_stream
 
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"--input {str(path)!r} does not exist")
+    from golden.paths import check_input_file
+    path = check_input_file(path, "--input")        # exists, and is a regular file
     if path.suffix == ".npz":
         words, config = load_stream(path)
         return decode_light(words, config, estimator).astype(np.float64), f"stream ({config}), decoded"
@@ -105,8 +104,6 @@ def run(args) -> int:
     import math
     from pathlib import Path
 
-    import numpy as np
-
     from golden.errors import InputError
     from golden.io import atomic_output
 
@@ -131,7 +128,7 @@ def run(args) -> int:
     if peak <= 0:
         raise InputError(f"--input {args.input!r}: every frame shown is 0 (give --peak to map it anyway)")
 
-    from recon.evaluate import tone_map
+    from recon.pictures import save_figure, tone_map
     mapped = tone_map(shown, peak, args.mu)
 
     import matplotlib
@@ -160,9 +157,7 @@ def run(args) -> int:
     fig.suptitle(f"{Path(args.input).name}: {what}; mu-law (mu = {args.mu:g}) of light / {peak:.4g}",
                  fontsize=8)
     fig.tight_layout()
-    with atomic_output(out) as tmp:
-        fig.savefig(tmp, format="png", dpi=100)
-    plt.close(fig)
+    save_figure(fig, out)
     if not args.quiet:
         print(f"wrote {out}: {len(frames)} frame(s) of {Path(args.input).name} ({what})")
     return 0

@@ -94,7 +94,7 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
 
 def scene_sources(names: Sequence[str], frames: int, height: int, width: int) -> list[Source]:
     """Built-in scenes (public seed 0, peak 1), each named after its scene."""
-    from recon.scenes import SCENES
+    from recon.scenes import MAX_VOXELS, SCENES
 
     out = []
     for name in names:
@@ -103,6 +103,9 @@ def scene_sources(names: Sequence[str], frames: int, height: int, width: int) ->
         for key, value in (("frames", frames), ("height", height), ("width", width)):
             if value < 1:
                 raise InputError(f"--{key} {value} must be >= 1")
+        if frames * height * width > MAX_VOXELS:
+            raise InputError(f"scene {name!r} of {frames} x {height} x {width} = {frames * height * width} "
+                             f"values exceeds the limit of {MAX_VOXELS}")
         out.append(Source(name, (frames, height, width), f"scene:{name} seed 0",
                           scene=(name, frames, height, width)))
     return out

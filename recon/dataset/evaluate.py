@@ -214,7 +214,8 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
 
 def write_store_outputs(evaluation, out: str | Path) -> dict[str, Path]:
     """table.md, table.csv, results.csv and strips/<sequence>.png (no timing plot: see the module)."""
-    from recon.evaluate import plot_strip, results_csv, safe_name, table_csv, table_markdown, write_text
+    from recon.pictures import write_text
+    from recon.evaluate import plot_strip, results_csv, safe_name, table_csv, table_markdown
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
