@@ -10,6 +10,9 @@ Negative estimated light is scored (every metric treats it as no light) with a
 warning on stderr.
 """
 
+#: Values of the estimate checked at once (float64: 32 MB).
+CHECK_VALUES = 1 << 22
+
 HELP = "score a reconstruction R.npy against its reference I.npy: PSNR-mu, SSIM-mu, PU21-PSNR, HDR-VQM, FovVideoVDP"
 
 
@@ -85,16 +88,23 @@ def run(args) -> int:
     if estimate.shape != reference.shape:
         raise InputError(f"estimate shape {estimate.shape} != reference shape {reference.shape}")
     frames = frame_range(args.frames, reference.shape[0])
-    ref = np.asarray(reference[frames.start:frames.stop], dtype=np.float64)
-    est = np.asarray(estimate[frames.start:frames.stop], dtype=np.float64)
-    if not np.isfinite(est).all():
-        raise InputError(f"estimate holds a non-finite value ({est[~np.isfinite(est)][0]}); light must be finite")
-    if not ref.max() > 0:
+    ref = reference[frames.start:frames.stop]          # memory maps: the metrics read them in bands
+    est = estimate[frames.start:frames.stop]
+    negative, lowest, peak = 0, 0.0, 0.0
+    step = max(1, CHECK_VALUES // max(1, ref[0].size))
+    for k in range(0, len(frames), step):
+        e = np.asarray(est[k:k + step], dtype=np.float64)
+        if not np.isfinite(e).all():
+            raise InputError(f"estimate holds a non-finite value ({e[~np.isfinite(e)][0]}); "
+                             "light must be finite")
+        negative += int((e < 0).sum())
+        lowest = min(lowest, float(e.min()))
+        peak = max(peak, float(np.max(ref[k:k + step])))
+    if not peak > 0:
         raise InputError(f"the reference is all zero in frames {frames.start}:{frames.stop}: "
                          "it has no peak to normalise by")
-    negative = int((est < 0).sum())
     if negative:
-        warnings.warn(f"estimate holds {negative} negative light values (lowest {float(est.min()):g}); "
+        warnings.warn(f"estimate holds {negative} negative light values (lowest {lowest:g}); "
                       "every metric scores them as no light", stacklevel=1)
     result = score(est, ref, metrics=metrics)
     keys = [c.key for c in result.columns]
