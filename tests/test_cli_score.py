@@ -140,3 +140,13 @@ def test_refusals(tmp_path, rng):
     for spec in ("3:3", "0:5", "x", "1:2:3", "-1:2"):
         refused("--frames", extra=("--frames", spec))
     refused("metrics", extra=("--metrics", "psnr_mu,hdr_vdp3"))
+
+
+def test_big_endian_and_fortran_files_score_like_native(tmp_path, capsys, rng):
+    reference = rng.uniform(0.01, 1.0, (2, 16, 20))
+    estimate = reference * rng.lognormal(0, 0.1, reference.shape)
+    native = score_json(capsys, *write_pair(tmp_path, estimate, reference))[0]
+    other = score_json(capsys, *write_pair(tmp_path, np.asfortranarray(estimate.astype(">f4")),
+                                           reference.astype(">f8"), names=("Rb.npy", "Ib.npy")))[0]
+    for key in native["per_frame"]:
+        assert np.allclose(other["per_frame"][key], native["per_frame"][key], rtol=1e-5), key
