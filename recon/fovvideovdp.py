@@ -24,9 +24,12 @@ import numpy as np
 import torch
 
 from golden.errors import InputError
+from golden.resources import require_memory
 from recon.display import DEFAULT_DISPLAY, HdrDisplay
 from recon.metrics import _frame_peaks, _frames, _shape
 
+#: Memory per pixel of one frame pyfvvdp judges (measured: about 220 bytes at 2048 x 2048).
+BYTES_PER_PIXEL = 256
 #: pyfvvdp's display whose geometry is used (its photometry is replaced by the project's display).
 GEOMETRY_DISPLAY = "standard_hdr_linear"
 
@@ -73,6 +76,7 @@ def fovvideovdp(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY, p
             raise InputError("the reference is all zero: it has no peak to show on the display")
     elif not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
         raise InputError(f"peak = {peak!r}: must be a finite number > 0")
+    require_memory(H * W * BYTES_PER_PIXEL, f"FovVideoVDP of {H} x {W} frames")
     metric = _metric(display, device)
     values = np.empty(K, dtype=np.float64)
     for k in range(K):

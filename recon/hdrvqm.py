@@ -51,6 +51,7 @@ import numpy as np
 import torch
 
 from golden.errors import InputError
+from golden.resources import require_memory
 from recon.display import DEFAULT_DISPLAY, HdrDisplay
 from recon.metrics import _frame_peaks, _frames, _shape, pu21_encode
 
@@ -67,8 +68,12 @@ FIXATION_S = 0.6
 #: Frames of one short-term tube: ceil(25 frames/s x 0.6 s) = 15.
 FIXATION_FRAMES = math.ceil(FRAME_RATE * FIXATION_S)
 POOL_FRACTION = 0.3
-#: Frames filtered at once (bounds the FFT temporaries: about 40 MB per 384 x 512 frame).
-FRAMES_PER_FFT = 2
+#: Pixels filtered at once (whole frames, at least one: FFT filtering needs the whole frame).
+FFT_PIXELS = 1 << 19
+#: Memory per pixel of a frame: the filter bank (20 float64) and the per-frame buffers.
+BYTES_PER_PIXEL = 20 * 8 + 64
+#: Memory per pixel per frame filtered at once: two spectra, the products and magnitudes of one scale.
+BYTES_PER_FFT_PIXEL = 2 * 16 + 4 * 16 * 3 + 4 * 8 * 4
 
 
 def log_gabor_bank(height: int, width: int, device="cpu") -> torch.Tensor:
@@ -109,22 +114,37 @@ def error_frames(estimate_pu: torch.Tensor, reference_pu: torch.Tensor, bank: to
     return total
 
 
-def tube_deviations(errors: torch.Tensor, block: int = BLOCK) -> torch.Tensor:
-    """Sample standard deviation of each (frames x block x block) tube of (F, H, W) errors -> (tubes,).
+def block_statistics(errors: torch.Tensor, block: int = BLOCK) -> tuple[torch.Tensor, ...]:
+    """Pixel count, mean and sum of squared deviations (M2) of each block of each (F, H, W) frame.
 
-    Edge blocks that do not fill ``block`` pixels use the pixels they have.
+    Returns three (F, blocks) tensors; blocks at the right and bottom edges that
+    do not fill ``block`` pixels use the pixels they have.
     """
     F, H, W = errors.shape
     ny, nx = -(-H // block), -(-W // block)
     pad = (0, nx * block - W, 0, ny * block - H)
     e = torch.nn.functional.pad(errors, pad).reshape(F, ny, block, nx, block)
     m = torch.nn.functional.pad(torch.ones_like(errors), pad).reshape(F, ny, block, nx, block)
-    dims = (0, 2, 4)
-    n = m.sum(dim=dims)
-    mean = e.sum(dim=dims) / n
-    dev = (e - mean[None, :, None, :, None]) * m
-    var = (dev ** 2).sum(dim=dims) / (n - 1).clamp(min=1)
-    return var.sqrt().flatten()
+    n = m.sum(dim=(2, 4))
+    mean = e.sum(dim=(2, 4)) / n
+    m2 = (((e - mean[:, :, None, :, None]) * m) ** 2).sum(dim=(2, 4))
+    return n.reshape(F, -1), mean.reshape(F, -1), m2.reshape(F, -1)
+
+
+def combine_statistics(n: torch.Tensor, mean: torch.Tensor, m2: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    """Count, mean and M2 of the union of the frames (axis 0) of each block (Chan et al.'s pairwise rule)."""
+    total = n.sum(dim=0)
+    grand = (n * mean).sum(dim=0) / total
+    return total, grand, m2.sum(dim=0) + (n * (mean - grand) ** 2).sum(dim=0)
+
+
+def tube_deviations(errors: torch.Tensor, block: int = BLOCK) -> torch.Tensor:
+    """Sample standard deviation of each (frames x block x block) tube of (F, H, W) errors -> (tubes,)."""
+    return _deviation(*combine_statistics(*block_statistics(errors, block)))
+
+
+def _deviation(n, mean, m2):
+    return (m2 / (n - 1).clamp(min=1)).sqrt()
 
 
 def lowest_mean(values: torch.Tensor, fraction: float = POOL_FRACTION) -> torch.Tensor:
@@ -161,26 +181,29 @@ def hdr_vqm_scores(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY
             raise InputError("the reference is all zero: it has no peak to show on the display")
     elif not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
         raise InputError(f"peak = {peak!r}: must be a finite number > 0")
+    per_fft = max(1, FFT_PIXELS // (H * W))
+    require_memory(H * W * (BYTES_PER_PIXEL + BYTES_PER_FFT_PIXEL * per_fft),
+                   f"HDR-VQM of {H} x {W} frames")
     bank = log_gabor_bank(H, W, device)
     per_frame = torch.empty(K, dtype=torch.float64, device=device)
-    tube_values = []
-    chunk = fixation_frames if K >= fixation_frames else K
-    for k0 in range(0, K, chunk):
-        k1 = min(K, k0 + chunk)
-        errors = torch.empty(k1 - k0, H, W, dtype=torch.float64, device=device)
-        for f0 in range(k0, k1, FRAMES_PER_FFT):
-            f1 = min(k1, f0 + FRAMES_PER_FFT)
-            r = _frames(reference[f0:f1], "reference", device)
-            if float(r.min()) < 0:
-                raise InputError(f"reference holds a negative light value ({float(r.min())})")
-            e = _frames(estimate[f0:f1], "estimate", device)
-            pu_r = pu21_encode(display.luminance(r, peak))
-            pu_e = pu21_encode(display.luminance(e, peak))
-            errors[f0 - k0:f1 - k0] = error_frames(pu_e, pu_r, bank)
-        for i in range(k1 - k0):
-            per_frame[k0 + i] = lowest_mean(tube_deviations(errors[i:i + 1]))
-        if k1 - k0 == chunk:                           # only full fixations make tubes
-            tube_values.append(lowest_mean(tube_deviations(errors)))
+    fixation = fixation_frames if K >= fixation_frames else K
+    stats, tube_values = [], []                  # block statistics of the frames of the open fixation
+    for f0 in range(0, K, per_fft):
+        f1 = min(K, f0 + per_fft)
+        r = _frames(reference[f0:f1], "reference", device)
+        if float(r.min()) < 0:
+            raise InputError(f"reference holds a negative light value ({float(r.min())})")
+        e = _frames(estimate[f0:f1], "estimate", device)
+        errors = error_frames(pu21_encode(display.luminance(e, peak)), pu21_encode(display.luminance(r, peak)),
+                              bank)
+        n, mean, m2 = block_statistics(errors)
+        per_frame[f0:f1] = lowest_mean(_deviation(n, mean, m2))
+        for i, k in enumerate(range(f0, f1)):
+            stats.append((n[i], mean[i], m2[i]))
+            if (k + 1) % fixation == 0:          # a full fixation: its tubes (a partial one makes none)
+                tubes = combine_statistics(*(torch.stack(column) for column in zip(*stats)))
+                tube_values.append(lowest_mean(_deviation(*tubes)))
+                stats = []
     sequence = float(lowest_mean(torch.stack(tube_values)))
     values = per_frame.cpu().numpy()
     return (values.reshape(()) if single else values), sequence

@@ -52,6 +52,14 @@ def test_display_grading_from_the_reference(rng):
     assert fovvideovdp(est[0], ref[0]).shape == ()
 
 
+def test_refused_up_front_when_memory_is_short(monkeypatch):
+    import golden.resources
+    monkeypatch.setattr(golden.resources, "available_memory", lambda: 1 << 20)
+    ref = scene(frames=1)
+    with pytest.raises(InputError, match="FovVideoVDP of 64 x 96 frames needs about"):
+        fovvideovdp(ref, ref)
+
+
 def test_refusals():
     ref = scene(frames=1, height=16, width=16)
     with pytest.raises(InputError, match="shape"):

@@ -119,6 +119,14 @@ def test_tubes_and_pooling():
     assert np.all(hdrvqm.hdr_vqm(est, ref)[15:] > 0)
 
 
+def test_refused_up_front_when_memory_is_short(monkeypatch):
+    import golden.resources
+    monkeypatch.setattr(golden.resources, "available_memory", lambda: 1 << 20)
+    ref = scene(frames=1, height=64, width=96)
+    with pytest.raises(InputError, match="HDR-VQM of 64 x 96 frames needs about"):
+        hdrvqm.hdr_vqm(ref, ref)
+
+
 def test_refusals(rng):
     ref = scene(frames=2, height=32, width=32)
     with pytest.raises(InputError, match="shape"):
