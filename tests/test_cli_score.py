@@ -131,7 +131,10 @@ def test_refusals(tmp_path, rng):
     zero_frame = reference.copy()
     zero_frame[1] = 0
     np.save(tmp_path / "zero1.npy", zero_frame)
-    refused("frame 1 is all zero", reference_path=tmp_path / "zero1.npy", extra=("--metrics", "psnr_mu"))
+    refused("reference frame 1 is all zero", reference_path=tmp_path / "zero1.npy")
+    refused("reference frame 1 is all zero", reference_path=tmp_path / "zero1.npy", extra=("--frames", "1:3"))
+    assert run_tespike("score", "--reference", tmp_path / "zero1.npy", "--estimate", r_path,
+                       "--metrics", "psnr_pu21").returncode == 0
     np.save(tmp_path / "int.npy", (reference * 100).astype(np.int32))
     refused("float", estimate_path=tmp_path / "int.npy")
     (tmp_path / "junk.npy").write_bytes(b"not an npy file")

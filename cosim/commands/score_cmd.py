@@ -5,7 +5,9 @@ I.npy and R.npy; a reconstruction made by another tool is welcome). Prints a
 table (one row per frame, then the mean, then the sequence values of the
 metrics that pool over time) or, with ``--json``, one JSON object. Refused with
 one line: unreadable files, a non-float, non-(K, H, W) or non-finite array,
-mismatched shapes, a negative or all-zero reference, a bad ``--frames``.
+mismatched shapes, a negative or all-zero reference (or an all-zero reference
+frame when PSNR-mu or SSIM-mu, which divide each frame by its peak, are asked
+for), a bad ``--frames`` or ``--metrics``.
 Negative estimated light is scored (every metric treats it as no light) with a
 warning on stderr.
 """
@@ -91,6 +93,7 @@ def run(args) -> int:
     ref = reference[frames.start:frames.stop]          # memory maps: the metrics read them in bands
     est = estimate[frames.start:frames.stop]
     negative, lowest, peak = 0, 0.0, 0.0
+    per_frame_peak = bool({"psnr_mu", "ssim_mu"} & set(metrics))
     step = max(1, CHECK_VALUES // max(1, ref[0].size))
     for k in range(0, len(frames), step):
         e = np.asarray(est[k:k + step], dtype=np.float64)
@@ -99,7 +102,12 @@ def run(args) -> int:
                              "light must be finite")
         negative += int((e < 0).sum())
         lowest = min(lowest, float(e.min()))
-        peak = max(peak, float(np.max(ref[k:k + step])))
+        frame_peaks = np.max(ref[k:k + step], axis=(1, 2))
+        peak = max(peak, float(frame_peaks.max()))
+        if per_frame_peak and not frame_peaks.all():
+            frame = frames.start + k + int(np.argmin(frame_peaks > 0))
+            raise InputError(f"reference frame {frame} is all zero: PSNR-mu and SSIM-mu divide each frame "
+                             "by its peak (leave it out with --frames, or them with --metrics)")
     if not peak > 0:
         raise InputError(f"the reference is all zero in frames {frames.start}:{frames.stop}: "
                          "it has no peak to normalise by")
