@@ -14,8 +14,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from golden.errors import InputError
+
+if TYPE_CHECKING:                   # torch only for the annotations: importing this module stays light
+    import torch
 
 
 @dataclass(frozen=True)
