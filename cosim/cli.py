@@ -27,6 +27,7 @@ COMMANDS = {
     "cocotb": "cocotb_cmd",
     "reconstruct": "reconstruct_cmd",
     "evaluate": "evaluate_cmd",
+    "score": "score_cmd",
     "demo": "demo_cmd",
     "scene": "scene_cmd",
     "view": "view_cmd",

@@ -53,7 +53,9 @@ DEFAULT_NITS_PER_UNIT = 4000.0
 def _frames(x, name: str, device) -> torch.Tensor:
     if not isinstance(x, torch.Tensor):
         x = np.asarray(x)
-        if not x.flags.writeable:          # a read-only memory map: copy the (small) band
+        if not x.dtype.isnative:           # torch takes native byte order only (big-endian .npy files)
+            x = x.astype(x.dtype.newbyteorder("="))
+        elif not x.flags.writeable:        # a read-only memory map: copy the (small) band
             x = x.copy()
     t = torch.as_tensor(x)
     if t.dtype.is_complex or t.dtype == torch.bool:
