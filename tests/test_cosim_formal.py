@@ -3,6 +3,7 @@
 import json
 import shutil
 from dataclasses import replace
+from types import SimpleNamespace
 
 import pytest
 from amaranth.hdl import Const, Module
@@ -63,7 +64,27 @@ def test_msb_remainder_dropped_is_caught(tmp_path, monkeypatch):
     config = SensorConfig(mode="ml", ml_readout="msb", ml_bits=3, threshold=2, acc_bits=2, input_bits=2)
     results = _prove_all(config, tmp_path)
     assert not results["rule"].proved and "count" in results["rule"].detail
-    assert not results["bounds"].proved
+
+
+class WrappingMLPixel(rtl.pixel.MLPixel):
+    """A broken pixel: its counter wraps past 2^ml_bits - 1 instead of saturating."""
+
+    def elaborate(self, platform):
+        c = self.config
+        wraps = SimpleNamespace(ml_bits=c.ml_bits, ml_max=2 ** c.ml_bits, is_msb=c.is_msb,
+                                threshold=c.threshold, acc_bits=c.acc_bits, acc_max=c.acc_max,
+                                input_bits=c.input_bits)
+        m = Module()
+        rtl.pixel.ml_pixel_logic(m, wraps, self.charge, self.last, self.word,
+                                 word_register=self.word_register, clear=self.clear)
+        return m
+
+
+def test_a_silently_wrapping_counter_fails_the_bounds(tmp_path):
+    config = SensorConfig(mode="ml", ml_bits=2, threshold=1, acc_bits=1, input_bits=1)
+    results = _prove_all(config, tmp_path, WrappingMLPixel)
+    assert not results["bounds"].proved and "never wraps" in results["bounds"].detail
+    assert results["bounds"].trace is not None
 
 
 def test_command_proves_a_config_and_reports_each_property(tmp_path):
