@@ -47,10 +47,16 @@ class Toggles:
         """Toggles of the pixel's state registers (not the word register), per pixel."""
         return sum(self.registers.values())
 
-    def per_interval(self) -> tuple[np.ndarray, np.ndarray]:
-        """(state flip-flop toggles, word bus toggles) per pixel per readout interval, float64."""
+    @property
+    def counters(self) -> np.ndarray:
+        """Toggles of the counting registers alone (all but ``acc``: the part a pixel with an
+        analog integrate-and-fire front end, as the paper's, keeps digital)."""
+        return self.flops - self.registers["acc"]
+
+    def per_interval(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(state flip-flop, counter, word bus) toggles per pixel per readout interval, float64."""
         k = max(self.intervals, 1)
-        return self.flops / k, self.word / k
+        return self.flops / k, self.counters / k, self.word / k
 
 
 def _flips(old: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -109,3 +115,17 @@ def count_toggles(config: SensorConfig, electrons: np.ndarray) -> Toggles:
             word_reg = word
             words[t // L] = word
     return Toggles(counts, word_count, words, T // L)
+
+
+def constant_light_toggles(config: SensorConfig, light: np.ndarray, readouts: int, *,
+                           seed: int = 0) -> Toggles:
+    """Toggles of n pixels under constant ``light`` (n,) (1 = the brightest designed light,
+    42000 electrons per readout), Poisson electrons per clock as SPEC section 6's
+    stimulus, saturated at 2^E - 1, over ``readouts`` intervals from the zero start."""
+    from .config import DESIGN_ELECTRONS
+
+    light = np.asarray(light, np.float64)
+    lam = DESIGN_ELECTRONS * light / config.clocks_per_readout
+    rng = np.random.default_rng(seed)
+    electrons = rng.poisson(np.broadcast_to(lam, (readouts * config.clocks_per_readout, light.size)))
+    return count_toggles(config, np.minimum(electrons, config.input_max))

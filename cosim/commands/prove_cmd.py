@@ -38,7 +38,6 @@ def targets(specs, with_corners: bool):
 
 def run(args) -> int:
     import time
-    import warnings
     from pathlib import Path
 
     from cosim.formal import properties, prove, require_tools
@@ -54,17 +53,17 @@ def run(args) -> int:
     count = 0
     for name, config in configs.items():
         for prop, build in properties(config).items():
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", category=DeprecationWarning)
-                result = prove(f"{name.replace(':', '-')}-{prop}", build(), depth=args.depth,
-                               solver=args.solver, trace_dir=traces)
+            result = prove(f"{name.replace(':', '-')}-{prop}", build(), depth=args.depth,
+                           solver=args.solver, trace_dir=traces)
             count += 1
             if result.proved:
-                print(f"{name} {prop}: proved ({result.seconds:.1f} s)", flush=True)
+                if not args.quiet:
+                    print(f"{name} {prop}: proved ({result.seconds:.1f} s)", flush=True)
             else:
                 failed += 1
                 where = f"; counterexample {result.trace}" if result.trace else ""
                 print(f"{name} {prop}: FAILED in the {result.detail}{where}", flush=True)
-    print(f"prove: {count - failed} of {count} properties proved, {len(configs)} configuration(s), "
-          f"k = {args.depth}, {args.solver}, {time.perf_counter() - start:.1f} s", flush=True)
+    if failed or not args.quiet:
+        print(f"prove: {count - failed} of {count} properties proved, {len(configs)} configuration(s), "
+              f"k = {args.depth}, {args.solver}, {time.perf_counter() - start:.1f} s", flush=True)
     return 1 if failed else 0
