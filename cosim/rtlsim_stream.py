@@ -34,6 +34,12 @@ def build_stream_array(config: SensorConfig, height: int, width: int, lanes: int
 def rtl_stream_beats(config: SensorConfig, stimulus: np.ndarray, lanes: int, *, flat: bool = True
                      ) -> np.ndarray:
     """Run the streaming RTL on ``stimulus`` (T, H, W); return its beats (K, B, N) as int64."""
+    return rtl_stream_run(config, stimulus, lanes, flat=flat)[0]
+
+
+def rtl_stream_run(config: SensorConfig, stimulus: np.ndarray, lanes: int, *, flat: bool = True
+                   ) -> tuple[np.ndarray, int]:
+    """:func:`rtl_stream_beats` and the largest latency of a last beat (clocks after its interval)."""
     from amaranth.hdl import ClockDomain, Elaboratable, Module
     from amaranth.sim import Simulator
 
@@ -86,7 +92,7 @@ def rtl_stream_beats(config: SensorConfig, stimulus: np.ndarray, lanes: int, *, 
     raw = b"".join(v.to_bytes(nbytes, "little") for v in lane_values)
     rows = np.frombuffer(raw, "<u4").reshape(len(lane_values), nbytes // 4)
     what = f"Amaranth simulation of the {H} x {W} streaming array ({lanes} lanes)"
-    return check_beats(clocks, firsts, rows, config, H, W, lanes, K, what)[0]
+    return check_beats(clocks, firsts, rows, config, H, W, lanes, K, what)
 
 
 

@@ -1,113 +1,131 @@
 """Verilog of the streaming array (SPEC section 6, ``tespike verilog --lanes N``).
 
-The Verilog form of :class:`rtl.stream.StreamingPixelArray`, written to build in
-Verilator at sensor size (400 x 250 pixels). Three hand-written structural
-levels around the Amaranth-generated pixel and timing modules:
+The Verilog form of :class:`rtl.stream.StreamingPixelArray` (same ports,
+timing and words, checked bit for bit against the golden model in Icarus,
+Verilator and cocotb), written so that Verilator builds it at sensor size
+(400 x 250 pixels) in time and memory that hardly grow with the pixel count.
+The top ``<mode>_pixel_array_stream`` (ports ``clk``, ``rst``, ``charge``,
+``out_valid``, ``out_first``, ``out_words``) holds:
 
-* ``<mode>_pixel_array_stream`` (top, SPEC ports ``clk``, ``rst``, ``charge``,
-  ``out_valid``, ``out_first``, ``out_words``): the timing block, H row
-  modules in a generate loop, and the beat counter, which after the edge where
-  the pixels show the words of interval k (``frame_valid``) puts beat
-  j = 0..B-1 on ``out_words``, one per clock, lane i showing the held word of
-  pixel p = j*N + i (row p / W, column p % W; 0 past the last pixel);
-* ``<mode>_pixel_row``: one row of W pixels, each behind its own E-bit input
-  register, and the row's second buffer ``held`` (W words), loaded by one loop
-  at the ``frame_valid`` edge and read by the beats while the pixels integrate
-  the next interval (a column-parallel readout's row buffer); kept a module of
-  its own in Verilator (``verilator no_inline_module``);
-* ``<mode>_pixel`` (Amaranth), inlined into the row
-  (``verilator inline_module``), and ``<mode>_readout_timing`` (Amaranth).
+* the readout timing block, ``<mode>_readout_timing``, generated from Amaranth
+  (:class:`rtl.timing.ReadoutTiming`, one instance);
+* the pixels as memories indexed by pixel p = r W + c (``acc``, ``sfc``,
+  ``ovf``, ``m`` or ``count``, and ``charge_sample``, the input register) and
+  one clocked ``for`` loop over p that applies the pixel rule of
+  :mod:`rtl.pixel` (same names: ``q``, ``spike``, ``rest``, ``total``,
+  ``ovf_next``, ``m_next``, ``count_next``) to every pixel each clock, exactly
+  as the Amaranth pixel does behind the array's input register
+  (:mod:`rtl.array`): computed from ``charge_sample``, cleared by
+  ``rst_sample``;
+* the second buffer ``held`` (H x W words): at the edge where the timing shows
+  ``frame_valid`` the loop stores each pixel's word of the interval's last
+  clock there, and the pixels integrate on;
+* the beat counter, which then puts beat j = 0..B-1 on ``out_words``, one per
+  clock, lane i showing ``held[j*N + i]`` (0 past the last pixel).
 
-Why rows (docs/outside-simulators.md, "Sensor size"): with one non-inlined
-module instance per pixel Verilator 5.006 writes per-instance set-up code and a
-symbol table that every C++ file includes, both growing with H x W, so the
-build grows faster than the pixel count (128 x 128 did not build in 25
-minutes); with every pixel inlined into one module the code itself grows with
-H x W. With rows, the symbol table has H entries and the one row module's code
-W pixels: the build grows with H + W. The row's ``charge`` input is marked
-``verilator public_flat_rd`` so that it stays a variable of each row instance;
-otherwise Verilator 5.006 replaces it by its connection (``charge[r*W*E +: W*E]``)
-and writes one copy of the row's code per row (15 MB of C++ at 64 x 64 instead
-of 1.5 MB), as :func:`cosim.verilator.shared_pixel_view` explains for the pixel.
+Why a loop and not one pixel module instance per pixel, as the parallel top
+(:mod:`rtl.verilog`) has: Verilator 5.006 copies every instance's logic into
+its own scope before it optimises, whatever the hierarchy, so an instance
+netlist costs it about 90 KB of memory per pixel (1.5 GB at 128 x 128 with the
+pixels grouped in row modules; more than 6 GB, still growing, one minute into
+400 x 250) and a build time that grows faster than the pixel count
+(docs/outside-simulators.md, "Sensor size"). The loop holds one copy of the
+pixel rule whatever H x W is. For a synthesis tool the loop unrolls into the
+same H x W pixels.
 
-The ``verilator`` comments are comments to every other tool; Icarus, Yosys and
-a synthesis flow see the same structure: H x W pixel instances.
+The state is read and written only inside the loop's block, so its blocking
+assignments are safe (``verilator lint_off BLKSEQ`` with that reason); nothing
+outside the block reads a state memory in the same clock.
 """
 
 from __future__ import annotations
 
 import json
-import re
 
 from golden.config import SensorConfig
 from golden.stream import beat_count, check_lanes
 
 from .array import check_array_size
-from .pixel import pixel_class
 from .timing import ReadoutTiming
-from .verilog import _check, _convert, _genvars, _loop, module_names
+from .verilog import _check, _convert, module_names
+
+#: A one-bit one, zero-extended by :func:`_zext` for the msb readout's power of two.
+ONE_BIT = "1'b1"
 
 
 def stream_module_names(config: SensorConfig) -> dict[str, str]:
-    """``top`` (``<mode>_pixel_array_stream``), ``row``, ``pixel`` and ``timing``."""
+    """``top`` (``<mode>_pixel_array_stream``) and ``timing`` (``<mode>_readout_timing``)."""
     names = module_names(config)
-    return {**names, "top": names["top"] + "_stream", "row": f"{config.mode}_pixel_row"}
+    return {"top": names["top"] + "_stream", "timing": names["timing"]}
 
 
-def _mark_module(verilog: str, module: str, comment: str) -> str:
-    """Insert ``comment`` as the first line of ``module``'s body (after its port list)."""
-    pattern = re.compile(rf"^(module {re.escape(module)}\(.*?\);\n)", re.M | re.S)
-    text, count = pattern.subn(lambda mo: mo.group(1) + f"  {comment}\n", verilog, count=1)
-    if count != 1:
-        raise ValueError(f"module {module} not found in the Verilog")
-    return text
+def _zext(expr: str, width: int, to: int) -> str:
+    """``expr`` of ``width`` bits zero-extended to ``to`` bits (no zero-width replication)."""
+    return expr if to == width else f"{{{{{to - width}{{1'b0}}}}, {expr}}}"
 
 
-def row_verilog(config: SensorConfig, width: int) -> str:
-    """One row of W pixels: input registers, pixel instances, words gathered into ``words``."""
-    names = stream_module_names(config)
-    e, wd, b2 = config.input_bits, config.word_bits, config.b2
-    te = config.is_te
-    ccc_port = f"  input  wire [{b2 - 1}:0] ccc,                 // shared clock cycle counter\n" if te else ""
-    ccc_pin = ".ccc(ccc), " if te else ""
-
-    def pixel(c, indent):
-        return (f"{indent}reg [E-1:0] charge_sample = {e}'d0;  // this pixel's input register\n"
-                f"{indent}always @(posedge clk) charge_sample <= charge[{c}*E +: E];\n"
-                f"{indent}{names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge_sample), "
-                f"{ccc_pin}.last(last),\n{indent}  .clear(clear), .word(word[{c}]));\n")
-
-    loop = _loop("c", width, "W", "col", pixel, "    ")
-    return f"""\
-// {names['row']}: one row of {width} pixels of {names['top']}, each behind its own
-// input register, and the row's second buffer: at the edge with load high it takes the
-// pixels' words (pixel c at [c*{wd} +: {wd}]) and holds them while the pixels integrate on.
-module {names['row']} (
-  input  wire clk,
-  input  wire rst,
-  input  wire [{width * e - 1}:0] charge /* verilator public_flat_rd */,  // this row's slice of charge
-{ccc_port}  input  wire last,                      // S_r: last pixel clock of the readout interval
-  input  wire clear,                     // rst sampled one edge earlier: clears the pixels
-  input  wire load,                      // the pixels show an interval's words: hold them
-  output wire [{width * wd - 1}:0] held      // the held word of pixel c at [c*{wd} +: {wd}]
-);
-  /* verilator no_inline_module */
-  localparam integer W = {width};
-  localparam integer E = {e};
-  localparam integer WD = {wd};
-  wire [WD-1:0] word [0:W-1];
-  reg [{width * wd - 1}:0] words;  // the second buffer of this row
-  integer i;
-  always @(posedge clk)
-    if (load)
-      for (i = 0; i < W; i = i + 1) words[i*WD +: WD] <= word[i];
-  assign held = words;
-
-  genvar {", ".join(_genvars("c", width))};
-  generate
-{loop}  endgenerate
-endmodule
-"""
+def _pixel_rule(config: SensorConfig, indent: str) -> tuple[str, str]:
+    """(declarations, loop body) of one pixel's clock, pixel ``p``: the rule of rtl/pixel.py."""
+    c = config
+    A, E, WD = c.acc_bits, c.input_bits, c.word_bits
+    QB = max(A, E) + 1                                      # q = acc + charge never wraps
+    i = indent
+    common = (f"  reg [{QB - 1}:0] q, rest;      // acc + charge; what stays after the spike\n"
+              f"  reg spike;\n"
+              f"  reg [{WD - 1}:0] word;          // the word this clock would read out\n")
+    integrate = (f"{i}q = {_zext('acc[p]', A, QB)} + {_zext('charge_sample[p]', E, QB)};\n"
+                 f"{i}spike = q >= {QB}'d{c.threshold};\n"
+                 f"{i}rest = spike ? q - {QB}'d{c.threshold} : q;\n")
+    acc_next = f"(rest > {QB}'d{c.acc_max}) ? {A}'d{c.acc_max} : rest[{A - 1}:0]"
+    if c.is_te:
+        b1, b2, d = c.b1, c.b2, c.d
+        decls = (f"  reg [{b1 - 1}:0] sfc [0:P-1];   // spike-firing counter\n"
+                 f"  reg ovf [0:P-1];               // overflow flag\n"
+                 f"  reg [{b2 - 1}:0] m [0:P-1];    // CCC latched on overflow\n"
+                 + common +
+                 f"  reg [{b1}:0] total;            // sfc + spike; bit {b1} is the carry\n"
+                 f"  reg ovf_next;\n"
+                 f"  reg [{b2 - 1}:0] m_next;\n")
+        body = (integrate +
+                f"{i}total = {_zext('sfc[p]', b1, b1 + 1)} + {_zext('(spike & ~ovf[p])', 1, b1 + 1)};\n"
+                f"{i}ovf_next = ovf[p] | total[{b1}];\n"
+                f"{i}m_next = total[{b1}] ? ccc : m[p];\n"
+                f"{i}word = ovf_next ? {{1'b1, {_zext('m_next', b2, d)}}} : "
+                f"{{1'b0, {_zext(f'total[{b1 - 1}:0]', b1, d)}}};\n"
+                f"{i}if (frame_valid) held[p] = word;\n"
+                f"{i}if (clear) begin\n"
+                f"{i}  acc[p] = {A}'d0; sfc[p] = {b1}'d0; ovf[p] = 1'b0; m[p] = {b2}'d0;\n"
+                f"{i}end else begin\n"
+                f"{i}  acc[p] = {acc_next};\n"
+                f"{i}  sfc[p] = last ? {b1}'d0 : total[{b1 - 1}:0];\n"
+                f"{i}  ovf[p] = last ? 1'b0 : ovf_next;\n"
+                f"{i}  m[p] = m_next;   // shown only while the flag is set, so never cleared at readout\n"
+                f"{i}end\n")
+        return decls, body
+    B = c.ml_bits
+    decls = (f"  reg [{B - 1}:0] count [0:P-1]; // saturating spike counter\n" + common +
+             f"  reg [{B - 1}:0] count_next;\n")
+    body = integrate + (f"{i}count_next = (spike && count[p] != {B}'d{c.ml_max}) ? "
+                        f"count[p] + {B}'d1 : count[p];\n")
+    if c.is_msb:
+        decls += f"  reg [{B - 1}:0] kept;           // the count after an msb readout\n"
+        scan = "".join(f"{i}if (count_next[{j}]) word = {WD}'d{j + 1};\n" for j in range(B))
+        body += (f"{i}word = {WD}'d0;                 // bit_length(count_next): the highest set bit wins\n"
+                 + scan +
+                 f"{i}kept = (word == {WD}'d0) ? count_next : "
+                 f"count_next - ({_zext(ONE_BIT, 1, B)} << (word - {WD}'d1));\n")
+        after = "kept"
+    else:
+        body += f"{i}word = count_next;\n"
+        after = f"{B}'d0"
+    body += (f"{i}if (frame_valid) held[p] = word;\n"
+             f"{i}if (clear) begin\n"
+             f"{i}  acc[p] = {A}'d0; count[p] = {B}'d0;\n"
+             f"{i}end else begin\n"
+             f"{i}  acc[p] = {acc_next};\n"
+             f"{i}  count[p] = last ? {after} : count_next;\n"
+             f"{i}end\n")
+    return decls, body
 
 
 def stream_top_verilog(config: SensorConfig, height: int, width: int, lanes: int) -> str:
@@ -123,12 +141,7 @@ def stream_top_verilog(config: SensorConfig, height: int, width: int, lanes: int
     te = config.is_te
     ccc_wire = f"  wire [{b2 - 1}:0] ccc;  // shared clock cycle counter, 1..alpha\n" if te else ""
     ccc_pin = ".ccc(ccc), " if te else ""
-
-    def row(r, indent):
-        return (f"{indent}{names['row']} pixels (.clk(clk), .rst(rst), .charge(charge[{r}*W*E +: W*E]), "
-                f"{ccc_pin}.last(last),\n{indent}  .clear(rst_sample), .load(frame_valid), .held(row_held[{r}]));\n")
-
-    loop = _loop("r", height, "H", "row", row, "    ")
+    decls, body = _pixel_rule(config, "      ")
     return f"""\
 // The user names the output file (tespike verilog --out A.v): waive Verilator's file-name style check.
 /* verilator lint_off DECLFILENAME */
@@ -146,27 +159,33 @@ module {names['top']} (
   output wire out_first,                     // high with beat 0 of each readout interval
   output wire [{n * wd - 1}:0] out_words     // lane i at [i*{wd} +: {wd}]
 );
-  localparam integer H = {height};
-  localparam integer W = {width};
+  localparam integer P = {pixels};   // pixels, p = r*{width} + c
   localparam integer E = {e};
   localparam integer WD = {wd};
   localparam integer N = {n};        // lanes
-  localparam integer P = H*W;       // pixels
-{ccc_wire}  wire last;         // S_r: last pixel clock of the readout interval
-  wire frame_valid;  // the pixels show the words of an interval (one clock per interval): load them
-  reg rst_sample = 1'b0;  // clears the pixels at the edge after a reset edge
+{ccc_wire}  wire last;         // S_r: the clock in the input register is an interval's last
+  wire frame_valid;  // ... and not the empty clock after reset: the words go to held
+  reg rst_sample = 1'b0;  // rst sampled: clears the pixels at the edge after a reset edge
 
   always @(posedge clk) rst_sample <= rst;
+  wire clear = rst_sample;
 
   {names['timing']} timing (.clk(clk), .rst(rst), {ccc_pin}.last(last), .frame_valid(frame_valid));
 
-  // The pixels, one row module per row; each row holds its words of the last interval.
-  wire [W*WD-1:0] row_held [0:H-1];
-  genvar {", ".join(_genvars("r", height))};
-  generate
-{loop}  endgenerate
+  // The pixels: one entry per pixel in each memory, one loop over them per clock.
+  reg [E-1:0] charge_sample [0:P-1];  // the input registers
+  reg [{config.acc_bits - 1}:0] acc [0:P-1];    // charge residual, saturating
+{decls}  reg [WD-1:0] held [0:P-1];     // the second buffer: the words of the last interval
+  integer p;
+  // State is read and written only in this block, so blocking assignments are safe.
+  /* verilator lint_off BLKSEQ */
+  always @(posedge clk)
+    for (p = 0; p < P; p = p + 1) begin
+{body}      charge_sample[p] = charge[p*E +: E];
+    end
+  /* verilator lint_on BLKSEQ */
 
-  // The beat counter: beats 0..B-1 on the clocks after the load.
+  // The beat counter: beats 0..B-1 on the clocks after the words went to held.
   reg sending = 1'b0;
   reg [{beat_bits - 1}:0] beat = {beat_bits}'d0;
   always @(posedge clk)
@@ -181,17 +200,14 @@ module {names['top']} (
       beat <= beat + {beat_bits}'d1;
     end
 
-  // The beat's lanes, read from the rows' buffers: lane i shows pixel p = beat*N + i.
+  // The beat's lanes: lane i shows held[beat*N + i], 0 past the last pixel.
   reg [N*WD-1:0] lanes;
-  integer i, p;
+  integer i;
   always @* begin
     lanes = {{N*WD{{1'b0}}}};
-    p = 0;
     if (sending)
-      for (i = 0; i < N; i = i + 1) begin
-        p = beat*N + i;
-        if (p < P) lanes[i*WD +: WD] = row_held[p / W][(p % W)*WD +: WD];
-      end
+      for (i = 0; i < N; i = i + 1)
+        if (beat*N + i < P) lanes[i*WD +: WD] = held[beat*N + i];
   end
   assign out_valid = sending;
   assign out_first = sending & (beat == {beat_bits}'d0);
@@ -201,15 +217,12 @@ endmodule
 
 
 def stream_array_verilog(config: SensorConfig, height: int, width: int, lanes: int) -> str:
-    """Verilog text of the streaming H x W array with N lanes: top, row, pixel and timing modules.
+    """Verilog text of the streaming H x W array with N lanes: the top and the timing module.
 
     Refuses (:class:`golden.errors.ConfigError`, one line naming the smallest N) a lane
     count whose B = ceil(H W / N) beats do not fit in the L clocks of a readout interval.
     """
     config = _check(config)
     top = stream_top_verilog(config, height, width, lanes)   # refuses before any conversion
-    names = stream_module_names(config)
-    pixel, timing = _convert((pixel_class(config)(config, word_register=False), names["pixel"]),
-                             (ReadoutTiming(config), names["timing"]))
-    pixel = _mark_module(pixel, names["pixel"], "/* verilator inline_module */")
-    return "\n".join([top, row_verilog(config, width), pixel, timing])
+    timing, = _convert((ReadoutTiming(config), stream_module_names(config)["timing"]))
+    return "\n".join([top, timing])
