@@ -63,3 +63,18 @@ def unbeat(beats_: np.ndarray, height: int, width: int) -> np.ndarray:
     """Inverse of :func:`beats`: ``(K, B, N)`` -> words ``(K, H, W)`` (the padding lanes are dropped)."""
     K = beats_.shape[0]
     return beats_.reshape(K, -1)[:, :height * width].reshape(K, height, width)
+
+
+def output_bandwidth(config: SensorConfig, height: int, width: int, pixel_clock_hz: float) -> dict:
+    """What the streaming readout of an H x W array costs at a pixel clock of ``pixel_clock_hz``.
+
+    Returns ``readout_hz`` (readout intervals per second, f / L), ``bits_per_s`` (the words that
+    must leave: H W Wd f / L, whatever the lane count), ``min_lanes`` (N = ceil(H W / L)),
+    ``pins`` (N Wd output bits at that N) and ``port_bits_per_s`` (N Wd f, what those pins carry
+    when every clock holds a beat; at least ``bits_per_s``).
+    """
+    L, wd = config.clocks_per_readout, config.word_bits
+    lanes = min_lanes(config, height, width)
+    return {"readout_hz": pixel_clock_hz / L, "word_bits": wd,
+            "bits_per_s": height * width * wd * pixel_clock_hz / L,
+            "min_lanes": lanes, "pins": lanes * wd, "port_bits_per_s": lanes * wd * pixel_clock_hz}

@@ -47,3 +47,16 @@ def test_smallest_lane_count_and_refusal_naming_it():
 def test_lane_count_must_be_a_positive_integer(lanes):
     with pytest.raises(ConfigError, match="lanes"):
         check_lanes(SensorConfig(), 2, 3, lanes)
+
+
+def test_output_bandwidth_at_the_paper_settings():
+    """400 x 250 TE pixels at 40 kHz readout (pixel clock 9.6 MHz): 5-bit words, 20 Gbit/s, 417 lanes."""
+    from golden.stream import output_bandwidth
+    config = SensorConfig()
+    b = output_bandwidth(config, 400, 250, 40e3 * 240)
+    assert b["readout_hz"] == 40e3 and b["word_bits"] == 5
+    assert b["bits_per_s"] == 400 * 250 * 5 * 40e3 == 20e9
+    assert b["min_lanes"] == 417 and b["pins"] == 417 * 5
+    assert b["port_bits_per_s"] >= b["bits_per_s"]
+    msb = output_bandwidth(SensorConfig.preset("ml-msb"), 400, 250, 9.6e6)
+    assert msb["word_bits"] == 4 and msb["bits_per_s"] == 16e9
