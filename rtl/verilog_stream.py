@@ -128,6 +128,14 @@ def _pixel_rule(config: SensorConfig, indent: str) -> tuple[str, str]:
     return decls, body
 
 
+def _clear_lines(config: SensorConfig, indent: str) -> str:
+    """Zero the counter state of pixel ``p`` (the power-up values)."""
+    if config.is_te:
+        return (f"{indent}sfc[p] = {config.b1}'d0;\n{indent}ovf[p] = 1'b0;\n"
+                f"{indent}m[p] = {config.b2}'d0;\n")
+    return f"{indent}count[p] = {config.ml_bits}'d0;\n"
+
+
 def stream_top_verilog(config: SensorConfig, height: int, width: int, lanes: int) -> str:
     """The top ``<mode>_pixel_array_stream`` with exactly the SPEC section 6 streaming ports."""
     config = _check(config)
@@ -177,6 +185,12 @@ module {names['top']} (
   reg [{config.acc_bits - 1}:0] acc [0:P-1];    // charge residual, saturating
 {decls}  reg [WD-1:0] held [0:P-1];     // the second buffer: the words of the last interval
   integer p;
+  initial  // power-up state as the Amaranth array's: all zero, as after a reset
+    for (p = 0; p < P; p = p + 1) begin
+      charge_sample[p] = {{E{{1'b0}}}};
+      acc[p] = {{{config.acc_bits}{{1'b0}}}};
+{_clear_lines(config, "      ")}      held[p] = {{WD{{1'b0}}}};
+    end
   // State is read and written only in this block, so blocking assignments are safe.
   /* verilator lint_off BLKSEQ */
   always @(posedge clk)
