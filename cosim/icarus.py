@@ -88,7 +88,7 @@ endmodule
 """
 
 
-def _parse_captures(path: Path, what: str) -> tuple[np.ndarray, list[str]]:
+def _parse_captures(path: Path, what: str, word_port: str = "frame") -> tuple[np.ndarray, list[str]]:
     try:
         lines = path.read_text().splitlines()
     except FileNotFoundError:
@@ -101,7 +101,7 @@ def _parse_captures(path: Path, what: str) -> tuple[np.ndarray, list[str]]:
         if not all(ch in "0123456789abcdefABCDEF" for ch in value):
             raise SimulatorRunError(
                 f"{what}: at pixel clock {clock} "
-                f"{value.split('=')[0] if '=' in value else 'the sampled output word bus'} "
+                f"{value.split('=')[0] if '=' in value else word_port} "
                 f"holds X or Z bits ({value[:40]}); SPEC section 6 outputs must be defined")
         clocks.append(int(clock))
         frames.append(value)
@@ -109,7 +109,7 @@ def _parse_captures(path: Path, what: str) -> tuple[np.ndarray, list[str]]:
 
 
 def _simulate(config: SensorConfig, stimulus: np.ndarray, verilog: str, testbench: str, flush: int,
-              expected: int, what: str, work_dir) -> tuple[np.ndarray, list[str]]:
+              expected: int, what: str, work_dir, word_port: str = "frame") -> tuple[np.ndarray, list[str]]:
     """Compile ``verilog`` with ``testbench``, run it on ``stimulus``; return the parsed captures."""
     T, H, W = stimulus.shape
     iverilog = require_tool("iverilog", "iverilog")
@@ -135,7 +135,7 @@ def _simulate(config: SensorConfig, stimulus: np.ndarray, verilog: str, testbenc
         if ran.returncode != 0:
             raise SimulatorRunError(f"{what}: vvp failed (exit {ran.returncode}): "
                                     f"{first_error_line(ran.stderr + ran.stdout)}")
-        return _parse_captures(work / _CAPTURES, what)
+        return _parse_captures(work / _CAPTURES, what, word_port)
 
 
 def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Path | None = None,
@@ -248,7 +248,7 @@ def run_icarus_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,
         verilog = stream_array_verilog(config, H, W, lanes)
     what = f"Icarus run of {top} ({H} x {W}, {lanes} lanes)"
     clocks, lines = _simulate(config, stimulus, verilog, icarus_stream_testbench(top, H * W * E, lanes * Wd),
-                              flush_clocks(config), K * B, what, work_dir)
+                              flush_clocks(config), K * B, what, work_dir, "out_words")
     firsts = [line[0] == "1" for line in lines]
     rows = hex_to_rows([line[1:] for line in lines], lanes * Wd)
     return check_beats(clocks, firsts, rows, config, H, W, lanes, K, what)[0]
