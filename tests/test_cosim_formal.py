@@ -94,8 +94,8 @@ def test_command_proves_a_config_and_reports_each_property(tmp_path):
     assert done.returncode == 0, done.stderr
     lines = done.stdout.strip().splitlines()
     assert [line.split(":")[0] for line in lines[:-1]] == ["small rule", "small rule-registered-word",
-                                                            "small bounds"]
-    assert all("proved" in line for line in lines[:-1]) and "3 of 3 properties proved" in lines[-1]
+                                                            "small bounds", "small stream"]
+    assert all("proved" in line for line in lines[:-1]) and "4 of 4 properties proved" in lines[-1]
 
 
 def test_a_missing_tool_is_named_with_its_package(monkeypatch):
