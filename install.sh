@@ -4,7 +4,7 @@
 set -eu
 cd "$(dirname "$0")"
 missing=""
-for tool in iverilog verilator yosys; do
+for tool in iverilog verilator yosys z3 boolector; do
   command -v "$tool" >/dev/null 2>&1 || missing="$missing $tool"
 done
 if [ -n "$missing" ]; then

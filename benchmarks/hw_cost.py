@@ -106,12 +106,36 @@ def measure(config: SensorConfig) -> dict:
         "counting": synthesize(pixel_verilog(small), names["pixel"]),
         "nobuffer": synthesize(pixel_verilog(small, word_register=False), names["pixel"]),
         "timing": synthesize(timing_verilog(config), names["timing"]),
+        "toggles": activity(config),
     }
     for key, cfg, registered in (("full", config, True), ("counting", small, True), ("nobuffer", small, False)):
         if row[key]["flops"] != state_bits(cfg, registered):
             raise RuntimeError(f"{cfg}: {row[key]['flops']} flip-flops synthesized, "
                                f"{state_bits(cfg, registered)} expected from the architecture")
     return row
+
+
+#: Light levels (1 = brightest designed light) and run length of the switching-activity columns.
+ACTIVITY_LIGHT = (0.01, 1.0)
+ACTIVITY_READOUTS = 8
+ACTIVITY_PIXELS = 8
+
+
+def activity(config: SensorConfig) -> list[tuple[float, float, float]]:
+    """Mean (all state FF, counters only, word bus) toggles per pixel per readout interval at
+    each of :data:`ACTIVITY_LIGHT` (:func:`golden.toggles.constant_light_toggles`, seed 0)."""
+    import numpy as np
+
+    from golden.toggles import constant_light_toggles
+
+    light = np.repeat(np.array(ACTIVITY_LIGHT), ACTIVITY_PIXELS)
+    values = constant_light_toggles(config, light, ACTIVITY_READOUTS, seed=0).per_interval()
+    return [tuple(float(v.reshape(len(ACTIVITY_LIGHT), -1)[i].mean()) for v in values)
+            for i in range(len(ACTIVITY_LIGHT))]
+
+
+def activity_text(values: tuple[float, float, float]) -> str:
+    return f"{values[0]:.0f} / {values[1]:.1f} / {values[2]:.2f}"
 
 
 def config_text(c: SensorConfig) -> str:
@@ -197,14 +221,24 @@ def report(rows: list[tuple[str, dict, list[dict]]], yosys_version: str) -> str:
            "- **dynamic range**: SPEC section 5 with N_s = 1 (one readout interval, no multi-readout "
            "accumulation): D_TE = 20 log10(2^b1 (2^b2 - 1)), D_ML = 20 log10(2^B - 1) with the count "
            "readout and 20 log10(2^(B-1)) with the msb readout.",
+           "- **toggles/interval** (switching activity, an energy proxy, not energy): bit changes per "
+           "pixel per readout interval of the full pixel's state flip-flops (accumulator and counters) "
+           "/ its counters alone (no accumulator: what a pixel with an analog front end keeps) / its "
+           "readout word register (the word bus), counted exactly by `golden.toggles` (equal to a VCD "
+           f"count of the RTL in the tests) over {ACTIVITY_READOUTS} readouts of {ACTIVITY_PIXELS} "
+           "pixels under constant Poisson light I (1 = 42000 electrons per readout). It leaves out the "
+           "logic between registers, glitches, the clock tree and leakage. `benchmarks/toggles.py` "
+           "plots it against light (docs/toggles.png, docs/rtl.md).",
            "- Thresholds and accumulator widths are the SPEC defaults of each configuration "
            "(they differ between TE and ML and between groups, see the config column); they change "
            "only the full-pixel column.", "",
            "## Table", "",
            "| group | camera | config | bits/readout | DR (dB) | full: cells | FF | transistors "
            "| counting: cells | FF | transistors | no word register: FF | transistors "
-           "| timing block: transistors | per pixel |",
-           "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+           "| timing block: transistors | per pixel "
+           + "".join(f"| toggles/interval I = {i:g} " for i in ACTIVITY_LIGHT) + "|",
+           "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+           + " ---: |" * len(ACTIVITY_LIGHT)]
     for label, te, mls in rows:
         for row in (te, *mls):
             c = row["config"]
@@ -212,7 +246,8 @@ def report(rows: list[tuple[str, dict, list[dict]]], yosys_version: str) -> str:
             out.append(f"| {label} | {camera(c)} | {config_text(c)} | {row['word_bits']} | {row['dr_db']:.1f} "
                        f"| {f['cells']} | {f['flops']} | {span(f)} | {k['cells']} | {k['flops']} "
                        f"| {span(k)} | {n['flops']} | {span(n)} "
-                       f"| {span(t)} | {t['transistors'] / ARRAY_PIXELS:.2f} |")
+                       f"| {span(t)} | {t['transistors'] / ARRAY_PIXELS:.2f} "
+                       + "".join(f"| {activity_text(v)} " for v in row["toggles"]) + "|")
     out += ["", "## TE relative to each ML camera of its group", "",
             "Ratios use the smallest estimate of each; 'verdict' compares the ranges.", "",
             "| group | TE against | DR TE / ML (dB) | bits/readout TE / ML | counting logic TE / ML | verdict "

@@ -33,6 +33,7 @@ COMMANDS = {
     "view": "view_cmd",
     "train": "train_cmd",
     "synth": "synth_cmd",
+    "prove": "prove_cmd",
 }
 
 EXIT_BAD_INPUT = 2

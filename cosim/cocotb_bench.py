@@ -31,7 +31,13 @@ cocotb Makefile flow (docs/outside-simulators.md):
 ``TESPIKE_STIMULUS``
     an ``E.npy`` file (T, H, W) of electrons per pixel clock; without it
     :func:`default_stimulus` makes ``TESPIKE_READOUTS`` (default 3) intervals of
-    it from ``TESPIKE_SEED`` (default 0).
+    it from ``TESPIKE_SEED`` (default 0);
+``TESPIKE_LANES``
+    set: the design is the streaming top (SPEC section 6, ``--lanes N``):
+    :func:`run_stream_bench` samples ``out_valid``, ``out_first`` and
+    ``out_words`` before every rising edge, the beats are held to SPEC section
+    6 by :func:`cosim.stream_ports.check_beats` and compared with
+    :func:`golden.stream.beats` of the literal SPEC rule's words.
 """
 
 from __future__ import annotations
@@ -66,6 +72,7 @@ class Settings:
     readouts: int = 3
     seed: int = 0
     stimulus_path: str | None = None
+    lanes: int | None = None            # the streaming top's N; None: the parallel top
 
     @classmethod
     def from_env(cls, env=os.environ) -> "Settings":
@@ -88,7 +95,8 @@ class Settings:
 
         return cls(config, integer("TESPIKE_HEIGHT"), integer("TESPIKE_WIDTH"),
                    integer("TESPIKE_READOUTS", 3), int(env.get("TESPIKE_SEED", "0")),
-                   env.get("TESPIKE_STIMULUS") or None)
+                   env.get("TESPIKE_STIMULUS") or None,
+                   integer("TESPIKE_LANES") if env.get("TESPIKE_LANES") else None)
 
     def to_env(self) -> dict[str, str]:
         env = {"TESPIKE_CONFIG": self.config.to_json(), "TESPIKE_HEIGHT": str(self.height),
@@ -96,6 +104,8 @@ class Settings:
                "TESPIKE_SEED": str(self.seed)}
         if self.stimulus_path is not None:
             env["TESPIKE_STIMULUS"] = str(Path(self.stimulus_path).resolve())
+        if self.lanes is not None:
+            env["TESPIKE_LANES"] = str(self.lanes)
         return env
 
     def stimulus(self) -> np.ndarray:
@@ -182,6 +192,52 @@ async def run_bench(dut, settings: Settings) -> dict:
     return {"stimulus": stim, "words": words, "clocks": clocks, "latency": latency}
 
 
+async def run_stream_bench(dut, settings: Settings) -> dict:
+    """:func:`run_bench` for the streaming top: returns the stimulus, beats (K, B, N) and latency."""
+    from cocotb.clock import Clock
+    from cocotb.triggers import FallingEdge, RisingEdge, Timer
+
+    from golden.stream import beat_count
+
+    from .stream_ports import check_beats, flush_clocks, stream_top_module
+
+    config, H, W, N = settings.config, settings.height, settings.width, settings.lanes
+    E, Wd, L = config.input_bits, config.word_bits, config.clocks_per_readout
+    for port, bits in (("charge", H * W * E), ("out_words", N * Wd)):
+        width = len(getattr(dut, port))
+        assert width == bits, (f"port {port} is {width} bits, SPEC section 6 wants {bits} for "
+                               f"{H} x {W} pixels and {N} lanes of {config}")
+    stim = settings.stimulus()
+    T = stim.shape[0]
+    K, B = T // L, beat_count(H * W, N)
+    packed = pack_rows(stim.reshape(T, H * W), E)
+    rows = [int.from_bytes(row.tobytes(), "little") for row in packed]
+
+    clock_task = __import__("cocotb").start_soon(Clock(dut.clk, PERIOD_STEPS, units="step").start(start_high=False))
+    dut.rst.value = 1
+    dut.charge.value = 0
+    for _ in range(RESET_CLOCKS):
+        await RisingEdge(dut.clk)
+    clocks, firsts, lanes = [], [], []
+    for t in range(T + flush_clocks(config)):
+        if t >= T and len(clocks) >= K * B:
+            break
+        await FallingEdge(dut.clk)
+        dut.rst.value = 0
+        dut.charge.value = rows[t] if t < T else 0
+        await Timer(1, units="step")                # inputs of clock t settled; rising edge t next
+        if _as_int(dut.out_valid.value, f"out_valid before rising edge {t}"):
+            clocks.append(t)
+            firsts.append(bool(_as_int(dut.out_first.value, f"out_first before rising edge {t}")))
+            lanes.append(_as_int(dut.out_words.value, f"out_words before rising edge {t}"))
+    clock_task.kill()
+    nbytes = 4 * words_per_row(N, Wd)
+    raw = np.frombuffer(b"".join(v.to_bytes(nbytes, "little") for v in lanes), "<u4")
+    beats, latency = check_beats(clocks, firsts, raw.reshape(len(lanes), nbytes // 4), config, H, W, N, K,
+                                 f"cocotb run of {stream_top_module(config)}")
+    return {"stimulus": stim, "beats": beats, "latency": latency}
+
+
 try:
     import cocotb as _cocotb
 except ImportError:          # importable without cocotb (settings and stimulus for the runner)
@@ -192,6 +248,9 @@ if _cocotb is not None:
     async def spec_ports_equal_golden(dut):
         """The array's words equal the golden model's on the stimulus of TESPIKE_* (module docstring)."""
         settings = Settings.from_env()
+        if settings.lanes is not None:
+            await _stream_equal_golden(dut, settings)
+            return
         run = await run_bench(dut, settings)
         expected = step_reference(settings.config, run["stimulus"])[0]
         dut._log.info(f"{settings.config}: {settings.height} x {settings.width}, "
@@ -200,4 +259,22 @@ if _cocotb is not None:
             raise AssertionError("RTL != golden model: " + first_difference(run["words"], expected).text())
         summary = {"readouts": int(expected.shape[0]), "latency": run["latency"],
                    "distinct_words": int(len(np.unique(expected)))}
+        dut._log.info("RTL == golden model " + json.dumps(summary))
+
+    async def _stream_equal_golden(dut, settings: Settings) -> None:
+        """The streaming top's beats equal golden.stream.beats of the literal SPEC rule's words."""
+        from golden.stream import beats
+
+        run = await run_stream_bench(dut, settings)
+        expected = beats(step_reference(settings.config, run["stimulus"])[0], settings.lanes)
+        dut._log.info(f"{settings.config}: {settings.height} x {settings.width}, {settings.lanes} lanes, "
+                      f"{expected.shape[0]} readouts of {expected.shape[1]} beats, last beat at most "
+                      f"{run['latency']} clock(s) after its interval")
+        if not np.array_equal(run["beats"], expected):
+            k, j, i = (int(v) for v in np.argwhere(expected != run["beats"])[0])
+            raise AssertionError(f"RTL != golden model: {int((expected != run['beats']).sum())} lane words "
+                                 f"differ; first at readout {k}, beat {j}, lane {i}: RTL "
+                                 f"{int(run['beats'][k, j, i])}, golden {int(expected[k, j, i])}")
+        summary = {"readouts": int(expected.shape[0]), "beats": int(expected.shape[1]),
+                   "lanes": settings.lanes, "latency": run["latency"]}
         dut._log.info("RTL == golden model " + json.dumps(summary))

@@ -163,13 +163,25 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
     """
     cocotb_version()
     _runner(simulator)                     # refuse an unknown simulator,
-    top = top_module(settings.config)
+    if settings.lanes is None:
+        top = top_module(settings.config)
+    else:
+        from golden.stream import check_lanes
+
+        from .stream_ports import stream_top_module
+        check_lanes(settings.config, settings.height, settings.width, settings.lanes)
+        top = stream_top_module(settings.config)
     settings.stimulus()                    # and a bad stimulus, before building anything
     with tempfile.TemporaryDirectory(prefix="tespike-cocotb-") as scratch:
         if verilog_path is None:
-            from rtl.verilog import array_verilog
             verilog_path = Path(scratch) / "array.v"
-            verilog_path.write_text(array_verilog(settings.config, settings.height, settings.width))
+            if settings.lanes is None:
+                from rtl.verilog import array_verilog
+                text = array_verilog(settings.config, settings.height, settings.width)
+            else:
+                from rtl.verilog_stream import stream_array_verilog
+                text = stream_array_verilog(settings.config, settings.height, settings.width, settings.lanes)
+            verilog_path.write_text(text)
         verilog_path = Path(verilog_path)
         if not verilog_path.is_file():
             raise InputError(f"Verilog file {str(verilog_path)!r} does not exist")

@@ -88,7 +88,7 @@ endmodule
 """
 
 
-def _parse_captures(path: Path, what: str) -> tuple[np.ndarray, list[str]]:
+def _parse_captures(path: Path, what: str, word_port: str = "frame") -> tuple[np.ndarray, list[str]]:
     try:
         lines = path.read_text().splitlines()
     except FileNotFoundError:
@@ -100,11 +100,42 @@ def _parse_captures(path: Path, what: str) -> tuple[np.ndarray, list[str]]:
         clock, value = line.split(" ", 1)
         if not all(ch in "0123456789abcdefABCDEF" for ch in value):
             raise SimulatorRunError(
-                f"{what}: at pixel clock {clock} {'frame_valid' if '=' in value else 'frame'} "
+                f"{what}: at pixel clock {clock} "
+                f"{value.split('=')[0] if '=' in value else word_port} "
                 f"holds X or Z bits ({value[:40]}); SPEC section 6 outputs must be defined")
         clocks.append(int(clock))
         frames.append(value)
     return np.asarray(clocks, np.int64), frames
+
+
+def _simulate(config: SensorConfig, stimulus: np.ndarray, verilog: str, testbench: str, flush: int,
+              expected: int, what: str, work_dir, word_port: str = "frame") -> tuple[np.ndarray, list[str]]:
+    """Compile ``verilog`` with ``testbench``, run it on ``stimulus``; return the parsed captures."""
+    T, H, W = stimulus.shape
+    iverilog = require_tool("iverilog", "iverilog")
+    vvp = require_tool("vvp", "iverilog")
+    N, E = H * W, config.input_bits
+    with tempfile.TemporaryDirectory(prefix="tespike-icarus-") as scratch:
+        work = Path(work_dir) if work_dir is not None else Path(scratch)
+        if not work.is_dir():
+            raise SimulatorRunError(f"work_dir {str(work)!r} is not an existing directory")
+        (work / "array.v").write_text(verilog)
+        (work / "tb.v").write_text(testbench)
+        with atomic_output(work / _STIMULUS) as tmp:
+            Path(tmp).write_text("\n".join(rows_to_hex(pack_rows(stimulus.reshape(T, N), E), N * E)) + "\n")
+        (work / _CAPTURES).unlink(missing_ok=True)
+        compiled = run_process([iverilog, "-g2005", "-o", "sim.vvp", "-s", TESTBENCH_TOP,
+                                f"-P{TESTBENCH_TOP}.CLOCKS={T}", f"-P{TESTBENCH_TOP}.READOUTS={expected}",
+                                f"-P{TESTBENCH_TOP}.FLUSH={flush}", "tb.v", "array.v"], cwd=work)
+        if compiled.returncode != 0:
+            raise SimulatorBuildError(
+                f"iverilog -g2005 could not compile {what} (exit {compiled.returncode}): "
+                f"{first_error_line(compiled.stderr + compiled.stdout)}")
+        ran = run_process([vvp, "-n", "sim.vvp"], cwd=work)
+        if ran.returncode != 0:
+            raise SimulatorRunError(f"{what}: vvp failed (exit {ran.returncode}): "
+                                    f"{first_error_line(ran.stderr + ran.stdout)}")
+        return _parse_captures(work / _CAPTURES, what, word_port)
 
 
 def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Path | None = None,
@@ -122,34 +153,102 @@ def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Pa
     K = T // L
     if K == 0:
         return np.zeros((0, H, W), np.int64)
-    iverilog = require_tool("iverilog", "iverilog")
-    vvp = require_tool("vvp", "iverilog")
     N, E, Wd = H * W, config.input_bits, config.word_bits
     top = top_module(config)
     if verilog is None:
         from rtl.verilog import array_verilog
         verilog = array_verilog(config, H, W)
     what = f"Icarus run of {top} ({H} x {W})"
-    with tempfile.TemporaryDirectory(prefix="tespike-icarus-") as scratch:
-        work = Path(work_dir) if work_dir is not None else Path(scratch)
-        if not work.is_dir():
-            raise SimulatorRunError(f"work_dir {str(work)!r} is not an existing directory")
-        (work / "array.v").write_text(verilog)
-        (work / "tb.v").write_text(icarus_testbench(top, N * E, N * Wd))
-        with atomic_output(work / _STIMULUS) as tmp:
-            Path(tmp).write_text("\n".join(rows_to_hex(pack_rows(stimulus.reshape(T, N), E), N * E)) + "\n")
-        (work / _CAPTURES).unlink(missing_ok=True)
-        compiled = run_process([iverilog, "-g2005", "-o", "sim.vvp", "-s", TESTBENCH_TOP,
-                                f"-P{TESTBENCH_TOP}.CLOCKS={T}", f"-P{TESTBENCH_TOP}.READOUTS={K}",
-                                f"-P{TESTBENCH_TOP}.FLUSH={L + 1}", "tb.v", "array.v"], cwd=work)
-        if compiled.returncode != 0:
-            raise SimulatorBuildError(
-                f"iverilog -g2005 could not compile {top} (exit {compiled.returncode}): "
-                f"{first_error_line(compiled.stderr + compiled.stdout)}")
-        ran = run_process([vvp, "-n", "sim.vvp"], cwd=work)
-        if ran.returncode != 0:
-            raise SimulatorRunError(f"{what}: vvp failed (exit {ran.returncode}): "
-                                    f"{first_error_line(ran.stderr + ran.stdout)}")
-        clocks, frames = _parse_captures(work / _CAPTURES, what)
+    clocks, frames = _simulate(config, stimulus, verilog, icarus_testbench(top, N * E, N * Wd), L + 1,
+                               K, what, work_dir)
     check_captures(clocks, config, K, what)
     return unpack_rows(hex_to_rows(frames, N * Wd), N, Wd).reshape(K, H, W)
+
+
+def icarus_stream_testbench(top: str, charge_bits: int, lane_bits: int) -> str:
+    """Verilog-2005 testbench of the streaming ports (SPEC section 6, ``--lanes N``).
+
+    Like :func:`icarus_testbench`; each clock with ``out_valid`` high writes
+    ``<clock> <out_first> <out_words in hex>``; READOUTS is the number of beats expected.
+    """
+    return f"""// tespike Icarus testbench for {top}: SPEC section 6 streaming ports only (generated).
+`timescale 1ns / 1ns
+module {TESTBENCH_TOP};
+  parameter CLOCKS = 1;     // stimulus rows (pixel clocks)
+  parameter READOUTS = 1;   // beats expected
+  parameter FLUSH = 1;      // clocks of zero charge allowed after the stimulus
+  reg clk;
+  reg rst;
+  reg [{charge_bits - 1}:0] charge;
+  wire out_valid, out_first;
+  wire [{lane_bits - 1}:0] out_words;
+  reg [{charge_bits - 1}:0] stimulus [0:CLOCKS - 1];
+  integer t, captured, out, i;
+
+  {top} dut(.clk(clk), .rst(rst), .charge(charge), .out_valid(out_valid), .out_first(out_first),
+    .out_words(out_words));
+
+  initial begin
+    $readmemh("{_STIMULUS}", stimulus);
+    out = $fopen("{_CAPTURES}", "w");
+    clk = 1'b0;
+    rst = 1'b1;
+    charge = {charge_bits}'d0;
+    for (i = 0; i < {RESET_CLOCKS}; i = i + 1) begin
+      #{_HALF_PERIOD} clk = 1'b1;
+      #{_HALF_PERIOD} clk = 1'b0;
+    end
+    rst = 1'b0;
+    captured = 0;
+    t = 0;
+    while (t < CLOCKS + FLUSH && !(t >= CLOCKS && captured >= READOUTS)) begin
+      if (t < CLOCKS) charge = stimulus[t];
+      else charge = {charge_bits}'d0;
+      #1;                                   // inputs of clock t settle; sample before the edge
+      if (out_valid === 1'b1) begin
+        if (out_first === 1'b1 || out_first === 1'b0) $fwrite(out, "%0d %b%h\\n", t, out_first, out_words);
+        else $fwrite(out, "%0d out_first=%b\\n", t, out_first);
+        captured = captured + 1;
+      end else if (out_valid !== 1'b0)
+        $fwrite(out, "%0d out_valid=%b\\n", t, out_valid);
+      #{_HALF_PERIOD - 1} clk = 1'b1;       // rising edge t
+      #{_HALF_PERIOD} clk = 1'b0;
+      t = t + 1;
+    end
+    $fwrite(out, "end %0d\\n", t);
+    $fclose(out);
+    $finish;
+  end
+endmodule
+"""
+
+
+def run_icarus_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,
+                      work_dir: str | Path | None = None, verilog: str | None = None) -> np.ndarray:
+    """Simulate the streaming top (``--lanes N``) on a (T, H, W) stimulus; return beats (K, B, N).
+
+    Equal to ``golden.stream.beats(golden words, N)`` for a correct array; the beat
+    timing is held to SPEC section 6 (:func:`cosim.stream_ports.check_beats`).
+    ``verilog`` replaces ``rtl.verilog_stream.stream_array_verilog(config, H, W, N)``.
+    """
+    from golden.stream import beat_count, check_lanes
+
+    from .stream_ports import check_beats, flush_clocks, stream_top_module
+
+    check_stimulus(stimulus, config)
+    T, H, W = stimulus.shape
+    check_lanes(config, H, W, lanes)
+    K, B = T // config.clocks_per_readout, beat_count(H * W, lanes)
+    if K == 0:
+        return np.zeros((0, B, lanes), np.int64)
+    E, Wd = config.input_bits, config.word_bits
+    top = stream_top_module(config)
+    if verilog is None:
+        from rtl.verilog_stream import stream_array_verilog
+        verilog = stream_array_verilog(config, H, W, lanes)
+    what = f"Icarus run of {top} ({H} x {W}, {lanes} lanes)"
+    clocks, lines = _simulate(config, stimulus, verilog, icarus_stream_testbench(top, H * W * E, lanes * Wd),
+                              flush_clocks(config), K * B, what, work_dir, "out_words")
+    firsts = [line[0] == "1" for line in lines]
+    rows = hex_to_rows([line[1:] for line in lines], lanes * Wd)
+    return check_beats(clocks, firsts, rows, config, H, W, lanes, K, what)[0]

@@ -244,3 +244,30 @@ def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, shape, *, dumpfile=Non
                     save.trace(full, datafmt="dec" if size > 1 else "hex")
                     written.append(full)
     return written
+
+
+def bit_toggles(vcd_path, suffixes: tuple[str, ...]) -> dict[str, int]:
+    """Bit changes of every signal whose name ends in ``.<suffix>``, by full name.
+
+    Each value change counts the bits that differ from the previous value (a value
+    with x or z bits counts nothing, and nor does the first value: the initial state).
+    The golden model's :func:`golden.toggles.count_toggles` is checked against this.
+    """
+    from vcdvcd import VCDVCD
+
+    sizes = _var_sizes(vcd_path)
+    names = [name for name in sizes if any(name.endswith("." + s) for s in suffixes)]
+    if not names:
+        raise InputError(f"waveform file {str(vcd_path)!r} has no signal ending in "
+                         + ", ".join(f"'.{s}'" for s in suffixes))
+    vcd = VCDVCD(str(vcd_path), signals=names, store_tvs=True)
+    counts = {}
+    for name in names:
+        total, previous = 0, None
+        for _, value in vcd[name].tv:
+            number = int(value, 2) if set(value) <= {"0", "1"} else None
+            if previous is not None and number is not None:
+                total += (previous ^ number).bit_count()
+            previous = number
+        counts[name] = total
+    return counts

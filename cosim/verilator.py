@@ -322,15 +322,19 @@ def _keep_runtime(obj: Path, runtime: Path, cxx_opt: str = CXX_OPT) -> None:
 
 def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
           build_dir: str | Path | None = None, progress: bool = False, inline: bool = False,
-          cxx_opt: str = CXX_OPT, extra_flags: tuple[str, ...] = ()) -> Path:
+          cxx_opt: str = CXX_OPT, extra_flags: tuple[str, ...] = (), harness: str | None = None) -> Path:
     """Build (or find in the cache) the simulation executable; return its path.
+
+    ``harness`` is the C++ ``main`` (default: :func:`harness_cpp` of the parallel
+    ports; the streaming top brings its own, :mod:`cosim.verilator_stream`).
 
     The cache key is a hash of the Verilog, the harness, the flags and the
     Verilator version. A build runs in a temporary directory renamed into
     place on success, under a lock, so concurrent runs never see half a build.
     """
     exe = require_tool("verilator", "verilator")
-    harness = harness_cpp(top, charge_bits, frame_bits)
+    if harness is None:
+        harness = harness_cpp(top, charge_bits, frame_bits)
     flags = build_flags(top, inline, cxx_opt, tuple(extra_flags))
     root = Path(build_dir) if build_dir is not None else default_cache_root() / "verilator"
     key = content_hash(verilog, harness, " ".join(flags), verilator_version())

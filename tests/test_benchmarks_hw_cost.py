@@ -105,3 +105,12 @@ def test_compare_calls_a_difference_only_when_ranges_do_not_overlap():
     assert hw_cost.compare(est(100, 110), est(120, 130)) == "fewer"
     assert hw_cost.compare(est(140, 150), est(120, 130)) == "more"
     assert hw_cost.compare(est(100, 125), est(120, 130)).startswith("about")
+
+
+def test_activity_column_counts_the_counters_switching():
+    """At I = 1 TE's counters freeze after 2^b1 spikes while the 8-bit ML counter counts ~255."""
+    te, ml = hw_cost.activity(SensorConfig()), hw_cost.activity(SensorConfig(mode="ml"))
+    assert len(te) == len(ml) == len(hw_cost.ACTIVITY_LIGHT)
+    assert te[1][1] < 40 < 200 < ml[1][1]
+    assert te[1][0] > te[1][1] and ml[1][0] > ml[1][1]          # the accumulator adds to both
+    assert hw_cost.activity_text(te[1]).count(" / ") == 2

@@ -45,3 +45,51 @@ def test_verilog_refuses_bad_config_without_output(tmp_path):
                          "--out", tmp_path / "A.v")
     assert_refused(result, "'alpha'", "99")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.json"]
+
+
+def test_verilog_lanes_writes_the_streaming_top(tmp_path):
+    """--lanes N: te_pixel_array_stream with the SPEC section 6 streaming ports; lints clean."""
+    result = run_tespike("verilog", "--config", "te", "--height", 2, "--width", 3, "--lanes", 4,
+                         "--out", tmp_path / "S.v")
+    assert result.returncode == 0, result.stderr
+    text = (tmp_path / "S.v").read_text()
+    assert "module te_pixel_array_stream (" in text and "input  wire [95:0] charge" in text   # 2*3*16
+    assert "output wire out_valid" in text and "output wire out_first" in text
+    assert "output wire [19:0] out_words" in text                                      # 4 lanes * 5
+    assert "frame" not in text.split("module te_pixel_array_stream (")[1].split(");")[0]
+    if shutil.which("verilator"):
+        lint = subprocess.run(["verilator", "--lint-only", "-Wall", str(tmp_path / "S.v")],
+                              capture_output=True, text=True)
+        assert lint.returncode == 0 and "%Warning" not in lint.stderr, lint.stderr
+
+
+def test_verilog_lanes_sensor_size_has_no_wide_literal(tmp_path):
+    """400 x 250 (the paper's sensor) with the fewest lanes: written in seconds, no literal over 64 bits."""
+    import re
+    result = run_tespike("verilog", "--config", "ml-msb", "--height", 400, "--width", 250, "--lanes", 417,
+                         "--out", tmp_path / "S.v")
+    assert result.returncode == 0, result.stderr
+    text = (tmp_path / "S.v").read_text()
+    assert "module ml_pixel_array_stream (" in text and "output wire [1667:0] out_words" in text
+    assert max(int(w) for w in re.findall(r"\b(\d+)'[bdh]", text)) <= 64
+
+
+@pytest.mark.parametrize("config, height, width, lanes, smallest", [
+    ("te", 400, 250, 416, 417),          # B = 241 > L = 240
+    ("te", 2, 3, 0, None),
+])
+def test_verilog_refuses_too_few_lanes_naming_the_smallest(tmp_path, config, height, width, lanes, smallest):
+    result = run_tespike("verilog", "--config", config, "--height", height, "--width", width,
+                         "--lanes", lanes, "--out", tmp_path / "S.v")
+    words = ["--lanes", str(lanes)] + ([f"smallest N is {smallest}"] if smallest else [])
+    assert_refused(result, *words)
+    assert not list(tmp_path.iterdir())
+
+
+def test_verilog_refuses_lanes_for_l_equal_one_below_the_pixel_count(tmp_path):
+    """L = 1: every interval's words must leave in one beat, so N >= H * W."""
+    (tmp_path / "one.json").write_text(json.dumps({"alpha": 1, "clocks_per_tick": 1}))
+    result = run_tespike("verilog", "--config", tmp_path / "one.json", "--height", 2, "--width", 3,
+                         "--lanes", 5, "--out", tmp_path / "S.v")
+    assert_refused(result, "--lanes", "smallest N is 6")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["one.json"]

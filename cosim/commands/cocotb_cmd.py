@@ -22,6 +22,8 @@ def add_arguments(parser):
                                            "(default: --readouts intervals of a mixed Poisson stimulus)")
     parser.add_argument("--readouts", type=int, default=3, help="readout intervals of the default stimulus")
     parser.add_argument("--seed", type=int, default=0, help="seed of the default stimulus")
+    parser.add_argument("--lanes", type=int, help="test the streaming top (tespike verilog --lanes N): "
+                                                  "its beats against the golden model's words in beat order")
     parser.add_argument("--work-dir", help="keep each simulator's log and results here")
 
 
@@ -46,7 +48,13 @@ def run(args) -> int:
                      memory=8 * clocks * args.height * args.width)
     if args.readouts < 1:
         raise InputError(f"--readouts {args.readouts}: must be >= 1")
-    settings = Settings(config, args.height, args.width, args.readouts, args.seed, args.stimulus)
+    if args.lanes is not None:
+        from golden.stream import check_lanes
+        try:
+            check_lanes(config, args.height, args.width, args.lanes)
+        except ValueError as exc:
+            raise InputError(f"--{exc}") from None
+    settings = Settings(config, args.height, args.width, args.readouts, args.seed, args.stimulus, args.lanes)
     failed = 0
     for simulator in args.simulator:
         result = run_cocotb(settings, simulator, verilog_path=args.verilog, work_dir=args.work_dir)

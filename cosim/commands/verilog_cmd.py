@@ -2,18 +2,28 @@
 
 from .common import add_config_argument
 
-HELP = "write the Verilog of an H x W pixel array (top te_pixel_array / ml_pixel_array)"
+HELP = ("write the Verilog of an H x W pixel array (top te_pixel_array / ml_pixel_array; "
+        "with --lanes N the streaming top te_pixel_array_stream / ml_pixel_array_stream)")
 
 #: Largest array written: 65536 pixels. The charge and frame ports are H * W * E
 #: and H * W * Wd bits wide (up to 2^21 bits at E = 32); larger arrays take
 #: minutes to convert and give ports beyond what the simulators here read well.
 MAX_PIXELS = 1 << 16
 
+#: Largest streaming array written (``--lanes``): 262144 pixels (e.g. 512 x 512), beyond the
+#: paper's 400 x 250 sensor. Its Verilog has no port or literal that grows with the words
+#: (only ``charge``, H * W * E bits, as SPEC section 6 fixes), and Verilator builds it in
+#: time that grows with H + W (docs/outside-simulators.md, "Sensor size").
+MAX_STREAM_PIXELS = 1 << 18
+
 
 def add_arguments(parser):
     add_config_argument(parser)
     parser.add_argument("--height", required=True, type=int, help="pixel rows H >= 1 (H x W <= 65536)")
     parser.add_argument("--width", required=True, type=int, help="pixel columns W >= 1 (H x W <= 65536)")
+    parser.add_argument("--lanes", type=int, default=None,
+                        help="streaming readout (SPEC section 6): N words per beat, raster order; "
+                             "N >= ceil(H * W / L) so one interval's beats fit in one readout interval")
     parser.add_argument("--out", required=True, help="A.v to write")
 
 
@@ -30,14 +40,29 @@ def run(args) -> int:
     check_outputs({"--out": args.out}, {"--config": args.config})
     config = load_config(args.config)
     check_array_size(args.height, args.width)     # refuse before the slow import and conversion
-    if args.height * args.width > MAX_PIXELS:
-        raise InputError(f"--height {args.height} x --width {args.width} = {args.height * args.width} "
-                         f"pixels: at most {MAX_PIXELS} (e.g. 256 x 256) are supported")
-    from rtl.verilog import array_verilog
-
-    text = array_verilog(config, args.height, args.width)
+    pixels = args.height * args.width
+    limit, example = (MAX_PIXELS, "256 x 256") if args.lanes is None else (MAX_STREAM_PIXELS, "512 x 512")
+    if pixels > limit:
+        raise InputError(f"--height {args.height} x --width {args.width} = {pixels} "
+                         f"pixels: at most {limit} (e.g. {example}) are supported"
+                         + ("" if args.lanes is None else " with --lanes"))
+    mode = "te" if config.is_te else "ml"
+    if args.lanes is None:
+        from rtl.verilog import array_verilog
+        text, what = array_verilog(config, args.height, args.width), f"{mode}_pixel_array"
+    else:
+        from golden.stream import beat_count, check_lanes
+        try:
+            check_lanes(config, args.height, args.width, args.lanes)
+        except InputError:
+            raise
+        except ValueError as exc:                 # ConfigError: name the flag
+            raise InputError(f"--{exc}") from None
+        from rtl.verilog_stream import stream_array_verilog
+        text = stream_array_verilog(config, args.height, args.width, args.lanes)
+        what = (f"{mode}_pixel_array_stream, {args.lanes} lanes, "
+                f"{beat_count(pixels, args.lanes)} beats per readout interval")
     with atomic_output(args.out) as tmp:
         Path(tmp).write_text(text)
-    report(args, f"wrote {args.out}: {'te' if config.is_te else 'ml'}_pixel_array, "
-                 f"{args.height} x {args.width} pixels")
+    report(args, f"wrote {args.out}: {what}, {args.height} x {args.width} pixels")
     return 0

@@ -1,0 +1,98 @@
+"""Co-simulation of the Amaranth streaming array (:class:`rtl.stream.StreamingPixelArray`).
+
+:func:`rtl_stream_beats` is the Amaranth counterpart of
+:func:`cosim.icarus.run_icarus_stream` and
+:func:`cosim.verilator_stream.run_verilator_stream`: stimulus ``(T, H, W)`` in,
+beats ``(K, B, N)`` out, equal to :func:`golden.stream.beats` of the golden
+words for a correct RTL, with the beat timing held to SPEC section 6 by the
+same check (:func:`cosim.stream_ports.check_beats`). The testbench is the one
+of :mod:`cosim.rtlsim`: reset for :data:`cosim.rtlsim.RESET_CLOCKS` edges, then
+one ``charge`` per pixel clock, the stream sampled at each rising edge.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.io import check_stimulus
+from golden.stream import beat_count, check_lanes
+
+from .outside import words_per_row
+from .rtlsim import CLOCK_PERIOD_S, RESET_CLOCKS, _refusing, iter_packed_charge
+from .stream_ports import check_beats, flush_clocks
+
+
+def build_stream_array(config: SensorConfig, height: int, width: int, lanes: int, *, flat: bool = False):
+    """``rtl.stream.StreamingPixelArray(config, height, width, lanes, flat=flat)``, the design under test."""
+    from rtl.stream import StreamingPixelArray
+    check_lanes(config, height, width, lanes)
+    return _refusing(lambda: StreamingPixelArray(config, height, width, lanes, flat=flat),
+                     config, height, width)
+
+
+def rtl_stream_beats(config: SensorConfig, stimulus: np.ndarray, lanes: int, *, flat: bool = True
+                     ) -> np.ndarray:
+    """Run the streaming RTL on ``stimulus`` (T, H, W); return its beats (K, B, N) as int64."""
+    return rtl_stream_run(config, stimulus, lanes, flat=flat)[0]
+
+
+def rtl_stream_run(config: SensorConfig, stimulus: np.ndarray, lanes: int, *, flat: bool = True
+                   ) -> tuple[np.ndarray, int]:
+    """:func:`rtl_stream_beats` and the largest latency of a last beat (clocks after its interval)."""
+    from amaranth.hdl import ClockDomain, Elaboratable, Module
+    from amaranth.sim import Simulator
+
+    check_stimulus(stimulus, config)
+    T, H, W = stimulus.shape
+    K, B = T // config.clocks_per_readout, beat_count(H * W, lanes)
+    dut = build_stream_array(config, H, W, lanes, flat=flat)
+
+    class Bench(Elaboratable):
+        def __init__(self):
+            self.domain = ClockDomain("sync")
+
+        def elaborate(self, platform):
+            m = Module()
+            m.domains.sync = self.domain
+            m.submodules.stream = dut
+            return m
+
+    bench = Bench()
+    clocks, firsts, lane_values = [], [], []
+
+    async def testbench(ctx):
+        ctx.set(bench.domain.rst, 1)
+        for _ in range(RESET_CLOCKS):
+            await ctx.tick()
+        ctx.set(bench.domain.rst, 0)
+        if K == 0:
+            return
+        charge = iter_packed_charge(stimulus, config.input_bits)
+        ctx.set(dut.charge, next(charge))
+        t = 0
+        async for _, _, valid, first, words in ctx.tick().sample(dut.out.valid, dut.out.p.first,
+                                                                 dut.out.p.words):
+            if valid:
+                clocks.append(t)
+                firsts.append(bool(first))
+                lane_values.append(int(words))
+                if len(clocks) == K * B:
+                    break
+            t += 1
+            if t >= T + flush_clocks(config):
+                break
+            ctx.set(dut.charge, next(charge) if t < T else 0)
+
+    sim = _refusing(lambda: Simulator(bench), config, H, W)
+    sim.add_clock(CLOCK_PERIOD_S)
+    sim.add_testbench(testbench)
+    sim.run()
+    nbytes = 4 * words_per_row(lanes, config.word_bits)
+    raw = b"".join(v.to_bytes(nbytes, "little") for v in lane_values)
+    rows = np.frombuffer(raw, "<u4").reshape(len(lane_values), nbytes // 4)
+    what = f"Amaranth simulation of the {H} x {W} streaming array ({lanes} lanes)"
+    return check_beats(clocks, firsts, rows, config, H, W, lanes, K, what)
+
+
+

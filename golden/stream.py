@@ -1,0 +1,80 @@
+"""The streaming readout of SPEC section 6: the words of each readout interval as beats of N lanes.
+
+A chip cannot bring all H x W words out in one clock; with ``--lanes N`` the
+array sends readout interval k as B = ceil(H W / N) beats, beat j carrying the
+words of pixels p = j N + i (raster order, p = r W + c) in lane i, lanes past
+the last pixel carrying 0. The beats of one interval must fit in one readout
+interval (B <= L), so the smallest lane count is ceil(H W / L).
+
+:func:`beats` is the reference every simulator check of the streaming top uses;
+:func:`check_lanes` is the one refusal of an impossible lane count.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .config import SensorConfig
+from .errors import ConfigError
+
+
+def beat_count(pixels: int, lanes: int) -> int:
+    """B = ceil(pixels / lanes): beats per readout interval."""
+    return -(-pixels // lanes)
+
+
+def min_lanes(config: SensorConfig, height: int, width: int) -> int:
+    """The smallest N whose B = ceil(H W / N) beats fit in one readout interval of L clocks."""
+    return beat_count(height * width, config.clocks_per_readout)
+
+
+def check_lanes(config: SensorConfig, height: int, width: int, lanes) -> int:
+    """Refuse a lane count that is not an integer >= 1 or whose beats do not fit in L clocks.
+
+    The message names the smallest N that works (one line, :class:`ConfigError`). N above
+    H W is legal (SPEC section 6): one beat, its lanes past the last pixel carrying 0.
+    """
+    pixels, L = height * width, config.clocks_per_readout
+    if type(lanes) is not int or lanes < 1:
+        raise ConfigError(f"lanes = {lanes!r}: must be an integer >= 1")
+    beats = beat_count(pixels, lanes)
+    if beats > L:
+        raise ConfigError(f"lanes = {lanes}: {height} x {width} pixels need B = ceil({pixels} / {lanes}) = "
+                          f"{beats} beats, more than the L = {L} clocks of a readout interval; "
+                          f"the smallest N is {min_lanes(config, height, width)}")
+    return lanes
+
+
+def beats(words: np.ndarray, lanes: int) -> np.ndarray:
+    """Words ``(K, H, W)`` -> beats ``(K, B, N)``: beat j, lane i holds pixel j N + i in raster order, or 0."""
+    words = np.asarray(words)
+    if words.ndim != 3:
+        raise ValueError(f"beats wants words (K, H, W), got shape {words.shape}")
+    if type(lanes) is not int or lanes < 1:
+        raise ValueError(f"lanes = {lanes!r}: must be an integer >= 1")
+    K, H, W = words.shape
+    B = beat_count(H * W, lanes)
+    out = np.zeros((K, B * lanes), words.dtype)
+    out[:, :H * W] = words.reshape(K, H * W)
+    return out.reshape(K, B, lanes)
+
+
+def unbeat(beats_: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Inverse of :func:`beats`: ``(K, B, N)`` -> words ``(K, H, W)`` (the padding lanes are dropped)."""
+    K = beats_.shape[0]
+    return beats_.reshape(K, -1)[:, :height * width].reshape(K, height, width)
+
+
+def output_bandwidth(config: SensorConfig, height: int, width: int, pixel_clock_hz: float) -> dict:
+    """What the streaming readout of an H x W array costs at a pixel clock of ``pixel_clock_hz``.
+
+    Returns ``readout_hz`` (readout intervals per second, f / L), ``bits_per_s`` (the words that
+    must leave: H W Wd f / L, whatever the lane count), ``min_lanes`` (N = ceil(H W / L)),
+    ``pins`` (N Wd output bits at that N) and ``port_bits_per_s`` (N Wd f, what those pins carry
+    when every clock holds a beat; at least ``bits_per_s``).
+    """
+    L, wd = config.clocks_per_readout, config.word_bits
+    lanes = min_lanes(config, height, width)
+    return {"readout_hz": pixel_clock_hz / L, "word_bits": wd,
+            "bits_per_s": height * width * wd * pixel_clock_hz / L,
+            "min_lanes": lanes, "pins": lanes * wd, "port_bits_per_s": lanes * wd * pixel_clock_hz}

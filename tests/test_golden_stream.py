@@ -1,0 +1,62 @@
+import numpy as np
+import pytest
+
+from golden.config import SensorConfig
+from golden.errors import ConfigError
+from golden.stream import beat_count, beats, check_lanes, min_lanes, unbeat
+
+
+def test_beats_are_raster_order_with_zero_padding():
+    words = np.arange(1, 2 * 2 * 3 + 1).reshape(2, 2, 3)       # K = 2 intervals of 2 x 3 pixels
+    got = beats(words, 4)                                      # B = 2 beats, lanes 6 and 7 padded
+    assert got.shape == (2, 2, 4)
+    assert got[0].tolist() == [[1, 2, 3, 4], [5, 6, 0, 0]]
+    assert got[1].tolist() == [[7, 8, 9, 10], [11, 12, 0, 0]]
+    assert np.array_equal(unbeat(got, 2, 3), words)
+
+
+@pytest.mark.parametrize("lanes", [1, 5, 6, 7, 64])
+def test_beat_j_lane_i_is_pixel_j_n_plus_i(lanes, rng):
+    words = rng.integers(0, 32, size=(3, 2, 3))
+    got = beats(words, lanes)
+    B = beat_count(6, lanes)
+    assert got.shape == (3, B, lanes)
+    for j in range(B):
+        for i in range(lanes):
+            p = j * lanes + i
+            want = words[:, p // 3, p % 3] if p < 6 else np.zeros(3, words.dtype)
+            assert np.array_equal(got[:, j, i], want)
+
+
+def test_smallest_lane_count_and_refusal_naming_it():
+    config = SensorConfig()                                    # L = 240
+    assert min_lanes(config, 400, 250) == 417                  # ceil(100000 / 240)
+    assert check_lanes(config, 400, 250, 417) == 417
+    with pytest.raises(ConfigError) as err:
+        check_lanes(config, 400, 250, 416)
+    message = str(err.value)
+    assert "\n" not in message and "416" in message and "the smallest N is 417" in message
+    one = SensorConfig(alpha=1, clocks_per_tick=1)             # L = 1: one beat per interval
+    assert min_lanes(one, 2, 3) == 6
+    with pytest.raises(ConfigError, match="smallest N is 6"):
+        check_lanes(one, 2, 3, 5)
+    assert check_lanes(one, 2, 3, 9) == 9                      # N > H*W: lanes past the last pixel carry 0
+
+
+@pytest.mark.parametrize("lanes", [0, -1, 2.0, True])
+def test_lane_count_must_be_a_positive_integer(lanes):
+    with pytest.raises(ConfigError, match="lanes"):
+        check_lanes(SensorConfig(), 2, 3, lanes)
+
+
+def test_output_bandwidth_at_the_paper_settings():
+    """400 x 250 TE pixels at 40 kHz readout (pixel clock 9.6 MHz): 5-bit words, 20 Gbit/s, 417 lanes."""
+    from golden.stream import output_bandwidth
+    config = SensorConfig()
+    b = output_bandwidth(config, 400, 250, 40e3 * 240)
+    assert b["readout_hz"] == 40e3 and b["word_bits"] == 5
+    assert b["bits_per_s"] == 400 * 250 * 5 * 40e3 == 20e9
+    assert b["min_lanes"] == 417 and b["pins"] == 417 * 5
+    assert b["port_bits_per_s"] >= b["bits_per_s"]
+    msb = output_bandwidth(SensorConfig.preset("ml-msb"), 400, 250, 9.6e6)
+    assert msb["word_bits"] == 4 and msb["bits_per_s"] == 16e9
