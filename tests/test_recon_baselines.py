@@ -11,7 +11,7 @@ from recon.baselines import BASELINES, PAPER_PARAMETERS, RECEPTIVE_RADIUS
 from recon.baselines.align import LocalCrossAttention, PyramidAlign
 from recon.baselines.common import parameter_count, windows
 from recon.baselines.mambaspike import temporal_tokens
-from recon.baselines.represent import firing_rates
+from recon.baselines.represent import LENGTHS, firing_rates, window_means
 from recon.baselines.scan import MambaBlock, selective_scan, selective_scan_reference
 from recon.net.deform import ModulatedDeformConv2d
 
@@ -252,3 +252,14 @@ def test_windows_and_tokens_are_centred_on_the_key():
     assert tokens.shape == (1, 21, 3, 1, 1)
     assert tokens[0, 10, :, 0, 0].tolist() == [29.0, 30.0, 31.0]
     assert tokens[0, 0, 0, 0, 0] == 0 and tokens[0, 20, 2, 0, 0] == 60       # ends repeated
+
+
+@pytest.mark.parametrize("readouts", [7, 61])
+def test_window_sums_equal_direct_sums(readouts):
+    light = hdr_light((2, readouts, 3, 2)).double()
+    for length, (total, mean) in zip(LENGTHS, window_means(light)):
+        half = length // 2
+        direct = torch.stack([light[:, max(0, i - half):i + half + 1].sum(1) for i in range(readouts)], 1)
+        count = torch.tensor([min(readouts, i + half + 1) - max(0, i - half) for i in range(readouts)])
+        assert torch.allclose(total, direct, rtol=1e-12)
+        assert torch.allclose(mean, direct / count[:, None, None].double(), rtol=1e-12)

@@ -26,13 +26,14 @@ folds the frame for a CPU size.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import ClassVar
 
 import torch
 from torch import nn
 
 from .align import PyramidAlign, pyramid_reach
-from .common import OutputHead, ResBlock, SizesMixin, check_input, compress, conv3, windows
+from .common import OutputHead, ResBlock, SizesMixin, check_input, conv3, windows
 from .represent import firing_rates
 
 
@@ -95,20 +96,36 @@ class BSFSizes(SizesMixin):
 
 
 class MultiOrderEncoder(nn.Module):
-    """(B, orders, window, H, W) compressed rates -> (B, C, H / u, W / u)."""
+    """Folded compressed rates of the whole span -> (N, S, C, H / u, W / u) features of the S sub-spans.
+
+    Input: (N, orders x span x u^2, H / u, W / u), the pixel-unshuffled rates,
+    channel (order, readout, fold) in that order, so a sub-span of one order
+    is a slice of channels (no copy of the overlapping sub-spans).
+    """
 
     def __init__(self, sizes: BSFSizes):
         super().__init__()
-        c, u, k = sizes.channels, sizes.unshuffle, len(sizes.orders)
-        self.fold = nn.PixelUnshuffle(u)
-        self.embed = nn.ModuleList(nn.Conv2d(sizes.window * u * u, c, 1) for _ in range(k))
+        s = self.sizes = sizes
+        c, u, k = s.channels, s.unshuffle, len(s.orders)
+        self.embed = nn.ModuleList(nn.Conv2d(s.window * u * u, c, 1) for _ in range(k))
         self.fuse = conv3(k * c, c)
         self.act = nn.LeakyReLU(0.1)
-        self.blocks = nn.Sequential(*[ResBlock(c, dilation=1 + i % 2) for i in range(sizes.blocks)])
+        self.blocks = nn.Sequential(*[ResBlock(c, dilation=1 + i % 2) for i in range(s.blocks)])
 
-    def forward(self, rates: torch.Tensor) -> torch.Tensor:
-        parts = [self.act(embed(self.fold(rates[:, i]))) for i, embed in enumerate(self.embed)]
-        return self.blocks(self.act(self.fuse(torch.cat(parts, 1))))
+    def forward(self, folded: torch.Tensor) -> torch.Tensor:
+        s = self.sizes
+        n, _, h, w = folded.shape
+        per_readout = s.unshuffle ** 2
+        subs = []
+        for start in range(0, s.windows * s.step, s.step):
+            parts = []
+            for i, embed in enumerate(self.embed):
+                first = (i * s.span + start) * per_readout
+                parts.append(self.act(embed(folded[:, first:first + s.window * per_readout])))
+            subs.append(torch.cat(parts, 1))
+        x = torch.stack(subs, 1).reshape(n * s.windows, -1, h, w)
+        x = self.blocks(self.act(self.fuse(x)))
+        return x.reshape(n, s.windows, *x.shape[1:])
 
 
 class BSF(nn.Module):
@@ -118,6 +135,7 @@ class BSF(nn.Module):
         super().__init__()
         self.sizes = s = sizes
         c = s.channels
+        self.fold = nn.PixelUnshuffle(s.unshuffle)
         self.encoder = MultiOrderEncoder(s)
         self.align = PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset,
                                   attention_radius=s.attention_radius)
@@ -129,11 +147,9 @@ class BSF(nn.Module):
         s = self.sizes
         check_input(light, s.span, s.pyramid_factor)
         n, _, h, w = light.shape
-        rates = compress(firing_rates(light, s.orders, s.threshold), s.mu)     # (N, orders, span, H, W)
-        subs = windows(rates.transpose(1, 2), s.windows, s.window, s.step)     # (N, S, window, orders, H, W)
-        subs = subs.transpose(2, 3).reshape(n * s.windows, len(s.orders), s.window, h, w)
-        feats = self.encoder(subs)
-        feats = feats.reshape(n, s.windows, *feats.shape[1:])
+        rates = firing_rates(light, s.orders, s.threshold)                    # (N, orders, span, H, W)
+        code = rates.mul_(s.mu).log1p_().div_(math.log1p(s.mu))              # compress, in place (no gradient)
+        feats = self.encoder(self.fold(code.reshape(n, -1, h, w)))
         middle = s.windows // 2
         key = feats[:, middle]
         refs = torch.cat((feats[:, :middle], feats[:, middle + 1:]), 1)

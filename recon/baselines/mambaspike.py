@@ -66,16 +66,16 @@ class MambaSpikeSizes(SizesMixin):
     """
 
     PRESETS: ClassVar[dict] = {
-        "cpu": {"unshuffle": 4, "channels": 16, "temporal_patch": 3, "moment_stride": 3,
+        "cpu": {"unshuffle": 4, "channels": 16, "temporal_patch": 5, "moment_stride": 3, "chunk": 13,
                 "temporal_blocks": 1, "spatial_blocks": 1, "recon_blocks": 1},
-        "paper": {"unshuffle": 1, "channels": 96, "state": 16, "temporal_patch": 1, "moment_stride": 10,
+        "paper": {"unshuffle": 2, "channels": 96, "state": 16, "temporal_patch": 1, "moment_stride": 10,
                   "temporal_blocks": 4, "spatial_blocks": 4, "recon_blocks": 1, "offset_groups": 8},
     }
     LABEL: ClassVar[str] = "mambaspike"
 
     readouts: int = 61
     parsings: int = 1
-    temporal_patch: int = 3
+    temporal_patch: int = 5
     moments: int = 5
     moment_stride: int = 3
     key_window: int = 21
@@ -84,7 +84,7 @@ class MambaSpikeSizes(SizesMixin):
     expand: int = 2
     state: int = 8
     head_dim: int = 8
-    chunk: int = 8
+    chunk: int = 13
     temporal_blocks: int = 1
     spatial_blocks: int = 1
     scan_window: int = 8

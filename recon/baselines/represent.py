@@ -19,39 +19,53 @@ gathered over that time divided by its length.
 Computed, for speed, on a ladder of centred windows (``LENGTHS`` readouts,
 cut at the ends of the span): the order-k rate at t is the mean light over
 the shortest window of the ladder around t that gathers at least
-``k * threshold`` of light, or over the longest (the whole span, as far as
-it reaches) when none does; so a bright pixel's rate is its light in the
-readout itself and a dark pixel's its mean over the span; zero light gives
-zero. The window sums come from one float64 cumulative sum along time (exact
-for HDR values), the choice from comparisons and one gather: vectorised, no
-loop over pixels, a few dozen elementwise passes over the stream.
+``k * threshold`` of light, or over the longest when none does; so a bright
+pixel's rate is its light in the readout itself and a dark pixel's its mean
+over the longest window; zero light gives zero. The window sums come from
+one cumulative sum along time (float64: exact for HDR values); the choice is
+a comparison and a selection per window and order, from the longest window
+to the shortest: a few dozen elementwise passes over the stream, no loop
+over pixels.
 """
 
 from __future__ import annotations
 
 import torch
 
-#: Window lengths (readouts, odd, centred) of the ladder, short to long; the last covers the span.
-LENGTHS = (1, 3, 7, 15, 31, 63)
+#: Window lengths (readouts, odd, centred) of the ladder, short to long.
+LENGTHS = (1, 3, 9, 27, 61)
 
 
 def window_means(light: torch.Tensor, lengths: tuple[int, ...] = LENGTHS):
-    """(N, T, H, W) light -> for each centred window length: (light summed over it, its mean).
+    """(N, T, H, W) light -> for each centred window length, short to long: (light summed over it, its mean).
 
-    Windows are cut at the ends of the span; sums are formed in float64 (one
-    cumulative sum, edge-padded so every window is two slices) and returned
-    in light's dtype.
+    Windows are cut at the ends of the span. Sums are differences of one
+    float64 cumulative sum (exact for HDR values), written straight into
+    light's dtype: the middle readouts as two slices, the readouts whose
+    window is cut at either end from the cumulative's ends.
     """
     n, t, h, w = light.shape
-    r = max(lengths) // 2
-    cum = light.to(torch.float64).cumsum(1)
-    cum = torch.cat((cum.new_zeros(n, r + 1, h, w), cum, cum[:, -1:].expand(n, r, h, w)), 1)  # cum[:, r + i] = sum light[:i]
+    cum = light.to(torch.float64).cumsum(1)                  # cum[:, i] = sum light[:i + 1]
     index = torch.arange(t, dtype=light.dtype, device=light.device)
+    out = []
     for length in lengths:
         half = length // 2
-        total = (cum[:, r + half + 1:r + half + 1 + t] - cum[:, r - half:r - half + t]).to(light.dtype)
+        if half == 0:
+            out.append((light, light))                      # the readout itself, exactly
+            continue
+        total = light.new_empty(n, t, h, w)
+        hi = torch.arange(t, device=light.device).add(half).clamp(max=t - 1)   # last readout of the window
+        lo = torch.arange(t, device=light.device).sub(half + 1)                # readout before its first
+        middle = (lo >= 0) & (hi == torch.arange(t, device=light.device) + half)
+        a, b = (int(i) for i in middle.nonzero()[[0, -1], 0]) if middle.any() else (0, -1)
+        if b >= a:
+            torch.sub(cum[:, a + half:b + half + 1], cum[:, a - half - 1:b - half], out=total[:, a:b + 1])
+        for i in [*range(0, a), *range(max(b + 1, a), t)] if b >= a else range(t):
+            top = cum[:, int(hi[i])]
+            total[:, i] = top - cum[:, int(lo[i])] if lo[i] >= 0 else top
         count = (index + half + 1).clamp(max=t) - (index - half).clamp(min=0)
-        yield total, total / count[:, None, None]
+        out.append((total, total / count[:, None, None]))
+    return out
 
 
 def firing_rates(light: torch.Tensor, orders: tuple[int, ...], threshold: float) -> torch.Tensor:
@@ -62,8 +76,11 @@ def firing_rates(light: torch.Tensor, orders: tuple[int, ...], threshold: float)
     light (the longest when none does).
     """
     x = light.detach().clamp(min=0)
-    rates = [None] * len(orders)
-    for total, mean in reversed(list(window_means(x))):      # long to short: the shortest enough wins
+    ladder = window_means(x)
+    longest = ladder[-1][1]
+    rates = longest.new_empty(x.shape[0], len(orders), *x.shape[1:])
+    rates.copy_(longest[:, None].expand_as(rates))
+    for total, mean in reversed(ladder[:-1]):                 # long to short: the shortest enough wins
         for i, order in enumerate(orders):
-            rates[i] = mean if rates[i] is None else torch.where(total >= order * float(threshold), mean, rates[i])
-    return torch.stack(rates, 1)
+            torch.where(total >= order * float(threshold), mean, rates[:, i], out=rates[:, i])
+    return rates
