@@ -33,7 +33,7 @@ import torch
 from torch import nn
 
 from .align import PyramidAlign, pyramid_reach
-from .common import OutputHead, ResBlock, SizesMixin, check_input, conv3, windows
+from .common import OutputHead, ResBlock, SizesMixin, check_input, conv3
 from .represent import firing_rates
 
 
@@ -96,34 +96,28 @@ class BSFSizes(SizesMixin):
 
 
 class MultiOrderEncoder(nn.Module):
-    """Folded compressed rates of the whole span -> (N, S, C, H / u, W / u) features of the S sub-spans.
+    """(N, orders, span, H, W) compressed rates -> (N, S, C, H / u, W / u) features of the S sub-spans.
 
-    Input: (N, orders x span x u^2, H / u, W / u), the pixel-unshuffled rates,
-    channel (order, readout, fold) in that order, so a sub-span of one order
-    is a slice of channels (no copy of the overlapping sub-spans).
+    A sub-span of one order is a slice of the input (no copy of the
+    overlapping sub-spans); its embedding is a u x u convolution of stride u
+    (a pixel-unshuffle by u and a 1 x 1 convolution, without the copy).
     """
 
     def __init__(self, sizes: BSFSizes):
         super().__init__()
         s = self.sizes = sizes
         c, u, k = s.channels, s.unshuffle, len(s.orders)
-        self.embed = nn.ModuleList(nn.Conv2d(s.window * u * u, c, 1) for _ in range(k))
+        self.embed = nn.ModuleList(nn.Conv2d(s.window, c, u, stride=u) for _ in range(k))
         self.fuse = conv3(k * c, c)
         self.act = nn.LeakyReLU(0.1)
         self.blocks = nn.Sequential(*[ResBlock(c, dilation=1 + i % 2) for i in range(s.blocks)])
 
-    def forward(self, folded: torch.Tensor) -> torch.Tensor:
+    def forward(self, rates: torch.Tensor) -> torch.Tensor:
         s = self.sizes
-        n, _, h, w = folded.shape
-        per_readout = s.unshuffle ** 2
-        subs = []
-        for start in range(0, s.windows * s.step, s.step):
-            parts = []
-            for i, embed in enumerate(self.embed):
-                first = (i * s.span + start) * per_readout
-                parts.append(self.act(embed(folded[:, first:first + s.window * per_readout])))
-            subs.append(torch.cat(parts, 1))
-        x = torch.stack(subs, 1).reshape(n * s.windows, -1, h, w)
+        n = rates.shape[0]
+        subs = [torch.cat([self.act(embed(rates[:, i, start:start + s.window])) for i, embed in enumerate(self.embed)], 1)
+                for start in range(0, s.windows * s.step, s.step)]
+        x = torch.stack(subs, 1).flatten(0, 1)
         x = self.blocks(self.act(self.fuse(x)))
         return x.reshape(n, s.windows, *x.shape[1:])
 
@@ -135,7 +129,6 @@ class BSF(nn.Module):
         super().__init__()
         self.sizes = s = sizes
         c = s.channels
-        self.fold = nn.PixelUnshuffle(s.unshuffle)
         self.encoder = MultiOrderEncoder(s)
         self.align = PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset,
                                   attention_radius=s.attention_radius)
@@ -146,17 +139,17 @@ class BSF(nn.Module):
     def forward(self, light: torch.Tensor) -> torch.Tensor:
         s = self.sizes
         check_input(light, s.span, s.pyramid_factor)
-        n, _, h, w = light.shape
+        n = light.shape[0]
         rates = firing_rates(light, s.orders, s.threshold)                    # (N, orders, span, H, W)
         code = rates.mul_(s.mu).log1p_().div_(math.log1p(s.mu))              # compress, in place (no gradient)
-        feats = self.encoder(self.fold(code.reshape(n, -1, h, w)))
+        feats = self.encoder(code)
         middle = s.windows // 2
         key = feats[:, middle]
         refs = torch.cat((feats[:, :middle], feats[:, middle + 1:]), 1)
         aligned = self.align(key, refs)
         stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
         fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
-        key_light = windows(light, s.windows, s.window, s.step)[:, middle]
+        key_light = light[:, middle * s.step:middle * s.step + s.window]
         return self.head(fused, key_light.mean(1, keepdim=True))
 
 

@@ -42,7 +42,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .align import PyramidAlign, pyramid_reach
-from .common import OutputHead, ResBlock, SizesMixin, centred, check_input, compress
+from .common import OutputHead, ResBlock, SizesMixin, centred, check_input
 from .represent import firing_rates
 from .scan import MambaBlock
 
@@ -127,15 +127,26 @@ class MambaSpikeSizes(SizesMixin):
         return math.lcm(self.unshuffle << (self.levels - 1), self.unshuffle * self.scan_window)
 
 
-def temporal_tokens(x: torch.Tensor, patch: int, tokens: int) -> torch.Tensor:
-    """(B, T, ...) -> (B, tokens, patch, ...): readouts grouped, the middle token centred on the key.
+class TokenEmbedding(nn.Module):
+    """(N, 2, T, H, W) -> (N, C, T / patch, H / u, W / u): one token per patch readouts x u x u pixels.
 
-    The stream is padded at both ends by repeating its first and last readout.
+    A 3-D convolution of stride = kernel, its weight kept 4-D, (C, 2 x patch, u, u),
+    so the model converts to channels_last as the project's inference does.
     """
-    t = x.shape[1]
-    pad = (tokens * patch - t) // 2
-    index = (torch.arange(tokens * patch, device=x.device) - pad).clamp(0, t - 1)
-    return x[:, index].reshape(x.shape[0], tokens, patch, *x.shape[2:])
+
+    def __init__(self, channels: int, patch: int, unshuffle: int):
+        super().__init__()
+        self.patch, self.unshuffle = patch, unshuffle
+        self.weight = nn.Parameter(torch.empty(channels, 2 * patch, unshuffle, unshuffle))
+        self.bias = nn.Parameter(torch.empty(channels))
+        fan_in = 2 * patch * unshuffle ** 2                 # Conv3d's default initialisation
+        nn.init.kaiming_uniform_(self.weight, a=math.sqrt(5))
+        nn.init.uniform_(self.bias, -1 / math.sqrt(fan_in), 1 / math.sqrt(fan_in))
+
+    def forward(self, rep: torch.Tensor) -> torch.Tensor:
+        c, u = self.weight.shape[0], self.unshuffle
+        weight = self.weight.reshape(c, 2, self.patch, u, u)
+        return F.conv3d(rep, weight, self.bias, stride=(self.patch, u, u))
 
 
 class ParsingBranch(nn.Module):
@@ -146,8 +157,7 @@ class ParsingBranch(nn.Module):
         s = self.sizes = sizes
         c, u = s.channels, s.unshuffle
         self.threshold = s.threshold * coarseness
-        self.fold = nn.PixelUnshuffle(u)
-        self.embed = nn.Conv2d(2 * s.temporal_patch * u * u, c, 1)
+        self.embed = TokenEmbedding(c, s.temporal_patch, u)
         self.blocks = nn.ModuleList(MambaBlock(c, s.expand, s.state, s.head_dim, s.chunk)
                                     for _ in range(s.temporal_blocks))
         self.norm = nn.LayerNorm(c)
@@ -155,13 +165,14 @@ class ParsingBranch(nn.Module):
     def forward(self, light: torch.Tensor) -> torch.Tensor:
         s = self.sizes
         n, t, h, w = light.shape
-        interval = firing_rates(light, (1,), self.threshold)[:, 0]          # the spike interval, as a rate
-        rep = compress(torch.stack((light, interval), 2), s.mu)              # (N, T, 2, H, W)
-        tokens = temporal_tokens(rep, s.temporal_patch, s.tokens)            # (N, L, patch, 2, H, W)
-        tokens = tokens.reshape(n * s.tokens, s.temporal_patch * 2, h, w)
-        feats = self.embed(self.fold(tokens))                                # (N L, C, h, w)
-        c, hh, ww = feats.shape[1:]
-        seq = feats.reshape(n, s.tokens, c, hh * ww).permute(0, 3, 1, 2).reshape(n * hh * ww, s.tokens, c)
+        rep = torch.stack((light.detach().clamp(min=0), firing_rates(light, (1,), self.threshold)[:, 0]), 1)
+        rep = rep.mul_(s.mu).log1p_().div_(math.log1p(s.mu))                # mu-law, in place: (N, 2, T, H, W)
+        pad = (s.tokens * s.temporal_patch - t) // 2                         # whole tokens, the key in the middle
+        if pad:
+            rep = F.pad(rep, (0, 0, 0, 0, pad, pad), mode="replicate")
+        feats = self.embed(rep)                                              # (N, C, L, h, w)
+        c, hh, ww = feats.shape[1], feats.shape[3], feats.shape[4]
+        seq = feats.permute(0, 3, 4, 2, 1).reshape(n * hh * ww, s.tokens, c)
         for block in self.blocks:
             seq = block(seq)
         middle = s.tokens // 2

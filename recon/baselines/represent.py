@@ -54,15 +54,13 @@ def window_means(light: torch.Tensor, lengths: tuple[int, ...] = LENGTHS):
             out.append((light, light))                      # the readout itself, exactly
             continue
         total = light.new_empty(n, t, h, w)
-        hi = torch.arange(t, device=light.device).add(half).clamp(max=t - 1)   # last readout of the window
-        lo = torch.arange(t, device=light.device).sub(half + 1)                # readout before its first
-        middle = (lo >= 0) & (hi == torch.arange(t, device=light.device) + half)
-        a, b = (int(i) for i in middle.nonzero()[[0, -1], 0]) if middle.any() else (0, -1)
-        if b >= a:
-            torch.sub(cum[:, a + half:b + half + 1], cum[:, a - half - 1:b - half], out=total[:, a:b + 1])
-        for i in [*range(0, a), *range(max(b + 1, a), t)] if b >= a else range(t):
-            top = cum[:, int(hi[i])]
-            total[:, i] = top - cum[:, int(lo[i])] if lo[i] >= 0 else top
+        first, last = half + 1, t - 1 - half                  # readouts whose window is not cut
+        if first <= last:
+            torch.sub(cum[:, first + half:last + half + 1], cum[:, :last - half], out=total[:, first:last + 1])
+        for i in range(t):
+            if not first <= i <= last:
+                top = cum[:, min(i + half, t - 1)]
+                total[:, i] = top - cum[:, i - half - 1] if i - half - 1 >= 0 else top
         count = (index + half + 1).clamp(max=t) - (index - half).clamp(min=0)
         out.append((total, total / count[:, None, None]))
     return out

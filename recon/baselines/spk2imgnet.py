@@ -20,7 +20,7 @@ Adapted here (see docs/baselines.md): the input is decoded light, compressed
 with the mu-law; the output is a correction, in that compressed domain, to
 the compressed mean light of the key window, expanded back (common.py);
 ``unshuffle`` folds the frame for a CPU size (pixel-unshuffle, every pixel
-kept), a 1 x 1 convolution embedding each folded temporal length first.
+kept), a u x u convolution of stride u embedding each temporal length first.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import torch
 from torch import nn
 
 from .align import PyramidAlign, pyramid_reach
-from .common import OutputHead, ResBlock, SizesMixin, centred, check_input, compress, conv3, windows
+from .common import OutputHead, ResBlock, SizesMixin, centred, check_input, compress, conv3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,20 +94,23 @@ class Spk2ImgNetSizes(SizesMixin):
 
 
 class AdaptiveRepresentation(nn.Module):
-    """(B, window, H, W) compressed light -> (B, C, H / u, W / u): several temporal lengths, attention-weighted."""
+    """(B, window, H, W) compressed light -> (B, C, H / u, W / u): several temporal lengths, attention-weighted.
+
+    Each length's first layer is a u x u convolution of stride u: a
+    pixel-unshuffle by u followed by a 1 x 1 convolution, without the copy.
+    """
 
     def __init__(self, sizes: Spk2ImgNetSizes):
         super().__init__()
         c, u = sizes.channels, sizes.unshuffle
         self.lengths = sizes.lengths
-        self.fold = nn.PixelUnshuffle(u)
         self.branches = nn.ModuleList(
-            nn.Sequential(nn.Conv2d(k * u * u, c, 1), nn.LeakyReLU(0.1), conv3(c, c), nn.LeakyReLU(0.1))
+            nn.Sequential(nn.Conv2d(k, c, u, stride=u), nn.LeakyReLU(0.1), conv3(c, c), nn.LeakyReLU(0.1))
             for k in sizes.lengths)
         self.attention = conv3(len(sizes.lengths) * c, len(sizes.lengths) * c)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        feats = torch.stack([branch(self.fold(centred(x, k))) for k, branch in zip(self.lengths, self.branches)], 1)
+        feats = torch.stack([branch(centred(x, k)) for k, branch in zip(self.lengths, self.branches)], 1)
         b, k, c, h, w = feats.shape
         weights = torch.softmax(self.attention(feats.reshape(b, k * c, h, w)).reshape(b, k, c, h, w), dim=1)
         return (weights * feats).sum(1)
@@ -130,10 +133,11 @@ class Spk2ImgNet(nn.Module):
     def forward(self, light: torch.Tensor) -> torch.Tensor:
         s = self.sizes
         check_input(light, s.span, s.pyramid_factor)
-        n, _, h, w = light.shape
-        subs = windows(light, s.windows, s.window, s.step)              # (N, S, window, H, W)
-        code = compress(subs, s.mu).reshape(n * s.windows, s.window, h, w)
-        feats = self.extract(self.represent(code))
+        n = light.shape[0]
+        code = compress(light, s.mu)                                    # the windows are slices of it
+        feats = torch.stack([self.represent(code[:, start:start + s.window])
+                             for start in range(0, s.windows * s.step, s.step)], 1)
+        feats = self.extract(feats.flatten(0, 1))
         feats = feats.reshape(n, s.windows, *feats.shape[1:])
         middle = s.windows // 2
         key = feats[:, middle]
@@ -141,7 +145,8 @@ class Spk2ImgNet(nn.Module):
         aligned = self.align(key, refs)
         stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
         fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
-        return self.head(fused, subs[:, middle].mean(1, keepdim=True))
+        key_light = light[:, middle * s.step:middle * s.step + s.window]
+        return self.head(fused, key_light.mean(1, keepdim=True))
 
 
 def receptive_radius(sizes: Spk2ImgNetSizes) -> int:
