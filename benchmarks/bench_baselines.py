@@ -33,6 +33,7 @@ from torch.utils.flop_counter import FlopCounterMode  # noqa: E402
 
 from recon.baselines import BASELINES, RECEPTIVE_RADIUS  # noqa: E402
 from recon.baselines.common import parameter_count  # noqa: E402
+from recon.net.infer import receptive_radius as net_radius  # noqa: E402
 from recon.net.model import TESpikeNet  # noqa: E402
 from recon.net.sizes import NetSizes  # noqa: E402
 
@@ -82,7 +83,7 @@ def main() -> None:
         for size in args.sizes:
             model = build(method, size).eval().to(memory_format=torch.channels_last)
             count = flops(method, size)
-            radius = RECEPTIVE_RADIUS[method](model.sizes) if method in RECEPTIVE_RADIUS else None
+            radius = (net_radius if method == "net" else RECEPTIVE_RADIUS[method])(model.sizes)
             for threads in args.threads:
                 if size == "cpu":
                     secs, note = seconds(model, HEIGHT, WIDTH, threads, args.min_run_time), ""
@@ -93,7 +94,7 @@ def main() -> None:
                 ratio = f"{secs / reference[threads]:.2f}" if threads in reference else "-"
                 paper = ", ".join(TABLE10[method]) if size == "paper" else ""
                 print(f"| {method} | {size} | {parameter_count(model):,} | {count / 1e9:.1f} | "
-                      f"{radius if radius is not None else '-'} | {threads} | {secs:.3f}{note} | {ratio} | {paper} |",
+                      f"{radius} | {threads} | {secs:.3f}{note} | {ratio} | {paper} |",
                       flush=True)
 
 

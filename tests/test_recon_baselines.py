@@ -8,7 +8,7 @@ import torch
 
 from golden.errors import InputError
 from recon.baselines import BASELINES, PAPER_PARAMETERS, RECEPTIVE_RADIUS
-from recon.baselines.align import LocalCrossAttention, PyramidAlign
+from recon.baselines.align import LocalCrossAttention, PyramidAlign, neighbourhood
 from recon.baselines.common import parameter_count, windows
 from recon.baselines.represent import LENGTHS, firing_rates, window_means
 from recon.baselines.scan import MambaBlock, selective_scan, selective_scan_reference
@@ -260,3 +260,15 @@ def test_window_sums_equal_direct_sums(readouts):
         count = torch.tensor([min(readouts, i + half + 1) - max(0, i - half) for i in range(readouts)])
         assert torch.allclose(total, direct, rtol=1e-12)
         assert torch.allclose(mean, direct / count[:, None, None].double(), rtol=1e-12)
+
+
+def test_local_cross_attention_equals_its_unfolded_definition():
+    torch.manual_seed(0)
+    att = LocalCrossAttention(8, 2).double()
+    key, ref = torch.randn(2, 8, 9, 11, dtype=torch.float64), torch.randn(2, 8, 9, 11, dtype=torch.float64)
+    k, v = neighbourhood(att.k(ref), 2), neighbourhood(att.v(ref), 2)           # (B, C, 25, h, w), zeros outside
+    weights = torch.softmax((att.q(key)[:, :, None] * k).sum(1) / 8 ** 0.5, dim=1)
+    attended, shift = att(key, ref)
+    assert torch.allclose(attended, (weights[:, None] * v).sum(2), atol=1e-12)
+    dy = torch.arange(-2, 3, dtype=torch.float64).repeat_interleave(5)
+    assert torch.allclose(shift[:, 0], (weights * dy[:, None, None]).sum(1), atol=1e-12)

@@ -55,12 +55,16 @@ class LocalCrossAttention(nn.Module):
         self.register_buffer("displacement", torch.stack((dy.reshape(-1), dx.reshape(-1))), persistent=False)
 
     def forward(self, key: torch.Tensor, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        c = key.shape[1]
+        """One shifted slice per neighbour (zeros outside), never the (2r+1)^2-fold unfolded copy."""
+        b, c, h, w = key.shape
+        r, side = self.radius, 2 * self.radius + 1
         q = self.q(key)
-        k = neighbourhood(self.k(ref), self.radius)
-        v = neighbourhood(self.v(ref), self.radius)
-        attention = torch.softmax((q[:, :, None] * k).sum(1) / math.sqrt(c), dim=1)   # (B, K, h, w)
-        attended = (attention[:, None] * v).sum(2)
+        k = F.pad(self.k(ref), (r, r, r, r))
+        v = F.pad(self.v(ref), (r, r, r, r))
+        shifts = [(dy, dx) for dy in range(side) for dx in range(side)]       # row-major, as displacement
+        scores = torch.stack([(q * k[:, :, dy:dy + h, dx:dx + w]).sum(1) for dy, dx in shifts], 1)
+        attention = torch.softmax(scores / math.sqrt(c), dim=1)                 # (B, K, h, w)
+        attended = sum(attention[:, i:i + 1] * v[:, :, dy:dy + h, dx:dx + w] for i, (dy, dx) in enumerate(shifts))
         shift = torch.einsum("bkhw,dk->bdhw", attention, self.displacement.to(attention.dtype))
         return attended, shift
 
