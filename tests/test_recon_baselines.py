@@ -11,7 +11,7 @@ from recon.baselines import BASELINES, PAPER_PARAMETERS, RECEPTIVE_RADIUS
 from recon.baselines.align import LocalCrossAttention, PyramidAlign, neighbourhood
 from recon.baselines.common import parameter_count, windows
 from recon.baselines.represent import LENGTHS, firing_rates, window_means
-from recon.baselines.scan import MambaBlock, selective_scan, selective_scan_reference
+from recon.baselines.scan import SPAN, MambaBlock, selective_scan, selective_scan_reference
 from recon.net.deform import ModulatedDeformConv2d
 
 NAMES = tuple(BASELINES)
@@ -227,7 +227,7 @@ def test_chunked_scan_equals_the_recurrence(chunk):
     g = torch.Generator().manual_seed(chunk)
     z, length, heads, p, n = 3, 21, 2, 4, 5
     u = torch.randn(z, length, heads, p, generator=g, dtype=torch.float64)
-    log_decay = -3.0 * torch.rand(z, length, heads, generator=g, dtype=torch.float64)
+    log_decay = -SPAN / chunk * torch.rand(z, length, heads, generator=g, dtype=torch.float64)
     b = torch.randn(z, length, n, generator=g, dtype=torch.float64)
     c = torch.randn(z, length, n, generator=g, dtype=torch.float64)
     assert torch.allclose(selective_scan(u, log_decay, b, c, chunk), selective_scan_reference(u, log_decay, b, c),

@@ -31,6 +31,7 @@ over pixels.
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 
 #: Window lengths (readouts, odd, centred) of the ladder, short to long.
 LENGTHS = (1, 3, 9, 27, 61)
@@ -40,30 +41,26 @@ def window_means(light: torch.Tensor, lengths: tuple[int, ...] = LENGTHS):
     """(N, T, H, W) light -> for each centred window length, short to long: (light summed over it, its mean).
 
     Windows are cut at the ends of the span. Sums are differences of one
-    float64 cumulative sum (exact for HDR values), written straight into
-    light's dtype: the middle readouts as two slices, the readouts whose
-    window is cut at either end from the cumulative's ends.
+    float64 cumulative sum (exact for HDR values), returned in light's dtype.
     """
-    n, t, h, w = light.shape
-    cum = light.to(torch.float64).cumsum(1)                  # cum[:, i] = sum light[:i + 1]
-    index = torch.arange(t, dtype=light.dtype, device=light.device)
+    t = light.shape[1]
+    cum = F.pad(light.to(torch.float64).cumsum(1), (0, 0, 0, 0, 1, 0))    # cum[:, i] = sum light[:i]
+    index = torch.arange(t, device=light.device)
     out = []
     for length in lengths:
         half = length // 2
         if half == 0:
             out.append((light, light))                      # the readout itself, exactly
             continue
-        total = light.new_empty(n, t, h, w)
-        first, last = half + 1, t - 1 - half                  # readouts whose window is not cut
-        if first <= last:
-            torch.sub(cum[:, first + half:last + half + 1], cum[:, :last - half], out=total[:, first:last + 1])
-        for i in range(t):
-            if not first <= i <= last:
-                top = cum[:, min(i + half, t - 1)]
-                total[:, i] = top - cum[:, i - half - 1] if i - half - 1 >= 0 else top
-        count = (index + half + 1).clamp(max=t) - (index - half).clamp(min=0)
-        out.append((total, total / count[:, None, None]))
+        hi, lo = (index + half + 1).clamp(max=t), (index - half).clamp(min=0)
+        total = (cum.index_select(1, hi) - cum.index_select(1, lo)).to(light.dtype)
+        out.append((total, total / (hi - lo).to(light.dtype)[:, None, None]))
     return out
+
+
+#: Elements of one block of rows (1 MiB of float32): the dozen passes of the choice run on a
+#: block while it is in cache, instead of streaming the whole stream through memory each time.
+BLOCK = 1 << 18
 
 
 def firing_rates(light: torch.Tensor, orders: tuple[int, ...], threshold: float) -> torch.Tensor:
@@ -71,14 +68,19 @@ def firing_rates(light: torch.Tensor, orders: tuple[int, ...], threshold: float)
 
     The rate of order k at readout t is the mean light over the shortest
     window of :data:`LENGTHS` centred on t that gathers ``k * threshold`` of
-    light (the longest when none does).
+    light (the longest when none does). Computed a block of rows at a time
+    (each pixel's rates depend on that pixel alone).
     """
     x = light.detach().clamp(min=0)
-    ladder = window_means(x)
-    longest = ladder[-1][1]
-    rates = longest.new_empty(x.shape[0], len(orders), *x.shape[1:])
-    rates.copy_(longest[:, None].expand_as(rates))
-    for total, mean in reversed(ladder[:-1]):                 # long to short: the shortest enough wins
-        for i, order in enumerate(orders):
-            torch.where(total >= order * float(threshold), mean, rates[:, i], out=rates[:, i])
+    n, t, h, w = x.shape
+    rates = x.new_empty(n, len(orders), t, h, w)
+    rows = max(1, BLOCK // max(1, n * t * w))
+    for top in range(0, h, rows):
+        block = x[:, :, top:top + rows]
+        out = rates[:, :, :, top:top + rows]
+        ladder = window_means(block)
+        out.copy_(ladder[-1][1][:, None].expand_as(out))
+        for total, mean in reversed(ladder[:-1]):             # long to short: the shortest enough wins
+            for i, order in enumerate(orders):
+                out[:, i] = torch.where(total >= order * float(threshold), mean, out[:, i])
     return rates
