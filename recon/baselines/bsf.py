@@ -115,7 +115,8 @@ class MultiOrderEncoder(nn.Module):
     def forward(self, rates: torch.Tensor) -> torch.Tensor:
         s = self.sizes
         n = rates.shape[0]
-        subs = [torch.cat([self.act(embed(rates[:, i, start:start + s.window])) for i, embed in enumerate(self.embed)], 1)
+        subs = [torch.cat([self.act(embed(rates[:, i, start:start + s.window]))
+                           for i, embed in enumerate(self.embed)], 1)
                 for start in range(0, s.windows * s.step, s.step)]
         x = torch.stack(subs, 1).flatten(0, 1)
         x = self.blocks(self.act(self.fuse(x)))
@@ -139,7 +140,6 @@ class BSF(nn.Module):
     def forward(self, light: torch.Tensor) -> torch.Tensor:
         s = self.sizes
         check_input(light, s.span, s.pyramid_factor)
-        n = light.shape[0]
         rates = firing_rates(light, s.orders, s.threshold)                    # (N, orders, span, H, W)
         code = rates.mul_(s.mu).log1p_().div_(math.log1p(s.mu))              # compress, in place (no gradient)
         feats = self.encoder(code)

@@ -24,8 +24,10 @@ pixel's rate is its light in the readout itself and a dark pixel's its mean
 over the longest window; zero light gives zero. The window sums come from
 one cumulative sum along time (float64: exact for HDR values); the choice is
 a comparison and a selection per window and order, from the longest window
-to the shortest: a few dozen elementwise passes over the stream, no loop
-over pixels.
+to the shortest: a few dozen elementwise passes, run on a block of rows at
+a time so they stay in cache (each pixel's rates depend on that pixel only),
+no loop over pixels. "Exact" is relative: a sum is a float64 difference
+rounded once to float32.
 """
 
 from __future__ import annotations
