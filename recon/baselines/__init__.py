@@ -1,0 +1,35 @@
+"""The learned baselines of the paper's Table 1, re-implemented from their papers (docs/baselines.md).
+
+Each takes (N, span, H, W) decoded light (the project's stream format into
+every learned method, TE and ML alike) and returns (N, 1, H, W) light at the
+key moment ``span // 2``; each module also has ``receptive_radius(sizes)``.
+"""
+
+from __future__ import annotations
+
+from torch import nn
+
+from . import bsf, mambaspike, spk2imgnet
+from .bsf import BSF, BSFSizes
+from .mambaspike import MambaSpike, MambaSpikeSizes
+from .spk2imgnet import Spk2ImgNet, Spk2ImgNetSizes
+
+#: method name -> (model class, sizes class).
+BASELINES: dict[str, tuple[type[nn.Module], type]] = {
+    "spk2imgnet": (Spk2ImgNet, Spk2ImgNetSizes),
+    "bsf": (BSF, BSFSizes),
+    "mambaspike": (MambaSpike, MambaSpikeSizes),
+}
+
+#: method name -> its module's ``receptive_radius(sizes) -> int`` (frame pixels).
+RECEPTIVE_RADIUS = {
+    "spk2imgnet": spk2imgnet.receptive_radius,
+    "bsf": bsf.receptive_radius,
+    "mambaspike": mambaspike.receptive_radius,
+}
+
+#: Parameters of each method in the paper's Table 10 (its TE version).
+PAPER_PARAMETERS = {"spk2imgnet": 3_760_000, "bsf": 2_071_000, "mambaspike": 4_418_000}
+
+__all__ = ["BASELINES", "RECEPTIVE_RADIUS", "PAPER_PARAMETERS", "Spk2ImgNet", "Spk2ImgNetSizes", "BSF",
+           "BSFSizes", "MambaSpike", "MambaSpikeSizes"]

@@ -1,0 +1,180 @@
+"""Pyramid deformable alignment of reference features to a key feature (PCD of EDVR, as the baselines use it).
+
+Spk2ImgNet aligns its window features with EDVR's pyramid, cascading
+deformable alignment; BSF computes the offsets of each level from a local
+cross-attention between key and reference; MambaSpike follows its pyramid
+alignment with an adaptive (per-pixel predicted) filter. One module holds
+the three: ``attention_radius`` > 0 adds the local cross-attention,
+``filter_kernel`` > 0 the adaptive filter. The deformable convolution is
+the project's own (:mod:`recon.net.deform`); offsets are
+``max_offset * tanh`` as in :mod:`recon.net.align`, so the receptive field is
+bounded (:meth:`PyramidAlign.reach`) and tiled inference is exact.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from ..net.deform import ModulatedDeformConv2d
+from .common import conv3
+
+
+def upsample(x: torch.Tensor) -> torch.Tensor:
+    return F.interpolate(x, scale_factor=2, mode="bilinear", align_corners=False)
+
+
+def neighbourhood(x: torch.Tensor, radius: int) -> torch.Tensor:
+    """(B, C, h, w) -> (B, C, (2r+1)^2, h, w): every pixel's (2r+1)^2 neighbours (zeros outside)."""
+    b, c, h, w = x.shape
+    k = 2 * radius + 1
+    return F.unfold(x, k, padding=radius).reshape(b, c, k * k, h, w)
+
+
+class LocalCrossAttention(nn.Module):
+    """Key queries the reference in a (2r+1)^2 neighbourhood: attended reference and expected displacement.
+
+    BSF's local cross-attention: q from the key, k and v from the reference
+    (1 x 1 projections), softmax over the neighbourhood of q . k / sqrt(C).
+    Returns the attended reference feature (C channels) and the
+    attention-weighted displacement (dy, dx) in pixels of the level, which
+    seed the deformable offsets.
+    """
+
+    def __init__(self, channels: int, radius: int):
+        super().__init__()
+        self.radius = radius
+        self.q = nn.Conv2d(channels, channels, 1)
+        self.k = nn.Conv2d(channels, channels, 1)
+        self.v = nn.Conv2d(channels, channels, 1)
+        r = torch.arange(-radius, radius + 1, dtype=torch.float32)
+        dy, dx = torch.meshgrid(r, r, indexing="ij")
+        self.register_buffer("displacement", torch.stack((dy.reshape(-1), dx.reshape(-1))), persistent=False)
+
+    def forward(self, key: torch.Tensor, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """One shifted slice per neighbour (zeros outside), never the (2r+1)^2-fold unfolded copy."""
+        b, c, h, w = key.shape
+        r, side = self.radius, 2 * self.radius + 1
+        q = self.q(key)
+        k = F.pad(self.k(ref), (r, r, r, r))
+        v = F.pad(self.v(ref), (r, r, r, r))
+        shifts = [(dy, dx) for dy in range(side) for dx in range(side)]       # row-major, as displacement
+        scores = torch.stack([(q * k[:, :, dy:dy + h, dx:dx + w]).sum(1) for dy, dx in shifts], 1)
+        attention = torch.softmax(scores / math.sqrt(c), dim=1)                 # (B, K, h, w)
+        attended = sum(attention[:, i:i + 1] * v[:, :, dy:dy + h, dx:dx + w] for i, (dy, dx) in enumerate(shifts))
+        shift = torch.einsum("bkhw,dk->bdhw", attention, self.displacement.to(attention.dtype))
+        return attended, shift
+
+
+class AdaptiveFilter(nn.Module):
+    """A k x k filter predicted per pixel (softmax-normalised) from (aligned, key), applied to aligned."""
+
+    def __init__(self, channels: int, kernel: int):
+        super().__init__()
+        self.kernel = kernel
+        self.predict = nn.Sequential(conv3(2 * channels, channels), nn.LeakyReLU(0.1),
+                                     conv3(channels, kernel * kernel))
+
+    def forward(self, aligned: torch.Tensor, key: torch.Tensor) -> torch.Tensor:
+        weights = torch.softmax(self.predict(torch.cat((aligned, key), 1)), dim=1)
+        patches = neighbourhood(aligned, self.kernel // 2)
+        return aligned + (patches * weights[:, None]).sum(2)
+
+
+class AlignLevel(nn.Module):
+    """One pyramid level: offsets from (key, reference[, attention]) and the coarser level, DCN, merge."""
+
+    def __init__(self, channels: int, dcn_kernel: int, offset_groups: int, max_offset: float,
+                 coarsest: bool, attention_radius: int, filter_kernel: int):
+        super().__init__()
+        c = channels
+        self.coarsest, self.max_offset = coarsest, float(max_offset)
+        self.act = nn.LeakyReLU(0.1)
+        self.attention = LocalCrossAttention(c, attention_radius) if attention_radius else None
+        extra = c + 2 if attention_radius else 0
+        self.offset_in = conv3(2 * c + extra, c)
+        self.offset_fuse = None if coarsest else conv3(2 * c, c)
+        self.offset_mid = conv3(c, c)
+        self.dcn = ModulatedDeformConv2d(c, c, dcn_kernel, offset_groups)
+        self.offset_out = conv3(c, self.dcn.offset_channels + self.dcn.mask_channels)
+        nn.init.zeros_(self.offset_out.weight)      # start as a plain convolution
+        nn.init.zeros_(self.offset_out.bias)
+        self.merge = None if coarsest else conv3(2 * c, c)
+        self.filter = AdaptiveFilter(c, filter_kernel) if filter_kernel else None
+
+    def forward(self, key, ref, coarser_offset_feature=None, coarser_aligned=None):
+        parts = [key, ref]
+        if self.attention is not None:
+            attended, shift = self.attention(key, ref)
+            parts += [attended, shift]
+        feature = self.act(self.offset_in(torch.cat(parts, 1)))
+        if not self.coarsest:
+            feature = self.act(self.offset_fuse(torch.cat((feature, upsample(coarser_offset_feature)), 1)))
+        feature = self.act(self.offset_mid(feature))
+        raw = self.offset_out(feature)
+        n_off = self.dcn.offset_channels
+        offset = self.max_offset * torch.tanh(raw[:, :n_off])
+        if self.attention is not None:      # the attention's displacement seeds every tap's offset
+            offset = offset + shift.repeat(1, n_off // 2, 1, 1)
+        aligned = self.dcn(ref, offset, torch.sigmoid(raw[:, n_off:]))
+        if not self.coarsest:
+            aligned = self.act(self.merge(torch.cat((aligned, upsample(coarser_aligned)), 1)))
+        if self.filter is not None:
+            aligned = self.filter(aligned, key)
+        return feature, aligned
+
+
+class PyramidAlign(nn.Module):
+    """key (N, C, h, w), refs (N, R, C, h, w) -> aligned refs (N, R, C, h, w), coarse to fine."""
+
+    def __init__(self, channels: int, levels: int, dcn_kernel: int = 3, offset_groups: int = 1,
+                 max_offset: float = 8.0, attention_radius: int = 0, filter_kernel: int = 0):
+        super().__init__()
+        c = channels
+        self.levels_count, self.dcn_kernel, self.max_offset = levels, dcn_kernel, float(max_offset)
+        self.attention_radius, self.filter_kernel = attention_radius, filter_kernel
+        self.down = nn.ModuleList(nn.Sequential(conv3(c, c, 2), nn.LeakyReLU(0.1), conv3(c, c), nn.LeakyReLU(0.1))
+                                  for _ in range(levels - 1))
+        self.levels = nn.ModuleList(AlignLevel(c, dcn_kernel, offset_groups, max_offset, level == levels - 1,
+                                               attention_radius, filter_kernel) for level in range(levels))
+        self.cascade = AlignLevel(c, dcn_kernel, offset_groups, max_offset, True, 0, 0)
+
+    def forward(self, key: torch.Tensor, refs: torch.Tensor) -> torch.Tensor:
+        n, r, c, h, w = refs.shape
+        keys = [key.repeat_interleave(r, 0)]
+        rs = [refs.reshape(n * r, c, h, w)]
+        for down in self.down:                 # one pyramid, shared by key and references
+            keys.append(down(keys[-1]))
+            rs.append(down(rs[-1]))
+        offset_feature = aligned = None
+        for level in reversed(range(self.levels_count)):
+            offset_feature, aligned = self.levels[level](keys[level], rs[level], offset_feature, aligned)
+        _, aligned = self.cascade(keys[0], aligned)      # EDVR's cascading refinement at full level
+        return aligned.reshape(n, r, c, h, w)
+
+    def reach(self) -> int:
+        """Upper bound on an aligned pixel's reach, in pixels of the finest level."""
+        return pyramid_reach(self.levels_count, self.dcn_kernel, self.max_offset, self.attention_radius,
+                             self.filter_kernel)
+
+
+def pyramid_reach(levels: int, dcn_kernel: int, max_offset: float, attention_radius: int = 0,
+                  filter_kernel: int = 0) -> int:
+    """Upper bound on the reach of :class:`PyramidAlign`, in pixels of its finest level.
+
+    Per level, in pixels of that level, every path summed (a bound, not the
+    exact field): four 3 x 3 offset convolutions, the attention's
+    neighbourhood r, the DCN's taps (kernel // 2 + max_offset + the
+    attention's seed r + 1 for the bilinear sample), the merge, the adaptive
+    filter (two convolutions and its kernel); plus one pixel for the
+    upsampling and two for the downsampling convolutions and the level's
+    pixel grid. A pixel of level l is 2^l pixels of the finest level.
+    """
+    r = attention_radius
+    dcn = dcn_kernel // 2 + math.ceil(max_offset) + 1
+    per = 4 + r + (dcn + r) + 1 + (2 + filter_kernel // 2 if filter_kernel else 0) + 3
+    total = sum(per << level for level in range(levels))
+    return total + 3 + dcn                  # the cascading level (three convolutions, DCN)

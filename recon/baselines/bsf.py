@@ -1,0 +1,167 @@
+"""BSF (Zhao et al., CVPR 2024, "Boosting spike camera image reconstruction from a perspective
+of dealing with spike fluctuations"), re-implemented from the paper for decoded light.
+
+The paper's pipeline, in its order:
+
+1. representation: the spike interval around every moment and the firing
+   rates of several orders (the rate over the interval spanning k spikes),
+   which average a bright pixel over a short time and a dark one over a long
+   time: the spikes' fluctuations are evened out where light is scarce, and
+   motion stays sharp where it is plentiful (:mod:`.represent` derives both
+   from decoded light);
+2. the span is cut into sub-spans around the key moment (here 5 of 21
+   readouts, 10 apart: 61 readouts), each read into a feature by a
+   multi-order encoder (one embedding per order, fused) and residual blocks
+   with growing dilation;
+3. pyramid alignment of every sub-span's feature to the key's with
+   deformable convolution whose offsets come from a local cross-attention
+   between key and reference at each level (:class:`.align.LocalCrossAttention`);
+4. fusion and reconstruction.
+
+Adapted here (docs/baselines.md): inputs and output in the mu-law domain
+with a correction to the key window's mean light (common.py); ``unshuffle``
+folds the frame for a CPU size.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import ClassVar
+
+import torch
+from torch import nn
+
+from .align import PyramidAlign, pyramid_reach
+from .common import OutputHead, ResBlock, SizesMixin, check_input, conv3
+from .represent import firing_rates
+
+
+@dataclasses.dataclass(frozen=True)
+class BSFSizes(SizesMixin):
+    """Every size of BSF.
+
+    ``windows`` sub-spans of ``window`` readouts ``step`` apart (span 61);
+    ``orders``: firing-rate orders (spikes spanned; order 1 is the inverse
+    of the spike interval); ``threshold``: light x readouts per virtual spike
+    (scene units; 1 = one spike per readout at the design light);
+    ``channels``; ``blocks``: dilated residual blocks of the encoder
+    (dilations 1, 2, 1, 2, ...); ``recon_blocks``; ``levels``, ``dcn_kernel``,
+    ``offset_groups``, ``max_offset``: the pyramid alignment;
+    ``attention_radius``: the local cross-attention's neighbourhood is
+    (2 r + 1)^2 pixels of each level; ``unshuffle``; ``mu``.
+    """
+
+    PRESETS: ClassVar[dict] = {
+        "cpu": {"unshuffle": 4, "channels": 16, "blocks": 2, "recon_blocks": 1, "offset_groups": 1},
+        "paper": {"unshuffle": 1, "channels": 64, "blocks": 4, "recon_blocks": 3, "offset_groups": 4},
+    }
+    LABEL: ClassVar[str] = "bsf"
+
+    windows: int = 5
+    window: int = 21
+    step: int = 10
+    orders: tuple[int, ...] = (1, 4, 16)
+    threshold: float = 1.0
+    unshuffle: int = 4
+    channels: int = 16
+    blocks: int = 2
+    recon_blocks: int = 1
+    levels: int = 3
+    dcn_kernel: int = 3
+    offset_groups: int = 1
+    max_offset: float = 8.0
+    attention_radius: int = 2
+    mu: float = 5000.0
+
+    def __post_init__(self) -> None:
+        self._need_ints("windows", "window", "step", "unshuffle", "channels", "levels", "dcn_kernel",
+                        "offset_groups", "attention_radius")
+        self._need_ints("blocks", "recon_blocks", least=0)
+        self._need("windows", self.windows % 2 == 1, "odd (the key sub-span sits in the middle)")
+        self._need("window", self.window % 2 == 1, "odd (centred on its moment)")
+        self._need("dcn_kernel", self.dcn_kernel % 2 == 1, "odd")
+        self._need("orders", isinstance(self.orders, tuple) and len(self.orders) >= 1
+                   and all(type(k) is int and k >= 1 for k in self.orders), "a tuple of integers >= 1")
+        self._need("channels", self.channels % self.offset_groups == 0, "a multiple of offset_groups")
+        self._need_positive("threshold", "max_offset", "mu")
+
+    @property
+    def span(self) -> int:
+        return (self.windows - 1) * self.step + self.window
+
+    @property
+    def pyramid_factor(self) -> int:
+        return self.unshuffle << (self.levels - 1)
+
+
+class MultiOrderEncoder(nn.Module):
+    """(N, orders, span, H, W) compressed rates -> (N, S, C, H / u, W / u) features of the S sub-spans.
+
+    A sub-span of one order is a slice of the input (no copy of the
+    overlapping sub-spans); its embedding is a u x u convolution of stride u
+    (a pixel-unshuffle by u and a 1 x 1 convolution, without the copy).
+    """
+
+    def __init__(self, sizes: BSFSizes):
+        super().__init__()
+        s = self.sizes = sizes
+        c, u, k = s.channels, s.unshuffle, len(s.orders)
+        self.embed = nn.ModuleList(nn.Conv2d(s.window, c, u, stride=u) for _ in range(k))
+        self.fuse = conv3(k * c, c)
+        self.act = nn.LeakyReLU(0.1)
+        self.blocks = nn.Sequential(*[ResBlock(c, dilation=1 + i % 2) for i in range(s.blocks)])
+
+    def forward(self, rates: torch.Tensor) -> torch.Tensor:
+        s = self.sizes
+        n = rates.shape[0]
+        subs = [torch.cat([self.act(embed(rates[:, i, start:start + s.window]))
+                           for i, embed in enumerate(self.embed)], 1)
+                for start in range(0, s.windows * s.step, s.step)]
+        x = torch.stack(subs, 1).flatten(0, 1)
+        x = self.blocks(self.act(self.fuse(x)))
+        return x.reshape(n, s.windows, *x.shape[1:])
+
+
+class BSF(nn.Module):
+    """(N, 61, H, W) decoded light -> (N, 1, H, W) light at the key moment (readout 30)."""
+
+    def __init__(self, sizes: BSFSizes = BSFSizes()):
+        super().__init__()
+        self.sizes = s = sizes
+        c = s.channels
+        self.encoder = MultiOrderEncoder(s)
+        self.align = PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset,
+                                  attention_radius=s.attention_radius)
+        self.fuse = nn.Sequential(nn.Conv2d(s.windows * c, c, 1), nn.LeakyReLU(0.1))
+        self.reconstruct = nn.Sequential(*[ResBlock(c) for _ in range(s.recon_blocks)])
+        self.head = OutputHead(c, s.unshuffle, s.mu)
+
+    def forward(self, light: torch.Tensor) -> torch.Tensor:
+        s = self.sizes
+        check_input(light, s.span, s.pyramid_factor)
+        rates = firing_rates(light, s.orders, s.threshold)                    # (N, orders, span, H, W)
+        code = rates.mul_(s.mu).log1p_().div_(math.log1p(s.mu))              # compress, in place (no gradient)
+        feats = self.encoder(code)
+        middle = s.windows // 2
+        key = feats[:, middle]
+        refs = torch.cat((feats[:, :middle], feats[:, middle + 1:]), 1)
+        aligned = self.align(key, refs)
+        stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
+        fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
+        key_light = light[:, middle * s.step:middle * s.step + s.window]
+        return self.head(fused, key_light.mean(1, keepdim=True))
+
+
+def receptive_radius(sizes: BSFSizes) -> int:
+    """Upper bound, in frame pixels, on how far an output pixel's inputs lie.
+
+    The rates are per pixel (no spatial reach). At 1/u of the frame: the
+    encoder's fusion (3 x 3) and dilated blocks (2 x dilation each), the
+    alignment's bound with its attention, the fusion (1 x 1), the
+    reconstruction's blocks and the output convolution; plus u for the fold.
+    """
+    blocks = sum(2 * (1 + i % 2) for i in range(sizes.blocks))
+    align = pyramid_reach(sizes.levels, sizes.dcn_kernel, sizes.max_offset, sizes.attention_radius)
+    reach = 1 + blocks + align + 2 * sizes.recon_blocks + 1
+    return sizes.unshuffle * (reach + 1)

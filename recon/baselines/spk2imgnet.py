@@ -1,0 +1,163 @@
+"""Spk2ImgNet (Zhao et al., CVPR 2021), re-implemented from the paper for decoded light, 61 readouts.
+
+The paper's pipeline, in its order:
+
+1. the stream around the key moment is cut into overlapping windows (here
+   5 windows of 21 readouts, 10 apart: the 61-readout variant of the TE
+   paper, key window in the middle);
+2. hierarchical adaptive representation: each window is read at several
+   temporal lengths around its centre (short ones keep motion sharp, long
+   ones average the noise), each length through its own convolutions, and a
+   pixel-wise attention (a softmax over the lengths, per channel) weighs them;
+3. residual feature extraction (residual blocks, shared by the windows);
+4. pyramid deformable alignment of every window's feature to the key
+   window's (EDVR's PCD: three levels, offsets propagated coarse to fine,
+   a cascading refinement);
+5. fusion of the aligned features and reconstruction (residual blocks, one
+   output convolution).
+
+Adapted here (see docs/baselines.md): the input is decoded light, compressed
+with the mu-law; the output is a correction, in that compressed domain, to
+the compressed mean light of the key window, expanded back (common.py);
+``unshuffle`` folds the frame for a CPU size (pixel-unshuffle, every pixel
+kept), a u x u convolution of stride u embedding each temporal length first.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import ClassVar
+
+import torch
+from torch import nn
+
+from .align import PyramidAlign, pyramid_reach
+from .common import OutputHead, ResBlock, SizesMixin, centred, check_input, compress, conv3
+
+
+@dataclasses.dataclass(frozen=True)
+class Spk2ImgNetSizes(SizesMixin):
+    """Every size of Spk2ImgNet.
+
+    ``windows`` windows of ``window`` readouts ``step`` apart (span
+    (windows - 1) * step + window = 61); ``lengths``: the temporal lengths
+    (odd, <= window) of the adaptive representation; ``channels``: feature
+    width; ``blocks``: residual blocks of feature extraction;
+    ``recon_blocks``: residual blocks after fusion; ``levels``, ``dcn_kernel``,
+    ``offset_groups``, ``max_offset`` (pixels of a level; offsets are
+    max_offset * tanh): the pyramid alignment; ``unshuffle``: frame folding;
+    ``mu``: the mu-law.
+    """
+
+    PRESETS: ClassVar[dict] = {
+        "cpu": {"unshuffle": 4, "channels": 16, "blocks": 2, "recon_blocks": 1, "offset_groups": 1},
+        "paper": {"unshuffle": 1, "channels": 64, "blocks": 13, "recon_blocks": 10, "offset_groups": 8},
+    }
+    LABEL: ClassVar[str] = "spk2imgnet"
+
+    windows: int = 5
+    window: int = 21
+    step: int = 10
+    lengths: tuple[int, ...] = (5, 11, 21)
+    unshuffle: int = 4
+    channels: int = 16
+    blocks: int = 2
+    recon_blocks: int = 1
+    levels: int = 3
+    dcn_kernel: int = 3
+    offset_groups: int = 1
+    max_offset: float = 8.0
+    mu: float = 5000.0
+
+    def __post_init__(self) -> None:
+        self._need_ints("windows", "window", "step", "unshuffle", "channels", "levels", "dcn_kernel",
+                        "offset_groups")
+        self._need_ints("blocks", "recon_blocks", least=0)
+        self._need("windows", self.windows % 2 == 1, "odd (the key window sits in the middle)")
+        self._need("window", self.window % 2 == 1, "odd (centred on its moment)")
+        self._need("dcn_kernel", self.dcn_kernel % 2 == 1, "odd")
+        self._need("lengths", isinstance(self.lengths, tuple) and len(self.lengths) >= 1
+                   and all(type(k) is int and k >= 1 and k % 2 == 1 and k <= self.window for k in self.lengths),
+                   "a tuple of odd integers from 1 to window")
+        self._need("channels", self.channels % self.offset_groups == 0, "a multiple of offset_groups")
+        self._need_positive("max_offset", "mu")
+
+    @property
+    def span(self) -> int:
+        """Readouts seen around the key moment."""
+        return (self.windows - 1) * self.step + self.window
+
+    @property
+    def pyramid_factor(self) -> int:
+        """H and W must be multiples of this (the fold and the pyramid's halvings)."""
+        return self.unshuffle << (self.levels - 1)
+
+
+class AdaptiveRepresentation(nn.Module):
+    """(B, window, H, W) compressed light -> (B, C, H / u, W / u): several temporal lengths, attention-weighted.
+
+    Each length's first layer is a u x u convolution of stride u: a
+    pixel-unshuffle by u followed by a 1 x 1 convolution, without the copy.
+    """
+
+    def __init__(self, sizes: Spk2ImgNetSizes):
+        super().__init__()
+        c, u = sizes.channels, sizes.unshuffle
+        self.lengths = sizes.lengths
+        self.branches = nn.ModuleList(
+            nn.Sequential(nn.Conv2d(k, c, u, stride=u), nn.LeakyReLU(0.1), conv3(c, c), nn.LeakyReLU(0.1))
+            for k in sizes.lengths)
+        self.attention = conv3(len(sizes.lengths) * c, len(sizes.lengths) * c)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        feats = torch.stack([branch(centred(x, k)) for k, branch in zip(self.lengths, self.branches)], 1)
+        b, k, c, h, w = feats.shape
+        weights = torch.softmax(self.attention(feats.reshape(b, k * c, h, w)).reshape(b, k, c, h, w), dim=1)
+        return (weights * feats).sum(1)
+
+
+class Spk2ImgNet(nn.Module):
+    """(N, 61, H, W) decoded light -> (N, 1, H, W) light at the key moment (readout 30)."""
+
+    def __init__(self, sizes: Spk2ImgNetSizes = Spk2ImgNetSizes()):
+        super().__init__()
+        self.sizes = s = sizes
+        c = s.channels
+        self.represent = AdaptiveRepresentation(s)
+        self.extract = nn.Sequential(conv3(c, c), nn.LeakyReLU(0.1), *[ResBlock(c) for _ in range(s.blocks)])
+        self.align = PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset)
+        self.fuse = nn.Sequential(nn.Conv2d(s.windows * c, c, 1), nn.LeakyReLU(0.1))
+        self.reconstruct = nn.Sequential(*[ResBlock(c) for _ in range(s.recon_blocks)])
+        self.head = OutputHead(c, s.unshuffle, s.mu)
+
+    def forward(self, light: torch.Tensor) -> torch.Tensor:
+        s = self.sizes
+        check_input(light, s.span, s.pyramid_factor)
+        n = light.shape[0]
+        code = compress(light, s.mu)                                    # the windows are slices of it
+        feats = torch.stack([self.represent(code[:, start:start + s.window])
+                             for start in range(0, s.windows * s.step, s.step)], 1)
+        feats = self.extract(feats.flatten(0, 1))
+        feats = feats.reshape(n, s.windows, *feats.shape[1:])
+        middle = s.windows // 2
+        key = feats[:, middle]
+        refs = torch.cat((feats[:, :middle], feats[:, middle + 1:]), 1)
+        aligned = self.align(key, refs)
+        stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
+        fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
+        key_light = light[:, middle * s.step:middle * s.step + s.window]
+        return self.head(fused, key_light.mean(1, keepdim=True))
+
+
+def receptive_radius(sizes: Spk2ImgNetSizes) -> int:
+    """Upper bound, in frame pixels, on how far an output pixel's inputs lie.
+
+    At 1/u of the frame (a pixel is u frame pixels): the representation
+    (3 x 3 branch, 3 x 3 attention), the extraction (one convolution and two
+    per residual block), the alignment's bound, the fusion (1 x 1), the
+    reconstruction's blocks and the output convolution; plus u for the fold.
+    """
+    u = sizes.unshuffle
+    align = pyramid_reach(sizes.levels, sizes.dcn_kernel, sizes.max_offset)
+    reach = 2 + (1 + 2 * sizes.blocks) + align + 2 * sizes.recon_blocks + 1
+    return u * (reach + 1)
