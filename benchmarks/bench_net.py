@@ -142,7 +142,7 @@ def complexity(args) -> None:
             for threads in args.threads:
                 torch.set_num_threads(threads)
                 repeats = args.repeat if name == "cpu" else 1
-                seconds = median_seconds(lambda: model(light), repeats)
+                seconds = median_seconds(lambda: model(light), repeats, warm_up=True)[0]
                 print(f"| {name} | {parameter_count(model):,} | {flops / 1e9:.1f} | {threads} | {seconds:.2f} |",
                       flush=True)
     from recon.net.deform import deform_conv2d
@@ -151,8 +151,9 @@ def complexity(args) -> None:
     weight = torch.rand(16, 16, 3, 3)
     offset = torch.randn(4, 18, 96, 128)
     mask = torch.rand(4, 9, 96, 128)
-    dcn = median_seconds(lambda: deform_conv2d(x, offset, weight, padding=1, mask=mask), args.repeat)
-    conv = median_seconds(lambda: torch.nn.functional.conv2d(x, weight, padding=1), args.repeat)
+    dcn = median_seconds(lambda: deform_conv2d(x, offset, weight, padding=1, mask=mask), args.repeat,
+                         warm_up=True)[0]
+    conv = median_seconds(lambda: torch.nn.functional.conv2d(x, weight, padding=1), args.repeat, warm_up=True)[0]
     print(f"\nDCN 3 x 3, 16 -> 16 channels, 4 x 96 x 128: {1e3 * dcn:.1f} ms; conv2d {1e3 * conv:.1f} ms "
           f"({dcn / conv:.1f}x)")
 

@@ -15,15 +15,10 @@ from golden.errors import InputError
 
 
 def learned_methods() -> dict[str, tuple[type, type]]:
+    from .baselines import BASELINES
     from .net.model import TESpikeNet
     from .net.sizes import NetSizes
-    methods: dict[str, tuple[type, type]] = {"net": (TESpikeNet, NetSizes)}
-    try:
-        from .baselines import BASELINES
-    except ImportError:
-        BASELINES = {}
-    methods.update(BASELINES)
-    return methods
+    return {"net": (TESpikeNet, NetSizes), **BASELINES}
 
 
 def method_classes(name: str) -> tuple[type, type]:

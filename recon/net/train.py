@@ -153,7 +153,7 @@ def plot_curves(log_path: Path, validation_path: Path, png_path: Path, title: st
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from ..figures import save_figure
+    from ..pictures import save_figure
     with open(log_path, newline="") as handle:
         rows = list(csv.DictReader(handle))
     if not rows:
