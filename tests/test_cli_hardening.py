@@ -654,6 +654,8 @@ def test_synth_checks_its_options_before_printing_or_creating_the_store(files):
 
 def test_train_refuses_before_making_its_run_folder(files):
     common = ("train", "--config", "te", "--out", files / "w.pt", "--steps", 1)
-    refused_without_change(files, (*common, "--crop", 100000), "--crop 100000", "training sequences")
-    refused_without_change(files, (*common, "--cache", files / "c.json"), "--cache", "not a directory")
-    refused_without_change(files, (*common, "--sequences", 10 ** 8), "of memory")
+    refused_without_change(files, (*common, "--crop", 100000), "crop = 100000", "engine's clips")
+    refused_without_change(files, (*common, "--crop", 36), "crop = 36", "pyramid factor")
+    refused_without_change(files, (*common, "--pool", 0), "pool = 0")
+    refused_without_change(files, (*common, "--workers", -1), "workers = -1")
+    refused_without_change(files, (*common, "--method", "nope"), "unknown learned method")
