@@ -126,6 +126,25 @@ def quality(args) -> None:
                 print(f"  middle: {m}_TE - {m}_{other} {mean['middle', 'TE', m] - mean['middle', other, m]:+.2f} dB")
 
 
+def validation(args) -> None:
+    """The held-out validation set of training (recon/engine/validation.py): TFP, TFI and the weights."""
+    from recon.engine.validation import score, validation_set
+    for label, preset in SENSORS:
+        config = SensorConfig.preset(preset)
+        cases = validation_set(config)
+        rows = {m: score(lambda w: reconstruct(w, config, m), cases) for m in ("tfp", "tfi")}
+        for path in [Path(args.weights_dir) / f"{preset}.pt", *map(Path, args.compare)]:
+            if path.is_file() and load_weights(path)[1] == config:
+                model = load_weights(path)[0]
+                rows[str(path)] = score(lambda w: reconstruct_model(model, w, config, tile=None), cases)
+        names = list(rows["tfp"])
+        print(f"\n{label}: validation PSNR-mu (dB), every frame of each case")
+        print("| method | " + " | ".join(names) + " |")
+        print("| --- |" + " ---: |" * len(names))
+        for method, values in rows.items():
+            print(f"| {method} | " + " | ".join(f"{values[n]:.2f}" for n in names) + " |", flush=True)
+
+
 def complexity(args) -> None:
     print("\n| size | parameters | GFLOPs at 384 x 512 | threads | s / frame (median) |")
     print("| --- | ---: | ---: | ---: | ---: |")
@@ -162,6 +181,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quality", action="store_true", help="held-out quality (default: both parts)")
     parser.add_argument("--complexity", action="store_true", help="parameters, FLOPs, latency")
+    parser.add_argument("--validation", action="store_true",
+                        help="only the training's held-out validation set (TFP, TFI, the weights)")
+    parser.add_argument("--compare", nargs="*", default=[], metavar="PT",
+                        help="with --validation: also score these weights files (each on its own sensor)")
     parser.add_argument("--weights-dir", default=str(WEIGHTS_DIR),
                         help="folder of te.pt, ml.pt, ml-msb.pt (and METHOD-te.pt ... of other learned methods)")
     parser.add_argument("--ablation-dir", default=None,
@@ -174,6 +197,9 @@ def main() -> None:
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
+    if args.validation:
+        validation(args)
+        return
     both = not (args.quality or args.complexity)
     if args.quality or both:
         quality(args)
