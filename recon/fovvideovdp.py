@@ -26,7 +26,7 @@ import torch
 from golden.errors import InputError
 from golden.resources import require_memory
 from recon.display import DEFAULT_DISPLAY, HdrDisplay
-from recon.metrics import _frame_peaks, _frames, _shape
+from recon.metrics import _frame_peaks, _frames, frame_stacks
 
 #: Memory per pixel of one frame pyfvvdp judges (measured: about 220 bytes at 2048 x 2048).
 BYTES_PER_PIXEL = 256
@@ -58,15 +58,7 @@ def fovvideovdp(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY, p
     ``peak``: the reference light shown at the display's peak (default: the
     reference's maximum over all the frames given).
     """
-    eshape, rshape = _shape(estimate), _shape(reference)
-    single = len(rshape) == 2
-    if single:
-        estimate, reference = estimate[None], reference[None]
-        eshape, rshape = _shape(estimate), _shape(reference)
-    if len(rshape) != 3 or len(eshape) != 3:
-        raise InputError(f"FovVideoVDP needs (K, H, W) or (H, W) frames, got {eshape} and {rshape}")
-    if eshape != rshape:
-        raise InputError(f"estimate shape {eshape} != reference shape {rshape}")
+    estimate, reference, single, rshape = frame_stacks(estimate, reference, "FovVideoVDP")
     K, H, W = rshape
     if K == 0 or H < 2 or W < 2:
         raise InputError(f"FovVideoVDP needs frames of at least 2 x 2 pixels, got shape {rshape}")

@@ -53,7 +53,7 @@ import torch
 from golden.errors import InputError
 from golden.resources import require_memory
 from recon.display import DEFAULT_DISPLAY, HdrDisplay
-from recon.metrics import _frame_peaks, _frames, _shape, pu21_encode
+from recon.metrics import _frame_peaks, _frames, frame_stacks, pu21_encode
 
 N_SCALES = 5
 N_ORIENTATIONS = 4
@@ -161,15 +161,7 @@ def hdr_vqm_scores(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY
     ``peak``: the reference light shown at the display's peak (default: the
     reference's maximum over all the frames given).
     """
-    eshape, rshape = _shape(estimate), _shape(reference)
-    single = len(rshape) == 2
-    if single:
-        estimate, reference = estimate[None], reference[None]
-        eshape, rshape = _shape(estimate), _shape(reference)
-    if len(rshape) != 3 or len(eshape) != 3:
-        raise InputError(f"HDR-VQM needs (K, H, W) or (H, W) frames, got {eshape} and {rshape}")
-    if eshape != rshape:
-        raise InputError(f"estimate shape {eshape} != reference shape {rshape}")
+    estimate, reference, single, rshape = frame_stacks(estimate, reference, "HDR-VQM")
     if not (isinstance(fixation_frames, int) and fixation_frames >= 1):
         raise InputError(f"fixation_frames = {fixation_frames!r}: must be an integer >= 1")
     K, H, W = rshape

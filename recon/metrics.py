@@ -153,6 +153,21 @@ def _shape(x) -> tuple[int, ...]:
     return tuple(x.shape) if isinstance(x, torch.Tensor) else np.shape(x)
 
 
+def frame_stacks(estimate, reference, metric: str):
+    """(estimate, reference, single, (K, H, W)): (H, W) frames lifted to one-frame stacks, the
+    shapes checked equal and three-dimensional; ``single`` says a lone frame was given."""
+    eshape, rshape = _shape(estimate), _shape(reference)
+    single = len(rshape) == 2
+    if single:
+        estimate, reference = estimate[None], reference[None]
+        eshape, rshape = _shape(estimate), _shape(reference)
+    if len(rshape) != 3 or len(eshape) != 3:
+        raise InputError(f"{metric} needs (K, H, W) or (H, W) frames, got {eshape} and {rshape}")
+    if eshape != rshape:
+        raise InputError(f"estimate shape {eshape} != reference shape {rshape}")
+    return estimate, reference, single, rshape
+
+
 def _frame_peaks(gt, K: int, H: int, W: int, device) -> torch.Tensor:
     """Per-frame maximum of the ground truth, computed band by band."""
     peaks = torch.empty(K, dtype=torch.float64, device=device)
