@@ -20,6 +20,7 @@ from __future__ import annotations
 import collections
 import multiprocessing
 import os
+import time
 
 import numpy as np
 import torch
@@ -67,7 +68,6 @@ class ClipSource:
             clip = make_clip(self.recipe, self.config, self.next_index)
         else:
             self._fill()
-            import time
             start = time.monotonic()
             clip = self.pending.popleft().get()
             self.waited += time.monotonic() - start
