@@ -90,12 +90,14 @@ def test_shapes_on_any_multiple_of_the_pyramid_factor(name):
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_untrained_output_is_the_key_window_mean(name):
-    """The zero-initialised head: an untrained baseline returns the mean light of its 21-readout key window."""
+def test_untrained_output_is_the_heads_initial_blend(name):
+    """The project's head (recon.net.head) starts from its blend of training-free estimates, features unused."""
     model = small(name)
     f = model.sizes.pyramid_factor
     light = hdr_light((1, 61, f, 2 * f))
-    assert torch.allclose(model(light), light[:, 20:41].mean(1, keepdim=True), rtol=1e-4)
+    feature = torch.zeros(1, model.head.conv.in_channels, f // model.head.unfold.upscale_factor,
+                          2 * f // model.head.unfold.upscale_factor)
+    assert torch.allclose(model(light), model.head(feature, light), rtol=1e-4)
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -241,7 +243,9 @@ def test_mamba_block_is_bidirectional_and_local_to_its_sequence():
     later = x.clone()
     later[0, 9, 0] += 1.0                                # (one channel: LayerNorm ignores a common shift)
     moved = block(later)
-    assert not torch.allclose(moved[0, 0], out[0, 0])       # the last step reaches the first (backward scan)
+    # the last step reaches the first (backward scan); decayed over 9 steps the change is small (~1e-6),
+    # far above float64 rounding but below allclose's default tolerance
+    assert float((moved[0, 0] - out[0, 0]).detach().abs().max()) > 1e-10
     assert torch.allclose(moved[1], out[1])                 # another sequence is untouched
 
 

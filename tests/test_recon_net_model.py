@@ -77,13 +77,22 @@ def test_attention_is_local_and_linear_in_pixels():
     assert IntensityFeature(3, 8, 2)(torch.rand(1, 3, 8, 8), torch.rand(1, 1, 8, 8)).shape == (1, 8, 4, 4)
 
 
-def test_whole_network_starts_at_the_temporal_mean():
+def test_whole_network_starts_at_its_head_initial_blend():
+    """Untrained, the network returns its head's initial blend of training-free estimates (features unused)."""
     model = TESpikeNet(SMALL)
     light = torch.rand(2, SMALL.span, 16, 16)
     out = model(light)
-    key = model.substreams(light)[:, SMALL.substreams // 2]
+    expected = model.head(torch.zeros(2, SMALL.channels, 16 // SMALL.unshuffle, 16 // SMALL.unshuffle), light)
     assert out.shape == (2, 1, 16, 16)
-    assert torch.allclose(out, key.mean(1, keepdim=True), rtol=1e-4, atol=1e-7)
+    assert torch.allclose(out, expected, rtol=1e-5, atol=1e-7)
+
+
+def test_mean_head_starts_at_the_temporal_mean():
+    sizes = dataclasses.replace(SMALL, head="mean")
+    model = TESpikeNet(sizes)
+    light = torch.rand(2, sizes.span, 16, 16)
+    key = model.substreams(light)[:, sizes.substreams // 2]
+    assert torch.allclose(model(light), key.mean(1, keepdim=True), rtol=1e-4, atol=1e-7)
 
 
 def test_compress_expand_inverse_and_nonnegative():

@@ -108,3 +108,37 @@ def test_method_and_crop_checked():
         options(crop=40)
     with pytest.raises(InputError, match="larger than the engine"):
         options(crop=64)
+
+
+def test_init_warm_starts_every_matching_tensor(tmp_path):
+    """--init copies the tensors whose name and shape match (a new head keeps its initial values)."""
+    import dataclasses
+
+    from recon.net.model import TESpikeNet
+    from recon.net.sizes import NetSizes
+    from recon.net.train import save_weights, warm_start
+    old = TESpikeNet(dataclasses.replace(NetSizes(), head="mean"))
+    for p in old.parameters():
+        torch.nn.init.normal_(p)
+    save_weights(tmp_path / "old.pt", old, SensorConfig.preset("te"), {}, "net")
+    new = TESpikeNet(NetSizes())
+    head_before = new.head.conv.weight.clone()
+    copied = warm_start(new, str(tmp_path / "old.pt"), "net")
+    assert "encoder.embed.weight" in copied or any(name.startswith("encoder.") for name in copied)
+    assert not any(name.startswith("head.") for name in copied)
+    assert torch.equal(new.head.conv.weight, head_before)
+    for name in copied:
+        assert torch.equal(new.state_dict()[name], old.state_dict()[name])
+    with pytest.raises(InputError, match="not of 'bsf'"):
+        warm_start(new, str(tmp_path / "old.pt"), "bsf")
+    out = train(options(init=str(tmp_path / "old.pt")), tmp_path / "w.pt")
+    assert load_weights(out)[2]["options"]["init"] == str(tmp_path / "old.pt")
+
+
+def test_init_refusals(tmp_path):
+    assert_refused(run_tespike("train", "--config", "te", "--init", tmp_path / "none.pt", "--out", tmp_path / "w.pt",
+                               "--steps", "1"), "no such weights file")
+    (tmp_path / "w.pt").write_bytes(b"x")
+    assert_refused(run_tespike("train", "--config", "te", "--init", tmp_path / "w.pt", "--out", tmp_path / "w.pt",
+                               "--steps", "1"), "--init")
+    assert (tmp_path / "w.pt").read_bytes() == b"x"

@@ -33,6 +33,8 @@ def add_arguments(parser):
     parser.add_argument("--device", default="cpu", help="torch device (default cpu; cuda where there is one)")
     parser.add_argument("--threads", type=int, default=1,
                         help="torch CPU threads (default 1: two runs share two cores better than one run)")
+    parser.add_argument("--init", default=None, metavar="WEIGHTS",
+                        help="start from this weights file's tensors of matching name and shape")
     parser.add_argument("--resume", action="store_true", help="continue from OUT.run/checkpoint.pt")
 
 
@@ -57,7 +59,11 @@ def run(args) -> int:
     out = Path(args.out)
     preset = args.config in PRESETS
     config_input = {} if preset else {"--config": args.config}
-    check_outputs({"--out": args.out}, config_input)
+    if args.init is not None and not Path(args.init).is_file():
+        raise InputError(f"--init {args.init!r}: no such weights file")
+    if args.init is not None and args.resume:
+        raise InputError("--init starts a new run; --resume continues one: give one of them")
+    check_outputs({"--out": args.out}, {**config_input, **({"--init": args.init} if args.init else {})})
     check_output_dir(out.with_suffix(".run"), "--out's run folder")
 
     from recon.net.train import TrainOptions, train
@@ -68,7 +74,8 @@ def run(args) -> int:
                            steps_per_epoch=args.steps_per_epoch, batch=args.batch, crop=args.crop,
                            steps=args.steps, minutes=args.minutes, seed=args.seed, device=args.device,
                            threads=args.threads, workers=args.workers, pool=args.pool, refresh=args.refresh,
-                           validate_every=args.validate_every, recipe={"folders": tuple(args.hdr)})
+                           validate_every=args.validate_every, recipe={"folders": tuple(args.hdr)},
+                           init=args.init)
     command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     train(options, out, resume=args.resume, progress=progress_wanted(args), command=command)
     report(args, f"wrote {out} (run log, loss curve and checkpoint in {out.with_suffix('.run')})")

@@ -33,7 +33,8 @@ import torch
 from torch import nn
 
 from .align import PyramidAlign, pyramid_reach
-from .common import OutputHead, ResBlock, SizesMixin, check_input, conv3
+from ..net.head import BlendHead
+from .common import ResBlock, SizesMixin, check_input, conv3
 from .represent import firing_rates
 
 
@@ -135,7 +136,7 @@ class BSF(nn.Module):
                                   attention_radius=s.attention_radius)
         self.fuse = nn.Sequential(nn.Conv2d(s.windows * c, c, 1), nn.LeakyReLU(0.1))
         self.reconstruct = nn.Sequential(*[ResBlock(c) for _ in range(s.recon_blocks)])
-        self.head = OutputHead(c, s.unshuffle, s.mu)
+        self.head = BlendHead(c, s.unshuffle, s.mu)
 
     def forward(self, light: torch.Tensor) -> torch.Tensor:
         s = self.sizes
@@ -149,8 +150,7 @@ class BSF(nn.Module):
         aligned = self.align(key, refs)
         stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
         fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
-        key_light = light[:, middle * s.step:middle * s.step + s.window]
-        return self.head(fused, key_light.mean(1, keepdim=True))
+        return self.head(fused, light)
 
 
 def receptive_radius(sizes: BSFSizes) -> int:

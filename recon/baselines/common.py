@@ -5,9 +5,10 @@ Every baseline takes the project's one stream format into learned methods,
 key moment at ``span // 2``, and returns (N, 1, H, W) light at the key moment.
 HDR light is compressed with the project's mu-law before the first layer and
 the output expanded with it (:func:`recon.net.model.compress` / ``expand``),
-as the project's network does: each baseline predicts, in the compressed
-domain, a correction to the compressed mean light of its key window, so it
-starts from a sensible image and trains stably on HDR scenes.
+as the project's network does, and each ends in the project's output head
+(:class:`recon.net.head.BlendHead`: a per-pixel choice among training-free
+estimates plus a correction), so it starts from a sensible image and trains
+stably on HDR scenes.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from torch import nn
 
 from golden.errors import InputError
 
-from ..net.model import compress, expand  # noqa: F401  (re-exported for the baselines)
+from ..net.mulaw import compress  # noqa: F401  (re-exported for the baselines)
 
 
 class SizesMixin:
@@ -104,26 +105,6 @@ class ResBlock(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return x + self.body(x)
-
-
-class OutputHead(nn.Module):
-    """Fused feature at 1/u of the frame -> light: a correction to the compressed key mean, expanded.
-
-    The last convolution starts at zero, so an untrained baseline returns the
-    mean light of its key window (finite, >= 0), as the project's network does.
-    """
-
-    def __init__(self, channels: int, unshuffle: int, mu: float):
-        super().__init__()
-        self.mu = float(mu)
-        self.conv = conv3(channels, unshuffle ** 2)
-        self.unfold = nn.PixelShuffle(unshuffle)
-        nn.init.zeros_(self.conv.weight)
-        nn.init.zeros_(self.conv.bias)
-
-    def forward(self, feature: torch.Tensor, key_mean_light: torch.Tensor) -> torch.Tensor:
-        base = compress(key_mean_light, self.mu)
-        return expand(base + self.unfold(self.conv(feature)), self.mu)
 
 
 def parameter_count(model: nn.Module) -> int:

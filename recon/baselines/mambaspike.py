@@ -42,7 +42,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from .align import PyramidAlign, pyramid_reach
-from .common import OutputHead, ResBlock, SizesMixin, centred, check_input
+from ..net.head import BlendHead
+from .common import ResBlock, SizesMixin, check_input
 from .represent import firing_rates
 from .scan import MambaBlock
 
@@ -54,8 +55,7 @@ class MambaSpikeSizes(SizesMixin):
     ``span``-readout input (``readouts``, odd; 61); ``parsings``: parsing
     branches (1 for TE, as the TE paper; more for ML); ``temporal_patch``:
     readouts per temporal token (odd); ``moments`` token features ``moment_stride``
-    tokens apart go to the alignment; ``key_window``: readouts whose mean
-    light is the starting estimate; ``channels``; ``expand``, ``state``,
+    tokens apart go to the alignment; ``channels``; ``expand``, ``state``,
     ``head_dim``, ``chunk``: the Mamba blocks (inner width expand x channels,
     state size, channels per decay head, scan chunk); ``temporal_blocks``,
     ``spatial_blocks``; ``scan_window``: side of a spatial scan window
@@ -78,7 +78,6 @@ class MambaSpikeSizes(SizesMixin):
     temporal_patch: int = 5
     moments: int = 5
     moment_stride: int = 3
-    key_window: int = 21
     unshuffle: int = 4
     channels: int = 16
     expand: int = 2
@@ -98,13 +97,12 @@ class MambaSpikeSizes(SizesMixin):
     mu: float = 5000.0
 
     def __post_init__(self) -> None:
-        self._need_ints("readouts", "parsings", "temporal_patch", "moments", "moment_stride", "key_window",
+        self._need_ints("readouts", "parsings", "temporal_patch", "moments", "moment_stride",
                         "unshuffle", "channels", "expand", "state", "head_dim", "chunk", "scan_window",
                         "levels", "dcn_kernel", "offset_groups", "filter_kernel")
         self._need_ints("temporal_blocks", "spatial_blocks", "recon_blocks", least=0)
-        for key in ("readouts", "temporal_patch", "moments", "key_window", "dcn_kernel", "filter_kernel"):
+        for key in ("readouts", "temporal_patch", "moments", "dcn_kernel", "filter_kernel"):
             self._need(key, getattr(self, key) % 2 == 1, "odd (centred on the key moment)")
-        self._need("key_window", self.key_window <= self.readouts, "at most readouts")
         self._need("moment_stride", (self.moments // 2) * self.moment_stride <= self.tokens // 2,
                    f"such that the moments lie within the {self.tokens} tokens")
         self._need("channels", self.channels % self.offset_groups == 0, "a multiple of offset_groups")
@@ -215,7 +213,7 @@ class MambaSpike(nn.Module):
                                   filter_kernel=s.filter_kernel)
         self.fuse = nn.Sequential(nn.Conv2d(s.moments * c, c, 1), nn.LeakyReLU(0.1))
         self.reconstruct = nn.Sequential(*[ResBlock(c) for _ in range(s.recon_blocks)])
-        self.head = OutputHead(c, s.unshuffle, s.mu)
+        self.head = BlendHead(c, s.unshuffle, s.mu)
 
     def forward(self, light: torch.Tensor) -> torch.Tensor:
         s = self.sizes
@@ -231,7 +229,7 @@ class MambaSpike(nn.Module):
         aligned = self.align(key, refs)
         stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
         fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
-        return self.head(fused, centred(light, s.key_window).mean(1, keepdim=True))
+        return self.head(fused, light)
 
 
 def receptive_radius(sizes: MambaSpikeSizes) -> int:

@@ -32,7 +32,8 @@ import torch
 from torch import nn
 
 from .align import PyramidAlign, pyramid_reach
-from .common import OutputHead, ResBlock, SizesMixin, centred, check_input, compress, conv3
+from ..net.head import BlendHead
+from .common import ResBlock, SizesMixin, centred, check_input, compress, conv3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,7 +129,7 @@ class Spk2ImgNet(nn.Module):
         self.align = PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset)
         self.fuse = nn.Sequential(nn.Conv2d(s.windows * c, c, 1), nn.LeakyReLU(0.1))
         self.reconstruct = nn.Sequential(*[ResBlock(c) for _ in range(s.recon_blocks)])
-        self.head = OutputHead(c, s.unshuffle, s.mu)
+        self.head = BlendHead(c, s.unshuffle, s.mu)
 
     def forward(self, light: torch.Tensor) -> torch.Tensor:
         s = self.sizes
@@ -145,8 +146,7 @@ class Spk2ImgNet(nn.Module):
         aligned = self.align(key, refs)
         stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
         fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
-        key_light = light[:, middle * s.step:middle * s.step + s.window]
-        return self.head(fused, key_light.mean(1, keepdim=True))
+        return self.head(fused, light)
 
 
 def receptive_radius(sizes: Spk2ImgNetSizes) -> int:

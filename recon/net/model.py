@@ -15,30 +15,15 @@ folded into the output.
 
 from __future__ import annotations
 
-import math
-
 import torch
 from torch import nn
 
 from .align import SPA
 from .features import MSFEG
+from .head import BlendHead
+from .mulaw import compress, expand  # noqa: F401  (re-exported)
 from .refine import GuidedAttention, IntensityFeature
 from .sizes import NetSizes
-
-
-def compress(light: torch.Tensor, mu: float) -> torch.Tensor:
-    """mu-law: light >= 0 (scene units) -> [0, ~1] (1 at the design light)."""
-    return torch.log1p(mu * light.clamp(min=0)) / math.log1p(mu)
-
-
-#: Largest code :func:`expand` accepts: light up to (1 + mu)^2 / mu, thousands of times the
-#: design light (beyond which every sensor here saturates), so the output is always finite.
-MAX_CODE = 2.0
-
-
-def expand(code: torch.Tensor, mu: float) -> torch.Tensor:
-    """Inverse of :func:`compress` on [0, MAX_CODE]; codes outside are clamped to it."""
-    return torch.expm1(code.clamp(0.0, MAX_CODE) * math.log1p(mu)) / mu
 
 
 class TESpikeNet(nn.Module):
@@ -51,10 +36,13 @@ class TESpikeNet(nn.Module):
         self.spa = SPA(s)
         self.intensity = IntensityFeature(s.window, s.channels, s.unshuffle) if s.refine else None
         self.attention = GuidedAttention(s.channels, s.heads, s.attention_window) if s.refine else None
-        self.head = nn.Conv2d(s.channels, s.unshuffle ** 2, 3, padding=1)
-        self.unfold = nn.PixelShuffle(s.unshuffle)
-        nn.init.zeros_(self.head.weight)        # start from the temporal mean
-        nn.init.zeros_(self.head.bias)
+        if s.head == "blend":
+            self.head = BlendHead(s.channels, s.unshuffle, s.mu)
+        else:                                   # "mean": a correction to the key sub-stream's mean
+            self.head = nn.Conv2d(s.channels, s.unshuffle ** 2, 3, padding=1)
+            self.unfold = nn.PixelShuffle(s.unshuffle)
+            nn.init.zeros_(self.head.weight)    # start from the temporal mean
+            nn.init.zeros_(self.head.bias)
 
     def substreams(self, x: torch.Tensor) -> torch.Tensor:
         """(N, span, H, W) -> (N, S, window, H, W): the sub-streams of eq. 4, key in the middle."""
@@ -78,6 +66,8 @@ class TESpikeNet(nn.Module):
         base = compress(key_light.mean(1, keepdim=True), s.mu)      # rough light at the key moment
         if self.attention is not None:
             fused = self.attention(fused, self.intensity(subs[:, s.substreams // 2], base))
+        if s.head == "blend":
+            return self.head(fused, light)
         return expand(base + self.unfold(self.head(fused)), s.mu)
 
 

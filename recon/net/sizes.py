@@ -16,6 +16,9 @@ from golden.errors import InputError
 
 #: Switches of the paper's Table 3, in its column order.
 SWITCHES = ("gradient", "dcn", "similarity", "motion_bias", "refine")
+#: Output heads: ``blend`` (recon/net/head.py: a per-pixel choice among training-free estimates plus a
+#: correction, the default) or ``mean`` (a correction to the key sub-stream's mean; weights made before it).
+HEADS = ("blend", "mean")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -37,7 +40,8 @@ class NetSizes:
     inference exact); ``heads``: attention heads of LIR; ``attention_window``:
     side of the neighbourhood over which LIR's K^T Q is averaged;
     ``mu``: the mu of the mu-law that compresses the HDR range of the decoded
-    stream before the first convolution (and expands the output).
+    stream before the first convolution (and expands the output); ``head``:
+    one of :data:`HEADS`.
     """
 
     substreams: int = 5
@@ -51,6 +55,7 @@ class NetSizes:
     heads: int = 2
     attention_window: int = 15
     mu: float = 5000.0
+    head: str = "blend"
     gradient: bool = True
     dcn: bool = True
     similarity: bool = True
@@ -72,6 +77,7 @@ class NetSizes:
              "a multiple of 4 and of heads")
         need("max_offset", float(self.max_offset) > 0, "> 0")
         need("mu", float(self.mu) > 0, "> 0")
+        need("head", self.head in HEADS, "one of " + ", ".join(HEADS))
         for key in SWITCHES:
             need(key, type(getattr(self, key)) is bool, "true or false")
 

@@ -65,6 +65,7 @@ class TrainOptions:
     validate_every: int = 1000          # steps between two validations (0: never)
     checkpoint_seconds: float = 120.0
     recipe: dict = dataclasses.field(default_factory=dict)
+    init: str | None = None             # weights file to start from (its tensors of matching name and shape)
 
     def __post_init__(self) -> None:
         if self.loss not in LOSSES:
@@ -207,6 +208,27 @@ def validate(model: torch.nn.Module, cases, config: SensorConfig, device: str) -
         model.train(was_training)
 
 
+def warm_start(model: torch.nn.Module, path: str, method: str) -> list[str]:
+    """Copy into ``model`` every tensor of weights file ``path`` whose name and shape match; return the names.
+
+    A network whose head changed keeps what it learned elsewhere (features,
+    alignment, refinement) and trains its new parts from their initial values.
+    """
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+        saved, saved_method = payload["state_dict"], payload.get("method", "net")
+    except (OSError, RuntimeError, KeyError, TypeError) as exc:
+        raise InputError(f"--init {path!r} is not a readable tespike weights file ({type(exc).__name__})") from None
+    if saved_method != method:
+        raise InputError(f"--init {path!r} holds weights of {saved_method!r}, not of {method!r}")
+    own = model.state_dict()
+    copied = [name for name, value in saved.items() if name in own and own[name].shape == value.shape]
+    if not copied:
+        raise InputError(f"--init {path!r}: no tensor matches the model's names and shapes")
+    model.load_state_dict({**own, **{name: saved[name] for name in copied}})
+    return copied
+
+
 def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None = None,
           resume: bool = False, progress: bool | None = None, command: str = "") -> Path:
     """Run (or resume) one training; write the best-on-validation weights to ``out``; return its path.
@@ -250,6 +272,8 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
         for stale in (log_path, validation_path, best_path):
             if stale.exists():
                 stale.unlink()
+        if options.init is not None:
+            warm_start(model, options.init, options.method)
     show = sys.stderr.isatty() if progress is None else progress
     cases = None
     if options.validate_every:

@@ -1,0 +1,103 @@
+"""The output head every learned method shares: a per-pixel choice among training-free estimates, plus a correction.
+
+Why: a network that predicts a correction to one fixed estimate (say the
+mean light of 13 readouts) must undo that estimate's failure itself: the
+motion blur of a long mean under a moving camera, the noise of a short one in
+the dark. Which temporal support is right is a local decision (how fast the
+pixel's light changes, how many spikes it sees), and every training-free
+estimate the project has answers it for one case only: on held-out pans TFI
+beats every windowed mean by 7 dB, on fast bright dead leaves the single
+readout beats TFI by 5 dB, in the dark the 61-readout mean wins; the best of
+them chosen per pixel (an oracle) is 5 to 14 dB above each alone
+(``benchmarks/bench_net.py --candidates``).
+
+So the head sees, at the key moment, :data:`RADII`'s centred means of the
+decoded light and the spike-interval estimate (TFI, searched inside the
+span), all compressed by the mu-law, and predicts from the method's features
+a softmax weight for each (per pixel) and a correction:
+
+    code = sum_j softmax(logits)_j * compress(estimate_j) + correction,
+
+expanded back to light. The head's convolution starts at zero weights with a
+bias that favours TFI and the 9-readout mean (TFP's window), so an untrained
+method already returns a sensible image.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from .mulaw import compress, expand
+
+#: Radii (readouts either side of the key) of the centred means the head chooses among.
+RADII = (0, 1, 2, 4, 7, 12, 20, 30)
+#: Initial logits: TFI and TFP's 9-readout mean first (the bias of an untrained head).
+INITIAL_LOGITS = {"tfi": 2.0, 4: 1.0}
+
+
+def estimate_count() -> int:
+    """Estimates the head chooses among: the centred means and TFI."""
+    return len(RADII) + 1
+
+
+def spike_interval_light(light: torch.Tensor) -> torch.Tensor:
+    """TFI (``recon/tfi.py``'s rule) at the middle readout of (N, T, H, W) decoded light, searched within T.
+
+    With n the first readout at or after the key whose light is non-zero and p
+    the last one before it (-1 for none), the estimate is ``light[n] / (n - p)``.
+    Past the last spike of the span the charge since p is below one spike:
+    the estimate is ``light[p] / (T - p)`` (0 without any spike), a bound the
+    head may weigh down; inside the network the span has no stream end (the
+    ends were padded by repeating readouts).
+    """
+    n_, t, h, w = light.shape
+    key = t // 2
+    index = torch.arange(t, device=light.device).view(1, t, 1, 1)
+    spiking = light > 0
+    after = torch.where(spiking[:, key:], index[:, key:], t).amin(1, keepdim=True)
+    before = torch.where(spiking[:, :key], index[:, :key], -1).amax(1, keepdim=True)
+    found = after < t
+    at_next = light.gather(1, after.clamp(max=t - 1)) / (after - before).to(light.dtype)
+    at_last = light.gather(1, before.clamp(min=0)) / (t - before).to(light.dtype)
+    tail = torch.where(before >= 0, at_last, torch.zeros_like(at_last))
+    return torch.where(found, at_next, tail)
+
+
+def key_estimates(light: torch.Tensor) -> torch.Tensor:
+    """(N, T, H, W) decoded light -> (N, len(RADII) + 1, H, W): centred means of :data:`RADII`, then TFI.
+
+    A radius beyond the span's half is cut to it (the whole span's mean), so
+    the head's shape does not depend on the span.
+    """
+    key = light.shape[1] // 2
+    sums = torch.cumsum(light, 1)
+    means = []
+    for r in (min(r, key) for r in RADII):       # loop over the few radii, not over pixels
+        total = sums[:, key + r] - (sums[:, key - r - 1] if key - r - 1 >= 0 else 0)
+        means.append(total / (2 * r + 1))
+    return torch.cat([torch.stack(means, 1), spike_interval_light(light)], 1)
+
+
+class BlendHead(nn.Module):
+    """Feature at 1/u of the frame and the decoded span -> light: a softmax blend of estimates plus a correction."""
+
+    def __init__(self, channels: int, unshuffle: int, mu: float):
+        super().__init__()
+        self.mu = float(mu)
+        self.estimates = estimate_count()
+        outputs = self.estimates + 1                       # logits, then the correction
+        self.conv = nn.Conv2d(channels, outputs * unshuffle ** 2, 3, padding=1)
+        self.unfold = nn.PixelShuffle(unshuffle)
+        nn.init.zeros_(self.conv.weight)
+        with torch.no_grad():
+            bias = torch.zeros(outputs)
+            for name, value in INITIAL_LOGITS.items():
+                bias[self.estimates - 1 if name == "tfi" else RADII.index(name)] = value
+            self.conv.bias.copy_(bias.repeat_interleave(unshuffle ** 2))
+
+    def forward(self, feature: torch.Tensor, light: torch.Tensor) -> torch.Tensor:
+        out = self.unfold(self.conv(feature))
+        weights = torch.softmax(out[:, :self.estimates], 1)
+        codes = compress(key_estimates(light), self.mu)
+        return expand((weights * codes).sum(1, keepdim=True) + out[:, self.estimates:], self.mu)

@@ -1,0 +1,73 @@
+"""The shared output head: its estimates equal TFP and TFI, and an untrained head returns their initial blend."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from golden.config import DESIGN_ELECTRONS, SensorConfig
+from golden.fastsim import simulate_scene
+from recon.net.head import INITIAL_LOGITS, RADII, BlendHead, key_estimates, spike_interval_light
+from recon.net.mulaw import compress, expand
+from recon.stream import decode_light
+from recon.tfi import tfi
+from recon.tfp import tfp
+
+
+def sparse_stream(seed: int, span: int = 61, size: int = 12) -> torch.Tensor:
+    """Decoded light of a real TE stream whose pixels span dense to very sparse codes."""
+    rng = np.random.default_rng(seed)
+    levels = 10.0 ** rng.uniform(-5.5, 0.5, size=(1, size, size))
+    light = np.repeat(levels, span, 0)
+    words = simulate_scene(SensorConfig.preset("te"), light, seed=seed, workers=1)
+    return decode_light(words, SensorConfig.preset("te"), dtype=torch.float64)
+
+
+@pytest.mark.parametrize("span", [61, 11])
+def test_means_are_tfp_at_the_key(span):
+    light = sparse_stream(1, span)
+    key = span // 2
+    got = key_estimates(light[None])[0]
+    for j, r in enumerate(RADII):
+        assert torch.allclose(got[j], tfp(light, min(r, key))[key], rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("seed", [2, 3, 4])
+def test_spike_interval_is_tfi_where_a_code_follows(seed):
+    """Inside the span TFI's rule is the whole-stream TFI of the span itself wherever a spike follows the key."""
+    light = sparse_stream(seed)
+    key = light.shape[0] // 2
+    nonzero = light > 0
+    reference = tfi(light, nonzero, SensorConfig.preset("te").threshold / DESIGN_ELECTRONS, 0)[key]
+    got = spike_interval_light(light[None])[0, 0]
+    follows = nonzero[key:].any(0)
+    assert follows.any() and (~follows).any()          # both cases are exercised
+    assert torch.allclose(got[follows], reference[follows], rtol=1e-12)
+    last = torch.where(nonzero[:key], torch.arange(key).view(-1, 1, 1), -1).amax(0)
+    tail = ~follows & (last >= 0)
+    expected = light[last.clamp(min=0), torch.arange(12)[:, None], torch.arange(12)][tail] / (61 - last[tail])
+    assert torch.allclose(got[tail], expected)
+    assert (got[~follows & (last < 0)] == 0).all()
+
+
+def test_untrained_head_returns_its_initial_blend():
+    head = BlendHead(8, 2, 5000.0)
+    light = sparse_stream(5)[None].float()
+    out = head(torch.randn(1, 8, 6, 6), light)
+    logits = torch.zeros(len(RADII) + 1)
+    for name, value in INITIAL_LOGITS.items():
+        logits[-1 if name == "tfi" else RADII.index(name)] = value
+    weights = torch.softmax(logits, 0).view(1, -1, 1, 1)
+    expected = expand((weights * compress(key_estimates(light), 5000.0)).sum(1, keepdim=True), 5000.0)
+    assert torch.allclose(out, expected, rtol=1e-5)
+    assert dataclasses.is_dataclass(SensorConfig)
+
+
+def test_extreme_light_is_finite():
+    head = BlendHead(4, 1, 5000.0)
+    light = torch.zeros(1, 61, 4, 4)
+    light[0, :, 0, 0] = 1e6
+    light[0, 50, 1, 1] = 1e-9
+    out = head(torch.randn(1, 4, 4, 4) * 1e3, light)
+    assert torch.isfinite(out).all() and (out >= 0).all()
