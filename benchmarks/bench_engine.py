@@ -72,10 +72,10 @@ def main() -> None:
         for _ in range(args.steps):
             draw_batch(pool, config, model.sizes.span, args.crop, args.batch, rng)
         draw_seconds = (time.perf_counter() - draw_start) / args.steps
-        inputs, truth = draw_batch(pool, config, model.sizes.span, args.crop, args.batch, rng)
+        inputs, truth, inside = draw_batch(pool, config, model.sizes.span, args.crop, args.batch, rng)
         start = time.perf_counter()
         for _ in range(args.steps):
-            loss = training_loss(model(inputs), truth, "mu-l1")
+            loss = training_loss(model(inputs, inside), truth, "mu-l1")
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()
@@ -84,8 +84,8 @@ def main() -> None:
         run_start = time.perf_counter()
         for step in range(args.steps):
             pool.advance_to(pool.refresh * (pool.made - pool.capacity + 1))    # one new clip per step
-            loss = training_loss(model(draw_batch(pool, config, model.sizes.span, args.crop, args.batch, rng)[0]),
-                                 truth, "mu-l1")
+            inputs, _, inside = draw_batch(pool, config, model.sizes.span, args.crop, args.batch, rng)
+            loss = training_loss(model(inputs, inside), truth, "mu-l1")
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()

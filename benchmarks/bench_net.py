@@ -145,6 +145,45 @@ def validation(args) -> None:
             print(f"| {method} | " + " | ".join(f"{values[n]:.2f}" for n in names) + " |", flush=True)
 
 
+def candidates(args) -> None:
+    """What the shared output head chooses among (recon/net/head.py), alone, on the validation set.
+
+    Every estimate as the head sees it (the 61-readout span of each key moment,
+    stream ends padded as inference pads them), its initial blend, and the
+    per-pixel oracle: the estimate closest to the truth after the metric's
+    mu-law, chosen with the truth's help (a bound on what choosing can give,
+    not a method).
+    """
+    from recon.engine.validation import validation_set
+    from recon.metrics import mu_law
+    from recon.net.head import BlendHead, RADII, key_estimates
+    from recon.stream import decode_light, key_span
+    names = [f"mean {2 * r + 1}" for r in RADII] + ["tfi in span"]
+    span = NetSizes().span
+    for label, preset in SENSORS:
+        config = SensorConfig.preset(preset)
+        print(f"\n{label}: validation PSNR-mu (dB) of the head's estimates, every frame of each case")
+        print("| case | " + " | ".join(names) + " | initial blend | oracle |")
+        print("| --- |" + " ---: |" * (len(names) + 2))
+        for case in validation_set(config):
+            light = decode_light(case.words, config, dtype=torch.float64)
+            spans = torch.from_numpy(np.stack([key_span(len(light), k, span) for k in range(len(light))]))
+            estimates = key_estimates(light[spans])                         # (K, estimates, H, W)
+            head = BlendHead(4, 1, NetSizes().mu).double()
+            with torch.no_grad():
+                blend = head(torch.zeros(len(light), 4, *light.shape[1:], dtype=torch.float64), light[spans])
+            truth = torch.from_numpy(case.light).double()
+            cells = [float(np.mean(psnr_mu(estimates[:, j].numpy(), case.light))) for j in range(len(names))]
+            cells.append(float(np.mean(psnr_mu(blend[:, 0].numpy(), case.light))))
+            peak = truth.flatten(1).amax(1).view(-1, 1, 1, 1)
+            mapped = mu_law((estimates / peak).clamp(0, 1))
+            target = mu_law((truth[:, None] / peak).clamp(0, 1))
+            best = mapped.gather(1, (mapped - target).abs().argmin(1, keepdim=True))
+            mse = ((best - target) ** 2).flatten(1).mean(1)
+            cells.append(float((10 * torch.log10(1 / mse)).mean()))
+            print(f"| {case.label} | " + " | ".join(f"{v:.2f}" for v in cells) + " |", flush=True)
+
+
 def complexity(args) -> None:
     print("\n| size | parameters | GFLOPs at 384 x 512 | threads | s / frame (median) |")
     print("| --- | ---: | ---: | ---: | ---: |")
@@ -183,6 +222,8 @@ def main() -> None:
     parser.add_argument("--complexity", action="store_true", help="parameters, FLOPs, latency")
     parser.add_argument("--validation", action="store_true",
                         help="only the training's held-out validation set (TFP, TFI, the weights)")
+    parser.add_argument("--candidates", action="store_true",
+                        help="only the output head's training-free estimates, their initial blend and the oracle")
     parser.add_argument("--compare", nargs="*", default=[], metavar="PT",
                         help="with --validation: also score these weights files (each on its own sensor)")
     parser.add_argument("--weights-dir", default=str(WEIGHTS_DIR),
@@ -199,6 +240,9 @@ def main() -> None:
     args = parser.parse_args()
     if args.validation:
         validation(args)
+        return
+    if args.candidates:
+        candidates(args)
         return
     both = not (args.quality or args.complexity)
     if args.quality or both:

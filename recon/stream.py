@@ -184,6 +184,12 @@ def key_span(length: int, key: int, span: int) -> np.ndarray:
     return np.clip(np.arange(span) + key - span // 2, 0, length - 1)
 
 
+def span_inside(length: int, key: int, span: int) -> np.ndarray:
+    """(span,) bool: which readouts of :func:`key_span` lie in the stream (the others repeat an end)."""
+    times = np.arange(span) + key - span // 2
+    return (times >= 0) & (times < length)
+
+
 def substreams(stream: torch.Tensor, centres, radius: int, edge: str = "shift") -> torch.Tensor:
     """Sub-streams ``S_i = {S(t)}_{t = t_i - radius}^{t_i + radius}`` (paper eq. 4).
 

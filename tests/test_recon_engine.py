@@ -10,7 +10,7 @@ from golden.errors import InputError
 from recon.engine.batches import ClipPool, draw_batch, draw_sample
 from recon.engine.clips import Clip, EngineRecipe, clip_light, draw_length, make_clip
 from recon.engine.deadleaves import DeadLeavesParams, _power_law, dead_leaves
-from recon.stream import key_span
+from recon.stream import key_span, span_inside
 
 SMALL = EngineRecipe(height=24, width=24, long=(6, 12), short=(1, 5))
 
@@ -92,6 +92,8 @@ def test_recipe_refusals():
 
 
 def test_key_span_repeats_the_ends_as_inference_does():
+    assert span_inside(1, 0, 5).tolist() == [False, False, True, False, False]
+    assert span_inside(10, 1, 5).tolist() == [False, True, True, True, True]
     assert key_span(1, 0, 5).tolist() == [0, 0, 0, 0, 0]
     assert key_span(10, 1, 5).tolist() == [0, 0, 1, 2, 3]
     assert key_span(10, 9, 5).tolist() == [7, 8, 9, 9, 9]
@@ -105,7 +107,7 @@ def test_sample_is_the_padded_span_around_its_key():
     rng = np.random.default_rng(4)
     for _ in range(20):
         state = rng.bit_generator.state
-        sample, truth = draw_sample(clip, 5, 8, rng)
+        sample, truth, inside = draw_sample(clip, 5, 8, rng)
         replay = np.random.default_rng()
         replay.bit_generator.state = state
         key = int(replay.integers(K))
@@ -116,6 +118,7 @@ def test_sample_is_the_padded_span_around_its_key():
             expected = np.flip(expected, flips)
         assert np.array_equal(sample, expected)
         assert np.array_equal(truth[0], expected[2])       # the key moment sits in the middle
+        assert inside.tolist() == [0 <= t < K for t in range(key - 2, key + 3)]
 
 
 def test_pool_schedule_depends_on_the_step_only():
@@ -128,7 +131,7 @@ def test_pool_schedule_depends_on_the_step_only():
     a = draw_batch(straight, config, 5, 16, 3, np.random.default_rng(0))
     b = draw_batch(late, config, 5, 16, 3, np.random.default_rng(0))
     assert all(np.array_equal(x.numpy(), y.numpy()) for x, y in zip(a, b))
-    assert a[0].shape == (3, 5, 16, 16) and a[1].shape == (3, 1, 16, 16)
+    assert a[0].shape == (3, 5, 16, 16) and a[1].shape == (3, 1, 16, 16) and a[2].shape == (3, 5)
 
 
 def test_worker_processes_make_the_same_clips():

@@ -44,11 +44,7 @@ def test_spike_interval_is_tfi_where_a_code_follows(seed):
     follows = nonzero[key:].any(0)
     assert follows.any() and (~follows).any()          # both cases are exercised
     assert torch.allclose(got[follows], reference[follows], rtol=1e-12)
-    last = torch.where(nonzero[:key], torch.arange(key).view(-1, 1, 1), -1).amax(0)
-    tail = ~follows & (last >= 0)
-    expected = light[last.clamp(min=0), torch.arange(12)[:, None], torch.arange(12)][tail] / (61 - last[tail])
-    assert torch.allclose(got[tail], expected)
-    assert (got[~follows & (last < 0)] == 0).all()
+    assert (got[~nonzero.any(0)] == 0).all()
 
 
 def test_untrained_head_returns_its_initial_blend():
@@ -71,3 +67,37 @@ def test_extreme_light_is_finite():
     light[0, 50, 1, 1] = 1e-9
     out = head(torch.randn(1, 4, 4, 4) * 1e3, light)
     assert torch.isfinite(out).all() and (out >= 0).all()
+
+
+def stream_spans(light: torch.Tensor, span: int = 61) -> tuple[torch.Tensor, torch.Tensor]:
+    """Every key's padded span and its inside mask, as inference builds them."""
+    from recon.stream import key_span, span_inside
+    K = light.shape[0]
+    spans = torch.stack([light[key_span(K, k, span)] for k in range(K)])
+    inside = torch.from_numpy(np.stack([span_inside(K, k, span) for k in range(K)]))
+    return spans, inside
+
+
+@pytest.mark.parametrize("length", [1, 5, 16, 31])
+def test_estimates_equal_tfp_and_tfi_on_whole_short_streams(length):
+    """Told which readouts are padding, the head's estimates are TFP's and TFI's exactly, at every readout."""
+    light = sparse_stream(length + 7, length)
+    spans, inside = stream_spans(light)
+    got = key_estimates(spans, inside)
+    for j, r in enumerate(RADII):
+        assert torch.allclose(got[:, j], tfp(light, r), rtol=1e-12, atol=1e-15)
+    nonzero = light > 0
+    reference = tfi(light, nonzero, SensorConfig.preset("te").threshold / DESIGN_ELECTRONS, 0)
+    follows = torch.flip(torch.cumsum(torch.flip(nonzero.int(), [0]), 0), [0]) > 0     # a spike at or after k
+    assert torch.allclose(got[:, -1][follows], reference[follows], rtol=1e-12)
+    tail = ~follows & nonzero.any(0)
+    assert (got[:, -1][tail] >= reference[tail] - 1e-15).all()          # never below TFI's one-spike bound
+    assert (got[:, -1][~nonzero.any(0).expand_as(follows)] == 0).all()
+
+
+def test_inside_must_hold_the_key():
+    light = torch.rand(1, 5, 2, 2)
+    with pytest.raises(ValueError, match="key moment"):
+        key_estimates(light, torch.tensor([[True, True, False, True, True]]))
+    with pytest.raises(ValueError, match="shape"):
+        key_estimates(light, torch.ones(1, 4, dtype=torch.bool))

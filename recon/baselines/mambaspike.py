@@ -215,7 +215,8 @@ class MambaSpike(nn.Module):
         self.reconstruct = nn.Sequential(*[ResBlock(c) for _ in range(s.recon_blocks)])
         self.head = BlendHead(c, s.unshuffle, s.mu)
 
-    def forward(self, light: torch.Tensor) -> torch.Tensor:
+    def forward(self, light: torch.Tensor, inside: torch.Tensor | None = None) -> torch.Tensor:
+        """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); see recon/net/head.py."""
         s = self.sizes
         check_input(light, s.span, s.pyramid_factor)
         feats = [branch(light) for branch in self.parsings]                 # (N, M, C, h, w) each
@@ -229,7 +230,7 @@ class MambaSpike(nn.Module):
         aligned = self.align(key, refs)
         stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
         fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
-        return self.head(fused, light)
+        return self.head(fused, light, inside)
 
 
 def receptive_radius(sizes: MambaSpikeSizes) -> int:

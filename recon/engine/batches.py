@@ -11,7 +11,8 @@ which clips a step can draw from depends only on the step, never on how fast
 the workers were, so a run is a pure function of its seed and resumes
 exactly (the pool is re-made from the step). Each sample is a key moment drawn
 anywhere in a clip (its span padded at the stream's ends by repeating the
-first or last readout, exactly as inference does: :func:`recon.stream.key_span`),
+first or last readout, exactly as inference does: :func:`recon.stream.key_span`, and marked as
+padding by :func:`recon.stream.span_inside`),
 a random crop and random flips.
 """
 
@@ -27,7 +28,7 @@ import torch
 
 from golden.config import SensorConfig
 
-from ..stream import decode_light, key_span
+from ..stream import decode_light, key_span, span_inside
 from .clips import Clip, EngineRecipe, make_clip
 
 
@@ -117,8 +118,12 @@ class ClipPool:
         self.source.close()
 
 
-def draw_sample(clip: Clip, span: int, crop: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """(words (span, c, c), truth (1, c, c)) at a random key moment, crop and flip of ``clip``."""
+def draw_sample(clip: Clip, span: int, crop: int, rng: np.random.Generator
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(words (span, c, c), truth (1, c, c), inside (span,)) at a random key moment, crop and flip of ``clip``.
+
+    ``inside`` marks the span's readouts that lie in the clip (the others repeat its first or last).
+    """
     K, H, W = clip.words.shape
     key = int(rng.integers(K))
     times = key_span(K, key, span)
@@ -128,13 +133,14 @@ def draw_sample(clip: Clip, span: int, crop: int, rng: np.random.Generator) -> t
     flips = [axis for axis in (-1, -2) if rng.integers(2)]
     if flips:
         words, truth = np.flip(words, flips), np.flip(truth, flips)
-    return np.ascontiguousarray(words), np.ascontiguousarray(truth)
+    return np.ascontiguousarray(words), np.ascontiguousarray(truth), span_inside(K, key, span)
 
 
 def draw_batch(pool: ClipPool, config: SensorConfig, span: int, crop: int, batch: int,
-               rng: np.random.Generator, device: str = "cpu") -> tuple[torch.Tensor, torch.Tensor]:
-    """(decoded light (B, span, c, c), truth (B, 1, c, c)) from random clips of the pool."""
-    pairs = [draw_sample(pool.clips[int(rng.integers(len(pool.clips)))], span, crop, rng)
-             for _ in range(batch)]
-    light = decode_light(np.stack([w for w, _ in pairs]), config, device=device, dtype=torch.float32)
-    return light, torch.from_numpy(np.stack([t for _, t in pairs])).to(device)
+               rng: np.random.Generator, device: str = "cpu") -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(decoded light (B, span, c, c), truth (B, 1, c, c), inside (B, span)) from random clips of the pool."""
+    samples = [draw_sample(pool.clips[int(rng.integers(len(pool.clips)))], span, crop, rng)
+               for _ in range(batch)]
+    words, truth, inside = (np.stack(part) for part in zip(*samples))
+    light = decode_light(words, config, device=device, dtype=torch.float32)
+    return light, torch.from_numpy(truth).to(device), torch.from_numpy(inside).to(device)

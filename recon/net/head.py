@@ -41,42 +41,70 @@ def estimate_count() -> int:
     return len(RADII) + 1
 
 
-def spike_interval_light(light: torch.Tensor) -> torch.Tensor:
-    """TFI (``recon/tfi.py``'s rule) at the middle readout of (N, T, H, W) decoded light, searched within T.
+def _inside(light: torch.Tensor, inside: torch.Tensor | None) -> torch.Tensor:
+    """(N, T, 1, 1) bool: which readouts of the span lie in the stream (all, without ``inside``)."""
+    n, t = light.shape[:2]
+    if inside is None:
+        return torch.ones((n, t, 1, 1), dtype=torch.bool, device=light.device)
+    if inside.shape != (n, t):
+        raise ValueError(f"inside has shape {tuple(inside.shape)}: need (N, T) = {(n, t)}")
+    if not bool(inside[:, t // 2].all()):
+        raise ValueError("the key moment (the middle readout) must lie in the stream")
+    return inside.view(n, t, 1, 1)
 
-    With n the first readout at or after the key whose light is non-zero and p
-    the last one before it (-1 for none), the estimate is ``light[n] / (n - p)``.
-    Past the last spike of the span the charge since p is below one spike:
-    the estimate is ``light[p] / (T - p)`` (0 without any spike), a bound the
-    head may weigh down; inside the network the span has no stream end (the
-    ends were padded by repeating readouts).
+
+def spike_interval_light(light: torch.Tensor, inside: torch.Tensor | None = None) -> torch.Tensor:
+    """TFI (``recon/tfi.py``'s whole-stream rule) at the middle readout of (N, T, H, W) decoded light.
+
+    ``inside`` (N, T) marks the readouts that lie in the stream (those past
+    its ends are padding); without it every readout does. With n the first
+    readout at or after the key whose light is non-zero and p the last one
+    before it (the readout before the stream's first when none: the sensor's
+    accumulator starts at 0), the estimate is ``light[n] / (n - p)``: exactly
+    TFI wherever n and p lie in the span, as they do for any stream of at
+    most T // 2 + 1 readouts. Past the last spike TFI bounds the light by
+    one spike over the readouts since p; the head is not given the threshold,
+    so it uses the looser ``light[p] / (end - p)`` (never below TFI's bound),
+    capped by the light of the interval that ends at p, as TFI does; 0
+    without any spike.
     """
     n_, t, h, w = light.shape
     key = t // 2
+    inside = _inside(light, inside)
     index = torch.arange(t, device=light.device).view(1, t, 1, 1)
-    spiking = light > 0
+    start = torch.where(inside, index, t).amin(1, keepdim=True) - 1          # "p" before the first spike
+    end = torch.where(inside, index, -1).amax(1, keepdim=True)
+    spiking = (light > 0) & inside
     after = torch.where(spiking[:, key:], index[:, key:], t).amin(1, keepdim=True)
-    before = torch.where(spiking[:, :key], index[:, :key], -1).amax(1, keepdim=True)
-    found = after < t
+    before = torch.maximum(torch.where(spiking[:, :key], index[:, :key], -1).amax(1, keepdim=True), start)
     at_next = light.gather(1, after.clamp(max=t - 1)) / (after - before).to(light.dtype)
-    at_last = light.gather(1, before.clamp(min=0)) / (t - before).to(light.dtype)
-    tail = torch.where(before >= 0, at_last, torch.zeros_like(at_last))
-    return torch.where(found, at_next, tail)
+    earlier = torch.maximum(torch.where(spiking & (index < before), index, -1).amax(1, keepdim=True), start)
+    last = light.gather(1, before.clamp(min=0))
+    previous = last / (before - earlier).clamp(min=1).to(light.dtype)
+    bound = last / (end - before).clamp(min=1).to(light.dtype)
+    tail = torch.where(before > start, torch.minimum(previous, bound), torch.zeros_like(last))
+    return torch.where(after < t, at_next, tail)
 
 
-def key_estimates(light: torch.Tensor) -> torch.Tensor:
+def key_estimates(light: torch.Tensor, inside: torch.Tensor | None = None) -> torch.Tensor:
     """(N, T, H, W) decoded light -> (N, len(RADII) + 1, H, W): centred means of :data:`RADII`, then TFI.
 
-    A radius beyond the span's half is cut to it (the whole span's mean), so
-    the head's shape does not depend on the span.
+    Each mean is TFP's (``recon/tfp.py``): over the readouts of its window
+    that lie in the stream (``inside``, as :func:`spike_interval_light`). A
+    radius beyond the span's half is cut to it, so the head's shape does not
+    depend on the span.
     """
     key = light.shape[1] // 2
-    sums = torch.cumsum(light, 1)
+    weight = _inside(light, inside).to(light.dtype)
+    sums = torch.cumsum(light * weight, 1)
+    counts = torch.cumsum(weight, 1)
     means = []
     for r in (min(r, key) for r in RADII):       # loop over the few radii, not over pixels
-        total = sums[:, key + r] - (sums[:, key - r - 1] if key - r - 1 >= 0 else 0)
-        means.append(total / (2 * r + 1))
-    return torch.cat([torch.stack(means, 1), spike_interval_light(light)], 1)
+        below = key - r - 1
+        total = sums[:, key + r] - (sums[:, below] if below >= 0 else 0)
+        count = counts[:, key + r] - (counts[:, below] if below >= 0 else 0)
+        means.append(total / count)
+    return torch.cat([torch.stack(means, 1), spike_interval_light(light, inside)], 1)
 
 
 class BlendHead(nn.Module):
@@ -96,8 +124,9 @@ class BlendHead(nn.Module):
                 bias[self.estimates - 1 if name == "tfi" else RADII.index(name)] = value
             self.conv.bias.copy_(bias.repeat_interleave(unshuffle ** 2))
 
-    def forward(self, feature: torch.Tensor, light: torch.Tensor) -> torch.Tensor:
+    def forward(self, feature: torch.Tensor, light: torch.Tensor, inside: torch.Tensor | None = None) -> torch.Tensor:
+        """``inside`` (N, T): the span's readouts that lie in the stream (see :func:`key_estimates`)."""
         out = self.unfold(self.conv(feature))
         weights = torch.softmax(out[:, :self.estimates], 1)
-        codes = compress(key_estimates(light), self.mu)
+        codes = compress(key_estimates(light, inside), self.mu)
         return expand((weights * codes).sum(1, keepdim=True) + out[:, self.estimates:], self.mu)

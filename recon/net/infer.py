@@ -2,7 +2,8 @@
 
 For key moment k the network sees readouts k - span/2 .. k + span/2; past
 either end of the stream the first or last readout is repeated (so a stream
-shorter than the span works, down to one readout). Frames are padded (edge
+shorter than the span works, down to one readout), and the network is told
+which readouts are such padding (``inside``). Frames are padded (edge
 values repeated) to a multiple of the network's pyramid factor and cut into
 tiles with an overlap of :func:`tile_margin` pixels on every side, more than
 the network's receptive field, so a tiled result equals the whole-frame one
@@ -25,7 +26,7 @@ import torch
 from golden.config import PRESETS, SensorConfig
 from golden.errors import InputError
 
-from ..stream import decode_light, key_span, output_images
+from ..stream import decode_light, key_span, output_images, span_inside
 from .model import TESpikeNet
 from .sizes import NetSizes
 
@@ -118,6 +119,7 @@ def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, 
     sizes = model.sizes
     K, H, W = words.shape
     times = key_span(K, key, sizes.span)
+    inside = torch.from_numpy(span_inside(K, key, sizes.span))[None].to(device)
     hp, wp = -(-H // sizes.pyramid_factor) * sizes.pyramid_factor, -(-W // sizes.pyramid_factor) * sizes.pyramid_factor
     boxes = tiles(H, W, sizes, tile)
     margin = 0 if len(boxes) == 1 else tile_margin(sizes)
@@ -131,7 +133,7 @@ def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, 
         cols = np.clip(np.arange(x0, x1), 0, W - 1)
         block = words[times[:, None, None], rows[None, :, None], cols[None, None, :]]
         light = decode_light(block, config, device=device, dtype=torch.float32)
-        result = model(light[None])[0, 0]
+        result = model(light[None], inside)[0, 0]
         yh, xw = min(y + h, H), min(x + w, W)
         out[y:yh, x:xw] = result[y - y0:yh - y0, x - x0:xw - x0].float().cpu()
     return out

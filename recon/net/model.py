@@ -51,7 +51,8 @@ class TESpikeNet(nn.Module):
             + torch.arange(s.window, device=x.device)[None, :]
         return x[:, index]
 
-    def forward(self, light: torch.Tensor) -> torch.Tensor:
+    def forward(self, light: torch.Tensor, inside: torch.Tensor | None = None) -> torch.Tensor:
+        """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); see recon/net/head.py."""
         s = self.sizes
         n, span, h, w = light.shape
         if span != s.span or h % s.pyramid_factor or w % s.pyramid_factor:
@@ -67,7 +68,7 @@ class TESpikeNet(nn.Module):
         if self.attention is not None:
             fused = self.attention(fused, self.intensity(subs[:, s.substreams // 2], base))
         if s.head == "blend":
-            return self.head(fused, light)
+            return self.head(fused, light, inside)
         return expand(base + self.unfold(self.head(fused)), s.mu)
 
 
