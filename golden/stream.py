@@ -18,6 +18,12 @@ from .config import SensorConfig
 from .errors import ConfigError
 
 
+#: Most lanes accepted: 262144 (2^18, the largest streaming array's pixel count). N above H W
+#: only adds lanes that carry 0; beyond this the out_words port (N Wd bits) and the Verilog
+#: integers that index it (32-bit) stop being something a simulator or a chip can hold.
+MAX_LANES = 1 << 18
+
+
 def beat_count(pixels: int, lanes: int) -> int:
     """B = ceil(pixels / lanes): beats per readout interval."""
     return -(-pixels // lanes)
@@ -29,7 +35,7 @@ def min_lanes(config: SensorConfig, height: int, width: int) -> int:
 
 
 def check_lanes(config: SensorConfig, height: int, width: int, lanes) -> int:
-    """Refuse a lane count that is not an integer >= 1 or whose beats do not fit in L clocks.
+    """Refuse a lane count that is not an integer in 1..MAX_LANES or whose beats do not fit in L clocks.
 
     The message names the smallest N that works (one line, :class:`ConfigError`). N above
     H W is legal (SPEC section 6): one beat, its lanes past the last pixel carrying 0.
@@ -37,6 +43,9 @@ def check_lanes(config: SensorConfig, height: int, width: int, lanes) -> int:
     pixels, L = height * width, config.clocks_per_readout
     if type(lanes) is not int or lanes < 1:
         raise ConfigError(f"lanes = {lanes!r}: must be an integer >= 1")
+    if lanes > MAX_LANES:
+        raise ConfigError(f"lanes = {lanes}: at most {MAX_LANES} lanes are supported (out_words would be "
+                          f"{lanes} x {config.word_bits} bits; {pixels} pixels need at most {pixels})")
     beats = beat_count(pixels, lanes)
     if beats > L:
         raise ConfigError(f"lanes = {lanes}: {height} x {width} pixels need B = ceil({pixels} / {lanes}) = "

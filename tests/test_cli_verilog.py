@@ -93,3 +93,13 @@ def test_verilog_refuses_lanes_for_l_equal_one_below_the_pixel_count(tmp_path):
                          "--lanes", 5, "--out", tmp_path / "S.v")
     assert_refused(result, "--lanes", "smallest N is 6")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["one.json"]
+
+
+@pytest.mark.parametrize("lanes", [1 << 18 | 1, 10 ** 20])
+def test_verilog_refuses_absurd_lane_counts_without_a_file(tmp_path, lanes):
+    """A lane count past 2^18 is refused in one line, no file (it used to write a port of
+    N * Wd bits, e.g. [499999999999999999994:0] for N = 10^20, and a 32-bit localparam N that wraps)."""
+    result = run_tespike("verilog", "--config", "te", "--height", 2, "--width", 2,
+                         "--lanes", lanes, "--out", tmp_path / "S.v")
+    assert_refused(result, "--lanes", "at most 262144 lanes")
+    assert not list(tmp_path.iterdir())

@@ -60,3 +60,14 @@ def test_output_bandwidth_at_the_paper_settings():
     assert b["port_bits_per_s"] >= b["bits_per_s"]
     msb = output_bandwidth(SensorConfig.preset("ml-msb"), 400, 250, 9.6e6)
     assert msb["word_bits"] == 4 and msb["bits_per_s"] == 16e9
+
+
+def test_lane_count_above_the_limit_is_refused_in_one_line():
+    """N past MAX_LANES is refused (an out_words port of N Wd bits no simulator holds; the
+    generator wrote a [499999999999999999994:0] port for N = 10^20 before); N = H W + 1 still works."""
+    from golden.stream import MAX_LANES
+    assert check_lanes(SensorConfig(), 2, 3, 7) == 7
+    assert check_lanes(SensorConfig(), 2, 3, MAX_LANES) == MAX_LANES
+    with pytest.raises(ConfigError, match=f"at most {MAX_LANES} lanes") as info:
+        check_lanes(SensorConfig(), 2, 3, MAX_LANES + 1)
+    assert "\n" not in str(info.value)
