@@ -36,7 +36,9 @@ import torch
 
 from golden.errors import InputError
 
-MU = 5000
+from .net.mulaw import compress
+from .pictures import MU  # noqa: F401  (the paper's mu, one constant for pictures and metrics)
+
 SSIM_SIGMA = 1.5
 SSIM_TRUNCATE = 3.5
 SSIM_K1, SSIM_K2 = 0.01, 0.03
@@ -95,8 +97,9 @@ def normalise(pred: torch.Tensor, gt: torch.Tensor, peak=None) -> tuple[torch.Te
 
 
 def mu_law(h: torch.Tensor, mu: float = MU) -> torch.Tensor:
-    """Tone map T(H) = log(1 + mu H) / log(1 + mu) (paper eq. 11), H in [0, 1]."""
-    return torch.log1p(mu * h) / math.log1p(mu)
+    """Tone map T(H) = log(1 + mu H) / log(1 + mu) (paper eq. 11), H in [0, 1]: the learned
+    methods' own mu-law (:func:`recon.net.mulaw.compress`), with the paper's mu by default."""
+    return compress(h, mu)
 
 
 def psnr(x: torch.Tensor, y: torch.Tensor, data_range: float = 1.0) -> torch.Tensor:
