@@ -659,3 +659,14 @@ def test_train_refuses_before_making_its_run_folder(files):
     refused_without_change(files, (*common, "--pool", 0), "pool = 0")
     refused_without_change(files, (*common, "--workers", -1), "workers = -1")
     refused_without_change(files, (*common, "--method", "nope"), "unknown learned method")
+
+
+def test_an_unknown_flag_is_named_by_its_sub_command(capsys):
+    """One line naming the flag and the sub-command whose --help lists the right ones."""
+    from cosim.cli import main
+    with pytest.raises(SystemExit) as stop:
+        main(["train", "--out", "w.pt", "--sequences", "2"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert err == ("tespike train: error: unrecognized arguments: --sequences 2 "
+                   "(see tespike train --help)\n")
