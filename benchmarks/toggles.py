@@ -26,8 +26,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))                       # measure this checkout's golden/
 
 from golden.config import SensorConfig  # noqa: E402
-from golden.io import atomic_output  # noqa: E402
 from golden.toggles import constant_light_toggles  # noqa: E402
+from recon.pictures import save_figure  # noqa: E402
 
 #: label -> configuration (the paper's settings and the equal-dynamic-range msb camera)
 CAMERAS = {
@@ -67,9 +67,7 @@ def plot(path: Path, light: np.ndarray, curves: dict) -> None:
         ax.legend(fontsize=8)
     fig.suptitle("Switching activity (energy proxy), Poisson light, SPEC default thresholds")
     fig.tight_layout()
-    with atomic_output(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def main(argv=None) -> int:

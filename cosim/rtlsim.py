@@ -45,10 +45,10 @@ class RTLProtocolError(RuntimeError):
 def build_array(config: SensorConfig, height: int, width: int, *, flat: bool = False):
     """``rtl.array.PixelArray(config, height, width, flat=flat)``, the design under test."""
     from rtl.array import PixelArray
-    return _refusing(lambda: PixelArray(config, height, width, flat=flat), config, height, width)
+    return build_or_refuse(lambda: PixelArray(config, height, width, flat=flat), config, height, width)
 
 
-def _refusing(make, config, height, width):
+def build_or_refuse(make, config, height, width):
     """Call ``make()``; turn the RTL's refusal of a configuration into a one-line :class:`ConfigError`."""
     from golden.errors import TespikeError
     try:
@@ -178,7 +178,7 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
             bar.update(min(t + 1, T) - bar.n)
             bar.close()
 
-    sim = _refusing(lambda: Simulator(bench), config, H, W)   # elaborates the array
+    sim = build_or_refuse(lambda: Simulator(bench), config, H, W)   # elaborates the array
     sim.add_clock(CLOCK_PERIOD_S)
     sim.add_testbench(testbench)
     if vcd_path is None:

@@ -19,7 +19,7 @@ from golden.io import check_stimulus
 from golden.stream import beat_count, check_lanes
 
 from .outside import words_per_row
-from .rtlsim import CLOCK_PERIOD_S, RESET_CLOCKS, _refusing, iter_packed_charge
+from .rtlsim import CLOCK_PERIOD_S, RESET_CLOCKS, build_or_refuse, iter_packed_charge
 from .stream_ports import check_beats, flush_clocks
 
 
@@ -27,7 +27,7 @@ def build_stream_array(config: SensorConfig, height: int, width: int, lanes: int
     """``rtl.stream.StreamingPixelArray(config, height, width, lanes, flat=flat)``, the design under test."""
     from rtl.stream import StreamingPixelArray
     check_lanes(config, height, width, lanes)
-    return _refusing(lambda: StreamingPixelArray(config, height, width, lanes, flat=flat),
+    return build_or_refuse(lambda: StreamingPixelArray(config, height, width, lanes, flat=flat),
                      config, height, width)
 
 
@@ -84,7 +84,7 @@ def rtl_stream_run(config: SensorConfig, stimulus: np.ndarray, lanes: int, *, fl
                 break
             ctx.set(dut.charge, next(charge) if t < T else 0)
 
-    sim = _refusing(lambda: Simulator(bench), config, H, W)
+    sim = build_or_refuse(lambda: Simulator(bench), config, H, W)
     sim.add_clock(CLOCK_PERIOD_S)
     sim.add_testbench(testbench)
     sim.run()

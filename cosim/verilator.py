@@ -64,7 +64,7 @@ CXX_OPTS = ("-O0", "-O1", "-O2", "-O3", "-Os")
 _RUNTIME_OBJECTS = ("verilated.o", "verilated_threads.o")
 
 #: Stimulus rows the harness reads at once.
-_READ_ROWS = 4096
+READ_ROWS = 4096
 
 #: Rows packed and written at once.
 _WRITE_ROWS = 4096
@@ -102,7 +102,8 @@ def shared_pixel_view(verilog: str, pixel_module: str) -> str:
     return verilog[:start.end()] + body + verilog[end:]
 
 
-def _ctype(bits: int) -> str:
+def c_type(bits: int) -> str:
+    """The smallest unsigned C++ integer type of ``bits`` bits."""
     return "uint8_t" if bits <= 8 else "uint16_t" if bits <= 16 else "uint32_t" if bits <= 32 else "uint64_t"
 
 
@@ -120,7 +121,7 @@ def harness_cpp(top: str, charge_bits: int, frame_bits: int) -> str:
     elif charge_bits > 32:
         set_charge = "top->charge = (uint64_t)w[0] | ((uint64_t)w[1] << 32);"
     else:
-        set_charge = f"top->charge = ({_ctype(charge_bits)})w[0];"
+        set_charge = f"top->charge = ({c_type(charge_bits)})w[0];"
     if frame_bits > 64:
         get_frame = f"std::memcpy(w, top->frame.data(), sizeof(uint32_t) * {out_words});"
     elif frame_bits > 32:
@@ -139,7 +140,7 @@ def harness_cpp(top: str, charge_bits: int, frame_bits: int) -> str:
 
 static const size_t IN_WORDS = {in_words};
 static const size_t OUT_WORDS = {out_words};
-static const size_t READ_ROWS = {_READ_ROWS};
+static const size_t READ_ROWS = {READ_ROWS};
 static const int RESET_CLOCKS = {RESET_CLOCKS};
 
 static inline void set_charge(Varray* top, const uint32_t* w) {{ {set_charge} }}
@@ -237,7 +238,8 @@ def build_jobs() -> int:
     return max(1, min(4, cores))
 
 
-def _check_cxx_opt(cxx_opt: str) -> str:
+def check_cxx_opt(cxx_opt: str) -> str:
+    """``cxx_opt`` if it is one of :data:`CXX_OPTS`, else one line (:class:`InputError`)."""
     if cxx_opt not in CXX_OPTS:
         raise InputError(f"cxx_opt {cxx_opt!r}: the C++ optimisation must be one of "
                          f"{', '.join(CXX_OPTS)}")
@@ -254,7 +256,7 @@ def build_flags(top: str, inline: bool = False, cxx_opt: str = CXX_OPT,
     options (the benchmark's experiments, e.g. ``-fno-dfg``), part of the cache key."""
     return [*VERILATOR_FLAGS, *([] if inline else ["-fno-inline"]), *LINT_WAIVERS,
             "--top-module", top, "--prefix", "Varray", "-o", _EXECUTABLE,
-            "-MAKEFLAGS", f"OPT_FAST={_check_cxx_opt(cxx_opt)}", *extra]
+            "-MAKEFLAGS", f"OPT_FAST={check_cxx_opt(cxx_opt)}", *extra]
 
 
 def _runtime_dir(root: Path, cxx_opt: str = CXX_OPT) -> Path:
@@ -406,7 +408,7 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
     bit for bit to ``golden.sensor.simulate`` for a correct array.
     """
     check_stimulus(stimulus, config)
-    _check_cxx_opt(cxx_opt)
+    check_cxx_opt(cxx_opt)
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
     K = T // L

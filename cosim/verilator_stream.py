@@ -25,7 +25,7 @@ from golden.stream import beat_count, check_lanes
 
 from .outside import RESET_CLOCKS, SimulatorRunError, first_error_line, words_per_row
 from .stream_ports import check_beats, flush_clocks, stream_top_module
-from .verilator import CXX_OPT, _READ_ROWS, _check_cxx_opt, _ctype, build, write_stimulus_file
+from .verilator import CXX_OPT, READ_ROWS, build, c_type, check_cxx_opt, write_stimulus_file
 
 
 def stream_harness_cpp(top: str, charge_bits: int, lane_bits: int) -> str:
@@ -37,7 +37,7 @@ def stream_harness_cpp(top: str, charge_bits: int, lane_bits: int) -> str:
     elif charge_bits > 32:
         set_charge = "top->charge = (uint64_t)w[0] | ((uint64_t)w[1] << 32);"
     else:
-        set_charge = f"top->charge = ({_ctype(charge_bits)})w[0];"
+        set_charge = f"top->charge = ({c_type(charge_bits)})w[0];"
     if lane_bits > 64:
         get_lanes = f"std::memcpy(w, top->out_words.data(), sizeof(uint32_t) * {out_words});"
     elif lane_bits > 32:
@@ -56,7 +56,7 @@ def stream_harness_cpp(top: str, charge_bits: int, lane_bits: int) -> str:
 
 static const size_t IN_WORDS = {in_words};
 static const size_t OUT_WORDS = {out_words};
-static const size_t READ_ROWS = {_READ_ROWS};
+static const size_t READ_ROWS = {READ_ROWS};
 static const int RESET_CLOCKS = {RESET_CLOCKS};
 
 static inline void set_charge(Varray* top, const uint32_t* w) {{ {set_charge} }}
@@ -194,7 +194,7 @@ def run_verilator_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int,
     ``verilog`` replaces ``rtl.verilog_stream.stream_array_verilog(config, H, W, N)``.
     """
     check_stimulus(stimulus, config)
-    _check_cxx_opt(cxx_opt)
+    check_cxx_opt(cxx_opt)
     T, H, W = stimulus.shape
     check_lanes(config, H, W, lanes)
     K, B = T // config.clocks_per_readout, beat_count(H * W, lanes)

@@ -147,18 +147,23 @@ class SceneSimulator:
         self.budget = log_budget(total_pixel_readouts or n, config.clocks_per_readout) - np.log(CHECKS)
         self.path_counts = dict.fromkeys(SIMULATION_PATHS + ("fallback",), 0)
         self.levels = path_levels(config, float(self.budget))
-        self._peek_rng = None                              # draws of lazy pixels' charge when read
+        self.readouts = 0                                  # readout intervals simulated
+        seq = getattr(self.rng.bit_generator, "seed_seq", None)
+        if not isinstance(seq, np.random.SeedSequence):
+            seq = np.random.SeedSequence()                 # a seedless generator: fresh entropy, once
+        self._peek_seed = (seq.entropy, tuple(seq.spawn_key) + (PEEK_KEY,), seq.pool_size)  # read only
 
     @property
     def acc(self) -> np.ndarray:
-        """The carried charge of every pixel (flat int64). Reading it changes no
-        state and draws nothing from the simulator's generator, so later words
-        are those of a run without the read. With no lazy pixel it is the
-        simulator's own array (writes set the charge the next readout starts
-        from); otherwise a read-only copy in which each lazy pixel's charge is
-        drawn from its law given everything simulated so far (:meth:`_lazy_charge`)
-        from a generator of its own: two reads may differ there. To set charges
-        while pixels are lazy, assign the whole array (``sim.acc = values``)."""
+        """The carried charge of every pixel (flat int64). Reading it is free of side
+        effects: it changes no state, draws nothing from the simulator's generator (later
+        words are those of a run without the read) and gives the same values when read
+        again before the next readout. With no lazy pixel it is the simulator's own array
+        (writes set the charge the next readout starts from); otherwise a read-only copy in
+        which each lazy pixel's charge is drawn from its law given everything simulated so
+        far (:meth:`_lazy_charge`), from a generator made afresh for the read from the
+        simulator's seed and the number of readouts done (:meth:`_peek_generator`). To set
+        charges while pixels are lazy, assign the whole array (``sim.acc = values``)."""
         lazy = np.flatnonzero(self._lazy)
         if not lazy.size:
             return self._acc
@@ -175,24 +180,21 @@ class SceneSimulator:
         self._lazy[:] = False
 
     def _peek_generator(self) -> np.random.Generator:
-        """The generator of :attr:`acc`'s draws: a child of the simulator's seed
-        sequence made without spawning (its counter is untouched), so reading is
-        reproducible for a seed and never moves the simulator's own stream."""
-        if self._peek_rng is None:
-            seq = getattr(self.rng.bit_generator, "seed_seq", None)
-            if isinstance(seq, np.random.SeedSequence):
-                seq = np.random.SeedSequence(seq.entropy, spawn_key=tuple(seq.spawn_key) + (PEEK_KEY,),
-                                             pool_size=seq.pool_size)
-            else:
-                seq = None                                 # a seedless generator: fresh entropy
-            self._peek_rng = np.random.default_rng(seq)
-        return self._peek_rng
+        """A new generator for one read of :attr:`acc`: a child of the simulator's seed
+        sequence keyed by :data:`PEEK_KEY` and :attr:`readouts`, made without spawning (the
+        simulator's own stream and counter are untouched), so a read is a function of the
+        seed and the readouts done. A seedless generator's reads take one fresh entropy,
+        drawn at the simulator's making."""
+        entropy, key, pool_size = self._peek_seed
+        return np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=key + (self.readouts,),
+                                                            pool_size=pool_size))
 
     # -- one readout interval -------------------------------------------------
     def readout(self, light: np.ndarray) -> np.ndarray:
         """Light of one interval (H, W), checked >= 0 and finite -> words (H, W) int64."""
         L = self.config.clocks_per_readout
         expected = electrons_per_readout(np.asarray(light).reshape(-1))
+        self.readouts += 1
         dark = (dark_electrons(self.dark_model, expected.shape, self.rng) if self.dark_model
                 else self._no_dark)
         words = np.zeros(expected.shape, np.int64)

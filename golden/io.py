@@ -19,11 +19,12 @@ from .decode import check_words
 from .errors import InputError, TespikeError
 from .paths import check_input_file
 
-__all__ = ["atomic_output", "check_scene", "check_stimulus", "load_scene", "load_stimulus",
+__all__ = ["atomic_output", "check_scene", "check_stimulus", "load_npy", "load_scene", "load_stimulus",
            "load_stream", "save_images", "save_stream", "scan_light", "unsigned_dtype", "word_dtype"]
 
 
-def _load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.ndarray:
+def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.ndarray:
+    """One .npy array (never a pickle or an archive), or one line naming ``what`` and the file."""
     check_input_file(path, what)
     try:
         array = np.load(path, allow_pickle=False, mmap_mode=mmap_mode)
@@ -88,7 +89,7 @@ def load_stimulus(path: str | Path, config: SensorConfig) -> np.ndarray:
     The range check streams through the file in slices of about 2^24 values,
     so it too needs memory bounded by the slice, not by the file.
     """
-    stimulus = _load_npy(path, "stimulus", mmap_mode="r")
+    stimulus = load_npy(path, "stimulus", mmap_mode="r")
     if stimulus.ndim == 3 and stimulus.shape[0] == 0:
         raise InputError(f"stimulus file {str(path)!r} has T = 0 pixel clocks (no readout to make)")
     if stimulus.ndim != 3 or stimulus.dtype.kind not in "iu":
@@ -147,7 +148,7 @@ def load_scene(path: str | Path, *, memory_map: bool = False) -> np.ndarray:
     file's own dtype) and checks the values one slice of readouts at a time,
     so memory stays bounded by the slice; the caller converts what it reads.
     """
-    scene = check_scene(_load_npy(path, "scene", mmap_mode="r"), scan_values=False)
+    scene = check_scene(load_npy(path, "scene", mmap_mode="r"), scan_values=False)
     if scene.shape[0] == 0:
         raise InputError(f"scene file {str(path)!r} has K = 0 readout intervals (nothing to simulate)")
     if not memory_map:

@@ -26,7 +26,7 @@ import torch
 from golden.errors import InputError
 from golden.resources import require_memory
 from recon.display import DEFAULT_DISPLAY, HdrDisplay
-from recon.metrics import _frame_peaks, _frames, frame_stacks
+from recon.metrics import as_frames, frame_peaks, frame_stacks
 
 #: Memory per pixel of one frame pyfvvdp judges (measured: about 220 bytes at 2048 x 2048).
 BYTES_PER_PIXEL = 256
@@ -63,7 +63,7 @@ def fovvideovdp(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY, p
     if K == 0 or H < 2 or W < 2:
         raise InputError(f"FovVideoVDP needs frames of at least 2 x 2 pixels, got shape {rshape}")
     if peak is None:
-        peak = float(_frame_peaks(reference, K, H, W, device).max())
+        peak = float(frame_peaks(reference, K, H, W, device).max())
         if peak <= 0:
             raise InputError("the reference is all zero: it has no peak to show on the display")
     elif not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
@@ -72,10 +72,10 @@ def fovvideovdp(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY, p
     metric = _metric(display, device)
     values = np.empty(K, dtype=np.float64)
     for k in range(K):
-        r = _frames(reference[k], "reference", device)
+        r = as_frames(reference[k], "reference", device)
         if float(r.min()) < 0:
             raise InputError(f"reference holds a negative light value ({float(r.min())})")
-        e = _frames(estimate[k], "estimate", device)
+        e = as_frames(estimate[k], "estimate", device)
         # linear EOTF: pyfvvdp takes cd/m^2 and adds the black level itself, so pass luminance above black
         lum_r = display.luminance(r[0], peak) - display.black_nits
         lum_e = display.luminance(e[0], peak) - display.black_nits

@@ -53,7 +53,7 @@ import torch
 from golden.errors import InputError
 from golden.resources import require_memory
 from recon.display import DEFAULT_DISPLAY, HdrDisplay
-from recon.metrics import _frame_peaks, _frames, frame_stacks, pu21_encode
+from recon.metrics import as_frames, frame_peaks, frame_stacks, pu21_encode
 
 N_SCALES = 5
 N_ORIENTATIONS = 4
@@ -168,7 +168,7 @@ def hdr_vqm_scores(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY
     if K == 0 or H == 0 or W == 0:
         raise InputError(f"HDR-VQM needs at least one pixel, got frames of shape {rshape}")
     if peak is None:
-        peak = float(_frame_peaks(reference, K, H, W, device).max())
+        peak = float(frame_peaks(reference, K, H, W, device).max())
         if peak <= 0:
             raise InputError("the reference is all zero: it has no peak to show on the display")
     elif not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
@@ -182,10 +182,10 @@ def hdr_vqm_scores(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY
     stats, tube_values = [], []                  # block statistics of the frames of the open fixation
     for f0 in range(0, K, per_fft):
         f1 = min(K, f0 + per_fft)
-        r = _frames(reference[f0:f1], "reference", device)
+        r = as_frames(reference[f0:f1], "reference", device)
         if float(r.min()) < 0:
             raise InputError(f"reference holds a negative light value ({float(r.min())})")
-        e = _frames(estimate[f0:f1], "estimate", device)
+        e = as_frames(estimate[f0:f1], "estimate", device)
         errors = error_frames(pu21_encode(display.luminance(e, peak)), pu21_encode(display.luminance(r, peak)),
                               bank)
         n, mean, m2 = block_statistics(errors)

@@ -36,7 +36,9 @@ import torch
 
 from golden.errors import InputError
 
-MU = 5000
+from .net.mulaw import compress
+from .pictures import MU  # noqa: F401  (the paper's mu, one constant for pictures and metrics)
+
 SSIM_SIGMA = 1.5
 SSIM_TRUNCATE = 3.5
 SSIM_K1, SSIM_K2 = 0.01, 0.03
@@ -50,7 +52,8 @@ PU21_PEAK = 256.0
 DEFAULT_NITS_PER_UNIT = 4000.0
 
 
-def _frames(x, name: str, device) -> torch.Tensor:
+def as_frames(x, name: str, device) -> torch.Tensor:
+    """A (K, H, W) or (H, W) array or tensor as a float64 tensor on ``device``; ``name`` in refusals."""
     if not isinstance(x, torch.Tensor):
         x = np.asarray(x)
         if not x.dtype.isnative:           # torch takes native byte order only (big-endian .npy files)
@@ -94,8 +97,9 @@ def normalise(pred: torch.Tensor, gt: torch.Tensor, peak=None) -> tuple[torch.Te
 
 
 def mu_law(h: torch.Tensor, mu: float = MU) -> torch.Tensor:
-    """Tone map T(H) = log(1 + mu H) / log(1 + mu) (paper eq. 11), H in [0, 1]."""
-    return torch.log1p(mu * h) / math.log1p(mu)
+    """Tone map T(H) = log(1 + mu H) / log(1 + mu) (paper eq. 11), H in [0, 1]: the learned
+    methods' own mu-law (:func:`recon.net.mulaw.compress`), with the paper's mu by default."""
+    return compress(h, mu)
 
 
 def psnr(x: torch.Tensor, y: torch.Tensor, data_range: float = 1.0) -> torch.Tensor:
@@ -168,14 +172,14 @@ def frame_stacks(estimate, reference, metric: str):
     return estimate, reference, single, rshape
 
 
-def _frame_peaks(gt, K: int, H: int, W: int, device) -> torch.Tensor:
+def frame_peaks(gt, K: int, H: int, W: int, device) -> torch.Tensor:
     """Per-frame maximum of the ground truth, computed band by band."""
     peaks = torch.empty(K, dtype=torch.float64, device=device)
     for k in range(K):
         rows = max(1, CHUNK_PIXELS // max(1, W))
         top = -math.inf
         for r in range(0, H, rows):
-            band = _frames(gt[k:k + 1, r:r + rows], "ground truth", device)
+            band = as_frames(gt[k:k + 1, r:r + rows], "ground truth", device)
             if band.numel():
                 if float(band.min()) < 0:
                     raise InputError(f"ground truth holds a negative light value ({float(band.min())})")
@@ -209,7 +213,7 @@ def _banded(pred, gt, stat, *, halo: int = 0, peak=None, normalised: bool = True
     K, H, W = gshape
     if normalised:
         if peak is None:
-            scales = _frame_peaks(gt, K, H, W, device)
+            scales = frame_peaks(gt, K, H, W, device)
             if K and bool((scales <= 0).any()):
                 frame = int(torch.nonzero(scales <= 0)[0])
                 raise InputError(f"ground-truth frame {frame} is all zero: its peak cannot normalise "
@@ -227,8 +231,8 @@ def _banded(pred, gt, stat, *, halo: int = 0, peak=None, normalised: bool = True
         k1 = min(K, k0 + frames_per)
         for r0 in range(0, max(out_rows, 0), rows_per):
             r1 = min(out_rows, r0 + rows_per)
-            p = _frames(pred[k0:k1, r0:r1 + 2 * halo], "prediction", device)
-            g = _frames(gt[k0:k1, r0:r1 + 2 * halo], "ground truth", device)
+            p = as_frames(pred[k0:k1, r0:r1 + 2 * halo], "prediction", device)
+            g = as_frames(gt[k0:k1, r0:r1 + 2 * halo], "ground truth", device)
             if g.numel() and float(g.min()) < 0:
                 raise InputError(f"ground truth holds a negative light value ({float(g.min())})")
             if normalised:

@@ -51,7 +51,7 @@ def _waive(text: str) -> str:
     return reason + offs + text.strip() + "\n" + ons
 
 
-def _convert(*named_components) -> list[str]:
+def convert_modules(*named_components) -> list[str]:
     """Verilog text of each (component, module name), one module each, in the given order.
 
     The components are lowered to RTLIL separately and handed to Yosys in ONE run when
@@ -73,7 +73,8 @@ def _convert(*named_components) -> list[str]:
     return [_waive(header.strip() + "\n\n" + by_name[n]) for _, n in named_components]
 
 
-def _check(config) -> SensorConfig:
+def checked_config(config) -> SensorConfig:
+    """``config`` checked (a :class:`SensorConfig` the RTL can build), or :class:`ConfigError`."""
     if not isinstance(config, SensorConfig):
         raise ConfigError(f"configuration must be a SensorConfig, not {type(config).__name__}")
     return config.check()
@@ -84,15 +85,15 @@ def pixel_verilog(config: SensorConfig, name: str | None = None, *, word_registe
 
     ``word_register=False``: the pixel without its readout word register (cost studies only).
     """
-    config = _check(config)
+    config = checked_config(config)
     pixel = pixel_class(config)(config, word_register=word_register)
-    return _convert((pixel, name or module_names(config)["pixel"]))[0]
+    return convert_modules((pixel, name or module_names(config)["pixel"]))[0]
 
 
 def timing_verilog(config: SensorConfig, name: str | None = None) -> str:
     """Verilog of the shared readout timing block (ports clk, rst, [ccc,] last, frame_valid)."""
-    config = _check(config)
-    return _convert((ReadoutTiming(config), name or module_names(config)["timing"]))[0]
+    config = checked_config(config)
+    return convert_modules((ReadoutTiming(config), name or module_names(config)["timing"]))[0]
 
 
 #: Longest generate loop written out: Verilator 5.006 refuses to unroll a generate loop of
@@ -130,7 +131,7 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
     slices of ``frame`` directly, the words become, in Verilator 5.006, one chain of
     H*W wide concatenations per clock (quadratic in the pixel count).
     """
-    config = _check(config)
+    config = checked_config(config)
     height, width = check_array_size(height, width)
     names = module_names(config)
     e, wd, b2 = config.input_bits, config.word_bits, config.b2
@@ -200,9 +201,9 @@ def array_verilog(config: SensorConfig, height: int, width: int) -> str:
     """Verilog text of an H x W array: top ``te_pixel_array`` / ``ml_pixel_array`` with the
     input register, the pixel module (instantiated H x W times; its word is combinational
     from the input register and its state, see :mod:`rtl.array`) and the timing module (once)."""
-    config = _check(config)
+    config = checked_config(config)
     top = top_verilog(config, height, width)       # refuses a bad size before any conversion
     names = module_names(config)
-    pixel, timing = _convert((pixel_class(config)(config, word_register=False), names["pixel"]),
+    pixel, timing = convert_modules((pixel_class(config)(config, word_register=False), names["pixel"]),
                              (ReadoutTiming(config), names["timing"]))
     return "\n".join([top, pixel, timing])

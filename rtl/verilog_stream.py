@@ -47,7 +47,7 @@ from golden.stream import beat_count, check_lanes
 
 from .array import check_array_size
 from .timing import ReadoutTiming
-from .verilog import _check, _convert, module_names
+from .verilog import checked_config, convert_modules, module_names
 
 #: A one-bit one, zero-extended by :func:`_zext` for the msb readout's power of two.
 ONE_BIT = "1'b1"
@@ -138,7 +138,7 @@ def _clear_lines(config: SensorConfig, indent: str) -> str:
 
 def stream_top_verilog(config: SensorConfig, height: int, width: int, lanes: int) -> str:
     """The top ``<mode>_pixel_array_stream`` with exactly the SPEC section 6 streaming ports."""
-    config = _check(config)
+    config = checked_config(config)
     height, width = check_array_size(height, width)
     check_lanes(config, height, width, lanes)
     names = stream_module_names(config)
@@ -236,7 +236,7 @@ def stream_array_verilog(config: SensorConfig, height: int, width: int, lanes: i
     Refuses (:class:`golden.errors.ConfigError`, one line naming the smallest N) a lane
     count whose B = ceil(H W / N) beats do not fit in the L clocks of a readout interval.
     """
-    config = _check(config)
+    config = checked_config(config)
     top = stream_top_verilog(config, height, width, lanes)   # refuses before any conversion
-    timing, = _convert((ReadoutTiming(config), stream_module_names(config)["timing"]))
+    timing, = convert_modules((ReadoutTiming(config), stream_module_names(config)["timing"]))
     return "\n".join([top, timing])

@@ -659,3 +659,29 @@ def test_train_refuses_before_making_its_run_folder(files):
     refused_without_change(files, (*common, "--pool", 0), "pool = 0")
     refused_without_change(files, (*common, "--workers", -1), "workers = -1")
     refused_without_change(files, (*common, "--method", "nope"), "unknown learned method")
+
+
+def test_an_unknown_flag_is_named_by_its_sub_command(capsys):
+    """One line naming the flag and the sub-command whose --help lists the right ones."""
+    from cosim.cli import main
+    with pytest.raises(SystemExit) as stop:
+        main(["train", "--out", "w.pt", "--sequences", "2"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert err == ("tespike train: error: unrecognized arguments: --sequences 2 "
+                   "(see tespike train --help)\n")
+
+
+def test_the_version_is_looked_up_only_when_asked(monkeypatch, capsys):
+    """Building the parser (every run) skips the package-metadata lookup (about 30 ms)."""
+    import cosim.cli as cli
+
+    def lookup():
+        raise AssertionError("version looked up")
+    monkeypatch.setattr(cli, "version", lookup)
+    cli.build_parser("simulate")
+    cli.build_parser()
+    monkeypatch.setattr(cli, "version", lambda: "9.9")
+    with pytest.raises(SystemExit) as stop:
+        cli.main(["--version"])
+    assert stop.value.code == 0 and capsys.readouterr().out == "tespike 9.9\n"

@@ -6,7 +6,7 @@ from matplotlib.image import imread
 from golden.config import SensorConfig
 from golden.fastsim import scene_stimulus, simulate_scene
 from golden.io import save_stream
-from recon.evaluate import tone_map
+from recon.pictures import MU, tone_map
 from tests.cli import assert_refused, run_tespike
 
 
@@ -53,3 +53,8 @@ def test_refusals(tmp_path):
     assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.png",
                                "--peak", "-1"), "--peak")
     assert not list(tmp_path.glob("*.png")) and not list(tmp_path.glob(".*"))
+
+
+def test_the_default_mu_is_the_metrics_mu():
+    from cosim.cli import build_parser
+    assert build_parser("view").parse_args(["view", "--input", "x.npy", "--out", "y.png"]).mu == MU

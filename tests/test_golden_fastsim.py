@@ -513,3 +513,20 @@ def test_reading_acc_changes_no_later_word(config):
     assert np.array_equal(quiet._acc, read._acc) and np.array_equal(quiet.sfc, read.sfc)
     read.acc = np.arange(1000) % theta                      # a write: no pixel is lazy any more
     assert np.array_equal(read.acc, np.arange(1000) % theta) and read.acc.flags.writeable
+
+
+def test_reading_acc_is_a_function_of_the_seed_and_the_readouts_done():
+    """Reading ``acc`` has no side effect: a second read before the next readout gives the
+    same charges, and so does a twin simulator with the same seed after the same readouts."""
+    config = SensorConfig()
+    probe = SceneSimulator(config, (2, 500), total_pixel_readouts=6 * 1000)
+    scene = np.full((3, 2, 500), 0.5 * probe.levels.mean_lazy / 42000)
+    sims = [SceneSimulator(config, (2, 500), rng=81, total_pixel_readouts=scene.size) for _ in range(2)]
+    for k in range(2):
+        for sim in sims:
+            sim.readout(scene[k])
+    first = sims[0].acc
+    assert sims[0]._lazy.any() and not np.array_equal(first, sims[0]._acc)   # lazy charges were drawn
+    assert np.array_equal(first, sims[0].acc) and np.array_equal(first, sims[1].acc)
+    sims[0].readout(scene[2])
+    assert sims[0].readouts == 3

@@ -125,3 +125,14 @@ def test_twelve_decades_and_huge_light(rng):
     assert np.allclose(metrics.psnr_mu(pred * 1e30, gt * 1e30), ref_psnr, rtol=1e-9)
     # PU21 clamps at 10000 cd/m^2: two images both far above it are equal
     assert np.all(np.isinf(metrics.psnr_pu21(pred * 1e30, gt * 1e30)))
+
+
+def test_one_mu_law_for_metrics_pictures_and_learned_methods():
+    """One constant mu and one torch mu-law (recon.net.mulaw.compress) serve the metrics;
+    the numpy tone map of the pictures is its twin for code that runs without torch."""
+    from recon import pictures
+    from recon.net.mulaw import compress
+    assert metrics.MU is pictures.MU
+    h = torch.linspace(0, 1, 101, dtype=torch.float64)
+    assert torch.equal(metrics.mu_law(h), compress(h, pictures.MU))
+    assert np.allclose(pictures.tone_map(h.numpy(), 1.0), metrics.mu_law(h).numpy(), rtol=0, atol=1e-15)

@@ -142,3 +142,25 @@ def test_init_refusals(tmp_path):
     assert_refused(run_tespike("train", "--config", "te", "--init", tmp_path / "w.pt", "--out", tmp_path / "w.pt",
                                "--steps", "1"), "--init")
     assert (tmp_path / "w.pt").read_bytes() == b"x"
+
+
+def test_cli_keeps_no_copy_of_the_trainers_defaults(tmp_path, monkeypatch, capsys):
+    """tespike train passes on only the trainer's flags a user gave; the rest, and --help's
+    defaults, come from TrainOptions (they had drifted: 200 vs 250 steps per epoch)."""
+    import dataclasses
+
+    import recon.net.train as trainer
+    from cosim.cli import build_parser, main
+    from cosim.commands.train_cmd import TRAINER_FLAGS
+
+    defaults = {f.name: f.default for f in dataclasses.fields(TrainOptions)}
+    args = build_parser("train").parse_args(["train", "--out", "w.pt", "--steps", "1"])
+    assert not any(hasattr(args, flag) for flag in TRAINER_FLAGS)
+    seen = []
+    monkeypatch.setattr(trainer, "train", lambda options, out, **kw: seen.append(options))
+    assert main(["train", "--out", str(tmp_path / "w.pt"), "--steps", "1", "--batch", "2", "-q"]) == 0
+    assert seen[0].batch == 2
+    assert all(getattr(seen[0], flag) == defaults[flag] for flag in TRAINER_FLAGS if flag != "batch")
+    with pytest.raises(SystemExit):
+        build_parser("train").parse_args(["train", "--help"])
+    assert f"steps per epoch (default {defaults['steps_per_epoch']})" in " ".join(capsys.readouterr().out.split())

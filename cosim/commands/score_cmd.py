@@ -51,8 +51,8 @@ def frame_range(spec, count: int) -> range:
 def load_estimate(path):
     """R.npy as a read-only map; refused unless a float (K, H, W) array."""
     from golden.errors import InputError
-    from golden.io import _load_npy
-    estimate = _load_npy(path, "estimate", mmap_mode="r")
+    from golden.io import load_npy
+    estimate = load_npy(path, "estimate", mmap_mode="r")
     if estimate.dtype.kind != "f":
         raise InputError(f"estimate dtype {estimate.dtype} is not a float type (light must be a float array)")
     if estimate.ndim != 3:

@@ -1,38 +1,65 @@
-"""``tespike train``: train a learned reconstruction method on the data engine's clips (paper section 6.3)."""
+"""``tespike train``: train a learned reconstruction method on the data engine's clips (paper section 6.3).
+
+The trainer's options (:class:`recon.net.train.TrainOptions`) keep their defaults in one
+place, the trainer: an option not given is not passed on, and ``--help`` reads the
+defaults from there when it is printed (importing torch then only).
+"""
+
+import argparse
 
 from .common import add_config_argument
 
 HELP = "train a learned reconstruction method for one sensor configuration (resumable, CPU or GPU)"
 
+#: Flags whose default is the trainer's (their dest is the TrainOptions field).
+TRAINER_FLAGS = ("method", "size", "loss", "lr", "steps_per_epoch", "halve_every", "batch", "crop",
+                 "workers", "pool", "refresh", "validate_every", "seed", "device")
+
+
+class _TrainerDefaults(argparse.HelpFormatter):
+    """Fills ``%(default)s`` of the trainer's flags with :class:`TrainOptions`'s defaults."""
+
+    def _expand_help(self, action):
+        if action.dest in TRAINER_FLAGS:
+            import dataclasses
+
+            from recon.net.train import TrainOptions
+            default = {f.name: f.default for f in dataclasses.fields(TrainOptions)}[action.dest]
+            return self._get_help_string(action) % dict(vars(action), default=default, prog=self._prog)
+        return super()._expand_help(action)
+
 
 def add_arguments(parser):
+    parser.formatter_class = _TrainerDefaults
     add_config_argument(parser, required=False, default="te")
     parser.add_argument("--out", required=True, help="weights file to write (.pt); its run folder is OUT.run/")
-    parser.add_argument("--method", default="net", help="learned method: net (default) or a baseline")
-    parser.add_argument("--size", default="cpu", help="method size: cpu (the shipped default) or paper")
+
+    def trainer(flag, help, **kw):
+        parser.add_argument(flag, default=argparse.SUPPRESS, help=help + " (default %(default)s)", **kw)
+
+    trainer("--method", "learned method: net or a baseline")
+    trainer("--size", "method size: cpu (the shipped default) or paper")
     parser.add_argument("--ablation", type=int, default=None, metavar="CASE",
                         help="train the paper's Table 3 ablation case 1..6 instead of the whole network")
-    parser.add_argument("--loss", default="l1", help="l1 (paper eq. 7, default) or mu-l1 (after the mu-law)")
-    parser.add_argument("--lr", type=float, default=1e-4, help="initial learning rate (default 1e-4)")
-    parser.add_argument("--steps-per-epoch", type=int, default=250, help="steps per epoch (default 250)")
-    parser.add_argument("--halve-every", type=int, default=10, help="epochs between learning-rate halvings")
-    parser.add_argument("--batch", type=int, default=4, help="batch size (default 4)")
-    parser.add_argument("--crop", type=int, default=96, help="random crop side (default 96)")
+    trainer("--loss", "l1 (paper eq. 7) or mu-l1 (after the mu-law)")
+    trainer("--lr", "initial learning rate", type=float)
+    trainer("--steps-per-epoch", "steps per epoch", type=int)
+    trainer("--halve-every", "epochs between learning-rate halvings", type=int)
+    trainer("--batch", "batch size", type=int)
+    trainer("--crop", "random crop side", type=int)
     parser.add_argument("--steps", type=int, default=None, help="step budget")
     parser.add_argument("--minutes", type=float, default=None, help="wall-time budget in minutes")
     parser.add_argument("--hdr", action="append", default=[], metavar="DIR",
                         help="also train on this folder of .exr/.hdr frames (a quarter of the clips; repeatable)")
-    parser.add_argument("--workers", type=int, default=1,
-                        help="data-engine processes making clips ahead (default 1; 0: in this process)")
-    parser.add_argument("--pool", type=int, default=48, help="clips a step draws from (default 48)")
-    parser.add_argument("--refresh", type=int, default=4,
-                        help="steps between two new clips entering the pool (default 4)")
-    parser.add_argument("--validate-every", type=int, default=1000,
-                        help="steps between validations on the held-out set (default 1000; 0: never)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the draws and of the initial weights")
-    parser.add_argument("--device", default="cpu", help="torch device (default cpu; cuda where there is one)")
+    trainer("--workers", "data-engine processes making clips ahead (0: in this process)", type=int)
+    trainer("--pool", "clips a step draws from", type=int)
+    trainer("--refresh", "steps between two new clips entering the pool", type=int)
+    trainer("--validate-every", "steps between validations on the held-out set (0: never)", type=int)
+    trainer("--seed", "seed of the draws and of the initial weights", type=int)
+    trainer("--device", "torch device (cuda where there is one)")
     parser.add_argument("--threads", type=int, default=1,
-                        help="torch CPU threads (default 1: two runs share two cores better than one run)")
+                        help="torch CPU threads (default 1: two runs share two cores better than one run; "
+                             "the trainer alone leaves torch's own setting)")
     parser.add_argument("--init", default=None, metavar="WEIGHTS",
                         help="start from this weights file's tensors of matching name and shape")
     parser.add_argument("--resume", action="store_true", help="continue from OUT.run/checkpoint.pt")
@@ -68,14 +95,10 @@ def run(args) -> int:
 
     from recon.net.train import TrainOptions, train
 
-    options = TrainOptions(sensor=args.config if preset else config.to_json(),
-                           method=args.method, size=args.size, ablation=args.ablation, loss=args.loss, lr=args.lr,
-                           halve_every=args.halve_every,
-                           steps_per_epoch=args.steps_per_epoch, batch=args.batch, crop=args.crop,
-                           steps=args.steps, minutes=args.minutes, seed=args.seed, device=args.device,
-                           threads=args.threads, workers=args.workers, pool=args.pool, refresh=args.refresh,
-                           validate_every=args.validate_every, recipe={"folders": tuple(args.hdr)},
-                           init=args.init)
+    given = {flag: getattr(args, flag) for flag in TRAINER_FLAGS if hasattr(args, flag)}
+    options = TrainOptions(sensor=args.config if preset else config.to_json(), ablation=args.ablation,
+                           steps=args.steps, minutes=args.minutes, threads=args.threads,
+                           recipe={"folders": tuple(args.hdr)}, init=args.init, **given)
     command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     train(options, out, resume=args.resume, progress=progress_wanted(args), command=command)
     report(args, f"wrote {out} (run log, loss curve and checkpoint in {out.with_suffix('.run')})")

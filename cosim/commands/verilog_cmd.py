@@ -30,7 +30,7 @@ def add_arguments(parser):
 def run(args) -> int:
     from pathlib import Path
 
-    from cosim.cli import report
+    from cosim.console import report
     from golden.config import load_config
     from golden.errors import InputError
     from golden.io import atomic_output

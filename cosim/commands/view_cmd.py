@@ -12,6 +12,8 @@ numbers as titles) or, with ``--each``, one grayscale PNG per frame at the
 array's own resolution.
 """
 
+from recon.pictures import MU
+
 HELP = "write tone-mapped PNGs (contact sheet or one per frame) of I.npy, S.npz, R.npy or E.npy"
 
 #: Frames on a contact sheet unless --frames says otherwise (evenly spaced).
@@ -27,7 +29,7 @@ def add_arguments(parser):
                                          f"(default: {DEFAULT_SHEET_FRAMES} evenly spaced; --each: all)")
     parser.add_argument("--each", action="store_true", help="one PNG per frame instead of a contact sheet")
     parser.add_argument("--peak", type=float, help="light mapped to white (default: the frames' maximum)")
-    parser.add_argument("--mu", type=float, default=5000.0, help="mu of the mu-law (default 5000)")
+    parser.add_argument("--mu", type=float, default=MU, help=f"mu of the mu-law (default {MU:g})")
     parser.add_argument("--columns", type=int, default=6, help="frames per row of the sheet (default 6)")
     parser.add_argument("--config", help="config of a stimulus E.npy (its clocks per readout L)")
     parser.add_argument("--quiet", action="store_true", help="print nothing on success")

@@ -1,0 +1,117 @@
+"""The house rules of issue 20, checked on the source (no import, no run).
+
+- no import circle among the project's modules, at module level or inside functions;
+- no module imports another module's private (``_name``) functions or constants;
+- no command module imports :mod:`cosim.cli` back (shared pieces live below it).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("golden", "cosim", "recon", "rtl")
+
+
+def _modules() -> dict[str, Path]:
+    modules = {}
+    for package in PACKAGES:
+        for path in (ROOT / package).rglob("*.py"):
+            name = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+            modules[name.removesuffix(".__init__")] = path
+    return modules
+
+
+MODULES = _modules()
+
+
+def _imports(name: str, path: Path):
+    """(imported module, names taken from it) for every import statement of the file."""
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, ()
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+                parts = parts[:len(parts) - (node.level - 1)]
+                base = ".".join(parts + ([base] if base else []))
+            yield base, tuple(alias.name for alias in node.names)
+
+
+def _graph() -> dict[str, set[str]]:
+    graph = {}
+    for name, path in MODULES.items():
+        targets = set()
+        for module, names in _imports(name, path):
+            if module in MODULES:
+                targets.add(module)
+            targets.update(f"{module}.{n}" for n in names if f"{module}.{n}" in MODULES)
+        targets.discard(name)
+        graph[name] = targets
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan, iterative)."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+    for start in graph:
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            node, children = work[-1]
+            for child in children:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                    break
+                if child in on_stack:
+                    low[node] = min(low[node], index[child])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    component = []
+                    while True:
+                        member = stack.pop()
+                        on_stack.discard(member)
+                        component.append(member)
+                        if member == node:
+                            break
+                    if len(component) > 1:
+                        found.append(sorted(component))
+    return found
+
+
+def test_the_cycle_finder_finds_a_circle():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_import_circles():
+    assert _cycles(_graph()) == []
+
+
+def test_no_module_imports_private_names_of_another():
+    reach_ins = []
+    for name, path in MODULES.items():
+        for module, names in _imports(name, path):
+            private = [n for n in names if n.startswith("_") and not n.startswith("__")]
+            if private and module != name:
+                reach_ins.append(f"{path.relative_to(ROOT)}: from {module} import {', '.join(private)}")
+    assert reach_ins == []
+
+
+def test_command_modules_do_not_import_the_cli_back():
+    back = [f"{path.relative_to(ROOT)}" for name, path in MODULES.items()
+            if name.startswith("cosim.commands") and any(module == "cosim.cli" or (module == "cosim" and "cli" in names)
+                                                         for module, names in _imports(name, path))]
+    assert back == []
