@@ -5,7 +5,7 @@ either end of the stream the first or last readout is repeated (so a stream
 shorter than the span works, down to one readout). Frames are padded (edge
 values repeated) to a multiple of the network's pyramid factor and cut into
 tiles with an overlap of :func:`tile_margin` pixels on every side, more than
-the network's receptive field, so a tiled result equals the whole-frame one
+the network's receptive field (derived from the module, :mod:`recon.reach`), so a tiled result equals the whole-frame one
 to float rounding (``tests/test_recon_net_infer.py``). The shipped weights
 (``recon/net/weights/<preset>.pt``) are chosen by the stream's configuration;
 a configuration no weights were trained for is refused, naming both.
@@ -14,7 +14,6 @@ a configuration no weights were trained for is refused, naming both.
 from __future__ import annotations
 
 import functools
-import math
 import pickle
 import zipfile
 from pathlib import Path
@@ -25,6 +24,7 @@ import torch
 from golden.config import PRESETS, SensorConfig
 from golden.errors import InputError
 
+from ..learned import receptive_radius  # noqa: F401  (re-exported: derived from the module)
 from ..stream import decode_light, key_span, output_images
 from .model import TESpikeNet
 from .sizes import NetSizes
@@ -67,26 +67,6 @@ def load_weights(path: str | Path) -> tuple[torch.nn.Module, SensorConfig, dict]
             zipfile.BadZipFile) as exc:
         raise InputError(f"network weights {str(path)!r} are not a tespike weights file "
                          f"({str(exc).splitlines()[0][:100] if str(exc) else type(exc).__name__})") from None
-
-
-def receptive_radius(sizes: NetSizes) -> int:
-    """An upper bound, in frame pixels, on how far an output pixel's inputs can lie.
-
-    Summed over the layers at each resolution (a 3 x 3 convolution reaches one
-    pixel of its level, a pixel of level l being u 2^l frame pixels; a DCN tap
-    reaches at most ``max_offset`` further), plus LIR's attention window.
-    """
-    u = sizes.unshuffle
-    reach = 3 * u + u * (3 + 2)                 # MSFEG (7 x 7 then 3 x 3) and the fold
-    if sizes.dcn:
-        for level in range(sizes.levels):
-            scale = u << level
-            per_level = 2 + 1 + 1 + 1 + 2 + 2 + 1    # offsets (3 convs + out), DCN, SP, merge, MBP
-            reach += scale * (per_level + sizes.dcn_kernel // 2 + math.ceil(sizes.max_offset)) + 2 * scale
-    reach += u * 2                               # fusion
-    if sizes.refine:
-        reach += u * (2 + sizes.attention_window // 2 + 1)
-    return reach + u                             # the output convolution
 
 
 def tile_margin(sizes: NetSizes) -> int:

@@ -23,6 +23,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..reach import Support, support, union
 from .features import channels_last
 
 
@@ -49,6 +50,9 @@ class IntensityFeature(nn.Module):
     def forward(self, substream: torch.Tensor, mean: torch.Tensor) -> torch.Tensor:
         return self.convs(channels_last(self.fold(torch.cat((mean, substream), 1))))
 
+    def support(self, substream: Support, mean: Support) -> Support:
+        return support(self.convs, support(self.fold, union(mean, substream)))
+
 
 class GuidedAttention(nn.Module):
     """Eq. 6: (F~ (N, C, h, w), I (N, C, h, w)) -> F_o (N, C, h, w)."""
@@ -74,3 +78,10 @@ class GuidedAttention(nn.Module):
         weights = torch.softmax(gram / self.gamma.reshape(1, k, 1, 1, 1, 1), dim=2)
         att = torch.einsum("nkiyx,nkijyx->nkjyx", yv, weights).reshape(n, c, h, w)
         return self.project(att) + self.position(x)
+
+    def support(self, x: Support, guide: Support) -> Support:
+        """:meth:`forward` on supports: the box mean of the outer products reaches window // 2."""
+        q, key, value = (support(layer, x) for layer in (self.query, self.key, self.value))
+        gram = union(key, q).taps(self.window // 2)
+        att = union(guide, value, gram)
+        return union(support(self.project, att), support(self.position, x))
