@@ -9,6 +9,18 @@ disk, memory-mapped; the work is done in blocks).
 
 Run from the repository root: ``python3 benchmarks/bench_memory.py [--sizes 8,32,128] [--out DIR]``
 (sizes in millions of readout words; DIR defaults to a temporary folder).
+
+``--learned``: instead, the learned methods' tiled inference (``recon.net.infer.frame``,
+one key moment): for each frame size (``--frames 384x512,1024x1024,384x4096``) and tile
+(``--tiles none,auto``: the whole frame, the default core of two derived
+margins; or core sides in pixels), a fresh process decodes and reconstructs one
+image; its peak resident memory (``ru_maxrss``) is printed above the
+process's own before the call (interpreter, torch, the model), with the run
+time, the number of tiles and the largest block, and every tiled image is
+compared with the whole-frame one (largest difference relative to the
+image's peak; equal within float tolerance is ``allclose(rtol=1e-4,
+atol=1e-6 x peak)``). ``--methods net,bsf,...``; ``net`` runs the shipped
+``te`` weights, a baseline its ``cpu`` size with random weights (same cost).
 """
 
 from __future__ import annotations
@@ -39,11 +51,99 @@ def peak_rss_mb(args: list[str]) -> float:
     return int(done.stdout.split()[-1]) / 1024
 
 
+def learned_child(method: str, height: int, width: int, tile: str, threads: int, out: str) -> None:
+    """One case, in this (fresh) process: prints its JSON line."""
+    import json
+    import resource
+    import time
+
+    import torch
+
+    from golden.config import SensorConfig
+    from recon.learned import method_classes
+    from recon.net.infer import frame, load_weights, tile_margin, tiles, weights_path
+
+    torch.set_num_threads(threads)
+    config = SensorConfig(mode="te")
+    if method == "net":
+        model = load_weights(weights_path(config))[0]
+    else:
+        model_cls, sizes_cls = method_classes(method)
+        torch.manual_seed(0)
+        model = model_cls(sizes_cls.preset("cpu")).eval().to(memory_format=torch.channels_last)
+    words = np.random.default_rng(0).integers(0, 16, size=(1, height, width)).astype(np.uint8)
+    chosen = None if tile == "none" else "auto" if tile == "auto" else int(tile)
+    boxes = tiles(height, width, model.sizes, chosen)
+    margin = 0 if len(boxes) == 1 else tile_margin(model.sizes)
+    block = max((min(y + h + margin, height) - max(0, y - margin)) * (min(x + w + margin, width) - max(0, x - margin))
+                for y, x, h, w in boxes)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    start = time.perf_counter()
+    with torch.inference_mode():
+        image = frame(model, words, config, 0, tile=chosen)
+    seconds = time.perf_counter() - start
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    np.save(out, image.numpy())
+    print(json.dumps({"before": before / 1024, "peak": peak / 1024, "seconds": seconds, "tiles": len(boxes),
+                      "block": block, "margin": tile_margin(model.sizes)}))
+
+
+def learned_table(args) -> int:
+    import json
+
+    methods = args.methods.split(",")
+    frames = [tuple(int(v) for v in f.split("x")) for f in args.frames.split(",")]
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    print(f"tiled inference, one image, {args.threads} thread(s); peak = ru_maxrss of a fresh process, "
+          "'model' = its resident memory before the call")
+    print("| method | frame | tile | margin (px) | tiles | largest block (px) | model (MB) | peak (MB) | "
+          "peak - model (MB) | s | tiled vs whole (max diff / peak) |")
+    print("| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
+    with tempfile.TemporaryDirectory() as scratch:
+        for method in methods:
+            for height, width in frames:
+                whole = None
+                for tile in args.tiles.split(","):
+                    out = Path(scratch) / f"{method}-{height}-{width}-{tile}.npy"
+                    done = subprocess.run([sys.executable, __file__, "--child", method, str(height), str(width), tile,
+                                           str(args.threads), str(out)], capture_output=True, text=True, env=env)
+                    if done.returncode != 0:
+                        raise SystemExit(f"{method} {height}x{width} tile {tile} failed: {done.stderr.strip()}")
+                    r = json.loads(done.stdout.split("\n")[-2])
+                    image = np.load(out)
+                    if tile == "none":
+                        whole, check = image, "(reference)"
+                    elif whole is None:
+                        check = "-"
+                    else:
+                        peak = float(np.abs(whole).max())
+                        diff = float(np.abs(image - whole).max()) / peak
+                        ok = np.allclose(image, whole, rtol=1e-4, atol=1e-6 * peak)
+                        check = f"{diff:.1e} {'equal' if ok else 'DIFFERENT'}"
+                    print(f"| {method} | {height} x {width} | {tile} | {r['margin']} | {r['tiles']} | {r['block']:,} | "
+                          f"{r['before']:.0f} | {r['peak']:.0f} | {r['peak'] - r['before']:.0f} | "
+                          f"{r['seconds']:.1f} | {check} |", flush=True)
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", default="8,32,128", help="millions of readout words, comma-separated")
     parser.add_argument("--out", default=None, help="folder for the inputs (default: a temporary folder)")
+    parser.add_argument("--learned", action="store_true", help="the learned methods' tiled inference instead")
+    parser.add_argument("--methods", default="net", help="with --learned: net and/or baselines, comma-separated")
+    parser.add_argument("--frames", default="384x512,1024x1024,384x4096", help="with --learned: HxW, comma-separated")
+    parser.add_argument("--tiles", default="none,auto", help="with --learned: none (whole frame; first), "
+                        "auto, or core sides")
+    parser.add_argument("--threads", type=int, default=1, help="with --learned: torch threads")
+    parser.add_argument("--child", nargs=6, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.child:
+        method, height, width, tile, threads, out = args.child
+        learned_child(method, int(height), int(width), tile, int(threads), out)
+        return 0
+    if args.learned:
+        return learned_table(args)
     from golden.config import SensorConfig
     from golden.io import save_stream
 

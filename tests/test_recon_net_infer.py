@@ -10,7 +10,7 @@ import torch
 from golden.config import SensorConfig
 from golden.errors import InputError
 from golden.fastsim import simulate_scene
-from recon.net.infer import frame, load_weights, reconstruct_net, tile_margin, weights_path
+from recon.net.infer import default_tile, frame, load_weights, reconstruct_net, tile_margin, tiles, weights_path
 from recon.net.model import TESpikeNet
 from recon.net.sizes import NetSizes
 from recon.net.train import save_weights
@@ -48,17 +48,34 @@ def test_tiles_equal_the_whole_frame(te_weights):
 
 
 def test_far_pixels_do_not_matter(te_weights):
-    """The receptive field is finite (bounded offsets, local attention): the tile margin is honest."""
+    """The receptive field is finite (bounded offsets, local attention): the tile margin is honest,
+    on both sides (a pixel before the centre as well as after it: no running sum across the frame)."""
     model, config, _ = load_weights(te_weights)
     margin = tile_margin(model.sizes)
     width = 2 * margin + 16
-    words = np.zeros((6, 8, width), np.uint8)
-    changed = words.copy()
-    changed[:, :, -1] = 15
+    words = np.random.default_rng(5).integers(0, 16, (6, 8, width)).astype(np.uint8)
     with torch.inference_mode():
-        a, b = (frame(model, w, config, 3) for w in (words, changed))
-    assert torch.allclose(a[:, :8], b[:, :8], atol=1e-6)
-    assert not torch.allclose(a[:, -8:], b[:, -8:])
+        a = frame(model, words, config, 3)
+        for column, kept in ((-1, slice(0, 8)), (0, slice(width - 8, width))):
+            changed = words.copy()
+            changed[:, :, column] = 15 - changed[:, :, column]
+            b = frame(model, changed, config, 3)
+            assert torch.equal(a[:, kept], b[:, kept])
+            assert not torch.equal(a, b)
+
+
+def test_tile_policy():
+    """Default core: two margins; an axis within core + margin is not cut; smaller tiles are accepted."""
+    f, margin = TINY.pyramid_factor, tile_margin(TINY)
+    core = default_tile(TINY)
+    assert core == 2 * margin and core % f == 0
+    assert tiles(core + margin, 5 * core, TINY) == [(0, x, core + margin, min(core, 5 * core - x))
+                                                    for x in range(0, 5 * core, core)]
+    assert tiles(core, core, TINY) == [(0, 0, core, core)]                          # runs whole
+    assert len(tiles(3 * margin, 40 * f, TINY, f)) == 3 * margin // f * 40         # smaller than the margin: fine
+    assert tiles(10, 10, TINY, None) == [(0, 0, 12, 12)]                          # padded to f = 4
+    with pytest.raises(InputError, match="multiple of the pyramid factor"):
+        tiles(64, 64, TINY, f + 1)
 
 
 @pytest.mark.parametrize("shape", [(1, 1, 1), (1, 5, 7), (3, 17, 9), (TINY.span + 4, 6, 33)])

@@ -8,7 +8,7 @@ the three: ``attention_radius`` > 0 adds the local cross-attention,
 ``filter_kernel`` > 0 the adaptive filter. The deformable convolution is
 the project's own (:mod:`recon.net.deform`); offsets are
 ``max_offset * tanh`` as in :mod:`recon.net.align`, so the receptive field is
-bounded (:meth:`PyramidAlign.reach`) and tiled inference is exact.
+bounded (:meth:`PyramidAlign.support`, :mod:`recon.reach`) and tiled inference is exact.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..net.deform import ModulatedDeformConv2d
+from ..reach import Support, support, union
 from .common import conv3
 
 
@@ -68,6 +69,12 @@ class LocalCrossAttention(nn.Module):
         shift = torch.einsum("bkhw,dk->bdhw", attention, self.displacement.to(attention.dtype))
         return attended, shift
 
+    def support(self, key: Support, ref: Support) -> tuple[Support, Support]:
+        """(attended, shift): both read the reference within ``radius`` pixels."""
+        near = union(support(self.q, key), support(self.k, ref).taps(self.radius),
+                     support(self.v, ref).taps(self.radius))
+        return near, near
+
 
 class AdaptiveFilter(nn.Module):
     """A k x k filter predicted per pixel (softmax-normalised) from (aligned, key), applied to aligned."""
@@ -82,6 +89,9 @@ class AdaptiveFilter(nn.Module):
         weights = torch.softmax(self.predict(torch.cat((aligned, key), 1)), dim=1)
         patches = neighbourhood(aligned, self.kernel // 2)
         return aligned + (patches * weights[:, None]).sum(2)
+
+    def support(self, aligned: Support, key: Support) -> Support:
+        return union(aligned.taps(self.kernel // 2), support(self.predict, union(aligned, key)))
 
 
 class AlignLevel(nn.Module):
@@ -126,6 +136,27 @@ class AlignLevel(nn.Module):
             aligned = self.filter(aligned, key)
         return feature, aligned
 
+    def support(self, key: Support, ref: Support, coarser_offset_feature: Support | None = None,
+                coarser_aligned: Support | None = None) -> tuple[Support, Support]:
+        """:meth:`forward` on supports; the attention's shift (at most its radius) adds to every offset."""
+        parts, seed = [key, ref], 0
+        if self.attention is not None:
+            attended, shift = self.attention.support(key, ref)
+            parts += [attended, shift]
+            seed = self.attention.radius
+        feature = support(self.act, support(self.offset_in, union(*parts)))
+        if not self.coarsest:
+            feature = support(self.offset_fuse, union(feature, coarser_offset_feature.upsample(2)))
+        feature = support(self.offset_mid, feature)
+        raw = support(self.offset_out, feature)
+        offset = union(raw, shift) if self.attention is not None else raw
+        aligned = self.dcn.support(ref, offset, raw, self.max_offset + seed)
+        if not self.coarsest:
+            aligned = support(self.merge, union(aligned, coarser_aligned.upsample(2)))
+        if self.filter is not None:
+            aligned = self.filter.support(aligned, key)
+        return feature, aligned
+
 
 class PyramidAlign(nn.Module):
     """key (N, C, h, w), refs (N, R, C, h, w) -> aligned refs (N, R, C, h, w), coarse to fine."""
@@ -155,26 +186,14 @@ class PyramidAlign(nn.Module):
         _, aligned = self.cascade(keys[0], aligned)      # EDVR's cascading refinement at full level
         return aligned.reshape(n, r, c, h, w)
 
-    def reach(self) -> int:
-        """Upper bound on an aligned pixel's reach, in pixels of the finest level."""
-        return pyramid_reach(self.levels_count, self.dcn_kernel, self.max_offset, self.attention_radius,
-                             self.filter_kernel)
+    def support(self, key: Support, refs: Support) -> Support:
+        """:meth:`forward` on supports."""
+        keys, rs = [key], [refs]
+        for down in self.down:
+            keys.append(support(down, keys[-1]))
+            rs.append(support(down, rs[-1]))
+        offset_feature = aligned = None
+        for level in reversed(range(self.levels_count)):
+            offset_feature, aligned = self.levels[level].support(keys[level], rs[level], offset_feature, aligned)
+        return self.cascade.support(keys[0], aligned)[1]
 
-
-def pyramid_reach(levels: int, dcn_kernel: int, max_offset: float, attention_radius: int = 0,
-                  filter_kernel: int = 0) -> int:
-    """Upper bound on the reach of :class:`PyramidAlign`, in pixels of its finest level.
-
-    Per level, in pixels of that level, every path summed (a bound, not the
-    exact field): four 3 x 3 offset convolutions, the attention's
-    neighbourhood r, the DCN's taps (kernel // 2 + max_offset + the
-    attention's seed r + 1 for the bilinear sample), the merge, the adaptive
-    filter (two convolutions and its kernel); plus one pixel for the
-    upsampling and two for the downsampling convolutions and the level's
-    pixel grid. A pixel of level l is 2^l pixels of the finest level.
-    """
-    r = attention_radius
-    dcn = dcn_kernel // 2 + math.ceil(max_offset) + 1
-    per = 4 + r + (dcn + r) + 1 + (2 + filter_kernel // 2 if filter_kernel else 0) + 3
-    total = sum(per << level for level in range(levels))
-    return total + 3 + dcn                  # the cascading level (three convolutions, DCN)

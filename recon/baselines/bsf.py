@@ -32,8 +32,9 @@ from typing import ClassVar
 import torch
 from torch import nn
 
-from .align import PyramidAlign, pyramid_reach
+from .align import PyramidAlign
 from ..net.head import BlendHead
+from ..reach import Support, support, union
 from .common import ResBlock, SizesMixin, check_input, conv3
 from .represent import firing_rates
 
@@ -123,6 +124,10 @@ class MultiOrderEncoder(nn.Module):
         x = self.blocks(self.act(self.fuse(x)))
         return x.reshape(n, s.windows, *x.shape[1:])
 
+    def support(self, rates: Support) -> Support:
+        embedded = union(*(support(embed, rates) for embed in self.embed))
+        return support(self.blocks, support(self.fuse, embedded))
+
 
 class BSF(nn.Module):
     """(N, 61, H, W) decoded light -> (N, 1, H, W) light at the key moment (readout 30)."""
@@ -153,16 +158,10 @@ class BSF(nn.Module):
         fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
         return self.head(fused, light, inside)
 
+    def support(self, light: Support) -> Support:
+        """:meth:`forward` on supports (the firing rates are per pixel)."""
+        feats = self.encoder.support(light)
+        aligned = self.align.support(feats, feats)
+        fused = support(self.reconstruct, support(self.fuse, union(aligned, feats)))
+        return self.head.support(fused, light)
 
-def receptive_radius(sizes: BSFSizes) -> int:
-    """Upper bound, in frame pixels, on how far an output pixel's inputs lie.
-
-    The rates are per pixel (no spatial reach). At 1/u of the frame: the
-    encoder's fusion (3 x 3) and dilated blocks (2 x dilation each), the
-    alignment's bound with its attention, the fusion (1 x 1), the
-    reconstruction's blocks and the output convolution; plus u for the fold.
-    """
-    blocks = sum(2 * (1 + i % 2) for i in range(sizes.blocks))
-    align = pyramid_reach(sizes.levels, sizes.dcn_kernel, sizes.max_offset, sizes.attention_radius)
-    reach = 1 + blocks + align + 2 * sizes.recon_blocks + 1
-    return sizes.unshuffle * (reach + 1)

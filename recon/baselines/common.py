@@ -22,6 +22,7 @@ from torch import nn
 from golden.errors import InputError
 
 from ..net.mulaw import compress  # noqa: F401  (re-exported for the baselines)
+from ..reach import Support, support
 
 
 class SizesMixin:
@@ -105,6 +106,9 @@ class ResBlock(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return x + self.body(x)
+
+    def support(self, x: Support) -> Support:
+        return x.union(support(self.body, x))
 
 
 def parameter_count(model: nn.Module) -> int:

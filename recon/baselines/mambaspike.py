@@ -41,8 +41,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .align import PyramidAlign, pyramid_reach
+from .align import PyramidAlign
 from ..net.head import BlendHead
+from ..reach import Support, support, union
 from .common import ResBlock, SizesMixin, check_input
 from .represent import firing_rates
 from .scan import MambaBlock
@@ -146,6 +147,9 @@ class TokenEmbedding(nn.Module):
         weight = self.weight.reshape(c, 2, self.patch, u, u)
         return F.conv3d(rep, weight, self.bias, stride=(self.patch, u, u))
 
+    def support(self, rep: Support) -> Support:
+        return rep.conv(self.weight.shape[-1], stride=self.unshuffle)
+
 
 class ParsingBranch(nn.Module):
     """One parsing: (N, T, H, W) light -> (N, moments, C, h, w) temporally scanned token features."""
@@ -178,6 +182,10 @@ class ParsingBranch(nn.Module):
         seq = self.norm(seq[:, picks])                                       # (N h w, M, C)
         return seq.reshape(n, hh, ww, s.moments, c).permute(0, 3, 4, 1, 2)
 
+    def support(self, light: Support) -> Support:
+        """The representation and the temporal scan act per (folded) pixel: the embedding's reach only."""
+        return self.embed.support(light)
+
 
 class WindowScan(nn.Module):
     """(B, C, h, w) -> same: a bidirectional Mamba block over each window's pixels, in rows or columns."""
@@ -197,6 +205,10 @@ class WindowScan(nn.Module):
         seq = self.block(seq).reshape(b, h // k, w // k, k, k, c)
         inverse = (0, 5, 1, 4, 2, 3) if self.columns else (0, 5, 1, 3, 2, 4)
         return seq.permute(*inverse).reshape(b, c, h, w)
+
+    def support(self, x: Support) -> Support:
+        """Every pixel of a window reads the whole window (a second scan on the same windows adds nothing)."""
+        return x.window(self.window)
 
 
 class MambaSpike(nn.Module):
@@ -232,16 +244,13 @@ class MambaSpike(nn.Module):
         fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
         return self.head(fused, light, inside)
 
+    def support(self, light: Support) -> Support:
+        """:meth:`forward` on supports."""
+        feats = union(*(branch.support(light) for branch in self.parsings))
+        if self.merge is not None:
+            feats = support(self.merge, feats)
+        feats = support(self.spatial, feats)
+        aligned = self.align.support(feats, feats)
+        fused = support(self.reconstruct, support(self.fuse, union(aligned, feats)))
+        return self.head.support(fused, light)
 
-def receptive_radius(sizes: MambaSpikeSizes) -> int:
-    """Upper bound, in frame pixels, on how far an output pixel's inputs lie.
-
-    The representation and the temporal scan are per (folded) pixel. At 1/u
-    of the frame: every spatial scan reaches at most across its window
-    (scan_window - 1 pixels), the alignment's bound with its filter, the
-    fusion (1 x 1), the reconstruction's blocks, the output convolution;
-    plus u for the fold.
-    """
-    align = pyramid_reach(sizes.levels, sizes.dcn_kernel, sizes.max_offset, filter_kernel=sizes.filter_kernel)
-    reach = sizes.spatial_blocks * sizes.scan_window + align + 2 * sizes.recon_blocks + 1
-    return sizes.unshuffle * (reach + 1)

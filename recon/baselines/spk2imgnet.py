@@ -31,8 +31,9 @@ from typing import ClassVar
 import torch
 from torch import nn
 
-from .align import PyramidAlign, pyramid_reach
+from .align import PyramidAlign
 from ..net.head import BlendHead
+from ..reach import Support, support, union
 from .common import ResBlock, SizesMixin, centred, check_input, compress, conv3
 
 
@@ -116,6 +117,10 @@ class AdaptiveRepresentation(nn.Module):
         weights = torch.softmax(self.attention(feats.reshape(b, k * c, h, w)).reshape(b, k, c, h, w), dim=1)
         return (weights * feats).sum(1)
 
+    def support(self, x: Support) -> Support:
+        feats = union(*(support(branch, x) for branch in self.branches))
+        return union(support(self.attention, feats), feats)
+
 
 class Spk2ImgNet(nn.Module):
     """(N, 61, H, W) decoded light -> (N, 1, H, W) light at the key moment (readout 30)."""
@@ -149,16 +154,10 @@ class Spk2ImgNet(nn.Module):
         fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
         return self.head(fused, light, inside)
 
+    def support(self, light: Support) -> Support:
+        """:meth:`forward` on supports (windows and the mu-law act per pixel)."""
+        feats = support(self.extract, support(self.represent, light))
+        aligned = self.align.support(feats, feats)
+        fused = support(self.reconstruct, support(self.fuse, union(aligned, feats)))
+        return self.head.support(fused, light)
 
-def receptive_radius(sizes: Spk2ImgNetSizes) -> int:
-    """Upper bound, in frame pixels, on how far an output pixel's inputs lie.
-
-    At 1/u of the frame (a pixel is u frame pixels): the representation
-    (3 x 3 branch, 3 x 3 attention), the extraction (one convolution and two
-    per residual block), the alignment's bound, the fusion (1 x 1), the
-    reconstruction's blocks and the output convolution; plus u for the fold.
-    """
-    u = sizes.unshuffle
-    align = pyramid_reach(sizes.levels, sizes.dcn_kernel, sizes.max_offset)
-    reach = 2 + (1 + 2 * sizes.blocks) + align + 2 * sizes.recon_blocks + 1
-    return u * (reach + 1)

@@ -17,6 +17,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..reach import Support, support, union
 from .deform import ModulatedDeformConv2d
 from .sizes import NetSizes
 
@@ -75,6 +76,24 @@ class LevelAlignment(nn.Module):
             aligned = aligned + self.motion_bias(torch.cat((aligned, key), 1))        # + b_{i,l}
         return feature, aligned
 
+    def support(self, key: Support, ref: Support, coarser_offset_feature: Support | None = None,
+                coarser_aligned: Support | None = None) -> tuple[Support, Support]:
+        """:meth:`forward` on supports."""
+        feature = support(self.offset_in, union(key, ref))
+        if not self.coarsest:
+            feature = support(self.offset_fuse, union(feature, coarser_offset_feature.upsample(2)))
+        feature = support(self.offset_mid, feature)
+        raw = support(self.offset_out, feature)
+        aligned = self.dcn.support(ref, raw, raw, self.max_offset)
+        if not self.coarsest:
+            up = coarser_aligned.upsample(2)
+            if self.similarity is not None:
+                up = union(support(self.similarity, union(up, key)), up)
+            aligned = support(self.merge, union(aligned, up))
+        if self.motion_bias is not None:
+            aligned = union(aligned, support(self.motion_bias, union(aligned, key)))
+        return feature, aligned
+
 
 class SPA(nn.Module):
     """(N, S, C, h, w) features of S sub-streams (key in the middle) -> fused (N, C, h, w)."""
@@ -113,3 +132,17 @@ class SPA(nn.Module):
             refs = self.align(key, refs)
         stacked = torch.cat((refs[:, :middle], key[:, None], refs[:, middle:]), 1)
         return self.act(self.fusion(stacked.reshape(n, s * c, h, w)))
+
+    def support(self, features: Support) -> Support:
+        """:meth:`forward` on supports (every sub-stream's feature has the same)."""
+        key = refs = features
+        if self.levels is not None:
+            keys, rs = [key], [refs]
+            for down in self.down:
+                keys.append(support(down, keys[-1]))
+                rs.append(support(down, rs[-1]))
+            offset_feature = aligned = None
+            for level in reversed(range(len(self.levels))):
+                offset_feature, aligned = self.levels[level].support(keys[level], rs[level], offset_feature, aligned)
+            refs = aligned
+        return support(self.fusion, union(refs, key))

@@ -21,6 +21,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..reach import Support, union
+
 
 def deform_conv2d(input: torch.Tensor, offset: torch.Tensor, weight: torch.Tensor,
                   bias: torch.Tensor | None = None, *, stride: int = 1, padding: int = 0,
@@ -83,6 +85,10 @@ class ModulatedDeformConv2d(nn.Module):
     @property
     def mask_channels(self) -> int:
         return self.offset_groups * self.kernel_size ** 2
+
+    def support(self, x: Support, offset: Support, mask: Support, max_offset: float) -> Support:
+        """Reach with offsets of at most ``max_offset`` pixels (the caller bounds them)."""
+        return union(x.sample(self.kernel_size, max_offset), offset, mask)
 
     def forward(self, x: torch.Tensor, offset: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         return deform_conv2d(x, offset, self.weight, self.bias, padding=self.kernel_size // 2, mask=mask)

@@ -12,6 +12,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from ..reach import Support, support, union
+
 #: The paper's eq. 8: Sobel G_x, Sobel G_y and the Laplacian L.
 GRADIENT_KERNELS = torch.tensor([
     [[1.0, 0.0, -1.0], [2.0, 0.0, -2.0], [1.0, 0.0, -1.0]],
@@ -36,6 +38,9 @@ class GradientFilters(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return nn.functional.conv2d(x, self.weight.to(x.dtype), padding=1, groups=self.in_channels)
+
+    def support(self, x: Support) -> Support:
+        return x.conv(self.weight.shape[-1], padding=1)
 
 
 class MSFEG(nn.Module):
@@ -72,6 +77,14 @@ class MSFEG(nn.Module):
         if self.gradient is not None:
             parts.append(self.gradient_proj(channels_last(self.fold(self.gradient(x)))))
         return self.act(self.fuse(self.act(torch.cat(parts, dim=1))))
+
+    def support(self, x: Support) -> Support:
+        """The reach of :meth:`folded_forward` (the same function as :meth:`forward`)."""
+        embedded = support(self.embed, support(self.fold, x))
+        parts = [support(scale, embedded) for scale in self.scales]
+        if self.gradient is not None:
+            parts.append(support(self.gradient_proj, support(self.fold, support(self.gradient, x))))
+        return support(self.fuse, union(*parts))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """:meth:`folded_forward` computed without its full-resolution intermediates.

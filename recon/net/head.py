@@ -28,6 +28,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from ..reach import Support, support
 from .mulaw import compress, expand
 
 #: Radii (readouts either side of the key) of the centred means the head chooses among.
@@ -130,3 +131,7 @@ class BlendHead(nn.Module):
         weights = torch.softmax(out[:, :self.estimates], 1)
         codes = compress(key_estimates(light, inside), self.mu)
         return expand((weights * codes).sum(1, keepdim=True) + out[:, self.estimates:], self.mu)
+
+    def support(self, feature: Support, light: Support) -> Support:
+        """The estimates are per pixel of the light; the weights and correction come from the feature."""
+        return support(self.unfold, support(self.conv, feature)).union(light)

@@ -5,9 +5,22 @@ either end of the stream the first or last readout is repeated (so a stream
 shorter than the span works, down to one readout), and the network is told
 which readouts are such padding (``inside``). Frames are padded (edge
 values repeated) to a multiple of the network's pyramid factor and cut into
-tiles with an overlap of :func:`tile_margin` pixels on every side, more than
-the network's receptive field, so a tiled result equals the whole-frame one
-to float rounding (``tests/test_recon_net_infer.py``). The shipped weights
+tiles whose cores are computed with :func:`tile_margin` pixels more on every
+side: the receptive radius derived from the module itself
+(:func:`recon.learned.receptive_radius`, :mod:`recon.reach`), rounded up to
+the pyramid factor, so a tiled result equals the whole-frame one to float
+rounding (``tests/test_recon_net_infer.py``).
+
+Tile size (:func:`tiles`): by default (``tile="auto"``) the core is
+:data:`TILE_MARGINS` = 2 margins (:func:`default_tile`), so a tile computes
+at most (2 + 2)^2 / 2^2 = 4 times its core's pixels and the peak memory is
+that of a block of 4 margins square, whatever the frame size. Along an axis
+no longer than core + margin the first block would already span the whole
+axis, so that axis is not cut (same peak, less work); a frame within
+core + margin on both axes runs whole. A tile given smaller than the margin
+is accepted: the result is the same, only slower (each tile computes
+(tile + 2 margin)^2 pixels for tile^2). ``tile=None`` runs the whole frame at
+once. The shipped weights
 (``recon/net/weights/<preset>.pt``) are chosen by the stream's configuration;
 a configuration no weights were trained for is refused, naming both.
 """
@@ -15,7 +28,6 @@ a configuration no weights were trained for is refused, naming both.
 from __future__ import annotations
 
 import functools
-import math
 import pickle
 import zipfile
 from pathlib import Path
@@ -26,9 +38,9 @@ import torch
 from golden.config import PRESETS, SensorConfig
 from golden.errors import InputError
 
+from ..learned import receptive_radius  # noqa: F401  (re-exported: derived from the module)
 from ..stream import decode_light, key_span, output_images, span_inside
 from .model import TESpikeNet
-from .sizes import NetSizes
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 
@@ -70,51 +82,50 @@ def load_weights(path: str | Path) -> tuple[torch.nn.Module, SensorConfig, dict]
                          f"({str(exc).splitlines()[0][:100] if str(exc) else type(exc).__name__})") from None
 
 
-def receptive_radius(sizes: NetSizes) -> int:
-    """An upper bound, in frame pixels, on how far an output pixel's inputs can lie.
-
-    Summed over the layers at each resolution (a 3 x 3 convolution reaches one
-    pixel of its level, a pixel of level l being u 2^l frame pixels; a DCN tap
-    reaches at most ``max_offset`` further), plus LIR's attention window.
-    """
-    u = sizes.unshuffle
-    reach = 3 * u + u * (3 + 2)                 # MSFEG (7 x 7 then 3 x 3) and the fold
-    if sizes.dcn:
-        for level in range(sizes.levels):
-            scale = u << level
-            per_level = 2 + 1 + 1 + 1 + 2 + 2 + 1    # offsets (3 convs + out), DCN, SP, merge, MBP
-            reach += scale * (per_level + sizes.dcn_kernel // 2 + math.ceil(sizes.max_offset)) + 2 * scale
-    reach += u * 2                               # fusion
-    if sizes.refine:
-        reach += u * (2 + sizes.attention_window // 2 + 1)
-    return reach + u                             # the output convolution
-
-
-def tile_margin(sizes: NetSizes) -> int:
-    """Overlap added on every side of a tile: the receptive radius rounded up to the pyramid factor."""
+def tile_margin(sizes) -> int:
+    """Overlap added on every side of a tile: the derived receptive radius rounded up to the pyramid factor."""
     f = sizes.pyramid_factor
     return -(-receptive_radius(sizes) // f) * f
 
 
-def tiles(height: int, width: int, sizes: NetSizes, tile: int | None) -> list[tuple[int, int, int, int]]:
-    """Tile cores (y, x, h, w) covering the frame padded to the pyramid factor."""
+#: The default tile core, in margins (:func:`default_tile`).
+TILE_MARGINS = 2
+
+
+def default_tile(sizes) -> int:
+    """The default tile core: :data:`TILE_MARGINS` margins (a multiple of the pyramid factor)."""
+    return TILE_MARGINS * tile_margin(sizes)
+
+
+def tiles(height: int, width: int, sizes, tile: int | str | None = "auto") -> list[tuple[int, int, int, int]]:
+    """Tile cores (y, x, h, w) covering the frame padded to the pyramid factor.
+
+    ``tile``: the core's side (a multiple of the pyramid factor), ``"auto"`` for
+    :func:`default_tile`, ``None`` for the whole frame. An axis no longer than
+    core + margin is not cut (its first block would already span it).
+    """
     f = sizes.pyramid_factor
     hp, wp = -(-height // f) * f, -(-width // f) * f
     if tile is None:
         return [(0, 0, hp, wp)]
+    if tile == "auto":
+        tile = default_tile(sizes)
     if type(tile) is not int or tile < f or tile % f:
-        raise InputError(f"tile = {tile!r}: must be a multiple of the pyramid factor {f}")
-    return [(y, x, min(tile, hp - y), min(tile, wp - x)) for y in range(0, hp, tile) for x in range(0, wp, tile)]
+        raise InputError(f"tile = {tile!r}: must be a multiple of the pyramid factor {f}, 'auto' or None")
+    margin = tile_margin(sizes)
+    ty = tile if hp > tile + margin else hp
+    tx = tile if wp > tile + margin else wp
+    return [(y, x, min(ty, hp - y), min(tx, wp - x)) for y in range(0, hp, ty) for x in range(0, wp, tx)]
 
 
 def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, *,
-          tile: int | None = None, device: str = "cpu") -> torch.Tensor:
+          tile: int | str | None = None, device: str = "cpu") -> torch.Tensor:
     """The network's image (H, W) at readout ``key`` of the stream ``words`` (K, H, W).
 
     Only the readouts and pixels one tile needs are decoded at a time, so memory
     is bounded by the tile, not the frame. Readouts past either end and pixels
     past the bottom or right edge (padding to the pyramid factor) repeat the
-    last one; with ``tile=None`` the whole frame is one tile.
+    last one; with ``tile=None`` the whole frame is one tile (:func:`tiles`).
     """
     sizes = model.sizes
     K, H, W = words.shape
@@ -139,13 +150,14 @@ def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, 
     return out
 
 
-def reconstruct_net(words, config: SensorConfig, *, weights: str | Path | None = None, tile: int | None = 256,
+def reconstruct_net(words, config: SensorConfig, *, weights: str | Path | None = None,
+                    tile: int | str | None = "auto",
                     device: str = "cpu", progress: bool = False, out: np.ndarray | None = None) -> np.ndarray:
     """Stream words (K, H, W) -> float32 light (K, H, W), one image per readout.
 
     ``words`` may be a memory map: only the readouts and pixels of one tile are
     read at a time. ``out``: a float32 (K, H, W) array to fill (e.g. a memory map
-    of the output file); it is returned.
+    of the output file); it is returned. ``tile``: see :func:`tiles`.
     """
     path = Path(weights) if weights is not None else weights_path(config)
     model, trained_for, _ = load_weights(path)
@@ -155,7 +167,7 @@ def reconstruct_net(words, config: SensorConfig, *, weights: str | Path | None =
     return reconstruct_model(model, words, config, tile=tile, device=device, progress=progress, out=out)
 
 
-def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, tile: int | None = 256,
+def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, tile: int | str | None = "auto",
                       device: str = "cpu", progress: bool = False, out: np.ndarray | None = None) -> np.ndarray:
     """Any learned method's module (in eval mode) on a whole stream: float32 light (K, H, W)."""
     if isinstance(words, torch.Tensor):

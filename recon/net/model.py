@@ -22,6 +22,7 @@ from .align import SPA
 from .features import MSFEG
 from .head import BlendHead
 from .mulaw import compress, expand  # noqa: F401  (re-exported)
+from ..reach import Support, support
 from .refine import GuidedAttention, IntensityFeature
 from .sizes import NetSizes
 
@@ -70,6 +71,15 @@ class TESpikeNet(nn.Module):
         if s.head == "blend":
             return self.head(fused, light, inside)
         return expand(base + self.unfold(self.head(fused)), s.mu)
+
+    def support(self, light: Support) -> Support:
+        """:meth:`forward` on supports (sub-streams, means and the mu-law act per pixel)."""
+        fused = support(self.spa, support(self.encoder, light))
+        if self.attention is not None:
+            fused = self.attention.support(fused, support(self.intensity, light, light))
+        if self.sizes.head == "blend":
+            return self.head.support(fused, light)
+        return support(self.unfold, support(self.head, fused)).union(light)
 
 
 def parameter_count(model: nn.Module) -> int:
