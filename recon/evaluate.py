@@ -142,7 +142,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     """Simulate every sequence in every mode, reconstruct with every method, score.
 
     ``sequences``: (label, light (K, H, W)) pairs; ``methods``: keys of
-    :data:`recon.methods.METHODS` (default all); ``seed`` makes the shot
+    :data:`recon.methods.RECON_METHODS` (default all); ``seed`` makes the shot
     noise reproducible (one independent stream per sequence and mode);
     ``keep`` keeps every stream and reconstruction in the result (memory!);
     ``options`` maps a method to extra keywords of :func:`recon.methods.reconstruct`
@@ -152,13 +152,13 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     import torch
     from tqdm import tqdm
 
-    from .methods import METHODS, reconstruct
+    from .methods import RECON_METHODS, reconstruct
     from .metrics import psnr_mu, ssim_mu
 
-    methods = tuple(METHODS) if methods is None else tuple(methods)
+    methods = tuple(RECON_METHODS) if methods is None else tuple(methods)
     for method in methods:
-        if method not in METHODS:
-            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(METHODS)})")
+        if method not in RECON_METHODS:
+            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
     configs = dict(paper_configs() if configs is None else configs)
     for mode in modes:
         if mode not in configs:

@@ -141,14 +141,15 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     from dask import delayed
 
     from recon.evaluate import Evaluation, Result, scored_frames
-    from recon.methods import METHODS
+    from recon.methods import RECON_METHODS, available_methods
     from recon.settings import ReconSettings
 
     store = DatasetStore.open(url)
-    methods = tuple(METHODS) if methods is None else tuple(methods)
+    # by default every method that has weights for each sensor of the store
+    methods = available_methods(store.configs.values()) if methods is None else tuple(methods)
     for method in methods:
-        if method not in METHODS:
-            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(METHODS)})")
+        if method not in RECON_METHODS:
+            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
     if not methods:
         raise InputError("no reconstruction method to evaluate")
     ReconSettings(window=window, device=device)          # refuse a bad window or device here
