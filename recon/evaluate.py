@@ -15,7 +15,11 @@ normalises each sequence by its maximum; built-in scenes already have peak
 1.0, so this changes nothing for them and keeps user sequences comparable),
 clipping to [0, 1] and mu-law tone mapping. Frames whose window of readouts
 would reach past either end of the sequence are not scored (the first and
-last ``window // 2``; all frames when the sequence is shorter than a window).
+last ``window // 2``; all frames when the sequence is shorter than a window);
+with a learned method in the run and sequences longer than its span (61
+readouts), only the frames whose whole span lies inside the sequence are
+scored, for every method alike (shorter sequences: the window's rule, the
+learned methods seeing the end readouts repeated).
 The per-frame values are averaged per sequence, then the sequence means are
 averaged (paper section 6.4).
 
@@ -106,10 +110,20 @@ def label(method: str, mode: str) -> str:
     return f"{METHOD_NAMES.get(method, method.upper())}_{name(mode)}"
 
 
-def scored_frames(frames: int, window: int) -> slice:
-    """Frames whose whole window of readouts lies inside the sequence (all if too short)."""
-    half = window // 2
+def scored_frames(frames: int, window: int, span: int | None = None) -> slice:
+    """Frames whose whole window of readouts lies inside the sequence (all if too short);
+    with ``span`` (the readouts a learned method sees), frames whose span lies inside it
+    too, where the sequence is longer than the span (else the window's frames)."""
+    reach = window if span is None or frames <= 2 * (span // 2) else max(window, span)
+    half = reach // 2
     return slice(half, frames - half) if frames > 2 * half else slice(0, frames)
+
+
+def learned_span(methods: Sequence[str]) -> int | None:
+    """The longest span of readouts the learned ones of ``methods`` see (None: none is learned)."""
+    from .learned import LEARNED, method_span
+    spans = [method_span(m) for m in methods if m in LEARNED]
+    return max(spans) if spans else None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -154,6 +168,9 @@ class Evaluation:
     complexity: dict[str, dict] = dataclasses.field(default_factory=dict)
     #: frame size of the sequences (rows, columns), when all share one
     frame_size: tuple[int, int] | None = None
+    #: readouts the learned methods see (None: none was run); sequences longer than it are
+    #: scored only where every method's readouts lie inside them (:func:`scored_frames`)
+    span: int | None = None
 
     def summary(self) -> dict[tuple[str, str], dict[str, float]]:
         """(method, mode) -> mean over sequences of the per-sequence means."""
@@ -241,6 +258,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     evaluation = Evaluation([], methods, tuple(modes), window, repeats=repeats,
                             threads=torch.get_num_threads(), metrics=metrics, vdp_frames=vdp_frames,
                             missing=absent)
+    span = evaluation.span = learned_span([m for m in methods if any((m, mode) not in absent for mode in modes)])
     sizes = {tuple(light.shape[1:]) for _, light in sequences}
     evaluation.frame_size = sizes.pop() if len(sizes) == 1 else None
     warmed: set[tuple[str, str]] = set()
@@ -256,7 +274,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
         kept = len(modes) * (word_bytes + 4 * len(methods)) if keep else 0
         require_memory(K * H * W * (word_bytes + 4 + kept) + WORKING_BYTES,
                        f"evaluating sequence {name!r} ({K} x {H} x {W})")
-        frames = scored_frames(light.shape[0], window)
+        frames = scored_frames(light.shape[0], window, span)
         middle = (frames.start + frames.stop - 1) // 2
         strip = {"gt": np.array(light[middle], np.float64), "peak": peak, "frame": middle}
         for mode_index, mode in enumerate(modes):
@@ -424,7 +442,7 @@ def table_markdown(evaluation: Evaluation) -> str:
     lines = _markdown(header, align, table_rows(evaluation))
     if any(mode in NOISE_MODES for mode in evaluation.modes):
         lines += ["", *noise_markdown(evaluation)]
-    notes = metric_notes(evaluation) + missing_notes(evaluation)
+    notes = scoring_notes(evaluation) + metric_notes(evaluation) + missing_notes(evaluation)
     if notes:
         lines += ["", *notes]
     return "\n".join(lines) + "\n"
@@ -445,6 +463,17 @@ def metric_notes(evaluation: Evaluation) -> list[str]:
         lines.append(f"- FovVideoVDP on {which} ({'/'.join(map(str, counts)) or 0}); every other metric on every "
                      "scored frame; HDR-VQM is the sequence value (15-frame tubes), the others frame means")
     return lines
+
+
+def scoring_notes(evaluation: Evaluation) -> list[str]:
+    """With a learned method in the run: which frames were scored, and why."""
+    if evaluation.span is None:
+        return []
+    counts = sorted({r.frames_scored for r in evaluation.results})
+    return [f"- frames scored per sequence: {'/'.join(map(str, counts))}, those whose {evaluation.window}-readout "
+            f"window and, in sequences longer than {evaluation.span} readouts, whose {evaluation.span}-readout "
+            "span of the learned methods lie inside the sequence (in shorter ones the learned methods see the "
+            "end readouts repeated)"]
 
 
 def missing_notes(evaluation: Evaluation) -> list[str]:

@@ -22,6 +22,9 @@ def simulate(config, light, rng):
 
 def test_scored_frames_skip_incomplete_windows():
     assert scored_frames(24, 9) == slice(4, 20)
+    assert scored_frames(70, 9, 61) == slice(30, 40)          # a learned method's span inside too
+    assert scored_frames(61, 9, 61) == slice(30, 31)
+    assert scored_frames(60, 9, 61) == slice(4, 56)           # shorter than the span: the window's rule
     assert scored_frames(9, 9) == slice(4, 5)
     assert scored_frames(8, 9) == slice(0, 8)
     assert scored_frames(5, 1) == slice(0, 5)
@@ -281,3 +284,19 @@ def test_complexity_columns_with_the_papers_table10():
     rows = list(csv.DictReader(io.StringIO(table_csv(evaluation))))
     assert rows[2]["parameters"] == "152236" and float(rows[2]["paper_flops"]) == 0.887e12
     assert rows[2]["te_psnr_mu"] == ""                                   # CSV cells stay numeric or empty
+
+
+def test_with_a_learned_method_frames_are_scored_where_its_span_fits(no_weights):
+    import torch
+
+    from recon.learned import method_classes
+    from recon.net.train import save_weights
+    torch.manual_seed(0)
+    module, sizes = method_classes("spk2imgnet")
+    save_weights(no_weights / "spk2imgnet-te.pt", module(sizes.preset("cpu")).eval(), SensorConfig(), {},
+                 "spk2imgnet")
+    light = make_scene("moderate", 63, 24, 24, seed=2)
+    evaluation = evaluate([("a", light)], simulate, methods=("tfp", "spk2imgnet"), modes=("te",), progress=False,
+                          repeats=1)
+    assert evaluation.span == 61 and [r.frames_scored for r in evaluation.results] == [3, 3]
+    assert "- frames scored per sequence: 3, those whose 9-readout window" in table_markdown(evaluation)
