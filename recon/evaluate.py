@@ -461,7 +461,8 @@ def metric_notes(evaluation: Evaluation) -> list[str]:
         which = ("every scored frame" if evaluation.vdp_frames is None else
                  f"the middle {evaluation.vdp_frames} scored frames of each sequence")
         lines.append(f"- FovVideoVDP on {which} ({'/'.join(map(str, counts)) or 0}); every other metric on every "
-                     "scored frame; HDR-VQM is the sequence value (15-frame tubes), the others frame means")
+                     "scored frame; HDR-VQM is the sequence value (15-frame tubes, fewer frames one tube), "
+                     "the others frame means")
     return lines
 
 
