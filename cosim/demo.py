@@ -14,7 +14,7 @@ Stages (each timed, each written, each with the individual command that redoes i
    vcdvcd (:func:`cosim.vcd.waveform_stream`) and compared with the golden
    stream of the same pixels and readouts: "bit-identical", or the first
    differing readout, pixel and both words (``verdict.txt``, exit 1);
-4. reconstruction: every method of :data:`recon.methods.METHODS` on every
+4. reconstruction: every method of :data:`recon.methods.RECON_METHODS` with weights for the sensors on every
    golden stream (:func:`recon.evaluate.evaluate`: PSNR-mu / SSIM-mu, run time
    the median of repeats) and on the RTL's own stream;
 5. dynamic range (formula and measured, :mod:`golden.dynamic_range`) and a
@@ -171,13 +171,14 @@ def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, 
     from cosim.room import require_room as require
     from golden.io import word_dtype
     from golden.light import stimulus_dtype
-    from recon.methods import METHODS
+    from recon.methods import available_methods
 
     from .vcd import VCD_BYTES_PER_PIXEL_CLOCK
     te = configs[RTL_SENSOR]
     values = frames * height * width
     word_bytes = sum(word_dtype(config).itemsize for config in configs.values())
-    images = 4 * len(METHODS) * len(configs) * values                 # R_*.npy, float32, kept for the report
+    methods = available_methods(configs.values())
+    images = 4 * len(methods) * len(configs) * values            # R_*.npy, float32, kept for the report
     crop_clocks = rtl_readouts * te.clocks_per_readout * crop * crop
     disk = (4 * values + word_bytes * values + images + stimulus_dtype(te).itemsize * crop_clocks
             + (VCD_BYTES_PER_PIXEL_CLOCK * crop_clocks if vcd else 0))
@@ -299,11 +300,12 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     started = progress.begin("reconstruction: every method on every stream (run time: median of "
                              f"{repeats}) and on the RTL stream")
     from recon.evaluate import evaluate, label, scored_frames, write_outputs
-    from recon.methods import METHODS, reconstruct
+    from recon.methods import RECON_METHODS, available_methods, reconstruct
     from recon.metrics import psnr_mu, ssim_mu
+    methods = available_methods(configs.values())     # learned ones only where weights are shipped
     by_config = {configs[name]: streams[name] for name in configs}
     evaluation = evaluate([("default", light)], lambda config, scene, rng: by_config[config],
-                          modes=tuple(configs), configs=configs, window=window, seed=seed,
+                          methods=methods, modes=tuple(configs), configs=configs, window=window, seed=seed,
                           progress=bars, keep=True, repeats=repeats)
     paths = write_outputs(evaluation, out)
     for (_, mode, method), images in evaluation.images.items():
@@ -313,7 +315,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     scored = scored_frames(rtl_readouts, window)
     rtl_rows, rtl_images, golden_images = [], {}, {}
     middle = (scored.start + scored.stop - 1) // 2
-    for method in METHODS:
+    for method in methods:
         seconds, images = median_seconds(lambda: reconstruct(rtl_words, te, method, window=window), repeats)
         save_images(out / f"R_{method}_rtl.npy", images)
         full = evaluation.images["default", RTL_SENSOR, method][:rtl_readouts, y:y + crop, x:x + crop]
@@ -327,8 +329,9 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
             "max_diff": float(np.max(np.abs(images[scored] - full[scored]))),
             "ms_per_frame": 1e3 * seconds / rtl_readouts})
     progress.end("reconstruction", started,
-                 [f"tespike reconstruct --stream S_{mode}.npz --method {method} --window {window} "
-                  f"--out R_{method}_{mode}.npy" for mode in list(configs) + ["rtl"] for method in METHODS]
+                 [f"tespike reconstruct --stream S_{mode}.npz --method {method} "
+                  + (f"--window {window} " if "window" in RECON_METHODS[method].options else "")
+                  + f"--out R_{method}_{mode}.npy" for mode in list(configs) + ["rtl"] for method in methods]
                  + [f"tespike evaluate --set default --frames {frames} --height {height} --width {width} "
                     f"--seed {seed} --out eval   # Table 1 layout, TE and ML count, other noise draws"])
 
@@ -354,7 +357,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         configs=configs, rtl_config=te, frames=frames, height=height, width=width, seed=seed, crop=(y, x, crop),
         rtl_readouts=rtl_readouts, rtl_info=rtl_info, verdict=verdict, evaluation=evaluation,
         rtl_rows=rtl_rows, scored=scored, ranges=ranges, hardware=hardware, stages=progress.stages,
-        total=time.perf_counter() - progress.start, window=window, methods=list(METHODS),
+        total=time.perf_counter() - progress.start, window=window, methods=list(methods),
         label=label)
     write_text(out / "report.md", report)
 

@@ -1,4 +1,4 @@
-"""Every learned reconstruction method: name -> (module class, sizes class).
+"""Every learned reconstruction method: name -> (module class, sizes class), and its shipped weights.
 
 A learned method's module takes (N, span, H, W) light decoded by golden's one
 decoder (scene units, key moment in the middle, H and W multiples of
@@ -8,13 +8,26 @@ and ``pyramid_factor``. One trainer (:mod:`recon.net.train`), one data engine
 (:mod:`recon.engine`) and one tiled inference (:mod:`recon.net.infer`) serve
 them all. Each module reports how far its output pixels reach
 (:func:`receptive_radius`, derived from its sub-modules by :mod:`recon.reach`).
+
+Shipped weights live in :data:`WEIGHTS_DIR`, one file per method and sensor
+preset: ``<preset>.pt`` for the project's network (``net``), ``<method>-<preset>.pt``
+for a baseline (e.g. ``bsf-te.pt``). :func:`weights_path` finds them and refuses,
+in one line naming the file and the command that trains it, where there are none.
+Importing this module does not import torch (command lines check names quickly).
 """
 
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 
+from golden.config import PRESETS, SensorConfig
 from golden.errors import InputError
+
+#: Names of the learned methods in the paper's row order: its learned baselines, then the network.
+LEARNED = ("spk2imgnet", "bsf", "mambaspike", "net")
+#: The folder of the shipped weights (the same folder as ``recon.net.infer.WEIGHTS_DIR``).
+WEIGHTS_DIR = Path(__file__).resolve().parent / "net" / "weights"
 
 
 def learned_methods() -> dict[str, tuple[type, type]]:
@@ -48,3 +61,51 @@ def receptive_radius(sizes) -> int:
                 model = model_cls(sizes)
             return derived(model)
     raise InputError(f"{type(sizes).__name__} is the sizes of no learned method")
+
+
+def method_span(name: str, size: str = "cpu") -> int:
+    """Readouts a learned method sees around each key moment: the span its sizes fix."""
+    return method_classes(name)[1].preset(size).span
+
+
+def preset_of(config: SensorConfig) -> str | None:
+    """The name of the preset ``config`` equals, else None."""
+    for name, keys in PRESETS.items():
+        if SensorConfig(**keys) == config:
+            return name
+    return None
+
+
+def weights_name(method: str, preset: str) -> str:
+    """File name of the shipped weights: ``<preset>.pt`` for the network, ``<method>-<preset>.pt`` else."""
+    return f"{preset}.pt" if method == "net" else f"{method}-{preset}.pt"
+
+
+def weights_path(config: SensorConfig, method: str = "net") -> Path:
+    """The shipped weights of ``method`` for ``config``; a one-line refusal where there are none."""
+    if method not in LEARNED:
+        raise InputError(f"unknown learned method {method!r} (known: {', '.join(LEARNED)})")
+    preset = preset_of(config)
+    if preset is None:
+        raise InputError(f"the stream's configuration {config} is none of the presets {', '.join(PRESETS)} "
+                         f"that {method} weights are shipped for (train weights for it with "
+                         f"'tespike train --method {method} --config C.json --out W.pt')")
+    path = WEIGHTS_DIR / weights_name(method, preset)
+    if not path.is_file():
+        raise InputError(f"no {method} weights for the {preset} camera: {str(path)!r} is missing (train them "
+                         f"with 'tespike train --method {method} --config {preset} --minutes M --out {path}')")
+    return path
+
+
+def load_learned(config: SensorConfig, method: str):
+    """The shipped ``method`` module for ``config``, in eval mode; refused in one line where its
+    weights are missing, hold another method or were trained for another configuration."""
+    from .net.infer import load_weights
+    path = weights_path(config, method)
+    model, trained_for, _ = load_weights(path)
+    wanted = method_classes(method)[0]
+    if type(model) is not wanted:
+        raise InputError(f"weights {str(path)!r} hold a {type(model).__name__}, not {method}'s {wanted.__name__}")
+    if trained_for != config:
+        raise InputError(f"{method} weights {str(path)!r} were trained for {trained_for}, the stream is {config}")
+    return model

@@ -2,9 +2,16 @@
 
 ``reconstruct(words, config, method)`` turns a (K, H, W) stream of readout
 words into (K, H, W) float32 light, in the units of the scene (I = 1 is 42000
-electrons per readout interval), one image per readout interval. The stream is
-processed in blocks of pixels (every method here works along time, pixel by
-pixel), so memory stays bounded and results do not depend on the block size.
+electrons per readout interval), one image per readout interval. Two kinds of
+method, with bounded memory either way:
+
+- TFP and TFI work along time, pixel by pixel: the stream is processed in
+  blocks of pixels, and results do not depend on the block size;
+- the learned methods (the project's network ``net`` and the paper's baselines
+  ``spk2imgnet``, ``bsf``, ``mambaspike``, :mod:`recon.learned`) are spatial:
+  each image comes from the span of readouts their sizes fix around it, over
+  whole tiles (:func:`recon.net.infer.reconstruct_model`), with the shipped
+  weights of the stream's sensor preset (:func:`recon.learned.weights_path`).
 """
 
 from __future__ import annotations
@@ -36,10 +43,16 @@ def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSetting
     return tfi(light, words != 0, config.threshold / DESIGN_ELECTRONS, settings.radius, settings.search)
 
 
-def _net_frames(words, config: SensorConfig, settings: ReconSettings, progress: bool,
-                out: np.ndarray) -> np.ndarray:
-    from .net.infer import reconstruct_net
-    return reconstruct_net(words, config, device=settings.device, progress=progress, out=out)
+def _learned_frames(name: str) -> Callable:
+    """The whole-stream function of learned method ``name``: its shipped weights for the stream's preset."""
+    def frames(words, config: SensorConfig, settings: ReconSettings, progress: bool,
+               out: np.ndarray) -> np.ndarray:
+        from .learned import load_learned
+        from .net.infer import reconstruct_model
+        model = load_learned(config, name)
+        return reconstruct_model(model, words, config, device=settings.device, progress=progress, out=out)
+    frames.__name__ = f"_{name}_frames"
+    return frames
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,14 +68,21 @@ class Method:
     frames: Callable | None = None
 
 
-#: name -> method. ``net`` ignores ``window``: it sees the span its sizes fix (61 readouts).
-METHODS: dict[str, Method] = {
+#: name -> reconstruction method (not golden.fastsim's simulation methods). The learned
+#: ones ignore ``window``: they see the span their sizes fix (:func:`recon.learned.method_span`).
+RECON_METHODS: dict[str, Method] = {
     "tfp": Method("tfp", "mean decoded light over the window (spike-firing rate)", _tfp_block,
                   ("window", "estimator", "chunk_elements", "device", "dtype")),
     "tfi": Method("tfi", "decoded spikes over the spike interval around each readout", _tfi_block,
                   ("window", "estimator", "search", "chunk_elements", "device", "dtype")),
-    "net": Method("net", "the paper's network (section 5) with the shipped weights; sees 61 readouts",
-                  None, ("device",), frames=_net_frames),
+    "spk2imgnet": Method("spk2imgnet", "Spk2ImgNet (Zhao et al. 2021, re-implemented), shipped weights",
+                         None, ("device",), frames=_learned_frames("spk2imgnet")),
+    "bsf": Method("bsf", "BSF (Zhao et al. 2024, re-implemented), shipped weights",
+                  None, ("device",), frames=_learned_frames("bsf")),
+    "mambaspike": Method("mambaspike", "MambaSpike (selective scan, re-implemented), shipped weights",
+                         None, ("device",), frames=_learned_frames("mambaspike")),
+    "net": Method("net", "the paper's network (section 5) with the shipped weights",
+                  None, ("device",), frames=_learned_frames("net")),
 }
 
 
@@ -71,7 +91,7 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
                 **options) -> np.ndarray:
     """Stream words (K, H, W) -> reconstructed light, float32 (K, H, W), scene units.
 
-    ``method`` is a key of :data:`METHODS`. ``window`` (odd, readouts) and
+    ``method`` is a key of :data:`RECON_METHODS`. ``window`` (odd, readouts) and
     ``device`` (a torch device) apply to every method; further ``options``
     are fields of :class:`recon.settings.ReconSettings` the method uses
     (``estimator``, ``search`` for TFI, ``chunk_elements``, ``dtype``). Words are checked
@@ -79,9 +99,9 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     float32 (K, H, W) array to fill (e.g. a memory map of the output file, so
     the images never need to fit in memory); it is returned.
     """
-    if method not in METHODS:
-        raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(METHODS)})")
-    spec = METHODS[method]
+    if method not in RECON_METHODS:
+        raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
+    spec = RECON_METHODS[method]
     unknown = sorted(set(options) - set(spec.options))
     if unknown:
         raise InputError(f"option {unknown[0]!r} is not an option of method {method!r} "
@@ -115,3 +135,24 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
             result = spec.block(block, config, settings)
             out_flat[:, start:start + step] = result.to("cpu", torch.float32).numpy()
     return out
+
+
+def missing_weights(method: str, config: SensorConfig) -> str | None:
+    """Why ``method`` cannot reconstruct streams of ``config`` (the one-line refusal of its
+    weights: missing, another method's, another sensor's), or None where it can."""
+    if method not in RECON_METHODS:
+        raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
+    if RECON_METHODS[method].frames is None:
+        return None
+    from .learned import load_learned
+    try:
+        load_learned(config, method)
+    except InputError as exc:
+        return str(exc)
+    return None
+
+
+def available_methods(configs) -> tuple[str, ...]:
+    """The methods of :data:`RECON_METHODS` that can reconstruct streams of every config given
+    (TFP and TFI always; a learned method where its weights for each one are shipped)."""
+    return tuple(m for m in RECON_METHODS if all(missing_weights(m, c) is None for c in configs))

@@ -56,3 +56,55 @@ def test_evaluate_without_the_count_camera(tmp_path, capsys):
     assert "| TFI_ML |" in stdout and "ML-count" not in stdout
     rows = list(csv.DictReader((tmp_path / "ev" / "results.csv").read_text().splitlines()))
     assert sorted(r["mode"] for r in rows) == ["ml-msb", "te"]
+
+
+def test_evaluate_table(tmp_path, capsys, monkeypatch):
+    """--table: the paper's rows and every metric column, ML (msb) left and TE right, no ML-count rows,
+    complexity with Table 10 beside; a method without weights says so instead of failing the table."""
+    import torch
+
+    import recon.learned
+    from golden.config import SensorConfig
+    from recon.net.train import save_weights
+    folder = tmp_path / "weights"
+    folder.mkdir()
+    monkeypatch.setattr(recon.learned, "WEIGHTS_DIR", folder)
+    torch.manual_seed(0)
+    module, sizes = recon.learned.method_classes("bsf")
+    save_weights(folder / "bsf-te.pt", module(sizes.preset("cpu")).eval(), SensorConfig.preset("te"), {}, "bsf")
+    code, stdout, stderr = run_here(capsys, "evaluate", "--table", "--set", "default", "--frames", 10, "--height", 24,
+                                    "--width", 24, "--methods", "tfp,bsf", "--vdp-frames", 1, "--out", tmp_path / "ev")
+    assert code == 0, stderr
+    lines = stdout.splitlines()
+    assert lines[0].startswith("| ML reconstruction | PSNR-μ ↑ | SSIM-μ ↑ | PU21-PSNR (dB) ↑ | HDR-VQM ↓ | "
+                               "FovVideoVDP (JOD) ↑ | ms / frame ↓ (median of 1, ")
+    assert "| TE reconstruction |" in lines[0] and "| paper: parameters |" in lines[0]
+    assert lines[3].startswith("| BSF_ML | no weights |") and "| BSF_TE | " in lines[3]
+    assert lines[3].endswith("| 2.071 M | 0.887 T | 0.231 |") and "ML-count" not in stdout
+    assert "bsf-ml-msb.pt' is missing" in stdout and "FovVideoVDP (JOD, HDR display" in stdout
+    for name in ("table.md", "table.csv", "results.csv", "quality_vs_time.png"):
+        assert (tmp_path / "ev" / name).is_file()
+    rows = list(csv.DictReader((tmp_path / "ev" / "results.csv").read_text().splitlines()))
+    assert {(r["method"], r["mode"]) for r in rows} == {("tfp", "ml-msb"), ("tfp", "te"), ("bsf", "te")}
+    assert all(float(r["hdr_vqm"]) >= 0 and r["frames_vdp"] == "1" for r in rows)
+
+
+def test_evaluate_noise_tables(tmp_path, capsys):
+    code, stdout, stderr = run_here(capsys, "evaluate", "--noise", "--set", "default", "--frames", 10,
+                                    "--height", 24, "--width", 24, "--methods", "tfp", "--out", tmp_path / "ev")
+    assert code == 0, stderr
+    assert "| TE reconstruction | PSNR-μ ↑ (shot noise only) |" in stdout and "(dark current eq. 13)" in stdout
+    rows = list(csv.DictReader((tmp_path / "ev" / "results.csv").read_text().splitlines()))
+    assert sorted(r["mode"] for r in rows) == ["ml", "ml-msb", "te", "te+eq12", "te+eq13"]
+
+
+def test_evaluate_table_refuses(tmp_path, capsys):
+    out = tmp_path / "ev"
+    refused(capsys, "evaluate", "--table", "--vdp-frames", 0, "--out", out, "--vdp-frames 0")
+    refused(capsys, "evaluate", "--metrics", "vdp3", "--out", out, "--metrics 'vdp3'")
+    refused(capsys, "evaluate", "--table", "--frames", 0, "--out", out, "--frames 0")
+    refused(capsys, "evaluate", "--table", "--threads", 0, "--out", out, "--threads 0")
+    refused(capsys, "evaluate", "--table", "--store", tmp_path / "s.zarr", "--out", out, "--table does not apply")
+    refused(capsys, "evaluate", "--methods", "tfp,bsf", "--set", "default", "--frames", 4, "--height", 24, "--width", 24,
+            "--out", out, "bsf-ml-msb.pt' is missing")
+    assert not out.exists()

@@ -111,6 +111,8 @@ def test_tiled_scores_equal_whole_frame_scores(tmp_path):
         assert a.psnr_mu == pytest.approx(b.psnr_mu, rel=1e-12)
         assert a.ssim_mu == pytest.approx(b.ssim_mu, rel=1e-12)
         assert np.isnan(a.ms_per_frame) and a.frames_scored == 4
+    with Runner() as run, pytest.raises(InputError, match="method 'net' is spatial: sequence '.*' has frames larger"):
+        evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp", "net"], tile=(16, 16))
     for sequence in ("lights", "decades"):
         for key, image in whole.strips[sequence].items():
             if isinstance(key, tuple):

@@ -9,8 +9,9 @@ import pytest
 from golden.config import SensorConfig
 from golden.errors import InputError
 from golden.fastsim import simulate_scene
-from recon.evaluate import (Evaluation, Result, evaluate, paper_configs, results_csv, scored_frames,
-                            table_csv, table_markdown, tone_map, write_outputs)
+from recon.evaluate import (Evaluation, Result, evaluate, label, paper_configs, results_csv, scored_frames,
+                            table_csv, table_markdown, write_outputs)
+from recon.pictures import tone_map
 from recon.metrics import psnr_mu, ssim_mu
 from recon.scenes import make_scene
 
@@ -21,6 +22,9 @@ def simulate(config, light, rng):
 
 def test_scored_frames_skip_incomplete_windows():
     assert scored_frames(24, 9) == slice(4, 20)
+    assert scored_frames(70, 9, 61) == slice(30, 40)          # a learned method's span inside too
+    assert scored_frames(61, 9, 61) == slice(30, 31)
+    assert scored_frames(60, 9, 61) == slice(4, 56)           # shorter than the span: the window's rule
     assert scored_frames(9, 9) == slice(4, 5)
     assert scored_frames(8, 9) == slice(0, 8)
     assert scored_frames(5, 1) == slice(0, 5)
@@ -34,7 +38,8 @@ def test_tone_map_divides_by_the_peak_and_clips():
 
 def test_paper_configs():
     configs = paper_configs()
-    assert list(configs) == ["ml-msb", "te", "ml"]
+    assert list(configs) == ["ml-msb", "te", "ml", "te+eq12", "te+eq13"]     # the last two: Tables 6-9
+    assert configs["te+eq12"] == configs["te+eq13"] == SensorConfig()
     assert configs["te"] == SensorConfig() and configs["ml"] == SensorConfig(mode="ml")
     assert configs["ml-msb"] == SensorConfig(mode="ml", ml_readout="msb")
     assert configs["te"].threshold == 175 and configs["ml"].threshold == configs["ml-msb"].threshold == 328
@@ -190,3 +195,108 @@ def test_msb_and_count_cameras_see_the_same_light_and_differ(small_run):
     msb, count = evaluation.streams["m", "ml-msb"], evaluation.streams["m", "ml"]
     assert msb.shape == count.shape and int(msb.max()) <= 8 < int(count.max())
     assert not np.array_equal(evaluation.images["m", "ml-msb", "tfp"], evaluation.images["m", "ml", "tfp"])
+
+
+# ----------------------------------------------------------- the paper's Tables 1, 2, 6 to 10
+def test_labels_are_the_papers_names():
+    assert label("spk2imgnet", "te") == "Spk2ImgNet_TE" and label("mambaspike", "ml-msb") == "MambaSpike_ML"
+    assert label("bsf", "te+eq12") == "BSF_TE+dark12" and label("tfp", "ml") == "TFP_ML-count"
+
+
+@pytest.fixture
+def no_weights(tmp_path, monkeypatch):
+    """An empty weights folder: every learned method lacks weights."""
+    import recon.learned
+    folder = tmp_path / "weights"
+    folder.mkdir()
+    monkeypatch.setattr(recon.learned, "WEIGHTS_DIR", folder)
+    return folder
+
+
+def test_missing_weights_are_noted_by_default_and_refused_when_named(no_weights):
+    light = make_scene("moderate", 6, 16, 16, seed=2)
+    with pytest.raises(InputError, match=r"bsf-te\.pt' is missing"):
+        evaluate([("a", light)], simulate, methods=("tfp", "bsf"), modes=("te",), progress=False)
+    evaluation = evaluate([("a", light)], simulate, methods=("tfp", "bsf"), modes=("te",), progress=False,
+                          missing="note", repeats=1)
+    assert [(r.method, r.mode) for r in evaluation.results] == [("tfp", "te")]
+    assert set(evaluation.missing) == {("bsf", "te")}
+    text = table_markdown(evaluation)
+    assert "| BSF_TE | no weights |" in text and "- BSF_TE: no bsf weights for the te camera" in text
+    everything = evaluate([("a", light)], simulate, modes=("te",), progress=False, repeats=1)   # methods=None
+    assert {m for m, _ in everything.missing} == {"spk2imgnet", "bsf", "mambaspike", "net"}
+    assert [r.method for r in everything.results] == ["tfp", "tfi"]
+
+
+def test_further_metrics_are_the_scores_of_the_scored_frames():
+    from recon.score import score
+    light = make_scene("moderate", 14, 24, 24, seed=4)
+    evaluation = evaluate([("a", light)], simulate, methods=("tfp",), modes=("te",), progress=False, keep=True,
+                          repeats=1, metrics=("fovvideovdp", "psnr_pu21", "hdr_vqm"), vdp_frames=2)
+    assert evaluation.metrics == ("psnr_mu", "ssim_mu", "psnr_pu21", "hdr_vqm", "fovvideovdp")
+    (result,) = evaluation.results
+    pred, truth = evaluation.images["a", "te", "tfp"][4:10], light[4:10]
+    every = score(pred, truth, metrics=("psnr_pu21", "hdr_vqm"))
+    assert result.psnr_pu21 == pytest.approx(every.mean["psnr_pu21"])
+    assert result.hdr_vqm == pytest.approx(every.sequence["hdr_vqm"])
+    assert result.fovvideovdp == pytest.approx(score(pred[2:4], truth[2:4], metrics=("fovvideovdp",)).mean["fovvideovdp"])
+    assert result.frames_vdp == 2 and result.frames_scored == 6
+    text = table_markdown(evaluation)
+    assert "HDR-VQM ↓" in text and "FovVideoVDP (JOD) ↑" in text and "middle 2 scored frames" in text
+    with pytest.raises(InputError, match="unknown metric 'vdp'"):
+        evaluate([("a", light)], simulate, methods=("tfp",), metrics=("vdp",), progress=False)
+    with pytest.raises(InputError, match="vdp_frames"):
+        evaluate([("a", light)], simulate, methods=("tfp",), vdp_frames=0, progress=False)
+
+
+def test_noise_sensors_get_dark_current_and_their_own_table():
+    seen = []
+
+    def recording(config, light, rng, dark_current=None):
+        seen.append(dark_current)
+        return simulate_scene(config, light, seed=rng, dark_current=dark_current)
+
+    light = make_scene("moderate", 12, 24, 24, seed=3)
+    configs = paper_configs()
+    evaluation = evaluate([("a", light)], recording, methods=("tfp",), modes=("ml-msb", "te", "te+eq12", "te+eq13"),
+                          configs=configs, progress=False, repeats=1)
+    assert seen == [None, None, "eq12", "eq13"]
+    by_mode = {r.mode: r.psnr_mu for r in evaluation.results}
+    assert by_mode["te+eq12"] < by_mode["te"] and by_mode["te+eq13"] < by_mode["te"]   # dark current costs
+    lines = table_markdown(evaluation).splitlines()
+    assert lines[0].count("reconstruction") == 2 and len([x for x in lines if x.startswith("| TFP_")]) == 2
+    noise = lines.index(next(x for x in lines if x.startswith("| TE reconstruction | PSNR-μ ↑ (shot noise only)")))
+    assert "(dark current eq. 12)" in lines[noise] and "(dark current eq. 13)" in lines[noise]
+    assert lines[noise + 2].startswith(f"| TFP_TE | {by_mode['te']:.2f} |")
+
+
+def test_complexity_columns_with_the_papers_table10():
+    evaluation = _hand_made()
+    evaluation.methods = ("tfp", "tfi", "bsf")
+    evaluation.missing = {("bsf", "ml-msb"): "no bsf weights", ("bsf", "te"): "no bsf weights"}
+    evaluation.complexity = {"bsf": {"parameters": 152236, "flops": 9.5e9}}
+    lines = table_markdown(evaluation).splitlines()
+    assert lines[0].endswith("| parameters | GFLOPs / 384 x 512 | paper: parameters | paper: FLOPs | "
+                             "paper: s / frame (GPU) |")
+    assert lines[2].endswith("| - | - | - | - | - |")                    # TFP: no network
+    assert lines[4].endswith("| 152,236 | 9.5 | 2.071 M | 0.887 T | 0.231 |")
+    assert "| BSF_ML | no weights |" in lines[4] and "- BSF_ML, BSF_TE: no bsf weights" in lines
+    rows = list(csv.DictReader(io.StringIO(table_csv(evaluation))))
+    assert rows[2]["parameters"] == "152236" and float(rows[2]["paper_flops"]) == 0.887e12
+    assert rows[2]["te_psnr_mu"] == ""                                   # CSV cells stay numeric or empty
+
+
+def test_with_a_learned_method_frames_are_scored_where_its_span_fits(no_weights):
+    import torch
+
+    from recon.learned import method_classes
+    from recon.net.train import save_weights
+    torch.manual_seed(0)
+    module, sizes = method_classes("spk2imgnet")
+    save_weights(no_weights / "spk2imgnet-te.pt", module(sizes.preset("cpu")).eval(), SensorConfig(), {},
+                 "spk2imgnet")
+    light = make_scene("moderate", 63, 24, 24, seed=2)
+    evaluation = evaluate([("a", light)], simulate, methods=("tfp", "spk2imgnet"), modes=("te",), progress=False,
+                          repeats=1)
+    assert evaluation.span == 61 and [r.frames_scored for r in evaluation.results] == [3, 3]
+    assert "- frames scored per sequence: 3, those whose 9-readout window" in table_markdown(evaluation)

@@ -2,8 +2,26 @@
 
 The ML column is the paper's ML camera, the msb readout of its eq. 10; the
 full-count ML camera is reported as extra rows beneath (``--ml-count-config none``
-leaves it out).
+leaves it out). ``--table`` is the paper's Tables 1 and 2 whole: its rows (TFI,
+TFP, Spk2ImgNet, BSF, MambaSpike, the network), every metric of the project,
+parameters, FLOPs and run time with its Table 10 beside, sized to finish on the
+built-in held-out set in 15 minutes on 2 cores (:data:`TABLE_DEFAULTS`);
+``--noise`` adds its Tables 6 to 9 (the TE camera with dark current).
 """
+
+#: --table's methods in the paper's row order.
+TABLE_METHODS = ("tfi", "tfp", "spk2imgnet", "bsf", "mambaspike", "net")
+#: Defaults of the built-in sequences' size and of the timing: (frames, height, width, repeats);
+#: --table's are cut to its time budget (docs/evaluation.md).
+DEFAULTS = (24, 96, 128, 3)
+TABLE_DEFAULTS = (70, 64, 96, 1)      # 70 frames: 10 scored where the learned methods' 61 readouts fit
+#: --table's torch threads: on a shared machine two threads spin against the load (a 64 x 96 frame of
+#: the network took 2.6 s with 2 threads against 0.04 s with 1 at load 10 on 2 cores).
+TABLE_THREADS = 1
+#: Most torch CPU threads ``--threads`` accepts.
+MAX_THREADS = 256
+#: --table's FovVideoVDP frames per sequence (it costs about 0.5 s a frame whatever the size).
+TABLE_VDP_FRAMES = 4
 
 HELP = ("simulate sequences with the paper's TE and ML (msb readout) sensors and the full-count ML "
         "camera, reconstruct with every method, write Table 1 (Markdown, CSV), a quality-against-run-time "
@@ -21,18 +39,40 @@ def add_arguments(parser):
                         help="also evaluate this light sequence (repeatable)")
     parser.add_argument("--folder", action="append", default=[], metavar="DIR",
                         help="also evaluate a folder of .exr/.hdr frames (repeatable)")
-    parser.add_argument("--frames", type=int, default=24, help="frames of built-in sequences (default 24)")
-    parser.add_argument("--height", type=int, default=96, help="rows of built-in sequences (default 96)")
-    parser.add_argument("--width", type=int, default=128, help="columns of built-in sequences (default 128)")
+    parser.add_argument("--frames", type=int, default=None,
+                        help=f"frames of built-in sequences (default {DEFAULTS[0]}; --table {TABLE_DEFAULTS[0]})")
+    parser.add_argument("--height", type=int, default=None,
+                        help=f"rows of built-in sequences (default {DEFAULTS[1]}; --table {TABLE_DEFAULTS[1]})")
+    parser.add_argument("--width", type=int, default=None,
+                        help=f"columns of built-in sequences (default {DEFAULTS[2]}; --table {TABLE_DEFAULTS[2]})")
     parser.add_argument("--methods", default=None,
-                        help="comma-separated reconstruction methods (default: every method)")
+                        help="comma-separated reconstruction methods: tfp, tfi, spk2imgnet, bsf, mambaspike, net "
+                             "(default: every method; a learned one without weights is noted, not run)")
+    parser.add_argument("--table", action="store_true",
+                        help="the paper's Tables 1 and 2 whole: rows TFI, TFP, Spk2ImgNet, BSF, MambaSpike, net; "
+                             "every metric; parameters, FLOPs, run time and the paper's Table 10 beside")
+    parser.add_argument("--noise", action="store_true",
+                        help="also the paper's Tables 6 to 9: the TE camera with the dark current of eq. 12 and "
+                             "of eq. 13")
+    parser.add_argument("--metrics", default=None,
+                        help="comma-separated further metrics: psnr_pu21, hdr_vqm, fovvideovdp "
+                             "(default: none; --table: all)")
+    parser.add_argument("--vdp-frames", type=int, default=None,
+                        help="compute FovVideoVDP (about 0.5 s a frame) on the middle N scored frames of each "
+                             f"sequence (default: every scored frame; --table {TABLE_VDP_FRAMES})")
+    parser.add_argument("--threads", type=int, default=None,
+                        help=f"torch CPU threads, 1..{MAX_THREADS} (default: torch's choice; --table {TABLE_THREADS})")
+    parser.add_argument("--repeats", type=int, default=None,
+                        help=f"timed runs per method, the median reported (default {DEFAULTS[3]}; "
+                             f"--table {TABLE_DEFAULTS[3]})")
     parser.add_argument("--window", type=int, default=9, help="readouts per window (default 9, paper 6.4)")
     parser.add_argument("--te-config", default="te", help="TE sensor: JSON file or 'te' (paper b1 = b2 = 4)")
     parser.add_argument("--ml-config", default="ml-msb",
                         help="ML sensor of the table's ML column, msb readout: JSON file or 'ml-msb' "
                              "(paper 8 bits, eq. 10)")
-    parser.add_argument("--ml-count-config", default="ml",
-                        help="full-count ML sensor of the extra rows: JSON file, 'ml' (8 bits) or 'none'")
+    parser.add_argument("--ml-count-config", default=None,
+                        help="full-count ML sensor of the extra rows: JSON file, 'ml' (8 bits) or 'none' "
+                             "(default 'ml'; with --table 'none': the paper's tables have no such camera)")
     parser.add_argument("--seed", type=int, default=0, help="shot-noise seed (default 0)")
     parser.add_argument("--device", default="cpu", help="torch device for reconstruction (default cpu)")
     parser.add_argument("--store", metavar="STORE",
@@ -57,26 +97,53 @@ def run(args) -> int:
     from recon.scenes.heldout import sequence_set
 
     if args.store or args.workers is not None or args.scheduler:
+        for flag, value in (("--table", args.table), ("--noise", args.noise), ("--metrics", args.metrics),
+                            ("--vdp-frames", args.vdp_frames), ("--threads", args.threads), ("--repeats", args.repeats)):
+            if value not in (None, False):
+                raise InputError(f"{flag} does not apply with --store (a store's streams are scored as they are)")
         from cosim.dataset.evaluate import run_store
         return run_store(args)
-    methods = None
+    from recon.evaluate import NOISE_MODES
+    from recon.score import KEYS
+    defaults = TABLE_DEFAULTS if args.table else DEFAULTS
+    frames, height, width, repeats = (default if value is None else value for value, default in
+                                      zip((args.frames, args.height, args.width, args.repeats), defaults))
+    for flag, value in (("--frames", frames), ("--height", height), ("--width", width), ("--repeats", repeats)):
+        if value < 1:
+            raise InputError(f"{flag} {value}: must be an integer >= 1")
+    threads = TABLE_THREADS if args.table and args.threads is None else args.threads
+    if threads is not None and not 1 <= threads <= MAX_THREADS:
+        raise InputError(f"--threads {threads}: must be in 1..{MAX_THREADS}")
+    vdp_frames = TABLE_VDP_FRAMES if args.table and args.vdp_frames is None else args.vdp_frames
+    if vdp_frames is not None and vdp_frames < 1:
+        raise InputError(f"--vdp-frames {vdp_frames}: must be an integer >= 1")
+    methods = list(TABLE_METHODS) if args.table else None
     if args.methods is not None:
         methods = [m.strip() for m in args.methods.split(",") if m.strip()]
         if not methods:
             raise InputError(f"--methods {args.methods!r} names no method (give e.g. tfp,tfi)")
+    metrics = list(KEYS) if args.table else []
+    if args.metrics is not None:
+        metrics = [m.strip() for m in args.metrics.split(",") if m.strip()]
+        unknown = [m for m in metrics if m not in KEYS]
+        if unknown or not metrics:
+            raise InputError(f"--metrics {args.metrics!r}: choose from {', '.join(KEYS)}")
+    ml_count = args.ml_count_config or ("none" if args.table else "ml")
     check_output_dir(args.out, "--out", OUTPUT_FILES)
     # option, value, sensor key, (mode, ml_readout) it must have
     wanted = [("--ml-config", args.ml_config, "ml-msb", ("ml", "msb")),
               ("--te-config", args.te_config, "te", ("te", "count"))]
-    if args.ml_count_config != "none":
-        wanted.append(("--ml-count-config", args.ml_count_config, "ml", ("ml", "count")))
+    if ml_count != "none":
+        wanted.append(("--ml-count-config", ml_count, "ml", ("ml", "count")))
     configs = {}
     for option, value, mode, (kind, readout) in wanted:
         config = configs[mode] = load_config(value)
         if (config.mode, config.ml_readout) != (kind, readout):
             raise ConfigError(f"{option} {value!r} has mode {config.mode!r}, ml_readout {config.ml_readout!r}; "
                               f"expected mode {kind!r}" + (f", ml_readout {readout!r}" if kind == "ml" else ""))
-    sequences = [] if args.set == "none" else sequence_set(args.set, args.frames, args.height, args.width)
+    if args.noise:              # the paper's Tables 6 to 9: its TE camera with dark current
+        configs.update({mode: configs["te"] for mode in NOISE_MODES})
+    sequences = [] if args.set == "none" else sequence_set(args.set, frames, height, width)
     for path in args.scene:          # memory-mapped: read one slice at a time
         sequences.append((Path(path).stem, load_scene(path, memory_map=True)))
     for folder in args.folder:
@@ -84,9 +151,20 @@ def run(args) -> int:
                           load_hdr_sequence(folder, progress=progress_wanted(args))))
     if not sequences:
         raise InputError("nothing to evaluate: --set none and no --scene or --folder")
-    evaluation = evaluate(sequences, lambda config, light, rng: simulate_scene(config, light, seed=rng),
-                          methods=methods, modes=tuple(configs), configs=configs, window=args.window, seed=args.seed,
-                          device=args.device, progress=progress_wanted(args))
+    if threads is not None:
+        import torch
+        torch.set_num_threads(threads)
+
+    def simulate(config, light, rng, dark_current=None):
+        return simulate_scene(config, light, seed=rng, dark_current=dark_current)
+
+    evaluation = evaluate(sequences, simulate, methods=methods, modes=tuple(configs), configs=configs,
+                          window=args.window, seed=args.seed, device=args.device, progress=progress_wanted(args),
+                          repeats=repeats, metrics=metrics, vdp_frames=vdp_frames,
+                          missing="note" if args.table else None)
+    if args.table:
+        from recon.complexity import measure
+        evaluation.complexity = measure(evaluation.methods, configs["te"])
     paths = write_outputs(evaluation, args.out)
     if args.quiet:
         return 0

@@ -1,8 +1,11 @@
-"""``tespike reconstruct``: a stream S.npz to reconstructed light R.npy (TFP, TFI, the network)."""
+"""``tespike reconstruct``: a stream S.npz to reconstructed light R.npy (TFP, TFI, the learned methods)."""
 
-HELP = "reconstruct light images R.npy from a TE or ML stream S.npz (tfp, tfi, net)"
+from recon.learned import LEARNED
 
-METHOD_CHOICES = ("tfp", "tfi", "net")
+HELP = "reconstruct light images R.npy from a TE or ML stream S.npz (tfp, tfi, spk2imgnet, bsf, mambaspike, net)"
+
+#: The keys of recon.methods.RECON_METHODS (named here without importing torch, so refusals are quick).
+METHOD_CHOICES = ("tfp", "tfi", *LEARNED)
 
 #: Most torch CPU threads ``--threads`` accepts.
 MAX_THREADS = 256
@@ -11,11 +14,13 @@ MAX_THREADS = 256
 def add_arguments(parser):
     parser.add_argument("--stream", required=True, help="S.npz: readout words and the full config")
     parser.add_argument("--method", required=True,
-                        help="tfp (mean decoded light over the window), tfi (spike interval) or net "
-                             "(the paper's network, shipped weights for the te, ml and ml-msb presets)")
+                        help="tfp (mean decoded light over the window), tfi (spike interval), the paper's "
+                             "learned baselines spk2imgnet, bsf, mambaspike, or net (the paper's network); "
+                             "learned methods use the shipped weights of the stream's preset (te, ml, ml-msb)")
     parser.add_argument("--out", required=True, help="R.npy to write: float32 (K, H, W) light, I = 1 is 42000 e-")
     parser.add_argument("--window", type=int, default=None,
-                        help="tfp/tfi: readouts per window, odd (default 9, paper 6.4); net sees 61 readouts")
+                        help="tfp/tfi: readouts per window, odd (default 9, paper 6.4); learned methods see the "
+                             "span of readouts their sizes fix")
     parser.add_argument("--device", default="cpu", help="torch device (default cpu)")
     parser.add_argument("--search", choices=("stream", "window"), default="stream",
                         help="tfi only: look for the spike interval in the whole stream (default) or the window")
@@ -33,9 +38,10 @@ def run(args) -> int:
     # every check that needs no torch comes first, so a refusal is quick
     if args.method not in METHOD_CHOICES:
         raise InputError(f"unknown method {args.method!r} (offered: {', '.join(METHOD_CHOICES)})")
-    if args.method == "net" and args.window is not None:
-        raise InputError(f"--window applies to methods 'tfp' and 'tfi'; 'net' sees the 61 readouts it was "
-                         "trained on")
+    if args.method in LEARNED and args.window is not None:
+        from recon.learned import method_span
+        raise InputError(f"--window applies to methods 'tfp' and 'tfi'; {args.method!r} sees the "
+                         f"{method_span(args.method)} readouts its sizes fix")
     window = 9 if args.window is None else args.window
     if window < 1 or window % 2 == 0:
         raise InputError(f"--window {window}: window = {window} must be an odd integer >= 1")
@@ -47,9 +53,9 @@ def run(args) -> int:
     words, config = load_stream(args.stream, memory_map=True)     # stays on disk
     K, H, W = words.shape
     require_room(f"the {K} images of {H} x {W} pixels", disk={args.out: 4 * K * H * W})
-    if args.method == "net":
-        from recon.net.infer import load_weights, weights_path
-        load_weights(weights_path(config))      # refuse a configuration without weights before writing
+    if args.method in LEARNED:
+        from recon.learned import load_learned
+        load_learned(config, args.method)       # refuse a configuration without weights before writing
 
     import torch
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 #: Options of ``tespike evaluate`` that pick or simulate sequences, with their defaults:
 #: a store already holds its sequences and streams, so any other value is refused.
-SIMULATION_OPTIONS = {"set": "heldout", "scene": [], "folder": [], "frames": 24, "height": 96,
-                      "width": 128, "te_config": "te", "ml_config": "ml-msb", "ml_count_config": "ml",
+SIMULATION_OPTIONS = {"set": "heldout", "scene": [], "folder": [], "frames": None, "height": None,
+                      "width": None, "te_config": "te", "ml_config": "ml-msb", "ml_count_config": None,
                       "seed": 0}
 
 

@@ -11,8 +11,8 @@ evaluate`` (:func:`recon.evaluate.table_markdown`, ``table_csv``,
 A frame that fits in one :data:`EVAL_TILE` is scored by one task with
 :func:`recon.metrics.psnr_mu` / ``ssim_mu`` on whole frames, exactly as the
 serial evaluation does. A larger frame is cut into tiles; each task
-reconstructs its tile plus a halo of the SSIM window radius (every method
-works pixel by pixel along time, so the halo makes the tile exact) and
+reconstructs its tile plus a halo of the SSIM window radius (TFP and TFI work
+pixel by pixel along time, so the halo makes the tile exact) and
 returns per-frame sums of squared mu-law error and of the SSIM map over its
 own pixels; the driver adds them in tile order. Tiles depend only on the frame
 size, and torch runs single-threaded in every task, so the numbers are the
@@ -141,18 +141,33 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     from dask import delayed
 
     from recon.evaluate import Evaluation, Result, scored_frames
-    from recon.methods import METHODS
+    from recon.methods import RECON_METHODS, available_methods, missing_weights
     from recon.settings import ReconSettings
 
     store = DatasetStore.open(url)
-    methods = tuple(METHODS) if methods is None else tuple(methods)
+    sequences = store.sequences()
+    tiled = [s for s in sequences if store.info(s)["height"] > tile[0] or store.info(s)["width"] > tile[1]]
+    named = methods is not None
+    # by default every method that has weights for each sensor of the store (and, where frames
+    # must be tiled, works pixel by pixel: a learned method sees far beyond the tiles' halo)
+    methods = available_methods(store.configs.values()) if methods is None else tuple(methods)
+    if tiled and not named:
+        methods = tuple(m for m in methods if RECON_METHODS[m].block is not None)
     for method in methods:
-        if method not in METHODS:
-            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(METHODS)})")
+        if method not in RECON_METHODS:
+            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
     if not methods:
         raise InputError("no reconstruction method to evaluate")
+    spatial = [m for m in methods if RECON_METHODS[m].block is None]
+    if tiled and spatial:
+        raise InputError(f"method {spatial[0]!r} is spatial: sequence {tiled[0]!r} has frames larger than the "
+                         f"{tile[0]} x {tile[1]} tiles of a store evaluation (evaluate it without --store)")
+    for method in methods:                               # weights for every sensor, before any task runs
+        for config in store.configs.values():
+            reason = missing_weights(method, config)
+            if reason is not None:
+                raise InputError(reason)
     ReconSettings(window=window, device=device)          # refuse a bad window or device here
-    sequences = store.sequences()
     if not sequences:
         raise InputError(f"dataset store {store.url!r} holds no complete sequence")
     h = _halo()
