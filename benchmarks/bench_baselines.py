@@ -31,9 +31,9 @@ import torch  # noqa: E402
 import torch.utils.benchmark as benchmark  # noqa: E402
 from torch.utils.flop_counter import FlopCounterMode  # noqa: E402
 
-from recon.baselines import BASELINES, RECEPTIVE_RADIUS  # noqa: E402
+from recon.baselines import BASELINES  # noqa: E402
+from recon.learned import receptive_radius  # noqa: E402
 from recon.baselines.common import parameter_count  # noqa: E402
-from recon.net.infer import receptive_radius as net_radius  # noqa: E402
 from recon.net.model import TESpikeNet  # noqa: E402
 from recon.net.sizes import NetSizes  # noqa: E402
 
@@ -83,7 +83,7 @@ def main() -> None:
         for size in args.sizes:
             model = build(method, size).eval().to(memory_format=torch.channels_last)
             count = flops(method, size)
-            radius = (net_radius if method == "net" else RECEPTIVE_RADIUS[method])(model.sizes)
+            radius = receptive_radius(model.sizes)
             for threads in args.threads:
                 if size == "cpu":
                     secs, note = seconds(model, HEIGHT, WIDTH, threads, args.min_run_time), ""

@@ -100,7 +100,6 @@ def weights_path(config: SensorConfig, method: str = "net") -> Path:
 def load_learned(config: SensorConfig, method: str):
     """The shipped ``method`` module for ``config``, in eval mode; refused in one line where its
     weights are missing, hold another method or were trained for another configuration."""
-    from .net.infer import load_weights
     path = weights_path(config, method)
     model, trained_for, _ = load_weights(path)
     wanted = method_classes(method)[0]
@@ -109,3 +108,29 @@ def load_learned(config: SensorConfig, method: str):
     if trained_for != config:
         raise InputError(f"{method} weights {str(path)!r} were trained for {trained_for}, the stream is {config}")
     return model
+
+
+@functools.lru_cache(maxsize=8)
+def _load_cached(path: str, mtime: float):
+    import torch
+    payload = torch.load(path, map_location="cpu", weights_only=True)
+    module, sizes_class = method_classes(payload.get("method", "net"))
+    model = module(sizes_class.from_dict(payload["sizes"]))
+    model.load_state_dict(payload["state_dict"])
+    model.eval().to(memory_format=torch.channels_last)
+    return model, SensorConfig.from_dict(payload["config"]), payload.get("meta", {})
+
+
+def load_weights(path: str | Path):
+    """(model in eval mode, the sensor configuration it was trained for, how it was made) of any learned method."""
+    import pickle
+    import zipfile
+    path = Path(path)
+    try:
+        return _load_cached(str(path), path.stat().st_mtime)
+    except OSError as exc:
+        raise InputError(f"cannot read network weights {str(path)!r}: {exc.strerror}") from None
+    except (RuntimeError, KeyError, TypeError, ValueError, EOFError, pickle.UnpicklingError,
+            zipfile.BadZipFile) as exc:
+        raise InputError(f"network weights {str(path)!r} are not a tespike weights file "
+                         f"({str(exc).splitlines()[0][:100] if str(exc) else type(exc).__name__})") from None

@@ -7,7 +7,8 @@ import pytest
 import torch
 
 from golden.errors import InputError
-from recon.baselines import BASELINES, PAPER_PARAMETERS, RECEPTIVE_RADIUS
+from recon.baselines import BASELINES, PAPER_PARAMETERS
+from recon.learned import receptive_radius
 from recon.baselines.align import LocalCrossAttention, PyramidAlign, neighbourhood
 from recon.baselines.common import parameter_count, windows
 from recon.baselines.represent import LENGTHS, firing_rates, window_means
@@ -169,7 +170,7 @@ def test_receptive_radius_bounds_the_field(name):
     """A pixel beyond the radius leaves the centre alone; a change near the centre moves it."""
     changes = {"parsings": 1, "unshuffle": 1, "channels": 4} if name == "mambaspike" else {}
     model = randomise(small(name, **changes)).double()
-    radius = RECEPTIVE_RADIUS[name](model.sizes)
+    radius = receptive_radius(model.sizes)
     f = model.sizes.pyramid_factor
     side = -(-(2 * radius + 2 * f + 2) // f) * f
     light = hdr_light((1, 61, side, side)).double()

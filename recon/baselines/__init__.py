@@ -3,14 +3,14 @@
 Each takes (N, span, H, W) decoded light (the project's stream format into
 every learned method, TE and ML alike) and returns (N, 1, H, W) light at the
 key moment ``span // 2``; how far an output pixel reaches is derived from each
-module (``support`` methods beside ``forward``, :mod:`recon.reach`).
+module (``support`` methods beside ``forward``, :mod:`recon.reach`;
+:func:`recon.learned.receptive_radius` for every learned method).
 """
 
 from __future__ import annotations
 
 from torch import nn
 
-from ..learned import receptive_radius
 from .bsf import BSF, BSFSizes
 from .mambaspike import MambaSpike, MambaSpikeSizes
 from .spk2imgnet import Spk2ImgNet, Spk2ImgNetSizes
@@ -22,12 +22,8 @@ BASELINES: dict[str, tuple[type[nn.Module], type]] = {
     "mambaspike": (MambaSpike, MambaSpikeSizes),
 }
 
-#: method name -> ``receptive_radius(sizes) -> int`` (frame pixels), derived from the module
-#: (:func:`recon.learned.receptive_radius`; one function for every learned method).
-RECEPTIVE_RADIUS = {name: receptive_radius for name in BASELINES}
-
 #: Parameters of each method in the paper's Table 10 (its TE version).
 PAPER_PARAMETERS = {"spk2imgnet": 3_760_000, "bsf": 2_071_000, "mambaspike": 4_418_000}
 
-__all__ = ["BASELINES", "RECEPTIVE_RADIUS", "PAPER_PARAMETERS", "Spk2ImgNet", "Spk2ImgNetSizes", "BSF",
+__all__ = ["BASELINES", "PAPER_PARAMETERS", "Spk2ImgNet", "Spk2ImgNetSizes", "BSF",
            "BSFSizes", "MambaSpike", "MambaSpikeSizes"]

@@ -27,59 +27,26 @@ a configuration no weights were trained for is refused, naming both.
 
 from __future__ import annotations
 
-import functools
-import pickle
-import zipfile
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from golden.config import PRESETS, SensorConfig
+from golden.config import SensorConfig
 from golden.errors import InputError
 
+from ..learned import WEIGHTS_DIR  # noqa: F401  (re-exported: the shipped weights' folder)
 from ..learned import receptive_radius  # noqa: F401  (re-exported: derived from the module)
+from ..learned import load_weights  # noqa: F401  (re-exported)
+from ..learned import weights_path as learned_weights_path
 from ..stream import decode_light, key_span, output_images, span_inside
 from .model import TESpikeNet
 
-WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 
 
 def weights_path(config: SensorConfig) -> Path:
-    """The shipped weights for ``config``: the preset it equals, else a refusal naming both."""
-    for name, keys in PRESETS.items():
-        if SensorConfig(**keys) == config:
-            path = WEIGHTS_DIR / f"{name}.pt"
-            if not path.is_file():
-                raise InputError(f"no network weights shipped for preset {name!r} (looked for {str(path)!r})")
-            return path
-    raise InputError(f"the stream's configuration {config} is none of the presets "
-                     f"{', '.join(PRESETS)} the network's weights were trained for "
-                     "(train weights for it with 'tespike train --config C.json')")
-
-
-@functools.lru_cache(maxsize=8)
-def _load_cached(path: str, mtime: float) -> tuple[torch.nn.Module, SensorConfig, dict]:
-    from ..learned import method_classes
-    payload = torch.load(path, map_location="cpu", weights_only=True)
-    module, sizes_class = method_classes(payload.get("method", "net"))
-    model = module(sizes_class.from_dict(payload["sizes"]))
-    model.load_state_dict(payload["state_dict"])
-    model.eval().to(memory_format=torch.channels_last)
-    return model, SensorConfig.from_dict(payload["config"]), payload.get("meta", {})
-
-
-def load_weights(path: str | Path) -> tuple[torch.nn.Module, SensorConfig, dict]:
-    """(model in eval mode, the sensor configuration it was trained for, how it was made)."""
-    path = Path(path)
-    try:
-        return _load_cached(str(path), path.stat().st_mtime)
-    except OSError as exc:
-        raise InputError(f"cannot read network weights {str(path)!r}: {exc.strerror}") from None
-    except (RuntimeError, KeyError, TypeError, ValueError, EOFError, pickle.UnpicklingError,
-            zipfile.BadZipFile) as exc:
-        raise InputError(f"network weights {str(path)!r} are not a tespike weights file "
-                         f"({str(exc).splitlines()[0][:100] if str(exc) else type(exc).__name__})") from None
+    """The shipped network weights for ``config`` (:func:`recon.learned.weights_path` of ``net``)."""
+    return learned_weights_path(config, "net")
 
 
 def tile_margin(sizes) -> int:
@@ -184,7 +151,7 @@ def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, ti
     keys = range(K)
     if progress:
         from tqdm import tqdm
-        keys = tqdm(keys, desc="reconstruct net", unit="frame")
+        keys = tqdm(keys, desc=f"reconstruct {type(model).__name__}", unit="frame")
     with torch.inference_mode():
         for k in keys:
             out[k] = frame(model, words, config, k, tile=tile, device=device).numpy()
