@@ -157,8 +157,8 @@ def candidates(args) -> None:
     from recon.engine.validation import validation_set
     from recon.metrics import mu_law
     from recon.net.head import BlendHead, RADII, key_estimates
-    from recon.stream import decode_light, key_span
-    names = [f"mean {2 * r + 1}" for r in RADII] + ["tfi in span"]
+    from recon.stream import decode_light, key_span, span_inside
+    names = [f"mean {2 * r + 1}" for r in RADII] + ["tfi"]
     span = NetSizes().span
     for label, preset in SENSORS:
         config = SensorConfig.preset(preset)
@@ -168,10 +168,11 @@ def candidates(args) -> None:
         for case in validation_set(config):
             light = decode_light(case.words, config, dtype=torch.float64)
             spans = torch.from_numpy(np.stack([key_span(len(light), k, span) for k in range(len(light))]))
-            estimates = key_estimates(light[spans])                         # (K, estimates, H, W)
+            inside = torch.from_numpy(np.stack([span_inside(len(light), k, span) for k in range(len(light))]))
+            estimates = key_estimates(light[spans], inside)                 # (K, estimates, H, W)
             head = BlendHead(4, 1, NetSizes().mu).double()
             with torch.no_grad():
-                blend = head(torch.zeros(len(light), 4, *light.shape[1:], dtype=torch.float64), light[spans])
+                blend = head(torch.zeros(len(light), 4, *light.shape[1:], dtype=torch.float64), light[spans], inside)
             truth = torch.from_numpy(case.light).double()
             cells = [float(np.mean(psnr_mu(estimates[:, j].numpy(), case.light))) for j in range(len(names))]
             cells.append(float(np.mean(psnr_mu(blend[:, 0].numpy(), case.light))))
