@@ -33,6 +33,10 @@ pixels grouped in row modules; more than 6 GB, still growing, one minute into
 pixel rule whatever H x W is. For a synthesis tool the loop unrolls into the
 same H x W pixels.
 
+The pixel rule here is its own Verilog text (:func:`_pixel_rule`), not generated from
+:mod:`rtl.pixel`; ``tespike prove`` proves it equivalent to that pixel (property
+``stream-pixel-rule``) through :func:`stream_pixel_rule_verilog`, one pixel of the same text.
+
 The state is read and written only inside the loop's block, so its blocking
 assignments are safe (``verilator lint_off BLKSEQ`` with that reason); nothing
 outside the block reads a state memory in the same clock.
@@ -128,6 +132,60 @@ def _pixel_rule(config: SensorConfig, indent: str) -> tuple[str, str]:
     return decls, body
 
 
+#: Indent of the pixel rule inside the top's loop (and inside :func:`stream_pixel_rule_verilog`).
+RULE_INDENT = "      "
+
+
+def stream_pixel_rule_verilog(config: SensorConfig) -> str:
+    """One pixel of the streaming top as a combinational module, for ``tespike prove``.
+
+    The module ``<mode>_stream_pixel_rule`` holds the very text of :func:`_pixel_rule` that the
+    top's loop holds (same declarations, same body, same indent), with one pixel (``P = 1``)
+    and the loop's clocked block made combinational: the state memories are loaded from the
+    ``<reg>_q`` inputs (the registers' current values), the body runs once, and the
+    ``<reg>_d`` outputs show what the body left in them (the values the top's registers take
+    at the edge). ``charge`` is the input register's value (``charge_sample[p]``), ``held_q``
+    / ``held_d`` the second buffer's entry, ``word_now`` the body's ``word``.
+    :func:`cosim.formal.stream_rule_equivalence` proves it equivalent to :mod:`rtl.pixel`.
+    """
+    c = checked_config(config)
+    decls, body = _pixel_rule(c, RULE_INDENT)
+    regs = {"acc": c.acc_bits, **({"sfc": c.b1, "ovf": 1, "m": c.b2} if c.is_te else
+                                  {"count": c.ml_bits})}
+    ports = ([f"  input  wire [{c.input_bits - 1}:0] charge,"]
+             + ([f"  input  wire [{c.b2 - 1}:0] ccc,"] if c.is_te else [])
+             + ["  input  wire last,", "  input  wire frame_valid,", "  input  wire clear,"]
+             + [f"  input  wire [{w - 1}:0] {r}_q," for r, w in regs.items()]
+             + [f"  input  wire [{c.word_bits - 1}:0] held_q,"]
+             + [f"  output reg  [{w - 1}:0] {r}_d," for r, w in regs.items()]
+             + [f"  output reg  [{c.word_bits - 1}:0] held_d,",
+                f"  output reg  [{c.word_bits - 1}:0] word_now"])
+    load = "".join(f"{RULE_INDENT}{r}[p] = {r}_q;\n" for r in regs)
+    store = "".join(f"{RULE_INDENT}{r}_d = {r}[p];\n" for r in regs)
+    return f"""\
+// One pixel of {stream_module_names(c)['top']}: the rule text of its loop, combinational.
+// config: {json.dumps(c.to_dict())}
+module {c.mode}{'_msb' if c.is_msb else ''}_stream_pixel_rule (
+{chr(10).join(ports)}
+);
+  localparam integer P = 1;
+  localparam integer WD = {c.word_bits};
+  reg [{c.input_bits - 1}:0] charge_sample [0:P-1];
+  reg [{c.acc_bits - 1}:0] acc [0:P-1];
+{decls}  reg [WD-1:0] held [0:P-1];
+  integer p;
+  always @* begin
+    for (p = 0; p < P; p = p + 1) begin
+      charge_sample[p] = charge;
+{load}{RULE_INDENT}held[p] = held_q;
+{body}{store}{RULE_INDENT}held_d = held[p];
+{RULE_INDENT}word_now = word;
+    end
+  end
+endmodule
+"""
+
+
 def _clear_lines(config: SensorConfig, indent: str) -> str:
     """Zero the counter state of pixel ``p`` (the power-up values)."""
     if config.is_te:
@@ -149,7 +207,7 @@ def stream_top_verilog(config: SensorConfig, height: int, width: int, lanes: int
     te = config.is_te
     ccc_wire = f"  wire [{b2 - 1}:0] ccc;  // shared clock cycle counter, 1..alpha\n" if te else ""
     ccc_pin = ".ccc(ccc), " if te else ""
-    decls, body = _pixel_rule(config, "      ")
+    decls, body = _pixel_rule(config, RULE_INDENT)
     return f"""\
 // The user names the output file (tespike verilog --out A.v): waive Verilator's file-name style check.
 /* verilator lint_off DECLFILENAME */

@@ -9,8 +9,9 @@ import pytest
 from amaranth.hdl import Const, Module
 
 import rtl.pixel
-from cosim.formal import ProofToolError, corners, properties, prove, require_tools
-from golden.config import SensorConfig
+import rtl.verilog_stream
+from cosim.formal import ProofToolError, corners, properties, prove, require_tools, stream_rule_equivalence
+from golden.config import SensorConfig, load_config
 from tests.cli import assert_refused, run_tespike
 
 pytestmark = pytest.mark.skipif(
@@ -94,8 +95,9 @@ def test_command_proves_a_config_and_reports_each_property(tmp_path):
     assert done.returncode == 0, done.stderr
     lines = done.stdout.strip().splitlines()
     assert [line.split(":")[0] for line in lines[:-1]] == ["small rule", "small rule-registered-word",
-                                                            "small bounds", "small stream"]
-    assert all("proved" in line for line in lines[:-1]) and "4 of 4 properties proved" in lines[-1]
+                                                            "small bounds", "small stream",
+                                                            "small stream-pixel-rule"]
+    assert all("proved" in line for line in lines[:-1]) and "5 of 5 properties proved" in lines[-1]
 
 
 def test_a_missing_tool_is_named_with_its_package(monkeypatch):
@@ -109,3 +111,69 @@ def test_command_refuses_bad_options_in_one_line():
     assert_refused(done, "cvc9")
     done = run_tespike("prove", "--depth", "0", timeout=60)
     assert_refused(done, "--depth")
+
+
+# -- the streaming Verilog top's pixel rule (rtl/verilog_stream.py) --------------------------------
+PRESETS = ("te", "ml", "ml-msb")
+
+#: Hand edits of the streaming top's rule text, per preset: (what is replaced, by what).
+MUTATIONS = {
+    "te": [(">=", ">"),                           # fires one electron late
+           ("m_next = total[4]", "m_next = total[3]"),   # latches the CCC on the wrong bit
+           ("{1'b1, m_next}", "{1'b0, m_next}")],  # loses the flag in the word
+    "ml": [(">=", ">"), ("count[p] + 8'd1", "count[p] + 8'd2")],
+    "ml-msb": [(">=", ">"), ("(word - 4'd1)", "word"),   # keeps the wrong remainder
+               ("word = 4'd2", "word = 4'd3")],           # a wrong msb index
+}
+
+
+def _mutated(monkeypatch, old: str, new: str) -> None:
+    real = rtl.verilog_stream._pixel_rule
+
+    def edited(config, indent):
+        decls, body = real(config, indent)
+        assert old in body, (old, body)
+        return decls, body.replace(old, new, 1)
+    monkeypatch.setattr(rtl.verilog_stream, "_pixel_rule", edited)
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_stream_pixel_rule_is_the_tops_text_and_equivalent(preset, tmp_path):
+    config = load_config(preset)
+    decls, body = rtl.verilog_stream._pixel_rule(config, rtl.verilog_stream.RULE_INDENT)
+    module = rtl.verilog_stream.stream_pixel_rule_verilog(config)
+    top = rtl.verilog_stream.stream_top_verilog(config, 2, 3, 2)
+    assert decls in module and body in module and decls in top and body in top
+    result = prove(f"{preset}-stream-pixel-rule", stream_rule_equivalence(config), depth=1,
+                   solver="z3", trace_dir=tmp_path)
+    assert result.proved, result.detail
+    assert result.seconds < 30
+
+
+@pytest.mark.parametrize("preset,old,new", [(p, o, n) for p, edits in MUTATIONS.items() for o, n in edits])
+def test_an_edited_stream_pixel_rule_fails_with_a_counterexample(preset, old, new, tmp_path, monkeypatch):
+    _mutated(monkeypatch, old, new)
+    config = load_config(preset)
+    assert new in rtl.verilog_stream.stream_top_verilog(config, 2, 3, 2)   # the top has the edit too
+    result = prove(f"{preset}-stream-pixel-rule", stream_rule_equivalence(config), depth=1,
+                   solver="z3", trace_dir=tmp_path)
+    assert not result.proved
+    assert result.detail.startswith("equivalence check: ") and "(pixel) vs" in result.detail, result.detail
+    assert " at " in result.detail and "charge=" in result.detail, result.detail
+    assert result.trace is not None and "in_charge" in result.trace.read_text()
+
+
+def test_command_fails_in_one_line_on_an_edited_stream_rule(tmp_path, monkeypatch, capsys):
+    from cosim.cli import main
+
+    _mutated(monkeypatch, ">=", ">")
+    path = tmp_path / "small.json"
+    path.write_text(json.dumps(SMALL_TE.to_dict()))
+    code = main(["prove", "--config", str(path), "--depth", "2", "--traces", str(tmp_path / "traces")])
+    out = capsys.readouterr().out.strip().splitlines()
+    assert code == 1
+    failed = [line for line in out if "FAILED" in line]
+    assert len(failed) == 1 and failed[0].startswith("small stream-pixel-rule: FAILED in the equivalence "
+                                                     "check: "), out
+    assert (tmp_path / "traces" / "small-stream-pixel-rule.vcd").exists()
+    assert "4 of 5 properties proved" in out[-1]

@@ -1,7 +1,9 @@
-"""``tespike prove``: unbounded proofs (k-induction) of the pixel against SPEC sections 3-4."""
+"""``tespike prove``: unbounded proofs (k-induction) of the pixel against SPEC sections 3-4, and the
+streaming Verilog top's pixel rule proved equivalent to that pixel (``stream-pixel-rule``)."""
 
 HELP = ("prove the pixel equal to SPEC section 3's rule and its counters and words legal, for every "
-        "input (Yosys + yosys-smtbmc k-induction), for a configuration and optionally its extreme corners")
+        "input (Yosys + yosys-smtbmc k-induction), and the streaming Verilog top's pixel rule equivalent "
+        "to that pixel (Yosys miter + sat), for a configuration and optionally its extreme corners")
 
 
 def add_arguments(parser):
