@@ -74,11 +74,11 @@ class Support:
         first = Fraction(1, 2) - Fraction(stride, 2) - padding
         return self.extend(first, first + dilation * (kernel - 1), self.scale * stride)
 
-    def fold(self, factor: int) -> "Support":
+    def unshuffle(self, factor: int) -> "Support":
         """Pixel-unshuffle: a factor x factor block becomes one pixel of a grid factor times coarser."""
         return self.conv(factor, stride=factor)
 
-    def unfold(self, factor: int) -> "Support":
+    def shuffle(self, factor: int) -> "Support":
         """Pixel-shuffle: each pixel becomes factor x factor pixels of a finer grid."""
         half = Fraction(factor - 1, 2 * factor)
         return self.extend(-half, half, self.scale / factor)
@@ -163,9 +163,9 @@ def support(module: nn.Module, *inputs: Support) -> Support:
             raise TypeError(f"no reach rule for {module!r} (unequal strides)")
         return union(*axes)
     if isinstance(module, nn.PixelUnshuffle):
-        return union(*inputs).fold(module.downscale_factor)
+        return union(*inputs).unshuffle(module.downscale_factor)
     if isinstance(module, nn.PixelShuffle):
-        return union(*inputs).unfold(module.upscale_factor)
+        return union(*inputs).shuffle(module.upscale_factor)
     raise TypeError(f"no reach rule for {type(module).__name__}: give it a support() method beside its forward")
 
 

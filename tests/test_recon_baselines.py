@@ -96,8 +96,8 @@ def test_untrained_output_is_the_heads_initial_blend(name):
     model = small(name)
     f = model.sizes.pyramid_factor
     light = hdr_light((1, 61, f, 2 * f))
-    feature = torch.zeros(1, model.head.conv.in_channels, f // model.head.unfold.upscale_factor,
-                          2 * f // model.head.unfold.upscale_factor)
+    feature = torch.zeros(1, model.head.conv.in_channels, f // model.head.shuffle.upscale_factor,
+                          2 * f // model.head.shuffle.upscale_factor)
     assert torch.allclose(model(light), model.head(feature, light), rtol=1e-4)
 
 

@@ -25,11 +25,11 @@ def one_thread():
 
 
 def test_conv_rules_are_the_exact_geometry():
-    """Centre-to-centre displacements, frame pixels: a 3 x 3 stride-2 convolution, a fold, upsampling."""
+    """Centre-to-centre displacements, frame pixels: a 3 x 3 stride-2 convolution, a pixel-unshuffle, upsampling."""
     assert Support().conv(3, padding=1) == Support(-1, 1, 1)
     assert Support().conv(3, stride=2, padding=1) == Support(-1.5, 0.5, 2)      # reads 2j - 1 .. 2j + 1
-    assert Support().fold(4) == Support(-1.5, 1.5, 4)
-    assert Support().fold(4).unfold(4) == Support(-3, 3, 1)                     # a 4 x 4 block, both ways
+    assert Support().unshuffle(4) == Support(-1.5, 1.5, 4)
+    assert Support().unshuffle(4).shuffle(4) == Support(-3, 3, 1)                     # a 4 x 4 block, both ways
     assert Support(0, 0, 2).upsample(2) == Support(-1.5, 1.5, 1)                # 3/4 of a coarse pixel
     assert Support().window(8).window(8) == Support().window(8)                 # same windows: no further
     with pytest.raises(ValueError, match="grids of scale"):

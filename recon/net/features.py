@@ -61,7 +61,7 @@ class MSFEG(nn.Module):
         super().__init__()
         folded = window * unshuffle ** 2
         branch = channels // len(self.KERNELS)
-        self.fold = nn.PixelUnshuffle(unshuffle)
+        self.unshuffle = nn.PixelUnshuffle(unshuffle)
         self.embed = nn.Conv2d(folded, channels, 1)
         self.scales = nn.ModuleList(nn.Conv2d(channels, branch, k, padding=k // 2) for k in self.KERNELS)
         self.gradient = GradientFilters(window) if gradient else None
@@ -72,18 +72,18 @@ class MSFEG(nn.Module):
 
     def folded_forward(self, x: torch.Tensor) -> torch.Tensor:
         """The definition, step by step: gradients, pixel-unshuffle, 1 x 1 convolutions."""
-        embedded = self.act(self.embed(channels_last(self.fold(x))))
+        embedded = self.act(self.embed(channels_last(self.unshuffle(x))))
         parts = [scale(embedded) for scale in self.scales]
         if self.gradient is not None:
-            parts.append(self.gradient_proj(channels_last(self.fold(self.gradient(x)))))
+            parts.append(self.gradient_proj(channels_last(self.unshuffle(self.gradient(x)))))
         return self.act(self.fuse(self.act(torch.cat(parts, dim=1))))
 
     def support(self, x: Support) -> Support:
         """The reach of :meth:`folded_forward` (the same function as :meth:`forward`)."""
-        embedded = support(self.embed, support(self.fold, x))
+        embedded = support(self.embed, support(self.unshuffle, x))
         parts = [support(scale, embedded) for scale in self.scales]
         if self.gradient is not None:
-            parts.append(support(self.gradient_proj, support(self.fold, support(self.gradient, x))))
+            parts.append(support(self.gradient_proj, support(self.unshuffle, support(self.gradient, x))))
         return support(self.fuse, union(*parts))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -95,7 +95,7 @@ class MSFEG(nn.Module):
         eq. 8 kernels and the trained projection. Same function, same parameters,
         no 3 x window full-resolution gradient images to write and fold.
         """
-        u = self.fold.downscale_factor
+        u = self.unshuffle.downscale_factor
         window = x.shape[1]
         c = self.embed.out_channels
         embed = self.embed.weight.reshape(c, window, u, u)

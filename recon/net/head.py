@@ -117,7 +117,7 @@ class BlendHead(nn.Module):
         self.estimates = estimate_count()
         outputs = self.estimates + 1                       # logits, then the correction
         self.conv = nn.Conv2d(channels, outputs * unshuffle ** 2, 3, padding=1)
-        self.unfold = nn.PixelShuffle(unshuffle)
+        self.shuffle = nn.PixelShuffle(unshuffle)
         nn.init.zeros_(self.conv.weight)
         with torch.no_grad():
             bias = torch.zeros(outputs)
@@ -127,11 +127,11 @@ class BlendHead(nn.Module):
 
     def forward(self, feature: torch.Tensor, light: torch.Tensor, inside: torch.Tensor | None = None) -> torch.Tensor:
         """``inside`` (N, T): the span's readouts that lie in the stream (see :func:`key_estimates`)."""
-        out = self.unfold(self.conv(feature))
+        out = self.shuffle(self.conv(feature))
         weights = torch.softmax(out[:, :self.estimates], 1)
         codes = compress(key_estimates(light, inside), self.mu)
         return expand((weights * codes).sum(1, keepdim=True) + out[:, self.estimates:], self.mu)
 
     def support(self, feature: Support, light: Support) -> Support:
         """The estimates are per pixel of the light; the weights and correction come from the feature."""
-        return support(self.unfold, support(self.conv, feature)).union(light)
+        return support(self.shuffle, support(self.conv, feature)).union(light)

@@ -41,7 +41,7 @@ class TESpikeNet(nn.Module):
             self.head = BlendHead(s.channels, s.unshuffle, s.mu)
         else:                                   # "mean": a correction to the key sub-stream's mean
             self.head = nn.Conv2d(s.channels, s.unshuffle ** 2, 3, padding=1)
-            self.unfold = nn.PixelShuffle(s.unshuffle)
+            self.shuffle = nn.PixelShuffle(s.unshuffle)
             nn.init.zeros_(self.head.weight)    # start from the temporal mean
             nn.init.zeros_(self.head.bias)
 
@@ -70,7 +70,7 @@ class TESpikeNet(nn.Module):
             fused = self.attention(fused, self.intensity(subs[:, s.substreams // 2], base))
         if s.head == "blend":
             return self.head(fused, light, inside)
-        return expand(base + self.unfold(self.head(fused)), s.mu)
+        return expand(base + self.shuffle(self.head(fused)), s.mu)
 
     def support(self, light: Support) -> Support:
         """:meth:`forward` on supports (sub-streams, means and the mu-law act per pixel)."""
@@ -79,7 +79,7 @@ class TESpikeNet(nn.Module):
             fused = self.attention.support(fused, support(self.intensity, light, light))
         if self.sizes.head == "blend":
             return self.head.support(fused, light)
-        return support(self.unfold, support(self.head, fused)).union(light)
+        return support(self.shuffle, support(self.head, fused)).union(light)
 
 
 def parameter_count(model: nn.Module) -> int:

@@ -43,15 +43,15 @@ class IntensityFeature(nn.Module):
 
     def __init__(self, window: int, channels: int, unshuffle: int = 1):
         super().__init__()
-        self.fold = nn.PixelUnshuffle(unshuffle)
+        self.unshuffle = nn.PixelUnshuffle(unshuffle)
         self.convs = nn.Sequential(nn.Conv2d((window + 1) * unshuffle ** 2, channels, 3, padding=1),
                                    nn.ReLU(), nn.Conv2d(channels, channels, 3, padding=1))
 
     def forward(self, substream: torch.Tensor, mean: torch.Tensor) -> torch.Tensor:
-        return self.convs(channels_last(self.fold(torch.cat((mean, substream), 1))))
+        return self.convs(channels_last(self.unshuffle(torch.cat((mean, substream), 1))))
 
     def support(self, substream: Support, mean: Support) -> Support:
-        return support(self.convs, support(self.fold, union(mean, substream)))
+        return support(self.convs, support(self.unshuffle, union(mean, substream)))
 
 
 class GuidedAttention(nn.Module):
