@@ -189,7 +189,7 @@ def complexity(args) -> None:
     print("\n| size | parameters | GFLOPs at 384 x 512 | threads | s / frame (median) |")
     print("| --- | ---: | ---: | ---: | ---: |")
     from torch.utils.flop_counter import FlopCounterMode
-    for name in ("cpu", "paper"):
+    for name in args.sizes:
         sizes = NetSizes.preset(name)
         model = TESpikeNet(sizes).eval().to(memory_format=torch.channels_last)
         with torch.inference_mode():
@@ -238,6 +238,8 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--sizes", nargs="+", default=["cpu", "paper"], choices=["cpu", "paper"],
+                        help="network sizes timed by --complexity (the paper size takes minutes per frame)")
     args = parser.parse_args()
     if args.validation:
         validation(args)
