@@ -98,7 +98,9 @@ def test_evaluate_noise_tables(tmp_path, capsys):
     assert sorted(r["mode"] for r in rows) == ["ml", "ml-msb", "te", "te+eq12", "te+eq13"]
 
 
-def test_evaluate_table_refuses(tmp_path, capsys):
+def test_evaluate_table_refuses(tmp_path, capsys, monkeypatch):
+    import recon.learned
+    monkeypatch.setattr(recon.learned, "WEIGHTS_DIR", tmp_path)      # no weights shipped, whatever the checkout holds
     out = tmp_path / "ev"
     refused(capsys, "evaluate", "--table", "--vdp-frames", 0, "--out", out, "--vdp-frames 0")
     refused(capsys, "evaluate", "--metrics", "vdp3", "--out", out, "--metrics 'vdp3'")
