@@ -5,6 +5,16 @@ import pytest
 
 
 @pytest.fixture
+def one_torch_thread():
+    """Tiny tensors: one torch thread (two spin against each other on a busy machine); restored after."""
+    import torch
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture
 def rng():
     return np.random.default_rng(12345)
 

@@ -16,12 +16,7 @@ from tests.test_recon_baselines import SMALL, hdr_light
 from tests.test_recon_net_infer import TINY
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def test_conv_rules_are_the_exact_geometry():
