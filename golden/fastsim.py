@@ -8,10 +8,11 @@ dynamics allow. Each pixel-readout takes one of these paths, chosen from its
 light and its carried charge only (never from a random draw of its own, so
 the choice cannot bias the result); docs/simulator.md has the derivation.
 
-``lazy``     dim light (interval mean at most theta / 2), no dark electrons,
+``lazy``     dim light (interval mean at most 2 theta), no dark electrons,
              ``acc < theta``: no draw until the next threshold crossing, whose
-             light-time is Gamma(theta - acc); an interval only subtracts its
-             mean from what remains (:meth:`SceneSimulator._lazy_path`).
+             light-time is Gamma(theta - acc), then Gamma(theta) from crossing
+             to crossing; an interval only subtracts its mean from what
+             remains (:meth:`SceneSimulator._lazy_path`).
 ``event``    ``acc < theta`` and no clock can get more than ``min(theta, 2^E - 1)``
              electrons (bound below). Then no clock holds two threshold
              crossings, so every crossing is a spike in its own clock and no
@@ -42,8 +43,11 @@ the choice cannot bias the result); docs/simulator.md has the derivation.
              interval by the event, queue or full path from the state reached,
              chosen from that state (:meth:`SceneSimulator._head_path`).
 ``clock``    anything else (light within about 10 % of one threshold per clock,
-             where charge backs up and the accumulator can clip): per-clock electrons for these pixels only, run through
-             the cycle-exact model :class:`golden.sensor.PixelArray`.
+             where charge backs up and the accumulator can clip): per-clock
+             electrons for these pixels only; where they are few, the queue
+             of crossings over all clocks in a few array passes, kept where
+             no clock clipped (:meth:`SceneSimulator._walk_clocks`), else the
+             cycle-exact model :class:`golden.sensor.PixelArray` on them.
 
 ML msb (SPEC section 3): every path finds the spikes of the interval as for
 the count readout; the counter is then ``min(sfc + spikes, 2^ml_bits - 1)``
@@ -76,7 +80,7 @@ from .errors import InputError
 from .fastsim_classify import (BRIGHT, CLOCK, EVENT, FULL, HEAD, LAZY, MAX_BACKLOG, MIN_WINDOW, QUEUE,
                                SIMULATION_PATHS, groups, path_levels, round_window)
 from .fastsim_stripes import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, check_workers, run_stripes,
-                              spawn_generators, stripe_slices)
+                              spawn_generators, stripe_rows, stripe_slices)
 from .io import check_scene, word_dtype
 from .light import (as_generator, check_dark_current, dark_electrons,
                     deterministic_clock_electrons, electrons_per_readout, log_budget,
@@ -88,8 +92,8 @@ from .sensor import PixelArray
 
 __all__ = ["CHECKS", "MAX_BACKLOG", "MAX_STRIPES", "MIN_WINDOW", "SIMULATION_METHODS", "SIMULATION_PATHS",
            "STRIPE_PIXELS", "STRIPE_ROWS", "SceneSimulator", "check_workers", "iter_scene_stimulus",
-           "lindley_ends", "scene_stimulus", "simulate_scene", "spawn_generators", "stripe_simulators",
-           "stripe_slices"]
+           "lindley_ends", "scene_stimulus", "simulate_scene", "spawn_generators", "stripe_rows",
+           "stripe_simulators", "stripe_slices"]
 
 #: Bounded events a pixel-readout can rely on (input saturation, clipping,
 #: backlog, firing, window certification, ...); each gets 1/CHECKS of the budget.
@@ -107,6 +111,11 @@ SMALL_DRAW = 4096
 
 #: Pixel clocks x pixels of per-clock electrons held at once (bounds memory).
 CLOCK_CHUNK_ELEMENTS = 1 << 21
+
+#: Pixels up to which the per-clock path first tries the unclipped walk
+#: (:meth:`SceneSimulator._walk_clocks`): a few array passes over all clocks instead of
+#: the cycle-exact model's five per clock, whose Python cost dominates for few pixels.
+WALK_PIXELS = 512
 
 
 class SceneSimulator:
@@ -135,11 +144,11 @@ class SceneSimulator:
         n = self.shape[0] * self.shape[1]
         self._acc = np.zeros(n, np.int64)                  # carried charge (lazy pixels: at their last sync)
         # lazy pixels (dim light, see _lazy_path): light-time still to the next
-        # threshold crossing, and light-time since the last sync
+        # threshold crossing, and from the last sync to that crossing
         self.sampler = None                                # PoissonSampler, made on first use
         self._lazy = np.zeros(n, bool)
         self._remaining = np.zeros(n)
-        self._elapsed = np.zeros(n)
+        self._span = np.zeros(n)
         self.sfc = np.zeros(n, np.int64)                   # msb: remainder left in the counter
         self.fraction = np.zeros(n)
         self._no_dark = np.zeros(n, np.int64)              # read only
@@ -253,7 +262,7 @@ class SceneSimulator:
         return words.reshape(self.shape)
 
     def _lazy_path(self, expected, dark, words):
-        """Dim light (interval mean at most ``levels.mean_lazy``, no dark electrons,
+        """Dim light (interval mean at most ``levels.mean_lazy``, 2 theta; no dark electrons,
         ``acc < theta``): no random draw until the next threshold crossing.
 
         In light-time (tau grows by expected per interval) the electrons are a
@@ -261,11 +270,12 @@ class SceneSimulator:
         electrons after a sync, comes ``Gamma(n)`` later. Each interval only
         subtracts expected from the light-time remaining; an interval that reaches
         it fires that spike (a crossing is a spike in its own clock, as on the
-        event path) and draws the electrons after it, ``Poisson(-remaining)``
-        (memoryless), which give the further spikes and the new charge; the
-        next crossing is drawn from there. A pixel that leaves this path is
-        synced (:meth:`_sync`). TE overflow needs ``(2^b1 - 1) theta`` electrons
-        after a crossing in one interval, surely not at this light (bound).
+        event path) and the charge restarts from 0 at the crossing electron: a
+        sync, whose next crossing is ``Gamma(theta)`` later (memoryless), maybe
+        again within the interval (a further spike). The charge between syncs
+        is drawn only when a pixel leaves this path (:meth:`_sync`). TE overflow
+        needs ``(2^b1 - 1) theta`` electrons after a crossing in one interval,
+        surely not at this light (bound).
         -> the pixels on this path (a flat mask)."""
         c = self.config
         theta = c.threshold
@@ -280,28 +290,31 @@ class SceneSimulator:
                 self._sync(leave)
             enter = changed[~was]
             if enter.size:
-                self._remaining[enter] = self.rng.standard_gamma(theta - self._acc[enter])
-                self._elapsed[enter] = 0.0
+                self._span[enter] = self._remaining[enter] = self.rng.standard_gamma(theta - self._acc[enter])
         self._lazy = eligible
-        # whole-frame passes, no gather: the other pixels' values are never read
+        # a whole-frame pass, no gather: the other pixels' values are never read
         np.subtract(self._remaining, expected, out=self._remaining)
-        np.add(self._elapsed, expected, out=self._elapsed)
         hit = eligible & (self._remaining <= 0.0)
         cross = np.flatnonzero(hit)
         if c.is_msb:                                       # msb reads out a remainder left
             self._ml_words(np.flatnonzero(eligible & ~hit & (self.sfc > 0)), 0, words)
         if cross.size:
-            # charge after the interval, from the crossing on
-            level = theta + self.rng.poisson(-self._remaining[cross])
-            spikes = level // theta
-            rest = level - spikes * theta
-            self._acc[cross] = rest
+            spikes = np.ones(cross.size, np.int64)
+            span = self.rng.standard_gamma(float(theta), cross.size)
+            remaining = self._remaining[cross] + span
+            again = np.flatnonzero(remaining <= 0.0)
+            while again.size:                              # another crossing in the interval
+                spikes[again] += 1
+                span[again] = self.rng.standard_gamma(float(theta), again.size)
+                remaining[again] += span[again]
+                again = again[remaining[again] <= 0.0]
+            self._acc[cross] = 0
+            self._remaining[cross] = remaining
+            self._span[cross] = span
             if c.is_te:
                 words[cross] = spikes
             else:
                 self._ml_words(cross, spikes, words)
-            self._remaining[cross] = self.rng.standard_gamma(theta - rest)
-            self._elapsed[cross] = 0.0
         return eligible
 
     def _sync(self, sel):
@@ -313,12 +326,14 @@ class SceneSimulator:
 
     def _lazy_charge(self, sel, rng):
         """Electrons lazy pixels ``sel`` have gathered since their sync, drawn with
-        ``rng``: given the crossing at light-time ``elapsed + remaining`` after the
-        sync, the ``n - 1`` electrons before it are iid uniform over that span, so
-        ``Binomial(n - 1, elapsed / span)`` of them have come."""
+        ``rng``: given the crossing at light-time ``span`` after the sync, of which
+        ``span - remaining`` has passed, the ``n - 1`` electrons before it are iid
+        uniform over the span, so ``Binomial(n - 1, (span - remaining) / span)`` of them
+        have come."""
         n = self.config.threshold - self._acc[sel]
-        span = self._elapsed[sel] + self._remaining[sel]
-        return rng.binomial(n - 1, np.where(span > 0, self._elapsed[sel] / span, 0.0))
+        span = self._span[sel]
+        elapsed = span - self._remaining[sel]
+        return rng.binomial(n - 1, np.where(span > 0, elapsed / np.where(span > 0, span, 1.0), 0.0))
 
     def _head_path(self, sel, h, expected, lam, words):
         """The first ``h`` clocks per clock through the cycle-exact model, then
@@ -489,7 +504,9 @@ class SceneSimulator:
         ok &= ~over | ((need * theta - acc0) <= rest)       # the crossings' ranks lie in the rest
         over &= ok
         span = clocks - w
-        for p in np.unique(need[over]):
+        needs = need[over]
+        # one need for all (the queue path's 2^b1) skips np.unique's sort
+        for p in needs[:1] if needs.size and (needs == needs[0]).all() else np.unique(needs):
             i = np.flatnonzero(over & (need == p))
             a, t = acc0[i], rest[i]
             shapes = np.empty((i.size, p + 1))
@@ -693,11 +710,49 @@ class SceneSimulator:
             self.sampler = PoissonSampler(self.budget)
         return self.sampler.draw(self.rng, lam, clocks=clocks)
 
+    def _walk_clocks(self, sel, e, words):
+        """Pixels ``sel`` from the start of the interval on electrons ``e`` (L, n), where
+        no clock clips the accumulator: there the pixel is a queue whose arrivals are the
+        crossings ``D_t = floor((acc0 + e_1 + .. + e_t) / theta)`` and which serves one a
+        clock, so the backlog ``B_t = D_t - S_t`` (S_t spikes so far, ``B_0 = D_0``)
+        follows Lindley, ``B_t = W_t - min(0, min_{1<=k<=t} W_k)`` with ``W_t = D_t - t``,
+        and the charge is ``acc0 + e_1 + .. + e_t - theta S_t``. A pixel whose charge so
+        computed never exceeds ``2^A - 1`` had the very trajectory of the cycle-exact
+        model (its ``min`` never acted); the others are left to it, on the same
+        electrons (a check of the outcome, not a bound: nothing is drawn again).
+        -> mask of the pixels settled here."""
+        c = self.config
+        theta = c.threshold
+        acc0 = self._acc[sel]
+        level = np.cumsum(e, axis=0)
+        level += acc0
+        crossed = level // theta
+        walk = crossed - np.arange(1, e.shape[0] + 1)[:, None]
+        low = np.minimum.accumulate(walk, axis=0)
+        np.minimum(low, 0, out=low)
+        spikes = crossed - (walk - low)                     # S_t = D_t - B_t
+        charge = level - theta * spikes
+        ok = charge.max(axis=0) <= c.acc_max
+        done, total = sel[ok], spikes[-1, ok]
+        self._acc[done] = charge[-1, ok]
+        if not c.is_te:
+            self._ml_words(done, total, words)
+            return ok
+        over = total >= c.p_max
+        at = np.argmax(spikes[:, ok] >= c.p_max, axis=0)   # the clock of spike 2^b1 (0-based)
+        words[done] = np.where(over, (1 << c.d) | (at // c.clocks_per_tick + 1), total)
+        return ok
+
     def _run_clocks(self, sel, e, words, start=None):
         """The cycle-exact model (:class:`golden.sensor.PixelArray`, clock for clock
         the literal rule of SPEC section 3) on electrons ``e`` (clocks, n) of pixels
         ``sel``, from the start of the interval or from ``start`` (a
         :class:`golden.reference.PixelState` of shape (1, n) part-way through it)."""
+        if start is None and self.method == "fast" and 0 < sel.size <= WALK_PIXELS:
+            settled = self._walk_clocks(sel, e, words)
+            if settled.all():
+                return
+            sel, e = sel[~settled], e[:, ~settled]
         array = PixelArray(self.config, (1, sel.size))
         if start is None:
             array.state.acc[0] = self._acc[sel]
@@ -735,7 +790,7 @@ def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None
     H, W = shape
     rows = stripe_slices(H, W)
     rngs = [seed] if len(rows) == 1 else spawn_generators(seed, len(rows))
-    return rows, [SceneSimulator(config, (r.stop - r.start, W), rng=rng, dark_current=dark_current,
+    return rows, [SceneSimulator(config, (stripe_rows(r), W), rng=rng, dark_current=dark_current,
                                  total_pixel_readouts=total_pixel_readouts or H * W)
                   for r, rng in zip(rows, rngs)]
 

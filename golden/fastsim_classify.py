@@ -28,6 +28,9 @@ LAZY, EVENT, BRIGHT, QUEUE, FULL, HEAD, CLOCK = range(len(SIMULATION_PATHS))
 MAX_BACKLOG = 64
 MIN_WINDOW = 8
 
+#: Interval mean, in thresholds, up to which dim light takes the lazy path.
+LAZY_THRESHOLDS = 2.0
+
 #: Pixels of one path processed as one group whatever their window lengths.
 SMALL_GROUP = 256
 
@@ -53,11 +56,13 @@ class PathLevels:
         cap = min(c.threshold, c.input_max)
         #: event: P(some clock > min(theta, 2^E - 1) electrons) below budget
         self.mean_event = _largest_below(lambda m: log_poisson_tail_above(m, cap + 1), budget, cap + 1)
-        # lazy: an interval mean of at most theta / 2 (a crossing in two readouts
-        # or fewer: there a draw per crossing, about 70 ns, costs what the event
-        # path's draw per readout does) that surely cannot fire the 2^b1 spikes of
-        # a TE overflow in one interval, and event light per clock
-        self.mean_lazy = min(c.threshold / 2.0, self.mean_event * c.clocks_per_readout)
+        # lazy: an interval mean of at most 2 theta (two crossings a readout or fewer:
+        # one Gamma draw per crossing, about 25 ns with its bookkeeping, against the
+        # event path's Poisson draw per readout, about 40 ns; measured best between
+        # 1.5 and 3 theta on the panorama pans of docs/simulator.md) that surely cannot
+        # fire the 2^b1 spikes of a TE overflow in one interval, and event light per
+        # clock (at most one crossing a clock, so each crossing is a spike in its clock)
+        self.mean_lazy = min(c.threshold * LAZY_THRESHOLDS, self.mean_event * c.clocks_per_readout)
         if c.is_te:
             self.mean_lazy = min(self.mean_lazy, _largest_below(
                 lambda m: log_poisson_tail_above(m, (c.p_max - 1) * c.threshold),

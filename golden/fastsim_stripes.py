@@ -1,4 +1,4 @@
-"""Horizontal stripes of a frame and the worker processes that simulate them.
+"""Stripes of a frame (interleaved rows) and the worker processes that simulate them.
 
 The noisy fast simulator (:func:`golden.fastsim.simulate_scene`) splits a frame
 into stripes that depend on its shape only, gives each its own generator
@@ -15,23 +15,30 @@ import numpy as np
 from .errors import InputError
 from .io import scan_light
 
-#: Horizontal stripes of a noisy fast simulation (:func:`stripe_slices`): a
-#: power of two, at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a
-#: stripe's readout has a fixed cost) and STRIPE_ROWS rows.
+#: Stripes of a noisy fast simulation (:func:`stripe_slices`): a power of two,
+#: at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a stripe's
+#: readout has a fixed cost) and STRIPE_ROWS rows.
 STRIPE_PIXELS = 1 << 16
 STRIPE_ROWS = 16
 MAX_STRIPES = 8
 
 
 def stripe_slices(height: int, width: int) -> list[slice]:
-    """Row slices of the horizontal stripes of a ``height`` x ``width`` frame: a function
-    of the shape only (never of the worker count), so a seed gives one result. A
-    power of two, so that 2, 4 or 8 workers get equal shares; a frame of fewer
-    than 2 x STRIPE_PIXELS pixels (e.g. 256 x 256) or 2 x STRIPE_ROWS rows is one stripe."""
+    """Row slices of the stripes of a ``height`` x ``width`` frame: stripe i of n holds
+    rows i, i + n, i + 2n, ... (interleaved, so that each stripe sees the same mix of
+    sky and ground, bright and dark: a scene's costly part is shared evenly by the
+    workers). A function of the shape only (never of the worker count), so a seed
+    gives one result. A power of two, so that 2, 4 or 8 workers get equal shares; a
+    frame of fewer than 2 x STRIPE_PIXELS pixels (e.g. 256 x 256) or 2 x STRIPE_ROWS
+    rows is one stripe."""
     most = int(min(MAX_STRIPES, height // STRIPE_ROWS, height * width // STRIPE_PIXELS))
     n = 1 << (most.bit_length() - 1) if most > 1 else 1
-    bounds = [height * i // n for i in range(n + 1)]
-    return [slice(bounds[i], bounds[i + 1]) for i in range(n)]
+    return [slice(i, height, n) if n > 1 else slice(0, height) for i in range(n)]
+
+
+def stripe_rows(rows: slice) -> int:
+    """Rows in stripe ``rows`` (a slice of :func:`stripe_slices`)."""
+    return len(range(rows.start, rows.stop, rows.step or 1))
 
 
 def spawn_generators(seed, n: int) -> list[np.random.Generator]:

@@ -18,7 +18,7 @@ from golden.errors import InputError
 from golden.fastsim import SceneSimulator, simulate_scene
 from golden.light import poisson_stimulus
 from golden.reference import msb_index
-from golden.sensor import simulate
+from golden.sensor import PixelArray, simulate
 from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
 LEVELS = [1e-4, 1e-3, 1e-2, 0.05, 0.2, 0.5, 1.0, 2.0, 10.0]
@@ -530,3 +530,33 @@ def test_reading_acc_is_a_function_of_the_seed_and_the_readouts_done():
     assert np.array_equal(first, sims[0].acc) and np.array_equal(first, sims[1].acc)
     sims[0].readout(scene[2])
     assert sims[0].readouts == 3
+
+
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_EDGE_CONFIGS,
+                         ids=str)
+def test_unclipped_walk_equals_the_cycle_exact_model_word_for_word(config):
+    """The per-clock path's shortcut for few pixels (``_walk_clocks``: the queue of
+    threshold crossings in closed form, kept only where no clock clipped) gives the
+    cycle-exact model's words, charges and msb remainders on the same electrons, from
+    any carried charge (backlogs included), and leaves to it exactly the pixels that
+    clipped."""
+    rng = np.random.default_rng(12)
+    L, theta, n = config.clocks_per_readout, config.threshold, 400
+    lam = np.exp(rng.uniform(np.log(0.005), np.log(1.5), n)) * theta      # dim .. above a threshold a clock
+    e = np.minimum(rng.poisson(lam[None, :], size=(L, n)), config.input_max).astype(np.int64)
+    sim = SceneSimulator(config, (1, n), rng=0)
+    sim._acc[:] = rng.integers(0, config.acc_max + 1, n)
+    if config.is_msb:
+        sim.sfc[:] = rng.integers(0, config.ml_max + 1, n)
+    array = PixelArray(config, (1, n))
+    array.state.acc[0], array.state.sfc[0] = sim._acc, sim.sfc
+    exact = array.feed(e.reshape(L, 1, n))[0, 0]
+    words = np.full(n, -1, np.int64)
+    settled = sim._walk_clocks(np.arange(n), e, words)
+    assert settled.sum() > 0.2 * n
+    if config.input_max > 2 * config.threshold:             # light above a threshold a clock clips
+        assert not settled.all()
+    assert np.array_equal(words[settled], exact[settled])
+    assert np.array_equal(sim._acc[settled], array.state.acc[0][settled])
+    assert np.array_equal(sim.sfc[settled], array.state.sfc[0][settled])
+    assert (words[~settled] == -1).all()                  # the others are left untouched

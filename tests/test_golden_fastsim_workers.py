@@ -16,7 +16,7 @@ from golden.config import SensorConfig
 from golden.decode import decode_spikes
 from golden.errors import InputError
 from golden.fastsim import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, SceneSimulator, scene_stimulus,
-                            simulate_scene, stripe_simulators, stripe_slices)
+                            simulate_scene, stripe_rows, stripe_simulators, stripe_slices)
 from golden.io import load_stream
 from golden.light import poisson_stimulus
 from golden.sensor import simulate
@@ -38,12 +38,24 @@ def _log_uniform(shape, seed):
 def test_stripes_depend_on_the_shape_only(height, width, count):
     rows = stripe_slices(height, width)
     assert len(rows) == count
-    assert rows[0].start == 0 and rows[-1].stop == height
-    assert all(a.stop == b.start for a, b in zip(rows, rows[1:]))
-    sizes = [r.stop - r.start for r in rows]
+    owners = np.zeros(height, int)                     # every row in exactly one stripe
+    for r in rows:
+        owners[r] += 1
+    assert (owners == 1).all()
+    sizes = [stripe_rows(r) for r in rows]
+    assert sizes == [len(range(height)[r]) for r in rows]
     assert max(sizes) - min(sizes) <= 1
     if count > 1:
         assert min(sizes) >= STRIPE_ROWS and min(sizes) * width >= STRIPE_PIXELS
+
+
+def test_stripes_share_a_sky_over_ground_scene_evenly():
+    # a pan's costly rows (bright sky, detailed ground) lie together: interleaved
+    # rows give every stripe, and so every worker, the same mix of them
+    H, W = 384, 512
+    light = np.where(np.arange(H)[:, None] < H // 3, 2.0, 1e-3) * np.ones((1, W))
+    shares = [light[r].mean() for r in stripe_slices(H, W)]
+    assert len(shares) == 2 and max(shares) / min(shares) < 1.02
 
 
 @pytest.mark.parametrize("config, height", [(SensorConfig(), 128), (SensorConfig.preset("ml-msb"), 128),
@@ -119,7 +131,7 @@ def test_striped_frame_has_the_law_of_the_cycle_exact_model(config):
     exact = simulate(config, poisson_stimulus(config, scene, 22))
     a_all, b_all = decode_spikes(fast, config).mean(axis=0), decode_spikes(exact, config).mean(axis=0)
     for i in range(len(levels)):
-        for half in (slice(0, H // 2), slice(H // 2, H)):               # each stripe on its own
+        for half in stripe_slices(H, W):                                 # each stripe on its own
             mask = level[half] == i
             a, b = a_all[half][mask], b_all[half][mask]
             se = np.sqrt(a.var() / a.size + b.var() / b.size)
