@@ -26,7 +26,6 @@ folds the frame for a CPU size.
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import ClassVar
 
 import torch
@@ -34,6 +33,7 @@ from torch import nn
 
 from .align import PyramidAlign
 from ..net.head import BlendHead
+from ..net.mulaw import compress_
 from ..reach import Support, support, union
 from .common import ResBlock, SizesMixin, check_input, conv3
 from .represent import firing_rates
@@ -148,7 +148,7 @@ class BSF(nn.Module):
         s = self.sizes
         check_input(light, s.span, s.pyramid_factor)
         rates = firing_rates(light, s.orders, s.threshold)                    # (N, orders, span, H, W)
-        code = rates.mul_(s.mu).log1p_().div_(math.log1p(s.mu))              # compress, in place (no gradient)
+        code = compress_(rates, s.mu)                                           # in place (no gradient)
         feats = self.encoder(code)
         middle = s.windows // 2
         key = feats[:, middle]

@@ -43,6 +43,7 @@ from torch import nn
 
 from .align import PyramidAlign
 from ..net.head import BlendHead
+from ..net.mulaw import compress_
 from ..reach import Support, support, union
 from .common import ResBlock, SizesMixin, check_input
 from .represent import firing_rates
@@ -168,7 +169,7 @@ class ParsingBranch(nn.Module):
         s = self.sizes
         n, t, h, w = light.shape
         rep = torch.stack((light.detach().clamp(min=0), firing_rates(light, (1,), self.threshold)[:, 0]), 1)
-        rep = rep.mul_(s.mu).log1p_().div_(math.log1p(s.mu))                # mu-law, in place: (N, 2, T, H, W)
+        rep = compress_(rep, s.mu)                                          # mu-law, in place: (N, 2, T, H, W)
         pad = (s.tokens * s.temporal_patch - t) // 2                         # whole tokens, the key in the middle
         if pad:
             rep = F.pad(rep, (0, 0, 0, 0, pad, pad), mode="replicate")

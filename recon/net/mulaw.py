@@ -12,6 +12,13 @@ def compress(light: torch.Tensor, mu: float) -> torch.Tensor:
     return torch.log1p(mu * light.clamp(min=0)) / math.log1p(mu)
 
 
+def compress_(light: torch.Tensor, mu: float) -> torch.Tensor:
+    """:func:`compress` in place (returns ``light``, overwritten): for large inputs that
+    need no gradient, e.g. the baselines' firing-rate stacks, which would otherwise be
+    held twice."""
+    return light.clamp_(min=0).mul_(mu).log1p_().div_(math.log1p(mu))
+
+
 #: Largest code :func:`expand` accepts: light up to (1 + mu)^2 / mu, thousands of times the
 #: design light (beyond which every sensor here saturates), so the output is always finite.
 MAX_CODE = 2.0
