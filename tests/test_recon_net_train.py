@@ -9,6 +9,7 @@ from golden.config import SensorConfig
 from golden.errors import InputError
 from recon.net.infer import load_weights
 from recon.net.train import TrainOptions, train, training_loss
+from recon.engine.clips import EngineRecipe
 from tests.cli import assert_refused, run_tespike
 
 RECIPE = {"height": 32, "width": 32, "long": (8, 20), "short": (1, 7)}
@@ -98,7 +99,22 @@ def test_cli_refusals(tmp_path):
                                "--steps", "1"), "loss")
     assert_refused(run_tespike("train", "--config", "te", "--ablation", "0", "--out", tmp_path / "w.pt",
                                "--steps", "1"), "ablation case 0")
+    for low, high in (("0.3", "0.1"), ("0", "1"), ("1", "inf")):
+        assert_refused(run_tespike("train", "--config", "te", "--peak", low, high, "--out", tmp_path / "w.pt",
+                                   "--steps", "1"), f"--peak {low} {high}")
     assert not (tmp_path / "w.pt").exists()
+
+
+def test_peak_sets_the_clips_brightness(tmp_path, monkeypatch):
+    import recon.net.train as trainer
+    from cosim.cli import main
+
+    seen = []
+    monkeypatch.setattr(trainer, "train", lambda options, out, **kw: seen.append(options))
+    assert main(["train", "--out", str(tmp_path / "w.pt"), "--steps", "1", "--peak", "0.01", "0.3", "-q"]) == 0
+    assert seen[0].data_recipe().peak == (0.01, 0.3)
+    assert main(["train", "--out", str(tmp_path / "w.pt"), "--steps", "1", "-q"]) == 0
+    assert seen[1].data_recipe().peak == EngineRecipe().peak
 
 
 def test_method_and_crop_checked():

@@ -51,6 +51,9 @@ def add_arguments(parser):
     parser.add_argument("--minutes", type=float, default=None, help="wall-time budget in minutes")
     parser.add_argument("--hdr", action="append", default=[], metavar="DIR",
                         help="also train on this folder of .exr/.hdr frames (a quarter of the clips; repeatable)")
+    parser.add_argument("--peak", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
+                        help="the clips' brightest light, drawn log-uniformly in [LOW, HIGH] x the design "
+                             "light (default: the engine's 0.01 3)")
     trainer("--workers", "data-engine processes making clips ahead (0: in this process)", type=int)
     trainer("--pool", "clips a step draws from", type=int)
     trainer("--refresh", "steps between two new clips entering the pool", type=int)
@@ -80,6 +83,10 @@ def run(args) -> int:
         raise InputError("give a budget: --steps N or --minutes M")
     if args.threads is not None and not 1 <= args.threads <= 1024:
         raise InputError(f"--threads {args.threads}: must be in 1..1024")
+    if args.peak is not None:
+        low, high = args.peak
+        if not (0 < low <= high < float("inf")):
+            raise InputError(f"--peak {low:g} {high:g}: need 0 < LOW <= HIGH, finite")
     for folder in args.hdr:
         if not Path(folder).is_dir():
             raise InputError(f"--hdr {folder!r}: not a folder of .exr/.hdr frames")
@@ -98,7 +105,8 @@ def run(args) -> int:
     given = {flag: getattr(args, flag) for flag in TRAINER_FLAGS if hasattr(args, flag)}
     options = TrainOptions(sensor=args.config if preset else config.to_json(), ablation=args.ablation,
                            steps=args.steps, minutes=args.minutes, threads=args.threads,
-                           recipe={"folders": tuple(args.hdr)}, init=args.init, **given)
+                           recipe={"folders": tuple(args.hdr), **({"peak": tuple(args.peak)} if args.peak else {})},
+                           init=args.init, **given)
     command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     train(options, out, resume=args.resume, progress=progress_wanted(args), command=command)
     report(args, f"wrote {out} (run log, loss curve and checkpoint in {out.with_suffix('.run')})")
