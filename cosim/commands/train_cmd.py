@@ -84,9 +84,8 @@ def run(args) -> int:
     if args.threads is not None and not 1 <= args.threads <= 1024:
         raise InputError(f"--threads {args.threads}: must be in 1..1024")
     if args.peak is not None:
-        low, high = args.peak
-        if not (0 < low <= high < float("inf")):
-            raise InputError(f"--peak {low:g} {high:g}: need 0 < LOW <= HIGH, finite")
+        from recon.engine.clips import check_peak
+        check_peak(args.peak, "--peak {:g} {:g}".format(*args.peak))
     for folder in args.hdr:
         if not Path(folder).is_dir():
             raise InputError(f"--hdr {folder!r}: not a folder of .exr/.hdr frames")

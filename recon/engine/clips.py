@@ -48,6 +48,14 @@ FAMILIES = ("deadleaves", "panorama", "folder")
 TRAIN_DOMAIN, VALIDATION_DOMAIN = 17, 23
 
 
+def check_peak(peak, name: str) -> None:
+    """A clips' peak range ``(low, high)`` (x the design light), refused in one line
+    naming ``name`` unless ``0 < low <= high`` and finite (the recipe and ``--peak``)."""
+    low, high = peak
+    if not 0 < low <= high < math.inf:
+        raise InputError(f"{name}: need 0 < low <= high, finite")
+
+
 @dataclasses.dataclass(frozen=True)
 class EngineRecipe:
     """What the training clips are made of (every field is recorded with the weights)."""
@@ -83,8 +91,7 @@ class EngineRecipe:
             lo, hi = getattr(self, key)
             if not (type(lo) is int and type(hi) is int and 1 <= lo <= hi):
                 raise InputError(f"engine recipe {key} = {(lo, hi)!r}: need integers 1 <= low <= high")
-        if not 0 < self.peak[0] <= self.peak[1] or not math.isfinite(self.peak[1]):
-            raise InputError(f"engine recipe peak = {self.peak!r}: need 0 < low <= high, finite")
+        check_peak(self.peak, f"engine recipe peak = {self.peak!r}")
         if not 0 <= self.short_fraction <= 1 or not 0 <= self.folder_weight <= 1:
             raise InputError("engine recipe short_fraction and folder_weight must lie in [0, 1]")
         if sum(w for _, w in self.weights) <= 0 and not self.folders:
