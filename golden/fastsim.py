@@ -80,7 +80,7 @@ from .errors import InputError
 from .fastsim_classify import (BRIGHT, CLOCK, EVENT, FULL, HEAD, LAZY, MAX_BACKLOG, MIN_WINDOW, QUEUE,
                                SIMULATION_PATHS, groups, path_levels, round_window)
 from .fastsim_stripes import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, check_workers, run_stripes,
-                              spawn_generators, stripe_rows, stripe_slices)
+                              spawn_generators, stripe_slices)
 from .io import check_scene, word_dtype
 from .light import (as_generator, check_dark_current, dark_electrons,
                     deterministic_clock_electrons, electrons_per_readout, log_budget,
@@ -92,8 +92,8 @@ from .sensor import PixelArray
 
 __all__ = ["CHECKS", "MAX_BACKLOG", "MAX_STRIPES", "MIN_WINDOW", "SIMULATION_METHODS", "SIMULATION_PATHS",
            "STRIPE_PIXELS", "STRIPE_ROWS", "SceneSimulator", "check_workers", "iter_scene_stimulus",
-           "lindley_ends", "scene_stimulus", "simulate_scene", "spawn_generators", "stripe_rows",
-           "stripe_simulators", "stripe_slices"]
+           "lindley_ends", "scene_stimulus", "simulate_scene", "spawn_generators", "stripe_simulators",
+           "stripe_slices"]
 
 #: Bounded events a pixel-readout can rely on (input saturation, clipping,
 #: backlog, firing, window certification, ...); each gets 1/CHECKS of the budget.
@@ -790,7 +790,7 @@ def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None
     H, W = shape
     rows = stripe_slices(H, W)
     rngs = [seed] if len(rows) == 1 else spawn_generators(seed, len(rows))
-    return rows, [SceneSimulator(config, (stripe_rows(r), W), rng=rng, dark_current=dark_current,
+    return rows, [SceneSimulator(config, (len(range(H)[r]), W), rng=rng, dark_current=dark_current,
                                  total_pixel_readouts=total_pixel_readouts or H * W)
                   for r, rng in zip(rows, rngs)]
 

@@ -33,12 +33,7 @@ def stripe_slices(height: int, width: int) -> list[slice]:
     rows is one stripe."""
     most = int(min(MAX_STRIPES, height // STRIPE_ROWS, height * width // STRIPE_PIXELS))
     n = 1 << (most.bit_length() - 1) if most > 1 else 1
-    return [slice(i, height, n) if n > 1 else slice(0, height) for i in range(n)]
-
-
-def stripe_rows(rows: slice) -> int:
-    """Rows in stripe ``rows`` (a slice of :func:`stripe_slices`)."""
-    return len(range(rows.start, rows.stop, rows.step or 1))
+    return [slice(i, height, n) for i in range(n)]
 
 
 def spawn_generators(seed, n: int) -> list[np.random.Generator]:
