@@ -15,6 +15,17 @@ def one_torch_thread():
 
 
 @pytest.fixture
+def empty_weights_dir(tmp_path, monkeypatch):
+    """An empty folder as ``recon.learned.WEIGHTS_DIR``: no learned method has weights,
+    whatever the checkout ships; a test may save its own there."""
+    import recon.learned
+    folder = tmp_path / "weights"
+    folder.mkdir()
+    monkeypatch.setattr(recon.learned, "WEIGHTS_DIR", folder)
+    return folder
+
+
+@pytest.fixture
 def rng():
     return np.random.default_rng(12345)
 

@@ -58,7 +58,7 @@ def test_evaluate_without_the_count_camera(tmp_path, capsys):
     assert sorted(r["mode"] for r in rows) == ["ml-msb", "te"]
 
 
-def test_evaluate_table(tmp_path, capsys, monkeypatch):
+def test_evaluate_table(tmp_path, capsys, empty_weights_dir):
     """--table: the paper's rows and every metric column, ML (msb) left and TE right, no ML-count rows,
     complexity with Table 10 beside; a method without weights says so instead of failing the table."""
     import torch
@@ -66,9 +66,7 @@ def test_evaluate_table(tmp_path, capsys, monkeypatch):
     import recon.learned
     from golden.config import SensorConfig
     from recon.net.train import save_weights
-    folder = tmp_path / "weights"
-    folder.mkdir()
-    monkeypatch.setattr(recon.learned, "WEIGHTS_DIR", folder)
+    folder = empty_weights_dir
     torch.manual_seed(0)
     module, sizes = recon.learned.method_classes("bsf")
     save_weights(folder / "bsf-te.pt", module(sizes.preset("cpu")).eval(), SensorConfig.preset("te"), {}, "bsf")
@@ -98,9 +96,7 @@ def test_evaluate_noise_tables(tmp_path, capsys):
     assert sorted(r["mode"] for r in rows) == ["ml", "ml-msb", "te", "te+eq12", "te+eq13"]
 
 
-def test_evaluate_table_refuses(tmp_path, capsys, monkeypatch):
-    import recon.learned
-    monkeypatch.setattr(recon.learned, "WEIGHTS_DIR", tmp_path)      # no weights shipped, whatever the checkout holds
+def test_evaluate_table_refuses(tmp_path, capsys, empty_weights_dir):   # no weights, whatever the checkout holds
     out = tmp_path / "ev"
     refused(capsys, "evaluate", "--table", "--vdp-frames", 0, "--out", out, "--vdp-frames 0")
     refused(capsys, "evaluate", "--metrics", "vdp3", "--out", out, "--metrics 'vdp3'")

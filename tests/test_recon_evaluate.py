@@ -203,17 +203,7 @@ def test_labels_are_the_papers_names():
     assert label("bsf", "te+eq12") == "BSF_TE+dark12" and label("tfp", "ml") == "TFP_ML-count"
 
 
-@pytest.fixture
-def no_weights(tmp_path, monkeypatch):
-    """An empty weights folder: every learned method lacks weights."""
-    import recon.learned
-    folder = tmp_path / "weights"
-    folder.mkdir()
-    monkeypatch.setattr(recon.learned, "WEIGHTS_DIR", folder)
-    return folder
-
-
-def test_missing_weights_are_noted_by_default_and_refused_when_named(no_weights):
+def test_missing_weights_are_noted_by_default_and_refused_when_named(empty_weights_dir):
     light = make_scene("moderate", 6, 16, 16, seed=2)
     with pytest.raises(InputError, match=r"bsf-te\.pt' is missing"):
         evaluate([("a", light)], simulate, methods=("tfp", "bsf"), modes=("te",), progress=False)
@@ -286,14 +276,14 @@ def test_complexity_columns_with_the_papers_table10():
     assert rows[2]["te_psnr_mu"] == ""                                   # CSV cells stay numeric or empty
 
 
-def test_with_a_learned_method_frames_are_scored_where_its_span_fits(no_weights):
+def test_with_a_learned_method_frames_are_scored_where_its_span_fits(empty_weights_dir):
     import torch
 
     from recon.learned import method_classes
     from recon.net.train import save_weights
     torch.manual_seed(0)
     module, sizes = method_classes("spk2imgnet")
-    save_weights(no_weights / "spk2imgnet-te.pt", module(sizes.preset("cpu")).eval(), SensorConfig(), {},
+    save_weights(empty_weights_dir / "spk2imgnet-te.pt", module(sizes.preset("cpu")).eval(), SensorConfig(), {},
                  "spk2imgnet")
     light = make_scene("moderate", 63, 24, 24, seed=2)
     evaluation = evaluate([("a", light)], simulate, methods=("tfp", "spk2imgnet"), modes=("te",), progress=False,

@@ -30,14 +30,6 @@ def save_tiny(folder, method, config, file_name=None, seed=0):
     return path, model
 
 
-@pytest.fixture
-def weights(tmp_path, monkeypatch):
-    folder = tmp_path / "weights"
-    folder.mkdir()
-    monkeypatch.setattr(recon.learned, "WEIGHTS_DIR", folder)
-    return folder
-
-
 def tiny_stream(rng, config=TE, shape=(5, 8, 8)):
     return rng.choice(legal_codes(config), size=shape)
 
@@ -58,9 +50,9 @@ def test_weights_folder_is_the_networks():
     assert recon.learned.weights_name("bsf", "ml-msb") == "bsf-ml-msb.pt"
 
 
-def test_a_baseline_reconstructs_with_its_weights(weights, rng):
-    path, model = save_tiny(weights, "bsf", TE)
-    assert weights_path(TE, "bsf") == path == weights / "bsf-te.pt"
+def test_a_baseline_reconstructs_with_its_weights(empty_weights_dir, rng):
+    path, model = save_tiny(empty_weights_dir, "bsf", TE)
+    assert weights_path(TE, "bsf") == path == empty_weights_dir / "bsf-te.pt"
     words = tiny_stream(rng)
     from recon.net.infer import reconstruct_model
     images = reconstruct(words, TE, "bsf")
@@ -69,7 +61,7 @@ def test_a_baseline_reconstructs_with_its_weights(weights, rng):
     assert missing_weights("bsf", TE) is None and available_methods([TE]) == ("tfp", "tfi", "bsf")
 
 
-def test_missing_weights_are_refused_naming_the_file_and_the_training(weights, rng):
+def test_missing_weights_are_refused_naming_the_file_and_the_training(empty_weights_dir, rng):
     with pytest.raises(InputError, match=r"mambaspike-te\.pt' is missing .*tespike train --method mambaspike "
                                          r"--config te"):
         reconstruct(tiny_stream(rng), TE, "mambaspike")
@@ -80,11 +72,11 @@ def test_missing_weights_are_refused_naming_the_file_and_the_training(weights, r
         weights_path(odd, "bsf")
 
 
-def test_weights_of_another_method_or_sensor_are_refused(weights, rng):
-    save_tiny(weights, "spk2imgnet", TE, file_name="bsf-te.pt")
+def test_weights_of_another_method_or_sensor_are_refused(empty_weights_dir, rng):
+    save_tiny(empty_weights_dir, "spk2imgnet", TE, file_name="bsf-te.pt")
     with pytest.raises(InputError, match="hold a Spk2ImgNet, not bsf's BSF"):
         reconstruct(tiny_stream(rng), TE, "bsf")
-    save_tiny(weights, "spk2imgnet", ML, file_name="spk2imgnet-te.pt")
+    save_tiny(empty_weights_dir, "spk2imgnet", ML, file_name="spk2imgnet-te.pt")
     with pytest.raises(InputError, match="were trained for"):
         reconstruct(tiny_stream(rng), TE, "spk2imgnet")
 
@@ -96,8 +88,8 @@ def run_here(capsys, *args):
     return code, captured.out, captured.err
 
 
-def test_cli_reconstruct_with_a_baseline(weights, tmp_path, rng, capsys):
-    _, model = save_tiny(weights, "bsf", TE)
+def test_cli_reconstruct_with_a_baseline(empty_weights_dir, tmp_path, rng, capsys):
+    _, model = save_tiny(empty_weights_dir, "bsf", TE)
     words = tiny_stream(rng)
     stream = tmp_path / "S.npz"
     save_stream(stream, words, TE)
