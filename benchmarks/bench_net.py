@@ -41,7 +41,8 @@ from golden.config import SensorConfig  # noqa: E402
 from golden.fastsim import simulate_scene  # noqa: E402
 from recon.methods import reconstruct  # noqa: E402
 from recon.metrics import psnr_mu  # noqa: E402
-from recon.net.infer import WEIGHTS_DIR, load_weights, reconstruct_model  # noqa: E402
+from recon.learned import WEIGHTS_DIR  # noqa: E402
+from recon.net.infer import load_weights, reconstruct_model  # noqa: E402
 from recon.scenes import normalise_sequence, scene_rng  # noqa: E402
 from recon.scenes.panorama import panorama_sequence  # noqa: E402
 from recon.net.model import TESpikeNet, parameter_count  # noqa: E402

@@ -26,7 +26,7 @@ from golden.errors import InputError
 
 #: Names of the learned methods in the paper's row order: its learned baselines, then the network.
 LEARNED = ("spk2imgnet", "bsf", "mambaspike", "net")
-#: The folder of the shipped weights (the same folder as ``recon.net.infer.WEIGHTS_DIR``).
+#: The folder of the shipped weights (beside the network's code).
 WEIGHTS_DIR = Path(__file__).resolve().parent / "net" / "weights"
 
 

@@ -4,6 +4,8 @@ Weights are tiny ones made here in a temporary folder (``WEIGHTS_DIR`` patched):
 test depends on shipped baseline weights.
 """
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -44,9 +46,10 @@ def test_registry_has_every_learned_method_as_a_spatial_method():
 
 
 def test_weights_folder_is_the_networks():
-    from recon.net.infer import WEIGHTS_DIR
-    assert recon.learned.WEIGHTS_DIR == WEIGHTS_DIR
-    assert weights_path(TE, "net") == WEIGHTS_DIR / "te.pt"        # the shipped network
+    import recon.net
+    folder = Path(recon.net.__file__).resolve().parent / "weights"
+    assert recon.learned.WEIGHTS_DIR == folder
+    assert weights_path(TE, "net") == folder / "te.pt"             # the shipped network
     assert recon.learned.weights_name("bsf", "ml-msb") == "bsf-ml-msb.pt"
 
 

@@ -35,7 +35,6 @@ import torch
 from golden.config import SensorConfig
 from golden.errors import InputError
 
-from ..learned import WEIGHTS_DIR  # noqa: F401  (re-exported: the shipped weights' folder)
 from ..learned import receptive_radius  # noqa: F401  (re-exported: derived from the module)
 from ..learned import load_weights  # noqa: F401  (re-exported)
 from ..learned import weights_path as learned_weights_path
