@@ -75,7 +75,7 @@ def main() -> None:
         inputs, truth, inside = draw_batch(pool, config, model.sizes.span, args.crop, args.batch, rng)
         start = time.perf_counter()
         for _ in range(args.steps):
-            loss = training_loss(model(inputs, inside), truth, "mu-l1")
+            loss = training_loss(model(inputs, inside, config.spike_light), truth, "mu-l1")
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()
@@ -85,7 +85,7 @@ def main() -> None:
         for step in range(args.steps):
             pool.advance_to(pool.refresh * (pool.made - pool.capacity + 1))    # one new clip per step
             inputs, _, inside = draw_batch(pool, config, model.sizes.span, args.crop, args.batch, rng)
-            loss = training_loss(model(inputs, inside), truth, "mu-l1")
+            loss = training_loss(model(inputs, inside, config.spike_light), truth, "mu-l1")
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()

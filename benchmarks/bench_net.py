@@ -170,10 +170,11 @@ def candidates(args) -> None:
             light = decode_light(case.words, config, dtype=torch.float64)
             spans = torch.from_numpy(np.stack([key_span(len(light), k, span) for k in range(len(light))]))
             inside = torch.from_numpy(np.stack([span_inside(len(light), k, span) for k in range(len(light))]))
-            estimates = key_estimates(light[spans], inside)                 # (K, estimates, H, W)
+            estimates = key_estimates(light[spans], inside, config.spike_light)    # (K, estimates, H, W)
             head = BlendHead(4, 1, NetSizes().mu).double()
             with torch.no_grad():
-                blend = head(torch.zeros(len(light), 4, *light.shape[1:], dtype=torch.float64), light[spans], inside)
+                blend = head(torch.zeros(len(light), 4, *light.shape[1:], dtype=torch.float64), light[spans],
+                             inside, config.spike_light)
             truth = torch.from_numpy(case.light).double()
             cells = [float(np.mean(psnr_mu(estimates[:, j].numpy(), case.light))) for j in range(len(names))]
             cells.append(float(np.mean(psnr_mu(blend[:, 0].numpy(), case.light))))

@@ -227,6 +227,11 @@ class SensorConfig:
     def ml_max(self) -> int:
         return (1 << self.ml_bits) - 1
 
+    @property
+    def spike_light(self) -> float:
+        """Light of one spike per readout interval, in scene units (1.0 = the design light)."""
+        return self.threshold / DESIGN_ELECTRONS
+
     def __str__(self) -> str:   # short, for test ids and logs
         keys = ("b1", "b2", "alpha", "clocks_per_tick", "threshold", "acc_bits", "input_bits")
         if not self.is_te:

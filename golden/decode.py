@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .config import DESIGN_ELECTRONS, SensorConfig
+from .config import SensorConfig
 from .errors import InputError
 
 
@@ -132,7 +132,7 @@ def decode_spikes(words: np.ndarray, config: SensorConfig, estimator: str = "rat
 
 def spikes_to_light(spikes: np.ndarray, config: SensorConfig) -> np.ndarray:
     """Spikes per readout -> light in scene units (1.0 = 42000 electrons per readout)."""
-    return np.asarray(spikes, np.float64) * (config.threshold / DESIGN_ELECTRONS)
+    return np.asarray(spikes, np.float64) * config.spike_light
 
 
 def decode_light(words: np.ndarray, config: SensorConfig, estimator: str = "ratio") -> np.ndarray:

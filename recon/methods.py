@@ -22,7 +22,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from golden.config import DESIGN_ELECTRONS, SensorConfig
+from golden.config import SensorConfig
 from golden.errors import InputError
 
 from .settings import ReconSettings
@@ -40,7 +40,7 @@ def _tfp_block(words: torch.Tensor, config: SensorConfig, settings: ReconSetting
 def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings) -> torch.Tensor:
     light = decode_light(words, config, estimator=settings.estimator, device=settings.device,
                          dtype=settings.torch_dtype)
-    return tfi(light, words != 0, config.threshold / DESIGN_ELECTRONS, settings.radius, settings.search)
+    return tfi(light, words != 0, config.spike_light, settings.radius, settings.search)
 
 
 def _learned_frames(name: str) -> Callable:

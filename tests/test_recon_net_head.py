@@ -6,13 +6,16 @@ import numpy as np
 import pytest
 import torch
 
-from golden.config import DESIGN_ELECTRONS, SensorConfig
+from golden.config import SensorConfig
 from golden.fastsim import simulate_scene
 from recon.net.head import INITIAL_LOGITS, RADII, BlendHead, key_estimates, spike_interval_light
 from recon.net.mulaw import compress, expand
 from recon.stream import decode_light
 from recon.tfi import tfi
 from recon.tfp import tfp
+
+
+TE = SensorConfig.preset("te")
 
 
 def sparse_stream(seed: int, span: int = 61, size: int = 12) -> torch.Tensor:
@@ -34,17 +37,46 @@ def test_means_are_tfp_at_the_key(span):
 
 
 @pytest.mark.parametrize("seed", [2, 3, 4])
-def test_spike_interval_is_tfi_where_a_code_follows(seed):
-    """Inside the span TFI's rule is the whole-stream TFI of the span itself wherever a spike follows the key."""
+def test_spike_interval_without_the_sensor_is_tfi_where_a_code_follows(seed):
+    """Not told the spike light, TFI's rule holds wherever a spike follows the key; a pixel without spikes gets 0."""
     light = sparse_stream(seed)
     key = light.shape[0] // 2
     nonzero = light > 0
-    reference = tfi(light, nonzero, SensorConfig.preset("te").threshold / DESIGN_ELECTRONS, 0)[key]
+    reference = tfi(light, nonzero, TE.spike_light, 0)[key]
     got = spike_interval_light(light[None])[0, 0]
     follows = nonzero[key:].any(0)
     assert follows.any() and (~follows).any()          # both cases are exercised
     assert torch.allclose(got[follows], reference[follows], rtol=1e-12)
     assert (got[~nonzero.any(0)] == 0).all()
+
+
+@pytest.mark.parametrize("seed", [2, 3])
+@pytest.mark.parametrize("length", [61, 97])
+def test_spike_interval_is_windowed_tfi_at_every_readout(seed, length):
+    """Told the sensor's spike light, the head's TFI is ``tfi(search="window")`` over its span, tails,
+    spike-free pixels and the stream's padded ends included; the one difference: past the last spike
+    with one spike p in the span before the key, the cap (the light of the interval ending at p) counts
+    that interval from the span's start, where TFI counts it from p's own window (outside the span)."""
+    radius = 30
+    light = sparse_stream(seed, length)
+    spans, inside = stream_spans(light)
+    got = spike_interval_light(spans, inside, TE.spike_light)[:, 0]
+    nonzero = light > 0
+    reference = tfi(light, nonzero, TE.spike_light, radius, search="window")
+    counts = torch.cat([torch.zeros_like(nonzero[:1], dtype=torch.int64), nonzero.long().cumsum(0)])
+    k = torch.arange(length)
+    def spikes(first, last):            # spikes in readouts first..last (clipped to the stream), per key
+        return counts[(last + 1).clamp(0, length)] - counts[first.clamp(0, length)]
+    after = spikes(k, k + radius)
+    before = spikes(k - radius, k - 1)
+    exact = (after > 0) | (before != 1)
+    assert (~nonzero.any(0)).any() and nonzero.all(0).any()      # spike-free and dense pixels both exercised
+    assert (~exact).any()
+    assert torch.allclose(got[exact], reference[exact], rtol=1e-12, atol=0)
+    end = torch.clamp(k + radius, max=length - 1).view(-1, 1, 1)
+    last = torch.where(nonzero, k.view(-1, 1, 1), -1).cummax(0).values      # last spike at or before each readout
+    bound = TE.spike_light / (end - last).to(light.dtype)
+    assert (got[~exact] <= bound[~exact] * (1 + 1e-12)).all() and (got[~exact] > 0).all()
 
 
 def test_untrained_head_returns_its_initial_blend():
@@ -87,12 +119,11 @@ def test_estimates_equal_tfp_and_tfi_on_whole_short_streams(length):
     for j, r in enumerate(RADII):
         assert torch.allclose(got[:, j], tfp(light, r), rtol=1e-12, atol=1e-15)
     nonzero = light > 0
-    reference = tfi(light, nonzero, SensorConfig.preset("te").threshold / DESIGN_ELECTRONS, 0)
-    follows = torch.flip(torch.cumsum(torch.flip(nonzero.int(), [0]), 0), [0]) > 0     # a spike at or after k
-    assert torch.allclose(got[:, -1][follows], reference[follows], rtol=1e-12)
-    tail = ~follows & nonzero.any(0)
-    assert (got[:, -1][tail] >= reference[tail] - 1e-15).all()          # never below TFI's one-spike bound
-    assert (got[:, -1][~nonzero.any(0).expand_as(follows)] == 0).all()
+    reference = tfi(light, nonzero, TE.spike_light, 0)
+    assert torch.allclose(key_estimates(spans, inside, TE.spike_light)[:, -1], reference, rtol=1e-12, atol=0)
+    unknown = got[:, -1]                          # the sensor not told: the looser bound past the last spike
+    spiking = nonzero.any(0).expand_as(unknown)
+    assert (unknown[spiking] >= reference[spiking] - 1e-15).all() and (unknown[~spiking] == 0).all()
 
 
 def test_inside_must_hold_the_key():

@@ -136,8 +136,10 @@ class Spk2ImgNet(nn.Module):
         self.reconstruct = nn.Sequential(*[ResBlock(c) for _ in range(s.recon_blocks)])
         self.head = BlendHead(c, s.unshuffle, s.mu)
 
-    def forward(self, light: torch.Tensor, inside: torch.Tensor | None = None) -> torch.Tensor:
-        """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); see recon/net/head.py."""
+    def forward(self, light: torch.Tensor, inside: torch.Tensor | None = None,
+                spike_light: float | None = None) -> torch.Tensor:
+        """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
+        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/net/head.py."""
         s = self.sizes
         check_input(light, s.span, s.pyramid_factor)
         n = light.shape[0]
@@ -152,7 +154,7 @@ class Spk2ImgNet(nn.Module):
         aligned = self.align(key, refs)
         stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
         fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
-        return self.head(fused, light, inside)
+        return self.head(fused, light, inside, spike_light)
 
     def support(self, light: Support) -> Support:
         """:meth:`forward` on supports (windows and the mu-law act per pixel)."""

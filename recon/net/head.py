@@ -13,7 +13,7 @@ them chosen per pixel (an oracle) is 5 to 14 dB above each alone
 
 So the head sees, at the key moment, :data:`RADII`'s centred means of the
 decoded light and the spike-interval estimate (TFI, searched inside the
-span), all compressed by the mu-law, and predicts from the method's features
+span, with the sensor's one-spike bound where no spike follows), all compressed by the mu-law, and predicts from the method's features
 a softmax weight for each (per pixel) and a correction:
 
     code = sum_j softmax(logits)_j * compress(estimate_j) + correction,
@@ -54,20 +54,26 @@ def _inside(light: torch.Tensor, inside: torch.Tensor | None) -> torch.Tensor:
     return inside.view(n, t, 1, 1)
 
 
-def spike_interval_light(light: torch.Tensor, inside: torch.Tensor | None = None) -> torch.Tensor:
-    """TFI (``recon/tfi.py``'s whole-stream rule) at the middle readout of (N, T, H, W) decoded light.
+def spike_interval_light(light: torch.Tensor, inside: torch.Tensor | None = None,
+                         spike_light: float | None = None) -> torch.Tensor:
+    """TFI (``recon/tfi.py``) at the middle readout of (N, T, H, W) decoded light, searched inside the span.
 
     ``inside`` (N, T) marks the readouts that lie in the stream (those past
     its ends are padding); without it every readout does. With n the first
     readout at or after the key whose light is non-zero and p the last one
     before it (the readout before the stream's first when none: the sensor's
-    accumulator starts at 0), the estimate is ``light[n] / (n - p)``: exactly
-    TFI wherever n and p lie in the span, as they do for any stream of at
-    most T // 2 + 1 readouts. Past the last spike TFI bounds the light by
-    one spike over the readouts since p; the head is not given the threshold,
-    so it uses the looser ``light[p] / (end - p)`` (never below TFI's bound),
-    capped by the light of the interval that ends at p, as TFI does; 0
-    without any spike.
+    accumulator starts at 0), the estimate is ``light[n] / (n - p)``. Past
+    the last spike the charge since p is below one threshold: the light is
+    at most ``spike_light`` (one spike per readout, :attr:`SensorConfig.spike_light`)
+    over the ``end - p`` readouts since p, capped by the light of the
+    interval that ends at p; without any spike, that bound alone. So, given
+    ``spike_light``, this is TFI searched in the span's window (``tfi(...,
+    search="window")``), at the stream's ends too, and the whole-stream TFI
+    on a stream of at most T // 2 + 1 readouts; one difference: where that
+    capping interval began before the span, it is counted from the span's
+    start (TFI counts it from p's own window, which the span does not hold).
+    Without ``spike_light`` (a sensor not known) the bound uses the looser
+    ``light[p]`` for one spike's light, and a pixel without spikes gets 0.
     """
     n_, t, h, w = light.shape
     key = t // 2
@@ -82,16 +88,21 @@ def spike_interval_light(light: torch.Tensor, inside: torch.Tensor | None = None
     earlier = torch.maximum(torch.where(spiking & (index < before), index, -1).amax(1, keepdim=True), start)
     last = light.gather(1, before.clamp(min=0))
     previous = last / (before - earlier).clamp(min=1).to(light.dtype)
-    bound = last / (end - before).clamp(min=1).to(light.dtype)
-    tail = torch.where(before > start, torch.minimum(previous, bound), torch.zeros_like(last))
+    since = (end - before).to(light.dtype)                 # >= 1: the key lies in the stream, after p
+    if spike_light is None:
+        tail = torch.where(before > start, torch.minimum(previous, last / since), torch.zeros_like(last))
+    else:
+        bound = spike_light / since
+        tail = torch.where(before > start, torch.minimum(previous, bound), bound)
     return torch.where(after < t, at_next, tail)
 
 
-def key_estimates(light: torch.Tensor, inside: torch.Tensor | None = None) -> torch.Tensor:
+def key_estimates(light: torch.Tensor, inside: torch.Tensor | None = None,
+                  spike_light: float | None = None) -> torch.Tensor:
     """(N, T, H, W) decoded light -> (N, len(RADII) + 1, H, W): centred means of :data:`RADII`, then TFI.
 
     Each mean is TFP's (``recon/tfp.py``): over the readouts of its window
-    that lie in the stream (``inside``, as :func:`spike_interval_light`). A
+    that lie in the stream (``inside``, ``spike_light``: as :func:`spike_interval_light`). A
     radius beyond the span's half is cut to it, so the head's shape does not
     depend on the span.
     """
@@ -105,7 +116,7 @@ def key_estimates(light: torch.Tensor, inside: torch.Tensor | None = None) -> to
         total = sums[:, key + r] - (sums[:, below] if below >= 0 else 0)
         count = counts[:, key + r] - (counts[:, below] if below >= 0 else 0)
         means.append(total / count)
-    return torch.cat([torch.stack(means, 1), spike_interval_light(light, inside)], 1)
+    return torch.cat([torch.stack(means, 1), spike_interval_light(light, inside, spike_light)], 1)
 
 
 class BlendHead(nn.Module):
@@ -125,11 +136,13 @@ class BlendHead(nn.Module):
                 bias[self.estimates - 1 if name == "tfi" else RADII.index(name)] = value
             self.conv.bias.copy_(bias.repeat_interleave(unshuffle ** 2))
 
-    def forward(self, feature: torch.Tensor, light: torch.Tensor, inside: torch.Tensor | None = None) -> torch.Tensor:
-        """``inside`` (N, T): the span's readouts that lie in the stream (see :func:`key_estimates`)."""
+    def forward(self, feature: torch.Tensor, light: torch.Tensor, inside: torch.Tensor | None = None,
+                spike_light: float | None = None) -> torch.Tensor:
+        """``inside`` (N, T): the span's readouts that lie in the stream; ``spike_light``: the
+        sensor's light of one spike per readout (see :func:`spike_interval_light`)."""
         out = self.shuffle(self.conv(feature))
         weights = torch.softmax(out[:, :self.estimates], 1)
-        codes = compress(key_estimates(light, inside), self.mu)
+        codes = compress(key_estimates(light, inside, spike_light), self.mu)
         return expand((weights * codes).sum(1, keepdim=True) + out[:, self.estimates:], self.mu)
 
     def support(self, feature: Support, light: Support) -> Support:

@@ -110,7 +110,7 @@ def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, 
         cols = np.clip(np.arange(x0, x1), 0, W - 1)
         block = words[times[:, None, None], rows[None, :, None], cols[None, None, :]]
         light = decode_light(block, config, device=device, dtype=torch.float32)
-        result = model(light[None], inside)[0, 0]
+        result = model(light[None], inside, config.spike_light)[0, 0]
         yh, xw = min(y + h, H), min(x + w, W)
         out[y:yh, x:xw] = result[y - y0:yh - y0, x - x0:xw - x0].float().cpu()
     return out

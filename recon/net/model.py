@@ -52,8 +52,10 @@ class TESpikeNet(nn.Module):
             + torch.arange(s.window, device=x.device)[None, :]
         return x[:, index]
 
-    def forward(self, light: torch.Tensor, inside: torch.Tensor | None = None) -> torch.Tensor:
-        """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); see recon/net/head.py."""
+    def forward(self, light: torch.Tensor, inside: torch.Tensor | None = None,
+                spike_light: float | None = None) -> torch.Tensor:
+        """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
+        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/net/head.py."""
         s = self.sizes
         n, span, h, w = light.shape
         if span != s.span or h % s.pyramid_factor or w % s.pyramid_factor:
@@ -69,7 +71,7 @@ class TESpikeNet(nn.Module):
         if self.attention is not None:
             fused = self.attention(fused, self.intensity(subs[:, s.substreams // 2], base))
         if s.head == "blend":
-            return self.head(fused, light, inside)
+            return self.head(fused, light, inside, spike_light)
         return expand(base + self.shuffle(self.head(fused)), s.mu)
 
     def support(self, light: Support) -> Support:

@@ -328,7 +328,7 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
                 lr = optimizer.param_groups[0]["lr"]
                 inputs, truth, inside = draw_batch(pool, config, sizes.span, options.crop, options.batch, generator,
                                                    options.device)
-                loss = training_loss(model(inputs, inside), truth, options.loss, 5000.0)
+                loss = training_loss(model(inputs, inside, config.spike_light), truth, options.loss, 5000.0)
                 value = loss.detach().item()
                 if not math.isfinite(value):
                     raise InputError(f"training diverged at step {step} (loss {value}); lower the learning rate")
