@@ -10,7 +10,9 @@ import torch
 from golden.config import SensorConfig
 from golden.errors import InputError
 from golden.fastsim import simulate_scene
-from recon.net.infer import default_tile, frame, load_weights, reconstruct_net, tile_margin, tiles, weights_path
+import recon.net.infer as infer
+from recon.net.infer import (MIRROR_BORDER, default_tile, frame, load_weights, mirrored_index, reconstruct_net,
+                              tile_margin, tiles, weights_path)
 from recon.net.model import TESpikeNet
 from recon.net.sizes import NetSizes
 from recon.net.train import save_weights
@@ -76,6 +78,33 @@ def test_tile_policy():
     assert tiles(10, 10, TINY, None) == [(0, 0, 12, 12)]                          # padded to f = 4
     with pytest.raises(InputError, match="multiple of the pyramid factor"):
         tiles(64, 64, TINY, f + 1)
+
+
+@pytest.mark.parametrize("length", [1, 2, 3, 9, 17, 64])
+def test_mirrored_index(length):
+    """The frame, mirrored by MIRROR_BORDER or more on each side, to a multiple of the pyramid factor."""
+    f = TINY.pyramid_factor
+    index, first = mirrored_index(length, f)
+    assert first == MIRROR_BORDER and len(index) % f == 0 and len(index) >= length + 2 * MIRROR_BORDER
+    assert (index[first:first + length] == np.arange(length)).all()
+    assert index.min() == 0 and index.max() == length - 1
+    if length > 1:
+        assert (index[first - 1::-1][:length - 1] == np.arange(1, length)[:first]).all()           # reflected
+        assert (index[first + length:][:length - 1] == np.arange(length - 2, -1, -1)[:len(index) - first - length]).all()
+
+
+def test_the_network_sees_the_frame_mirrored(te_weights, monkeypatch):
+    """Equal to the network on the explicitly mirrored frame (np.pad "reflect"), cut back."""
+    model, config, _ = load_weights(te_weights)
+    words = np.random.default_rng(4).integers(0, 16, (5, 11, 14)).astype(np.uint8)
+    rows, top = mirrored_index(11, model.sizes.pyramid_factor)
+    cols, left = mirrored_index(14, model.sizes.pyramid_factor)
+    padded = np.pad(words, ((0, 0), (top, len(rows) - 11 - top), (left, len(cols) - 14 - left)), mode="reflect")
+    with torch.inference_mode():
+        got = frame(model, words, config, 2)
+        monkeypatch.setattr(infer, "MIRROR_BORDER", 0)
+        reference = frame(model, padded, config, 2)[top:top + 11, left:left + 14]
+    assert torch.allclose(got, reference, rtol=1e-5, atol=1e-7)
 
 
 @pytest.mark.parametrize("shape", [(1, 1, 1), (1, 5, 7), (3, 17, 9), (TINY.span + 4, 6, 33)])

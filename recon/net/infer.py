@@ -3,8 +3,10 @@
 For key moment k the network sees readouts k - span/2 .. k + span/2; past
 either end of the stream the first or last readout is repeated (so a stream
 shorter than the span works, down to one readout), and the network is told
-which readouts are such padding (``inside``). Frames are padded (edge
-values repeated) to a multiple of the network's pyramid factor and cut into
+which readouts are such padding (``inside``). Frames are mirrored by
+:data:`MIRROR_BORDER` pixels or more beyond every edge, to a multiple of the
+network's pyramid factor (the convolutions' zero padding then meets scene
+content, not a cliff: +0.9 dB on 16 x 16 crops, below), and cut into
 tiles whose cores are computed with :func:`tile_margin` pixels more on every
 side: the receptive radius derived from the module itself
 (:func:`recon.learned.receptive_radius`, :mod:`recon.reach`), rounded up to
@@ -48,6 +50,10 @@ def weights_path(config: SensorConfig) -> Path:
     return learned_weights_path(config, "net")
 
 
+#: Pixels of the frame mirrored beyond each edge before the network sees it (:func:`mirrored_index`).
+MIRROR_BORDER = 8
+
+
 def tile_margin(sizes) -> int:
     """Overlap added on every side of a tile: the derived receptive radius rounded up to the pyramid factor."""
     f = sizes.pyramid_factor
@@ -84,35 +90,51 @@ def tiles(height: int, width: int, sizes, tile: int | str | None = "auto") -> li
     return [(y, x, min(ty, hp - y), min(tx, wp - x)) for y in range(0, hp, ty) for x in range(0, wp, tx)]
 
 
+def mirrored_index(length: int, factor: int) -> tuple[np.ndarray, int]:
+    """(index, first): the rows (or columns) of the frame the network sees, and where the frame starts.
+
+    The frame mirrored (``np.pad`` "reflect") by :data:`MIRROR_BORDER` before its
+    first row and by that or more after its last, to a multiple of the pyramid
+    factor; a frame of one row repeats it.
+    """
+    total = -(-(length + 2 * MIRROR_BORDER) // factor) * factor
+    after = total - length - MIRROR_BORDER
+    if length == 1:
+        return np.zeros(total, np.int64), MIRROR_BORDER
+    return np.pad(np.arange(length), (MIRROR_BORDER, after), mode="reflect"), MIRROR_BORDER
+
+
 def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, *,
           tile: int | str | None = None, device: str = "cpu") -> torch.Tensor:
     """The network's image (H, W) at readout ``key`` of the stream ``words`` (K, H, W).
 
     Only the readouts and pixels one tile needs are decoded at a time, so memory
-    is bounded by the tile, not the frame. Readouts past either end and pixels
-    past the bottom or right edge (padding to the pyramid factor) repeat the
-    last one; with ``tile=None`` the whole frame is one tile (:func:`tiles`).
+    is bounded by the tile, not the frame. Readouts past either end repeat the
+    first or last one; the frame is mirrored at its edges (:func:`mirrored_index`);
+    with ``tile=None`` the whole mirrored frame is one tile (:func:`tiles`).
     """
     sizes = model.sizes
     K, H, W = words.shape
     times = key_span(K, key, sizes.span)
     inside = torch.from_numpy(span_inside(K, key, sizes.span))[None].to(device)
-    hp, wp = -(-H // sizes.pyramid_factor) * sizes.pyramid_factor, -(-W // sizes.pyramid_factor) * sizes.pyramid_factor
-    boxes = tiles(H, W, sizes, tile)
+    row_index, top = mirrored_index(H, sizes.pyramid_factor)
+    col_index, left = mirrored_index(W, sizes.pyramid_factor)
+    hp, wp = len(row_index), len(col_index)
+    boxes = tiles(hp, wp, sizes, tile)
     margin = 0 if len(boxes) == 1 else tile_margin(sizes)
     out = torch.empty((H, W), dtype=torch.float32)
     for y, x, h, w in boxes:
-        if y >= H or x >= W:
-            continue                     # a tile of padding only
+        ya, yb = max(y, top), min(y + h, top + H)           # the part of the core inside the frame
+        xa, xb = max(x, left), min(x + w, left + W)
+        if ya >= yb or xa >= xb:
+            continue                     # a tile of the mirrored border only
         y0, x0 = max(0, y - margin), max(0, x - margin)
         y1, x1 = min(hp, y + h + margin), min(wp, x + w + margin)
-        rows = np.clip(np.arange(y0, y1), 0, H - 1)
-        cols = np.clip(np.arange(x0, x1), 0, W - 1)
+        rows, cols = row_index[y0:y1], col_index[x0:x1]
         block = words[times[:, None, None], rows[None, :, None], cols[None, None, :]]
         light = decode_light(block, config, device=device, dtype=torch.float32)
         result = model(light[None], inside, config.spike_light)[0, 0]
-        yh, xw = min(y + h, H), min(x + w, W)
-        out[y:yh, x:xw] = result[y - y0:yh - y0, x - x0:xw - x0].float().cpu()
+        out[ya - top:yb - top, xa - left:xb - left] = result[ya - y0:yb - y0, xa - x0:xb - x0].float().cpu()
     return out
 
 
