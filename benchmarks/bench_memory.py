@@ -61,7 +61,7 @@ def learned_child(method: str, height: int, width: int, tile: str, threads: int,
 
     from golden.config import SensorConfig
     from recon.learned import method_classes
-    from recon.net.infer import frame, load_weights, tile_margin, tiles, weights_path
+    from recon.net.infer import blocks, frame, load_weights, tile_margin, weights_path
 
     torch.set_num_threads(threads)
     config = SensorConfig(mode="te")
@@ -73,10 +73,8 @@ def learned_child(method: str, height: int, width: int, tile: str, threads: int,
         model = model_cls(sizes_cls.preset("cpu")).eval().to(memory_format=torch.channels_last)
     words = np.random.default_rng(0).integers(0, 16, size=(1, height, width)).astype(np.uint8)
     chosen = None if tile == "none" else "auto" if tile == "auto" else int(tile)
-    boxes = tiles(height, width, model.sizes, chosen)
-    margin = 0 if len(boxes) == 1 else tile_margin(model.sizes)
-    block = max((min(y + h + margin, height) - max(0, y - margin)) * (min(x + w + margin, width) - max(0, x - margin))
-                for y, x, h, w in boxes)
+    boxes = blocks(height, width, model.sizes, chosen)
+    block = max(len(b.rows) * len(b.cols) for b in boxes)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     start = time.perf_counter()
     with torch.inference_mode():

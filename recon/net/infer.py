@@ -29,6 +29,7 @@ a configuration no weights were trained for is refused, naming both.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -104,6 +105,36 @@ def mirrored_index(length: int, factor: int) -> tuple[np.ndarray, int]:
     return np.pad(np.arange(length), (MIRROR_BORDER, after), mode="reflect"), MIRROR_BORDER
 
 
+@dataclasses.dataclass(frozen=True)
+class Block:
+    """One tile as the network computes it: the frame rows and columns it reads (mirrored at the
+    edges, with the tile margin), and where its core lands, in the frame and in its own result."""
+    rows: np.ndarray
+    cols: np.ndarray
+    frame: tuple[slice, slice]
+    result: tuple[slice, slice]
+
+
+def blocks(height: int, width: int, sizes, tile: int | str | None = None) -> list[Block]:
+    """The blocks :func:`frame` computes for a ``height`` x ``width`` frame (see :func:`tiles`)."""
+    row_index, top = mirrored_index(height, sizes.pyramid_factor)
+    col_index, left = mirrored_index(width, sizes.pyramid_factor)
+    hp, wp = len(row_index), len(col_index)
+    cores = tiles(hp, wp, sizes, tile)
+    margin = 0 if len(cores) == 1 else tile_margin(sizes)
+    out = []
+    for y, x, h, w in cores:
+        ya, yb = max(y, top), min(y + h, top + height)          # the part of the core inside the frame
+        xa, xb = max(x, left), min(x + w, left + width)
+        if ya >= yb or xa >= xb:
+            continue                                           # a core of mirrored border only
+        y0, x0 = max(0, y - margin), max(0, x - margin)
+        y1, x1 = min(hp, y + h + margin), min(wp, x + w + margin)
+        out.append(Block(row_index[y0:y1], col_index[x0:x1], (slice(ya - top, yb - top), slice(xa - left, xb - left)),
+                         (slice(ya - y0, yb - y0), slice(xa - x0, xb - x0))))
+    return out
+
+
 def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, *,
           tile: int | str | None = None, device: str = "cpu") -> torch.Tensor:
     """The network's image (H, W) at readout ``key`` of the stream ``words`` (K, H, W).
@@ -111,30 +142,17 @@ def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, 
     Only the readouts and pixels one tile needs are decoded at a time, so memory
     is bounded by the tile, not the frame. Readouts past either end repeat the
     first or last one; the frame is mirrored at its edges (:func:`mirrored_index`);
-    with ``tile=None`` the whole mirrored frame is one tile (:func:`tiles`).
+    with ``tile=None`` the whole mirrored frame is one tile (:func:`blocks`).
     """
     sizes = model.sizes
     K, H, W = words.shape
     times = key_span(K, key, sizes.span)
     inside = torch.from_numpy(span_inside(K, key, sizes.span))[None].to(device)
-    row_index, top = mirrored_index(H, sizes.pyramid_factor)
-    col_index, left = mirrored_index(W, sizes.pyramid_factor)
-    hp, wp = len(row_index), len(col_index)
-    boxes = tiles(hp, wp, sizes, tile)
-    margin = 0 if len(boxes) == 1 else tile_margin(sizes)
     out = torch.empty((H, W), dtype=torch.float32)
-    for y, x, h, w in boxes:
-        ya, yb = max(y, top), min(y + h, top + H)           # the part of the core inside the frame
-        xa, xb = max(x, left), min(x + w, left + W)
-        if ya >= yb or xa >= xb:
-            continue                     # a tile of the mirrored border only
-        y0, x0 = max(0, y - margin), max(0, x - margin)
-        y1, x1 = min(hp, y + h + margin), min(wp, x + w + margin)
-        rows, cols = row_index[y0:y1], col_index[x0:x1]
-        block = words[times[:, None, None], rows[None, :, None], cols[None, None, :]]
-        light = decode_light(block, config, device=device, dtype=torch.float32)
-        result = model(light[None], inside, config.spike_light)[0, 0]
-        out[ya - top:yb - top, xa - left:xb - left] = result[ya - y0:yb - y0, xa - x0:xb - x0].float().cpu()
+    for block in blocks(H, W, sizes, tile):
+        light = decode_light(words[times[:, None, None], block.rows[None, :, None], block.cols[None, None, :]],
+                             config, device=device, dtype=torch.float32)
+        out[block.frame] = model(light[None], inside, config.spike_light)[0, 0][block.result].float().cpu()
     return out
 
 
