@@ -6,7 +6,7 @@ shorter than the span works, down to one readout), and the network is told
 which readouts are such padding (``inside``). Frames are mirrored by
 :data:`MIRROR_BORDER` pixels or more beyond every edge, to a multiple of the
 network's pyramid factor (the convolutions' zero padding then meets scene
-content, not a cliff: +0.9 dB on 16 x 16 crops, below), and cut into
+content, not a cliff: +0.9 dB on 16 x 16 crops, docs/network.md), and cut into
 tiles whose cores are computed with :func:`tile_margin` pixels more on every
 side: the receptive radius derived from the module itself
 (:func:`recon.learned.receptive_radius`, :mod:`recon.reach`), rounded up to
