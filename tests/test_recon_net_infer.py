@@ -84,8 +84,8 @@ def test_tile_policy():
 def test_mirrored_index(length):
     """The frame, mirrored by MIRROR_BORDER or more on each side, to a multiple of the pyramid factor."""
     f = TINY.pyramid_factor
-    index, first = mirrored_index(length, f)
-    assert first == MIRROR_BORDER and len(index) % f == 0 and len(index) >= length + 2 * MIRROR_BORDER
+    index, first = mirrored_index(length, f), MIRROR_BORDER
+    assert len(index) % f == 0 and len(index) >= length + 2 * MIRROR_BORDER
     assert (index[first:first + length] == np.arange(length)).all()
     assert index.min() == 0 and index.max() == length - 1
     if length > 1:
@@ -97,8 +97,8 @@ def test_the_network_sees_the_frame_mirrored(te_weights, monkeypatch):
     """Equal to the network on the explicitly mirrored frame (np.pad "reflect"), cut back."""
     model, config, _ = load_weights(te_weights)
     words = np.random.default_rng(4).integers(0, 16, (5, 11, 14)).astype(np.uint8)
-    rows, top = mirrored_index(11, model.sizes.pyramid_factor)
-    cols, left = mirrored_index(14, model.sizes.pyramid_factor)
+    rows, cols = mirrored_index(11, model.sizes.pyramid_factor), mirrored_index(14, model.sizes.pyramid_factor)
+    top = left = MIRROR_BORDER
     padded = np.pad(words, ((0, 0), (top, len(rows) - 11 - top), (left, len(cols) - 14 - left)), mode="reflect")
     with torch.inference_mode():
         got = frame(model, words, config, 2)

@@ -91,18 +91,14 @@ def tiles(height: int, width: int, sizes, tile: int | str | None = "auto") -> li
     return [(y, x, min(ty, hp - y), min(tx, wp - x)) for y in range(0, hp, ty) for x in range(0, wp, tx)]
 
 
-def mirrored_index(length: int, factor: int) -> tuple[np.ndarray, int]:
-    """(index, first): the rows (or columns) of the frame the network sees, and where the frame starts.
-
-    The frame mirrored (``np.pad`` "reflect") by :data:`MIRROR_BORDER` before its
-    first row and by that or more after its last, to a multiple of the pyramid
-    factor; a frame of one row repeats it.
+def mirrored_index(length: int, factor: int) -> np.ndarray:
+    """The rows (or columns) of the frame the network sees: the frame mirrored (``np.pad``
+    "reflect") by :data:`MIRROR_BORDER` before its first row and by that or more after its
+    last, to a multiple of the pyramid factor (a frame of one row repeats it); the frame
+    itself starts at :data:`MIRROR_BORDER`.
     """
     total = -(-(length + 2 * MIRROR_BORDER) // factor) * factor
-    after = total - length - MIRROR_BORDER
-    if length == 1:
-        return np.zeros(total, np.int64), MIRROR_BORDER
-    return np.pad(np.arange(length), (MIRROR_BORDER, after), mode="reflect"), MIRROR_BORDER
+    return np.pad(np.arange(length), (MIRROR_BORDER, total - length - MIRROR_BORDER), mode="reflect")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,8 +113,9 @@ class Block:
 
 def blocks(height: int, width: int, sizes, tile: int | str | None = None) -> list[Block]:
     """The blocks :func:`frame` computes for a ``height`` x ``width`` frame (see :func:`tiles`)."""
-    row_index, top = mirrored_index(height, sizes.pyramid_factor)
-    col_index, left = mirrored_index(width, sizes.pyramid_factor)
+    row_index = mirrored_index(height, sizes.pyramid_factor)
+    col_index = mirrored_index(width, sizes.pyramid_factor)
+    top = left = MIRROR_BORDER
     hp, wp = len(row_index), len(col_index)
     cores = tiles(hp, wp, sizes, tile)
     margin = 0 if len(cores) == 1 else tile_margin(sizes)
