@@ -25,7 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))    # measure this checkout's golden/
 
-from golden.config import DESIGN_ELECTRONS, SensorConfig
+from golden.config import SensorConfig
 from golden.decode import ESTIMATORS, decode_light
 from golden.dynamic_range import constant_light_words, estimator_error, formula_db, light_grid, measure
 from golden.io import atomic_output
@@ -78,7 +78,7 @@ def range_table(n_s: int, windows: int, seed: int):
 
 def estimator_table(seed: int, readouts: int):
     config = SensorConfig()
-    low = config.p_max * config.threshold / DESIGN_ELECTRONS          # 2^b1 spikes per readout
+    low = config.p_max * config.spike_light                           # 2^b1 spikes per readout
     light = np.logspace(np.log10(low), 0, 25)
     header = ("| estimator | mean abs bias | max abs bias | mean spread (std) | RMS error |\n"
               "| --- | --- | --- | --- | --- |\n")

@@ -65,17 +65,16 @@ def midpoint_light(words: np.ndarray, config) -> np.ndarray:
     """EXPERIMENT, not a shipped estimator: TE overflow in S_h cycle m means the 2^b1-th
     spike fired in clocks (m-1)F .. mF-1, so take the middle of that range instead of its
     end (the paper's eq. 3, ``ratio``); m = 1 can only be clock 2^b1 - 1 or later."""
-    from golden.config import DESIGN_ELECTRONS
     from golden.decode import decode_spikes
     spikes = decode_spikes(words, config)
     if not config.is_te:
-        return spikes * config.threshold / DESIGN_ELECTRONS
+        return spikes * config.spike_light
     w = words.astype(np.int64)
     flag, m = (w >> config.d).astype(bool), (w & ((1 << config.d) - 1)).astype(np.float64)
     F, L = config.clocks_per_tick, config.clocks_per_readout
     clocks = np.where(m <= 1, max(config.p_max, F), (m - 0.5) * F + 0.5)
     rate = np.where(flag, np.minimum(config.p_max * L / np.maximum(clocks, 1), L), spikes)
-    return rate * config.threshold / DESIGN_ELECTRONS
+    return rate * config.spike_light
 
 
 def flat_light_sweep(window: int, seed: int) -> list[str]:

@@ -13,8 +13,9 @@ them chosen per pixel (an oracle) is 5 to 14 dB above each alone
 
 So the head sees, at the key moment, :data:`RADII`'s centred means of the
 decoded light and the spike-interval estimate (TFI, searched inside the
-span, with the sensor's one-spike bound where no spike follows), all compressed by the mu-law, and predicts from the method's features
-a softmax weight for each (per pixel) and a correction:
+span, with the sensor's one-spike bound where no spike follows), all
+compressed by the mu-law, and predicts from the method's features a softmax
+weight for each (per pixel) and a correction:
 
     code = sum_j softmax(logits)_j * compress(estimate_j) + correction,
 
