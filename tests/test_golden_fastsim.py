@@ -15,7 +15,8 @@ import pytest
 from golden.config import SensorConfig
 from golden.decode import check_words, decode_spikes
 from golden.errors import InputError
-from golden.fastsim import SceneSimulator, simulate_scene
+from golden.fastsim import SceneSimulator, head, simulate_scene
+from golden.fastsim.clock import walk_clocks
 from golden.light import poisson_stimulus
 from golden.reference import msb_index
 from golden.sensor import PixelArray, simulate
@@ -385,14 +386,14 @@ def test_head_path_matches_per_clock_from_carried_charge(config, monkeypatch):
     low = np.arange(light.size) % theta                                    # 0 .. theta - 1
     acc0 = np.where(np.repeat(per_clock, pixels) > 1, low, backlog)
     tails = {}
-    for name in ("_queue_walk", "_full_walk"):
-        original = getattr(SceneSimulator, name)
+    for name in ("queue_walk", "full_walk"):
+        original = getattr(head, name)
 
-        def spy(self, sel, w, lam, acc0, clocks, *rest, _name=name, _original=original):
+        def spy(sim, sel, w, lam, acc0, clocks, *rest, _name=name, _original=original):
             if clocks < L:
                 tails[_name] = tails.get(_name, 0) + sel.size
-            return _original(self, sel, w, lam, acc0, clocks, *rest)
-        monkeypatch.setattr(SceneSimulator, name, spy)
+            return _original(sim, sel, w, lam, acc0, clocks, *rest)
+        monkeypatch.setattr(head, name, spy)
     fast = SceneSimulator(config, light.shape, rng=51)
     full = SceneSimulator(config, light.shape, rng=52, method="per-clock")
     for sim in (fast, full):
@@ -402,7 +403,7 @@ def test_head_path_matches_per_clock_from_carried_charge(config, monkeypatch):
     a, b = fast.readout(light)[0], full.readout(light)[0]
     assert fast.path_counts["head"] >= 3 * pixels, fast.path_counts
     assert fast.path_counts["fallback"] < fast.path_counts["head"] / 2, fast.path_counts
-    assert tails.get("_queue_walk", 0) > pixels // 2 and tails.get("_full_walk", 0) > pixels // 2, tails
+    assert tails.get("queue_walk", 0) > pixels // 2 and tails.get("full_walk", 0) > pixels // 2, tails
     width = max(1, theta // 2)                     # two bins below theta: sampling noise well under 0.05
     bins = np.arange(0, acc_max + width + 1, width)
     for i in range(len(levels)):
@@ -505,12 +506,12 @@ def test_reading_acc_changes_no_later_word(config):
     for k in range(6):
         assert np.array_equal(quiet.readout(scene[k]), read.readout(scene[k])), k
         if k < 3:
-            before = read._acc.copy()
+            before = read.carried.copy()
             seen = read.acc
-            assert read._lazy.any() and not seen.flags.writeable
-            assert np.all(seen >= before) and np.all(seen[read._lazy] < theta)
+            assert read.lazy.mask.any() and not seen.flags.writeable
+            assert np.all(seen >= before) and np.all(seen[read.lazy.mask] < theta)
     assert quiet.path_counts == read.path_counts and quiet.path_counts["lazy"] > 0
-    assert np.array_equal(quiet._acc, read._acc) and np.array_equal(quiet.sfc, read.sfc)
+    assert np.array_equal(quiet.carried, read.carried) and np.array_equal(quiet.sfc, read.sfc)
     read.acc = np.arange(1000) % theta                      # a write: no pixel is lazy any more
     assert np.array_equal(read.acc, np.arange(1000) % theta) and read.acc.flags.writeable
 
@@ -526,7 +527,7 @@ def test_reading_acc_is_a_function_of_the_seed_and_the_readouts_done():
         for sim in sims:
             sim.readout(scene[k])
     first = sims[0].acc
-    assert sims[0]._lazy.any() and not np.array_equal(first, sims[0]._acc)   # lazy charges were drawn
+    assert sims[0].lazy.mask.any() and not np.array_equal(first, sims[0].carried)   # lazy charges were drawn
     assert np.array_equal(first, sims[0].acc) and np.array_equal(first, sims[1].acc)
     sims[0].readout(scene[2])
     assert sims[0].readouts == 3
@@ -535,7 +536,7 @@ def test_reading_acc_is_a_function_of_the_seed_and_the_readouts_done():
 @pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_EDGE_CONFIGS,
                          ids=str)
 def test_unclipped_walk_equals_the_cycle_exact_model_word_for_word(config):
-    """The per-clock path's shortcut for few pixels (``_walk_clocks``: the queue of
+    """The per-clock path's shortcut for few pixels (``golden.fastsim.clock.walk_clocks``: the queue of
     threshold crossings in closed form, kept only where no clock clipped) gives the
     cycle-exact model's words, charges and msb remainders on the same electrons, from
     any carried charge (backlogs included), and leaves to it exactly the pixels that
@@ -545,18 +546,18 @@ def test_unclipped_walk_equals_the_cycle_exact_model_word_for_word(config):
     lam = np.exp(rng.uniform(np.log(0.005), np.log(1.5), n)) * theta      # dim .. above a threshold a clock
     e = np.minimum(rng.poisson(lam[None, :], size=(L, n)), config.input_max).astype(np.int64)
     sim = SceneSimulator(config, (1, n), rng=0)
-    sim._acc[:] = rng.integers(0, config.acc_max + 1, n)
+    sim.carried[:] = rng.integers(0, config.acc_max + 1, n)
     if config.is_msb:
         sim.sfc[:] = rng.integers(0, config.ml_max + 1, n)
     array = PixelArray(config, (1, n))
-    array.state.acc[0], array.state.sfc[0] = sim._acc, sim.sfc
+    array.state.acc[0], array.state.sfc[0] = sim.carried, sim.sfc
     exact = array.feed(e.reshape(L, 1, n))[0, 0]
     words = np.full(n, -1, np.int64)
-    settled = sim._walk_clocks(np.arange(n), e, words)
+    settled = walk_clocks(sim, np.arange(n), e, words)
     assert settled.sum() > 0.2 * n
     if config.input_max > 2 * config.threshold:             # light above a threshold a clock clips
         assert not settled.all()
     assert np.array_equal(words[settled], exact[settled])
-    assert np.array_equal(sim._acc[settled], array.state.acc[0][settled])
+    assert np.array_equal(sim.carried[settled], array.state.acc[0][settled])
     assert np.array_equal(sim.sfc[settled], array.state.sfc[0][settled])
     assert (words[~settled] == -1).all()                  # the others are left untouched

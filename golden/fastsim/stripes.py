@@ -12,8 +12,8 @@ import os
 
 import numpy as np
 
-from .errors import InputError
-from .io import scan_light
+from ..errors import InputError
+from ..io import scan_light
 
 #: Stripes of a noisy fast simulation (:func:`stripe_slices`): a power of two,
 #: at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a stripe's

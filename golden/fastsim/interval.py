@@ -1,0 +1,117 @@
+"""The event and bright paths: one draw of the interval's total electrons.
+
+``event``    ``acc < theta`` and no clock can get more than ``min(theta, 2^E - 1)``
+             electrons (bound). Then no clock holds two threshold crossings, so
+             every crossing is a spike in its own clock and no input saturates:
+             the interval total ``T ~ Poisson(expected) + dark`` fixes the spike
+             count ``floor((acc + T) / theta)`` and the residual
+             ``(acc + T) mod theta``; given T the electrons sit in iid uniform
+             positions over the L clocks, so the clock of the ``2^b1``-th spike
+             (TE overflow) is ``floor(L * Beta(n, T - n + 1))`` with
+             ``n = 2^b1 * theta - acc``, the n-th of T uniform order statistics.
+``bright``   every clock surely gets at least ``theta`` electrons: a spike in every
+             clock (word known), the accumulator only grows, so it ends at
+             ``min(acc + sum(e) - L theta, 2^A - 1)``; ``sum(e)`` is
+             ``Poisson(expected) + dark`` when no input can saturate, ``L (2^E - 1)``
+             when every input surely does, and need not be drawn at all when
+             the accumulator surely ends full.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import SensorConfig
+from ..light import log_poisson_tail_above, log_poisson_tail_below
+from .clock import clock_path
+from .bisection import largest_below, smallest_below
+from .codes import BRIGHT, EVENT
+from .words import firing_words, ml_words
+
+
+def interval_levels(config: SensorConfig, budget: float) -> tuple[float, float, float]:
+    """-> (``mean_event``: largest interval mean per clock at which no clock surely
+    gets more than ``min(theta, 2^E - 1)`` electrons; ``mean_unclipped``: at which no
+    input saturates; ``lam_bright``: smallest photo-electrons per clock at which every
+    clock surely gets ``theta``, infinite where inputs saturate below theta)."""
+    c = config
+    cap = min(c.threshold, c.input_max)
+    mean_event = largest_below(lambda m: log_poisson_tail_above(m, cap + 1), budget, cap + 1)
+    mean_unclipped = largest_below(lambda m: log_poisson_tail_above(m, c.input_max + 1),
+                                   budget, c.input_max + 1)
+    lam_bright = np.inf
+    if c.input_max >= c.threshold:
+        lam_bright = smallest_below(lambda m: log_poisson_tail_below(m, c.threshold - 1), budget, c.threshold)
+    return mean_event, mean_unclipped, lam_bright
+
+
+def classify_interval(levels, code, lam, mean, acc):
+    """Mark the event and bright pixels in ``code`` (the others keep theirs): event
+    from the light with dark electrons per clock ``mean`` and the charge ``acc``,
+    bright from the photo-electrons per clock ``lam`` alone."""
+    code[(acc < levels.config.threshold) & (mean <= levels.mean_event)] = EVENT
+    code[lam >= levels.lam_bright] = BRIGHT
+
+
+def event_path(sim, sel, expected, dark, words):
+    """Event path of pixels ``sel``: flat indices, or ``slice(None)`` for the whole frame."""
+    c = sim.config
+    theta, L = c.threshold, c.clocks_per_readout
+    acc0 = sim.carried[sel]
+    total = sim.rng.poisson(expected[sel])
+    if sim.dark_model:
+        total += dark[sel]
+    level = acc0 + total
+    spikes = level // theta                            # (np.divmod is 3x slower on int64)
+    residual = level - spikes * theta
+    if not c.is_te:
+        sim.carried[sel] = residual
+        ml_words(sim, sel, spikes, words)
+        return
+    over = np.flatnonzero(spikes >= c.p_max)
+    if over.size:
+        n = c.p_max * theta - acc0[over]               # electron that makes the 2^b1-th spike
+        t = total[over]
+        position = sim.rng.beta(n, t - n + 1)          # n-th of t uniform order statistics
+        at = np.minimum((position * L).astype(np.int64), L - 1)
+        spikes[over] = (1 << c.d) | (at // c.clocks_per_tick + 1)
+    sim.carried[sel] = residual                         # after acc0 (maybe a view) is used
+    words[sel] = spikes
+
+
+def bright_path(sim, sel, expected, lam, dark, words):
+    """Bright path of pixels ``sel`` (flat indices); inputs that may or may not
+    saturate (rare) go per clock."""
+    c = sim.config
+    theta, L, top, acc_max = c.threshold, c.clocks_per_readout, c.input_max, c.acc_max
+    acc0 = sim.carried[sel]
+    lam_s = lam[sel]
+    end = np.full(sel.size, acc_max, np.int64)
+    # every clock saturated at 2^E - 1: a deterministic sum
+    all_top = log_poisson_tail_below(lam_s, top - 1) < sim.budget
+    # accumulator surely full after the first clock: nothing to draw
+    full = np.zeros(sel.size, bool)
+    if top >= theta + acc_max:
+        full = log_poisson_tail_below(lam_s, theta + acc_max - 1) < sim.budget
+    # no input can saturate: the sum is Poisson(expected) + dark
+    unclipped = log_poisson_tail_above(lam_s + dark[sel] / L, top + 1) < sim.budget
+    need = ~full & ~all_top
+    if (need & ~unclipped).any():
+        # inputs that may or may not saturate: per clock (exact), rare in practice
+        mixed = need & ~unclipped
+        sim.path_counts["bright"] -= int(mixed.sum())
+        sim.path_counts["clock"] += int(mixed.sum())
+        clock_path(sim, sel[mixed], expected, dark, words)
+        need &= unclipped
+        keep = ~mixed
+    else:
+        keep = np.ones(sel.size, bool)
+    top_sel = all_top & ~full
+    end[top_sel] = np.minimum(acc0[top_sel] + L * (top - theta), acc_max)
+    if need.any():
+        total = sim.rng.poisson(expected[sel][need]) + dark[sel][need]
+        # under the sure event total >= L theta; max(.., 0) only guards the
+        # 2^-64 failure event against an illegal negative state
+        end[need] = np.clip(acc0[need] + total - L * theta, 0, acc_max)
+    sim.carried[sel[keep]] = end[keep]
+    firing_words(sim, sel[keep], words)

@@ -1,0 +1,185 @@
+"""The simulator's state and its readout: which path each pixel takes, then each path run.
+
+:class:`SceneSimulator` holds an H x W array's carried state and, for each
+readout interval, asks the lazy path for its pixels (:mod:`.lazy`), the
+other families for the rest (:mod:`.plan`) and runs each path's pixels in
+the order of :data:`SIMULATION_PATHS` (the order fixes which random numbers
+each path draws, so a seed gives one stream). The paths themselves live in
+their families' modules, each with its classification.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import SensorConfig
+from ..errors import InputError
+from ..light import (as_generator, check_dark_current, dark_electrons, electrons_per_readout,
+                     log_budget)
+from .clock import clock_chunks, clock_path
+from .head import head_path
+from .interval import bright_path, event_path
+from .lazy import LazyState, lazy_charge, lazy_path
+from .window import groups, window_path
+from .codes import BRIGHT, CLOCK, EVENT, FULL, HEAD, LAZY, QUEUE, SIMULATION_PATHS
+from .plan import path_levels
+from .words import word_tables
+
+#: Bounded events a pixel-readout can rely on (input saturation, clipping,
+#: backlog, firing, window certification, ...); each gets 1/CHECKS of the budget.
+CHECKS = 8
+
+#: Spawn key of the generator that draws lazy pixels' charge when :attr:`SceneSimulator.acc`
+#: is read (beyond any child index a caller spawns in practice).
+PEEK_KEY = 0x7065656B
+
+#: How :class:`SceneSimulator` draws electrons: the fast paths, or per pixel clock everywhere.
+SIMULATION_METHODS = ("fast", "per-clock")
+
+
+class SceneSimulator:
+    """An H x W array of pixels lit by a scene, one readout interval at a time.
+
+    Holds the carried accumulator (``carried``, int64, flat; lazy pixels' at
+    their last sync, :attr:`acc` gives every pixel's), the lazy pixels' state
+    (``lazy``, :class:`golden.fastsim.lazy.LazyState`), the ML msb counter
+    remainder (``sfc``, int64, flat; 0 otherwise) and, for ``noise=False``, the
+    carried charge fraction. ``method="per-clock"`` sends every pixel down
+    the per-clock path (the full path the shortcuts are tested against).
+    ``path_counts`` counts pixel-readouts per path.
+    """
+
+    def __init__(self, config: SensorConfig, shape: tuple[int, int], *, rng=None,
+                 dark_current: str | None = None, noise: bool = True,
+                 method: str = "fast", total_pixel_readouts: int | None = None):
+        check_method(method)
+        self.config = config
+        self.shape = tuple(shape)
+        self.dark_model = check_dark_current(dark_current)
+        if not noise and self.dark_model is not None:
+            raise InputError(f"dark current {self.dark_model!r} is random; "
+                             "it cannot be combined with noise switched off")
+        self.noise = noise
+        self.method = method
+        self.rng = as_generator(rng)
+        n = self.shape[0] * self.shape[1]
+        self.carried = np.zeros(n, np.int64)               # carried charge (lazy pixels: at their last sync)
+        self.lazy = LazyState(n)
+        self.sampler = None                                # PoissonSampler, made on first use
+        self.sfc = np.zeros(n, np.int64)                   # msb: remainder left in the counter
+        self.fraction = np.zeros(n)
+        self.no_dark = np.zeros(n, np.int64)               # read only
+        # at most CHECKS bounded events per pixel-readout, each below the budget
+        self.budget = log_budget(total_pixel_readouts or n, config.clocks_per_readout) - np.log(CHECKS)
+        self.path_counts = dict.fromkeys(SIMULATION_PATHS + ("fallback",), 0)
+        self.levels = path_levels(config, float(self.budget))
+        self.tables = word_tables(config)
+        self.readouts = 0                                  # readout intervals simulated
+        seq = getattr(self.rng.bit_generator, "seed_seq", None)
+        if not isinstance(seq, np.random.SeedSequence):
+            seq = np.random.SeedSequence()                 # a seedless generator: fresh entropy, once
+        self._peek_seed = (seq.entropy, tuple(seq.spawn_key) + (PEEK_KEY,), seq.pool_size)  # read only
+
+    @property
+    def acc(self) -> np.ndarray:
+        """The carried charge of every pixel (flat int64). Reading it is free of side
+        effects: it changes no state, draws nothing from the simulator's generator (later
+        words are those of a run without the read) and gives the same values when read
+        again before the next readout. With no lazy pixel it is the simulator's own array
+        (writes set the charge the next readout starts from); otherwise a read-only copy in
+        which each lazy pixel's charge is drawn from its law given everything simulated so
+        far (:func:`golden.fastsim.lazy.lazy_charge`), from a generator made afresh for the read
+        from the simulator's seed and the number of readouts done (:meth:`_peek_generator`).
+        To set charges while pixels are lazy, assign the whole array (``sim.acc = values``)."""
+        on = np.flatnonzero(self.lazy.mask)
+        if not on.size:
+            return self.carried
+        acc = self.carried.copy()
+        acc[on] += lazy_charge(self, on, self._peek_generator())
+        acc.flags.writeable = False
+        return acc
+
+    @acc.setter
+    def acc(self, values) -> None:
+        """Set every pixel's carried charge (lazy pixels leave their path: their
+        charge is now known, and what follows depends on it alone)."""
+        self.carried[:] = values
+        self.lazy.mask[:] = False
+
+    def _peek_generator(self) -> np.random.Generator:
+        """A new generator for one read of :attr:`acc`: a child of the simulator's seed
+        sequence keyed by :data:`PEEK_KEY` and :attr:`readouts`, made without spawning (the
+        simulator's own stream and counter are untouched), so a read is a function of the
+        seed and the readouts done. A seedless generator's reads take one fresh entropy,
+        drawn at the simulator's making."""
+        entropy, key, pool_size = self._peek_seed
+        return np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=key + (self.readouts,),
+                                                            pool_size=pool_size))
+
+    def readout(self, light: np.ndarray) -> np.ndarray:
+        """Light of one interval (H, W), checked >= 0 and finite -> words (H, W) int64."""
+        L = self.config.clocks_per_readout
+        expected = electrons_per_readout(np.asarray(light).reshape(-1))
+        self.readouts += 1
+        dark = (dark_electrons(self.dark_model, expected.shape, self.rng) if self.dark_model
+                else self.no_dark)
+        words = np.zeros(expected.shape, np.int64)
+        if not self.noise or self.method == "per-clock":
+            clock_path(self, np.arange(expected.size), expected, dark, words)
+            self.path_counts["clock"] += expected.size
+            return words.reshape(self.shape)
+
+        on_lazy = lazy_path(self, expected, dark, words)
+        n_lazy = int(np.count_nonzero(on_lazy))
+        if n_lazy == expected.size:                        # a dark frame: nothing else to do
+            self.path_counts["lazy"] += n_lazy
+            return words.reshape(self.shape)
+        lam = expected / L                                 # photo-electrons per clock
+        mean = lam + dark / L if self.dark_model else lam  # with dark electrons
+        plan = self.levels.classify(on_lazy, n_lazy, lam, mean, dark, self.carried)
+        counts = np.bincount(plan.path, minlength=len(SIMULATION_PATHS))
+        for code, name in enumerate(SIMULATION_PATHS):
+            if not counts[code]:
+                continue
+            self.path_counts[name] += int(counts[code])
+            if code == LAZY:                               # done by lazy_path
+                continue
+            if code == EVENT and counts[code] == expected.size:
+                sel = slice(None)                          # the whole frame: no gather / scatter
+            else:
+                sel = np.flatnonzero(plan.path == code)
+            if code == EVENT:
+                event_path(self, sel, expected, dark, words)
+            elif code == BRIGHT:
+                bright_path(self, sel, expected, lam, dark, words)
+            elif code in (QUEUE, FULL):
+                window_path(self, code, sel, plan, expected, dark, lam, words)
+            elif code == HEAD:
+                for h, group in groups(sel, plan.length[sel]):
+                    head_path(self, group, h, expected, lam, words)
+            elif code == CLOCK:
+                clock_path(self, sel, expected, dark, words)
+        return words.reshape(self.shape)
+
+    def clock_stimulus(self, light: np.ndarray) -> np.ndarray:
+        """Per-clock electrons ``(L, H, W)`` of one interval, drawn exactly as
+        :meth:`readout` draws them with ``method="per-clock"`` (same random numbers
+        in the same order), without running the pixels: the cycle-exact model on
+        these electrons gives that readout's words. Smallest unsigned dtype."""
+        from ..light import stimulus_dtype
+        if self.noise and self.method != "per-clock":
+            raise InputError("clock_stimulus needs method='per-clock' (or noise switched off)")
+        L = self.config.clocks_per_readout
+        expected = electrons_per_readout(np.asarray(light).reshape(-1))
+        dark = (dark_electrons(self.dark_model, expected.shape, self.rng) if self.dark_model
+                else self.no_dark)
+        out = np.empty((L, expected.size), stimulus_dtype(self.config))
+        for part, e in clock_chunks(self, np.arange(expected.size), expected, dark):
+            out[:, part] = e
+        return out.reshape((L,) + self.shape)
+
+
+def check_method(method) -> None:
+    """Refuse a simulation method not in :data:`SIMULATION_METHODS`."""
+    if method not in SIMULATION_METHODS:
+        raise InputError(f"simulation method {method!r} unknown (known: {', '.join(SIMULATION_METHODS)})")

@@ -1,0 +1,244 @@
+"""The queue and full paths: light near one threshold per clock, settled by a window of its last clocks.
+
+``queue``    light below one threshold per clock, no clipping (Lundberg bound):
+             spikes follow the threshold crossings through a unit-rate queue;
+             the last w clocks are drawn per clock to settle the backlog left
+             at readout, the TE overflow clock comes from Gamma-gap order
+             statistics of the first crossings (:func:`queue_walk`).
+``full``     light above one threshold per clock and a spike in every clock
+             sure (Lundberg bound on the walk from the carried charge): word
+             known, accumulator from a window of the last clocks (:func:`full_walk`).
+
+A window that does not settle its pixel's outcome sends it per clock with
+what was drawn (:func:`golden.fastsim.clock.fallback`). The head path
+(:mod:`.head`) runs the same walks on the rest of an interval.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import SensorConfig
+from .clock import clock_draws, clock_path, fallback
+from .codes import FULL, QUEUE
+from .words import firing_words, ml_words
+
+#: Largest backlog bound the queue path accepts, and its shortest window.
+MAX_BACKLOG = 64
+MIN_WINDOW = 8
+
+#: Pixels of one path processed as one group whatever their window lengths.
+SMALL_GROUP = 256
+
+
+def queue_level(config: SensorConfig, budget: float) -> float:
+    """Largest light per clock, in thresholds, of the queue path: ``L exp(-s (acc_max
+    + 2 - theta))`` below budget with ``s = 2 (1 - rho)`` (the accumulator never clips)."""
+    h = config.acc_max + 2 - config.threshold
+    return 1.0 - (np.log(config.clocks_per_readout) - budget) / (2.0 * h)
+
+
+def classify_window(levels, idx, lam, mean, dark, acc, path, length, b_max):
+    """Queue or full path for pixels ``idx`` near one threshold per clock, where
+    allowed; their window lengths (rounded) and queue backlog bounds are written
+    into ``length`` and ``b_max``."""
+    theta = levels.config.threshold
+    ok = (dark == 0) & (mean <= levels.mean_unclipped)
+    rho = lam / theta
+    # queue: below the threshold per clock, the accumulator surely never clips
+    queue = ok & (acc < theta) & (rho < levels.rho_queue)
+    if queue.any():
+        sel = idx[queue]
+        keep, bound, window = queue_plan(levels, rho[queue])
+        path[sel[keep]] = QUEUE
+        length[sel[keep]] = round_window(window[keep])
+        b_max[sel[keep]] = bound[keep]
+    # full: above the threshold per clock, a spike in every clock surely
+    full = ok & (lam > theta)
+    if full.any():
+        sel = idx[full]
+        keep, window = full_plan(levels, lam[full], acc[full])
+        path[sel[keep]] = FULL
+        length[sel[keep]] = round_window(window[keep])
+
+
+def full_plan(levels, lam, acc):
+    """Full path at ``lam`` > theta electrons per clock from charge ``acc`` ->
+    (where the bound makes a spike in every clock sure, window length): the
+    walk held at ``acc_max`` never goes below 0 (Lundberg, ``s = 2 (lam -
+    theta) / lam``: ``exp(-s (acc + 1)) + L exp(-s (acc_max + 1))`` below budget)."""
+    c = levels.config
+    theta = c.threshold
+    s_full = 2.0 * (lam - theta) / lam
+    fire = np.logaddexp(-s_full * (acc + 1.0), np.log(c.clocks_per_readout) - s_full * (c.acc_max + 1.0))
+    gap = lam - theta
+    window = 1.3 * -levels.budget / s_full / gap + 16.0 * lam / gap ** 2
+    return fire < levels.budget, window
+
+
+def queue_plan(levels, rho):
+    """Queue path at ``rho`` thresholds per clock -> (where the bound allows the
+    path, b_max <= MAX_BACKLOG; backlog bound b_max; window length)."""
+    L = levels.config.clocks_per_readout
+    theta = levels.config.threshold
+    s_queue = 2.0 * (1.0 - rho)                        # Lundberg exponent (see queue_walk)
+    # P(backlog >= b at the window) <= L exp(-s ((b - 1) theta + 1)): b_max + 1 is unlikely
+    bound = np.floor(((np.log(L) - levels.budget) / s_queue - 1.0) / theta) + 1.0
+    bound = np.maximum(bound, 0.0)
+    # the Lindley recursion drains b_max in about b_max / (1 - rho) clocks
+    return bound <= MAX_BACKLOG, bound, (bound + 3.0) / (1.0 - rho)
+
+
+def round_window(clocks: np.ndarray) -> np.ndarray:
+    """Window or head lengths rounded up to multiples of MIN_WINDOW, at least
+    MIN_WINDOW: pixels of one length are one block, and few lengths mean few blocks."""
+    return MIN_WINDOW * np.maximum(1.0, np.ceil(clocks / MIN_WINDOW))
+
+
+def groups(sel, size):
+    """Pixels ``sel`` (any index array) grouped by window (or head) length ``size``, one block per
+    length; a few pixels go together at their longest length (a longer
+    window or head is as exact, only dearer, and one call costs less than
+    several small ones) -> [(length, pixels)]."""
+    if sel.size <= SMALL_GROUP:
+        return [(int(size.max()), sel)] if sel.size else []
+    return [(int(w), sel[size == w]) for w in np.unique(size)]
+
+
+def window_path(sim, code, sel, plan, expected, dark, lam, words):
+    """Pixels ``sel`` of path ``code`` (QUEUE or FULL), grouped by window length
+    (multiples of MIN_WINDOW) so that each group is one block; a window longer
+    than half the interval would cost more than the per-clock path, which takes it."""
+    name = "queue" if code == QUEUE else "full"
+    L = sim.config.clocks_per_readout
+    size = plan.length[sel]
+    too_long = size > L // 2
+    if too_long.any():
+        sim.path_counts[name] -= int(too_long.sum())
+        sim.path_counts["clock"] += int(too_long.sum())
+        clock_path(sim, sel[too_long], expected, dark, words)
+    for w, group in groups(sel[~too_long], size[~too_long]):
+        if code == QUEUE:
+            queue_path(sim, group, w, plan.b_max[group], lam, words)
+        else:
+            full_path(sim, group, w, lam, words)
+
+
+def window_draw(sim, sel, w, lam, clocks=None):
+    """Electrons of the last ``w`` of ``clocks`` clocks (default L; iid Poisson),
+    ``(w, n)`` clock-major, and the total of the other ``clocks - w``; the order
+    in which independent clocks are drawn does not change their law."""
+    clocks = sim.config.clocks_per_readout if clocks is None else clocks
+    window = clock_draws(sim, lam[sel], w)
+    rest = sim.rng.poisson(lam[sel] * (clocks - w))
+    return window, rest
+
+
+def queue_path(sim, sel, w, b_max, lam, words):
+    """Light below one threshold per clock and no clipping (bound): spikes
+    and the accumulator from :func:`queue_walk` over the whole interval
+    (window ``w`` clocks, backlog bounds ``b_max``)."""
+    c = sim.config
+    ok, spikes, end, at, window, rest = queue_walk(
+        sim, sel, w, lam, sim.carried[sel], c.clocks_per_readout, np.full(sel.size, c.p_max, np.int64), b_max)
+    fallback(sim, sel[~ok], window[:, ~ok], rest[~ok], words)
+    done = sel[ok]
+    sim.carried[done] = end[ok]
+    if not c.is_te:
+        ml_words(sim, done, spikes[ok], words)
+        return
+    words[done] = np.where(at[ok] >= 0, (1 << c.d) | (at[ok] // c.clocks_per_tick + 1), spikes[ok])
+
+
+def lindley_ends(walk: np.ndarray, *b0s: np.ndarray) -> list[np.ndarray]:
+    """Backlogs after the unit-rate queue ``b <- max(b + x_j - 1, 0)`` over the
+    rows of a window, from each start backlog in ``b0s`` (n,), given the walk
+    ``W_k = sum_{j<=k} (x_j - 1)`` (w, n), in closed form (Lindley):
+    ``b_w = max(b0 + W_w, W_w - min_{1<=k<=w} W_k) = W_w - min(-b0, min_k W_k)``;
+    one reduction for all starts instead of a Python step per clock."""
+    low = walk.min(axis=0)
+    return [walk[-1] - np.minimum(-b0, low) for b0 in b0s]
+
+
+def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max):
+    """``clocks`` clocks of light below one threshold per clock from charge
+    ``acc0 < theta``, no clipping (bound): spikes follow the crossings of the
+    threshold levels through a unit-rate queue.
+
+    Without clipping, spike j fires at ``s_j = max(c_j, s_{j-1} + 1)``, c_j
+    the clock where the charge reaches ``j theta``; the count at the end is
+    the crossings minus the backlog left. The backlog entering the window
+    of the last ``w`` clocks is at most ``b_max`` (per pixel, bound); the Lindley
+    recursion over the window from 0 and from ``b_max`` agreeing settles the
+    end backlog. TE: the clock of spike ``need`` (per pixel) when it fires,
+    from the first ``need`` crossings, all before the window.
+    -> (ok, spikes, end accumulator, that clock or -1, window, rest total);
+    pixels not ``ok`` go per clock with the window and rest drawn."""
+    c = sim.config
+    theta = c.threshold
+    window, rest = window_draw(sim, sel, w, lam, clocks)
+    level0 = acc0 + rest                               # charge before the window
+    levels = np.cumsum(window, axis=0)
+    levels += level0
+    # the queue's walk W_k = crossings up to window clock k, minus k
+    walk = levels // theta
+    walk -= (level0 // theta + 1) + np.arange(w)[:, None]
+    b_lo, b_hi = lindley_ends(walk, np.zeros(sel.size, np.int64), b_max.astype(np.int64))
+    ok = b_lo == b_hi
+    level_end = levels[-1]
+    spikes = level_end // theta - b_lo
+    at = np.full(sel.size, -1, np.int64)
+    if not c.is_te:
+        return ok, spikes, level_end - theta * spikes, at, window, rest
+    over = ok & (spikes >= need)
+    ok &= ~over | ((need * theta - acc0) <= rest)       # the crossings' ranks lie in the rest
+    over &= ok
+    span = clocks - w
+    needs = need[over]
+    # one need for all (the queue path's 2^b1) skips np.unique's sort
+    for p in needs[:1] if needs.size and (needs == needs[0]).all() else np.unique(needs):
+        i = np.flatnonzero(over & (need == p))
+        a, t = acc0[i], rest[i]
+        shapes = np.empty((i.size, p + 1))
+        shapes[:, 0] = theta - a                       # electron of the first crossing
+        shapes[:, 1:p] = theta
+        shapes[:, p] = t - (p * theta - a) + 1
+        gaps = sim.rng.standard_gamma(shapes)
+        position = np.cumsum(gaps[:, :p], axis=1) / gaps.sum(axis=1, keepdims=True)
+        cross = np.minimum((position * span).astype(np.int64), span - 1)
+        at[i] = (cross - np.arange(1, p + 1)).max(axis=1) + p   # s_p = max_i (c_i + p - i)
+    return ok, spikes, level_end - theta * spikes, at, window, rest
+
+
+def full_path(sim, sel, w, lam, words):
+    """Light above one threshold per clock, a spike in every clock (bound):
+    the word is known and the accumulator comes from :func:`full_walk`."""
+    ok, end, window, rest = full_walk(sim, sel, w, lam, sim.carried[sel], sim.config.clocks_per_readout)
+    fallback(sim, sel[~ok], window[:, ~ok], rest[~ok], words)
+    done = sel[ok]
+    sim.carried[done] = end[ok]
+    firing_words(sim, done, words)
+
+
+def full_walk(sim, sel, w, lam, acc0, clocks):
+    """End accumulator of ``clocks`` clocks that surely all fire (bound): the
+    walk ``acc0 + sum(e - theta)`` held at or below ``2^A - 1`` ends at
+    ``min(acc0 - R, acc_max - M)``, R the sum of ``theta - e`` and M its
+    largest suffix sum. M is read from a window of the last ``w`` clocks
+    where the rest provably cannot exceed it (bound) -> (ok, end, window, rest):
+    pixels not ``ok`` go per clock with the window and rest drawn."""
+    c = sim.config
+    theta, acc_max = c.threshold, c.acc_max
+    window, rest = window_draw(sim, sel, w, lam, clocks)
+    deficit = theta - window
+    suffix = np.cumsum(deficit[::-1], axis=0)
+    m_win = np.maximum(suffix.max(axis=0), 0)
+    r_win = suffix[-1]
+    lam_s = lam[sel]
+    s = 2.0 * (lam_s - theta) / lam_s
+    ok = -s * (m_win + 1 - r_win) < sim.budget
+    total_deficit = r_win + (clocks - w) * theta - rest
+    end = np.minimum(acc0 - total_deficit, acc_max - m_win)
+    # under the sure event every clock fires, so end >= 0; clip only guards
+    # the 2^-64 failure event against an illegal state
+    return ok, np.clip(end, 0, acc_max), window, rest

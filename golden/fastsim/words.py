@@ -1,0 +1,67 @@
+"""Readout words from a pixel-readout's spike count, shared by every path.
+
+TE: a path that knows the spike count and the overflow clock writes the word
+itself; a pixel that fired on every clock has one known word. ML (SPEC
+section 3): the counter is ``min(sfc + spikes, 2^ml_bits - 1)`` from the
+carried remainder ``sfc`` (0 for the count readout); count reads it all, msb
+reads its top bit's index and keeps the remainder below that bit. The
+remainder is a function of past spike counts, so each path stays exact in
+distribution.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from ..config import SensorConfig
+from ..reference import msb_index
+
+
+class WordTables:
+    """Words every path shares for one configuration: ``bright_word`` (a spike in
+    every clock of the interval) and, for the msb readout, the word and remainder
+    of every counter value 0..2^ml_bits - 1 (at most 64 Ki entries). Read-only."""
+
+    def __init__(self, config: SensorConfig):
+        c = self.config = config
+        if c.is_te:
+            ovf_clock = c.p_max - 1                       # spike in every clock
+            self.bright_word = ((1 << c.d) | (ovf_clock // c.clocks_per_tick + 1)
+                                if c.p_max <= c.clocks_per_readout else c.clocks_per_readout)
+        else:
+            self.bright_word = min(c.clocks_per_readout, c.ml_max)
+        if c.is_msb:
+            count = np.arange(c.ml_max + 1, dtype=np.int64)
+            self.msb_word = msb_index(count)
+            self.msb_rest = count - np.where(count > 0, np.left_shift(1, np.maximum(self.msb_word - 1, 0)), 0)
+            self.msb_word.flags.writeable = self.msb_rest.flags.writeable = False
+
+
+@functools.lru_cache(maxsize=16)
+def word_tables(config: SensorConfig) -> WordTables:
+    """:class:`WordTables` of ``config``, made once per process."""
+    return WordTables(config)
+
+
+def firing_words(sim, sel, words):
+    """Words of pixels ``sel`` that fired on every clock of the interval (L spikes)."""
+    if sim.config.is_msb:
+        ml_words(sim, sel, sim.config.clocks_per_readout, words)
+    else:
+        words[sel] = sim.tables.bright_word
+
+
+def ml_words(sim, sel, spikes, words):
+    """ML words of pixels ``sel`` (flat indices or a slice) from their spike
+    counts in the interval: the counter ``min(sfc + spikes, 2^ml_bits - 1)``
+    (it saturates one spike at a time, so the clipped sum is exact); count
+    reads it all, msb reads its top bit's index and keeps the remainder."""
+    c = sim.config
+    if not c.is_msb:
+        words[sel] = np.minimum(spikes, c.ml_max)
+        return
+    count = np.minimum(sim.sfc[sel] + spikes, c.ml_max)
+    words[sel] = sim.tables.msb_word[count]
+    sim.sfc[sel] = sim.tables.msb_rest[count]
