@@ -25,10 +25,14 @@ SMALL_DRAW = 4096
 #: Pixel clocks x pixels of per-clock electrons held at once (bounds memory).
 CLOCK_CHUNK_ELEMENTS = 1 << 21
 
-#: Pixels up to which the per-clock path first tries the unclipped walk
+#: Pixels up to which the per-clock path first tries the walk
 #: (:func:`walk_clocks`): a few array passes over all clocks instead of the
 #: cycle-exact model's five per clock, whose Python cost dominates for few pixels.
 WALK_PIXELS = 512
+
+#: Phases (queue, firing, queue, ...) :func:`walk_clocks` walks before it leaves a
+#: pixel to the cycle-exact model.
+MAX_PHASES = 16
 
 
 def clock_path(sim, sel, expected, dark, words):
@@ -98,37 +102,103 @@ def clock_draws(sim, lam, clocks):
 
 
 def walk_clocks(sim, sel, e, words):
-    """Pixels ``sel`` from the start of the interval on electrons ``e`` (L, n), where
-    no clock clips the accumulator: there the pixel is a queue whose arrivals are the
-    crossings ``D_t = floor((acc0 + e_1 + .. + e_t) / theta)`` and which serves one a
-    clock, so the backlog ``B_t = D_t - S_t`` (S_t spikes so far, ``B_0 = D_0``)
-    follows Lindley, ``B_t = W_t - min(0, min_{1<=k<=t} W_k)`` with ``W_t = D_t - t``,
-    and the charge is ``acc0 + e_1 + .. + e_t - theta S_t``. A pixel whose charge so
-    computed never exceeds ``2^A - 1`` had the very trajectory of the cycle-exact
-    model (its ``min`` never acted); the others are left to it, on the same
-    electrons (a check of the outcome, not a bound: nothing is drawn again).
-    -> mask of the pixels settled here."""
+    """Pixels ``sel`` from the start of the interval on electrons ``e`` (L, n) by
+    :func:`walk` -> mask of the pixels settled there (their words and charges
+    written; the others untouched, for the cycle-exact model)."""
     c = sim.config
-    theta = c.threshold
-    acc0 = sim.carried[sel]
-    level = np.cumsum(e, axis=0)
-    level += acc0
-    crossed = level // theta
-    queue = crossed - np.arange(1, e.shape[0] + 1)[:, None]
-    low = np.minimum.accumulate(queue, axis=0)
-    np.minimum(low, 0, out=low)
-    spikes = crossed - (queue - low)                    # S_t = D_t - B_t
-    charge = level - theta * spikes
-    ok = charge.max(axis=0) <= c.acc_max
-    done, total = sel[ok], spikes[-1, ok]
-    sim.carried[done] = charge[-1, ok]
+    settled, spikes, charge, at = walk(c, sim.carried[sel], e)
+    done, total = sel[settled], spikes[settled]
+    sim.carried[done] = charge[settled]
     if not c.is_te:
         ml_words(sim, done, total, words)
-        return ok
+        return settled
     over = total >= c.p_max
-    at = np.argmax(spikes[:, ok] >= c.p_max, axis=0)   # the clock of spike 2^b1 (0-based)
-    words[done] = np.where(over, (1 << c.d) | (at // c.clocks_per_tick + 1), total)
-    return ok
+    words[done] = np.where(over, (1 << c.d) | (at[settled] // c.clocks_per_tick + 1), total)
+    return settled
+
+
+def walk(c, acc0, e):
+    """Pixels from charge ``acc0`` (n,) over electrons ``e`` (clocks, n) from the start
+    of an interval: the trajectory of the cycle-exact model in a few array passes over
+    all clocks per phase instead of five per clock (whose Python cost dominates for
+    few pixels).
+
+    A pixel alternates two phases, each exact while its condition holds, and a phase
+    ends at the first clock where it fails, from that clock's exact state:
+
+    * **queue** (no clock clips the accumulator): the pixel is a queue whose arrivals
+      are the crossings ``D_t = floor((a + e_1 + .. + e_t) / theta)`` (``a`` the charge
+      the phase starts from) and which serves one a clock, so the backlog
+      ``B_t = D_t - S_t`` (S_t spikes so far, ``B_0 = D_0``) follows Lindley,
+      ``B_t = W_t - min(0, min_{1<=k<=t} W_k)`` with ``W_t = D_t - t``, and the charge
+      is ``a + e_1 + .. + e_t - theta S_t``. It ends at the first clock whose charge
+      so computed exceeds ``2^A - 1``: that clock's spike is right, its charge is
+      ``2^A - 1``, and the **firing** phase starts from it;
+    * **firing** (a spike in every clock): the charge is ``2^A - 1 - u_t`` with the
+      deficit ``u_t = max(u_{t-1} + theta - e_t, 0)`` (Lindley again: the clip at
+      ``2^A - 1`` is the reflection), so ``u_t = V_t - min(-u_0, min_{k<=t} V_k)``,
+      ``V_t`` the sum of ``theta - e``. It ends at the first clock whose input leaves
+      the charge below theta (no spike, charge ``x + e`` unclipped): the queue phase
+      starts from it.
+
+    Nothing is drawn or bounded: each phase is checked on the electrons themselves.
+    Pixels still walking after MAX_PHASES phases are left to the cycle-exact model on
+    the same electrons. -> (settled mask, spikes, end charge, TE: the 0-based clock of
+    spike 2^b1 or ``clocks`` where it did not fire), the last three valid where settled."""
+    theta, top = c.threshold, c.acc_max
+    L, n = e.shape
+    clocks = np.arange(L)[:, None]
+    done_clocks = np.zeros(n, np.int64)                 # clocks walked so far
+    charge = np.array(acc0, np.int64)
+    spikes = np.zeros(n, np.int64)
+    at = np.full(n, L, np.int64)                        # TE: 0-based clock of spike 2^b1 (L: none)
+    settled = np.zeros(n, bool)
+    active = np.arange(n)
+    for phase in range(MAX_PHASES):
+        if not active.size:
+            break
+        s0, a, before = done_clocks[active], charge[active], spikes[active]
+        ea = e[:, active]
+        later = clocks >= s0                            # the clocks still to walk
+        cols = np.arange(active.size)
+        if phase % 2 == 0:                              # queue: until the first clip
+            level = np.cumsum(np.where(later, ea, 0), axis=0)
+            level += a
+            crossed = level // theta
+            queue = crossed - np.maximum(clocks + 1 - s0, 0)
+            low = np.minimum.accumulate(queue, axis=0)
+            np.minimum(low, 0, out=low)
+            fired = crossed - (queue - low)             # spikes since the phase began
+            after = level - theta * fired
+            clip = after > top
+            stops = clip.any(axis=0)
+            last = np.where(stops, np.argmax(clip, axis=0), L - 1)   # last clock walked right
+            total = before + fired[last, cols]
+            end = np.where(stops, top, after[last, cols])
+            if c.is_te:
+                reach = later & (fired + before[None] >= c.p_max) & (clocks <= last)
+                at[active] = np.minimum(at[active], np.where(reach.any(axis=0), np.argmax(reach, axis=0), L))
+        else:                                           # firing: until the first clock without a spike
+            deficit = np.cumsum(np.where(later, theta - ea, 0), axis=0)
+            low = np.minimum.accumulate(deficit, axis=0)
+            np.minimum(low, (a - top)[None], out=low)
+            x = top - (deficit - low)
+            prev = np.concatenate([a[None], x[:-1]], axis=0)
+            miss = later & (prev + ea < theta)
+            stops = miss.any(axis=0)
+            last = np.where(stops, np.argmax(miss, axis=0), L - 1)
+            total = before + last + 1 - s0 - stops      # a spike in every clock but the stopping one
+            end = np.where(stops, prev[last, cols] + ea[last, cols], x[-1])
+            if c.is_te:
+                reach = s0 + c.p_max - before - 1           # clock of spike 2^b1 if all fire
+                hit = (before < c.p_max) & (reach <= last - stops)
+                at[active[hit]] = np.minimum(at[active[hit]], reach[hit])
+        spikes[active], charge[active] = total, end
+        done_clocks[active] = last + 1
+        finished = active[~stops | (last == L - 1)]
+        settled[finished] = True
+        active = active[stops & (last < L - 1)]
+    return settled, spikes, charge, at
 
 
 def run_clocks(sim, sel, e, words, start=None):

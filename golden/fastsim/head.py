@@ -13,7 +13,7 @@ import numpy as np
 
 from ..reference import PixelState
 from ..sensor import PixelArray
-from .clock import clock_draws, fallback, run_clocks
+from .clock import clock_draws, fallback, run_clocks, walk
 from .window import full_plan, full_walk, groups, queue_plan, queue_walk, round_window
 from .codes import HEAD
 from .words import ml_words
@@ -61,11 +61,7 @@ def head_path(sim, sel, h, expected, lam, words):
     theta, L = c.threshold, c.clocks_per_readout
     n, rest = sel.size, L - h
     e = np.minimum(clock_draws(sim, lam[sel], h), c.input_max)
-    array = PixelArray(c, (1, n))
-    array.state.acc[0] = sim.carried[sel]
-    array.state.sfc[0] = sim.sfc[sel]
-    array.feed(e.reshape(h, 1, n))
-    st = array.state
+    st = run_head(c, sim.carried[sel], sim.sfc[sel], e)
     acc_h, sfc_h, ovf, m = st.acc[0], st.sfc[0], st.ovf[0], st.m[0]
     lam_s = lam[sel]
     # the rest's path, from the state after the head and the light only
@@ -136,6 +132,33 @@ def head_path(sim, sel, h, expected, lam, words):
         ml_words(sim, sel[done], spikes[done], words)
     else:
         ml_words(sim, sel[done], sfc_h[done] + spikes[done], words)
+
+
+def run_head(c, acc0, sfc0, e):
+    """The state (a (1, n) :class:`golden.reference.PixelState`) of pixels from charge
+    ``acc0`` and counter ``sfc0`` after the head's electrons ``e`` (h, n) from the start
+    of the interval: by :func:`golden.fastsim.clock.walk` (the cycle-exact trajectory in
+    a few array passes), the cycle-exact model where the walk leaves a pixel."""
+    h, n = e.shape
+    settled, spikes, charge, at = walk(c, acc0, e)
+    state = PixelState(h, charge[None].copy(), np.zeros((1, n), np.int64), np.zeros((1, n), bool),
+                       np.zeros((1, n), np.int64))
+    count = sfc0 + spikes
+    if c.is_te:
+        state.ovf[0] = count >= c.p_max
+        state.sfc[0] = np.minimum(count, c.p_max)
+        state.m[0] = np.where(state.ovf[0], at // c.clocks_per_tick + 1, 0)
+    else:
+        state.sfc[0] = np.minimum(count, c.ml_max)
+    rest = np.flatnonzero(~settled)
+    if rest.size:
+        array = PixelArray(c, (1, rest.size))
+        array.state.acc[0] = acc0[rest]
+        array.state.sfc[0] = sfc0[rest]
+        array.feed(np.ascontiguousarray(e[:, rest]).reshape(h, 1, rest.size))
+        for name in ("acc", "sfc", "ovf", "m"):
+            getattr(state, name)[0, rest] = getattr(array.state, name)[0]
+    return state
 
 
 def head_state(pixels, i, h):
