@@ -588,3 +588,25 @@ def test_head_state_equals_the_cycle_exact_model(config):
         assert state.clock == array.state.clock == h
         for name in ("acc", "sfc", "ovf", "m"):
             assert np.array_equal(getattr(state, name), getattr(array.state, name)), (h, name)
+
+
+def test_window_groups_cover_each_pixel_once_at_a_length_it_allows():
+    """``golden.fastsim.window.groups``: every pixel in exactly one block, run at a
+    length at least its own (a longer window is as exact), neighbouring lengths merged
+    only while the draws a block adds stay within MERGE_DRAWS."""
+    from golden.fastsim import window
+    rng = np.random.default_rng(4)
+    for n in (5, 256, 3000, 40000):
+        size = window.round_window(rng.uniform(1, 120, n) ** rng.uniform(0.5, 1.0, n))
+        sel = rng.permutation(10 * n)[:n]
+        blocks = window.groups(sel, size)
+        got = np.concatenate([pixels for _, pixels in blocks])
+        assert np.array_equal(np.sort(got), np.sort(sel))
+        where = {p: i for i, p in enumerate(sel)}
+        for length, pixels in blocks:
+            own = size[[where[p] for p in pixels]]
+            assert (own <= length).all()
+            if n > window.SMALL_GROUP and np.unique(own).size > 1:
+                assert (length - own).sum() <= window.MERGE_DRAWS
+        if n > window.SMALL_GROUP:
+            assert len(blocks) < np.unique(size).size or n >= 40000

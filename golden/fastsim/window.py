@@ -30,6 +30,10 @@ MIN_WINDOW = 8
 #: Pixels of one path processed as one group whatever their window lengths.
 SMALL_GROUP = 256
 
+#: Per-clock draws a block of neighbouring window lengths may add by running at its
+#: longest (about the cost of one more call of a window path: half a millisecond).
+MERGE_DRAWS = 16384
+
 
 def queue_level(config: SensorConfig, budget: float) -> float:
     """Largest light per clock, in thresholds, of the queue path: ``L exp(-s (acc_max
@@ -96,13 +100,22 @@ def round_window(clocks: np.ndarray) -> np.ndarray:
 
 
 def groups(sel, size):
-    """Pixels ``sel`` (any index array) grouped by window (or head) length ``size``, one block per
-    length; a few pixels go together at their longest length (a longer
-    window or head is as exact, only dearer, and one call costs less than
-    several small ones) -> [(length, pixels)]."""
+    """Pixels ``sel`` (any index array) grouped by window (or head) length ``size``, in
+    blocks that each run at their longest length (a longer window or head is as exact,
+    only dearer): a few pixels go together, and neighbouring lengths share a block while
+    the draws it adds stay below MERGE_DRAWS, about what one more call costs
+    -> [(length, pixels)]."""
     if sel.size <= SMALL_GROUP:
         return [(int(size.max()), sel)] if sel.size else []
-    return [(int(w), sel[size == w]) for w in np.unique(size)]
+    lengths, counts = np.unique(size, return_counts=True)
+    out, first = [], 0
+    for j in range(1, lengths.size + 1):
+        if j < lengths.size and (counts[first:j + 1] * (lengths[j] - lengths[first:j + 1])).sum() <= MERGE_DRAWS:
+            continue
+        block = sel[(size >= lengths[first]) & (size <= lengths[j - 1])] if j - first > 1 else sel[size == lengths[first]]
+        out.append((int(lengths[j - 1]), block))
+        first = j
+    return out
 
 
 def window_path(sim, code, sel, plan, expected, dark, lam, words):
