@@ -5,7 +5,9 @@ Usage (from the worktree root):
     python3 benchmarks/bench_fastsim.py [--pixels 2000] [--readouts 4] [--out PNG | --docs]
                                         [--skip-whole] [--skip-levels] [--whole-shape 64 384 512]
                                         [--scene I.npy ...] [--crops 6] [--repeats 3]
-                                        [--workers N [N ...]] [--skip-synthetic] [--baseline DIR]
+                                        [--workers N [N ...]] [--skip-synthetic] [--skip-redrawn] [--baseline DIR]
+                                        [--interior PANORAMA.hdr ...] [--dim-median 0.015]
+                                        [--dim-range 3e-4 0.36]
 
 Part 1, per light level from 1e-4 to 10 x design light, paper TE, ML (count
 readout) and ML msb (eq. 10) configurations: ``simulate_scene`` (fast) against the naive loop (Poisson
@@ -26,7 +28,12 @@ and child-process CPU time; the issue's target is within 10 %), and with
 wall-time ratio of the first count over the others. ``--baseline DIR`` times
 another checkout's ``tespike simulate`` (e.g. ``git archive <commit> | tar -x -C
 DIR``) interleaved with this one's, against the same naive rate: before/after
-ratios from one run, under one load.
+ratios from one run, under one load. ``--interior`` adds a dim interior pan of
+each panorama given (e.g. the Poly Haven interiors of the shared data folder):
+the panorama panned (``recon.scenes.panorama``), its light mapped monotonically
+(a power law in log light on each side of the median) to median ``--dim-median``
+and 1st..99th percentiles ``--dim-range`` of the design light, the dim,
+wide-range scenes of issue 28.
 Prints tables, writes a PNG. Figures depend on the machine and its load; the
 ratios are measured in the same run.
 """
@@ -121,6 +128,22 @@ def redrawn_scene(shape, seed=0):
     and dark alternate, so charge carried from the last readout (backlogs, full
     or empty accumulators) meets other light everywhere."""
     return (10.0 ** np.random.default_rng(seed).uniform(-4, 1, shape)).astype(np.float32)
+
+
+def dim_interior_scene(panorama, shape, median=0.015, low=3e-4, high=0.36, seed=0):
+    """A pan over the panorama file ``panorama`` (K, H, W), its light mapped to median
+    ``median`` and 1st / 99th percentiles ``low`` / ``high`` of the design light: log
+    light scaled about the log median, by one factor below it and another above (a
+    monotone map: the scene's texture and ordering are kept, its spread is set)."""
+    from recon.scenes.panorama import panorama_sequence
+    light = panorama_sequence(np.random.default_rng(seed), *shape, source=panorama)
+    mid = np.median(light)
+    p1, p99 = np.percentile(light, [1, 99])
+    if not 0 < p1 < mid < p99:
+        raise SystemExit(f"{panorama}: its pan has no spread to map (percentiles {p1}, {mid}, {p99})")
+    x = np.log(np.maximum(light, p1 * 1e-6) / mid)
+    x *= np.where(x < 0, np.log(low / median) / np.log(p1 / mid), np.log(high / median) / np.log(p99 / mid))
+    return (median * np.exp(x)).astype(np.float32)
 
 
 def naive_rate(config, scene, crops=6, crop=(2, 32, 48), seed=0):
@@ -271,9 +294,18 @@ def main(argv=None):
                         help="whole-process runs per camera, interleaved; the fastest counts")
     parser.add_argument("--skip-synthetic", action="store_true",
                         help="whole process: only the --scene files, not the two log-uniform scenes")
+    parser.add_argument("--skip-redrawn", action="store_true",
+                        help="whole process: of the two log-uniform scenes, only the drifting one")
     parser.add_argument("--workers", type=int, nargs="+", default=[None],
                         help="whole process: tespike simulate --workers values to time, interleaved "
                              "(e.g. 1 2; default: the command's default)")
+    parser.add_argument("--interior", action="append", default=[], metavar="PANORAMA",
+                        help="whole process: a dim pan over this .hdr/.exr panorama as well (repeatable; "
+                             "e.g. /work/shared/data/hdri-polyhaven/vestibule_1k.hdr)")
+    parser.add_argument("--dim-median", type=float, default=0.015,
+                        help="median light of the --interior pans, in design light")
+    parser.add_argument("--dim-range", type=float, nargs=2, default=(3e-4, 0.36), metavar=("P1", "P99"),
+                        help="1st and 99th percentile light of the --interior pans")
     parser.add_argument("--baseline", metavar="DIR",
                         help="whole process: another checkout whose tespike simulate is timed interleaved "
                              "with this one's (before/after in one run)")
@@ -291,10 +323,16 @@ def main(argv=None):
         with tempfile.TemporaryDirectory() as tmp:
             for name, make in (("log-uniform 1e-4..10", hdr_scene),
                                ("log-uniform 1e-4..10 redrawn every readout", redrawn_scene)):
-                if args.skip_synthetic:
+                if args.skip_synthetic or (args.skip_redrawn and make is redrawn_scene):
                     break
                 path = Path(tmp) / "I.npy"
                 np.save(path, make(tuple(args.whole_shape)))
+                whole_process(name, path, args.crops, args.repeats, tuple(args.workers), args.baseline)
+            for panorama in args.interior:
+                path = Path(tmp) / "I.npy"
+                np.save(path, dim_interior_scene(panorama, tuple(args.whole_shape), args.dim_median,
+                                                 *args.dim_range))
+                name = f"dim {Path(panorama).stem} (median {args.dim_median:g})"
                 whole_process(name, path, args.crops, args.repeats, tuple(args.workers), args.baseline)
         for scene in args.scene:
             whole_process(Path(scene).name, scene, args.crops, args.repeats, tuple(args.workers),
