@@ -14,7 +14,7 @@ def run_store(args) -> int:
 
     from golden.errors import InputError
     from recon.dataset.evaluate import evaluate_store, write_store_outputs
-    from recon.evaluate import table_markdown
+    from recon.report import table_markdown
 
     from .cluster import Runner, check_workers
 

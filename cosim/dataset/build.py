@@ -1,4 +1,4 @@
-"""Dataset synthesis: HDR frame folders and built-in scenes -> light and sensor streams in a store.
+"""Building a dataset: HDR frame folders and built-in scenes -> light and sensor streams in a store.
 
 Per sequence, the work is a small Dask graph (every task idempotent: the
 same inputs write the same bytes, so a retry after a lost worker is harmless):
@@ -243,7 +243,7 @@ def sequence_graph(store: DatasetStore, source: Source):
                                                 dask_key_name=f"sequence-done-{name}"), len(streams)
 
 
-def synthesise(url: str, sources: Sequence[Source], configs: dict[str, SensorConfig], seed: int, run, *,
+def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, SensorConfig], seed: int, run, *,
                chunk_frames: int = CHUNK_FRAMES, tile: tuple[int, int] = TILE, report=None) -> dict:
     """Write every source into the store at ``url`` (made or resumed) with every configuration.
 
