@@ -173,7 +173,7 @@ def refused(capsys, *args_and_word):
 def test_cli_refusals(tmp_path, capsys, rng):
     out = tmp_path / "s.zarr"
     refused(capsys, "dataset", "--scene", "sun", "--out", out, "--config")
-    refused(capsys, "dataset", "--config", "te", "--out", out, "nothing to synthesise")
+    refused(capsys, "dataset", "--config", "te", "--out", out, "nothing to build")
     refused(capsys, "dataset", "--scene", "sun", "--config", "te", "--config", "te", "--out", out, "already given")
     refused(capsys, "dataset", "--scene", "magic", "--config", "te", "--out", out, "magic")
     refused(capsys, "dataset", "--scene", "sun", "--config", "te", "--workers", 0, "--out", out, "--workers")

@@ -78,7 +78,7 @@ def run(args) -> int:
         sources += hdr_sources(folder, weights=args.weights, max_frames=args.frames)
     sources += scene_sources(args.scene, args.frames or 24, args.height, args.width)
     if not sources:
-        raise InputError("nothing to synthesise: give --hdr DIR and/or --scene NAME")
+        raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     start = time.perf_counter()
     with Runner(args.workers, args.scheduler) as runner:
         print(f"dataset: {len(sources)} sequence(s) x {len(configs)} sensor(s) on {runner.where}",

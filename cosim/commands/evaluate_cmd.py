@@ -32,7 +32,10 @@ HELP = ("simulate sequences with the paper's TE and ML (msb readout) sensors and
 
 def add_arguments(parser):
     parser.add_argument("--out", required=True, help="folder for table.md, table.csv, results.csv, "
-                                                     "quality_vs_time.png and strips/")
+                                                     "quality_vs_time.png and strips/ (new or empty; "
+                                                     "written whole when the run ends)")
+    parser.add_argument("--force", action="store_true",
+                        help="replace the results of a previous run in --out (never a folder holding other files)")
     parser.add_argument("--set", default="heldout",
                         help="built-in sequences: heldout (default: the project's evaluation set), "
                              "moderate (its moderately HDR part), panoramas (tuning/examples), default, "
@@ -94,7 +97,8 @@ def run(args) -> int:
     from golden.errors import ConfigError, InputError
     from golden.fastsim import simulate_scene
     from golden.io import load_scene
-    from golden.paths import check_output_dir
+    from golden.atomic import atomic_folder
+    from golden.paths import check_results_dir
 
     from .common import check_threads_argument
     from recon.evaluate import evaluate
@@ -134,7 +138,7 @@ def run(args) -> int:
         if unknown or not metrics:
             raise InputError(f"--metrics {args.metrics!r}: choose from {', '.join(KEYS)}")
     ml_count = args.ml_count_config or ("none" if args.table else "ml")
-    check_output_dir(args.out, "--out", OUTPUT_FILES)
+    check_results_dir(args.out, OUTPUT_FILES, args.force)
     # option, value, sensor key, (mode, ml_readout) it must have
     wanted = [("--ml-config", args.ml_config, "ml-msb", ("ml", "msb")),
               ("--te-config", args.te_config, "te", ("te", "count"))]
@@ -170,10 +174,13 @@ def run(args) -> int:
     if args.table:
         from recon.complexity import measure
         evaluation.complexity = measure(evaluation.methods, configs["te"])
-    paths = write_outputs(evaluation, args.out)
+    check_results_dir(args.out, OUTPUT_FILES, args.force)       # again: the run may have taken an hour
+    with atomic_folder(args.out) as folder:
+        write_outputs(evaluation, folder)
     if args.quiet:
         return 0
+    out = Path(args.out)
     print(table_markdown(evaluation), end="")
-    print(f"wrote {paths['table.md']}, {paths['table.csv']}, {paths['results.csv']}, {paths['plot']} "
-          f"and {len(evaluation.strips)} strip(s) in {Path(args.out) / 'strips'}")
+    print(f"wrote {out / 'table.md'}, {out / 'table.csv'}, {out / 'results.csv'}, "
+          f"{out / 'quality_vs_time.png'} and {len(evaluation.strips)} strip(s) in {out / 'strips'}")
     return 0

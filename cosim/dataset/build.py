@@ -46,7 +46,7 @@ from recon.dataset.store import (CHUNK_FRAMES, TILE, DatasetStore, check_name, m
 
 @dataclasses.dataclass(frozen=True)
 class Source:
-    """One sequence to synthesise: an HDR frame folder or a built-in scene."""
+    """One sequence of the dataset: an HDR frame folder or a built-in scene."""
 
     name: str
     shape: tuple[int, int, int]
@@ -262,7 +262,7 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
         raise InputError(f"sequence name {repeated[0]!r} is given twice (HDR sub-folders and "
                          "--scene names share one namespace)")
     if not sources:
-        raise InputError("nothing to synthesise: give --hdr DIR and/or --scene NAME")
+        raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     if not configs:
         raise InputError("no sensor configuration: give --config at least once")
     store = DatasetStore.create_or_resume(url, seed=seed, configs=configs, tile=tile,
