@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import torch  # noqa: E402
 
-from cosim.timing import median_seconds  # noqa: E402
+from cosim.walltime import median_seconds  # noqa: E402
 from golden.config import SensorConfig  # noqa: E402
 from golden.fastsim import simulate_scene  # noqa: E402
 from recon.methods import reconstruct  # noqa: E402
@@ -129,15 +129,15 @@ def quality(args) -> None:
 
 def validation(args) -> None:
     """The held-out validation set of training (recon/engine/validation.py): TFP, TFI and the weights."""
-    from recon.engine.validation import score, validation_set
+    from recon.engine.validation import validation_psnr, validation_set
     for label, preset in SENSORS:
         config = SensorConfig.preset(preset)
         cases = validation_set(config)
-        rows = {m: score(lambda w: reconstruct(w, config, m), cases) for m in ("tfp", "tfi")}
+        rows = {m: validation_psnr(lambda w: reconstruct(w, config, m), cases) for m in ("tfp", "tfi")}
         for path in [Path(args.weights_dir) / f"{preset}.pt", *map(Path, args.compare)]:
             if path.is_file() and load_weights(path)[1] == config:
                 model = load_weights(path)[0]
-                rows[str(path)] = score(lambda w: reconstruct_model(model, w, config, tile=None), cases)
+                rows[str(path)] = validation_psnr(lambda w: reconstruct_model(model, w, config, tile=None), cases)
         names = list(rows["tfp"])
         print(f"\n{label}: validation PSNR-mu (dB), every frame of each case")
         print("| method | " + " | ".join(names) + " |")

@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from cosim.timing import median_seconds  # noqa: E402
+from cosim.walltime import median_seconds  # noqa: E402
 from golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
 from golden.decode import decode_light  # noqa: E402
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402

@@ -9,7 +9,7 @@ g++, and the peak resident memory of the build's largest process; Verilator's
 runtime objects of the user's cache are reused, as in normal use), runs
 ``--readouts`` readout intervals of Poisson light through the harness alone
 (stimulus packing excluded) and checks every beat against the golden model
-(``golden.stream.beats`` of ``golden.sensor.simulate``).
+(``golden.beats.beats`` of ``golden.sensor.simulate``).
 
 Printed per size: build wall / CPU seconds and peak MB, cycles per second
 (wall) and per CPU-second of the harness process, pixel clocks per CPU-second
@@ -78,7 +78,7 @@ def bench(config, height, width, readouts, rng) -> dict:
     from cosim.outside import words_per_row
     from cosim.stream_ports import check_beats, flush_clocks
     from golden.sensor import simulate
-    from golden.stream import beat_count, beats, min_lanes
+    from golden.beats import beat_count, beats, min_lanes
     from rtl.verilog_stream import stream_array_verilog
 
     lanes = min_lanes(config, height, width)

@@ -27,7 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from golden.fastsim import simulate_scene  # noqa: E402
 from recon.pictures import tone_map  # noqa: E402
-from recon.evaluate import evaluate, label, table_markdown, write_outputs, scored_frames  # noqa: E402
+from recon.evaluate import evaluate, label, scored_frames  # noqa: E402
+from recon.report import table_markdown, write_outputs  # noqa: E402
 from recon.scenes.heldout import sequence_set  # noqa: E402
 
 TARGET_TFP_TE = 28.0
@@ -39,19 +40,19 @@ def breakdown(evaluation, sequences) -> list[str]:
     """RMS of the tone-mapped error per ground-truth brightness band, all scored frames pooled."""
     lines = ["", "RMS tone-mapped error by ground-truth brightness (mu-law value of light / peak):",
              "| band | pixels | " + " | ".join(label(m, d) for m in evaluation.methods
-                                               for d in evaluation.modes) + " |",
-             "| --- | ---: | " + " | ".join("---:" for _ in evaluation.methods for _ in evaluation.modes) + " |"]
+                                               for d in evaluation.sensors) + " |",
+             "| --- | ---: | " + " | ".join("---:" for _ in evaluation.methods for _ in evaluation.sensors) + " |"]
     truths = {name: tone_map(light[scored_frames(len(light), evaluation.window)], float(light.max()))
               for name, light in sequences}
     for low, high in BANDS:
         cells, count = [], 0
         for method in evaluation.methods:
-            for mode in evaluation.modes:
+            for sensor in evaluation.sensors:
                 squared, n = 0.0, 0
                 for name, light in sequences:
                     frames = scored_frames(len(light), evaluation.window)
                     truth = truths[name]
-                    pred = tone_map(evaluation.images[name, mode, method][frames], float(light.max()))
+                    pred = tone_map(evaluation.images[name, sensor, method][frames], float(light.max()))
                     mask = (truth >= low) & (truth < high)
                     squared += float(np.sum((pred[mask] - truth[mask]) ** 2))
                     n += int(mask.sum())
@@ -154,10 +155,10 @@ def main(argv=None) -> int:
         print(f"info  {label(method, 'te')} - {label(method, 'ml')} = "
               f"{psnr[method, 'te'] - psnr[method, 'ml']:+.2f} dB PSNR-mu (the full-count ML camera)")
     print("\nper sequence (PSNR-mu dB; margin = TE - ML (msb)):")
-    by = {(r.sequence, r.mode, r.method): r.psnr_mu for r in evaluation.results}
+    by = {(r.sequence, r.sensor, r.method): r.psnr_mu for r in evaluation.results}
     for name, _ in sequences:
         cells = [f"{label(method, mode)} {by[name, mode, method]:.2f}"
-                 for method in evaluation.methods for mode in evaluation.modes]
+                 for method in evaluation.methods for sensor in evaluation.sensors]
         margins = [f"{method.upper()} {by[name, 'te', method] - by[name, 'ml-msb', method]:+.2f}"
                    for method in evaluation.methods]
         print(f"  {name}: " + ", ".join(cells) + "; margin " + ", ".join(margins))

@@ -32,7 +32,7 @@ COMMANDS = {
     "scene": "scene_cmd",
     "view": "view_cmd",
     "train": "train_cmd",
-    "synth": "synth_cmd",
+    "dataset": "dataset_cmd",
     "prove": "prove_cmd",
 }
 

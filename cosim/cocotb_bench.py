@@ -37,7 +37,7 @@ cocotb Makefile flow (docs/outside-simulators.md):
     :func:`run_stream_bench` samples ``out_valid``, ``out_first`` and
     ``out_words`` before every rising edge, the beats are held to SPEC section
     6 by :func:`cosim.stream_ports.check_beats` and compared with
-    :func:`golden.stream.beats` of the literal SPEC rule's words.
+    :func:`golden.beats.beats` of the literal SPEC rule's words.
 """
 
 from __future__ import annotations
@@ -197,7 +197,7 @@ async def run_stream_bench(dut, settings: Settings) -> dict:
     from cocotb.clock import Clock
     from cocotb.triggers import FallingEdge, RisingEdge, Timer
 
-    from golden.stream import beat_count
+    from golden.beats import beat_count
 
     from .stream_ports import check_beats, flush_clocks, stream_top_module
 
@@ -262,8 +262,8 @@ if _cocotb is not None:
         dut._log.info("RTL == golden model " + json.dumps(summary))
 
     async def _stream_equal_golden(dut, settings: Settings) -> None:
-        """The streaming top's beats equal golden.stream.beats of the literal SPEC rule's words."""
-        from golden.stream import beats
+        """The streaming top's beats equal golden.beats.beats of the literal SPEC rule's words."""
+        from golden.beats import beats
 
         run = await run_stream_bench(dut, settings)
         expected = beats(step_reference(settings.config, run["stimulus"])[0], settings.lanes)

@@ -166,7 +166,7 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
     if settings.lanes is None:
         top = top_module(settings.config)
     else:
-        from golden.stream import check_lanes
+        from golden.beats import check_lanes
 
         from .stream_ports import stream_top_module
         check_lanes(settings.config, settings.height, settings.width, settings.lanes)

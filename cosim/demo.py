@@ -35,7 +35,7 @@ from golden.config import SensorConfig
 from golden.errors import InputError
 
 #: Sensors of the golden full frame: file label -> config preset (paper section 6.1 and eq. 10),
-#: in :data:`recon.evaluate.MODES` order: the paper's ML (msb) camera, TE, the full-count ML camera.
+#: in :data:`recon.evaluate.SENSORS` order: the paper's ML (msb) camera, TE, the full-count ML camera.
 SENSORS = {"ml-msb": "ml-msb", "te": "te", "ml": "ml"}
 #: The sensor the RTL runs (the paper's subject).
 RTL_SENSOR = "te"
@@ -210,7 +210,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     from .compare import first_difference
     from .demo_plots import plot_frame, plot_rtl_crop
     from .demo_report import report_markdown, verdict_text
-    from .timing import median_seconds
+    from .walltime import median_seconds
     sensors = tuple(sensors)
     crop, rtl_readouts = check_options(out, frames=frames, height=height, width=width, seed=seed, crop=crop,
                                        rtl_readouts=rtl_readouts, backend=backend, repeats=repeats,
@@ -299,13 +299,14 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     # 4. reconstruction: every method on every golden stream, and on the RTL's own stream
     started = progress.begin("reconstruction: every method on every stream (run time: median of "
                              f"{repeats}) and on the RTL stream")
-    from recon.evaluate import evaluate, label, scored_frames, write_outputs
+    from recon.evaluate import evaluate, label, scored_frames
+    from recon.report import write_outputs
     from recon.methods import RECON_METHODS, available_methods, reconstruct
     from recon.metrics import psnr_mu, ssim_mu
     methods = available_methods(configs.values())     # learned ones only where weights are shipped
     by_config = {configs[name]: streams[name] for name in configs}
     evaluation = evaluate([("default", light)], lambda config, scene, rng: by_config[config],
-                          methods=methods, modes=tuple(configs), configs=configs, window=window, seed=seed,
+                          methods=methods, sensors=tuple(configs), configs=configs, window=window, seed=seed,
                           progress=bars, keep=True, repeats=repeats)
     paths = write_outputs(evaluation, out)
     for (_, mode, method), images in evaluation.images.items():
@@ -362,7 +363,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     write_text(out / "report.md", report)
 
     if not quiet:
-        from recon.evaluate import table_markdown
+        from recon.report import table_markdown
         print(table_markdown(evaluation), end="")
     print(f"RTL: {verdict}")
     print(f"wrote {out}/: report.md, verdict.txt, I.npy, S_*.npz, R_*.npy, E_crop.npy, "

@@ -34,7 +34,7 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
 
     import torch
 
-    from recon.evaluate import table_markdown
+    from recon.report import table_markdown
     y, x, size = crop
     te = rtl_config
     lines = ["# tespike demo report", "",

@@ -227,11 +227,11 @@ def run_icarus_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,
                       work_dir: str | Path | None = None, verilog: str | None = None) -> np.ndarray:
     """Simulate the streaming top (``--lanes N``) on a (T, H, W) stimulus; return beats (K, B, N).
 
-    Equal to ``golden.stream.beats(golden words, N)`` for a correct array; the beat
+    Equal to ``golden.beats.beats(golden words, N)`` for a correct array; the beat
     timing is held to SPEC section 6 (:func:`cosim.stream_ports.check_beats`).
     ``verilog`` replaces ``rtl.verilog_stream.stream_array_verilog(config, H, W, N)``.
     """
-    from golden.stream import beat_count, check_lanes
+    from golden.beats import beat_count, check_lanes
 
     from .stream_ports import check_beats, flush_clocks, stream_top_module
 

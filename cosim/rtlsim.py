@@ -34,7 +34,7 @@ from golden.io import atomic_output, check_stimulus
 
 from .benchbus import (ARRAY_SCOPE, CLOCK_PERIOD_FS, CLOCK_PERIOD_S, RESET_CLOCKS,  # noqa: F401
                        iter_packed_charge, unpack_frames)
-from .vcd import write_gtkw
+from .vcd import dump_path, write_gtkw
 
 class RTLProtocolError(RuntimeError):
     """The RTL broke the output protocol of SPEC section 6 (a bug in rtl/, not bad input)."""
@@ -218,7 +218,12 @@ def _run_with_vcd(sim, config, shape, vcd_path, gtkw_path) -> None:
     with contextlib.ExitStack() as stack:
         vcd_tmp = stack.enter_context(atomic_output(vcd_path))
         gtkw_tmp = stack.enter_context(atomic_output(gtkw_path)) if gtkw_path is not None else None
-        with sim.write_vcd(vcd_tmp):
-            sim.run()
+        try:
+            with sim.write_vcd(vcd_tmp):
+                sim.run()
+        except OSError as exc:
+            if exc.filename is None:     # the waveform's write (a full disk): its file, never the .gtkw
+                exc.filename = vcd_tmp
+            raise
         if gtkw_tmp is not None:
-            write_gtkw(gtkw_tmp, vcd_tmp, config, shape, dumpfile=Path(vcd_path).resolve())
+            write_gtkw(gtkw_tmp, vcd_tmp, config, shape, dumpfile=dump_path(vcd_path, gtkw_path))

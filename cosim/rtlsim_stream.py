@@ -3,7 +3,7 @@
 :func:`rtl_stream_beats` is the Amaranth counterpart of
 :func:`cosim.icarus.run_icarus_stream` and
 :func:`cosim.verilator_stream.run_verilator_stream`: stimulus ``(T, H, W)`` in,
-beats ``(K, B, N)`` out, equal to :func:`golden.stream.beats` of the golden
+beats ``(K, B, N)`` out, equal to :func:`golden.beats.beats` of the golden
 words for a correct RTL, with the beat timing held to SPEC section 6 by the
 same check (:func:`cosim.stream_ports.check_beats`). The testbench is the one
 of :mod:`cosim.rtlsim`: reset for :data:`cosim.rtlsim.RESET_CLOCKS` edges, then
@@ -16,7 +16,7 @@ import numpy as np
 
 from golden.config import SensorConfig
 from golden.io import check_stimulus
-from golden.stream import beat_count, check_lanes
+from golden.beats import beat_count, check_lanes
 
 from .outside import words_per_row
 from .rtlsim import CLOCK_PERIOD_S, RESET_CLOCKS, build_or_refuse, iter_packed_charge

@@ -19,6 +19,7 @@ own copies), never from a parent's ``$N`` re-listing.
 from __future__ import annotations
 
 import dataclasses
+import os
 import re
 from pathlib import Path
 
@@ -191,6 +192,12 @@ def gtkw_view(vcd_path, config: SensorConfig, readout: int = 0) -> tuple[int, in
     return start, marker, zoom
 
 
+def dump_path(vcd_path, gtkw_path) -> str:
+    """The VCD's path as a save file records it: relative to the save file's folder, so the
+    pair can be moved or shared together (GTKWave reads it relative to the save file)."""
+    return os.path.relpath(Path(vcd_path).resolve(), Path(gtkw_path).resolve().parent)
+
+
 def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, shape, *, dumpfile=None,
                readout: int = 0) -> list[str]:
     """Write a GTKWave save file for ``vcd_path`` showing the signals worth looking at.
@@ -200,7 +207,7 @@ def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, shape, *, dumpfile=Non
     m, word), output (frame_valid, frame). It opens on readout interval
     ``readout`` (:func:`gtkw_view`: one interval wide, marker on its last clock).
     Returns the trace names written. ``dumpfile`` is the VCD path recorded in
-    the save file (default: ``vcd_path``).
+    the save file (default: :func:`dump_path`, ``vcd_path`` relative to the save file).
     """
     from vcd.gtkw import GTKWSave
 
@@ -229,7 +236,7 @@ def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, shape, *, dumpfile=Non
     written = []
     with open(gtkw_path, "w") as handle:
         save = GTKWSave(handle)
-        save.dumpfile(str(dumpfile if dumpfile is not None else Path(vcd_path).resolve()))
+        save.dumpfile(str(dumpfile if dumpfile is not None else dump_path(vcd_path, gtkw_path)), abspath=False)
         save.size(*GTKW_WINDOW)
         save.timestart(start)
         save.treeopen(ARRAY_SCOPE)

@@ -21,7 +21,7 @@ import numpy as np
 
 from golden.config import SensorConfig
 from golden.io import check_stimulus
-from golden.stream import beat_count, check_lanes
+from golden.beats import beat_count, check_lanes
 
 from .outside import RESET_CLOCKS, SimulatorRunError, first_error_line, words_per_row
 from .stream_ports import check_beats, flush_clocks, stream_top_module
@@ -189,7 +189,7 @@ def run_verilator_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int,
                          cxx_opt: str = CXX_OPT) -> np.ndarray:
     """Simulate the streaming top on a (T, H, W) stimulus in Verilator; return beats (K, B, N).
 
-    Equal to ``golden.stream.beats(golden words, N)`` for a correct array; the beat
+    Equal to ``golden.beats.beats(golden words, N)`` for a correct array; the beat
     timing is held to SPEC section 6 (:func:`cosim.stream_ports.check_beats`).
     ``verilog`` replaces ``rtl.verilog_stream.stream_array_verilog(config, H, W, N)``.
     """

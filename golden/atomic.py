@@ -128,3 +128,103 @@ def _write_through(tmp: str, target: Path, shown: str) -> None:
     os.set_blocking(fd, True)
     with os.fdopen(fd, "wb") as out, open(tmp, "rb") as source:
         shutil.copyfileobj(source, out, 1 << 20)
+
+
+#: renameat2's flag that swaps two paths in one step (Linux >= 3.15).
+_RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+def _exchange(a: str, b: str) -> bool:
+    """Swap two existing paths in one atomic step; False where the system cannot."""
+    import ctypes
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    if renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.EINVAL, errno.ENOSYS, errno.EPERM, errno.ENOTSUP):
+        return False
+    raise OSError(code, os.strerror(code), b)
+
+
+def _remove_stale_folders(directory: Path, stem: str) -> None:
+    """Remove ``.<stem>.<pid>.<random>.part`` folders whose process is gone (killed runs)."""
+    pattern = re.compile(r"\." + re.escape(stem) + r"\.(\d+)\.[A-Za-z0-9_]{8}\.part")
+    try:
+        entries = [e for e in os.scandir(directory) if e.name.startswith("." + stem + ".")]
+    except OSError:
+        return
+    for entry in entries:
+        match = pattern.fullmatch(entry.name)
+        if not match or not entry.is_dir(follow_symlinks=False) or int(match.group(1)) == os.getpid():
+            continue
+        try:
+            os.kill(int(match.group(1)), 0)
+            continue                        # its writer is still running
+        except ProcessLookupError:
+            shutil.rmtree(entry.path, ignore_errors=True)
+        except (PermissionError, OverflowError):
+            continue
+
+
+def folder_holds_files(path: str | Path) -> bool:
+    """Whether ``path`` is a folder with anything in it (a previous run's results)."""
+    try:
+        with os.scandir(path) as entries:
+            return any(True for _ in entries)
+    except (FileNotFoundError, NotADirectoryError):
+        return False
+
+
+@contextlib.contextmanager
+def atomic_folder(path: str | Path, what: str = "--out") -> Iterator[Path]:
+    """Yield a hidden temporary folder to fill; on success it becomes ``path`` whole, else it is removed.
+
+    A results folder is one run's: the new folder is built beside the target
+    (``.<name>.<pid>.<random>.part``, same file system) and swapped with it in one
+    step (Linux ``renameat2``; elsewhere two renames), the previous contents then
+    removed. Killed or failing at any moment, ``path`` holds the previous run whole
+    or the new one whole; a temporary a killed run left is removed by the next run.
+    A symlink ``path`` keeps pointing where it did (its target folder is replaced).
+    Errors naming a file inside the temporary are re-worded to name it under ``path``.
+    """
+    shown = os.fspath(path)
+    target = Path(os.path.realpath(shown))
+    stem = target.name[:_PART_NAME]
+    _remove_stale_folders(target.parent, stem)
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{stem}.{os.getpid()}.", suffix=".part", dir=target.parent))
+        os.chmod(tmp, 0o777 & ~_umask())
+    except OSError as exc:
+        raise _write_error(shown, exc) from None
+    inside = str(tmp)
+
+    def reworded(text: str) -> str:
+        return text.replace(inside, shown.rstrip("/") or shown)
+
+    try:
+        try:
+            yield tmp
+            if not os.path.lexists(target):
+                os.rename(tmp, target)
+            elif not folder_holds_files(target) and target.is_dir():
+                os.replace(tmp, target)            # an empty folder is replaced in one step
+            elif _exchange(str(tmp), str(target)):
+                pass                               # tmp now holds the previous run: removed below
+            else:
+                old = Path(tempfile.mkdtemp(prefix=f".{stem}.{os.getpid()}.", suffix=".part", dir=target.parent))
+                os.rename(target, old / "previous")
+                os.rename(tmp, target)
+                os.rename(old, tmp)
+        except InputError as exc:
+            raise InputError(reworded(str(exc))) from None
+        except OSError as exc:
+            name = reworded(os.fspath(exc.filename)) if exc.filename else shown
+            raise InputError(f"cannot write {name!r}: {exc.strerror or exc}") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)

@@ -182,3 +182,29 @@ def check_output_dir(path: str | os.PathLike, what: str = "--out",
             raise InputError(f"cannot write {what} {str(inside)!r}: "
                              f"{str(inside.parent)!r} is not a directory")
     return folder
+
+
+def check_results_dir(path: str | os.PathLike, names: tuple[str, ...], force: bool,
+                      what: str = "--out") -> Path:
+    """A folder a command fills whole (:func:`golden.atomic.atomic_folder`): new or empty;
+    holding a previous run's results (only ``names``, a trailing ``/`` for a folder) only
+    with ``force``; never a folder holding anything else, which replacing it would delete."""
+    folder = check_output_dir(path, what)
+    text = os.fspath(path)
+    if not folder.is_dir():
+        return folder
+    try:
+        present = sorted(os.listdir(folder))
+    except OSError as exc:
+        raise InputError(f"cannot read {what} {text!r}: {_reason(exc)}") from None
+    if not present:
+        return folder
+    allowed = {name.rstrip("/") for name in names}
+    foreign = [name for name in present if name not in allowed]
+    if foreign:
+        raise InputError(f"{what} {text!r} holds {foreign[0]!r}, which is not one of a results folder's "
+                         f"files ({', '.join(names)}): choose a new or empty folder")
+    if not force:
+        raise InputError(f"{what} {text!r} holds a previous run's results: give --force to replace them "
+                         "(the new run replaces the folder whole when it is done), or another folder")
+    return folder

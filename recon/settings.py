@@ -15,6 +15,16 @@ import numpy as np
 from golden.decode import ESTIMATORS
 from golden.errors import InputError
 
+#: Readouts per window of the training-free methods (paper section 6.4).
+DEFAULT_WINDOW = 9
+
+
+def check_window(window, what: str = "window") -> None:
+    """The one window rule: an odd integer >= 1 (readouts centred on the key moment)."""
+    if type(window) is not int or window < 1 or window % 2 == 0:
+        raise InputError(f"{what} {window!r}: must be an odd integer >= 1 (readouts centred on the key moment)")
+
+
 #: TFI search modes: the whole stream (default) or the window around the key moment.
 TFI_SEARCH = ("stream", "window")
 
@@ -34,7 +44,7 @@ class ReconSettings:
     sums, so it costs < 1e-6 relative) or "float64".
     """
 
-    window: int = 9
+    window: int = DEFAULT_WINDOW
     chunk_elements: int | None = None
     estimator: str = "ratio"
     search: str = "stream"
@@ -46,9 +56,7 @@ class ReconSettings:
             value = getattr(self, key)
             if isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)):
                 object.__setattr__(self, key, int(value))
-        if type(self.window) is not int or self.window < 1 or self.window % 2 == 0:
-            raise InputError(f"window = {self.window!r}: must be an odd integer >= 1 "
-                             "(readouts centred on the key moment)")
+        check_window(self.window, "window =")
         if self.chunk_elements is not None and (type(self.chunk_elements) is not int
                                                 or self.chunk_elements < 1):
             raise InputError(f"chunk_elements = {self.chunk_elements!r}: must be an integer >= 1")

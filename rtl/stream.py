@@ -20,7 +20,7 @@ Timing: the parallel array's words of interval k are sampled with
 loads at that edge and beat j is on ``out`` during the clock after it plus j:
 the last beat is sampled B + 1 clocks after the interval's last clock, at most
 L + 1 <= 2L because the generator refuses B > L
-(:func:`golden.stream.check_lanes`). The next interval's words arrive L clocks
+(:func:`golden.beats.check_lanes`). The next interval's words arrive L clocks
 after the previous ones, when beat B - 1 <= L - 1 has just been sent, so the
 buffer is never overwritten before all its beats left.
 """
@@ -33,7 +33,7 @@ from amaranth.lib.wiring import In, Out
 
 from golden.config import SensorConfig
 from golden.errors import ConfigError
-from golden.stream import beat_count, check_lanes
+from golden.beats import beat_count, check_lanes
 
 from .array import PixelArray, check_array_size
 

@@ -47,7 +47,7 @@ from __future__ import annotations
 import json
 
 from golden.config import SensorConfig
-from golden.stream import beat_count, check_lanes
+from golden.beats import beat_count, check_lanes
 
 from .array import check_array_size
 from .timing import ReadoutTiming

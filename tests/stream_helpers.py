@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from golden.config import SensorConfig
-from golden.stream import min_lanes
+from golden.beats import min_lanes
 
 #: Array shape of the streaming runs: 6 pixels, rows != columns.
 STREAM_SHAPE = (2, 3)

@@ -1,7 +1,7 @@
 """An outsider's check of `tespike verilog --lanes N` (SPEC sections 3, 4 and 6 only).
 
 Written from SPEC's text alone, as the issue 19 acceptance check describes: it imports nothing
-from the project (the golden model, golden.stream and the project's Icarus harness are not
+from the project (the golden model, golden.beats and the project's Icarus harness are not
 used), gives every config key explicitly, writes its own Icarus testbench from the ports SPEC
 section 6 names, drives random stimulus and compares every beat (content, out_first, beats per
 interval, no beat before its interval ends, last beat within 2L). Used by

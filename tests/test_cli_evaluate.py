@@ -30,7 +30,7 @@ def test_evaluate_user_scene_and_builtin_set(tmp_path, capsys):
     assert "| TFP_ML |" in stdout and "| TFP_TE |" in stdout and "| TFP_ML-count |" in stdout
     rows = list(csv.DictReader((tmp_path / "ev" / "results.csv").read_text().splitlines()))
     assert sorted({r["sequence"] for r in rows}) == ["default", "mine"] and len(rows) == 6
-    assert sorted({r["mode"] for r in rows}) == ["ml", "ml-msb", "te"]
+    assert sorted({r["sensor"] for r in rows}) == ["ml", "ml-msb", "te"]
     assert (tmp_path / "ev" / "strips" / "mine.png").is_file()
     assert not list((tmp_path / "ev").rglob("*.part"))
 
@@ -55,7 +55,7 @@ def test_evaluate_without_the_count_camera(tmp_path, capsys):
     assert code == 0, stderr
     assert "| TFI_ML |" in stdout and "ML-count" not in stdout
     rows = list(csv.DictReader((tmp_path / "ev" / "results.csv").read_text().splitlines()))
-    assert sorted(r["mode"] for r in rows) == ["ml-msb", "te"]
+    assert sorted(r["sensor"] for r in rows) == ["ml-msb", "te"]
 
 
 def test_evaluate_table(tmp_path, capsys, empty_weights_dir):
@@ -83,7 +83,7 @@ def test_evaluate_table(tmp_path, capsys, empty_weights_dir):
     for name in ("table.md", "table.csv", "results.csv", "quality_vs_time.png"):
         assert (tmp_path / "ev" / name).is_file()
     rows = list(csv.DictReader((tmp_path / "ev" / "results.csv").read_text().splitlines()))
-    assert {(r["method"], r["mode"]) for r in rows} == {("tfp", "ml-msb"), ("tfp", "te"), ("bsf", "te")}
+    assert {(r["method"], r["sensor"]) for r in rows} == {("tfp", "ml-msb"), ("tfp", "te"), ("bsf", "te")}
     assert all(float(r["hdr_vqm"]) >= 0 and r["frames_vdp"] == "1" for r in rows)
 
 
@@ -93,7 +93,7 @@ def test_evaluate_noise_tables(tmp_path, capsys):
     assert code == 0, stderr
     assert "| TE reconstruction | PSNR-μ ↑ (shot noise only) |" in stdout and "(dark current eq. 13)" in stdout
     rows = list(csv.DictReader((tmp_path / "ev" / "results.csv").read_text().splitlines()))
-    assert sorted(r["mode"] for r in rows) == ["ml", "ml-msb", "te", "te+eq12", "te+eq13"]
+    assert sorted(r["sensor"] for r in rows) == ["ml", "ml-msb", "te", "te+eq12", "te+eq13"]
 
 
 def test_evaluate_table_refuses(tmp_path, capsys, empty_weights_dir):   # no weights, whatever the checkout holds

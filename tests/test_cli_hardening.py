@@ -642,13 +642,13 @@ def test_generated_arrays_and_their_stimuli_are_bounded_up_front(files):
                            "character device")
 
 
-def test_synth_checks_its_options_before_printing_or_creating_the_store(files):
+def test_dataset_checks_its_options_before_printing_or_creating_the_store(files):
     for args, word in ((("--chunk-frames", 0), "--chunk-frames"), (("--frames", 10 ** 8), "limit"),
                        (("--seed", -1), "--seed")):
-        result = refused_without_change(files, ("synth", "--config", "te", "--scene", "default",
+        result = refused_without_change(files, ("dataset", "--config", "te", "--scene", "default",
                                                 "--out", files / "store", *args), word)
         assert result.stdout == ""
-    refused_without_change(files, ("synth", "--config", "te", "--scene", "default", "--frames", 2,
+    refused_without_change(files, ("dataset", "--config", "te", "--scene", "default", "--frames", 2,
                                    "--out", files / "c.json"), "not a directory")
 
 

@@ -35,9 +35,9 @@ def hdr_root(root):
     return root
 
 
-def synth_args(hdr, out, *extra):
+def dataset_args(hdr, out, *extra):
     scenes = [a for s in SCENES for a in ("--scene", s)]
-    return ("synth", "--hdr", hdr, *scenes, *SIZE, "--config", "te", "--config", "ml",
+    return ("dataset", "--hdr", hdr, *scenes, *SIZE, "--config", "te", "--config", "ml",
             "--out", out, "--seed", "11", *extra)
 
 
@@ -46,7 +46,7 @@ def serial(tmp_path_factory):
     """The in-process run everything is compared with: the store and its table."""
     base = tmp_path_factory.mktemp("serial")
     hdr = hdr_root(base / "hdr")
-    result = run_tespike(*synth_args(hdr, base / "s.zarr"), timeout=1800)
+    result = run_tespike(*dataset_args(hdr, base / "s.zarr"), timeout=1800)
     assert result.returncode == 0, result.stderr
     result = run_tespike("evaluate", "--store", base / "s.zarr", "--methods", "tfp,tfi", "--out",
                          base / "ev", timeout=1800)
@@ -56,7 +56,7 @@ def serial(tmp_path_factory):
 
 
 def test_local_cluster_of_two_workers_gives_the_same_store_and_table(serial, tmp_path):
-    result = run_tespike(*synth_args(serial["hdr"], tmp_path / "s.zarr", "--workers", "2"), timeout=1800)
+    result = run_tespike(*dataset_args(serial["hdr"], tmp_path / "s.zarr", "--workers", "2"), timeout=1800)
     assert result.returncode == 0, result.stderr
     assert "local cluster of 2 worker processes" in result.stdout
     assert compare_stores(serial["store"], tmp_path / "s.zarr") == []
@@ -150,7 +150,7 @@ def test_a_worker_killed_mid_run_costs_only_a_retry(serial, tmp_path):
     runs = []
     try:
         doomed, _ = cluster.add_worker(2)
-        run = tespike_process(*synth_args(serial["hdr"], tmp_path / "s.zarr", "--scheduler", cluster.address))
+        run = tespike_process(*dataset_args(serial["hdr"], tmp_path / "s.zarr", "--scheduler", cluster.address))
         runs.append(run)
         cluster.wait_until_busy("sim-", run)
         os.kill(doomed.pid, signal.SIGKILL)
@@ -180,7 +180,7 @@ def test_a_worker_killed_mid_run_costs_only_a_retry(serial, tmp_path):
 
 def test_unreachable_scheduler_is_refused_in_one_line(tmp_path, monkeypatch):
     monkeypatch.setenv("DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT", "2s")
-    result = run_tespike("synth", "--scene", "sun", "--config", "te", "--out", tmp_path / "s.zarr",
+    result = run_tespike("dataset", "--scene", "sun", "--config", "te", "--out", tmp_path / "s.zarr",
                          "--scheduler", "tcp://127.0.0.1:9", timeout=120)
     assert result.returncode == 2, result
     lines = result.stderr.strip().splitlines()

@@ -4,7 +4,7 @@ Every simulator drives only ``clk``, ``rst`` and ``charge`` and reads only
 ``out_valid``, ``out_first`` and ``out_words``; the beats are held to SPEC
 section 6 (count, ``out_first``, the 2L latency bound:
 :func:`cosim.stream_ports.check_beats`) and compared bit for bit with
-:func:`golden.stream.beats` of the literal SPEC rule's words.
+:func:`golden.beats.beats` of the literal SPEC rule's words.
 """
 
 import shutil
@@ -15,7 +15,7 @@ import pytest
 from cosim.icarus import run_icarus_stream
 from cosim.outside import SimulatorRunError
 from golden.config import SensorConfig
-from golden.stream import beats
+from golden.beats import beats
 from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.outside_helpers import KINDS, make_stimulus, reference_words
 from tests.stream_helpers import STREAM_SHAPE, lane_counts

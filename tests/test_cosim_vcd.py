@@ -34,7 +34,10 @@ def test_gtkw_shows_clock_strobes_ccc_and_pixel_00(rng, tmp_path):
     vcd, gtkw = tmp_path / "w.vcd", tmp_path / "w.gtkw"
     rtl_run(config, threshold_stimulus(config, rng, 1, 2, 2), vcd_path=vcd, gtkw_path=gtkw)
     text = gtkw.read_text()
-    assert f'[dumpfile] "{vcd.resolve()}"' in text        # the final path, not the temporary one
+    assert '[dumpfile] "w.vcd"' in text        # the final file, relative to the save file (not the temporary)
+    (tmp_path / "views").mkdir()
+    rtl_run(config, threshold_stimulus(config, rng, 1, 2, 2), vcd_path=vcd, gtkw_path=tmp_path / "views" / "w.gtkw")
+    assert '[dumpfile] "../w.vcd"' in (tmp_path / "views" / "w.gtkw").read_text()
     traces = {line.split("[")[0] for line in text.splitlines() if line.startswith("bench.")}
     for name in ["bench.top.tb_clk", "bench.top.tb_rst", "bench.top.tb_frame_valid", "bench.top.tb_frame",
                  "bench.top.array.timing.tick", "bench.top.array.timing.last", "bench.top.array.timing.ccc",

@@ -8,7 +8,7 @@ import zarr
 
 from cosim.cli import main
 from cosim.dataset.cluster import Runner
-from cosim.dataset.synth import hdr_sources, scene_sources, synthesise
+from cosim.dataset.build import build_dataset, hdr_sources, scene_sources
 from golden.config import SensorConfig
 from golden.errors import InputError
 from golden.fastsim import simulate_scene
@@ -33,13 +33,13 @@ def hdr_folder(root, rng, sequences=(("alpha", 5, 20, 28), ("beta", 3, 18, 22)))
     return root
 
 
-def synth(url, sources, seed=7, configs=CONFIGS, **kwargs):
+def build(url, sources, seed=7, configs=CONFIGS, **kwargs):
     with Runner() as run:
-        return synthesise(str(url), sources, configs, seed, run, **kwargs)
+        return build_dataset(str(url), sources, configs, seed, run, **kwargs)
 
 
 def test_single_tile_stream_is_simulate_scene_with_the_tile_seed(tmp_path):
-    counts = synth(tmp_path / "s.zarr", scene_sources(["moderate"], 10, 24, 32), seed=5)
+    counts = build(tmp_path / "s.zarr", scene_sources(["moderate"], 10, 24, 32), seed=5)
     assert counts == {"done": 1, "skipped": 0, "pixel_readouts": 2 * 10 * 24 * 32,
                       "store": str(tmp_path / "s.zarr")}
     store = DatasetStore.open(tmp_path / "s.zarr")
@@ -60,8 +60,8 @@ def test_hdr_light_equals_load_hdr_sequence_across_chunks_and_tiles(tmp_path, rn
     root = hdr_folder(tmp_path / "hdr", rng)
     sources = hdr_sources(root)
     assert [(s.name, s.shape) for s in sources] == [("alpha", (5, 20, 28)), ("beta", (3, 18, 22))]
-    synth(tmp_path / "a.zarr", sources, chunk_frames=2, tile=(8, 8))
-    synth(tmp_path / "b.zarr", sources, chunk_frames=3, tile=(8, 8))
+    build(tmp_path / "a.zarr", sources, chunk_frames=2, tile=(8, 8))
+    build(tmp_path / "b.zarr", sources, chunk_frames=3, tile=(8, 8))
     store = DatasetStore.open(tmp_path / "a.zarr")
     assert store.sequences() == ["alpha", "beta"]
     for name in ("alpha", "beta"):
@@ -79,8 +79,8 @@ def test_hdr_light_equals_load_hdr_sequence_across_chunks_and_tiles(tmp_path, rn
 def test_resume_redoes_only_unfinished_parts_and_readers_ignore_them(tmp_path, rng):
     root = hdr_folder(tmp_path / "hdr", rng)
     sources = hdr_sources(root) + scene_sources(["sun"], 6, 16, 16)
-    synth(tmp_path / "ref.zarr", sources, tile=(8, 8))
-    synth(tmp_path / "cut.zarr", sources, tile=(8, 8))
+    build(tmp_path / "ref.zarr", sources, tile=(8, 8))
+    build(tmp_path / "cut.zarr", sources, tile=(8, 8))
     # an interrupted run: one sequence never marked complete, one stream half-written
     group = zarr.open_group(str(tmp_path / "cut.zarr"), mode="r+")
     group["beta"].attrs.update(complete=False)
@@ -90,24 +90,24 @@ def test_resume_redoes_only_unfinished_parts_and_readers_ignore_them(tmp_path, r
     assert DatasetStore.open(tmp_path / "cut.zarr").sequences(complete=False) == ["alpha", "beta", "sun"]
     done = []
     with Runner() as run:
-        counts = synthesise(str(tmp_path / "cut.zarr"), sources, CONFIGS, 7, run, tile=(8, 8),
+        counts = build_dataset(str(tmp_path / "cut.zarr"), sources, CONFIGS, 7, run, tile=(8, 8),
                             report=done.append)
     assert done == ["beta"] and counts["skipped"] == 2
     assert compare_stores(tmp_path / "ref.zarr", tmp_path / "cut.zarr") == []
     # a different seed, sensor list or tile would not match the streams already there
     for kwargs in ({"seed": 8}, {"configs": {"te": CONFIGS["te"]}}, {"tile": (16, 16)}):
         with pytest.raises(InputError, match="resume with the same settings"):
-            synth(tmp_path / "cut.zarr", sources, **{"tile": (8, 8), **kwargs})
+            build(tmp_path / "cut.zarr", sources, **{"tile": (8, 8), **kwargs})
 
 
 def test_tiled_scores_equal_whole_frame_scores(tmp_path):
-    synth(tmp_path / "s.zarr", scene_sources(["lights", "decades"], 12, 30, 41), tile=(8, 8))
+    build(tmp_path / "s.zarr", scene_sources(["lights", "decades"], 12, 30, 41), tile=(8, 8))
     with Runner() as run:
         whole = evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp", "tfi"])
         tiled = evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp", "tfi"], tile=(16, 16))
     assert len(whole.results) == 2 * 2 * 2
     for a, b in zip(whole.results, tiled.results):
-        assert (a.sequence, a.mode, a.method) == (b.sequence, b.mode, b.method)
+        assert (a.sequence, a.sensor, a.method) == (b.sequence, b.sensor, b.method)
         assert a.psnr_mu == pytest.approx(b.psnr_mu, rel=1e-12)
         assert a.ssim_mu == pytest.approx(b.ssim_mu, rel=1e-12)
         assert np.isnan(a.ms_per_frame) and a.frames_scored == 4
@@ -123,16 +123,16 @@ def test_store_scores_equal_the_serial_evaluation(tmp_path):
     """On the same light and words, the store path gives recon.evaluate's numbers exactly."""
     from recon.evaluate import evaluate
 
-    synth(tmp_path / "s.zarr", scene_sources(["moderate"], 12, 24, 32), seed=3)
+    build(tmp_path / "s.zarr", scene_sources(["moderate"], 12, 24, 32), seed=3)
     store = DatasetStore.open(tmp_path / "s.zarr")
     streams = {m: store.words("moderate", m).compute() for m in CONFIGS}
     serial = evaluate([("moderate", store.light("moderate").compute())],
                       lambda config, light, rng: streams[config.mode], methods=["tfp", "tfi"],
-                      modes=("te", "ml"), configs=CONFIGS, progress=False)
+                      sensors=("te", "ml"), configs=CONFIGS, progress=False)
     with Runner() as run:
         stored = evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp", "tfi"])
-    assert [(r.sequence, r.mode, r.method, r.psnr_mu, r.ssim_mu) for r in serial.results] == \
-           [(r.sequence, r.mode, r.method, r.psnr_mu, r.ssim_mu) for r in stored.results]
+    assert [(r.sequence, r.sensor, r.method, r.psnr_mu, r.ssim_mu) for r in serial.results] == \
+           [(r.sequence, r.sensor, r.method, r.psnr_mu, r.ssim_mu) for r in stored.results]
 
 
 def run_here(capsys, *args):
@@ -141,16 +141,16 @@ def run_here(capsys, *args):
     return code, captured.out, captured.err
 
 
-def test_cli_synth_and_evaluate_store(tmp_path, capsys):
+def test_cli_dataset_and_evaluate_store(tmp_path, capsys):
     store = tmp_path / "s.zarr"
     SensorConfig(mode="ml", ml_bits=6).save(tmp_path / "ml6.json")
-    code, out, err = run_here(capsys, "synth", "--scene", "lights", "--scene", "sun", "--frames", 10,
+    code, out, err = run_here(capsys, "dataset", "--scene", "lights", "--scene", "sun", "--frames", 10,
                               "--height", 16, "--width", 20, "--config", "te", "--config", tmp_path / "ml6.json",
                               "--out", store, "--seed", 2)
     assert code == 0, err
     assert "wrote 2 sequence(s)" in out and "sun complete" in out
     assert zarr.open_group(str(store), mode="r")["sun/streams/ml6"].dtype == np.uint8
-    code, out, err = run_here(capsys, "synth", "--scene", "lights", "--scene", "sun", "--frames", 10,
+    code, out, err = run_here(capsys, "dataset", "--scene", "lights", "--scene", "sun", "--frames", 10,
                               "--height", 16, "--width", 20, "--config", "te", "--config", tmp_path / "ml6.json",
                               "--out", store, "--seed", 2)
     assert code == 0 and "(2 already complete)" in out, err
@@ -172,25 +172,25 @@ def refused(capsys, *args_and_word):
 
 def test_cli_refusals(tmp_path, capsys, rng):
     out = tmp_path / "s.zarr"
-    refused(capsys, "synth", "--scene", "sun", "--out", out, "--config")
-    refused(capsys, "synth", "--config", "te", "--out", out, "nothing to synthesise")
-    refused(capsys, "synth", "--scene", "sun", "--config", "te", "--config", "te", "--out", out, "already given")
-    refused(capsys, "synth", "--scene", "magic", "--config", "te", "--out", out, "magic")
-    refused(capsys, "synth", "--scene", "sun", "--config", "te", "--workers", 0, "--out", out, "--workers")
-    refused(capsys, "synth", "--scene", "sun", "--config", "te", "--workers", 2, "--scheduler",
+    refused(capsys, "dataset", "--scene", "sun", "--out", out, "--config")
+    refused(capsys, "dataset", "--config", "te", "--out", out, "nothing to build")
+    refused(capsys, "dataset", "--scene", "sun", "--config", "te", "--config", "te", "--out", out, "already given")
+    refused(capsys, "dataset", "--scene", "magic", "--config", "te", "--out", out, "magic")
+    refused(capsys, "dataset", "--scene", "sun", "--config", "te", "--workers", 0, "--out", out, "--workers")
+    refused(capsys, "dataset", "--scene", "sun", "--config", "te", "--workers", 2, "--scheduler",
             "tcp://127.0.0.1:1", "--out", out, "exclude")
-    refused(capsys, "synth", "--hdr", tmp_path / "none", "--config", "te", "--out", out, "none")
+    refused(capsys, "dataset", "--hdr", tmp_path / "none", "--config", "te", "--out", out, "none")
     (tmp_path / "empty" / "seq").mkdir(parents=True)
-    refused(capsys, "synth", "--hdr", tmp_path / "empty", "--config", "te", "--out", out, "no frames")
+    refused(capsys, "dataset", "--hdr", tmp_path / "empty", "--config", "te", "--out", out, "no frames")
     assert not out.exists()
     (tmp_path / "taken").mkdir()
     (tmp_path / "taken" / "keep.txt").write_text("mine")
-    refused(capsys, "synth", "--scene", "sun", "--config", "te", "--out", tmp_path / "taken", "not a dataset store")
+    refused(capsys, "dataset", "--scene", "sun", "--config", "te", "--out", tmp_path / "taken", "not a dataset store")
     assert (tmp_path / "taken" / "keep.txt").read_text() == "mine"
     # frames of different sizes in one sequence: refused by the task that reads them
     root = hdr_folder(tmp_path / "hdr", rng, sequences=(("odd", 2, 12, 12),))
     write_exr(root / "odd" / "f009.exr", np.ones((12, 13, 3), np.float32))
-    refused(capsys, "synth", "--hdr", root, "--config", "te", "--out", tmp_path / "o.zarr", "same size")
+    refused(capsys, "dataset", "--hdr", root, "--config", "te", "--out", tmp_path / "o.zarr", "same size")
     assert DatasetStore.open(tmp_path / "o.zarr").sequences() == []
     refused(capsys, "evaluate", "--store", tmp_path / "o.zarr", "--out", tmp_path / "ev", "no complete sequence")
     refused(capsys, "evaluate", "--store", tmp_path / "nope.zarr", "--out", tmp_path / "ev", "does not exist")

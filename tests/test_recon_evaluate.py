@@ -9,8 +9,8 @@ import pytest
 from golden.config import SensorConfig
 from golden.errors import InputError
 from golden.fastsim import simulate_scene
-from recon.evaluate import (Evaluation, Result, evaluate, label, paper_configs, results_csv, scored_frames,
-                            table_csv, table_markdown, write_outputs)
+from recon.evaluate import Evaluation, Measurement, evaluate, label, paper_configs, scored_frames
+from recon.report import results_csv, table_csv, table_markdown, write_outputs
 from recon.pictures import tone_map
 from recon.metrics import psnr_mu, ssim_mu
 from recon.scenes import make_scene
@@ -45,12 +45,12 @@ def test_paper_configs():
     assert configs["te"].threshold == 175 and configs["ml"].threshold == configs["ml-msb"].threshold == 328
 
 
-def _hand_made(modes=("ml-msb", "te")):
-    rows = [Result("a", "ml-msb", "tfp", 20.0, 0.5, 1.0, 3), Result("b", "ml-msb", "tfp", 30.0, 0.7, 3.0, 3),
-            Result("a", "te", "tfp", 25.0, 0.6, 2.0, 3), Result("b", "te", "tfp", 35.0, 0.8, 4.0, 3),
-            Result("a", "ml-msb", "tfi", 10.0, 0.1, 5.0, 3), Result("a", "te", "tfi", 12.5, 0.25, 7.0, 3),
-            Result("a", "ml", "tfp", 22.0, 0.55, 1.5, 3), Result("a", "ml", "tfi", 11.0, 0.15, 4.5, 3)]
-    return Evaluation([r for r in rows if r.mode in modes], ("tfp", "tfi"), modes, 9)
+def _hand_made(sensors=("ml-msb", "te")):
+    rows = [Measurement("a", "ml-msb", "tfp", 20.0, 0.5, 1.0, 3), Measurement("b", "ml-msb", "tfp", 30.0, 0.7, 3.0, 3),
+            Measurement("a", "te", "tfp", 25.0, 0.6, 2.0, 3), Measurement("b", "te", "tfp", 35.0, 0.8, 4.0, 3),
+            Measurement("a", "ml-msb", "tfi", 10.0, 0.1, 5.0, 3), Measurement("a", "te", "tfi", 12.5, 0.25, 7.0, 3),
+            Measurement("a", "ml", "tfp", 22.0, 0.55, 1.5, 3), Measurement("a", "ml", "tfi", 11.0, 0.15, 4.5, 3)]
+    return Evaluation([r for r in rows if r.sensor in sensors], ("tfp", "tfi"), sensors, 9)
 
 
 def test_summary_is_mean_of_sequence_means():
@@ -81,6 +81,10 @@ def test_table_markdown_puts_the_full_count_camera_in_extra_rows():
     # without a column sensor, every sensor is a column
     only = table_markdown(_hand_made(("ml",))).splitlines()
     assert only[0].startswith("| ML-count reconstruction |") and only[2].startswith("| TFP_ML-count | 22.00 |")
+    # without the msb camera (a store of te and ml), the full-count camera is a column, never under "TE"
+    lines = table_markdown(_hand_made(("te", "ml"))).splitlines()
+    assert lines[0].startswith("| TE reconstruction |") and "| ML-count reconstruction |" in lines[0]
+    assert lines[2].startswith("| TFP_TE | 30.00 |") and "| TFP_ML-count | 22.00 |" in lines[2] and len(lines) == 4
 
 
 def test_table_and_results_csv():
@@ -108,7 +112,7 @@ def test_end_to_end_scores_are_the_metrics_of_the_scored_frames(small_run):
         for mode in ("ml-msb", "te", "ml"):
             for method in ("tfp", "tfi"):
                 result = next(r for r in evaluation.results
-                              if (r.sequence, r.mode, r.method) == (name, mode, method))
+                              if (r.sequence, r.sensor, r.method) == (name, mode, method))
                 images = evaluation.images[name, mode, method]
                 assert images.shape == light.shape and result.frames_scored == 4
                 peak = float(light.max())
@@ -135,7 +139,7 @@ def test_run_time_is_the_median_of_repeats(small_run, monkeypatch):
     calls = []
     real = recon.methods.reconstruct
     monkeypatch.setattr(recon.methods, "reconstruct", lambda *a, **k: calls.append(a[0].shape) or real(*a, **k))
-    evaluation = evaluate(sequences[:1], simulate, methods=("tfp",), modes=("te",), seed=3,
+    evaluation = evaluate(sequences[:1], simulate, methods=("tfp",), sensors=("te",), seed=3,
                           progress=False, repeats=5)
     assert calls.count(sequences[0][1].shape) == 5            # plus one small warm-up call
     assert evaluation.repeats == 5 and evaluation.threads == torch.get_num_threads()
@@ -173,9 +177,9 @@ def test_evaluate_refuses():
 
 def test_method_options_reach_the_method(small_run):
     sequences, evaluation = small_run
-    windowed = evaluate(sequences[:1], simulate, methods=("tfi",), modes=("ml-msb",), seed=3, progress=False,
+    windowed = evaluate(sequences[:1], simulate, methods=("tfi",), sensors=("ml-msb",), seed=3, progress=False,
                         options={"tfi": {"search": "window"}})
-    default = [r.psnr_mu for r in evaluation.results if (r.sequence, r.mode, r.method) == ("m", "ml-msb", "tfi")]
+    default = [r.psnr_mu for r in evaluation.results if (r.sequence, r.sensor, r.method) == ("m", "ml-msb", "tfi")]
     assert [r.psnr_mu for r in windowed.results] != default
     with pytest.raises(InputError, match="not an option"):
         evaluate(sequences[:1], simulate, methods=("tfp",), progress=False, options={"tfp": {"search": "window"}})
@@ -183,7 +187,7 @@ def test_method_options_reach_the_method(small_run):
 
 def test_light_far_above_float32_is_scored_not_overflowed():
     light = make_scene("moderate", 4, 24, 24, seed=1).astype(np.float64) * 1e300
-    evaluation = evaluate([("huge", light)], simulate, methods=("tfp",), modes=("te",), progress=False)
+    evaluation = evaluate([("huge", light)], simulate, methods=("tfp",), sensors=("te",), progress=False)
     (result,) = evaluation.results
     assert np.isfinite(result.psnr_mu) and result.psnr_mu < 10     # saturated codes: far too dark
 
@@ -206,14 +210,14 @@ def test_labels_are_the_papers_names():
 def test_missing_weights_are_noted_by_default_and_refused_when_named(empty_weights_dir):
     light = make_scene("moderate", 6, 16, 16, seed=2)
     with pytest.raises(InputError, match=r"bsf-te\.pt' is missing"):
-        evaluate([("a", light)], simulate, methods=("tfp", "bsf"), modes=("te",), progress=False)
-    evaluation = evaluate([("a", light)], simulate, methods=("tfp", "bsf"), modes=("te",), progress=False,
+        evaluate([("a", light)], simulate, methods=("tfp", "bsf"), sensors=("te",), progress=False)
+    evaluation = evaluate([("a", light)], simulate, methods=("tfp", "bsf"), sensors=("te",), progress=False,
                           missing="note", repeats=1)
-    assert [(r.method, r.mode) for r in evaluation.results] == [("tfp", "te")]
+    assert [(r.method, r.sensor) for r in evaluation.results] == [("tfp", "te")]
     assert set(evaluation.missing) == {("bsf", "te")}
     text = table_markdown(evaluation)
     assert "| BSF_TE | no weights |" in text and "- BSF_TE: no bsf weights for the te camera" in text
-    everything = evaluate([("a", light)], simulate, modes=("te",), progress=False, repeats=1)   # methods=None
+    everything = evaluate([("a", light)], simulate, sensors=("te",), progress=False, repeats=1)   # methods=None
     assert {m for m, _ in everything.missing} == {"spk2imgnet", "bsf", "mambaspike", "net"}
     assert [r.method for r in everything.results] == ["tfp", "tfi"]
 
@@ -221,7 +225,7 @@ def test_missing_weights_are_noted_by_default_and_refused_when_named(empty_weigh
 def test_further_metrics_are_the_scores_of_the_scored_frames():
     from recon.score import score
     light = make_scene("moderate", 14, 24, 24, seed=4)
-    evaluation = evaluate([("a", light)], simulate, methods=("tfp",), modes=("te",), progress=False, keep=True,
+    evaluation = evaluate([("a", light)], simulate, methods=("tfp",), sensors=("te",), progress=False, keep=True,
                           repeats=1, metrics=("fovvideovdp", "psnr_pu21", "hdr_vqm"), vdp_frames=2)
     assert evaluation.metrics == ("psnr_mu", "ssim_mu", "psnr_pu21", "hdr_vqm", "fovvideovdp")
     (result,) = evaluation.results
@@ -248,10 +252,10 @@ def test_noise_sensors_get_dark_current_and_their_own_table():
 
     light = make_scene("moderate", 12, 24, 24, seed=3)
     configs = paper_configs()
-    evaluation = evaluate([("a", light)], recording, methods=("tfp",), modes=("ml-msb", "te", "te+eq12", "te+eq13"),
+    evaluation = evaluate([("a", light)], recording, methods=("tfp",), sensors=("ml-msb", "te", "te+eq12", "te+eq13"),
                           configs=configs, progress=False, repeats=1)
     assert seen == [None, None, "eq12", "eq13"]
-    by_mode = {r.mode: r.psnr_mu for r in evaluation.results}
+    by_mode = {r.sensor: r.psnr_mu for r in evaluation.results}
     assert by_mode["te+eq12"] < by_mode["te"] and by_mode["te+eq13"] < by_mode["te"]   # dark current costs
     lines = table_markdown(evaluation).splitlines()
     assert lines[0].count("reconstruction") == 2 and len([x for x in lines if x.startswith("| TFP_")]) == 2
@@ -286,7 +290,7 @@ def test_with_a_learned_method_frames_are_scored_where_its_span_fits(empty_weigh
     save_weights(empty_weights_dir / "spk2imgnet-te.pt", module(sizes.preset("cpu")).eval(), SensorConfig(), {},
                  "spk2imgnet")
     light = make_scene("moderate", 63, 24, 24, seed=2)
-    evaluation = evaluate([("a", light)], simulate, methods=("tfp", "spk2imgnet"), modes=("te",), progress=False,
+    evaluation = evaluate([("a", light)], simulate, methods=("tfp", "spk2imgnet"), sensors=("te",), progress=False,
                           repeats=1)
     assert evaluation.span == 61 and [r.frames_scored for r in evaluation.results] == [3, 3]
     assert "- frames scored per sequence: 3, those whose 9-readout window" in table_markdown(evaluation)

@@ -46,13 +46,13 @@ def test_validation_keeps_the_best_weights(tmp_path, monkeypatch):
 
 
 def test_validation_scores_every_held_out_case():
-    from recon.engine.validation import CASES, score, validation_set
+    from recon.engine.validation import CASES, validation_psnr, validation_set
     cases = validation_set(SensorConfig(), 16, 24)
     assert [c.label for c in cases] == [c.label for c in CASES]
     assert all(c.words.shape == c.light.shape for c in cases)
-    perfect = score(lambda words: next(c.light for c in cases if c.words is words), cases)
+    perfect = validation_psnr(lambda words: next(c.light for c in cases if c.words is words), cases)
     assert all(v == float("inf") for v in perfect.values())
-    rough = score(lambda words: next(c.light for c in cases if c.words is words) * 1.5, cases)
+    rough = validation_psnr(lambda words: next(c.light for c in cases if c.words is words) * 1.5, cases)
     assert all(10 < v < 60 for v in rough.values())
 
 

@@ -11,7 +11,7 @@ from cosim.stream_ports import check_beats
 from golden.config import SensorConfig
 from golden.errors import ConfigError
 from golden.reference import step_reference
-from golden.stream import beat_count, beats
+from golden.beats import beat_count, beats
 from rtl.stream import StreamingPixelArray
 from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.rtl_helpers import mixed_stimulus

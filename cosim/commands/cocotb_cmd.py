@@ -49,7 +49,7 @@ def run(args) -> int:
     if args.readouts < 1:
         raise InputError(f"--readouts {args.readouts}: must be >= 1")
     if args.lanes is not None:
-        from golden.stream import check_lanes
+        from golden.beats import check_lanes
         try:
             check_lanes(config, args.height, args.width, args.lanes)
         except ValueError as exc:

@@ -25,6 +25,8 @@ def add_light_arguments(parser, *, out_help: str, seed_help: str, no_noise_help:
 
 #: Most worker processes ``simulate --workers`` accepts.
 MAX_WORKERS = 256
+#: Most torch CPU threads any command's ``--threads`` accepts (reconstruct, evaluate, train).
+MAX_THREADS = 256
 
 
 def check_workers_argument(workers: int | None) -> None:
@@ -32,3 +34,10 @@ def check_workers_argument(workers: int | None) -> None:
     from golden.errors import InputError
     if workers is not None and not 1 <= workers <= MAX_WORKERS:
         raise InputError(f"--workers {workers}: must be in 1..{MAX_WORKERS}")
+
+
+def check_threads_argument(threads: int | None) -> None:
+    """Refuse a ``--threads`` outside 1..MAX_THREADS with one line (None: torch's choice)."""
+    from golden.errors import InputError
+    if threads is not None and not 1 <= threads <= MAX_THREADS:
+        raise InputError(f"--threads {threads}: must be in 1..{MAX_THREADS}")

@@ -18,10 +18,12 @@ TABLE_DEFAULTS = (70, 64, 96, 1)      # 70 frames: 10 scored where the learned m
 #: --table's torch threads: on a shared machine two threads spin against the load (a 64 x 96 frame of
 #: the network took 2.6 s with 2 threads against 0.04 s with 1 at load 10 on 2 cores).
 TABLE_THREADS = 1
-#: Most torch CPU threads ``--threads`` accepts.
-MAX_THREADS = 256
 #: --table's FovVideoVDP frames per sequence (it costs about 0.5 s a frame whatever the size).
 TABLE_VDP_FRAMES = 4
+
+from recon.settings import DEFAULT_WINDOW  # noqa: E402  (after the constants the help quotes)
+
+from .common import MAX_THREADS  # noqa: E402
 
 HELP = ("simulate sequences with the paper's TE and ML (msb readout) sensors and the full-count ML "
         "camera, reconstruct with every method, write Table 1 (Markdown, CSV), a quality-against-run-time "
@@ -30,7 +32,10 @@ HELP = ("simulate sequences with the paper's TE and ML (msb readout) sensors and
 
 def add_arguments(parser):
     parser.add_argument("--out", required=True, help="folder for table.md, table.csv, results.csv, "
-                                                     "quality_vs_time.png and strips/")
+                                                     "quality_vs_time.png and strips/ (new or empty; "
+                                                     "written whole when the run ends)")
+    parser.add_argument("--force", action="store_true",
+                        help="replace the results of a previous run in --out (never a folder holding other files)")
     parser.add_argument("--set", default="heldout",
                         help="built-in sequences: heldout (default: the project's evaluation set), "
                              "moderate (its moderately HDR part), panoramas (tuning/examples), default, "
@@ -65,7 +70,8 @@ def add_arguments(parser):
     parser.add_argument("--repeats", type=int, default=None,
                         help=f"timed runs per method, the median reported (default {DEFAULTS[3]}; "
                              f"--table {TABLE_DEFAULTS[3]})")
-    parser.add_argument("--window", type=int, default=9, help="readouts per window (default 9, paper 6.4)")
+    parser.add_argument("--window", type=int, default=DEFAULT_WINDOW,
+                        help=f"readouts per window, odd (default {DEFAULT_WINDOW}, paper 6.4)")
     parser.add_argument("--te-config", default="te", help="TE sensor: JSON file or 'te' (paper b1 = b2 = 4)")
     parser.add_argument("--ml-config", default="ml-msb",
                         help="ML sensor of the table's ML column, msb readout: JSON file or 'ml-msb' "
@@ -76,7 +82,7 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=int, default=0, help="shot-noise seed (default 0)")
     parser.add_argument("--device", default="cpu", help="torch device for reconstruction (default cpu)")
     parser.add_argument("--store", metavar="STORE",
-                        help="instead of simulating: score the streams of a dataset store (tespike synth), "
+                        help="instead of simulating: score the streams of a dataset store (tespike dataset), "
                              "one task per sequence x sensor x method (docs/distributed.md)")
     parser.add_argument("--workers", type=int, default=None,
                         help="with --store: worker processes on this machine (default 1, in this process)")
@@ -91,8 +97,12 @@ def run(args) -> int:
     from golden.errors import ConfigError, InputError
     from golden.fastsim import simulate_scene
     from golden.io import load_scene
-    from golden.paths import check_output_dir
-    from recon.evaluate import OUTPUT_FILES, evaluate, table_markdown, write_outputs
+    from golden.atomic import atomic_folder
+    from golden.paths import check_results_dir
+
+    from .common import check_threads_argument
+    from recon.evaluate import evaluate
+    from recon.report import OUTPUT_FILES, table_markdown, write_outputs
     from recon.scenes import load_hdr_sequence
     from recon.scenes.heldout import sequence_set
 
@@ -103,7 +113,7 @@ def run(args) -> int:
                 raise InputError(f"{flag} does not apply with --store (a store's streams are scored as they are)")
         from cosim.dataset.evaluate import run_store
         return run_store(args)
-    from recon.evaluate import NOISE_MODES
+    from recon.evaluate import NOISE_SENSORS
     from recon.score import KEYS
     defaults = TABLE_DEFAULTS if args.table else DEFAULTS
     frames, height, width, repeats = (default if value is None else value for value, default in
@@ -112,8 +122,7 @@ def run(args) -> int:
         if value < 1:
             raise InputError(f"{flag} {value}: must be an integer >= 1")
     threads = TABLE_THREADS if args.table and args.threads is None else args.threads
-    if threads is not None and not 1 <= threads <= MAX_THREADS:
-        raise InputError(f"--threads {threads}: must be in 1..{MAX_THREADS}")
+    check_threads_argument(threads)
     vdp_frames = TABLE_VDP_FRAMES if args.table and args.vdp_frames is None else args.vdp_frames
     if vdp_frames is not None and vdp_frames < 1:
         raise InputError(f"--vdp-frames {vdp_frames}: must be an integer >= 1")
@@ -129,7 +138,7 @@ def run(args) -> int:
         if unknown or not metrics:
             raise InputError(f"--metrics {args.metrics!r}: choose from {', '.join(KEYS)}")
     ml_count = args.ml_count_config or ("none" if args.table else "ml")
-    check_output_dir(args.out, "--out", OUTPUT_FILES)
+    check_results_dir(args.out, OUTPUT_FILES, args.force)
     # option, value, sensor key, (mode, ml_readout) it must have
     wanted = [("--ml-config", args.ml_config, "ml-msb", ("ml", "msb")),
               ("--te-config", args.te_config, "te", ("te", "count"))]
@@ -142,7 +151,7 @@ def run(args) -> int:
             raise ConfigError(f"{option} {value!r} has mode {config.mode!r}, ml_readout {config.ml_readout!r}; "
                               f"expected mode {kind!r}" + (f", ml_readout {readout!r}" if kind == "ml" else ""))
     if args.noise:              # the paper's Tables 6 to 9: its TE camera with dark current
-        configs.update({mode: configs["te"] for mode in NOISE_MODES})
+        configs.update({sensor: configs["te"] for sensor in NOISE_SENSORS})
     sequences = [] if args.set == "none" else sequence_set(args.set, frames, height, width)
     for path in args.scene:          # memory-mapped: read one slice at a time
         sequences.append((Path(path).stem, load_scene(path, memory_map=True)))
@@ -158,17 +167,20 @@ def run(args) -> int:
     def simulate(config, light, rng, dark_current=None):
         return simulate_scene(config, light, seed=rng, dark_current=dark_current)
 
-    evaluation = evaluate(sequences, simulate, methods=methods, modes=tuple(configs), configs=configs,
+    evaluation = evaluate(sequences, simulate, methods=methods, sensors=tuple(configs), configs=configs,
                           window=args.window, seed=args.seed, device=args.device, progress=progress_wanted(args),
                           repeats=repeats, metrics=metrics, vdp_frames=vdp_frames,
                           missing="note" if args.table else None)
     if args.table:
         from recon.complexity import measure
         evaluation.complexity = measure(evaluation.methods, configs["te"])
-    paths = write_outputs(evaluation, args.out)
+    check_results_dir(args.out, OUTPUT_FILES, args.force)       # again: the run may have taken an hour
+    with atomic_folder(args.out) as folder:
+        write_outputs(evaluation, folder)
     if args.quiet:
         return 0
+    out = Path(args.out)
     print(table_markdown(evaluation), end="")
-    print(f"wrote {paths['table.md']}, {paths['table.csv']}, {paths['results.csv']}, {paths['plot']} "
-          f"and {len(evaluation.strips)} strip(s) in {Path(args.out) / 'strips'}")
+    print(f"wrote {out / 'table.md'}, {out / 'table.csv'}, {out / 'results.csv'}, "
+          f"{out / 'quality_vs_time.png'} and {len(evaluation.strips)} strip(s) in {out / 'strips'}")
     return 0

@@ -2,13 +2,12 @@
 
 from recon.learned import LEARNED
 
+from .common import MAX_THREADS
+
 HELP = "reconstruct light images R.npy from a TE or ML stream S.npz (tfp, tfi, spk2imgnet, bsf, mambaspike, net)"
 
 #: The keys of recon.methods.RECON_METHODS (named here without importing torch, so refusals are quick).
 METHOD_CHOICES = ("tfp", "tfi", *LEARNED)
-
-#: Most torch CPU threads ``--threads`` accepts.
-MAX_THREADS = 256
 
 
 def add_arguments(parser):
@@ -33,6 +32,9 @@ def run(args) -> int:
     from golden.errors import InputError
     from golden.io import atomic_output, load_stream
     from golden.paths import check_outputs
+    from recon.settings import DEFAULT_WINDOW, check_window
+
+    from .common import check_threads_argument
     from cosim.room import require_room, reserved_memmap
 
     # every check that needs no torch comes first, so a refusal is quick
@@ -42,11 +44,9 @@ def run(args) -> int:
         from recon.learned import method_span
         raise InputError(f"--window applies to methods 'tfp' and 'tfi'; {args.method!r} sees the "
                          f"{method_span(args.method)} readouts its sizes fix")
-    window = 9 if args.window is None else args.window
-    if window < 1 or window % 2 == 0:
-        raise InputError(f"--window {window}: window = {window} must be an odd integer >= 1")
-    if args.threads is not None and not 1 <= args.threads <= MAX_THREADS:
-        raise InputError(f"--threads {args.threads}: must be in 1..{MAX_THREADS}")
+    window = DEFAULT_WINDOW if args.window is None else args.window
+    check_window(window, "--window")
+    check_threads_argument(args.threads)
     if args.method != "tfi" and args.search != "stream":
         raise InputError(f"--search applies to method 'tfi' only, not {args.method!r}")
     check_outputs({"--out": args.out}, {"--stream": args.stream})

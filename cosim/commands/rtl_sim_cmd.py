@@ -12,7 +12,7 @@ def add_arguments(parser):
     add_config_argument(parser)
     parser.add_argument("--stimulus", required=True, help="E.npy: integer (T, H, W) electrons per pixel clock")
     parser.add_argument("--out", required=True, help="S.npz to write: readout words and the full config")
-    parser.add_argument("--vcd", help="also write the waveform W.vcd (amaranth backend; about 5x slower) "
+    parser.add_argument("--vcd", help="also write the waveform W.vcd (amaranth backend; the run takes about 2x as long) "
                                       "and a GTKWave save file beside it")
     parser.add_argument("--gtkw", help="GTKWave save file to write with --vcd (default: the VCD path with .gtkw)")
     parser.add_argument("--backend", choices=BACKEND_NAMES, default=BACKEND_NAMES[0],

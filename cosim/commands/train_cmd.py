@@ -7,7 +7,7 @@ defaults from there when it is printed (importing torch then only).
 
 import argparse
 
-from .common import add_config_argument
+from .common import MAX_THREADS, add_config_argument, check_threads_argument
 
 HELP = "train a learned reconstruction method for one sensor configuration (resumable, CPU or GPU)"
 
@@ -61,7 +61,8 @@ def add_arguments(parser):
     trainer("--seed", "seed of the draws and of the initial weights", type=int)
     trainer("--device", "torch device (cuda where there is one)")
     parser.add_argument("--threads", type=int, default=1,
-                        help="torch CPU threads (default 1: two runs share two cores better than one run; "
+                        help=f"torch CPU threads, 1..{MAX_THREADS} (default 1: two runs share two cores better "
+                             "than one run; "
                              "the trainer alone leaves torch's own setting)")
     parser.add_argument("--init", default=None, metavar="WEIGHTS",
                         help="start from this weights file's tensors of matching name and shape")
@@ -81,8 +82,7 @@ def run(args) -> int:
     config = load_config(args.config)
     if args.steps is None and args.minutes is None:
         raise InputError("give a budget: --steps N or --minutes M")
-    if args.threads is not None and not 1 <= args.threads <= 1024:
-        raise InputError(f"--threads {args.threads}: must be in 1..1024")
+    check_threads_argument(args.threads)
     if args.peak is not None:
         from recon.engine.clips import check_peak
         check_peak(args.peak, "--peak {:g} {:g}".format(*args.peak))

@@ -51,7 +51,7 @@ def run(args) -> int:
         from rtl.verilog import array_verilog
         text, what = array_verilog(config, args.height, args.width), f"{mode}_pixel_array"
     else:
-        from golden.stream import beat_count, check_lanes
+        from golden.beats import beat_count, check_lanes
         try:
             check_lanes(config, args.height, args.width, args.lanes)
         except InputError:

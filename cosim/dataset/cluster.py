@@ -5,7 +5,8 @@ finish. ``workers=1`` (the default) runs them one after another in this
 process with Dask's synchronous scheduler: no server, no extra process.
 ``workers=N > 1`` starts a :class:`distributed.LocalCluster` of N worker
 processes, one thread each, listening on 127.0.0.1 only (their HTTP status
-servers too, on free ports), and stops it at the end. ``scheduler=ADDRESS`` (or Dask's own ``scheduler-address`` setting, e.g.
+servers too, on free ports), in a process and session of its own (a Ctrl-C
+interrupts this process alone, quietly), and stops it at the end. ``scheduler=ADDRESS`` (or Dask's own ``scheduler-address`` setting, e.g.
 ``DASK_SCHEDULER_ADDRESS``) sends the same tasks to a running cluster started
 with ``dask scheduler`` / ``dask worker`` (docs/distributed.md).
 
@@ -16,13 +17,16 @@ raise); every task here is idempotent, so a retry changes nothing but time.
 
 from __future__ import annotations
 
-import logging
+import contextlib
+import os
 from typing import Iterator, Sequence
 
 from golden.errors import InputError
 
 #: Extra attempts for a task that raised (a worker that dies is handled by the scheduler).
 RETRIES = 2
+#: Seconds between two looks for finished tasks (and for a Ctrl-C) while a cluster runs.
+POLL_SECONDS = 0.1
 
 
 def check_workers(workers: int | None, scheduler: str | None) -> None:
@@ -32,6 +36,102 @@ def check_workers(workers: int | None, scheduler: str | None) -> None:
     if workers is not None and scheduler:
         raise InputError("--workers and --scheduler exclude each other "
                          "(an existing cluster has its own workers)")
+
+
+#: The local cluster's own process: started in a session of its own, so a terminal's Ctrl-C
+#: (sent to the whole foreground group) never reaches its workers (each printed its traceback:
+#: 63 lines for two); it prints the scheduler's address, then runs until its stdin closes,
+#: which happens however this command ends (a SIGKILL included), so no worker outlives it.
+LOCAL_CLUSTER = """
+import logging, sys
+from distributed import LocalCluster
+cluster = LocalCluster(n_workers=int(sys.argv[1]), threads_per_worker=1, processes=True, host="127.0.0.1",
+                       dashboard_address="127.0.0.1:0", worker_dashboard_address="127.0.0.1:0",
+                       silence_logs=logging.CRITICAL)
+print(cluster.scheduler_address, flush=True)
+sys.stdin.read()
+cluster.close(timeout=10)
+"""
+#: Seconds a local cluster is given to start, and to stop before its processes are killed.
+START_SECONDS = 120
+STOP_SECONDS = 30
+
+
+def _start_local_cluster(workers: int, interrupted):
+    """(process, scheduler address) of a local cluster of ``workers`` processes (:data:`LOCAL_CLUSTER`);
+    ``interrupted()`` is called while it starts (a Ctrl-C ends the wait at once)."""
+    import select
+    import subprocess
+    import sys
+    import time
+    process = subprocess.Popen([sys.executable, "-c", LOCAL_CLUSTER, str(workers)], stdin=subprocess.PIPE,
+                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                               start_new_session=True)
+    try:
+        end = time.monotonic() + START_SECONDS
+        while not select.select([process.stdout], [], [], POLL_SECONDS)[0]:
+            interrupted()
+            if time.monotonic() > end:
+                raise InputError(f"a local Dask cluster of {workers} worker processes did not start "
+                                 f"in {START_SECONDS} s")
+        address = process.stdout.readline().strip()
+    except BaseException:
+        _stop_local_cluster(process, at_once=True)
+        raise
+    if not address:
+        _stop_local_cluster(process)
+        raise InputError(f"cannot start a local Dask cluster of {workers} worker processes "
+                         f"(exit status {process.returncode})")
+    return process, address
+
+
+def _stop_local_cluster(process, at_once: bool = False) -> None:
+    """Close its stdin (the cluster closes itself) and wait; kill its session's processes if it
+    hangs, or ``at_once`` (a run that failed or was interrupted: nothing of theirs is wanted)."""
+    import signal
+    import subprocess
+    for pipe in (process.stdin, process.stdout):
+        with contextlib.suppress(OSError):
+            pipe.close()
+    try:
+        if at_once:
+            raise subprocess.TimeoutExpired(process.args, 0)
+        process.wait(timeout=STOP_SECONDS)
+    except subprocess.TimeoutExpired:
+        with contextlib.suppress(OSError):
+            os.killpg(process.pid, signal.SIGKILL)     # its own session: only the processes it started
+        process.wait()
+
+
+class _Interrupts:
+    """Ctrl-C while a cluster runs: recorded by the handler, raised as KeyboardInterrupt at
+    :meth:`check` (between tasks, after the start). Raised wherever the main thread happened
+    to be, it landed inside Dask's start-up (which then hung) or in a garbage-collection
+    callback (where Python prints it and goes on)."""
+
+    def __init__(self):
+        self.pending = False
+        self.previous = None
+
+    def _record(self, signum, frame):
+        self.pending = True
+
+    def install(self) -> None:
+        import signal
+        import threading
+        if threading.current_thread() is threading.main_thread() and self.previous is None:
+            self.previous = signal.signal(signal.SIGINT, self._record)
+
+    def check(self) -> None:
+        if self.pending:
+            self.pending = False
+            raise KeyboardInterrupt
+
+    def restore(self) -> None:
+        import signal
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+            self.previous = None
 
 
 class Runner:
@@ -44,6 +144,7 @@ class Runner:
         self.workers = 1 if workers is None else workers
         self.client = None
         self.cluster = None
+        self._interrupts = _Interrupts()
 
     @property
     def where(self) -> str:
@@ -54,29 +155,38 @@ class Runner:
         return "this process"
 
     def __enter__(self) -> "Runner":
-        if self.address:
-            import dask
-            from distributed import Client
-            try:                 # Dask's own connect timeout (distributed.comm.timeouts.connect, 30 s)
-                self.client = Client(self.address, timeout=dask.config.get("distributed.comm.timeouts.connect"))
-            except (OSError, TimeoutError, ValueError) as exc:
-                first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-                raise InputError(f"cannot reach the Dask scheduler {self.address!r}: {first}") from None
-        elif self.workers > 1:
-            from distributed import Client, LocalCluster
-            self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                        host="127.0.0.1", dashboard_address="127.0.0.1:0",
-                                        worker_dashboard_address="127.0.0.1:0",
-                                        silence_logs=logging.ERROR)
-            self.client = Client(self.cluster)
+        if self.address is None and self.workers == 1:
+            return self                       # Dask's synchronous scheduler: Ctrl-C as anywhere else
+        self._interrupts.install()
+        try:
+            if self.address:
+                import dask
+                from distributed import Client
+                try:             # Dask's own connect timeout (distributed.comm.timeouts.connect, 30 s)
+                    self.client = Client(self.address,
+                                         timeout=dask.config.get("distributed.comm.timeouts.connect"))
+                except (OSError, TimeoutError, ValueError) as exc:
+                    first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                    raise InputError(f"cannot reach the Dask scheduler {self.address!r}: {first}") from None
+            else:
+                from distributed import Client
+                self.cluster, address = _start_local_cluster(self.workers, self._interrupts.check)
+                self.client = Client(address)
+            self._interrupts.check()          # a Ctrl-C during the start ends the run here
+        except BaseException as exc:
+            self.__exit__(type(exc), exc, None)
+            raise
         return self
 
-    def __exit__(self, *exc) -> None:
-        if self.client is not None:
-            self.client.close()
-        if self.cluster is not None:
-            self.cluster.close()
-        self.client = self.cluster = None
+    def __exit__(self, kind=None, *exc) -> None:
+        try:
+            if self.client is not None:
+                self.client.close()
+            if self.cluster is not None:
+                _stop_local_cluster(self.cluster, at_once=kind is not None)
+        finally:
+            self.client = self.cluster = None
+            self._interrupts.restore()
 
     def __call__(self, tasks: Sequence) -> Iterator[tuple[int, object]]:
         """Run ``dask.delayed`` tasks; yield (index in ``tasks``, result) as each finishes.
@@ -90,11 +200,19 @@ class Runner:
             for index, task in enumerate(tasks):
                 yield index, dask.compute(task, scheduler="sync")[0]
             return
+        import time
+
         from distributed import as_completed
         futures = self.client.compute(tasks, retries=RETRIES)
         index_of = {id(future): index for index, future in enumerate(futures)}
         try:
-            for future in as_completed(futures):
-                yield index_of[id(future)], future.result()
+            finished = as_completed(futures)
+            while not finished.is_empty():
+                self._interrupts.check()
+                batch = finished.next_batch(block=False)
+                if not batch:
+                    time.sleep(POLL_SECONDS)
+                for future in batch:
+                    yield index_of[id(future)], future.result()
         finally:
             self.client.cancel(futures)

@@ -12,9 +12,11 @@ SIMULATION_OPTIONS = {"set": "heldout", "scene": [], "folder": [], "frames": Non
 def run_store(args) -> int:
     from pathlib import Path
 
+    from golden.atomic import atomic_folder
     from golden.errors import InputError
+    from golden.paths import check_results_dir
     from recon.dataset.evaluate import evaluate_store, write_store_outputs
-    from recon.evaluate import table_markdown
+    from recon.report import OUTPUT_FILES, table_markdown
 
     from .cluster import Runner, check_workers
 
@@ -26,13 +28,19 @@ def run_store(args) -> int:
             raise InputError(f"--{key.replace('_', '-')} cannot be combined with --store "
                              "(the store holds the sequences and their streams)")
     check_workers(args.workers, args.scheduler)
+    check_results_dir(args.out, OUTPUT_FILES, args.force)
     methods = None if args.methods is None else [m.strip() for m in args.methods.split(",") if m.strip()]
     with Runner(args.workers, args.scheduler) as runner:
         print(f"evaluate: {args.store} on {runner.where}", flush=True)
         evaluation = evaluate_store(args.store, runner, methods=methods, window=args.window,
                                     device=args.device)
-    paths = write_store_outputs(evaluation, args.out)
+    check_results_dir(args.out, OUTPUT_FILES, args.force)       # again: the run may have taken an hour
+    with atomic_folder(args.out) as folder:
+        write_store_outputs(evaluation, folder)
+    if args.quiet:
+        return 0
+    out = Path(args.out)
     print(table_markdown(evaluation), end="")
-    print(f"wrote {paths['table.md']}, {paths['table.csv']}, {paths['results.csv']} "
-          f"and {len(evaluation.strips)} strip(s) in {Path(args.out) / 'strips'}")
+    print(f"wrote {out / 'table.md'}, {out / 'table.csv'}, {out / 'results.csv'} "
+          f"and {len(evaluation.strips)} strip(s) in {out / 'strips'}")
     return 0

@@ -5,7 +5,7 @@ PSNR-mu and SSIM-mu per frame after dividing by the sequence's peak, frames
 whose window reaches past the sequence not scored, frame means averaged per
 sequence, then over sequences), on the streams already in the store instead
 of freshly simulated ones, and the output files are those of ``tespike
-evaluate`` (:func:`recon.evaluate.table_markdown`, ``table_csv``,
+evaluate`` (:func:`recon.report.table_markdown`, ``table_csv``,
 ``results_csv``, ``plot_strip``).
 
 A frame that fits in one :data:`EVAL_TILE` is scored by one task with
@@ -140,7 +140,7 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     """
     from dask import delayed
 
-    from recon.evaluate import Evaluation, Result, scored_frames
+    from recon.evaluate import Evaluation, Measurement, scored_frames
     from recon.methods import RECON_METHODS, available_methods, missing_weights
     from recon.settings import ReconSettings
 
@@ -220,7 +220,7 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
                     image = np.zeros((H, W), np.float32)
                     for (rows, cols), p in parts:
                         image[rows, cols] = p["strip"]
-                evaluation.results.append(Result(sequence, sensor, method, float(np.mean(psnr)),
+                evaluation.results.append(Measurement(sequence, sensor, method, float(np.mean(psnr)),
                                                  float(np.mean(ssim)), math.nan, int(span[1] - span[0])))
                 strip[sensor, method] = image
         evaluation.strips[sequence] = strip
@@ -230,7 +230,7 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
 def write_store_outputs(evaluation, out: str | Path) -> dict[str, Path]:
     """table.md, table.csv, results.csv and strips/<sequence>.png (no timing plot: see the module)."""
     from recon.pictures import write_text
-    from recon.evaluate import plot_strip, results_csv, safe_name, table_csv, table_markdown
+    from recon.report import plot_strip, results_csv, safe_name, table_csv, table_markdown
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -23,7 +23,7 @@ only once its group carries ``complete: true``, an attribute written last,
 after every array of the sequence is written and itself marked complete (Zarr
 writes a ``zarr.json`` by temporary file and rename, so the flag appears whole
 or not at all). Incomplete groups are ignored by readers and finished (or
-redone) by the next synthesis run; chunk writes are idempotent (the same bytes
+redone) by the next `tespike dataset` run; chunk writes are idempotent (the same bytes
 every time), so a task that is retried after its worker died rewrites exactly
 what it wrote before.
 
@@ -162,7 +162,7 @@ class DatasetStore:
         already complete: ``{"sequence": ..., "light": ..., <config>: ...}``.
 
         A complete sequence must match ``shape`` and ``source``; unfinished arrays
-        are made anew (their chunks are rewritten by the synthesis anyway).
+        are made anew (their chunks are rewritten by the next build anyway).
         """
         check_name(name, "sequence")
         K, H, W = (int(n) for n in shape)

@@ -5,10 +5,10 @@
   folders), drawn peak and length, a clip's stream by golden's fast simulator;
 - :mod:`recon.engine.batches`: clips made ahead on worker processes, the pool
   a step draws from, samples with the inference's edge padding;
-- :mod:`recon.engine.validation`: the held-out validation set and its score.
+- :mod:`recon.engine.validation`: the held-out validation set and its PSNR-mu (:func:`validation_psnr`).
 """
 
 from .clips import EngineRecipe, make_clip
-from .validation import score, validation_set
+from .validation import validation_psnr, validation_set
 
-__all__ = ["EngineRecipe", "make_clip", "score", "validation_set"]
+__all__ = ["EngineRecipe", "make_clip", "validation_psnr", "validation_set"]

@@ -10,7 +10,7 @@ Every case is made from the validation seed domain (never a training seed):
   16 readouts, twice the design light.
 
 :func:`validation_set` returns light and words for one sensor configuration;
-:func:`score` gives PSNR-mu (mu = 5000, each frame divided by the ground
+:func:`validation_psnr` gives PSNR-mu (mu = 5000, each frame divided by the ground
 truth's peak) of every case over all its frames (the ends of each stream,
 where inference repeats the first or last readout, included) and their mean.
 """
@@ -83,7 +83,7 @@ def validation_set(config: SensorConfig, height: int = 96, width: int = 128) -> 
     return out
 
 
-def score(reconstruct: Callable[[np.ndarray], np.ndarray],
+def validation_psnr(reconstruct: Callable[[np.ndarray], np.ndarray],
           cases: list[ValidationCase]) -> dict[str, float]:
     """PSNR-mu (dB) of ``reconstruct(words) -> light`` on every case, and ``mean``."""
     from ..metrics import psnr_mu

@@ -197,13 +197,14 @@ def plot_curves(log_path: Path, validation_path: Path, png_path: Path, title: st
 
 def validate(model: torch.nn.Module, cases, config: SensorConfig, device: str) -> dict[str, float]:
     """PSNR-mu of ``model`` on the validation cases (whole frames, every readout)."""
-    from ..engine.validation import score
+    from ..engine.validation import validation_psnr
     from .infer import reconstruct_model
     was_training = model.training
     model.eval()
     try:
         with torch.inference_mode():
-            return score(lambda words: reconstruct_model(model, words, config, tile=None, device=device), cases)
+            return validation_psnr(lambda words: reconstruct_model(model, words, config, tile=None, device=device),
+                                   cases)
     finally:
         model.train(was_training)
 

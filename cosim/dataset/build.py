@@ -1,4 +1,4 @@
-"""Dataset synthesis: HDR frame folders and built-in scenes -> light and sensor streams in a store.
+"""Building a dataset: HDR frame folders and built-in scenes -> light and sensor streams in a store.
 
 Per sequence, the work is a small Dask graph (every task idempotent: the
 same inputs write the same bytes, so a retry after a lost worker is harmless):
@@ -46,7 +46,7 @@ from recon.dataset.store import (CHUNK_FRAMES, TILE, DatasetStore, check_name, m
 
 @dataclasses.dataclass(frozen=True)
 class Source:
-    """One sequence to synthesise: an HDR frame folder or a built-in scene."""
+    """One sequence of the dataset: an HDR frame folder or a built-in scene."""
 
     name: str
     shape: tuple[int, int, int]
@@ -243,7 +243,7 @@ def sequence_graph(store: DatasetStore, source: Source):
                                                 dask_key_name=f"sequence-done-{name}"), len(streams)
 
 
-def synthesise(url: str, sources: Sequence[Source], configs: dict[str, SensorConfig], seed: int, run, *,
+def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, SensorConfig], seed: int, run, *,
                chunk_frames: int = CHUNK_FRAMES, tile: tuple[int, int] = TILE, report=None) -> dict:
     """Write every source into the store at ``url`` (made or resumed) with every configuration.
 
@@ -262,7 +262,7 @@ def synthesise(url: str, sources: Sequence[Source], configs: dict[str, SensorCon
         raise InputError(f"sequence name {repeated[0]!r} is given twice (HDR sub-folders and "
                          "--scene names share one namespace)")
     if not sources:
-        raise InputError("nothing to synthesise: give --hdr DIR and/or --scene NAME")
+        raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     if not configs:
         raise InputError("no sensor configuration: give --config at least once")
     store = DatasetStore.create_or_resume(url, seed=seed, configs=configs, tile=tile,

@@ -1,4 +1,4 @@
-"""``tespike synth``: HDR frame folders and built-in scenes -> a dataset store of light and streams."""
+"""``tespike dataset``: HDR frame folders and built-in scenes -> a dataset store of light and streams."""
 
 HELP = ("simulate every sequence of a folder of HDR frame folders (and/or built-in scenes) with "
         "every sensor configuration into a Zarr dataset store, locally or on a Dask cluster")
@@ -57,7 +57,7 @@ def run(args) -> int:
     import time
 
     from cosim.dataset.cluster import Runner, check_workers
-    from cosim.dataset.synth import hdr_sources, scene_sources, synthesise
+    from cosim.dataset.build import build_dataset, hdr_sources, scene_sources
     from golden.errors import InputError
 
     check_workers(args.workers, args.scheduler)
@@ -78,13 +78,13 @@ def run(args) -> int:
         sources += hdr_sources(folder, weights=args.weights, max_frames=args.frames)
     sources += scene_sources(args.scene, args.frames or 24, args.height, args.width)
     if not sources:
-        raise InputError("nothing to synthesise: give --hdr DIR and/or --scene NAME")
+        raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     start = time.perf_counter()
     with Runner(args.workers, args.scheduler) as runner:
-        print(f"synth: {len(sources)} sequence(s) x {len(configs)} sensor(s) on {runner.where}",
+        print(f"dataset: {len(sources)} sequence(s) x {len(configs)} sensor(s) on {runner.where}",
               flush=True)
-        counts = synthesise(args.out, sources, configs, args.seed, runner, chunk_frames=args.chunk_frames,
-                            report=lambda name: print(f"synth: {name} complete", flush=True))
+        counts = build_dataset(args.out, sources, configs, args.seed, runner, chunk_frames=args.chunk_frames,
+                            report=lambda name: print(f"dataset: {name} complete", flush=True))
     seconds = time.perf_counter() - start
     print(f"wrote {counts['done']} sequence(s) to {args.out} ({counts['skipped']} already complete), "
           f"{counts['pixel_readouts']} pixel-readouts in {seconds:.1f} s")

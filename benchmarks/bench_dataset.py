@@ -1,9 +1,9 @@
-"""Dataset synthesis and store evaluation throughput with 1 and 2 workers, and the per-core
+"""Dataset building and store evaluation throughput with 1 and 2 workers, and the per-core
 figures docs/distributed.md projects the paper's full dataset from.
 
 Prints, in one run on this machine:
 
-* synthesis (``tespike synth``'s code: EXR frames read twice, light written, TE and ML
+* building (``tespike dataset``'s code: EXR frames read twice, light written, TE and ML
   streams simulated) of real HDR content (the shipped panorama under three camera
   motions, written as EXR frame folders) with ``--workers 1`` (in this process) and ``--workers 2`` (a
   LocalCluster of two processes; its start-up is not counted): pixel-readouts/s
@@ -32,7 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from cosim.dataset.cluster import Runner  # noqa: E402
-from cosim.dataset.synth import hdr_sources, read_gray, synthesise  # noqa: E402
+from cosim.dataset.build import build_dataset, hdr_sources, read_gray  # noqa: E402
 from golden.config import SensorConfig  # noqa: E402
 from golden.fastsim import simulate_scene  # noqa: E402
 from recon.dataset import compare_stores  # noqa: E402
@@ -84,9 +84,9 @@ def main() -> None:
         sources = hdr_sources(tmp / "hdr")
         readouts = sum(int(np.prod(s.shape)) for s in sources)          # per sensor
         print(f"{count} HDR sequences (EXR) of {args.frames} x {args.height} x {args.width}, sensors te + ml: "
-              f"{readouts * len(configs):,} pixel-readouts per synthesis")
+              f"{readouts * len(configs):,} pixel-readouts per dataset")
         total = readouts * len(configs)
-        print("\n| workers | synthesis wall s | pixel-readouts/s | sequences/hour | CPU s | CPU us / pixel-readout "
+        print("\n| workers | build wall s | pixel-readouts/s | sequences/hour | CPU s | CPU us / pixel-readout "
               "| evaluation wall s | CPU s | CPU us / pixel-readout / method |")
         print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |", flush=True)
         rows = {}
@@ -95,7 +95,7 @@ def main() -> None:
             with Runner(workers) as run:
                 # hand-written timing: CPU seconds of worker processes (torch.utils.benchmark sees this process's wall time only)
                 cpu, start = cpu_seconds(run), time.perf_counter()
-                synthesise(url, sources, configs, 0, run)
+                build_dataset(url, sources, configs, 0, run)
                 s_wall, s_cpu = time.perf_counter() - start, cpu_seconds(run) - cpu
                 cpu, start = cpu_seconds(run), time.perf_counter()
                 evaluate_store(url, run, methods=["tfp", "tfi"])
@@ -105,7 +105,7 @@ def main() -> None:
                   f"| {1e6 * s_cpu / total:.2f} | {e_wall:.1f} | {e_cpu:.1f} | {1e6 * e_cpu / (2 * total):.2f} |",
                   flush=True)
         same = compare_stores(tmp / "w1.zarr", tmp / "w2.zarr") == []
-        print(f"\nspeed-up of 2 workers over 1 (wall): synthesis x{rows[1][0] / rows[2][0]:.2f}, "
+        print(f"\nspeed-up of 2 workers over 1 (wall): build x{rows[1][0] / rows[2][0]:.2f}, "
               f"evaluation x{rows[1][1] / rows[2][1]:.2f}; stores bit-identical: {same}")
 
         # per-core breakdown, in this process
