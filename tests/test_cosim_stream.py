@@ -46,7 +46,7 @@ def test_icarus_stream_notices_a_wrong_beat(rng):
     """A lane swapped in the Verilog is caught (the comparison can fail)."""
     config = SensorConfig(b1=2, b2=2)
     stim = make_stimulus("random", config, rng, shape=STREAM_SHAPE)
-    verilog = _verilog(config, STREAM_SHAPE, 4).replace("= held[beat*N + i];", "= held[beat*N + (i ^ 1)];")
+    verilog = _verilog(config, STREAM_SHAPE, 4).replace("= buffered[i];", "= buffered[i ^ 1];")
     got = run_icarus_stream(config, stim, 4, verilog=verilog)
     assert not np.array_equal(got, beats(reference_words(config, stim), 4))
 
@@ -111,7 +111,7 @@ def test_cocotb_stream_bench_notices_a_wrong_beat(tmp_path):
     from cosim.cocotb_bench import Settings
     from cosim.cocotb_run import run_cocotb
     config = SensorConfig(b1=2, b2=2)
-    bad = _verilog(config, (2, 3), 4).replace("= held[beat*N + i];", "= held[beat*N + (i ^ 1)];")
+    bad = _verilog(config, (2, 3), 4).replace("= buffered[i];", "= buffered[i ^ 1];")
     (tmp_path / "bad.v").write_text(bad)
     result = run_cocotb(Settings(config, 2, 3, readouts=3, lanes=4), "icarus",
                         verilog_path=tmp_path / "bad.v", work_dir=tmp_path)
