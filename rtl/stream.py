@@ -1,16 +1,12 @@
 """The streaming readout of SPEC section 6: an H x W array whose words leave in beats of N lanes.
 
 :class:`StreamingPixelArray` is the :class:`rtl.array.PixelArray` (pixels and
-timing, unchanged) followed by a double-buffered readout: one readout cell
-(a Wd-bit register) per pixel, chained into N shift registers, lane i being cells
-i, i + N, i + 2N, ... At the edge where the array shows the words of interval k
-(``frame_valid``) every cell loads its pixel's word (``held``) and the pixels go
-on integrating interval k + 1; on each clock that carries a beat every cell
-takes the word of the cell N on (0 past the last pixel), so the lanes, cells
-0..N-1, carry beat j = pixels p = j N + i (raster order), 0 past the last
-pixel, and every cell is 0 once the B = ceil(H W / N) beats have left. The same
-structure as the Verilog top (:mod:`rtl.verilog_stream`), whose logic grows
-linearly with the pixel count (no multiplexer over the whole array).
+timing, unchanged) followed by a double-buffered readout, as a column-parallel
+sensor reads out: at the edge where the array shows the words of interval k
+(``frame_valid``), all H x W words are copied into the readout buffer
+(``held``) and the pixels go on integrating interval k + 1 while the buffer
+sends its B = ceil(H W / N) beats, one per clock, beat j carrying pixels
+p = j N + i (raster order) in lane i and 0 past the last pixel.
 
 Ports (clock domain ``sync``): ``charge`` as the parallel array; ``out``, an
 ``amaranth.lib.stream`` source (``always_ready``: a sensor cannot stall, the
@@ -27,6 +23,12 @@ L + 1 <= 2L because the generator refuses B > L
 (:func:`golden.stream.check_lanes`). The next interval's words arrive L clocks
 after the previous ones, when beat B - 1 <= L - 1 has just been sent, so the
 buffer is never overwritten before all its beats left.
+
+Structure: ``held.word_select(beat, N*Wd)`` is one B-to-1 multiplexer per lane (N B words
+in all, linear in the pixel count). The Verilog top (:mod:`rtl.verilog_stream`) draws the
+same readout as per-lane shift registers (no multiplexer at all); the outputs are equal
+at every clock. The proof of this component (``tespike prove``, property ``stream``) reads
+``held`` as the interval's words, so it stays a static buffer here.
 """
 
 from __future__ import annotations
@@ -74,20 +76,19 @@ class StreamingPixelArray(wiring.Component):
         wd = cfg.word_bits
         m.submodules.array = array = PixelArray(cfg, self.height, self.width, flat=self.flat)
         m.d.comb += array.charge.eq(self.charge)
-        pixels = self.height * self.width
-        # The readout cells, one Wd-bit register per pixel (cell p at [p*Wd +: Wd]); ``rst`` clears them.
-        held = Signal(pixels * wd, name="held")
+        pad = B * n * wd - len(array.frame)                     # lanes past the last pixel: 0
+        held = Signal(B * n * wd, name="held", reset_less=True)  # the second buffer of the words
         beat = Signal(range(max(B, 2)), name="beat")              # index of the beat on ``out``
         sending = Signal(name="sending")
-        step = min(n, pixels) * wd                 # one beat: every chain moves by N cells
-        shifted = Cat(held[step:], Const(0, step)) if step < len(held) else Const(0, len(held))
         with m.If(array.frame_valid):
-            m.d.sync += [held.eq(array.frame), beat.eq(0), sending.eq(1)]
+            m.d.sync += [held.eq(Cat(array.frame, Const(0, pad)) if pad else array.frame),
+                         beat.eq(0), sending.eq(1)]
         with m.Elif(sending):
-            m.d.sync += [held.eq(shifted), beat.eq(beat + 1)]
+            m.d.sync += beat.eq(beat + 1)
             with m.If(beat == B - 1):
                 m.d.sync += sending.eq(0)
         m.d.comb += [self.out.valid.eq(sending),
-                     self.out.p.first.eq(sending & (beat == 0)),
-                     self.out.p.words.eq(held[:step])]     # lanes past the last pixel: 0
+                     self.out.p.first.eq(sending & (beat == 0))]
+        with m.If(sending):
+            m.d.comb += self.out.p.words.eq(held.word_select(beat, n * wd))
         return m

@@ -13,19 +13,25 @@ The top ``<mode>_pixel_array_stream`` (ports ``clk``, ``rst``, ``charge``,
   (:class:`rtl.timing.ReadoutTiming`, one instance);
 * ``rst_sample`` (``rst`` one edge later: it clears the pixels, as in
   :mod:`rtl.array`) and the beat counter (``sending``, ``beat``);
-* per site p = r W + c, in generate loops over rows and columns: one pixel
-  ``<mode>_stream_pixel`` (its input register ``charge_sample``, its state
-  registers, and the pixel rule ``<mode>[_msb]_stream_pixel_rule``, a
-  combinational module: the rule of :mod:`rtl.pixel`, proved equivalent to it by
-  ``tespike prove``, property ``stream-pixel-rule``) and one readout cell
-  ``<mode>_readout_cell`` (a Wd-bit register).
+* B beat groups (``<mode>_beat_group``, B - 1 instances of N sites, and
+  ``<mode>_beat_group_end``, the S = H W - (B - 1) N last sites): group j holds
+  the sites of pixels p = j N + i (raster order, p = r W + c), site i on lane i,
+  each site one pixel ``<mode>_stream_pixel`` (its input register
+  ``charge_sample``, its state registers, and the pixel rule
+  ``<mode>[_msb]_stream_pixel_rule``, a combinational module: the rule of
+  :mod:`rtl.pixel`, proved equivalent to it by ``tespike prove``, property
+  ``stream-pixel-rule``) and one readout cell ``<mode>_readout_cell`` (a Wd-bit
+  register), in a generate loop. Grouping by beat keeps the top's own netlist
+  at B instances (Yosys's passes over the top cost time per wire: with all
+  2 H W site instances in the top, ``synth`` grew to about 13 CPU-minutes at
+  400 x 250).
 
 The readout is a shift register per lane (the second buffer of a
 double-buffered readout). At the edge where the timing shows ``frame_valid``
 every cell loads its pixel's word of the interval's last clock and the pixels
 integrate on; on every clock that carries a beat, cell p takes the word of cell
-p + N (0 past the last pixel). Lane i is chain i, i + N, i + 2N, ... and its
-output is cell i's register, so beat j carries pixels j N + i exactly as SPEC
+p + N (group j's cell i takes group j + 1's; 0 past the last pixel). Lane i is
+chain i, i + N, i + 2N, ... and its output is cell i's register (group 0), so beat j carries pixels j N + i exactly as SPEC
 section 6 orders, and after the last beat every cell holds 0 (``out_words`` is
 0 whenever ``out_valid`` is low). The logic is one 3-way multiplexer per cell
 bit: linear in H x W, where a run-time index ``held[beat*N + i]`` per lane made a
@@ -52,7 +58,7 @@ from golden.stream import beat_count, check_lanes
 
 from .array import check_array_size
 from .timing import ReadoutTiming
-from .verilog import _genvars, _loop, checked_config, convert_modules, module_names
+from .verilog import genvar_names, generate_loop, checked_config, convert_modules, module_names
 
 #: A one-bit one, zero-extended by :func:`_zext` for the msb readout's power of two.
 ONE_BIT = "1'b1"
@@ -66,7 +72,8 @@ def stream_module_names(config: SensorConfig) -> dict[str, str]:
     mode = config.mode
     return {"top": names["top"] + "_stream", "timing": names["timing"], "pixel": f"{mode}_stream_pixel",
             "rule": f"{mode}{'_msb' if config.is_msb else ''}_stream_pixel_rule",
-            "cell": f"{mode}_readout_cell"}
+            "cell": f"{mode}_readout_cell", "group": f"{mode}_beat_group",
+            "group_end": f"{mode}_beat_group_end"}
 
 
 def _zext(expr: str, width: int, to: int) -> str:
@@ -336,52 +343,98 @@ def _timing_and_beats(config: SensorConfig, beats: int, beat_bits: int) -> str:
 """
 
 
+def group_verilog(config: SensorConfig, sites: int, *, chained: bool) -> str:
+    """One beat group: ``sites`` consecutive sites (pixel + readout cell each, a generate loop),
+    the sites whose words leave in one beat. ``chained``: each cell shifts in the word of the
+    next group's cell of the same lane (``shift_in``); the end group (the last beat's sites)
+    shifts in 0. Named ``<mode>_beat_group`` / ``<mode>_beat_group_end``."""
+    c = checked_config(config)
+    names = stream_module_names(c)
+    name = names["group"] if chained else names["group_end"]
+    te = c.is_te
+    shift = "shift_in[i*WD +: WD]" if chained else "{WD{1'b0}}"
+
+    def site(i, indent):
+        return (f"{indent}wire [WD-1:0] word;  // this site's pixel word\n"
+                f"{indent}{names['pixel']} pixel (.clk(clk), .charge(charge[{i}*E +: E]), "
+                f"{'.ccc(ccc), ' if te else ''}.last(last), .clear(clear), .word(word));\n"
+                f"{indent}{names['cell']} readout (.clk(clk), .rst(rst), .load(frame_valid), .shift(sending),\n"
+                f"{indent}  .word(word), .shift_in({shift.replace('i*', f'{i}*')}), .held(held[{i}*WD +: WD]));\n")
+
+    loop = generate_loop("i", sites, "SITES", "site", site, "    ")
+    return f"""\
+// {name}: {sites} sites of {names['top']} whose words leave in one beat (site i on lane i).
+module {name} (
+  input  wire clk,
+  input  wire rst,                 // clears the readout cells
+  input  wire clear,               // rst sampled: clears the pixels
+{f"  input  wire [{c.b2 - 1}:0] ccc," + chr(10) if te else ""}\
+  input  wire last,
+  input  wire frame_valid,         // the cells load their pixels' words
+  input  wire sending,             // a beat leaves: every cell shifts by one group
+  input  wire [{sites * c.input_bits - 1}:0] charge,   // site i at [i*{c.input_bits} +: {c.input_bits}]
+{f"  input  wire [{sites * c.word_bits - 1}:0] shift_in,  // the next group's cells" + chr(10) if chained else ""}\
+  output wire [{sites * c.word_bits - 1}:0] held       // this group's cells, site i at [i*{c.word_bits} +: {c.word_bits}]
+);
+  localparam integer SITES = {sites};
+  localparam integer E = {c.input_bits};
+  localparam integer WD = {c.word_bits};
+  genvar {", ".join(genvar_names("i", sites))};
+  generate
+{loop}  endgenerate
+endmodule
+"""
+
+
 def stream_top_verilog(config: SensorConfig, height: int, width: int, lanes: int) -> str:
     """The top ``<mode>_pixel_array_stream`` (SPEC section 6 streaming ports) and its hand-written
-    blocks: the site pixel, its rule and the readout cell (the timing block is Amaranth's,
-    :func:`stream_array_verilog`). One pixel and one cell instance per site (module docstring)."""
+    blocks: the beat groups, the site pixel, its rule and the readout cell (the timing block is
+    Amaranth's, :func:`stream_array_verilog`).
+
+    Sites are grouped by beat: group j holds pixels j N .. j N + N - 1 (the end group the
+    S = P - (B - 1) N last ones), so lane i is cell i of every group, group j's cells shift
+    into group j - 1's, and ``out_words`` is group 0's cells. The top holds B group instances
+    and the synthesis tool sees one full group and one end group, whatever H x W is.
+    """
     config = checked_config(config)
     pixels, beats, beat_bits = _geometry(config, height, width, lanes)
     names = stream_module_names(config)
-    ccc_pin = ".ccc(ccc), " if config.is_te else ""
+    n, wd, e = lanes, config.word_bits, config.input_bits
+    end_sites = pixels - (beats - 1) * n
+    te = config.is_te
+    pins = f".clk(clk), .rst(rst), .clear(clear), {'.ccc(ccc), ' if te else ''}.last(last), " \
+           f".frame_valid(frame_valid), .sending(sending),"
 
-    def site(r, c, indent):
-        p = f"({r}*W + {c})"
-        return (f"{indent}wire [WD-1:0] word;      // this site's pixel word\n"
-                f"{indent}wire [WD-1:0] shift_in;  // the cell N sites on, 0 past the last pixel\n"
-                f"{indent}{names['pixel']} pixel (.clk(clk), .charge(charge[{p}*E +: E]), {ccc_pin}"
-                f".last(last), .clear(clear), .word(word));\n"
-                f"{indent}if ({p} + N < P) begin : chained\n"
-                f"{indent}  assign shift_in = buffered[{p} + N];\n"
-                f"{indent}end else begin : chain_end\n"
-                f"{indent}  assign shift_in = {{WD{{1'b0}}}};\n"
-                f"{indent}end\n"
-                f"{indent}{names['cell']} readout (.clk(clk), .rst(rst), .load(frame_valid), .shift(sending),\n"
-                f"{indent}  .word(word), .shift_in(shift_in), .held(buffered[{p}]));\n")
+    def group(j, indent):
+        return (f"{indent}{names['group']} group ({pins}\n"
+                f"{indent}  .charge(charge[{j}*N*E +: N*E]), .shift_in(beat_bus[{j} + 1]), "
+                f".held(beat_bus[{j}]));\n")
 
-    def lane(i, indent):
-        return (f"{indent}if ({i} < P) begin : from_cell\n"
-                f"{indent}  assign out_words[{i}*WD +: WD] = buffered[{i}];\n"
-                f"{indent}end else begin : past_last\n"
-                f"{indent}  assign out_words[{i}*WD +: WD] = {{WD{{1'b0}}}};\n"
-                f"{indent}end\n")
-
-    sites = _loop("r", height, "H", "row",
-                  lambda r, ind: _loop("c", width, "W", "col", lambda c, i: site(r, c, i), ind), "    ")
-    lanes_out = _loop("i", lanes, "N", "lane", lane, "    ")
-    genvars = ", ".join(_genvars("r", height) + _genvars("c", width) + _genvars("i", lanes))
+    full = generate_loop("j", beats - 1, "B - 1", "groups", group, "    ") if beats > 1 else ""
+    pad = "" if end_sites == n else "{{(N - S)*WD{1'b0}}, end_held}"
     top = (_header(config, height, width, lanes,
-                   "Structure: one pixel and one readout cell per site (generate loops), one timing block.", True)
+                   "Structure: B beat groups of N sites (one pixel and one readout cell each), "
+                   "one timing block.", False)
            + _timing_and_beats(config, beats, beat_bits) + f"""
-  // The readout cells: lane i is the chain of cells i, i + N, i + 2N, ...; out_words are cells 0..N-1.
-  wire [WD-1:0] buffered [0:P-1];  // each readout cell's word
-  genvar {genvars};
-  generate
-{sites}{lanes_out}  endgenerate
+  // Beat group j's readout cells (pixel j*N + i at [i*WD +: WD]); lane i is cell i of
+  // every group, group j + 1's cells shift into group j's, group 0's cells are the lanes.
+  localparam integer B = {beats};
+  localparam integer S = P - (B - 1)*N;   // sites of the end group: {end_sites}
+  wire [N*WD-1:0] beat_bus [0:B-1];
+  wire [S*WD-1:0] end_held;
+{f"  genvar {', '.join(genvar_names('j', beats - 1))};{chr(10)}  generate{chr(10)}{full}  endgenerate{chr(10)}" if full else ""}\
+  {names['group_end']} group_end ({pins}
+    .charge(charge[(B - 1)*N*E +: S*E]), .held(end_held));
+  assign beat_bus[B - 1] = {pad or "end_held"};
+  assign out_words = beat_bus[0];
 endmodule
 """)
-    return "\n".join([top, stream_pixel_verilog(config), stream_pixel_rule_verilog(config),
-                      readout_cell_verilog(config)])
+    parts = [top]
+    if beats > 1:
+        parts.append(group_verilog(config, n, chained=True))
+    parts += [group_verilog(config, end_sites, chained=False), stream_pixel_verilog(config),
+              stream_pixel_rule_verilog(config), readout_cell_verilog(config)]
+    return "\n".join(parts)
 
 
 def _clear_lines(config: SensorConfig, indent: str) -> str:
