@@ -3,7 +3,8 @@
 For each array (paper TE configuration, L = 240; default 32 x 32, 64 x 64,
 128 x 128 and the paper's 400 x 250) the benchmark generates the streaming
 Verilog (``rtl.verilog_stream.stream_array_verilog``, N = ceil(H W / L) lanes,
-the fewest that fit), builds the Verilator model in a fresh cache directory
+the fewest that fit; ``--view loop``, the default, is the simulation view made for
+Verilator at sensor size, ``--view instances`` the design with one instance per site), builds the Verilator model in a fresh cache directory
 (``cosim.verilator_stream.build_stream``: wall and CPU seconds of Verilator and
 g++, and the peak resident memory of the build's largest process; Verilator's
 runtime objects of the user's cache are reused, as in normal use), runs
@@ -73,7 +74,7 @@ def stimulus(config: SensorConfig, height: int, width: int, readouts: int, rng) 
     return rng.poisson(mean, size=(readouts * L, height, width)).astype(np.uint16)
 
 
-def bench(config, height, width, readouts, rng) -> dict:
+def bench(config, height, width, readouts, rng, view="loop") -> dict:
     import cosim.verilator_stream as vs
     from cosim.outside import words_per_row
     from cosim.stream_ports import check_beats, flush_clocks
@@ -83,7 +84,7 @@ def bench(config, height, width, readouts, rng) -> dict:
 
     lanes = min_lanes(config, height, width)
     start = time.perf_counter()
-    verilog = stream_array_verilog(config, height, width, lanes)
+    verilog = stream_array_verilog(config, height, width, lanes, view=view)
     gen = time.perf_counter() - start
     stim = stimulus(config, height, width, readouts, rng)
     T, L = stim.shape[0], config.clocks_per_readout
@@ -112,6 +113,10 @@ def main(argv=None) -> int:
     parser.add_argument("--readouts", type=int, default=4,
                         help="readout intervals of L = 240 clocks of the largest array; smaller arrays run "
                              "as many more as give the same pixel clocks (so start-up weighs alike)")
+    parser.add_argument("--view", choices=("loop", "instances"), default="loop",
+                        help="the simulation view (default; one clocked loop over memories) or the design "
+                             "itself (one pixel and readout cell instance per site: Verilator 5.006 copies "
+                             "every instance, so keep it to small sizes)")
     args = parser.parse_args(argv)
     config = SensorConfig()
     rng = np.random.default_rng(2024)
@@ -121,10 +126,10 @@ def main(argv=None) -> int:
     for size in args.sizes:
         height, width = parse_size(size)
         readouts = max(args.readouts, round(args.readouts * largest / (height * width)))
-        rows.append((size, bench(config, height, width, readouts, rng)))
+        rows.append((size, bench(config, height, width, readouts, rng, args.view)))
         print(f"  done {size}", file=sys.stderr, flush=True)
     load = os.getloadavg()[0]
-    print(f"streaming top, paper TE (L = 240), {args.readouts} readouts of the largest array and the same "
+    print(f"streaming top ({args.view} view), paper TE (L = 240), {args.readouts} readouts of the largest array and the same "
           f"pixel clocks for the others, N = ceil(H W / L) lanes; "
           f"load average {load_start:.1f} at the start, {load:.1f} at the end, {os.cpu_count()} cores")
     print(f"{'array':>8} {'pixels':>7} {'lanes':>5} {'clocks':>7} {'gen s':>6} {'build s':>8} {'build cpu':>9} "

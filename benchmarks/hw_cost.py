@@ -360,6 +360,20 @@ def claims(rows, pairs) -> list[str]:
     return out
 
 
+#: Everything from this line on in the page is written by hand (the whole-top synthesis figures of
+#: benchmarks/bench_synthesis.py) and kept when the table above it is regenerated.
+KEPT_MARKER = "<!-- hand-written below: kept by benchmarks/hw_cost.py -->"
+
+
+def kept_tail(path: Path) -> str:
+    """The hand-written part of an existing page (from :data:`KEPT_MARKER` on), or ''."""
+    if not path.is_file():
+        return ""
+    text = path.read_text()
+    at = text.find(KEPT_MARKER)
+    return "" if at < 0 else "\n" + text[at:]
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(Path(__file__).resolve().parent.parent / "out" / "bench" / "hardware-cost.md"),
@@ -382,7 +396,7 @@ def main(argv=None) -> int:
     rows = []
     for label, te, mls in tqdm(GROUPS, desc="synthesizing groups", file=sys.stderr):
         rows.append((label, measure(te), [measure(ml) for ml in mls]))
-    text = report(rows, version)
+    text = report(rows, version) + kept_tail(Path(args.out))
     print(text)
     with atomic_output(args.out) as tmp:
         Path(tmp).write_text(text)

@@ -24,6 +24,7 @@ COMMANDS = {
     "stimulus": "stimulus_cmd",
     "rtl-sim": "rtl_sim_cmd",
     "verilog": "verilog_cmd",
+    "synthesize": "synthesize_cmd",
     "cocotb": "cocotb_cmd",
     "reconstruct": "reconstruct_cmd",
     "evaluate": "evaluate_cmd",

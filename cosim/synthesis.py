@@ -13,15 +13,23 @@ is the mapping noise).
 One rule for Yosys's estimate: a count it marks incomplete (``"1574+"``: some
 cell type has no entry in its CMOS table) is refused, never read as a number:
 it is a lower bound of unknown slack, and every gate set here maps only to cells
-the table covers, so a "+" means the flow broke.
+the table covers, so a "+" means the flow broke (except where the unknown cells are
+submodule instances: :func:`parse_stat_modules`).
+
+:func:`synthesize_hierarchy` synthesises a whole generated top with its hierarchy
+kept (``tespike synthesize``): one report per module, and :func:`hierarchy_total`
+multiplies them out by instance counts.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import re
 import shutil
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
 #: ABC gate sets tried for the transistor estimate (all have entries in Yosys's CMOS table).
@@ -100,3 +108,125 @@ def span(stat: dict) -> str:
     """Transistor estimate as 'min' or 'min-max' over the ABC mappings."""
     lo, hi = stat["transistors"], stat["transistors_max"]
     return f"{lo}" if lo == hi else f"{lo}-{hi}"
+
+
+# -- a whole generated top, hierarchy kept (``tespike synthesize``) ---------------------------
+
+def _stat_json(text: str) -> dict:
+    """Yosys 0.23's ``stat -json`` of a whole design: with no ``top`` attribute it ends its
+    module list with a stray comma (``},\\n\\n}``), which is removed here; nothing else is touched."""
+    return json.loads(re.sub(r",\s*\}\s*$", "\n}", text))
+
+
+def parse_stat_modules(json_text: str) -> dict:
+    """Per module of one ``stat -json`` report: its own gate cells (``cells``, ``by_type``,
+    ``flops``), the submodule instances it holds (``instances``: name -> count) and its own
+    transistor estimate (``None`` without ``-tech cmos``).
+
+    A module with submodules is marked incomplete by Yosys (``"544+"``: a module instance has no
+    CMOS cost); its own estimate is the number, accepted only because every cell type of its own
+    that is not a module instance is a gate (``$_..._``) of the same mapping.
+    """
+    modules = _stat_json(json_text).get("modules") or {}
+    names = {name.lstrip("\\") for name in modules}
+    out = {}
+    for raw, design in modules.items():
+        by_type = dict(design.get("num_cells_by_type", {}))
+        instances = {t.lstrip("\\"): n for t, n in by_type.items() if t.lstrip("\\") in names}
+        gates = {t: n for t, n in by_type.items() if t.lstrip("\\") not in names}
+        strange = [t for t in gates if not (t.startswith("$_") and t.endswith("_"))]
+        if strange:
+            raise ValueError(f"module {raw.lstrip(chr(92))}: cell types {strange} are neither gates nor modules")
+        transistors = design.get("estimated_num_transistors")
+        if transistors is not None:
+            text = str(transistors)
+            number = text[:-1] if text.endswith("+") and instances else text
+            if not number.isdigit():
+                raise ValueError(f"module {raw.lstrip(chr(92))}: transistor estimate {text!r} is incomplete")
+            transistors = int(number)
+        out[raw.lstrip("\\")] = {"cells": sum(gates.values()), "by_type": gates, "instances": instances,
+                                 "flops": sum(n for t, n in gates.items() if "DFF" in t or "DLATCH" in t),
+                                 "transistors": transistors}
+    return out
+
+
+def hierarchy_total(modules: dict, name: str) -> dict:
+    """Cells (by type), flip-flops and transistor estimates of module ``name`` with everything it
+    instantiates, each submodule counted once per instance."""
+    own = modules[name]
+    total = {"cells": own["cells"], "flops": own["flops"], "by_type": dict(own["by_type"]),
+             "transistors": own.get("transistors"), "transistors_max": own.get("transistors_max")}
+    for sub, count in own["instances"].items():
+        part = hierarchy_total(modules, sub)
+        total["cells"] += count * part["cells"]
+        total["flops"] += count * part["flops"]
+        for kind, n in part["by_type"].items():
+            total["by_type"][kind] = total["by_type"].get(kind, 0) + count * n
+        for key in ("transistors", "transistors_max"):
+            if total[key] is not None and part[key] is not None:
+                total[key] += count * part[key]
+    return total
+
+
+def top_module(modules: dict) -> str:
+    """The one module no other module instantiates (the design's top), or ValueError."""
+    used = {sub for stat in modules.values() for sub in stat["instances"]}
+    roots = sorted(set(modules) - used)
+    if len(roots) != 1:
+        raise ValueError(f"the design has {len(roots)} top modules ({', '.join(roots) or 'none'}); name one")
+    return roots[0]
+
+
+def _run_measured(command: list[str], cwd: Path) -> tuple[int, str, dict]:
+    """Run ``command``; return (exit code, its output, wall seconds, CPU seconds and peak resident MB
+    of that one child process, from ``os.wait4``)."""
+    start = time.perf_counter()
+    proc = subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    output = proc.stdout.read()
+    proc.stdout.close()
+    _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    return proc.returncode, output, {"seconds": time.perf_counter() - start,
+                                     "cpu_seconds": usage.ru_utime + usage.ru_stime,
+                                     "peak_mb": usage.ru_maxrss / 1024.0}
+
+
+def synthesize_hierarchy(verilog_text: str, top: str | None = None, yosys: str = "yosys",
+                         gate_sets: tuple[str, ...] = ABC_GATE_SETS) -> dict:
+    """Yosys generic synthesis of a whole design with its hierarchy kept (``synth``, no flatten).
+
+    Returns ``top``, ``modules`` (per module its own cells by type, flip-flops, submodule
+    instances and own transistor estimates, smallest and largest over ``gate_sets``, by the
+    flow of :func:`synthesize`) and ``run`` (wall and CPU seconds and peak memory of Yosys).
+    ``top=None``: the module no other instantiates. Raises :class:`SynthesisError`.
+    """
+    missing = yosys_missing(yosys)
+    if missing:
+        raise SynthesisError(missing)
+    with tempfile.TemporaryDirectory(prefix="tespike-synthesize-") as tmp:
+        work = Path(tmp)
+        (work / "design.v").write_text(verilog_text)
+        steps = ["read_verilog design.v", f"synth -top {top}" if top else "synth -auto-top",
+                 "setattr -mod -unset top", "tee -q -o generic.json stat -json",
+                 "dfflegalize -cell $_DFF_P_ 01", "opt_clean", "design -save legal"]
+        for gates in gate_sets:
+            steps += ["design -load legal", f"abc -g {gates}", "opt_clean",
+                      f"tee -q -o {gates}.json stat -json -tech cmos"]
+        code, output, run = _run_measured([yosys, "-q", "-p", "; ".join(steps)], work)
+        if code != 0:
+            errors = [line for line in output.splitlines() if "ERROR" in line] or output.strip().splitlines()[-1:]
+            raise SynthesisError(f"yosys failed: {errors[0].strip() if errors else f'exit code {code}'}")
+        try:
+            modules = parse_stat_modules((work / "generic.json").read_text())
+            mapped = {g: parse_stat_modules((work / f"{g}.json").read_text()) for g in gate_sets}
+            top = top or top_module(modules)
+        except (OSError, ValueError, KeyError) as exc:
+            raise SynthesisError(str(exc)) from None
+    for name, stat in modules.items():
+        for gates, other in mapped.items():
+            if other[name]["flops"] != stat["flops"]:
+                raise SynthesisError(f"{name}: flip-flop count changed in the {gates} mapping "
+                                     f"({stat['flops']} -> {other[name]['flops']})")
+        estimates = [other[name]["transistors"] for other in mapped.values()]
+        stat["transistors"], stat["transistors_max"] = min(estimates), max(estimates)
+    return {"top": top, "modules": modules, "run": run}

@@ -12,7 +12,7 @@ Ports (clock domain ``sync``): ``charge`` as the parallel array; ``out``, an
 ``amaranth.lib.stream`` source (``always_ready``: a sensor cannot stall, the
 receiver takes every beat) whose payload is ``words`` (N * Wd bits, lane i at
 ``[i*Wd +: Wd]``) and ``first`` (beat 0 of an interval). The generated Verilog
-top (:func:`rtl.verilog.stream_top_verilog`) names them ``out_words``,
+top (:func:`rtl.verilog_stream.stream_top_verilog`) names them ``out_words``,
 ``out_first`` and ``out_valid``.
 
 Timing: the parallel array's words of interval k are sampled with
@@ -23,6 +23,12 @@ L + 1 <= 2L because the generator refuses B > L
 (:func:`golden.beats.check_lanes`). The next interval's words arrive L clocks
 after the previous ones, when beat B - 1 <= L - 1 has just been sent, so the
 buffer is never overwritten before all its beats left.
+
+Structure: ``held.word_select(beat, N*Wd)`` is one B-to-1 multiplexer per lane (N B words
+in all, linear in the pixel count). The Verilog top (:mod:`rtl.verilog_stream`) draws the
+same readout as per-lane shift registers (no multiplexer at all); the outputs are equal
+at every clock. The proof of this component (``tespike prove``, property ``stream``) reads
+``held`` as the interval's words, so it stays a static buffer here.
 """
 
 from __future__ import annotations

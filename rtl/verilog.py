@@ -102,11 +102,12 @@ def timing_verilog(config: SensorConfig, name: str | None = None) -> str:
 LOOP_BLOCK = 1024
 
 
-def _genvars(var: str, count: int) -> list[str]:
+def genvar_names(var: str, count: int) -> list[str]:
+    """The genvars :func:`generate_loop` needs for a loop of ``count`` over ``var``."""
     return [var] if count <= LOOP_BLOCK else [f"{var}_block", f"{var}_in_block"]
 
 
-def _loop(var: str, count: int, bound: str, label: str, body, indent: str) -> str:
+def generate_loop(var: str, count: int, bound: str, label: str, body, indent: str) -> str:
     """A generate loop over ``var`` = 0..count-1 (``bound``: the localparam holding count)
     around ``body(expr, indent)``."""
     if count <= LOOP_BLOCK:
@@ -126,7 +127,7 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
     """The hand-written structural top of an H x W array with exactly the SPEC section 6 ports.
 
     Pixel (r, c) is the instance ``row[r].col[c].pixel`` (rows or columns longer than
-    :data:`LOOP_BLOCK` add a block level, see :func:`_loop`); its word goes to
+    :data:`LOOP_BLOCK` add a block level, see :func:`generate_loop`); its word goes to
     ``word[r*W + c]``, which one combinational loop copies to ``frame``: connected to
     slices of ``frame`` directly, the words become, in Verilator 5.006, one chain of
     H*W wide concatenations per clock (quadratic in the pixel count).
@@ -146,9 +147,9 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
                 f"{indent}{names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge_sample), "
                 f"{ccc_pin}.last(last),\n{indent}  .clear(rst_sample), .word(word[{index}]));\n")
 
-    loops = _loop("r", height, "H", "row",
-                  lambda r, ind: _loop("c", width, "W", "col", lambda c, i: pixel(r, c, i), ind), "    ")
-    genvars = ", ".join(_genvars("r", height) + _genvars("c", width))
+    loops = generate_loop("r", height, "H", "row",
+                  lambda r, ind: generate_loop("c", width, "W", "col", lambda c, i: pixel(r, c, i), ind), "    ")
+    genvars = ", ".join(genvar_names("r", height) + genvar_names("c", width))
     return f"""\
 // The user names the output file (tespike verilog --out A.v): waive Verilator's file-name style check.
 /* verilator lint_off DECLFILENAME */

@@ -1,0 +1,86 @@
+"""``tespike synthesize`` (cosim/commands/synthesize_cmd.py) and the hierarchy flow of cosim/synthesis.py."""
+
+import re
+import shutil
+
+import pytest
+
+from cosim.synthesis import hierarchy_total, parse_stat_modules, top_module
+from tests.cli import assert_refused, run_tespike
+
+needs_yosys = pytest.mark.skipif(not shutil.which("yosys"), reason="Yosys is not installed")
+
+#: Yosys 0.23's ``stat -json`` of a design without a top attribute: note the stray comma.
+STAT = """{
+   "creator": "Yosys 0.23",
+   "modules": {
+      "\\\\cell": {"num_cells": 3, "num_cells_by_type": {"$_DFF_P_": 2, "$_MUX_": 1},
+                   "estimated_num_transistors": "40"},
+      "\\\\group": {"num_cells": 3, "num_cells_by_type": {"cell": 2, "$_AND_": 1},
+                    "estimated_num_transistors": "6+"},
+      "\\\\top": {"num_cells": 4, "num_cells_by_type": {"group": 3, "$_DFF_P_": 1},
+                  "estimated_num_transistors": "24+"}
+   },
+
+}
+"""
+
+
+def test_hierarchy_is_multiplied_out_by_instance_counts():
+    modules = parse_stat_modules(STAT)
+    assert modules["group"]["instances"] == {"cell": 2} and modules["group"]["cells"] == 1
+    assert modules["top"]["transistors"] == 24 and top_module(modules) == "top"
+    for stat in modules.values():
+        stat["transistors_max"] = stat["transistors"]
+    total = hierarchy_total(modules, "top")
+    assert total["cells"] == 1 + 3 * (1 + 2 * 3) and total["flops"] == 1 + 3 * 2 * 2
+    assert total["transistors"] == 24 + 3 * (6 + 2 * 40)
+    assert total["by_type"] == {"$_DFF_P_": 13, "$_AND_": 3, "$_MUX_": 6}
+
+
+def test_an_incomplete_estimate_of_a_leaf_is_refused():
+    with pytest.raises(ValueError, match="incomplete"):
+        parse_stat_modules(STAT.replace('"40"', '"38+"'))
+
+
+@needs_yosys
+def test_synthesize_streaming_top_counts_every_state_bit():
+    """Paper TE, 2 x 3, N = 4 (B = 2): per pixel 16 input + 9 acc + 4 SFC + 1 flag + 4 CCC latch + 5 readout
+    = 39 flip-flops; the top 1 rst_sample + 1 sending + 2 beat; the timing 4 divider + 4 CCC + 1 primed."""
+    result = run_tespike("synthesize", "--config", "te", "--height", 2, "--width", 3, "--lanes", 4)
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
+    assert re.search(r"^te_stream_pixel\s+6\s+\d+\s+34\s", out, re.M), out
+    assert re.search(r"^te_readout_cell\s+6\s+\d+\s+5\s", out, re.M), out
+    assert re.search(r"^te_readout_timing\s+1\s+\d+\s+9\s", out, re.M), out
+    assert re.search(r"^te_beat_group\s+1\s", out, re.M) and re.search(r"^te_beat_group_end\s+1\s", out, re.M)
+    assert f"{6 * 39 + 4 + 9} flip-flops" in out, out
+    assert re.search(r"yosys: [\d.]+ s wall, [\d.]+ s CPU, peak \d+ MB", out), out
+
+
+@needs_yosys
+def test_synthesize_a_verilog_file_finds_its_top(tmp_path):
+    (tmp_path / "A.v").write_text("module leaf(input clk, input d, output reg q); always @(posedge clk) q <= d; endmodule\n"
+                                  "module pair(input clk, input d, output q); wire m;\n"
+                                  "  leaf a (.clk(clk), .d(d), .q(m)); leaf b (.clk(clk), .d(m), .q(q)); endmodule\n")
+    result = run_tespike("synthesize", "--verilog", tmp_path / "A.v")
+    assert result.returncode == 0, result.stderr
+    assert "total pair: 2 cells, 2 flip-flops" in result.stdout, result.stdout
+
+
+@pytest.mark.parametrize("args, words", [
+    (("--verilog", "missing.v"), ("missing.v", "no such file")),
+    (("--verilog", "A.v", "--config", "te"), ("--verilog", "not both")),
+    (("--config", "te", "--height", 4), ("missing --width",)),
+    (("--config", "te", "--height", 4, "--width", 4, "--lanes", 0), ("--lanes",)),
+    (("--config", "te", "--height", 0, "--width", 4), ("height",)),
+    (("--config", "te", "--height", 2, "--width", 2, "--top", "x"), ("--top",)),
+])
+def test_synthesize_refuses_bad_input_in_one_line(tmp_path, args, words):
+    assert_refused(run_tespike("synthesize", *args), *words)
+
+
+@needs_yosys
+def test_synthesize_refuses_verilog_yosys_cannot_read(tmp_path):
+    (tmp_path / "bad.v").write_text("module x(input a, output b); assign b = a &; endmodule\n")
+    assert_refused(run_tespike("synthesize", "--verilog", tmp_path / "bad.v"), "yosys failed", "syntax error")
