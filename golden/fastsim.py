@@ -82,8 +82,8 @@ from .fastsim_classify import (BRIGHT, CLOCK, EVENT, FULL, HEAD, LAZY, MAX_BACKL
 from .fastsim_stripes import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, check_workers, run_stripes,
                               spawn_generators, stripe_slices)
 from .io import check_scene, word_dtype
-from .light import (as_generator, check_dark_current, dark_electrons,
-                    deterministic_clock_electrons, electrons_per_readout, log_budget,
+from .noise import PixelNoise, pixel_noise
+from .light import (as_generator, deterministic_clock_electrons, electrons_per_readout, log_budget,
                     log_poisson_tail_above, log_poisson_tail_below)
 from .reference import PixelState
 from .resources import keep_freed_memory
@@ -130,11 +130,15 @@ class SceneSimulator:
 
     def __init__(self, config: SensorConfig, shape: tuple[int, int], *, rng=None,
                  dark_current: str | None = None, noise: bool = True,
-                 method: str = "fast", total_pixel_readouts: int | None = None):
+                 method: str = "fast", total_pixel_readouts: int | None = None,
+                 sensor=None, pixels: PixelNoise | None = None):
         _check_method(method)
         self.config = config
         self.shape = tuple(shape)
-        self.dark_model = check_dark_current(dark_current)
+        # sensor non-idealities as per-pixel rates (golden.noise): a Sensor, or its
+        # PixelNoise for these pixels (a stripe's share of a frame's maps)
+        self.pixels = pixels if pixels is not None else pixel_noise(dark_current, sensor, self.shape)
+        self.dark_model = self.pixels.dark_model
         if not noise and self.dark_model is not None:
             raise InputError(f"dark current {self.dark_model!r} is random; "
                              "it cannot be combined with noise switched off")
@@ -202,10 +206,9 @@ class SceneSimulator:
     def readout(self, light: np.ndarray) -> np.ndarray:
         """Light of one interval (H, W), checked >= 0 and finite -> words (H, W) int64."""
         L = self.config.clocks_per_readout
-        expected = electrons_per_readout(np.asarray(light).reshape(-1))
+        expected = self.pixels.photo(electrons_per_readout(np.asarray(light).reshape(-1)))
         self.readouts += 1
-        dark = (dark_electrons(self.dark_model, expected.shape, self.rng) if self.dark_model
-                else self._no_dark)
+        dark = self.pixels.dark(expected.size, self.rng) if self.dark_model else self._no_dark
         words = np.zeros(expected.shape, np.int64)
         if not self.noise:
             idx = np.arange(expected.size)
@@ -663,9 +666,8 @@ class SceneSimulator:
         if self.noise and self.method != "per-clock":
             raise InputError("clock_stimulus needs method='per-clock' (or noise switched off)")
         L = self.config.clocks_per_readout
-        expected = electrons_per_readout(np.asarray(light).reshape(-1))
-        dark = (dark_electrons(self.dark_model, expected.shape, self.rng) if self.dark_model
-                else self._no_dark)
+        expected = self.pixels.photo(electrons_per_readout(np.asarray(light).reshape(-1)))
+        dark = self.pixels.dark(expected.size, self.rng) if self.dark_model else self._no_dark
         out = np.empty((L, expected.size), stimulus_dtype(self.config))
         for part, e in self._clock_chunks(np.arange(expected.size), expected, dark):
             out[:, part] = e
@@ -777,7 +779,8 @@ def lindley_ends(walk: np.ndarray, *b0s: np.ndarray) -> list[np.ndarray]:
 
 
 def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None,
-                      dark_current: str | None = None, total_pixel_readouts: int | None = None):
+                      dark_current: str | None = None, total_pixel_readouts: int | None = None,
+                      sensor=None):
     """(row slices, one noisy fast :class:`SceneSimulator` per stripe) of an H x W frame.
 
     Stripe i draws from child i of ``seed`` (:func:`spawn_generators`); a single
@@ -785,12 +788,14 @@ def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None
     ``SceneSimulator(rng=seed)``. Pixels are independent given the light, so
     the stripes have the law of one simulator over the frame; each stripe's
     error budget counts ``total_pixel_readouts`` (the whole scene), so the
-    2^-64 bound for the whole stream is unchanged.
+    2^-64 bound for the whole stream is unchanged. ``sensor``'s maps are drawn for
+    the whole frame; each stripe gets its rows of them.
     """
     H, W = shape
     rows = stripe_slices(H, W)
     rngs = [seed] if len(rows) == 1 else spawn_generators(seed, len(rows))
-    return rows, [SceneSimulator(config, (len(range(H)[r]), W), rng=rng, dark_current=dark_current,
+    frame = pixel_noise(dark_current, sensor, (H, W))
+    return rows, [SceneSimulator(config, (len(range(H)[r]), W), rng=rng, pixels=frame.rows(r, W),
                                  total_pixel_readouts=total_pixel_readouts or H * W)
                   for r, rng in zip(rows, rngs)]
 
@@ -798,7 +803,7 @@ def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None
 def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
                    dark_current: str | None = None, noise: bool = True,
                    progress: bool = False, method: str = "fast",
-                   workers: int | None = 1) -> np.ndarray:
+                   workers: int | None = 1, sensor=None) -> np.ndarray:
     """Scene light ``(K, H, W)`` -> readout words ``(K, H, W)`` (smallest word dtype).
 
     ``seed``: int, numpy Generator or ``None`` (fresh entropy). ``method="per-clock"``
@@ -812,6 +817,8 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     the words depend on the seed and the frame's shape, not on ``workers``.
     ``method="per-clock"`` and ``noise=False`` run one :class:`SceneSimulator` in
     this process (the per-clock electrons of :func:`iter_scene_stimulus`).
+    ``sensor``: a :class:`golden.noise.Sensor` (non-idealities with their per-pixel
+    maps from its sensor seed), instead of ``dark_current``.
     """
     scene = check_scene(scene, scan_values=False)       # values: one readout at a time
     K, H, W = scene.shape
@@ -819,11 +826,11 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     keep_freed_memory()                                 # (speed only: see golden.resources)
     if noise and method == "fast":
         rows, sims = stripe_simulators(config, (H, W), seed=seed, dark_current=dark_current,
-                                       total_pixel_readouts=scene.size)
+                                       total_pixel_readouts=scene.size, sensor=sensor)
         return run_stripes(rows, sims, scene, word_dtype(config), workers=workers, progress=progress)
     check_workers(workers, 1)
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
-                         method=method, total_pixel_readouts=scene.size)
+                         method=method, total_pixel_readouts=scene.size, sensor=sensor)
     words = np.empty((K, H, W), word_dtype(config))
     readouts = range(K)
     if progress:
@@ -835,7 +842,7 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
 
 
 def iter_scene_stimulus(config: SensorConfig, scene: np.ndarray, *, seed=None,
-                        dark_current: str | None = None, noise: bool = True):
+                        dark_current: str | None = None, noise: bool = True, sensor=None):
     """Yield the per-clock electrons ``(L, H, W)`` of each readout interval of ``scene``.
 
     The noise model and seed semantics of :func:`simulate_scene`: the electrons
@@ -848,7 +855,7 @@ def iter_scene_stimulus(config: SensorConfig, scene: np.ndarray, *, seed=None,
     scene = check_scene(scene, scan_values=False)
     K, H, W = scene.shape
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
-                         method="per-clock", total_pixel_readouts=scene.size)
+                         method="per-clock", total_pixel_readouts=scene.size, sensor=sensor)
     for k in range(K):
         yield sim.clock_stimulus(check_scene(np.asarray(scene[k:k + 1]))[0])
 
