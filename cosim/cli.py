@@ -25,6 +25,7 @@ COMMANDS = {
     "rtl-sim": "rtl_sim_cmd",
     "verilog": "verilog_cmd",
     "cocotb": "cocotb_cmd",
+    "calibrate": "calibrate_cmd",
     "reconstruct": "reconstruct_cmd",
     "evaluate": "evaluate_cmd",
     "score": "score_cmd",
