@@ -34,8 +34,14 @@ is the table's ML column (``TFP_ML``, ``TFI_ML``); ``"te"`` the TE column;
 ``"ml"``, the full-count ML camera (a stronger, wider-output sensor than the
 paper's), is added below the table as extra rows (``TFP_ML-count``, ...).
 The noise sensors of :data:`NOISE_MODES` (``"te+eq12"``, ``"te+eq13"``: the TE
-camera with the dark current of the paper's eq. 12 or 13, its Tables 6 to 9)
-get a table of their own (:mod:`recon.paper_tables`).
+camera with the dark current of the paper's eq. 12 or 13, its Tables 6 to 9),
+or any sensor of ``sensors=`` (a :class:`golden.noise.Sensor` per mode key: dark
+level, non-uniformity, gain spread), get a table of their own
+(:func:`noise_markdown`). A mode ``<noise mode>+cal`` is the same sensor
+reconstructed with its calibration (:mod:`recon.calibration`): per sequence
+frame size, :data:`CALIBRATION_READOUTS` dark readouts and as many under a flat
+light of :data:`CALIBRATION_FLAT`, simulated with the sensor (its own noise
+seed), estimate the per-pixel dark rate and gain that correct every method's output.
 
 Metrics: PSNR-mu and SSIM-mu always; ``metrics=`` adds any further column of
 :data:`recon.score.KEYS` (PU21-PSNR, HDR-VQM, FovVideoVDP, conventions in
@@ -73,6 +79,12 @@ from .pictures import ERROR_RANGE, save_figure, tone_map, write_text
 MODES = ("ml-msb", "te", "ml")
 #: Noise sensors (the paper's Tables 6 to 9): key -> (sensor preset, dark-current model of golden.light).
 NOISE_MODES = {"te+eq12": ("te", "eq12"), "te+eq13": ("te", "eq13")}
+#: Suffix of a noise sensor reconstructed with its calibration (``"te+eq12+cal"``).
+CALIBRATED = "+cal"
+#: Readouts of each calibration stream (dark and flat) and the flat's light, scene units
+#: (below the TE overflow level; benchmarks/calibration_error.py measured the error).
+CALIBRATION_READOUTS = 256
+CALIBRATION_FLAT = 0.03
 #: Sensors that get a column of Table 1; any other evaluated sensor gets extra rows.
 COLUMNS = ("ml-msb", "te")
 #: Names in tables and plots: the paper's names for its two cameras.
@@ -89,7 +101,8 @@ WORKING_BYTES = 512 << 20
 #: Files :func:`write_outputs` writes into its folder (besides strips/<sequence>.png).
 OUTPUT_FILES = ("table.md", "table.csv", "results.csv", "quality_vs_time.png", "strips/")
 
-#: ``simulate(config, light, rng) -> words``; for a noise sensor also ``dark_current="eq12"`` (a keyword).
+#: ``simulate(config, light, rng) -> words``; for a noise sensor also ``sensor=`` (a keyword: a
+#: :class:`golden.noise.Sensor`).
 Simulate = Callable[..., np.ndarray]
 
 
@@ -117,6 +130,28 @@ def scored_frames(frames: int, window: int, span: int | None = None) -> slice:
     reach = window if span is None or frames <= 2 * (span // 2) else max(window, span)
     half = reach // 2
     return slice(half, frames - half) if frames > 2 * half else slice(0, frames)
+
+
+def default_sensors(seed: int = 0) -> dict:
+    """The paper's noise sensors (:data:`NOISE_MODES`) as :class:`golden.noise.Sensor`: its
+    dark current, no non-uniformity, sensor seed ``seed``."""
+    from golden.noise import Sensor, SensorNoise
+    return {mode: Sensor(SensorNoise(dark_current=model), seed) for mode, (_, model) in NOISE_MODES.items()}
+
+
+def noise_base(mode: str, sensors) -> str | None:
+    """The noise sensor a mode uses (itself, or the one it calibrates), or None for an ideal sensor."""
+    base = mode[:-len(CALIBRATED)] if mode.endswith(CALIBRATED) else mode
+    return base if base in sensors else None
+
+
+def calibrate_sensor(simulate: Simulate, config: SensorConfig, sensor, shape: tuple[int, int], rng):
+    """A calibration of ``sensor`` for frames of ``shape``: dark and flat streams it records."""
+    from .calibration import estimate
+    dark = simulate(config, np.zeros((CALIBRATION_READOUTS, *shape), np.float32), rng, sensor=sensor)
+    flat = simulate(config, np.full((CALIBRATION_READOUTS, *shape), CALIBRATION_FLAT, np.float32), rng,
+                    sensor=sensor)
+    return estimate(dark, flat, config, CALIBRATION_FLAT)
 
 
 def learned_span(methods: Sequence[str]) -> int | None:
@@ -171,6 +206,8 @@ class Evaluation:
     #: readouts the learned methods see (None: none was run); sequences longer than it are
     #: scored only where every method's readouts lie inside them (:func:`scored_frames`)
     span: int | None = None
+    #: mode -> the noise sensor it uses (a golden.noise.Sensor), for noise and calibrated modes
+    sensors: dict = dataclasses.field(default_factory=dict)
 
     def summary(self) -> dict[tuple[str, str], dict[str, float]]:
         """(method, mode) -> mean over sequences of the per-sequence means."""
@@ -191,7 +228,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
              device: str = "cpu", progress: bool = True, keep: bool = False,
              options: dict[str, dict] | None = None, repeats: int = 3,
              metrics: Sequence[str] = BASIC_METRICS, vdp_frames: int | None = None,
-             missing: str | None = None) -> Evaluation:
+             missing: str | None = None, sensors: dict | None = None) -> Evaluation:
     """Simulate every sequence in every mode, reconstruct with every method, score.
 
     ``sequences``: (label, light (K, H, W)) pairs; ``methods``: keys of
@@ -202,8 +239,11 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     (e.g. ``{"tfi": {"search": "window"}}``); ``repeats``: runs timed per method
     (the median is reported). ``metrics``: keys of :data:`recon.score.KEYS` (PSNR-mu
     and SSIM-mu are always computed); ``vdp_frames``: compute FovVideoVDP on the
-    middle this many scored frames only (None: all). A mode of
-    :data:`NOISE_MODES` is simulated with ``simulate(..., dark_current=model)``.
+    middle this many scored frames only (None: all). A mode of ``sensors``
+    (default :func:`default_sensors`: the :data:`NOISE_MODES`) is simulated with
+    ``simulate(..., sensor=sensors[mode])``; ``<mode>+cal`` is that sensor again,
+    reconstructed with a calibration from its own dark and flat streams
+    (:func:`calibrate_sensor`, one per sequence frame size).
     ``missing``: ``"refuse"`` a learned method without weights for a sensor (the
     default when ``methods`` are named), or ``"note"`` it in
     ``Evaluation.missing`` and go on (the default for every method).
@@ -233,6 +273,10 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     if vdp_frames is not None and (type(vdp_frames) is not int or vdp_frames < 1):
         raise InputError(f"vdp_frames = {vdp_frames!r}: must be an integer >= 1")
     configs = dict(paper_configs() if configs is None else configs)
+    for mode in modes:                       # a calibrated sensor is its noise sensor's configuration
+        base = mode[:-len(CALIBRATED)]
+        if mode.endswith(CALIBRATED) and mode not in configs and base in configs:
+            configs[mode] = configs[base]
     for mode in modes:
         if mode not in configs:
             raise InputError(f"no sensor configuration for mode {mode!r}")
@@ -255,9 +299,12 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     if len(set(labels)) != len(labels):
         raise InputError(f"sequence labels must be unique, got {labels}")
 
+    sensors = default_sensors() if sensors is None else dict(sensors)
     evaluation = Evaluation([], methods, tuple(modes), window, repeats=repeats,
                             threads=torch.get_num_threads(), metrics=metrics, vdp_frames=vdp_frames,
-                            missing=absent)
+                            missing=absent, sensors={mode: sensors[noise_base(mode, sensors)] for mode in modes
+                                                     if noise_base(mode, sensors) is not None})
+    calibrations = {}                        # (mode, frame shape) -> calibration
     span = evaluation.span = learned_span([m for m in methods if any((m, mode) not in absent for mode in modes)])
     sizes = {tuple(light.shape[1:]) for _, light in sequences}
     evaluation.frame_size = sizes.pop() if len(sizes) == 1 else None
@@ -281,8 +328,17 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
             config = configs[mode]
             bar.set_postfix_str(f"{name} {mode} simulate")
             rng = np.random.default_rng([seed, index, mode_index])
-            if mode in NOISE_MODES:
-                words = simulate(config, light, rng, dark_current=NOISE_MODES[mode][1])
+            base = noise_base(mode, sensors)
+            calibration = None
+            if base is not None:
+                words = simulate(config, light, rng, sensor=sensors[base])
+                if mode.endswith(CALIBRATED):
+                    key = mode, (H, W)
+                    if key not in calibrations:
+                        bar.set_postfix_str(f"{name} {mode} calibrate")
+                        calibrations[key] = calibrate_sensor(simulate, config, sensors[base], (H, W),
+                                                             np.random.default_rng([seed, mode_index, H, W]))
+                    calibration = calibrations[key]
             else:
                 words = simulate(config, light, rng)
             if keep:
@@ -299,7 +355,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
                 times = []
                 for _ in range(repeats):
                     start = time.perf_counter()
-                    images = reconstruct(words, config, method, window=window, device=device, **kwargs)
+                    images = reconstruct(words, config, method, window=window, device=device,
+                                         calibration=calibration, **kwargs)
                     times.append(time.perf_counter() - start)
                 seconds = float(np.median(times))
                 pred, truth = images[frames], light[frames]
@@ -380,7 +437,7 @@ def table_layout(evaluation: Evaluation) -> tuple[list[str], list[str]]:
     get columns, in evaluation order; the others get rows under the first column.
     An evaluation without any of them gives every sensor a column. The noise
     sensors (:data:`NOISE_MODES`) have a table of their own (:func:`noise_markdown`)."""
-    plain = [mode for mode in evaluation.modes if mode not in NOISE_MODES]
+    plain = [mode for mode in evaluation.modes if mode not in NOISE_MODES and mode not in evaluation.sensors]
     columns = [mode for mode in plain if mode in COLUMNS] or plain
     return columns, [mode for mode in plain if mode not in columns]
 
@@ -440,7 +497,7 @@ def table_markdown(evaluation: Evaluation) -> str:
         header += complexity_header()
         align += ["---:"] * len(complexity_header())
     lines = _markdown(header, align, table_rows(evaluation))
-    if any(mode in NOISE_MODES for mode in evaluation.modes):
+    if any(mode in NOISE_MODES or mode in evaluation.sensors for mode in evaluation.modes):
         lines += ["", *noise_markdown(evaluation)]
     notes = scoring_notes(evaluation) + metric_notes(evaluation) + missing_notes(evaluation)
     if notes:
@@ -485,23 +542,45 @@ def missing_notes(evaluation: Evaluation) -> list[str]:
     return [f"- {', '.join(labels)}: {reason}" for reason, labels in by_reason.items()]
 
 
+def noise_what(evaluation: Evaluation, mode: str) -> str:
+    """Column title of a noise sensor: the paper's dark current, else its description."""
+    if mode in NOISE_MODES:
+        return f"dark current eq. {NOISE_MODES[mode][1][2:]}"
+    if mode not in evaluation.sensors:
+        return "shot noise only"
+    noise = evaluation.sensors[mode].noise
+    changed = {k: v for k, v in noise.to_dict().items() if v != type(noise)().to_dict()[k]}
+    return ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}" for k, v in changed.items())
+
+
 def noise_markdown(evaluation: Evaluation) -> list[str]:
-    """The paper's Tables 6 to 9: the TE methods with shot noise only and with each dark current."""
+    """The paper's Tables 6 to 9: the TE methods with shot noise only and with each noise
+    sensor, a row as the method reconstructs and, where a ``+cal`` mode was run, a row
+    with the sensor's calibration."""
     summary = evaluation.summary()
-    modes = [m for m in ("te", *NOISE_MODES) if m in evaluation.modes]
+    noisy = [m for m in evaluation.modes if m in evaluation.sensors and not m.endswith(CALIBRATED)]
+    noisy += [m[:-len(CALIBRATED)] for m in evaluation.modes if m.endswith(CALIBRATED)
+              and m in evaluation.sensors and m[:-len(CALIBRATED)] not in noisy]
+    modes = [m for m in ("te",) if m in evaluation.modes] + noisy
+    calibrated = any(m.endswith(CALIBRATED) for m in evaluation.modes)
     header, align = ["TE reconstruction"], [":---"]
     for mode in modes:
-        what = f"dark current eq. {NOISE_MODES[mode][1][2:]}" if mode in NOISE_MODES else "shot noise only"
+        what = noise_what(evaluation, mode)
         header += [f"PSNR-μ ↑ ({what})", f"SSIM-μ ↑ ({what})"]
         align += ["---:", "---:"]
     rows = []
     for method in evaluation.methods:
-        row = [label(method, "te")]
-        for mode in modes:
-            s = summary.get((method, mode))
-            row += ([_fmt(s["psnr_mu"], 2), _fmt(s["ssim_mu"], 3)] if s else
-                    [NO_WEIGHTS if (method, mode) in evaluation.missing else "", ""])
-        rows.append(row)
+        for suffix in (("", CALIBRATED) if calibrated else ("",)):
+            row = [label(method, "te") + (" (calibrated)" if suffix else "")]
+            for mode in modes:
+                if suffix and mode not in evaluation.sensors:      # nothing to calibrate
+                    row += ["-", "-"]
+                    continue
+                key = mode + suffix
+                s = summary.get((method, key))
+                row += ([_fmt(s["psnr_mu"], 2), _fmt(s["ssim_mu"], 3)] if s else
+                        [NO_WEIGHTS if (method, key) in evaluation.missing else "", ""])
+            rows.append(row)
     return _markdown(header, align, rows)
 
 

@@ -242,9 +242,9 @@ def test_further_metrics_are_the_scores_of_the_scored_frames():
 def test_noise_sensors_get_dark_current_and_their_own_table():
     seen = []
 
-    def recording(config, light, rng, dark_current=None):
-        seen.append(dark_current)
-        return simulate_scene(config, light, seed=rng, dark_current=dark_current)
+    def recording(config, light, rng, sensor=None):
+        seen.append(sensor and sensor.noise.dark_current)
+        return simulate_scene(config, light, seed=rng, sensor=sensor)
 
     light = make_scene("moderate", 12, 24, 24, seed=3)
     configs = paper_configs()
@@ -258,6 +258,25 @@ def test_noise_sensors_get_dark_current_and_their_own_table():
     noise = lines.index(next(x for x in lines if x.startswith("| TE reconstruction | PSNR-μ ↑ (shot noise only)")))
     assert "(dark current eq. 12)" in lines[noise] and "(dark current eq. 13)" in lines[noise]
     assert lines[noise + 2].startswith(f"| TFP_TE | {by_mode['te']:.2f} |")
+
+
+def test_calibrated_rows_win_back_the_dark_current():
+    """A +cal mode reconstructs the same sensor with its calibration: its own row in the
+    noise table, above the uncalibrated row; a custom sensor gets a column named by its options."""
+    from golden.noise import Sensor, SensorNoise
+
+    def simulate(config, light, rng, sensor=None):
+        return simulate_scene(config, light, seed=rng, sensor=sensor)
+
+    light = make_scene("moderate", 12, 24, 24, seed=3)
+    sensors = {"te+hot": Sensor(SensorNoise(dark_current="eq12", dark_level=2.0, dsnu=0.3, prnu=0.05), 1)}
+    evaluation = evaluate([("a", light)], simulate, methods=("tfp",), modes=("te", "te+hot", "te+hot+cal"),
+                          progress=False, repeats=1, sensors=sensors, configs=paper_configs() | {"te+hot": SensorConfig()})
+    by_mode = {r.mode: r.psnr_mu for r in evaluation.results}
+    assert by_mode["te+hot"] < by_mode["te+hot+cal"] <= by_mode["te"] + 0.5, by_mode
+    lines = table_markdown(evaluation).splitlines()
+    assert any("(dark_current eq12, dark_level 2, dsnu 0.3, prnu 0.05)" in x for x in lines)
+    assert any(x.startswith(f"| TFP_TE (calibrated) | - | - | {by_mode['te+hot+cal']:.2f} |") for x in lines)
 
 
 def test_complexity_columns_with_the_papers_table10():

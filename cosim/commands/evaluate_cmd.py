@@ -54,6 +54,14 @@ def add_arguments(parser):
     parser.add_argument("--noise", action="store_true",
                         help="also the paper's Tables 6 to 9: the TE camera with the dark current of eq. 12 and "
                              "of eq. 13")
+    parser.add_argument("--sensor-noise", action="append", default=[], metavar="N.json",
+                        help="add a TE noise sensor described by N.json (golden.noise: dark level, DSNU, hot "
+                             "pixels, PRNU, comparator offset), named by the file's stem, to the noise table")
+    parser.add_argument("--sensor-seed", type=int, default=0,
+                        help="sensor seed of every noise sensor (default 0): its per-pixel maps")
+    parser.add_argument("--calibrate", action="store_true",
+                        help="add a calibrated row per method for every noise sensor (its own dark and flat "
+                             "streams, recon.calibration)")
     parser.add_argument("--metrics", default=None,
                         help="comma-separated further metrics: psnr_pu21, hdr_vqm, fovvideovdp "
                              "(default: none; --table: all)")
@@ -98,6 +106,7 @@ def run(args) -> int:
 
     if args.store or args.workers is not None or args.scheduler:
         for flag, value in (("--table", args.table), ("--noise", args.noise), ("--metrics", args.metrics),
+                            ("--sensor-noise", args.sensor_noise), ("--calibrate", args.calibrate),
                             ("--vdp-frames", args.vdp_frames), ("--threads", args.threads), ("--repeats", args.repeats)):
             if value not in (None, False):
                 raise InputError(f"{flag} does not apply with --store (a store's streams are scored as they are)")
@@ -141,8 +150,24 @@ def run(args) -> int:
         if (config.mode, config.ml_readout) != (kind, readout):
             raise ConfigError(f"{option} {value!r} has mode {config.mode!r}, ml_readout {config.ml_readout!r}; "
                               f"expected mode {kind!r}" + (f", ml_readout {readout!r}" if kind == "ml" else ""))
+    if args.sensor_seed < 0:
+        raise InputError(f"--sensor-seed {args.sensor_seed}: must be >= 0")
+    sensors = {}
     if args.noise:              # the paper's Tables 6 to 9: its TE camera with dark current
-        configs.update({mode: configs["te"] for mode in NOISE_MODES})
+        from recon.evaluate import default_sensors
+        sensors.update(default_sensors(args.sensor_seed))
+    for path in args.sensor_noise:
+        from golden.noise import Sensor, load_noise
+        key = f"te+{Path(path).stem}"
+        if key in sensors or key in configs:
+            raise InputError(f"--sensor-noise {path}: the sensor name {key!r} is taken; rename the file")
+        sensors[key] = Sensor(load_noise(path), args.sensor_seed)
+    if args.calibrate and not sensors:
+        raise InputError("--calibrate needs a noise sensor: --noise or --sensor-noise N.json")
+    configs.update({mode: configs["te"] for mode in sensors})
+    if args.calibrate:
+        from recon.evaluate import CALIBRATED
+        configs.update({mode + CALIBRATED: configs["te"] for mode in sensors})
     sequences = [] if args.set == "none" else sequence_set(args.set, frames, height, width)
     for path in args.scene:          # memory-mapped: read one slice at a time
         sequences.append((Path(path).stem, load_scene(path, memory_map=True)))
@@ -155,13 +180,13 @@ def run(args) -> int:
         import torch
         torch.set_num_threads(threads)
 
-    def simulate(config, light, rng, dark_current=None):
-        return simulate_scene(config, light, seed=rng, dark_current=dark_current)
+    def simulate(config, light, rng, sensor=None):
+        return simulate_scene(config, light, seed=rng, sensor=sensor)
 
     evaluation = evaluate(sequences, simulate, methods=methods, modes=tuple(configs), configs=configs,
                           window=args.window, seed=args.seed, device=args.device, progress=progress_wanted(args),
                           repeats=repeats, metrics=metrics, vdp_frames=vdp_frames,
-                          missing="note" if args.table else None)
+                          missing="note" if args.table else None, sensors=sensors)
     if args.table:
         from recon.complexity import measure
         evaluation.complexity = measure(evaluation.methods, configs["te"])
