@@ -26,6 +26,7 @@ COMMANDS = {
     "verilog": "verilog_cmd",
     "synthesize": "synthesize_cmd",
     "cocotb": "cocotb_cmd",
+    "calibrate": "calibrate_cmd",
     "reconstruct": "reconstruct_cmd",
     "evaluate": "evaluate_cmd",
     "score": "score_cmd",

@@ -72,8 +72,13 @@ def electrons_per_readout(light: np.ndarray) -> np.ndarray:
     return np.minimum(np.asarray(light, np.float64), LIGHT_CAP) * DESIGN_ELECTRONS
 
 
-def dark_electrons(model: str | None, shape, rng: np.random.Generator) -> np.ndarray:
+def dark_electrons(model: str | None, shape, rng: np.random.Generator, *,
+                   scale: np.ndarray | None = None) -> np.ndarray:
     """Dark electrons per pixel and readout interval (int64), one draw each.
+
+    ``scale``: a per-pixel factor (float64, broadcast to ``shape``) applied to the
+    model's electrons before rounding (:mod:`golden.noise`: dark level, DSNU, hot
+    pixels); ``None`` is 1 and gives exactly the unscaled draws.
 
     ``eq12``: ``x ~ N(400, 50)``, ``round(x)`` (half to even), and a negative
     result (probability about 1e-15 per draw) is counted as 0 electrons: a
@@ -89,12 +94,13 @@ def dark_electrons(model: str | None, shape, rng: np.random.Generator) -> np.nda
         return np.zeros(shape, np.int64)
     x = rng.normal(400.0, 50.0, shape) if model == "eq12" else rng.normal(140.0, 50.0, shape)
     if model == "eq12":
-        electrons = np.maximum(np.rint(x), 0.0)
+        per = np.maximum(x, 0.0)
     else:
         with np.errstate(divide="ignore"):
-            per = np.where(x > 0, 60000.0 / np.where(x > 0, x, 1.0), 0.0)
-        electrons = np.rint(np.clip(per, 0.0, 15000.0))
-    return electrons.astype(np.int64)
+            per = np.clip(np.where(x > 0, 60000.0 / np.where(x > 0, x, 1.0), 0.0), 0.0, 15000.0)
+    if scale is not None:
+        per = per * scale
+    return np.rint(per).astype(np.int64)
 
 
 # -- rigorous tail bounds (natural logs) ---------------------------------------
@@ -187,7 +193,7 @@ def deterministic_clock_electrons(config: SensorConfig, mean_per_readout: np.nda
 
 
 def poisson_stimulus(config: SensorConfig, scene: np.ndarray, rng=None, *,
-                     dark_current: str | None = None, noise: bool = True) -> np.ndarray:
+                     dark_current: str | None = None, noise: bool = True, sensor=None) -> np.ndarray:
     """Scene light ``(K, H, W)`` -> per-clock electrons ``(K * L, H, W)``.
 
     The stimulus for the cycle-exact model (:func:`golden.sensor.simulate`) and
@@ -196,9 +202,17 @@ def poisson_stimulus(config: SensorConfig, scene: np.ndarray, rng=None, *,
     dark current, which is random by nature). The dtype is the smallest unsigned
     one that holds ``2^input_bits - 1``. Memory is ``K * L * H * W`` values: use
     it for crops, not whole videos (:mod:`golden.fastsim` simulates those).
+    ``sensor``: a :class:`golden.noise.Sensor` (non-idealities and their per-pixel
+    maps), instead of ``dark_current``.
     """
     scene = check_scene(scene)
     model = check_dark_current(dark_current)
+    pixels = None
+    if sensor is not None:                     # (golden.noise imports this module: no import back)
+        if model is not None:
+            raise InputError("give the dark current either alone or inside the sensor noise, not both")
+        pixels = sensor.pixels(scene.shape[1:])
+        model = pixels.dark_model
     if not noise and model is not None:
         raise InputError(f"dark current {model!r} is random; it cannot be combined with noise=False")
     rng = as_generator(rng)
@@ -209,8 +223,12 @@ def poisson_stimulus(config: SensorConfig, scene: np.ndarray, rng=None, *,
     fraction = np.zeros(H * W)
     for k in range(K):
         expected = electrons_per_readout(scene[k].reshape(-1))
+        if pixels is not None:
+            expected = pixels.photo(expected)
         if noise:
-            e = clock_electrons(config, expected, dark_electrons(model, expected.shape, rng), rng, budget)
+            dark = (dark_electrons(model, expected.shape, rng) if pixels is None
+                    else pixels.dark(expected.size, rng))
+            e = clock_electrons(config, expected, dark, rng, budget)
         else:
             e, fraction = deterministic_clock_electrons(config, expected, fraction)
         out[k * L:(k + 1) * L] = e.T.reshape(L, H, W)

@@ -38,8 +38,14 @@ is the table's ML column (``TFP_ML``, ``TFI_ML``); ``"te"`` the TE column;
 ``"ml"``, the full-count ML camera (a stronger, wider-output sensor than the
 paper's), is added below the table as extra rows (``TFP_ML-count``, ...).
 The noise sensors of :data:`NOISE_SENSORS` (``"te+eq12"``, ``"te+eq13"``: the TE
-camera with the dark current of the paper's eq. 12 or 13, its Tables 6 to 9)
-get a table of their own (:func:`recon.report.noise_markdown`).
+camera with the dark current of the paper's eq. 12 or 13, its Tables 6 to 9),
+or any sensor of ``noise_sensors=`` (a :class:`golden.noise.Sensor` per sensor key:
+dark level, non-uniformity, gain spread), get a table of their own
+(:func:`recon.report.noise_markdown`). A sensor ``<noise sensor>+cal`` is the same
+sensor reconstructed with its calibration (:mod:`recon.calibration`): per sequence
+frame size, :data:`CALIBRATION_READOUTS` dark readouts and as many under a flat
+light of :data:`CALIBRATION_FLAT`, simulated with the sensor (its own noise
+seed), estimate the per-pixel dark rate and gain that correct every method's output.
 
 Metrics: PSNR-mu and SSIM-mu always; ``metrics=`` adds any further column of
 :data:`recon.score.KEYS` (PU21-PSNR, HDR-VQM, FovVideoVDP, conventions in
@@ -74,6 +80,12 @@ from .settings import DEFAULT_WINDOW, check_window
 SENSORS = ("ml-msb", "te", "ml")
 #: Noise sensors (the paper's Tables 6 to 9): key -> (sensor preset, dark-current model of golden.light).
 NOISE_SENSORS = {"te+eq12": ("te", "eq12"), "te+eq13": ("te", "eq13")}
+#: Suffix of a noise sensor reconstructed with its calibration (``"te+eq12+cal"``).
+CALIBRATED = "+cal"
+#: Readouts of each calibration stream (dark and flat) and the flat's light, scene units
+#: (below the TE overflow level; benchmarks/calibration_error.py measured the error).
+CALIBRATION_READOUTS = 256
+CALIBRATION_FLAT = 0.03
 #: Names in tables and plots: the paper's names for its two cameras.
 NAMES = {"ml-msb": "ML", "te": "TE", "ml": "ML-count", "te+eq12": "TE+dark12", "te+eq13": "TE+dark13"}
 #: Methods as the paper names them (``label``); other methods in capitals.
@@ -85,7 +97,8 @@ BASIC_METRICS = ("psnr_mu", "ssim_mu")
 #: blocks, metric bands, torch), for the up-front check of :func:`evaluate`.
 WORKING_BYTES = 512 << 20
 
-#: ``simulate(config, light, rng) -> words``; for a noise sensor also ``dark_current="eq12"`` (a keyword).
+#: ``simulate(config, light, rng) -> words``; for a noise sensor also ``noise_sensor=`` (a keyword:
+#: its :class:`golden.noise.Sensor`).
 Simulate = Callable[..., np.ndarray]
 
 
@@ -114,6 +127,29 @@ def scored_frames(frames: int, window: int, span: int | None = None) -> slice:
     reach = window if span is None or frames <= 2 * (span // 2) else max(window, span)
     half = reach // 2
     return slice(half, frames - half) if frames > 2 * half else slice(0, frames)
+
+
+def default_noise_sensors(seed: int = 0) -> dict:
+    """The paper's noise sensors (:data:`NOISE_SENSORS`) as :class:`golden.noise.Sensor`: its
+    dark current, no non-uniformity, sensor seed ``seed``."""
+    from golden.noise import Sensor, SensorNoise
+    return {sensor: Sensor(SensorNoise(dark_current=model), seed) for sensor, (_, model) in NOISE_SENSORS.items()}
+
+
+def noise_base(sensor: str, noise_sensors) -> str | None:
+    """The noise sensor a sensor key uses (itself, or the one it calibrates), or None for an ideal sensor."""
+    base = sensor[:-len(CALIBRATED)] if sensor.endswith(CALIBRATED) else sensor
+    return base if base in noise_sensors else None
+
+
+def calibrate_sensor(simulate: Simulate, config: SensorConfig, noise_sensor, shape: tuple[int, int], rng):
+    """A calibration of ``noise_sensor`` (a :class:`golden.noise.Sensor`) for frames of ``shape``:
+    dark and flat streams it records."""
+    from .calibration import estimate
+    dark = simulate(config, np.zeros((CALIBRATION_READOUTS, *shape), np.float32), rng, noise_sensor=noise_sensor)
+    flat = simulate(config, np.full((CALIBRATION_READOUTS, *shape), CALIBRATION_FLAT, np.float32), rng,
+                    noise_sensor=noise_sensor)
+    return estimate(dark, flat, config, CALIBRATION_FLAT)
 
 
 def learned_span(methods: Sequence[str]) -> int | None:
@@ -168,6 +204,8 @@ class Evaluation:
     #: readouts the learned methods see (None: none was run); sequences longer than it are
     #: scored only where every method's readouts lie inside them (:func:`scored_frames`)
     span: int | None = None
+    #: sensor key -> the golden.noise.Sensor it simulates, for the noise and calibrated sensors
+    noise_sensors: dict = dataclasses.field(default_factory=dict)
 
     def summary(self) -> dict[tuple[str, str], dict[str, float]]:
         """(method, sensor) -> mean over sequences of the per-sequence means."""
@@ -188,7 +226,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
              device: str = "cpu", progress: bool = True, keep: bool = False,
              options: dict[str, dict] | None = None, repeats: int = 3,
              metrics: Sequence[str] = BASIC_METRICS, vdp_frames: int | None = None,
-             missing: str | None = None) -> Evaluation:
+             missing: str | None = None, noise_sensors: dict | None = None) -> Evaluation:
     """Simulate every sequence in every sensor, reconstruct with every method, score.
 
     ``sequences``: (label, light (K, H, W)) pairs; ``methods``: keys of
@@ -199,8 +237,11 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     (e.g. ``{"tfi": {"search": "window"}}``); ``repeats``: runs timed per method
     (the median is reported). ``metrics``: keys of :data:`recon.score.KEYS` (PSNR-mu
     and SSIM-mu are always computed); ``vdp_frames``: compute FovVideoVDP on the
-    middle this many scored frames only (None: all). A sensor of
-    :data:`NOISE_SENSORS` is simulated with ``simulate(..., dark_current=model)``.
+    middle this many scored frames only (None: all). A sensor key of ``noise_sensors``
+    (key -> :class:`golden.noise.Sensor`, over :func:`default_noise_sensors`: the
+    :data:`NOISE_SENSORS`) is simulated with ``simulate(..., noise_sensor=noise_sensors[key])``;
+    ``<key>+cal`` is that sensor again, reconstructed with a calibration from its own
+    dark and flat streams (:func:`calibrate_sensor`, one per sequence frame size).
     ``missing``: ``"refuse"`` a learned method without weights for a sensor (the
     default when ``methods`` are named), or ``"note"`` it in
     ``Evaluation.missing`` and go on (the default for every method).
@@ -231,6 +272,12 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     if vdp_frames is not None and (type(vdp_frames) is not int or vdp_frames < 1):
         raise InputError(f"vdp_frames = {vdp_frames!r}: must be an integer >= 1")
     configs = dict(paper_configs() if configs is None else configs)
+    noise_sensors = default_noise_sensors() | dict(noise_sensors or {})
+    for sensor in sensors:
+        if sensor.endswith(CALIBRATED) and noise_base(sensor, noise_sensors) is None:
+            raise InputError(f"sensor {sensor!r}: {sensor[:-len(CALIBRATED)]!r} is no noise sensor to calibrate")
+        if sensor.endswith(CALIBRATED) and sensor not in configs and sensor[:-len(CALIBRATED)] in configs:
+            configs[sensor] = configs[sensor[:-len(CALIBRATED)]]     # its noise sensor's configuration
     for sensor in sensors:
         if sensor not in configs:
             raise InputError(f"no sensor configuration for sensor {sensor!r}")
@@ -253,9 +300,12 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     if len(set(labels)) != len(labels):
         raise InputError(f"sequence labels must be unique, got {labels}")
 
+    bases = {sensor: noise_base(sensor, noise_sensors) for sensor in sensors}
     evaluation = Evaluation([], methods, tuple(sensors), window, repeats=repeats,
                             threads=torch.get_num_threads(), metrics=metrics, vdp_frames=vdp_frames,
-                            missing=absent)
+                            missing=absent, noise_sensors={sensor: noise_sensors[base] for sensor, base in
+                                                           bases.items() if base is not None})
+    calibrations = {}                        # (sensor, frame shape) -> calibration
     span = evaluation.span = learned_span([m for m in methods if any((m, sensor) not in absent for sensor in sensors)])
     sizes = {tuple(light.shape[1:]) for _, light in sequences}
     evaluation.frame_size = sizes.pop() if len(sizes) == 1 else None
@@ -279,8 +329,17 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
             config = configs[sensor]
             bar.set_postfix_str(f"{name} {sensor} simulate")
             rng = np.random.default_rng([seed, index, sensor_index])
-            if sensor in NOISE_SENSORS:
-                words = simulate(config, light, rng, dark_current=NOISE_SENSORS[sensor][1])
+            base = bases[sensor]
+            calibration = None
+            if base is not None:
+                words = simulate(config, light, rng, noise_sensor=noise_sensors[base])
+                if sensor.endswith(CALIBRATED):
+                    key = sensor, (H, W)
+                    if key not in calibrations:
+                        bar.set_postfix_str(f"{name} {sensor} calibrate")
+                        calibrations[key] = calibrate_sensor(simulate, config, noise_sensors[base], (H, W),
+                                                             np.random.default_rng([seed, sensor_index, H, W]))
+                    calibration = calibrations[key]
             else:
                 words = simulate(config, light, rng)
             if keep:
@@ -297,7 +356,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
                 times = []
                 for _ in range(repeats):
                     start = time.perf_counter()
-                    images = reconstruct(words, config, method, window=window, device=device, **kwargs)
+                    images = reconstruct(words, config, method, window=window, device=device,
+                                         calibration=calibration, **kwargs)
                     times.append(time.perf_counter() - start)
                 seconds = float(np.median(times))
                 pred, truth = images[frames], light[frames]

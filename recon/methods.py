@@ -88,7 +88,7 @@ RECON_METHODS: dict[str, Method] = {
 
 def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
                 device: str = "cpu", progress: bool = False, out: np.ndarray | None = None,
-                **options) -> np.ndarray:
+                calibration=None, **options) -> np.ndarray:
     """Stream words (K, H, W) -> reconstructed light, float32 (K, H, W), scene units.
 
     ``method`` is a key of :data:`RECON_METHODS`. ``window`` (odd, readouts) and
@@ -97,7 +97,10 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     (``estimator``, ``search`` for TFI, ``chunk_elements``, ``dtype``). Words are checked
     legal for ``config``; an unknown method or option is refused. ``out``: a
     float32 (K, H, W) array to fill (e.g. a memory map of the output file, so
-    the images never need to fit in memory); it is returned.
+    the images never need to fit in memory); it is returned. ``calibration``: a
+    :class:`recon.calibration.Calibration` of the sensor that recorded the stream;
+    every method's output is then corrected for the pixels' dark rate and gain,
+    ``max(0, (x - dark) / gain)`` (:func:`recon.calibration.correct`), here and only here.
     """
     if method not in RECON_METHODS:
         raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
@@ -117,9 +120,22 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     if len(shape) != 3:
         raise InputError(f"stream words shape {shape} must be (K, H, W)")
     K, H, W = shape
+    if calibration is not None:
+        from .calibration import check_matches
+        check_matches(calibration, config, (H, W))
     out = output_images((K, H, W), out)
     if out.size == 0:
         return out
+    if calibration is not None:
+        from .calibration import correct
+        return correct(_reconstruct_raw(words, config, spec, settings, progress, out), calibration)
+    return _reconstruct_raw(words, config, spec, settings, progress, out)
+
+
+def _reconstruct_raw(words, config, spec, settings, progress, out) -> np.ndarray:
+    """The method's own output into ``out`` (K, H, W), uncorrected."""
+    method = spec.name
+    K, H, W = out.shape
     if spec.frames is not None:
         return spec.frames(words, config, settings, progress, out)
     flat = words.reshape(K, H * W)

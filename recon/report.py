@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .evaluate import BASIC_METRICS, NOISE_SENSORS, Evaluation, Measurement, label, name
+from .evaluate import BASIC_METRICS, CALIBRATED, NOISE_SENSORS, Evaluation, Measurement, label, name
 from .pictures import ERROR_RANGE, MU, save_figure, tone_map, write_text
 
 #: Sensors that get a column of Table 1; any other evaluated sensor gets extra rows.
@@ -56,9 +56,10 @@ def table_layout(evaluation: Evaluation) -> tuple[list[str], list[str]]:
     (``ml``) gets rows beneath the ML (msb) column when that is the first column (the
     paper's Table 1 with its extra rows, both ML cameras under one title); otherwise, and
     for every other sensor, a column of its own, so no row sits under another camera's
-    title. The noise sensors (:data:`NOISE_SENSORS`) have a table of their own
-    (:func:`noise_markdown`)."""
-    plain = [sensor for sensor in evaluation.sensors if sensor not in NOISE_SENSORS]
+    title. The noise sensors (:data:`NOISE_SENSORS`, ``Evaluation.noise_sensors``) and
+    their calibrated ``+cal`` sensors have a table of their own (:func:`noise_markdown`)."""
+    plain = [sensor for sensor in evaluation.sensors
+             if sensor not in NOISE_SENSORS and sensor not in evaluation.noise_sensors]
     first = [sensor for sensor in plain if sensor in COLUMNS][:1]
     extra = [sensor for sensor in plain if sensor == "ml"] if first == ["ml-msb"] else []
     return [sensor for sensor in plain if sensor not in extra], extra
@@ -119,7 +120,7 @@ def table_markdown(evaluation: Evaluation) -> str:
         header += complexity_header()
         align += ["---:"] * len(complexity_header())
     lines = _markdown(header, align, table_rows(evaluation))
-    if any(sensor in NOISE_SENSORS for sensor in evaluation.sensors):
+    if any(sensor in NOISE_SENSORS or sensor in evaluation.noise_sensors for sensor in evaluation.sensors):
         lines += ["", *noise_markdown(evaluation)]
     notes = scoring_notes(evaluation) + metric_notes(evaluation) + missing_notes(evaluation)
     if notes:
@@ -164,23 +165,48 @@ def missing_notes(evaluation: Evaluation) -> list[str]:
     return [f"- {', '.join(labels)}: {reason}" for reason, labels in by_reason.items()]
 
 
+def noise_what(evaluation: Evaluation, sensor: str) -> str:
+    """Column title of a noise sensor: the paper's dark current, else the options its
+    :class:`golden.noise.SensorNoise` sets (``shot noise only`` for an ideal sensor)."""
+    if sensor in NOISE_SENSORS:
+        return f"dark current eq. {NOISE_SENSORS[sensor][1][2:]}"
+    if sensor not in evaluation.noise_sensors:
+        return "shot noise only"
+    noise = evaluation.noise_sensors[sensor].noise
+    ideal = type(noise)().to_dict()
+    changed = {k: v for k, v in noise.to_dict().items() if v != ideal[k]}
+    return ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}" for k, v in changed.items())
+
+
 def noise_markdown(evaluation: Evaluation) -> list[str]:
-    """The paper's Tables 6 to 9: the TE methods with shot noise only and with each dark current."""
+    """The paper's Tables 6 to 9: the TE methods with shot noise only and with each noise
+    sensor, a row as the method reconstructs and, where a ``+cal`` sensor was run, a row
+    with the sensor's calibration."""
     summary = evaluation.summary()
-    sensors = [m for m in ("te", *NOISE_SENSORS) if m in evaluation.sensors]
+    noisy = [s for s in evaluation.sensors if s in evaluation.noise_sensors and not s.endswith(CALIBRATED)]
+    noisy += [s[:-len(CALIBRATED)] for s in evaluation.sensors if s.endswith(CALIBRATED)
+              and s in evaluation.noise_sensors and s[:-len(CALIBRATED)] not in noisy]
+    noisy += [s for s in evaluation.sensors if s in NOISE_SENSORS and s not in noisy]  # a store's, no Sensor kept
+    sensors = [s for s in ("te",) if s in evaluation.sensors] + noisy
+    calibrated = any(s.endswith(CALIBRATED) for s in evaluation.sensors)
     header, align = ["TE reconstruction"], [":---"]
     for sensor in sensors:
-        what = f"dark current eq. {NOISE_SENSORS[sensor][1][2:]}" if sensor in NOISE_SENSORS else "shot noise only"
+        what = noise_what(evaluation, sensor)
         header += [f"PSNR-μ ↑ ({what})", f"SSIM-μ ↑ ({what})"]
         align += ["---:", "---:"]
     rows = []
     for method in evaluation.methods:
-        row = [label(method, "te")]
-        for sensor in sensors:
-            s = summary.get((method, sensor))
-            row += ([_fmt(s["psnr_mu"], 2), _fmt(s["ssim_mu"], 3)] if s else
-                    [NO_WEIGHTS if (method, sensor) in evaluation.missing else "", ""])
-        rows.append(row)
+        for suffix in (("", CALIBRATED) if calibrated else ("",)):
+            row = [label(method, "te") + (" (calibrated)" if suffix else "")]
+            for sensor in sensors:
+                if suffix and sensor not in evaluation.noise_sensors:      # nothing to calibrate
+                    row += ["-", "-"]
+                    continue
+                key = sensor + suffix
+                s = summary.get((method, key))
+                row += ([_fmt(s["psnr_mu"], 2), _fmt(s["ssim_mu"], 3)] if s else
+                        [NO_WEIGHTS if (method, key) in evaluation.missing else "", ""])
+            rows.append(row)
     return _markdown(header, align, rows)
 
 

@@ -96,6 +96,26 @@ def test_evaluate_noise_tables(tmp_path, capsys):
     assert sorted(r["sensor"] for r in rows) == ["ml", "ml-msb", "te", "te+eq12", "te+eq13"]
 
 
+def test_evaluate_sensor_noise_and_calibrate(tmp_path, capsys):
+    """--sensor-noise adds a noise sensor named by the file, --calibrate its +cal rows; one line each refusal."""
+    (tmp_path / "hot.json").write_text('{"dark_current": "eq12", "dark_level": 2.0, "dsnu": 0.3}')
+    code, stdout, stderr = run_here(capsys, "evaluate", "--sensor-noise", tmp_path / "hot.json", "--calibrate",
+                                    "--sensor-seed", 4, "--set", "default", "--frames", 10, "--height", 24,
+                                    "--width", 24, "--methods", "tfp", "--ml-count-config", "none",
+                                    "--out", tmp_path / "ev")
+    assert code == 0, stderr
+    assert "(dark_current eq12, dark_level 2, dsnu 0.3)" in stdout and "| TFP_TE (calibrated) | - | - |" in stdout
+    rows = list(csv.DictReader((tmp_path / "ev" / "results.csv").read_text().splitlines()))
+    assert [r["sensor"] for r in rows] == ["ml-msb", "te", "te+hot", "te+hot+cal"]
+    out = tmp_path / "refused"
+    refused(capsys, "evaluate", "--calibrate", "--out", out, "--calibrate needs a noise sensor")
+    refused(capsys, "evaluate", "--sensor-seed", -1, "--out", out, "--sensor-seed -1")
+    (tmp_path / "eq12.json").write_text("{}")
+    refused(capsys, "evaluate", "--sensor-noise", tmp_path / "eq12.json", "--out", out, "'te+eq12' is taken")
+    refused(capsys, "evaluate", "--sensor-noise", tmp_path / "hot.json", "--store", tmp_path, "--out", out,
+            "--sensor-noise does not apply with --store")
+
+
 def test_evaluate_table_refuses(tmp_path, capsys, empty_weights_dir):   # no weights, whatever the checkout holds
     out = tmp_path / "ev"
     refused(capsys, "evaluate", "--table", "--vdp-frames", 0, "--out", out, "--vdp-frames 0")

@@ -84,6 +84,33 @@ def test_simulate_refuses_bad_files_and_config(tmp_path):
     assert _no_output(tmp_path)
 
 
+def test_simulate_with_a_sensor_noise_file(tmp_path):
+    """--noise / --sensor-seed: the library's stream for that Sensor; clashes refused in one line."""
+    from golden.noise import Sensor, SensorNoise
+    noise = SensorNoise(dark_current="eq12", dark_level=2.0, dsnu=0.3, hot_pixels=0.05, prnu=0.05)
+    (tmp_path / "n.json").write_text(noise.to_json())
+    scene = np.full((3, 4, 5), 0.05)
+    np.save(tmp_path / "i.npy", scene)
+    common = ("simulate", "--config", "te", "--scene", tmp_path / "i.npy", "--seed", "2",
+              "--noise", tmp_path / "n.json")
+    for name, extra in (("a.npz", ()), ("b.npz", ("--sensor-seed", "7"))):
+        result = run_tespike(*common, "--out", tmp_path / name, *extra)
+        assert result.returncode == 0, result.stderr
+    config = SensorConfig()
+    assert np.array_equal(load_stream(tmp_path / "a.npz")[0], simulate_scene(config, scene, seed=2,
+                                                                             sensor=Sensor(noise, 0)))
+    assert np.array_equal(load_stream(tmp_path / "b.npz")[0], simulate_scene(config, scene, seed=2,
+                                                                             sensor=Sensor(noise, 7)))
+    assert_refused(run_tespike(*common, "--out", tmp_path / "s.npz", "--dark-current", "eq13"), "--dark-current")
+    assert_refused(run_tespike(*common, "--out", tmp_path / "s.npz", "--sensor-seed", "-1"), "--sensor-seed")
+    assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
+                               "--out", tmp_path / "s.npz", "--sensor-seed", "1"), "--noise")
+    (tmp_path / "bad.json").write_text('{"prnu": 3}')
+    assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
+                               "--out", tmp_path / "s.npz", "--noise", tmp_path / "bad.json"), "prnu")
+    assert _no_output(tmp_path)
+
+
 @pytest.mark.parametrize("config", ["te", "ml", "edge"])
 def test_simulate_extreme_light(tmp_path, config):
     if config == "edge":

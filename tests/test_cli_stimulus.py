@@ -7,6 +7,7 @@ from golden.config import SensorConfig
 from golden.decode import decode_spikes
 from golden.fastsim import scene_stimulus, simulate_scene
 from golden.io import load_stream
+from golden.noise import Sensor, SensorNoise
 from golden.sensor import simulate
 from tests.cli import assert_refused, run_tespike
 
@@ -14,7 +15,10 @@ SMALL_TE = SensorConfig(b1=2, b2=2, threshold=300)
 
 
 @pytest.mark.parametrize("config", [SMALL_TE, SensorConfig(mode="ml", b1=2, b2=2, ml_bits=4)], ids=str)
-@pytest.mark.parametrize("options", [{}, {"dark_current": "eq12"}, {"noise": False}], ids=str)
+@pytest.mark.parametrize("options", [{}, {"dark_current": "eq12"}, {"noise": False},
+                                     {"sensor": Sensor(SensorNoise(dark_current="eq13", dsnu=0.3, hot_pixels=0.1,
+                                                                   prnu=0.05, comparator_offset=0.05), 3)}],
+                         ids=str)
 def test_golden_on_the_stimulus_is_simulate_per_clock(config, options):
     """Same seed, same options: the cycle-exact model on the stimulus is simulate's per-clock stream."""
     scene = np.random.default_rng(0).uniform(0, 2.5, (5, 6, 7))

@@ -47,6 +47,32 @@ def test_clip_is_a_pure_function_of_recipe_config_and_index():
     assert other_seed.light.shape != a.light.shape or not np.array_equal(other_seed.light, a.light)
 
 
+def test_noisy_clips_target_the_light_their_pixels_saw():
+    """noise_fraction 1: every clip has a random sensor in NOISE_DRAW, target gain x I + dark;
+    noise_fraction 0 draws nothing more (the clips recipes always gave)."""
+    from golden.noise import Sensor
+    from recon.engine.clips import NOISE_DRAW, seen_light
+    config = SensorConfig()
+    noisy = EngineRecipe(**{**SMALL.to_dict(), "noise_fraction": 1.0})
+    plain = make_clip(SMALL, config, 3)
+    light, _, _ = clip_light(SMALL, 3)
+    assert np.array_equal(plain.light, light.astype(np.float32)) and plain.sensor is None
+    levels = []
+    for i in range(6):
+        clip = make_clip(noisy, config, i)
+        assert isinstance(clip.sensor, Sensor)
+        n = clip.sensor.noise
+        levels.append(n.dark_level)
+        assert n.dark_current in NOISE_DRAW["dark_current"] and 0.05 <= n.dark_level <= 6.0
+        assert 0 <= n.prnu <= 0.05 and 0 <= n.dsnu <= 0.5
+        scene, _, _ = clip_light(noisy, i)
+        assert np.allclose(clip.light, seen_light(clip.sensor, scene).astype(np.float32))
+        assert (clip.light > scene.astype(np.float32) * 0.8).all() and clip.light.min() > 0
+    assert len(set(levels)) == 6
+    with pytest.raises(InputError, match="noise_fraction"):
+        EngineRecipe(noise_fraction=1.5)
+
+
 def test_peaks_lengths_and_families_are_drawn_in_their_ranges():
     recipe = EngineRecipe(height=16, width=16, long=(30, 40), short=(1, 9), short_fraction=0.5,
                           peak=(0.01, 3.0))

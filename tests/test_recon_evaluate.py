@@ -246,9 +246,9 @@ def test_further_metrics_are_the_scores_of_the_scored_frames():
 def test_noise_sensors_get_dark_current_and_their_own_table():
     seen = []
 
-    def recording(config, light, rng, dark_current=None):
-        seen.append(dark_current)
-        return simulate_scene(config, light, seed=rng, dark_current=dark_current)
+    def recording(config, light, rng, noise_sensor=None):
+        seen.append(noise_sensor and noise_sensor.noise.dark_current)
+        return simulate_scene(config, light, seed=rng, sensor=noise_sensor)
 
     light = make_scene("moderate", 12, 24, 24, seed=3)
     configs = paper_configs()
@@ -262,6 +262,33 @@ def test_noise_sensors_get_dark_current_and_their_own_table():
     noise = lines.index(next(x for x in lines if x.startswith("| TE reconstruction | PSNR-μ ↑ (shot noise only)")))
     assert "(dark current eq. 12)" in lines[noise] and "(dark current eq. 13)" in lines[noise]
     assert lines[noise + 2].startswith(f"| TFP_TE | {by_mode['te']:.2f} |")
+
+
+def test_calibrated_rows_win_back_the_dark_current():
+    """A +cal sensor reconstructs the same noise sensor with its calibration: its own row in the
+    noise table, under the uncalibrated row; a custom sensor gets a column named by its options."""
+    from golden.noise import Sensor, SensorNoise
+
+    def simulate(config, light, rng, noise_sensor=None):
+        return simulate_scene(config, light, seed=rng, sensor=noise_sensor)
+
+    light = make_scene("moderate", 12, 24, 24, seed=3)
+    noise_sensors = {"te+hot": Sensor(SensorNoise(dark_current="eq12", dark_level=2.0, dsnu=0.3, prnu=0.05), 1)}
+    evaluation = evaluate([("a", light)], simulate, methods=("tfp",), sensors=("te", "te+hot", "te+hot+cal"),
+                          progress=False, repeats=1, noise_sensors=noise_sensors,
+                          configs=paper_configs() | {"te+hot": SensorConfig()})
+    assert evaluation.noise_sensors == {"te+hot": noise_sensors["te+hot"], "te+hot+cal": noise_sensors["te+hot"]}
+    by_sensor = {r.sensor: r.psnr_mu for r in evaluation.results}
+    lost, won = by_sensor["te"] - by_sensor["te+hot"], by_sensor["te+hot+cal"] - by_sensor["te+hot"]
+    assert lost > 5 and 0.5 * lost < won <= lost + 0.5, by_sensor     # most of the dark current's cost won back
+    lines = table_markdown(evaluation).splitlines()
+    assert lines[0].count("reconstruction") == 1        # the noise sensors sit in the noise table only
+    assert any("(dark_current eq12, dark_level 2, dsnu 0.3, prnu 0.05)" in x for x in lines)
+    assert any(x.startswith(f"| TFP_TE (calibrated) | - | - | {by_sensor['te+hot+cal']:.2f} |") for x in lines)
+    rows = list(csv.DictReader(results_csv(evaluation).splitlines()))
+    assert [r["sensor"] for r in rows] == ["te", "te+hot", "te+hot+cal"]
+    with pytest.raises(InputError, match="'te' is no noise sensor to calibrate"):
+        evaluate([("a", light)], simulate, methods=("tfp",), sensors=("te+cal",), progress=False)
 
 
 def test_complexity_columns_with_the_papers_table10():

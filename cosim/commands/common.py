@@ -21,6 +21,33 @@ def add_light_arguments(parser, *, out_help: str, seed_help: str, no_noise_help:
     parser.add_argument("--dark-current", choices=("none", "eq12", "eq13"), default="none",
                         help="dark current model of the paper's eq. 12 or 13 (default: none)")
     parser.add_argument("--no-noise", action="store_true", help=no_noise_help)
+    parser.add_argument("--noise", metavar="N.json",
+                        help="sensor non-idealities (dark current and level, DSNU, hot pixels, PRNU, comparator "
+                             "offset; docs/simulator.md); default: shot noise only (or --dark-current)")
+    parser.add_argument("--sensor-seed", type=int, default=None,
+                        help="with --noise: the sensor whose per-pixel maps are used (default 0); streams of "
+                             "one sensor seed come from one physical sensor")
+
+
+def sensor_argument(args):
+    """The :class:`golden.noise.Sensor` of ``--noise`` / ``--sensor-seed`` (None without
+    ``--noise``), refused in one line where it clashes with ``--dark-current`` or ``--no-noise``."""
+    from golden.errors import InputError
+    from golden.noise import Sensor, load_noise
+    if args.noise is None:
+        if args.sensor_seed is not None:
+            raise InputError("--sensor-seed needs --noise N.json (the maps it draws are the non-idealities')")
+        return None
+    if args.dark_current != "none":
+        raise InputError(f"--dark-current {args.dark_current} with --noise: give the dark current in "
+                         f"{args.noise} ('dark_current')")
+    noise = load_noise(args.noise)
+    if args.no_noise and not noise.is_ideal:
+        raise InputError(f"--noise {args.noise} describes random non-idealities; it cannot be combined with "
+                         "--no-noise")
+    if args.sensor_seed is not None and args.sensor_seed < 0:
+        raise InputError(f"--sensor-seed {args.sensor_seed}: must be >= 0")
+    return Sensor(noise, 0 if args.sensor_seed is None else args.sensor_seed)
 
 
 #: Most worker processes ``simulate --workers`` accepts.

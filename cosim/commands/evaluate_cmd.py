@@ -6,7 +6,9 @@ leaves it out). ``--table`` is the paper's Tables 1 and 2 whole: its rows (TFI,
 TFP, Spk2ImgNet, BSF, MambaSpike, the network), every metric of the project,
 parameters, FLOPs and run time with its Table 10 beside, sized to finish on the
 built-in held-out set in 15 minutes on 2 cores (:data:`TABLE_DEFAULTS`);
-``--noise`` adds its Tables 6 to 9 (the TE camera with dark current).
+``--noise`` adds its Tables 6 to 9 (the TE camera with dark current),
+``--sensor-noise N.json`` a noise sensor of :mod:`golden.noise` of its own, and
+``--calibrate`` a calibrated row (``<sensor>+cal``) per method for each of them.
 """
 
 #: --table's methods in the paper's row order.
@@ -59,6 +61,14 @@ def add_arguments(parser):
     parser.add_argument("--noise", action="store_true",
                         help="also the paper's Tables 6 to 9: the TE camera with the dark current of eq. 12 and "
                              "of eq. 13")
+    parser.add_argument("--sensor-noise", action="append", default=[], metavar="N.json",
+                        help="add a TE noise sensor described by N.json (golden.noise: dark level, DSNU, hot "
+                             "pixels, PRNU, comparator offset), named by the file's stem, to the noise table")
+    parser.add_argument("--sensor-seed", type=int, default=0,
+                        help="sensor seed of every noise sensor (default 0): its per-pixel maps")
+    parser.add_argument("--calibrate", action="store_true",
+                        help="add a calibrated row per method for every noise sensor (its own dark and flat "
+                             "streams, recon.calibration)")
     parser.add_argument("--metrics", default=None,
                         help="comma-separated further metrics: psnr_pu21, hdr_vqm, fovvideovdp "
                              "(default: none; --table: all)")
@@ -108,12 +118,14 @@ def run(args) -> int:
 
     if args.store or args.workers is not None or args.scheduler:
         for flag, value in (("--table", args.table), ("--noise", args.noise), ("--metrics", args.metrics),
+                            ("--sensor-noise", args.sensor_noise), ("--calibrate", args.calibrate),
                             ("--vdp-frames", args.vdp_frames), ("--threads", args.threads), ("--repeats", args.repeats)):
-            if value not in (None, False):
+            if value not in (None, False, []):          # []: no --sensor-noise given
                 raise InputError(f"{flag} does not apply with --store (a store's streams are scored as they are)")
         from cosim.dataset.evaluate import run_store
         return run_store(args)
-    from recon.evaluate import NOISE_SENSORS
+    from golden.noise import Sensor, load_noise
+    from recon.evaluate import CALIBRATED, NOISE_SENSORS, default_noise_sensors
     from recon.score import KEYS
     defaults = TABLE_DEFAULTS if args.table else DEFAULTS
     frames, height, width, repeats = (default if value is None else value for value, default in
@@ -150,8 +162,21 @@ def run(args) -> int:
         if (config.mode, config.ml_readout) != (kind, readout):
             raise ConfigError(f"{option} {value!r} has mode {config.mode!r}, ml_readout {config.ml_readout!r}; "
                               f"expected mode {kind!r}" + (f", ml_readout {readout!r}" if kind == "ml" else ""))
+    if args.sensor_seed < 0:
+        raise InputError(f"--sensor-seed {args.sensor_seed}: must be >= 0")
+    noise_sensors = {}          # sensor key -> golden.noise.Sensor
     if args.noise:              # the paper's Tables 6 to 9: its TE camera with dark current
-        configs.update({sensor: configs["te"] for sensor in NOISE_SENSORS})
+        noise_sensors.update(default_noise_sensors(args.sensor_seed))
+    for path in args.sensor_noise:
+        key = f"te+{Path(path).stem}"
+        if key in noise_sensors or key in configs or key in NOISE_SENSORS or key.endswith(CALIBRATED):
+            raise InputError(f"--sensor-noise {path}: the sensor name {key!r} is taken; rename the file")
+        noise_sensors[key] = Sensor(load_noise(path), args.sensor_seed)
+    if args.calibrate and not noise_sensors:
+        raise InputError("--calibrate needs a noise sensor: --noise or --sensor-noise N.json")
+    configs.update({sensor: configs["te"] for sensor in noise_sensors})
+    if args.calibrate:
+        configs.update({sensor + CALIBRATED: configs["te"] for sensor in noise_sensors})
     sequences = [] if args.set == "none" else sequence_set(args.set, frames, height, width)
     for path in args.scene:          # memory-mapped: read one slice at a time
         sequences.append((Path(path).stem, load_scene(path, memory_map=True)))
@@ -164,13 +189,13 @@ def run(args) -> int:
         import torch
         torch.set_num_threads(threads)
 
-    def simulate(config, light, rng, dark_current=None):
-        return simulate_scene(config, light, seed=rng, dark_current=dark_current)
+    def simulate(config, light, rng, noise_sensor=None):
+        return simulate_scene(config, light, seed=rng, sensor=noise_sensor)
 
     evaluation = evaluate(sequences, simulate, methods=methods, sensors=tuple(configs), configs=configs,
                           window=args.window, seed=args.seed, device=args.device, progress=progress_wanted(args),
                           repeats=repeats, metrics=metrics, vdp_frames=vdp_frames,
-                          missing="note" if args.table else None)
+                          missing="note" if args.table else None, noise_sensors=noise_sensors)
     if args.table:
         from recon.complexity import measure
         evaluation.complexity = measure(evaluation.methods, configs["te"])

@@ -23,6 +23,9 @@ def add_arguments(parser):
     parser.add_argument("--device", default="cpu", help="torch device (default cpu)")
     parser.add_argument("--search", choices=("stream", "window"), default="stream",
                         help="tfi only: look for the spike interval in the whole stream (default) or the window")
+    parser.add_argument("--calibration", metavar="C.npz",
+                        help="a calibration of the sensor that recorded the stream ('tespike calibrate'): the "
+                             "output is corrected to (x - dark) / gain per pixel (every method)")
     parser.add_argument("--threads", type=int, default=None,
                         help=f"torch CPU threads, 1..{MAX_THREADS} (default: torch's choice)")
 
@@ -49,9 +52,14 @@ def run(args) -> int:
     check_threads_argument(args.threads)
     if args.method != "tfi" and args.search != "stream":
         raise InputError(f"--search applies to method 'tfi' only, not {args.method!r}")
-    check_outputs({"--out": args.out}, {"--stream": args.stream})
+    check_outputs({"--out": args.out}, {"--stream": args.stream, "--calibration": args.calibration})
     words, config = load_stream(args.stream, memory_map=True)     # stays on disk
     K, H, W = words.shape
+    calibration = None
+    if args.calibration is not None:
+        from recon.calibration import check_matches, load_calibration
+        calibration = load_calibration(args.calibration)
+        check_matches(calibration, config, (H, W), f"stream {args.stream}")
     require_room(f"the {K} images of {H} x {W} pixels", disk={args.out: 4 * K * H * W})
     if args.method in LEARNED:
         from recon.learned import load_learned
@@ -70,7 +78,7 @@ def run(args) -> int:
         # reserved first), so neither the words nor the images need to fit in memory
         images = reserved_memmap(tmp, np.float32, (K, H, W))
         reconstruct(words, config, args.method, window=window, device=args.device,
-                    progress=progress_wanted(args), out=images, **options)
+                    progress=progress_wanted(args), out=images, calibration=calibration, **options)
         images.flush()
         del images
     report(args, f"wrote {args.out}: {K} {args.method} images of {H} x {W} pixels")

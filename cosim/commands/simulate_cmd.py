@@ -1,6 +1,6 @@
 """``tespike simulate``: scene light I.npy -> readout stream S.npz, with photon shot noise."""
 
-from .common import MAX_WORKERS, add_light_arguments, check_workers_argument
+from .common import MAX_WORKERS, add_light_arguments, check_workers_argument, sensor_argument
 
 HELP = "simulate the sensor on a light scene I.npy (photon shot noise; fast, exact in distribution)"
 
@@ -28,6 +28,7 @@ def run(args) -> int:
     check_workers_argument(args.workers)                # before the scene is read and scanned
     check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config})
     config = load_config(args.config)
+    sensor = sensor_argument(args)
     scene = load_scene(args.scene, memory_map=True)     # read one readout at a time
     if args.seed is not None and args.seed < 0:
         raise InputError(f"--seed {args.seed}: must be >= 0")
@@ -36,7 +37,7 @@ def run(args) -> int:
     require_room(f"the stream of {K} readouts of {H} x {W} words", memory=size, disk={args.out: size})
     words = simulate_scene(config, scene, seed=args.seed, dark_current=args.dark_current,
                            noise=not args.no_noise, method=args.method,
-                           progress=progress_wanted(args), workers=args.workers)
+                           progress=progress_wanted(args), workers=args.workers, sensor=sensor)
     save_stream(args.out, words, config)
     K, H, W = words.shape
     report(args, f"wrote {args.out}: {K} readouts of {H} x {W} {config.mode.upper()} words")

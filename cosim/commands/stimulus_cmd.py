@@ -1,7 +1,7 @@
 """``tespike stimulus``: scene light I.npy -> per-clock electrons E.npy (SPEC section 6).
 
 The electrons are those ``tespike simulate --method per-clock`` draws with the
-same ``--seed``, ``--dark-current`` and ``--no-noise`` (photon shot noise,
+same ``--seed``, ``--dark-current``, ``--noise``, ``--sensor-seed`` and ``--no-noise`` (photon shot noise,
 Poisson per pixel clock; :func:`golden.fastsim.iter_scene_stimulus`), so
 
     tespike stimulus --seed N ... --out E.npy
@@ -11,14 +11,14 @@ gives the stream ``tespike simulate --method per-clock --seed N`` gives, bit for
 bit, and the law of the default fast ``simulate`` (which draws other random
 numbers per readout interval, hence other words for the same seed).
 ``--crop`` and ``--readouts`` keep a window of pixels and the first readouts:
-the electrons are still drawn for the whole frame, so the window holds exactly
+the electrons (and the sensor maps) are still drawn for the whole frame, so the window holds exactly
 the electrons of those pixels in the full stimulus (what ``tespike demo``
 gives the RTL). E.npy holds
 K * L * H * W values, so the command refuses sizes above ``--max-bytes``;
 it is written one readout interval at a time into a memory-mapped file.
 """
 
-from .common import add_light_arguments
+from .common import add_light_arguments, sensor_argument
 
 HELP = "turn a light scene I.npy into the per-clock electron stimulus E.npy of golden / rtl-sim"
 
@@ -56,6 +56,7 @@ def run(args) -> int:
         raise InputError(f"--seed {args.seed}: must be >= 0")
     if args.no_noise and args.dark_current != "none":
         raise InputError(f"--dark-current {args.dark_current} is random; it cannot be combined with --no-noise")
+    sensor = sensor_argument(args)
     scene = load_scene(args.scene, memory_map=True)
     K, H, W = scene.shape
     rows, cols = slice(0, H), slice(0, W)
@@ -83,7 +84,7 @@ def run(args) -> int:
                          "or simulate it with 'tespike simulate'")
     # the whole scene sets the generator's budget, so the first K readouts are those of the full stimulus
     stream = itertools.islice(iter_scene_stimulus(config, scene, seed=args.seed, dark_current=args.dark_current,
-                                                  noise=not args.no_noise), K)
+                                                  noise=not args.no_noise, sensor=sensor), K)
     if sys.stderr.isatty() and K > 1:
         from tqdm import tqdm
         stream = tqdm(stream, total=K, desc="stimulus", unit="readout", delay=2.0, leave=False)

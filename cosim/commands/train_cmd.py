@@ -54,6 +54,10 @@ def add_arguments(parser):
     parser.add_argument("--peak", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
                         help="the clips' brightest light, drawn log-uniformly in [LOW, HIGH] x the design "
                              "light (default: the engine's 0.01 3)")
+    parser.add_argument("--noise-fraction", type=float, default=None, metavar="P",
+                        help="share of clips recorded by a random noisy sensor (dark current eq. 12/13 at 0.05..6 x, "
+                             "DSNU, hot pixels, PRNU, comparator offset; recon.engine.clips.NOISE_DRAW), whose "
+                             "target is the light the pixels saw (default 0: shot noise only)")
     trainer("--workers", "data-engine processes making clips ahead (0: in this process)", type=int)
     trainer("--pool", "clips a step draws from", type=int)
     trainer("--refresh", "steps between two new clips entering the pool", type=int)
@@ -86,6 +90,8 @@ def run(args) -> int:
     if args.peak is not None:
         from recon.engine.clips import check_peak
         check_peak(args.peak, "--peak {:g} {:g}".format(*args.peak))
+    if args.noise_fraction is not None and not 0 <= args.noise_fraction <= 1:
+        raise InputError(f"--noise-fraction {args.noise_fraction}: must lie in [0, 1]")
     for folder in args.hdr:
         if not Path(folder).is_dir():
             raise InputError(f"--hdr {folder!r}: not a folder of .exr/.hdr frames")
@@ -104,7 +110,8 @@ def run(args) -> int:
     given = {flag: getattr(args, flag) for flag in TRAINER_FLAGS if hasattr(args, flag)}
     options = TrainOptions(sensor=args.config if preset else config.to_json(), ablation=args.ablation,
                            steps=args.steps, minutes=args.minutes, threads=args.threads,
-                           recipe={"folders": tuple(args.hdr), **({"peak": tuple(args.peak)} if args.peak else {})},
+                           recipe={"folders": tuple(args.hdr), **({"peak": tuple(args.peak)} if args.peak else {}),
+                                   **({"noise_fraction": args.noise_fraction} if args.noise_fraction else {})},
                            init=args.init, **given)
     command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     train(options, out, resume=args.resume, progress=progress_wanted(args), command=command)

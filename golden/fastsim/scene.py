@@ -13,13 +13,15 @@ import numpy as np
 
 from ..config import SensorConfig
 from ..io import check_scene, word_dtype
+from ..noise import pixel_noise
 from ..resources import keep_freed_memory
 from .simulator import SceneSimulator, check_method
 from .stripes import check_workers, run_stripes, spawn_generators, stripe_slices
 
 
 def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None,
-                      dark_current: str | None = None, total_pixel_readouts: int | None = None):
+                      dark_current: str | None = None, total_pixel_readouts: int | None = None,
+                      sensor=None):
     """(row slices, one noisy fast :class:`SceneSimulator` per stripe) of an H x W frame.
 
     Stripe i draws from child i of ``seed`` (:func:`spawn_generators`); a single
@@ -27,12 +29,14 @@ def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None
     ``SceneSimulator(rng=seed)``. Pixels are independent given the light, so
     the stripes have the law of one simulator over the frame; each stripe's
     error budget counts ``total_pixel_readouts`` (the whole scene), so the
-    2^-64 bound for the whole stream is unchanged.
+    2^-64 bound for the whole stream is unchanged. ``sensor``'s maps are drawn for
+    the whole frame; each stripe gets its rows of them.
     """
     H, W = shape
     rows = stripe_slices(H, W)
     rngs = [seed] if len(rows) == 1 else spawn_generators(seed, len(rows))
-    return rows, [SceneSimulator(config, (len(range(H)[r]), W), rng=rng, dark_current=dark_current,
+    frame = pixel_noise(dark_current, sensor, (H, W))
+    return rows, [SceneSimulator(config, (len(range(H)[r]), W), rng=rng, pixels=frame.rows(r, W),
                                  total_pixel_readouts=total_pixel_readouts or H * W)
                   for r, rng in zip(rows, rngs)]
 
@@ -40,7 +44,7 @@ def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None
 def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
                    dark_current: str | None = None, noise: bool = True,
                    progress: bool = False, method: str = "fast",
-                   workers: int | None = 1) -> np.ndarray:
+                   workers: int | None = 1, sensor=None) -> np.ndarray:
     """Scene light ``(K, H, W)`` -> readout words ``(K, H, W)`` (smallest word dtype).
 
     ``seed``: int, numpy Generator or ``None`` (fresh entropy). ``method="per-clock"``
@@ -54,6 +58,8 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     the words depend on the seed and the frame's shape, not on ``workers``.
     ``method="per-clock"`` and ``noise=False`` run one :class:`SceneSimulator` in
     this process (the per-clock electrons of :func:`iter_scene_stimulus`).
+    ``sensor``: a :class:`golden.noise.Sensor` (non-idealities with their per-pixel
+    maps from its sensor seed), instead of ``dark_current``.
     """
     scene = check_scene(scene, scan_values=False)       # values: one readout at a time
     K, H, W = scene.shape
@@ -61,11 +67,11 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     keep_freed_memory()                                 # (speed only: see golden.resources)
     if noise and method == "fast":
         rows, sims = stripe_simulators(config, (H, W), seed=seed, dark_current=dark_current,
-                                       total_pixel_readouts=scene.size)
+                                       total_pixel_readouts=scene.size, sensor=sensor)
         return run_stripes(rows, sims, scene, word_dtype(config), workers=workers, progress=progress)
     check_workers(workers, 1)
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
-                         method=method, total_pixel_readouts=scene.size)
+                         method=method, total_pixel_readouts=scene.size, sensor=sensor)
     words = np.empty((K, H, W), word_dtype(config))
     readouts = range(K)
     if progress:
@@ -77,7 +83,7 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
 
 
 def iter_scene_stimulus(config: SensorConfig, scene: np.ndarray, *, seed=None,
-                        dark_current: str | None = None, noise: bool = True):
+                        dark_current: str | None = None, noise: bool = True, sensor=None):
     """Yield the per-clock electrons ``(L, H, W)`` of each readout interval of ``scene``.
 
     The noise model and seed semantics of :func:`simulate_scene`: the electrons
@@ -90,7 +96,7 @@ def iter_scene_stimulus(config: SensorConfig, scene: np.ndarray, *, seed=None,
     scene = check_scene(scene, scan_values=False)
     K, H, W = scene.shape
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
-                         method="per-clock", total_pixel_readouts=scene.size)
+                         method="per-clock", total_pixel_readouts=scene.size, sensor=sensor)
     for k in range(K):
         yield sim.clock_stimulus(check_scene(np.asarray(scene[k:k + 1]))[0])
 

@@ -14,8 +14,8 @@ import numpy as np
 
 from ..config import SensorConfig
 from ..errors import InputError
-from ..light import (as_generator, check_dark_current, dark_electrons, electrons_per_readout,
-                     log_budget)
+from ..light import as_generator, electrons_per_readout, log_budget
+from ..noise import PixelNoise, pixel_noise
 from .clock import clock_chunks, clock_path
 from .head import head_path
 from .interval import bright_path, event_path
@@ -51,11 +51,15 @@ class SceneSimulator:
 
     def __init__(self, config: SensorConfig, shape: tuple[int, int], *, rng=None,
                  dark_current: str | None = None, noise: bool = True,
-                 method: str = "fast", total_pixel_readouts: int | None = None):
+                 method: str = "fast", total_pixel_readouts: int | None = None,
+                 sensor=None, pixels: PixelNoise | None = None):
         check_method(method)
         self.config = config
         self.shape = tuple(shape)
-        self.dark_model = check_dark_current(dark_current)
+        # sensor non-idealities as per-pixel rates (golden.noise): a Sensor, or its
+        # PixelNoise for these pixels (a stripe's share of a frame's maps)
+        self.pixels = pixels if pixels is not None else pixel_noise(dark_current, sensor, self.shape)
+        self.dark_model = self.pixels.dark_model
         if not noise and self.dark_model is not None:
             raise InputError(f"dark current {self.dark_model!r} is random; "
                              "it cannot be combined with noise switched off")
@@ -119,10 +123,9 @@ class SceneSimulator:
     def readout(self, light: np.ndarray) -> np.ndarray:
         """Light of one interval (H, W), checked >= 0 and finite -> words (H, W) int64."""
         L = self.config.clocks_per_readout
-        expected = electrons_per_readout(np.asarray(light).reshape(-1))
+        expected = self.pixels.photo(electrons_per_readout(np.asarray(light).reshape(-1)))
         self.readouts += 1
-        dark = (dark_electrons(self.dark_model, expected.shape, self.rng) if self.dark_model
-                else self.no_dark)
+        dark = self.pixels.dark(expected.size, self.rng) if self.dark_model else self.no_dark
         words = np.zeros(expected.shape, np.int64)
         if not self.noise or self.method == "per-clock":
             clock_path(self, np.arange(expected.size), expected, dark, words)
@@ -170,9 +173,8 @@ class SceneSimulator:
         if self.noise and self.method != "per-clock":
             raise InputError("clock_stimulus needs method='per-clock' (or noise switched off)")
         L = self.config.clocks_per_readout
-        expected = electrons_per_readout(np.asarray(light).reshape(-1))
-        dark = (dark_electrons(self.dark_model, expected.shape, self.rng) if self.dark_model
-                else self.no_dark)
+        expected = self.pixels.photo(electrons_per_readout(np.asarray(light).reshape(-1)))
+        dark = self.pixels.dark(expected.size, self.rng) if self.dark_model else self.no_dark
         out = np.empty((L, expected.size), stimulus_dtype(self.config))
         for part, e in clock_chunks(self, np.arange(expected.size), expected, dark):
             out[:, part] = e

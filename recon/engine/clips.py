@@ -24,6 +24,19 @@ the network sees light in scene units, as at inference. Length: with
 probability ``recipe.short_fraction`` the stream is short (log-uniform in
 ``recipe.short``, down to one readout), else uniform in ``recipe.long``;
 key moments are drawn anywhere in it by :mod:`recon.engine.batches`.
+
+Sensor noise (``recipe.noise_fraction``, 0 by default: shot noise only, the
+clips of every recipe before it): that share of clips is recorded by a sensor
+drawn at random over :data:`NOISE_DRAW` (:func:`draw_sensor`: the paper's eq. 12
+or eq. 13 dark current at 0.05 .. 6 x its level, log-uniform, so from almost
+none to beyond eq. 13; DSNU, hot pixels, PRNU and comparator offset uniform up
+to their bounds; its own sensor seed). The target of such a clip is the light
+its pixels saw, ``gain x I + dark`` (:func:`seen_light`; dark the pixel's mean
+dark rate in scene units), not ``I``: the learned methods are corrected by the
+sensor's calibration at their output (:mod:`recon.calibration`,
+``(x - dark) / gain``), so a network should reproduce what the pixel measured
+and leave the per-pixel correction, which it cannot know from one stream, to the
+calibration (docs/reconstruction.md "Calibration" has the measurements).
 """
 
 from __future__ import annotations
@@ -46,6 +59,11 @@ TRAIN_PANORAMAS = ("city", "forest", "studio", "sunset")
 FAMILIES = ("deadleaves", "panorama", "folder")
 #: Seed domains: training clips and validation clips never share a seed.
 TRAIN_DOMAIN, VALIDATION_DOMAIN = 17, 23
+#: The range noisy clips' sensors are drawn over (:func:`draw_sensor`): dark level x the
+#: model's, log-uniform; the others uniform in [0, high] (golden.noise.SensorNoise fields).
+NOISE_DRAW = {"dark_current": ("eq12", "eq13"), "dark_level": (0.05, 6.0), "dsnu": (0.0, 0.5),
+              "hot_pixels": (0.0, 0.02), "hot_factor": (5.0, 50.0), "prnu": (0.0, 0.05),
+              "comparator_offset": (0.0, 0.05)}
 
 
 def check_peak(peak, name: str) -> None:
@@ -71,6 +89,7 @@ class EngineRecipe:
     folders: tuple[str, ...] = ()            # user .exr/.hdr frame folders (family "folder")
     folder_weight: float = 0.25              # share of folder clips when folders are given
     seed: int = 0
+    noise_fraction: float = 0.0              # share of clips from a random noisy sensor (NOISE_DRAW)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "weights", tuple((str(n), float(w)) for n, w in self.weights))
@@ -92,8 +111,9 @@ class EngineRecipe:
             if not (type(lo) is int and type(hi) is int and 1 <= lo <= hi):
                 raise InputError(f"engine recipe {key} = {(lo, hi)!r}: need integers 1 <= low <= high")
         check_peak(self.peak, f"engine recipe peak = {self.peak!r}")
-        if not 0 <= self.short_fraction <= 1 or not 0 <= self.folder_weight <= 1:
-            raise InputError("engine recipe short_fraction and folder_weight must lie in [0, 1]")
+        if not 0 <= self.short_fraction <= 1 or not 0 <= self.folder_weight <= 1 \
+                or not 0 <= self.noise_fraction <= 1:
+            raise InputError("engine recipe short_fraction, folder_weight and noise_fraction must lie in [0, 1]")
         if sum(w for _, w in self.weights) <= 0 and not self.folders:
             raise InputError("engine recipe: every family weight is 0 and no folder is given")
 
@@ -134,6 +154,7 @@ class Clip:
     words: np.ndarray
     family: str
     index: int
+    sensor: object = None        # the golden.noise.Sensor of a noisy clip (None: shot noise only)
 
 
 def clip_rng(recipe: EngineRecipe, index: int, domain: int = TRAIN_DOMAIN) -> np.random.Generator:
@@ -198,9 +219,37 @@ def clip_light(recipe: EngineRecipe, index: int, *, domain: int = TRAIN_DOMAIN,
     return np.ascontiguousarray(light), family, rng
 
 
+def draw_sensor(rng: np.random.Generator):
+    """A random noisy sensor over :data:`NOISE_DRAW` (a :class:`golden.noise.Sensor`, its own seed)."""
+    from golden.noise import Sensor, SensorNoise
+    d = NOISE_DRAW
+    low, high = d["dark_level"]
+    noise = SensorNoise(dark_current=d["dark_current"][int(rng.integers(len(d["dark_current"])))],
+                        dark_level=math.exp(rng.uniform(math.log(low), math.log(high))),
+                        **{key: float(rng.uniform(*d[key]))
+                           for key in ("dsnu", "hot_pixels", "hot_factor", "prnu", "comparator_offset")})
+    return Sensor(noise, int(rng.integers(1 << 62)))
+
+
+def seen_light(sensor, light: np.ndarray) -> np.ndarray:
+    """The light a sensor's pixels measure, ``gain x I + dark`` (scene units; dark the mean
+    dark rate): the target of a noisy clip (what the calibration then corrects)."""
+    from golden.config import DESIGN_ELECTRONS
+    maps = sensor.maps(light.shape[1:])
+    return light * maps.gain + maps.mean_dark_electrons(sensor.noise) / DESIGN_ELECTRONS
+
+
 def make_clip(recipe: EngineRecipe, config: SensorConfig, index: int, *, domain: int = TRAIN_DOMAIN,
               deadleaves: DeadLeavesParams = DeadLeavesParams()) -> Clip:
-    """Clip ``index`` of the recipe for ``config``: light (float32) and its simulated words."""
+    """Clip ``index`` of the recipe for ``config``: target light (float32) and its simulated words.
+
+    With ``recipe.noise_fraction`` > 0 that share of clips is recorded by a random sensor
+    (:func:`draw_sensor`) and its target is :func:`seen_light`; no random number is drawn for
+    it otherwise, so recipes without noise give the clips they always gave."""
     light, family, rng = clip_light(recipe, index, domain=domain, deadleaves=deadleaves)
-    words = simulate_scene(config, light, seed=rng, workers=1)
-    return Clip(light.astype(np.float32), words, family, index)
+    sensor = None
+    if recipe.noise_fraction > 0 and rng.uniform() < recipe.noise_fraction:
+        sensor = draw_sensor(rng)
+    words = simulate_scene(config, light, seed=rng, workers=1, sensor=sensor)
+    target = light if sensor is None else seen_light(sensor, light)
+    return Clip(target.astype(np.float32), words, family, index, sensor)

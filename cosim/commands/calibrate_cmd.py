@@ -1,0 +1,40 @@
+"""``tespike calibrate``: dark and flat streams of one sensor -> per-pixel dark rate and gain C.npz.
+
+Record the dark stream with no light (``tespike simulate`` on a scene of zeros)
+and the flat stream under uniform light of a known level, below the TE overflow
+level (0.067 for the paper's TE camera; docs/reconstruction.md "Calibration"),
+both with the sensor's ``--noise`` and ``--sensor-seed``; ``--flat-light`` states
+that level. The file format is :mod:`recon.calibration`'s.
+"""
+
+HELP = "estimate a sensor's per-pixel dark rate and gain C.npz from a dark and a flat stream"
+
+
+def add_arguments(parser):
+    parser.add_argument("--dark", required=True, help="D.npz: a stream recorded in the dark")
+    parser.add_argument("--flat", required=True, help="F.npz: a stream of the same sensor under uniform light")
+    parser.add_argument("--flat-light", required=True, type=float,
+                        help="the flat's light, scene units (1 = design light, 42000 e- per readout)")
+    parser.add_argument("--out", required=True, help="C.npz to write: dark and gain maps, config, readouts")
+    parser.add_argument("--quiet", action="store_true", help="print nothing on success")
+
+
+def run(args) -> int:
+    from cosim.console import report
+    from golden.errors import InputError
+    from golden.io import load_stream
+    from golden.paths import check_outputs
+    from recon.calibration import calibration_summary, estimate, save_calibration
+
+    check_outputs({"--out": args.out}, {"--dark": args.dark, "--flat": args.flat})
+    dark, config = load_stream(args.dark, memory_map=True)
+    flat, flat_config = load_stream(args.flat, memory_map=True)
+    if flat_config != config:
+        mine, theirs = config.to_dict(), flat_config.to_dict()
+        key = next(k for k in mine if mine[k] != theirs[k])
+        raise InputError(f"--dark and --flat were recorded with different configurations: "
+                         f"{key} = {mine[key]!r} in {args.dark}, {theirs[key]!r} in {args.flat}")
+    calibration = estimate(dark, flat, config, args.flat_light)
+    save_calibration(args.out, calibration)
+    report(args, f"wrote {args.out}: {calibration_summary(calibration)}")
+    return 0

@@ -1,0 +1,200 @@
+"""Per-pixel dark rate and gain from dark and flat streams, and the correction that uses them.
+
+A camera team calibrates a sensor from two recordings by that sensor: one in
+the dark (the lens capped) and one under uniform light of a known level (a flat
+field). Per pixel, the mean decoded light over K readouts (SPEC section 5's
+decoding, ``estimator="mean-decoded"``) is
+
+    dark   = mean over the dark stream                    (light units per readout)
+    gain   = (mean over the flat stream - dark) / flat_light
+
+and a reconstruction ``x`` of that pixel is corrected to the light
+
+    light  = max(0, (x - dark) / gain)                    (:func:`correct`)
+
+which is exact for any method linear in the decoded light (TFP's windowed mean,
+TFI's count over an interval) and is applied to every method's output in one
+place (:func:`recon.methods.reconstruct`). Light below 0 after subtracting the
+dark rate is noise around darkness and is reported as 0 (the light is never
+negative).
+
+The mean decoded light is an unbiased rate estimate wherever the decoding
+conserves spikes: the TE word without overflow (below ``2^b1`` spikes per
+readout: for the paper's TE camera a flat below 2^4 x 175 / 42000 = 0.067),
+ML counts, and the ML msb word (the remainder is carried) below the counter's
+saturation. Record the flat below that level: :func:`estimate` reports the
+share of overflow words in the flat (TE), where ``alpha / m`` decoding would bias
+the gain. A pixel whose estimated gain is below :data:`MIN_GAIN` (a dead pixel,
+or a flat too dim for the readouts taken) is given :data:`MIN_GAIN` and counted
+in ``floored``.
+
+File ``C.npz`` (``np.savez``): ``dark`` (H, W) float64, light units (1 = 42000
+electrons) per readout; ``gain`` (H, W) float64, relative to the nominal pixel;
+``config``: the JSON text of the full :class:`golden.config.SensorConfig` the
+streams were recorded with; ``dark_readouts``, ``flat_readouts`` (int), ``flat_light``
+(float), ``estimator`` (text), ``floored`` (int), ``overflow_share`` (float), and
+``format`` = :data:`FORMAT`. A calibration applies only to streams of the same
+configuration and frame size (:func:`check_matches`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from golden.config import SensorConfig
+from golden.decode import decode_spikes
+from golden.errors import InputError, TespikeError
+
+#: The estimator written into every calibration file.
+ESTIMATOR = "mean-decoded"
+#: Version tag of the file format.
+FORMAT = "tespike-calibration-1"
+#: Smallest gain a pixel is given (a pixel below it is dead or was not lit enough).
+MIN_GAIN = 0.05
+#: Readouts decoded at once (bounds memory to this many float64 frames).
+CHUNK_READOUTS = 32
+
+
+@dataclasses.dataclass(frozen=True)
+class Calibration:
+    """Per-pixel dark rate and gain of one sensor, for one configuration."""
+
+    dark: np.ndarray            # (H, W) float64, light units per readout
+    gain: np.ndarray            # (H, W) float64
+    config: SensorConfig
+    dark_readouts: int
+    flat_readouts: int
+    flat_light: float
+    estimator: str = ESTIMATOR
+    floored: int = 0
+    overflow_share: float = 0.0
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self.dark.shape)
+
+
+def mean_decoded_light(words, config: SensorConfig) -> np.ndarray:
+    """Per-pixel mean decoded light (scene units) over the readouts of ``words`` (K, H, W)."""
+    K = words.shape[0]
+    total = np.zeros(words.shape[1:])
+    for start in range(0, K, CHUNK_READOUTS):
+        total += decode_spikes(np.asarray(words[start:start + CHUNK_READOUTS]), config).sum(axis=0)
+    return total * (config.spike_light / K)
+
+
+def overflow_share(words, config: SensorConfig) -> float:
+    """Share of TE overflow words in ``words`` (0 for ML)."""
+    if not config.is_te:
+        return 0.0
+    flag = 1 << max(config.b1, config.b2)
+    count = sum(int(np.count_nonzero(np.asarray(words[s:s + CHUNK_READOUTS]) >= flag))
+                for s in range(0, words.shape[0], CHUNK_READOUTS))
+    return count / words.size
+
+
+def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) -> Calibration:
+    """Dark stream (K_d, H, W) and flat stream (K_f, H, W) of one sensor, the flat's light
+    (scene units) -> :class:`Calibration`."""
+    if not (isinstance(flat_light, (int, float)) and not isinstance(flat_light, bool)
+            and np.isfinite(flat_light) and flat_light > 0):
+        raise InputError(f"flat light {flat_light!r}: must be a finite number > 0 (1 = design light)")
+    for what, words in (("dark", dark_words), ("flat", flat_words)):
+        if words.ndim != 3 or min(words.shape) < 1:
+            raise InputError(f"{what} stream shape {words.shape} must be (K, H, W) with K, H, W >= 1")
+    if dark_words.shape[1:] != flat_words.shape[1:]:
+        raise InputError(f"dark stream frames {dark_words.shape[1:]} and flat stream frames "
+                         f"{flat_words.shape[1:]} differ: both must come from the same sensor")
+    dark = mean_decoded_light(dark_words, config)
+    raw_gain = (mean_decoded_light(flat_words, config) - dark) / float(flat_light)
+    floored = int(np.count_nonzero(raw_gain < MIN_GAIN))
+    return Calibration(dark, np.maximum(raw_gain, MIN_GAIN), config, int(dark_words.shape[0]),
+                       int(flat_words.shape[0]), float(flat_light), ESTIMATOR, floored,
+                       overflow_share(flat_words, config))
+
+
+def save_calibration(path: str | Path, calibration: Calibration) -> None:
+    """Write ``C.npz`` (atomically: a temporary file beside it, then renamed)."""
+    from golden.io import atomic_output
+    c = calibration
+    with atomic_output(path) as tmp:
+        with open(tmp, "wb") as handle:
+            np.savez(handle, dark=c.dark, gain=c.gain, config=np.array(c.config.to_json()),
+                     dark_readouts=np.int64(c.dark_readouts), flat_readouts=np.int64(c.flat_readouts),
+                     flat_light=np.float64(c.flat_light), estimator=np.array(c.estimator),
+                     floored=np.int64(c.floored), overflow_share=np.float64(c.overflow_share),
+                     format=np.array(FORMAT))
+
+
+def load_calibration(path: str | Path) -> Calibration:
+    """Read ``C.npz``, or one line naming the file and what is wrong."""
+    from golden.paths import check_input_file
+    shown = str(path)
+    check_input_file(path, "calibration")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            keys = ("dark", "gain", "config", "dark_readouts", "flat_readouts", "flat_light", "estimator",
+                    "floored", "overflow_share", "format")
+            missing = [k for k in keys if k not in npz.files]
+            if missing:
+                raise InputError(f"calibration file {shown!r} lacks {', '.join(missing)} "
+                                 "(write it with 'tespike calibrate')")
+            values = {k: npz[k] for k in keys}
+    except (OSError, ValueError, EOFError) as exc:
+        raise InputError(f"calibration file {shown!r} is not a readable .npz archive: "
+                         f"{' '.join(str(exc).split())[:200]}") from None
+    if str(values["format"]) != FORMAT:
+        raise InputError(f"calibration file {shown!r} has format {str(values['format'])!r}, not {FORMAT!r}")
+    dark, gain = np.asarray(values["dark"], np.float64), np.asarray(values["gain"], np.float64)
+    if dark.ndim != 2 or dark.shape != gain.shape or not (np.isfinite(dark).all() and np.isfinite(gain).all()) \
+            or (gain <= 0).any():
+        raise InputError(f"calibration file {shown!r}: dark and gain must be finite (H, W) maps of one "
+                         "shape, gain > 0")
+    try:
+        config = SensorConfig.from_json(str(values["config"]))
+    except TespikeError as exc:
+        raise InputError(f"calibration file {shown!r}: {exc}") from None
+    return Calibration(dark, gain, config, int(values["dark_readouts"]), int(values["flat_readouts"]),
+                       float(values["flat_light"]), str(values["estimator"]), int(values["floored"]),
+                       float(values["overflow_share"]))
+
+
+def check_matches(calibration: Calibration, config: SensorConfig, shape: tuple[int, int],
+                  what: str = "the stream") -> None:
+    """Refuse, in one line, a calibration made for another configuration or frame size."""
+    if calibration.config != config:
+        mine, theirs = calibration.config.to_dict(), config.to_dict()
+        key = next(k for k in mine if mine[k] != theirs.get(k))
+        raise InputError(f"calibration is for another sensor configuration than {what}: "
+                         f"{key} = {mine[key]!r} there, {theirs.get(key)!r} here")
+    if tuple(shape) != calibration.shape:
+        raise InputError(f"calibration maps are {calibration.shape[0]} x {calibration.shape[1]}, "
+                         f"{what}'s frames {shape[0]} x {shape[1]}")
+
+
+def correct(images: np.ndarray, calibration: Calibration) -> np.ndarray:
+    """Reconstructed light (K, H, W) -> ``max(0, (x - dark) / gain)`` per pixel, in place
+    where ``images`` is a writable float array (a memory-mapped R.npy stays on disk)."""
+    out = images if isinstance(images, np.ndarray) and images.flags.writeable and \
+        images.dtype.kind == "f" else np.array(images, np.float32)
+    dark, inverse = calibration.dark.astype(out.dtype), (1.0 / calibration.gain).astype(out.dtype)
+    for k in range(out.shape[0]):           # one frame at a time: bounded memory
+        frame = out[k]
+        frame -= dark
+        frame *= inverse
+        np.maximum(frame, 0, out=frame)
+    return out
+
+
+def calibration_summary(calibration: Calibration) -> str:
+    """One line: maps, readouts, mean dark (electrons per readout), gain spread, floored pixels."""
+    c = calibration
+    from golden.config import DESIGN_ELECTRONS
+    return (f"{c.shape[0]} x {c.shape[1]} pixels from {c.dark_readouts} dark and {c.flat_readouts} flat "
+            f"readouts (flat light {c.flat_light:g}): dark {DESIGN_ELECTRONS * c.dark.mean():.0f} e-/readout "
+            f"mean ({DESIGN_ELECTRONS * np.median(c.dark):.0f} median), gain {c.gain.mean():.4f} +- "
+            f"{c.gain.std():.4f}, {c.floored} pixels floored at gain {MIN_GAIN}, "
+            f"{100 * c.overflow_share:.2f} % overflow words in the flat")

@@ -1,0 +1,77 @@
+"""Sensor non-idealities (golden.noise): the description, the maps of one sensor, the dark draws."""
+
+import json
+
+import numpy as np
+import pytest
+
+from golden.errors import InputError
+from golden.light import dark_electrons
+from golden.noise import Sensor, SensorNoise, load_noise, model_mean
+
+
+def test_defaults_are_shot_noise_only():
+    noise = SensorNoise()
+    assert noise.is_ideal and not noise.has_maps
+    maps = Sensor(noise, seed=3).maps((4, 5))
+    assert np.array_equal(maps.gain, np.ones((4, 5))) and np.array_equal(maps.dark_scale, np.ones((4, 5)))
+
+
+def test_maps_have_the_stated_statistics():
+    noise = SensorNoise(dark_current="eq12", dsnu=0.3, hot_pixels=0.01, hot_factor=50.0, prnu=0.02)
+    maps = Sensor(noise, seed=1).maps((400, 500))
+    hot = maps.dark_scale > 10
+    assert abs(hot.mean() - 0.01) < 0.002
+    normal = maps.dark_scale[~hot]
+    assert abs(normal.mean() - 1) < 0.01 and abs(normal.std() - 0.3) < 0.01
+    assert abs(maps.gain.mean() - 1) < 0.001 and abs(maps.gain.std() - 0.02) < 0.001
+
+
+def test_comparator_offset_scales_photo_and_dark_alike():
+    noise = SensorNoise(dark_current="eq12", comparator_offset=0.1)
+    maps = Sensor(noise, seed=2).maps((100, 100))
+    assert np.array_equal(maps.gain, maps.dark_scale)
+    assert maps.gain.min() >= 1 / 1.4 and maps.gain.max() <= 1 / 0.6
+    assert abs(np.std(1 / maps.gain) - 0.1) < 0.005
+
+
+def test_sensor_seed_fixes_the_maps_and_each_option_has_its_own():
+    a = SensorNoise(dark_current="eq13", dsnu=0.2, prnu=0.05)
+    b = SensorNoise(dark_current="eq13", dsnu=0.2, prnu=0.05, hot_pixels=0.1)
+    m1, m2, m3 = Sensor(a, 7).maps((30, 30)), Sensor(a, 7).maps((30, 30)), Sensor(a, 8).maps((30, 30))
+    assert np.array_equal(m1.gain, m2.gain) and not np.array_equal(m1.gain, m3.gain)
+    assert np.array_equal(Sensor(b, 7).maps((30, 30)).gain, m1.gain)     # hot pixels leave PRNU alone
+
+
+def test_scaled_dark_draws_and_unscaled_ones():
+    assert np.array_equal(dark_electrons("eq12", (1000,), np.random.default_rng(5)),
+                          dark_electrons("eq12", (1000,), np.random.default_rng(5), scale=None))
+    scaled = dark_electrons("eq12", (200000,), np.random.default_rng(5), scale=np.full(200000, 3.0))
+    assert abs(scaled.mean() - 1200) < 2 and abs(scaled.std() - 150) < 2
+
+
+def test_eq13_mean_agrees_with_monte_carlo(rng):
+    draws = dark_electrons("eq13", (2_000_000,), rng)
+    assert abs(draws.mean() - model_mean("eq13")) < 4 * draws.std() / np.sqrt(draws.size) + 0.5
+    assert model_mean("eq12") == 400.0 and model_mean(None) == 0.0
+
+
+def test_json_round_trip_and_refusals(tmp_path):
+    noise = SensorNoise(dark_current="eq12", dark_level=3, dsnu=0.1)
+    path = tmp_path / "n.json"
+    path.write_text(noise.to_json())
+    assert load_noise(path) == noise
+    for values, words in [({"dark_current": "eq12", "prnu": 0.9}, "prnu"),
+                          ({"dark_current": "eq14"}, "eq14"),
+                          ({"gain": 1}, "unknown key 'gain'"),
+                          ({"dsnu": 0.1}, "need dark_current"),
+                          ({"dark_current": "eq12", "dark_level": float("nan")}, "finite"),
+                          ({"dark_current": "eq12", "hot_factor": True}, "hot_factor")]:
+        path.write_text(json.dumps(values))
+        with pytest.raises(InputError, match=words):
+            load_noise(path)
+    path.write_text("{")
+    with pytest.raises(InputError, match="not readable JSON"):
+        load_noise(path)
+    with pytest.raises(InputError, match="sensor seed"):
+        Sensor(noise, seed=-1)

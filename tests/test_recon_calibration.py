@@ -1,0 +1,111 @@
+"""Calibration (recon.calibration, tespike calibrate, reconstruct --calibration)."""
+
+import numpy as np
+import pytest
+
+from golden.config import DESIGN_ELECTRONS, SensorConfig
+from golden.errors import InputError
+from golden.fastsim import simulate_scene
+from golden.io import save_stream
+from golden.noise import Sensor, SensorNoise
+from recon.calibration import (MIN_GAIN, Calibration, correct, estimate, load_calibration, save_calibration)
+from recon.methods import reconstruct
+from tests.cli import assert_refused, run_tespike
+
+SENSOR = Sensor(SensorNoise(dark_current="eq12", dark_level=2.0, dsnu=0.3, prnu=0.1), seed=3)
+
+
+def _streams(config, readouts, shape=(6, 8), flat_light=0.03, sensor=SENSOR):
+    dark = simulate_scene(config, np.zeros((readouts, *shape)), seed=1, sensor=sensor)
+    flat = simulate_scene(config, np.full((readouts, *shape), flat_light), seed=2, sensor=sensor)
+    return dark, flat
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig.preset("ml-msb")], ids=str)
+def test_estimate_finds_the_maps(config):
+    """Below the TE overflow level the mean decoded light converges on the maps: dark rate
+    within 3 % of its mean, gain within 1.5 % (PRNU here is 10 %)."""
+    dark, flat = _streams(config, 400)
+    c = estimate(dark, flat, config, 0.03)
+    maps = SENSOR.maps((6, 8))
+    truth = maps.mean_dark_electrons(SENSOR.noise) / DESIGN_ELECTRONS
+    assert np.sqrt(np.mean((c.dark / truth - 1) ** 2)) < 0.03
+    assert np.sqrt(np.mean((c.gain / maps.gain - 1) ** 2)) < 0.015
+    assert c.dark_readouts == c.flat_readouts == 400 and c.floored == 0 and c.overflow_share < 0.1
+
+
+def test_correct_inverts_the_pixel_response():
+    config = SensorConfig(mode="ml")
+    c = Calibration(np.full((2, 2), 0.01), np.array([[1.0, 2.0], [0.5, 1.0]]), config, 1, 1, 0.1)
+    light = np.array([[[0.2, 0.3], [0.0, 0.005]]], np.float32)
+    seen = light * c.gain + c.dark
+    assert np.allclose(correct(seen.copy(), c), light, atol=1e-6)
+    below = np.full((1, 2, 2), 0.005, np.float32)         # below the dark rate: no light, not negative
+    assert np.array_equal(correct(below, c), np.zeros((1, 2, 2), np.float32))
+
+
+def test_calibration_wins_back_the_dark_and_the_gain():
+    """TFP on a noisy stream: calibrated, its error against the light is far below uncalibrated."""
+    config = SensorConfig()
+    dark, flat = _streams(config, 200, (16, 16))
+    c = estimate(dark, flat, config, 0.03)
+    light = np.random.default_rng(0).uniform(0.0, 0.05, (1, 16, 16)).repeat(30, axis=0)
+    words = simulate_scene(config, light, seed=5, sensor=SENSOR)
+    raw = reconstruct(words, config, "tfp", window=29)[15]
+    fixed = reconstruct(words, config, "tfp", window=29, calibration=c)[15]
+    assert np.abs(fixed - light[15]).mean() < 0.25 * np.abs(raw - light[15]).mean()
+
+
+def test_refusals_and_floor():
+    config = SensorConfig()
+    dark, flat = _streams(config, 4)
+    with pytest.raises(InputError, match="flat light"):
+        estimate(dark, flat, config, 0.0)
+    with pytest.raises(InputError, match="differ"):
+        estimate(dark, flat[:, :3], config, 0.03)
+    c = estimate(dark, dark, config, 0.03)                  # a "flat" with no light: every gain floored
+    assert c.floored == dark[0].size and (c.gain == MIN_GAIN).all()
+    with pytest.raises(InputError, match="threshold = 175 there, 100 here"):
+        reconstruct(dark, SensorConfig(threshold=100), "tfp", calibration=c)
+    with pytest.raises(InputError, match="6 x 8"):
+        reconstruct(dark[:, :2], config, "tfp", calibration=c)
+
+
+def test_calibrate_command_and_reconstruct_with_it(tmp_path):
+    config = SensorConfig()
+    dark, flat = _streams(config, 40)
+    save_stream(tmp_path / "d.npz", dark, config)
+    save_stream(tmp_path / "f.npz", flat, config)
+    result = run_tespike("calibrate", "--dark", tmp_path / "d.npz", "--flat", tmp_path / "f.npz",
+                         "--flat-light", "0.03", "--out", tmp_path / "c.npz")
+    assert result.returncode == 0 and "6 x 8 pixels from 40 dark and 40 flat" in result.stdout, result.stderr
+    c = load_calibration(tmp_path / "c.npz")
+    expected = estimate(dark, flat, config, 0.03)
+    assert np.array_equal(c.dark, expected.dark) and np.array_equal(c.gain, expected.gain)
+    assert c.config == config and c.estimator == "mean-decoded"
+    result = run_tespike("reconstruct", "--stream", tmp_path / "f.npz", "--method", "tfp",
+                         "--calibration", tmp_path / "c.npz", "--out", tmp_path / "r.npy")
+    assert result.returncode == 0, result.stderr
+    assert np.array_equal(np.load(tmp_path / "r.npy"), reconstruct(flat, config, "tfp", calibration=c))
+    # another configuration's stream, another frame size, a bad file: one line each
+    save_stream(tmp_path / "ml.npz", simulate_scene(SensorConfig(mode="ml"), np.zeros((3, 6, 8)), seed=0),
+                SensorConfig(mode="ml"))
+    assert_refused(run_tespike("reconstruct", "--stream", tmp_path / "ml.npz", "--method", "tfp",
+                               "--calibration", tmp_path / "c.npz", "--out", tmp_path / "r2.npy"),
+                   "another sensor configuration")
+    assert_refused(run_tespike("calibrate", "--dark", tmp_path / "d.npz", "--flat", tmp_path / "ml.npz",
+                               "--flat-light", "0.03", "--out", tmp_path / "c2.npz"), "different configurations")
+    assert_refused(run_tespike("calibrate", "--dark", tmp_path / "d.npz", "--flat", tmp_path / "f.npz",
+                               "--flat-light", "-1", "--out", tmp_path / "c2.npz"), "flat light")
+    (tmp_path / "bad.npz").write_bytes(b"PK no zip")
+    assert_refused(run_tespike("reconstruct", "--stream", tmp_path / "f.npz", "--method", "tfp",
+                               "--calibration", tmp_path / "bad.npz", "--out", tmp_path / "r2.npy"), "bad.npz")
+    assert not (tmp_path / "r2.npy").exists() and not (tmp_path / "c2.npz").exists()
+
+
+def test_file_round_trip(tmp_path):
+    config = SensorConfig()
+    c = estimate(*_streams(config, 8), config, 0.03)
+    save_calibration(tmp_path / "c.npz", c)
+    back = load_calibration(tmp_path / "c.npz")
+    assert np.array_equal(back.gain, c.gain) and back.flat_light == 0.03 and back.overflow_share == c.overflow_share
