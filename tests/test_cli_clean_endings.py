@@ -21,6 +21,14 @@ from tests.test_cli_hardening import TINY, small_tmpfs, snapshot
 EVALUATE = ("evaluate", "--set", "none", "--methods", "tfp", "--repeats", "1", "--ml-count-config", "none")
 
 
+def run_here(capsys, *args):
+    """``tespike ARGS`` in this process (torch imported once): a CompletedProcess-like result."""
+    from cosim.cli import main
+    code = main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return subprocess.CompletedProcess(args, code, captured.out, captured.err)
+
+
 def tiny_scene(folder: Path, frames: int = 10) -> Path:
     path = folder / "sc.npy"
     np.save(path, np.random.default_rng(1).uniform(0.05, 1.0, (frames, 16, 20)))
@@ -28,22 +36,22 @@ def tiny_scene(folder: Path, frames: int = 10) -> Path:
 
 
 # ------------------------------------------------------------------ a results folder is one run's
-def test_evaluate_refuses_a_previous_runs_folder_without_force_and_never_a_foreign_one(tmp_path):
+def test_evaluate_refuses_a_previous_runs_folder_without_force_and_never_a_foreign_one(capsys, tmp_path):
     scene = tiny_scene(tmp_path)
     out = tmp_path / "ev"
-    assert run_tespike(*EVALUATE, "--scene", scene, "--out", out, "--quiet").returncode == 0
+    assert run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--quiet").returncode == 0
     (out / "strips" / "old.png").write_bytes(b"an older run's picture")
     before = snapshot(tmp_path)
-    assert_refused(run_tespike(*EVALUATE, "--scene", scene, "--out", out), "previous run", "--force")
+    assert_refused(run_here(capsys, *EVALUATE, "--scene", scene, "--out", out), "previous run", "--force")
     assert snapshot(tmp_path) == before
-    done = run_tespike(*EVALUATE, "--scene", scene, "--out", out, "--force", "--quiet")
+    done = run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--force", "--quiet")
     assert done.returncode == 0, done.stderr
     assert sorted(os.listdir(out / "strips")) == ["sc.png"]          # the older picture went with its run
     assert not [name for name in os.listdir(tmp_path) if name.endswith(".part")]
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("keep")
     before = snapshot(tmp_path)
-    assert_refused(run_tespike(*EVALUATE, "--scene", scene, "--out", tmp_path / "mine", "--force"),
+    assert_refused(run_here(capsys, *EVALUATE, "--scene", scene, "--out", tmp_path / "mine", "--force"),
                    "'notes.txt'", "new or empty folder")
     assert snapshot(tmp_path) == before
 
@@ -70,15 +78,15 @@ def test_atomic_folder_leaves_the_previous_run_whole_or_the_new_one_whole(tmp_pa
     assert not stale.exists() and (out / "table.md").read_text() == "newer"
 
 
-def test_evaluate_on_a_full_disk_keeps_the_previous_results(tmp_path):
+def test_evaluate_on_a_full_disk_keeps_the_previous_results(capsys, tmp_path):
     scene = tiny_scene(tmp_path)
     with small_tmpfs(tmp_path / "small", "2m") as mount:
         out = mount / "ev"
-        assert run_tespike(*EVALUATE, "--scene", scene, "--out", out, "--quiet").returncode == 0
+        assert run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--quiet").returncode == 0
         free = os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize
         (mount / "filler").write_bytes(b"\0" * (free - 24 * 1024))        # room for the tables, not the pictures
         before = snapshot(mount)
-        result = run_tespike(*EVALUATE, "--scene", scene, "--out", out, "--force")
+        result = run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--force")
         assert_refused(result, str(out), "No space left")
         assert ".part" not in result.stderr
         assert snapshot(mount) == before
@@ -101,14 +109,14 @@ def copy_store(store, folder):
 
 
 @pytest.mark.parametrize("damage", ["chunk", "array zarr.json", "sequence zarr.json"])
-def test_a_damaged_store_file_is_named(tmp_path, store, damage):
+def test_a_damaged_store_file_is_named(capsys, tmp_path, store, damage):
     copy = copy_store(store, tmp_path)
     target = {"chunk": copy / "sun" / "light" / "c" / "0" / "0" / "0",
               "array zarr.json": copy / "sun" / "streams" / "te" / "zarr.json",
               "sequence zarr.json": copy / "sun" / "zarr.json"}[damage]
     with open(target, "r+b") as handle:
         handle.truncate(20)
-    result = run_tespike("evaluate", "--store", copy, "--methods", "tfp", "--out", tmp_path / "ev")
+    result = run_here(capsys, "evaluate", "--store", copy, "--methods", "tfp", "--out", tmp_path / "ev")
     assert_refused(result, repr(str(target)), "is damaged")
     assert not (tmp_path / "ev").exists()
 
