@@ -44,8 +44,10 @@ def test_evaluate_refuses_a_previous_runs_folder_without_force_and_never_a_forei
     before = snapshot(tmp_path)
     assert_refused(run_here(capsys, *EVALUATE, "--scene", scene, "--out", out), "previous run", "--force")
     assert snapshot(tmp_path) == before
-    done = run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--force", "--quiet")
+    done = run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--force")
     assert done.returncode == 0, done.stderr
+    progress = done.stderr.strip().splitlines()          # stderr is not a terminal: one line per step
+    assert progress[0].startswith("evaluate: 1/4 sc ml-msb simulate") and progress[-1].startswith("evaluate: 4/4 "), progress
     assert sorted(os.listdir(out / "strips")) == ["sc.png"]          # the older picture went with its run
     assert not [name for name in os.listdir(tmp_path) if name.endswith(".part")]
     (tmp_path / "mine").mkdir()
