@@ -1,4 +1,7 @@
-"""Hardware cost of the TE, ML-count and ML-msb pixels, synthesized with Yosys; writes docs/hardware-cost.md.
+"""Hardware cost of the TE, ML-count and ML-msb pixels, synthesized with Yosys; writes a report (--out, --docs).
+
+The report goes to out/bench/hardware-cost.md by default; ``--docs`` rewrites the
+page the docs show, docs/hardware-cost.md.
 
 For each configuration the script synthesizes, from the project's own RTL
 (:func:`rtl.verilog.pixel_verilog` / :func:`rtl.verilog.timing_verilog`):

@@ -251,6 +251,9 @@ def load_config(spec: str | Path) -> SensorConfig:
     except OSError as exc:
         raise ConfigError(f"cannot read configuration file {str(path)!r}: {exc.strerror}") from None
     except TespikeError as exc:
+        if not path.exists() and not path.suffix:       # a mistyped preset, not a missing file
+            raise ConfigError(f"configuration {str(spec)!r} is neither a preset ({', '.join(PRESETS)}) "
+                              "nor an existing JSON file") from None
         raise ConfigError(str(exc)) from None
     if len(data) > MAX_CONFIG_BYTES:
         raise ConfigError(f"configuration file {str(path)!r} is {len(data)} bytes; "

@@ -101,30 +101,31 @@ def load_stimulus(path: str | Path, config: SensorConfig) -> np.ndarray:
     return stimulus
 
 
-def check_scene(scene: np.ndarray, *, scan_values: bool = True) -> np.ndarray:
+def check_scene(scene: np.ndarray, *, scan_values: bool = True, what: str = "scene") -> np.ndarray:
     """Refuse a light array that SPEC section 6 does not allow; return it as float64.
 
     ``scan_values=False`` checks only type and shape and returns the array
     unchanged (for a caller that checks and converts it slice by slice).
+    ``what`` names the array in refusals (e.g. ``reference 'I.npy'`` for ``tespike score``).
     """
     if not isinstance(scene, np.ndarray):
-        raise InputError(f"scene must be a numpy array, not {type(scene).__name__}")
+        raise InputError(f"{what} must be a numpy array, not {type(scene).__name__}")
     if scene.dtype.kind != "f":
-        raise InputError(f"scene dtype {scene.dtype} is not a float type (light per readout interval "
+        raise InputError(f"{what} dtype {scene.dtype} is not a float type (light per readout interval "
                          "must be a float array, SPEC section 6; an integer array is refused "
                          "like a float stimulus is)")
     if scene.ndim != 3:
-        raise InputError(f"scene shape {scene.shape} must be (K, H, W)")
+        raise InputError(f"{what} shape {scene.shape} must be (K, H, W)")
     if scene.shape[1] < 1 or scene.shape[2] < 1:
-        raise InputError(f"scene shape {scene.shape}: H and W must be at least 1")
+        raise InputError(f"{what} shape {scene.shape}: H and W must be at least 1")
     if not scan_values:
         return scene
     scene = scene.astype(np.float64, copy=False)
-    scan_light(scene)
+    scan_light(scene, what)
     return scene
 
 
-def scan_light(light: np.ndarray) -> None:
+def scan_light(light: np.ndarray, what: str = "scene") -> None:
     """Refuse a non-finite or negative value of a float light array, in its own
     dtype (nothing converted: two reductions, no temporary; a NaN anywhere makes
     the minimum NaN). The values are those float64 would hold, so the message
@@ -137,25 +138,30 @@ def scan_light(light: np.ndarray) -> None:
     finite = np.isfinite(light)
     if not finite.all():
         bad = np.float64(light[~finite][0])
-        raise InputError(f"scene holds a non-finite light value ({bad}); light must be finite")
-    raise InputError(f"scene holds a negative light value ({float(low)}); light must be >= 0")
+        raise InputError(f"{what} holds a non-finite light value ({bad}); light must be finite")
+    raise InputError(f"{what} holds a negative light value ({float(low)}); light must be >= 0")
 
 
-def load_scene(path: str | Path, *, memory_map: bool = False) -> np.ndarray:
+def load_scene(path: str | Path, *, memory_map: bool = False, what: str | None = None) -> np.ndarray:
     """Read and check ``I.npy`` (light per readout interval, 1.0 = design light).
 
     ``memory_map=True`` leaves the file on disk (read-only memory map, in the
     file's own dtype) and checks the values one slice of readouts at a time,
     so memory stays bounded by the slice; the caller converts what it reads.
+    ``what`` names the file in refusals (default "scene": ``tespike score`` says "reference").
     """
-    scene = check_scene(load_npy(path, "scene", mmap_mode="r"), scan_values=False)
+    name = "scene" if what is None else what
+    scene = load_npy(path, name, mmap_mode="r")
+    name = name if what is None else f"{what} {str(path)!r}"       # values refused naming the file
+    scene = check_scene(scene, scan_values=False, what=name)
     if scene.shape[0] == 0:
-        raise InputError(f"scene file {str(path)!r} has K = 0 readout intervals (nothing to simulate)")
+        raise InputError(f"scene file {str(path)!r} has K = 0 readout intervals (nothing to simulate)"
+                         if what is None else f"{name} has K = 0 frames")
     if not memory_map:
-        return check_scene(np.array(scene))
+        return check_scene(np.array(scene), what=name)
     step = max(1, (1 << 22) // max(1, scene[0].size))
     for start in range(0, scene.shape[0], step):
-        scan_light(np.asarray(scene[start:start + step]))
+        scan_light(np.asarray(scene[start:start + step]), name)
     return scene
 
 

@@ -223,7 +223,7 @@ class Evaluation:
 def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
              methods: Sequence[str] | None = None, sensors: Sequence[str] = SENSORS,
              configs: dict[str, SensorConfig] | None = None, window: int = DEFAULT_WINDOW, seed: int = 0,
-             device: str = "cpu", progress: bool = True, keep: bool = False,
+             device: str = "cpu", progress: bool | str = True, keep: bool = False,
              options: dict[str, dict] | None = None, repeats: int = 3,
              metrics: Sequence[str] = BASIC_METRICS, vdp_frames: int | None = None,
              missing: str | None = None, noise_sensors: dict | None = None) -> Evaluation:
@@ -232,7 +232,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     ``sequences``: (label, light (K, H, W)) pairs; ``methods``: keys of
     :data:`recon.methods.RECON_METHODS` (default all); ``seed`` makes the shot
     noise reproducible (one independent stream per sequence and sensor);
-    ``keep`` keeps every stream and reconstruction in the result (memory!);
+    ``progress``: a bar (True), nothing (False) or ``"lines"`` (one line per step on
+    stderr, for a log file); ``keep`` keeps every stream and reconstruction in the result (memory!);
     ``options`` maps a method to extra keywords of :func:`recon.methods.reconstruct`
     (e.g. ``{"tfi": {"search": "window"}}``); ``repeats``: runs timed per method
     (the median is reported). ``metrics``: keys of :data:`recon.score.KEYS` (PSNR-mu
@@ -310,8 +311,9 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     sizes = {tuple(light.shape[1:]) for _, light in sequences}
     evaluation.frame_size = sizes.pop() if len(sizes) == 1 else None
     warmed: set[tuple[str, str]] = set()
-    bar = tqdm(total=len(sequences) * (len(sensors) * (1 + len(methods)) - len(absent)), desc="evaluate",
-               unit="step", disable=not progress)
+    total = len(sequences) * (len(sensors) * (1 + len(methods)) - len(absent))
+    bar = (ProgressLines(total) if progress == "lines" else
+           tqdm(total=total, desc="evaluate", unit="step", disable=not progress))
     for index, (name, light) in enumerate(sequences):
         light, peak = _checked_sequence(name, light)   # checked slice by slice, never copied whole
         if peak <= 0:
@@ -380,6 +382,26 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
         evaluation.strips[name] = strip
     bar.close()
     return evaluation
+
+
+class ProgressLines:
+    """Progress for a log file (stderr not a terminal): one line per finished step, with
+    the time so far, where a bar would print nothing readable (the tqdm interface used here)."""
+
+    def __init__(self, total: int):
+        self.total, self.done, self.what, self.start = total, 0, "", time.perf_counter()
+
+    def set_postfix_str(self, what: str) -> None:
+        self.what = what
+
+    def update(self) -> None:
+        import sys
+        self.done += 1
+        print(f"evaluate: {self.done}/{self.total} {self.what} done, {time.perf_counter() - self.start:.0f} s",
+              file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        pass
 
 
 def metric_subset(scored: int, count: int | None) -> slice:

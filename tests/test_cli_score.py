@@ -104,9 +104,14 @@ def test_negative_estimate_is_scored_with_a_warning(tmp_path, capsys, rng):
     estimate = reference.copy()
     estimate[0, 0, 0] = -0.5
     r_path, i_path = write_pair(tmp_path, estimate, reference)
-    with pytest.warns(UserWarning, match="1 negative light values"):
-        result, _ = score_json(capsys, r_path, i_path, "--metrics", "psnr_mu")
+    result, _ = score_json(capsys, r_path, i_path, "--metrics", "psnr_mu")
     assert result["per_frame"]["psnr_mu"][1] == "inf" and result["per_frame"]["psnr_mu"][0] != "inf"
+    # one line, naming the file, never Python's two-line warning with its source path
+    done = run_tespike("score", "--reference", i_path, "--estimate", r_path, "--metrics", "psnr_mu")
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 0 and len(lines) == 1, done.stderr
+    assert lines[0].startswith("tespike score: warning: estimate") and str(r_path) in lines[0]
+    assert "1 negative light values" in lines[0] and ".py:" not in lines[0]
 
 
 def test_refusals(tmp_path, rng):
@@ -123,9 +128,9 @@ def test_refusals(tmp_path, rng):
     bad[2, 3, 4] = np.nan
     np.save(tmp_path / "nan.npy", bad)
     refused("estimate", "non-finite", estimate_path=tmp_path / "nan.npy")
-    refused("non-finite", reference_path=tmp_path / "nan.npy")
+    refused("reference", "non-finite", reference_path=tmp_path / "nan.npy")
     np.save(tmp_path / "neg.npy", reference - 0.5)
-    refused("negative", reference_path=tmp_path / "neg.npy")
+    refused("reference", str(tmp_path / "neg.npy"), "negative", reference_path=tmp_path / "neg.npy")
     np.save(tmp_path / "zero.npy", np.zeros_like(reference))
     refused("all zero", reference_path=tmp_path / "zero.npy")
     zero_frame = reference.copy()

@@ -79,6 +79,8 @@ def test_bad_json_and_missing_file(tmp_path):
         load_config(tmp_path / "bad.json")
     with pytest.raises(ConfigError, match="missing.json.*does not exist"):
         load_config(tmp_path / "missing.json")
+    with pytest.raises(ConfigError, match=r"'ml_msb' is neither a preset \(te, ml, ml-msb\)"):
+        load_config("ml_msb")                       # a mistyped preset names the presets
     (tmp_path / "list.json").write_text("[1]")
     with pytest.raises(ConfigError, match="JSON object"):
         load_config(tmp_path / "list.json")

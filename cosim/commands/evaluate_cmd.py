@@ -13,9 +13,13 @@ built-in held-out set in 15 minutes on 2 cores (:data:`TABLE_DEFAULTS`);
 
 #: --table's methods in the paper's row order.
 TABLE_METHODS = ("tfi", "tfp", "spk2imgnet", "bsf", "mambaspike", "net")
+#: The default run's methods: the training-free ones and the paper's network, so the default
+#: evaluation takes minutes on 2 cores (each learned baseline adds about 40 CPU seconds per
+#: sequence and sensor at 24 x 96 x 128: --methods or --table name them).
+DEFAULT_METHODS = ("tfp", "tfi", "net")
 #: Defaults of the built-in sequences' size and of the timing: (frames, height, width, repeats);
 #: --table's are cut to its time budget (docs/evaluation.md).
-DEFAULTS = (24, 96, 128, 3)
+DEFAULTS = (24, 96, 128, 1)
 TABLE_DEFAULTS = (70, 64, 96, 1)      # 70 frames: 10 scored where the learned methods' 61 readouts fit
 #: --table's torch threads: on a shared machine two threads spin against the load (a 64 x 96 frame of
 #: the network took 2.6 s with 2 threads against 0.04 s with 1 at load 10 on 2 cores).
@@ -54,7 +58,8 @@ def add_arguments(parser):
                         help=f"columns of built-in sequences (default {DEFAULTS[2]}; --table {TABLE_DEFAULTS[2]})")
     parser.add_argument("--methods", default=None,
                         help="comma-separated reconstruction methods: tfp, tfi, spk2imgnet, bsf, mambaspike, net "
-                             "(default: every method; a learned one without weights is noted, not run)")
+                             f"(default {','.join(DEFAULT_METHODS)}: a few minutes on 2 cores; a learned one "
+                             "without weights for a sensor is noted, not run)")
     parser.add_argument("--table", action="store_true",
                         help="the paper's Tables 1 and 2 whole: rows TFI, TFP, Spk2ImgNet, BSF, MambaSpike, net; "
                              "every metric; parameters, FLOPs, run time and the paper's Table 10 beside")
@@ -138,7 +143,7 @@ def run(args) -> int:
     vdp_frames = TABLE_VDP_FRAMES if args.table and args.vdp_frames is None else args.vdp_frames
     if vdp_frames is not None and vdp_frames < 1:
         raise InputError(f"--vdp-frames {vdp_frames}: must be an integer >= 1")
-    methods = list(TABLE_METHODS) if args.table else None
+    methods = list(TABLE_METHODS) if args.table else None       # None: DEFAULT_METHODS, noted if missing
     if args.methods is not None:
         methods = [m.strip() for m in args.methods.split(",") if m.strip()]
         if not methods:
@@ -192,10 +197,12 @@ def run(args) -> int:
     def simulate(config, light, rng, noise_sensor=None):
         return simulate_scene(config, light, seed=rng, sensor=noise_sensor)
 
-    evaluation = evaluate(sequences, simulate, methods=methods, sensors=tuple(configs), configs=configs,
-                          window=args.window, seed=args.seed, device=args.device, progress=progress_wanted(args),
-                          repeats=repeats, metrics=metrics, vdp_frames=vdp_frames,
-                          missing="note" if args.table else None, noise_sensors=noise_sensors)
+    progress = progress_wanted(args) or ("lines" if args.progress == "auto" and not args.quiet else False)
+    evaluation = evaluate(sequences, simulate, methods=list(DEFAULT_METHODS) if methods is None else methods,
+                          sensors=tuple(configs), configs=configs, window=args.window, seed=args.seed,
+                          device=args.device, progress=progress, repeats=repeats, metrics=metrics,
+                          vdp_frames=vdp_frames, missing="note" if args.table or methods is None else None,
+                          noise_sensors=noise_sensors)
     if args.table:
         from recon.complexity import measure
         evaluation.complexity = measure(evaluation.methods, configs["te"])

@@ -9,7 +9,7 @@ mismatched shapes, a negative or all-zero reference (or an all-zero reference
 frame when PSNR-mu or SSIM-mu, which divide each frame by its peak, are asked
 for), a bad ``--frames`` or ``--metrics``.
 Negative estimated light is scored (every metric treats it as no light) with a
-warning on stderr.
+one-line warning on stderr.
 """
 
 #: Values of the estimate checked at once (float64: 32 MB).
@@ -76,7 +76,7 @@ def _json_number(value: float):
 
 def run(args) -> int:
     import json
-    import warnings
+    import sys
 
     import numpy as np
 
@@ -85,7 +85,7 @@ def run(args) -> int:
     from recon.score import score
 
     metrics = tuple(m.strip() for m in args.metrics.split(",") if m.strip())
-    reference = load_scene(args.reference, memory_map=True)
+    reference = load_scene(args.reference, memory_map=True, what="reference")
     estimate = load_estimate(args.estimate)
     if estimate.shape != reference.shape:
         raise InputError(f"estimate shape {estimate.shape} != reference shape {reference.shape}")
@@ -111,9 +111,9 @@ def run(args) -> int:
     if not peak > 0:
         raise InputError(f"the reference is all zero in frames {frames.start}:{frames.stop}: "
                          "it has no peak to normalise by")
-    if negative:
-        warnings.warn(f"estimate holds {negative} negative light values (lowest {lowest:g}); "
-                      "every metric scores them as no light", stacklevel=1)
+    if negative:              # one line, as a refusal is (Python's warning adds its source line)
+        print(f"tespike score: warning: estimate {str(args.estimate)!r} holds {negative} negative light values "
+              f"(lowest {lowest:g}); every metric scores them as no light", file=sys.stderr)
     result = score(est, ref, metrics=metrics)
     keys = [c.key for c in result.columns]
     if args.json:

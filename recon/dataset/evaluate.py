@@ -36,7 +36,7 @@ import numpy as np
 from golden.config import SensorConfig
 from golden.errors import InputError
 
-from .store import DatasetStore, open_array, tiles
+from .store import DatasetStore, open_array, reading, tiles
 
 #: Largest frame (rows, cols) scored whole by one task; larger frames are tiled.
 EVAL_TILE = (256, 256)
@@ -69,11 +69,14 @@ def score_whole(url: str, sequence: str, sensor: str, method: str, window: int, 
     from recon.metrics import psnr_mu, ssim_mu
 
     stream = open_array(url, f"{sequence}/streams/{sensor}")
-    config = SensorConfig.from_json(stream.attrs["config"])
+    with reading(url, f"{sequence}/streams/{sensor}"):
+        config = SensorConfig.from_json(stream.attrs["config"])
+        words = stream[...]
     with _one_thread():
-        images = reconstruct(stream[...], config, method, window=window, device=device, **options)
+        images = reconstruct(words, config, method, window=window, device=device, **options)
         scored = slice(*frames)
-        truth = open_array(url, f"{sequence}/light")[scored]
+        with reading(url, f"{sequence}/light"):
+            truth = open_array(url, f"{sequence}/light")[scored]
         pred = images[scored]
         return {"psnr": psnr_mu(pred, truth, peak=peak), "ssim": ssim_mu(pred, truth, peak=peak),
                 "strip": images[middle]}
@@ -90,7 +93,8 @@ def score_tile(url: str, sequence: str, sensor: str, method: str, window: int, d
     from recon.metrics import mu_law, normalise, ssim_map
 
     stream = open_array(url, f"{sequence}/streams/{sensor}")
-    config = SensorConfig.from_json(stream.attrs["config"])
+    with reading(url, f"{sequence}/streams/{sensor}"):
+        config = SensorConfig.from_json(stream.attrs["config"])
     K, H, W = stream.shape
     h = _halo()
     r0, r1, c0, c1 = rows.start, rows.stop, cols.start, cols.stop
@@ -102,12 +106,14 @@ def score_tile(url: str, sequence: str, sensor: str, method: str, window: int, d
     light = open_array(url, f"{sequence}/light")
     sse, ssum = [], []
     with _one_thread():
-        images = reconstruct(stream[:, R0:R1, C0:C1], config, method, window=window, device=device,
-                             **options)
+        with reading(url, f"{sequence}/streams/{sensor}"):
+            words = stream[:, R0:R1, C0:C1]
+        images = reconstruct(words, config, method, window=window, device=device, **options)
         for start in range(frames[0], frames[1], METRIC_FRAMES):
             stop = min(frames[1], start + METRIC_FRAMES)
             pred = torch.as_tensor(images[start:stop], dtype=torch.float64)
-            truth = torch.as_tensor(light[start:stop, R0:R1, C0:C1], dtype=torch.float64)
+            with reading(url, f"{sequence}/light"):
+                truth = torch.as_tensor(light[start:stop, R0:R1, C0:C1], dtype=torch.float64)
             p, g = normalise(pred, truth, peak)
             tp, tg = mu_law(p), mu_law(g)
             sse.append(((tp - tg) ** 2)[core].sum(dim=(1, 2)).numpy())
@@ -208,7 +214,9 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     evaluation = Evaluation([], methods, tuple(store.configs), window)
     for sequence in sequences:
         H, W, peak, middle, span = plan[sequence]
-        strip = {"gt": np.asarray(store.array(sequence, "light")[middle]), "peak": peak, "frame": middle}
+        with reading(store.url, f"{sequence}/light"):
+            gt = np.asarray(store.array(sequence, "light")[middle])
+        strip = {"gt": gt, "peak": peak, "frame": middle}
         for sensor in store.configs:
             for method in methods:
                 parts = by_cell[sequence, sensor, method]

@@ -33,9 +33,12 @@ evaluation and the training read the store through it.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import re
+from pathlib import Path
+
 import numpy as np
 
 from golden.config import SensorConfig
@@ -203,14 +206,27 @@ class DatasetStore:
     # -- reading --------------------------------------------------------------
     def sequences(self, *, complete: bool = True) -> list[str]:
         """Sequence names, sorted; only complete ones unless ``complete=False``."""
-        names = sorted(self.group.group_keys())
-        return [n for n in names if not complete or self.group[n].attrs.get("complete", False)]
+        try:
+            names = sorted(self.group.group_keys())
+        except _DAMAGE:                   # listing reads every sequence's zarr.json: name the bad one
+            folders = sorted(p.name for p in Path(self.url).iterdir() if p.is_dir()) if Path(self.url).is_dir() else []
+            for child in folders:
+                with reading(self.url, child):
+                    self.group[child]
+            raise
+        done = []
+        for name in names:
+            with reading(self.url, name):
+                if not complete or self.group[name].attrs.get("complete", False):
+                    done.append(name)
+        return done
 
     def info(self, sequence: str) -> dict:
         """Attributes of one sequence (source, frames, height, width, peak, scale, complete)."""
         if sequence not in self.group:
             raise InputError(f"dataset store {self.url!r} has no sequence {sequence!r}")
-        return self.group[sequence].attrs.asdict()
+        with reading(self.url, sequence):
+            return self.group[sequence].attrs.asdict()
 
     def light(self, sequence: str):
         """The ground-truth light of one sequence as a lazy dask array (K, H, W) float32."""
@@ -227,13 +243,68 @@ class DatasetStore:
 
     def array(self, sequence: str, part: str):
         """The Zarr array ``light`` or ``streams/<config>`` of one sequence (for tasks)."""
-        return self.group[f"{sequence}/{part}"]
+        with reading(self.url, f"{sequence}/{part}"):
+            return self.group[f"{sequence}/{part}"]
 
 
 def open_array(url: str, path: str, mode: str = "r"):
     """One Zarr array of a store, opened in a task (workers open by URL, not by object)."""
     import zarr
-    return zarr.open_array(str(url), path=path, mode=mode)
+    with reading(url, path):
+        return zarr.open_array(str(url), path=path, mode=mode)
+
+
+#: What a damaged store file raises while Zarr reads it: truncated JSON (ValueError), a chunk
+#: that does not decompress (RuntimeError "error during blosc decompression"), odd metadata.
+_DAMAGE = (ValueError, RuntimeError, KeyError, TypeError, EOFError)
+
+
+@contextlib.contextmanager
+def reading(url: str, path: str = ""):
+    """Read node ``path`` of a store; a damaged file of it (a truncated ``zarr.json`` or chunk)
+    becomes one :class:`InputError` naming that file and the cause, not Zarr's traceback."""
+    try:
+        yield
+    except InputError:
+        raise
+    except _DAMAGE as exc:
+        where = damaged_file(str(url), path)
+        if where is None:
+            raise
+        cause = " ".join(str(exc).split())[:160] or type(exc).__name__
+        raise InputError(f"dataset store file {where!r} is damaged ({cause}); remove its sequence's "
+                         "folder and run tespike dataset again to rebuild it") from None
+
+
+def damaged_file(url: str, path: str = "") -> str | None:
+    """The first file of a local store that cannot be read along ``path``: a ``zarr.json``
+    (the root's, then each level's) that is not JSON, or a chunk of the array at ``path``
+    that does not decode; None if every one reads (or the store is not a local folder)."""
+    root = Path(url)
+    if not root.is_dir():
+        return None
+    parts = [part for part in path.split("/") if part]
+    for depth in range(len(parts) + 1):
+        meta = root.joinpath(*parts[:depth], "zarr.json")
+        try:
+            json.loads(meta.read_bytes())
+        except FileNotFoundError:
+            continue
+        except (OSError, ValueError):
+            return str(meta)
+    try:
+        import itertools
+
+        import zarr
+        array = zarr.open_array(str(root), path=path, mode="r")
+        for index in itertools.product(*(range(n) for n in array.cdata_shape)):
+            try:
+                array.blocks[index]
+            except _DAMAGE:
+                return str(root.joinpath(*parts, array.metadata.encode_chunk_key(index)))
+    except _DAMAGE:
+        return None
+    return None
 
 
 def mark_complete(url: str, path: str, **attrs) -> None:

@@ -1,0 +1,181 @@
+"""Every fault of a long command ends cleanly (issue 28, item 6): one line naming the file and
+the cause, a non-zero exit, no traceback, no process left behind, no results folder mixing
+two runs. (The classes of issue 12 are in test_cli_hardening.py, whose helpers these use.)
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from golden.errors import InputError
+from tests.cli import ROOT, assert_refused, run_tespike
+from tests.test_cli_hardening import TINY, small_tmpfs, snapshot
+
+EVALUATE = ("evaluate", "--set", "none", "--methods", "tfp", "--repeats", "1", "--ml-count-config", "none")
+
+
+def run_here(capsys, *args):
+    """``tespike ARGS`` in this process (torch imported once): a CompletedProcess-like result."""
+    from cosim.cli import main
+    code = main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return subprocess.CompletedProcess(args, code, captured.out, captured.err)
+
+
+def tiny_scene(folder: Path, frames: int = 10) -> Path:
+    path = folder / "sc.npy"
+    np.save(path, np.random.default_rng(1).uniform(0.05, 1.0, (frames, 16, 20)))
+    return path
+
+
+# ------------------------------------------------------------------ a results folder is one run's
+def test_evaluate_refuses_a_previous_runs_folder_without_force_and_never_a_foreign_one(capsys, tmp_path):
+    scene = tiny_scene(tmp_path)
+    out = tmp_path / "ev"
+    assert run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--quiet").returncode == 0
+    (out / "strips" / "old.png").write_bytes(b"an older run's picture")
+    before = snapshot(tmp_path)
+    assert_refused(run_here(capsys, *EVALUATE, "--scene", scene, "--out", out), "previous run", "--force")
+    assert snapshot(tmp_path) == before
+    done = run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--force")
+    assert done.returncode == 0, done.stderr
+    progress = done.stderr.strip().splitlines()          # stderr is not a terminal: one line per step
+    assert progress[0].startswith("evaluate: 1/4 sc ml-msb simulate") and progress[-1].startswith("evaluate: 4/4 "), progress
+    assert sorted(os.listdir(out / "strips")) == ["sc.png"]          # the older picture went with its run
+    assert not [name for name in os.listdir(tmp_path) if name.endswith(".part")]
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("keep")
+    before = snapshot(tmp_path)
+    assert_refused(run_here(capsys, *EVALUATE, "--scene", scene, "--out", tmp_path / "mine", "--force"),
+                   "'notes.txt'", "new or empty folder")
+    assert snapshot(tmp_path) == before
+
+
+def test_atomic_folder_leaves_the_previous_run_whole_or_the_new_one_whole(tmp_path):
+    from golden.atomic import atomic_folder
+    out = tmp_path / "ev"
+    (out / "strips").mkdir(parents=True)
+    (out / "table.md").write_text("old")
+    (out / "strips" / "a.png").write_text("old picture")
+    before = snapshot(tmp_path)
+    with pytest.raises(InputError, match=r"cannot write '.*ev/table\.csv': No space left on device"):
+        with atomic_folder(out) as folder:
+            (folder / "table.md").write_text("new")
+            raise OSError(28, os.strerror(28), str(folder / "table.csv"))
+    assert snapshot(tmp_path) == before                                # failing: untouched, no temporary
+    with atomic_folder(out) as folder:
+        (folder / "table.md").write_text("new")
+    assert snapshot(tmp_path) == {"ev": before["ev"], "ev/table.md": (before["ev/table.md"][0], b"new")}
+    stale = tmp_path / ".ev.999999999.abcdefgh.part"                  # left by a killed run
+    stale.mkdir()
+    with atomic_folder(out) as folder:
+        (folder / "table.md").write_text("newer")
+    assert not stale.exists() and (out / "table.md").read_text() == "newer"
+
+
+def test_evaluate_on_a_full_disk_keeps_the_previous_results(capsys, tmp_path):
+    scene = tiny_scene(tmp_path)
+    with small_tmpfs(tmp_path / "small", "2m") as mount:
+        out = mount / "ev"
+        assert run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--quiet").returncode == 0
+        free = os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize
+        (mount / "filler").write_bytes(b"\0" * (free - 24 * 1024))        # room for the tables, not the pictures
+        before = snapshot(mount)
+        result = run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--force")
+        assert_refused(result, str(out), "No space left")
+        assert ".part" not in result.stderr
+        assert snapshot(mount) == before
+
+
+# ------------------------------------------------------------------ a store's evaluation
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("store")
+    done = run_tespike("dataset", "--scene", "sun", "--frames", 10, "--height", 16, "--width", 20,
+                       "--config", "te", "--out", folder / "s.zarr", "--quiet")
+    assert done.returncode == 0, done.stderr
+    return folder / "s.zarr"
+
+
+def copy_store(store, folder):
+    import shutil
+    shutil.copytree(store, folder / "s.zarr")
+    return folder / "s.zarr"
+
+
+@pytest.mark.parametrize("damage", ["chunk", "array zarr.json", "sequence zarr.json"])
+def test_a_damaged_store_file_is_named(capsys, tmp_path, store, damage):
+    copy = copy_store(store, tmp_path)
+    target = {"chunk": copy / "sun" / "light" / "c" / "0" / "0" / "0",
+              "array zarr.json": copy / "sun" / "streams" / "te" / "zarr.json",
+              "sequence zarr.json": copy / "sun" / "zarr.json"}[damage]
+    with open(target, "r+b") as handle:
+        handle.truncate(20)
+    result = run_here(capsys, "evaluate", "--store", copy, "--methods", "tfp", "--out", tmp_path / "ev")
+    assert_refused(result, repr(str(target)), "is damaged")
+    assert not (tmp_path / "ev").exists()
+
+
+def descendants(pid: int) -> set[int]:
+    """Every process below ``pid`` (children, their children, ...)."""
+    listing = subprocess.run(["ps", "-eo", "pid=,ppid="], capture_output=True, text=True).stdout
+    children: dict[int, list[int]] = {}
+    for line in listing.splitlines():
+        child, parent = map(int, line.split())
+        children.setdefault(parent, []).append(child)
+    found, todo = set(), [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            found.add(child)
+            todo.append(child)
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_ctrl_c_during_a_store_evaluation_on_workers_is_one_line_and_leaves_no_process(tmp_path, store):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    process = subprocess.Popen([sys.executable, "-m", "cosim", "evaluate", "--store", str(store), "--workers", "2",
+                                "--methods", "tfp,tfi", "--out", str(tmp_path / "ev")], env=env, text=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    first = process.stdout.readline()                  # printed once the cluster is up
+    assert "local cluster of 2 worker processes" in first, first
+    time.sleep(1.0)
+    started = descendants(process.pid)                 # the cluster's process and its workers
+    assert len(started) >= 3, started
+    os.killpg(process.pid, signal.SIGINT)              # as a terminal's Ctrl-C: the whole group
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stderr
+    assert stderr.strip().splitlines() == ["tespike evaluate: interrupted"], stderr
+    end = time.monotonic() + 30
+    while any(alive(pid) for pid in started) and time.monotonic() < end:
+        time.sleep(0.2)
+    assert not [pid for pid in started if alive(pid)]
+    assert not (tmp_path / "ev").exists()
+
+
+# ------------------------------------------------------------------ rtl-sim's two files
+def test_rtl_sim_names_the_vcd_when_its_disk_is_full(tmp_path):
+    (tmp_path / "c.json").write_text(json.dumps({"b1": 1, "b2": 1, "threshold": 3, "acc_bits": 3}))
+    np.save(tmp_path / "long.npy", np.full((TINY.clocks_per_readout * 4000, 2, 2), 3, np.uint8))
+    (tmp_path / "other").mkdir()
+    with small_tmpfs(tmp_path / "small", "200k") as mount:
+        result = run_tespike("rtl-sim", "--config", tmp_path / "c.json", "--stimulus", tmp_path / "long.npy",
+                             "--out", tmp_path / "w.npz", "--vcd", mount / "W.vcd", "--gtkw",
+                             tmp_path / "other" / "W.gtkw")
+        assert_refused(result, str(mount / "W.vcd"), "No space left")
+        assert "W.gtkw" not in result.stderr
+        assert os.listdir(mount) == [] and os.listdir(tmp_path / "other") == []
