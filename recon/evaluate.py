@@ -189,7 +189,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
              methods: Sequence[str] | None = None, modes: Sequence[str] = MODES,
              configs: dict[str, SensorConfig] | None = None, window: int = 9, seed: int = 0,
              device: str = "cpu", progress: bool = True, keep: bool = False,
-             options: dict[str, dict] | None = None, repeats: int = 3,
+             options: dict[str, dict] | None = None, weights: dict[tuple[str, str], str] | None = None,
+             repeats: int = 3,
              metrics: Sequence[str] = BASIC_METRICS, vdp_frames: int | None = None,
              missing: str | None = None) -> Evaluation:
     """Simulate every sequence in every mode, reconstruct with every method, score.
@@ -199,8 +200,9 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     noise reproducible (one independent stream per sequence and mode);
     ``keep`` keeps every stream and reconstruction in the result (memory!);
     ``options`` maps a method to extra keywords of :func:`recon.methods.reconstruct`
-    (e.g. ``{"tfi": {"search": "window"}}``); ``repeats``: runs timed per method
-    (the median is reported). ``metrics``: keys of :data:`recon.score.KEYS` (PSNR-mu
+    (e.g. ``{"tfi": {"search": "window"}}``); ``weights``: (method, mode) -> the
+    learned method's weights file there (:func:`recon.learned.weights_by_sensor`; else
+    the shipped ones); ``repeats``: runs timed per method (the median is reported). ``metrics``: keys of :data:`recon.score.KEYS` (PSNR-mu
     and SSIM-mu are always computed); ``vdp_frames``: compute FovVideoVDP on the
     middle this many scored frames only (None: all). A mode of
     :data:`NOISE_MODES` is simulated with ``simulate(..., dark_current=model)``.
@@ -239,7 +241,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     absent = {}
     for mode in modes:
         for method in methods:
-            reason = missing_weights(method, configs[mode])
+            reason = missing_weights(method, configs[mode], (weights or {}).get((method, mode)))
             if reason is not None and missing == "refuse":
                 raise InputError(reason)
             if reason is not None:
@@ -292,7 +294,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
                 if (method, mode) in absent:
                     continue
                 bar.set_postfix_str(f"{name} {label(method, mode)}")
-                kwargs = (options or {}).get(method, {})
+                kwargs = {**(options or {}).get(method, {}),
+                          **({"weights": weights[method, mode]} if (method, mode) in (weights or {}) else {})}
                 if (mode, method) not in warmed:      # one-time costs (tables, torch) are not timed
                     reconstruct(words[:window, :4, :4], config, method, window=window, device=device, **kwargs)
                     warmed.add((mode, method))

@@ -280,7 +280,7 @@ def test_with_a_learned_method_frames_are_scored_where_its_span_fits(empty_weigh
     import torch
 
     from recon.learned import method_classes
-    from recon.net.train import save_weights
+    from recon.learning.weights import save_weights
     torch.manual_seed(0)
     module, sizes = method_classes("spk2imgnet")
     save_weights(empty_weights_dir / "spk2imgnet-te.pt", module(sizes.preset("cpu")).eval(), SensorConfig(), {},

@@ -48,6 +48,9 @@ def add_arguments(parser):
     parser.add_argument("--methods", default=None,
                         help="comma-separated reconstruction methods: tfp, tfi, spk2imgnet, bsf, mambaspike, net "
                              "(default: every method; a learned one without weights is noted, not run)")
+    parser.add_argument("--weights", action="append", default=[], metavar="W.pt",
+                        help="a learned method's weights file ('tespike train --out W.pt') used instead of the "
+                             "shipped ones for the sensor it was trained for (repeatable; not with --store)")
     parser.add_argument("--table", action="store_true",
                         help="the paper's Tables 1 and 2 whole: rows TFI, TFP, Spk2ImgNet, BSF, MambaSpike, net; "
                              "every metric; parameters, FLOPs, run time and the paper's Table 10 beside")
@@ -101,6 +104,9 @@ def run(args) -> int:
                             ("--vdp-frames", args.vdp_frames), ("--threads", args.threads), ("--repeats", args.repeats)):
             if value not in (None, False):
                 raise InputError(f"{flag} does not apply with --store (a store's streams are scored as they are)")
+        if args.weights:
+            raise InputError("--weights does not apply with --store (its tasks use the shipped weights); "
+                             "evaluate without --store to use your own")
         from cosim.dataset.evaluate import run_store
         return run_store(args)
     from recon.evaluate import NOISE_MODES
@@ -143,6 +149,8 @@ def run(args) -> int:
                               f"expected mode {kind!r}" + (f", ml_readout {readout!r}" if kind == "ml" else ""))
     if args.noise:              # the paper's Tables 6 to 9: its TE camera with dark current
         configs.update({mode: configs["te"] for mode in NOISE_MODES})
+    from recon.learned import weights_by_sensor
+    weights = weights_by_sensor(args.weights, configs)
     sequences = [] if args.set == "none" else sequence_set(args.set, frames, height, width)
     for path in args.scene:          # memory-mapped: read one slice at a time
         sequences.append((Path(path).stem, load_scene(path, memory_map=True)))
@@ -160,6 +168,7 @@ def run(args) -> int:
 
     evaluation = evaluate(sequences, simulate, methods=methods, modes=tuple(configs), configs=configs,
                           window=args.window, seed=args.seed, device=args.device, progress=progress_wanted(args),
+                          weights=weights,
                           repeats=repeats, metrics=metrics, vdp_frames=vdp_frames,
                           missing="note" if args.table else None)
     if args.table:
