@@ -10,7 +10,12 @@ the metrics. Every ``validate_every`` steps the model is scored on the held-out
 validation set (:mod:`recon.engine.validation`); the weights kept are the best
 on it. A run stops at a step or wall-time budget, writes a CSV log, a PNG of
 the loss and validation curves and a checkpoint every ``checkpoint_seconds``,
-and resumes exactly (the same draws as an uninterrupted run).
+and resumes exactly (the same draws as an uninterrupted run; its logs are cut back
+to the checkpoint's step). Faults end in one line naming the file: files are
+written whole or not at all (a full disk named, not torch's internal error), a
+truncated ``--init`` or checkpoint is named with its cause, the weights go to
+``out`` before anything else at the end (a run folder removed meanwhile loses
+none), and an interrupted run keeps its steps in a checkpoint (:func:`train`).
 """
 
 from __future__ import annotations
