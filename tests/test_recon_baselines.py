@@ -72,6 +72,10 @@ def test_sizes_presets_and_round_trip(name):
         sizes_cls(channels=0)
     with pytest.raises(InputError, match="max_offset"):
         sizes_cls(max_offset=-1.0)
+    if "substreams" in sizes_cls.__dataclass_fields__:       # weights written before the rename still load
+        former = {"windows" if k == "substreams" else "step" if k == "stride" else k: v
+                  for k, v in sizes_cls(substreams=3, stride=20).to_dict().items()}
+        assert sizes_cls.from_dict(former) == sizes_cls(substreams=3, stride=20)
     with pytest.raises(dataclasses.FrozenInstanceError):
         sizes_cls().channels = 3
 
