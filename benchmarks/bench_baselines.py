@@ -33,7 +33,7 @@ from torch.utils.flop_counter import FlopCounterMode  # noqa: E402
 
 from recon.baselines import BASELINES  # noqa: E402
 from recon.learned import receptive_radius  # noqa: E402
-from recon.baselines.common import parameter_count  # noqa: E402
+from recon.learning.layers import parameter_count  # noqa: E402
 from recon.net.model import TESpikeNet  # noqa: E402
 from recon.net.sizes import NetSizes  # noqa: E402
 
@@ -54,16 +54,16 @@ def flops(method: str, size: str) -> int:
     model = build(method, size).to("meta")
     counter = FlopCounterMode(display=False)
     with torch.no_grad(), counter:
-        model(torch.empty(1, model.sizes.span, HEIGHT, WIDTH, device="meta"))
+        model(torch.empty(1, model.sizes.span, HEIGHT, WIDTH, device="meta"), None, 1.0)   # any one-spike light
     return counter.get_total_flops()
 
 
 def seconds(model: torch.nn.Module, height: int, width: int, threads: int, min_run_time: float) -> float:
     light = torch.rand(1, model.sizes.span, height, width)
-    timer = benchmark.Timer(stmt="model(light)", globals={"model": model, "light": light}, num_threads=threads,
+    timer = benchmark.Timer(stmt="model(light, None, 1.0)", globals={"model": model, "light": light}, num_threads=threads,
                             setup="torch.set_num_threads(%d)" % threads)
     with torch.inference_mode():
-        model(light)                                    # warm-up, untimed
+        model(light, None, 1.0)                         # warm-up, untimed
         return timer.blocked_autorange(min_run_time=min_run_time).median
 
 

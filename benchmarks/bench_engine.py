@@ -28,7 +28,7 @@ from golden.config import SensorConfig  # noqa: E402
 from recon.engine.batches import ClipPool, draw_batch  # noqa: E402
 from recon.engine.clips import EngineRecipe, make_clip  # noqa: E402
 from recon.learned import method_classes  # noqa: E402
-from recon.net.train import training_loss  # noqa: E402
+from recon.train import training_loss  # noqa: E402
 
 
 def main() -> None:

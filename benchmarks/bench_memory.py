@@ -10,7 +10,7 @@ disk, memory-mapped; the work is done in blocks).
 Run from the repository root: ``python3 benchmarks/bench_memory.py [--sizes 8,32,128] [--out DIR]``
 (sizes in millions of readout words; DIR defaults to a temporary folder).
 
-``--learned``: instead, the learned methods' tiled inference (``recon.net.infer.frame``,
+``--learned``: instead, the learned methods' tiled inference (``recon.learning.infer.frame``,
 one key moment): for each frame size (``--frames 384x512,1024x1024,384x4096``) and tile
 (``--tiles none,auto``: the whole frame, the default core of two derived
 margins; or core sides in pixels), a fresh process decodes and reconstructs one
@@ -60,8 +60,8 @@ def learned_child(method: str, height: int, width: int, tile: str, threads: int,
     import torch
 
     from golden.config import SensorConfig
-    from recon.learned import method_classes
-    from recon.net.infer import blocks, frame, load_weights, tile_margin, weights_path
+    from recon.learned import load_weights, method_classes, weights_path
+    from recon.learning.infer import blocks, frame, tile_margin
 
     torch.set_num_threads(threads)
     config = SensorConfig(mode="te")
@@ -73,7 +73,7 @@ def learned_child(method: str, height: int, width: int, tile: str, threads: int,
         model = model_cls(sizes_cls.preset("cpu")).eval().to(memory_format=torch.channels_last)
     words = np.random.default_rng(0).integers(0, 16, size=(1, height, width)).astype(np.uint8)
     chosen = None if tile == "none" else "auto" if tile == "auto" else int(tile)
-    boxes = blocks(height, width, model.sizes, chosen)
+    boxes = blocks(height, width, model, chosen)
     block = max(len(b.rows) * len(b.cols) for b in boxes)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     start = time.perf_counter()
@@ -83,7 +83,7 @@ def learned_child(method: str, height: int, width: int, tile: str, threads: int,
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     np.save(out, image.numpy())
     print(json.dumps({"before": before / 1024, "peak": peak / 1024, "seconds": seconds, "tiles": len(boxes),
-                      "block": block, "margin": tile_margin(model.sizes)}))
+                      "block": block, "margin": tile_margin(model)}))
 
 
 def learned_table(args) -> int:

@@ -42,10 +42,12 @@ from golden.fastsim import simulate_scene  # noqa: E402
 from recon.methods import reconstruct  # noqa: E402
 from recon.metrics import psnr_mu  # noqa: E402
 from recon.learned import WEIGHTS_DIR  # noqa: E402
-from recon.net.infer import load_weights, reconstruct_model  # noqa: E402
+from recon.learned import load_weights  # noqa: E402
+from recon.learning.infer import reconstruct_model  # noqa: E402
 from recon.scenes import normalise_sequence, scene_rng  # noqa: E402
 from recon.scenes.panorama import panorama_sequence  # noqa: E402
-from recon.net.model import TESpikeNet, parameter_count  # noqa: E402
+from recon.learning.layers import parameter_count  # noqa: E402
+from recon.net.model import TESpikeNet  # noqa: E402
 from recon.net.sizes import NetSizes  # noqa: E402
 
 SENSORS = (("TE", "te"), ("ML-msb", "ml-msb"), ("ML-count", "ml"))
@@ -147,7 +149,7 @@ def validation(args) -> None:
 
 
 def candidates(args) -> None:
-    """What the shared output head chooses among (recon/net/head.py), alone, on the validation set.
+    """What the shared output head chooses among (recon/learning/head.py), alone, on the validation set.
 
     Every estimate as the head sees it (the 61-readout span of each key moment,
     stream ends padded as inference pads them), its initial blend, and the
@@ -157,7 +159,7 @@ def candidates(args) -> None:
     """
     from recon.engine.validation import validation_set
     from recon.metrics import mu_law
-    from recon.net.head import BlendHead, RADII, key_estimates
+    from recon.learning.head import BlendHead, RADII, key_estimates
     from recon.stream import decode_light, key_span, span_inside
     names = [f"mean {2 * r + 1}" for r in RADII] + ["tfi"]
     span = NetSizes().span
@@ -197,16 +199,16 @@ def complexity(args) -> None:
         with torch.inference_mode():
             counter = FlopCounterMode(display=False)
             with counter:
-                model(torch.rand(1, sizes.span, 192, 256))
+                model(torch.rand(1, sizes.span, 192, 256), None, 1.0)
             flops = 4 * counter.get_total_flops()
             light = torch.rand(1, sizes.span, 384, 512)
             for threads in args.threads:
                 torch.set_num_threads(threads)
                 repeats = args.repeat if name == "cpu" else 1
-                seconds = median_seconds(lambda: model(light), repeats, warm_up=True)[0]
+                seconds = median_seconds(lambda: model(light, None, 1.0), repeats, warm_up=True)[0]
                 print(f"| {name} | {parameter_count(model):,} | {flops / 1e9:.1f} | {threads} | {seconds:.2f} |",
                       flush=True)
-    from recon.net.deform import deform_conv2d
+    from recon.learning.deform import deform_conv2d
     torch.set_num_threads(max(args.threads))
     x = torch.rand(4, 16, 96, 128)
     weight = torch.rand(16, 16, 3, 3)

@@ -154,6 +154,12 @@ def _one_line(exc: BaseException, limit: int = 300) -> str:
     return text if len(text) <= limit else text[:limit] + "..."
 
 
+def _notes(exc: BaseException) -> str:
+    """What the interrupted command noted on the exception (e.g. the checkpoint it saved), one line."""
+    notes = getattr(exc, "__notes__", ())
+    return " " + _one_line("; ".join(notes)) if notes else ""
+
+
 def main(argv: list[str] | None = None) -> int:
     whole_process = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -203,12 +209,12 @@ def _run(args) -> tuple[int, bool]:
             print(f"{prefix}: error: out of memory ({_one_line(exc, 160)})", file=sys.stderr)
             return 1, False
         raise
-    except KeyboardInterrupt:
-        print(f"{prefix}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        print(f"{prefix}: interrupted{_notes(exc)}", file=sys.stderr)
         return 130, False
     except Terminated as exc:
         import signal
-        print(f"{prefix}: terminated by {signal.Signals(exc.signum).name}", file=sys.stderr)
+        print(f"{prefix}: terminated by {signal.Signals(exc.signum).name}{_notes(exc)}", file=sys.stderr)
         return 128 + exc.signum, False
 
 

@@ -165,7 +165,7 @@ def check_options(out, *, frames, height, width, seed, crop, rtl_readouts, backe
 
 
 def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, crop, rtl_readouts,
-                 vcd: bool) -> None:
+               vcd: bool, weights=None) -> None:
     """Refuse up front (one line) a demo whose arrays do not fit in memory or whose files do not
     fit on the disk of ``out``: a lower bound of each, from the sizes the options give."""
     from cosim.room import require_room as require
@@ -177,7 +177,7 @@ def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, 
     te = configs[RTL_SENSOR]
     values = frames * height * width
     word_bytes = sum(word_dtype(config).itemsize for config in configs.values())
-    methods = available_methods(configs.values())
+    methods = available_methods(configs.values(), weights)
     images = 4 * len(methods) * len(configs) * values            # R_*.npy, float32, kept for the report
     crop_clocks = rtl_readouts * te.clocks_per_readout * crop * crop
     disk = (4 * values + word_bytes * values + images + stimulus_dtype(te).itemsize * crop_clocks
@@ -191,18 +191,20 @@ def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, 
 def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed: int = 0,
              crop: int | None = None, rtl_readouts: int | None = None,
              backend: str = "amaranth", repeats: int = 3, window: int = 9, hw_cost: bool = True,
-             sensors=tuple(SENSORS), quiet: bool = False, bars: bool | None = None) -> int:
+             sensors=tuple(SENSORS), quiet: bool = False, bars: bool | None = None, weights=()) -> int:
     """Run every stage into folder ``out``; 0 if the RTL stream is bit-identical to golden, else 1.
 
     ``crop`` / ``rtl_readouts``: None for :data:`DEFAULT_CROP` / :data:`DEFAULT_RTL_READOUTS`
     within the frame and the scene. Every option and the room the outputs need are checked
     before anything is printed or written. ``quiet``: no stage lines and no table; ``bars``:
-    progress bars within the stages (default: when not quiet and stderr is a terminal).
+    progress bars within the stages (default: when not quiet and stderr is a terminal); ``weights``:
+    learned methods' weights files to use instead of the shipped ones for the sensor each was trained for.
     """
     from golden.config import load_config
     from golden.fastsim import iter_scene_stimulus, simulate_scene
     from golden.io import save_images, save_stream
     from golden.sensor import PixelArray, simulate
+    from recon.learned import weights_by_sensor
     from recon.pictures import write_text
     from recon.scenes import make_scene
 
@@ -216,10 +218,12 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                                        rtl_readouts=rtl_readouts, backend=backend, repeats=repeats,
                                        window=window, sensors=sensors)
     configs = {label: load_config(SENSORS[label]) for label in sensors}
+    chosen = weights_by_sensor(weights, configs)                        # (method, sensor) -> file
+    ready = {(method, configs[sensor]): path for (method, sensor), path in chosen.items()}
     te = configs[RTL_SENSOR]
     L = te.clocks_per_readout
     check_room(out, configs, frames=frames, height=height, width=width, crop=crop,
-               rtl_readouts=rtl_readouts, vcd=backend == "amaranth")
+               rtl_readouts=rtl_readouts, vcd=backend == "amaranth", weights=ready)
     out = Path(out)
     out.mkdir(exist_ok=True)
     progress = Progress(6, quiet)
@@ -303,11 +307,11 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     from recon.report import write_outputs
     from recon.methods import RECON_METHODS, available_methods, reconstruct
     from recon.metrics import psnr_mu, ssim_mu
-    methods = available_methods(configs.values())     # learned ones only where weights are shipped
+    methods = available_methods(configs.values(), ready)     # learned ones only where there are weights
     by_config = {configs[name]: streams[name] for name in configs}
     evaluation = evaluate([("default", light)], lambda config, scene, rng: by_config[config],
                           methods=methods, sensors=tuple(configs), configs=configs, window=window, seed=seed,
-                          progress=bars, keep=True, repeats=repeats)
+                          progress=bars, keep=True, repeats=repeats, weights=chosen)
     paths = write_outputs(evaluation, out)
     for (_, mode, method), images in evaluation.images.items():
         save_images(out / f"R_{method}_{mode}.npy", images)
@@ -317,7 +321,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     rtl_rows, rtl_images, golden_images = [], {}, {}
     middle = (scored.start + scored.stop - 1) // 2
     for method in methods:
-        seconds, images = median_seconds(lambda: reconstruct(rtl_words, te, method, window=window), repeats)
+        seconds, images = median_seconds(lambda: reconstruct(rtl_words, te, method, window=window,
+                                                                  weights=chosen.get((method, RTL_SENSOR))), repeats)
         save_images(out / f"R_{method}_rtl.npy", images)
         full = evaluation.images["default", RTL_SENSOR, method][:rtl_readouts, y:y + crop, x:x + crop]
         rtl_images[method], golden_images[method] = images[middle], full[middle]

@@ -18,6 +18,8 @@ import dataclasses
 
 import torch
 
+from .learning.layers import parameter_count
+
 #: Frame the FLOPs are counted on (the project's benchmark frame; Table 10 states none).
 FLOP_HEIGHT, FLOP_WIDTH = 384, 512
 #: Frame counted on instead (then scaled) by a module the meta device cannot run.
@@ -42,10 +44,6 @@ def paper_table10() -> dict[str, PaperCost]:
     return {m: PaperCost(parameters[m], flops[m], seconds[m]) for m in flops}
 
 
-def parameter_count(model: torch.nn.Module) -> int:
-    return sum(p.numel() for p in model.parameters() if p.requires_grad)
-
-
 def flops_per_frame(model: torch.nn.Module, height: int = FLOP_HEIGHT, width: int = FLOP_WIDTH) -> int:
     """FLOPs of one (height x width) output frame of a learned module (its span of readouts in)."""
     import copy
@@ -56,12 +54,12 @@ def flops_per_frame(model: torch.nn.Module, height: int = FLOP_HEIGHT, width: in
     try:
         meta = copy.deepcopy(model).to("meta")
         with torch.no_grad(), counter:
-            meta(torch.empty(1, span, height, width, device="meta"))
+            meta(torch.empty(1, span, height, width, device="meta"), None, 1.0)   # any one-spike light
         return int(counter.get_total_flops())
     except (NotImplementedError, RuntimeError):
         counter = FlopCounterMode(display=False)
         with torch.no_grad(), counter:
-            model(torch.rand(1, span, SMALL_HEIGHT, SMALL_WIDTH))
+            model(torch.rand(1, span, SMALL_HEIGHT, SMALL_WIDTH), None, 1.0)
         return int(round(counter.get_total_flops() * height * width / (SMALL_HEIGHT * SMALL_WIDTH)))
 
 

@@ -224,7 +224,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
              methods: Sequence[str] | None = None, sensors: Sequence[str] = SENSORS,
              configs: dict[str, SensorConfig] | None = None, window: int = DEFAULT_WINDOW, seed: int = 0,
              device: str = "cpu", progress: bool | str = True, keep: bool = False,
-             options: dict[str, dict] | None = None, repeats: int = 3,
+             options: dict[str, dict] | None = None, weights: dict[tuple[str, str], str] | None = None,
+             repeats: int = 3,
              metrics: Sequence[str] = BASIC_METRICS, vdp_frames: int | None = None,
              missing: str | None = None, noise_sensors: dict | None = None) -> Evaluation:
     """Simulate every sequence in every sensor, reconstruct with every method, score.
@@ -235,8 +236,9 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     ``progress``: a bar (True), nothing (False) or ``"lines"`` (one line per step on
     stderr, for a log file); ``keep`` keeps every stream and reconstruction in the result (memory!);
     ``options`` maps a method to extra keywords of :func:`recon.methods.reconstruct`
-    (e.g. ``{"tfi": {"search": "window"}}``); ``repeats``: runs timed per method
-    (the median is reported). ``metrics``: keys of :data:`recon.score.KEYS` (PSNR-mu
+    (e.g. ``{"tfi": {"search": "window"}}``); ``weights``: (method, sensor) -> the
+    learned method's weights file there (:func:`recon.learned.weights_by_sensor`; else
+    the shipped ones); ``repeats``: runs timed per method (the median is reported). ``metrics``: keys of :data:`recon.score.KEYS` (PSNR-mu
     and SSIM-mu are always computed); ``vdp_frames``: compute FovVideoVDP on the
     middle this many scored frames only (None: all). A sensor key of ``noise_sensors``
     (key -> :class:`golden.noise.Sensor`, over :func:`default_noise_sensors`: the
@@ -285,7 +287,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     absent = {}
     for sensor in sensors:
         for method in methods:
-            reason = missing_weights(method, configs[sensor])
+            reason = missing_weights(method, configs[sensor], (weights or {}).get((method, sensor)))
             if reason is not None and missing == "refuse":
                 raise InputError(reason)
             if reason is not None:
@@ -351,7 +353,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
                 if (method, sensor) in absent:
                     continue
                 bar.set_postfix_str(f"{name} {label(method, sensor)}")
-                kwargs = (options or {}).get(method, {})
+                kwargs = {**(options or {}).get(method, {}),
+                          **({"weights": weights[method, sensor]} if (method, sensor) in (weights or {}) else {})}
                 if (sensor, method) not in warmed:      # one-time costs (tables, torch) are not timed
                     reconstruct(words[:window, :4, :4], config, method, window=window, device=device, **kwargs)
                     warmed.add((sensor, method))

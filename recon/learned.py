@@ -1,18 +1,22 @@
-"""Every learned reconstruction method: name -> (module class, sizes class), and its shipped weights.
+"""Every learned reconstruction method: name -> (module class, sizes class), and its weights.
 
 A learned method's module takes (N, span, H, W) light decoded by golden's one
 decoder (scene units, key moment in the middle, H and W multiples of
-``sizes.pyramid_factor``) and returns (N, 1, H, W) light at the key moment;
-its sizes dataclass has ``preset(name)``, ``to_dict``/``from_dict``, ``span``
-and ``pyramid_factor``. One trainer (:mod:`recon.net.train`), one data engine
-(:mod:`recon.engine`) and one tiled inference (:mod:`recon.net.infer`) serve
-them all. Each module reports how far its output pixels reach
-(:func:`receptive_radius`, derived from its sub-modules by :mod:`recon.reach`).
+``sizes.pyramid_factor``), the readouts of the span that lie in the stream and
+the sensor's one-spike light, and returns (N, 1, H, W) light at the key moment;
+its sizes dataclass is a :class:`recon.learning.sizes.SizesMixin` with
+``span`` and ``pyramid_factor``. The machinery they share (output head,
+alignment, deformable convolution, mu-law, weights file, tiled inference) is
+:mod:`recon.learning`; one trainer (:mod:`recon.train`) and one data engine
+(:mod:`recon.engine`) serve them all. Each module reports how far its output
+pixels reach (:func:`receptive_radius`, derived by :mod:`recon.reach`).
 
 Shipped weights live in :data:`WEIGHTS_DIR`, one file per method and sensor
 preset: ``<preset>.pt`` for the project's network (``net``), ``<method>-<preset>.pt``
-for a baseline (e.g. ``bsf-te.pt``). :func:`weights_path` finds them and refuses,
-in one line naming the file and the command that trains it, where there are none.
+for a baseline (e.g. ``bsf-te.pt``). :func:`load_learned` takes them, or a file
+the user names (``--weights``), and refuses in one line a file of another
+method or sensor, or a configuration no weights were shipped for (naming the
+command that trains them).
 Importing this module does not import torch (command lines check names quickly).
 """
 
@@ -26,8 +30,8 @@ from golden.errors import InputError
 
 #: Names of the learned methods in the paper's row order: its learned baselines, then the network.
 LEARNED = ("spk2imgnet", "bsf", "mambaspike", "net")
-#: The folder of the shipped weights (beside the network's code).
-WEIGHTS_DIR = Path(__file__).resolve().parent / "net" / "weights"
+#: The folder of the shipped weights.
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 
 
 def learned_methods() -> dict[str, tuple[type, type]]:
@@ -44,22 +48,13 @@ def method_classes(name: str) -> tuple[type, type]:
     return methods[name]
 
 
-@functools.lru_cache(maxsize=64)
 def receptive_radius(sizes) -> int:
-    """Frame pixels an output pixel of the learned method of ``sizes`` can reach (an upper bound).
-
-    Derived from the module built from ``sizes`` (on the meta device: no memory,
-    no weights) by :func:`recon.reach.receptive_radius`, so any change of a kernel,
-    a level, an offset bound or a window shows in it.
-    """
-    import torch
-
-    from .reach import receptive_radius as derived
+    """Frame pixels an output pixel of the learned method of ``sizes`` can reach (an upper bound;
+    :func:`recon.learning.infer.module_radius`)."""
+    from .learning.infer import module_radius
     for model_cls, sizes_cls in learned_methods().values():
         if type(sizes) is sizes_cls:
-            with torch.device("meta"):
-                model = model_cls(sizes)
-            return derived(model)
+            return module_radius(model_cls, sizes)
     raise InputError(f"{type(sizes).__name__} is the sizes of no learned method")
 
 
@@ -88,49 +83,79 @@ def weights_path(config: SensorConfig, method: str = "net") -> Path:
     preset = preset_of(config)
     if preset is None:
         raise InputError(f"the stream's configuration {config} is none of the presets {', '.join(PRESETS)} "
-                         f"that {method} weights are shipped for (train weights for it with "
-                         f"'tespike train --method {method} --config C.json --out W.pt')")
+                         f"that {method} weights are shipped for: train weights for it with "
+                         f"'tespike train --method {method} --config C.json --out W.pt' and pass --weights W.pt")
     path = WEIGHTS_DIR / weights_name(method, preset)
     if not path.is_file():
         raise InputError(f"no {method} weights for the {preset} camera: {str(path)!r} is missing (train them "
-                         f"with 'tespike train --method {method} --config {preset} --minutes M --out {path}')")
+                         f"with 'tespike train --method {method} --config {preset} --minutes M --out W.pt' "
+                         f"and pass --weights W.pt)")
     return path
 
 
-def load_learned(config: SensorConfig, method: str):
-    """The shipped ``method`` module for ``config``, in eval mode; refused in one line where its
-    weights are missing, hold another method or were trained for another configuration."""
-    path = weights_path(config, method)
-    model, trained_for, _ = load_weights(path)
+def load_learned(config: SensorConfig, method: str, weights: str | Path | None = None):
+    """The ``method`` module for streams of ``config``, in eval mode: from the file ``weights``, or the
+    shipped one (None); refused in one line where the file is missing or unreadable, holds another
+    method or was trained for another configuration."""
+    path = weights_path(config, method) if weights is None else Path(weights)
+    what = "weights" if weights is None else "--weights"
+    model, trained_for, _ = load_weights(path, what)
     wanted = method_classes(method)[0]
     if type(model) is not wanted:
-        raise InputError(f"weights {str(path)!r} hold a {type(model).__name__}, not {method}'s {wanted.__name__}")
+        raise InputError(f"{what} {str(path)!r} hold a {type(model).__name__}, not {method}'s {wanted.__name__}")
     if trained_for != config:
-        raise InputError(f"{method} weights {str(path)!r} were trained for {trained_for}, the stream is {config}")
+        raise InputError(f"{method} {what} {str(path)!r} were trained for {trained_for}, the stream is {config}")
     return model
 
 
 @functools.lru_cache(maxsize=8)
-def _load_cached(path: str, mtime: float):
+def _load_cached(path: str, mtime: float, what: str):
     import torch
-    payload = torch.load(path, map_location="cpu", weights_only=True)
-    module, sizes_class = method_classes(payload.get("method", "net"))
-    model = module(sizes_class.from_dict(payload["sizes"]))
-    model.load_state_dict(payload["state_dict"])
+
+    from .learning.weights import read_weights
+    payload = read_weights(path, what)
+    try:
+        module, sizes_class = method_classes(payload["method"])
+        model = module(sizes_class.from_dict(payload["sizes"]))
+    except InputError as exc:
+        raise InputError(f"{what} {path!r}: {exc}") from None
+    try:
+        model.load_state_dict(payload["state_dict"])
+    except (RuntimeError, TypeError, AttributeError) as exc:
+        raise InputError(f"{what} {path!r} do not fit a {payload['method']} module "
+                         f"({str(exc).splitlines()[0][:100]})") from None
     model.eval().to(memory_format=torch.channels_last)
-    return model, SensorConfig.from_dict(payload["config"]), payload.get("meta", {})
+    return model, payload["config"], payload["meta"]
 
 
-def load_weights(path: str | Path):
-    """(model in eval mode, the sensor configuration it was trained for, how it was made) of any learned method."""
-    import pickle
-    import zipfile
+def load_weights(path: str | Path, what: str = "weights"):
+    """(module in eval mode, the sensor configuration it was trained for, how it was made) of any learned
+    method's weights file; ``what`` names the file in a refusal (a flag, or "weights")."""
     path = Path(path)
     try:
-        return _load_cached(str(path), path.stat().st_mtime)
+        mtime = path.stat().st_mtime
     except OSError as exc:
-        raise InputError(f"cannot read network weights {str(path)!r}: {exc.strerror}") from None
-    except (RuntimeError, KeyError, TypeError, ValueError, EOFError, pickle.UnpicklingError,
-            zipfile.BadZipFile) as exc:
-        raise InputError(f"network weights {str(path)!r} are not a tespike weights file "
-                         f"({str(exc).splitlines()[0][:100] if str(exc) else type(exc).__name__})") from None
+        raise InputError(f"cannot read {what} {str(path)!r}: {exc.strerror}") from None
+    return _load_cached(str(path), mtime, what)
+
+
+def weights_by_sensor(paths, configs) -> dict[tuple[str, str], Path]:
+    """(method, sensor) -> the weights file to use for it, from weights files the user gave
+    (``--weights``, repeatable) and ``configs`` (sensor name -> configuration): each file serves its
+    method on every sensor of the configuration it was trained for. Refused in one line: a file that
+    cannot be read, one trained for none of the sensors, two for the same method and sensor."""
+    chosen: dict[tuple[str, str], Path] = {}
+    for path in map(Path, paths):
+        model, trained_for, _ = load_weights(path, "--weights")
+        method = next(name for name, (module, _) in learned_methods().items() if type(model) is module)
+        sensors = [name for name, config in configs.items() if config == trained_for]
+        if not sensors:
+            raise InputError(f"--weights {str(path)!r} were trained for {trained_for}, none of the sensors "
+                             f"evaluated ({', '.join(configs)})")
+        for sensor in sensors:
+            if (method, sensor) in chosen:
+                raise InputError(f"--weights {str(chosen[method, sensor])!r} and {str(path)!r} are both "
+                                 f"{method} weights for the {sensor} sensor: give one")
+            chosen[method, sensor] = path
+    return chosen
+

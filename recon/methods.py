@@ -10,8 +10,9 @@ method, with bounded memory either way:
 - the learned methods (the project's network ``net`` and the paper's baselines
   ``spk2imgnet``, ``bsf``, ``mambaspike``, :mod:`recon.learned`) are spatial:
   each image comes from the span of readouts their sizes fix around it, over
-  whole tiles (:func:`recon.net.infer.reconstruct_model`), with the shipped
-  weights of the stream's sensor preset (:func:`recon.learned.weights_path`).
+  whole tiles (:func:`recon.learning.infer.reconstruct_model`), with the shipped
+  weights of the stream's sensor preset (:func:`recon.learned.weights_path`) or
+  a weights file given (``weights``).
 """
 
 from __future__ import annotations
@@ -44,12 +45,13 @@ def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSetting
 
 
 def _learned_frames(name: str) -> Callable:
-    """The whole-stream function of learned method ``name``: its shipped weights for the stream's preset."""
+    """The whole-stream function of learned method ``name``: the weights file given, else its shipped
+    weights for the stream's preset."""
     def frames(words, config: SensorConfig, settings: ReconSettings, progress: bool,
-               out: np.ndarray) -> np.ndarray:
+               out: np.ndarray, weights=None) -> np.ndarray:
         from .learned import load_learned
-        from .net.infer import reconstruct_model
-        model = load_learned(config, name)
+        from .learning.infer import reconstruct_model
+        model = load_learned(config, name, weights)
         return reconstruct_model(model, words, config, device=settings.device, progress=progress, out=out)
     frames.__name__ = f"_{name}_frames"
     return frames
@@ -88,7 +90,7 @@ RECON_METHODS: dict[str, Method] = {
 
 def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
                 device: str = "cpu", progress: bool = False, out: np.ndarray | None = None,
-                calibration=None, **options) -> np.ndarray:
+                calibration=None, weights=None, **options) -> np.ndarray:
     """Stream words (K, H, W) -> reconstructed light, float32 (K, H, W), scene units.
 
     ``method`` is a key of :data:`RECON_METHODS`. ``window`` (odd, readouts) and
@@ -97,9 +99,10 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     (``estimator``, ``search`` for TFI, ``chunk_elements``, ``dtype``). Words are checked
     legal for ``config``; an unknown method or option is refused. ``out``: a
     float32 (K, H, W) array to fill (e.g. a memory map of the output file, so
-    the images never need to fit in memory); it is returned. ``calibration``: a
-    :class:`recon.calibration.Calibration` of the sensor that recorded the stream;
-    every method's output is then corrected for the pixels' dark rate and gain,
+    the images never need to fit in memory); it is returned. ``weights``: a
+    learned method's weights file (None: the shipped ones; refused for TFP and TFI).
+    ``calibration``: a :class:`recon.calibration.Calibration` of the sensor that recorded
+    the stream; every method's output is then corrected for the pixels' dark rate and gain,
     ``max(0, (x - dark) / gain)`` (:func:`recon.calibration.correct`), here and only here.
     """
     if method not in RECON_METHODS:
@@ -109,6 +112,8 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     if unknown:
         raise InputError(f"option {unknown[0]!r} is not an option of method {method!r} "
                          f"(its options: {', '.join(spec.options)})")
+    if weights is not None and spec.frames is None:
+        raise InputError(f"weights apply to the learned methods, not to {method!r}")
     settings = ReconSettings(window=window, device=device, **options)
     if isinstance(words, torch.Tensor):
         shape = tuple(words.shape)
@@ -128,16 +133,17 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
         return out
     if calibration is not None:
         from .calibration import correct
-        return correct(_reconstruct_raw(words, config, spec, settings, progress, out), calibration)
-    return _reconstruct_raw(words, config, spec, settings, progress, out)
+        return correct(_reconstruct_raw(words, config, spec, settings, progress, out, weights), calibration)
+    return _reconstruct_raw(words, config, spec, settings, progress, out, weights)
 
 
-def _reconstruct_raw(words, config, spec, settings, progress, out) -> np.ndarray:
-    """The method's own output into ``out`` (K, H, W), uncorrected."""
+def _reconstruct_raw(words, config, spec, settings, progress, out, weights=None) -> np.ndarray:
+    """The method's own output into ``out`` (K, H, W), uncorrected (``weights``: a learned
+    method's weights file, None for the shipped ones)."""
     method = spec.name
     K, H, W = out.shape
     if spec.frames is not None:
-        return spec.frames(words, config, settings, progress, out)
+        return spec.frames(words, config, settings, progress, out, weights)
     flat = words.reshape(K, H * W)
     out_flat = out.reshape(K, H * W)
     step = max(1, settings.block_elements() // K)
@@ -153,22 +159,25 @@ def _reconstruct_raw(words, config, spec, settings, progress, out) -> np.ndarray
     return out
 
 
-def missing_weights(method: str, config: SensorConfig) -> str | None:
-    """Why ``method`` cannot reconstruct streams of ``config`` (the one-line refusal of its
-    weights: missing, another method's, another sensor's), or None where it can."""
+def missing_weights(method: str, config: SensorConfig, weights=None) -> str | None:
+    """Why ``method`` cannot reconstruct streams of ``config`` with the weights file ``weights``
+    (None: the shipped ones): the one-line refusal of its weights (missing, another method's,
+    another sensor's), or None where it can."""
     if method not in RECON_METHODS:
         raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
     if RECON_METHODS[method].frames is None:
         return None
     from .learned import load_learned
     try:
-        load_learned(config, method)
+        load_learned(config, method, weights)
     except InputError as exc:
         return str(exc)
     return None
 
 
-def available_methods(configs) -> tuple[str, ...]:
+def available_methods(configs, weights=None) -> tuple[str, ...]:
     """The methods of :data:`RECON_METHODS` that can reconstruct streams of every config given
-    (TFP and TFI always; a learned method where its weights for each one are shipped)."""
-    return tuple(m for m in RECON_METHODS if all(missing_weights(m, c) is None for c in configs))
+    (TFP and TFI always; a learned method where its weights for each one are shipped, or given:
+    ``weights`` maps (method, config) to a weights file)."""
+    weights = weights or {}
+    return tuple(m for m in RECON_METHODS if all(missing_weights(m, c, weights.get((m, c))) is None for c in configs))

@@ -36,7 +36,7 @@ import torch
 
 from golden.errors import InputError
 
-from .net.mulaw import compress
+from .learning.mulaw import compress
 from .pictures import MU  # noqa: F401  (the paper's mu, one constant for pictures and metrics)
 
 SSIM_SIGMA = 1.5
@@ -98,7 +98,7 @@ def normalise(pred: torch.Tensor, gt: torch.Tensor, peak=None) -> tuple[torch.Te
 
 def mu_law(h: torch.Tensor, mu: float = MU) -> torch.Tensor:
     """Tone map T(H) = log(1 + mu H) / log(1 + mu) (paper eq. 11), H in [0, 1]: the learned
-    methods' own mu-law (:func:`recon.net.mulaw.compress`), with the paper's mu by default."""
+    methods' own mu-law (:func:`recon.learning.mulaw.compress`), with the paper's mu by default."""
     return compress(h, mu)
 
 

@@ -24,7 +24,7 @@ ERROR_RANGE = 0.25
 def tone_map(light: np.ndarray, peak: float, mu: float = MU) -> np.ndarray:
     """Divide by the ground truth's peak, clip to [0, 1], mu-law (paper eq. 11); float64.
 
-    The numpy twin of :func:`recon.net.mulaw.compress` (the metrics' and the learned
+    The numpy twin of :func:`recon.learning.mulaw.compress` (the metrics' and the learned
     methods' torch mu-law), kept because ``tespike view``, the demo's pictures and the
     benchmarks' plots run without importing torch (1.7 s of every start, measured here)."""
     h = np.clip(np.asarray(light, np.float64) / peak, 0.0, 1.0)

@@ -65,7 +65,7 @@ def test_evaluate_table(tmp_path, capsys, empty_weights_dir):
 
     import recon.learned
     from golden.config import SensorConfig
-    from recon.net.train import save_weights
+    from recon.learning.weights import save_weights
     folder = empty_weights_dir
     torch.manual_seed(0)
     module, sizes = recon.learned.method_classes("bsf")

@@ -2,7 +2,9 @@
 
 - no import circle among the project's modules, at module level or inside functions;
 - no module imports another module's private (``_name``) functions or constants;
-- no command module imports :mod:`cosim.cli` back (shared pieces live below it).
+- no command module imports :mod:`cosim.cli` back (shared pieces live below it);
+- the learned wing's shared package (:mod:`recon.learning`) reaches no method (:mod:`recon.net`,
+  :mod:`recon.baselines`), directly or through another module (the registry, the trainer).
 """
 
 from __future__ import annotations
@@ -12,6 +14,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("golden", "cosim", "recon", "rtl")
+#: The learned wing: its shared package, and the packages of the methods built on it.
+SHARED, METHODS = "recon.learning", ("recon.net", "recon.baselines")
 
 
 def _modules() -> dict[str, Path]:
@@ -115,3 +119,39 @@ def test_command_modules_do_not_import_the_cli_back():
             if name.startswith("cosim.commands") and any(module == "cosim.cli" or (module == "cosim" and "cli" in names)
                                                          for module, names in _imports(name, path))]
     assert back == []
+
+
+def _inside(name: str, package: str) -> bool:
+    return name == package or name.startswith(package + ".")
+
+
+def _runs_up(graph: dict[str, set[str]], shared: str, methods: tuple[str, ...]) -> list[str]:
+    """``module -> ... -> method`` for every module of ``shared`` whose imports reach a module of ``methods``."""
+    found = []
+    for start in sorted(m for m in graph if _inside(m, shared)):
+        came_from, todo = {start: None}, [start]
+        while todo:
+            node = todo.pop()
+            if any(_inside(node, package) for package in methods):
+                path = [node]
+                while came_from[path[-1]] is not None:
+                    path.append(came_from[path[-1]])
+                found.append(" -> ".join(reversed(path)))
+                break
+            for child in sorted(graph.get(node, ())):
+                if child not in came_from:
+                    came_from[child] = node
+                    todo.append(child)
+    return found
+
+
+def test_the_wing_check_finds_an_import_up_into_a_method():
+    graph = {"w.shared.head": {"w.registry"}, "w.registry": {"w.net.model"}, "w.net.model": {"w.shared.head"},
+             "w.shared.mulaw": set()}
+    assert _runs_up(graph, "w.shared", ("w.net",)) == ["w.shared.head -> w.registry -> w.net.model"]
+    assert _runs_up({"w.shared.a": {"w.shared.b"}, "w.shared.b": set()}, "w.shared", ("w.net",)) == []
+
+
+def test_the_shared_learning_package_reaches_no_method():
+    assert any(_inside(m, SHARED) for m in MODULES) and all(any(_inside(m, p) for m in MODULES) for p in METHODS)
+    assert _runs_up(_graph(), SHARED, METHODS) == []

@@ -311,7 +311,7 @@ def test_with_a_learned_method_frames_are_scored_where_its_span_fits(empty_weigh
     import torch
 
     from recon.learned import method_classes
-    from recon.net.train import save_weights
+    from recon.learning.weights import save_weights
     torch.manual_seed(0)
     module, sizes = method_classes("spk2imgnet")
     save_weights(empty_weights_dir / "spk2imgnet-te.pt", module(sizes.preset("cpu")).eval(), SensorConfig(), {},
@@ -321,3 +321,24 @@ def test_with_a_learned_method_frames_are_scored_where_its_span_fits(empty_weigh
                           repeats=1)
     assert evaluation.span == 61 and [r.frames_scored for r in evaluation.results] == [3, 3]
     assert "- frames scored per sequence: 3, those whose 9-readout window" in table_markdown(evaluation)
+
+
+def test_weights_given_replace_the_shipped_ones(empty_weights_dir, tmp_path):
+    """``weights`` (``--weights``): a learned method runs with the user's file on the sensor it was trained for."""
+    import torch
+
+    from recon.learned import method_classes, weights_by_sensor
+    from recon.learning.weights import save_weights
+    from recon.methods import reconstruct
+    torch.manual_seed(0)
+    module, sizes = method_classes("bsf")
+    save_weights(tmp_path / "mine.pt", module(sizes.preset("cpu")).eval(), SensorConfig(), {}, "bsf")
+    light = make_scene("moderate", 63, 16, 16, seed=2)
+    with pytest.raises(InputError, match="bsf-te.pt' is missing"):
+        evaluate([("a", light)], simulate, methods=("bsf",), sensors=("te",), progress=False, repeats=1)
+    chosen = weights_by_sensor([tmp_path / "mine.pt"], {"te": SensorConfig()})
+    evaluation = evaluate([("a", light)], simulate, methods=("bsf",), sensors=("te",), progress=False, repeats=1,
+                          weights=chosen, keep=True)
+    words = evaluation.streams["a", "te"]
+    assert np.array_equal(evaluation.images["a", "te", "bsf"],
+                          reconstruct(words, SensorConfig(), "bsf", weights=tmp_path / "mine.pt"))

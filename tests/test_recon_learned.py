@@ -23,7 +23,7 @@ TE, ML = SensorConfig.preset("te"), SensorConfig.preset("ml")
 
 def save_tiny(folder, method, config, file_name=None, seed=0):
     """Weights of ``method`` at its cpu size (random, seeded) saved as the shipped form."""
-    from recon.net.train import save_weights
+    from recon.learning.weights import save_weights
     torch.manual_seed(seed)
     module, sizes = method_classes(method)
     model = module(sizes.preset("cpu")).eval()
@@ -45,9 +45,8 @@ def test_registry_has_every_learned_method_as_a_spatial_method():
         assert method_span(name) == method_classes(name)[1].preset("cpu").span
 
 
-def test_weights_folder_is_the_networks():
-    import recon.net
-    folder = Path(recon.net.__file__).resolve().parent / "weights"
+def test_weights_folder_is_beside_the_registry():
+    folder = Path(recon.learned.__file__).resolve().parent / "weights"
     assert recon.learned.WEIGHTS_DIR == folder
     assert weights_path(TE, "net") == folder / "te.pt"             # the shipped network
     assert recon.learned.weights_name("bsf", "ml-msb") == "bsf-ml-msb.pt"
@@ -57,7 +56,7 @@ def test_a_baseline_reconstructs_with_its_weights(empty_weights_dir, rng):
     path, model = save_tiny(empty_weights_dir, "bsf", TE)
     assert weights_path(TE, "bsf") == path == empty_weights_dir / "bsf-te.pt"
     words = tiny_stream(rng)
-    from recon.net.infer import reconstruct_model
+    from recon.learning.infer import reconstruct_model
     images = reconstruct(words, TE, "bsf")
     assert images.shape == (5, 8, 8) and images.dtype == np.float32 and np.isfinite(images).all()
     assert np.array_equal(images, reconstruct_model(model, words, TE))
@@ -108,3 +107,44 @@ def test_cli_reconstruct_with_a_baseline(empty_weights_dir, tmp_path, rng, capsy
         lines = err.strip().splitlines()
         assert code != 0 and len(lines) == 1 and word in lines[0], err
         assert not out.exists() and not list(tmp_path.glob("*.part"))
+
+
+def test_cli_reconstruct_with_weights_the_user_trained(empty_weights_dir, tmp_path, rng, capsys):
+    """--weights: your own file, checked against the method and the stream's configuration; a
+    configuration without shipped weights is told to train and pass --weights, which then works."""
+    own = SensorConfig(b1=3, b2=3)
+    path, _ = save_tiny(tmp_path, "bsf", own, file_name="mine.pt")
+    words = tiny_stream(rng, own)
+    stream, out = tmp_path / "S.npz", tmp_path / "R.npy"
+    save_stream(stream, words, own)
+    code, _, err = run_here(capsys, "reconstruct", "--stream", stream, "--method", "bsf", "--out", out)
+    assert code != 0 and "train weights" in err and "--weights W.pt" in err and len(err.strip().splitlines()) == 1
+    code, _, err = run_here(capsys, "reconstruct", "--stream", stream, "--method", "bsf", "--weights", path,
+                            "--out", out)
+    assert code == 0, err
+    assert np.array_equal(np.load(out), reconstruct(words, own, "bsf", weights=path))
+    out.unlink()
+    save_stream(tmp_path / "T.npz", tiny_stream(rng), TE)
+    (tmp_path / "empty.pt").write_bytes(b"")
+    for args, word in [(("--stream", stream, "--method", "net", "--weights", path), "hold a BSF, not net's"),
+                       (("--stream", tmp_path / "T.npz", "--method", "bsf", "--weights", path), "were trained for"),
+                       (("--stream", stream, "--method", "tfi", "--weights", path), "--weights applies"),
+                       (("--stream", stream, "--method", "bsf", "--weights", tmp_path / "empty.pt"), "empty"),
+                       (("--stream", stream, "--method", "bsf", "--weights", tmp_path / "none.pt"), "none.pt")]:
+        code, _, err = run_here(capsys, "reconstruct", *args, "--out", out)
+        lines = err.strip().splitlines()
+        assert code != 0 and len(lines) == 1 and word in lines[0], err
+        assert not out.exists()
+
+
+def test_weights_by_sensor(tmp_path):
+    from recon.learned import weights_by_sensor
+    te_file, _ = save_tiny(tmp_path, "bsf", TE, file_name="a.pt")
+    ml_file, _ = save_tiny(tmp_path, "net", ML, file_name="b.pt")
+    configs = {"te": TE, "ml": ML, "noisy": TE}
+    assert weights_by_sensor([te_file, ml_file], configs) == {("bsf", "te"): te_file, ("bsf", "noisy"): te_file,
+                                                             ("net", "ml"): ml_file}
+    with pytest.raises(InputError, match="b.pt' were trained for .*none of the sensors evaluated"):
+        weights_by_sensor([ml_file], {"te": TE})
+    with pytest.raises(InputError, match="both bsf weights for the te sensor"):
+        weights_by_sensor([te_file, te_file], {"te": TE})

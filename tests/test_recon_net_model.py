@@ -5,12 +5,20 @@ import dataclasses
 import pytest
 import torch
 
+from golden.config import SensorConfig
+
 from golden.errors import InputError
-from recon.net.align import SPA, LevelAlignment
+from recon.learning.align import AlignLevel
+from recon.net.align import SPA
 from recon.net.features import GRADIENT_KERNELS, MSFEG, GradientFilters
-from recon.net.model import TESpikeNet, compress, expand, parameter_count
+from recon.learning.layers import parameter_count, substreams
+from recon.learning.mulaw import compress, expand
+from recon.net.model import TESpikeNet
 from recon.net.refine import GuidedAttention, IntensityFeature, box_mean
 from recon.net.sizes import SWITCHES, NetSizes
+
+#: The TE sensor's light of one spike per readout (every learned module is told its sensor's).
+ONE_SPIKE = SensorConfig.preset("te").spike_light
 
 SMALL = NetSizes(channels=8, heads=2, window=3, stride=2, substreams=5, unshuffle=2, attention_window=5)
 
@@ -45,7 +53,7 @@ def test_msfeg_fast_path_equals_its_definition(unshuffle):
 
 def test_level_alignment_starts_as_plain_convolution():
     """Zero-initialised offsets: the DCN is a convolution with masks 1/2."""
-    level = LevelAlignment(8, SMALL, coarsest=True)
+    level = AlignLevel(8, SMALL.dcn_kernel, 1, SMALL.max_offset, coarsest=True, similarity=True, motion_bias=True)
     key, ref = torch.rand(1, 8, 6, 6), torch.rand(1, 8, 6, 6)
     _, aligned = level(key, ref)
     dcn = level.dcn
@@ -58,6 +66,18 @@ def test_spa_alone_and_without_dcn():
     feats = torch.rand(2, 5, 8, 8, 8)
     assert SPA(SMALL)(feats).shape == (2, 8, 8, 8)
     assert SPA(dataclasses.replace(SMALL, dcn=False))(feats).shape == (2, 8, 8, 8)
+
+
+def test_spa_loads_weights_saved_under_its_former_names():
+    """Weights written when SPA held the pyramid's ``down`` and ``levels`` itself load unchanged."""
+    torch.manual_seed(3)
+    spa = SPA(SMALL)
+    former = {k.replace("align.", "", 1): v for k, v in spa.state_dict().items()}
+    assert any(k.startswith("levels.") for k in former) and not any(k.startswith("align.") for k in former)
+    again = SPA(SMALL)
+    again.load_state_dict(former)                      # strict: every tensor found under its new name
+    feats = torch.rand(1, 5, 8, 8, 8)
+    assert torch.equal(again(feats), spa(feats))
 
 
 def test_box_mean_equals_avg_pool():
@@ -81,8 +101,9 @@ def test_whole_network_starts_at_its_head_initial_blend():
     """Untrained, the network returns its head's initial blend of training-free estimates (features unused)."""
     model = TESpikeNet(SMALL)
     light = torch.rand(2, SMALL.span, 16, 16)
-    out = model(light)
-    expected = model.head(torch.zeros(2, SMALL.channels, 16 // SMALL.unshuffle, 16 // SMALL.unshuffle), light)
+    out = model(light, None, ONE_SPIKE)
+    expected = model.head(torch.zeros(2, SMALL.channels, 16 // SMALL.unshuffle, 16 // SMALL.unshuffle), light,
+                          None, ONE_SPIKE)
     assert out.shape == (2, 1, 16, 16)
     assert torch.allclose(out, expected, rtol=1e-5, atol=1e-7)
 
@@ -91,8 +112,8 @@ def test_mean_head_starts_at_the_temporal_mean():
     sizes = dataclasses.replace(SMALL, head="mean")
     model = TESpikeNet(sizes)
     light = torch.rand(2, sizes.span, 16, 16)
-    key = model.substreams(light)[:, sizes.substreams // 2]
-    assert torch.allclose(model(light), key.mean(1, keepdim=True), rtol=1e-4, atol=1e-7)
+    key = substreams(light, sizes.substreams, sizes.window, sizes.stride)[:, sizes.substreams // 2]
+    assert torch.allclose(model(light, None, ONE_SPIKE), key.mean(1, keepdim=True), rtol=1e-4, atol=1e-7)
 
 
 def test_compress_expand_inverse_and_nonnegative():
@@ -107,7 +128,7 @@ def test_compress_expand_inverse_and_nonnegative():
 def test_ablation_cases_build_and_run(case):
     sizes = SMALL.ablation(case)
     assert [getattr(sizes, key) for key in SWITCHES] == [i < case - 1 for i in range(5)]
-    out = TESpikeNet(sizes)(torch.rand(1, sizes.span, 16, 16))
+    out = TESpikeNet(sizes)(torch.rand(1, sizes.span, 16, 16), None, ONE_SPIKE)
     assert out.shape == (1, 1, 16, 16) and torch.isfinite(out).all()
 
 

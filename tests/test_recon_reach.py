@@ -6,6 +6,7 @@ import pytest
 import torch
 from torch import nn
 
+from golden.config import SensorConfig
 from recon.baselines import BASELINES
 from recon.learned import learned_methods, receptive_radius
 from recon.net.features import MSFEG
@@ -13,7 +14,10 @@ from recon.net.model import TESpikeNet
 from recon.net.sizes import NetSizes
 from recon.reach import FRAME, Support, support
 from tests.test_recon_baselines import SMALL, hdr_light
-from tests.test_recon_net_infer import TINY
+from tests.test_recon_learning_infer import TINY
+
+#: The TE sensor's light of one spike per readout (every learned module is told its sensor's).
+ONE_SPIKE = SensorConfig.preset("te").spike_light
 
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -93,18 +97,18 @@ def test_the_bound_holds_and_is_tight(name):
     side = -(-(2 * radius + 2 * f + 8) // f) * f
     light = hdr_light((1, model.sizes.span, side, side)).double()
     c = side // 2
-    base = model(light)[0, 0, c, c]
+    base = model(light, None, ONE_SPIKE)[0, 0, c, c]
 
     def moves(*rows):
         x = light.clone()
         for dy in rows:
             x[0, :, c + dy, :] *= 50.0
-        return bool(model(x)[0, 0, c, c] != base)
+        return bool(model(x, None, ONE_SPIKE)[0, 0, c, c] != base)
 
     beyond = radius + 1
     assert not moves(-beyond, beyond)
     x = light.clone()
     x[0, :, :, c - beyond] *= 50.0
     x[0, :, :, c + beyond] *= 50.0
-    assert model(x)[0, 0, c, c] == base
+    assert model(x, None, ONE_SPIKE)[0, 0, c, c] == base
     assert moves(-(3 * radius) // 4)

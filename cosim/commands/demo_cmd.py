@@ -28,6 +28,9 @@ def add_arguments(parser):
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per method, median, 1..100 (default 3)")
     parser.add_argument("--sensors", default="ml-msb,te,ml",
                         help="golden sensors: comma list of ml-msb, te, ml (default all; te is the RTL's)")
+    parser.add_argument("--weights", action="append", default=[], metavar="W.pt",
+                        help="a learned method's weights file ('tespike train --out W.pt') used instead of the "
+                             "shipped ones for the sensor it was trained for (repeatable)")
     parser.add_argument("--no-hw-cost", action="store_true", help="skip the Yosys hardware cost table")
     parser.add_argument("--quiet", action="store_true", help="no progress on stderr, no table on stdout")
 
@@ -39,4 +42,4 @@ def run(args) -> int:
                     crop=args.crop, rtl_readouts=args.rtl_readouts, backend=args.backend,
                     repeats=args.repeats, sensors=[s.strip() for s in args.sensors.split(",") if s.strip()],
                     hw_cost=not args.no_hw_cost, quiet=args.quiet,
-                    bars=not args.quiet and progress_wanted(args))
+                    bars=not args.quiet and progress_wanted(args), weights=args.weights)

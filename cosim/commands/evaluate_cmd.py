@@ -60,6 +60,9 @@ def add_arguments(parser):
                         help="comma-separated reconstruction methods: tfp, tfi, spk2imgnet, bsf, mambaspike, net "
                              f"(default {','.join(DEFAULT_METHODS)}: a few minutes on 2 cores; a learned one "
                              "without weights for a sensor is noted, not run)")
+    parser.add_argument("--weights", action="append", default=[], metavar="W.pt",
+                        help="a learned method's weights file ('tespike train --out W.pt') used instead of the "
+                             "shipped ones for the sensor it was trained for (repeatable; not with --store)")
     parser.add_argument("--table", action="store_true",
                         help="the paper's Tables 1 and 2 whole: rows TFI, TFP, Spk2ImgNet, BSF, MambaSpike, net; "
                              "every metric; parameters, FLOPs, run time and the paper's Table 10 beside")
@@ -127,6 +130,9 @@ def run(args) -> int:
                             ("--vdp-frames", args.vdp_frames), ("--threads", args.threads), ("--repeats", args.repeats)):
             if value not in (None, False, []):          # []: no --sensor-noise given
                 raise InputError(f"{flag} does not apply with --store (a store's streams are scored as they are)")
+        if args.weights:
+            raise InputError("--weights does not apply with --store (its tasks use the shipped weights); "
+                             "evaluate without --store to use your own")
         from cosim.dataset.evaluate import run_store
         return run_store(args)
     from golden.noise import Sensor, load_noise
@@ -182,6 +188,8 @@ def run(args) -> int:
     configs.update({sensor: configs["te"] for sensor in noise_sensors})
     if args.calibrate:
         configs.update({sensor + CALIBRATED: configs["te"] for sensor in noise_sensors})
+    from recon.learned import weights_by_sensor
+    weights = weights_by_sensor(args.weights, configs)
     sequences = [] if args.set == "none" else sequence_set(args.set, frames, height, width)
     for path in args.scene:          # memory-mapped: read one slice at a time
         sequences.append((Path(path).stem, load_scene(path, memory_map=True)))
@@ -202,7 +210,7 @@ def run(args) -> int:
                           sensors=tuple(configs), configs=configs, window=args.window, seed=args.seed,
                           device=args.device, progress=progress, repeats=repeats, metrics=metrics,
                           vdp_frames=vdp_frames, missing="note" if args.table or methods is None else None,
-                          noise_sensors=noise_sensors)
+                          noise_sensors=noise_sensors, weights=weights)
     if args.table:
         from recon.complexity import measure
         evaluation.complexity = measure(evaluation.methods, configs["te"])

@@ -15,11 +15,15 @@ def add_arguments(parser):
     parser.add_argument("--method", required=True,
                         help="tfp (mean decoded light over the window), tfi (spike interval), the paper's "
                              "learned baselines spk2imgnet, bsf, mambaspike, or net (the paper's network); "
-                             "learned methods use the shipped weights of the stream's preset (te, ml, ml-msb)")
+                             "learned methods use the shipped weights of the stream's preset (te, ml, ml-msb) "
+                             "or --weights")
     parser.add_argument("--out", required=True, help="R.npy to write: float32 (K, H, W) light, I = 1 is 42000 e-")
     parser.add_argument("--window", type=int, default=None,
                         help="tfp/tfi: readouts per window, odd (default 9, paper 6.4); learned methods see the "
                              "span of readouts their sizes fix")
+    parser.add_argument("--weights", default=None, metavar="W.pt",
+                        help="learned methods: this weights file ('tespike train --out W.pt') instead of the "
+                             "shipped one; it must hold the method and be trained for the stream's configuration")
     parser.add_argument("--device", default="cpu", help="torch device (default cpu)")
     parser.add_argument("--search", choices=("stream", "window"), default="stream",
                         help="tfi only: look for the spike interval in the whole stream (default) or the window")
@@ -52,7 +56,10 @@ def run(args) -> int:
     check_threads_argument(args.threads)
     if args.method != "tfi" and args.search != "stream":
         raise InputError(f"--search applies to method 'tfi' only, not {args.method!r}")
-    check_outputs({"--out": args.out}, {"--stream": args.stream, "--calibration": args.calibration})
+    if args.weights is not None and args.method not in LEARNED:
+        raise InputError(f"--weights applies to the learned methods ({', '.join(LEARNED)}), not {args.method!r}")
+    check_outputs({"--out": args.out},
+                  {"--stream": args.stream, "--calibration": args.calibration, "--weights": args.weights})
     words, config = load_stream(args.stream, memory_map=True)     # stays on disk
     K, H, W = words.shape
     calibration = None
@@ -61,9 +68,6 @@ def run(args) -> int:
         calibration = load_calibration(args.calibration)
         check_matches(calibration, config, (H, W), f"stream {args.stream}")
     require_room(f"the {K} images of {H} x {W} pixels", disk={args.out: 4 * K * H * W})
-    if args.method in LEARNED:
-        from recon.learned import load_learned
-        load_learned(config, args.method)       # refuse a configuration without weights before writing
 
     import torch
 
@@ -78,7 +82,8 @@ def run(args) -> int:
         # reserved first), so neither the words nor the images need to fit in memory
         images = reserved_memmap(tmp, np.float32, (K, H, W))
         reconstruct(words, config, args.method, window=window, device=args.device,
-                    progress=progress_wanted(args), out=images, calibration=calibration, **options)
+                    progress=progress_wanted(args), out=images, calibration=calibration, weights=args.weights,
+                    **options)
         images.flush()
         del images
     report(args, f"wrote {args.out}: {K} {args.method} images of {H} x {W} pixels")

@@ -1,6 +1,6 @@
 """``tespike train``: train a learned reconstruction method on the data engine's clips (paper section 6.3).
 
-The trainer's options (:class:`recon.net.train.TrainOptions`) keep their defaults in one
+The trainer's options (:class:`recon.train.TrainOptions`) keep their defaults in one
 place, the trainer: an option not given is not passed on, and ``--help`` reads the
 defaults from there when it is printed (importing torch then only).
 """
@@ -23,7 +23,7 @@ class _TrainerDefaults(argparse.HelpFormatter):
         if action.dest in TRAINER_FLAGS:
             import dataclasses
 
-            from recon.net.train import TrainOptions
+            from recon.train import TrainOptions
             default = {f.name: f.default for f in dataclasses.fields(TrainOptions)}[action.dest]
             return self._get_help_string(action) % dict(vars(action), default=default, prog=self._prog)
         return super()._expand_help(action)
@@ -105,7 +105,7 @@ def run(args) -> int:
     check_outputs({"--out": args.out}, {**config_input, **({"--init": args.init} if args.init else {})})
     check_output_dir(out.with_suffix(".run"), "--out's run folder")
 
-    from recon.net.train import TrainOptions, train
+    from recon.train import TrainOptions, train
 
     given = {flag: getattr(args, flag) for flag in TRAINER_FLAGS if hasattr(args, flag)}
     options = TrainOptions(sensor=args.config if preset else config.to_json(), ablation=args.ablation,

@@ -31,19 +31,21 @@ from typing import ClassVar
 import torch
 from torch import nn
 
-from .align import PyramidAlign
-from ..net.head import BlendHead
-from ..net.mulaw import compress_
+from ..learning.align import PyramidAlign
+from ..learning.layers import conv3
+from ..learning.mulaw import compress_
+from ..learning.sizes import SizesMixin, SubstreamSizes
+from ..pictures import MU
 from ..reach import Support, support, union
-from .common import ResBlock, SizesMixin, check_input, conv3
+from .common import AlignedBaseline, ResBlock, check_input
 from .represent import firing_rates
 
 
 @dataclasses.dataclass(frozen=True)
-class BSFSizes(SizesMixin):
+class BSFSizes(SizesMixin, SubstreamSizes):
     """Every size of BSF.
 
-    ``windows`` sub-spans of ``window`` readouts ``step`` apart (span 61);
+    ``substreams`` sub-spans of ``window`` readouts ``stride`` apart (span 61);
     ``orders``: firing-rate orders (spikes spanned; order 1 is the inverse
     of the spike interval); ``threshold``: light x readouts per virtual spike
     (scene units; 1 = one spike per readout at the design light);
@@ -60,9 +62,9 @@ class BSFSizes(SizesMixin):
     }
     LABEL: ClassVar[str] = "bsf"
 
-    windows: int = 5
+    substreams: int = 5
     window: int = 21
-    step: int = 10
+    stride: int = 10
     orders: tuple[int, ...] = (1, 4, 16)
     threshold: float = 1.0
     unshuffle: int = 4
@@ -74,23 +76,17 @@ class BSFSizes(SizesMixin):
     offset_groups: int = 1
     max_offset: float = 8.0
     attention_radius: int = 2
-    mu: float = 5000.0
+    mu: float = MU
 
     def __post_init__(self) -> None:
-        self._need_ints("windows", "window", "step", "unshuffle", "channels", "levels", "dcn_kernel",
-                        "offset_groups", "attention_radius")
+        self._need_substreams("sub-span")
+        self._need_ints("unshuffle", "channels", "levels", "dcn_kernel", "offset_groups", "attention_radius")
         self._need_ints("blocks", "recon_blocks", least=0)
-        self._need("windows", self.windows % 2 == 1, "odd (the key sub-span sits in the middle)")
-        self._need("window", self.window % 2 == 1, "odd (centred on its moment)")
         self._need("dcn_kernel", self.dcn_kernel % 2 == 1, "odd")
         self._need("orders", isinstance(self.orders, tuple) and len(self.orders) >= 1
                    and all(type(k) is int and k >= 1 for k in self.orders), "a tuple of integers >= 1")
         self._need("channels", self.channels % self.offset_groups == 0, "a multiple of offset_groups")
         self._need_positive("threshold", "max_offset", "mu")
-
-    @property
-    def span(self) -> int:
-        return (self.windows - 1) * self.step + self.window
 
     @property
     def pyramid_factor(self) -> int:
@@ -119,17 +115,17 @@ class MultiOrderEncoder(nn.Module):
         n = rates.shape[0]
         subs = [torch.cat([self.act(embed(rates[:, i, start:start + s.window]))
                            for i, embed in enumerate(self.embed)], 1)
-                for start in range(0, s.windows * s.step, s.step)]
+                for start in range(0, s.substreams * s.stride, s.stride)]
         x = torch.stack(subs, 1).flatten(0, 1)
         x = self.blocks(self.act(self.fuse(x)))
-        return x.reshape(n, s.windows, *x.shape[1:])
+        return x.reshape(n, s.substreams, *x.shape[1:])
 
     def support(self, rates: Support) -> Support:
         embedded = union(*(support(embed, rates) for embed in self.embed))
         return support(self.blocks, support(self.fuse, embedded))
 
 
-class BSF(nn.Module):
+class BSF(AlignedBaseline):
     """(N, 61, H, W) decoded light -> (N, 1, H, W) light at the key moment (readout 30)."""
 
     def __init__(self, sizes: BSFSizes = BSFSizes()):
@@ -137,33 +133,21 @@ class BSF(nn.Module):
         self.sizes = s = sizes
         c = s.channels
         self.encoder = MultiOrderEncoder(s)
-        self.align = PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset,
-                                  attention_radius=s.attention_radius)
-        self.fuse = nn.Sequential(nn.Conv2d(s.windows * c, c, 1), nn.LeakyReLU(0.1))
-        self.reconstruct = nn.Sequential(*[ResBlock(c) for _ in range(s.recon_blocks)])
-        self.head = BlendHead(c, s.unshuffle, s.mu)
+        self.build_tail(PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset, cascade=True,
+                                     attention_radius=s.attention_radius), s.substreams)
 
-    def forward(self, light: torch.Tensor, inside: torch.Tensor | None = None,
-                spike_light: float | None = None) -> torch.Tensor:
+    def forward(self, light: torch.Tensor, inside: torch.Tensor | None, spike_light: float) -> torch.Tensor:
         """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
-        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/net/head.py."""
+        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/learning/head.py."""
         s = self.sizes
         check_input(light, s.span, s.pyramid_factor)
         rates = firing_rates(light, s.orders, s.threshold)                    # (N, orders, span, H, W)
         code = compress_(rates, s.mu)                                           # in place (no gradient)
         feats = self.encoder(code)
-        middle = s.windows // 2
-        key = feats[:, middle]
-        refs = torch.cat((feats[:, :middle], feats[:, middle + 1:]), 1)
-        aligned = self.align(key, refs)
-        stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
-        fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
-        return self.head(fused, light, inside, spike_light)
+        return self.tail(feats, light, inside, spike_light)
 
     def support(self, light: Support) -> Support:
         """:meth:`forward` on supports (the firing rates are per pixel)."""
         feats = self.encoder.support(light)
-        aligned = self.align.support(feats, feats)
-        fused = support(self.reconstruct, support(self.fuse, union(aligned, feats)))
-        return self.head.support(fused, light)
+        return self.tail_support(feats, light)
 

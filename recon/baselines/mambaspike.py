@@ -41,11 +41,12 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .align import PyramidAlign
-from ..net.head import BlendHead
-from ..net.mulaw import compress_
+from ..learning.align import PyramidAlign
+from ..learning.mulaw import compress_
+from ..learning.sizes import SizesMixin
+from ..pictures import MU
 from ..reach import Support, support, union
-from .common import ResBlock, SizesMixin, check_input
+from .common import AlignedBaseline, check_input
 from .represent import firing_rates
 from .scan import MambaBlock
 
@@ -96,7 +97,7 @@ class MambaSpikeSizes(SizesMixin):
     filter_kernel: int = 3
     recon_blocks: int = 1
     threshold: float = 1.0
-    mu: float = 5000.0
+    mu: float = MU
 
     def __post_init__(self) -> None:
         self._need_ints("readouts", "parsings", "temporal_patch", "moments", "moment_stride",
@@ -212,7 +213,7 @@ class WindowScan(nn.Module):
         return x.window(self.window)
 
 
-class MambaSpike(nn.Module):
+class MambaSpike(AlignedBaseline):
     """(N, 61, H, W) decoded light -> (N, 1, H, W) light at the key moment (readout 30)."""
 
     def __init__(self, sizes: MambaSpikeSizes = MambaSpikeSizes()):
@@ -222,16 +223,12 @@ class MambaSpike(nn.Module):
         self.parsings = nn.ModuleList(ParsingBranch(s, 4.0 ** p) for p in range(s.parsings))
         self.merge = nn.Conv2d(s.parsings * c, c, 1) if s.parsings > 1 else None
         self.spatial = nn.Sequential(*[WindowScan(s, columns=bool(i % 2)) for i in range(s.spatial_blocks)])
-        self.align = PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset,
-                                  filter_kernel=s.filter_kernel)
-        self.fuse = nn.Sequential(nn.Conv2d(s.moments * c, c, 1), nn.LeakyReLU(0.1))
-        self.reconstruct = nn.Sequential(*[ResBlock(c) for _ in range(s.recon_blocks)])
-        self.head = BlendHead(c, s.unshuffle, s.mu)
+        self.build_tail(PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset, cascade=True,
+                                     filter_kernel=s.filter_kernel), s.moments)
 
-    def forward(self, light: torch.Tensor, inside: torch.Tensor | None = None,
-                spike_light: float | None = None) -> torch.Tensor:
+    def forward(self, light: torch.Tensor, inside: torch.Tensor | None, spike_light: float) -> torch.Tensor:
         """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
-        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/net/head.py."""
+        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/learning/head.py."""
         s = self.sizes
         check_input(light, s.span, s.pyramid_factor)
         feats = [branch(light) for branch in self.parsings]                 # (N, M, C, h, w) each
@@ -239,13 +236,7 @@ class MambaSpike(nn.Module):
         if self.merge is not None:
             feats = [self.merge(torch.cat(feats, 2).reshape(n * m, -1, h, w)).reshape(n, m, c, h, w)]
         feats = self.spatial(feats[0].reshape(n * m, c, h, w)).reshape(n, m, c, h, w)
-        middle = m // 2
-        key = feats[:, middle]
-        refs = torch.cat((feats[:, :middle], feats[:, middle + 1:]), 1)
-        aligned = self.align(key, refs)
-        stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
-        fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
-        return self.head(fused, light, inside, spike_light)
+        return self.tail(feats, light, inside, spike_light)
 
     def support(self, light: Support) -> Support:
         """:meth:`forward` on supports."""
@@ -253,7 +244,5 @@ class MambaSpike(nn.Module):
         if self.merge is not None:
             feats = support(self.merge, feats)
         feats = support(self.spatial, feats)
-        aligned = self.align.support(feats, feats)
-        fused = support(self.reconstruct, support(self.fuse, union(aligned, feats)))
-        return self.head.support(fused, light)
+        return self.tail_support(feats, light)
 

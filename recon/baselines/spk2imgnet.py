@@ -31,18 +31,21 @@ from typing import ClassVar
 import torch
 from torch import nn
 
-from .align import PyramidAlign
-from ..net.head import BlendHead
+from ..learning.align import PyramidAlign
+from ..learning.layers import conv3
+from ..learning.mulaw import compress
+from ..learning.sizes import SizesMixin, SubstreamSizes
+from ..pictures import MU
 from ..reach import Support, support, union
-from .common import ResBlock, SizesMixin, centred, check_input, compress, conv3
+from .common import AlignedBaseline, ResBlock, centred, check_input
 
 
 @dataclasses.dataclass(frozen=True)
-class Spk2ImgNetSizes(SizesMixin):
+class Spk2ImgNetSizes(SizesMixin, SubstreamSizes):
     """Every size of Spk2ImgNet.
 
-    ``windows`` windows of ``window`` readouts ``step`` apart (span
-    (windows - 1) * step + window = 61); ``lengths``: the temporal lengths
+    ``substreams`` windows of ``window`` readouts ``stride`` apart (span
+    (substreams - 1) * stride + window = 61); ``lengths``: the temporal lengths
     (odd, <= window) of the adaptive representation; ``channels``: feature
     width; ``blocks``: residual blocks of feature extraction;
     ``recon_blocks``: residual blocks after fusion; ``levels``, ``dcn_kernel``,
@@ -57,9 +60,9 @@ class Spk2ImgNetSizes(SizesMixin):
     }
     LABEL: ClassVar[str] = "spk2imgnet"
 
-    windows: int = 5
+    substreams: int = 5
     window: int = 21
-    step: int = 10
+    stride: int = 10
     lengths: tuple[int, ...] = (5, 11, 21)
     unshuffle: int = 4
     channels: int = 16
@@ -69,25 +72,18 @@ class Spk2ImgNetSizes(SizesMixin):
     dcn_kernel: int = 3
     offset_groups: int = 1
     max_offset: float = 8.0
-    mu: float = 5000.0
+    mu: float = MU
 
     def __post_init__(self) -> None:
-        self._need_ints("windows", "window", "step", "unshuffle", "channels", "levels", "dcn_kernel",
-                        "offset_groups")
+        self._need_substreams("window")
+        self._need_ints("unshuffle", "channels", "levels", "dcn_kernel", "offset_groups")
         self._need_ints("blocks", "recon_blocks", least=0)
-        self._need("windows", self.windows % 2 == 1, "odd (the key window sits in the middle)")
-        self._need("window", self.window % 2 == 1, "odd (centred on its moment)")
         self._need("dcn_kernel", self.dcn_kernel % 2 == 1, "odd")
         self._need("lengths", isinstance(self.lengths, tuple) and len(self.lengths) >= 1
                    and all(type(k) is int and k >= 1 and k % 2 == 1 and k <= self.window for k in self.lengths),
                    "a tuple of odd integers from 1 to window")
         self._need("channels", self.channels % self.offset_groups == 0, "a multiple of offset_groups")
         self._need_positive("max_offset", "mu")
-
-    @property
-    def span(self) -> int:
-        """Readouts seen around the key moment."""
-        return (self.windows - 1) * self.step + self.window
 
     @property
     def pyramid_factor(self) -> int:
@@ -122,7 +118,7 @@ class AdaptiveRepresentation(nn.Module):
         return union(support(self.attention, feats), feats)
 
 
-class Spk2ImgNet(nn.Module):
+class Spk2ImgNet(AlignedBaseline):
     """(N, 61, H, W) decoded light -> (N, 1, H, W) light at the key moment (readout 30)."""
 
     def __init__(self, sizes: Spk2ImgNetSizes = Spk2ImgNetSizes()):
@@ -131,35 +127,24 @@ class Spk2ImgNet(nn.Module):
         c = s.channels
         self.represent = AdaptiveRepresentation(s)
         self.extract = nn.Sequential(conv3(c, c), nn.LeakyReLU(0.1), *[ResBlock(c) for _ in range(s.blocks)])
-        self.align = PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset)
-        self.fuse = nn.Sequential(nn.Conv2d(s.windows * c, c, 1), nn.LeakyReLU(0.1))
-        self.reconstruct = nn.Sequential(*[ResBlock(c) for _ in range(s.recon_blocks)])
-        self.head = BlendHead(c, s.unshuffle, s.mu)
+        self.build_tail(PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset, cascade=True),
+                        s.substreams)
 
-    def forward(self, light: torch.Tensor, inside: torch.Tensor | None = None,
-                spike_light: float | None = None) -> torch.Tensor:
+    def forward(self, light: torch.Tensor, inside: torch.Tensor | None, spike_light: float) -> torch.Tensor:
         """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
-        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/net/head.py."""
+        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/learning/head.py."""
         s = self.sizes
         check_input(light, s.span, s.pyramid_factor)
         n = light.shape[0]
         code = compress(light, s.mu)                                    # the windows are slices of it
         feats = torch.stack([self.represent(code[:, start:start + s.window])
-                             for start in range(0, s.windows * s.step, s.step)], 1)
+                             for start in range(0, s.substreams * s.stride, s.stride)], 1)
         feats = self.extract(feats.flatten(0, 1))
-        feats = feats.reshape(n, s.windows, *feats.shape[1:])
-        middle = s.windows // 2
-        key = feats[:, middle]
-        refs = torch.cat((feats[:, :middle], feats[:, middle + 1:]), 1)
-        aligned = self.align(key, refs)
-        stacked = torch.cat((aligned[:, :middle], key[:, None], aligned[:, middle:]), 1)
-        fused = self.reconstruct(self.fuse(stacked.flatten(1, 2)))
-        return self.head(fused, light, inside, spike_light)
+        feats = feats.reshape(n, s.substreams, *feats.shape[1:])
+        return self.tail(feats, light, inside, spike_light)
 
     def support(self, light: Support) -> Support:
         """:meth:`forward` on supports (windows and the mu-law act per pixel)."""
         feats = support(self.extract, support(self.represent, light))
-        aligned = self.align.support(feats, feats)
-        fused = support(self.reconstruct, support(self.fuse, union(aligned, feats)))
-        return self.head.support(fused, light)
+        return self.tail_support(feats, light)
 

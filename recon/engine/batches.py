@@ -19,8 +19,11 @@ a random crop and random flips.
 from __future__ import annotations
 
 import collections
+import contextlib
 import multiprocessing
 import os
+import signal
+import threading
 import time
 
 import numpy as np
@@ -37,11 +40,39 @@ def _make(args) -> Clip:
     return make_clip(recipe, config, index)
 
 
-def _worker_init() -> None:
+#: Seconds between a worker's checks that the trainer that started it is alive.
+PARENT_POLL = 0.2
+
+
+def _worker_init(parent: int) -> None:
+    """A worker runs at lower priority and ends when the trainer is gone, however it ended (even
+    killed, with no chance to end its workers)."""
     try:
         os.nice(5)              # the trainer keeps priority on a shared machine
     except OSError:
         pass
+    threading.Thread(target=_exit_without, args=(parent,), daemon=True).start()
+
+
+def _exit_without(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL)
+    os._exit(0)                 # quietly: nobody is left to take the clip being made
+
+
+@contextlib.contextmanager
+def _ctrl_c_ignored():
+    """SIGINT ignored while the workers start: Ctrl-C reaches a terminal's whole process group, and
+    the trainer, not each worker, answers it (ending the workers); an ignored signal stays ignored
+    across the workers' exec. Only the main thread can change it (elsewhere nothing changes)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 class ClipSource:
@@ -53,7 +84,9 @@ class ClipSource:
         self.prefetch = max(1, prefetch)
         self.pool = None
         if workers > 0:
-            self.pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_worker_init)
+            with _ctrl_c_ignored():         # the workers inherit it from their first instruction on
+                self.pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_worker_init,
+                                                                      initargs=(os.getpid(),))
         self.pending: collections.deque = collections.deque()
         self.submitted = start
         self.waited = 0.0
@@ -103,7 +136,11 @@ class ClipPool:
         if progress:
             from tqdm import tqdm
             indices = tqdm(indices, desc="fill the clip pool", unit="clip", leave=False)
-        clips = [next(self.source) for _ in indices]
+        try:
+            clips = [next(self.source) for _ in indices]
+        except BaseException:            # interrupted while filling: no worker outlives the pool
+            self.source.close()
+            raise
         # clip i lives in slot i % capacity, whatever step the pool was made at
         self.clips: list[Clip] = [clips[(slot - first) % capacity] for slot in range(capacity)]
         self.made = first + capacity              # index of the next clip to enter

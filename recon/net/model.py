@@ -2,7 +2,7 @@
 
 Input: decoded light (golden's one decoder; scene units, I = 1 is the design
 light) of ``sizes.span`` readouts around the key moment, (N, span, H, W),
-with H and W multiples of ``sizes.pyramid_factor`` (:mod:`recon.net.infer`
+with H and W multiples of ``sizes.pyramid_factor`` (:mod:`recon.learning.infer`
 pads any frame). The HDR range is compressed by the mu-law
 ``log(1 + mu x) / log(1 + mu)`` before the first convolution (the network
 sees the stream, never the ground truth); the network predicts, in that
@@ -18,11 +18,12 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from ..learning.head import BlendHead
+from ..learning.layers import substreams
+from ..learning.mulaw import compress, expand
+from ..reach import Support, support
 from .align import SPA
 from .features import MSFEG
-from .head import BlendHead
-from .mulaw import compress, expand  # noqa: F401  (re-exported)
-from ..reach import Support, support
 from .refine import GuidedAttention, IntensityFeature
 from .sizes import NetSizes
 
@@ -45,23 +46,15 @@ class TESpikeNet(nn.Module):
             nn.init.zeros_(self.head.weight)    # start from the temporal mean
             nn.init.zeros_(self.head.bias)
 
-    def substreams(self, x: torch.Tensor) -> torch.Tensor:
-        """(N, span, H, W) -> (N, S, window, H, W): the sub-streams of eq. 4, key in the middle."""
-        s = self.sizes
-        index = torch.arange(s.substreams, device=x.device)[:, None] * s.stride \
-            + torch.arange(s.window, device=x.device)[None, :]
-        return x[:, index]
-
-    def forward(self, light: torch.Tensor, inside: torch.Tensor | None = None,
-                spike_light: float | None = None) -> torch.Tensor:
+    def forward(self, light: torch.Tensor, inside: torch.Tensor | None, spike_light: float) -> torch.Tensor:
         """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
-        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/net/head.py."""
+        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/learning/head.py."""
         s = self.sizes
         n, span, h, w = light.shape
         if span != s.span or h % s.pyramid_factor or w % s.pyramid_factor:
             raise ValueError(f"input (N, {span}, {h}, {w}): need span {s.span} and H, W multiples of "
                              f"{s.pyramid_factor}")
-        subs_light = self.substreams(light)
+        subs_light = substreams(light, s.substreams, s.window, s.stride)
         key_light = subs_light[:, s.substreams // 2]
         subs = compress(subs_light, s.mu)
         features = self.encoder(subs.reshape(n * s.substreams, s.window, h, w))
@@ -83,7 +76,3 @@ class TESpikeNet(nn.Module):
             return self.head.support(fused, light)
         return support(self.shuffle, support(self.head, fused)).union(light)
 
-
-def parameter_count(model: nn.Module) -> int:
-    """Trainable parameters (the frozen eq. 8 kernels are buffers, not counted)."""
-    return sum(p.numel() for p in model.parameters() if p.requires_grad)

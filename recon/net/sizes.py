@@ -10,19 +10,22 @@ Table 3 are :meth:`NetSizes.ablation`.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Mapping
+from typing import Any, ClassVar
 
 from golden.errors import InputError
 
+from ..learning.sizes import SizesMixin, SubstreamSizes
+from ..pictures import MU
+
 #: Switches of the paper's Table 3, in its column order.
 SWITCHES = ("gradient", "dcn", "similarity", "motion_bias", "refine")
-#: Output heads: ``blend`` (recon/net/head.py: a per-pixel choice among training-free estimates plus a
+#: Output heads: ``blend`` (recon/learning/head.py: a per-pixel choice among training-free estimates plus a
 #: correction, the default) or ``mean`` (a correction to the key sub-stream's mean; weights made before it).
 HEADS = ("blend", "mean")
 
 
 @dataclasses.dataclass(frozen=True)
-class NetSizes:
+class NetSizes(SizesMixin, SubstreamSizes):
     """Every size of the network (paper section 5, appendix A.1).
 
     Input: ``substreams`` sub-streams (eq. 4) of ``window`` readouts each, their
@@ -44,6 +47,13 @@ class NetSizes:
     one of :data:`HEADS`.
     """
 
+    #: name -> keyword arguments: the shipped CPU size and the paper's.
+    PRESETS: ClassVar[dict[str, dict[str, Any]]] = {
+        "cpu": {},
+        "paper": {"unshuffle": 1, "channels": 120, "heads": 4},
+    }
+    LABEL: ClassVar[str] = "network"
+
     substreams: int = 5
     window: int = 13
     stride: int = 12
@@ -54,7 +64,7 @@ class NetSizes:
     max_offset: float = 8.0
     heads: int = 2
     attention_window: int = 15
-    mu: float = 5000.0
+    mu: float = MU
     head: str = "blend"
     gradient: bool = True
     dcn: bool = True
@@ -63,14 +73,9 @@ class NetSizes:
     refine: bool = True
 
     def __post_init__(self) -> None:
-        def need(key: str, ok: bool, rule: str) -> None:
-            if not ok:
-                raise InputError(f"network size {key} = {getattr(self, key)!r}: must be {rule}")
-        for key in ("substreams", "window", "stride", "unshuffle", "channels", "levels", "dcn_kernel",
-                    "heads", "attention_window"):
-            need(key, type(getattr(self, key)) is int and getattr(self, key) >= 1, "an integer >= 1")
-        need("substreams", self.substreams % 2 == 1, "odd (the key sub-stream sits in the middle)")
-        need("window", self.window % 2 == 1, "odd (centred on its moment)")
+        need = self._need
+        self._need_substreams("sub-stream")
+        self._need_ints("unshuffle", "channels", "levels", "dcn_kernel", "heads", "attention_window")
         need("dcn_kernel", self.dcn_kernel % 2 == 1, "odd")
         need("attention_window", self.attention_window % 2 == 1, "odd")
         need("channels", self.channels % 4 == 0 and self.channels % self.heads == 0,
@@ -82,20 +87,9 @@ class NetSizes:
             need(key, type(getattr(self, key)) is bool, "true or false")
 
     @property
-    def span(self) -> int:
-        """Readouts the network sees around its key moment."""
-        return (self.substreams - 1) * self.stride + self.window
-
-    @property
     def pyramid_factor(self) -> int:
         """Frame sizes are padded to a multiple of this (unshuffle and the pyramid's halvings)."""
         return self.unshuffle * (1 << (self.levels - 1))
-
-    @classmethod
-    def preset(cls, name: str) -> "NetSizes":
-        if name not in PRESETS:
-            raise InputError(f"unknown network size {name!r} (known: {', '.join(PRESETS)})")
-        return cls(**PRESETS[name])
 
     def ablation(self, case: int) -> "NetSizes":
         """The paper's Table 3 case 1..6 (MSFE always; then gradient, DCNs, SP, MBP, LIR)."""
@@ -103,20 +97,3 @@ class NetSizes:
             raise InputError(f"ablation case {case!r}: must be 1..6 (paper Table 3)")
         on = SWITCHES[:case - 1]
         return dataclasses.replace(self, **{key: key in on for key in SWITCHES})
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "NetSizes":
-        unknown = sorted(set(data) - {f.name for f in dataclasses.fields(cls)})
-        if unknown:
-            raise InputError(f"unknown network size key {unknown[0]!r}")
-        return cls(**dict(data))
-
-
-#: name -> keyword arguments of :class:`NetSizes`.
-PRESETS: dict[str, dict[str, Any]] = {
-    "cpu": {},
-    "paper": {"unshuffle": 1, "channels": 120, "heads": 4},
-}

@@ -1,4 +1,4 @@
-"""recon.net.train and ``tespike train``: a few steps, the log and plot, resume equal to one run."""
+"""recon.train and ``tespike train``: a few steps, the log and plot, resume equal to one run."""
 
 import csv
 
@@ -7,8 +7,8 @@ import torch
 
 from golden.config import SensorConfig
 from golden.errors import InputError
-from recon.net.infer import load_weights
-from recon.net.train import TrainOptions, train, training_loss
+from recon.learned import load_weights
+from recon.train import TrainOptions, train, training_loss
 from recon.engine.clips import EngineRecipe
 from tests.cli import assert_refused, run_tespike
 
@@ -33,7 +33,7 @@ def test_a_few_steps_write_weights_log_and_plot(tmp_path):
 
 def test_validation_keeps_the_best_weights(tmp_path, monkeypatch):
     """The weights written are those of the best validation score, recorded with it."""
-    import recon.net.train as train_module
+    import recon.train as train_module
     scores = iter([20.0, 25.0, 22.0])
     monkeypatch.setattr(train_module, "validate", lambda model, cases, config, device: {"a": (v := next(scores)),
                                                                                         "mean": v})
@@ -106,7 +106,7 @@ def test_cli_refusals(tmp_path):
 
 
 def test_peak_sets_the_clips_brightness(tmp_path, monkeypatch):
-    import recon.net.train as trainer
+    import recon.train as trainer
     from cosim.cli import main
 
     seen = []
@@ -132,7 +132,8 @@ def test_init_warm_starts_every_matching_tensor(tmp_path):
 
     from recon.net.model import TESpikeNet
     from recon.net.sizes import NetSizes
-    from recon.net.train import save_weights, warm_start
+    from recon.learning.weights import save_weights
+    from recon.train import warm_start
     old = TESpikeNet(dataclasses.replace(NetSizes(), head="mean"))
     for p in old.parameters():
         torch.nn.init.normal_(p)
@@ -145,7 +146,7 @@ def test_init_warm_starts_every_matching_tensor(tmp_path):
     assert torch.equal(new.head.conv.weight, head_before)
     for name in copied:
         assert torch.equal(new.state_dict()[name], old.state_dict()[name])
-    with pytest.raises(InputError, match="not of 'bsf'"):
+    with pytest.raises(InputError, match="not bsf's BSF"):
         warm_start(new, str(tmp_path / "old.pt"), "bsf")
     out = train(options(init=str(tmp_path / "old.pt")), tmp_path / "w.pt")
     assert load_weights(out)[2]["options"]["init"] == str(tmp_path / "old.pt")
@@ -165,7 +166,7 @@ def test_cli_keeps_no_copy_of_the_trainers_defaults(tmp_path, monkeypatch, capsy
     defaults, come from TrainOptions (they had drifted: 200 vs 250 steps per epoch)."""
     import dataclasses
 
-    import recon.net.train as trainer
+    import recon.train as trainer
     from cosim.cli import build_parser, main
     from cosim.commands.train_cmd import TRAINER_FLAGS
 

@@ -1,17 +1,17 @@
-"""The network on whole streams: every readout gets an image, any frame size, bounded memory.
+"""Any learned method on whole streams: every readout gets an image, any frame size, bounded memory.
 
-For key moment k the network sees readouts k - span/2 .. k + span/2; past
+For key moment k the method sees readouts k - span/2 .. k + span/2; past
 either end of the stream the first or last readout is repeated (so a stream
-shorter than the span works, down to one readout), and the network is told
+shorter than the span works, down to one readout), and the method is told
 which readouts are such padding (``inside``). Frames are mirrored by
 :data:`MIRROR_BORDER` pixels or more beyond every edge, to a multiple of the
-network's pyramid factor (the convolutions' zero padding then meets scene
+method's pyramid factor (the convolutions' zero padding then meets scene
 content, not a cliff: +0.9 dB on 16 x 16 crops, docs/network.md), and cut into
 tiles whose cores are computed with :func:`tile_margin` pixels more on every
 side: the receptive radius derived from the module itself
-(:func:`recon.learned.receptive_radius`, :mod:`recon.reach`), rounded up to
-the pyramid factor, so a tiled result equals the whole-frame one to float
-rounding (``tests/test_recon_net_infer.py``).
+(:func:`receptive_radius`, :mod:`recon.reach`), rounded up to the pyramid
+factor, so a tiled result equals the whole-frame one to float rounding
+(``tests/test_recon_learning_infer.py``).
 
 Tile size (:func:`tiles`): by default (``tile="auto"``) the core is
 :data:`TILE_MARGINS` = 2 margins (:func:`default_tile`), so a tile computes
@@ -22,15 +22,13 @@ axis, so that axis is not cut (same peak, less work); a frame within
 core + margin on both axes runs whole. A tile given smaller than the margin
 is accepted: the result is the same, only slower (each tile computes
 (tile + 2 margin)^2 pixels for tile^2). ``tile=None`` runs the whole frame at
-once. The shipped weights
-(``recon/net/weights/<preset>.pt``) are chosen by the stream's configuration;
-a configuration no weights were trained for is refused, naming both.
+once. Which weights a module holds is the caller's (:func:`recon.learned.load_learned`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
+import functools
 
 import numpy as np
 import torch
@@ -38,54 +36,64 @@ import torch
 from golden.config import SensorConfig
 from golden.errors import InputError
 
-from ..learned import receptive_radius  # noqa: F401  (re-exported: derived from the module)
-from ..learned import load_weights  # noqa: F401  (re-exported)
-from ..learned import weights_path as learned_weights_path
+from ..reach import receptive_radius as derived_radius
 from ..stream import decode_light, key_span, output_images, span_inside
-from .model import TESpikeNet
 
 
+@functools.lru_cache(maxsize=64)
+def module_radius(module_class: type, sizes) -> int:
+    """Frame pixels an output pixel of ``module_class(sizes)`` can reach (an upper bound).
 
-def weights_path(config: SensorConfig) -> Path:
-    """The shipped network weights for ``config`` (:func:`recon.learned.weights_path` of ``net``)."""
-    return learned_weights_path(config, "net")
+    Derived from the module built from ``sizes`` (on the meta device: no memory,
+    no weights) by :func:`recon.reach.receptive_radius`, so any change of a kernel,
+    a level, an offset bound or a window shows in it.
+    """
+    with torch.device("meta"):
+        model = module_class(sizes)
+    return derived_radius(model)
+
+
+def receptive_radius(model: torch.nn.Module) -> int:
+    """:func:`module_radius` of a learned method's module (its class and sizes)."""
+    return module_radius(type(model), model.sizes)
 
 
 #: Pixels of the frame mirrored beyond each edge before the network sees it (:func:`mirrored_index`).
 MIRROR_BORDER = 8
 
 
-def tile_margin(sizes) -> int:
+def tile_margin(model: torch.nn.Module) -> int:
     """Overlap added on every side of a tile: the derived receptive radius rounded up to the pyramid factor."""
-    f = sizes.pyramid_factor
-    return -(-receptive_radius(sizes) // f) * f
+    f = model.sizes.pyramid_factor
+    return -(-receptive_radius(model) // f) * f
 
 
 #: The default tile core, in margins (:func:`default_tile`).
 TILE_MARGINS = 2
 
 
-def default_tile(sizes) -> int:
+def default_tile(model: torch.nn.Module) -> int:
     """The default tile core: :data:`TILE_MARGINS` margins (a multiple of the pyramid factor)."""
-    return TILE_MARGINS * tile_margin(sizes)
+    return TILE_MARGINS * tile_margin(model)
 
 
-def tiles(height: int, width: int, sizes, tile: int | str | None = "auto") -> list[tuple[int, int, int, int]]:
+def tiles(height: int, width: int, model: torch.nn.Module,
+          tile: int | str | None = "auto") -> list[tuple[int, int, int, int]]:
     """Tile cores (y, x, h, w) covering the frame padded to the pyramid factor.
 
     ``tile``: the core's side (a multiple of the pyramid factor), ``"auto"`` for
     :func:`default_tile`, ``None`` for the whole frame. An axis no longer than
     core + margin is not cut (its first block would already span it).
     """
-    f = sizes.pyramid_factor
+    f = model.sizes.pyramid_factor
     hp, wp = -(-height // f) * f, -(-width // f) * f
     if tile is None:
         return [(0, 0, hp, wp)]
     if tile == "auto":
-        tile = default_tile(sizes)
+        tile = default_tile(model)
     if type(tile) is not int or tile < f or tile % f:
         raise InputError(f"tile = {tile!r}: must be a multiple of the pyramid factor {f}, 'auto' or None")
-    margin = tile_margin(sizes)
+    margin = tile_margin(model)
     ty = tile if hp > tile + margin else hp
     tx = tile if wp > tile + margin else wp
     return [(y, x, min(ty, hp - y), min(tx, wp - x)) for y in range(0, hp, ty) for x in range(0, wp, tx)]
@@ -111,14 +119,14 @@ class Block:
     result: tuple[slice, slice]
 
 
-def blocks(height: int, width: int, sizes, tile: int | str | None = None) -> list[Block]:
+def blocks(height: int, width: int, model: torch.nn.Module, tile: int | str | None = None) -> list[Block]:
     """The blocks :func:`frame` computes for a ``height`` x ``width`` frame (see :func:`tiles`)."""
-    row_index = mirrored_index(height, sizes.pyramid_factor)
-    col_index = mirrored_index(width, sizes.pyramid_factor)
+    row_index = mirrored_index(height, model.sizes.pyramid_factor)
+    col_index = mirrored_index(width, model.sizes.pyramid_factor)
     top = left = MIRROR_BORDER
     hp, wp = len(row_index), len(col_index)
-    cores = tiles(hp, wp, sizes, tile)
-    margin = 0 if len(cores) == 1 else tile_margin(sizes)
+    cores = tiles(hp, wp, model, tile)
+    margin = 0 if len(cores) == 1 else tile_margin(model)
     out = []
     for y, x, h, w in cores:
         ya, yb = max(y, top), min(y + h, top + height)          # the part of the core inside the frame
@@ -132,9 +140,9 @@ def blocks(height: int, width: int, sizes, tile: int | str | None = None) -> lis
     return out
 
 
-def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, *,
+def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: int, *,
           tile: int | str | None = None, device: str = "cpu") -> torch.Tensor:
-    """The network's image (H, W) at readout ``key`` of the stream ``words`` (K, H, W).
+    """The method's image (H, W) at readout ``key`` of the stream ``words`` (K, H, W).
 
     Only the readouts and pixels one tile needs are decoded at a time, so memory
     is bounded by the tile, not the frame. Readouts past either end repeat the
@@ -146,28 +154,11 @@ def frame(model: TESpikeNet, words: np.ndarray, config: SensorConfig, key: int, 
     times = key_span(K, key, sizes.span)
     inside = torch.from_numpy(span_inside(K, key, sizes.span))[None].to(device)
     out = torch.empty((H, W), dtype=torch.float32)
-    for block in blocks(H, W, sizes, tile):
+    for block in blocks(H, W, model, tile):
         light = decode_light(words[times[:, None, None], block.rows[None, :, None], block.cols[None, None, :]],
                              config, device=device, dtype=torch.float32)
         out[block.frame] = model(light[None], inside, config.spike_light)[0, 0][block.result].float().cpu()
     return out
-
-
-def reconstruct_net(words, config: SensorConfig, *, weights: str | Path | None = None,
-                    tile: int | str | None = "auto",
-                    device: str = "cpu", progress: bool = False, out: np.ndarray | None = None) -> np.ndarray:
-    """Stream words (K, H, W) -> float32 light (K, H, W), one image per readout.
-
-    ``words`` may be a memory map: only the readouts and pixels of one tile are
-    read at a time. ``out``: a float32 (K, H, W) array to fill (e.g. a memory map
-    of the output file); it is returned. ``tile``: see :func:`tiles`.
-    """
-    path = Path(weights) if weights is not None else weights_path(config)
-    model, trained_for, _ = load_weights(path)
-    if trained_for != config:
-        raise InputError(f"network weights {str(path)!r} were trained for {trained_for}, "
-                         f"the stream is {config}")
-    return reconstruct_model(model, words, config, tile=tile, device=device, progress=progress, out=out)
 
 
 def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, tile: int | str | None = "auto",

@@ -1,6 +1,5 @@
-"""recon.net.infer: any stream length and frame size, tiles equal to the whole frame, stiff inputs."""
+"""recon.learning.infer: any learned method on any stream length and frame size, tiles equal to the whole frame, stiff inputs."""
 
-import dataclasses
 import warnings
 
 import numpy as np
@@ -10,12 +9,13 @@ import torch
 from golden.config import SensorConfig
 from golden.errors import InputError
 from golden.fastsim import simulate_scene
-import recon.net.infer as infer
-from recon.net.infer import (MIRROR_BORDER, default_tile, frame, load_weights, mirrored_index, reconstruct_net,
-                              tile_margin, tiles, weights_path)
+import recon.learning.infer as infer
+from recon.learned import load_weights, weights_path
+from recon.learning.infer import MIRROR_BORDER, default_tile, frame, mirrored_index, tile_margin, tiles
+from recon.learning.weights import save_weights
+from recon.methods import reconstruct
 from recon.net.model import TESpikeNet
 from recon.net.sizes import NetSizes
-from recon.net.train import save_weights
 
 TINY = NetSizes(channels=8, heads=2, window=3, stride=2, unshuffle=2, levels=2, max_offset=1.0,
                 attention_window=3)
@@ -28,7 +28,7 @@ def random_weights(path, config, sizes=TINY, seed=0):
     with torch.no_grad():
         for p in model.parameters():
             p.normal_(0.0, 0.05)
-    save_weights(path, model, config, {"what": "random test weights"})
+    save_weights(path, model, config, {"what": "random test weights"}, "net")
     return path
 
 
@@ -39,7 +39,7 @@ def te_weights(tmp_path):
 
 def test_tiles_equal_the_whole_frame(te_weights):
     model, config, _ = load_weights(te_weights)
-    margin = tile_margin(model.sizes)
+    margin = tile_margin(model)
     rng = np.random.default_rng(1)
     words = simulate_scene(config, rng.uniform(0, 1, (12, 20, 3 * margin)).astype(np.float32), seed=2)
     with torch.inference_mode():
@@ -53,7 +53,7 @@ def test_far_pixels_do_not_matter(te_weights):
     """The receptive field is finite (bounded offsets, local attention): the tile margin is honest,
     on both sides (a pixel before the centre as well as after it: no running sum across the frame)."""
     model, config, _ = load_weights(te_weights)
-    margin = tile_margin(model.sizes)
+    margin = tile_margin(model)
     width = 2 * margin + 16
     words = np.random.default_rng(5).integers(0, 16, (6, 8, width)).astype(np.uint8)
     with torch.inference_mode():
@@ -68,16 +68,17 @@ def test_far_pixels_do_not_matter(te_weights):
 
 def test_tile_policy():
     """Default core: two margins; an axis within core + margin is not cut; smaller tiles are accepted."""
-    f, margin = TINY.pyramid_factor, tile_margin(TINY)
-    core = default_tile(TINY)
+    tiny = TESpikeNet(TINY)
+    f, margin = TINY.pyramid_factor, tile_margin(tiny)
+    core = default_tile(tiny)
     assert core == 2 * margin and core % f == 0
-    assert tiles(core + margin, 5 * core, TINY) == [(0, x, core + margin, min(core, 5 * core - x))
+    assert tiles(core + margin, 5 * core, tiny) == [(0, x, core + margin, min(core, 5 * core - x))
                                                     for x in range(0, 5 * core, core)]
-    assert tiles(core, core, TINY) == [(0, 0, core, core)]                          # runs whole
-    assert len(tiles(3 * margin, 40 * f, TINY, f)) == 3 * margin // f * 40         # smaller than the margin: fine
-    assert tiles(10, 10, TINY, None) == [(0, 0, 12, 12)]                          # padded to f = 4
+    assert tiles(core, core, tiny) == [(0, 0, core, core)]                          # runs whole
+    assert len(tiles(3 * margin, 40 * f, tiny, f)) == 3 * margin // f * 40         # smaller than the margin: fine
+    assert tiles(10, 10, tiny, None) == [(0, 0, 12, 12)]                          # padded to f = 4
     with pytest.raises(InputError, match="multiple of the pyramid factor"):
-        tiles(64, 64, TINY, f + 1)
+        tiles(64, 64, tiny, f + 1)
 
 
 @pytest.mark.parametrize("length", [1, 2, 3, 9, 17, 64])
@@ -110,7 +111,7 @@ def test_the_network_sees_the_frame_mirrored(te_weights, monkeypatch):
 @pytest.mark.parametrize("shape", [(1, 1, 1), (1, 5, 7), (3, 17, 9), (TINY.span + 4, 6, 33)])
 def test_any_length_and_size(te_weights, shape):
     words = np.random.default_rng(0).integers(0, 16, shape).astype(np.uint8)
-    out = reconstruct_net(words, SensorConfig(), weights=te_weights)
+    out = reconstruct(words, SensorConfig(), "net", weights=te_weights)
     assert out.shape == shape and out.dtype == np.float32 and np.isfinite(out).all()
 
 
@@ -129,13 +130,13 @@ def test_stiff_streams_are_finite_without_warnings(te_weights, name):
     words = stiff_streams(config)[name]
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        out = reconstruct_net(words, config, weights=te_weights)
+        out = reconstruct(words, config, "net", weights=te_weights)
     assert np.isfinite(out).all() and (out >= 0).all()
 
 
 def test_weights_for_another_configuration_are_refused(te_weights):
     with pytest.raises(InputError, match="trained for.*te-.*the stream is ml-"):
-        reconstruct_net(np.zeros((2, 3, 3), np.uint8), SensorConfig(mode="ml"), weights=te_weights)
+        reconstruct(np.zeros((2, 3, 3), np.uint8), SensorConfig(mode="ml"), "net", weights=te_weights)
     with pytest.raises(InputError, match="none of the presets"):
         weights_path(SensorConfig(b1=3))
 

@@ -55,8 +55,7 @@ def _inside(light: torch.Tensor, inside: torch.Tensor | None) -> torch.Tensor:
     return inside.view(n, t, 1, 1)
 
 
-def spike_interval_light(light: torch.Tensor, inside: torch.Tensor | None = None,
-                         spike_light: float | None = None) -> torch.Tensor:
+def spike_interval_light(light: torch.Tensor, inside: torch.Tensor | None, spike_light: float) -> torch.Tensor:
     """TFI (``recon/tfi.py``) at the middle readout of (N, T, H, W) decoded light, searched inside the span.
 
     ``inside`` (N, T) marks the readouts that lie in the stream (those past
@@ -67,14 +66,13 @@ def spike_interval_light(light: torch.Tensor, inside: torch.Tensor | None = None
     the last spike the charge since p is below one threshold: the light is
     at most ``spike_light`` (one spike per readout, :attr:`SensorConfig.spike_light`)
     over the ``end - p`` readouts since p, capped by the light of the
-    interval that ends at p; without any spike, that bound alone. So, given
-    ``spike_light``, this is TFI searched in the span's window (``tfi(...,
+    interval that ends at p; without any spike, that bound alone. So this is TFI searched in the span's window (``tfi(...,
     search="window")``), at the stream's ends too, and the whole-stream TFI
     on a stream of at most T // 2 + 1 readouts; one difference: where that
     capping interval began before the span, it is counted from the span's
     start (TFI counts it from p's own window, which the span does not hold).
-    Without ``spike_light`` (a sensor not known) the bound uses the looser
-    ``light[p]`` for one spike's light, and a pixel without spikes gets 0.
+    ``spike_light`` is required: every learned method is trained and run for
+    one sensor, whose value it is.
     """
     n_, t, h, w = light.shape
     key = t // 2
@@ -89,17 +87,12 @@ def spike_interval_light(light: torch.Tensor, inside: torch.Tensor | None = None
     earlier = torch.maximum(torch.where(spiking & (index < before), index, -1).amax(1, keepdim=True), start)
     last = light.gather(1, before.clamp(min=0))
     previous = last / (before - earlier).clamp(min=1).to(light.dtype)
-    since = (end - before).to(light.dtype)                 # >= 1: the key lies in the stream, after p
-    if spike_light is None:
-        tail = torch.where(before > start, torch.minimum(previous, last / since), torch.zeros_like(last))
-    else:
-        bound = spike_light / since
-        tail = torch.where(before > start, torch.minimum(previous, bound), bound)
+    bound = spike_light / (end - before).to(light.dtype)  # end - before >= 1: the key lies in the stream, after p
+    tail = torch.where(before > start, torch.minimum(previous, bound), bound)
     return torch.where(after < t, at_next, tail)
 
 
-def key_estimates(light: torch.Tensor, inside: torch.Tensor | None = None,
-                  spike_light: float | None = None) -> torch.Tensor:
+def key_estimates(light: torch.Tensor, inside: torch.Tensor | None, spike_light: float) -> torch.Tensor:
     """(N, T, H, W) decoded light -> (N, len(RADII) + 1, H, W): centred means of :data:`RADII`, then TFI.
 
     Each mean is TFP's (``recon/tfp.py``): over the readouts of its window
@@ -137,10 +130,10 @@ class BlendHead(nn.Module):
                 bias[self.estimates - 1 if name == "tfi" else RADII.index(name)] = value
             self.conv.bias.copy_(bias.repeat_interleave(unshuffle ** 2))
 
-    def forward(self, feature: torch.Tensor, light: torch.Tensor, inside: torch.Tensor | None = None,
-                spike_light: float | None = None) -> torch.Tensor:
-        """``inside`` (N, T): the span's readouts that lie in the stream; ``spike_light``: the
-        sensor's light of one spike per readout (see :func:`spike_interval_light`)."""
+    def forward(self, feature: torch.Tensor, light: torch.Tensor, inside: torch.Tensor | None,
+                spike_light: float) -> torch.Tensor:
+        """``inside`` (N, T): the span's readouts that lie in the stream (None: all); ``spike_light``:
+        the sensor's light of one spike per readout (see :func:`spike_interval_light`)."""
         out = self.shuffle(self.conv(feature))
         weights = torch.softmax(out[:, :self.estimates], 1)
         codes = compress(key_estimates(light, inside, spike_light), self.mu)

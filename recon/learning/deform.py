@@ -9,7 +9,7 @@ weighted by its mask, and the taps are contracted with the weights in one
 matrix product. The argument layout is torchvision's: ``offset`` is
 (N, 2 * G * kh * kw, H', W') with (dy, dx) per tap, taps in row-major order,
 offset group g first; ``mask`` is (N, G * kh * kw, H', W').
-``tests/test_recon_net_deform.py`` checks it against a direct float64 loop
+``tests/test_recon_learning_deform.py`` checks it against a direct float64 loop
 and measures nothing: ``benchmarks/bench_net.py`` times it.
 """
 

@@ -10,18 +10,24 @@ the metrics. Every ``validate_every`` steps the model is scored on the held-out
 validation set (:mod:`recon.engine.validation`); the weights kept are the best
 on it. A run stops at a step or wall-time budget, writes a CSV log, a PNG of
 the loss and validation curves and a checkpoint every ``checkpoint_seconds``,
-and resumes exactly (the same draws as an uninterrupted run).
+and resumes exactly (the same draws as an uninterrupted run; its logs are cut back
+to the checkpoint's step). Faults end in one line naming the file: files are
+written whole or not at all (a full disk named, not torch's internal error), a
+truncated ``--init`` or checkpoint is named with its cause, the weights go to
+``out`` before anything else at the end (a run folder removed meanwhile loses
+none), and an interrupted run keeps its steps in a checkpoint (:func:`train`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import math
+import shutil
 import sys
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -30,10 +36,13 @@ from golden.config import SensorConfig
 from golden.errors import InputError
 from golden.io import atomic_output
 
-from ..engine.batches import ClipPool, draw_batch
-from ..engine.clips import EngineRecipe
-from ..learned import method_classes
-from .model import compress, parameter_count
+from .engine.batches import ClipPool, draw_batch
+from .engine.clips import EngineRecipe
+from .learned import load_weights, method_classes
+from .learning.layers import parameter_count
+from .learning.mulaw import compress
+from .learning.weights import cpu_state, read_torch_file, read_weights, save_weights, write_torch_file
+from .pictures import MU
 
 LOSSES = ("l1", "mu-l1")
 #: Quantum efficiency of the paper's eq. 7 (its output is divided by it).
@@ -115,7 +124,7 @@ class TrainOptions:
         return EngineRecipe.from_dict({**self.recipe, "seed": self.seed})
 
 
-def training_loss(pred: torch.Tensor, truth: torch.Tensor, loss: str, mu: float = 5000.0) -> torch.Tensor:
+def training_loss(pred: torch.Tensor, truth: torch.Tensor, loss: str, mu: float = MU) -> torch.Tensor:
     """Eq. 7 (``l1``: |I^ / eta - I_gt|, the network's output already being I^ / eta) or
     ``mu-l1``: the same after the mu-law tone map of the metrics."""
     if loss == "l1":
@@ -123,14 +132,8 @@ def training_loss(pred: torch.Tensor, truth: torch.Tensor, loss: str, mu: float 
     return (compress(pred, mu) - compress(truth, mu)).abs().mean()
 
 
-def save_weights(path: str | Path, model: torch.nn.Module, config: SensorConfig, meta: dict[str, Any],
-                 method: str = "net") -> None:
-    """The shipped form: method + state dict + sizes + sensor configuration + how they were made,
-    loadable with ``torch.load(weights_only=True)`` (no pickled code)."""
-    payload = {"method": method, "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
-               "sizes": model.sizes.to_dict(), "config": config.to_dict(), "meta": meta}
-    with atomic_output(path) as tmp:
-        torch.save(payload, tmp)
+#: What a checkpoint holds (:func:`_save_checkpoint`).
+CHECKPOINT_KEYS = ("model", "optimizer", "scheduler", "step", "elapsed", "generator", "options", "torch_rng")
 
 
 def _save_checkpoint(path: Path, model, optimizer, scheduler, step, elapsed, generator, options,
@@ -139,8 +142,38 @@ def _save_checkpoint(path: Path, model, optimizer, scheduler, step, elapsed, gen
                "scheduler": scheduler.state_dict(), "step": step, "elapsed": elapsed,
                "generator": json_state(generator), "options": dataclasses.asdict(options),
                "torch_rng": torch.get_rng_state(), "best": best}
-    with atomic_output(path) as tmp:
-        torch.save(payload, tmp)
+    write_torch_file(path, payload)
+
+
+def read_checkpoint(path: Path) -> tuple[dict, "TrainOptions"]:
+    """(the checkpoint's payload, the options it was made with); a one-line refusal naming ``path``
+    where it is missing, truncated or not a checkpoint of this trainer."""
+    if not path.is_file():
+        raise InputError(f"nothing to resume: no checkpoint at {str(path)!r}")
+    state = read_torch_file(path, "checkpoint", "training checkpoint")
+    if not isinstance(state, dict) or any(key not in state for key in CHECKPOINT_KEYS):
+        raise InputError(f"checkpoint {str(path)!r} is not a checkpoint of tespike train")
+    try:
+        return state, TrainOptions(**state["options"])
+    except (TypeError, InputError) as exc:
+        raise InputError(f"checkpoint {str(path)!r} holds options this trainer cannot take "
+                         f"({str(exc).splitlines()[0][:100]})") from None
+
+
+def trim_log(path: Path, step: int) -> None:
+    """Drop the rows of CSV log ``path`` after ``step`` (written by a run killed after its last
+    checkpoint, which a resumed run writes again); a missing log is left missing."""
+    if not path.is_file():
+        return
+    try:
+        with open(path, newline="") as handle:
+            rows = list(csv.reader(handle))
+        kept = rows[:1] + [row for row in rows[1:] if int(row[0]) <= step]
+    except (ValueError, IndexError, csv.Error, UnicodeDecodeError):
+        raise InputError(f"run log {str(path)!r} is damaged: move it away to resume") from None
+    if len(kept) < len(rows):
+        with atomic_output(path) as tmp, open(tmp, "w", newline="") as handle:
+            csv.writer(handle).writerows(kept)
 
 
 def json_state(generator: np.random.Generator) -> dict:
@@ -154,7 +187,7 @@ def plot_curves(log_path: Path, validation_path: Path, png_path: Path, title: st
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from ..pictures import save_figure
+    from .pictures import save_figure
     with open(log_path, newline="") as handle:
         rows = list(csv.DictReader(handle))
     if not rows:
@@ -197,8 +230,8 @@ def plot_curves(log_path: Path, validation_path: Path, png_path: Path, title: st
 
 def validate(model: torch.nn.Module, cases, config: SensorConfig, device: str) -> dict[str, float]:
     """PSNR-mu of ``model`` on the validation cases (whole frames, every readout)."""
-    from ..engine.validation import validation_psnr
-    from .infer import reconstruct_model
+    from .engine.validation import validation_psnr
+    from .learning.infer import reconstruct_model
     was_training = model.training
     model.eval()
     try:
@@ -215,14 +248,11 @@ def warm_start(model: torch.nn.Module, path: str, method: str) -> list[str]:
     A network whose head changed keeps what it learned elsewhere (features,
     alignment, refinement) and trains its new parts from their initial values.
     """
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-        saved, saved_method = payload["state_dict"], payload.get("method", "net")
-    except (OSError, RuntimeError, KeyError, TypeError) as exc:
-        raise InputError(f"--init {path!r} is not a readable tespike weights file ({type(exc).__name__})") from None
-    if saved_method != method:
-        raise InputError(f"--init {path!r} holds weights of {saved_method!r}, not of {method!r}")
-    own = model.state_dict()
+    source, _, _ = load_weights(path, "--init")
+    wanted = method_classes(method)[0]
+    if type(source) is not wanted:
+        raise InputError(f"--init {path!r} holds a {type(source).__name__}, not {method}'s {wanted.__name__}")
+    saved, own = source.state_dict(), model.state_dict()
     copied = [name for name, value in saved.items() if name in own and own[name].shape == value.shape]
     if not copied:
         raise InputError(f"--init {path!r}: no tensor matches the model's names and shapes")
@@ -230,16 +260,33 @@ def warm_start(model: torch.nn.Module, path: str, method: str) -> list[str]:
     return copied
 
 
+class RunFolderGone(InputError):
+    """The run folder vanished during training (the weights were saved to the output first)."""
+
+
 def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None = None,
           resume: bool = False, progress: bool | None = None, command: str = "") -> Path:
     """Run (or resume) one training; write the best-on-validation weights to ``out``; return its path.
 
     ``work_dir`` (default: ``out`` with suffix ``.run``) holds the checkpoint, the
-    CSV logs and the curves' PNG.
+    CSV logs and the curves' PNG. Interrupted (Ctrl-C, a termination signal)
+    after a step, the run saves its checkpoint first and says so in a note on
+    the exception; one that made nothing removes the run folder it created.
     """
     out = Path(out)
     work = Path(work_dir) if work_dir is not None else out.with_suffix(".run")
+    created = not work.exists()
     work.mkdir(parents=True, exist_ok=True)
+    try:
+        return _train(options, out, work, resume, progress, command)
+    except BaseException:
+        if created and work.is_dir() and not (work / "checkpoint.pt").exists():
+            shutil.rmtree(work, ignore_errors=True)        # nothing to resume: leave no empty folder
+        raise
+
+
+def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress: bool | None,
+           command: str) -> Path:
     checkpoint, log_path = work / "checkpoint.pt", work / "log.csv"
     validation_path, best_path = work / "validation.csv", work / "best.pt"
     if options.threads is not None:
@@ -250,25 +297,31 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
     model = options.model().to(options.device).to(memory_format=torch.channels_last)
     optimizer = torch.optim.Adam(model.parameters(), lr=options.lr, betas=(0.9, 0.999))
     scheduler = torch.optim.lr_scheduler.StepLR(optimizer, options.steps_per_epoch * options.halve_every, 0.5)
-    step, elapsed_before, best = 0, 0.0, None
+    step, elapsed_before, best, best_weights = 0, 0.0, None, None
     if resume:
-        if not checkpoint.is_file():
-            raise InputError(f"nothing to resume: no checkpoint at {str(checkpoint)!r}")
-        state = torch.load(checkpoint, map_location=options.device, weights_only=True)
-        saved = TrainOptions(**{**state["options"], "steps": options.steps, "minutes": options.minutes,
-                                "device": options.device, "threads": options.threads,
-                                "workers": options.workers})
+        state, saved = read_checkpoint(checkpoint)
+        kept = {"steps": options.steps, "minutes": options.minutes, "device": options.device,
+                "threads": options.threads, "workers": options.workers}
+
         def same(o: TrainOptions) -> TrainOptions:    # the recipe compared as resolved, not as typed
-            return dataclasses.replace(o, checkpoint_seconds=0, recipe=o.data_recipe().to_dict())
+            return dataclasses.replace(o, **kept, checkpoint_seconds=0, recipe=o.data_recipe().to_dict())
         if same(saved) != same(options):
             raise InputError(f"checkpoint {str(checkpoint)!r} was made with other options; "
                              "resume with the same sensor, method, size, loss, recipe and seed")
-        model.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])
-        scheduler.load_state_dict(state["scheduler"])
-        step, elapsed_before, best = int(state["step"]), float(state["elapsed"]), state.get("best")
-        generator.bit_generator.state = state["generator"]
-        torch.set_rng_state(state["torch_rng"])
+        try:
+            model.load_state_dict(state["model"])
+            optimizer.load_state_dict(state["optimizer"])
+            scheduler.load_state_dict(state["scheduler"])
+            step, elapsed_before, best = int(state["step"]), float(state["elapsed"]), state.get("best")
+            generator.bit_generator.state = state["generator"]
+            torch.set_rng_state(state["torch_rng"])
+        except (RuntimeError, KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"checkpoint {str(checkpoint)!r} does not fit this run "
+                             f"({str(exc).splitlines()[0][:100] if str(exc) else type(exc).__name__})") from None
+        if best is not None:
+            best_weights = read_weights(best_path, "the run's best weights")
+        for log in (log_path, validation_path):
+            trim_log(log, step)
     else:
         for stale in (log_path, validation_path, best_path):
             if stale.exists():
@@ -278,24 +331,44 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
     show = sys.stderr.isatty() if progress is None else progress
     cases = None
     if options.validate_every:
-        from ..engine.validation import validation_set
+        from .engine.validation import validation_set
         cases = validation_set(config)
-    pool = ClipPool(options.data_recipe(), config, capacity=options.pool, refresh=options.refresh,
-                    step=step, workers=options.workers, progress=show)
-    bar = None
-    if show:
-        from tqdm import tqdm
-        bar = tqdm(total=options.steps, initial=step, desc=f"train {options.method} {options.sensor}",
-                   unit="step")
     meta = {"options": dataclasses.asdict(options), "recipe": options.data_recipe().to_dict(),
             "parameters": parameter_count(model), "command": command}
+    start, first_step = time.monotonic(), step
+
+    def elapsed() -> float:
+        return elapsed_before + time.monotonic() - start
+
+    def write_weights() -> None:
+        """``out``: the best weights on validation so far, else the present ones."""
+        if best_weights is None:
+            save_weights(out, model, config, {**meta, "steps": step, "wall_seconds": round(elapsed(), 1),
+                                              "threads": torch.get_num_threads()}, options.method)
+            return
+        final = {**best_weights["meta"], "final_step": step, "final_wall_seconds": round(elapsed(), 1),
+                 "threads": torch.get_num_threads(), "waited_for_data_seconds": round(pool.source.waited, 1)}
+        save_weights(out, model, config, final, options.method, best_weights["state_dict"])
+
+    def run_folder_kept() -> None:
+        """Before every write into the run folder: one removed meanwhile ends the run, its weights saved."""
+        if not work.is_dir():
+            write_weights()
+            raise RunFolderGone(f"run folder {str(work)!r} was removed during training (step {step}): its "
+                                f"checkpoint and logs are lost; wrote the weights to {str(out)!r}")
+
+    def save_checkpoint() -> None:
+        run_folder_kept()
+        _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options, best)
+        plot_curves(log_path, validation_path, work / "curves.png", f"{options.method} {options.sensor}")
 
     validated = None
 
     def keep_if_best() -> None:
-        nonlocal best, validated
+        nonlocal best, best_weights, validated
         validated = step
         scores = validate(model, cases, config, options.device)
+        run_folder_kept()
         new_file = not validation_path.exists()
         with open(validation_path, "a", newline="") as handle:
             writer = csv.writer(handle)
@@ -304,15 +377,18 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
             writer.writerow([step, *(f"{v:.3f}" for v in scores.values()), f"{elapsed():.1f}"])
         if best is None or scores["mean"] > best["mean"]:
             best = {"step": step, **scores}
-            save_weights(best_path, model, config, {**meta, "steps": step, "validation": scores,
-                                                    "wall_seconds": round(elapsed(), 1)}, options.method)
+            best_weights = {"state_dict": cpu_state(model), "meta": {**meta, "steps": step, "validation": scores,
+                                                                      "wall_seconds": round(elapsed(), 1)}}
+            save_weights(best_path, model, config, best_weights["meta"], options.method, best_weights["state_dict"])
 
-    start = time.monotonic()
-
-    def elapsed() -> float:
-        return elapsed_before + time.monotonic() - start
-
-    last_save = start
+    pool = ClipPool(options.data_recipe(), config, capacity=options.pool, refresh=options.refresh,
+                    step=step, workers=options.workers, progress=show)
+    bar = None
+    if show:
+        from tqdm import tqdm
+        bar = tqdm(total=options.steps, initial=step, desc=f"train {options.method} {options.sensor}",
+                   unit="step")
+    last_save = time.monotonic()
     new_log = not log_path.exists()
     try:
         with open(log_path, "a", newline="") as handle:
@@ -329,7 +405,7 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
                 lr = optimizer.param_groups[0]["lr"]
                 inputs, truth, inside = draw_batch(pool, config, sizes.span, options.crop, options.batch, generator,
                                                    options.device)
-                loss = training_loss(model(inputs, inside, config.spike_light), truth, options.loss, 5000.0)
+                loss = training_loss(model(inputs, inside, config.spike_light), truth, options.loss)
                 value = loss.detach().item()
                 if not math.isfinite(value):
                     raise InputError(f"training diverged at step {step} (loss {value}); lower the learning rate")
@@ -348,26 +424,20 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
                     keep_if_best()
                 if time.monotonic() - last_save >= options.checkpoint_seconds:
                     handle.flush()
-                    _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator,
-                                     options, best)
-                    plot_curves(log_path, validation_path, work / "curves.png", f"{options.method} {options.sensor}")
+                    save_checkpoint()
                     last_save = time.monotonic()
         if cases is not None and validated != step:
             keep_if_best()
+    except BaseException as exc:
+        if not isinstance(exc, Exception) and step > first_step and work.is_dir():     # interrupted: keep the steps
+            with contextlib.suppress(Exception):
+                _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options, best)
+                exc.add_note(f"at step {step}: checkpoint {str(checkpoint)!r} saved (continue with --resume)")
+        raise
     finally:
         pool.close()
         if bar is not None:
             bar.close()
-    _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options, best)
-    plot_curves(log_path, validation_path, work / "curves.png", f"{options.method} {options.sensor}")
-    if cases is not None:
-        payload = torch.load(best_path, map_location="cpu", weights_only=True)
-        payload["meta"].update({"final_step": step, "final_wall_seconds": round(elapsed(), 1),
-                                "threads": torch.get_num_threads(), "waited_for_data_seconds":
-                                round(pool.source.waited, 1)})
-        with atomic_output(out) as tmp:
-            torch.save(payload, tmp)
-    else:
-        save_weights(out, model.eval(), config, {**meta, "steps": step, "wall_seconds": round(elapsed(), 1),
-                                                 "threads": torch.get_num_threads()}, options.method)
+    write_weights()                    # the result first: a run folder lost now loses no weights
+    save_checkpoint()
     return out

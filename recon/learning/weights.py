@@ -1,0 +1,74 @@
+"""The weights file of every learned method: one format, written by one function and read by one.
+
+A weights file is a ``torch.save`` of a plain dictionary, loadable with
+``torch.load(weights_only=True)`` (no pickled code): ``method`` (its name in
+:data:`recon.learned.LEARNED`), ``state_dict``, ``sizes`` (the sizes
+dataclass's ``to_dict``), ``config`` (the sensor configuration it was trained
+for) and ``meta`` (how it was made). Building the module from it is the
+registry's (:func:`recon.learned.load_weights`): this layer knows no method.
+"""
+
+from __future__ import annotations
+
+import io
+import pickle
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from golden.config import SensorConfig
+from golden.errors import InputError
+from golden.io import atomic_output
+
+#: Keys every weights file holds.
+KEYS = ("state_dict", "sizes", "config")
+
+
+def cpu_state(model: torch.nn.Module) -> dict[str, torch.Tensor]:
+    """A copy of ``model``'s tensors on the CPU (later training does not change it)."""
+    return {k: v.detach().to("cpu", copy=True) for k, v in model.state_dict().items()}
+
+
+def save_weights(path: str | Path, model: torch.nn.Module, config: SensorConfig, meta: dict[str, Any],
+                 method: str, state: dict[str, torch.Tensor] | None = None) -> None:
+    """Write ``model`` (a learned method's module with its ``sizes``) for ``config``, atomically;
+    ``state``: its tensors at another moment (:func:`cpu_state`), instead of its present ones."""
+    payload = {"method": method, "state_dict": cpu_state(model) if state is None else state,
+               "sizes": model.sizes.to_dict(), "config": config.to_dict(), "meta": meta}
+    write_torch_file(path, payload)
+
+
+def write_torch_file(path: str | Path, payload: Any) -> None:
+    """``torch.save`` of ``payload`` to ``path``, atomically, as one plain write: a full disk or a
+    vanished folder is a one-line refusal naming ``path`` (torch's own writer reports neither)."""
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    with atomic_output(path) as tmp:
+        Path(tmp).write_bytes(buffer.getbuffer())
+
+
+def read_torch_file(path: str | Path, what: str, kind: str) -> Any:
+    """``torch.load(path, weights_only=True)`` on the CPU; a one-line refusal naming ``what`` (a flag or a
+    role), the file and the cause where it cannot be read or is no torch file of ``kind``."""
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except OSError as exc:
+        raise InputError(f"cannot read {what} {str(path)!r}: {exc.strerror or exc}") from None
+    except (RuntimeError, EOFError, ValueError, pickle.UnpicklingError, zipfile.BadZipFile) as exc:
+        cause = "the file is empty" if Path(path).stat().st_size == 0 else \
+            (str(exc).splitlines()[0][:100] if str(exc) else type(exc).__name__)
+        raise InputError(f"{what} {str(path)!r} is not a {kind} (truncated or another format: {cause})") from None
+
+
+def read_weights(path: str | Path, what: str = "weights") -> dict[str, Any]:
+    """The payload of weights file ``path`` (method, state dict, sizes, config as a SensorConfig, meta)."""
+    payload = read_torch_file(path, what, "tespike weights file")
+    if not isinstance(payload, dict) or any(key not in payload for key in KEYS):
+        raise InputError(f"{what} {str(path)!r} is not a tespike weights file (no {', '.join(KEYS)})")
+    try:
+        config = SensorConfig.from_dict(payload["config"])
+    except (InputError, TypeError, ValueError) as exc:
+        raise InputError(f"{what} {str(path)!r}: its sensor configuration is not valid ({exc})") from None
+    return {**payload, "method": payload.get("method", "net"), "config": config, "meta": payload.get("meta", {})}

@@ -1,0 +1,165 @@
+"""``tespike train`` faults (issue 28): each ends in one line naming the file and the cause, a non-zero
+exit, no traceback, no orphan worker, no repeated log rows and no lost weights.
+
+In-process where the trainer's own refusal is the point (tiny clips, no worker
+processes); as a subprocess where a signal or a killed trainer is.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from golden.errors import InputError
+from recon.learned import load_weights
+from recon.train import RunFolderGone, train
+from tests.cli import ROOT, assert_refused
+from tests.test_cli_hardening import small_tmpfs
+from tests.test_recon_train import options
+
+
+def log_steps(path) -> list[int]:
+    with open(path, newline="") as handle:
+        return [int(row["step"]) for row in csv.DictReader(handle)]
+
+
+def test_full_disk_names_the_file_torch_could_not_write(tmp_path):
+    """torch's own writer fails on a full disk with an internal error; the trainer names the file."""
+    with small_tmpfs(tmp_path / "small", "256k") as mount:
+        with pytest.raises(InputError, match=r"cannot write '.*small/w\.pt': No space left on device"):
+            train(options(steps=1), mount / "w.pt")
+        assert not [name for name in os.listdir(mount) if name.endswith(".part")]
+        with pytest.raises(InputError, match=r"cannot write '.*checkpoint\.pt': No space left on device"):
+            train(options(steps=1), tmp_path / "v.pt", work_dir=mount / "v.run")
+        assert load_weights(tmp_path / "v.pt")[2]["steps"] == 1         # the weights were written first
+
+
+def test_empty_or_truncated_files_are_named(tmp_path):
+    (tmp_path / "empty.pt").write_bytes(b"")
+    with pytest.raises(InputError, match=r"--init '.*empty\.pt' is not a tespike weights file .*empty"):
+        train(options(steps=1, init=str(tmp_path / "empty.pt")), tmp_path / "e.pt")
+    assert not (tmp_path / "e.run").exists()                             # no empty run folder left
+    train(options(steps=1), tmp_path / "w.pt")
+    checkpoint = tmp_path / "w.run" / "checkpoint.pt"
+    data = checkpoint.read_bytes()
+    for cut in (len(data) // 2, 10, 0):
+        checkpoint.write_bytes(data[:cut])
+        with pytest.raises(InputError, match=r"checkpoint '.*w\.run/checkpoint\.pt' is not a training checkpoint"):
+            train(options(steps=2), tmp_path / "w.pt", resume=True)
+
+
+def test_resume_does_not_repeat_the_killed_runs_rows(tmp_path):
+    """Rows a killed run logged after its last checkpoint are written again by the resumed run: once."""
+    train(options(steps=2), tmp_path / "w.pt")
+    log = tmp_path / "w.run" / "log.csv"
+    with open(log, "a", newline="") as handle:                          # steps 3 and 4, then killed
+        csv.writer(handle).writerows([[3, 0, "0.0001", "0.5", "9.0"], [4, 0, "0.0001", "0.5", "9.5"]])
+    train(options(steps=4), tmp_path / "w.pt", resume=True)
+    assert log_steps(log) == [1, 2, 3, 4]
+
+
+def test_a_run_folder_removed_during_training_keeps_the_weights(tmp_path, monkeypatch):
+    import recon.train as trainer
+    draw, calls = trainer.draw_batch, []
+
+    def draw_then_remove(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            shutil.rmtree(tmp_path / "w.run")
+        return draw(*args, **kwargs)
+    monkeypatch.setattr(trainer, "draw_batch", draw_then_remove)
+    with pytest.raises(RunFolderGone, match=r"run folder '.*w\.run' was removed .*wrote the weights to '.*w\.pt'"):
+        train(options(steps=3), tmp_path / "w.pt")
+    assert load_weights(tmp_path / "w.pt")[2]["steps"] == 3
+
+
+# ------------------------------------------------------------------ signals, as a user's terminal sends them
+def start_training(folder) -> subprocess.Popen:
+    """``tespike train`` with one data-engine worker, in a session of its own (its process group
+    gets Ctrl-C as a terminal's would)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.Popen([sys.executable, "-m", "cosim", "train", "--config", "te", "--out", str(folder / "w.pt"),
+                             "--minutes", "10", "--workers", "1", "--pool", "2", "--refresh", "1", "--crop", "32",
+                             "--batch", "1", "--validate-every", "0"], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=interruptible)
+
+
+def interruptible() -> None:
+    """In the child: Ctrl-C as a terminal gives it (a test run from a background job inherits it ignored)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def children(pid: int) -> list[int]:
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as handle:
+                    fields = handle.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                found.append(int(entry))
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as handle:
+            return handle.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def wait_for_worker(process, timeout=180) -> list[int]:
+    """The trainer's children once its data worker runs (the resource tracker is one more)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        assert process.poll() is None, process.communicate()
+        kids = children(process.pid)
+        if len(kids) >= 2:
+            return kids
+        time.sleep(0.2)
+    pytest.fail("no data worker started")
+
+
+def gone(pids, timeout=10) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and any(alive(p) for p in pids):
+        time.sleep(0.1)
+    return not any(alive(p) for p in pids)
+
+
+def test_a_killed_trainer_leaves_no_worker(tmp_path):
+    process = start_training(tmp_path)
+    try:
+        kids = wait_for_worker(process)
+        process.kill()
+        _, stderr = process.communicate(timeout=60)
+        assert gone(kids), [p for p in kids if alive(p)]
+        assert "BrokenPipeError" not in stderr and "Traceback" not in stderr, stderr
+    finally:
+        os.killpg(process.pid, signal.SIGKILL) if process.poll() is None else None
+
+
+def test_ctrl_c_is_one_line_and_leaves_no_empty_run_folder(tmp_path):
+    process = start_training(tmp_path)
+    try:
+        kids = wait_for_worker(process)
+        os.killpg(process.pid, signal.SIGINT)                 # the whole group, as a terminal does
+        _, stderr = process.communicate(timeout=120)
+    finally:
+        os.killpg(process.pid, signal.SIGKILL) if process.poll() is None else None
+    assert process.returncode == 130
+    assert_refused(subprocess.CompletedProcess([], 130, "", stderr), "interrupted")
+    assert gone(kids)
+    run = tmp_path / "w.run"
+    assert not run.exists() or (run / "checkpoint.pt").is_file(), os.listdir(run)
+    assert not (tmp_path / "w.pt").exists()
