@@ -32,6 +32,13 @@ cocotb Makefile flow (docs/outside-simulators.md):
     an ``E.npy`` file (T, H, W) of electrons per pixel clock; without it
     :func:`default_stimulus` makes ``TESPIKE_READOUTS`` (default 3) intervals of
     it from ``TESPIKE_SEED`` (default 0);
+``TESPIKE_RESETS``
+    reset in the middle of the run (:mod:`cosim.resets`): ``sweep`` asserts
+    ``rst`` at every phase of an interval and of its beats
+    (:func:`cosim.resets.reset_sweep` from the seed; the default stimulus then
+    covers the sweep and ``TESPIKE_READOUTS`` intervals after it), or an ``.npy``
+    file of one 0/1 per stimulus clock; each segment between resets is checked
+    against the golden model from zero state (:func:`cosim.resets.golden_segments`);
 ``TESPIKE_LANES``
     set: the design is the streaming top (SPEC section 6, ``--lanes N``):
     :func:`run_stream_bench` samples ``out_valid``, ``out_first`` and
@@ -73,6 +80,7 @@ class Settings:
     seed: int = 0
     stimulus_path: str | None = None
     lanes: int | None = None            # the streaming top's N; None: the parallel top
+    resets: str | None = None           # "sweep", an .npy of per-clock rst, or None (module docstring)
 
     @classmethod
     def from_env(cls, env=os.environ) -> "Settings":
@@ -96,7 +104,8 @@ class Settings:
         return cls(config, integer("TESPIKE_HEIGHT"), integer("TESPIKE_WIDTH"),
                    integer("TESPIKE_READOUTS", 3), int(env.get("TESPIKE_SEED", "0")),
                    env.get("TESPIKE_STIMULUS") or None,
-                   integer("TESPIKE_LANES") if env.get("TESPIKE_LANES") else None)
+                   integer("TESPIKE_LANES") if env.get("TESPIKE_LANES") else None,
+                   env.get("TESPIKE_RESETS") or None)
 
     def to_env(self) -> dict[str, str]:
         env = {"TESPIKE_CONFIG": self.config.to_json(), "TESPIKE_HEIGHT": str(self.height),
@@ -106,7 +115,32 @@ class Settings:
             env["TESPIKE_STIMULUS"] = str(Path(self.stimulus_path).resolve())
         if self.lanes is not None:
             env["TESPIKE_LANES"] = str(self.lanes)
+        if self.resets is not None:
+            env["TESPIKE_RESETS"] = self.resets if self.resets == "sweep" else str(Path(self.resets).resolve())
         return env
+
+    def inputs(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The stimulus and the reset vector (None without ``resets``); one line if they disagree."""
+        from golden.stream import beat_count
+
+        from .resets import check_resets, reset_sweep
+        if self.resets is None:
+            return self.stimulus(), None
+        if self.resets == "sweep":
+            beats = beat_count(self.height * self.width, self.lanes) if self.lanes else 1
+            resets = reset_sweep(self.config, np.random.default_rng(self.seed + 1), beats=beats,
+                                 tail_readouts=self.readouts)
+            if self.stimulus_path is None:
+                stim = default_stimulus(self.config, np.random.default_rng(self.seed),
+                                        len(resets) // self.config.clocks_per_readout, self.height, self.width)
+                return stim, resets
+        else:
+            try:
+                resets = np.load(self.resets, allow_pickle=False)
+            except (OSError, ValueError) as exc:
+                raise InputError(f"reset vector {self.resets!r}: cannot read it as .npy ({exc})") from None
+        stim = self.stimulus()
+        return stim, check_resets(resets, stim.shape[0])
 
     def stimulus(self) -> np.ndarray:
         if self.stimulus_path is None:
@@ -146,96 +180,110 @@ def _as_int(value, what: str) -> int:
     return int(value)
 
 
-async def run_bench(dut, settings: Settings) -> dict:
-    """Drive ``dut`` through ``settings``'s stimulus; return captures, words and latency.
+#: Each top's outputs: (valid port, word port, whether ``out_first`` is sampled too).
+OUTPUTS = {"frame": ("frame_valid", "frame", False), "beats": ("out_valid", "out_words", True)}
 
-    Raises ``AssertionError`` (the test fails) on X/Z, on wrong port widths, and
-    :class:`cosim.outside.SimulatorRunError` on a frame_valid that breaks SPEC section 6.
+
+async def _drive(dut, settings: Settings, outputs: str, stim: np.ndarray, resets, expected: int,
+                 flush: int) -> tuple[list, list, np.ndarray]:
+    """Reset, then per clock ``rst``/``charge`` at the falling edge and the outputs sampled a step later.
+
+    Returns the sampled clocks, ``out_first`` values (empty for the parallel top) and
+    the word port's values as uint32 rows; ``expected`` counts captures after the last reset.
     """
     from cocotb.clock import Clock
     from cocotb.triggers import FallingEdge, RisingEdge, Timer
 
-    config, H, W = settings.config, settings.height, settings.width
-    N, E, Wd, L = H * W, config.input_bits, config.word_bits, config.clocks_per_readout
-    for port, bits in (("charge", N * E), ("frame", N * Wd)):
-        width = len(getattr(dut, port))
-        assert width == bits, (f"port {port} is {width} bits, SPEC section 6 wants {bits} for "
-                               f"{H} x {W} pixels of {config}")
-    stim = settings.stimulus()
+    valid_port, word_port, has_first = OUTPUTS[outputs]
     T = stim.shape[0]
-    K = T // L
-    packed = pack_rows(stim.reshape(T, N), E)
+    packed = pack_rows(stim.reshape(T, -1), settings.config.input_bits)
     rows = [int.from_bytes(row.tobytes(), "little") for row in packed]
-
-    cocotb_clock = Clock(dut.clk, PERIOD_STEPS, units="step")
-    clock_task = __import__("cocotb").start_soon(cocotb_clock.start(start_high=False))
-    dut.rst.value = 1
-    dut.charge.value = 0
-    for _ in range(RESET_CLOCKS):
-        await RisingEdge(dut.clk)
-    clocks, frames = [], []
-    for t in range(T + L + 1):
-        if t >= T and len(clocks) >= K:
-            break
-        await FallingEdge(dut.clk)
-        dut.rst.value = 0
-        dut.charge.value = rows[t] if t < T else 0
-        await Timer(1, units="step")                # inputs of clock t settled; rising edge t next
-        if _as_int(dut.frame_valid.value, f"frame_valid before rising edge {t}"):
-            clocks.append(t)
-            frames.append(_as_int(dut.frame.value, f"frame before rising edge {t}"))
-    clock_task.kill()
-    latency = check_captures(np.array(clocks, np.int64), config, K, f"cocotb run of {top_module(config)}")
-    nbytes = 4 * words_per_row(N, Wd)
-    raw = np.frombuffer(b"".join(f.to_bytes(nbytes, "little") for f in frames[:K]), "<u4")
-    words = unpack_rows(raw.reshape(len(frames[:K]), nbytes // 4), N, Wd).reshape(K, H, W)
-    return {"stimulus": stim, "words": words, "clocks": clocks, "latency": latency}
-
-
-async def run_stream_bench(dut, settings: Settings) -> dict:
-    """:func:`run_bench` for the streaming top: returns the stimulus, beats (K, B, N) and latency."""
-    from cocotb.clock import Clock
-    from cocotb.triggers import FallingEdge, RisingEdge, Timer
-
-    from golden.stream import beat_count
-
-    from .stream_ports import check_beats, flush_clocks, stream_top_module
-
-    config, H, W, N = settings.config, settings.height, settings.width, settings.lanes
-    E, Wd, L = config.input_bits, config.word_bits, config.clocks_per_readout
-    for port, bits in (("charge", H * W * E), ("out_words", N * Wd)):
-        width = len(getattr(dut, port))
-        assert width == bits, (f"port {port} is {width} bits, SPEC section 6 wants {bits} for "
-                               f"{H} x {W} pixels and {N} lanes of {config}")
-    stim = settings.stimulus()
-    T = stim.shape[0]
-    K, B = T // L, beat_count(H * W, N)
-    packed = pack_rows(stim.reshape(T, H * W), E)
-    rows = [int.from_bytes(row.tobytes(), "little") for row in packed]
-
     clock_task = __import__("cocotb").start_soon(Clock(dut.clk, PERIOD_STEPS, units="step").start(start_high=False))
     dut.rst.value = 1
     dut.charge.value = 0
     for _ in range(RESET_CLOCKS):
         await RisingEdge(dut.clk)
-    clocks, firsts, lanes = [], [], []
-    for t in range(T + flush_clocks(config)):
-        if t >= T and len(clocks) >= K * B:
+    clocks, firsts, values = [], [], []
+    captured = 0
+    for t in range(T + flush):
+        if t >= T and captured >= expected:
             break
         await FallingEdge(dut.clk)
-        dut.rst.value = 0
+        rst = int(resets[t]) if resets is not None and t < T else 0
+        dut.rst.value = rst
         dut.charge.value = rows[t] if t < T else 0
         await Timer(1, units="step")                # inputs of clock t settled; rising edge t next
-        if _as_int(dut.out_valid.value, f"out_valid before rising edge {t}"):
+        if _as_int(getattr(dut, valid_port).value, f"{valid_port} before rising edge {t}"):
             clocks.append(t)
-            firsts.append(bool(_as_int(dut.out_first.value, f"out_first before rising edge {t}")))
-            lanes.append(_as_int(dut.out_words.value, f"out_words before rising edge {t}"))
+            if has_first:
+                firsts.append(bool(_as_int(dut.out_first.value, f"out_first before rising edge {t}")))
+            values.append(_as_int(getattr(dut, word_port).value, f"{word_port} before rising edge {t}"))
+            captured += 1
+        if rst:
+            captured = 0                            # a reset edge: count the captures after it
     clock_task.kill()
-    nbytes = 4 * words_per_row(N, Wd)
-    raw = np.frombuffer(b"".join(v.to_bytes(nbytes, "little") for v in lanes), "<u4")
-    beats, latency = check_beats(clocks, firsts, raw.reshape(len(lanes), nbytes // 4), config, H, W, N, K,
-                                 f"cocotb run of {stream_top_module(config)}")
-    return {"stimulus": stim, "beats": beats, "latency": latency}
+    nbits = len(getattr(dut, word_port))
+    nbytes = 4 * ((nbits + 31) // 32)
+    raw = np.frombuffer(b"".join(v.to_bytes(nbytes, "little") for v in values), "<u4")
+    return clocks, firsts, raw.reshape(len(values), nbytes // 4)
+
+
+def _check_widths(dut, settings: Settings, word_port: str, word_bits: int, what: str) -> None:
+    config, H, W = settings.config, settings.height, settings.width
+    for port, bits in (("charge", H * W * config.input_bits), (word_port, word_bits)):
+        width = len(getattr(dut, port))
+        assert width == bits, (f"port {port} is {width} bits, SPEC section 6 wants {bits} for "
+                               f"{what} of {config}")
+
+
+async def run_bench(dut, settings: Settings) -> dict:
+    """Drive ``dut`` through ``settings``'s stimulus; return captures, words and latency.
+
+    Raises ``AssertionError`` (the test fails) on X/Z, on wrong port widths, and
+    :class:`cosim.outside.SimulatorRunError` on a frame_valid that breaks SPEC section 6.
+    With resets, ``words`` is the list of each segment's words
+    (:func:`cosim.resets.frame_segments`) and ``latency`` is None.
+    """
+    from .resets import frame_segments, segments
+
+    config, H, W = settings.config, settings.height, settings.width
+    N, Wd, L = H * W, config.word_bits, config.clocks_per_readout
+    _check_widths(dut, settings, "frame", N * Wd, f"{H} x {W} pixels")
+    stim, resets = settings.inputs()
+    T = stim.shape[0]
+    K = T // L if resets is None else segments(resets, T)[-1].readouts(T, L)
+    clocks, _, rows = await _drive(dut, settings, "frame", stim, resets, K, L + 1)
+    what = f"cocotb run of {top_module(config)}"
+    if resets is not None:
+        words = frame_segments(np.array(clocks, np.int64), rows, config, H, W, resets, T, what)
+        return {"stimulus": stim, "resets": resets, "words": words, "clocks": clocks, "latency": None}
+    latency = check_captures(np.array(clocks, np.int64), config, K, what)
+    words = unpack_rows(rows[:K], N, Wd).reshape(K, H, W)
+    return {"stimulus": stim, "resets": None, "words": words, "clocks": clocks, "latency": latency}
+
+
+async def run_stream_bench(dut, settings: Settings) -> dict:
+    """:func:`run_bench` for the streaming top: returns the stimulus, beats (K, B, N) and latency
+    (with resets: each segment's beats ``(n, N)``, :func:`cosim.resets.beat_segments`)."""
+    from golden.stream import beat_count
+
+    from .resets import beat_segments, segments
+    from .stream_ports import check_beats, flush_clocks, stream_top_module
+
+    config, H, W, N = settings.config, settings.height, settings.width, settings.lanes
+    L = config.clocks_per_readout
+    _check_widths(dut, settings, "out_words", N * config.word_bits, f"{H} x {W} pixels and {N} lanes")
+    stim, resets = settings.inputs()
+    T = stim.shape[0]
+    B = beat_count(H * W, N)
+    K = T // L if resets is None else segments(resets, T)[-1].readouts(T, L)
+    clocks, firsts, rows = await _drive(dut, settings, "beats", stim, resets, K * B, flush_clocks(config))
+    what = f"cocotb run of {stream_top_module(config)}"
+    if resets is not None:
+        beats = beat_segments(np.array(clocks, np.int64), firsts, rows, config, H, W, N, resets, T, what)
+        return {"stimulus": stim, "resets": resets, "beats": beats, "latency": None}
+    beats, latency = check_beats(clocks, firsts, rows, config, H, W, N, K, what)
+    return {"stimulus": stim, "resets": None, "beats": beats, "latency": latency}
 
 
 try:
@@ -248,6 +296,9 @@ if _cocotb is not None:
     async def spec_ports_equal_golden(dut):
         """The array's words equal the golden model's on the stimulus of TESPIKE_* (module docstring)."""
         settings = Settings.from_env()
+        if settings.resets is not None:
+            await _segments_equal_golden(dut, settings)
+            return
         if settings.lanes is not None:
             await _stream_equal_golden(dut, settings)
             return
@@ -277,4 +328,18 @@ if _cocotb is not None:
                                  f"{int(run['beats'][k, j, i])}, golden {int(expected[k, j, i])}")
         summary = {"readouts": int(expected.shape[0]), "beats": int(expected.shape[1]),
                    "lanes": settings.lanes, "latency": run["latency"]}
+        dut._log.info("RTL == golden model " + json.dumps(summary))
+
+    async def _segments_equal_golden(dut, settings: Settings) -> None:
+        """With resets: each segment's words (or beats) equal the golden model's from zero state."""
+        from .resets import first_segment_difference, golden_segments
+
+        run = await (run_bench(dut, settings) if settings.lanes is None else run_stream_bench(dut, settings))
+        got = run["words"] if settings.lanes is None else run["beats"]
+        expected = golden_segments(settings.config, run["stimulus"], run["resets"], settings.lanes)
+        difference = first_segment_difference(got, expected)
+        if difference is not None:
+            raise AssertionError("RTL != golden model after a reset: " + difference)
+        summary = {"segments": len(got), "resets": len(got) - 1,
+                   "outputs": int(sum(len(g) for g in got)), "golden_outputs": int(sum(len(e) for e in expected))}
         dut._log.info("RTL == golden model " + json.dumps(summary))

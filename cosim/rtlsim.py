@@ -33,7 +33,8 @@ from golden.errors import ConfigError
 from golden.io import atomic_output, check_stimulus
 
 from .benchbus import (ARRAY_SCOPE, CLOCK_PERIOD_FS, CLOCK_PERIOD_S, RESET_CLOCKS,  # noqa: F401
-                       iter_packed_charge, unpack_frames)
+                       frame_rows, iter_packed_charge, unpack_frames)
+from .resets import check_resets, frame_segments, segments
 from .vcd import write_gtkw
 
 class RTLProtocolError(RuntimeError):
@@ -110,7 +111,7 @@ class RtlRun:
 
 
 def rtl_words(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_path=None,
-              progress: bool | None = False, flat: bool = False) -> np.ndarray:
+              progress: bool | None = False, flat: bool = False, resets=None):
     """Run the RTL on ``stimulus`` (T, H, W); return the ``(T / L, H, W)`` int64 readout words.
 
     ``vcd_path`` writes the whole waveform (all signals of the design) and
@@ -118,24 +119,30 @@ def rtl_words(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw
     :func:`cosim.vcd.write_gtkw`); both appear only if the run succeeds.
     ``progress`` shows a tqdm bar (``None``: only on a terminal). ``flat``
     simulates the array with its pixels inlined into one module (same logic).
+    ``resets`` (T booleans): ``rst`` of every stimulus clock (:mod:`cosim.resets`);
+    the result is then a list of each segment's words ``(n, H, W)``.
     """
     return rtl_run(config, stimulus, vcd_path=vcd_path, gtkw_path=gtkw_path,
-                   progress=progress, flat=flat).words
+                   progress=progress, flat=flat, resets=resets).words
 
 
 def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_path=None,
-            progress: bool | None = False, flat: bool = False, reset_charge: int = 0) -> RtlRun:
+            progress: bool | None = False, flat: bool = False, reset_charge: int = 0,
+            resets=None) -> RtlRun:
     """:func:`rtl_words`, also returning the clock of every ``frame_valid``.
 
-    ``reset_charge`` is the value of the whole ``charge`` bus while reset is
-    held (the tests drive all ones: a synchronous reset must ignore it).
+    ``reset_charge`` is the value of the whole ``charge`` bus while the initial
+    reset is held (the tests drive all ones: a synchronous reset must ignore it).
+    With ``resets``, ``words`` is the list of each segment's words, checked by
+    :func:`cosim.resets.frame_segments` (``latency`` is then None).
     """
     from amaranth.sim import Simulator
 
     check_stimulus(stimulus, config)
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
-    K = T // L
+    resets = check_resets(resets, T)
+    K = T // L if resets is None else segments(resets, T)[-1].readouts(T, L)
     n = H * W
     if gtkw_path is not None and vcd_path is None:
         raise ValueError("a GTKWave save file (gtkw_path) needs a waveform (vcd_path)")
@@ -151,31 +158,37 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
         for _ in range(RESET_CLOCKS):
             await ctx.tick()
         ctx.set(bench.domain.rst, 0)
-        if K == 0:
+        if T == 0 or (K == 0 and resets is None):
             ctx.set(bench.tb_charge, 0)
             return
         charge = iter_packed_charge(stimulus, config.input_bits)
         bar = _progress_bar(T, progress)
-        t = 0
+        t = captured = 0
         clock["start"] = time.perf_counter()
         ctx.set(bench.tb_charge, next(charge))
+        if resets is not None:
+            ctx.set(bench.domain.rst, int(resets[0]))
         # Multi-shot wait: cheaper than a fresh one-shot trigger per clock.
         async for _, _, valid, frame in ctx.tick().sample(bench.tb_frame_valid, bench.tb_frame):
             if valid:
-                _check_edge(t, len(frames), edges, L)
+                if resets is None:
+                    _check_edge(t, len(frames), edges, L)
                 frames.append(frame)
                 edges.append(t)
-                if len(frames) == K:
-                    break
+                captured += 1
+            if resets is not None and t < T and resets[t]:
+                captured = 0                      # a reset edge: count the captures after it
             t += 1
-            if t >= T + L:
+            if (t >= T and captured >= K) or t >= T + L:
                 break
             ctx.set(bench.tb_charge, next(charge) if t < T else 0)
+            if resets is not None:
+                ctx.set(bench.domain.rst, int(t < T and resets[t]))
             if bar is not None and (t & 1023) == 0:
                 bar.update(1024)
-        clock["stop"], clock["cycles"] = time.perf_counter(), t + 1
+        clock["stop"], clock["cycles"] = time.perf_counter(), t
         if bar is not None:
-            bar.update(min(t + 1, T) - bar.n)
+            bar.update(min(t, T) - bar.n)
             bar.close()
 
     sim = build_or_refuse(lambda: Simulator(bench), config, H, W)   # elaborates the array
@@ -186,12 +199,18 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
     else:
         _run_with_vcd(sim, config, (H, W), vcd_path, gtkw_path)
 
+    seconds = clock["stop"] - clock["start"]
+    if resets is not None:
+        what = f"Amaranth simulation of the {H} x {W} array"
+        rows = frame_rows(frames, n, config.word_bits)
+        segment_words = frame_segments(edges, rows, config, H, W, resets, T, what)
+        return RtlRun(segment_words, np.asarray(edges, np.int64), None, clock["cycles"], seconds)
     if len(frames) != K:
         raise RTLProtocolError(f"RTL gave {len(frames)} frame_valid pulses for {K} readout intervals "
                                f"within {T + L} clocks (latency must be at most L = {L})")
     words = unpack_frames(frames, n, config.word_bits).reshape(K, H, W)
     latency = edges[0] - (L - 1) if edges else None
-    return RtlRun(words, np.asarray(edges, np.int64), latency, clock["cycles"], clock["stop"] - clock["start"])
+    return RtlRun(words, np.asarray(edges, np.int64), latency, clock["cycles"], seconds)
 
 
 def _check_edge(t: int, k: int, edges: list[int], L: int) -> None:
