@@ -7,7 +7,8 @@ only ``clk``, ``rst`` and ``charge`` and reads only ``frame_valid`` and
 the generated one:
 
 1. ``rst`` high for :data:`cosim.outside.RESET_CLOCKS` rising edges;
-2. for pixel clock t = 0, 1, ...: at the falling edge, ``rst`` low and stimulus
+2. for pixel clock t = 0, 1, ...: at the falling edge, ``rst`` low (or, with
+   ``TESPIKE_RESETS``, the reset vector's value) and stimulus
    row t on ``charge``; one simulator step later (the logic has settled) ``frame_valid`` and,
    when it is high, ``frame`` are sampled: the values the rising edge t sees;
    then the rising edge;
@@ -41,7 +42,7 @@ cocotb Makefile flow (docs/outside-simulators.md):
     against the golden model from zero state (:func:`cosim.resets.golden_segments`);
 ``TESPIKE_LANES``
     set: the design is the streaming top (SPEC section 6, ``--lanes N``):
-    :func:`run_stream_bench` samples ``out_valid``, ``out_first`` and
+    :func:`run_top_bench` samples ``out_valid``, ``out_first`` and
     ``out_words`` before every rising edge, the beats are held to SPEC section
     6 by :func:`cosim.stream_ports.check_beats` and compared with
     :func:`golden.stream.beats` of the literal SPEC rule's words.
@@ -62,7 +63,8 @@ from golden.io import check_stimulus, load_stimulus
 from golden.reference import step_reference
 
 from .compare import first_difference
-from .outside import RESET_CLOCKS, check_captures, pack_rows, top_module, unpack_rows, words_per_row
+from .outside import RESET_CLOCKS, pack_rows, words_per_row
+from .tops import Run, Top, prepare
 
 #: Pixel clock period in simulator steps (its time precision, whatever the Verilog's timescale):
 #: low for 2 steps (inputs change at the falling edge, sampled 1 step later), high for 2.
@@ -180,23 +182,19 @@ def _as_int(value, what: str) -> int:
     return int(value)
 
 
-#: Each top's outputs: (valid port, word port, whether ``out_first`` is sampled too).
-OUTPUTS = {"frame": ("frame_valid", "frame", False), "beats": ("out_valid", "out_words", True)}
-
-
-async def _drive(dut, settings: Settings, outputs: str, stim: np.ndarray, resets, expected: int,
-                 flush: int) -> tuple[list, list, np.ndarray]:
+async def _drive(dut, top: Top, run: Run) -> tuple[list, list, np.ndarray]:
     """Reset, then per clock ``rst``/``charge`` at the falling edge and the outputs sampled a step later.
 
-    Returns the sampled clocks, ``out_first`` values (empty for the parallel top) and
-    the word port's values as uint32 rows; ``expected`` counts captures after the last reset.
+    Either top: the valid flag, ``out_first`` (streaming top only) and the word port of
+    :class:`cosim.tops.Top`. Returns the sampled clocks, the ``out_first`` values and
+    the word port's values as uint32 rows.
     """
     from cocotb.clock import Clock
     from cocotb.triggers import FallingEdge, RisingEdge, Timer
 
-    valid_port, word_port, has_first = OUTPUTS[outputs]
+    stim, resets = run.stimulus, run.resets
     T = stim.shape[0]
-    packed = pack_rows(stim.reshape(T, -1), settings.config.input_bits)
+    packed = pack_rows(stim.reshape(T, -1), top.config.input_bits)
     rows = [int.from_bytes(row.tobytes(), "little") for row in packed]
     clock_task = __import__("cocotb").start_soon(Clock(dut.clk, PERIOD_STEPS, units="step").start(start_high=False))
     dut.rst.value = 1
@@ -205,85 +203,48 @@ async def _drive(dut, settings: Settings, outputs: str, stim: np.ndarray, resets
         await RisingEdge(dut.clk)
     clocks, firsts, values = [], [], []
     captured = 0
-    for t in range(T + flush):
-        if t >= T and captured >= expected:
+    for t in range(T + top.flush):
+        if t >= T and captured >= run.expected:
             break
         await FallingEdge(dut.clk)
         rst = int(resets[t]) if resets is not None and t < T else 0
         dut.rst.value = rst
         dut.charge.value = rows[t] if t < T else 0
         await Timer(1, units="step")                # inputs of clock t settled; rising edge t next
-        if _as_int(getattr(dut, valid_port).value, f"{valid_port} before rising edge {t}"):
+        if _as_int(getattr(dut, top.valid_port).value, f"{top.valid_port} before rising edge {t}"):
             clocks.append(t)
-            if has_first:
+            if top.streaming:
                 firsts.append(bool(_as_int(dut.out_first.value, f"out_first before rising edge {t}")))
-            values.append(_as_int(getattr(dut, word_port).value, f"{word_port} before rising edge {t}"))
+            values.append(_as_int(getattr(dut, top.word_port).value, f"{top.word_port} before rising edge {t}"))
             captured += 1
         if rst:
             captured = 0                            # a reset edge: count the captures after it
     clock_task.kill()
-    nbits = len(getattr(dut, word_port))
-    nbytes = 4 * ((nbits + 31) // 32)
+    nbytes = 4 * words_per_row(top.word_values, top.config.word_bits)
     raw = np.frombuffer(b"".join(v.to_bytes(nbytes, "little") for v in values), "<u4")
     return clocks, firsts, raw.reshape(len(values), nbytes // 4)
 
 
-def _check_widths(dut, settings: Settings, word_port: str, word_bits: int, what: str) -> None:
-    config, H, W = settings.config, settings.height, settings.width
-    for port, bits in (("charge", H * W * config.input_bits), (word_port, word_bits)):
+async def run_top_bench(dut, settings: Settings) -> dict:
+    """Drive ``dut`` (either top: ``settings.lanes``) through ``settings``'s stimulus and resets.
+
+    Returns the stimulus, the reset vector (or None) and ``outputs``: words
+    ``(K, H, W)`` of the parallel top or beats ``(K, B, N)`` of the streaming top,
+    held to SPEC section 6 (:meth:`cosim.tops.Top.result`); with resets, each
+    segment's. Raises ``AssertionError`` (the test fails) on X/Z and on wrong port
+    widths, :class:`cosim.outside.SimulatorRunError` on outputs that break SPEC section 6.
+    """
+    top = Top(settings.config, settings.height, settings.width, settings.lanes)
+    lanes = f" and {top.lanes} lanes" if top.streaming else ""
+    for port, bits in (("charge", top.charge_bits), (top.word_port, top.output_bits)):
         width = len(getattr(dut, port))
         assert width == bits, (f"port {port} is {width} bits, SPEC section 6 wants {bits} for "
-                               f"{what} of {config}")
-
-
-async def run_bench(dut, settings: Settings) -> dict:
-    """Drive ``dut`` through ``settings``'s stimulus; return captures, words and latency.
-
-    Raises ``AssertionError`` (the test fails) on X/Z, on wrong port widths, and
-    :class:`cosim.outside.SimulatorRunError` on a frame_valid that breaks SPEC section 6.
-    With resets, ``words`` is the list of each segment's words
-    (:func:`cosim.resets.frame_segments`) and ``latency`` is None.
-    """
-    from .resets import frame_segments, segments
-
-    config, H, W = settings.config, settings.height, settings.width
-    N, Wd, L = H * W, config.word_bits, config.clocks_per_readout
-    _check_widths(dut, settings, "frame", N * Wd, f"{H} x {W} pixels")
+                               f"{top.height} x {top.width} pixels{lanes} of {top.config}")
     stim, resets = settings.inputs()
-    T = stim.shape[0]
-    K = T // L if resets is None else segments(resets, T)[-1].readouts(T, L)
-    clocks, _, rows = await _drive(dut, settings, "frame", stim, resets, K, L + 1)
-    what = f"cocotb run of {top_module(config)}"
-    if resets is not None:
-        words = frame_segments(np.array(clocks, np.int64), rows, config, H, W, resets, T, what)
-        return {"stimulus": stim, "resets": resets, "words": words, "clocks": clocks, "latency": None}
-    latency = check_captures(np.array(clocks, np.int64), config, K, what)
-    words = unpack_rows(rows[:K], N, Wd).reshape(K, H, W)
-    return {"stimulus": stim, "resets": None, "words": words, "clocks": clocks, "latency": latency}
-
-
-async def run_stream_bench(dut, settings: Settings) -> dict:
-    """:func:`run_bench` for the streaming top: returns the stimulus, beats (K, B, N) and latency
-    (with resets: each segment's beats ``(n, N)``, :func:`cosim.resets.beat_segments`)."""
-    from golden.stream import beat_count
-
-    from .resets import beat_segments, segments
-    from .stream_ports import check_beats, flush_clocks, stream_top_module
-
-    config, H, W, N = settings.config, settings.height, settings.width, settings.lanes
-    L = config.clocks_per_readout
-    _check_widths(dut, settings, "out_words", N * config.word_bits, f"{H} x {W} pixels and {N} lanes")
-    stim, resets = settings.inputs()
-    T = stim.shape[0]
-    B = beat_count(H * W, N)
-    K = T // L if resets is None else segments(resets, T)[-1].readouts(T, L)
-    clocks, firsts, rows = await _drive(dut, settings, "beats", stim, resets, K * B, flush_clocks(config))
-    what = f"cocotb run of {stream_top_module(config)}"
-    if resets is not None:
-        beats = beat_segments(np.array(clocks, np.int64), firsts, rows, config, H, W, N, resets, T, what)
-        return {"stimulus": stim, "resets": resets, "beats": beats, "latency": None}
-    beats, latency = check_beats(clocks, firsts, rows, config, H, W, N, K, what)
-    return {"stimulus": stim, "resets": None, "beats": beats, "latency": latency}
+    run = prepare(settings.config, stim, settings.lanes, resets)
+    clocks, firsts, rows = await _drive(dut, top, run)
+    return {"stimulus": stim, "resets": run.resets, "clocks": clocks,
+            "outputs": top.result(run, clocks, firsts, rows, f"cocotb run of {top.module}")}
 
 
 try:
@@ -294,21 +255,26 @@ except ImportError:          # importable without cocotb (settings and stimulus 
 if _cocotb is not None:
     @_cocotb.test()
     async def spec_ports_equal_golden(dut):
-        """The array's words equal the golden model's on the stimulus of TESPIKE_* (module docstring)."""
+        """The top's words (or beats) equal the golden model's on the stimulus of TESPIKE_* (module docstring)."""
         settings = Settings.from_env()
         if settings.resets is not None:
             await _segments_equal_golden(dut, settings)
-            return
-        if settings.lanes is not None:
+        elif settings.lanes is not None:
             await _stream_equal_golden(dut, settings)
-            return
-        run = await run_bench(dut, settings)
-        expected = step_reference(settings.config, run["stimulus"])[0]
+        else:
+            await _frames_equal_golden(dut, settings)
+
+    async def _frames_equal_golden(dut, settings: Settings) -> None:
+        """The parallel top's words equal the literal SPEC rule's."""
+        run = await run_top_bench(dut, settings)
+        words, expected = run["outputs"], step_reference(settings.config, run["stimulus"])[0]
+        L = settings.config.clocks_per_readout
+        latency = run["clocks"][0] - (L - 1) if run["clocks"] else None
         dut._log.info(f"{settings.config}: {settings.height} x {settings.width}, "
-                      f"{expected.shape[0]} readouts, latency {run['latency']} clock(s)")
-        if not np.array_equal(run["words"], expected):
-            raise AssertionError("RTL != golden model: " + first_difference(run["words"], expected).text())
-        summary = {"readouts": int(expected.shape[0]), "latency": run["latency"],
+                      f"{expected.shape[0]} readouts, latency {latency} clock(s)")
+        if not np.array_equal(words, expected):
+            raise AssertionError("RTL != golden model: " + first_difference(words, expected).text())
+        summary = {"readouts": int(expected.shape[0]), "latency": latency,
                    "distinct_words": int(len(np.unique(expected)))}
         dut._log.info("RTL == golden model " + json.dumps(summary))
 
@@ -316,26 +282,30 @@ if _cocotb is not None:
         """The streaming top's beats equal golden.stream.beats of the literal SPEC rule's words."""
         from golden.stream import beats
 
-        run = await run_stream_bench(dut, settings)
+        from .stream_ports import last_beat_latency
+
+        run = await run_top_bench(dut, settings)
+        got = run["outputs"]
         expected = beats(step_reference(settings.config, run["stimulus"])[0], settings.lanes)
+        latency = last_beat_latency(run["clocks"], settings.config, expected.shape[1])
         dut._log.info(f"{settings.config}: {settings.height} x {settings.width}, {settings.lanes} lanes, "
                       f"{expected.shape[0]} readouts of {expected.shape[1]} beats, last beat at most "
-                      f"{run['latency']} clock(s) after its interval")
-        if not np.array_equal(run["beats"], expected):
-            k, j, i = (int(v) for v in np.argwhere(expected != run["beats"])[0])
-            raise AssertionError(f"RTL != golden model: {int((expected != run['beats']).sum())} lane words "
+                      f"{latency} clock(s) after its interval")
+        if not np.array_equal(got, expected):
+            k, j, i = (int(v) for v in np.argwhere(expected != got)[0])
+            raise AssertionError(f"RTL != golden model: {int((expected != got).sum())} lane words "
                                  f"differ; first at readout {k}, beat {j}, lane {i}: RTL "
-                                 f"{int(run['beats'][k, j, i])}, golden {int(expected[k, j, i])}")
+                                 f"{int(got[k, j, i])}, golden {int(expected[k, j, i])}")
         summary = {"readouts": int(expected.shape[0]), "beats": int(expected.shape[1]),
-                   "lanes": settings.lanes, "latency": run["latency"]}
+                   "lanes": settings.lanes, "latency": latency}
         dut._log.info("RTL == golden model " + json.dumps(summary))
 
     async def _segments_equal_golden(dut, settings: Settings) -> None:
         """With resets: each segment's words (or beats) equal the golden model's from zero state."""
         from .resets import first_segment_difference, golden_segments
 
-        run = await (run_bench(dut, settings) if settings.lanes is None else run_stream_bench(dut, settings))
-        got = run["words"] if settings.lanes is None else run["beats"]
+        run = await run_top_bench(dut, settings)
+        got = run["outputs"]
         expected = golden_segments(settings.config, run["stimulus"], run["resets"], settings.lanes)
         difference = first_segment_difference(got, expected)
         if difference is not None:

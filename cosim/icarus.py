@@ -1,13 +1,15 @@
-"""Run the generated array Verilog in Icarus Verilog: an independent, outside check.
+"""Run the generated Verilog of either top in Icarus Verilog: an independent, outside check.
 
-:func:`run_icarus` writes the array Verilog (``rtl.verilog.array_verilog``) and
-a Verilog-2005 testbench that drives only the SPEC section 6 ports: it reads
-the stimulus rows with ``$readmemh``, holds ``rst`` for
-:data:`~cosim.outside.RESET_CLOCKS` clocks, then per pixel clock puts the row
-on ``charge``, waits for the logic to settle, samples ``frame_valid`` /
-``frame`` and gives the rising edge. Every capture is written with
-``$fwrite("%h")``; an X or Z on ``frame_valid`` or ``frame`` is reported, never
-read as a number. Compiled with ``iverilog -g2005`` (``-g2012`` would give
+:func:`run_icarus` (the parallel top, ``rtl.verilog.array_verilog``) and
+:func:`run_icarus_stream` (the streaming top, ``--lanes N``) write the top's
+Verilog and one Verilog-2005 testbench (:func:`_testbench`, its output ports
+taken from :class:`cosim.tops.Top`) that drives only the SPEC section 6 ports:
+it reads the stimulus rows with ``$readmemh`` (and the reset vector with
+``$readmemb``), holds ``rst`` for :data:`~cosim.outside.RESET_CLOCKS` clocks,
+then per pixel clock puts the row on ``charge`` (and its ``rst``), waits for the
+logic to settle, samples the outputs (``frame_valid`` / ``frame``, or
+``out_valid`` / ``out_first`` / ``out_words``) and gives the rising edge. Every capture is written with
+``$fwrite("%h")``; an X or Z on an output is reported, never read as a number. Compiled with ``iverilog -g2005`` (``-g2012`` would give
 Amaranth's initialisers SystemVerilog semantics), run with ``vvp``.
 
 Icarus is slow (tens of cycles per second at 1024 pixels): use it on small
@@ -22,12 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from golden.config import SensorConfig
-from golden.io import atomic_output, check_stimulus
+from golden.io import atomic_output
 
-from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, check_captures,
-                      first_error_line, hex_to_rows, pack_rows, require_tool, rows_to_hex,
-                      run_process, top_module, unpack_rows)
-from .resets import beat_segments, check_resets, frame_segments, segments
+from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, first_error_line, hex_to_rows,
+                      pack_rows, require_tool, rows_to_hex, run_process)
+from .tops import Run, prepare
 
 TESTBENCH_TOP = "tespike_tb"
 _STIMULUS = "stimulus.hex"
@@ -140,29 +141,31 @@ def _parse_captures(path: Path, what: str, word_port: str = "frame") -> tuple[np
     return np.asarray(clocks, np.int64), frames
 
 
-def _simulate(config: SensorConfig, stimulus: np.ndarray, verilog: str, testbench: str, flush: int,
-              expected: int, what: str, work_dir, word_port: str = "frame",
-              resets: np.ndarray | None = None) -> tuple[np.ndarray, list[str]]:
-    """Compile ``verilog`` with ``testbench``, run it on ``stimulus`` (and ``rst`` = ``resets``,
-    :mod:`cosim.resets`); return the parsed captures. ``expected``: captures after the last reset."""
-    T, H, W = stimulus.shape
+def _simulate(run: Run, verilog: str, what: str, work_dir) -> tuple[np.ndarray, list[str]]:
+    """Compile ``verilog`` with the top's testbench, run it on the stimulus (and ``rst`` = the
+    reset vector, :mod:`cosim.resets`); return the parsed captures."""
+    top, stimulus = run.top, run.stimulus
+    T = stimulus.shape[0]
     iverilog = require_tool("iverilog", "iverilog")
     vvp = require_tool("vvp", "iverilog")
-    N, E = H * W, config.input_bits
+    testbench = _testbench(top.module, top.charge_bits, top.output_bits, top.outputs,
+                           "streaming ports" if top.streaming else "ports")
     with tempfile.TemporaryDirectory(prefix="tespike-icarus-") as scratch:
         work = Path(work_dir) if work_dir is not None else Path(scratch)
         if not work.is_dir():
             raise SimulatorRunError(f"work_dir {str(work)!r} is not an existing directory")
         (work / "array.v").write_text(verilog)
         (work / "tb.v").write_text(testbench)
+        E = top.config.input_bits
         with atomic_output(work / _STIMULUS) as tmp:
-            Path(tmp).write_text("\n".join(rows_to_hex(pack_rows(stimulus.reshape(T, N), E), N * E)) + "\n")
-        rst = np.zeros(T, np.uint8) if resets is None else resets.astype(np.uint8)
+            rows = rows_to_hex(pack_rows(stimulus.reshape(T, -1), E), top.charge_bits)
+            Path(tmp).write_text("\n".join(rows) + "\n")
+        rst = np.zeros(T, np.uint8) if run.resets is None else run.resets.astype(np.uint8)
         (work / _RESETS).write_text("\n".join("01"[v] for v in rst) + "\n")
         (work / _CAPTURES).unlink(missing_ok=True)
         compiled = run_process([iverilog, "-g2005", "-o", "sim.vvp", "-s", TESTBENCH_TOP,
-                                f"-P{TESTBENCH_TOP}.CLOCKS={T}", f"-P{TESTBENCH_TOP}.READOUTS={expected}",
-                                f"-P{TESTBENCH_TOP}.FLUSH={flush}", "tb.v", "array.v"], cwd=work)
+                                f"-P{TESTBENCH_TOP}.CLOCKS={T}", f"-P{TESTBENCH_TOP}.READOUTS={run.expected}",
+                                f"-P{TESTBENCH_TOP}.FLUSH={top.flush}", "tb.v", "array.v"], cwd=work)
         if compiled.returncode != 0:
             raise SimulatorBuildError(
                 f"iverilog -g2005 could not compile {what} (exit {compiled.returncode}): "
@@ -171,7 +174,19 @@ def _simulate(config: SensorConfig, stimulus: np.ndarray, verilog: str, testbenc
         if ran.returncode != 0:
             raise SimulatorRunError(f"{what}: vvp failed (exit {ran.returncode}): "
                                     f"{first_error_line(ran.stderr + ran.stdout)}")
-        return _parse_captures(work / _CAPTURES, what, word_port)
+        return _parse_captures(work / _CAPTURES, what, top.word_port)
+
+
+def _run(run: Run, verilog: str | None, work_dir):
+    """Simulate ``run`` in Icarus (either top); its words, beats, or each segment's."""
+    top = run.top
+    if run.idle:
+        return top.empty()
+    what = top.describe("Icarus")
+    clocks, lines = _simulate(run, top.verilog() if verilog is None else verilog, what, work_dir)
+    firsts = [line[0] == "1" for line in lines] if top.streaming else []
+    rows = hex_to_rows([line[1:] for line in lines] if top.streaming else lines, top.output_bits)
+    return top.result(run, clocks, firsts, rows, what)
 
 
 def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Path | None = None,
@@ -186,25 +201,7 @@ def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Pa
     (:func:`cosim.resets.frame_segments`) and the result is a list of each
     segment's words ``(n, H, W)``.
     """
-    check_stimulus(stimulus, config)
-    T, H, W = stimulus.shape
-    L = config.clocks_per_readout
-    resets = check_resets(resets, T)
-    K = T // L if resets is None else segments(resets, T)[-1].readouts(T, L)
-    if K == 0 and resets is None:
-        return np.zeros((0, H, W), np.int64)
-    N, E, Wd = H * W, config.input_bits, config.word_bits
-    top = top_module(config)
-    if verilog is None:
-        from rtl.verilog import array_verilog
-        verilog = array_verilog(config, H, W)
-    what = f"Icarus run of {top} ({H} x {W})"
-    clocks, frames = _simulate(config, stimulus, verilog, icarus_testbench(top, N * E, N * Wd), L + 1,
-                               K, what, work_dir, resets=resets)
-    if resets is not None:
-        return frame_segments(clocks, hex_to_rows(frames, N * Wd), config, H, W, resets, T, what)
-    check_captures(clocks, config, K, what)
-    return unpack_rows(hex_to_rows(frames, N * Wd), N, Wd).reshape(K, H, W)
+    return _run(prepare(config, stimulus, None, resets), verilog, work_dir)
 
 
 def icarus_stream_testbench(top: str, charge_bits: int, lane_bits: int) -> str:
@@ -223,28 +220,4 @@ def run_icarus_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,
     ``resets``: as :func:`run_icarus`; the result is then each segment's beats ``(n, N)``
     (:func:`cosim.resets.beat_segments`).
     """
-    from golden.stream import beat_count, check_lanes
-
-    from .stream_ports import check_beats, flush_clocks, stream_top_module
-
-    check_stimulus(stimulus, config)
-    T, H, W = stimulus.shape
-    check_lanes(config, H, W, lanes)
-    L, B = config.clocks_per_readout, beat_count(H * W, lanes)
-    resets = check_resets(resets, T)
-    K = T // L if resets is None else segments(resets, T)[-1].readouts(T, L)
-    if K == 0 and resets is None:
-        return np.zeros((0, B, lanes), np.int64)
-    E, Wd = config.input_bits, config.word_bits
-    top = stream_top_module(config)
-    if verilog is None:
-        from rtl.verilog_stream import stream_array_verilog
-        verilog = stream_array_verilog(config, H, W, lanes)
-    what = f"Icarus run of {top} ({H} x {W}, {lanes} lanes)"
-    clocks, lines = _simulate(config, stimulus, verilog, icarus_stream_testbench(top, H * W * E, lanes * Wd),
-                              flush_clocks(config), K * B, what, work_dir, "out_words", resets)
-    firsts = [line[0] == "1" for line in lines]
-    rows = hex_to_rows([line[1:] for line in lines], lanes * Wd)
-    if resets is not None:
-        return beat_segments(clocks, firsts, rows, config, H, W, lanes, resets, T, what)
-    return check_beats(clocks, firsts, rows, config, H, W, lanes, K, what)[0]
+    return _run(prepare(config, stimulus, lanes, resets), verilog, work_dir)

@@ -1,20 +1,24 @@
-"""Run the generated array Verilog in Verilator, for scale (SPEC section 6 ports only).
+"""Run the generated Verilog of either top in Verilator, for scale (SPEC section 6 ports only).
 
-:func:`run_verilator` writes the Verilog of an H x W array
-(``rtl.verilog.array_verilog``) and a C++ harness that knows nothing but the
-SPEC section 6 ports: it holds ``rst`` for :data:`~cosim.outside.RESET_CLOCKS`
-clocks, then applies one stimulus row per pixel clock, samples ``frame`` before
-every rising edge at which ``frame_valid`` is high, and writes what it saw to a
-binary file. The build (``verilator --cc --exe --build -O3``) is cached under a
-hash of the Verilog, the harness, the flags and the Verilator version, so a
-second run of the same array skips it.
+:func:`run_verilator` (the parallel top, ``rtl.verilog.array_verilog``) and
+:func:`run_verilator_stream` (the streaming top, ``--lanes N``, up to the
+400 x 250 sensor) write the top's Verilog and one C++ harness
+(:func:`harness_cpp`, its output ports taken from :class:`cosim.tops.Top`) that
+knows nothing but the SPEC section 6 ports: it holds ``rst`` for
+:data:`~cosim.outside.RESET_CLOCKS` clocks, then applies one stimulus row (and
+its ``rst``, with a reset vector) per pixel clock, samples the outputs before
+every rising edge at which ``frame_valid`` / ``out_valid`` is high, and writes
+what it saw to a binary file. The build (``verilator --cc --exe --build -O3``)
+is cached under a hash of the Verilog, the harness, the flags and the Verilator
+version, so a second run of the same array skips it.
 
 Files between Python and the harness (little-endian):
 
 - stimulus: T rows of ``ceil(H*W*E / 32)`` uint32 words, the ``charge`` port's
   bits exactly as Verilator stores a wide port (word 0 = bits 31..0);
-- captures: records of one uint64 sample clock and ``ceil(H*W*Wd / 32)``
-  uint32 words of ``frame``.
+- resets (optional): one byte, 0 or 1, per stimulus clock;
+- captures: records of one uint64 sample clock, for the streaming top a uint32
+  ``out_first``, and the word port's ``ceil(bits / 32)`` uint32 words.
 """
 
 from __future__ import annotations
@@ -31,12 +35,11 @@ import numpy as np
 
 from golden.config import SensorConfig
 from golden.errors import InputError
-from golden.io import atomic_output, check_stimulus
+from golden.io import atomic_output
 
-from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, cache_entry,
-                      check_captures, content_hash, default_cache_root, first_error_line,
-                      pack_rows, require_tool, top_module, unpack_rows, words_per_row)
-from .resets import check_resets, frame_segments, segments
+from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, cache_entry, content_hash,
+                      default_cache_root, first_error_line, pack_rows, require_tool, words_per_row)
+from .tops import Run, Top, prepare
 
 #: Verilator options of every build. ``-O3``: Verilator's own optimisation;
 #: ``--x-assign/--x-initial fast``: X is irrelevant after the synchronous reset.
@@ -357,7 +360,7 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
     """Build (or find in the cache) the simulation executable; return its path.
 
     ``harness`` is the C++ ``main`` (default: :func:`harness_cpp` of the parallel
-    ports; the streaming top brings its own, :mod:`cosim.verilator_stream`).
+    ports; the streaming top brings its own, :func:`build_stream`).
 
     The cache key is a hash of the Verilog, the harness, the flags and the
     Verilator version. A build runs in a temporary directory renamed into
@@ -419,9 +422,18 @@ def write_resets_file(path: str | Path, resets: np.ndarray) -> None:
 
 
 def read_captures(path: str | Path, frame_words: int) -> tuple[np.ndarray, np.ndarray]:
+    """The parallel harness's records -> (clocks, frame rows)."""
     record = np.dtype([("clock", "<u8"), ("frame", "<u4", (frame_words,))])
     data = np.fromfile(path, dtype=record)
     return data["clock"].astype(np.int64), data["frame"].reshape(len(data), frame_words)
+
+
+def read_beat_captures(path: str | Path, lane_words: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The streaming harness's records -> (clocks, firsts, lane rows)."""
+    record = np.dtype([("clock", "<u8"), ("first", "<u4"), ("lanes", "<u4", (lane_words,))])
+    data = np.fromfile(path, dtype=record)
+    return (data["clock"].astype(np.int64), data["first"].astype(bool),
+            data["lanes"].reshape(len(data), lane_words))
 
 
 def run_executable(executable: Path, stim_path: Path, cap_path: Path, clocks: int, expected: int, flush: int,
@@ -454,6 +466,21 @@ def run_executable(executable: Path, stim_path: Path, cap_path: Path, clocks: in
                                 f"{first_error_line(err)}")
 
 
+def build_stream(config: SensorConfig, verilog: str, height: int, width: int, lanes: int, *,
+                 build_dir=None, progress: bool = False, cxx_opt: str = CXX_OPT,
+                 extra_flags: tuple[str, ...] = ()) -> Path:
+    """Build (or find in the cache) the Verilator model of a streaming top; return the executable.
+
+    With Verilator's module inlining: the streaming top's Verilog holds one copy of
+    the pixel rule whatever the size (:mod:`rtl.verilog_stream`); ``-fno-inline``
+    would only keep the timing module apart.
+    """
+    top = Top(config, height, width, lanes)
+    return build(verilog, top.module, top.charge_bits, top.output_bits, build_dir=build_dir,
+                 progress=progress, inline=True, cxx_opt=cxx_opt, extra_flags=tuple(extra_flags),
+                 harness=harness_cpp(top.module, top.charge_bits, top.output_bits, outputs="beats"))
+
+
 def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str | Path | None = None,
                   progress: bool = False, verilog: str | None = None, inline: bool = False,
                   cxx_opt: str = CXX_OPT, shared: bool = True, resets=None):
@@ -465,58 +492,67 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
     is ``rtl.verilog.array_verilog(config, H, W)``. ``inline=True`` builds with
     Verilator's default module inlining instead of ``-fno-inline`` (see
     :func:`build_flags`); ``cxx_opt`` is g++'s optimisation of the model
-    (:data:`CXX_OPT`). ``shared=True``
-    builds :func:`shared_pixel_view` of Verilog that has the ``<te|ml>_pixel``
-    module (the generated array; a hand-written model without it is built as
-    given); ``shared=False`` builds the text exactly as given. The words are
-    int64, equal
-    bit for bit to ``golden.sensor.simulate`` for a correct array. ``resets`` (T
-    booleans): ``rst`` of every stimulus clock (:mod:`cosim.resets`); the result is
-    then a list of each segment's words ``(n, H, W)``.
+    (:data:`CXX_OPT`). ``shared=True`` builds :func:`shared_pixel_view` of
+    Verilog that has the ``<te|ml>_pixel`` module (the generated array; a
+    hand-written model without it is built as given); ``shared=False`` builds
+    the text exactly as given. The words are int64, equal bit for bit to
+    ``golden.sensor.simulate`` for a correct array. ``resets`` (T booleans):
+    ``rst`` of every stimulus clock (:mod:`cosim.resets`); the result is then a
+    list of each segment's words ``(n, H, W)``.
     """
-    check_stimulus(stimulus, config)
+    run = prepare(config, stimulus, None, resets)
     check_cxx_opt(cxx_opt)
-    T, H, W = stimulus.shape
-    L = config.clocks_per_readout
-    resets = check_resets(resets, T)
-    K = T // L if resets is None else segments(resets, T)[-1].readouts(T, L)
-    if K == 0 and resets is None:
-        return np.zeros((0, H, W), np.int64)
-    N, E, Wd = H * W, config.input_bits, config.word_bits
-    top = top_module(config)
+    top = run.top
+    if run.idle:
+        return top.empty()
     if verilog is None:
-        from rtl.verilog import array_verilog
-        verilog = array_verilog(config, H, W)
-    pixel = top.replace("_array", "")
+        verilog = top.verilog()
+    pixel = top.module.replace("_array", "")
     if shared and re.search(rf"^module {pixel}\(", verilog, re.M):
         verilog = shared_pixel_view(verilog, pixel)
-    executable = build(verilog, top, N * E, N * Wd, build_dir=build_dir, progress=progress,
-                       inline=inline, cxx_opt=cxx_opt)
-    what = f"Verilator run of {top} ({H} x {W})"
-    clocks, frames = run_captures(executable, stimulus, E, K, L + 1, words_per_row(N, Wd), progress, resets)
-    if resets is not None:
-        return frame_segments(clocks, frames, config, H, W, resets, T, what)
-    check_captures(clocks, config, K, what)
-    return unpack_rows(frames[:K], N, Wd).reshape(K, H, W)
+    executable = build(verilog, top.module, top.charge_bits, top.output_bits, build_dir=build_dir,
+                       progress=progress, inline=inline, cxx_opt=cxx_opt)
+    return _run(run, executable, progress)
 
 
-def run_captures(executable: Path, stimulus: np.ndarray, input_bits: int, expected: int, flush: int,
-                 frame_words: int, progress: bool = False, resets: np.ndarray | None = None,
-                 firsts: bool = False):
-    """Write the stimulus (and resets), run the model, read its records: (clocks, rows), or
-    (clocks, firsts, rows) for the streaming harness (``firsts=True``)."""
+def run_verilator_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,
+                         build_dir=None, progress: bool = False, verilog: str | None = None,
+                         cxx_opt: str = CXX_OPT, resets=None):
+    """Simulate the streaming top on a (T, H, W) stimulus in Verilator; return beats (K, B, N).
+
+    Equal to ``golden.stream.beats(golden words, N)`` for a correct array; the beat
+    timing is held to SPEC section 6 (:func:`cosim.stream_ports.check_beats`).
+    ``verilog`` replaces ``rtl.verilog_stream.stream_array_verilog(config, H, W, N)``.
+    ``resets`` (T booleans): ``rst`` of every stimulus clock (:mod:`cosim.resets`); the
+    result is then a list of each segment's beats ``(n, N)``.
+    """
+    run = prepare(config, stimulus, lanes, resets)
+    check_cxx_opt(cxx_opt)
+    top = run.top
+    if run.idle:
+        return top.empty()
+    if verilog is None:
+        verilog = top.verilog()
+    executable = build_stream(config, verilog, top.height, top.width, lanes, build_dir=build_dir,
+                              progress=progress, cxx_opt=cxx_opt)
+    return _run(run, executable, progress)
+
+
+def _run(run: Run, executable: Path, progress: bool):
+    """Run a built model of either top on ``run``; its words, beats, or each segment's."""
+    top = run.top
     with tempfile.TemporaryDirectory(prefix="tespike-verilator-") as scratch:
         stim_path, cap_path = Path(scratch) / "stimulus.bin", Path(scratch) / "captures.bin"
-        write_stimulus_file(stim_path, stimulus, input_bits)
+        write_stimulus_file(stim_path, run.stimulus, top.config.input_bits)
         resets_path = None
-        if resets is not None:
+        if run.resets is not None:
             resets_path = Path(scratch) / "resets.bin"
-            write_resets_file(resets_path, resets)
-        run_executable(executable, stim_path, cap_path, stimulus.shape[0], expected, flush, progress,
-                       resets_path)
-        if not firsts:
-            return read_captures(cap_path, frame_words)
-        record = np.dtype([("clock", "<u8"), ("first", "<u4"), ("words", "<u4", (frame_words,))])
-        data = np.fromfile(cap_path, dtype=record)
-        return (data["clock"].astype(np.int64), data["first"].astype(bool),
-                data["words"].reshape(len(data), frame_words))
+            write_resets_file(resets_path, run.resets)
+        run_executable(executable, stim_path, cap_path, run.stimulus.shape[0], run.expected, top.flush,
+                       progress, resets_path)
+        words = words_per_row(top.word_values, top.config.word_bits)
+        if top.streaming:
+            clocks, firsts, rows = read_beat_captures(cap_path, words)
+        else:
+            (clocks, rows), firsts = read_captures(cap_path, words), []
+    return top.result(run, clocks, firsts, rows, top.describe("Verilator"))

@@ -132,7 +132,7 @@ def test_icarus_resets_mid_run_equal_golden(config):
 @pytest.mark.parametrize("config", CAMERAS[::2], ids=str)
 def test_amaranth_resets_mid_run_equal_golden(config):
     from cosim.rtlsim import rtl_words
-    from cosim.rtlsim_stream import rtl_stream_beats
+    from cosim.rtlsim import rtl_stream_beats
     stim, resets = sweep(config)
     assert_segments_golden(config, stim, resets, rtl_words(config, stim, resets=resets))
     assert_segments_golden(config, stim, resets, rtl_stream_beats(config, stim, LANES, resets=resets), LANES)
@@ -141,7 +141,7 @@ def test_amaranth_resets_mid_run_equal_golden(config):
 @needs_verilator
 def test_verilator_resets_mid_run_equal_golden():
     from cosim.verilator import run_verilator
-    from cosim.verilator_stream import run_verilator_stream
+    from cosim.verilator import run_verilator_stream
     config = CAMERAS[0]
     stim, resets = sweep(config)
     assert_segments_golden(config, stim, resets, run_verilator(config, stim, resets=resets))

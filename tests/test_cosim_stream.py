@@ -72,7 +72,7 @@ def test_icarus_stream_refuses_a_late_beat(rng):
     (MSB_CONFIGS[3], 6),         # ML msb, L = 1
 ], ids=str)
 def test_verilator_stream_equals_golden(config, lanes, rng):
-    from cosim.verilator_stream import run_verilator_stream
+    from cosim.verilator import run_verilator_stream
     verilog = _verilog(config, STREAM_SHAPE, lanes)
     for kind in KINDS:
         stim = make_stimulus(kind, config, rng, shape=STREAM_SHAPE)
@@ -83,7 +83,7 @@ def test_verilator_stream_equals_golden(config, lanes, rng):
 @needs_verilator
 def test_verilator_stream_larger_array(rng):
     """A 24 x 40 paper-TE array (rows of 40 pixels, one row module each) over 4 readouts."""
-    from cosim.verilator_stream import run_verilator_stream
+    from cosim.verilator import run_verilator_stream
     from golden.sensor import simulate
     config = SensorConfig()
     L = config.clocks_per_readout
