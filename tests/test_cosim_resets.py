@@ -233,3 +233,19 @@ def test_the_two_reviewed_faults_pass_a_run_without_reset():
         assert np.array_equal(run_icarus_stream(config, stim, LANES, verilog=bad), beats(words, LANES))
     bad = FAULTS["pixels cleared by rst, not the sampled reset"][1](array_verilog(config, *SHAPE))
     assert np.array_equal(run_icarus(config, stim, verilog=bad), words)
+
+
+@needs_icarus
+def test_cocotb_command_resets_mid_run(tmp_path):
+    """``tespike cocotb --resets sweep``, and one-line refusals of a reset file that does not fit."""
+    pytest.importorskip("cocotb")
+    from tests.cli import assert_refused, run_tespike
+    (tmp_path / "c.json").write_text('{"mode": "ml", "ml_readout": "msb", "b1": 2, "b2": 2}')
+    common = ["cocotb", "--config", tmp_path / "c.json", "--height", 2, "--width", 3, "--simulator", "icarus",
+              "--readouts", 2]
+    result = run_tespike(*common, "--lanes", 4, "--resets", "sweep")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert '"segments": 26' in result.stdout and '"resets": 25' in result.stdout
+    np.save(tmp_path / "r.npy", np.zeros(5, bool))
+    assert_refused(run_tespike(*common, "--resets", tmp_path / "r.npy"), "reset vector", "(24,)")
+    assert_refused(run_tespike(*common, "--resets", tmp_path / "none.npy"), "none.npy")
