@@ -48,8 +48,10 @@ MUTANTS = {
     "CCC bus registered, last not": ("parallel", lambda t: _replace(_replace(
         t, "  wire last;", "  wire last;\n  reg [1:0] ccc_late = 2'd3;\n  always @(posedge clk) ccc_late <= ccc;"),
         ".ccc(ccc), .last(last),\n", ".ccc(ccc_late), .last(last),\n")),
-    "lane index off by one": ("stream", lambda t: _replace(t, "held[beat*N + i]", "held[beat*N + i + 1]")),
-    "beat order reversed": ("stream", lambda t: _replace(t, "beat*N + i", "(2 - beat)*N + i")),
+    "lane index off by one": ("stream", lambda t: _replace(
+        t, ".shift_in(shift_in[i*WD +: WD])", ".shift_in(shift_in[((i + 1) % SITES)*WD +: WD])")),
+    "beat order reversed": ("stream", lambda t: _replace(
+        t, ".charge(charge[j*N*E +: N*E])", ".charge(charge[(B - 2 - j)*N*E +: N*E])")),
     "out_first on beat 1": ("stream", lambda t: _replace(t, "sending & (beat == 2'd0)", "sending & (beat == 2'd1)")),
     "beat counter one bit narrow": ("stream", lambda t: _replace(t, "reg [1:0] beat = 2'd0;", "reg [0:0] beat = 2'd0;")),
     "beat/sending not cleared by rst": ("stream", lambda t: _replace(t, "if (rst) begin\n      sending <= 1'b0;",
@@ -61,7 +63,8 @@ MUTANTS = {
     "two pixels' charge swapped (parallel)": ("parallel", lambda t: _replace(
         t, "charge[(r*W + c)*E +: E]", "charge[((r*W + c) ^ 1)*E +: E]")),
     "two pixels' charge swapped (stream)": ("stream", lambda t: _replace(
-        t, "charge_sample[p] = charge[p*E +: E];", "charge_sample[p] = charge[(p ^ 1)*E +: E];")),
+        t, "te_stream_pixel pixel (.clk(clk), .charge(charge[i*E +: E])",
+        "te_stream_pixel pixel (.clk(clk), .charge(charge[(i ^ 1)*E +: E])")),
 }
 
 
