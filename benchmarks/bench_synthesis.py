@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 
 from cosim.synthesis import hierarchy_total, synthesize_hierarchy  # noqa: E402
 from golden.config import load_config  # noqa: E402
-from golden.stream import min_lanes  # noqa: E402
+from golden.beats import min_lanes  # noqa: E402
 from rtl.verilog_stream import stream_array_verilog, stream_module_names  # noqa: E402
 
 

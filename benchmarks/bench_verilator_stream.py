@@ -5,7 +5,7 @@ For each array (paper TE configuration, L = 240; default 32 x 32, 64 x 64,
 Verilog (``rtl.verilog_stream.stream_array_verilog``, N = ceil(H W / L) lanes,
 the fewest that fit; ``--view loop``, the default, is the simulation view made for
 Verilator at sensor size, ``--view instances`` the design with one instance per site), builds the Verilator model in a fresh cache directory
-(``cosim.verilator_stream.build_stream``: wall and CPU seconds of Verilator and
+(``cosim.verilator.build_stream``: wall and CPU seconds of Verilator and
 g++, and the peak resident memory of the build's largest process; Verilator's
 runtime objects of the user's cache are reused, as in normal use), runs
 ``--readouts`` readout intervals of Poisson light through the harness alone
@@ -47,7 +47,7 @@ def children_cpu() -> float:
 
 
 def _build_and_peak(config, verilog, height, width, lanes, build_dir):
-    from cosim.verilator_stream import build_stream
+    from cosim.verilator import build_stream
     exe = build_stream(config, verilog, height, width, lanes, build_dir=build_dir)
     return exe, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
 
@@ -75,7 +75,7 @@ def stimulus(config: SensorConfig, height: int, width: int, readouts: int, rng) 
 
 
 def bench(config, height, width, readouts, rng, view="loop") -> dict:
-    import cosim.verilator_stream as vs
+    import cosim.verilator as vs
     from cosim.outside import words_per_row
     from cosim.stream_ports import check_beats, flush_clocks
     from golden.sensor import simulate

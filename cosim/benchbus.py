@@ -45,8 +45,13 @@ def iter_packed_charge(stimulus: np.ndarray, input_bits: int) -> Iterator[int]:
             yield int.from_bytes(row.tobytes(), "little")
 
 
+def frame_rows(frames: list[int], n_values: int, bits: int) -> np.ndarray:
+    """Port values as integers -> ``(K, words_per_row)`` uint32 rows, as the outside harnesses capture them."""
+    nbytes = 4 * words_per_row(n_values, bits)
+    raw = b"".join(f.to_bytes(nbytes, "little") for f in frames)
+    return np.frombuffer(raw, "<u4").reshape(len(frames), nbytes // 4)
+
+
 def unpack_frames(frames: list[int], n_pixels: int, word_bits: int) -> np.ndarray:
     """Frame bus integers -> ``(K, n_pixels)`` int64 words (:func:`cosim.outside.unpack_rows`)."""
-    nbytes = 4 * words_per_row(n_pixels, word_bits)
-    raw = b"".join(f.to_bytes(nbytes, "little") for f in frames)
-    return unpack_rows(np.frombuffer(raw, "<u4").reshape(len(frames), nbytes // 4), n_pixels, word_bits)
+    return unpack_rows(frame_rows(frames, n_pixels, word_bits), n_pixels, word_bits)

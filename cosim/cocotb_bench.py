@@ -7,7 +7,8 @@ only ``clk``, ``rst`` and ``charge`` and reads only ``frame_valid`` and
 the generated one:
 
 1. ``rst`` high for :data:`cosim.outside.RESET_CLOCKS` rising edges;
-2. for pixel clock t = 0, 1, ...: at the falling edge, ``rst`` low and stimulus
+2. for pixel clock t = 0, 1, ...: at the falling edge, ``rst`` low (or, with
+   ``TESPIKE_RESETS``, the reset vector's value) and stimulus
    row t on ``charge``; one simulator step later (the logic has settled) ``frame_valid`` and,
    when it is high, ``frame`` are sampled: the values the rising edge t sees;
    then the rising edge;
@@ -32,9 +33,16 @@ cocotb Makefile flow (docs/outside-simulators.md):
     an ``E.npy`` file (T, H, W) of electrons per pixel clock; without it
     :func:`default_stimulus` makes ``TESPIKE_READOUTS`` (default 3) intervals of
     it from ``TESPIKE_SEED`` (default 0);
+``TESPIKE_RESETS``
+    reset in the middle of the run (:mod:`cosim.resets`): ``sweep`` asserts
+    ``rst`` at every phase of an interval and of its beats
+    (:func:`cosim.resets.reset_sweep` from the seed; the default stimulus then
+    covers the sweep and ``TESPIKE_READOUTS`` intervals after it), or an ``.npy``
+    file of one 0/1 per stimulus clock; each segment between resets is checked
+    against the golden model from zero state (:func:`cosim.resets.golden_segments`);
 ``TESPIKE_LANES``
     set: the design is the streaming top (SPEC section 6, ``--lanes N``):
-    :func:`run_stream_bench` samples ``out_valid``, ``out_first`` and
+    :func:`run_top_bench` samples ``out_valid``, ``out_first`` and
     ``out_words`` before every rising edge, the beats are held to SPEC section
     6 by :func:`cosim.stream_ports.check_beats` and compared with
     :func:`golden.beats.beats` of the literal SPEC rule's words.
@@ -55,7 +63,8 @@ from golden.io import check_stimulus, load_stimulus
 from golden.reference import step_reference
 
 from .compare import first_difference
-from .outside import RESET_CLOCKS, check_captures, pack_rows, top_module, unpack_rows, words_per_row
+from .outside import RESET_CLOCKS, pack_rows, words_per_row
+from .tops import Run, Top, prepare
 
 #: Pixel clock period in simulator steps (its time precision, whatever the Verilog's timescale):
 #: low for 2 steps (inputs change at the falling edge, sampled 1 step later), high for 2.
@@ -73,6 +82,7 @@ class Settings:
     seed: int = 0
     stimulus_path: str | None = None
     lanes: int | None = None            # the streaming top's N; None: the parallel top
+    resets: str | None = None           # "sweep", an .npy of per-clock rst, or None (module docstring)
 
     @classmethod
     def from_env(cls, env=os.environ) -> "Settings":
@@ -96,7 +106,8 @@ class Settings:
         return cls(config, integer("TESPIKE_HEIGHT"), integer("TESPIKE_WIDTH"),
                    integer("TESPIKE_READOUTS", 3), int(env.get("TESPIKE_SEED", "0")),
                    env.get("TESPIKE_STIMULUS") or None,
-                   integer("TESPIKE_LANES") if env.get("TESPIKE_LANES") else None)
+                   integer("TESPIKE_LANES") if env.get("TESPIKE_LANES") else None,
+                   env.get("TESPIKE_RESETS") or None)
 
     def to_env(self) -> dict[str, str]:
         env = {"TESPIKE_CONFIG": self.config.to_json(), "TESPIKE_HEIGHT": str(self.height),
@@ -106,7 +117,32 @@ class Settings:
             env["TESPIKE_STIMULUS"] = str(Path(self.stimulus_path).resolve())
         if self.lanes is not None:
             env["TESPIKE_LANES"] = str(self.lanes)
+        if self.resets is not None:
+            env["TESPIKE_RESETS"] = self.resets if self.resets == "sweep" else str(Path(self.resets).resolve())
         return env
+
+    def inputs(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The stimulus and the reset vector (None without ``resets``); one line if they disagree."""
+        from golden.beats import beat_count
+
+        from .resets import check_resets, reset_sweep
+        if self.resets is None:
+            return self.stimulus(), None
+        if self.resets == "sweep":
+            beats = beat_count(self.height * self.width, self.lanes) if self.lanes else 1
+            resets = reset_sweep(self.config, np.random.default_rng(self.seed + 1), beats=beats,
+                                 tail_readouts=self.readouts)
+            if self.stimulus_path is None:
+                stim = default_stimulus(self.config, np.random.default_rng(self.seed),
+                                        len(resets) // self.config.clocks_per_readout, self.height, self.width)
+                return stim, resets
+        else:
+            try:
+                resets = np.load(self.resets, allow_pickle=False)
+            except (OSError, ValueError) as exc:
+                raise InputError(f"reset vector {self.resets!r}: cannot read it as .npy ({exc})") from None
+        stim = self.stimulus()
+        return stim, check_resets(resets, stim.shape[0])
 
     def stimulus(self) -> np.ndarray:
         if self.stimulus_path is None:
@@ -146,96 +182,69 @@ def _as_int(value, what: str) -> int:
     return int(value)
 
 
-async def run_bench(dut, settings: Settings) -> dict:
-    """Drive ``dut`` through ``settings``'s stimulus; return captures, words and latency.
+async def _drive(dut, top: Top, run: Run) -> tuple[list, list, np.ndarray]:
+    """Reset, then per clock ``rst``/``charge`` at the falling edge and the outputs sampled a step later.
 
-    Raises ``AssertionError`` (the test fails) on X/Z, on wrong port widths, and
-    :class:`cosim.outside.SimulatorRunError` on a frame_valid that breaks SPEC section 6.
+    Either top: the valid flag, ``out_first`` (streaming top only) and the word port of
+    :class:`cosim.tops.Top`. Returns the sampled clocks, the ``out_first`` values and
+    the word port's values as uint32 rows.
     """
     from cocotb.clock import Clock
     from cocotb.triggers import FallingEdge, RisingEdge, Timer
 
-    config, H, W = settings.config, settings.height, settings.width
-    N, E, Wd, L = H * W, config.input_bits, config.word_bits, config.clocks_per_readout
-    for port, bits in (("charge", N * E), ("frame", N * Wd)):
-        width = len(getattr(dut, port))
-        assert width == bits, (f"port {port} is {width} bits, SPEC section 6 wants {bits} for "
-                               f"{H} x {W} pixels of {config}")
-    stim = settings.stimulus()
+    stim, resets = run.stimulus, run.resets
     T = stim.shape[0]
-    K = T // L
-    packed = pack_rows(stim.reshape(T, N), E)
+    packed = pack_rows(stim.reshape(T, -1), top.config.input_bits)
     rows = [int.from_bytes(row.tobytes(), "little") for row in packed]
-
-    cocotb_clock = Clock(dut.clk, PERIOD_STEPS, units="step")
-    clock_task = __import__("cocotb").start_soon(cocotb_clock.start(start_high=False))
-    dut.rst.value = 1
-    dut.charge.value = 0
-    for _ in range(RESET_CLOCKS):
-        await RisingEdge(dut.clk)
-    clocks, frames = [], []
-    for t in range(T + L + 1):
-        if t >= T and len(clocks) >= K:
-            break
-        await FallingEdge(dut.clk)
-        dut.rst.value = 0
-        dut.charge.value = rows[t] if t < T else 0
-        await Timer(1, units="step")                # inputs of clock t settled; rising edge t next
-        if _as_int(dut.frame_valid.value, f"frame_valid before rising edge {t}"):
-            clocks.append(t)
-            frames.append(_as_int(dut.frame.value, f"frame before rising edge {t}"))
-    clock_task.kill()
-    latency = check_captures(np.array(clocks, np.int64), config, K, f"cocotb run of {top_module(config)}")
-    nbytes = 4 * words_per_row(N, Wd)
-    raw = np.frombuffer(b"".join(f.to_bytes(nbytes, "little") for f in frames[:K]), "<u4")
-    words = unpack_rows(raw.reshape(len(frames[:K]), nbytes // 4), N, Wd).reshape(K, H, W)
-    return {"stimulus": stim, "words": words, "clocks": clocks, "latency": latency}
-
-
-async def run_stream_bench(dut, settings: Settings) -> dict:
-    """:func:`run_bench` for the streaming top: returns the stimulus, beats (K, B, N) and latency."""
-    from cocotb.clock import Clock
-    from cocotb.triggers import FallingEdge, RisingEdge, Timer
-
-    from golden.beats import beat_count
-
-    from .stream_ports import check_beats, flush_clocks, stream_top_module
-
-    config, H, W, N = settings.config, settings.height, settings.width, settings.lanes
-    E, Wd, L = config.input_bits, config.word_bits, config.clocks_per_readout
-    for port, bits in (("charge", H * W * E), ("out_words", N * Wd)):
-        width = len(getattr(dut, port))
-        assert width == bits, (f"port {port} is {width} bits, SPEC section 6 wants {bits} for "
-                               f"{H} x {W} pixels and {N} lanes of {config}")
-    stim = settings.stimulus()
-    T = stim.shape[0]
-    K, B = T // L, beat_count(H * W, N)
-    packed = pack_rows(stim.reshape(T, H * W), E)
-    rows = [int.from_bytes(row.tobytes(), "little") for row in packed]
-
     clock_task = __import__("cocotb").start_soon(Clock(dut.clk, PERIOD_STEPS, units="step").start(start_high=False))
     dut.rst.value = 1
     dut.charge.value = 0
     for _ in range(RESET_CLOCKS):
         await RisingEdge(dut.clk)
-    clocks, firsts, lanes = [], [], []
-    for t in range(T + flush_clocks(config)):
-        if t >= T and len(clocks) >= K * B:
+    clocks, firsts, values = [], [], []
+    captured = 0
+    for t in range(T + top.flush):
+        if t >= T and captured >= run.expected:
             break
         await FallingEdge(dut.clk)
-        dut.rst.value = 0
+        rst = int(resets[t]) if resets is not None and t < T else 0
+        dut.rst.value = rst
         dut.charge.value = rows[t] if t < T else 0
         await Timer(1, units="step")                # inputs of clock t settled; rising edge t next
-        if _as_int(dut.out_valid.value, f"out_valid before rising edge {t}"):
+        if _as_int(getattr(dut, top.valid_port).value, f"{top.valid_port} before rising edge {t}"):
             clocks.append(t)
-            firsts.append(bool(_as_int(dut.out_first.value, f"out_first before rising edge {t}")))
-            lanes.append(_as_int(dut.out_words.value, f"out_words before rising edge {t}"))
+            if top.streaming:
+                firsts.append(bool(_as_int(dut.out_first.value, f"out_first before rising edge {t}")))
+            values.append(_as_int(getattr(dut, top.word_port).value, f"{top.word_port} before rising edge {t}"))
+            captured += 1
+        if rst:
+            captured = 0                            # a reset edge: count the captures after it
     clock_task.kill()
-    nbytes = 4 * words_per_row(N, Wd)
-    raw = np.frombuffer(b"".join(v.to_bytes(nbytes, "little") for v in lanes), "<u4")
-    beats, latency = check_beats(clocks, firsts, raw.reshape(len(lanes), nbytes // 4), config, H, W, N, K,
-                                 f"cocotb run of {stream_top_module(config)}")
-    return {"stimulus": stim, "beats": beats, "latency": latency}
+    nbytes = 4 * words_per_row(top.word_values, top.config.word_bits)
+    raw = np.frombuffer(b"".join(v.to_bytes(nbytes, "little") for v in values), "<u4")
+    return clocks, firsts, raw.reshape(len(values), nbytes // 4)
+
+
+async def run_top_bench(dut, settings: Settings) -> dict:
+    """Drive ``dut`` (either top: ``settings.lanes``) through ``settings``'s stimulus and resets.
+
+    Returns the stimulus, the reset vector (or None) and ``outputs``: words
+    ``(K, H, W)`` of the parallel top or beats ``(K, B, N)`` of the streaming top,
+    held to SPEC section 6 (:meth:`cosim.tops.Top.result`); with resets, each
+    segment's. Raises ``AssertionError`` (the test fails) on X/Z and on wrong port
+    widths, :class:`cosim.outside.SimulatorRunError` on outputs that break SPEC section 6.
+    """
+    top = Top(settings.config, settings.height, settings.width, settings.lanes)
+    lanes = f" and {top.lanes} lanes" if top.streaming else ""
+    for port, bits in (("charge", top.charge_bits), (top.word_port, top.output_bits)):
+        width = len(getattr(dut, port))
+        assert width == bits, (f"port {port} is {width} bits, SPEC section 6 wants {bits} for "
+                               f"{top.height} x {top.width} pixels{lanes} of {top.config}")
+    stim, resets = settings.inputs()
+    run = prepare(settings.config, stim, settings.lanes, resets)
+    clocks, firsts, rows = await _drive(dut, top, run)
+    return {"stimulus": stim, "resets": run.resets, "clocks": clocks,
+            "outputs": top.result(run, clocks, firsts, rows, f"cocotb run of {top.module}")}
 
 
 try:
@@ -246,18 +255,26 @@ except ImportError:          # importable without cocotb (settings and stimulus 
 if _cocotb is not None:
     @_cocotb.test()
     async def spec_ports_equal_golden(dut):
-        """The array's words equal the golden model's on the stimulus of TESPIKE_* (module docstring)."""
+        """The top's words (or beats) equal the golden model's on the stimulus of TESPIKE_* (module docstring)."""
         settings = Settings.from_env()
-        if settings.lanes is not None:
+        if settings.resets is not None:
+            await _segments_equal_golden(dut, settings)
+        elif settings.lanes is not None:
             await _stream_equal_golden(dut, settings)
-            return
-        run = await run_bench(dut, settings)
-        expected = step_reference(settings.config, run["stimulus"])[0]
+        else:
+            await _frames_equal_golden(dut, settings)
+
+    async def _frames_equal_golden(dut, settings: Settings) -> None:
+        """The parallel top's words equal the literal SPEC rule's."""
+        run = await run_top_bench(dut, settings)
+        words, expected = run["outputs"], step_reference(settings.config, run["stimulus"])[0]
+        L = settings.config.clocks_per_readout
+        latency = run["clocks"][0] - (L - 1) if run["clocks"] else None
         dut._log.info(f"{settings.config}: {settings.height} x {settings.width}, "
-                      f"{expected.shape[0]} readouts, latency {run['latency']} clock(s)")
-        if not np.array_equal(run["words"], expected):
-            raise AssertionError("RTL != golden model: " + first_difference(run["words"], expected).text())
-        summary = {"readouts": int(expected.shape[0]), "latency": run["latency"],
+                      f"{expected.shape[0]} readouts, latency {latency} clock(s)")
+        if not np.array_equal(words, expected):
+            raise AssertionError("RTL != golden model: " + first_difference(words, expected).text())
+        summary = {"readouts": int(expected.shape[0]), "latency": latency,
                    "distinct_words": int(len(np.unique(expected)))}
         dut._log.info("RTL == golden model " + json.dumps(summary))
 
@@ -265,16 +282,34 @@ if _cocotb is not None:
         """The streaming top's beats equal golden.beats.beats of the literal SPEC rule's words."""
         from golden.beats import beats
 
-        run = await run_stream_bench(dut, settings)
+        from .stream_ports import last_beat_latency
+
+        run = await run_top_bench(dut, settings)
+        got = run["outputs"]
         expected = beats(step_reference(settings.config, run["stimulus"])[0], settings.lanes)
+        latency = last_beat_latency(run["clocks"], settings.config, expected.shape[1])
         dut._log.info(f"{settings.config}: {settings.height} x {settings.width}, {settings.lanes} lanes, "
                       f"{expected.shape[0]} readouts of {expected.shape[1]} beats, last beat at most "
-                      f"{run['latency']} clock(s) after its interval")
-        if not np.array_equal(run["beats"], expected):
-            k, j, i = (int(v) for v in np.argwhere(expected != run["beats"])[0])
-            raise AssertionError(f"RTL != golden model: {int((expected != run['beats']).sum())} lane words "
+                      f"{latency} clock(s) after its interval")
+        if not np.array_equal(got, expected):
+            k, j, i = (int(v) for v in np.argwhere(expected != got)[0])
+            raise AssertionError(f"RTL != golden model: {int((expected != got).sum())} lane words "
                                  f"differ; first at readout {k}, beat {j}, lane {i}: RTL "
-                                 f"{int(run['beats'][k, j, i])}, golden {int(expected[k, j, i])}")
+                                 f"{int(got[k, j, i])}, golden {int(expected[k, j, i])}")
         summary = {"readouts": int(expected.shape[0]), "beats": int(expected.shape[1]),
-                   "lanes": settings.lanes, "latency": run["latency"]}
+                   "lanes": settings.lanes, "latency": latency}
+        dut._log.info("RTL == golden model " + json.dumps(summary))
+
+    async def _segments_equal_golden(dut, settings: Settings) -> None:
+        """With resets: each segment's words (or beats) equal the golden model's from zero state."""
+        from .resets import first_segment_difference, golden_segments
+
+        run = await run_top_bench(dut, settings)
+        got = run["outputs"]
+        expected = golden_segments(settings.config, run["stimulus"], run["resets"], settings.lanes)
+        difference = first_segment_difference(got, expected)
+        if difference is not None:
+            raise AssertionError("RTL != golden model after a reset: " + difference)
+        summary = {"segments": len(got), "resets": len(got) - 1,
+                   "outputs": int(sum(len(g) for g in got)), "golden_outputs": int(sum(len(e) for e in expected))}
         dut._log.info("RTL == golden model " + json.dumps(summary))

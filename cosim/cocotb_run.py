@@ -171,7 +171,7 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
         from .stream_ports import stream_top_module
         check_lanes(settings.config, settings.height, settings.width, settings.lanes)
         top = stream_top_module(settings.config)
-    settings.stimulus()                    # and a bad stimulus, before building anything
+    settings.inputs()                      # and a bad stimulus or reset vector, before building anything
     with tempfile.TemporaryDirectory(prefix="tespike-cocotb-") as scratch:
         if verilog_path is None:
             verilog_path = Path(scratch) / "array.v"

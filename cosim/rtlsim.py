@@ -1,8 +1,12 @@
-"""Co-simulation: run the Amaranth RTL pixel array on a per-clock stimulus (SPEC sections 3, 4, 6).
+"""Co-simulation: run the Amaranth RTL, either top, on a per-clock stimulus (SPEC sections 3, 4, 6).
 
 :func:`rtl_words` is the pure function behind ``tespike rtl-sim`` and the conformance
 tests: stimulus ``(T, H, W)`` in, readout words ``(T / L, H, W)`` out, exactly what
-:func:`golden.sensor.simulate` returns for a correct RTL.
+:func:`golden.sensor.simulate` returns for a correct RTL. :func:`rtl_stream_beats`
+is the same for the streaming array (:class:`rtl.stream.StreamingPixelArray`): beats
+``(K, B, N)`` out, equal to :func:`golden.beats.beats` of the golden words. Both
+run the one testbench (:func:`_simulate`) and take a reset vector (``resets=``,
+:mod:`cosim.resets`).
 
 The testbench is one async Amaranth testbench around a small wrapper
 (:class:`Bench`) that owns the ``sync`` clock domain. Per pixel clock it makes
@@ -30,11 +34,15 @@ import numpy as np
 
 from golden.config import SensorConfig
 from golden.errors import ConfigError
-from golden.io import atomic_output, check_stimulus
+from golden.io import atomic_output
+from golden.beats import check_lanes
 
 from .benchbus import (ARRAY_SCOPE, CLOCK_PERIOD_FS, CLOCK_PERIOD_S, RESET_CLOCKS,  # noqa: F401
-                       iter_packed_charge, unpack_frames)
+                       frame_rows, iter_packed_charge, unpack_frames)
+from .stream_ports import check_beats
+from .tops import Run, prepare
 from .vcd import dump_path, write_gtkw
+
 
 class RTLProtocolError(RuntimeError):
     """The RTL broke the output protocol of SPEC section 6 (a bug in rtl/, not bad input)."""
@@ -110,7 +118,7 @@ class RtlRun:
 
 
 def rtl_words(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_path=None,
-              progress: bool | None = False, flat: bool = False) -> np.ndarray:
+              progress: bool | None = False, flat: bool = False, resets=None):
     """Run the RTL on ``stimulus`` (T, H, W); return the ``(T / L, H, W)`` int64 readout words.
 
     ``vcd_path`` writes the whole waveform (all signals of the design) and
@@ -118,80 +126,175 @@ def rtl_words(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw
     :func:`cosim.vcd.write_gtkw`); both appear only if the run succeeds.
     ``progress`` shows a tqdm bar (``None``: only on a terminal). ``flat``
     simulates the array with its pixels inlined into one module (same logic).
+    ``resets`` (T booleans): ``rst`` of every stimulus clock (:mod:`cosim.resets`);
+    the result is then a list of each segment's words ``(n, H, W)``.
     """
     return rtl_run(config, stimulus, vcd_path=vcd_path, gtkw_path=gtkw_path,
-                   progress=progress, flat=flat).words
+                   progress=progress, flat=flat, resets=resets).words
 
 
 def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_path=None,
-            progress: bool | None = False, flat: bool = False, reset_charge: int = 0) -> RtlRun:
+            progress: bool | None = False, flat: bool = False, reset_charge: int = 0,
+            resets=None) -> RtlRun:
     """:func:`rtl_words`, also returning the clock of every ``frame_valid``.
 
-    ``reset_charge`` is the value of the whole ``charge`` bus while reset is
-    held (the tests drive all ones: a synchronous reset must ignore it).
+    ``reset_charge`` is the value of the whole ``charge`` bus while the initial
+    reset is held (the tests drive all ones: a synchronous reset must ignore it).
+    With ``resets``, ``words`` is the list of each segment's words, checked by
+    :func:`cosim.resets.frame_segments` (``latency`` is then None).
     """
-    from amaranth.sim import Simulator
-
-    check_stimulus(stimulus, config)
+    run = prepare(config, stimulus, None, resets)
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
-    K = T // L
-    n = H * W
     if gtkw_path is not None and vcd_path is None:
         raise ValueError("a GTKWave save file (gtkw_path) needs a waveform (vcd_path)")
     bench = _bench(build_array(config, H, W, flat=flat))
-
     frames: list[int] = []
     edges: list[int] = []
+
+    def record(t: int, values) -> None:
+        if run.resets is None:
+            _check_edge(t, len(frames), edges, L)
+        frames.append(values[1])
+        edges.append(t)
+
+    ports = (bench.tb_frame_valid, bench.tb_frame)
+    clock = _simulate(bench, bench.tb_charge, ports, run, record, limit=L, reset_charge=reset_charge,
+                      progress=progress, waveform=None if vcd_path is None else
+                      lambda sim: _run_with_vcd(sim, config, (H, W), vcd_path, gtkw_path))
+    what = f"Amaranth simulation of the {H} x {W} array"
+    if run.resets is not None:
+        segment_words = run.top.result(run, edges, [], frame_rows(frames, H * W, config.word_bits), what)
+        return RtlRun(segment_words, np.asarray(edges, np.int64), None, *clock)
+    K = run.readouts
+    if len(frames) != K:
+        raise RTLProtocolError(f"RTL gave {len(frames)} frame_valid pulses for {K} readout intervals "
+                               f"within {T + L} clocks (latency must be at most L = {L})")
+    words = unpack_frames(frames, H * W, config.word_bits).reshape(K, H, W)
+    latency = edges[0] - (L - 1) if edges else None
+    return RtlRun(words, np.asarray(edges, np.int64), latency, *clock)
+
+
+def build_stream_array(config: SensorConfig, height: int, width: int, lanes: int, *, flat: bool = False):
+    """``rtl.stream.StreamingPixelArray(config, height, width, lanes, flat=flat)``, the design under test."""
+    from rtl.stream import StreamingPixelArray
+    check_lanes(config, height, width, lanes)
+    return build_or_refuse(lambda: StreamingPixelArray(config, height, width, lanes, flat=flat),
+                           config, height, width)
+
+
+def rtl_stream_beats(config: SensorConfig, stimulus: np.ndarray, lanes: int, *, flat: bool = True,
+                     resets=None):
+    """Run the streaming RTL on ``stimulus`` (T, H, W); return its beats (K, B, N) as int64.
+
+    The Amaranth counterpart of :func:`cosim.icarus.run_icarus_stream` and
+    :func:`cosim.verilator.run_verilator_stream`, held to SPEC section 6 by the same
+    check (:func:`cosim.stream_ports.check_beats`). ``resets`` (T booleans): ``rst``
+    of every stimulus clock (:mod:`cosim.resets`); the result is then a list of each
+    segment's beats ``(n, N)`` (:func:`cosim.resets.beat_segments`).
+    """
+    if resets is not None:
+        return rtl_stream_run(config, stimulus, lanes, flat=flat, resets=resets)
+    return rtl_stream_run(config, stimulus, lanes, flat=flat)[0]
+
+
+def rtl_stream_run(config: SensorConfig, stimulus: np.ndarray, lanes: int, *, flat: bool = True,
+                   resets=None):
+    """:func:`rtl_stream_beats` and the largest latency of a last beat (clocks after its interval);
+    with ``resets``, the list of each segment's beats only."""
+    from amaranth.hdl import ClockDomain, Elaboratable, Module
+
+    run = prepare(config, stimulus, lanes, resets)
+    T, H, W = stimulus.shape
+    dut = build_stream_array(config, H, W, lanes, flat=flat)
+
+    class Bench(Elaboratable):
+        def __init__(self):
+            self.domain = ClockDomain("sync")
+
+        def elaborate(self, platform):
+            m = Module()
+            m.domains.sync = self.domain
+            m.submodules.stream = dut
+            return m
+
+    clocks, firsts, lane_values = [], [], []
+
+    def record(t: int, values) -> None:
+        clocks.append(t)
+        firsts.append(bool(values[1]))
+        lane_values.append(int(values[2]))
+
+    _simulate(Bench(), dut.charge, (dut.out.valid, dut.out.p.first, dut.out.p.words), run, record,
+              limit=run.top.flush)
+    rows = frame_rows(lane_values, lanes, config.word_bits)
+    what = f"Amaranth simulation of the {H} x {W} streaming array ({lanes} lanes)"
+    if run.resets is not None:
+        return run.top.result(run, clocks, firsts, rows, what)
+    return check_beats(clocks, firsts, rows, config, H, W, lanes, run.readouts, what)
+
+
+def _simulate(bench, charge, ports, run: Run, record, *, limit: int, reset_charge: int = 0,
+              progress: bool | None = False, waveform=None) -> tuple[int, float]:
+    """The one testbench of both tops: reset, then per pixel clock one ``charge`` (and ``rst``).
+
+    ``bench`` owns the ``sync`` domain (``bench.domain``); ``ports`` are sampled at
+    every rising edge, the first being the valid flag: ``record(t, values)`` gets each
+    edge t at which it is high. The run stops once the stimulus is over and the
+    captures expected after the last reset are in, or ``limit`` clocks past the
+    stimulus. ``waveform(sim)`` runs the simulation instead of ``sim.run()`` (the VCD).
+    Returns the edges simulated after reset and their wall time.
+    """
+    from amaranth.sim import Simulator
+
+    config, stimulus, resets = run.top.config, run.stimulus, run.resets
+    T = stimulus.shape[0]
     clock = {"cycles": 0, "start": 0.0, "stop": 0.0}
 
     async def testbench(ctx):
         ctx.set(bench.domain.rst, 1)
-        ctx.set(bench.tb_charge, reset_charge)
+        ctx.set(charge, reset_charge)
         for _ in range(RESET_CLOCKS):
             await ctx.tick()
         ctx.set(bench.domain.rst, 0)
-        if K == 0:
-            ctx.set(bench.tb_charge, 0)
+        if T == 0 or run.idle:
+            ctx.set(charge, 0)
             return
-        charge = iter_packed_charge(stimulus, config.input_bits)
+        rows = iter_packed_charge(stimulus, config.input_bits)
         bar = _progress_bar(T, progress)
-        t = 0
+        t = captured = 0
         clock["start"] = time.perf_counter()
-        ctx.set(bench.tb_charge, next(charge))
+        ctx.set(charge, next(rows))
+        if resets is not None:
+            ctx.set(bench.domain.rst, int(resets[0]))
         # Multi-shot wait: cheaper than a fresh one-shot trigger per clock.
-        async for _, _, valid, frame in ctx.tick().sample(bench.tb_frame_valid, bench.tb_frame):
-            if valid:
-                _check_edge(t, len(frames), edges, L)
-                frames.append(frame)
-                edges.append(t)
-                if len(frames) == K:
-                    break
+        async for _, _, *values in ctx.tick().sample(*ports):
+            if values[0]:
+                record(t, values)
+                captured += 1
+            if resets is not None and t < T and resets[t]:
+                captured = 0                      # a reset edge: count the captures after it
             t += 1
-            if t >= T + L:
+            if (t >= T and captured >= run.expected) or t >= T + limit:
                 break
-            ctx.set(bench.tb_charge, next(charge) if t < T else 0)
+            ctx.set(charge, next(rows) if t < T else 0)
+            if resets is not None:
+                ctx.set(bench.domain.rst, int(t < T and resets[t]))
             if bar is not None and (t & 1023) == 0:
                 bar.update(1024)
-        clock["stop"], clock["cycles"] = time.perf_counter(), t + 1
+        clock["stop"], clock["cycles"] = time.perf_counter(), t
         if bar is not None:
-            bar.update(min(t + 1, T) - bar.n)
+            bar.update(min(t, T) - bar.n)
             bar.close()
 
-    sim = build_or_refuse(lambda: Simulator(bench), config, H, W)   # elaborates the array
+    sim = build_or_refuse(lambda: Simulator(bench), config, run.top.height, run.top.width)   # elaborates
     sim.add_clock(CLOCK_PERIOD_S)
     sim.add_testbench(testbench)
-    if vcd_path is None:
+    if waveform is None:
         sim.run()
     else:
-        _run_with_vcd(sim, config, (H, W), vcd_path, gtkw_path)
-
-    if len(frames) != K:
-        raise RTLProtocolError(f"RTL gave {len(frames)} frame_valid pulses for {K} readout intervals "
-                               f"within {T + L} clocks (latency must be at most L = {L})")
-    words = unpack_frames(frames, n, config.word_bits).reshape(K, H, W)
-    latency = edges[0] - (L - 1) if edges else None
-    return RtlRun(words, np.asarray(edges, np.int64), latency, clock["cycles"], clock["stop"] - clock["start"])
+        waveform(sim)
+    return clock["cycles"], clock["stop"] - clock["start"]
 
 
 def _check_edge(t: int, k: int, edges: list[int], L: int) -> None:

@@ -70,6 +70,19 @@ def check_beats(clocks, firsts, lane_rows, config: SensorConfig, height: int, wi
     return words.reshape(readouts, B, lanes), int(latency.max()) if readouts else 0
 
 
+def last_beat_latency(clocks, config: SensorConfig, beats_per_interval: int) -> int:
+    """Clocks from each interval's last clock to its last beat, the largest of the run (0 without beats).
+
+    ``clocks`` are the sample clocks of the run's K * B beats, in order.
+    """
+    clocks = np.asarray(clocks, np.int64)
+    if len(clocks) == 0:
+        return 0
+    per = clocks.reshape(-1, beats_per_interval)
+    ends = (np.arange(len(per), dtype=np.int64) + 1) * config.clocks_per_readout - 1
+    return int((per[:, -1] - ends).max())
+
+
 def flush_clocks(config: SensorConfig) -> int:
     """Clocks of zero charge a harness runs after the stimulus: 2L + 1 (the latency bound, and one)."""
     return 2 * config.clocks_per_readout + 1

@@ -1,20 +1,24 @@
-"""Run the generated array Verilog in Verilator, for scale (SPEC section 6 ports only).
+"""Run the generated Verilog of either top in Verilator, for scale (SPEC section 6 ports only).
 
-:func:`run_verilator` writes the Verilog of an H x W array
-(``rtl.verilog.array_verilog``) and a C++ harness that knows nothing but the
-SPEC section 6 ports: it holds ``rst`` for :data:`~cosim.outside.RESET_CLOCKS`
-clocks, then applies one stimulus row per pixel clock, samples ``frame`` before
-every rising edge at which ``frame_valid`` is high, and writes what it saw to a
-binary file. The build (``verilator --cc --exe --build -O3``) is cached under a
-hash of the Verilog, the harness, the flags and the Verilator version, so a
-second run of the same array skips it.
+:func:`run_verilator` (the parallel top, ``rtl.verilog.array_verilog``) and
+:func:`run_verilator_stream` (the streaming top, ``--lanes N``, up to the
+400 x 250 sensor) write the top's Verilog and one C++ harness
+(:func:`harness_cpp`, its output ports taken from :class:`cosim.tops.Top`) that
+knows nothing but the SPEC section 6 ports: it holds ``rst`` for
+:data:`~cosim.outside.RESET_CLOCKS` clocks, then applies one stimulus row (and
+its ``rst``, with a reset vector) per pixel clock, samples the outputs before
+every rising edge at which ``frame_valid`` / ``out_valid`` is high, and writes
+what it saw to a binary file. The build (``verilator --cc --exe --build -O3``)
+is cached under a hash of the Verilog, the harness, the flags and the Verilator
+version, so a second run of the same array skips it.
 
 Files between Python and the harness (little-endian):
 
 - stimulus: T rows of ``ceil(H*W*E / 32)`` uint32 words, the ``charge`` port's
   bits exactly as Verilator stores a wide port (word 0 = bits 31..0);
-- captures: records of one uint64 sample clock and ``ceil(H*W*Wd / 32)``
-  uint32 words of ``frame``.
+- resets (optional): one byte, 0 or 1, per stimulus clock;
+- captures: records of one uint64 sample clock, for the streaming top a uint32
+  ``out_first``, and the word port's ``ceil(bits / 32)`` uint32 words.
 """
 
 from __future__ import annotations
@@ -31,11 +35,11 @@ import numpy as np
 
 from golden.config import SensorConfig
 from golden.errors import InputError
-from golden.io import atomic_output, check_stimulus
+from golden.io import atomic_output
 
-from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, cache_entry,
-                      check_captures, content_hash, default_cache_root, first_error_line,
-                      pack_rows, require_tool, top_module, unpack_rows, words_per_row)
+from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, cache_entry, content_hash,
+                      default_cache_root, first_error_line, pack_rows, require_tool, words_per_row)
+from .tops import Run, Top, prepare
 
 #: Verilator options of every build. ``-O3``: Verilator's own optimisation;
 #: ``--x-assign/--x-initial fast``: X is irrelevant after the synchronous reset.
@@ -107,27 +111,43 @@ def c_type(bits: int) -> str:
     return "uint8_t" if bits <= 8 else "uint16_t" if bits <= 16 else "uint32_t" if bits <= 32 else "uint64_t"
 
 
-def harness_cpp(top: str, charge_bits: int, frame_bits: int) -> str:
-    """C++ ``main`` driving only ``clk``, ``rst``, ``charge`` and reading ``frame_valid``, ``frame``.
+def _port_io(port: str, bits: int, into: bool) -> str:
+    """C++ that copies 32-bit words ``w`` into (``into``) or out of the port ``top-><port>``.
 
     Verilator stores a port of up to 64 bits in an integer (CData/SData/IData/
-    QData) and a wider one in ``VlWide`` (32-bit words, word 0 least
-    significant); both cases are generated here.
+    QData) and a wider one in ``VlWide`` (32-bit words, word 0 least significant).
     """
+    words = (bits + 31) // 32
+    if bits > 64:
+        return (f"std::memcpy(top->{port}.data(), w, sizeof(uint32_t) * {words});" if into else
+                f"std::memcpy(w, top->{port}.data(), sizeof(uint32_t) * {words});")
+    if bits > 32:
+        return (f"top->{port} = (uint64_t)w[0] | ((uint64_t)w[1] << 32);" if into else
+                f"uint64_t v = top->{port}; w[0] = (uint32_t)v; w[1] = (uint32_t)(v >> 32);")
+    return f"top->{port} = ({c_type(bits)})w[0];" if into else f"w[0] = (uint32_t)top->{port};"
+
+
+#: Each top's outputs as the harness sees them: (valid port, word port, whether a record
+#: carries ``out_first`` as a uint32 between the clock and the words).
+HARNESS_OUTPUTS = {"frame": ("frame_valid", "frame", False), "beats": ("out_valid", "out_words", True)}
+
+
+def harness_cpp(top: str, charge_bits: int, output_bits: int, outputs: str = "frame") -> str:
+    """C++ ``main`` driving only ``clk``, ``rst`` and ``charge`` and recording the SPEC outputs.
+
+    ``outputs`` is ``"frame"`` (the parallel top: records of a uint64 clock and the
+    ``frame`` words, one per clock with ``frame_valid`` high) or ``"beats"`` (the
+    streaming top: a uint64 clock, a uint32 ``out_first`` and the ``out_words``
+    words, one per clock with ``out_valid`` high). Arguments: STIMULUS CLOCKS
+    EXPECTED FLUSH CAPTURES PROGRESS_EVERY [RESETS], RESETS a file of one byte
+    (0 or 1) per stimulus clock, ``rst`` of that clock (:mod:`cosim.resets`);
+    EXPECTED counts the records after the last reset edge.
+    """
+    valid, word_port, has_first = HARNESS_OUTPUTS[outputs]
     in_words = (charge_bits + 31) // 32
-    out_words = (frame_bits + 31) // 32
-    if charge_bits > 64:
-        set_charge = f"std::memcpy(top->charge.data(), w, sizeof(uint32_t) * {in_words});"
-    elif charge_bits > 32:
-        set_charge = "top->charge = (uint64_t)w[0] | ((uint64_t)w[1] << 32);"
-    else:
-        set_charge = f"top->charge = ({c_type(charge_bits)})w[0];"
-    if frame_bits > 64:
-        get_frame = f"std::memcpy(w, top->frame.data(), sizeof(uint32_t) * {out_words});"
-    elif frame_bits > 32:
-        get_frame = "uint64_t v = top->frame; w[0] = (uint32_t)v; w[1] = (uint32_t)(v >> 32);"
-    else:
-        get_frame = "w[0] = (uint32_t)top->frame;"
+    out_words = (output_bits + 31) // 32
+    record_first = (" || std::fwrite(&first, sizeof first, 1, out) != 1" if has_first else "")
+    first_line = "            const uint32_t first = top->out_first;\n" if has_first else ""
     return f"""// tespike Verilator harness for {top}: SPEC section 6 ports only (generated).
 #include "Varray.h"
 #include "verilated.h"
@@ -143,8 +163,8 @@ static const size_t OUT_WORDS = {out_words};
 static const size_t READ_ROWS = {READ_ROWS};
 static const int RESET_CLOCKS = {RESET_CLOCKS};
 
-static inline void set_charge(Varray* top, const uint32_t* w) {{ {set_charge} }}
-static inline void get_frame(const Varray* top, uint32_t* w) {{ {get_frame} }}
+static inline void set_charge(Varray* top, const uint32_t* w) {{ {_port_io("charge", charge_bits, True)} }}
+static inline void get_words(const Varray* top, uint32_t* w) {{ {_port_io(word_port, output_bits, False)} }}
 
 static int fail(const char* what, const char* path) {{
     std::fprintf(stderr, "tespike_sim: %s %s\\n", what, path);
@@ -152,25 +172,35 @@ static int fail(const char* what, const char* path) {{
 }}
 
 int main(int argc, char** argv) {{
-    if (argc != 7) {{
-        std::fprintf(stderr, "usage: %s STIMULUS CLOCKS READOUTS FLUSH CAPTURES PROGRESS_EVERY\\n", argv[0]);
+    if (argc != 7 && argc != 8) {{
+        std::fprintf(stderr, "usage: %s STIMULUS CLOCKS EXPECTED FLUSH CAPTURES PROGRESS_EVERY [RESETS]\\n",
+                     argv[0]);
         return 2;
     }}
     const char* stim_path = argv[1];
     const uint64_t clocks = std::strtoull(argv[2], nullptr, 10);
-    const uint64_t readouts = std::strtoull(argv[3], nullptr, 10);
+    const uint64_t expected = std::strtoull(argv[3], nullptr, 10);
     const uint64_t flush = std::strtoull(argv[4], nullptr, 10);
     const char* out_path = argv[5];
     const uint64_t progress = std::strtoull(argv[6], nullptr, 10);
 
     std::FILE* in = std::fopen(stim_path, "rb");
     if (!in) return fail("cannot open stimulus", stim_path);
+    std::vector<uint8_t> resets(clocks, 0);
+    if (argc == 8) {{
+        std::FILE* rf = std::fopen(argv[7], "rb");
+        if (!rf) return fail("cannot open resets", argv[7]);
+        const size_t got = std::fread(resets.data(), 1, clocks, rf);
+        std::fclose(rf);
+        if (got != clocks) return fail("resets file too short:", argv[7]);
+    }}
     std::FILE* out = std::fopen(out_path, "wb");
     if (!out) return fail("cannot open captures", out_path);
 
     const std::unique_ptr<VerilatedContext> context{{new VerilatedContext}};
     const std::unique_ptr<Varray> top{{new Varray{{context.get()}}}};
-    std::vector<uint32_t> rows(READ_ROWS * IN_WORDS), zero(IN_WORDS, 0), frame(OUT_WORDS, 0);
+    const size_t read_rows = READ_ROWS * IN_WORDS > (1u << 24) ? 16 : READ_ROWS;   // at most ~64 MB
+    std::vector<uint32_t> rows(read_rows * IN_WORDS), zero(IN_WORDS, 0), words(OUT_WORDS, 0);
 
     top->clk = 0;
     top->rst = 1;
@@ -185,12 +215,12 @@ int main(int argc, char** argv) {{
     uint64_t captured = 0;
     size_t have = 0, next = 0;
     for (uint64_t t = 0; t < clocks + flush; ++t) {{
-        if (t >= clocks && captured >= readouts) break;
+        if (t >= clocks && captured >= expected) break;
         const uint32_t* row = zero.data();
         if (t < clocks) {{
             if (next == have) {{
                 const uint64_t left = clocks - t;
-                const size_t want = left < READ_ROWS ? (size_t)left : READ_ROWS;
+                const size_t want = left < read_rows ? (size_t)left : read_rows;
                 if (std::fread(rows.data(), sizeof(uint32_t) * IN_WORDS, want, in) != want)
                     return fail("stimulus file too short:", stim_path);
                 have = want;
@@ -199,15 +229,17 @@ int main(int argc, char** argv) {{
             row = &rows[next++ * IN_WORDS];
         }}
         set_charge(top.get(), row);
+        top->rst = t < clocks ? resets[t] : 0;
         top->clk = 0;
         top->eval();                      // inputs of clock t settle; sample before the edge
-        if (top->frame_valid) {{
-            get_frame(top.get(), frame.data());
-            if (std::fwrite(&t, sizeof t, 1, out) != 1 ||
-                std::fwrite(frame.data(), sizeof(uint32_t), OUT_WORDS, out) != OUT_WORDS)
+        if (top->{valid}) {{
+{first_line}            get_words(top.get(), words.data());
+            if (std::fwrite(&t, sizeof t, 1, out) != 1{record_first} ||
+                std::fwrite(words.data(), sizeof(uint32_t), OUT_WORDS, out) != OUT_WORDS)
                 return fail("cannot write captures", out_path);
             ++captured;
         }}
+        if (top->rst) captured = 0;       // a reset edge: count the records after it
         top->clk = 1;
         top->eval();                      // rising edge t
         if (progress && (t + 1) % progress == 0) {{
@@ -328,7 +360,7 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
     """Build (or find in the cache) the simulation executable; return its path.
 
     ``harness`` is the C++ ``main`` (default: :func:`harness_cpp` of the parallel
-    ports; the streaming top brings its own, :mod:`cosim.verilator_stream`).
+    ports; the streaming top brings its own, :func:`build_stream`).
 
     The cache key is a hash of the Verilog, the harness, the flags and the
     Verilator version. A build runs in a temporary directory renamed into
@@ -383,15 +415,75 @@ def write_stimulus_file(path: str | Path, stimulus: np.ndarray, bits: int) -> No
             handle.write(pack_rows(flat[a:a + _WRITE_ROWS], bits).tobytes())
 
 
+def write_resets_file(path: str | Path, resets: np.ndarray) -> None:
+    """The reset vector as the harness reads it: one byte, 0 or 1, per stimulus clock."""
+    with atomic_output(path) as tmp:
+        Path(tmp).write_bytes(np.asarray(resets, np.uint8).tobytes())
+
+
 def read_captures(path: str | Path, frame_words: int) -> tuple[np.ndarray, np.ndarray]:
+    """The parallel harness's records -> (clocks, frame rows)."""
     record = np.dtype([("clock", "<u8"), ("frame", "<u4", (frame_words,))])
     data = np.fromfile(path, dtype=record)
     return data["clock"].astype(np.int64), data["frame"].reshape(len(data), frame_words)
 
 
+def read_beat_captures(path: str | Path, lane_words: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The streaming harness's records -> (clocks, firsts, lane rows)."""
+    record = np.dtype([("clock", "<u8"), ("first", "<u4"), ("lanes", "<u4", (lane_words,))])
+    data = np.fromfile(path, dtype=record)
+    return (data["clock"].astype(np.int64), data["first"].astype(bool),
+            data["lanes"].reshape(len(data), lane_words))
+
+
+def run_executable(executable: Path, stim_path: Path, cap_path: Path, clocks: int, expected: int, flush: int,
+                   progress: bool = False, resets_path: Path | None = None) -> None:
+    """Run a built model (either top's harness) on a stimulus file; captures go to ``cap_path``.
+
+    ``expected``: records after the last reset edge (the run stops once the stimulus
+    is over and they are in); ``resets_path``: :func:`write_resets_file`'s file.
+    """
+    every = max(1, min(1 << 16, clocks // 100)) if progress else 0
+    argv = [str(executable), str(stim_path), str(clocks), str(expected), str(flush), str(cap_path), str(every)]
+    if resets_path is not None:
+        argv.append(str(resets_path))
+    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as process:
+        try:
+            if progress:
+                from tqdm import tqdm
+                with tqdm(total=clocks, unit="clk", desc="verilator", file=sys.stderr) as bar:
+                    done = 0
+                    for line in process.stdout:
+                        clock = min(int(line), clocks)
+                        bar.update(clock - done)
+                        done = clock
+            _, err = process.communicate()
+        except BaseException:          # interrupted (Ctrl-C, SIGTERM): no simulator left running
+            process.kill()
+            raise
+    if process.returncode != 0:
+        raise SimulatorRunError(f"Verilator simulation of {executable} failed (exit {process.returncode}): "
+                                f"{first_error_line(err)}")
+
+
+def build_stream(config: SensorConfig, verilog: str, height: int, width: int, lanes: int, *,
+                 build_dir=None, progress: bool = False, cxx_opt: str = CXX_OPT,
+                 extra_flags: tuple[str, ...] = ()) -> Path:
+    """Build (or find in the cache) the Verilator model of a streaming top; return the executable.
+
+    With Verilator's module inlining: the streaming top's Verilog holds one copy of
+    the pixel rule whatever the size (:mod:`rtl.verilog_stream`); ``-fno-inline``
+    would only keep the timing module apart.
+    """
+    top = Top(config, height, width, lanes)
+    return build(verilog, top.module, top.charge_bits, top.output_bits, build_dir=build_dir,
+                 progress=progress, inline=True, cxx_opt=cxx_opt, extra_flags=tuple(extra_flags),
+                 harness=harness_cpp(top.module, top.charge_bits, top.output_bits, outputs="beats"))
+
+
 def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str | Path | None = None,
                   progress: bool = False, verilog: str | None = None, inline: bool = False,
-                  cxx_opt: str = CXX_OPT, shared: bool = True) -> np.ndarray:
+                  cxx_opt: str = CXX_OPT, shared: bool = True, resets=None):
     """Simulate the generated Verilog of a (T, H, W) stimulus in Verilator; return words (K, H, W).
 
     ``build_dir`` is the root of the build cache (default: ``$TESPIKE_CACHE`` or
@@ -400,56 +492,67 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
     is ``rtl.verilog.array_verilog(config, H, W)``. ``inline=True`` builds with
     Verilator's default module inlining instead of ``-fno-inline`` (see
     :func:`build_flags`); ``cxx_opt`` is g++'s optimisation of the model
-    (:data:`CXX_OPT`). ``shared=True``
-    builds :func:`shared_pixel_view` of Verilog that has the ``<te|ml>_pixel``
-    module (the generated array; a hand-written model without it is built as
-    given); ``shared=False`` builds the text exactly as given. The words are
-    int64, equal
-    bit for bit to ``golden.sensor.simulate`` for a correct array.
+    (:data:`CXX_OPT`). ``shared=True`` builds :func:`shared_pixel_view` of
+    Verilog that has the ``<te|ml>_pixel`` module (the generated array; a
+    hand-written model without it is built as given); ``shared=False`` builds
+    the text exactly as given. The words are int64, equal bit for bit to
+    ``golden.sensor.simulate`` for a correct array. ``resets`` (T booleans):
+    ``rst`` of every stimulus clock (:mod:`cosim.resets`); the result is then a
+    list of each segment's words ``(n, H, W)``.
     """
-    check_stimulus(stimulus, config)
+    run = prepare(config, stimulus, None, resets)
     check_cxx_opt(cxx_opt)
-    T, H, W = stimulus.shape
-    L = config.clocks_per_readout
-    K = T // L
-    if K == 0:
-        return np.zeros((0, H, W), np.int64)
-    N, E, Wd = H * W, config.input_bits, config.word_bits
-    top = top_module(config)
+    top = run.top
+    if run.idle:
+        return top.empty()
     if verilog is None:
-        from rtl.verilog import array_verilog
-        verilog = array_verilog(config, H, W)
-    pixel = top.replace("_array", "")
+        verilog = top.verilog()
+    pixel = top.module.replace("_array", "")
     if shared and re.search(rf"^module {pixel}\(", verilog, re.M):
         verilog = shared_pixel_view(verilog, pixel)
-    executable = build(verilog, top, N * E, N * Wd, build_dir=build_dir, progress=progress,
-                       inline=inline, cxx_opt=cxx_opt)
-    frame_words = words_per_row(N, Wd)
-    flush = L + 1
+    executable = build(verilog, top.module, top.charge_bits, top.output_bits, build_dir=build_dir,
+                       progress=progress, inline=inline, cxx_opt=cxx_opt)
+    return _run(run, executable, progress)
+
+
+def run_verilator_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,
+                         build_dir=None, progress: bool = False, verilog: str | None = None,
+                         cxx_opt: str = CXX_OPT, resets=None):
+    """Simulate the streaming top on a (T, H, W) stimulus in Verilator; return beats (K, B, N).
+
+    Equal to ``golden.beats.beats(golden words, N)`` for a correct array; the beat
+    timing is held to SPEC section 6 (:func:`cosim.stream_ports.check_beats`).
+    ``verilog`` replaces ``rtl.verilog_stream.stream_array_verilog(config, H, W, N)``.
+    ``resets`` (T booleans): ``rst`` of every stimulus clock (:mod:`cosim.resets`); the
+    result is then a list of each segment's beats ``(n, N)``.
+    """
+    run = prepare(config, stimulus, lanes, resets)
+    check_cxx_opt(cxx_opt)
+    top = run.top
+    if run.idle:
+        return top.empty()
+    if verilog is None:
+        verilog = top.verilog()
+    executable = build_stream(config, verilog, top.height, top.width, lanes, build_dir=build_dir,
+                              progress=progress, cxx_opt=cxx_opt)
+    return _run(run, executable, progress)
+
+
+def _run(run: Run, executable: Path, progress: bool):
+    """Run a built model of either top on ``run``; its words, beats, or each segment's."""
+    top = run.top
     with tempfile.TemporaryDirectory(prefix="tespike-verilator-") as scratch:
         stim_path, cap_path = Path(scratch) / "stimulus.bin", Path(scratch) / "captures.bin"
-        write_stimulus_file(stim_path, stimulus, E)
-        every = max(1, min(1 << 16, T // 100)) if progress else 0
-        argv = [str(executable), str(stim_path), str(T), str(K), str(flush), str(cap_path), str(every)]
-        with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as process:
-            try:
-                if progress:
-                    from tqdm import tqdm
-                    with tqdm(total=T, unit="clk", desc="verilator", file=sys.stderr) as bar:
-                        done = 0
-                        for line in process.stdout:
-                            clock = min(int(line), T)
-                            bar.update(clock - done)
-                            done = clock
-                _, err = process.communicate()
-            except BaseException:          # interrupted (Ctrl-C, SIGTERM): no simulator left running
-                process.kill()
-                raise
-        if process.returncode != 0:
-            raise SimulatorRunError(
-                f"Verilator simulation of {top} failed (exit {process.returncode}): "
-                f"{first_error_line(err)}")
-        clocks, frames = read_captures(cap_path, frame_words)
-    what = f"Verilator run of {top} ({H} x {W})"
-    check_captures(clocks, config, K, what)
-    return unpack_rows(frames[:K], N, Wd).reshape(K, H, W)
+        write_stimulus_file(stim_path, run.stimulus, top.config.input_bits)
+        resets_path = None
+        if run.resets is not None:
+            resets_path = Path(scratch) / "resets.bin"
+            write_resets_file(resets_path, run.resets)
+        run_executable(executable, stim_path, cap_path, run.stimulus.shape[0], run.expected, top.flush,
+                       progress, resets_path)
+        words = words_per_row(top.word_values, top.config.word_bits)
+        if top.streaming:
+            clocks, firsts, rows = read_beat_captures(cap_path, words)
+        else:
+            (clocks, rows), firsts = read_captures(cap_path, words), []
+    return top.result(run, clocks, firsts, rows, top.describe("Verilator"))

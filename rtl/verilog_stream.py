@@ -150,11 +150,13 @@ RULE_INDENT = "      "
 
 
 def stream_pixel_rule_verilog(config: SensorConfig) -> str:
-    """One pixel of the streaming top as a combinational module, for ``tespike prove``.
+    """One pixel's rule as a combinational module: the design's per-site rule, and what
+    ``tespike prove`` proves.
 
-    The module ``<mode>_stream_pixel_rule`` holds the very text of :func:`_pixel_rule` that the
-    top's loop holds (same declarations, same body, same indent), with one pixel (``P = 1``)
-    and the loop's clocked block made combinational: the state memories are loaded from the
+    The module ``<mode>[_msb]_stream_pixel_rule`` is instantiated once per site by
+    :func:`stream_pixel_verilog` (the design) and holds the very text of :func:`_pixel_rule`
+    that the simulation view's loop holds (same declarations, same body, same indent), with
+    one pixel (``P = 1``) and the loop's clocked block made combinational: the state memories are loaded from the
     ``<reg>_q`` inputs (the registers' current values), the body runs once, and the
     ``<reg>_d`` outputs show what the body left in them (the values the top's registers take
     at the edge). ``charge`` is the input register's value (``charge_sample[p]``), ``held_q``

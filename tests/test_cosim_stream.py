@@ -90,7 +90,7 @@ def test_icarus_stream_refuses_a_late_beat(rng):
     (MSB_CONFIGS[3], 6),         # ML msb, L = 1
 ], ids=str)
 def test_verilator_stream_equals_golden(config, lanes, rng):
-    from cosim.verilator_stream import run_verilator_stream
+    from cosim.verilator import run_verilator_stream
     verilog = _verilog(config, STREAM_SHAPE, lanes)
     for kind in KINDS:
         stim = make_stimulus(kind, config, rng, shape=STREAM_SHAPE)
@@ -103,7 +103,7 @@ def test_verilator_stream_larger_array(rng):
     """A 24 x 40 paper-TE array over 4 readouts, in the simulation view Verilator runs at sensor size
     (the design's 960 pixel instances took 323 s to build and run here under a load of 12; the design
     itself is checked in Verilator at 2 x 3 above, and at every size in Icarus and Amaranth)."""
-    from cosim.verilator_stream import run_verilator_stream
+    from cosim.verilator import run_verilator_stream
     from golden.sensor import simulate
     from rtl.verilog_stream import stream_array_verilog
     config = SensorConfig()

@@ -6,7 +6,7 @@ import pytest
 from amaranth.lib import stream, wiring
 
 from cosim.outside import SimulatorRunError, pack_rows
-from cosim.rtlsim_stream import rtl_stream_beats, rtl_stream_run
+from cosim.rtlsim import rtl_stream_beats, rtl_stream_run
 from cosim.stream_ports import check_beats
 from golden.config import SensorConfig
 from golden.errors import ConfigError

@@ -24,6 +24,9 @@ def add_arguments(parser):
     parser.add_argument("--seed", type=int, default=0, help="seed of the default stimulus")
     parser.add_argument("--lanes", type=int, help="test the streaming top (tespike verilog --lanes N): "
                                                   "its beats against the golden model's words in beat order")
+    parser.add_argument("--resets", help="also reset mid-run: 'sweep' (rst at every phase of an interval "
+                                         "and of its beats, charge flowing throughout) or R.npy (one 0/1 per "
+                                         "stimulus clock); each segment is checked from zero state")
     parser.add_argument("--work-dir", help="keep each simulator's log and results here")
 
 
@@ -43,7 +46,10 @@ def run(args) -> int:
                          f"at most {MAX_PIXELS} pixels")
     if args.stimulus is None:           # the default stimulus, int64 electrons per pixel clock
         from cosim.room import require_room
-        clocks = args.readouts * config.clocks_per_readout
+        L = config.clocks_per_readout
+        clocks = args.readouts * L
+        if args.resets == "sweep":          # at most 2L + 3 segments cut up to 2L + 2 clocks in, held up
+            clocks += (2 * L + 3) * (2 * L + 2) // 2 + 3 * (2 * L + 3) + L   # to 3 (reset_sweep)
         require_room(f"the stimulus of {clocks} clocks of {args.height} x {args.width} pixels",
                      memory=8 * clocks * args.height * args.width)
     if args.readouts < 1:
@@ -54,7 +60,8 @@ def run(args) -> int:
             check_lanes(config, args.height, args.width, args.lanes)
         except ValueError as exc:
             raise InputError(f"--{exc}") from None
-    settings = Settings(config, args.height, args.width, args.readouts, args.seed, args.stimulus, args.lanes)
+    settings = Settings(config, args.height, args.width, args.readouts, args.seed, args.stimulus, args.lanes,
+                        args.resets)
     failed = 0
     for simulator in args.simulator:
         result = run_cocotb(settings, simulator, verilog_path=args.verilog, work_dir=args.work_dir)

@@ -61,7 +61,7 @@ def _design(args):
         from rtl.verilog import array_verilog, module_names
         return (array_verilog(config, height, width), module_names(config)["top"], pixels,
                 f"{module_names(config)['top']}, {height} x {width} pixels")
-    from golden.stream import check_lanes
+    from golden.beats import check_lanes
     try:
         check_lanes(config, height, width, args.lanes)
     except ValueError as exc:

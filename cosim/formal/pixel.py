@@ -1,66 +1,22 @@
-"""Unbounded proofs of the pixel against SPEC sections 3-4 (``tespike prove``).
+"""Harnesses of the pixel proofs against SPEC sections 3-4, and of the Amaranth streaming top.
 
 Each property is an Amaranth *harness*: the pixel under proof (the component of
-:mod:`rtl.pixel`, elaborated as it is built for Verilog) beside logic written
-here from SPEC's text, with ``Assert``/``Assume`` statements relating the two.
-The harness goes to RTLIL, Yosys (``prep``, ``write_smt2``) and
-``yosys-smtbmc``, which proves it by k-induction: a base case (no assertion
-fails in the first k clocks from the initial state) and an induction step (k
-clocks in a row where every assertion holds, from *any* state, imply the next
-one holds too). Both passing is a proof for every input sequence of any length.
+:mod:`rtl.pixel`, elaborated as it is built for Verilog) beside logic written here from
+SPEC's text, with ``Assert``/``Assume`` statements relating the two, proved by
+:func:`cosim.formal.smtbmc.prove`. The assertions state the pixel's registers equal the
+reference's (or the invariants of the bound), so every property is 1-inductive; ``depth``
+only adds margin.
 
-The assertions state the pixel's registers equal the reference's (or the
-invariants of the bound), so every property is 1-inductive; ``depth`` only
-adds margin.
-
-Amaranth 0.5 writes its assertions as ``$check`` cells, which Yosys 0.23
-(Debian's) predates; :func:`_yosys_checks` rewrites each combinational check
-into the ``$assert`` / ``$assume`` cell that Yosys 0.23 reads (the same
-condition and enable). Only combinational checks are used here.
-
-One more property, ``stream-pixel-rule``, is no harness but an equivalence: the streaming
-Verilog top's own text of the pixel rule (:mod:`rtl.verilog_stream`) against the pixel,
-both cut at the registers, proved combinationally by Yosys ``miter`` + ``sat``
-(:func:`prove_equivalence`).
-
-The harness reads the pixel's state registers by name (``acc``, ``sfc``,
-``ovf``, ``m``, ``count``) from its elaborated fragment: the proof is about
-that state, and a pixel whose registers are renamed is refused in one line.
+The harness reads the pixel's state registers by name (``acc``, ``sfc``, ``ovf``, ``m``,
+``count``) from its elaborated fragment: the proof is about that state, and a pixel whose
+registers are renamed is refused in one line.
 """
 
 from __future__ import annotations
 
-import re
-import shutil
-import subprocess
-import tempfile
-import time
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Callable
-
 from golden.config import SensorConfig
-from golden.errors import TespikeError
 
-#: SMT solvers ``yosys-smtbmc`` drives here (Debian package each ships in).
-SOLVERS = {"z3": "z3"}
-#: Tools the proof needs: executable -> Debian package.
-TOOLS = {"yosys": "yosys", "yosys-smtbmc": "yosys"}
-
-
-class ProofToolError(TespikeError, RuntimeError):
-    """A tool the proof needs is missing or failed (one line: which and how to install)."""
-
-
-def require_tools(solver: str) -> None:
-    """Refuse in one line when yosys, yosys-smtbmc or the solver is not on PATH."""
-    if solver not in SOLVERS:
-        raise ProofToolError(f"--solver {solver!r}: must be one of {', '.join(SOLVERS)}")
-    for tool, package in {**TOOLS, solver: SOLVERS[solver]}.items():
-        if shutil.which(tool) is None:
-            raise ProofToolError(f"{tool!r} is not on PATH; the proof needs it "
-                                 f"(Debian/Ubuntu: apt-get install {package})")
-
+from .smtbmc import ProofToolError
 
 # -- the corners of SPEC section 2 ------------------------------------------------------------
 def corners(mode: str, ml_readout: str = "count") -> dict[str, SensorConfig]:
@@ -285,212 +241,6 @@ def bounds_harness(config: SensorConfig, pixel_factory):
         value = Mux(spike & (count < config.ml_max), count + 1, count)
         m.d.comb += Assert(~p.last | (p.word == value), "count word is the saturated count")
     return h
-
-
-# -- Yosys and yosys-smtbmc ----------------------------------------------------------------
-_CHECK = re.compile(r"cell \$check (\S+)\n(.*?)\n  end\n", re.S)
-
-
-def _yosys_checks(text: str) -> tuple[str, dict[str, str]]:
-    """Amaranth 0.5's combinational ``$check`` cells -> Yosys 0.23's ``$assert``/``$assume``;
-    also returns each cell's message (the ``Assert``'s text), by cell name."""
-    messages = {}
-
-    def rewrite(match):
-        body = match.group(2)
-        flavor = re.search(r'parameter \\FLAVOR "(\w+)"', body).group(1)
-        if re.search(r"parameter \\TRG_ENABLE 1", body) or flavor not in ("assert", "assume"):
-            raise ProofToolError(f"only combinational Assert/Assume are supported here (got {flavor})")
-        message = re.search(r'parameter \\FORMAT "(.*)"', body)
-        messages[match.group(1)] = message.group(1) if message else ""
-        a = re.search(r"connect \\A (.*)", body).group(1)
-        en = re.search(r"connect \\EN (.*)", body).group(1)
-        return f"cell ${flavor} {match.group(1)}\n    connect \\A {a}\n    connect \\EN {en}\n  end\n"
-    return _CHECK.sub(rewrite, text), messages
-
-
-@dataclass
-class Result:
-    name: str
-    proved: bool
-    seconds: float
-    detail: str = ""          # failure: which step and assertion
-    trace: Path | None = None  # failure: the counterexample VCD
-
-
-def _run(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
-
-
-def _failed_assertion(log: str, messages: dict[str, str]) -> str:
-    """The first failed assertion's message (``Assert failed in top: src (cell)`` in the log)."""
-    for line in log.splitlines():
-        if "Assumptions are unsatisfiable" in line:
-            return "the assumptions are unsatisfiable"
-        found = re.search(r"Assert failed in \S+ (.*)\((\S+)\)", line)
-        if found:
-            return messages.get(found.group(2)) or found.group(1).strip()
-    return "no failed assertion named in the log"
-
-
-def prove(name: str, harness: _Harness, *, depth: int, solver: str, trace_dir: Path) -> Result:
-    """Prove one harness by k-induction (base case and induction step, both ``depth`` long);
-    an :class:`_Equivalence` by one SAT call (:func:`prove_equivalence`)."""
-    from amaranth.back import rtlil
-
-    if isinstance(harness, _Equivalence):
-        return prove_equivalence(name, harness, trace_dir)
-
-    start = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="tespike-prove-") as tmp:
-        work = Path(tmp)
-        text = rtlil.convert(harness.m, ports=harness.inputs, name="top")
-        text, messages = _yosys_checks(text)
-        (work / "top.il").write_text(text)
-        # The streaming harness goes to gates (techmap): its word_select becomes a $shift by a
-        # $mul, which z3 4.8 does not finish as words. The pixel harnesses solve faster as words.
-        gates = "techmap; opt -fast; " if getattr(harness, "gate_level", False) else ""
-        script = (f"read_rtlil top.il; prep -flatten -top top; {gates}async2sync; "
-                  "dffunmap; write_smt2 -wires top.smt2")
-        done = _run(["yosys", "-q", "-p", script], work)
-        if done.returncode != 0:
-            raise ProofToolError(f"{name}: yosys failed: {(done.stderr or done.stdout).strip().splitlines()[-1:]}")
-        for step, extra in (("base case", []), ("induction step", ["-i"])):
-            vcd = work / "trace.vcd"
-            done = _run(["yosys-smtbmc", "-s", solver, *extra, "-t", str(depth),
-                         "--dump-vcd", str(vcd), "top.smt2"], work)
-            if "Status: PASSED" in done.stdout:
-                continue
-            if "Status: FAILED" not in done.stdout:
-                raise ProofToolError(f"{name}: yosys-smtbmc ({solver}) gave no verdict: "
-                                     f"{done.stdout.strip().splitlines()[-1:] or done.stderr.strip()}")
-            trace = None
-            if vcd.exists():
-                trace_dir.mkdir(parents=True, exist_ok=True)
-                trace = trace_dir / f"{name}.vcd"
-                shutil.copyfile(vcd, trace)
-            return Result(name, False, time.perf_counter() - start,
-                          f"{step}: {_failed_assertion(done.stdout, messages)}", trace)
-    return Result(name, True, time.perf_counter() - start)
-
-
-# -- the streaming Verilog top's pixel rule ---------------------------------------------------
-class _Equivalence:
-    """The streaming Verilog top's pixel rule (:func:`rtl.verilog_stream.stream_pixel_rule_verilog`)
-    beside the pixel of :mod:`rtl.pixel`, to be proved combinationally equivalent."""
-
-    def __init__(self, config: SensorConfig, pixel_factory):
-        self.config, self.pixel_factory = config, pixel_factory
-
-    def registers(self) -> dict[str, int]:
-        c = self.config
-        return {"acc": c.acc_bits, **({"sfc": c.b1, "ovf": 1, "m": c.b2} if c.is_te
-                                      else {"count": c.ml_bits})}
-
-
-def stream_rule_equivalence(config: SensorConfig, pixel_factory=None) -> _Equivalence:
-    """The streaming top's one-pixel rule == the pixel proved against SPEC (``rule``), for every
-    current state and input: next ``acc``, ``sfc``/``ovf``/``m`` or ``count``, the word, and the
-    second buffer's entry (loaded with the word while ``frame_valid``)."""
-    if pixel_factory is None:
-        from rtl.pixel import pixel_class
-        pixel_factory = pixel_class(config)
-    return _Equivalence(config, pixel_factory)
-
-
-def _pixel_wrapper(config: SensorConfig, registers: dict[str, int]) -> str:
-    """``gold``: the Amaranth pixel cut at its registers (``<reg>_q`` in, ``<reg>_d`` out, made
-    by ``expose -evert-dff``) with the ports of the Verilog rule module; ``held_d`` is what the
-    array's second buffer takes (the word while ``frame_valid``, else what it held)."""
-    c, wd = config, config.word_bits
-    ports = ([f"input [{c.input_bits - 1}:0] charge"] + ([f"input [{c.b2 - 1}:0] ccc"] if c.is_te else [])
-             + ["input last", "input frame_valid", "input clear"]
-             + [f"input [{w - 1}:0] {r}_q" for r, w in registers.items()] + [f"input [{wd - 1}:0] held_q"]
-             + [f"output [{w - 1}:0] {r}_d" for r, w in registers.items()]
-             + [f"output [{wd - 1}:0] held_d", f"output [{wd - 1}:0] word_now"])
-    pins = ([".charge(charge)"] + ([".ccc(ccc)"] if c.is_te else [])
-            + [".last(last)", ".clear(clear)", ".clk(1'b0)", ".rst(1'b0)", ".word(word_now)"]
-            + [f".{r}_{x}({r}_{x})" for r in registers for x in "qd"])
-    return (f"module gold ({', '.join(ports)});\n"
-            f"  pixel u ({', '.join(pins)});\n"
-            f"  assign held_d = frame_valid ? word_now : held_q;\n"
-            f"endmodule\n")
-
-
-_SAT_ROW = re.compile(r"^\s+\\(in|gold|gate)_(\S+)\s+(\S+)\s+\S+\s+\S+\s*$")
-
-
-def _counterexample(log: str) -> str:
-    """``sat -show-ports``'s table -> 'inputs ...; differ: out gold/gate ...' in one line."""
-    values = {}
-    for line in log.splitlines():
-        found = _SAT_ROW.match(line)
-        if found:
-            values[(found.group(1), found.group(2))] = found.group(3)
-    inputs = [f"{n}={v}" for (side, n), v in values.items() if side == "in"]
-    differ = [f"{n} {v} (pixel) vs {values.get(('gate', n))} (stream rule)"
-              for (side, n), v in values.items() if side == "gold" and values.get(("gate", n)) != v]
-    return f"{', '.join(differ) or 'outputs differ'} at {' '.join(inputs)}"
-
-
-def prove_equivalence(name: str, eq: _Equivalence, trace_dir: Path) -> Result:
-    """Yosys ``miter -equiv`` + ``sat -prove-asserts``: the rule module of the streaming top
-    against the Amaranth pixel (built without its word register, as the arrays use it) cut at
-    its registers. Purely combinational, so one SAT call is the proof (no induction)."""
-    from amaranth.back import rtlil
-
-    from rtl.verilog_stream import stream_pixel_rule_verilog
-
-    start = time.perf_counter()
-    config, registers = eq.config, eq.registers()
-    with tempfile.TemporaryDirectory(prefix="tespike-prove-") as tmp:
-        work = Path(tmp)
-        (work / "pixel.il").write_text(rtlil.convert(eq.pixel_factory(config, word_register=False),
-                                                     name="pixel"))
-        (work / "gold.v").write_text(_pixel_wrapper(config, registers))
-        rule = stream_pixel_rule_verilog(config)
-        (work / "rule.v").write_text(rule)
-        rule_name = re.search(r"^module (\w+)", rule, re.M).group(1)
-        script = "; ".join([
-            "read_rtlil pixel.il", "hierarchy -top pixel", "proc", "flatten", "opt_clean",
-            # each pixel register becomes an input (its value) and an output (its next value)
-            "expose -evert-dff -sep _ t:$dff", "opt_clean",
-            "select -assert-none t:$*ff* t:$*latch* t:$mem*",
-            f"select -assert-count {len(registers)} pixel/i:*_q",
-            "read_verilog gold.v", "hierarchy -check -top gold",   # refuses a port gold lacks
-            "read_verilog rule.v", "proc", "opt_clean",
-            "select -assert-none t:$*ff* t:$*latch* t:$mem*", f"rename {rule_name} gate",
-            "miter -equiv -flatten -make_assert -make_outputs gold gate miter", "hierarchy -top miter",
-            "sat -prove-asserts -show-ports -dump_vcd trace.vcd miter"])
-        done = _run(["yosys", "-p", script], work)
-        log = done.stdout + done.stderr
-        if done.returncode == 0 and "SAT proof finished - no model found: SUCCESS!" in log:
-            return Result(name, True, time.perf_counter() - start)
-        if "SAT proof finished - model found: FAIL!" not in log:
-            errors = [line for line in log.splitlines() if "ERROR" in line] or log.strip().splitlines()[-1:]
-            raise ProofToolError(f"{name}: yosys failed: {errors[0] if errors else 'no output'}")
-        trace = None
-        if (work / "trace.vcd").exists():
-            trace_dir.mkdir(parents=True, exist_ok=True)
-            trace = trace_dir / f"{name}.vcd"
-            shutil.copyfile(work / "trace.vcd", trace)
-        return Result(name, False, time.perf_counter() - start,
-                      f"equivalence check: {_counterexample(log)}", trace)
-
-
-def properties(config: SensorConfig, pixel_factory=None) -> dict[str, Callable[[], _Harness]]:
-    """The properties of one configuration, name -> harness builder."""
-    if pixel_factory is None:
-        from rtl.pixel import pixel_class
-        pixel_factory = pixel_class(config)
-    return {
-        "rule": lambda: rule_harness(config, pixel_factory, word_register=False),
-        "rule-registered-word": lambda: rule_harness(config, pixel_factory, word_register=True),
-        "bounds": lambda: bounds_harness(config, pixel_factory),
-        **({} if config.is_msb else {"stream": lambda: stream_harness(config, *STREAM_ARRAY,
-                                                                      stream_lanes(config))}),
-        "stream-pixel-rule": lambda: stream_rule_equivalence(config, pixel_factory),
-    }
 
 
 #: Array (height, width) of the streaming property: three pixels, so two lanes leave one

@@ -1,0 +1,53 @@
+"""Proofs of the design (``tespike prove``), one module per idea.
+
+* :mod:`cosim.formal.pixel`: Amaranth harnesses of the pixel against SPEC sections 3-4
+  (``rule``, ``rule-registered-word``, ``bounds``) and of the Amaranth streaming top
+  (``stream``), proved by k-induction in :mod:`cosim.formal.smtbmc` (Yosys + yosys-smtbmc);
+* :mod:`cosim.formal.rule_equivalence`: the streaming Verilog top's own pixel-rule text
+  against the pixel (``stream-pixel-rule``, Yosys miter + sat);
+* :mod:`cosim.formal.reference` and :mod:`cosim.formal.tops`: the generated Verilog tops,
+  read from the text ``tespike verilog`` writes, against a SPEC reference written
+  independently of rtl/, and the timing block's phase, proved by ABC
+  (:mod:`cosim.formal.abc`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+from golden.config import SensorConfig
+
+from .pixel import (STREAM_ARRAY, bounds_harness, corners, rule_harness, stream_harness,
+                    stream_lanes)
+from .rule_equivalence import _Equivalence, prove_equivalence, stream_rule_equivalence
+from .smtbmc import SOLVERS, TOOLS, ProofToolError, Result, require_tools
+from .smtbmc import prove as _prove_harness
+
+__all__ = ["SOLVERS", "TOOLS", "ProofToolError", "Result", "corners", "properties", "prove",
+           "require_tools", "rule_harness", "bounds_harness", "stream_harness",
+           "stream_rule_equivalence", "STREAM_ARRAY", "stream_lanes"]
+
+
+def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Result:
+    """Prove one pixel property: a harness by k-induction (base case and induction step, both
+    ``depth`` long); a ``stream-pixel-rule`` equivalence by one SAT call."""
+    if isinstance(harness, _Equivalence):
+        return prove_equivalence(name, harness, trace_dir)
+    return _prove_harness(name, harness, depth=depth, solver=solver, trace_dir=trace_dir)
+
+
+def properties(config: SensorConfig, pixel_factory=None) -> dict[str, Callable[[], object]]:
+    """The properties of one configuration, name -> harness builder."""
+    if pixel_factory is None:
+        from rtl.pixel import pixel_class
+        pixel_factory = pixel_class(config)
+    return {
+        "rule": lambda: rule_harness(config, pixel_factory, word_register=False),
+        "rule-registered-word": lambda: rule_harness(config, pixel_factory, word_register=True),
+        "bounds": lambda: bounds_harness(config, pixel_factory),
+        **({} if config.is_msb else {"stream": lambda: stream_harness(config, *STREAM_ARRAY,
+                                                                      stream_lanes(config))}),
+        "stream-pixel-rule": lambda: stream_rule_equivalence(config, pixel_factory),
+    }
+

@@ -1,0 +1,247 @@
+"""Proofs of the generated Verilog tops, read from the very text ``tespike verilog`` writes.
+
+Each property is a Verilog harness beside the generated text (:func:`design_text`, the
+same generator calls as ``tespike verilog``), proved by ``yosys-smtbmc``
+(:mod:`cosim.formal.solver`). Only the tops' ports and the timing block's ports are used,
+never an internal name, so the proofs hold whatever structure produces those ports.
+
+* ``parallel-equiv`` (``<mode>_pixel_array``): ``frame_valid`` equals the SPEC reference's
+  (:mod:`cosim.formal.reference`) on every clock, and ``frame`` equals its words while
+  ``frame_valid`` is high. ``rst`` and ``charge`` are free inputs on every clock.
+* ``stream-equiv`` (``<mode>_pixel_array_stream``, N lanes): ``out_valid`` equals the
+  reference's on every clock, ``out_first`` and ``out_words`` while it is high; and the
+  streaming contract of SPEC section 6 checked by a monitor that sees only the top's ports
+  and the reference's words of each interval: a beat only while an interval's words are
+  outstanding (so ``out_valid`` stays low after a reset until the first beat is due, and no
+  word leaves twice), each beat the next ``N`` words in raster order (0 past the last
+  pixel), ``out_first`` with beat 0 only, no beat of interval k + 1 before the last of k,
+  the last beat sampled within 2L clocks of the interval's last clock.
+* ``timing`` (``<mode>_readout_timing``, the block every top holds once): its reset state
+  and phase: in the clock after the edge that samples ``e[t]`` (t = 0 the first edge with
+  ``rst`` low), CCC = j + 1 (j = (t mod L) div F), ``last`` iff t mod L = L - 1,
+  ``frame_valid`` = ``last`` except in the clock after a reset (t = -1: CCC alpha,
+  ``last`` high, ``frame_valid`` low). Proved by k-induction (depth L + 2: L clocks of
+  outputs pin the phase), so it holds for every input sequence of any length.
+
+The two equivalences are bounded model checks from power-up (the design's initial values;
+the reference powers up in its reset state): every input sequence of ``bound`` clocks, at
+least three readout intervals and the last interval's beats (:func:`bmc_bound`). They are
+not inductive without naming the design's internal registers, which these proofs avoid.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from golden.config import SensorConfig
+
+from .reference import PARALLEL_DELAY, STREAM_DELAY, reference_verilog
+
+
+def design_text(config: SensorConfig, height: int, width: int, lanes: int | None) -> str:
+    """The Verilog text ``tespike verilog`` writes for this array (parallel without ``lanes``)."""
+    if lanes is None:
+        from rtl.verilog import array_verilog
+        return array_verilog(config, height, width)
+    from rtl.verilog_stream import stream_array_verilog
+    return stream_array_verilog(config, height, width, lanes)
+
+
+def top_name(config: SensorConfig, lanes: int | None) -> str:
+    """SPEC section 6's top name: ``te_pixel_array`` / ``ml_pixel_array``, ``_stream`` with lanes."""
+    return f"{config.mode}_pixel_array" + ("" if lanes is None else "_stream")
+
+
+def timing_name(config: SensorConfig) -> str:
+    """The timing block's module name in the generated text."""
+    return f"{config.mode}_readout_timing"
+
+
+def bmc_bound(config: SensorConfig, height: int, width: int, lanes: int | None, intervals: int = 3) -> int:
+    """Clocks of the bounded proofs: ``intervals`` readout intervals after the first edge,
+    then the latency and the last interval's beats, and one more clock."""
+    L = config.clocks_per_readout
+    drain = PARALLEL_DELAY if lanes is None else STREAM_DELAY + -(-height * width // lanes)
+    return intervals * L + drain + 2
+
+
+@dataclass
+class Harness:
+    """Verilog text of a proof: the design, the reference and the harness module ``proof_top``;
+    ``messages`` maps the harness's assertion lines to what each says."""
+    text: str
+    messages: dict[int, str]
+    method: str          # "bmc" or "induction"
+    steps: int           # BMC bound, or induction depth
+
+
+class _Asserts:
+    """Assertion lines of a harness, each remembered by its line number for the failure report."""
+
+    def __init__(self):
+        self.lines: list[tuple[str, str]] = []
+
+    def add(self, condition: str, message: str) -> None:
+        self.lines.append((condition, message))
+
+    def render(self, first_line: int) -> tuple[str, dict[int, str]]:
+        text, messages = "", {}
+        for k, (condition, message) in enumerate(self.lines):
+            text += f"  always @* assert ({condition});  // {message}\n"
+            messages[first_line + k] = message
+        return text, messages
+
+
+def _assemble(parts: list[str], body_head: str, asserts: _Asserts, body_tail: str = "") -> tuple[str, dict]:
+    prefix = "\n".join(parts) + "\n" + body_head
+    text, messages = asserts.render(prefix.count("\n") + 1)
+    return prefix + text + body_tail + "endmodule\n", messages
+
+
+def parallel_harness(config: SensorConfig, height: int, width: int, design: str | None = None,
+                     bound: int | None = None) -> Harness:
+    """``parallel-equiv``: the parallel top against the SPEC reference (see the module docstring)."""
+    c = config.check()
+    P, E, wd = height * width, c.input_bits, c.word_bits
+    design = design_text(c, height, width, None) if design is None else design
+    head = (f"module proof_top (input wire clk, input wire rst, input wire [{P * E - 1}:0] charge);\n"
+            f"  wire dut_valid;\n  wire [{P * wd - 1}:0] dut_frame;\n"
+            f"  {top_name(c, None)} dut (.clk(clk), .rst(rst), .charge(charge), "
+            f".frame_valid(dut_valid), .frame(dut_frame));\n"
+            f"  wire done, ref_valid;\n  wire [{P * wd - 1}:0] words, ref_frame;\n"
+            f"  spec_reference ref (.clk(clk), .rst(rst), .charge(charge), .done(done), .words(words), "
+            f".frame_valid(ref_valid), .frame(ref_frame));\n")
+    a = _Asserts()
+    a.add("dut_valid == ref_valid", "frame_valid on the reference's clocks (latency, reset, one per interval)")
+    a.add("!ref_valid || dut_frame == ref_frame", "frame equals the reference's words while frame_valid")
+    text, messages = _assemble([design, reference_verilog(c, height, width)], head, a)
+    return Harness(text, messages, "bmc", bound or bmc_bound(c, height, width, None))
+
+
+def stream_harness(config: SensorConfig, height: int, width: int, lanes: int, design: str | None = None,
+                   bound: int | None = None) -> Harness:
+    """``stream-equiv``: the streaming top against the SPEC reference and the streaming contract
+    (see the module docstring)."""
+    c = config.check()
+    P, E, wd, n = height * width, c.input_bits, c.word_bits, lanes
+    L = c.clocks_per_readout
+    B = -(-P // n)
+    bb = max(1, B.bit_length())
+    ab = (2 * L + 2).bit_length()
+    design = design_text(c, height, width, n) if design is None else design
+    head = (f"module proof_top (input wire clk, input wire rst, input wire [{P * E - 1}:0] charge);\n"
+            f"  wire out_valid, out_first;\n  wire [{n * wd - 1}:0] out_words;\n"
+            f"  {top_name(c, n)} dut (.clk(clk), .rst(rst), .charge(charge), .out_valid(out_valid), "
+            f".out_first(out_first), .out_words(out_words));\n"
+            f"  wire done, ref_valid, ref_first, ref_fv;\n"
+            f"  wire [{P * wd - 1}:0] words, ref_frame;\n  wire [{n * wd - 1}:0] ref_words, beat_words;\n"
+            # the contract monitor: a queue of the intervals whose words are outstanding
+            f"  reg q0v = 0, q1v = 0;\n  reg [{P * wd - 1}:0] q0w = 0, q1w = 0;\n"
+            f"  reg [{ab - 1}:0] age0 = 0, age1 = 0;  // clocks since the interval's last edge\n"
+            f"  reg [{bb - 1}:0] sent = 0;            // beats of the head interval seen\n"
+            f"  spec_reference ref (.clk(clk), .rst(rst), .charge(charge), .done(done), .words(words), "
+            f".frame_valid(ref_fv), .frame(ref_frame), .out_valid(ref_valid), .out_first(ref_first), "
+            f".out_words(ref_words), .beat_index(sent), .beat_source(q0w), .beat_words(beat_words));\n"
+            f"  wire pop = out_valid && q0v && sent == {bb}'d{B - 1};\n"
+            f"  wire hv = pop ? q1v : q0v;\n"
+            f"  wire [{ab - 1}:0] top_age = {ab}'d{2 * L + 1};\n"
+            f"  always @(posedge clk)\n"
+            f"    if (rst) begin q0v <= 0; q1v <= 0; sent <= 0; end\n"
+            f"    else begin\n"
+            f"      if (out_valid && q0v) sent <= pop ? {bb}'d0 : sent + 1'b1;\n"
+            f"      age0 <= (age0 < top_age) ? age0 + 1'b1 : age0;\n"
+            f"      age1 <= (age1 < top_age) ? age1 + 1'b1 : age1;\n"
+            f"      if (pop) begin q0v <= q1v; q0w <= q1w; age0 <= (age1 < top_age) ? age1 + 1'b1 : age1; "
+            f"q1v <= 0; end\n"
+            f"      if (done && !hv) begin q0v <= 1; q0w <= words; age0 <= 1; end\n"
+            f"      else if (done) begin q1v <= 1; q1w <= words; age1 <= 1; end\n"
+            f"    end\n")
+    a = _Asserts()
+    a.add("out_valid == ref_valid", "out_valid on the reference's clocks (latency, reset, B beats per interval)")
+    a.add("!ref_valid || out_first == ref_first", "out_first equals the reference's")
+    a.add("!ref_valid || out_words == ref_words", "out_words equal the reference's beat")
+    a.add("!out_valid || q0v", "a beat only while an interval's words are outstanding "
+                               "(none after a reset before the first is due, none twice)")
+    a.add("!out_first || out_valid", "out_first only on a beat")
+    a.add("!out_valid || out_first == (sent == 0)", "out_first with beat 0 only; no beat of k + 1 before the last of k")
+    a.add("!out_valid || out_words == beat_words", "each beat carries the next N words in raster order")
+    a.add(f"!q0v || age0 <= {2 * L - 1}", "last beat sampled within 2L clocks of the interval's end")
+    a.add("!(done && q1v && !pop)", "at most two intervals outstanding")
+    text, messages = _assemble([design, reference_verilog(c, height, width, n)], head, a)
+    return Harness(text, messages, "bmc", bound or bmc_bound(c, height, width, n))
+
+
+def timing_harness(config: SensorConfig, design: str | None = None, depth: int | None = None) -> Harness:
+    """``timing``: the timing block's reset state and phase (see the module docstring), by
+    k-induction."""
+    c = config.check()
+    F, alpha, L = c.clocks_per_tick, c.alpha, c.clocks_per_readout
+    design = design_text(c, 1, 1, None) if design is None else design
+    fb, jb = max(1, (F - 1).bit_length()), max(1, (alpha - 1).bit_length())
+    ccc = f"  wire [{c.b2 - 1}:0] ccc;\n" if c.is_te else ""
+    pin = ".ccc(ccc), " if c.is_te else ""
+    head = (f"module proof_top (input wire clk, input wire rst);\n{ccc}  wire last, frame_valid;\n"
+            f"  {timing_name(c)} dut (.clk(clk), .rst(rst), {pin}.last(last), .frame_valid(frame_valid));\n"
+            f"  // the pixel clock t whose charge the last edge sampled: ph inside S_h, jj inside S_r;\n"
+            f"  // after a reset t = -1 (the interval's last clock) and no frame\n"
+            f"  reg [{fb - 1}:0] ph = {F - 1};\n  reg [{jb - 1}:0] jj = {alpha - 1};\n  reg primed = 0;\n"
+            f"  always @(posedge clk)\n"
+            f"    if (rst) begin ph <= {F - 1}; jj <= {alpha - 1}; primed <= 0; end\n"
+            f"    else begin\n"
+            f"      ph <= (ph == {F - 1}) ? 0 : ph + 1'b1;\n"
+            f"      if (ph == {F - 1}) jj <= (jj == {alpha - 1}) ? 0 : jj + 1'b1;\n"
+            f"      primed <= 1;\n"
+            f"    end\n"
+            f"  wire ref_last = (ph == {F - 1}) && (jj == {alpha - 1});\n")
+    a = _Asserts()
+    if c.is_te:
+        a.add(f"ccc == jj + {c.b2}'d1", "CCC = j + 1 during S_h cycle j (alpha after a reset)")
+    a.add("last == ref_last", "last on clock L - 1 of each interval (and in the clock after a reset)")
+    a.add("frame_valid == (ref_last && primed)", "frame_valid with last, never in the clock after a reset")
+    text, messages = _assemble([design], head, a)
+    return Harness(text, messages, "induction", depth or L + 2)
+
+
+def failed_message(log: str, harness: Harness) -> str:
+    """The message of the first assertion ``yosys-smtbmc`` names as failed (by its line)."""
+    for line in log.splitlines():
+        found = re.search(r"Assert failed in \S+: \S+?:(\d+)\.", line)
+        if found:
+            return harness.messages.get(int(found.group(1)), f"assertion at line {found.group(1)}")
+    return "no failed assertion named in the log"
+
+
+# -- what ``tespike prove`` runs on the tops ---------------------------------------------------
+#: Array sizes of the default run (rows, columns).
+SIZES = ((1, 1), (2, 3), (3, 4))
+#: Lane counts tried on each size of :data:`SIZES` (one beat per pixel, padded last beats, a
+#: single beat); the others get 2 and 5. A lane count whose beats do not fit in L clocks is skipped.
+LANES = {(1, 1): (1, 2), (2, 3): (2, 5), (3, 4): (5, 12)}
+
+
+def small_clocks(config: SensorConfig) -> SensorConfig:
+    """``config`` with the smallest clocks that still have every phase (b1 = b2 = 2: F = 4,
+    alpha = 3, L = 12) and small widths (theta 3, A 3, E 2, ml_bits 3), so that three readout
+    intervals of a 3 x 4 array are a few seconds of proof."""
+    values = dict(config.to_dict(), b1=2, b2=2, alpha=3, clocks_per_tick=4, threshold=3, acc_bits=3,
+                  input_bits=2, ml_bits=3)
+    return SensorConfig(**values).check()
+
+
+def lane_counts(config: SensorConfig, height: int, width: int) -> list[int]:
+    """The lane counts of :data:`LANES` that fit (B <= L), or the smallest that does."""
+    pixels, L = height * width, config.clocks_per_readout
+    fit = [n for n in LANES.get((height, width), (2, 5)) if -(-pixels // n) <= L]
+    return fit or [-(-pixels // L)]
+
+
+def top_properties(config: SensorConfig, sizes) -> dict[str, object]:
+    """``{label: harness builder}`` of every generated top of ``config`` at ``sizes``: the timing
+    block once, the parallel top and the streaming top at each lane count of each size."""
+    props = {"timing": lambda: timing_harness(config)}
+    for h, w in sizes:
+        props[f"parallel {h}x{w}"] = lambda h=h, w=w: parallel_harness(config, h, w)
+        for n in lane_counts(config, h, w):
+            props[f"stream {h}x{w} N={n}"] = lambda h=h, w=w, n=n: stream_harness(config, h, w, n)
+    return props
