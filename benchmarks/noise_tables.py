@@ -11,7 +11,7 @@ what each method loses against shot noise alone and what the calibration wins
 back, and writes a PNG of PSNR-mu against the dark level (x eq. 12) per method,
 uncalibrated (solid) and calibrated (dashed), shot noise alone dotted.
 
-    nice -n 10 python3 benchmarks/noise_tables.py [--frames 12 --height 64 --width 80]
+    nice -n 10 python3 benchmarks/noise_tables.py [--sequences N] [--frames 12 --height 64 --width 80]
         [--levels 0.25,0.5,1,2,4] [--sensor-noise N.json] [--methods tfp,tfi,net] [--png P] [--docs]
 """
 
@@ -43,6 +43,7 @@ def simulate(config, light, rng, noise_sensor=None):
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--set", default="heldout")
+    parser.add_argument("--sequences", type=int, default=None, help="score only the first N sequences of the set")
     parser.add_argument("--frames", type=int, default=12)
     parser.add_argument("--height", type=int, default=64)
     parser.add_argument("--width", type=int, default=80)
@@ -67,7 +68,7 @@ def main() -> int:
         noise_sensors[f"te+{Path(path).stem}"] = Sensor(load_noise(path), args.sensor_seed)
     sensors = ["te"] + [s + suffix for s in noise_sensors for suffix in ("", CALIBRATED)]
     configs.update({sensor: te for sensor in sensors})
-    sequences = sequence_set(args.set, args.frames, args.height, args.width)
+    sequences = sequence_set(args.set, args.frames, args.height, args.width)[:args.sequences]
     print(f"{len(sequences)} {args.set} sequences of {args.frames} x {args.height} x {args.width}; "
           f"methods {', '.join(methods)}; sensor seed {args.sensor_seed}", flush=True)
     evaluation = evaluate(sequences, simulate, methods=methods, sensors=tuple(sensors), configs=configs,
