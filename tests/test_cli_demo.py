@@ -54,7 +54,7 @@ def test_small_demo_closes_the_loop(tmp_path):
     assert np.load(out / "E_crop.npy").shape == (3 * 240, 11, 11)
     assert (out / "verdict.txt").read_text().startswith("bit-identical")
     gtkw = (out / "W.gtkw").read_text()
-    assert "[timestart]" in gtkw and str((out / "W.vcd").resolve()) in gtkw
+    assert "[timestart]" in gtkw and '[dumpfile] "W.vcd"' in gtkw        # relative to the save file
     for section in ("## Configuration", "## RTL against the golden model", "## Dynamic range",
                     "## Hardware cost", "## Run time of every stage", "## Rerun each step"):
         assert section in report, section
