@@ -33,8 +33,8 @@ def _umask() -> int:
     return mask
 
 
-def _remove_stale_parts(directory: Path, stem: str) -> None:
-    """Remove ``.<stem>.<pid>.<random>.part`` files whose process is gone (killed runs)."""
+def _remove_stale_parts(directory: Path, stem: str, folders: bool = False) -> None:
+    """Remove ``.<stem>.<pid>.<random>.part`` files (``folders``: folders) whose process is gone (killed runs)."""
     pattern = re.compile(r"\." + re.escape(stem) + r"\.(\d+)\.[A-Za-z0-9_]{8}\.part")
     try:
         entries = [e for e in os.scandir(directory) if e.name.startswith("." + stem + ".")]
@@ -42,7 +42,8 @@ def _remove_stale_parts(directory: Path, stem: str) -> None:
         return
     for entry in entries:
         match = pattern.fullmatch(entry.name)
-        if not match or not entry.is_file(follow_symlinks=False):
+        kind = entry.is_dir(follow_symlinks=False) if folders else entry.is_file(follow_symlinks=False)
+        if not match or not kind:
             continue
         pid = int(match.group(1))
         if pid == os.getpid():
@@ -54,8 +55,11 @@ def _remove_stale_parts(directory: Path, stem: str) -> None:
             pass
         except (PermissionError, OverflowError):
             continue
-        with contextlib.suppress(OSError):
-            os.unlink(entry.path)
+        if folders:
+            shutil.rmtree(entry.path, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                os.unlink(entry.path)
 
 
 def _write_error(path: str, exc: OSError) -> InputError:
@@ -152,26 +156,6 @@ def _exchange(a: str, b: str) -> bool:
     raise OSError(code, os.strerror(code), b)
 
 
-def _remove_stale_folders(directory: Path, stem: str) -> None:
-    """Remove ``.<stem>.<pid>.<random>.part`` folders whose process is gone (killed runs)."""
-    pattern = re.compile(r"\." + re.escape(stem) + r"\.(\d+)\.[A-Za-z0-9_]{8}\.part")
-    try:
-        entries = [e for e in os.scandir(directory) if e.name.startswith("." + stem + ".")]
-    except OSError:
-        return
-    for entry in entries:
-        match = pattern.fullmatch(entry.name)
-        if not match or not entry.is_dir(follow_symlinks=False) or int(match.group(1)) == os.getpid():
-            continue
-        try:
-            os.kill(int(match.group(1)), 0)
-            continue                        # its writer is still running
-        except ProcessLookupError:
-            shutil.rmtree(entry.path, ignore_errors=True)
-        except (PermissionError, OverflowError):
-            continue
-
-
 def folder_holds_files(path: str | Path) -> bool:
     """Whether ``path`` is a folder with anything in it (a previous run's results)."""
     try:
@@ -196,7 +180,7 @@ def atomic_folder(path: str | Path, what: str = "--out") -> Iterator[Path]:
     shown = os.fspath(path)
     target = Path(os.path.realpath(shown))
     stem = target.name[:_PART_NAME]
-    _remove_stale_folders(target.parent, stem)
+    _remove_stale_parts(target.parent, stem, folders=True)
     try:
         tmp = Path(tempfile.mkdtemp(prefix=f".{stem}.{os.getpid()}.", suffix=".part", dir=target.parent))
         os.chmod(tmp, 0o777 & ~_umask())

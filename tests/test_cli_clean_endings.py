@@ -88,8 +88,8 @@ def test_evaluate_on_a_full_disk_keeps_the_previous_results(capsys, tmp_path):
         free = os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize
         (mount / "filler").write_bytes(b"\0" * (free - 24 * 1024))        # room for the tables, not the pictures
         before = snapshot(mount)
-        result = run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--force", "--quiet")
-        assert_refused(result, str(out), "No space left")         # --quiet: no progress lines before it
+        result = run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--force", "--progress", "off")
+        assert_refused(result, str(out), "No space left")
         assert ".part" not in result.stderr
         assert snapshot(mount) == before
 

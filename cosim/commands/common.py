@@ -68,3 +68,25 @@ def check_threads_argument(threads: int | None) -> None:
     from golden.errors import InputError
     if threads is not None and not 1 <= threads <= MAX_THREADS:
         raise InputError(f"--threads {threads}: must be in 1..{MAX_THREADS}")
+
+
+def publish_results(args, evaluation, write, files: tuple[str, ...]) -> int:
+    """The end of ``tespike evaluate`` (simulated or over a store): write the results folder
+    ``--out`` whole (:func:`golden.atomic.atomic_folder`, after checking it again: the run may
+    have taken an hour), then print the table and the files written (``files``: names in it)."""
+    from pathlib import Path
+
+    from golden.atomic import atomic_folder
+    from golden.paths import check_results_dir
+    from recon.report import OUTPUT_FILES, table_markdown
+
+    check_results_dir(args.out, OUTPUT_FILES, args.force)
+    with atomic_folder(args.out) as folder:
+        write(evaluation, folder)
+    if args.quiet:
+        return 0
+    out = Path(args.out)
+    print(table_markdown(evaluation), end="")
+    print(f"wrote {', '.join(str(out / name) for name in files)} and {len(evaluation.strips)} strip(s) "
+          f"in {out / 'strips'}")
+    return 0

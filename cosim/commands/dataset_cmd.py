@@ -56,6 +56,7 @@ def sensor_configs(specs):
 def run(args) -> int:
     import time
 
+    from cosim.console import report
     from cosim.dataset.cluster import Runner, check_workers
     from cosim.dataset.build import build_dataset, hdr_sources, scene_sources
     from golden.errors import InputError
@@ -81,11 +82,10 @@ def run(args) -> int:
         raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     start = time.perf_counter()
     with Runner(args.workers, args.scheduler) as runner:
-        print(f"dataset: {len(sources)} sequence(s) x {len(configs)} sensor(s) on {runner.where}",
-              flush=True)
+        report(args, f"dataset: {len(sources)} sequence(s) x {len(configs)} sensor(s) on {runner.where}")
         counts = build_dataset(args.out, sources, configs, args.seed, runner, chunk_frames=args.chunk_frames,
-                            report=lambda name: print(f"dataset: {name} complete", flush=True))
+                               report=lambda name: report(args, f"dataset: {name} complete"))
     seconds = time.perf_counter() - start
-    print(f"wrote {counts['done']} sequence(s) to {args.out} ({counts['skipped']} already complete), "
-          f"{counts['pixel_readouts']} pixel-readouts in {seconds:.1f} s")
+    report(args, f"wrote {counts['done']} sequence(s) to {args.out} ({counts['skipped']} already complete), "
+                 f"{counts['pixel_readouts']} pixel-readouts in {seconds:.1f} s")
     return 0

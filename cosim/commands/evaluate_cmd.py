@@ -115,12 +115,11 @@ def run(args) -> int:
     from golden.errors import ConfigError, InputError
     from golden.fastsim import simulate_scene
     from golden.io import load_scene
-    from golden.atomic import atomic_folder
     from golden.paths import check_results_dir
 
-    from .common import check_threads_argument
+    from .common import check_threads_argument, publish_results
     from recon.evaluate import evaluate
-    from recon.report import OUTPUT_FILES, table_markdown, write_outputs
+    from recon.report import OUTPUT_FILES, write_outputs
     from recon.scenes import load_hdr_sequence
     from recon.scenes.heldout import sequence_set
 
@@ -214,13 +213,5 @@ def run(args) -> int:
     if args.table:
         from recon.complexity import measure
         evaluation.complexity = measure(evaluation.methods, configs["te"])
-    check_results_dir(args.out, OUTPUT_FILES, args.force)       # again: the run may have taken an hour
-    with atomic_folder(args.out) as folder:
-        write_outputs(evaluation, folder)
-    if args.quiet:
-        return 0
-    out = Path(args.out)
-    print(table_markdown(evaluation), end="")
-    print(f"wrote {out / 'table.md'}, {out / 'table.csv'}, {out / 'results.csv'}, "
-          f"{out / 'quality_vs_time.png'} and {len(evaluation.strips)} strip(s) in {out / 'strips'}")
-    return 0
+    return publish_results(args, evaluation, write_outputs,
+                           ("table.md", "table.csv", "results.csv", "quality_vs_time.png"))

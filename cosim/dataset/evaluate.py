@@ -10,13 +10,12 @@ SIMULATION_OPTIONS = {"set": "heldout", "scene": [], "folder": [], "frames": Non
 
 
 def run_store(args) -> int:
-    from pathlib import Path
 
-    from golden.atomic import atomic_folder
+    from cosim.commands.common import publish_results
     from golden.errors import InputError
     from golden.paths import check_results_dir
     from recon.dataset.evaluate import evaluate_store, write_store_outputs
-    from recon.report import OUTPUT_FILES, table_markdown
+    from recon.report import OUTPUT_FILES
 
     from .cluster import Runner, check_workers
 
@@ -34,13 +33,4 @@ def run_store(args) -> int:
         print(f"evaluate: {args.store} on {runner.where}", flush=True)
         evaluation = evaluate_store(args.store, runner, methods=methods, window=args.window,
                                     device=args.device)
-    check_results_dir(args.out, OUTPUT_FILES, args.force)       # again: the run may have taken an hour
-    with atomic_folder(args.out) as folder:
-        write_store_outputs(evaluation, folder)
-    if args.quiet:
-        return 0
-    out = Path(args.out)
-    print(table_markdown(evaluation), end="")
-    print(f"wrote {out / 'table.md'}, {out / 'table.csv'}, {out / 'results.csv'} "
-          f"and {len(evaluation.strips)} strip(s) in {out / 'strips'}")
-    return 0
+    return publish_results(args, evaluation, write_store_outputs, ("table.md", "table.csv", "results.csv"))
