@@ -54,7 +54,7 @@ def test_small_demo_closes_the_loop(tmp_path):
     assert np.load(out / "E_crop.npy").shape == (3 * 240, 11, 11)
     assert (out / "verdict.txt").read_text().startswith("bit-identical")
     gtkw = (out / "W.gtkw").read_text()
-    assert "[timestart]" in gtkw and '[dumpfile] "W.vcd"' in gtkw        # relative to the save file
+    assert "[timestart]" in gtkw and '[dumpfile] "W.vcd"' in gtkw      # relative to the save file
     for section in ("## Configuration", "## RTL against the golden model", "## Dynamic range",
                     "## Hardware cost", "## Run time of every stage", "## Rerun each step"):
         assert section in report, section
@@ -120,3 +120,18 @@ def test_demo_is_deterministic(tmp_path, capsys):
 def test_demo_refuses_bad_options(tmp_path, capsys, args, word):
     code, _, err = run_here(capsys, "demo", *SMALL, *args, "--out", tmp_path / "d")
     assert code == 2 and word in err and len(err.strip().splitlines()) == 1
+
+
+def test_demo_refuses_weights_for_none_of_its_sensors(tmp_path, capsys):
+    """--weights: a file trained for no sensor of the demo is refused before any work."""
+    import torch
+
+    from golden.config import SensorConfig
+    from recon.learned import method_classes
+    from recon.learning.weights import save_weights
+    torch.manual_seed(0)
+    module, sizes = method_classes("bsf")
+    save_weights(tmp_path / "w.pt", module(sizes.preset("cpu")), SensorConfig(b1=3, b2=3), {}, "bsf")
+    code, _, err = run_here(capsys, "demo", *SMALL, "--weights", tmp_path / "w.pt", "--out", tmp_path / "d")
+    assert code == 2 and "none of the sensors" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "d").exists()
