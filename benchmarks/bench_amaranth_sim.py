@@ -23,9 +23,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from cosim.rtlsim import rtl_run                     # noqa: E402
-from golden.config import SensorConfig               # noqa: E402
-from recon.pictures import save_figure                # noqa: E402
+from tespike.cosim.rtlsim import rtl_run                     # noqa: E402
+from tespike.golden.config import SensorConfig               # noqa: E402
+from tespike.recon.pictures import save_figure                # noqa: E402
 from tests.cosim_helpers import light_stimulus       # noqa: E402
 
 SHAPES = {1: (1, 1), 16: (4, 4), 64: (8, 8)}

@@ -31,11 +31,11 @@ import torch  # noqa: E402
 import torch.utils.benchmark as benchmark  # noqa: E402
 from torch.utils.flop_counter import FlopCounterMode  # noqa: E402
 
-from recon.baselines import BASELINES  # noqa: E402
-from recon.learned import receptive_radius  # noqa: E402
-from recon.learning.layers import parameter_count  # noqa: E402
-from recon.net.model import TESpikeNet  # noqa: E402
-from recon.net.sizes import NetSizes  # noqa: E402
+from tespike.recon.baselines import BASELINES  # noqa: E402
+from tespike.recon.learned import receptive_radius  # noqa: E402
+from tespike.recon.learning.layers import parameter_count  # noqa: E402
+from tespike.recon.net.model import TESpikeNet  # noqa: E402
+from tespike.recon.net.sizes import NetSizes  # noqa: E402
 
 #: The paper's Table 10: parameters, FLOPs, testing time (GPU).
 TABLE10 = {"spk2imgnet": ("3.760M", "1.955T", "0.418s"), "bsf": ("2.071M", "0.887T", "0.231s"),

@@ -31,14 +31,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from cosim.dataset.cluster import Runner  # noqa: E402
-from cosim.dataset.build import build_dataset, hdr_sources, read_gray  # noqa: E402
-from golden.config import SensorConfig  # noqa: E402
-from golden.fastsim import simulate_scene  # noqa: E402
-from recon.dataset import compare_stores  # noqa: E402
-from recon.dataset.evaluate import evaluate_store  # noqa: E402
-from recon.scenes import make_scene  # noqa: E402
-from recon.scenes.hdr_io import write_exr  # noqa: E402
+from tespike.cosim.dataset.cluster import Runner  # noqa: E402
+from tespike.cosim.dataset.build import build_dataset, hdr_sources, read_gray  # noqa: E402
+from tespike.golden.config import SensorConfig  # noqa: E402
+from tespike.golden.fastsim import simulate_scene  # noqa: E402
+from tespike.recon.dataset import compare_stores  # noqa: E402
+from tespike.recon.dataset.evaluate import evaluate_store  # noqa: E402
+from tespike.recon.scenes import make_scene  # noqa: E402
+from tespike.recon.scenes.hdr_io import write_exr  # noqa: E402
 
 
 def folder_bytes(path: Path) -> int:

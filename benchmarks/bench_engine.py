@@ -24,11 +24,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from golden.config import SensorConfig  # noqa: E402
-from recon.engine.batches import ClipPool, draw_batch  # noqa: E402
-from recon.engine.clips import EngineRecipe, make_clip  # noqa: E402
-from recon.learned import method_classes  # noqa: E402
-from recon.train import training_loss  # noqa: E402
+from tespike.golden.config import SensorConfig  # noqa: E402
+from tespike.recon.engine.batches import ClipPool, draw_batch  # noqa: E402
+from tespike.recon.engine.clips import EngineRecipe, make_clip  # noqa: E402
+from tespike.recon.learned import method_classes  # noqa: E402
+from tespike.recon.train import training_loss  # noqa: E402
 
 
 def main() -> None:

@@ -11,8 +11,8 @@ Usage (from the worktree root):
 
 Part 1, per light level from 1e-4 to 10 x design light, paper TE, ML (count
 readout) and ML msb (eq. 10) configurations: ``simulate_scene`` (fast) against the naive loop (Poisson
-electrons drawn per pixel clock by ``golden.light.poisson_stimulus``, stepped
-by the cycle-exact ``golden.sensor.simulate``) on the same light: bias of the
+electrons drawn per pixel clock by ``tespike.golden.light.poisson_stimulus``, stepped
+by the cycle-exact ``tespike.golden.sensor.simulate``) on the same light: bias of the
 mean decoded value (spikes per readout, with its standard error), total
 variation distance (TVD) of the code histograms, and both throughputs
 (pixel-readouts per second). A second, independent naive run gives the TVD
@@ -30,7 +30,7 @@ another checkout's ``tespike simulate`` (e.g. ``git archive <commit> | tar -x -C
 DIR``) interleaved with this one's, against the same naive rate: before/after
 ratios from one run, under one load. ``--interior`` adds a dim interior pan of
 each panorama given (e.g. the Poly Haven interiors of the shared data folder):
-the panorama panned (``recon.scenes.panorama``), its light mapped monotonically
+the panorama panned (``tespike.recon.scenes.panorama``), its light mapped monotonically
 (a power law in log light on each side of the median) to median ``--dim-median``
 and 1st..99th percentiles ``--dim-range`` of the design light, the dim,
 wide-range scenes of issue 28.
@@ -54,13 +54,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from golden.config import SensorConfig  # noqa: E402
-from golden.decode import decode_spikes  # noqa: E402
-from golden.fastsim import SceneSimulator  # noqa: E402
-from golden.light import poisson_stimulus  # noqa: E402
-from golden.sensor import simulate  # noqa: E402
+from tespike.golden.config import SensorConfig  # noqa: E402
+from tespike.golden.decode import decode_spikes  # noqa: E402
+from tespike.golden.fastsim import SceneSimulator  # noqa: E402
+from tespike.golden.light import poisson_stimulus  # noqa: E402
+from tespike.golden.sensor import simulate  # noqa: E402
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
-from recon.pictures import save_figure  # noqa: E402
+from tespike.recon.pictures import save_figure  # noqa: E402
 
 LEVELS = np.logspace(-4, 1, 16)
 
@@ -135,7 +135,7 @@ def dim_interior_scene(panorama, shape, median=0.015, low=3e-4, high=0.36, seed=
     ``median`` and 1st / 99th percentiles ``low`` / ``high`` of the design light: log
     light scaled about the log median, by one factor below it and another above (a
     monotone map: the scene's texture and ordering are kept, its spread is set)."""
-    from recon.scenes.panorama import panorama_sequence
+    from tespike.recon.scenes.panorama import panorama_sequence
     light = panorama_sequence(np.random.default_rng(seed), *shape, source=panorama)
     mid = np.median(light)
     p1, p99 = np.percentile(light, [1, 99])
@@ -184,7 +184,7 @@ def whole_process(name, path, crops=6, repeats=3, workers=(None,), baseline=None
                     for tree, root in trees.items():
                         cpu0 = _child_cpu()
                         t0 = time.perf_counter()
-                        run = subprocess.run([sys.executable, "-m", "cosim", "simulate", "--config", mode,
+                        run = subprocess.run([sys.executable, "-m", "tespike", "simulate", "--config", mode,
                                               "--scene", str(Path(path).resolve()), "--out",
                                               str(Path(tmp) / "S.npz"), "--seed", "1",
                                               *(() if t is None else ("--workers", str(t)))],
@@ -288,7 +288,7 @@ def main(argv=None):
     parser.add_argument("--whole-shape", type=int, nargs=3, default=(64, 384, 512))
     parser.add_argument("--scene", action="append", default=[],
                         help="I.npy to time the whole process on as well (repeatable), e.g. from "
-                             "'python -m cosim scene --name city --frames 64 --height 384 --width 512'")
+                             "'python3 -m tespike scene --name city --frames 64 --height 384 --width 512'")
     parser.add_argument("--crops", type=int, default=6, help="random crops the naive loop is timed on")
     parser.add_argument("--repeats", type=int, default=3,
                         help="whole-process runs per camera, interleaved; the fastest counts")

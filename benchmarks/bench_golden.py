@@ -22,10 +22,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))    # measure this checkout's golden/
 
-from golden.config import DESIGN_ELECTRONS, SensorConfig
-from golden.io import atomic_output
-from golden.reference import step_reference
-from golden.sensor import simulate
+from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig
+from tespike.golden.io import atomic_output
+from tespike.golden.reference import step_reference
+from tespike.golden.sensor import simulate
 
 
 def poisson_stimulus(config, rng, size, readouts, low, high):

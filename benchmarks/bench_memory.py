@@ -1,6 +1,6 @@
 """Peak memory of ``tespike reconstruct`` and ``tespike simulate`` against the input size.
 
-Each command runs as a user would (a fresh ``python3 -m cosim`` process) on
+Each command runs as a user would (a fresh ``python3 -m tespike`` process) on
 inputs of growing size; the peak resident memory of the child (``ru_maxrss``,
 which also counts the pages of memory-mapped files it touched) is printed with
 the input size and the growth between sizes. Bounded memory shows as a peak
@@ -10,7 +10,7 @@ disk, memory-mapped; the work is done in blocks).
 Run from the repository root: ``python3 benchmarks/bench_memory.py [--sizes 8,32,128] [--out DIR]``
 (sizes in millions of readout words; DIR defaults to a temporary folder).
 
-``--learned``: instead, the learned methods' tiled inference (``recon.learning.infer.frame``,
+``--learned``: instead, the learned methods' tiled inference (``tespike.recon.learning.infer.frame``,
 one key moment): for each frame size (``--frames 384x512,1024x1024,384x4096``) and tile
 (``--tiles none,auto``: the whole frame, the default core of two derived
 margins; or core sides in pixels), a fresh process decodes and reconstructs one
@@ -39,10 +39,10 @@ sys.path.insert(0, str(ROOT))
 
 
 def peak_rss_mb(args: list[str]) -> float:
-    """Run ``python3 -m cosim ARGS`` and return its peak resident memory in MB."""
+    """Run ``python3 -m tespike ARGS`` and return its peak resident memory in MB."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     code = ("import resource, subprocess, sys; "
-            "r = subprocess.run([sys.executable, '-m', 'cosim', *sys.argv[1:]], capture_output=True); "
+            "r = subprocess.run([sys.executable, '-m', 'tespike', *sys.argv[1:]], capture_output=True); "
             "sys.stderr.write(r.stderr.decode()); "
             "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); sys.exit(r.returncode)")
     done = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, env=env)
@@ -59,9 +59,9 @@ def learned_child(method: str, height: int, width: int, tile: str, threads: int,
 
     import torch
 
-    from golden.config import SensorConfig
-    from recon.learned import load_weights, method_classes, weights_path
-    from recon.learning.infer import blocks, frame, tile_margin
+    from tespike.golden.config import SensorConfig
+    from tespike.recon.learned import load_weights, method_classes, weights_path
+    from tespike.recon.learning.infer import blocks, frame, tile_margin
 
     torch.set_num_threads(threads)
     config = SensorConfig(mode="te")
@@ -142,8 +142,8 @@ def main(argv=None) -> int:
         return 0
     if args.learned:
         return learned_table(args)
-    from golden.config import SensorConfig
-    from golden.io import save_stream
+    from tespike.golden.config import SensorConfig
+    from tespike.golden.io import save_stream
 
     config = SensorConfig(mode="te")
     sizes = [int(s) for s in args.sizes.split(",")]

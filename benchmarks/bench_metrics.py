@@ -36,8 +36,8 @@ def main() -> None:
 
     import torch
 
-    from recon.scenes import make_scene
-    from recon.score import KEYS, columns, score
+    from tespike.recon.scenes import make_scene
+    from tespike.recon.score import KEYS, columns, score
 
     torch.set_num_threads(args.threads)
     reference = make_scene("city", frames=args.frames, height=HEIGHT, width=WIDTH).astype(np.float64)

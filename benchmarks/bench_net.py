@@ -36,19 +36,19 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import torch  # noqa: E402
 
-from cosim.walltime import median_seconds  # noqa: E402
-from golden.config import SensorConfig  # noqa: E402
-from golden.fastsim import simulate_scene  # noqa: E402
-from recon.methods import reconstruct  # noqa: E402
-from recon.metrics import psnr_mu  # noqa: E402
-from recon.learned import WEIGHTS_DIR  # noqa: E402
-from recon.learned import load_weights  # noqa: E402
-from recon.learning.infer import reconstruct_model  # noqa: E402
-from recon.scenes import normalise_sequence, scene_rng  # noqa: E402
-from recon.scenes.panorama import panorama_sequence  # noqa: E402
-from recon.learning.layers import parameter_count  # noqa: E402
-from recon.net.model import TESpikeNet  # noqa: E402
-from recon.net.sizes import NetSizes  # noqa: E402
+from tespike.cosim.walltime import median_seconds  # noqa: E402
+from tespike.golden.config import SensorConfig  # noqa: E402
+from tespike.golden.fastsim import simulate_scene  # noqa: E402
+from tespike.recon.methods import reconstruct  # noqa: E402
+from tespike.recon.metrics import psnr_mu  # noqa: E402
+from tespike.recon.learned import WEIGHTS_DIR  # noqa: E402
+from tespike.recon.learned import load_weights  # noqa: E402
+from tespike.recon.learning.infer import reconstruct_model  # noqa: E402
+from tespike.recon.scenes import normalise_sequence, scene_rng  # noqa: E402
+from tespike.recon.scenes.panorama import panorama_sequence  # noqa: E402
+from tespike.recon.learning.layers import parameter_count  # noqa: E402
+from tespike.recon.net.model import TESpikeNet  # noqa: E402
+from tespike.recon.net.sizes import NetSizes  # noqa: E402
 
 SENSORS = (("TE", "te"), ("ML-msb", "ml-msb"), ("ML-count", "ml"))
 
@@ -131,7 +131,7 @@ def quality(args) -> None:
 
 def validation(args) -> None:
     """The held-out validation set of training (recon/engine/validation.py): TFP, TFI and the weights."""
-    from recon.engine.validation import validation_psnr, validation_set
+    from tespike.recon.engine.validation import validation_psnr, validation_set
     for label, preset in SENSORS:
         config = SensorConfig.preset(preset)
         cases = validation_set(config)
@@ -157,10 +157,10 @@ def candidates(args) -> None:
     mu-law, chosen with the truth's help (a bound on what choosing can give,
     not a method).
     """
-    from recon.engine.validation import validation_set
-    from recon.metrics import mu_law
-    from recon.learning.head import BlendHead, RADII, key_estimates
-    from recon.stream import decode_light, key_span, span_inside
+    from tespike.recon.engine.validation import validation_set
+    from tespike.recon.metrics import mu_law
+    from tespike.recon.learning.head import BlendHead, RADII, key_estimates
+    from tespike.recon.stream import decode_light, key_span, span_inside
     names = [f"mean {2 * r + 1}" for r in RADII] + ["tfi"]
     span = NetSizes().span
     for label, preset in SENSORS:
@@ -208,7 +208,7 @@ def complexity(args) -> None:
                 seconds = median_seconds(lambda: model(light, None, 1.0), repeats, warm_up=True)[0]
                 print(f"| {name} | {parameter_count(model):,} | {flops / 1e9:.1f} | {threads} | {seconds:.2f} |",
                       flush=True)
-    from recon.learning.deform import deform_conv2d
+    from tespike.recon.learning.deform import deform_conv2d
     torch.set_num_threads(max(args.threads))
     x = torch.rand(4, 16, 96, 128)
     weight = torch.rand(16, 16, 3, 3)

@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from golden.poisson import PoissonSampler  # noqa: E402
+from tespike.golden.poisson import PoissonSampler  # noqa: E402
 
 
 def best_ns(fn, draws: int, repeats: int) -> tuple[float, float]:

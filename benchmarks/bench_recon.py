@@ -7,8 +7,8 @@ against the ground truth (PSNR-mu and SSIM-mu, mu = 5000, peak = the scene's
 peak; PU21-PSNR at 4000 cd/m^2 per unit), then writes a PNG of error against
 run time. The scene is generated (a horizontal light ramp over four decades
 with stripes, a bright disc moving 4 pixels per readout, a dark patch with
-fine texture) and simulated with :func:`golden.fastsim.simulate_scene` when
-it is available, else with the cycle-exact :mod:`golden.sensor` on per-clock
+fine texture) and simulated with :func:`tespike.golden.fastsim.simulate_scene` when
+it is available, else with the cycle-exact :mod:`tespike.golden.sensor` on per-clock
 Poisson electrons (slow: progress shown).
 
     python3 benchmarks/bench_recon.py [--mode te|ml] [--frames 16] [--threads 2] [--png out.png | --docs]
@@ -28,11 +28,11 @@ ROOT = Path(__file__).resolve().parent.parent
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from cosim.walltime import median_seconds  # noqa: E402
-from golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
-from golden.decode import decode_light  # noqa: E402
+from tespike.cosim.walltime import median_seconds  # noqa: E402
+from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
+from tespike.golden.decode import decode_light  # noqa: E402
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
-from recon.pictures import save_figure  # noqa: E402
+from tespike.recon.pictures import save_figure  # noqa: E402
 
 
 def hdr_scene(frames: int, height: int, width: int, seed: int = 0) -> np.ndarray:
@@ -54,13 +54,13 @@ def hdr_scene(frames: int, height: int, width: int, seed: int = 0) -> np.ndarray
 
 def simulate(config: SensorConfig, scene: np.ndarray, seed: int) -> np.ndarray:
     try:
-        from golden.fastsim import simulate_scene
+        from tespike.golden.fastsim import simulate_scene
     except ImportError:
         simulate_scene = None
     if simulate_scene is not None:
         return simulate_scene(config, scene, seed=seed)
     from tqdm import tqdm
-    from golden.sensor import PixelArray
+    from tespike.golden.sensor import PixelArray
     rng = np.random.default_rng(seed)
     L = config.clocks_per_readout
     array = PixelArray(config, scene.shape[1:])
@@ -89,13 +89,13 @@ def main(argv=None) -> int:
 
     import torch
 
-    from recon.methods import reconstruct
-    from recon.metrics import psnr_mu, psnr_pu21, ssim_mu
+    from tespike.recon.methods import reconstruct
+    from tespike.recon.metrics import psnr_mu, psnr_pu21, ssim_mu
 
     torch.set_num_threads(args.threads)
     config = SensorConfig.preset(args.mode)
     scene = hdr_scene(args.frames, args.height, args.width)
-    from golden.io import load_stream, save_stream
+    from tespike.golden.io import load_stream, save_stream
     if args.stream:
         words, config = load_stream(args.stream)
         if words.shape != scene.shape or config != SensorConfig.preset(args.mode):

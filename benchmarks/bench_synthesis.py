@@ -2,8 +2,8 @@
 
 For each array (paper TE configuration, L = 240, N = ceil(H W / L) lanes, the fewest
 that fit; default 16 x 16, 64 x 64, 128 x 128 and the paper's 400 x 250) the script
-generates the streaming Verilog (``rtl.verilog_stream.stream_array_verilog``) and runs
-``cosim.synthesis.synthesize_hierarchy`` on it (``synth``, hierarchy kept, the flow of
+generates the streaming Verilog (``tespike.rtl.verilog_stream.stream_array_verilog``) and runs
+``tespike.cosim.synthesis.synthesize_hierarchy`` on it (``synth``, hierarchy kept, the flow of
 ``tespike synthesize``). Printed per size: cells, flip-flops and transistors per pixel,
 cells per pixel as a ratio to the first size's (issue 26's target: within 10 %), and
 Yosys's wall time, CPU time and peak resident memory (target at 400 x 250: under 10
@@ -23,10 +23,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from cosim.synthesis import hierarchy_total, synthesize_hierarchy  # noqa: E402
-from golden.config import load_config  # noqa: E402
-from golden.beats import min_lanes  # noqa: E402
-from rtl.verilog_stream import stream_array_verilog, stream_module_names  # noqa: E402
+from tespike.cosim.synthesis import hierarchy_total, synthesize_hierarchy  # noqa: E402
+from tespike.golden.config import load_config  # noqa: E402
+from tespike.golden.beats import min_lanes  # noqa: E402
+from tespike.rtl.verilog_stream import stream_array_verilog, stream_module_names  # noqa: E402
 
 
 def size(text: str) -> tuple[int, int]:

@@ -1,7 +1,7 @@
 """Outside simulators on the generated array Verilog: Verilator build time and cycles/s, Icarus cycles/s.
 
 For each array size (paper TE configuration, square arrays) the benchmark
-generates the Verilog (``rtl.verilog.array_verilog``), builds the Verilator
+generates the Verilog (``tespike.rtl.verilog.array_verilog``), builds the Verilator
 model in a fresh cache directory (wall and CPU seconds of the build, and the
 peak resident memory of its largest process; the runtime objects of the user's
 cache are reused, as in normal use) and runs ``--readouts`` readout intervals
@@ -13,7 +13,7 @@ over register arrays (tests/verilog_spec_model.py, ``style="loop"``): it shows
 what the generated array's one-instance-per-pixel structure costs in
 Verilator. The baseline
 measured in the same run is the literal golden model
-(``golden.reference.step_reference``) on the same stimulus; the table prints
+(``tespike.golden.reference.step_reference``) on the same stimulus; the table prints
 each simulator's speed as a ratio to it. Writes ``out/bench/bench_verilator.png`` (``--docs``: ``benchmarks/bench_verilator.png``).
 
 Run from the repository root:
@@ -22,7 +22,7 @@ Run from the repository root:
 
 ``--variants`` builds and runs the generated array once per variant in the same
 run: ``O<n>`` is the C++ optimisation (``cxx_opt``) of the backend's default
-view (``cosim.verilator.shared_pixel_view``), ``plain-O<n>`` the Verilog
+view (``tespike.cosim.verilator.shared_pixel_view``), ``plain-O<n>`` the Verilog
 exactly as generated, anything after ``:`` more Verilator options (space
 separated), e.g. ``O1:-fno-dfg``, ``O1:--threads 2`` or ``O1:-MAKEFLAGS OPT_SLOW=-O0``;
 ``default`` is the Verilog exactly as generated built with Verilator's default
@@ -48,8 +48,8 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from golden.config import SensorConfig  # noqa: E402
-from golden.reference import step_reference  # noqa: E402
+from tespike.golden.config import SensorConfig  # noqa: E402
+from tespike.golden.reference import step_reference  # noqa: E402
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
 
 
@@ -100,7 +100,7 @@ def build_default_options(verilog: str, top: str, charge_bits: int, frame_bits: 
     """Build with Verilator's default options only (``--cc --exe --build``: its default inlining,
     no ``-O3``, make's default ``OPT_FAST``) and the same plain C++ harness: what a user who
     takes the Verilog into their own Verilator flow gets. Returns the executable."""
-    import cosim.verilator as cv
+    import tespike.cosim.verilator as cv
 
     work = Path(tmp) / "default-options"
     work.mkdir()
@@ -114,9 +114,9 @@ def build_default_options(verilog: str, top: str, charge_bits: int, frame_bits: 
 
 def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False,
                     variant: str = "O1"):
-    import cosim.verilator as cv
-    from cosim.outside import check_captures, unpack_rows, words_per_row
-    from rtl.verilog import array_verilog
+    import tespike.cosim.verilator as cv
+    from tespike.cosim.outside import check_captures, unpack_rows, words_per_row
+    from tespike.rtl.verilog import array_verilog
     from tests.verilog_spec_model import spec_model_verilog
 
     start = time.perf_counter()
@@ -157,8 +157,8 @@ def bench_verilator(config, side, stim, inline: bool, loop_model: bool = False,
 
 
 def bench_icarus(config, side, stim):
-    from cosim.icarus import run_icarus
-    from rtl.verilog import array_verilog
+    from tespike.cosim.icarus import run_icarus
+    from tespike.rtl.verilog import array_verilog
 
     verilog = array_verilog(config, side, side)
     start = time.perf_counter()
@@ -247,7 +247,7 @@ def main(argv=None) -> int:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        from recon.pictures import save_figure
+        from tespike.recon.pictures import save_figure
 
         fig, ax = plt.subplots(figsize=(5.5, 3.5))
         names = list(dict.fromkeys(n for n, *_ in rows))

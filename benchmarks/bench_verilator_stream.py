@@ -2,15 +2,15 @@
 
 For each array (paper TE configuration, L = 240; default 32 x 32, 64 x 64,
 128 x 128 and the paper's 400 x 250) the benchmark generates the streaming
-Verilog (``rtl.verilog_stream.stream_array_verilog``, N = ceil(H W / L) lanes,
+Verilog (``tespike.rtl.verilog_stream.stream_array_verilog``, N = ceil(H W / L) lanes,
 the fewest that fit; ``--view loop``, the default, is the simulation view made for
 Verilator at sensor size, ``--view instances`` the design with one instance per site), builds the Verilator model in a fresh cache directory
-(``cosim.verilator.build_stream``: wall and CPU seconds of Verilator and
+(``tespike.cosim.verilator.build_stream``: wall and CPU seconds of Verilator and
 g++, and the peak resident memory of the build's largest process; Verilator's
 runtime objects of the user's cache are reused, as in normal use), runs
 ``--readouts`` readout intervals of Poisson light through the harness alone
 (stimulus packing excluded) and checks every beat against the golden model
-(``golden.beats.beats`` of ``golden.sensor.simulate``).
+(``tespike.golden.beats.beats`` of ``tespike.golden.sensor.simulate``).
 
 Printed per size: build wall / CPU seconds and peak MB, cycles per second
 (wall) and per CPU-second of the harness process, pixel clocks per CPU-second
@@ -38,7 +38,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from golden.config import SensorConfig  # noqa: E402
+from tespike.golden.config import SensorConfig  # noqa: E402
 
 
 def children_cpu() -> float:
@@ -47,7 +47,7 @@ def children_cpu() -> float:
 
 
 def _build_and_peak(config, verilog, height, width, lanes, build_dir):
-    from cosim.verilator import build_stream
+    from tespike.cosim.verilator import build_stream
     exe = build_stream(config, verilog, height, width, lanes, build_dir=build_dir)
     return exe, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
 
@@ -75,12 +75,12 @@ def stimulus(config: SensorConfig, height: int, width: int, readouts: int, rng) 
 
 
 def bench(config, height, width, readouts, rng, view="loop") -> dict:
-    import cosim.verilator as vs
-    from cosim.outside import words_per_row
-    from cosim.stream_ports import check_beats, flush_clocks
-    from golden.sensor import simulate
-    from golden.beats import beat_count, beats, min_lanes
-    from rtl.verilog_stream import stream_array_verilog
+    import tespike.cosim.verilator as vs
+    from tespike.cosim.outside import words_per_row
+    from tespike.cosim.stream_ports import check_beats, flush_clocks
+    from tespike.golden.sensor import simulate
+    from tespike.golden.beats import beat_count, beats, min_lanes
+    from tespike.rtl.verilog_stream import stream_array_verilog
 
     lanes = min_lanes(config, height, width)
     start = time.perf_counter()

@@ -1,6 +1,6 @@
 """Whole-process time of ``tespike verilog`` for small and large arrays, and the Verilog size.
 
-Each size runs the command as a user would (a fresh ``python3 -m cosim verilog``
+Each size runs the command as a user would (a fresh ``python3 -m tespike verilog``
 process: interpreter start, imports, Amaranth elaboration, Yosys conversion,
 atomic write), ``--repeats`` times; the median is reported, and the ratio of
 128 x 128 to 8 x 8 (the brief's bound: about 16x at most). Writes
@@ -31,7 +31,7 @@ SIZES = [8, 32, 128]
 def time_command(config: str, size: int, out: Path) -> float:
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     start = time.perf_counter()
-    result = subprocess.run([sys.executable, "-m", "cosim", "verilog", "--config", config,
+    result = subprocess.run([sys.executable, "-m", "tespike", "verilog", "--config", config,
                              "--height", str(size), "--width", str(size), "--out", str(out)],
                             capture_output=True, text=True, env=env, cwd=ROOT)
     elapsed = time.perf_counter() - start
@@ -69,7 +69,7 @@ def main(argv=None) -> int:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        from recon.pictures import save_figure
+        from tespike.recon.pictures import save_figure
 
         fig, ax = plt.subplots(figsize=(5, 3.2))
         ax.bar([f"{s}x{s}" for s in SIZES], [results[s][0] for s in SIZES], color="#4a7ab5")

@@ -3,7 +3,7 @@
 For two sensors (the paper's eq. 12 and eq. 13 dark current, each with DSNU,
 hot pixels, PRNU and comparator offset; one sensor seed), the TE camera records
 K dark readouts and K flat readouts at the flat light of recon.evaluate
-(CALIBRATION_FLAT, below the TE overflow level), ``recon.calibration.estimate``
+(CALIBRATION_FLAT, below the TE overflow level), ``tespike.recon.calibration.estimate``
 turns them into maps, and the maps are compared with the sensor's true ones
 (golden.noise.Sensor.maps):
 
@@ -34,11 +34,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
-from golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
-from golden.fastsim import simulate_scene  # noqa: E402
-from golden.noise import Sensor, SensorNoise  # noqa: E402
-from recon.calibration import estimate  # noqa: E402
-from recon.evaluate import CALIBRATION_FLAT  # noqa: E402
+from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
+from tespike.golden.fastsim import simulate_scene  # noqa: E402
+from tespike.golden.noise import Sensor, SensorNoise  # noqa: E402
+from tespike.recon.calibration import estimate  # noqa: E402
+from tespike.recon.evaluate import CALIBRATION_FLAT  # noqa: E402
 
 NAME = "calibration_error.png"
 SENSORS = {
@@ -97,7 +97,7 @@ def main() -> int:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from recon.pictures import save_figure
+    from tespike.recon.pictures import save_figure
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for name in SENSORS:
         seconds = [results[name, k]["seconds"] for k in counts]

@@ -25,11 +25,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))    # measure this checkout's golden/
 
-from golden.config import SensorConfig
-from golden.decode import ESTIMATORS, decode_light
-from golden.dynamic_range import constant_light_words, estimator_error, formula_db, light_grid, measure
-from golden.io import atomic_output
-from recon.pictures import save_figure
+from tespike.golden.config import SensorConfig
+from tespike.golden.decode import ESTIMATORS, decode_light
+from tespike.golden.dynamic_range import constant_light_words, estimator_error, formula_db, light_grid, measure
+from tespike.golden.io import atomic_output
+from tespike.recon.pictures import save_figure
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "dynamic-range.md"

@@ -26,12 +26,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
-from golden.fastsim import simulate_scene  # noqa: E402
-from golden.noise import Sensor, SensorNoise, load_noise  # noqa: E402
-from recon.evaluate import CALIBRATED, METHOD_NAMES, default_noise_sensors, evaluate, paper_configs  # noqa: E402
-from recon.methods import available_methods  # noqa: E402
-from recon.report import noise_markdown  # noqa: E402
-from recon.scenes.heldout import sequence_set  # noqa: E402
+from tespike.golden.fastsim import simulate_scene  # noqa: E402
+from tespike.golden.noise import Sensor, SensorNoise, load_noise  # noqa: E402
+from tespike.recon.evaluate import CALIBRATED, METHOD_NAMES, default_noise_sensors, evaluate, paper_configs  # noqa: E402
+from tespike.recon.methods import available_methods  # noqa: E402
+from tespike.recon.report import noise_markdown  # noqa: E402
+from tespike.recon.scenes.heldout import sequence_set  # noqa: E402
 
 NAME = "noise_tables.png"
 
@@ -89,7 +89,7 @@ def main() -> int:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from recon.pictures import save_figure
+    from tespike.recon.pictures import save_figure
     sweep = sorted([(1.0, "te+eq12")] + [(level, f"te+eq12x{level:g}") for level in levels])
     x = [level for level, _ in sweep]
     fig, ax = plt.subplots(figsize=(8, 5))

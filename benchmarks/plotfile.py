@@ -1,6 +1,6 @@
 """Where a benchmark's plot goes: ``--png`` (default ``out/bench/<name>``, git-ignored) or,
 with ``--docs``, the copy the docs show (``benchmarks/<name>``, regenerated on purpose).
-The figure itself is saved by :func:`recon.pictures.save_figure`."""
+The figure itself is saved by :func:`tespike.recon.pictures.save_figure`."""
 
 from __future__ import annotations
 

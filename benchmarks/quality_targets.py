@@ -25,11 +25,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from golden.fastsim import simulate_scene  # noqa: E402
-from recon.pictures import tone_map  # noqa: E402
-from recon.evaluate import evaluate, label, scored_frames  # noqa: E402
-from recon.report import table_markdown, write_outputs  # noqa: E402
-from recon.scenes.heldout import sequence_set  # noqa: E402
+from tespike.golden.fastsim import simulate_scene  # noqa: E402
+from tespike.recon.pictures import tone_map  # noqa: E402
+from tespike.recon.evaluate import evaluate, label, scored_frames  # noqa: E402
+from tespike.recon.report import table_markdown, write_outputs  # noqa: E402
+from tespike.recon.scenes.heldout import sequence_set  # noqa: E402
 
 TARGET_TFP_TE = 28.0
 #: Tone-mapped brightness bands of the ground truth for the breakdown (mu-law values).
@@ -66,7 +66,7 @@ def midpoint_light(words: np.ndarray, config) -> np.ndarray:
     """EXPERIMENT, not a shipped estimator: TE overflow in S_h cycle m means the 2^b1-th
     spike fired in clocks (m-1)F .. mF-1, so take the middle of that range instead of its
     end (the paper's eq. 3, ``ratio``); m = 1 can only be clock 2^b1 - 1 or later."""
-    from golden.decode import decode_spikes
+    from tespike.golden.decode import decode_spikes
     spikes = decode_spikes(words, config)
     if not config.is_te:
         return spikes * config.spike_light
@@ -82,9 +82,9 @@ def flat_light_sweep(window: int, seed: int) -> list[str]:
     """Constant light, no motion: bias and RMS tone-mapped error of every method and mode."""
     import torch
 
-    from golden.config import SensorConfig
-    from recon.methods import reconstruct
-    from recon.tfp import tfp
+    from tespike.golden.config import SensorConfig
+    from tespike.recon.methods import reconstruct
+    from tespike.recon.tfp import tfp
 
     lines = ["", "Constant light, 40 readouts of 32 x 32 (bias = mean / truth - 1; rms of mu-law error, "
                  "peak 1; ML = msb readout, ML-count = full count):",

@@ -8,7 +8,7 @@ camera: word bits, the data that must leave (H W Wd bits per readout interval,
 in Gbit/s), the fewest lanes that fit one interval's beats in one interval
 (N = ceil(H W / L)), the output pins they take (N Wd) and what those pins carry
 at the pixel clock. The parallel top (one H W Wd-bit port) would need H W Wd
-pins. ``golden.beats.output_bandwidth`` computes each line.
+pins. ``tespike.golden.beats.output_bandwidth`` computes each line.
 
 ``python3 benchmarks/stream_bandwidth.py [--height 400 --width 250 --readout-hz 40000]``
 """
@@ -21,8 +21,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from golden.config import SensorConfig  # noqa: E402
-from golden.beats import output_bandwidth  # noqa: E402
+from tespike.golden.config import SensorConfig  # noqa: E402
+from tespike.golden.beats import output_bandwidth  # noqa: E402
 
 
 def main(argv=None) -> int:

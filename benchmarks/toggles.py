@@ -5,7 +5,7 @@ dynamic range, 48.1 against 47.6 dB) and ML msb (8 bit: the paper's Table 1
 camera; 9 bit: about TE's dynamic range, 48.2 dB), each with its SPEC default
 threshold, counts the exact bit changes of the pixel's state flip-flops and of
 its readout word register (the word bus) under constant light with Poisson
-shot noise (:func:`golden.toggles.constant_light_toggles`), and prints a table
+shot noise (:func:`tespike.golden.toggles.constant_light_toggles`), and prints a table
 and writes a PNG (log axes; a zero count is not drawn on a log axis).
 
 Run from the repository root:
@@ -25,9 +25,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))                       # measure this checkout's golden/
 
-from golden.config import SensorConfig  # noqa: E402
-from golden.toggles import constant_light_toggles  # noqa: E402
-from recon.pictures import save_figure  # noqa: E402
+from tespike.golden.config import SensorConfig  # noqa: E402
+from tespike.golden.toggles import constant_light_toggles  # noqa: E402
+from tespike.recon.pictures import save_figure  # noqa: E402
 
 #: label -> configuration (the paper's settings and the equal-dynamic-range msb camera)
 CAMERAS = {

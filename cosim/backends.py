@@ -1,6 +1,6 @@
 """The RTL simulators a stimulus can run on, and the check every backend's words must pass.
 
-``amaranth`` runs the Amaranth design in Python (:mod:`cosim.rtlsim`, the only one
+``amaranth`` runs the Amaranth design in Python (:mod:`tespike.cosim.rtlsim`, the only one
 writing a VCD); ``verilator`` and ``icarus`` run the generated Verilog. Both
 ``tespike rtl-sim`` and ``tespike demo`` offer :data:`NAMES` and call
 :func:`backend` / :func:`checked_words`.
@@ -12,13 +12,13 @@ import importlib
 
 import numpy as np
 
-from golden.errors import InputError, TespikeError
+from tespike.golden.errors import InputError, TespikeError
 
 #: backend -> (module, function(config, stimulus) -> words) for the Verilog simulators;
 #: imported only when chosen.
 VERILOG_BACKENDS = {
-    "verilator": ("cosim.verilator", "run_verilator"),
-    "icarus": ("cosim.icarus", "run_icarus"),
+    "verilator": ("tespike.cosim.verilator", "run_verilator"),
+    "icarus": ("tespike.cosim.icarus", "run_icarus"),
 }
 #: Every backend, the default first.
 NAMES = ("amaranth", *VERILOG_BACKENDS)
@@ -41,7 +41,7 @@ def backend(name: str):
 
 def checked_words(words, config, stimulus, name: str) -> np.ndarray:
     """A backend must return integer words (T / L, H, W) that SPEC section 4 allows."""
-    from golden.decode import check_words
+    from tespike.golden.decode import check_words
     T, H, W = stimulus.shape
     expected = (T // config.clocks_per_readout, H, W)
     words = np.asarray(words)

@@ -1,6 +1,6 @@
 """The co-simulation testbench's conventions, shared by the testbench and its waveform reader.
 
-:mod:`cosim.rtlsim` drives the RTL with them and :mod:`cosim.vcd` reads its VCD
+:mod:`tespike.cosim.rtlsim` drives the RTL with them and :mod:`tespike.cosim.vcd` reads its VCD
 back with them (the clock period, where the array sits in the scope tree, how
 the ``charge`` and ``frame`` buses are packed); both import them from here, so
 neither imports the other's internals.
@@ -34,7 +34,7 @@ def iter_packed_charge(stimulus: np.ndarray, input_bits: int) -> Iterator[int]:
     """Yield, per pixel clock, the ``charge`` bus as one integer.
 
     Pixel (r, c) of clock t sits at bits ``[(r W + c) E +: E]``: the bus layout
-    of :func:`cosim.outside.pack_rows` (one implementation for every backend),
+    of :func:`tespike.cosim.outside.pack_rows` (one implementation for every backend),
     packed in chunks of clocks; only the final ``int.from_bytes`` is per clock.
     """
     T = stimulus.shape[0]
@@ -53,5 +53,5 @@ def frame_rows(frames: list[int], n_values: int, bits: int) -> np.ndarray:
 
 
 def unpack_frames(frames: list[int], n_pixels: int, word_bits: int) -> np.ndarray:
-    """Frame bus integers -> ``(K, n_pixels)`` int64 words (:func:`cosim.outside.unpack_rows`)."""
+    """Frame bus integers -> ``(K, n_pixels)`` int64 words (:func:`tespike.cosim.outside.unpack_rows`)."""
     return unpack_rows(frame_rows(frames, n_pixels, word_bits), n_pixels, word_bits)

@@ -1,6 +1,6 @@
 """The ``tespike`` command (SPEC section 6).
 
-Each sub-command lives in its own module under :mod:`cosim.commands` with
+Each sub-command lives in its own module under :mod:`tespike.cosim.commands` with
 ``HELP``, ``add_arguments(parser)`` and ``run(args) -> int``. Modules import
 their heavy dependencies (amaranth, torch) inside ``run`` so that ``tespike
 golden`` and ``tespike simulate`` start in numpy time. Every refusal of bad
@@ -13,7 +13,7 @@ import argparse
 import importlib
 import sys
 
-from golden.errors import TespikeError
+from tespike.golden.errors import TespikeError
 
 from .console import progress_wanted, report  # noqa: F401  (what command modules print)
 
@@ -74,9 +74,9 @@ def _available_commands(only: str | None = None) -> dict[str, object]:
         if only is not None and name != only:
             continue
         try:
-            modules[name] = importlib.import_module(f"cosim.commands.{module}")
+            modules[name] = importlib.import_module(f"tespike.cosim.commands.{module}")
         except ModuleNotFoundError as exc:
-            if exc.name != f"cosim.commands.{module}":
+            if exc.name != f"tespike.cosim.commands.{module}":
                 raise
     return modules
 

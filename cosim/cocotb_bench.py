@@ -6,7 +6,7 @@ only ``clk``, ``rst`` and ``charge`` and reads only ``frame_valid`` and
 ``frame``, so it checks any Verilog with the ports of SPEC section 6, not only
 the generated one:
 
-1. ``rst`` high for :data:`cosim.outside.RESET_CLOCKS` rising edges;
+1. ``rst`` high for :data:`tespike.cosim.outside.RESET_CLOCKS` rising edges;
 2. for pixel clock t = 0, 1, ...: at the falling edge, ``rst`` low (or, with
    ``TESPIKE_RESETS``, the reset vector's value) and stimulus
    row t on ``charge``; one simulator step later (the logic has settled) ``frame_valid`` and,
@@ -15,13 +15,13 @@ the generated one:
 3. after the stimulus, zero charge for up to L + 1 clocks until every readout
    has been seen.
 
-The scoreboard is the literal SPEC rule, :func:`golden.reference.step_reference`,
+The scoreboard is the literal SPEC rule, :func:`tespike.golden.reference.step_reference`,
 on the same stimulus. The test fails, naming what went wrong, on an X or Z on
 ``frame_valid`` or on a sampled ``frame``, on a ``frame_valid`` count or latency
-that breaks SPEC section 6 (:func:`cosim.outside.check_captures`: one pulse per
+that breaks SPEC section 6 (:func:`tespike.cosim.outside.check_captures`: one pulse per
 interval, one fixed latency in 0..L), or on the first word that differs.
 
-Settings come from environment variables, which :mod:`cosim.cocotb_run` (and so
+Settings come from environment variables, which :mod:`tespike.cosim.cocotb_run` (and so
 ``tespike cocotb`` and the tests) sets, and which a designer sets by hand in a
 cocotb Makefile flow (docs/outside-simulators.md):
 
@@ -34,18 +34,18 @@ cocotb Makefile flow (docs/outside-simulators.md):
     :func:`default_stimulus` makes ``TESPIKE_READOUTS`` (default 3) intervals of
     it from ``TESPIKE_SEED`` (default 0);
 ``TESPIKE_RESETS``
-    reset in the middle of the run (:mod:`cosim.resets`): ``sweep`` asserts
+    reset in the middle of the run (:mod:`tespike.cosim.resets`): ``sweep`` asserts
     ``rst`` at every phase of an interval and of its beats
-    (:func:`cosim.resets.reset_sweep` from the seed; the default stimulus then
+    (:func:`tespike.cosim.resets.reset_sweep` from the seed; the default stimulus then
     covers the sweep and ``TESPIKE_READOUTS`` intervals after it), or an ``.npy``
     file of one 0/1 per stimulus clock; each segment between resets is checked
-    against the golden model from zero state (:func:`cosim.resets.golden_segments`);
+    against the golden model from zero state (:func:`tespike.cosim.resets.golden_segments`);
 ``TESPIKE_LANES``
     set: the design is the streaming top (SPEC section 6, ``--lanes N``):
     :func:`run_top_bench` samples ``out_valid``, ``out_first`` and
     ``out_words`` before every rising edge, the beats are held to SPEC section
-    6 by :func:`cosim.stream_ports.check_beats` and compared with
-    :func:`golden.beats.beats` of the literal SPEC rule's words.
+    6 by :func:`tespike.cosim.stream_ports.check_beats` and compared with
+    :func:`tespike.golden.beats.beats` of the literal SPEC rule's words.
 """
 
 from __future__ import annotations
@@ -57,10 +57,10 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.config import SensorConfig, load_config
-from golden.errors import InputError
-from golden.io import check_stimulus, load_stimulus
-from golden.reference import step_reference
+from tespike.golden.config import SensorConfig, load_config
+from tespike.golden.errors import InputError
+from tespike.golden.io import check_stimulus, load_stimulus
+from tespike.golden.reference import step_reference
 
 from .compare import first_difference
 from .outside import RESET_CLOCKS, pack_rows, words_per_row
@@ -123,7 +123,7 @@ class Settings:
 
     def inputs(self) -> tuple[np.ndarray, np.ndarray | None]:
         """The stimulus and the reset vector (None without ``resets``); one line if they disagree."""
-        from golden.beats import beat_count
+        from tespike.golden.beats import beat_count
 
         from .resets import check_resets, reset_sweep
         if self.resets is None:
@@ -186,7 +186,7 @@ async def _drive(dut, top: Top, run: Run) -> tuple[list, list, np.ndarray]:
     """Reset, then per clock ``rst``/``charge`` at the falling edge and the outputs sampled a step later.
 
     Either top: the valid flag, ``out_first`` (streaming top only) and the word port of
-    :class:`cosim.tops.Top`. Returns the sampled clocks, the ``out_first`` values and
+    :class:`tespike.cosim.tops.Top`. Returns the sampled clocks, the ``out_first`` values and
     the word port's values as uint32 rows.
     """
     from cocotb.clock import Clock
@@ -230,9 +230,9 @@ async def run_top_bench(dut, settings: Settings) -> dict:
 
     Returns the stimulus, the reset vector (or None) and ``outputs``: words
     ``(K, H, W)`` of the parallel top or beats ``(K, B, N)`` of the streaming top,
-    held to SPEC section 6 (:meth:`cosim.tops.Top.result`); with resets, each
+    held to SPEC section 6 (:meth:`tespike.cosim.tops.Top.result`); with resets, each
     segment's. Raises ``AssertionError`` (the test fails) on X/Z and on wrong port
-    widths, :class:`cosim.outside.SimulatorRunError` on outputs that break SPEC section 6.
+    widths, :class:`tespike.cosim.outside.SimulatorRunError` on outputs that break SPEC section 6.
     """
     top = Top(settings.config, settings.height, settings.width, settings.lanes)
     lanes = f" and {top.lanes} lanes" if top.streaming else ""
@@ -280,7 +280,7 @@ if _cocotb is not None:
 
     async def _stream_equal_golden(dut, settings: Settings) -> None:
         """The streaming top's beats equal golden.beats.beats of the literal SPEC rule's words."""
-        from golden.beats import beats
+        from tespike.golden.beats import beats
 
         from .stream_ports import last_beat_latency
 

@@ -1,6 +1,6 @@
-"""Run the cocotb testbench (:mod:`cosim.cocotb_bench`) under Icarus, Verilator or another simulator.
+"""Run the cocotb testbench (:mod:`tespike.cosim.cocotb_bench`) under Icarus, Verilator or another simulator.
 
-:func:`run_cocotb` writes the array Verilog (``rtl.verilog.array_verilog``, or
+:func:`run_cocotb` writes the array Verilog (``tespike.rtl.verilog.array_verilog``, or
 a file the caller names: a designer's own Verilog with the SPEC section 6
 ports), builds it with cocotb's runner (``cocotb.runner.get_runner``) and runs
 the test module in the simulator. The build is cached under a hash of the
@@ -28,14 +28,14 @@ import sys
 import tempfile
 from pathlib import Path
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 from .cocotb_bench import Settings
 from .outside import (SimulatorBuildError, SimulatorMissingError, cache_entry, content_hash,
                       default_cache_root, first_error_line, top_module)
 
 #: The test module cocotb loads in the simulator.
-TEST_MODULE = "cosim.cocotb_bench"
+TEST_MODULE = "tespike.cosim.cocotb_bench"
 
 #: Simulators the project runs in its own tests, with the executables each needs.
 TESTED_SIMULATORS = {"icarus": ("iverilog", "vvp"), "verilator": ("verilator",)}
@@ -155,7 +155,7 @@ def build(verilog_path: Path, top: str, simulator: str, cache_root: Path | None 
 
 def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: str | Path | None = None,
                work_dir: str | Path | None = None, cache_root: Path | None = None) -> CocotbResult:
-    """Run :func:`cosim.cocotb_bench.spec_ports_equal_golden` on one simulator.
+    """Run :func:`tespike.cosim.cocotb_bench.spec_ports_equal_golden` on one simulator.
 
     ``verilog_path``: the Verilog to test (default: the generated array of
     ``settings``); ``work_dir``: where the run's log and results go (default: a
@@ -166,7 +166,7 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
     if settings.lanes is None:
         top = top_module(settings.config)
     else:
-        from golden.beats import check_lanes
+        from tespike.golden.beats import check_lanes
 
         from .stream_ports import stream_top_module
         check_lanes(settings.config, settings.height, settings.width, settings.lanes)
@@ -176,10 +176,10 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
         if verilog_path is None:
             verilog_path = Path(scratch) / "array.v"
             if settings.lanes is None:
-                from rtl.verilog import array_verilog
+                from tespike.rtl.verilog import array_verilog
                 text = array_verilog(settings.config, settings.height, settings.width)
             else:
-                from rtl.verilog_stream import stream_array_verilog
+                from tespike.rtl.verilog_stream import stream_array_verilog
                 text = stream_array_verilog(settings.config, settings.height, settings.width, settings.lanes)
             verilog_path.write_text(text)
         verilog_path = Path(verilog_path)

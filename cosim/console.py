@@ -1,6 +1,6 @@
 """What a command prints on success and whether it draws progress bars.
 
-Command modules import these from here (not from :mod:`cosim.cli`, which imports
+Command modules import these from here (not from :mod:`tespike.cosim.cli`, which imports
 the command modules), so the dependency runs one way: cli -> commands -> console.
 """
 

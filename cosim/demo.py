@@ -4,20 +4,20 @@ Stages (each timed, each written, each with the individual command that redoes i
 
 1. scene: the shipped CC0 panorama, panned (``I.npy``);
 2. golden, full frame: TE from the per-clock electrons of
-   :func:`golden.fastsim.iter_scene_stimulus` through the cycle-exact
-   :class:`golden.sensor.PixelArray` (so the RTL crop below gets literally the
+   :func:`tespike.golden.fastsim.iter_scene_stimulus` through the cycle-exact
+   :class:`tespike.golden.sensor.PixelArray` (so the RTL crop below gets literally the
    electrons the golden model got), ML count and ML msb with the fast
-   simulator :func:`golden.fastsim.simulate_scene` (same law); ``S_<sensor>.npz``;
+   simulator :func:`tespike.golden.fastsim.simulate_scene` (same law); ``S_<sensor>.npz``;
 3. RTL: the TE pixel array (Amaranth by default, pixels inlined, no build) on a
    crop of those electrons (``E_crop.npy``), with a VCD and a GTKWave save file
    opening on one readout interval; the stream is rebuilt from the VCD with
-   vcdvcd (:func:`cosim.vcd.waveform_stream`) and compared with the golden
+   vcdvcd (:func:`tespike.cosim.vcd.waveform_stream`) and compared with the golden
    stream of the same pixels and readouts: "bit-identical", or the first
    differing readout, pixel and both words (``verdict.txt``, exit 1);
-4. reconstruction: every method of :data:`recon.methods.RECON_METHODS` with weights for the sensors on every
-   golden stream (:func:`recon.evaluate.evaluate`: PSNR-mu / SSIM-mu, run time
+4. reconstruction: every method of :data:`tespike.recon.methods.RECON_METHODS` with weights for the sensors on every
+   golden stream (:func:`tespike.recon.evaluate.evaluate`: PSNR-mu / SSIM-mu, run time
    the median of repeats) and on the RTL's own stream;
-5. dynamic range (formula and measured, :mod:`golden.dynamic_range`) and a
+5. dynamic range (formula and measured, :mod:`tespike.golden.dynamic_range`) and a
    small hardware cost table (Yosys, when installed);
 6. pictures and ``report.md``.
 """
@@ -31,11 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.errors import InputError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
 
 #: Sensors of the golden full frame: file label -> config preset (paper section 6.1 and eq. 10),
-#: in :data:`recon.evaluate.SENSORS` order: the paper's ML (msb) camera, TE, the full-count ML camera.
+#: in :data:`tespike.recon.evaluate.SENSORS` order: the paper's ML (msb) camera, TE, the full-count ML camera.
 SENSORS = {"ml-msb": "ml-msb", "te": "te", "ml": "ml"}
 #: The sensor the RTL runs (the paper's subject).
 RTL_SENSOR = "te"
@@ -82,7 +82,7 @@ class Progress:
 
 
 def _save_npy(path: Path, array: np.ndarray) -> None:
-    from golden.io import atomic_output
+    from tespike.golden.io import atomic_output
     with atomic_output(path) as tmp:
         with open(tmp, "wb") as handle:
             np.save(handle, array)
@@ -100,10 +100,10 @@ def choose_crop(light: np.ndarray, size: int) -> tuple[int, int]:
 
 # ---------------------------------------------------------------- hardware cost
 def hardware_cost(configs: dict[str, SensorConfig], yosys: str = "yosys") -> list[dict] | str:
-    """Per sensor: Yosys cells, flip-flops and transistor estimates (:func:`cosim.synthesis.synthesize`)
+    """Per sensor: Yosys cells, flip-flops and transistor estimates (:func:`tespike.cosim.synthesis.synthesize`)
     of one pixel and of the shared timing block. A string says why there is no table (Yosys
     missing, failing, or reporting no usable estimate): the report says so instead of crashing."""
-    from rtl.verilog import module_names, pixel_verilog, timing_verilog
+    from tespike.rtl.verilog import module_names, pixel_verilog, timing_verilog
 
     from .synthesis import SynthesisError, synthesize, yosys_missing
     missing = yosys_missing(yosys)
@@ -125,9 +125,9 @@ def hardware_cost(configs: dict[str, SensorConfig], yosys: str = "yosys") -> lis
 def check_options(out, *, frames, height, width, seed, crop, rtl_readouts, backend, repeats, window,
                   sensors) -> tuple[int, int]:
     """Refuse a bad option in one line; return (crop, RTL readouts) with their defaults resolved."""
-    from cosim.backends import NAMES
-    from golden.paths import check_output_dir
-    from recon.scenes import MAX_VOXELS
+    from tespike.cosim.backends import NAMES
+    from tespike.golden.paths import check_output_dir
+    from tespike.recon.scenes import MAX_VOXELS
 
     for key, value, low in (("--frames", frames, 1), ("--height", height, 1), ("--width", width, 1),
                             ("--crop", crop, 1), ("--rtl-readouts", rtl_readouts, 1),
@@ -168,10 +168,10 @@ def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, 
                vcd: bool, weights=None) -> None:
     """Refuse up front (one line) a demo whose arrays do not fit in memory or whose files do not
     fit on the disk of ``out``: a lower bound of each, from the sizes the options give."""
-    from cosim.room import require_room as require
-    from golden.io import word_dtype
-    from golden.light import stimulus_dtype
-    from recon.methods import available_methods
+    from tespike.cosim.room import require_room as require
+    from tespike.golden.io import word_dtype
+    from tespike.golden.light import stimulus_dtype
+    from tespike.recon.methods import available_methods
 
     from .vcd import VCD_BYTES_PER_PIXEL_CLOCK
     te = configs[RTL_SENSOR]
@@ -200,13 +200,13 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     progress bars within the stages (default: when not quiet and stderr is a terminal); ``weights``:
     learned methods' weights files to use instead of the shipped ones for the sensor each was trained for.
     """
-    from golden.config import load_config
-    from golden.fastsim import iter_scene_stimulus, simulate_scene
-    from golden.io import save_images, save_stream
-    from golden.sensor import PixelArray, simulate
-    from recon.learned import weights_by_sensor
-    from recon.pictures import write_text
-    from recon.scenes import make_scene
+    from tespike.golden.config import load_config
+    from tespike.golden.fastsim import iter_scene_stimulus, simulate_scene
+    from tespike.golden.io import save_images, save_stream
+    from tespike.golden.sensor import PixelArray, simulate
+    from tespike.recon.learned import weights_by_sensor
+    from tespike.recon.pictures import write_text
+    from tespike.recon.scenes import make_scene
 
     from .backends import backend as run_backend, checked_words
     from .compare import first_difference
@@ -275,8 +275,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         raise RuntimeError("golden on the crop stimulus differs from the full frame's crop")
     rtl_info = {"backend": backend, "vcd": None}
     if backend == "amaranth":
-        from cosim.rtlsim import rtl_run
-        from cosim.vcd import waveform_stream
+        from tespike.cosim.rtlsim import rtl_run
+        from tespike.cosim.vcd import waveform_stream
         run = rtl_run(te, crop_stimulus, vcd_path=out / "W.vcd", gtkw_path=out / "W.gtkw", flat=True,
                       progress=bars)
         read_started = time.perf_counter()
@@ -303,10 +303,10 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     # 4. reconstruction: every method on every golden stream, and on the RTL's own stream
     started = progress.begin("reconstruction: every method on every stream (run time: median of "
                              f"{repeats}) and on the RTL stream")
-    from recon.evaluate import evaluate, label, scored_frames
-    from recon.report import write_outputs
-    from recon.methods import RECON_METHODS, available_methods, reconstruct
-    from recon.metrics import psnr_mu, ssim_mu
+    from tespike.recon.evaluate import evaluate, label, scored_frames
+    from tespike.recon.report import write_outputs
+    from tespike.recon.methods import RECON_METHODS, available_methods, reconstruct
+    from tespike.recon.metrics import psnr_mu, ssim_mu
     methods = available_methods(configs.values(), ready)     # learned ones only where there are weights
     by_config = {configs[name]: streams[name] for name in configs}
     evaluation = evaluate([("default", light)], lambda config, scene, rng: by_config[config],
@@ -368,7 +368,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     write_text(out / "report.md", report)
 
     if not quiet:
-        from recon.report import table_markdown
+        from tespike.recon.report import table_markdown
         print(table_markdown(evaluation), end="")
     print(f"RTL: {verdict}")
     print(f"wrote {out}/: report.md, verdict.txt, I.npy, S_*.npz, R_*.npy, E_crop.npy, "
@@ -380,7 +380,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
 
 def dynamic_ranges(configs: dict[str, SensorConfig], n_s: int = 16) -> list[dict]:
     """Formula (N_s = 1 and ``n_s``) and measured range (noise-free electrons, 5 % and 20 %)."""
-    from golden.dynamic_range import constant_light_words, formula_db, light_grid, measure
+    from tespike.golden.dynamic_range import constant_light_words, formula_db, light_grid, measure
     rows = []
     grid = light_grid()
     windows = 20

@@ -1,6 +1,6 @@
 """The text of the demo's ``report.md`` and of its RTL verdict: words only, no work.
 
-:func:`cosim.demo.run_demo` measures; this module turns its measurements into
+:func:`tespike.cosim.demo.run_demo` measures; this module turns its measurements into
 Markdown (configuration, RTL against golden, quality tables, dynamic range,
 hardware cost, stage times and the commands that redo each stage).
 """
@@ -13,7 +13,7 @@ from .synthesis import ABC_GATE_SETS, span
 
 def verdict_text(difference, backend: str, readouts: int, crop: int, corner) -> str:
     """The RTL's verdict in one line: bit-identical, or the first difference
-    (:class:`cosim.compare.Difference`) with its place in the frame."""
+    (:class:`tespike.cosim.compare.Difference`) with its place in the frame."""
     if difference is None:
         return (f"bit-identical: {backend} RTL == golden model, {readouts} readouts x {crop} x {crop} pixels "
                 f"({readouts * crop * crop} words)")
@@ -34,7 +34,7 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
 
     import torch
 
-    from recon.report import table_markdown
+    from tespike.recon.report import table_markdown
     y, x, size = crop
     te = rtl_config
     lines = ["# tespike demo report", "",

@@ -1,9 +1,9 @@
 """Run the generated Verilog of either top in Icarus Verilog: an independent, outside check.
 
-:func:`run_icarus` (the parallel top, ``rtl.verilog.array_verilog``) and
+:func:`run_icarus` (the parallel top, ``tespike.rtl.verilog.array_verilog``) and
 :func:`run_icarus_stream` (the streaming top, ``--lanes N``) write the top's
 Verilog and one Verilog-2005 testbench (:func:`_testbench`, its output ports
-taken from :class:`cosim.tops.Top`) that drives only the SPEC section 6 ports:
+taken from :class:`tespike.cosim.tops.Top`) that drives only the SPEC section 6 ports:
 it reads the stimulus rows with ``$readmemh`` (and the reset vector with
 ``$readmemb``), holds ``rst`` for :data:`~cosim.outside.RESET_CLOCKS` clocks,
 then per pixel clock puts the row on ``charge`` (and its ``rst``), waits for the
@@ -13,7 +13,7 @@ logic to settle, samples the outputs (``frame_valid`` / ``frame``, or
 Amaranth's initialisers SystemVerilog semantics), run with ``vvp``.
 
 Icarus is slow (tens of cycles per second at 1024 pixels): use it on small
-arrays; use :mod:`cosim.verilator` for scale.
+arrays; use :mod:`tespike.cosim.verilator` for scale.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.io import atomic_output
+from tespike.golden.config import SensorConfig
+from tespike.golden.io import atomic_output
 
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, first_error_line, hex_to_rows,
                       pack_rows, require_tool, rows_to_hex, run_process)
@@ -143,7 +143,7 @@ def _parse_captures(path: Path, what: str, word_port: str = "frame") -> tuple[np
 
 def _simulate(run: Run, verilog: str, what: str, work_dir) -> tuple[np.ndarray, list[str]]:
     """Compile ``verilog`` with the top's testbench, run it on the stimulus (and ``rst`` = the
-    reset vector, :mod:`cosim.resets`); return the parsed captures."""
+    reset vector, :mod:`tespike.cosim.resets`); return the parsed captures."""
     top, stimulus = run.top, run.stimulus
     T = stimulus.shape[0]
     iverilog = require_tool("iverilog", "iverilog")
@@ -195,10 +195,10 @@ def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Pa
 
     ``work_dir`` keeps the Verilog, testbench, stimulus and captures there (an
     existing directory); by default a temporary directory is used and removed.
-    ``verilog`` replaces ``rtl.verilog.array_verilog(config, H, W)`` (tests use
+    ``verilog`` replaces ``tespike.rtl.verilog.array_verilog(config, H, W)`` (tests use
     a hand-written model of the same ports). ``resets`` (T booleans): ``rst`` of
     every stimulus clock; the run is then checked segment by segment
-    (:func:`cosim.resets.frame_segments`) and the result is a list of each
+    (:func:`tespike.cosim.resets.frame_segments`) and the result is a list of each
     segment's words ``(n, H, W)``.
     """
     return _run(prepare(config, stimulus, None, resets), verilog, work_dir)
@@ -214,10 +214,10 @@ def run_icarus_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,
                       work_dir: str | Path | None = None, verilog: str | None = None, resets=None):
     """Simulate the streaming top (``--lanes N``) on a (T, H, W) stimulus; return beats (K, B, N).
 
-    Equal to ``golden.beats.beats(golden words, N)`` for a correct array; the beat
-    timing is held to SPEC section 6 (:func:`cosim.stream_ports.check_beats`).
-    ``verilog`` replaces ``rtl.verilog_stream.stream_array_verilog(config, H, W, N)``.
+    Equal to ``tespike.golden.beats.beats(golden words, N)`` for a correct array; the beat
+    timing is held to SPEC section 6 (:func:`tespike.cosim.stream_ports.check_beats`).
+    ``verilog`` replaces ``tespike.rtl.verilog_stream.stream_array_verilog(config, H, W, N)``.
     ``resets``: as :func:`run_icarus`; the result is then each segment's beats ``(n, N)``
-    (:func:`cosim.resets.beat_segments`).
+    (:func:`tespike.cosim.resets.beat_segments`).
     """
     return _run(prepare(config, stimulus, lanes, resets), verilog, work_dir)

@@ -30,8 +30,8 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.errors import TespikeError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import TespikeError
 
 #: Clocks with ``rst`` high before pixel clock t = 0 (synchronous reset needs >= 1 edge).
 RESET_CLOCKS = 2

@@ -2,7 +2,7 @@
 
 Every harness (Amaranth, Icarus, Verilator, cocotb; both tops) takes an optional
 per-clock reset vector ``resets`` (T booleans) beside the stimulus. After the
-harness's own initial reset (:data:`cosim.outside.RESET_CLOCKS` edges, charge
+harness's own initial reset (:data:`tespike.cosim.outside.RESET_CLOCKS` edges, charge
 0), before rising edge t = 0, 1, ... it drives ``rst = resets[t]`` and
 ``charge`` = stimulus row t (the charge keeps flowing while ``rst`` is high, as
 a photodiode's does) and samples the outputs.
@@ -28,7 +28,7 @@ are lost. docs/cosim.md "Reset in the middle of a run" says it with the figures
 of the generated tops (latency 1; beat j at 2 + j clocks after the interval).
 
 :func:`frame_segments` and :func:`beat_segments` hold a run's captures to these
-rules (:class:`cosim.outside.SimulatorRunError` naming the first broken one) and
+rules (:class:`tespike.cosim.outside.SimulatorRunError` naming the first broken one) and
 return each segment's words; :func:`golden_segments` gives the golden model's
 words of each segment from zero state; :func:`reset_sweep` makes a reset
 vector that asserts ``rst`` at every phase of an interval and of its beats.
@@ -40,9 +40,9 @@ import dataclasses
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.beats import beat_count
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.beats import beat_count
 
 from .outside import SimulatorRunError, unpack_rows
 
@@ -209,8 +209,8 @@ def golden_segments(config: SensorConfig, stimulus: np.ndarray, resets: np.ndarr
     flattened to ``(K_s B, N)``: what a segment cut by no reset sends, of which a cut
     one sends a prefix.
     """
-    from golden.reference import step_reference
-    from golden.beats import beats
+    from tespike.golden.reference import step_reference
+    from tespike.golden.beats import beats
 
     T, H, W = stimulus.shape
     L = config.clocks_per_readout

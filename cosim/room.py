@@ -14,8 +14,8 @@ import shutil
 from pathlib import Path
 from typing import Mapping
 
-from golden.errors import InputError
-from golden.resources import require_memory
+from tespike.golden.errors import InputError
+from tespike.golden.resources import require_memory
 
 
 def _existing_folder(path: str | os.PathLike) -> Path:
@@ -77,7 +77,7 @@ def _is_stream(path) -> bool:
 
 
 def require_room(what: str, *, memory: int = 0, disk: Mapping[str | os.PathLike, int] | None = None) -> None:
-    """:func:`golden.resources.require_memory` and :func:`require_disk` in one call."""
+    """:func:`tespike.golden.resources.require_memory` and :func:`require_disk` in one call."""
     if memory > 0:
         require_memory(int(memory), what)
     if disk:
@@ -88,7 +88,7 @@ def reserved_memmap(path: str | os.PathLike, dtype, shape):
     """A new ``.npy`` at ``path`` opened as a writable memory map, its blocks reserved first
     (``posix_fallocate``): a memory map writing into a sparse file on a full disk dies of
     SIGBUS, leaving its temporary; a reservation fails at once with ENOSPC (an OSError
-    naming ``path``, which :func:`golden.io.atomic_output` reports and cleans up)."""
+    naming ``path``, which :func:`tespike.golden.io.atomic_output` reports and cleans up)."""
     import errno
 
     import numpy as np

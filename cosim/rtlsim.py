@@ -2,11 +2,11 @@
 
 :func:`rtl_words` is the pure function behind ``tespike rtl-sim`` and the conformance
 tests: stimulus ``(T, H, W)`` in, readout words ``(T / L, H, W)`` out, exactly what
-:func:`golden.sensor.simulate` returns for a correct RTL. :func:`rtl_stream_beats`
-is the same for the streaming array (:class:`rtl.stream.StreamingPixelArray`): beats
-``(K, B, N)`` out, equal to :func:`golden.beats.beats` of the golden words. Both
+:func:`tespike.golden.sensor.simulate` returns for a correct RTL. :func:`rtl_stream_beats`
+is the same for the streaming array (:class:`tespike.rtl.stream.StreamingPixelArray`): beats
+``(K, B, N)`` out, equal to :func:`tespike.golden.beats.beats` of the golden words. Both
 run the one testbench (:func:`_simulate`) and take a reset vector (``resets=``,
-:mod:`cosim.resets`).
+:mod:`tespike.cosim.resets`).
 
 The testbench is one async Amaranth testbench around a small wrapper
 (:class:`Bench`) that owns the ``sync`` clock domain. Per pixel clock it makes
@@ -31,10 +31,10 @@ import time
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.errors import ConfigError
-from golden.io import atomic_output
-from golden.beats import check_lanes
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
+from tespike.golden.io import atomic_output
+from tespike.golden.beats import check_lanes
 
 from .benchbus import (ARRAY_SCOPE, CLOCK_PERIOD_FS, CLOCK_PERIOD_S, RESET_CLOCKS,  # noqa: F401
                        frame_rows, iter_packed_charge, unpack_frames)
@@ -50,14 +50,14 @@ class RTLProtocolError(RuntimeError):
 # -- the design under test ---------------------------------------------------
 
 def build_array(config: SensorConfig, height: int, width: int, *, flat: bool = False):
-    """``rtl.array.PixelArray(config, height, width, flat=flat)``, the design under test."""
-    from rtl.array import PixelArray
+    """``tespike.rtl.array.PixelArray(config, height, width, flat=flat)``, the design under test."""
+    from tespike.rtl.array import PixelArray
     return build_or_refuse(lambda: PixelArray(config, height, width, flat=flat), config, height, width)
 
 
 def build_or_refuse(make, config, height, width):
     """Call ``make()``; turn the RTL's refusal of a configuration into a one-line :class:`ConfigError`."""
-    from golden.errors import TespikeError
+    from tespike.golden.errors import TespikeError
     try:
         return make()
     except TespikeError:
@@ -72,7 +72,7 @@ def _bench(array):
 
     The copies ``tb_clk``, ``tb_rst``, ``tb_charge``, ``tb_frame_valid`` and
     ``tb_frame`` live in the wrapper's own VCD scope (``bench.top``), so
-    :mod:`cosim.vcd` reads the stream back from names that do not depend on
+    :mod:`tespike.cosim.vcd` reads the stream back from names that do not depend on
     how the RTL names its signals.
     """
     from amaranth.hdl import ClockDomain, ClockSignal, Elaboratable, Module, ResetSignal, Signal
@@ -122,10 +122,10 @@ def rtl_words(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw
 
     ``vcd_path`` writes the whole waveform (all signals of the design) and
     ``gtkw_path`` a GTKWave save file showing the useful ones (see
-    :func:`cosim.vcd.write_gtkw`); both appear only if the run succeeds.
+    :func:`tespike.cosim.vcd.write_gtkw`); both appear only if the run succeeds.
     ``progress`` shows a tqdm bar (``None``: only on a terminal). ``flat``
     simulates the array with its pixels inlined into one module (same logic).
-    ``resets`` (T booleans): ``rst`` of every stimulus clock (:mod:`cosim.resets`);
+    ``resets`` (T booleans): ``rst`` of every stimulus clock (:mod:`tespike.cosim.resets`);
     the result is then a list of each segment's words ``(n, H, W)``.
     """
     return rtl_run(config, stimulus, vcd_path=vcd_path, gtkw_path=gtkw_path,
@@ -140,7 +140,7 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
     ``reset_charge`` is the value of the whole ``charge`` bus while the initial
     reset is held (the tests drive all ones: a synchronous reset must ignore it).
     With ``resets``, ``words`` is the list of each segment's words, checked by
-    :func:`cosim.resets.frame_segments` (``latency`` is then None).
+    :func:`tespike.cosim.resets.frame_segments` (``latency`` is then None).
     """
     run = prepare(config, stimulus, None, resets)
     T, H, W = stimulus.shape
@@ -175,8 +175,8 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
 
 
 def build_stream_array(config: SensorConfig, height: int, width: int, lanes: int, *, flat: bool = False):
-    """``rtl.stream.StreamingPixelArray(config, height, width, lanes, flat=flat)``, the design under test."""
-    from rtl.stream import StreamingPixelArray
+    """``tespike.rtl.stream.StreamingPixelArray(config, height, width, lanes, flat=flat)``, the design under test."""
+    from tespike.rtl.stream import StreamingPixelArray
     check_lanes(config, height, width, lanes)
     return build_or_refuse(lambda: StreamingPixelArray(config, height, width, lanes, flat=flat),
                            config, height, width)
@@ -186,11 +186,11 @@ def rtl_stream_beats(config: SensorConfig, stimulus: np.ndarray, lanes: int, *, 
                      resets=None):
     """Run the streaming RTL on ``stimulus`` (T, H, W); return its beats (K, B, N) as int64.
 
-    The Amaranth counterpart of :func:`cosim.icarus.run_icarus_stream` and
-    :func:`cosim.verilator.run_verilator_stream`, held to SPEC section 6 by the same
-    check (:func:`cosim.stream_ports.check_beats`). ``resets`` (T booleans): ``rst``
-    of every stimulus clock (:mod:`cosim.resets`); the result is then a list of each
-    segment's beats ``(n, N)`` (:func:`cosim.resets.beat_segments`).
+    The Amaranth counterpart of :func:`tespike.cosim.icarus.run_icarus_stream` and
+    :func:`tespike.cosim.verilator.run_verilator_stream`, held to SPEC section 6 by the same
+    check (:func:`tespike.cosim.stream_ports.check_beats`). ``resets`` (T booleans): ``rst``
+    of every stimulus clock (:mod:`tespike.cosim.resets`); the result is then a list of each
+    segment's beats ``(n, N)`` (:func:`tespike.cosim.resets.beat_segments`).
     """
     if resets is not None:
         return rtl_stream_run(config, stimulus, lanes, flat=flat, resets=resets)

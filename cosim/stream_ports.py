@@ -2,10 +2,10 @@
 
 Every harness (Amaranth, Icarus, Verilator, cocotb) samples ``out_valid``,
 ``out_first`` and ``out_words`` before each rising edge t (pixel clock t after
-reset, the convention of :mod:`cosim.outside`) and records a capture for each
+reset, the convention of :mod:`tespike.cosim.outside`) and records a capture for each
 clock with ``out_valid`` high. :func:`check_beats` holds the captures to SPEC
 section 6 and returns them as beats ``(K, B, N)``, to be compared with
-:func:`golden.beats.beats` of the golden words:
+:func:`tespike.golden.beats.beats` of the golden words:
 
 * exactly K * B beats, ``out_first`` high on beat 0 of each interval only;
 * interval k's beats not before its last clock t = (k+1)L - 1, and its last
@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.beats import beat_count
+from tespike.golden.config import SensorConfig
+from tespike.golden.beats import beat_count
 
 from .outside import SimulatorRunError, unpack_rows
 

@@ -1,7 +1,7 @@
 """Yosys synthesis of the project's Verilog: cells, flip-flops and a CMOS transistor estimate.
 
 One function, :func:`synthesize`, for both the demo's small cost table
-(:mod:`cosim.demo`) and the full study (``benchmarks/hw_cost.py``,
+(:mod:`tespike.cosim.demo`) and the full study (``benchmarks/hw_cost.py``,
 ``docs/hardware-cost.md``). ``synth -top <module>; stat`` counts cells of
 Yosys's internal gate library and flip-flops; then every flip-flop is legalised
 to a plain D flip-flop (reset and enable become gates), the logic is mapped by

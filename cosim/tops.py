@@ -4,13 +4,13 @@ SPEC section 6 has two tops with the same inputs (``clk``, ``rst``, ``charge``)
 and different outputs: the parallel top ``<mode>_pixel_array`` shows every
 word of an interval at once (``frame_valid``, ``frame``), the streaming top
 ``<mode>_pixel_array_stream`` sends them as B beats of N lanes (``out_valid``,
-``out_first``, ``out_words``). Each simulator module (:mod:`cosim.rtlsim`,
-:mod:`cosim.icarus`, :mod:`cosim.verilator`, :mod:`cosim.cocotb_bench`) serves
+``out_first``, ``out_words``). Each simulator module (:mod:`tespike.cosim.rtlsim`,
+:mod:`tespike.cosim.icarus`, :mod:`tespike.cosim.verilator`, :mod:`tespike.cosim.cocotb_bench`) serves
 both through :class:`Top`: which output ports to sample, how wide they are, how
 many captures an interval makes, how long to run past the stimulus, and which
-check turns the captures into words (:func:`cosim.outside.check_captures`) or
-beats (:func:`cosim.stream_ports.check_beats`), or, with a reset vector, into
-each segment's (:mod:`cosim.resets`). :func:`prepare` is the run prologue they
+check turns the captures into words (:func:`tespike.cosim.outside.check_captures`) or
+beats (:func:`tespike.cosim.stream_ports.check_beats`), or, with a reset vector, into
+each segment's (:mod:`tespike.cosim.resets`). :func:`prepare` is the run prologue they
 share: the stimulus, lane count and reset vector checked before anything is built.
 """
 
@@ -20,9 +20,9 @@ import dataclasses
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.io import check_stimulus
-from golden.beats import beat_count, check_lanes
+from tespike.golden.config import SensorConfig
+from tespike.golden.io import check_stimulus
+from tespike.golden.beats import beat_count, check_lanes
 
 from .outside import check_captures, top_module, unpack_rows
 from .resets import beat_segments, check_resets, frame_segments, segments
@@ -91,9 +91,9 @@ class Top:
     def verilog(self) -> str:
         """The generated Verilog of this top (``tespike verilog [--lanes N]``)."""
         if self.streaming:
-            from rtl.verilog_stream import stream_array_verilog
+            from tespike.rtl.verilog_stream import stream_array_verilog
             return stream_array_verilog(self.config, self.height, self.width, self.lanes)
-        from rtl.verilog import array_verilog
+        from tespike.rtl.verilog import array_verilog
         return array_verilog(self.config, self.height, self.width)
 
     def empty(self) -> np.ndarray:
@@ -104,7 +104,7 @@ class Top:
 
     def result(self, run: "Run", clocks, firsts, rows, what: str):
         """Captures -> words ``(K, H, W)`` / beats ``(K, B, N)``, held to SPEC section 6; with resets,
-        each segment's words ``(n, H, W)`` / beats ``(n, N)`` (:mod:`cosim.resets`)."""
+        each segment's words ``(n, H, W)`` / beats ``(n, N)`` (:mod:`tespike.cosim.resets`)."""
         H, W, T = self.height, self.width, run.stimulus.shape[0]
         clocks = np.asarray(clocks, np.int64)
         if run.resets is not None:

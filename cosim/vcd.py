@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.errors import InputError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
 
 from . import benchbus
 from .benchbus import BENCH_SCOPE
@@ -258,7 +258,7 @@ def bit_toggles(vcd_path, suffixes: tuple[str, ...]) -> dict[str, int]:
 
     Each value change counts the bits that differ from the previous value (a value
     with x or z bits counts nothing, and nor does the first value: the initial state).
-    The golden model's :func:`golden.toggles.count_toggles` is checked against this.
+    The golden model's :func:`tespike.golden.toggles.count_toggles` is checked against this.
     """
     from vcdvcd import VCDVCD
 

@@ -1,9 +1,9 @@
 """Run the generated Verilog of either top in Verilator, for scale (SPEC section 6 ports only).
 
-:func:`run_verilator` (the parallel top, ``rtl.verilog.array_verilog``) and
+:func:`run_verilator` (the parallel top, ``tespike.rtl.verilog.array_verilog``) and
 :func:`run_verilator_stream` (the streaming top, ``--lanes N``, up to the
 400 x 250 sensor) write the top's Verilog and one C++ harness
-(:func:`harness_cpp`, its output ports taken from :class:`cosim.tops.Top`) that
+(:func:`harness_cpp`, its output ports taken from :class:`tespike.cosim.tops.Top`) that
 knows nothing but the SPEC section 6 ports: it holds ``rst`` for
 :data:`~cosim.outside.RESET_CLOCKS` clocks, then applies one stimulus row (and
 its ``rst``, with a reset vector) per pixel clock, samples the outputs before
@@ -33,9 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.io import atomic_output
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.io import atomic_output
 
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, cache_entry, content_hash,
                       default_cache_root, first_error_line, pack_rows, require_tool, words_per_row)
@@ -140,7 +140,7 @@ def harness_cpp(top: str, charge_bits: int, output_bits: int, outputs: str = "fr
     streaming top: a uint64 clock, a uint32 ``out_first`` and the ``out_words``
     words, one per clock with ``out_valid`` high). Arguments: STIMULUS CLOCKS
     EXPECTED FLUSH CAPTURES PROGRESS_EVERY [RESETS], RESETS a file of one byte
-    (0 or 1) per stimulus clock, ``rst`` of that clock (:mod:`cosim.resets`);
+    (0 or 1) per stimulus clock, ``rst`` of that clock (:mod:`tespike.cosim.resets`);
     EXPECTED counts the records after the last reset edge.
     """
     valid, word_port, has_first = HARNESS_OUTPUTS[outputs]
@@ -472,7 +472,7 @@ def build_stream(config: SensorConfig, verilog: str, height: int, width: int, la
     """Build (or find in the cache) the Verilator model of a streaming top; return the executable.
 
     With Verilator's module inlining: the streaming top's Verilog holds one copy of
-    the pixel rule whatever the size (:mod:`rtl.verilog_stream`); ``-fno-inline``
+    the pixel rule whatever the size (:mod:`tespike.rtl.verilog_stream`); ``-fno-inline``
     would only keep the timing module apart.
     """
     top = Top(config, height, width, lanes)
@@ -489,15 +489,15 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
     ``build_dir`` is the root of the build cache (default: ``$TESPIKE_CACHE`` or
     ``~/.cache/tespike``, then ``verilator/``). ``verilog`` replaces the array
     Verilog (tests use a hand-written model of the same ports); by default it
-    is ``rtl.verilog.array_verilog(config, H, W)``. ``inline=True`` builds with
+    is ``tespike.rtl.verilog.array_verilog(config, H, W)``. ``inline=True`` builds with
     Verilator's default module inlining instead of ``-fno-inline`` (see
     :func:`build_flags`); ``cxx_opt`` is g++'s optimisation of the model
     (:data:`CXX_OPT`). ``shared=True`` builds :func:`shared_pixel_view` of
     Verilog that has the ``<te|ml>_pixel`` module (the generated array; a
     hand-written model without it is built as given); ``shared=False`` builds
     the text exactly as given. The words are int64, equal bit for bit to
-    ``golden.sensor.simulate`` for a correct array. ``resets`` (T booleans):
-    ``rst`` of every stimulus clock (:mod:`cosim.resets`); the result is then a
+    ``tespike.golden.sensor.simulate`` for a correct array. ``resets`` (T booleans):
+    ``rst`` of every stimulus clock (:mod:`tespike.cosim.resets`); the result is then a
     list of each segment's words ``(n, H, W)``.
     """
     run = prepare(config, stimulus, None, resets)
@@ -520,10 +520,10 @@ def run_verilator_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int,
                          cxx_opt: str = CXX_OPT, resets=None):
     """Simulate the streaming top on a (T, H, W) stimulus in Verilator; return beats (K, B, N).
 
-    Equal to ``golden.beats.beats(golden words, N)`` for a correct array; the beat
-    timing is held to SPEC section 6 (:func:`cosim.stream_ports.check_beats`).
-    ``verilog`` replaces ``rtl.verilog_stream.stream_array_verilog(config, H, W, N)``.
-    ``resets`` (T booleans): ``rst`` of every stimulus clock (:mod:`cosim.resets`); the
+    Equal to ``tespike.golden.beats.beats(golden words, N)`` for a correct array; the beat
+    timing is held to SPEC section 6 (:func:`tespike.cosim.stream_ports.check_beats`).
+    ``verilog`` replaces ``tespike.rtl.verilog_stream.stream_array_verilog(config, H, W, N)``.
+    ``resets`` (T booleans): ``rst`` of every stimulus clock (:mod:`tespike.cosim.resets`); the
     result is then a list of each segment's beats ``(n, N)``.
     """
     run = prepare(config, stimulus, lanes, resets)

@@ -1,9 +1,9 @@
 """Bit-exact numpy reference of the time-encoding (TE) and multi-level (ML) spike camera.
 
-Depends on numpy alone. The pieces: :mod:`golden.config` (the one configuration
-type), :mod:`golden.sensor` (cycle-exact model), :mod:`golden.reference` (SPEC's
-update rule, literally), :mod:`golden.decode` (the one decoder),
-:mod:`golden.io` (the files of SPEC section 6), :mod:`golden.dynamic_range`
+Depends on numpy alone. The pieces: :mod:`tespike.golden.config` (the one configuration
+type), :mod:`tespike.golden.sensor` (cycle-exact model), :mod:`tespike.golden.reference` (SPEC's
+update rule, literally), :mod:`tespike.golden.decode` (the one decoder),
+:mod:`tespike.golden.io` (the files of SPEC section 6), :mod:`tespike.golden.dynamic_range`
 (formula and measured dynamic range).
 """
 

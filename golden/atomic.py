@@ -1,8 +1,8 @@
 """Atomic output files: write a hidden temporary, move it into place only when complete.
 
 Every writer of the project goes through :func:`atomic_output` (re-exported by
-:mod:`golden.io`), so a failed or interrupted run never leaves a half-written
-file. Standard library only, below :mod:`golden.config` and :mod:`golden.io`,
+:mod:`tespike.golden.io`), so a failed or interrupted run never leaves a half-written
+file. Standard library only, below :mod:`tespike.golden.config` and :mod:`tespike.golden.io`,
 which both use it.
 """
 
@@ -75,7 +75,7 @@ def _write_error(path: str, exc: OSError) -> InputError:
 def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
     """Yield a temporary path to write; on success move it to ``path``, else remove it.
 
-    ``path`` is checked with :func:`golden.paths.check_output_file` first. A
+    ``path`` is checked with :func:`tespike.golden.paths.check_output_file` first. A
     symlink's target is replaced (the link stays); a character device or FIFO
     (``/dev/null``, a pipe) is written through once the temporary is complete,
     never replaced. The file gets the mode the user's umask gives (an existing

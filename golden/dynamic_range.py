@@ -9,7 +9,7 @@ only fills the counter's remainder until it saturates). The paper writes
 alpha = 2^b2 - 1 (its only setting); SPEC also allows a smaller alpha.
 
 Measurement: constant light on a log grid is run through the cycle-exact
-engine (:mod:`golden.sensor`) and decoded (:mod:`golden.decode`); a light
+engine (:mod:`tespike.golden.sensor`) and decoded (:mod:`tespike.golden.decode`); a light
 passes when the mean decoded light over a window of N_s readouts is within a
 relative tolerance of the truth in at least a given fraction of the windows.
 The measured range is the longest run of passing grid lights.

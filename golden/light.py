@@ -77,7 +77,7 @@ def dark_electrons(model: str | None, shape, rng: np.random.Generator, *,
     """Dark electrons per pixel and readout interval (int64), one draw each.
 
     ``scale``: a per-pixel factor (float64, broadcast to ``shape``) applied to the
-    model's electrons before rounding (:mod:`golden.noise`: dark level, DSNU, hot
+    model's electrons before rounding (:mod:`tespike.golden.noise`: dark level, DSNU, hot
     pixels); ``None`` is 1 and gives exactly the unscaled draws.
 
     ``eq12``: ``x ~ N(400, 50)``, ``round(x)`` (half to even), and a negative
@@ -196,13 +196,13 @@ def poisson_stimulus(config: SensorConfig, scene: np.ndarray, rng=None, *,
                      dark_current: str | None = None, noise: bool = True, sensor=None) -> np.ndarray:
     """Scene light ``(K, H, W)`` -> per-clock electrons ``(K * L, H, W)``.
 
-    The stimulus for the cycle-exact model (:func:`golden.sensor.simulate`) and
+    The stimulus for the cycle-exact model (:func:`tespike.golden.sensor.simulate`) and
     the RTL. ``rng``: a numpy Generator or a seed. ``noise=False`` gives the
     deterministic stimulus of :func:`deterministic_clock_electrons` (and refuses
     dark current, which is random by nature). The dtype is the smallest unsigned
     one that holds ``2^input_bits - 1``. Memory is ``K * L * H * W`` values: use
-    it for crops, not whole videos (:mod:`golden.fastsim` simulates those).
-    ``sensor``: a :class:`golden.noise.Sensor` (non-idealities and their per-pixel
+    it for crops, not whole videos (:mod:`tespike.golden.fastsim` simulates those).
+    ``sensor``: a :class:`tespike.golden.noise.Sensor` (non-idealities and their per-pixel
     maps), instead of ``dark_current``.
     """
     scene = check_scene(scene)

@@ -8,7 +8,7 @@ unchanged: these effects only change the electrons it receives.
 
 :class:`SensorNoise` describes a kind of sensor (JSON file form, :func:`load_noise`):
 
-* ``dark_current``: the paper's eq. 12 or eq. 13 (:func:`golden.light.dark_electrons`),
+* ``dark_current``: the paper's eq. 12 or eq. 13 (:func:`tespike.golden.light.dark_electrons`),
   one draw per pixel and readout, times ``dark_level`` and the pixel's dark scale;
 * ``dsnu``: dark-signal non-uniformity, the relative standard deviation of the
   per-pixel dark scale (log-normal, mean 1; EMVA 1288's DSNU over the mean dark signal);

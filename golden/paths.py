@@ -74,7 +74,7 @@ def check_output_file(path: str | os.PathLike, what: str | None = None) -> Path:
 
     Accepted: a new file in an existing writable directory, an existing writable
     regular file (replaced atomically), an existing character device or FIFO
-    (written through by :func:`golden.io.atomic_output`, never replaced).
+    (written through by :func:`tespike.golden.io.atomic_output`, never replaced).
     """
     text = os.fspath(path)
     label = f"{what} {text!r}" if what else repr(text)
@@ -186,7 +186,7 @@ def check_output_dir(path: str | os.PathLike, what: str = "--out",
 
 def check_results_dir(path: str | os.PathLike, names: tuple[str, ...], force: bool,
                       what: str = "--out") -> Path:
-    """A folder a command fills whole (:func:`golden.atomic.atomic_folder`): new or empty;
+    """A folder a command fills whole (:func:`tespike.golden.atomic.atomic_folder`): new or empty;
     holding a previous run's results (only ``names``, a trailing ``/`` for a folder) only
     with ``force``; never a folder holding anything else, which replacing it would delete."""
     folder = check_output_dir(path, what)

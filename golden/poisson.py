@@ -1,4 +1,4 @@
-"""Poisson sampler by table inversion, for the fast simulator (:mod:`golden.fastsim`).
+"""Poisson sampler by table inversion, for the fast simulator (:mod:`tespike.golden.fastsim`).
 
 Why hand-written: ``numpy.random.Generator.poisson`` spends 30-70 ns per draw
 (transformed rejection, a few logs per draw), and the simulator draws millions
@@ -15,7 +15,7 @@ Law (exact decomposition): ``Poisson(lam) = Poisson(g) + Poisson(r)``, independe
   top bits of ``V`` pick a bucket; a bucket lying inside one CDF step gives the
   draw at once, the few others are settled by bisection between the first
   candidates of the bucket and of the next one. The table covers ``[lo, hi]``,
-  chosen with the rigorous tail bounds of :mod:`golden.light` so that the
+  chosen with the rigorous tail bounds of :mod:`tespike.golden.light` so that the
   mass left out on each side is below ``exp(log_tail)``: a draw outside is one
   of the simulator's bounded "surely not" events (docs/simulator.md, scene
   budget). The pmf comes from products of the ratios ``g / k`` around the mode,

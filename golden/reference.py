@@ -2,7 +2,7 @@
 
 This is the executable form of the specification, vectorised over pixels but
 looping over clocks. It is slow on purpose-free grounds (clarity over speed) and
-is what the fast cycle-exact engine (:mod:`golden.sensor`) and the RTL are
+is what the fast cycle-exact engine (:mod:`tespike.golden.sensor`) and the RTL are
 checked against. Integer arithmetic in int64 cannot wrap: acc < 2^62 and
 e < 2^32, so q = acc + e < 2^63.
 """

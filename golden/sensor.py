@@ -1,7 +1,7 @@
 """Cycle-exact model of a TE or ML pixel array (SPEC sections 3 and 4), fast and run in chunks.
 
 :class:`PixelArray` gives the same words, clock for clock, as the literal
-per-clock rule :func:`golden.reference.step_reference`. State (acc, sfc, ovf,
+per-clock rule :func:`tespike.golden.reference.step_reference`. State (acc, sfc, ovf,
 m and the clock phase; with the ML msb readout, sfc keeps its remainder across
 readouts) is carried between calls, so a run split anywhere gives the
 identical stream, and memory stays bounded by the chunk size however many

@@ -1,7 +1,7 @@
 """Exact switching activity of the pixel's flip-flops and readout word (an energy proxy).
 
 Counts, clock by clock, how many register bits change in each pixel of the RTL
-(:mod:`rtl.pixel`): the accumulator ``acc``, the TE counter ``sfc`` (b1 bits; its
+(:mod:`tespike.rtl.pixel`): the accumulator ``acc``, the TE counter ``sfc`` (b1 bits; its
 carry *is* the flag, so after an overflow it holds 0), flag ``ovf`` and latch ``m``
 (which the RTL does not clear at readout: it keeps the value it would latch), or
 the ML counter; and the readout word register (``word_reg``, loaded once per
@@ -10,7 +10,7 @@ The per-clock charge input register of the array is left out: it toggles with
 the light whatever the camera, and is the same for cameras with the same E.
 
 It is the literal SPEC section 3 rule over all pixels at once (one numpy
-operation per register per clock), not :class:`golden.sensor.PixelArray`'s
+operation per register per clock), not :class:`tespike.golden.sensor.PixelArray`'s
 engine: that engine's whole-block shortcuts never form the per-clock
 accumulator values whose bit changes are counted here. The words it returns are
 checked against that engine's in the tests, the toggles against a VCD of the

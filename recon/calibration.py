@@ -14,7 +14,7 @@ and a reconstruction ``x`` of that pixel is corrected to the light
 
 which is exact for any method linear in the decoded light (TFP's windowed mean,
 TFI's count over an interval) and is applied to every method's output in one
-place (:func:`recon.methods.reconstruct`). Light below 0 after subtracting the
+place (:func:`tespike.recon.methods.reconstruct`). Light below 0 after subtracting the
 dark rate is noise around darkness and is reported as 0 (the light is never
 negative).
 
@@ -30,7 +30,7 @@ in ``floored``.
 
 File ``C.npz`` (``np.savez``): ``dark`` (H, W) float64, light units (1 = 42000
 electrons) per readout; ``gain`` (H, W) float64, relative to the nominal pixel;
-``config``: the JSON text of the full :class:`golden.config.SensorConfig` the
+``config``: the JSON text of the full :class:`tespike.golden.config.SensorConfig` the
 streams were recorded with; ``dark_readouts``, ``flat_readouts`` (int), ``flat_light``
 (float), ``estimator`` (text), ``floored`` (int), ``overflow_share`` (float), and
 ``format`` = :data:`FORMAT`. A calibration applies only to streams of the same
@@ -44,9 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.decode import decode_spikes
-from golden.errors import InputError, TespikeError
+from tespike.golden.config import SensorConfig
+from tespike.golden.decode import decode_spikes
+from tespike.golden.errors import InputError, TespikeError
 
 #: The estimator written into every calibration file.
 ESTIMATOR = "mean-decoded"
@@ -118,7 +118,7 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
 
 def save_calibration(path: str | Path, calibration: Calibration) -> None:
     """Write ``C.npz`` (atomically: a temporary file beside it, then renamed)."""
-    from golden.io import atomic_output
+    from tespike.golden.io import atomic_output
     c = calibration
     with atomic_output(path) as tmp:
         with open(tmp, "wb") as handle:
@@ -131,7 +131,7 @@ def save_calibration(path: str | Path, calibration: Calibration) -> None:
 
 def load_calibration(path: str | Path) -> Calibration:
     """Read ``C.npz``, or one line naming the file and what is wrong."""
-    from golden.paths import check_input_file
+    from tespike.golden.paths import check_input_file
     shown = str(path)
     check_input_file(path, "calibration")
     try:
@@ -192,7 +192,7 @@ def correct(images: np.ndarray, calibration: Calibration) -> np.ndarray:
 def calibration_summary(calibration: Calibration) -> str:
     """One line: maps, readouts, mean dark (electrons per readout), gain spread, floored pixels."""
     c = calibration
-    from golden.config import DESIGN_ELECTRONS
+    from tespike.golden.config import DESIGN_ELECTRONS
     return (f"{c.shape[0]} x {c.shape[1]} pixels from {c.dark_readouts} dark and {c.flat_readouts} flat "
             f"readouts (flat light {c.flat_light:g}): dark {DESIGN_ELECTRONS * c.dark.mean():.0f} e-/readout "
             f"mean ({DESIGN_ELECTRONS * np.median(c.dark):.0f} median), gain {c.gain.mean():.4f} +- "

@@ -36,7 +36,7 @@ class PaperCost:
 
 
 def paper_table10() -> dict[str, PaperCost]:
-    """Method -> the paper's Table 10 row (parameters from ``recon.baselines.PAPER_PARAMETERS``)."""
+    """Method -> the paper's Table 10 row (parameters from ``tespike.recon.baselines.PAPER_PARAMETERS``)."""
     from .baselines import PAPER_PARAMETERS
     flops = {"spk2imgnet": 1.955e12, "bsf": 0.887e12, "mambaspike": 1.919e12, "net": 3.711e12}
     seconds = {"spk2imgnet": 0.418, "bsf": 0.231, "mambaspike": 0.004, "net": 0.005}

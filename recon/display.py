@@ -16,7 +16,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 if TYPE_CHECKING:                   # torch only for the annotations: importing this module stays light
     import torch

@@ -1,6 +1,6 @@
 """Evaluation harness: sequences -> TE and ML streams -> every method -> scored measurements.
 
-The harness measures; :mod:`recon.report` lays the :class:`Evaluation` out as the
+The harness measures; :mod:`tespike.recon.report` lays the :class:`Evaluation` out as the
 paper's Table 1, CSV files, plots and strips.
 
 For each light sequence ``I`` (K, H, W) and each sensor (the paper's
@@ -28,7 +28,7 @@ averaged (paper section 6.4).
 
 Simulation is passed in as a function (``simulate(config, light, rng) ->
 words``) because :mod:`recon` does not import the simulator; the command
-line and the benchmarks pass :func:`golden.fastsim.simulate_scene`.
+line and the benchmarks pass :func:`tespike.golden.fastsim.simulate_scene`.
 
 Sensors are named by a key (a sensor, not the configuration's ``mode``; the
 keys are ``--config`` presets): ``"ml-msb"`` is the ML camera the
@@ -39,17 +39,17 @@ is the table's ML column (``TFP_ML``, ``TFI_ML``); ``"te"`` the TE column;
 paper's), is added below the table as extra rows (``TFP_ML-count``, ...).
 The noise sensors of :data:`NOISE_SENSORS` (``"te+eq12"``, ``"te+eq13"``: the TE
 camera with the dark current of the paper's eq. 12 or 13, its Tables 6 to 9),
-or any sensor of ``noise_sensors=`` (a :class:`golden.noise.Sensor` per sensor key:
+or any sensor of ``noise_sensors=`` (a :class:`tespike.golden.noise.Sensor` per sensor key:
 dark level, non-uniformity, gain spread), get a table of their own
-(:func:`recon.report.noise_markdown`). A sensor ``<noise sensor>+cal`` is the same
-sensor reconstructed with its calibration (:mod:`recon.calibration`): per sequence
+(:func:`tespike.recon.report.noise_markdown`). A sensor ``<noise sensor>+cal`` is the same
+sensor reconstructed with its calibration (:mod:`tespike.recon.calibration`): per sequence
 frame size, :data:`CALIBRATION_READOUTS` dark readouts and as many under a flat
 light of :data:`CALIBRATION_FLAT`, simulated with the sensor (its own noise
 seed), estimate the per-pixel dark rate and gain that correct every method's output.
 
 Metrics: PSNR-mu and SSIM-mu always; ``metrics=`` adds any further column of
-:data:`recon.score.KEYS` (PU21-PSNR, HDR-VQM, FovVideoVDP, conventions in
-docs/metrics.md), computed by :func:`recon.score.score` on the scored frames;
+:data:`tespike.recon.score.KEYS` (PU21-PSNR, HDR-VQM, FovVideoVDP, conventions in
+docs/metrics.md), computed by :func:`tespike.recon.score.score` on the scored frames;
 FovVideoVDP, which costs about half a second per frame at any frame size here
 (100 times PSNR-mu at 96 x 128), on the middle ``vdp_frames`` of them where
 asked. HDR-VQM is its sequence value (15-frame tubes), the others frame means.
@@ -68,10 +68,10 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.io import check_scene
-from golden.resources import require_memory
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.io import check_scene
+from tespike.golden.resources import require_memory
 
 from .settings import DEFAULT_WINDOW, check_window
 
@@ -98,7 +98,7 @@ BASIC_METRICS = ("psnr_mu", "ssim_mu")
 WORKING_BYTES = 512 << 20
 
 #: ``simulate(config, light, rng) -> words``; for a noise sensor also ``noise_sensor=`` (a keyword:
-#: its :class:`golden.noise.Sensor`).
+#: its :class:`tespike.golden.noise.Sensor`).
 Simulate = Callable[..., np.ndarray]
 
 
@@ -130,9 +130,9 @@ def scored_frames(frames: int, window: int, span: int | None = None) -> slice:
 
 
 def default_noise_sensors(seed: int = 0) -> dict:
-    """The paper's noise sensors (:data:`NOISE_SENSORS`) as :class:`golden.noise.Sensor`: its
+    """The paper's noise sensors (:data:`NOISE_SENSORS`) as :class:`tespike.golden.noise.Sensor`: its
     dark current, no non-uniformity, sensor seed ``seed``."""
-    from golden.noise import Sensor, SensorNoise
+    from tespike.golden.noise import Sensor, SensorNoise
     return {sensor: Sensor(SensorNoise(dark_current=model), seed) for sensor, (_, model) in NOISE_SENSORS.items()}
 
 
@@ -143,7 +143,7 @@ def noise_base(sensor: str, noise_sensors) -> str | None:
 
 
 def calibrate_sensor(simulate: Simulate, config: SensorConfig, noise_sensor, shape: tuple[int, int], rng):
-    """A calibration of ``noise_sensor`` (a :class:`golden.noise.Sensor`) for frames of ``shape``:
+    """A calibration of ``noise_sensor`` (a :class:`tespike.golden.noise.Sensor`) for frames of ``shape``:
     dark and flat streams it records."""
     from .calibration import estimate
     dark = simulate(config, np.zeros((CALIBRATION_READOUTS, *shape), np.float32), rng, noise_sensor=noise_sensor)
@@ -197,7 +197,7 @@ class Evaluation:
     vdp_frames: int | None = None
     #: (method, sensor) -> why it was not run (a learned method's missing weights)
     missing: dict[tuple[str, str], str] = dataclasses.field(default_factory=dict)
-    #: method -> {"parameters", "flops"} of the learned methods (:func:`recon.complexity.measure`)
+    #: method -> {"parameters", "flops"} of the learned methods (:func:`tespike.recon.complexity.measure`)
     complexity: dict[str, dict] = dataclasses.field(default_factory=dict)
     #: frame size of the sequences (rows, columns), when all share one
     frame_size: tuple[int, int] | None = None
@@ -231,17 +231,17 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     """Simulate every sequence in every sensor, reconstruct with every method, score.
 
     ``sequences``: (label, light (K, H, W)) pairs; ``methods``: keys of
-    :data:`recon.methods.RECON_METHODS` (default all); ``seed`` makes the shot
+    :data:`tespike.recon.methods.RECON_METHODS` (default all); ``seed`` makes the shot
     noise reproducible (one independent stream per sequence and sensor);
     ``progress``: a bar (True), nothing (False) or ``"lines"`` (one line per step on
     stderr, for a log file); ``keep`` keeps every stream and reconstruction in the result (memory!);
-    ``options`` maps a method to extra keywords of :func:`recon.methods.reconstruct`
+    ``options`` maps a method to extra keywords of :func:`tespike.recon.methods.reconstruct`
     (e.g. ``{"tfi": {"search": "window"}}``); ``weights``: (method, sensor) -> the
-    learned method's weights file there (:func:`recon.learned.weights_by_sensor`; else
-    the shipped ones); ``repeats``: runs timed per method (the median is reported). ``metrics``: keys of :data:`recon.score.KEYS` (PSNR-mu
+    learned method's weights file there (:func:`tespike.recon.learned.weights_by_sensor`; else
+    the shipped ones); ``repeats``: runs timed per method (the median is reported). ``metrics``: keys of :data:`tespike.recon.score.KEYS` (PSNR-mu
     and SSIM-mu are always computed); ``vdp_frames``: compute FovVideoVDP on the
     middle this many scored frames only (None: all). A sensor key of ``noise_sensors``
-    (key -> :class:`golden.noise.Sensor`, over :func:`default_noise_sensors`: the
+    (key -> :class:`tespike.golden.noise.Sensor`, over :func:`default_noise_sensors`: the
     :data:`NOISE_SENSORS`) is simulated with ``simulate(..., noise_sensor=noise_sensors[key])``;
     ``<key>+cal`` is that sensor again, reconstructed with a calibration from its own
     dark and flat streams (:func:`calibrate_sensor`, one per sequence frame size).

@@ -5,7 +5,7 @@ HDR-VDP-3 (MATLAB only): its unit is the JOD (just-objectionable difference,
 10 = no visible difference, lower is worse), not HDR-VDP-3's Q.
 
 Each frame is judged as an image (non-foveated), both frames shown on
-:class:`recon.display.HdrDisplay` (the reference's peak at the display's peak)
+:class:`tespike.recon.display.HdrDisplay` (the reference's peak at the display's peak)
 through pyfvvdp's linear-EOTF photometry with the same peak and black level and
 no ambient light; the display geometry is pyfvvdp's ``standard_hdr_linear``
 (30-inch 3840 x 2160 monitor seen from 0.7472 m: 75.4 pixels per degree, one
@@ -23,10 +23,10 @@ import math
 import numpy as np
 import torch
 
-from golden.errors import InputError
-from golden.resources import require_memory
-from recon.display import DEFAULT_DISPLAY, HdrDisplay
-from recon.metrics import as_frames, frame_peaks, frame_stacks
+from tespike.golden.errors import InputError
+from tespike.golden.resources import require_memory
+from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay
+from tespike.recon.metrics import as_frames, frame_peaks, frame_stacks
 
 #: Memory per pixel of one frame pyfvvdp judges (measured: about 220 bytes at 2048 x 2048).
 BYTES_PER_PIXEL = 256

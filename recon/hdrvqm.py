@@ -6,7 +6,7 @@ reference (github.com/mperreir/HDR-VQM, version 2, July 2015), in torch
 project's other metrics and PU21 encoder are torch, and its FFT runs on any
 device). Lower is better; 0 for identical inputs.
 
-1. **Display**: both sequences are shown on :class:`recon.display.HdrDisplay`
+1. **Display**: both sequences are shown on :class:`tespike.recon.display.HdrDisplay`
    (the reference's peak at the display's peak, clipped to [black, peak]).
 2. **Perceived luminance**: PU21 ('banding_glare') of the emitted luminance.
 3. **Subband errors**: log-Gabor filters, 5 scales (wavelengths 3, 9, 27, 81,
@@ -50,10 +50,10 @@ import math
 import numpy as np
 import torch
 
-from golden.errors import InputError
-from golden.resources import require_memory
-from recon.display import DEFAULT_DISPLAY, HdrDisplay
-from recon.metrics import as_frames, frame_peaks, frame_stacks, pu21_encode
+from tespike.golden.errors import InputError
+from tespike.golden.resources import require_memory
+from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay
+from tespike.recon.metrics import as_frames, frame_peaks, frame_stacks, pu21_encode
 
 N_SCALES = 5
 N_ORIENTATIONS = 4

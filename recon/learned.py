@@ -4,12 +4,12 @@ A learned method's module takes (N, span, H, W) light decoded by golden's one
 decoder (scene units, key moment in the middle, H and W multiples of
 ``sizes.pyramid_factor``), the readouts of the span that lie in the stream and
 the sensor's one-spike light, and returns (N, 1, H, W) light at the key moment;
-its sizes dataclass is a :class:`recon.learning.sizes.SizesMixin` with
+its sizes dataclass is a :class:`tespike.recon.learning.sizes.SizesMixin` with
 ``span`` and ``pyramid_factor``. The machinery they share (output head,
 alignment, deformable convolution, mu-law, weights file, tiled inference) is
-:mod:`recon.learning`; one trainer (:mod:`recon.train`) and one data engine
-(:mod:`recon.engine`) serve them all. Each module reports how far its output
-pixels reach (:func:`receptive_radius`, derived by :mod:`recon.reach`).
+:mod:`tespike.recon.learning`; one trainer (:mod:`tespike.recon.train`) and one data engine
+(:mod:`tespike.recon.engine`) serve them all. Each module reports how far its output
+pixels reach (:func:`receptive_radius`, derived by :mod:`tespike.recon.reach`).
 
 Shipped weights live in :data:`WEIGHTS_DIR`, one file per method and sensor
 preset: ``<preset>.pt`` for the project's network (``net``), ``<method>-<preset>.pt``
@@ -25,8 +25,8 @@ from __future__ import annotations
 import functools
 from pathlib import Path
 
-from golden.config import PRESETS, SensorConfig
-from golden.errors import InputError
+from tespike.golden.config import PRESETS, SensorConfig
+from tespike.golden.errors import InputError
 
 #: Names of the learned methods in the paper's row order: its learned baselines, then the network.
 LEARNED = ("spk2imgnet", "bsf", "mambaspike", "net")
@@ -50,7 +50,7 @@ def method_classes(name: str) -> tuple[type, type]:
 
 def receptive_radius(sizes) -> int:
     """Frame pixels an output pixel of the learned method of ``sizes`` can reach (an upper bound;
-    :func:`recon.learning.infer.module_radius`)."""
+    :func:`tespike.recon.learning.infer.module_radius`)."""
     from .learning.infer import module_radius
     for model_cls, sizes_cls in learned_methods().values():
         if type(sizes) is sizes_cls:

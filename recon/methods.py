@@ -8,10 +8,10 @@ method, with bounded memory either way:
 - TFP and TFI work along time, pixel by pixel: the stream is processed in
   blocks of pixels, and results do not depend on the block size;
 - the learned methods (the project's network ``net`` and the paper's baselines
-  ``spk2imgnet``, ``bsf``, ``mambaspike``, :mod:`recon.learned`) are spatial:
+  ``spk2imgnet``, ``bsf``, ``mambaspike``, :mod:`tespike.recon.learned`) are spatial:
   each image comes from the span of readouts their sizes fix around it, over
-  whole tiles (:func:`recon.learning.infer.reconstruct_model`), with the shipped
-  weights of the stream's sensor preset (:func:`recon.learned.weights_path`) or
+  whole tiles (:func:`tespike.recon.learning.infer.reconstruct_model`), with the shipped
+  weights of the stream's sensor preset (:func:`tespike.recon.learned.weights_path`) or
   a weights file given (``weights``).
 """
 
@@ -23,8 +23,8 @@ from typing import Callable
 import numpy as np
 import torch
 
-from golden.config import SensorConfig
-from golden.errors import InputError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
 
 from .settings import ReconSettings
 from .stream import as_word_tensor, decode_light, output_images
@@ -71,7 +71,7 @@ class Method:
 
 
 #: name -> reconstruction method (not golden.fastsim's simulation methods). The learned
-#: ones ignore ``window``: they see the span their sizes fix (:func:`recon.learned.method_span`).
+#: ones ignore ``window``: they see the span their sizes fix (:func:`tespike.recon.learned.method_span`).
 RECON_METHODS: dict[str, Method] = {
     "tfp": Method("tfp", "mean decoded light over the window (spike-firing rate)", _tfp_block,
                   ("window", "estimator", "chunk_elements", "device", "dtype")),
@@ -95,15 +95,15 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
 
     ``method`` is a key of :data:`RECON_METHODS`. ``window`` (odd, readouts) and
     ``device`` (a torch device) apply to every method; further ``options``
-    are fields of :class:`recon.settings.ReconSettings` the method uses
+    are fields of :class:`tespike.recon.settings.ReconSettings` the method uses
     (``estimator``, ``search`` for TFI, ``chunk_elements``, ``dtype``). Words are checked
     legal for ``config``; an unknown method or option is refused. ``out``: a
     float32 (K, H, W) array to fill (e.g. a memory map of the output file, so
     the images never need to fit in memory); it is returned. ``weights``: a
     learned method's weights file (None: the shipped ones; refused for TFP and TFI).
-    ``calibration``: a :class:`recon.calibration.Calibration` of the sensor that recorded
+    ``calibration``: a :class:`tespike.recon.calibration.Calibration` of the sensor that recorded
     the stream; every method's output is then corrected for the pixels' dark rate and gain,
-    ``max(0, (x - dark) / gain)`` (:func:`recon.calibration.correct`), here and only here.
+    ``max(0, (x - dark) / gain)`` (:func:`tespike.recon.calibration.correct`), here and only here.
     """
     if method not in RECON_METHODS:
         raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")

@@ -34,7 +34,7 @@ import math
 import numpy as np
 import torch
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 from .learning.mulaw import compress
 from .pictures import MU  # noqa: F401  (the paper's mu, one constant for pictures and metrics)
@@ -98,7 +98,7 @@ def normalise(pred: torch.Tensor, gt: torch.Tensor, peak=None) -> tuple[torch.Te
 
 def mu_law(h: torch.Tensor, mu: float = MU) -> torch.Tensor:
     """Tone map T(H) = log(1 + mu H) / log(1 + mu) (paper eq. 11), H in [0, 1]: the learned
-    methods' own mu-law (:func:`recon.learning.mulaw.compress`), with the paper's mu by default."""
+    methods' own mu-law (:func:`tespike.recon.learning.mulaw.compress`), with the paper's mu by default."""
     return compress(h, mu)
 
 

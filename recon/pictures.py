@@ -3,7 +3,7 @@
 numpy and matplotlib only (no torch), so ``tespike view``, the demo's pictures and
 the benchmarks' plots share one tone map and one way of saving a figure without
 importing the evaluation or the network. Files are written atomically
-(:func:`golden.io.atomic_output`): a failed write leaves nothing.
+(:func:`tespike.golden.io.atomic_output`): a failed write leaves nothing.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.io import atomic_output
+from tespike.golden.io import atomic_output
 
 #: The paper's mu-law constant (its eq. 11).
 MU = 5000.0
@@ -24,7 +24,7 @@ ERROR_RANGE = 0.25
 def tone_map(light: np.ndarray, peak: float, mu: float = MU) -> np.ndarray:
     """Divide by the ground truth's peak, clip to [0, 1], mu-law (paper eq. 11); float64.
 
-    The numpy twin of :func:`recon.learning.mulaw.compress` (the metrics' and the learned
+    The numpy twin of :func:`tespike.recon.learning.mulaw.compress` (the metrics' and the learned
     methods' torch mu-law), kept because ``tespike view``, the demo's pictures and the
     benchmarks' plots run without importing torch (1.7 s of every start, measured here)."""
     h = np.clip(np.asarray(light, np.float64) / peak, 0.0, 1.0)

@@ -1,7 +1,7 @@
 """The report of an evaluation: the paper's Table 1 (Markdown, CSV), every result, the plots and strips.
 
-:func:`recon.evaluate.evaluate` (or :func:`recon.dataset.evaluate.evaluate_store`) measures;
-this module only lays out what an :class:`recon.evaluate.Evaluation` holds, so a table
+:func:`tespike.recon.evaluate.evaluate` (or :func:`tespike.recon.dataset.evaluate.evaluate_store`) measures;
+this module only lays out what an :class:`tespike.recon.evaluate.Evaluation` holds, so a table
 can be re-laid without re-running anything.
 """
 
@@ -167,7 +167,7 @@ def missing_notes(evaluation: Evaluation) -> list[str]:
 
 def noise_what(evaluation: Evaluation, sensor: str) -> str:
     """Column title of a noise sensor: the paper's dark current, else the options its
-    :class:`golden.noise.SensorNoise` sets (``shot noise only`` for an ideal sensor)."""
+    :class:`tespike.golden.noise.SensorNoise` sets (``shot noise only`` for an ideal sensor)."""
     if sensor in NOISE_SENSORS:
         return f"dark current eq. {NOISE_SENSORS[sensor][1][2:]}"
     if sensor not in evaluation.noise_sensors:

@@ -3,7 +3,7 @@
 :func:`score` is what ``tespike score`` prints and what a results table calls:
 
 ```python
-from recon.score import score, columns
+from tespike.recon.score import score, columns
 result = score(R, I)                    # (K, H, W) light, scene units
 result.mean["psnr_mu"], result.per_frame["hdr_vqm"], result.sequence["hdr_vqm"]
 ```
@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from golden.errors import InputError
-from recon.display import DEFAULT_DISPLAY, HdrDisplay
+from tespike.golden.errors import InputError
+from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay
 
 
 @dataclass(frozen=True)
@@ -37,7 +37,7 @@ KEYS = ("psnr_mu", "ssim_mu", "psnr_pu21", "hdr_vqm", "fovvideovdp")
 
 def columns(display: HdrDisplay = DEFAULT_DISPLAY) -> tuple[Column, ...]:
     """The columns (in :data:`KEYS` order) with their labels for ``display``."""
-    from recon.metrics import DEFAULT_NITS_PER_UNIT
+    from tespike.recon.metrics import DEFAULT_NITS_PER_UNIT
     shown = f"HDR display {display.peak_nits:g} cd/m^2"
     return (
         Column("psnr_mu", "PSNR-mu (dB, mu=5000)", True),
@@ -66,9 +66,9 @@ def score(estimate, reference, *, metrics=None, display: HdrDisplay = DEFAULT_DI
     project's convention); HDR-VQM and FovVideoVDP show the sequence on
     ``display`` with the reference's peak over these frames at its peak.
     """
-    from recon.fovvideovdp import fovvideovdp
-    from recon.hdrvqm import hdr_vqm_scores
-    from recon.metrics import psnr_mu, psnr_pu21, ssim_mu
+    from tespike.recon.fovvideovdp import fovvideovdp
+    from tespike.recon.hdrvqm import hdr_vqm_scores
+    from tespike.recon.metrics import psnr_mu, psnr_pu21, ssim_mu
 
     keys = KEYS if metrics is None else tuple(metrics)
     unknown = [k for k in keys if k not in KEYS]

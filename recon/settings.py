@@ -12,8 +12,8 @@ import numbers
 
 import numpy as np
 
-from golden.decode import ESTIMATORS
-from golden.errors import InputError
+from tespike.golden.decode import ESTIMATORS
+from tespike.golden.errors import InputError
 
 #: Readouts per window of the training-free methods (paper section 6.4).
 DEFAULT_WINDOW = 9
@@ -37,8 +37,8 @@ class ReconSettings:
     section 6.4 uses 9). ``chunk_elements``: readouts x pixels processed at
     once (bounds memory; results do not depend on it); ``None`` picks
     :meth:`block_elements`. ``estimator``: the
-    :data:`golden.decode.ESTIMATORS` rule. ``search``: where TFI looks for the
-    non-zero codes that bound a spike interval (see :mod:`recon.tfi`).
+    :data:`tespike.golden.decode.ESTIMATORS` rule. ``search``: where TFI looks for the
+    non-zero codes that bound a spike interval (see :mod:`tespike.recon.tfi`).
     ``device``: any torch device string. ``dtype``: the float type of the
     arithmetic, "float32" (default: the output is float32, windows are short
     sums, so it costs < 1e-6 relative) or "float64".

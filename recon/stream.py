@@ -1,11 +1,11 @@
 """Spike streams in torch: loading, decoding by lookup table, sub-streams (paper eq. 4).
 
-Decoding uses exactly :mod:`golden.decode`: for each configuration (and
+Decoding uses exactly :mod:`tespike.golden.decode`: for each configuration (and
 estimator) a table over every code a word of ``config.word_bits`` bits can
-hold (at most 2^17) is filled once by calling :func:`golden.decode.decode_light`
-and :func:`golden.decode.decode_spikes` on the legal codes; decoding a stream
+hold (at most 2^17) is filled once by calling :func:`tespike.golden.decode.decode_light`
+and :func:`tespike.golden.decode.decode_spikes` on the legal codes; decoding a stream
 is then one gather on the device. Codes the sensor cannot emit are marked
-illegal in the table and refused, as :func:`golden.decode.check_words` does.
+illegal in the table and refused, as :func:`tespike.golden.decode.check_words` does.
 """
 
 from __future__ import annotations
@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from golden.config import SensorConfig
-from golden.decode import check_words, decode_light as golden_decode_light
-from golden.decode import decode_spikes as golden_decode_spikes
-from golden.errors import InputError
-from golden.io import load_stream as golden_load_stream
+from tespike.golden.config import SensorConfig
+from tespike.golden.decode import check_words, decode_light as golden_decode_light
+from tespike.golden.decode import decode_spikes as golden_decode_spikes
+from tespike.golden.errors import InputError
+from tespike.golden.io import load_stream as golden_load_stream
 
 #: Edge rules of :func:`substreams` for windows that reach past the stream.
 EDGES = ("shift", "replicate", "error")
@@ -116,7 +116,7 @@ def decode_light(words, config: SensorConfig, *, estimator: str = "ratio",
 
 def decode_spikes(words, config: SensorConfig, *, estimator: str = "ratio",
                   device: str | torch.device = "cpu", dtype: torch.dtype = torch.float64) -> torch.Tensor:
-    """Words -> spikes per readout interval, equal to :func:`golden.decode.decode_spikes`."""
+    """Words -> spikes per readout interval, equal to :func:`tespike.golden.decode.decode_spikes`."""
     _, spikes, legal = code_tables(config, estimator)
     return _gather(spikes, legal, words, config, device, dtype)
 
@@ -131,7 +131,7 @@ def output_images(shape: tuple[int, int, int], out: np.ndarray | None = None) ->
 
 
 def load_stream(path: str | Path, device: str | torch.device = "cpu") -> tuple[torch.Tensor, SensorConfig]:
-    """Read S.npz with :func:`golden.io.load_stream` (checked legal); words as int64 on ``device``."""
+    """Read S.npz with :func:`tespike.golden.io.load_stream` (checked legal); words as int64 on ``device``."""
     words, config = golden_load_stream(path)
     return as_word_tensor(words, device), config
 

@@ -1,13 +1,13 @@
 """Training of every learned reconstruction method (paper section 6.3), resumable, on any torch device.
 
-Data come from the training-data engine (:mod:`recon.engine`): clips made on
+Data come from the training-data engine (:mod:`tespike.recon.engine`): clips made on
 worker processes, never the same twice, deterministic from the seed; each step
 draws ``batch`` (clip, key moment, crop, flip) samples. The optimiser is Adam
 (beta 0.9 / 0.999); the learning rate halves every ``halve_every`` epochs of
 ``steps_per_epoch`` steps (``torch.optim.lr_scheduler.StepLR``). Losses: ``l1``
 (the paper's eq. 7) or ``mu-l1``, the L1 distance after the mu-law tone map of
 the metrics. Every ``validate_every`` steps the model is scored on the held-out
-validation set (:mod:`recon.engine.validation`); the weights kept are the best
+validation set (:mod:`tespike.recon.engine.validation`); the weights kept are the best
 on it. A run stops at a step or wall-time budget, writes a CSV log, a PNG of
 the loss and validation curves and a checkpoint every ``checkpoint_seconds``,
 and resumes exactly (the same draws as an uninterrupted run; its logs are cut back
@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.io import atomic_output
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.io import atomic_output
 
 from .engine.batches import ClipPool, draw_batch
 from .engine.clips import EngineRecipe
@@ -103,7 +103,7 @@ class TrainOptions:
             raise InputError(f"minutes = {self.minutes!r}: must be a finite number > 0")
 
     def config(self) -> SensorConfig:
-        from golden.config import PRESETS
+        from tespike.golden.config import PRESETS
         if self.sensor in PRESETS:
             return SensorConfig.preset(self.sensor)
         return SensorConfig.from_json(self.sensor)

@@ -12,7 +12,7 @@ photodiode) and ``rst`` into ``rst_sample``, which drives every pixel's
 ``clear``. Each pixel computes its next state from these registers, the timing
 block's registers and its own state: registers only. The edge that samples e[t]
 processes clock t - 1, so pixel clock t is fully processed one edge later (the
-timing block counts in step, see :mod:`rtl.timing`), and a reset clears the
+timing block counts in step, see :mod:`tespike.rtl.timing`), and a reset clears the
 pixels at the edge after it (that edge would otherwise process the clock the
 reset edge sampled). The pixels' words are combinational from the same registers
 (pixels built with ``word_register=False``) and are on ``frame`` in the clock
@@ -26,7 +26,7 @@ after the edge that samples its last charge, t = (k+1)L - 1, so they are sampled
 valid at the next rising edge (1 clock), as SPEC section 6 counts it. With L = 1,
 ``frame_valid`` is high on every clock after the first edge out of reset.
 
-By default every pixel is a :class:`rtl.pixel.TEPixel` / :class:`MLPixel`
+By default every pixel is a :class:`tespike.rtl.pixel.TEPixel` / :class:`MLPixel`
 submodule (the structure a sensor has, and what the Verilog top mirrors);
 ``flat=True`` inlines the same pixel logic into one module, which the
 Amaranth simulator runs faster (measured on 2 loaded cores: 16 x 16 TE array,
@@ -39,8 +39,8 @@ from amaranth.hdl import Module, ResetSignal, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from golden.config import SensorConfig
-from golden.errors import ConfigError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
 
 from .pixel import ml_pixel_logic, pixel_class, te_pixel_logic
 from .timing import ReadoutTiming

@@ -3,7 +3,7 @@
 The pixel logic is written once, as the functions :func:`te_pixel_logic` and
 :func:`ml_pixel_logic` that add it to a module; :class:`TEPixel` and
 :class:`MLPixel` wrap them as components (one Verilog module each, the unit of
-synthesis), and :class:`rtl.array.PixelArray` may inline them into one flat
+synthesis), and :class:`tespike.rtl.array.PixelArray` may inline them into one flat
 module (faster in the Amaranth simulator). Both forms are the same logic.
 
 Shared intermediate values (``q``, the remainder after the spike, the SFC sum,
@@ -33,7 +33,7 @@ Per pixel clock (one rising edge of ``sync``):
 Reset: every state register is ``reset_less`` and cleared by the pixel's own
 ``clear`` input (synchronous), not by the clock domain's reset. The array drives
 ``clear`` from a register (``rst`` sampled one edge earlier, see
-:mod:`rtl.array`), so no pixel logic depends combinationally on an input port and
+:mod:`tespike.rtl.array`), so no pixel logic depends combinationally on an input port and
 a cycle-based simulator evaluates each pixel once per clock.
 
 The latched CCC register is not cleared at readout: the word shows it only
@@ -47,8 +47,8 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from golden.config import SensorConfig
-from golden.errors import ConfigError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
 
 
 def check_pixel_config(config: SensorConfig, mode: str, what: str) -> SensorConfig:
@@ -185,7 +185,7 @@ class TEPixel(wiring.Component):
 
     ``word_register=False`` builds the pixel without its readout word register
     (``word`` is then the combinational word of the ``last`` clock, to be sampled
-    at that edge). :class:`rtl.array.PixelArray` uses this form behind its input
+    at that edge). :class:`tespike.rtl.array.PixelArray` uses this form behind its input
     register (the word is then valid for the clock after the edge that sampled the
     interval's last charge, see there); the hardware-cost table shows both forms.
     """

@@ -1,6 +1,6 @@
 """The streaming readout of SPEC section 6: an H x W array whose words leave in beats of N lanes.
 
-:class:`StreamingPixelArray` is the :class:`rtl.array.PixelArray` (pixels and
+:class:`StreamingPixelArray` is the :class:`tespike.rtl.array.PixelArray` (pixels and
 timing, unchanged) followed by a double-buffered readout, as a column-parallel
 sensor reads out: at the edge where the array shows the words of interval k
 (``frame_valid``), all H x W words are copied into the readout buffer
@@ -12,7 +12,7 @@ Ports (clock domain ``sync``): ``charge`` as the parallel array; ``out``, an
 ``amaranth.lib.stream`` source (``always_ready``: a sensor cannot stall, the
 receiver takes every beat) whose payload is ``words`` (N * Wd bits, lane i at
 ``[i*Wd +: Wd]``) and ``first`` (beat 0 of an interval). The generated Verilog
-top (:func:`rtl.verilog_stream.stream_top_verilog`) names them ``out_words``,
+top (:func:`tespike.rtl.verilog_stream.stream_top_verilog`) names them ``out_words``,
 ``out_first`` and ``out_valid``.
 
 Timing: the parallel array's words of interval k are sampled with
@@ -20,12 +20,12 @@ Timing: the parallel array's words of interval k are sampled with
 loads at that edge and beat j is on ``out`` during the clock after it plus j:
 the last beat is sampled B + 1 clocks after the interval's last clock, at most
 L + 1 <= 2L because the generator refuses B > L
-(:func:`golden.beats.check_lanes`). The next interval's words arrive L clocks
+(:func:`tespike.golden.beats.check_lanes`). The next interval's words arrive L clocks
 after the previous ones, when beat B - 1 <= L - 1 has just been sent, so the
 buffer is never overwritten before all its beats left.
 
 Structure: ``held.word_select(beat, N*Wd)`` is one B-to-1 multiplexer per lane (N B words
-in all, linear in the pixel count). The Verilog top (:mod:`rtl.verilog_stream`) draws the
+in all, linear in the pixel count). The Verilog top (:mod:`tespike.rtl.verilog_stream`) draws the
 same readout as per-lane shift registers (no multiplexer at all); the outputs are equal
 at every clock. The proof of this component (``tespike prove``, property ``stream``) reads
 ``held`` as the interval's words, so it stays a static buffer here.
@@ -37,9 +37,9 @@ from amaranth.hdl import Cat, Const, Module, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from golden.config import SensorConfig
-from golden.errors import ConfigError
-from golden.beats import beat_count, check_lanes
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
+from tespike.golden.beats import beat_count, check_lanes
 
 from .array import PixelArray, check_array_size
 

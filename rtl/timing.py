@@ -9,7 +9,7 @@
   (``primed``).
 
 The counters describe the pixel clock whose charge the array's input register
-holds, which the next rising edge processes (see :mod:`rtl.array`). A
+holds, which the next rising edge processes (see :mod:`tespike.rtl.array`). A
 synchronous reset puts them at clock -1, the last clock of an interval
 (divider F - 1, CCC alpha) with an empty input register, and clears
 ``primed``: the first rising edge with ``rst`` low processes that empty clock
@@ -23,8 +23,8 @@ from amaranth.hdl import Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import Out
 
-from golden.config import SensorConfig
-from golden.errors import ConfigError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
 
 
 class ReadoutTiming(wiring.Component):

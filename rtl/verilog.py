@@ -2,13 +2,13 @@
 
 The pixel and the timing block are generated once each from their Amaranth
 components (``amaranth.back.verilog.convert``); the array top is a small
-hand-written structural module, the Verilog form of :class:`rtl.array.PixelArray`:
+hand-written structural module, the Verilog form of :class:`tespike.rtl.array.PixelArray`:
 the input registers (``charge_sample``, one per pixel), the timing block once and the pixel module
 H x W times in nested ``generate`` loops over rows and columns, their words gathered
 into ``frame`` by one ``always @*`` loop (see :func:`top_verilog`). Its text does not
 grow with the array, so a 128 x 128 array is generated as fast as a 2 x 2 one. The
 array's pixel module is the pixel without its word register
-(``pixel_verilog(config, word_register=False)``, see :mod:`rtl.array`).
+(``pixel_verilog(config, word_register=False)``, see :mod:`tespike.rtl.array`).
 
 Lint: Amaranth's RTLIL backend deliberately trims the zero extension of
 unsigned operands (``a + b`` with a 9-bit ``a`` and a 16-bit ``b`` into a
@@ -25,8 +25,8 @@ from __future__ import annotations
 import json
 import re
 
-from golden.config import SensorConfig
-from golden.errors import ConfigError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
 
 from .array import check_array_size
 from .pixel import pixel_class
@@ -201,7 +201,7 @@ endmodule
 def array_verilog(config: SensorConfig, height: int, width: int) -> str:
     """Verilog text of an H x W array: top ``te_pixel_array`` / ``ml_pixel_array`` with the
     input register, the pixel module (instantiated H x W times; its word is combinational
-    from the input register and its state, see :mod:`rtl.array`) and the timing module (once)."""
+    from the input register and its state, see :mod:`tespike.rtl.array`) and the timing module (once)."""
     config = checked_config(config)
     top = top_verilog(config, height, width)       # refuses a bad size before any conversion
     names = module_names(config)

@@ -1,6 +1,6 @@
 """Verilog of the streaming array (SPEC section 6, ``tespike verilog --lanes N``).
 
-The Verilog form of :class:`rtl.stream.StreamingPixelArray` (same ports,
+The Verilog form of :class:`tespike.rtl.stream.StreamingPixelArray` (same ports,
 timing and words at every clock, checked bit for bit against the golden model in
 Icarus, Verilator and cocotb), drawn as a chip is: every block a module, one
 instance per site, hierarchy kept, so that a synthesis tool sees H x W copies
@@ -10,16 +10,16 @@ The top ``<mode>_pixel_array_stream`` (ports ``clk``, ``rst``, ``charge``,
 ``out_valid``, ``out_first``, ``out_words``) holds:
 
 * the readout timing block, ``<mode>_readout_timing``, generated from Amaranth
-  (:class:`rtl.timing.ReadoutTiming`, one instance);
+  (:class:`tespike.rtl.timing.ReadoutTiming`, one instance);
 * ``rst_sample`` (``rst`` one edge later: it clears the pixels, as in
-  :mod:`rtl.array`) and the beat counter (``sending``, ``beat``);
+  :mod:`tespike.rtl.array`) and the beat counter (``sending``, ``beat``);
 * B beat groups (``<mode>_beat_group``, B - 1 instances of N sites, and
   ``<mode>_beat_group_end``, the S = H W - (B - 1) N last sites): group j holds
   the sites of pixels p = j N + i (raster order, p = r W + c), site i on lane i,
   each site one pixel ``<mode>_stream_pixel`` (its input register
   ``charge_sample``, its state registers, and the pixel rule
   ``<mode>[_msb]_stream_pixel_rule``, a combinational module: the rule of
-  :mod:`rtl.pixel`, proved equivalent to it by ``tespike prove``, property
+  :mod:`tespike.rtl.pixel`, proved equivalent to it by ``tespike prove``, property
   ``stream-pixel-rule``) and one readout cell ``<mode>_readout_cell`` (a Wd-bit
   register), in a generate loop. Grouping by beat keeps the top's own netlist
   at B instances (Yosys's passes over the top cost time per wire: with all
@@ -39,7 +39,7 @@ multiplexer over all H x W words per lane (N x H x W).
 
 ``rst`` clears the timing, the beat counter and every readout cell at its edge;
 the pixels are cleared one edge later by ``rst_sample`` (the edge that would
-otherwise process the clock the reset edge sampled, :mod:`rtl.array`).
+otherwise process the clock the reset edge sampled, :mod:`tespike.rtl.array`).
 
 For Verilator at sensor size, :func:`stream_loop_verilog` writes the same top
 as a simulation view: the pixels and cells as memories and one clocked ``for``
@@ -53,8 +53,8 @@ from __future__ import annotations
 
 import json
 
-from golden.config import SensorConfig
-from golden.beats import beat_count, check_lanes
+from tespike.golden.config import SensorConfig
+from tespike.golden.beats import beat_count, check_lanes
 
 from .array import check_array_size
 from .timing import ReadoutTiming
@@ -161,7 +161,7 @@ def stream_pixel_rule_verilog(config: SensorConfig) -> str:
     ``<reg>_d`` outputs show what the body left in them (the values the top's registers take
     at the edge). ``charge`` is the input register's value (``charge_sample[p]``), ``held_q``
     / ``held_d`` the second buffer's entry, ``word_now`` the body's ``word``.
-    :func:`cosim.formal.stream_rule_equivalence` proves it equivalent to :mod:`rtl.pixel`.
+    :func:`tespike.cosim.formal.stream_rule_equivalence` proves it equivalent to :mod:`tespike.rtl.pixel`.
     """
     c = checked_config(config)
     decls, body = _pixel_rule(c, RULE_INDENT)
@@ -503,7 +503,7 @@ def stream_array_verilog(config: SensorConfig, height: int, width: int, lanes: i
     """Verilog text of the streaming H x W array with N lanes: the top, its blocks and the timing.
 
     ``view="loop"``: the simulation view of :func:`stream_loop_verilog` instead of the
-    design. Refuses (:class:`golden.errors.ConfigError`, one line naming the smallest N) a
+    design. Refuses (:class:`tespike.golden.errors.ConfigError`, one line naming the smallest N) a
     lane count whose B = ceil(H W / N) beats do not fit in the L clocks of a readout interval.
     """
     config = checked_config(config)

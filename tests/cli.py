@@ -10,7 +10,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def run_tespike(*args, timeout=600) -> subprocess.CompletedProcess:
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    return subprocess.run([sys.executable, "-m", "cosim", *map(str, args)], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "tespike", *map(str, args)], capture_output=True,
                           text=True, env=env, timeout=timeout)
 
 

@@ -1,6 +1,6 @@
 """Configurations shared by the tests of every package."""
 
-from golden.config import SensorConfig
+from tespike.golden.config import SensorConfig
 
 #: Configurations at the edges of every valid range of SPEC section 2, both modes.
 EDGE_CONFIGS = [

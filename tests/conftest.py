@@ -16,9 +16,10 @@ def one_torch_thread():
 
 @pytest.fixture
 def empty_weights_dir(tmp_path, monkeypatch):
-    """An empty folder as ``recon.learned.WEIGHTS_DIR``: no learned method has weights,
+    """An empty folder as ``tespike.recon.learned.WEIGHTS_DIR``: no learned method has weights,
     whatever the checkout ships; a test may save its own there."""
-    import recon.learned
+    import tespike.recon.learned
+    from tespike import recon
     folder = tmp_path / "weights"
     folder.mkdir()
     monkeypatch.setattr(recon.learned, "WEIGHTS_DIR", folder)

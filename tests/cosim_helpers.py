@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.config import DESIGN_ELECTRONS, SensorConfig
-from golden.reference import step_reference
+from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig
+from tespike.golden.reference import step_reference
 
 VCD_DIR = Path(os.environ.get("TESPIKE_VCD_DIR", Path(__file__).resolve().parent / "vcd"))
 
@@ -69,7 +69,7 @@ def golden_words(config: SensorConfig, stimulus: np.ndarray) -> np.ndarray:
 
 
 def first_difference(expected: np.ndarray, got: np.ndarray) -> str:
-    from cosim.compare import first_difference as first
+    from tespike.cosim.compare import first_difference as first
     if expected.shape != got.shape:
         return f"shape {got.shape} != golden {expected.shape}"
     return first(got, expected).text()
@@ -81,8 +81,8 @@ def assert_rtl_matches_golden(config: SensorConfig, stimulus: np.ndarray, name: 
     On a mismatch the run is repeated with a waveform, kept for inspection, and
     its path is part of the failure message.
     """
-    from cosim.rtlsim import rtl_run
-    from cosim.vcd import waveform_stream
+    from tespike.cosim.rtlsim import rtl_run
+    from tespike.cosim.vcd import waveform_stream
 
     expected = golden_words(config, stimulus)
     vcd = vcd_path_for(name) if vcd_wanted() else None

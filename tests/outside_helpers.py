@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.io import atomic_output
-from golden.reference import step_reference
+from tespike.golden.config import SensorConfig
+from tespike.golden.io import atomic_output
+from tespike.golden.reference import step_reference
 
 #: Array shape of the small runs: rows != columns, so a row/column mix-up shows.
 SHAPE = (2, 3)
@@ -20,7 +20,7 @@ KINDS = ("random", "zero", "max", "bursts")
 
 @functools.lru_cache(maxsize=None)
 def generated_verilog(config: SensorConfig, height: int, width: int) -> str:
-    """``rtl.verilog.array_verilog``, generated once (Amaranth takes seconds per configuration).
+    """``tespike.rtl.verilog.array_verilog``, generated once (Amaranth takes seconds per configuration).
 
     Kept in memory for the session and on disk in the tespike cache, under a
     hash of the configuration, the size, every source file of ``rtl`` and
@@ -29,10 +29,11 @@ def generated_verilog(config: SensorConfig, height: int, width: int) -> str:
     import amaranth
     from importlib.metadata import version
 
-    import golden.config
-    import rtl
-    from cosim.outside import content_hash, default_cache_root
-    from rtl.verilog import array_verilog
+    import tespike.golden.config
+    from tespike import golden
+    from tespike import rtl
+    from tespike.cosim.outside import content_hash, default_cache_root
+    from tespike.rtl.verilog import array_verilog
 
     sources = sorted(Path(rtl.__file__).parent.glob("*.py")) + [Path(golden.config.__file__)]
     key = content_hash(config.to_json(), f"{height}x{width}", amaranth.__version__,

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from amaranth.sim import Simulator
 
-from golden.config import SensorConfig
-from rtl.array import PixelArray
+from tespike.golden.config import SensorConfig
+from tespike.rtl.array import PixelArray
 
 
 def pack(values, bits: int) -> int:

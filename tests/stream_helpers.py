@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from golden.config import SensorConfig
-from golden.beats import min_lanes
+from tespike.golden.config import SensorConfig
+from tespike.golden.beats import min_lanes
 
 #: Array shape of the streaming runs: 6 pixels, rows != columns.
 STREAM_SHAPE = (2, 3)

@@ -118,7 +118,7 @@ def check(c, H, W, N, K, seed, log, work=None):
     cfgp = os.path.join(d, "c.json"); json.dump(c, open(cfgp, "w"))
     v = os.path.join(d, "x.v")
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    r = subprocess.run([sys.executable, "-m", "cosim", "verilog", "--config", cfgp, "--height", str(H), "--width", str(W),
+    r = subprocess.run([sys.executable, "-m", "tespike", "verilog", "--config", cfgp, "--height", str(H), "--width", str(W),
                         "--lanes", str(N), "--out", v], capture_output=True, text=True, env=env)
     if os.environ.get("MUTATE"):
         a, b = os.environ["MUTATE"].split("=>")

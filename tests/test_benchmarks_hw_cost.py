@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from cosim.synthesis import parse_stat
-from golden.config import SensorConfig
+from tespike.cosim.synthesis import parse_stat
+from tespike.golden.config import SensorConfig
 
 spec = importlib.util.spec_from_file_location(
     "hw_cost", Path(__file__).resolve().parent.parent / "benchmarks" / "hw_cost.py")
@@ -83,7 +83,7 @@ def test_claims_follow_the_numbers():
 
 @pytest.mark.skipif(shutil.which("yosys") is None, reason="Debian yosys not installed")
 def test_synthesized_ml_pixel_has_exactly_its_state_bits():
-    from rtl.verilog import pixel_verilog
+    from tespike.rtl.verilog import pixel_verilog
     config = hw_cost.counting_only(SensorConfig(mode="ml", b1=2, b2=2, ml_bits=5))
     stat = hw_cost.synthesize(pixel_verilog(config), "ml_pixel")
     assert stat["flops"] == hw_cost.state_bits(config) == 1 + 5 + 5
@@ -93,7 +93,7 @@ def test_synthesized_ml_pixel_has_exactly_its_state_bits():
 @pytest.mark.skipif(shutil.which("yosys") is None, reason="Debian yosys not installed")
 def test_synthesized_msb_pixel_has_exactly_its_state_bits():
     """The msb pixel: the count's flip-flops and a bit_length(B) word, no hidden state."""
-    from rtl.verilog import pixel_verilog
+    from tespike.rtl.verilog import pixel_verilog
     config = hw_cost.counting_only(SensorConfig(mode="ml", ml_readout="msb", b1=2, b2=2, ml_bits=5))
     stat = hw_cost.synthesize(pixel_verilog(config), "ml_pixel")
     assert stat["flops"] == hw_cost.state_bits(config) == 1 + 5 + 3

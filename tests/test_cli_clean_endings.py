@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 from tests.cli import ROOT, assert_refused, run_tespike
 from tests.test_cli_hardening import TINY, small_tmpfs, snapshot
 
@@ -23,7 +23,7 @@ EVALUATE = ("evaluate", "--set", "none", "--methods", "tfp", "--repeats", "1", "
 
 def run_here(capsys, *args):
     """``tespike ARGS`` in this process (torch imported once): a CompletedProcess-like result."""
-    from cosim.cli import main
+    from tespike.cosim.cli import main
     code = main([str(a) for a in args])
     captured = capsys.readouterr()
     return subprocess.CompletedProcess(args, code, captured.out, captured.err)
@@ -59,7 +59,7 @@ def test_evaluate_refuses_a_previous_runs_folder_without_force_and_never_a_forei
 
 
 def test_atomic_folder_leaves_the_previous_run_whole_or_the_new_one_whole(tmp_path):
-    from golden.atomic import atomic_folder
+    from tespike.golden.atomic import atomic_folder
     out = tmp_path / "ev"
     (out / "strips").mkdir(parents=True)
     (out / "table.md").write_text("old")
@@ -148,7 +148,7 @@ def alive(pid: int) -> bool:
 
 def test_ctrl_c_during_a_store_evaluation_on_workers_is_one_line_and_leaves_no_process(tmp_path, store):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    process = subprocess.Popen([sys.executable, "-m", "cosim", "evaluate", "--store", str(store), "--workers", "2",
+    process = subprocess.Popen([sys.executable, "-m", "tespike", "evaluate", "--store", str(store), "--workers", "2",
                                 "--methods", "tfp,tfi", "--out", str(tmp_path / "ev")], env=env, text=True,
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     first = process.stdout.readline()                  # printed once the cluster is up

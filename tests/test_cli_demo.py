@@ -5,12 +5,12 @@ import shutil
 import numpy as np
 import pytest
 
-from cosim.cli import main
-from golden.config import SensorConfig
-from golden.decode import check_words
-from golden.errors import InputError
-from golden.fastsim import simulate_scene
-from golden.io import load_scene, load_stream
+from tespike.cosim.cli import main
+from tespike.golden.config import SensorConfig
+from tespike.golden.decode import check_words
+from tespike.golden.errors import InputError
+from tespike.golden.fastsim import simulate_scene
+from tespike.golden.io import load_scene, load_stream
 from tests.cli import run_tespike
 
 #: A small demo: 10 readouts of 24 x 32, the RTL on 11 x 11 pixels for 3 readouts.
@@ -79,7 +79,8 @@ def test_demo_with_every_sensor_and_the_hardware_cost(tmp_path, capsys):
 
 def test_demo_reports_the_first_difference(tmp_path, capsys, monkeypatch):
     """A wrong word rebuilt from the waveform: exit 1, the verdict names readout, pixel and words."""
-    import cosim.vcd
+    import tespike.cosim.vcd
+    from tespike import cosim
     real = cosim.vcd.waveform_stream
 
     def broken(*args, **kwargs):
@@ -126,9 +127,9 @@ def test_demo_refuses_weights_for_none_of_its_sensors(tmp_path, capsys):
     """--weights: a file trained for no sensor of the demo is refused before any work."""
     import torch
 
-    from golden.config import SensorConfig
-    from recon.learned import method_classes
-    from recon.learning.weights import save_weights
+    from tespike.golden.config import SensorConfig
+    from tespike.recon.learned import method_classes
+    from tespike.recon.learning.weights import save_weights
     torch.manual_seed(0)
     module, sizes = method_classes("bsf")
     save_weights(tmp_path / "w.pt", module(sizes.preset("cpu")), SensorConfig(b1=3, b2=3), {}, "bsf")

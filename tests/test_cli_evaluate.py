@@ -4,8 +4,8 @@ import csv
 
 import numpy as np
 
-from cosim.cli import main
-from recon.scenes import make_scene
+from tespike.cosim.cli import main
+from tespike.recon.scenes import make_scene
 
 
 def run_here(capsys, *args):
@@ -63,9 +63,10 @@ def test_evaluate_table(tmp_path, capsys, empty_weights_dir):
     complexity with Table 10 beside; a method without weights says so instead of failing the table."""
     import torch
 
-    import recon.learned
-    from golden.config import SensorConfig
-    from recon.learning.weights import save_weights
+    import tespike.recon.learned
+    from tespike import recon
+    from tespike.golden.config import SensorConfig
+    from tespike.recon.learning.weights import save_weights
     folder = empty_weights_dir
     torch.manual_seed(0)
     module, sizes = recon.learned.method_classes("bsf")

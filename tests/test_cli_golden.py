@@ -3,8 +3,8 @@ import json
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.reference import step_reference
+from tespike.golden.config import SensorConfig
+from tespike.golden.reference import step_reference
 from tests.cli import assert_refused, run_tespike
 
 

@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.errors import InputError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
 from tests.cli import ROOT, assert_refused, run_tespike
 
 TINY = SensorConfig(b1=1, b2=1, threshold=3, acc_bits=3)          # L = 2
@@ -151,7 +151,7 @@ def test_outputs_get_the_mode_of_the_umask(files):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     for mask, mode in ((0o022, 0o644), (0o077, 0o600), (0o002, 0o664)):
         out = files / f"m{mask:o}.npz"
-        subprocess.run([sys.executable, "-m", "cosim", *map(str, golden_args(files, out))], env=env,
+        subprocess.run([sys.executable, "-m", "tespike", *map(str, golden_args(files, out))], env=env,
                        check=True, capture_output=True, preexec_fn=lambda mask=mask: os.umask(mask))
         assert stat.S_IMODE(os.stat(out).st_mode) == mode
     (files / "keep.npz").write_bytes(b"old")
@@ -182,7 +182,7 @@ def long_rtl_run(folder):
     """An rtl-sim run with a VCD, long enough to be interrupted while writing."""
     np.save(folder / "long.npy", np.full((TINY.clocks_per_readout * 4000, 2, 2), 3, np.uint8))
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.Popen([sys.executable, "-m", "cosim", "rtl-sim", "--config", str(folder / "c.json"),
+    return subprocess.Popen([sys.executable, "-m", "tespike", "rtl-sim", "--config", str(folder / "c.json"),
                              "--stimulus", str(folder / "long.npy"), "--out", str(folder / "w.npz"),
                              "--vcd", str(folder / "w.vcd")], env=env, stderr=subprocess.PIPE,
                             stdout=subprocess.PIPE, text=True, preexec_fn=_default_signal_dispositions)
@@ -226,7 +226,7 @@ def test_temporary_left_by_sigkill_is_removed_by_the_next_run(files):
 
 
 def test_stale_temporary_of_a_live_process_is_kept(tmp_path):
-    from golden.io import atomic_output
+    from tespike.golden.io import atomic_output
     live = tmp_path / f".o.npy.{os.getppid()}.abcdefgh.part"
     dead = tmp_path / ".o.npy.999999999.abcdefgh.part"
     other = tmp_path / ".other.npy.999999999.abcdefgh.part"
@@ -240,7 +240,7 @@ def test_stale_temporary_of_a_live_process_is_kept(tmp_path):
 
 # ------------------------------------------------------------------ full disk, in-process
 def test_full_disk_names_the_users_path(tmp_path, monkeypatch):
-    from golden.io import atomic_output, save_images
+    from tespike.golden.io import atomic_output, save_images
 
     def full(*args, **kwargs):
         raise OSError("655360 requested and 522208 written")
@@ -465,7 +465,7 @@ def test_refusal_after_a_warning_is_still_one_line(monkeypatch, capsys):
     import warnings
     import types
 
-    from cosim import cli
+    from tespike.cosim import cli
 
     def run(args):
         warnings.warn("divide by zero", RuntimeWarning)
@@ -487,7 +487,7 @@ def test_refusal_after_a_warning_is_still_one_line(monkeypatch, capsys):
 
 # ------------------------------------------------------------------ bounded memory
 def test_metrics_in_small_bands_equal_whole_frames(monkeypatch, rng):
-    from recon import metrics
+    from tespike.recon import metrics
     gt = rng.uniform(0.01, 1, size=(3, 23, 19))
     pred = gt * rng.uniform(0.8, 1.2, size=gt.shape)
     whole = {name: fn(pred, gt) for name, fn in metrics.METRICS.items()}
@@ -500,8 +500,8 @@ def test_metrics_in_small_bands_equal_whole_frames(monkeypatch, rng):
 
 
 def test_evaluate_refuses_up_front_when_memory_is_short(files, monkeypatch):
-    from golden import resources
-    from recon.evaluate import evaluate
+    from tespike.golden import resources
+    from tespike.recon.evaluate import evaluate
     monkeypatch.setattr(resources, "available_memory", lambda: 1 << 20)
     with pytest.raises(InputError, match=r"needs about .* of memory, but only 1 MB is available"):
         evaluate([("x", np.ones((4, 16, 16)))], lambda config, light, rng: None, methods=["tfp"],
@@ -509,8 +509,8 @@ def test_evaluate_refuses_up_front_when_memory_is_short(files, monkeypatch):
 
 
 def test_reconstruct_streams_words_and_images_through_memory_maps(files):
-    from golden.io import load_stream
-    from recon.methods import reconstruct
+    from tespike.golden.io import load_stream
+    from tespike.recon.methods import reconstruct
     words, config = load_stream(files / "s.npz", memory_map=True)
     assert isinstance(words, np.memmap)
     assert run_tespike("reconstruct", "--stream", files / "s.npz", "--method", "tfi",
@@ -520,7 +520,7 @@ def test_reconstruct_streams_words_and_images_through_memory_maps(files):
 
 # ------------------------------------------------------------------ issue 20: defaults, room, full disks
 def run_in_process(capsys, *args):
-    from cosim.cli import main
+    from tespike.cosim.cli import main
     code = main([str(a) for a in args])
     captured = capsys.readouterr()
     return code, captured.out, captured.err
@@ -528,7 +528,7 @@ def run_in_process(capsys, *args):
 
 def test_demo_defaults_follow_the_flags_they_depend_on(tmp_path):
     """--frames 12 alone is a valid demo (--rtl-readouts follows it); an explicit conflict is refused."""
-    from cosim.demo import check_options
+    from tespike.cosim.demo import check_options
     common = dict(seed=0, backend="amaranth", repeats=1, window=9, sensors=("te",))
     assert check_options(tmp_path / "d", frames=12, height=96, width=128, crop=None, rtl_readouts=None,
                          **common) == (16, 12)
@@ -556,7 +556,7 @@ def test_demo_refuses_what_cannot_run_before_any_work(tmp_path, args, words):
 def test_demo_refuses_up_front_when_memory_or_disk_is_short(tmp_path, capsys, monkeypatch):
     import shutil as shutil_module
 
-    from golden import resources
+    from tespike.golden import resources
     monkeypatch.setattr(resources, "available_memory", lambda: 1 << 20)
     code, out, err = run_in_process(capsys, "demo", "--frames", 4, "--out", tmp_path / "d")
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
@@ -591,7 +591,7 @@ def test_memory_mapped_output_on_a_full_disk_is_one_line_and_leaves_nothing(file
     """The reservation fails (ENOSPC) before any write through the map (which would die of SIGBUS)."""
     import errno
 
-    from cosim import room
+    from tespike.cosim import room
 
     def full(fd, offset, length):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
@@ -619,7 +619,7 @@ def test_reconstruct_into_a_small_tmpfs(files, capsys, monkeypatch):
                              "--out", mount / "r.npy")
         assert_refused(result, str(mount / "r.npy"), "is free on its file system")
         assert sorted(os.listdir(mount)) == ["filler"]
-        from cosim import room          # past the estimate: the reservation refuses (no SIGBUS)
+        from tespike.cosim import room          # past the estimate: the reservation refuses (no SIGBUS)
         monkeypatch.setattr(room, "require_disk", lambda *args, **kwargs: None)
         code, out, err = run_in_process(capsys, "reconstruct", "--stream", files / "big.npz", "--method",
                                         "tfp", "--out", mount / "r.npy")
@@ -663,7 +663,7 @@ def test_train_refuses_before_making_its_run_folder(files):
 
 def test_an_unknown_flag_is_named_by_its_sub_command(capsys):
     """One line naming the flag and the sub-command whose --help lists the right ones."""
-    from cosim.cli import main
+    from tespike.cosim.cli import main
     with pytest.raises(SystemExit) as stop:
         main(["train", "--out", "w.pt", "--sequences", "2"])
     assert stop.value.code == 2
@@ -674,7 +674,7 @@ def test_an_unknown_flag_is_named_by_its_sub_command(capsys):
 
 def test_the_version_is_looked_up_only_when_asked(monkeypatch, capsys):
     """Building the parser (every run) skips the package-metadata lookup (about 30 ms)."""
-    import cosim.cli as cli
+    import tespike.cosim.cli as cli
 
     def lookup():
         raise AssertionError("version looked up")

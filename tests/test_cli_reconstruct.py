@@ -2,14 +2,14 @@
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.io import save_stream
-from recon.methods import reconstruct
+from tespike.golden.config import SensorConfig
+from tespike.golden.io import save_stream
+from tespike.recon.methods import reconstruct
 from tests.cli import assert_refused, run_tespike
 
 
 def make_stream(tmp_path, rng, config=SensorConfig()):
-    from recon.stream import legal_codes
+    from tespike.recon.stream import legal_codes
     words = rng.choice(legal_codes(config), size=(11, 3, 4))
     path = tmp_path / "S.npz"
     save_stream(path, words, config)

@@ -7,9 +7,9 @@ import types
 import numpy as np
 import pytest
 
-from cosim.cli import main
-from cosim.vcd import waveform_stream
-from golden.config import SensorConfig
+from tespike.cosim.cli import main
+from tespike.cosim.vcd import waveform_stream
+from tespike.golden.config import SensorConfig
 from tests.cli import assert_refused, run_tespike
 from tests.cosim_helpers import golden_words, threshold_stimulus
 
@@ -134,7 +134,8 @@ def _main(capsys, tmp_path, *extra):
 
 
 def test_rtl_sim_refuses_a_config_the_rtl_cannot_build(monkeypatch, capsys, tmp_path, rng):
-    import rtl.array
+    import tespike.rtl.array
+    from tespike import rtl
     _inputs(tmp_path, rng)
 
     def refusing(config, height, width, **kwargs):
@@ -148,7 +149,8 @@ def test_rtl_sim_refuses_a_config_the_rtl_cannot_build(monkeypatch, capsys, tmp_
 
 
 def test_rtl_sim_reports_a_broken_rtl_protocol_in_one_line(monkeypatch, capsys, tmp_path, rng):
-    import rtl.array
+    import tespike.rtl.array
+    from tespike import rtl
     from tests.test_cosim_rtlsim import _delayed_array
     _inputs(tmp_path, rng)
     monkeypatch.setattr(rtl.array, "PixelArray", _delayed_array(12))       # latency 13 > L = 12
@@ -166,7 +168,7 @@ def test_rtl_sim_hands_other_backends_the_stimulus(monkeypatch, capsys, tmp_path
         seen["args"] = (cfg, stimulus)
         return golden_words(cfg, stimulus)
 
-    monkeypatch.setitem(sys.modules, f"cosim.{backend}", types.SimpleNamespace(**{function: fake}))
+    monkeypatch.setitem(sys.modules, f"tespike.cosim.{backend}", types.SimpleNamespace(**{function: fake}))
     code, err = _main(capsys, tmp_path, "--backend", backend)
     assert code == 0, err
     assert seen["args"][0] == config and np.array_equal(seen["args"][1], stim)
@@ -177,14 +179,14 @@ def test_rtl_sim_hands_other_backends_the_stimulus(monkeypatch, capsys, tmp_path
 def test_rtl_sim_refuses_a_backend_result_of_the_wrong_shape(monkeypatch, capsys, tmp_path, rng):
     _inputs(tmp_path, rng)
     fake = types.SimpleNamespace(run_icarus=lambda cfg, stim, **kw: np.zeros((1, 1, 1), np.int64))
-    monkeypatch.setitem(sys.modules, "cosim.icarus", fake)
+    monkeypatch.setitem(sys.modules, "tespike.cosim.icarus", fake)
     code, err = _main(capsys, tmp_path, "--backend", "icarus")
     assert code != 0 and "shape (1, 1, 1)" in err and len(err.strip().splitlines()) == 1
     assert not _leftovers(tmp_path, "s.npz")
 
 
 def test_rtl_sim_names_a_missing_backend_module(monkeypatch, capsys, tmp_path, rng):
-    from cosim import backends
+    from tespike.cosim import backends
     _inputs(tmp_path, rng)
     monkeypatch.setitem(backends.VERILOG_BACKENDS, "verilator", ("cosim._no_such_backend", "run_verilator"))
     code, err = _main(capsys, tmp_path, "--backend", "verilator")
@@ -204,7 +206,7 @@ def test_rtl_sim_check_names_the_first_difference(monkeypatch, capsys, tmp_path,
     config, stim = _inputs(tmp_path, rng)
     wrong = golden_words(config, stim)
     wrong[1, 1, 2] = 1 if wrong[1, 1, 2] == 0 else 0     # still a legal word, not the golden one
-    monkeypatch.setitem(sys.modules, "cosim.icarus", types.SimpleNamespace(run_icarus=lambda c, s, **k: wrong))
+    monkeypatch.setitem(sys.modules, "tespike.cosim.icarus", types.SimpleNamespace(run_icarus=lambda c, s, **k: wrong))
     code, err = _main(capsys, tmp_path, "--backend", "icarus", "--check")
     assert code == 1 and "1 of 18 words differ; first at readout 1, pixel (1, 2)" in err
     with np.load(tmp_path / "s.npz") as npz:
@@ -213,7 +215,7 @@ def test_rtl_sim_check_names_the_first_difference(monkeypatch, capsys, tmp_path,
 
 def test_rtl_sim_icarus_backend_end_to_end(tmp_path, rng):
     """Runs once the verilator helper's cosim.icarus is merged (skipped before)."""
-    pytest.importorskip("cosim.icarus")
+    pytest.importorskip("tespike.cosim.icarus")
     import shutil
     if shutil.which("iverilog") is None:
         pytest.skip("iverilog is not installed")

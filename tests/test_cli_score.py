@@ -8,8 +8,8 @@ import torch
 from scipy.ndimage import gaussian_filter
 from skimage.metrics import structural_similarity
 
-from cosim.cli import main
-from recon.scenes import make_scene
+from tespike.cosim.cli import main
+from tespike.recon.scenes import make_scene
 from tests.cli import assert_refused, run_tespike
 
 

@@ -3,10 +3,10 @@ import json
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.decode import check_words
-from golden.fastsim import simulate_scene
-from golden.io import load_stream
+from tespike.golden.config import SensorConfig
+from tespike.golden.decode import check_words
+from tespike.golden.fastsim import simulate_scene
+from tespike.golden.io import load_stream
 from tests.cli import assert_refused, run_tespike
 
 
@@ -86,7 +86,7 @@ def test_simulate_refuses_bad_files_and_config(tmp_path):
 
 def test_simulate_with_a_sensor_noise_file(tmp_path):
     """--noise / --sensor-seed: the library's stream for that Sensor; clashes refused in one line."""
-    from golden.noise import Sensor, SensorNoise
+    from tespike.golden.noise import Sensor, SensorNoise
     noise = SensorNoise(dark_current="eq12", dark_level=2.0, dsnu=0.3, hot_pixels=0.05, prnu=0.05)
     (tmp_path / "n.json").write_text(noise.to_json())
     scene = np.full((3, 4, 5), 0.05)

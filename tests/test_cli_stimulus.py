@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.decode import decode_spikes
-from golden.fastsim import scene_stimulus, simulate_scene
-from golden.io import load_stream
-from golden.noise import Sensor, SensorNoise
-from golden.sensor import simulate
+from tespike.golden.config import SensorConfig
+from tespike.golden.decode import decode_spikes
+from tespike.golden.fastsim import scene_stimulus, simulate_scene
+from tespike.golden.io import load_stream
+from tespike.golden.noise import Sensor, SensorNoise
+from tespike.golden.sensor import simulate
 from tests.cli import assert_refused, run_tespike
 
 SMALL_TE = SensorConfig(b1=2, b2=2, threshold=300)

@@ -5,7 +5,7 @@ import shutil
 
 import pytest
 
-from cosim.synthesis import hierarchy_total, parse_stat_modules, top_module
+from tespike.cosim.synthesis import hierarchy_total, parse_stat_modules, top_module
 from tests.cli import assert_refused, run_tespike
 
 needs_yosys = pytest.mark.skipif(not shutil.which("yosys"), reason="Yosys is not installed")

@@ -3,10 +3,10 @@
 import numpy as np
 from matplotlib.image import imread
 
-from golden.config import SensorConfig
-from golden.fastsim import scene_stimulus, simulate_scene
-from golden.io import save_stream
-from recon.pictures import MU, tone_map
+from tespike.golden.config import SensorConfig
+from tespike.golden.fastsim import scene_stimulus, simulate_scene
+from tespike.golden.io import save_stream
+from tespike.recon.pictures import MU, tone_map
 from tests.cli import assert_refused, run_tespike
 
 
@@ -56,5 +56,5 @@ def test_refusals(tmp_path):
 
 
 def test_the_default_mu_is_the_metrics_mu():
-    from cosim.cli import build_parser
+    from tespike.cosim.cli import build_parser
     assert build_parser("view").parse_args(["view", "--input", "x.npy", "--out", "y.png"]).mu == MU

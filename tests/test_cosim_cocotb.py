@@ -12,11 +12,11 @@ import shutil
 import numpy as np
 import pytest
 
-from cosim.cocotb_bench import Settings, default_stimulus
-from cosim.compare import first_difference
-from cosim.cocotb_run import run_cocotb
-from golden.config import SensorConfig
-from golden.reference import step_reference
+from tespike.cosim.cocotb_bench import Settings, default_stimulus
+from tespike.cosim.compare import first_difference
+from tespike.cosim.cocotb_run import run_cocotb
+from tespike.golden.config import SensorConfig
+from tespike.golden.reference import step_reference
 from tests.cli import assert_refused, run_tespike
 from tests.verilog_spec_model import spec_model_verilog
 

@@ -13,8 +13,8 @@ import time
 import numpy as np
 import pytest
 
-from recon.dataset import compare_stores
-from recon.scenes.hdr_io import write_exr
+from tespike.recon.dataset import compare_stores
+from tespike.recon.scenes.hdr_io import write_exr
 
 from .cli import ROOT, run_tespike
 
@@ -130,7 +130,7 @@ class Cluster:
 
 def tespike_process(*args, **environ):
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), **environ)
-    return subprocess.Popen([sys.executable, "-m", "cosim", *map(str, args)], stdout=subprocess.PIPE,
+    return subprocess.Popen([sys.executable, "-m", "tespike", *map(str, args)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env)
 
 

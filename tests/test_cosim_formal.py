@@ -8,10 +8,12 @@ from types import SimpleNamespace
 import pytest
 from amaranth.hdl import Const, Module
 
-import rtl.pixel
-import rtl.verilog_stream
-from cosim.formal import ProofToolError, corners, properties, prove, require_tools, stream_rule_equivalence
-from golden.config import SensorConfig, load_config
+import tespike.rtl.pixel
+from tespike import rtl
+import tespike.rtl.verilog_stream
+from tespike import rtl
+from tespike.cosim.formal import ProofToolError, corners, properties, prove, require_tools, stream_rule_equivalence
+from tespike.golden.config import SensorConfig, load_config
 from tests.cli import assert_refused, run_tespike
 
 pytestmark = pytest.mark.skipif(
@@ -164,7 +166,7 @@ def test_an_edited_stream_pixel_rule_fails_with_a_counterexample(preset, old, ne
 
 
 def test_command_fails_in_one_line_on_an_edited_stream_rule(tmp_path, monkeypatch, capsys):
-    from cosim.cli import main
+    from tespike.cosim.cli import main
 
     _mutated(monkeypatch, ">=", ">")
     path = tmp_path / "small.json"

@@ -6,10 +6,10 @@ import shutil
 
 import pytest
 
-from cosim.formal.abc import prove_harness
-from cosim.formal.tops import (design_text, parallel_harness, small_clocks, stream_harness,
+from tespike.cosim.formal.abc import prove_harness
+from tespike.cosim.formal.tops import (design_text, parallel_harness, small_clocks, stream_harness,
                                timing_harness)
-from golden.config import load_config
+from tespike.golden.config import load_config
 
 pytestmark = pytest.mark.skipif(
     not all(shutil.which(tool) for tool in ("yosys", "yosys-abc")),

@@ -1,9 +1,9 @@
 """The generated array Verilog run by Icarus (cosim/icarus.py) equals the literal SPEC rule.
 
-The first test is the outside check of issue 3: ``rtl.verilog.array_verilog``
+The first test is the outside check of issue 3: ``tespike.rtl.verilog.array_verilog``
 for every edge configuration (the paper's TE and ML settings among them),
 random and extreme stimuli, compared bit for bit with
-``golden.reference.step_reference``. The others test the testbench itself on a
+``tespike.golden.reference.step_reference``. The others test the testbench itself on a
 hand-written model of the same ports (tests/verilog_spec_model.py): latencies,
 planted faults, X detection, refusals.
 """
@@ -13,11 +13,11 @@ import shutil
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.sensor import simulate
-from cosim.icarus import run_icarus, icarus_testbench
-from cosim.outside import SimulatorBuildError, SimulatorMissingError, SimulatorRunError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.sensor import simulate
+from tespike.cosim.icarus import run_icarus, icarus_testbench
+from tespike.cosim.outside import SimulatorBuildError, SimulatorMissingError, SimulatorRunError
 from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.outside_helpers import KINDS, SHAPE, generated_verilog, make_stimulus, reference_words
 from tests.verilog_spec_model import spec_model_verilog

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.errors import TespikeError
-from cosim.outside import (SimulatorRunError, cache_entry, check_captures, content_hash,
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import TespikeError
+from tespike.cosim.outside import (SimulatorRunError, cache_entry, check_captures, content_hash,
                            first_error_line, hex_to_rows, pack_rows, rows_to_hex, top_module,
                            unpack_rows, words_per_row)
 
@@ -35,7 +35,7 @@ def test_pack_accepts_any_integer_dtype(rng):
 
 
 def test_pack_large_chunks_match_small(rng, monkeypatch):
-    import cosim.outside as outside
+    import tespike.cosim.outside as outside
     values = rng.integers(0, 1 << 11, size=(300, 50), dtype=np.int64)
     whole = pack_rows(values, 11)
     monkeypatch.setattr(outside, "_PACK_CHUNK_BITS", 50 * 32 * 7)   # 7 rows per chunk

@@ -1,6 +1,6 @@
 """Reset asserted in the middle of a run, with charge in every pixel (cosim/resets.py), in every simulator.
 
-A reset vector from :func:`cosim.resets.reset_sweep` cuts segments at every phase
+A reset vector from :func:`tespike.cosim.resets.reset_sweep` cuts segments at every phase
 (mid-interval, on the interval's last clock, before, during and on the last
 beat, held 1-3 clocks) while the stimulus keeps charge flowing into every pixel,
 reset clocks included. Each top (parallel and streaming) in Amaranth, Icarus,
@@ -17,12 +17,12 @@ import shutil
 import numpy as np
 import pytest
 
-from cosim.outside import SimulatorRunError
-from cosim.resets import (Segment, beat_segments, check_resets, first_segment_difference, frame_segments,
+from tespike.cosim.outside import SimulatorRunError
+from tespike.cosim.resets import (Segment, beat_segments, check_resets, first_segment_difference, frame_segments,
                           golden_segments, reset_sweep, segments)
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.beats import beat_count, beats
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.beats import beat_count, beats
 from tests.outside_helpers import reference_words
 
 needs_icarus = pytest.mark.skipif(not shutil.which("iverilog"), reason="Icarus Verilog is not installed")
@@ -123,7 +123,7 @@ def test_beat_rules_cut_the_interval_at_the_reset_edge():
 @needs_icarus
 @pytest.mark.parametrize("config", CAMERAS, ids=str)
 def test_icarus_resets_mid_run_equal_golden(config):
-    from cosim.icarus import run_icarus, run_icarus_stream
+    from tespike.cosim.icarus import run_icarus, run_icarus_stream
     stim, resets = sweep(config)
     assert_segments_golden(config, stim, resets, run_icarus(config, stim, resets=resets))
     assert_segments_golden(config, stim, resets, run_icarus_stream(config, stim, LANES, resets=resets), LANES)
@@ -131,8 +131,8 @@ def test_icarus_resets_mid_run_equal_golden(config):
 
 @pytest.mark.parametrize("config", CAMERAS, ids=str)
 def test_amaranth_resets_mid_run_equal_golden(config):
-    from cosim.rtlsim import rtl_words
-    from cosim.rtlsim import rtl_stream_beats
+    from tespike.cosim.rtlsim import rtl_words
+    from tespike.cosim.rtlsim import rtl_stream_beats
     stim, resets = sweep(config)
     assert_segments_golden(config, stim, resets, rtl_words(config, stim, resets=resets))
     assert_segments_golden(config, stim, resets, rtl_stream_beats(config, stim, LANES, resets=resets), LANES)
@@ -142,7 +142,7 @@ def test_amaranth_resets_mid_run_equal_golden(config):
 @pytest.mark.parametrize("config", CAMERAS, ids=str)
 def test_verilator_resets_mid_run_equal_golden(config):
     """Both tops for TE (the parallel top's build is the slow one), the streaming top for every camera."""
-    from cosim.verilator import run_verilator, run_verilator_stream
+    from tespike.cosim.verilator import run_verilator, run_verilator_stream
     stim, resets = sweep(config)
     if config.is_te:
         assert_segments_golden(config, stim, resets, run_verilator(config, stim, resets=resets))
@@ -156,8 +156,8 @@ def test_verilator_resets_mid_run_equal_golden(config):
 def test_cocotb_resets_mid_run_equal_golden(simulator, lanes, tmp_path):
     """The ML msb camera of tests/test_cosim_stream.py's cocotb run (the same Verilog: one build)."""
     pytest.importorskip("cocotb")
-    from cosim.cocotb_bench import Settings
-    from cosim.cocotb_run import run_cocotb
+    from tespike.cosim.cocotb_bench import Settings
+    from tespike.cosim.cocotb_run import run_cocotb
     config = SensorConfig(mode="ml", ml_readout="msb", b1=2, b2=2)     # L = 12
     result = run_cocotb(Settings(config, *SHAPE, readouts=2, seed=3, lanes=lanes, resets="sweep"), simulator,
                         work_dir=tmp_path)
@@ -167,7 +167,7 @@ def test_cocotb_resets_mid_run_equal_golden(simulator, lanes, tmp_path):
 
 def test_reset_without_a_reset_mid_run_is_the_plain_run(rng):
     """An all-low vector is one segment: the same words as the run without one."""
-    from cosim.rtlsim import rtl_words
+    from tespike.cosim.rtlsim import rtl_words
     config = CAMERAS[1]
     stim = rng.integers(0, 60, size=(2 * config.clocks_per_readout, 1, 2))
     got = rtl_words(config, stim, resets=np.zeros(len(stim), bool))
@@ -200,9 +200,9 @@ FAULTS = {
 @needs_icarus
 @pytest.mark.parametrize("fault", FAULTS)
 def test_planted_reset_faults_are_caught(fault):
-    from cosim.icarus import run_icarus, run_icarus_stream
-    from rtl.verilog import array_verilog
-    from rtl.verilog_stream import stream_array_verilog
+    from tespike.cosim.icarus import run_icarus, run_icarus_stream
+    from tespike.rtl.verilog import array_verilog
+    from tespike.rtl.verilog_stream import stream_array_verilog
     config = CAMERAS[0]
     top, edit = FAULTS[fault]
     good = (stream_array_verilog(config, *SHAPE, LANES) if top == "stream" else array_verilog(config, *SHAPE))
@@ -223,9 +223,9 @@ def test_planted_reset_faults_are_caught(fault):
 @needs_icarus
 def test_the_two_reviewed_faults_pass_a_run_without_reset():
     """Why the reset runs exist: both edits of the issue pass today's reset-once check."""
-    from cosim.icarus import run_icarus, run_icarus_stream
-    from rtl.verilog import array_verilog
-    from rtl.verilog_stream import stream_array_verilog
+    from tespike.cosim.icarus import run_icarus, run_icarus_stream
+    from tespike.rtl.verilog import array_verilog
+    from tespike.rtl.verilog_stream import stream_array_verilog
     config = CAMERAS[0]
     stim = sweep(config)[0][:3 * config.clocks_per_readout]
     words = reference_words(config, stim)

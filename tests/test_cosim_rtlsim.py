@@ -5,9 +5,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cosim.rtlsim import (RTLProtocolError, iter_packed_charge, rtl_run, rtl_words, unpack_frames)
-from golden.config import SensorConfig
-from golden.errors import ConfigError, InputError
+from tespike.cosim.rtlsim import (RTLProtocolError, iter_packed_charge, rtl_run, rtl_words, unpack_frames)
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError, InputError
 from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.cosim_helpers import assert_rtl_matches_golden, golden_words, light_stimulus, threshold_stimulus
 
@@ -155,7 +155,8 @@ def test_bad_stimulus_is_refused_before_simulating(stimulus, words):
 
 
 def test_a_config_the_rtl_refuses_is_a_config_error(monkeypatch):
-    import rtl.array
+    import tespike.rtl.array
+    from tespike import rtl
 
     def refusing(*args, **kwargs):
         raise ValueError("no such array in this process")
@@ -173,7 +174,7 @@ def _delayed_array(delay, double=False):
     from amaranth.lib import wiring
     from amaranth.lib.wiring import In, Out
 
-    from rtl.array import PixelArray
+    from tespike.rtl.array import PixelArray
 
     class Delayed(wiring.Component):
         def __init__(self, config, height, width, flat=False):
@@ -199,8 +200,10 @@ def _delayed_array(delay, double=False):
 @pytest.mark.parametrize("delay, double, ok", [(0, False, True), (11, False, True),
                                                (12, False, False), (3, True, False)])
 def test_protocol_check_refuses_late_or_doubled_frame_valid(monkeypatch, rng, delay, double, ok):
-    import cosim.rtlsim
-    import rtl.array
+    import tespike.cosim.rtlsim
+    from tespike import cosim
+    import tespike.rtl.array
+    from tespike import rtl
     config = SensorConfig(b1=2, b2=2, threshold=20)           # L = 12, the RTL's own latency is 1
     monkeypatch.setattr(rtl.array, "PixelArray", _delayed_array(delay, double))
     stim = threshold_stimulus(config, rng, 3, 1, 2)

@@ -3,8 +3,8 @@
 Every simulator drives only ``clk``, ``rst`` and ``charge`` and reads only
 ``out_valid``, ``out_first`` and ``out_words``; the beats are held to SPEC
 section 6 (count, ``out_first``, the 2L latency bound:
-:func:`cosim.stream_ports.check_beats`) and compared bit for bit with
-:func:`golden.beats.beats` of the literal SPEC rule's words.
+:func:`tespike.cosim.stream_ports.check_beats`) and compared bit for bit with
+:func:`tespike.golden.beats.beats` of the literal SPEC rule's words.
 """
 
 import shutil
@@ -12,10 +12,10 @@ import shutil
 import numpy as np
 import pytest
 
-from cosim.icarus import run_icarus_stream
-from cosim.outside import SimulatorRunError
-from golden.config import SensorConfig
-from golden.beats import beats
+from tespike.cosim.icarus import run_icarus_stream
+from tespike.cosim.outside import SimulatorRunError
+from tespike.golden.config import SensorConfig
+from tespike.golden.beats import beats
 from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.outside_helpers import KINDS, make_stimulus, reference_words
 from tests.stream_helpers import STREAM_SHAPE, lane_counts
@@ -30,7 +30,7 @@ LANE_SWAP = ("assign out_words = beat_bus[0];",
 
 
 def _verilog(config, shape, lanes):
-    from rtl.verilog_stream import stream_array_verilog
+    from tespike.rtl.verilog_stream import stream_array_verilog
     return stream_array_verilog(config, *shape, lanes)
 
 
@@ -51,7 +51,7 @@ def test_icarus_stream_equals_golden(config, rng):
 def test_icarus_loop_view_equals_golden(config, rng):
     """The simulation view (rtl.verilog_stream.stream_loop_verilog: the same rule text and
     shift-register readout as one clocked loop) gives the golden beats for every kind of lane count."""
-    from rtl.verilog_stream import stream_array_verilog
+    from tespike.rtl.verilog_stream import stream_array_verilog
     stim = make_stimulus("random", config, rng, shape=STREAM_SHAPE)
     for lanes in lane_counts(config):
         verilog = stream_array_verilog(config, *STREAM_SHAPE, lanes, view="loop")
@@ -90,7 +90,7 @@ def test_icarus_stream_refuses_a_late_beat(rng):
     (MSB_CONFIGS[3], 6),         # ML msb, L = 1
 ], ids=str)
 def test_verilator_stream_equals_golden(config, lanes, rng):
-    from cosim.verilator import run_verilator_stream
+    from tespike.cosim.verilator import run_verilator_stream
     verilog = _verilog(config, STREAM_SHAPE, lanes)
     for kind in KINDS:
         stim = make_stimulus(kind, config, rng, shape=STREAM_SHAPE)
@@ -103,9 +103,9 @@ def test_verilator_stream_larger_array(rng):
     """A 24 x 40 paper-TE array over 4 readouts, in the simulation view Verilator runs at sensor size
     (the design's 960 pixel instances took 323 s to build and run here under a load of 12; the design
     itself is checked in Verilator at 2 x 3 above, and at every size in Icarus and Amaranth)."""
-    from cosim.verilator import run_verilator_stream
-    from golden.sensor import simulate
-    from rtl.verilog_stream import stream_array_verilog
+    from tespike.cosim.verilator import run_verilator_stream
+    from tespike.golden.sensor import simulate
+    from tespike.rtl.verilog_stream import stream_array_verilog
     config = SensorConfig()
     L = config.clocks_per_readout
     light = 10.0 ** rng.uniform(-3.0, np.log10(1.5), size=(24, 40))
@@ -118,8 +118,8 @@ def test_verilator_stream_larger_array(rng):
     pytest.param("icarus", marks=needs_icarus), pytest.param("verilator", marks=needs_verilator)])
 def test_cocotb_stream_bench(simulator, tmp_path):
     pytest.importorskip("cocotb")
-    from cosim.cocotb_bench import Settings
-    from cosim.cocotb_run import run_cocotb
+    from tespike.cosim.cocotb_bench import Settings
+    from tespike.cosim.cocotb_run import run_cocotb
     config = SensorConfig(mode="ml", ml_readout="msb", b1=2, b2=2)     # L = 12
     result = run_cocotb(Settings(config, 2, 3, readouts=3, seed=3, lanes=4), simulator, work_dir=tmp_path)
     assert result.passed, result.message
@@ -129,8 +129,8 @@ def test_cocotb_stream_bench(simulator, tmp_path):
 @needs_icarus
 def test_cocotb_stream_bench_notices_a_wrong_beat(tmp_path):
     pytest.importorskip("cocotb")
-    from cosim.cocotb_bench import Settings
-    from cosim.cocotb_run import run_cocotb
+    from tespike.cosim.cocotb_bench import Settings
+    from tespike.cosim.cocotb_run import run_cocotb
     config = SensorConfig(b1=2, b2=2)
     bad = _verilog(config, (2, 3), 4).replace(*LANE_SWAP)
     (tmp_path / "bad.v").write_text(bad)

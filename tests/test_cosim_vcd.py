@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from cosim.rtlsim import CLOCK_PERIOD_FS, RESET_CLOCKS, RTLProtocolError, rtl_run
-from cosim.vcd import rising_edges, waveform_stream, write_gtkw
-from golden.config import SensorConfig
-from golden.errors import InputError
+from tespike.cosim.rtlsim import CLOCK_PERIOD_FS, RESET_CLOCKS, RTLProtocolError, rtl_run
+from tespike.cosim.vcd import rising_edges, waveform_stream, write_gtkw
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
 from tests.cosim_helpers import golden_words, threshold_stimulus
 
 
@@ -58,7 +58,8 @@ def test_gtkw_shows_clock_strobes_ccc_and_pixel_00(rng, tmp_path):
 
 
 def test_failed_run_leaves_no_waveform(monkeypatch, rng, tmp_path):
-    import rtl.array
+    import tespike.rtl.array
+    from tespike import rtl
     from tests.test_cosim_rtlsim import _delayed_array
     config = SensorConfig(b1=2, b2=2, threshold=20)
     monkeypatch.setattr(rtl.array, "PixelArray", _delayed_array(3, double=True))

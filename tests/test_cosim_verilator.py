@@ -17,12 +17,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import cosim.verilator as cv
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.sensor import simulate
-from cosim.outside import SimulatorBuildError, SimulatorMissingError, SimulatorRunError
-from cosim.verilator import harness_cpp, run_verilator
+import tespike.cosim.verilator as cv
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.sensor import simulate
+from tespike.cosim.outside import SimulatorBuildError, SimulatorMissingError, SimulatorRunError
+from tespike.cosim.verilator import harness_cpp, run_verilator
 from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.outside_helpers import KINDS, SHAPE, generated_verilog, make_stimulus, reference_words
 from tests.verilog_spec_model import spec_model_verilog

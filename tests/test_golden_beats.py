@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.errors import ConfigError
-from golden.beats import beat_count, beats, check_lanes, min_lanes, unbeat
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
+from tespike.golden.beats import beat_count, beats, check_lanes, min_lanes, unbeat
 
 
 def test_beats_are_raster_order_with_zero_padding():
@@ -51,7 +51,7 @@ def test_lane_count_must_be_a_positive_integer(lanes):
 
 def test_output_bandwidth_at_the_paper_settings():
     """400 x 250 TE pixels at 40 kHz readout (pixel clock 9.6 MHz): 5-bit words, 20 Gbit/s, 417 lanes."""
-    from golden.beats import output_bandwidth
+    from tespike.golden.beats import output_bandwidth
     config = SensorConfig()
     b = output_bandwidth(config, 400, 250, 40e3 * 240)
     assert b["readout_hz"] == 40e3 and b["word_bits"] == 5
@@ -65,7 +65,7 @@ def test_output_bandwidth_at_the_paper_settings():
 def test_lane_count_above_the_limit_is_refused_in_one_line():
     """N past MAX_LANES is refused (an out_words port of N Wd bits no simulator holds; the
     generator wrote a [499999999999999999994:0] port for N = 10^20 before); N = H W + 1 still works."""
-    from golden.beats import MAX_LANES
+    from tespike.golden.beats import MAX_LANES
     assert check_lanes(SensorConfig(), 2, 3, 7) == 7
     assert check_lanes(SensorConfig(), 2, 3, MAX_LANES) == MAX_LANES
     with pytest.raises(ConfigError, match=f"at most {MAX_LANES} lanes") as info:

@@ -2,8 +2,8 @@ import json
 
 import pytest
 
-from golden.config import KEYS, SensorConfig, load_config
-from golden.errors import ConfigError
+from tespike.golden.config import KEYS, SensorConfig, load_config
+from tespike.golden.errors import ConfigError
 
 
 def test_te_defaults_follow_spec():

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.decode import decode_light, decode_spikes
-from golden.errors import InputError
+from tespike.golden.config import SensorConfig
+from tespike.golden.decode import decode_light, decode_spikes
+from tespike.golden.errors import InputError
 
 
 def test_te_decode_every_legal_word():
@@ -30,7 +30,7 @@ def test_ml_decode_and_refusal():
 
 def test_estimators_on_hand_worked_words():
     """TE b1 = b2 = 4 (alpha 15, F 16, L 240): flag-1 words decode by the centred rules."""
-    from golden.decode import ESTIMATORS
+    from tespike.golden.decode import ESTIMATORS
     c = SensorConfig()
     words = np.array([0, 7, 15, 16 | 1, 16 | 2, 16 | 3, 16 | 15])
     assert list(ESTIMATORS)[0] == "ratio"
@@ -55,7 +55,7 @@ def test_unknown_estimator_refused():
 
 def test_residual_estimator_less_biased_than_ratio_on_constant_light():
     """Seeded constant Poisson light over the TE overflow range, through the cycle-exact engine."""
-    from golden.dynamic_range import estimator_error
+    from tespike.golden.dynamic_range import estimator_error
     c = SensorConfig()
     light = np.logspace(np.log10(16 * 175 / 42000), 0, 25)      # 2^b1 .. 2^b1 alpha spikes per readout
     ratio_bias, _ = estimator_error(c, "ratio", light, readouts=30, replicas=2, seed=3)

@@ -3,9 +3,9 @@ import math
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.dynamic_range import constant_light_words, formula_db, light_grid, measure
-from golden.reference import step_reference
+from tespike.golden.config import SensorConfig
+from tespike.golden.dynamic_range import constant_light_words, formula_db, light_grid, measure
+from tespike.golden.reference import step_reference
 
 
 def test_formula_paper_settings():

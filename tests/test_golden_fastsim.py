@@ -12,14 +12,14 @@ import warnings
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.decode import check_words, decode_spikes
-from golden.errors import InputError
-from golden.fastsim import SceneSimulator, clock, head, simulate_scene, stripe_simulators
-from golden.light import poisson_stimulus
-from golden.noise import Sensor, SensorNoise
-from golden.reference import msb_index
-from golden.sensor import PixelArray, simulate
+from tespike.golden.config import SensorConfig
+from tespike.golden.decode import check_words, decode_spikes
+from tespike.golden.errors import InputError
+from tespike.golden.fastsim import SceneSimulator, clock, head, simulate_scene, stripe_simulators
+from tespike.golden.light import poisson_stimulus
+from tespike.golden.noise import Sensor, SensorNoise
+from tespike.golden.reference import msb_index
+from tespike.golden.sensor import PixelArray, simulate
 from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
 LEVELS = [1e-4, 1e-3, 1e-2, 0.05, 0.2, 0.5, 1.0, 2.0, 10.0]
@@ -343,7 +343,7 @@ def test_per_clock_path_spreads_dark_electrons_like_the_stimulus(model):
 
 
 def test_lindley_closed_form_equals_the_step_by_step_queue(rng):
-    from golden.fastsim import lindley_ends
+    from tespike.golden.fastsim import lindley_ends
     for w in (1, 2, 7, 40):
         x = rng.poisson(rng.uniform(0.2, 1.8, (1, 500)), (w, 500))
         b0 = rng.integers(0, 6, 500)
@@ -586,7 +586,7 @@ def test_reading_acc_is_a_function_of_the_seed_and_the_readouts_done():
 @pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_EDGE_CONFIGS,
                          ids=str)
 def test_walk_equals_the_cycle_exact_model_word_for_word(config, phases, monkeypatch):
-    """The per-clock path's shortcut for few pixels (``golden.fastsim.clock.walk_clocks``:
+    """The per-clock path's shortcut for few pixels (``tespike.golden.fastsim.clock.walk_clocks``:
     the queue of threshold crossings and, past a clip, the firing phase, both in closed
     form) gives the cycle-exact model's words, charges and msb remainders on the same
     electrons, from any carried charge (backlogs included), light around one threshold
@@ -621,7 +621,7 @@ def test_walk_equals_the_cycle_exact_model_word_for_word(config, phases, monkeyp
 
 @pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_EDGE_CONFIGS, ids=str)
 def test_head_state_equals_the_cycle_exact_model(config):
-    """The head's first clocks (``golden.fastsim.head.run_head``: the walk, the
+    """The head's first clocks (``tespike.golden.fastsim.head.run_head``: the walk, the
     cycle-exact model where it leaves a pixel) end in the cycle-exact model's state
     (charge, counter, TE overflow flag and latched tick) on the same electrons."""
     rng = np.random.default_rng(3)
@@ -641,10 +641,10 @@ def test_head_state_equals_the_cycle_exact_model(config):
 
 
 def test_window_groups_cover_each_pixel_once_at_a_length_it_allows():
-    """``golden.fastsim.window.groups``: every pixel in exactly one block, run at a
+    """``tespike.golden.fastsim.window.groups``: every pixel in exactly one block, run at a
     length at least its own (a longer window is as exact), neighbouring lengths merged
     only while the draws a block adds stay within MERGE_DRAWS."""
-    from golden.fastsim import window
+    from tespike.golden.fastsim import window
     rng = np.random.default_rng(4)
     for n in (5, 256, 3000, 40000):
         size = window.round_window(rng.uniform(1, 120, n) ** rng.uniform(0.5, 1.0, n))

@@ -12,14 +12,14 @@ import os
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.decode import decode_spikes
-from golden.errors import InputError
-from golden.fastsim import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, SceneSimulator, scene_stimulus,
+from tespike.golden.config import SensorConfig
+from tespike.golden.decode import decode_spikes
+from tespike.golden.errors import InputError
+from tespike.golden.fastsim import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, SceneSimulator, scene_stimulus,
                             simulate_scene, stripe_simulators, stripe_slices)
-from golden.io import load_stream
-from golden.light import poisson_stimulus
-from golden.sensor import simulate
+from tespike.golden.io import load_stream
+from tespike.golden.light import poisson_stimulus
+from tespike.golden.sensor import simulate
 from tests.cli import assert_refused, run_tespike
 
 SMALL = SensorConfig(b1=2, b2=2, threshold=100)                            # L = 12, one threshold/clock at I = 0.029

@@ -1,11 +1,11 @@
-"""golden.io: the stimulus reader is memory-mapped and checks every slice."""
+"""tespike.golden.io: the stimulus reader is memory-mapped and checks every slice."""
 
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.io import check_scene, check_stimulus, load_scene, load_stimulus, scan_light
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.io import check_scene, check_stimulus, load_scene, load_stimulus, scan_light
 
 
 def test_load_stimulus_is_memory_mapped(tmp_path):

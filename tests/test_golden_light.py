@@ -4,12 +4,12 @@ import warnings
 import numpy as np
 import pytest
 
-from golden.config import DESIGN_ELECTRONS, SensorConfig
-from golden.errors import InputError
-from golden.light import (LIGHT_CAP, dark_electrons, deterministic_clock_electrons, log_budget,
+from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.light import (LIGHT_CAP, dark_electrons, deterministic_clock_electrons, log_budget,
                           log_poisson_tail_above, log_poisson_tail_below, poisson_stimulus,
                           stimulus_dtype)
-from golden.io import check_stimulus
+from tespike.golden.io import check_stimulus
 from tests.configs import EDGE_CONFIGS
 
 

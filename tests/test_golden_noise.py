@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from golden.errors import InputError
-from golden.light import dark_electrons
-from golden.noise import Sensor, SensorNoise, load_noise, model_mean
+from tespike.golden.errors import InputError
+from tespike.golden.light import dark_electrons
+from tespike.golden.noise import Sensor, SensorNoise, load_noise, model_mean
 
 
 def test_defaults_are_shot_noise_only():

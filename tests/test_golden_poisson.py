@@ -1,4 +1,4 @@
-"""golden.poisson: table sampler's law, exactly (tables against 50-digit pmfs) and
+"""tespike.golden.poisson: table sampler's law, exactly (tables against 50-digit pmfs) and
 statistically (against numpy's Generator.poisson), and its lookup against plain inversion."""
 
 import math
@@ -7,9 +7,9 @@ from decimal import Decimal, localcontext
 import numpy as np
 import pytest
 
-from golden.errors import InputError
-from golden.light import log_poisson_tail_above, log_poisson_tail_below
-from golden.poisson import ONE, PoissonSampler, fraction_cdf, fraction_kmax, support
+from tespike.golden.errors import InputError
+from tespike.golden.light import log_poisson_tail_above, log_poisson_tail_below
+from tespike.golden.poisson import ONE, PoissonSampler, fraction_cdf, fraction_kmax, support
 
 LOG_TAIL = -75.0
 
@@ -263,7 +263,7 @@ def test_sorted_columns_stream(monkeypatch, local_bytes):
     """With many tables (forced by LOCAL_BYTES = 0) columns are drawn sorted by
     mean in blocks of columns, row by row within a block; otherwise row blocks.
     Either way each draw is the plain inversion of its word, put in its column."""
-    import golden.poisson as gp
+    import tespike.golden.poisson as gp
     monkeypatch.setattr(gp, "LOCAL_BYTES", local_bytes)
     monkeypatch.setattr(gp, "CHUNK", 1000)              # several blocks, a ragged last one
     L, n = 37, 101
@@ -315,7 +315,7 @@ class _FixedUniforms:
 def test_fraction_thresholds_exactly(monkeypatch):
     """Per element, u exactly at a threshold F_k counts it, the float just below
     does not; across several blocks (CHUNK patched small)."""
-    import golden.poisson as gp
+    import tespike.golden.poisson as gp
     monkeypatch.setattr(gp, "CHUNK", 64)
     sampler = PoissonSampler(LOG_TAIL)
     r = np.repeat([0.3, 0.5, 0.999, 1e-9], 50)                # 1e-9: F_1 rounds to 1, u never reaches it

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.reference import step_reference
+from tespike.golden.config import SensorConfig
+from tespike.golden.reference import step_reference
 
 
 def run(config, per_clock):

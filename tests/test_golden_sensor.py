@@ -7,12 +7,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import golden.sensor as sensor
-from golden.config import SensorConfig
-from golden.decode import check_words
-from golden.errors import InputError
-from golden.reference import PixelState, step_reference
-from golden.sensor import PixelArray, simulate
+import tespike.golden.sensor as sensor
+from tespike.golden.config import SensorConfig
+from tespike.golden.decode import check_words
+from tespike.golden.errors import InputError
+from tespike.golden.reference import PixelState, step_reference
+from tespike.golden.sensor import PixelArray, simulate
 from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
 MSB = SensorConfig.preset("ml-msb")

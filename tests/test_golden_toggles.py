@@ -1,15 +1,15 @@
-"""golden.toggles: the words are the golden model's, the toggles those of the RTL's VCD."""
+"""tespike.golden.toggles: the words are the golden model's, the toggles those of the RTL's VCD."""
 
 import numpy as np
 import pytest
 from amaranth.hdl import Module
 from amaranth.sim import Simulator
 
-from cosim.vcd import bit_toggles
-from golden.config import SensorConfig
-from golden.sensor import simulate
-from golden.toggles import count_toggles
-from rtl.pixel import pixel_class
+from tespike.cosim.vcd import bit_toggles
+from tespike.golden.config import SensorConfig
+from tespike.golden.sensor import simulate
+from tespike.golden.toggles import count_toggles
+from tespike.rtl.pixel import pixel_class
 
 CONFIGS = [SensorConfig(mode="te", b1=2, b2=2, threshold=5, acc_bits=4, input_bits=3),
            SensorConfig(mode="ml", b1=2, b2=2, ml_bits=3, threshold=4, acc_bits=4, input_bits=3),

@@ -2,9 +2,13 @@
 
 - no import circle among the project's modules, at module level or inside functions;
 - no module imports another module's private (``_name``) functions or constants;
-- no command module imports :mod:`cosim.cli` back (shared pieces live below it);
-- the learned wing's shared package (:mod:`recon.learning`) reaches no method (:mod:`recon.net`,
-  :mod:`recon.baselines`), directly or through another module (the registry, the trainer).
+- no command module imports :mod:`tespike.cosim.cli` back (shared pieces live below it);
+- the learned wing's shared package (:mod:`tespike.recon.learning`) reaches no method (:mod:`tespike.recon.net`,
+  :mod:`tespike.recon.baselines`), directly or through another module (the registry, the trainer);
+- the floors: ``golden`` imports no other room, ``rtl`` only ``golden``'s configuration,
+  errors and beat order, ``recon`` only ``golden``; ``cosim`` stands on all of them;
+- every import of a room goes through ``tespike.`` (the bare names ``golden``, ``rtl``,
+  ``cosim`` and ``recon`` belong to unrelated packages on the package index).
 """
 
 from __future__ import annotations
@@ -15,14 +19,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("golden", "cosim", "recon", "rtl")
 #: The learned wing: its shared package, and the packages of the methods built on it.
-SHARED, METHODS = "recon.learning", ("recon.net", "recon.baselines")
+SHARED, METHODS = "tespike.recon.learning", ("tespike.recon.net", "tespike.recon.baselines")
 
 
 def _modules() -> dict[str, Path]:
     modules = {}
     for package in PACKAGES:
         for path in (ROOT / package).rglob("*.py"):
-            name = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+            name = ".".join(("tespike",) + path.relative_to(ROOT).with_suffix("").parts)
             modules[name.removesuffix(".__init__")] = path
     return modules
 
@@ -116,7 +120,7 @@ def test_no_module_imports_private_names_of_another():
 
 def test_command_modules_do_not_import_the_cli_back():
     back = [f"{path.relative_to(ROOT)}" for name, path in MODULES.items()
-            if name.startswith("cosim.commands") and any(module == "cosim.cli" or (module == "cosim" and "cli" in names)
+            if name.startswith("tespike.cosim.commands") and any(module == "tespike.cosim.cli" or (module == "tespike.cosim" and "cli" in names)
                                                          for module, names in _imports(name, path))]
     assert back == []
 
@@ -155,3 +159,43 @@ def test_the_wing_check_finds_an_import_up_into_a_method():
 def test_the_shared_learning_package_reaches_no_method():
     assert any(_inside(m, SHARED) for m in MODULES) and all(any(_inside(m, p) for m in MODULES) for p in METHODS)
     assert _runs_up(_graph(), SHARED, METHODS) == []
+
+
+#: What each room may import from the others (a module name prefix, or the room itself).
+FLOORS = {
+    "golden": (),
+    "rtl": ("tespike.golden.config", "tespike.golden.errors", "tespike.golden.beats"),
+    "recon": ("tespike.golden",),
+    "cosim": ("tespike.golden", "tespike.rtl", "tespike.recon"),
+}
+
+
+def _room(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[0] == "tespike" and parts[1] in PACKAGES else None
+
+
+def test_rooms_import_only_their_floors():
+    up = []
+    for name, path in MODULES.items():
+        room = _room(name)
+        for module, names in _imports(name, path):
+            target = _room(module)
+            if target is None and module == "tespike":
+                targets = [f"tespike.{n}" for n in names if n in PACKAGES]
+            else:
+                targets = [module] if target else []
+            for full in targets:
+                if _room(full) != room and not any(full == f or full.startswith(f + ".") for f in FLOORS[room]):
+                    up.append(f"{path.relative_to(ROOT)}: {full}")
+    assert up == []
+
+
+def test_rooms_are_imported_as_tespike_modules():
+    bare = []
+    for folder in PACKAGES + ("tests", "benchmarks"):
+        for path in (ROOT / folder).rglob("*.py"):
+            for module, _ in _imports("tests.x" if folder in ("tests", "benchmarks") else "tespike.x.y", path):
+                if module.split(".")[0] in PACKAGES:
+                    bare.append(f"{path.relative_to(ROOT)}: {module}")
+    assert bare == []

@@ -1,4 +1,4 @@
-"""recon.baselines: Spk2ImgNet, BSF and MambaSpike against the contract the trainer and tiled inference rely on."""
+"""tespike.recon.baselines: Spk2ImgNet, BSF and MambaSpike against the contract the trainer and tiled inference rely on."""
 
 import dataclasses
 import json
@@ -6,16 +6,16 @@ import json
 import pytest
 import torch
 
-from golden.config import SensorConfig
+from tespike.golden.config import SensorConfig
 
-from golden.errors import InputError
-from recon.baselines import BASELINES, PAPER_PARAMETERS
-from recon.learned import receptive_radius
-from recon.learning.align import LocalCrossAttention, PyramidAlign, neighbourhood
-from recon.learning.layers import parameter_count, substreams
-from recon.baselines.represent import LENGTHS, firing_rates, window_means
-from recon.baselines.scan import SPAN, MambaBlock, selective_scan, selective_scan_reference
-from recon.learning.deform import ModulatedDeformConv2d
+from tespike.golden.errors import InputError
+from tespike.recon.baselines import BASELINES, PAPER_PARAMETERS
+from tespike.recon.learned import receptive_radius
+from tespike.recon.learning.align import LocalCrossAttention, PyramidAlign, neighbourhood
+from tespike.recon.learning.layers import parameter_count, substreams
+from tespike.recon.baselines.represent import LENGTHS, firing_rates, window_means
+from tespike.recon.baselines.scan import SPAN, MambaBlock, selective_scan, selective_scan_reference
+from tespike.recon.learning.deform import ModulatedDeformConv2d
 
 #: The TE sensor's light of one spike per readout (every learned module is told its sensor's).
 ONE_SPIKE = SensorConfig.preset("te").spike_light
@@ -192,7 +192,7 @@ def test_receptive_radius_bounds_the_field(name):
 def test_alignment_uses_the_projects_dcn(name):
     model = small(name)
     dcns = [m for m in model.modules() if isinstance(m, ModulatedDeformConv2d)]
-    assert dcns and ModulatedDeformConv2d.__module__ == "recon.learning.deform"
+    assert dcns and ModulatedDeformConv2d.__module__ == "tespike.recon.learning.deform"
     assert all(type(m) is ModulatedDeformConv2d for m in dcns)
 
 

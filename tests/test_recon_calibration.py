@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from golden.config import DESIGN_ELECTRONS, SensorConfig
-from golden.errors import InputError
-from golden.fastsim import simulate_scene
-from golden.io import save_stream
-from golden.noise import Sensor, SensorNoise
-from recon.calibration import (MIN_GAIN, Calibration, correct, estimate, load_calibration, save_calibration)
-from recon.methods import reconstruct
+from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.fastsim import simulate_scene
+from tespike.golden.io import save_stream
+from tespike.golden.noise import Sensor, SensorNoise
+from tespike.recon.calibration import (MIN_GAIN, Calibration, correct, estimate, load_calibration, save_calibration)
+from tespike.recon.methods import reconstruct
 from tests.cli import assert_refused, run_tespike
 
 SENSOR = Sensor(SensorNoise(dark_current="eq12", dark_level=2.0, dsnu=0.3, prnu=0.1), seed=3)
@@ -116,8 +116,8 @@ def test_reconstruct_with_calibration_and_weights(tmp_path):
     output is corrected like any method's (not the shipped weights, not uncorrected)."""
     import torch
 
-    from recon.learned import method_classes
-    from recon.learning.weights import save_weights
+    from tespike.recon.learned import method_classes
+    from tespike.recon.learning.weights import save_weights
     config = SensorConfig()
     dark, flat = _streams(config, 40)
     c = estimate(dark, flat, config, 0.03)

@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 import zarr
 
-from cosim.cli import main
-from cosim.dataset.cluster import Runner
-from cosim.dataset.build import build_dataset, hdr_sources, scene_sources
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.fastsim import simulate_scene
-from recon.dataset import DatasetStore, compare_stores, tile_seed
-from recon.dataset.evaluate import evaluate_store
-from recon.scenes import load_hdr_sequence, make_scene
-from recon.scenes.hdr_io import write_exr, write_hdr
+from tespike.cosim.cli import main
+from tespike.cosim.dataset.cluster import Runner
+from tespike.cosim.dataset.build import build_dataset, hdr_sources, scene_sources
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.fastsim import simulate_scene
+from tespike.recon.dataset import DatasetStore, compare_stores, tile_seed
+from tespike.recon.dataset.evaluate import evaluate_store
+from tespike.recon.scenes import load_hdr_sequence, make_scene
+from tespike.recon.scenes.hdr_io import write_exr, write_hdr
 
 CONFIGS = {"te": SensorConfig(mode="te"), "ml": SensorConfig(mode="ml")}
 
@@ -121,7 +121,7 @@ def test_tiled_scores_equal_whole_frame_scores(tmp_path):
 
 def test_store_scores_equal_the_serial_evaluation(tmp_path):
     """On the same light and words, the store path gives recon.evaluate's numbers exactly."""
-    from recon.evaluate import evaluate
+    from tespike.recon.evaluate import evaluate
 
     build(tmp_path / "s.zarr", scene_sources(["moderate"], 12, 24, 32), seed=3)
     store = DatasetStore.open(tmp_path / "s.zarr")

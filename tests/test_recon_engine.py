@@ -1,16 +1,16 @@
-"""recon.engine: dead leaves, clips (families, peak, length), the pool's schedule, samples' edge padding."""
+"""tespike.recon.engine: dead leaves, clips (families, peak, length), the pool's schedule, samples' edge padding."""
 
 import math
 
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from recon.engine.batches import ClipPool, draw_batch, draw_sample
-from recon.engine.clips import Clip, EngineRecipe, clip_light, draw_length, make_clip
-from recon.engine.deadleaves import DeadLeavesParams, _power_law, dead_leaves
-from recon.stream import key_span, span_inside
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.recon.engine.batches import ClipPool, draw_batch, draw_sample
+from tespike.recon.engine.clips import Clip, EngineRecipe, clip_light, draw_length, make_clip
+from tespike.recon.engine.deadleaves import DeadLeavesParams, _power_law, dead_leaves
+from tespike.recon.stream import key_span, span_inside
 
 SMALL = EngineRecipe(height=24, width=24, long=(6, 12), short=(1, 5))
 
@@ -50,8 +50,8 @@ def test_clip_is_a_pure_function_of_recipe_config_and_index():
 def test_noisy_clips_target_the_light_their_pixels_saw():
     """noise_fraction 1: every clip has a random sensor in NOISE_DRAW, target gain x I + dark;
     noise_fraction 0 draws nothing more (the clips recipes always gave)."""
-    from golden.noise import Sensor
-    from recon.engine.clips import NOISE_DRAW, seen_light
+    from tespike.golden.noise import Sensor
+    from tespike.recon.engine.clips import NOISE_DRAW, seen_light
     config = SensorConfig()
     noisy = EngineRecipe(**{**SMALL.to_dict(), "noise_fraction": 1.0})
     plain = make_clip(SMALL, config, 3)
@@ -92,7 +92,7 @@ def test_peaks_lengths_and_families_are_drawn_in_their_ranges():
 
 
 def test_user_folder_family(tmp_path):
-    from recon.scenes import write_hdr
+    from tespike.recon.scenes import write_hdr
     folder = tmp_path / "seq"
     folder.mkdir()
     rng = np.random.default_rng(0)

@@ -6,14 +6,14 @@ import io
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.fastsim import simulate_scene
-from recon.evaluate import Evaluation, Measurement, evaluate, label, paper_configs, scored_frames
-from recon.report import results_csv, table_csv, table_markdown, write_outputs
-from recon.pictures import tone_map
-from recon.metrics import psnr_mu, ssim_mu
-from recon.scenes import make_scene
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.fastsim import simulate_scene
+from tespike.recon.evaluate import Evaluation, Measurement, evaluate, label, paper_configs, scored_frames
+from tespike.recon.report import results_csv, table_csv, table_markdown, write_outputs
+from tespike.recon.pictures import tone_map
+from tespike.recon.metrics import psnr_mu, ssim_mu
+from tespike.recon.scenes import make_scene
 
 
 def simulate(config, light, rng):
@@ -134,7 +134,8 @@ def test_run_time_is_the_median_of_repeats(small_run, monkeypatch):
     """Each method runs ``repeats`` times; the table says how many and with how many threads."""
     import torch
 
-    import recon.methods
+    import tespike.recon.methods
+    from tespike import recon
     sequences, _ = small_run
     calls = []
     real = recon.methods.reconstruct
@@ -223,7 +224,7 @@ def test_missing_weights_are_noted_by_default_and_refused_when_named(empty_weigh
 
 
 def test_further_metrics_are_the_scores_of_the_scored_frames():
-    from recon.score import score
+    from tespike.recon.score import score
     light = make_scene("moderate", 14, 24, 24, seed=4)
     evaluation = evaluate([("a", light)], simulate, methods=("tfp",), sensors=("te",), progress=False, keep=True,
                           repeats=1, metrics=("fovvideovdp", "psnr_pu21", "hdr_vqm"), vdp_frames=2)
@@ -267,7 +268,7 @@ def test_noise_sensors_get_dark_current_and_their_own_table():
 def test_calibrated_rows_win_back_the_dark_current():
     """A +cal sensor reconstructs the same noise sensor with its calibration: its own row in the
     noise table, under the uncalibrated row; a custom sensor gets a column named by its options."""
-    from golden.noise import Sensor, SensorNoise
+    from tespike.golden.noise import Sensor, SensorNoise
 
     def simulate(config, light, rng, noise_sensor=None):
         return simulate_scene(config, light, seed=rng, sensor=noise_sensor)
@@ -310,8 +311,8 @@ def test_complexity_columns_with_the_papers_table10():
 def test_with_a_learned_method_frames_are_scored_where_its_span_fits(empty_weights_dir):
     import torch
 
-    from recon.learned import method_classes
-    from recon.learning.weights import save_weights
+    from tespike.recon.learned import method_classes
+    from tespike.recon.learning.weights import save_weights
     torch.manual_seed(0)
     module, sizes = method_classes("spk2imgnet")
     save_weights(empty_weights_dir / "spk2imgnet-te.pt", module(sizes.preset("cpu")).eval(), SensorConfig(), {},
@@ -327,9 +328,9 @@ def test_weights_given_replace_the_shipped_ones(empty_weights_dir, tmp_path):
     """``weights`` (``--weights``): a learned method runs with the user's file on the sensor it was trained for."""
     import torch
 
-    from recon.learned import method_classes, weights_by_sensor
-    from recon.learning.weights import save_weights
-    from recon.methods import reconstruct
+    from tespike.recon.learned import method_classes, weights_by_sensor
+    from tespike.recon.learning.weights import save_weights
+    from tespike.recon.methods import reconstruct
     torch.manual_seed(0)
     module, sizes = method_classes("bsf")
     save_weights(tmp_path / "mine.pt", module(sizes.preset("cpu")).eval(), SensorConfig(), {}, "bsf")

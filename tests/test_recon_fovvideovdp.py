@@ -1,14 +1,14 @@
-"""recon.fovvideovdp: pyfvvdp imports beside torch 2.13, runs offline, and orders known distortions."""
+"""tespike.recon.fovvideovdp: pyfvvdp imports beside torch 2.13, runs offline, and orders known distortions."""
 
 import numpy as np
 import pytest
 import torch
 from scipy.ndimage import gaussian_filter
 
-from golden.errors import InputError
-from recon.display import HdrDisplay
-from recon.fovvideovdp import fovvideovdp
-from recon.scenes import make_scene
+from tespike.golden.errors import InputError
+from tespike.recon.display import HdrDisplay
+from tespike.recon.fovvideovdp import fovvideovdp
+from tespike.recon.scenes import make_scene
 
 
 @pytest.fixture(autouse=True)
@@ -53,7 +53,8 @@ def test_display_grading_from_the_reference(rng):
 
 
 def test_refused_up_front_when_memory_is_short(monkeypatch):
-    import golden.resources
+    import tespike.golden.resources
+    from tespike import golden
     monkeypatch.setattr(golden.resources, "available_memory", lambda: 1 << 20)
     ref = scene(frames=1)
     with pytest.raises(InputError, match="FovVideoVDP of 64 x 96 frames needs about"):

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from golden.errors import InputError
-from recon.scenes import hdr_io
-from recon.scenes.color import normalise_sequence, to_gray
-from recon.scenes.hdr_io import (float_to_rgbe, list_frames, load_hdr_sequence, read_exr, read_hdr,
+from tespike.golden.errors import InputError
+from tespike.recon.scenes import hdr_io
+from tespike.recon.scenes.color import normalise_sequence, to_gray
+from tespike.recon.scenes.hdr_io import (float_to_rgbe, list_frames, load_hdr_sequence, read_exr, read_hdr,
                                  rgbe_to_float, write_exr, write_hdr)
 from tests.conftest import FULL_SIZE_HDRI
 
@@ -176,7 +176,7 @@ def test_writers_are_atomic(tmp_path):
 
 def test_reads_a_panorama_written_as_exr(tmp_path):
     """The shipped city panorama (HDR, 4e3 : 1 peak to median) survives an EXR round trip."""
-    from recon.scenes.panorama import load_panorama
+    from tespike.recon.scenes.panorama import load_panorama
     luminance = load_panorama("city").astype(np.float32)
     write_exr(tmp_path / "city.exr", np.repeat(luminance[:, :, None], 3, axis=2))
     rgb = hdr_io.read_image(tmp_path / "city.exr")

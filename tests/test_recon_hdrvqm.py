@@ -1,4 +1,4 @@
-"""recon.hdrvqm: HDR-VQM equals a hand-written numpy reading of the steps; orders known distortions."""
+"""tespike.recon.hdrvqm: HDR-VQM equals a hand-written numpy reading of the steps; orders known distortions."""
 
 import math
 
@@ -7,11 +7,11 @@ import pytest
 import torch
 from scipy.ndimage import gaussian_filter
 
-from golden.errors import InputError
-from recon import hdrvqm
-from recon.display import HdrDisplay
-from recon.metrics import PU21_BANDING_GLARE
-from recon.scenes import make_scene
+from tespike.golden.errors import InputError
+from tespike.recon import hdrvqm
+from tespike.recon.display import HdrDisplay
+from tespike.recon.metrics import PU21_BANDING_GLARE
+from tespike.recon.scenes import make_scene
 
 
 @pytest.fixture(autouse=True)
@@ -120,7 +120,8 @@ def test_tubes_and_pooling():
 
 
 def test_refused_up_front_when_memory_is_short(monkeypatch):
-    import golden.resources
+    import tespike.golden.resources
+    from tespike import golden
     monkeypatch.setattr(golden.resources, "available_memory", lambda: 1 << 20)
     ref = scene(frames=1, height=64, width=96)
     with pytest.raises(InputError, match="HDR-VQM of 64 x 96 frames needs about"):

@@ -1,4 +1,4 @@
-"""recon.learned and the registry's learned methods: weights per method and preset, refusals in one line.
+"""tespike.recon.learned and the registry's learned methods: weights per method and preset, refusals in one line.
 
 Weights are tiny ones made here in a temporary folder (``WEIGHTS_DIR`` patched): no
 test depends on shipped baseline weights.
@@ -10,20 +10,21 @@ import numpy as np
 import pytest
 import torch
 
-import recon.learned
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.io import save_stream
-from recon.learned import LEARNED, method_classes, method_span, weights_path
-from recon.methods import RECON_METHODS, available_methods, missing_weights, reconstruct
-from recon.stream import legal_codes
+import tespike.recon.learned
+from tespike import recon
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.io import save_stream
+from tespike.recon.learned import LEARNED, method_classes, method_span, weights_path
+from tespike.recon.methods import RECON_METHODS, available_methods, missing_weights, reconstruct
+from tespike.recon.stream import legal_codes
 
 TE, ML = SensorConfig.preset("te"), SensorConfig.preset("ml")
 
 
 def save_tiny(folder, method, config, file_name=None, seed=0):
     """Weights of ``method`` at its cpu size (random, seeded) saved as the shipped form."""
-    from recon.learning.weights import save_weights
+    from tespike.recon.learning.weights import save_weights
     torch.manual_seed(seed)
     module, sizes = method_classes(method)
     model = module(sizes.preset("cpu")).eval()
@@ -56,7 +57,7 @@ def test_a_baseline_reconstructs_with_its_weights(empty_weights_dir, rng):
     path, model = save_tiny(empty_weights_dir, "bsf", TE)
     assert weights_path(TE, "bsf") == path == empty_weights_dir / "bsf-te.pt"
     words = tiny_stream(rng)
-    from recon.learning.infer import reconstruct_model
+    from tespike.recon.learning.infer import reconstruct_model
     images = reconstruct(words, TE, "bsf")
     assert images.shape == (5, 8, 8) and images.dtype == np.float32 and np.isfinite(images).all()
     assert np.array_equal(images, reconstruct_model(model, words, TE))
@@ -84,7 +85,7 @@ def test_weights_of_another_method_or_sensor_are_refused(empty_weights_dir, rng)
 
 
 def run_here(capsys, *args):
-    from cosim.cli import main
+    from tespike.cosim.cli import main
     code = main([str(a) for a in args])
     captured = capsys.readouterr()
     return code, captured.out, captured.err
@@ -138,7 +139,7 @@ def test_cli_reconstruct_with_weights_the_user_trained(empty_weights_dir, tmp_pa
 
 
 def test_weights_by_sensor(tmp_path):
-    from recon.learned import weights_by_sensor
+    from tespike.recon.learned import weights_by_sensor
     te_file, _ = save_tiny(tmp_path, "bsf", TE, file_name="a.pt")
     ml_file, _ = save_tiny(tmp_path, "net", ML, file_name="b.pt")
     configs = {"te": TE, "ml": ML, "noisy": TE}

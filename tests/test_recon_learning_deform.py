@@ -1,4 +1,4 @@
-"""recon.learning.deform: the plain-torch DCNv2 against conv2d and a direct float64 loop."""
+"""tespike.recon.learning.deform: the plain-torch DCNv2 against conv2d and a direct float64 loop."""
 
 import math
 
@@ -6,7 +6,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from recon.learning.deform import ModulatedDeformConv2d, deform_conv2d
+from tespike.recon.learning.deform import ModulatedDeformConv2d, deform_conv2d
 
 
 def deform_conv2d_loop(input, offset, weight, bias=None, *, stride=1, padding=0, dilation=1, mask=None):

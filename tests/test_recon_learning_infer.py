@@ -1,4 +1,4 @@
-"""recon.learning.infer: any learned method on any stream length and frame size, tiles equal to the whole frame, stiff inputs."""
+"""tespike.recon.learning.infer: any learned method on any stream length and frame size, tiles equal to the whole frame, stiff inputs."""
 
 import warnings
 
@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 import torch
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.fastsim import simulate_scene
-import recon.learning.infer as infer
-from recon.learned import load_weights, weights_path
-from recon.learning.infer import MIRROR_BORDER, default_tile, frame, mirrored_index, tile_margin, tiles
-from recon.learning.weights import save_weights
-from recon.methods import reconstruct
-from recon.net.model import TESpikeNet
-from recon.net.sizes import NetSizes
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.fastsim import simulate_scene
+import tespike.recon.learning.infer as infer
+from tespike.recon.learned import load_weights, weights_path
+from tespike.recon.learning.infer import MIRROR_BORDER, default_tile, frame, mirrored_index, tile_margin, tiles
+from tespike.recon.learning.weights import save_weights
+from tespike.recon.methods import reconstruct
+from tespike.recon.net.model import TESpikeNet
+from tespike.recon.net.sizes import NetSizes
 
 TINY = NetSizes(channels=8, heads=2, window=3, stride=2, unshuffle=2, levels=2, max_offset=1.0,
                 attention_window=3)
@@ -160,7 +160,7 @@ def test_shipped_weights_match_their_preset(preset):
 
 
 def test_cli_reconstruct_net(tmp_path):
-    from golden.io import save_stream
+    from tespike.golden.io import save_stream
     config = SensorConfig()
     light = np.random.default_rng(4).uniform(0.001, 0.5, (5, 9, 11)).astype(np.float32)
     save_stream(tmp_path / "S.npz", simulate_scene(config, light, seed=1), config)

@@ -1,19 +1,19 @@
-"""recon.methods: reconstruct() on hand-made and simulated streams, both modes."""
+"""tespike.recon.methods: reconstruct() on hand-made and simulated streams, both modes."""
 
 import numpy as np
 import pytest
 import torch
 
-from golden.config import DESIGN_ELECTRONS, SensorConfig
-from golden.decode import decode_light
-from golden.errors import InputError
-from golden.sensor import simulate
-from recon.methods import RECON_METHODS, reconstruct
+from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig
+from tespike.golden.decode import decode_light
+from tespike.golden.errors import InputError
+from tespike.golden.sensor import simulate
+from tespike.recon.methods import RECON_METHODS, reconstruct
 
 #: The training-free methods, which work pixel by pixel along time on any configuration
 #: (the network is tested in tests/test_recon_net_*.py, on the presets it has weights for).
 PIXEL_METHODS = sorted(name for name, method in RECON_METHODS.items() if method.block is not None)
-from recon.stream import legal_codes
+from tespike.recon.stream import legal_codes
 from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
 TE, ML, MSB = SensorConfig(), SensorConfig(mode="ml"), SensorConfig.preset("ml-msb")

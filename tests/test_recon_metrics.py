@@ -1,4 +1,4 @@
-"""recon.metrics: torch PSNR-mu / SSIM-mu equal scikit-image on the same tone-mapped images."""
+"""tespike.recon.metrics: torch PSNR-mu / SSIM-mu equal scikit-image on the same tone-mapped images."""
 
 import math
 
@@ -7,8 +7,8 @@ import pytest
 import torch
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
-from golden.errors import InputError
-from recon import metrics
+from tespike.golden.errors import InputError
+from tespike.recon import metrics
 
 
 def hdr_pair(rng, shape=(3, 24, 31)):
@@ -130,14 +130,14 @@ def test_twelve_decades_and_huge_light(rng):
 def test_one_mu_law_for_metrics_pictures_and_learned_methods():
     """One constant mu and one torch mu-law (recon.learning.mulaw.compress) serve the metrics;
     the numpy tone map of the pictures is its twin for code that runs without torch."""
-    from recon import pictures
-    from recon.learning.mulaw import compress
+    from tespike.recon import pictures
+    from tespike.recon.learning.mulaw import compress
     assert metrics.MU is pictures.MU
     h = torch.linspace(0, 1, 101, dtype=torch.float64)
     assert torch.equal(metrics.mu_law(h), compress(h, pictures.MU))
     assert np.allclose(pictures.tone_map(h.numpy(), 1.0), metrics.mu_law(h).numpy(), rtol=0, atol=1e-15)
     # the in-place twin the baselines use on their large firing-rate stacks
-    from recon.learning.mulaw import compress_
+    from tespike.recon.learning.mulaw import compress_
     light = torch.cat((torch.tensor([-0.5, 0.0]), torch.logspace(-6, 1, 50)))
     work = light.clone()
     assert compress_(work, 5000.0) is work and torch.equal(work, compress(light, 5000.0))

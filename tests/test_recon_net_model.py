@@ -1,21 +1,21 @@
-"""recon.net: every part of the paper's Figure 3 alone, the whole, its sizes and ablation switches."""
+"""tespike.recon.net: every part of the paper's Figure 3 alone, the whole, its sizes and ablation switches."""
 
 import dataclasses
 
 import pytest
 import torch
 
-from golden.config import SensorConfig
+from tespike.golden.config import SensorConfig
 
-from golden.errors import InputError
-from recon.learning.align import AlignLevel
-from recon.net.align import SPA
-from recon.net.features import GRADIENT_KERNELS, MSFEG, GradientFilters
-from recon.learning.layers import parameter_count, substreams
-from recon.learning.mulaw import compress, expand
-from recon.net.model import TESpikeNet
-from recon.net.refine import GuidedAttention, IntensityFeature, box_mean
-from recon.net.sizes import SWITCHES, NetSizes
+from tespike.golden.errors import InputError
+from tespike.recon.learning.align import AlignLevel
+from tespike.recon.net.align import SPA
+from tespike.recon.net.features import GRADIENT_KERNELS, MSFEG, GradientFilters
+from tespike.recon.learning.layers import parameter_count, substreams
+from tespike.recon.learning.mulaw import compress, expand
+from tespike.recon.net.model import TESpikeNet
+from tespike.recon.net.refine import GuidedAttention, IntensityFeature, box_mean
+from tespike.recon.net.sizes import SWITCHES, NetSizes
 
 #: The TE sensor's light of one spike per readout (every learned module is told its sensor's).
 ONE_SPIKE = SensorConfig.preset("te").spike_light

@@ -1,4 +1,4 @@
-"""recon.reach: every learned method's receptive reach is derived from its modules, an upper bound, and tight."""
+"""tespike.recon.reach: every learned method's receptive reach is derived from its modules, an upper bound, and tight."""
 
 import dataclasses
 
@@ -6,13 +6,13 @@ import pytest
 import torch
 from torch import nn
 
-from golden.config import SensorConfig
-from recon.baselines import BASELINES
-from recon.learned import learned_methods, receptive_radius
-from recon.net.features import MSFEG
-from recon.net.model import TESpikeNet
-from recon.net.sizes import NetSizes
-from recon.reach import FRAME, Support, support
+from tespike.golden.config import SensorConfig
+from tespike.recon.baselines import BASELINES
+from tespike.recon.learned import learned_methods, receptive_radius
+from tespike.recon.net.features import MSFEG
+from tespike.recon.net.model import TESpikeNet
+from tespike.recon.net.sizes import NetSizes
+from tespike.recon.reach import FRAME, Support, support
 from tests.test_recon_baselines import SMALL, hdr_light
 from tests.test_recon_learning_infer import TINY
 

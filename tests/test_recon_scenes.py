@@ -5,14 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from golden.errors import InputError
-from golden.io import check_scene
-from recon.scenes import SCENES, make_scene, scene_rng
-from recon.scenes.heldout import EVALUATION_SET, MODERATE_SET, sequence_set
-from recon.scenes.panorama import (DATA_DIR, DEFAULT_PANORAMA_FILE, PANORAMAS, CameraPath, block_mean,
+from tespike.golden.errors import InputError
+from tespike.golden.io import check_scene
+from tespike.recon.scenes import SCENES, make_scene, scene_rng
+from tespike.recon.scenes.heldout import EVALUATION_SET, MODERATE_SET, sequence_set
+from tespike.recon.scenes.panorama import (DATA_DIR, DEFAULT_PANORAMA_FILE, PANORAMAS, CameraPath, block_mean,
                                    build_default_panorama, load_panorama, render_path,
                                    shipped_panorama_file)
-from recon.scenes.warp import render_window, sample_bilinear
+from tespike.recon.scenes.warp import render_window, sample_bilinear
 from tests.cli import assert_refused, run_tespike
 from tests.conftest import FULL_SIZE_HDRI
 
@@ -236,7 +236,7 @@ def test_scene_command_writes_the_scene(tmp_path):
 
 
 def test_scene_command_folder(tmp_path):
-    from recon.scenes.hdr_io import write_hdr
+    from tespike.recon.scenes.hdr_io import write_hdr
     (tmp_path / "seq").mkdir()
     for i in range(3):
         write_hdr(tmp_path / "seq" / f"f{i}.hdr", np.full((4, 9), 2.0 ** i))
@@ -258,7 +258,7 @@ def test_scene_command_refuses(tmp_path):
     (("--folder", ".", "--crop", "3y4"), "HxW"),
 ])
 def test_scene_command_refusals_in_process(tmp_path, capsys, monkeypatch, args, word):
-    from cosim.cli import main
+    from tespike.cosim.cli import main
     monkeypatch.chdir(tmp_path)
     assert main(["scene", *args, "--out", str(tmp_path / "I.npy")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -1,10 +1,10 @@
-"""recon.settings: one validated dataclass of sizes and switches."""
+"""tespike.recon.settings: one validated dataclass of sizes and switches."""
 
 import numpy as np
 import pytest
 
-from golden.errors import InputError
-from recon.settings import ReconSettings
+from tespike.golden.errors import InputError
+from tespike.recon.settings import ReconSettings
 
 
 def test_defaults_and_radius():

@@ -24,16 +24,16 @@ SHAPE = (3, 12, 18)
 
 def shipped() -> list[tuple[str, str]]:
     """(method, preset) of every shipped weights file."""
-    from golden.config import PRESETS
-    from recon.learned import LEARNED, WEIGHTS_DIR, weights_name
+    from tespike.golden.config import PRESETS
+    from tespike.recon.learned import LEARNED, WEIGHTS_DIR, weights_name
     return [(method, preset) for preset in PRESETS for method in LEARNED
             if (WEIGHTS_DIR / weights_name(method, preset)).is_file()]
 
 
 def stream(preset: str) -> np.ndarray:
     """Legal words of ``preset``, a third of the pixels dark (zero words: the head's one-spike bound)."""
-    from golden.config import SensorConfig
-    from recon.stream import legal_codes
+    from tespike.golden.config import SensorConfig
+    from tespike.recon.stream import legal_codes
     rng = np.random.default_rng(7)
     words = rng.choice(legal_codes(SensorConfig.preset(preset)), size=SHAPE)
     return np.where(rng.random(SHAPE) < 0.33, 0, words).astype(np.uint8)
@@ -42,8 +42,8 @@ def stream(preset: str) -> np.ndarray:
 def images(method: str, preset: str, words: np.ndarray) -> np.ndarray:
     import torch
 
-    from golden.config import SensorConfig
-    from recon.methods import reconstruct
+    from tespike.golden.config import SensorConfig
+    from tespike.recon.methods import reconstruct
     torch.set_num_threads(1)
     return reconstruct(words, SensorConfig.preset(preset), method)
 

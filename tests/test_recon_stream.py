@@ -1,14 +1,14 @@
-"""recon.stream: lookup-table decoding equals golden.decode on every code; sub-streams (eq. 4)."""
+"""tespike.recon.stream: lookup-table decoding equals golden.decode on every code; sub-streams (eq. 4)."""
 
 import numpy as np
 import pytest
 import torch
 
-import golden.decode as gd
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.io import save_stream
-from recon import stream
+import tespike.golden.decode as gd
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.io import save_stream
+from tespike.recon import stream
 from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
 WIDE_CONFIGS = [

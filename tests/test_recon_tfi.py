@@ -1,12 +1,12 @@
-"""recon.tfi: spike-interval light, with hand-worked streams and the documented edge rules."""
+"""tespike.recon.tfi: spike-interval light, with hand-worked streams and the documented edge rules."""
 
 import numpy as np
 import pytest
 import torch
 
-from golden.config import DESIGN_ELECTRONS, SensorConfig
-from recon.stream import decode_light
-from recon.tfi import tfi
+from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig
+from tespike.recon.stream import decode_light
+from tespike.recon.tfi import tfi
 
 TE = SensorConfig()                 # theta 175, d = 4
 ML = SensorConfig(mode="ml")        # theta 328
@@ -131,7 +131,7 @@ def test_equals_plain_loop_reference(search, K, radius, density, rng):
 
 
 def test_running_scans_equal_torch_cumulative(rng):
-    from recon.tfi import running_max, running_min_reversed
+    from tespike.recon.tfi import running_max, running_min_reversed
     x = torch.from_numpy(rng.integers(-5, 100, (37, 4)))
     assert torch.equal(running_max(x), x.cummax(0).values)
     assert torch.equal(running_min_reversed(x), x.flip(0).cummin(0).values.flip(0))
@@ -150,7 +150,7 @@ def test_msb_zero_word_means_no_spike_fired_in_its_interval(rng):
     spike fired, so both hold; a non-zero word may carry spikes of earlier
     intervals only when the previous word was non-zero too (dense codes). Checked
     against the spike counts of the same stimulus (the count readout, 16 bits)."""
-    from golden.sensor import simulate
+    from tespike.golden.sensor import simulate
     msb = SensorConfig(mode="ml", ml_readout="msb", ml_bits=16, b1=2, b2=2, threshold=6)
     count = SensorConfig(mode="ml", ml_bits=16, b1=2, b2=2, threshold=6)
     L = msb.clocks_per_readout

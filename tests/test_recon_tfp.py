@@ -1,9 +1,9 @@
-"""recon.tfp: windowed mean of decoded light, truncated at the stream ends."""
+"""tespike.recon.tfp: windowed mean of decoded light, truncated at the stream ends."""
 
 import pytest
 import torch
 
-from recon.tfp import tfp
+from tespike.recon.tfp import tfp
 
 
 def test_hand_worked_radius_1():

@@ -1,15 +1,15 @@
-"""recon.train and ``tespike train``: a few steps, the log and plot, resume equal to one run."""
+"""tespike.recon.train and ``tespike train``: a few steps, the log and plot, resume equal to one run."""
 
 import csv
 
 import pytest
 import torch
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from recon.learned import load_weights
-from recon.train import TrainOptions, train, training_loss
-from recon.engine.clips import EngineRecipe
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.recon.learned import load_weights
+from tespike.recon.train import TrainOptions, train, training_loss
+from tespike.recon.engine.clips import EngineRecipe
 from tests.cli import assert_refused, run_tespike
 
 RECIPE = {"height": 32, "width": 32, "long": (8, 20), "short": (1, 7)}
@@ -33,11 +33,11 @@ def test_a_few_steps_write_weights_log_and_plot(tmp_path):
 
 def test_validation_keeps_the_best_weights(tmp_path, monkeypatch):
     """The weights written are those of the best validation score, recorded with it."""
-    import recon.train as train_module
+    import tespike.recon.train as train_module
     scores = iter([20.0, 25.0, 22.0])
     monkeypatch.setattr(train_module, "validate", lambda model, cases, config, device: {"a": (v := next(scores)),
                                                                                         "mean": v})
-    monkeypatch.setattr("recon.engine.validation.validation_set", lambda config: [])
+    monkeypatch.setattr("tespike.recon.engine.validation.validation_set", lambda config: [])
     out = train(options(steps=3, validate_every=1), tmp_path / "v.pt")
     meta = load_weights(out)[2]
     assert meta["steps"] == 2 and meta["validation"]["mean"] == 25.0 and meta["final_step"] == 3
@@ -46,7 +46,7 @@ def test_validation_keeps_the_best_weights(tmp_path, monkeypatch):
 
 
 def test_validation_scores_every_held_out_case():
-    from recon.engine.validation import CASES, validation_psnr, validation_set
+    from tespike.recon.engine.validation import CASES, validation_psnr, validation_set
     cases = validation_set(SensorConfig(), 16, 24)
     assert [c.label for c in cases] == [c.label for c in CASES]
     assert all(c.words.shape == c.light.shape for c in cases)
@@ -106,8 +106,8 @@ def test_cli_refusals(tmp_path):
 
 
 def test_peak_sets_the_clips_brightness(tmp_path, monkeypatch):
-    import recon.train as trainer
-    from cosim.cli import main
+    import tespike.recon.train as trainer
+    from tespike.cosim.cli import main
 
     seen = []
     monkeypatch.setattr(trainer, "train", lambda options, out, **kw: seen.append(options))
@@ -130,10 +130,10 @@ def test_init_warm_starts_every_matching_tensor(tmp_path):
     """--init copies the tensors whose name and shape match (a new head keeps its initial values)."""
     import dataclasses
 
-    from recon.net.model import TESpikeNet
-    from recon.net.sizes import NetSizes
-    from recon.learning.weights import save_weights
-    from recon.train import warm_start
+    from tespike.recon.net.model import TESpikeNet
+    from tespike.recon.net.sizes import NetSizes
+    from tespike.recon.learning.weights import save_weights
+    from tespike.recon.train import warm_start
     old = TESpikeNet(dataclasses.replace(NetSizes(), head="mean"))
     for p in old.parameters():
         torch.nn.init.normal_(p)
@@ -166,9 +166,9 @@ def test_cli_keeps_no_copy_of_the_trainers_defaults(tmp_path, monkeypatch, capsy
     defaults, come from TrainOptions (they had drifted: 200 vs 250 steps per epoch)."""
     import dataclasses
 
-    import recon.train as trainer
-    from cosim.cli import build_parser, main
-    from cosim.commands.train_cmd import TRAINER_FLAGS
+    import tespike.recon.train as trainer
+    from tespike.cosim.cli import build_parser, main
+    from tespike.cosim.commands.train_cmd import TRAINER_FLAGS
 
     defaults = {f.name: f.default for f in dataclasses.fields(TrainOptions)}
     args = build_parser("train").parse_args(["train", "--out", "w.pt", "--steps", "1"])

@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.errors import ConfigError
-from golden.reference import step_reference
-from rtl.array import PixelArray
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
+from tespike.golden.reference import step_reference
+from tespike.rtl.array import PixelArray
 from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.rtl_helpers import mixed_stimulus, rtl_array_words
 

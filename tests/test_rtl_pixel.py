@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 from amaranth.sim import Simulator
 
-from golden.config import SensorConfig
-from golden.errors import ConfigError
-from golden.reference import step_reference
-from rtl.pixel import MLPixel, TEPixel, pixel_class
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
+from tespike.golden.reference import step_reference
+from tespike.rtl.pixel import MLPixel, TEPixel, pixel_class
 from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.rtl_helpers import mixed_stimulus
 

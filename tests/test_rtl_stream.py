@@ -5,14 +5,14 @@ import numpy as np
 import pytest
 from amaranth.lib import stream, wiring
 
-from cosim.outside import SimulatorRunError, pack_rows
-from cosim.rtlsim import rtl_stream_beats, rtl_stream_run
-from cosim.stream_ports import check_beats
-from golden.config import SensorConfig
-from golden.errors import ConfigError
-from golden.reference import step_reference
-from golden.beats import beat_count, beats
-from rtl.stream import StreamingPixelArray
+from tespike.cosim.outside import SimulatorRunError, pack_rows
+from tespike.cosim.rtlsim import rtl_stream_beats, rtl_stream_run
+from tespike.cosim.stream_ports import check_beats
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
+from tespike.golden.reference import step_reference
+from tespike.golden.beats import beat_count, beats
+from tespike.rtl.stream import StreamingPixelArray
 from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.rtl_helpers import mixed_stimulus
 from tests.stream_helpers import STREAM_SHAPE, lane_counts

@@ -3,9 +3,9 @@ import pytest
 from amaranth.hdl import ClockDomain, Module
 from amaranth.sim import Simulator
 
-from golden.config import SensorConfig
-from golden.errors import ConfigError
-from rtl.timing import ReadoutTiming
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
+from tespike.rtl.timing import ReadoutTiming
 from tests.configs import EDGE_CONFIGS
 
 

@@ -7,10 +7,10 @@ import subprocess
 import numpy as np
 import pytest
 
-from golden.config import SensorConfig
-from golden.errors import ConfigError
-from golden.reference import step_reference
-from rtl.verilog import array_verilog, pixel_verilog, top_verilog
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
+from tespike.golden.reference import step_reference
+from tespike.rtl.verilog import array_verilog, pixel_verilog, top_verilog
 from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.rtl_helpers import mixed_stimulus
 
@@ -158,7 +158,8 @@ def test_iverilog_run_equals_golden(config, tmp_path, rng):
 @needs["iverilog"]
 def test_blocked_generate_loops_equal_golden(tmp_path, rng, monkeypatch):
     """Rows/columns longer than LOOP_BLOCK (Verilator's unroll limit) use guarded blocks."""
-    import rtl.verilog
+    import tespike.rtl.verilog
+    from tespike import rtl
     monkeypatch.setattr(rtl.verilog, "LOOP_BLOCK", 2)
     config = SensorConfig(b1=2, b2=2, clocks_per_tick=2, threshold=30)       # L = 6
     text = array_verilog(config, 3, 5)

@@ -17,9 +17,9 @@ import time
 
 import pytest
 
-from golden.errors import InputError
-from recon.learned import load_weights
-from recon.train import RunFolderGone, train
+from tespike.golden.errors import InputError
+from tespike.recon.learned import load_weights
+from tespike.recon.train import RunFolderGone, train
 from tests.cli import ROOT, assert_refused
 from tests.test_cli_hardening import small_tmpfs
 from tests.test_recon_train import options
@@ -66,7 +66,7 @@ def test_resume_does_not_repeat_the_killed_runs_rows(tmp_path):
 
 
 def test_a_run_folder_removed_during_training_keeps_the_weights(tmp_path, monkeypatch):
-    import recon.train as trainer
+    import tespike.recon.train as trainer
     draw, calls = trainer.draw_batch, []
 
     def draw_then_remove(*args, **kwargs):
@@ -85,7 +85,7 @@ def start_training(folder) -> subprocess.Popen:
     """``tespike train`` with one data-engine worker, in a session of its own (its process group
     gets Ctrl-C as a terminal's would)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.Popen([sys.executable, "-m", "cosim", "train", "--config", "te", "--out", str(folder / "w.pt"),
+    return subprocess.Popen([sys.executable, "-m", "tespike", "train", "--config", "te", "--out", str(folder / "w.pt"),
                              "--minutes", "10", "--workers", "1", "--pool", "2", "--refresh", "1", "--crop", "32",
                              "--batch", "1", "--validate-every", "0"], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=interruptible)

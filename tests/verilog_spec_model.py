@@ -13,7 +13,7 @@ on ``frame`` or on ``frame_valid``.
 
 from __future__ import annotations
 
-from golden.config import SensorConfig
+from tespike.golden.config import SensorConfig
 
 BUGS = (None, "m_plus_one", "double_valid", "syntax", "x_frame", "x_valid")
 

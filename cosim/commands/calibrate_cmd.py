@@ -4,7 +4,7 @@ Record the dark stream with no light (``tespike simulate`` on a scene of zeros)
 and the flat stream under uniform light of a known level, below the TE overflow
 level (0.067 for the paper's TE camera; docs/reconstruction.md "Calibration"),
 both with the sensor's ``--noise`` and ``--sensor-seed``; ``--flat-light`` states
-that level. The file format is :mod:`recon.calibration`'s.
+that level. The file format is :mod:`tespike.recon.calibration`'s.
 """
 
 HELP = "estimate a sensor's per-pixel dark rate and gain C.npz from a dark and a flat stream"
@@ -20,11 +20,11 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from cosim.console import report
-    from golden.errors import InputError
-    from golden.io import load_stream
-    from golden.paths import check_outputs
-    from recon.calibration import calibration_summary, estimate, save_calibration
+    from tespike.cosim.console import report
+    from tespike.golden.errors import InputError
+    from tespike.golden.io import load_stream
+    from tespike.golden.paths import check_outputs
+    from tespike.recon.calibration import calibration_summary, estimate, save_calibration
 
     check_outputs({"--out": args.out}, {"--dark": args.dark, "--flat": args.flat})
     dark, config = load_stream(args.dark, memory_map=True)

@@ -1,7 +1,7 @@
 """``tespike cocotb``: the cocotb testbench of the array Verilog under one or more simulators.
 
 Drives only the SPEC section 6 ports and compares every word with the golden
-model (:mod:`cosim.cocotb_bench`); one line per simulator, exit 1 if any fails.
+model (:mod:`tespike.cosim.cocotb_bench`); one line per simulator, exit 1 if any fails.
 """
 
 from .common import add_config_argument
@@ -31,12 +31,12 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from golden.config import load_config
-    from golden.errors import InputError
-    from rtl.array import check_array_size
+    from tespike.golden.config import load_config
+    from tespike.golden.errors import InputError
+    from tespike.rtl.array import check_array_size
 
-    from cosim.cocotb_bench import Settings
-    from cosim.cocotb_run import run_cocotb
+    from tespike.cosim.cocotb_bench import Settings
+    from tespike.cosim.cocotb_run import run_cocotb
 
     config = load_config(args.config)
     check_array_size(args.height, args.width)
@@ -45,7 +45,7 @@ def run(args) -> int:
         raise InputError(f"--height {args.height} x --width {args.width}: the array is tespike verilog's, "
                          f"at most {MAX_PIXELS} pixels")
     if args.stimulus is None:           # the default stimulus, int64 electrons per pixel clock
-        from cosim.room import require_room
+        from tespike.cosim.room import require_room
         L = config.clocks_per_readout
         clocks = args.readouts * L
         if args.resets == "sweep":          # at most 2L + 3 segments cut up to 2L + 2 clocks in, held up
@@ -55,7 +55,7 @@ def run(args) -> int:
     if args.readouts < 1:
         raise InputError(f"--readouts {args.readouts}: must be >= 1")
     if args.lanes is not None:
-        from golden.beats import check_lanes
+        from tespike.golden.beats import check_lanes
         try:
             check_lanes(config, args.height, args.width, args.lanes)
         except ValueError as exc:

@@ -1,6 +1,6 @@
 """Argument blocks several sub-commands share, so their names and help read the same everywhere."""
 
-from golden.config import PRESETS
+from tespike.golden.config import PRESETS
 
 CONFIG_HELP = "JSON config file, or a preset: " + " / ".join(PRESETS)
 
@@ -30,10 +30,10 @@ def add_light_arguments(parser, *, out_help: str, seed_help: str, no_noise_help:
 
 
 def sensor_argument(args):
-    """The :class:`golden.noise.Sensor` of ``--noise`` / ``--sensor-seed`` (None without
+    """The :class:`tespike.golden.noise.Sensor` of ``--noise`` / ``--sensor-seed`` (None without
     ``--noise``), refused in one line where it clashes with ``--dark-current`` or ``--no-noise``."""
-    from golden.errors import InputError
-    from golden.noise import Sensor, load_noise
+    from tespike.golden.errors import InputError
+    from tespike.golden.noise import Sensor, load_noise
     if args.noise is None:
         if args.sensor_seed is not None:
             raise InputError("--sensor-seed needs --noise N.json (the maps it draws are the non-idealities')")
@@ -58,27 +58,27 @@ MAX_THREADS = 256
 
 def check_workers_argument(workers: int | None) -> None:
     """Refuse a ``--workers`` outside 1..MAX_WORKERS with one line."""
-    from golden.errors import InputError
+    from tespike.golden.errors import InputError
     if workers is not None and not 1 <= workers <= MAX_WORKERS:
         raise InputError(f"--workers {workers}: must be in 1..{MAX_WORKERS}")
 
 
 def check_threads_argument(threads: int | None) -> None:
     """Refuse a ``--threads`` outside 1..MAX_THREADS with one line (None: torch's choice)."""
-    from golden.errors import InputError
+    from tespike.golden.errors import InputError
     if threads is not None and not 1 <= threads <= MAX_THREADS:
         raise InputError(f"--threads {threads}: must be in 1..{MAX_THREADS}")
 
 
 def publish_results(args, evaluation, write, files: tuple[str, ...]) -> int:
     """The end of ``tespike evaluate`` (simulated or over a store): write the results folder
-    ``--out`` whole (:func:`golden.atomic.atomic_folder`, after checking it again: the run may
+    ``--out`` whole (:func:`tespike.golden.atomic.atomic_folder`, after checking it again: the run may
     have taken an hour), then print the table and the files written (``files``: names in it)."""
     from pathlib import Path
 
-    from golden.atomic import atomic_folder
-    from golden.paths import check_results_dir
-    from recon.report import OUTPUT_FILES, table_markdown
+    from tespike.golden.atomic import atomic_folder
+    from tespike.golden.paths import check_results_dir
+    from tespike.recon.report import OUTPUT_FILES, table_markdown
 
     check_results_dir(args.out, OUTPUT_FILES, args.force)
     with atomic_folder(args.out) as folder:

@@ -35,9 +35,9 @@ def sensor_configs(specs):
     """``--config`` values -> {stream name: SensorConfig}, names unique, configurations distinct."""
     from pathlib import Path
 
-    from golden.config import PRESETS, load_config
-    from golden.errors import InputError
-    from recon.dataset.store import check_name
+    from tespike.golden.config import PRESETS, load_config
+    from tespike.golden.errors import InputError
+    from tespike.recon.dataset.store import check_name
 
     configs = {}
     for spec in specs:
@@ -56,10 +56,10 @@ def sensor_configs(specs):
 def run(args) -> int:
     import time
 
-    from cosim.console import report
-    from cosim.dataset.cluster import Runner, check_workers
-    from cosim.dataset.build import build_dataset, hdr_sources, scene_sources
-    from golden.errors import InputError
+    from tespike.cosim.console import report
+    from tespike.cosim.dataset.cluster import Runner, check_workers
+    from tespike.cosim.dataset.build import build_dataset, hdr_sources, scene_sources
+    from tespike.golden.errors import InputError
 
     check_workers(args.workers, args.scheduler)
     if not args.config:
@@ -71,7 +71,7 @@ def run(args) -> int:
     if args.seed < 0:
         raise InputError(f"--seed {args.seed!r} must be an integer >= 0")
     if "://" not in args.out:          # a local store: its folder can be checked before any work
-        from golden.paths import check_output_dir
+        from tespike.golden.paths import check_output_dir
         check_output_dir(args.out, "--out")
     configs = sensor_configs(args.config)
     sources = []

@@ -1,4 +1,4 @@
-"""``tespike demo``: circuit to image in one command (see :mod:`cosim.demo`).
+"""``tespike demo``: circuit to image in one command (see :mod:`tespike.cosim.demo`).
 
 Scene -> golden model (TE, ML count, ML msb; full frame) -> the RTL on a crop of
 the very same per-clock electrons, waveform and GTKWave view, stream rebuilt
@@ -7,7 +7,7 @@ stream and on the RTL's own -> pictures and report.md. Exit 1 when the RTL and
 the golden model differ (after writing everything).
 """
 
-from cosim.backends import NAMES as BACKEND_NAMES
+from tespike.cosim.backends import NAMES as BACKEND_NAMES
 
 HELP = ("circuit to image on the built-in HDR scene: golden model, RTL on a crop (VCD, bit-exact "
         "check), reconstruction, pictures and report.md")
@@ -36,8 +36,8 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from cosim.console import progress_wanted
-    from cosim.demo import run_demo
+    from tespike.cosim.console import progress_wanted
+    from tespike.cosim.demo import run_demo
     return run_demo(args.out, frames=args.frames, height=args.height, width=args.width, seed=args.seed,
                     crop=args.crop, rtl_readouts=args.rtl_readouts, backend=args.backend,
                     repeats=args.repeats, sensors=[s.strip() for s in args.sensors.split(",") if s.strip()],

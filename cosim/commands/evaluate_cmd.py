@@ -7,7 +7,7 @@ TFP, Spk2ImgNet, BSF, MambaSpike, the network), every metric of the project,
 parameters, FLOPs and run time with its Table 10 beside, sized to finish on the
 built-in held-out set in 15 minutes on 2 cores (:data:`TABLE_DEFAULTS`);
 ``--noise`` adds its Tables 6 to 9 (the TE camera with dark current),
-``--sensor-noise N.json`` a noise sensor of :mod:`golden.noise` of its own, and
+``--sensor-noise N.json`` a noise sensor of :mod:`tespike.golden.noise` of its own, and
 ``--calibrate`` a calibrated row (``<sensor>+cal``) per method for each of them.
 """
 
@@ -27,7 +27,7 @@ TABLE_THREADS = 1
 #: --table's FovVideoVDP frames per sequence (it costs about 0.5 s a frame whatever the size).
 TABLE_VDP_FRAMES = 4
 
-from recon.settings import DEFAULT_WINDOW  # noqa: E402  (after the constants the help quotes)
+from tespike.recon.settings import DEFAULT_WINDOW  # noqa: E402  (after the constants the help quotes)
 
 from .common import MAX_THREADS  # noqa: E402
 
@@ -110,18 +110,18 @@ def add_arguments(parser):
 def run(args) -> int:
     from pathlib import Path
 
-    from cosim.console import progress_wanted
-    from golden.config import load_config
-    from golden.errors import ConfigError, InputError
-    from golden.fastsim import simulate_scene
-    from golden.io import load_scene
-    from golden.paths import check_results_dir
+    from tespike.cosim.console import progress_wanted
+    from tespike.golden.config import load_config
+    from tespike.golden.errors import ConfigError, InputError
+    from tespike.golden.fastsim import simulate_scene
+    from tespike.golden.io import load_scene
+    from tespike.golden.paths import check_results_dir
 
     from .common import check_threads_argument, publish_results
-    from recon.evaluate import evaluate
-    from recon.report import OUTPUT_FILES, write_outputs
-    from recon.scenes import load_hdr_sequence
-    from recon.scenes.heldout import sequence_set
+    from tespike.recon.evaluate import evaluate
+    from tespike.recon.report import OUTPUT_FILES, write_outputs
+    from tespike.recon.scenes import load_hdr_sequence
+    from tespike.recon.scenes.heldout import sequence_set
 
     if args.store or args.workers is not None or args.scheduler:
         for flag, value in (("--table", args.table), ("--noise", args.noise), ("--metrics", args.metrics),
@@ -132,11 +132,11 @@ def run(args) -> int:
         if args.weights:
             raise InputError("--weights does not apply with --store (its tasks use the shipped weights); "
                              "evaluate without --store to use your own")
-        from cosim.dataset.evaluate import run_store
+        from tespike.cosim.dataset.evaluate import run_store
         return run_store(args)
-    from golden.noise import Sensor, load_noise
-    from recon.evaluate import CALIBRATED, NOISE_SENSORS, default_noise_sensors
-    from recon.score import KEYS
+    from tespike.golden.noise import Sensor, load_noise
+    from tespike.recon.evaluate import CALIBRATED, NOISE_SENSORS, default_noise_sensors
+    from tespike.recon.score import KEYS
     defaults = TABLE_DEFAULTS if args.table else DEFAULTS
     frames, height, width, repeats = (default if value is None else value for value, default in
                                       zip((args.frames, args.height, args.width, args.repeats), defaults))
@@ -187,7 +187,7 @@ def run(args) -> int:
     configs.update({sensor: configs["te"] for sensor in noise_sensors})
     if args.calibrate:
         configs.update({sensor + CALIBRATED: configs["te"] for sensor in noise_sensors})
-    from recon.learned import weights_by_sensor
+    from tespike.recon.learned import weights_by_sensor
     weights = weights_by_sensor(args.weights, configs)
     sequences = [] if args.set == "none" else sequence_set(args.set, frames, height, width)
     for path in args.scene:          # memory-mapped: read one slice at a time
@@ -211,7 +211,7 @@ def run(args) -> int:
                           vdp_frames=vdp_frames, missing="note" if args.table or methods is None else None,
                           noise_sensors=noise_sensors, weights=weights)
     if args.table:
-        from recon.complexity import measure
+        from tespike.recon.complexity import measure
         evaluation.complexity = measure(evaluation.methods, configs["te"])
     return publish_results(args, evaluation, write_outputs,
                            ("table.md", "table.csv", "results.csv", "quality_vs_time.png"))

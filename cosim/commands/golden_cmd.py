@@ -30,13 +30,13 @@ def run(args) -> int:
 
     import sys
 
-    from cosim.console import report
-    from golden.config import load_config
-    from golden.errors import InputError
-    from golden.io import load_stimulus, save_stream, word_dtype
-    from golden.paths import check_outputs
-    from cosim.room import require_room
-    from golden.sensor import DEFAULT_CHUNK_ELEMENTS, PixelArray, iter_chunks
+    from tespike.cosim.console import report
+    from tespike.golden.config import load_config
+    from tespike.golden.errors import InputError
+    from tespike.golden.io import load_stimulus, save_stream, word_dtype
+    from tespike.golden.paths import check_outputs
+    from tespike.cosim.room import require_room
+    from tespike.golden.sensor import DEFAULT_CHUNK_ELEMENTS, PixelArray, iter_chunks
 
     check_outputs({"--out": args.out}, {"--stimulus": args.stimulus, "--config": args.config})
     config = load_config(args.config)

@@ -36,8 +36,8 @@ def targets(specs, with_corners: bool):
     """``--config`` values (and their corners) -> {name: SensorConfig}, in order."""
     from pathlib import Path
 
-    from cosim.formal import corners
-    from golden.config import PRESETS, load_config
+    from tespike.cosim.formal import corners
+    from tespike.golden.config import PRESETS, load_config
 
     configs = {}
     for spec in specs or list(PRESETS):
@@ -52,7 +52,7 @@ def targets(specs, with_corners: bool):
 
 def parse_sizes(flag: str, text: str) -> list[tuple[int, int]]:
     """``"1x1,2x3"`` -> [(1, 1), (2, 3)]; ``"none"`` -> []; anything else is refused in one line."""
-    from golden.errors import InputError
+    from tespike.golden.errors import InputError
 
     if text.strip() == "none":
         return []
@@ -68,7 +68,7 @@ def parse_sizes(flag: str, text: str) -> list[tuple[int, int]]:
 
 
 def _prove_pixel(name, config, args, traces, emit) -> tuple[int, int]:
-    from cosim.formal import properties, prove
+    from tespike.cosim.formal import properties, prove
 
     count = failed = 0
     for prop, build in properties(config).items():
@@ -86,8 +86,8 @@ def _prove_pixel(name, config, args, traces, emit) -> tuple[int, int]:
 
 
 def _prove_tops(name, config, sizes, args, emit) -> tuple[int, int]:
-    from cosim.formal.abc import prove_harness
-    from cosim.formal.tops import top_properties
+    from tespike.cosim.formal.abc import prove_harness
+    from tespike.cosim.formal.tops import top_properties
 
     count = failed = 0
     for prop, build in top_properties(config, sizes).items():
@@ -105,9 +105,9 @@ def run(args) -> int:
     import time
     from pathlib import Path
 
-    from cosim.formal import require_tools
-    from cosim.formal.tops import small_clocks
-    from golden.errors import InputError
+    from tespike.cosim.formal import require_tools
+    from tespike.cosim.formal.tops import small_clocks
+    from tespike.golden.errors import InputError
 
     if args.depth < 1:
         raise InputError(f"--depth {args.depth} must be >= 1")

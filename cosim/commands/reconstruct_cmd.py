@@ -1,6 +1,6 @@
 """``tespike reconstruct``: a stream S.npz to reconstructed light R.npy (TFP, TFI, the learned methods)."""
 
-from recon.learned import LEARNED
+from tespike.recon.learned import LEARNED
 
 from .common import MAX_THREADS
 
@@ -35,20 +35,20 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from cosim.console import progress_wanted, report
-    from golden.errors import InputError
-    from golden.io import atomic_output, load_stream
-    from golden.paths import check_outputs
-    from recon.settings import DEFAULT_WINDOW, check_window
+    from tespike.cosim.console import progress_wanted, report
+    from tespike.golden.errors import InputError
+    from tespike.golden.io import atomic_output, load_stream
+    from tespike.golden.paths import check_outputs
+    from tespike.recon.settings import DEFAULT_WINDOW, check_window
 
     from .common import check_threads_argument
-    from cosim.room import require_room, reserved_memmap
+    from tespike.cosim.room import require_room, reserved_memmap
 
     # every check that needs no torch comes first, so a refusal is quick
     if args.method not in METHOD_CHOICES:
         raise InputError(f"unknown method {args.method!r} (offered: {', '.join(METHOD_CHOICES)})")
     if args.method in LEARNED and args.window is not None:
-        from recon.learned import method_span
+        from tespike.recon.learned import method_span
         raise InputError(f"--window applies to methods 'tfp' and 'tfi'; {args.method!r} sees the "
                          f"{method_span(args.method)} readouts its sizes fix")
     window = DEFAULT_WINDOW if args.window is None else args.window
@@ -64,14 +64,14 @@ def run(args) -> int:
     K, H, W = words.shape
     calibration = None
     if args.calibration is not None:
-        from recon.calibration import check_matches, load_calibration
+        from tespike.recon.calibration import check_matches, load_calibration
         calibration = load_calibration(args.calibration)
         check_matches(calibration, config, (H, W), f"stream {args.stream}")
     require_room(f"the {K} images of {H} x {W} pixels", disk={args.out: 4 * K * H * W})
 
     import torch
 
-    from recon.methods import reconstruct
+    from tespike.recon.methods import reconstruct
 
     if args.threads is not None:
         torch.set_num_threads(args.threads)

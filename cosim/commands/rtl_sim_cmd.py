@@ -2,7 +2,7 @@
 
 import sys
 
-from cosim.backends import NAMES as BACKEND_NAMES
+from tespike.cosim.backends import NAMES as BACKEND_NAMES
 
 from .common import add_config_argument
 
@@ -26,14 +26,14 @@ def add_arguments(parser):
 def run(args) -> int:
     from pathlib import Path
 
-    from cosim.backends import backend, checked_words
-    from cosim.console import progress_wanted, report
-    from golden.config import load_config
-    from golden.errors import InputError
-    from golden.io import load_stimulus, save_stream, word_dtype
-    from cosim.vcd import VCD_BYTES_PER_PIXEL_CLOCK
-    from cosim.room import require_room
-    from golden.paths import check_outputs
+    from tespike.cosim.backends import backend, checked_words
+    from tespike.cosim.console import progress_wanted, report
+    from tespike.golden.config import load_config
+    from tespike.golden.errors import InputError
+    from tespike.golden.io import load_stimulus, save_stream, word_dtype
+    from tespike.cosim.vcd import VCD_BYTES_PER_PIXEL_CLOCK
+    from tespike.cosim.room import require_room
+    from tespike.golden.paths import check_outputs
 
     gtkw = args.gtkw
     if args.vcd is not None:
@@ -54,7 +54,7 @@ def run(args) -> int:
     progress = False if args.no_progress else progress_wanted(args)
 
     if args.backend == "amaranth":
-        from cosim.rtlsim import RTLProtocolError, rtl_words
+        from tespike.cosim.rtlsim import RTLProtocolError, rtl_words
         try:
             words = rtl_words(config, stimulus, vcd_path=args.vcd, gtkw_path=gtkw,
                               progress=progress)
@@ -75,8 +75,8 @@ def run(args) -> int:
 
 def _compare_with_golden(words, config, stimulus, backend) -> int:
     """One line on stderr: RTL == golden, or where the first difference is."""
-    from cosim.compare import first_difference
-    from golden.sensor import simulate
+    from tespike.cosim.compare import first_difference
+    from tespike.golden.sensor import simulate
     expected = simulate(config, stimulus)
     difference = first_difference(words, expected)
     if difference is None:

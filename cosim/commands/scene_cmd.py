@@ -30,12 +30,12 @@ def run(args) -> int:
 
     import numpy as np
 
-    from cosim.console import progress_wanted, report
-    from golden.errors import InputError
-    from golden.io import atomic_output
-    from golden.paths import check_outputs
-    from cosim.room import require_room
-    from recon.scenes import SCENES, load_hdr_sequence, make_scene
+    from tespike.cosim.console import progress_wanted, report
+    from tespike.golden.errors import InputError
+    from tespike.golden.io import atomic_output
+    from tespike.golden.paths import check_outputs
+    from tespike.cosim.room import require_room
+    from tespike.recon.scenes import SCENES, load_hdr_sequence, make_scene
 
     if args.list:
         for name, (_, summary) in SCENES.items():

@@ -19,7 +19,7 @@ HELP = "score a reconstruction R.npy against its reference I.npy: PSNR-mu, SSIM-
 
 
 def add_arguments(parser):
-    from recon.score import KEYS
+    from tespike.recon.score import KEYS
     parser.add_argument("--reference", required=True, help="I.npy: float (K, H, W) reference light, scene units")
     parser.add_argument("--estimate", required=True, help="R.npy: float (K, H, W) reconstructed light, same shape")
     parser.add_argument("--frames", help="frames to score: 'a:b' (b excluded, either end may be left out); "
@@ -31,7 +31,7 @@ def add_arguments(parser):
 
 def frame_range(spec, count: int) -> range:
     """Frames selected by ``--frames a:b`` among ``count``."""
-    from golden.errors import InputError
+    from tespike.golden.errors import InputError
     if spec is None:
         return range(count)
     parts = spec.split(":")
@@ -50,8 +50,8 @@ def frame_range(spec, count: int) -> range:
 
 def load_estimate(path):
     """R.npy as a read-only map; refused unless a float (K, H, W) array."""
-    from golden.errors import InputError
-    from golden.io import load_npy
+    from tespike.golden.errors import InputError
+    from tespike.golden.io import load_npy
     estimate = load_npy(path, "estimate", mmap_mode="r")
     if estimate.dtype.kind != "f":
         raise InputError(f"estimate dtype {estimate.dtype} is not a float type (light must be a float array)")
@@ -80,9 +80,9 @@ def run(args) -> int:
 
     import numpy as np
 
-    from golden.errors import InputError
-    from golden.io import load_scene
-    from recon.score import score
+    from tespike.golden.errors import InputError
+    from tespike.golden.io import load_scene
+    from tespike.recon.score import score
 
     metrics = tuple(m.strip() for m in args.metrics.split(",") if m.strip())
     reference = load_scene(args.reference, memory_map=True, what="reference")

@@ -17,13 +17,13 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from cosim.console import progress_wanted, report
-    from golden.config import load_config
-    from golden.errors import InputError
-    from golden.fastsim import simulate_scene
-    from golden.io import load_scene, save_stream, word_dtype
-    from cosim.room import require_room
-    from golden.paths import check_outputs
+    from tespike.cosim.console import progress_wanted, report
+    from tespike.golden.config import load_config
+    from tespike.golden.errors import InputError
+    from tespike.golden.fastsim import simulate_scene
+    from tespike.golden.io import load_scene, save_stream, word_dtype
+    from tespike.cosim.room import require_room
+    from tespike.golden.paths import check_outputs
 
     check_workers_argument(args.workers)                # before the scene is read and scanned
     check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config})

@@ -2,7 +2,7 @@
 
 The electrons are those ``tespike simulate --method per-clock`` draws with the
 same ``--seed``, ``--dark-current``, ``--noise``, ``--sensor-seed`` and ``--no-noise`` (photon shot noise,
-Poisson per pixel clock; :func:`golden.fastsim.iter_scene_stimulus`), so
+Poisson per pixel clock; :func:`tespike.golden.fastsim.iter_scene_stimulus`), so
 
     tespike stimulus --seed N ... --out E.npy
     tespike golden --stimulus E.npy ...        (or tespike rtl-sim)
@@ -42,14 +42,14 @@ def run(args) -> int:
     import itertools
     import sys
 
-    from golden.config import load_config
-    from golden.errors import InputError
-    from golden.fastsim import iter_scene_stimulus
-    from golden.io import atomic_output, load_scene
-    from golden.light import stimulus_dtype
-    from cosim.room import require_room, reserved_memmap
+    from tespike.golden.config import load_config
+    from tespike.golden.errors import InputError
+    from tespike.golden.fastsim import iter_scene_stimulus
+    from tespike.golden.io import atomic_output, load_scene
+    from tespike.golden.light import stimulus_dtype
+    from tespike.cosim.room import require_room, reserved_memmap
 
-    from golden.paths import check_outputs
+    from tespike.golden.paths import check_outputs
     check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config})
     config = load_config(args.config)
     if args.seed is not None and args.seed < 0:

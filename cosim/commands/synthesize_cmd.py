@@ -27,9 +27,9 @@ def _design(args):
     """(Verilog text, top name or None, pixels or None, a one-line description) from the arguments."""
     from pathlib import Path
 
-    from golden.config import load_config
-    from golden.errors import InputError
-    from rtl.array import check_array_size
+    from tespike.golden.config import load_config
+    from tespike.golden.errors import InputError
+    from tespike.rtl.array import check_array_size
 
     generated = [flag for flag, value in (("--config", args.config), ("--height", args.height),
                                           ("--width", args.width), ("--lanes", args.lanes)) if value is not None]
@@ -58,15 +58,15 @@ def _design(args):
         raise InputError(f"--height {height} x --width {width} = {pixels} pixels: at most {limit} are supported"
                          + ("" if args.lanes is None else " with --lanes"))
     if args.lanes is None:
-        from rtl.verilog import array_verilog, module_names
+        from tespike.rtl.verilog import array_verilog, module_names
         return (array_verilog(config, height, width), module_names(config)["top"], pixels,
                 f"{module_names(config)['top']}, {height} x {width} pixels")
-    from golden.beats import check_lanes
+    from tespike.golden.beats import check_lanes
     try:
         check_lanes(config, height, width, args.lanes)
     except ValueError as exc:
         raise InputError(f"--{exc}") from None
-    from rtl.verilog_stream import stream_array_verilog, stream_module_names
+    from tespike.rtl.verilog_stream import stream_array_verilog, stream_module_names
     top = stream_module_names(config)["top"]
     return (stream_array_verilog(config, height, width, args.lanes), top, pixels,
             f"{top}, {height} x {width} pixels, {args.lanes} lanes")
@@ -85,8 +85,8 @@ def instance_counts(modules: dict, top: str) -> dict[str, int]:
 
 
 def report_lines(result: dict, pixels: int | None) -> list[str]:
-    """The printed report of :func:`cosim.synthesis.synthesize_hierarchy`'s result."""
-    from cosim.synthesis import hierarchy_total
+    """The printed report of :func:`tespike.cosim.synthesis.synthesize_hierarchy`'s result."""
+    from tespike.cosim.synthesis import hierarchy_total
     modules, top = result["modules"], result["top"]
     counts = instance_counts(modules, top)
     lines = [f"{'module':<28} {'instances':>9} {'cells':>7} {'flops':>6} {'transistors':>12}   "
@@ -118,8 +118,8 @@ def report_lines(result: dict, pixels: int | None) -> list[str]:
 
 
 def run(args) -> int:
-    from cosim.synthesis import SynthesisError, synthesize_hierarchy
-    from golden.errors import InputError
+    from tespike.cosim.synthesis import SynthesisError, synthesize_hierarchy
+    from tespike.golden.errors import InputError
 
     text, top, pixels, what = _design(args)
     print(f"synthesize: {what} (yosys synth, hierarchy kept)", flush=True)

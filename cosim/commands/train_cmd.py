@@ -1,6 +1,6 @@
 """``tespike train``: train a learned reconstruction method on the data engine's clips (paper section 6.3).
 
-The trainer's options (:class:`recon.train.TrainOptions`) keep their defaults in one
+The trainer's options (:class:`tespike.recon.train.TrainOptions`) keep their defaults in one
 place, the trainer: an option not given is not passed on, and ``--help`` reads the
 defaults from there when it is printed (importing torch then only).
 """
@@ -23,7 +23,7 @@ class _TrainerDefaults(argparse.HelpFormatter):
         if action.dest in TRAINER_FLAGS:
             import dataclasses
 
-            from recon.train import TrainOptions
+            from tespike.recon.train import TrainOptions
             default = {f.name: f.default for f in dataclasses.fields(TrainOptions)}[action.dest]
             return self._get_help_string(action) % dict(vars(action), default=default, prog=self._prog)
         return super()._expand_help(action)
@@ -78,17 +78,17 @@ def run(args) -> int:
     import sys
     from pathlib import Path
 
-    from golden.config import PRESETS, load_config
-    from cosim.console import progress_wanted, report
-    from golden.errors import InputError
-    from golden.paths import check_output_dir, check_outputs
+    from tespike.golden.config import PRESETS, load_config
+    from tespike.cosim.console import progress_wanted, report
+    from tespike.golden.errors import InputError
+    from tespike.golden.paths import check_output_dir, check_outputs
 
     config = load_config(args.config)
     if args.steps is None and args.minutes is None:
         raise InputError("give a budget: --steps N or --minutes M")
     check_threads_argument(args.threads)
     if args.peak is not None:
-        from recon.engine.clips import check_peak
+        from tespike.recon.engine.clips import check_peak
         check_peak(args.peak, "--peak {:g} {:g}".format(*args.peak))
     if args.noise_fraction is not None and not 0 <= args.noise_fraction <= 1:
         raise InputError(f"--noise-fraction {args.noise_fraction}: must lie in [0, 1]")
@@ -105,7 +105,7 @@ def run(args) -> int:
     check_outputs({"--out": args.out}, {**config_input, **({"--init": args.init} if args.init else {})})
     check_output_dir(out.with_suffix(".run"), "--out's run folder")
 
-    from recon.train import TrainOptions, train
+    from tespike.recon.train import TrainOptions, train
 
     given = {flag: getattr(args, flag) for flag in TRAINER_FLAGS if hasattr(args, flag)}
     options = TrainOptions(sensor=args.config if preset else config.to_json(), ablation=args.ablation,

@@ -30,12 +30,12 @@ def add_arguments(parser):
 def run(args) -> int:
     from pathlib import Path
 
-    from cosim.console import report
-    from golden.config import load_config
-    from golden.errors import InputError
-    from golden.io import atomic_output
-    from golden.paths import check_outputs
-    from rtl.array import check_array_size
+    from tespike.cosim.console import report
+    from tespike.golden.config import load_config
+    from tespike.golden.errors import InputError
+    from tespike.golden.io import atomic_output
+    from tespike.golden.paths import check_outputs
+    from tespike.rtl.array import check_array_size
 
     check_outputs({"--out": args.out}, {"--config": args.config})
     config = load_config(args.config)
@@ -48,17 +48,17 @@ def run(args) -> int:
                          + ("" if args.lanes is None else " with --lanes"))
     mode = "te" if config.is_te else "ml"
     if args.lanes is None:
-        from rtl.verilog import array_verilog
+        from tespike.rtl.verilog import array_verilog
         text, what = array_verilog(config, args.height, args.width), f"{mode}_pixel_array"
     else:
-        from golden.beats import beat_count, check_lanes
+        from tespike.golden.beats import beat_count, check_lanes
         try:
             check_lanes(config, args.height, args.width, args.lanes)
         except InputError:
             raise
         except ValueError as exc:                 # ConfigError: name the flag
             raise InputError(f"--{exc}") from None
-        from rtl.verilog_stream import stream_array_verilog
+        from tespike.rtl.verilog_stream import stream_array_verilog
         text = stream_array_verilog(config, args.height, args.width, args.lanes)
         what = (f"{mode}_pixel_array_stream, {args.lanes} lanes, "
                 f"{beat_count(pixels, args.lanes)} beats per readout interval")

@@ -1,18 +1,18 @@
 """``tespike view``: look at a scene, stream, reconstruction or stimulus as tone-mapped PNGs.
 
 Input by content: ``S.npz`` (a stream: words decoded to light per readout with
-:func:`golden.decode.decode_light`), a float ``.npy`` (a scene ``I.npy`` or a
+:func:`tespike.golden.decode.decode_light`), a float ``.npy`` (a scene ``I.npy`` or a
 reconstruction ``R.npy``: light, 1.0 = design light), an integer ``.npy`` (a
 stimulus ``E.npy``: electrons per readout interval, summed over its L clocks
 with ``--config``, shown in design-light units). Tone mapping is the project's
-(:func:`recon.pictures.tone_map`): divide by the peak (default: the largest
+(:func:`tespike.recon.pictures.tone_map`): divide by the peak (default: the largest
 value of the frames shown; give ``--peak`` to compare files on one scale),
 clip to [0, 1], mu-law with mu = 5000. Writes a contact sheet (one PNG, frame
 numbers as titles) or, with ``--each``, one grayscale PNG per frame at the
 array's own resolution.
 """
 
-from recon.pictures import MU
+from tespike.recon.pictures import MU
 
 HELP = "write tone-mapped PNGs (contact sheet or one per frame) of I.npy, S.npz, R.npy or E.npy"
 
@@ -42,12 +42,12 @@ def load_light(path, config_spec=None, estimator="ratio"):
 
     import numpy as np
 
-    from golden.config import DESIGN_ELECTRONS, load_config
-    from golden.decode import decode_light
-    from golden.errors import InputError
-    from golden.io import load_scene, load_stimulus, load_stream
+    from tespike.golden.config import DESIGN_ELECTRONS, load_config
+    from tespike.golden.decode import decode_light
+    from tespike.golden.errors import InputError
+    from tespike.golden.io import load_scene, load_stimulus, load_stream
 
-    from golden.paths import check_input_file
+    from tespike.golden.paths import check_input_file
     path = check_input_file(path, "--input")        # exists, and is a regular file
     if path.suffix == ".npz":
         words, config = load_stream(path)
@@ -77,7 +77,7 @@ def pick_frames(spec, count, each):
     """Frame indices from ``--frames`` (see its help)."""
     import numpy as np
 
-    from golden.errors import InputError
+    from tespike.golden.errors import InputError
     if count == 0:
         raise InputError("--input has no frames (K = 0)")
     if spec is None:
@@ -106,8 +106,8 @@ def run(args) -> int:
     import math
     from pathlib import Path
 
-    from golden.errors import InputError
-    from golden.io import atomic_output
+    from tespike.golden.errors import InputError
+    from tespike.golden.io import atomic_output
 
     if args.peak is not None and not (math.isfinite(args.peak) and args.peak > 0):
         raise InputError(f"--peak {args.peak}: must be a finite number > 0")
@@ -130,7 +130,7 @@ def run(args) -> int:
     if peak <= 0:
         raise InputError(f"--input {args.input!r}: every frame shown is 0 (give --peak to map it anyway)")
 
-    from recon.pictures import save_figure, tone_map
+    from tespike.recon.pictures import save_figure, tone_map
     mapped = tone_map(shown, peak, args.mu)
 
     import matplotlib

@@ -4,14 +4,14 @@ Per sequence, the work is a small Dask graph (every task idempotent: the
 same inputs write the same bytes, so a retry after a lost worker is harmless):
 
 1. HDR folders: one task per ``chunk_frames`` frames reads them (grayscale,
-   :func:`recon.scenes.to_gray`) and returns their maximum; the sequence peak is
+   :func:`tespike.recon.scenes.to_gray`) and returns their maximum; the sequence peak is
    the maximum of those. Then one task per chunk reads the frames again and
    writes ``light = frame * (1 / peak)`` as float32, exactly what
-   :func:`recon.scenes.load_hdr_sequence` returns (paper appendix A.2.2),
+   :func:`tespike.recon.scenes.load_hdr_sequence` returns (paper appendix A.2.2),
    without ever holding the whole sequence. A built-in scene is one task
-   (:func:`recon.scenes.make_scene`, public seed 0, as ``tespike scene``).
+   (:func:`tespike.recon.scenes.make_scene`, public seed 0, as ``tespike scene``).
 2. Per sensor configuration, one task per simulation tile (:data:`TILE`) runs
-   :class:`golden.fastsim.SceneSimulator` (the code of ``tespike simulate``)
+   :class:`tespike.golden.fastsim.SceneSimulator` (the code of ``tespike simulate``)
    readout after readout over the whole sequence, reading and writing
    ``chunk_frames`` readouts at a time: the simulator carries charge across
    readouts, so time is walked in order inside a task and tiles are the
@@ -19,12 +19,12 @@ same inputs write the same bytes, so a retry after a lost worker is harmless):
 3. Each array, then the sequence, is marked complete (the sequence last).
 
 Seeds: tile (r, c) of sequence s with configuration C draws from
-:func:`recon.dataset.tile_seed` (root seed, SHA-256 of s and C's JSON, r, c),
+:func:`tespike.recon.dataset.tile_seed` (root seed, SHA-256 of s and C's JSON, r, c),
 never from the order of completion, and the simulator's error budget counts the
 whole sequence's pixel-readouts (as ``tespike simulate`` on the whole frame), so
 a frame that fits in one tile gives exactly ``simulate_scene(config, light,
 seed=default_rng(tile_seed(seed, s, C, 0, 0)))`` (a tile is below the size
-:func:`golden.fastsim.simulate_scene` splits into stripes).
+:func:`tespike.golden.fastsim.simulate_scene` splits into stripes).
 Tiles run one simulator each in their task (Dask workers are the parallel
 axis), never ``simulate_scene``'s forked workers.
 """
@@ -38,9 +38,9 @@ from typing import Sequence
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from recon.dataset.store import (CHUNK_FRAMES, TILE, DatasetStore, check_name, mark_complete,
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.recon.dataset.store import (CHUNK_FRAMES, TILE, DatasetStore, check_name, mark_complete,
                                  open_array, tile_seed, tiles)
 
 
@@ -57,8 +57,8 @@ class Source:
 
 
 def read_gray(path: str, weights: str) -> np.ndarray:
-    """One HDR frame -> float32 grayscale (H, W), as :func:`recon.scenes.load_hdr_sequence` reads it."""
-    from recon.scenes import read_image, to_gray
+    """One HDR frame -> float32 grayscale (H, W), as :func:`tespike.recon.scenes.load_hdr_sequence` reads it."""
+    from tespike.recon.scenes import read_image, to_gray
     return to_gray(read_image(path), weights, what=f"frame {path!r}").astype(np.float32)
 
 
@@ -69,8 +69,8 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
     refused, as is a folder without sub-folders. The first frame of each
     sequence is read for its size (the tasks check every other frame).
     """
-    from recon.scenes import LUMA_WEIGHTS
-    from recon.scenes.hdr_io import list_frames
+    from tespike.recon.scenes import LUMA_WEIGHTS
+    from tespike.recon.scenes.hdr_io import list_frames
 
     folder = Path(folder)
     if weights not in LUMA_WEIGHTS:
@@ -94,7 +94,7 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
 
 def scene_sources(names: Sequence[str], frames: int, height: int, width: int) -> list[Source]:
     """Built-in scenes (public seed 0, peak 1), each named after its scene."""
-    from recon.scenes import MAX_VOXELS, SCENES
+    from tespike.recon.scenes import MAX_VOXELS, SCENES
 
     out = []
     for name in names:
@@ -140,7 +140,7 @@ def write_hdr_light(url: str, source: Source, start: int, stop: int, top: float)
 
 def write_scene_light(url: str, source: Source) -> float:
     """Make a built-in scene and write it whole (scenes are bounded by recon.scenes.MAX_VOXELS)."""
-    from recon.scenes import make_scene
+    from tespike.recon.scenes import make_scene
     name, frames, height, width = source.scene
     light = make_scene(name, frames, height, width, seed=0)
     open_array(url, f"{source.name}/light", "r+")[...] = light
@@ -153,9 +153,9 @@ def simulate_tile(url: str, sequence: str, sensor: str, config_json: str, seed: 
 
     ``after`` only orders the task after the light is written.
     """
-    from golden.decode import check_words
-    from golden.fastsim import SceneSimulator
-    from golden.io import word_dtype
+    from tespike.golden.decode import check_words
+    from tespike.golden.fastsim import SceneSimulator
+    from tespike.golden.io import word_dtype
 
     config = SensorConfig.from_json(config_json)
     light = open_array(url, f"{sequence}/light")
@@ -247,7 +247,7 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
                chunk_frames: int = CHUNK_FRAMES, tile: tuple[int, int] = TILE, report=None) -> dict:
     """Write every source into the store at ``url`` (made or resumed) with every configuration.
 
-    ``run`` is a :class:`cosim.dataset.cluster.Runner`; ``report(name)`` is
+    ``run`` is a :class:`tespike.cosim.dataset.cluster.Runner`; ``report(name)`` is
     called as each sequence completes. Returns counts: ``done`` (sequences
     written now), ``skipped`` (already complete), ``pixel_readouts`` (simulated
     now, summed over the streams).

@@ -21,7 +21,7 @@ import contextlib
 import os
 from typing import Iterator, Sequence
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 #: Extra attempts for a task that raised (a worker that dies is handled by the scheduler).
 RETRIES = 2

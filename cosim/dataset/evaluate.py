@@ -1,4 +1,4 @@
-"""``tespike evaluate --store STORE``: the command-line side of :mod:`recon.dataset.evaluate`."""
+"""``tespike evaluate --store STORE``: the command-line side of :mod:`tespike.recon.dataset.evaluate`."""
 
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ SIMULATION_OPTIONS = {"set": "heldout", "scene": [], "folder": [], "frames": Non
 
 def run_store(args) -> int:
 
-    from cosim.commands.common import publish_results
-    from golden.errors import InputError
-    from golden.paths import check_results_dir
-    from recon.dataset.evaluate import evaluate_store, write_store_outputs
-    from recon.report import OUTPUT_FILES
+    from tespike.cosim.commands.common import publish_results
+    from tespike.golden.errors import InputError
+    from tespike.golden.paths import check_results_dir
+    from tespike.recon.dataset.evaluate import evaluate_store, write_store_outputs
+    from tespike.recon.report import OUTPUT_FILES
 
     from .cluster import Runner, check_workers
 

@@ -1,14 +1,14 @@
 """Proofs of the design (``tespike prove``), one module per idea.
 
-* :mod:`cosim.formal.pixel`: Amaranth harnesses of the pixel against SPEC sections 3-4
+* :mod:`tespike.cosim.formal.pixel`: Amaranth harnesses of the pixel against SPEC sections 3-4
   (``rule``, ``rule-registered-word``, ``bounds``) and of the Amaranth streaming top
-  (``stream``), proved by k-induction in :mod:`cosim.formal.smtbmc` (Yosys + yosys-smtbmc);
-* :mod:`cosim.formal.rule_equivalence`: the streaming Verilog top's own pixel-rule text
+  (``stream``), proved by k-induction in :mod:`tespike.cosim.formal.smtbmc` (Yosys + yosys-smtbmc);
+* :mod:`tespike.cosim.formal.rule_equivalence`: the streaming Verilog top's own pixel-rule text
   against the pixel (``stream-pixel-rule``, Yosys miter + sat);
-* :mod:`cosim.formal.reference` and :mod:`cosim.formal.tops`: the generated Verilog tops,
+* :mod:`tespike.cosim.formal.reference` and :mod:`tespike.cosim.formal.tops`: the generated Verilog tops,
   read from the text ``tespike verilog`` writes, against a SPEC reference written
   independently of rtl/, and the timing block's phase, proved by ABC
-  (:mod:`cosim.formal.abc`).
+  (:mod:`tespike.cosim.formal.abc`).
 """
 
 from __future__ import annotations
@@ -16,11 +16,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-from golden.config import SensorConfig
+from tespike.golden.config import SensorConfig
 
 from .pixel import (STREAM_ARRAY, bounds_harness, corners, rule_harness, stream_harness,
                     stream_lanes)
-from .rule_equivalence import _Equivalence, prove_equivalence, stream_rule_equivalence
+from .rule_equivalence import Equivalence, prove_equivalence, stream_rule_equivalence
 from .smtbmc import SOLVERS, TOOLS, ProofToolError, Result, require_tools
 from .smtbmc import prove as _prove_harness
 
@@ -32,7 +32,7 @@ __all__ = ["SOLVERS", "TOOLS", "ProofToolError", "Result", "corners", "propertie
 def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Result:
     """Prove one pixel property: a harness by k-induction (base case and induction step, both
     ``depth`` long); a ``stream-pixel-rule`` equivalence by one SAT call."""
-    if isinstance(harness, _Equivalence):
+    if isinstance(harness, Equivalence):
         return prove_equivalence(name, harness, trace_dir)
     return _prove_harness(name, harness, depth=depth, solver=solver, trace_dir=trace_dir)
 
@@ -40,7 +40,7 @@ def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Re
 def properties(config: SensorConfig, pixel_factory=None) -> dict[str, Callable[[], object]]:
     """The properties of one configuration, name -> harness builder."""
     if pixel_factory is None:
-        from rtl.pixel import pixel_class
+        from tespike.rtl.pixel import pixel_class
         pixel_factory = pixel_class(config)
     return {
         "rule": lambda: rule_harness(config, pixel_factory, word_register=False),

@@ -1,6 +1,6 @@
 """Solver driving for the proofs of the generated tops: Yosys to an AIGER model, ABC to a verdict.
 
-The harness (:mod:`cosim.formal.tops`) goes through Yosys to gates (``prep -flatten``,
+The harness (:mod:`tespike.cosim.formal.tops`) goes through Yosys to gates (``prep -flatten``,
 memories to registers, undefined bits made free inputs, ``techmap``, ``aigmap``) and to an
 AIGER file whose bad-state outputs are the harness's assertions. ABC (``yosys-abc``, shipped
 with Yosys) then runs:

@@ -1,9 +1,9 @@
 """Harnesses of the pixel proofs against SPEC sections 3-4, and of the Amaranth streaming top.
 
 Each property is an Amaranth *harness*: the pixel under proof (the component of
-:mod:`rtl.pixel`, elaborated as it is built for Verilog) beside logic written here from
+:mod:`tespike.rtl.pixel`, elaborated as it is built for Verilog) beside logic written here from
 SPEC's text, with ``Assert``/``Assume`` statements relating the two, proved by
-:func:`cosim.formal.smtbmc.prove`. The assertions state the pixel's registers equal the
+:func:`tespike.cosim.formal.smtbmc.prove`. The assertions state the pixel's registers equal the
 reference's (or the invariants of the bound), so every property is 1-inductive; ``depth``
 only adds margin.
 
@@ -14,7 +14,7 @@ registers are renamed is refused in one line.
 
 from __future__ import annotations
 
-from golden.config import SensorConfig
+from tespike.golden.config import SensorConfig
 
 from .smtbmc import ProofToolError
 
@@ -89,7 +89,7 @@ def _power(word, bits: int):
 
 
 def _reference_step(m, config: SensorConfig, charge, ccc, last, clear):
-    """SPEC section 3-4 written from its text (not from :mod:`rtl.pixel`): registers,
+    """SPEC section 3-4 written from its text (not from :mod:`tespike.rtl.pixel`): registers,
     next values and the word of this clock. Returns ``(regs, word)``; the registers
     update at the clock edge (``clear`` zeroes them, ``last`` restarts the interval)."""
     from amaranth.hdl import Const, Mux, Signal
@@ -267,7 +267,7 @@ def stream_harness(config: SensorConfig, height: int, width: int, lanes: int, st
     from amaranth.hdl import Assert, Assume, Cat, Const, Fragment, Module, ResetSignal, Signal
 
     if stream_factory is None:
-        from rtl.stream import StreamingPixelArray as stream_factory
+        from tespike.rtl.stream import StreamingPixelArray as stream_factory
     top = stream_factory(config, height, width, lanes)
     body = Fragment.get(top, None)
     arrays = [origin for sub, _, _ in body.subfragments for origin in sub.origins

@@ -24,7 +24,7 @@ spelled out beat by beat (no run-time index). A reset clears both.
 
 from __future__ import annotations
 
-from golden.config import SensorConfig
+from tespike.golden.config import SensorConfig
 
 #: Edges between the edge that samples an interval's last charge and the first clock its
 #: words show on the parallel top (0: ``frame_valid`` in the very next clock, sampled one

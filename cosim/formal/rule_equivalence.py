@@ -1,5 +1,5 @@
 """``stream-pixel-rule``: the streaming Verilog top's own text of the pixel rule
-(:mod:`rtl.verilog_stream`) against the Amaranth pixel, both cut at the registers, proved
+(:mod:`tespike.rtl.verilog_stream`) against the Amaranth pixel, both cut at the registers, proved
 combinationally by Yosys ``miter`` + ``sat`` (:func:`prove_equivalence`)."""
 
 from __future__ import annotations
@@ -10,14 +10,14 @@ import tempfile
 import time
 from pathlib import Path
 
-from golden.config import SensorConfig
+from tespike.golden.config import SensorConfig
 
-from .smtbmc import ProofToolError, Result, _run
+from .smtbmc import ProofToolError, Result, run_tool
 
 # -- the streaming Verilog top's pixel rule ---------------------------------------------------
-class _Equivalence:
-    """The streaming Verilog top's pixel rule (:func:`rtl.verilog_stream.stream_pixel_rule_verilog`)
-    beside the pixel of :mod:`rtl.pixel`, to be proved combinationally equivalent."""
+class Equivalence:
+    """The streaming Verilog top's pixel rule (:func:`tespike.rtl.verilog_stream.stream_pixel_rule_verilog`)
+    beside the pixel of :mod:`tespike.rtl.pixel`, to be proved combinationally equivalent."""
 
     def __init__(self, config: SensorConfig, pixel_factory):
         self.config, self.pixel_factory = config, pixel_factory
@@ -28,14 +28,14 @@ class _Equivalence:
                                       else {"count": c.ml_bits})}
 
 
-def stream_rule_equivalence(config: SensorConfig, pixel_factory=None) -> _Equivalence:
+def stream_rule_equivalence(config: SensorConfig, pixel_factory=None) -> Equivalence:
     """The streaming top's one-pixel rule == the pixel proved against SPEC (``rule``), for every
     current state and input: next ``acc``, ``sfc``/``ovf``/``m`` or ``count``, the word, and the
     second buffer's entry (loaded with the word while ``frame_valid``)."""
     if pixel_factory is None:
-        from rtl.pixel import pixel_class
+        from tespike.rtl.pixel import pixel_class
         pixel_factory = pixel_class(config)
-    return _Equivalence(config, pixel_factory)
+    return Equivalence(config, pixel_factory)
 
 
 def _pixel_wrapper(config: SensorConfig, registers: dict[str, int]) -> str:
@@ -73,13 +73,13 @@ def _counterexample(log: str) -> str:
     return f"{', '.join(differ) or 'outputs differ'} at {' '.join(inputs)}"
 
 
-def prove_equivalence(name: str, eq: _Equivalence, trace_dir: Path) -> Result:
+def prove_equivalence(name: str, eq: Equivalence, trace_dir: Path) -> Result:
     """Yosys ``miter -equiv`` + ``sat -prove-asserts``: the rule module of the streaming top
     against the Amaranth pixel (built without its word register, as the arrays use it) cut at
     its registers. Purely combinational, so one SAT call is the proof (no induction)."""
     from amaranth.back import rtlil
 
-    from rtl.verilog_stream import stream_pixel_rule_verilog
+    from tespike.rtl.verilog_stream import stream_pixel_rule_verilog
 
     start = time.perf_counter()
     config, registers = eq.config, eq.registers()
@@ -102,7 +102,7 @@ def prove_equivalence(name: str, eq: _Equivalence, trace_dir: Path) -> Result:
             "select -assert-none t:$*ff* t:$*latch* t:$mem*", f"rename {rule_name} gate",
             "miter -equiv -flatten -make_assert -make_outputs gold gate miter", "hierarchy -top miter",
             "sat -prove-asserts -show-ports -dump_vcd trace.vcd miter"])
-        done = _run(["yosys", "-p", script], work)
+        done = run_tool(["yosys", "-p", script], work)
         log = done.stdout + done.stderr
         if done.returncode == 0 and "SAT proof finished - no model found: SUCCESS!" in log:
             return Result(name, True, time.perf_counter() - start)

@@ -1,6 +1,6 @@
 """Tools and solver driving for the pixel proofs: Yosys (RTLIL to SMT-LIB2) and yosys-smtbmc.
 
-An Amaranth harness (:mod:`cosim.formal.pixel`) goes to RTLIL, Yosys (``prep``,
+An Amaranth harness (:mod:`tespike.cosim.formal.pixel`) goes to RTLIL, Yosys (``prep``,
 ``write_smt2``) and ``yosys-smtbmc``, which proves it by k-induction: a base case (no
 assertion fails in the first k clocks from the initial state) and an induction step (k
 clocks in a row where every assertion holds, from *any* state, imply the next one holds
@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from golden.errors import TespikeError
+from tespike.golden.errors import TespikeError
 
 SOLVERS = {"z3": "z3"}
 #: Tools the proof needs: executable -> Debian package.
@@ -73,7 +73,7 @@ class Result:
     trace: Path | None = None  # failure: the counterexample VCD
 
 
-def _run(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess:
+def run_tool(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
 
 
@@ -90,7 +90,7 @@ def _failed_assertion(log: str, messages: dict[str, str]) -> str:
 
 def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Result:
     """Prove one harness by k-induction (base case and induction step, both ``depth`` long);
-    an :class:`_Equivalence` by one SAT call (:func:`prove_equivalence`)."""
+    an :class:`Equivalence` by one SAT call (:func:`prove_equivalence`)."""
     from amaranth.back import rtlil
 
     start = time.perf_counter()
@@ -104,12 +104,12 @@ def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Re
         gates = "techmap; opt -fast; " if getattr(harness, "gate_level", False) else ""
         script = (f"read_rtlil top.il; prep -flatten -top top; {gates}async2sync; "
                   "dffunmap; write_smt2 -wires top.smt2")
-        done = _run(["yosys", "-q", "-p", script], work)
+        done = run_tool(["yosys", "-q", "-p", script], work)
         if done.returncode != 0:
             raise ProofToolError(f"{name}: yosys failed: {(done.stderr or done.stdout).strip().splitlines()[-1:]}")
         for step, extra in (("base case", []), ("induction step", ["-i"])):
             vcd = work / "trace.vcd"
-            done = _run(["yosys-smtbmc", "-s", solver, *extra, "-t", str(depth),
+            done = run_tool(["yosys-smtbmc", "-s", solver, *extra, "-t", str(depth),
                          "--dump-vcd", str(vcd), "top.smt2"], work)
             if "Status: PASSED" in done.stdout:
                 continue

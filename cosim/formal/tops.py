@@ -2,11 +2,11 @@
 
 Each property is a Verilog harness beside the generated text (:func:`design_text`, the
 same generator calls as ``tespike verilog``), proved by ``yosys-smtbmc``
-(:mod:`cosim.formal.solver`). Only the tops' ports and the timing block's ports are used,
+(:mod:`tespike.cosim.formal.solver`). Only the tops' ports and the timing block's ports are used,
 never an internal name, so the proofs hold whatever structure produces those ports.
 
 * ``parallel-equiv`` (``<mode>_pixel_array``): ``frame_valid`` equals the SPEC reference's
-  (:mod:`cosim.formal.reference`) on every clock, and ``frame`` equals its words while
+  (:mod:`tespike.cosim.formal.reference`) on every clock, and ``frame`` equals its words while
   ``frame_valid`` is high. ``rst`` and ``charge`` are free inputs on every clock.
 * ``stream-equiv`` (``<mode>_pixel_array_stream``, N lanes): ``out_valid`` equals the
   reference's on every clock, ``out_first`` and ``out_words`` while it is high; and the
@@ -34,7 +34,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from golden.config import SensorConfig
+from tespike.golden.config import SensorConfig
 
 from .reference import PARALLEL_DELAY, STREAM_DELAY, reference_verilog
 
@@ -42,9 +42,9 @@ from .reference import PARALLEL_DELAY, STREAM_DELAY, reference_verilog
 def design_text(config: SensorConfig, height: int, width: int, lanes: int | None) -> str:
     """The Verilog text ``tespike verilog`` writes for this array (parallel without ``lanes``)."""
     if lanes is None:
-        from rtl.verilog import array_verilog
+        from tespike.rtl.verilog import array_verilog
         return array_verilog(config, height, width)
-    from rtl.verilog_stream import stream_array_verilog
+    from tespike.rtl.verilog_stream import stream_array_verilog
     return stream_array_verilog(config, height, width, lanes)
 
 

@@ -1,7 +1,7 @@
 """Fast light-to-stream simulator, distributed like the cycle-exact model (SPEC sections 3, 6).
 
 :func:`simulate_scene` gives readout words with the same distribution as
-:func:`golden.sensor.simulate` driven by :func:`golden.light.poisson_stimulus`
+:func:`tespike.golden.sensor.simulate` driven by :func:`tespike.golden.light.poisson_stimulus`
 (accumulator starting at 0, residual carried across readouts), but draws
 random numbers per readout interval instead of per pixel clock wherever the
 dynamics allow. Each pixel-readout takes one path, chosen from its light and
@@ -27,12 +27,12 @@ the word its bit_length), :mod:`.scene` runs whole scenes and
 :mod:`.stripes` splits frames into stripes on worker processes.
 
 "Surely" means: each such event fails with probability below
-``2^-64 / (CHECKS x pixel-readouts x L)`` (:func:`golden.light.log_budget`,
-rigorous tail bounds in :mod:`golden.light`); a pixel-readout relies on at
+``2^-64 / (CHECKS x pixel-readouts x L)`` (:func:`tespike.golden.light.log_budget`,
+rigorous tail bounds in :mod:`tespike.golden.light`); a pixel-readout relies on at
 most CHECKS of them, so the law of the whole output stream differs from the
 exact one by less than 2^-64 in total variation. With ``noise=False`` nothing is
 random and every pixel takes the per-clock path on the deterministic
-stimulus of :func:`golden.light.deterministic_clock_electrons`.
+stimulus of :func:`tespike.golden.light.deterministic_clock_electrons`.
 """
 
 from .codes import SIMULATION_PATHS

@@ -1,7 +1,7 @@
 """The light level where a tail bound crosses the error budget, found once by bisection.
 
 Every bound a path relies on is monotone in the light, so each path test is one
-comparison with such a level (:class:`golden.fastsim.plan.PathLevels`).
+comparison with such a level (:class:`tespike.golden.fastsim.plan.PathLevels`).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ pixel with ``method="per-clock"`` or ``noise=False``, and as the fallback of
 the window paths (:mod:`.window`) and the head (:mod:`.head`) where a drawn
 window did not settle the outcome. Where few pixels take it, the queue of
 crossings over all clocks in a few array passes (:func:`walk_clocks`), kept where no
-clock clipped; else the cycle-exact model :class:`golden.sensor.PixelArray`.
+clock clipped; else the cycle-exact model :class:`tespike.golden.sensor.PixelArray`.
 Nothing here classifies: the path is what is left when the others decline.
 """
 
@@ -62,7 +62,7 @@ def clock_chunks(sim, sel, expected, dark):
 
 def clock_electrons(sim, expected, dark):
     """Random electrons ``(L, n)`` of one interval, the law of
-    :func:`golden.light.clock_electrons` (Poisson per clock, dark electrons
+    :func:`tespike.golden.light.clock_electrons` (Poisson per clock, dark electrons
     multinomial over the clocks, saturated at ``2^E - 1``; no draw where
     every clock surely saturates)."""
     c = sim.config
@@ -87,7 +87,7 @@ def clock_electrons(sim, expected, dark):
 def clock_draws(sim, lam, clocks):
     """Per-clock photo-electrons ``(clocks, n)``, iid Poisson(lam[j]) in column j.
 
-    The fast method draws them with :class:`golden.poisson.PoissonSampler`
+    The fast method draws them with :class:`tespike.golden.poisson.PoissonSampler`
     (tables of the integer part of the mean, 3-5x cheaper than numpy's
     sampler per draw; same law to float64 precision, tables cut where the
     tail is below the per-clock budget); ``method="per-clock"``, the
@@ -202,10 +202,10 @@ def walk(c, acc0, e):
 
 
 def run_clocks(sim, sel, e, words, start=None):
-    """The cycle-exact model (:class:`golden.sensor.PixelArray`, clock for clock
+    """The cycle-exact model (:class:`tespike.golden.sensor.PixelArray`, clock for clock
     the literal rule of SPEC section 3) on electrons ``e`` (clocks, n) of pixels
     ``sel``, from the start of the interval or from ``start`` (a
-    :class:`golden.reference.PixelState` of shape (1, n) part-way through it)."""
+    :class:`tespike.golden.reference.PixelState` of shape (1, n) part-way through it)."""
     if start is None and sim.method == "fast" and 0 < sel.size <= WALK_PIXELS:
         settled = walk_clocks(sim, sel, e, words)
         if settled.all():

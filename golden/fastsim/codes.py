@@ -6,6 +6,6 @@ module (:mod:`.lazy`, :mod:`.interval`, :mod:`.window`, :mod:`.head`,
 classifications together and ``SceneSimulator.readout`` dispatches them.
 """
 
-#: The paths of :class:`golden.fastsim.SceneSimulator` (path codes index this tuple).
+#: The paths of :class:`tespike.golden.fastsim.SceneSimulator` (path codes index this tuple).
 SIMULATION_PATHS = ("lazy", "event", "bright", "queue", "full", "head", "clock")
 LAZY, EVENT, BRIGHT, QUEUE, FULL, HEAD, CLOCK = range(len(SIMULATION_PATHS))

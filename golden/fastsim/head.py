@@ -135,9 +135,9 @@ def head_path(sim, sel, h, expected, lam, words):
 
 
 def run_head(c, acc0, sfc0, e):
-    """The state (a (1, n) :class:`golden.reference.PixelState`) of pixels from charge
+    """The state (a (1, n) :class:`tespike.golden.reference.PixelState`) of pixels from charge
     ``acc0`` and counter ``sfc0`` after the head's electrons ``e`` (h, n) from the start
-    of the interval: by :func:`golden.fastsim.clock.walk` (the cycle-exact trajectory in
+    of the interval: by :func:`tespike.golden.fastsim.clock.walk` (the cycle-exact trajectory in
     a few array passes), the cycle-exact model where the walk leaves a pixel."""
     h, n = e.shape
     settled, spikes, charge, at = walk(c, acc0, e)
@@ -162,7 +162,7 @@ def run_head(c, acc0, sfc0, e):
 
 
 def head_state(pixels, i, h):
-    """The state of pixels ``i`` of a head's (1, n) :class:`golden.reference.PixelState`
+    """The state of pixels ``i`` of a head's (1, n) :class:`tespike.golden.reference.PixelState`
     ``pixels``, at clock ``h``."""
     return PixelState(h, pixels.acc[:, i].copy(), pixels.sfc[:, i].copy(),
                       pixels.ovf[:, i].copy(), pixels.m[:, i].copy())

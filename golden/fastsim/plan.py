@@ -29,7 +29,7 @@ from .codes import CLOCK, LAZY
 class Plan(NamedTuple):
     """One readout's classification: ``path`` (n,) int8 codes into SIMULATION_PATHS;
     ``length`` (n,) the window (queue, full) or head length in clocks, rounded
-    (:func:`golden.fastsim.window.round_window`; 0 elsewhere); ``b_max`` (n,) the
+    (:func:`tespike.golden.fastsim.window.round_window`; 0 elsewhere); ``b_max`` (n,) the
     queue's backlog bound entering its window (0 elsewhere)."""
     path: np.ndarray
     length: np.ndarray

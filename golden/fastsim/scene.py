@@ -58,7 +58,7 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     the words depend on the seed and the frame's shape, not on ``workers``.
     ``method="per-clock"`` and ``noise=False`` run one :class:`SceneSimulator` in
     this process (the per-clock electrons of :func:`iter_scene_stimulus`).
-    ``sensor``: a :class:`golden.noise.Sensor` (non-idealities with their per-pixel
+    ``sensor``: a :class:`tespike.golden.noise.Sensor` (non-idealities with their per-pixel
     maps from its sensor seed), instead of ``dark_current``.
     """
     scene = check_scene(scene, scan_values=False)       # values: one readout at a time
@@ -88,7 +88,7 @@ def iter_scene_stimulus(config: SensorConfig, scene: np.ndarray, *, seed=None,
 
     The noise model and seed semantics of :func:`simulate_scene`: the electrons
     are the very ones ``simulate_scene(..., seed=seed, method="per-clock")``
-    draws, so :func:`golden.sensor.simulate` on their concatenation returns
+    draws, so :func:`tespike.golden.sensor.simulate` on their concatenation returns
     that call's words bit for bit, and has the law of the fast method's words
     (same seed, other random numbers: the fast paths draw per interval).
     One readout interval is held at a time.

@@ -42,7 +42,7 @@ class SceneSimulator:
 
     Holds the carried accumulator (``carried``, int64, flat; lazy pixels' at
     their last sync, :attr:`acc` gives every pixel's), the lazy pixels' state
-    (``lazy``, :class:`golden.fastsim.lazy.LazyState`), the ML msb counter
+    (``lazy``, :class:`tespike.golden.fastsim.lazy.LazyState`), the ML msb counter
     remainder (``sfc``, int64, flat; 0 otherwise) and, for ``noise=False``, the
     carried charge fraction. ``method="per-clock"`` sends every pixel down
     the per-clock path (the full path the shortcuts are tested against).
@@ -92,7 +92,7 @@ class SceneSimulator:
         again before the next readout. With no lazy pixel it is the simulator's own array
         (writes set the charge the next readout starts from); otherwise a read-only copy in
         which each lazy pixel's charge is drawn from its law given everything simulated so
-        far (:func:`golden.fastsim.lazy.lazy_charge`), from a generator made afresh for the read
+        far (:func:`tespike.golden.fastsim.lazy.lazy_charge`), from a generator made afresh for the read
         from the simulator's seed and the number of readouts done (:meth:`_peek_generator`).
         To set charges while pixels are lazy, assign the whole array (``sim.acc = values``)."""
         on = np.flatnonzero(self.lazy.mask)

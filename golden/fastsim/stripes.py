@@ -1,6 +1,6 @@
 """Stripes of a frame (interleaved rows) and the worker processes that simulate them.
 
-The noisy fast simulator (:func:`golden.fastsim.simulate_scene`) splits a frame
+The noisy fast simulator (:func:`tespike.golden.fastsim.simulate_scene`) splits a frame
 into stripes that depend on its shape only, gives each its own generator
 (children of the seed) and simulator, and runs them on forked processes;
 docs/simulator.md ("Stripes and worker processes") has the measurements.

@@ -10,7 +10,7 @@
              known, accumulator from a window of the last clocks (:func:`full_walk`).
 
 A window that does not settle its pixel's outcome sends it per clock with
-what was drawn (:func:`golden.fastsim.clock.fallback`). The head path
+what was drawn (:func:`tespike.golden.fastsim.clock.fallback`). The head path
 (:mod:`.head`) runs the same walks on the rest of an interval.
 """
 

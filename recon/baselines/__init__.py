@@ -3,8 +3,8 @@
 Each takes (N, span, H, W) decoded light (the project's stream format into
 every learned method, TE and ML alike) and returns (N, 1, H, W) light at the
 key moment ``span // 2``; how far an output pixel reaches is derived from each
-module (``support`` methods beside ``forward``, :mod:`recon.reach`;
-:func:`recon.learned.receptive_radius` for every learned method).
+module (``support`` methods beside ``forward``, :mod:`tespike.recon.reach`;
+:func:`tespike.recon.learned.receptive_radius` for every learned method).
 """
 
 from __future__ import annotations

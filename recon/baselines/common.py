@@ -1,15 +1,15 @@
 """What the three learned baselines share: input checks, centred windows, residual blocks, and their tail.
 
 Every baseline takes the project's one stream format into learned methods,
-(N, span, H, W) decoded light in scene units (``recon.stream.decode_light``),
+(N, span, H, W) decoded light in scene units (``tespike.recon.stream.decode_light``),
 key moment at ``span // 2``, and returns (N, 1, H, W) light at the key moment.
 HDR light is compressed with the project's mu-law before the first layer
-(:mod:`recon.learning.mulaw`), as the project's network does. Each reads its
+(:mod:`tespike.recon.learning.mulaw`), as the project's network does. Each reads its
 sub-streams into features its own way, then ends in the same tail
 (:class:`AlignedBaseline`): pyramid alignment to the key
-(:class:`recon.learning.align.PyramidAlign`), a 1 x 1 fusion, residual
+(:class:`tespike.recon.learning.align.PyramidAlign`), a 1 x 1 fusion, residual
 reconstruction blocks, and the project's output head
-(:class:`recon.learning.head.BlendHead`: a per-pixel choice among training-free
+(:class:`tespike.recon.learning.head.BlendHead`: a per-pixel choice among training-free
 estimates plus a correction), so it starts from a sensible image and trains
 stably on HDR scenes.
 """

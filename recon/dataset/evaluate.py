@@ -1,15 +1,15 @@
 """Evaluation over a dataset store: one task per sequence x sensor x method (x tile).
 
-The measures are those of :func:`recon.evaluate.evaluate` (paper Table 1:
+The measures are those of :func:`tespike.recon.evaluate.evaluate` (paper Table 1:
 PSNR-mu and SSIM-mu per frame after dividing by the sequence's peak, frames
 whose window reaches past the sequence not scored, frame means averaged per
 sequence, then over sequences), on the streams already in the store instead
 of freshly simulated ones, and the output files are those of ``tespike
-evaluate`` (:func:`recon.report.table_markdown`, ``table_csv``,
+evaluate`` (:func:`tespike.recon.report.table_markdown`, ``table_csv``,
 ``results_csv``, ``plot_strip``).
 
 A frame that fits in one :data:`EVAL_TILE` is scored by one task with
-:func:`recon.metrics.psnr_mu` / ``ssim_mu`` on whole frames, exactly as the
+:func:`tespike.recon.metrics.psnr_mu` / ``ssim_mu`` on whole frames, exactly as the
 serial evaluation does. A larger frame is cut into tiles; each task
 reconstructs its tile plus a halo of the SSIM window radius (TFP and TFI work
 pixel by pixel along time, so the halo makes the tile exact) and
@@ -33,8 +33,8 @@ from typing import Sequence
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.errors import InputError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
 
 from .store import DatasetStore, open_array, reading, tiles
 
@@ -45,7 +45,7 @@ METRIC_FRAMES = 16
 
 
 def _halo() -> int:
-    from recon.metrics import SSIM_SIGMA, SSIM_TRUNCATE
+    from tespike.recon.metrics import SSIM_SIGMA, SSIM_TRUNCATE
     return int(SSIM_TRUNCATE * SSIM_SIGMA + 0.5)
 
 
@@ -64,9 +64,9 @@ def _one_thread():
 
 def score_whole(url: str, sequence: str, sensor: str, method: str, window: int, device: str,
                 peak: float, frames: tuple[int, int], middle: int, options: dict) -> dict:
-    """Reconstruct and score whole frames (as :func:`recon.evaluate.evaluate`)."""
-    from recon.methods import reconstruct
-    from recon.metrics import psnr_mu, ssim_mu
+    """Reconstruct and score whole frames (as :func:`tespike.recon.evaluate.evaluate`)."""
+    from tespike.recon.methods import reconstruct
+    from tespike.recon.metrics import psnr_mu, ssim_mu
 
     stream = open_array(url, f"{sequence}/streams/{sensor}")
     with reading(url, f"{sequence}/streams/{sensor}"):
@@ -89,8 +89,8 @@ def score_tile(url: str, sequence: str, sensor: str, method: str, window: int, d
     of the SSIM map over the tile's own pixels (window centres), and its strip pixels."""
     import torch
 
-    from recon.methods import reconstruct
-    from recon.metrics import mu_law, normalise, ssim_map
+    from tespike.recon.methods import reconstruct
+    from tespike.recon.metrics import mu_law, normalise, ssim_map
 
     stream = open_array(url, f"{sequence}/streams/{sensor}")
     with reading(url, f"{sequence}/streams/{sensor}"):
@@ -138,17 +138,17 @@ def _combine(parts: list[dict], height: int, width: int) -> tuple[np.ndarray, np
 def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, window: int = 9,
                    device: str = "cpu", tile: tuple[int, int] = EVAL_TILE,
                    options: dict[str, dict] | None = None):
-    """Score every complete sequence x sensor x method of the store -> :class:`recon.evaluate.Evaluation`.
+    """Score every complete sequence x sensor x method of the store -> :class:`tespike.recon.evaluate.Evaluation`.
 
-    ``run`` runs ``dask.delayed`` tasks (:class:`cosim.dataset.cluster.Runner`);
+    ``run`` runs ``dask.delayed`` tasks (:class:`tespike.cosim.dataset.cluster.Runner`);
     sensors are the store's configurations, in its order (they are the table's
-    column groups); ``options`` as in :func:`recon.evaluate.evaluate`.
+    column groups); ``options`` as in :func:`tespike.recon.evaluate.evaluate`.
     """
     from dask import delayed
 
-    from recon.evaluate import Evaluation, Measurement, scored_frames
-    from recon.methods import RECON_METHODS, available_methods, missing_weights
-    from recon.settings import ReconSettings
+    from tespike.recon.evaluate import Evaluation, Measurement, scored_frames
+    from tespike.recon.methods import RECON_METHODS, available_methods, missing_weights
+    from tespike.recon.settings import ReconSettings
 
     store = DatasetStore.open(url)
     sequences = store.sequences()
@@ -237,8 +237,8 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
 
 def write_store_outputs(evaluation, out: str | Path) -> dict[str, Path]:
     """table.md, table.csv, results.csv and strips/<sequence>.png (no timing plot: see the module)."""
-    from recon.pictures import write_text
-    from recon.report import plot_strip, results_csv, safe_name, table_csv, table_markdown
+    from tespike.recon.pictures import write_text
+    from tespike.recon.report import plot_strip, results_csv, safe_name, table_csv, table_markdown
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -41,9 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.io import word_dtype
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.io import word_dtype
 
 FORMAT = "tespike-dataset"
 VERSION = 1

@@ -8,7 +8,7 @@ network sees a new noise draw with every clip.
 
 Families (:data:`FAMILIES`), each a documented generator:
 
-- ``deadleaves``: :func:`recon.engine.deadleaves.dead_leaves`, procedural HDR
+- ``deadleaves``: :func:`tespike.recon.engine.deadleaves.dead_leaves`, procedural HDR
   video built for generalisation (occlusion, power-law sizes, log-uniform
   radiance over up to six decades, textures, soft and sharp edges, object and
   camera motion, small bright and flickering sources);
@@ -23,7 +23,7 @@ log-uniformly in ``recipe.peak`` (0.01 .. 3 x the design light by default);
 the network sees light in scene units, as at inference. Length: with
 probability ``recipe.short_fraction`` the stream is short (log-uniform in
 ``recipe.short``, down to one readout), else uniform in ``recipe.long``;
-key moments are drawn anywhere in it by :mod:`recon.engine.batches`.
+key moments are drawn anywhere in it by :mod:`tespike.recon.engine.batches`.
 
 Sensor noise (``recipe.noise_fraction``, 0 by default: shot noise only, the
 clips of every recipe before it): that share of clips is recorded by a sensor
@@ -33,7 +33,7 @@ none to beyond eq. 13; DSNU, hot pixels, PRNU and comparator offset uniform up
 to their bounds; its own sensor seed). The target of such a clip is the light
 its pixels saw, ``gain x I + dark`` (:func:`seen_light`; dark the pixel's mean
 dark rate in scene units), not ``I``: the learned methods are corrected by the
-sensor's calibration at their output (:mod:`recon.calibration`,
+sensor's calibration at their output (:mod:`tespike.recon.calibration`,
 ``(x - dark) / gain``), so a network should reproduce what the pixel measured
 and leave the per-pixel correction, which it cannot know from one stream, to the
 calibration (docs/reconstruction.md "Calibration" has the measurements).
@@ -47,9 +47,9 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.fastsim import simulate_scene
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.fastsim import simulate_scene
 
 from .deadleaves import DeadLeavesParams, dead_leaves
 
@@ -220,8 +220,8 @@ def clip_light(recipe: EngineRecipe, index: int, *, domain: int = TRAIN_DOMAIN,
 
 
 def draw_sensor(rng: np.random.Generator):
-    """A random noisy sensor over :data:`NOISE_DRAW` (a :class:`golden.noise.Sensor`, its own seed)."""
-    from golden.noise import Sensor, SensorNoise
+    """A random noisy sensor over :data:`NOISE_DRAW` (a :class:`tespike.golden.noise.Sensor`, its own seed)."""
+    from tespike.golden.noise import Sensor, SensorNoise
     d = NOISE_DRAW
     low, high = d["dark_level"]
     noise = SensorNoise(dark_current=d["dark_current"][int(rng.integers(len(d["dark_current"])))],
@@ -234,7 +234,7 @@ def draw_sensor(rng: np.random.Generator):
 def seen_light(sensor, light: np.ndarray) -> np.ndarray:
     """The light a sensor's pixels measure, ``gain x I + dark`` (scene units; dark the mean
     dark rate): the target of a noisy clip (what the calibration then corrects)."""
-    from golden.config import DESIGN_ELECTRONS
+    from tespike.golden.config import DESIGN_ELECTRONS
     maps = sensor.maps(light.shape[1:])
     return light * maps.gain + maps.mean_dark_electrons(sensor.noise) / DESIGN_ELECTRONS
 

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 
 @dataclasses.dataclass(frozen=True)

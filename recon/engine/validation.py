@@ -23,8 +23,8 @@ from typing import Callable
 
 import numpy as np
 
-from golden.config import SensorConfig
-from golden.fastsim import simulate_scene
+from tespike.golden.config import SensorConfig
+from tespike.golden.fastsim import simulate_scene
 
 from .clips import HELDOUT_PANORAMA, VALIDATION_DOMAIN
 from .deadleaves import DeadLeavesParams, dead_leaves

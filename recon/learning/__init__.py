@@ -1,9 +1,9 @@
 """The machinery every learned reconstruction method shares, below the methods themselves.
 
-The paper's network (:mod:`recon.net`) and the learned baselines
-(:mod:`recon.baselines`) build on these pieces; nothing here imports a method
+The paper's network (:mod:`tespike.recon.net`) and the learned baselines
+(:mod:`tespike.recon.baselines`) build on these pieces; nothing here imports a method
 (``tests/test_house.py``): the registry that names the methods and builds them
-from weights files is :mod:`recon.learned`, the trainer :mod:`recon.train`.
+from weights files is :mod:`tespike.recon.learned`, the trainer :mod:`tespike.recon.train`.
 
 - :mod:`.mulaw`: the mu-law that compresses HDR light, and its inverse;
 - :mod:`.layers`: the 3 x 3 convolution, upsampling, sub-streams, parameter count;

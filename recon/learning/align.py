@@ -6,7 +6,7 @@ the offsets and masks of a modulated deformable convolution (paper eq. 5),
 fused with the upsampled offset features of the coarser level; below the
 coarsest level the aligned reference is merged with the upsampled coarser
 result. Offsets are ``max_offset * tanh``, so the receptive field is bounded
-(:meth:`PyramidAlign.support`, :mod:`recon.reach`) and tiled inference is exact.
+(:meth:`PyramidAlign.support`, :mod:`tespike.recon.reach`) and tiled inference is exact.
 
 The methods differ in the parts each level adds, all options of one module:
 

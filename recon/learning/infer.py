@@ -9,7 +9,7 @@ method's pyramid factor (the convolutions' zero padding then meets scene
 content, not a cliff: +0.9 dB on 16 x 16 crops, docs/network.md), and cut into
 tiles whose cores are computed with :func:`tile_margin` pixels more on every
 side: the receptive radius derived from the module itself
-(:func:`receptive_radius`, :mod:`recon.reach`), rounded up to the pyramid
+(:func:`receptive_radius`, :mod:`tespike.recon.reach`), rounded up to the pyramid
 factor, so a tiled result equals the whole-frame one to float rounding
 (``tests/test_recon_learning_infer.py``).
 
@@ -22,7 +22,7 @@ axis, so that axis is not cut (same peak, less work); a frame within
 core + margin on both axes runs whole. A tile given smaller than the margin
 is accepted: the result is the same, only slower (each tile computes
 (tile + 2 margin)^2 pixels for tile^2). ``tile=None`` runs the whole frame at
-once. Which weights a module holds is the caller's (:func:`recon.learned.load_learned`).
+once. Which weights a module holds is the caller's (:func:`tespike.recon.learned.load_learned`).
 """
 
 from __future__ import annotations
@@ -33,8 +33,8 @@ import functools
 import numpy as np
 import torch
 
-from golden.config import SensorConfig
-from golden.errors import InputError
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
 
 from ..reach import receptive_radius as derived_radius
 from ..stream import decode_light, key_span, output_images, span_inside
@@ -45,7 +45,7 @@ def module_radius(module_class: type, sizes) -> int:
     """Frame pixels an output pixel of ``module_class(sizes)`` can reach (an upper bound).
 
     Derived from the module built from ``sizes`` (on the meta device: no memory,
-    no weights) by :func:`recon.reach.receptive_radius`, so any change of a kernel,
+    no weights) by :func:`tespike.recon.reach.receptive_radius`, so any change of a kernel,
     a level, an offset bound or a window shows in it.
     """
     with torch.device("meta"):

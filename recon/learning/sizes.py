@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, ClassVar, Mapping
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 #: Old field name -> its name now, for sizes read from files written before the rename
 #: (the baselines' ``windows`` / ``step`` are the network's ``substreams`` / ``stride``).

@@ -2,10 +2,10 @@
 
 A weights file is a ``torch.save`` of a plain dictionary, loadable with
 ``torch.load(weights_only=True)`` (no pickled code): ``method`` (its name in
-:data:`recon.learned.LEARNED`), ``state_dict``, ``sizes`` (the sizes
+:data:`tespike.recon.learned.LEARNED`), ``state_dict``, ``sizes`` (the sizes
 dataclass's ``to_dict``), ``config`` (the sensor configuration it was trained
 for) and ``meta`` (how it was made). Building the module from it is the
-registry's (:func:`recon.learned.load_weights`): this layer knows no method.
+registry's (:func:`tespike.recon.learned.load_weights`): this layer knows no method.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from typing import Any
 
 import torch
 
-from golden.config import SensorConfig
-from golden.errors import InputError
-from golden.io import atomic_output
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+from tespike.golden.io import atomic_output
 
 #: Keys every weights file holds.
 KEYS = ("state_dict", "sizes", "config")

@@ -1,7 +1,7 @@
 """Similarity-based pyramid alignment (SPA, paper section 5.3, Fig. 3 (b), eq. 5 and 9).
 
 Every reference feature is aligned to the key feature coarse to fine by the
-pyramid alignment every learned method shares (:class:`recon.learning.align.PyramidAlign`)
+pyramid alignment every learned method shares (:class:`tespike.recon.learning.align.PyramidAlign`)
 with the paper's two parts at each level: the similarity predictor SP gates
 the upsampled coarser result before it is merged with this level's DCN
 output, and the motion bias predictor MBP adds a bias (eq. 9). The aligned

@@ -2,7 +2,7 @@
 
 Input: decoded light (golden's one decoder; scene units, I = 1 is the design
 light) of ``sizes.span`` readouts around the key moment, (N, span, H, W),
-with H and W multiples of ``sizes.pyramid_factor`` (:mod:`recon.learning.infer`
+with H and W multiples of ``sizes.pyramid_factor`` (:mod:`tespike.recon.learning.infer`
 pads any frame). The HDR range is compressed by the mu-law
 ``log(1 + mu x) / log(1 + mu)`` before the first convolution (the network
 sees the stream, never the ground truth); the network predicts, in that

@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, ClassVar
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 from ..learning.sizes import SizesMixin, SubstreamSizes
 from ..pictures import MU

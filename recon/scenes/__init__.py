@@ -5,7 +5,7 @@ normalised so that its brightest pixel over the whole sequence is ``peak``
 (1.0 = the design light, paper appendix A.2.2). Random numbers come from
 :func:`scene_rng`, which keeps two domains apart: the public one (``tespike
 scene``, examples, tuning, training) and the held-out one used only by the
-evaluation set (:mod:`recon.scenes.heldout`), so no seed a user or a training
+evaluation set (:mod:`tespike.recon.scenes.heldout`), so no seed a user or a training
 run can ask for ever reproduces an evaluation scene.
 """
 
@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 from . import procedural
 from .color import DEFAULT_WEIGHTS, LUMA_WEIGHTS, normalise_sequence, to_gray

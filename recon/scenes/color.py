@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 #: Linear-light luminance weights (R, G, B) by name.
 LUMA_WEIGHTS = {

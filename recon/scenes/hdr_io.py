@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.errors import InputError
-from golden.io import atomic_output
-from golden.paths import check_input_file
+from tespike.golden.errors import InputError
+from tespike.golden.io import atomic_output
+from tespike.golden.paths import check_input_file
 
 from .color import DEFAULT_WEIGHTS, normalise_sequence, to_gray
 

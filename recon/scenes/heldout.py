@@ -1,7 +1,7 @@
 """The held-out evaluation set and the panorama (tuning) set.
 
 Evaluation scenes are procedural scenes of the project's own making drawn
-from the held-out random domain of :func:`recon.scenes.scene_rng`, so they
+from the held-out random domain of :func:`tespike.recon.scenes.scene_rng`, so they
 share no seed, and no pixel, with anything made for tuning, training or
 examples (the panorama set below, ``tespike scene``, the demo). Panorama
 sequences are for tuning and examples only, as the data folder's README asks.
@@ -36,7 +36,7 @@ def sequence_set(name: str, frames: int, height: int, width: int) -> list[tuple[
     ``panoramas``: a mixed-motion camera over each of the five panoramas
     (tuning and examples); ``default``: the demo scene.
     """
-    from golden.errors import InputError
+    from tespike.golden.errors import InputError
 
     if name in ("heldout", "moderate"):
         entries = EVALUATION_SET if name == "heldout" else MODERATE_SET

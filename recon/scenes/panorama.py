@@ -15,7 +15,7 @@ Sources of a panorama (:func:`load_panorama`):
 - any path to an ``.exr`` or ``.hdr`` file.
 
 A sequence is a camera window moving over the panorama (see
-:mod:`recon.scenes.warp`): a pan along the longitude (exact sub-pixel motion,
+:mod:`tespike.recon.scenes.warp`): a pan along the longitude (exact sub-pixel motion,
 wrapping round), a tilt, a rotation, a zoom, or all at once, with optional
 moving bright sources added, then normalised so the brightest pixel of the
 whole sequence is ``peak`` (paper appendix A.2.2).
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 from .color import DEFAULT_WEIGHTS, to_gray
 from .procedural import moving_spots
@@ -92,7 +92,7 @@ def build_default_panorama(exr_path: str | Path, out: str | Path = DEFAULT_PANOR
     """Make a shipped panorama from a full-size EXR (how recon/data was built): the default
     (courtyard) in float32, the other four with ``dtype=np.float16`` (their luminance lies
     within float16's normal range, relative step 2^-11; half the size)."""
-    from golden.io import atomic_output
+    from tespike.golden.io import atomic_output
     from .hdr_io import read_image
 
     luminance = block_mean(to_gray(read_image(exr_path), DEFAULT_WEIGHTS), factor).astype(dtype)

@@ -13,7 +13,7 @@ at pixel centres, so motion is exact at any sub-pixel speed. Building blocks:
   (exactly 0.0, an occluder fixed in the frame).
 
 Every generator takes a numpy ``Generator``; callers make it from a seed with
-:func:`recon.scenes.scene_rng`. Results are float64 ``(K, H, W)``, not yet
+:func:`tespike.recon.scenes.scene_rng`. Results are float64 ``(K, H, W)``, not yet
 normalised (the registry divides by the sequence maximum).
 """
 
@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 
 @dataclasses.dataclass(frozen=True)

@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from golden.errors import InputError
+from tespike.golden.errors import InputError
 
 
 def sample_bilinear(image: np.ndarray, ys: np.ndarray, xs: np.ndarray, *, wrap_x: bool = True) -> np.ndarray:

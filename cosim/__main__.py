@@ -1,5 +1,0 @@
-import sys
-
-from cosim.cli import main
-
-sys.exit(main())
