@@ -500,19 +500,14 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
     ``rst`` of every stimulus clock (:mod:`tespike.cosim.resets`); the result is then a
     list of each segment's words ``(n, H, W)``.
     """
-    run = prepare(config, stimulus, None, resets)
-    check_cxx_opt(cxx_opt)
-    top = run.top
-    if run.idle:
-        return top.empty()
-    if verilog is None:
-        verilog = top.verilog()
-    pixel = top.module.replace("_array", "")
-    if shared and re.search(rf"^module {pixel}\(", verilog, re.M):
-        verilog = shared_pixel_view(verilog, pixel)
-    executable = build(verilog, top.module, top.charge_bits, top.output_bits, build_dir=build_dir,
-                       progress=progress, inline=inline, cxx_opt=cxx_opt)
-    return _run(run, executable, progress)
+    def build_parallel(text: str, top) -> Path:
+        pixel = top.module.replace("_array", "")
+        if shared and re.search(rf"^module {pixel}\(", text, re.M):
+            text = shared_pixel_view(text, pixel)
+        return build(text, top.module, top.charge_bits, top.output_bits, build_dir=build_dir,
+                     progress=progress, inline=inline, cxx_opt=cxx_opt)
+
+    return _run(prepare(config, stimulus, None, resets), verilog, cxx_opt, build_parallel, progress)
 
 
 def run_verilator_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,
@@ -526,21 +521,22 @@ def run_verilator_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int,
     ``resets`` (T booleans): ``rst`` of every stimulus clock (:mod:`tespike.cosim.resets`); the
     result is then a list of each segment's beats ``(n, N)``.
     """
-    run = prepare(config, stimulus, lanes, resets)
+    def build_streaming(text: str, top) -> Path:
+        return build_stream(config, text, top.height, top.width, lanes, build_dir=build_dir,
+                            progress=progress, cxx_opt=cxx_opt)
+
+    return _run(prepare(config, stimulus, lanes, resets), verilog, cxx_opt, build_streaming, progress)
+
+
+def _run(run: Run, verilog: str | None, cxx_opt: str, build_model, progress: bool):
+    """Build ``verilog`` (default: the top's generated text) with ``build_model(text, top)`` and
+    run it on ``run``, either top; its words, beats, or each segment's (nothing is built for an
+    idle run)."""
     check_cxx_opt(cxx_opt)
     top = run.top
     if run.idle:
         return top.empty()
-    if verilog is None:
-        verilog = top.verilog()
-    executable = build_stream(config, verilog, top.height, top.width, lanes, build_dir=build_dir,
-                              progress=progress, cxx_opt=cxx_opt)
-    return _run(run, executable, progress)
-
-
-def _run(run: Run, executable: Path, progress: bool):
-    """Run a built model of either top on ``run``; its words, beats, or each segment's."""
-    top = run.top
+    executable = build_model(top.verilog() if verilog is None else verilog, top)
     with tempfile.TemporaryDirectory(prefix="tespike-verilator-") as scratch:
         stim_path, cap_path = Path(scratch) / "stimulus.bin", Path(scratch) / "captures.bin"
         write_stimulus_file(stim_path, run.stimulus, top.config.input_bits)
