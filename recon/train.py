@@ -110,7 +110,7 @@ class TrainOptions:
 
     def sizes(self):
         module, sizes_class = method_classes(self.method)
-        sizes = sizes_class.preset(self.size)
+        sizes = sizes_class.for_camera(self.size, self.config())
         if self.ablation is None:
             return sizes
         if self.method != "net":

@@ -31,6 +31,7 @@ SMALL = {
     "mambaspike": {"unshuffle": 2, "channels": 8, "temporal_patch": 3, "moment_stride": 3, "levels": 2,
                    "max_offset": 2.0, "scan_window": 4, "head_dim": 4, "state": 4, "chunk": 4, "parsings": 2},
 }
+SMALL["mambaspike1"] = {**SMALL["mambaspike"], "parsings": 1}
 
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -284,3 +285,16 @@ def test_local_cross_attention_equals_its_unfolded_definition():
     assert torch.allclose(attended, (weights[:, None] * v).sum(2), atol=1e-12)
     dy = torch.arange(-2, 3, dtype=torch.float64).repeat_interleave(5)
     assert torch.allclose(shift[:, 0], (weights * dy[:, None, None]).sum(1), atol=1e-12)
+
+
+def test_mambaspike_parsings_follow_the_camera():
+    """Several parsings on the msb camera only (its readout leaves the counter's rest unread), one on
+    TE and the full count; the spade row's one-branch MambaSpike has one on every camera, and refuses more."""
+    from tespike.recon.baselines.mambaspike import MSB_PARSINGS
+    for camera, parsings in (("te", 1), ("ml", 1), ("ml-msb", MSB_PARSINGS)):
+        config = SensorConfig.preset(camera)
+        assert BASELINES["mambaspike"][1].for_camera("cpu", config).parsings == parsings
+        assert BASELINES["mambaspike1"][1].for_camera("cpu", config).parsings == 1
+    assert MSB_PARSINGS > 1
+    with pytest.raises(InputError, match="parsings = 2: must be 1"):
+        BASELINES["mambaspike1"][1](parsings=2)

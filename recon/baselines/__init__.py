@@ -12,7 +12,7 @@ from __future__ import annotations
 from torch import nn
 
 from .bsf import BSF, BSFSizes
-from .mambaspike import MambaSpike, MambaSpikeSizes
+from .mambaspike import MambaSpike, MambaSpikeOneBranchSizes, MambaSpikeSizes
 from .spk2imgnet import Spk2ImgNet, Spk2ImgNetSizes
 
 #: method name -> (model class, sizes class).
@@ -20,10 +20,12 @@ BASELINES: dict[str, tuple[type[nn.Module], type]] = {
     "spk2imgnet": (Spk2ImgNet, Spk2ImgNetSizes),
     "bsf": (BSF, BSFSizes),
     "mambaspike": (MambaSpike, MambaSpikeSizes),
+    "mambaspike1": (MambaSpike, MambaSpikeOneBranchSizes),
 }
 
-#: Parameters of each method in the paper's Table 10 (its TE version).
-PAPER_PARAMETERS = {"spk2imgnet": 3_760_000, "bsf": 2_071_000, "mambaspike": 4_418_000}
+#: Parameters of each method in the paper's Table 10 (its TE version: MambaSpike of one parsing branch).
+PAPER_PARAMETERS = {"spk2imgnet": 3_760_000, "bsf": 2_071_000, "mambaspike": 4_418_000, "mambaspike1": 4_418_000}
 
 __all__ = ["BASELINES", "PAPER_PARAMETERS", "Spk2ImgNet", "Spk2ImgNetSizes", "BSF",
-           "BSFSizes", "MambaSpike", "MambaSpikeSizes"]
+           "BSFSizes", "MambaSpike", "MambaSpikeSizes",
+           "MambaSpikeOneBranchSizes"]

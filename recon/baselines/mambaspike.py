@@ -51,6 +51,11 @@ from .represent import firing_rates
 from .scan import MambaBlock
 
 
+#: Parsing branches on the msb camera (the paper's "multiple parsings"): virtual thresholds
+#: 1, 4 and 16 x the interval's spike (branch p re-reads at 4^p).
+MSB_PARSINGS = 3
+
+
 @dataclasses.dataclass(frozen=True)
 class MambaSpikeSizes(SizesMixin):
     """Every size of MambaSpike.
@@ -112,6 +117,14 @@ class MambaSpikeSizes(SizesMixin):
         self._need("head_dim", (self.expand * self.channels) % self.head_dim == 0,
                    "a divisor of expand x channels")
         self._need_positive("max_offset", "threshold", "mu")
+
+    @classmethod
+    def for_camera(cls, name: str, config):
+        """The paper's parsings: several on the msb camera, whose readout leaves the counter's
+        rest unread (:data:`MSB_PARSINGS`), one where the whole count or TE word is read."""
+        sizes = cls.preset(name)
+        msb = config.mode == "ml" and config.ml_readout == "msb"
+        return dataclasses.replace(sizes, parsings=MSB_PARSINGS) if msb else sizes
 
     @property
     def tokens(self) -> int:
@@ -211,6 +224,22 @@ class WindowScan(nn.Module):
     def support(self, x: Support) -> Support:
         """Every pixel of a window reads the whole window (a second scan on the same windows adds nothing)."""
         return x.window(self.window)
+
+
+@dataclasses.dataclass(frozen=True)
+class MambaSpikeOneBranchSizes(MambaSpikeSizes):
+    """MambaSpike with one parsing branch on every camera: the paper's Tables 1-2 row marked
+    with a spade on the ML side (method ``mambaspike1``)."""
+
+    LABEL: ClassVar[str] = "mambaspike1"
+
+    @classmethod
+    def for_camera(cls, name: str, config):
+        return dataclasses.replace(cls.preset(name), parsings=1)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._need("parsings", self.parsings == 1, "1 (the one-branch MambaSpike)")
 
 
 class MambaSpike(AlignedBaseline):

@@ -53,6 +53,13 @@ class SizesMixin:
             raise InputError(f"unknown {cls.LABEL} size {name!r} (known: {', '.join(cls.PRESETS)})")
         return cls(**cls.PRESETS[name])
 
+    @classmethod
+    def for_camera(cls, name: str, config):
+        """The preset ``name`` as built for a camera of ``config`` (a
+        :class:`tespike.golden.config.SensorConfig`): the preset itself unless a method's
+        published design differs between cameras (MambaSpike's parsings)."""
+        return cls.preset(name)
+
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 

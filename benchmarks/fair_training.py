@@ -1,0 +1,168 @@
+"""One fair retraining of every learned method (issue 27 item 4): the same recipe, budget and selection rule.
+
+Every run is ``tespike train`` on the data engine with the same recipe (mu-L1 loss,
+learning rate, halving, batch, crop, pool, the same share of noisy clips) and the
+same selection rule (validation on the held-out set every ``--validate-every``
+steps, the best checkpoint kept). The runs of one group start together on one
+machine and get the same wall-clock budget (``--minutes``), so each had the same
+share of the same cores and accelerator; the summary gives the steps each reached,
+which is where the methods' speeds show.
+
+Groups (``--groups``):
+
+- ``fair``: every learned method from its initial weights on every camera it ships
+  for: net on te / ml-msb / ml, Spk2ImgNet, BSF and MambaSpike on te / ml-msb, and
+  the one-branch MambaSpike on ml-msb (the paper's spade row);
+- ``continue``: the shipped network weights warm-started (``--init``) and trained on
+  the same engine with noise, at a lower learning rate (the network's shipped weights
+  keep their longer training; the ``fair`` net rows are the budget-matched ones);
+- ``continue-baselines``: the same for every shipped baseline file (the msb MambaSpike,
+  now of several parsings, and the one-branch MambaSpike both start from the shipped
+  one-branch ``mambaspike-ml-msb.pt``: ``--init`` copies the tensors that match);
+- ``ablation``: the paper's Table 3 cases 1..6 of the network on te, from scratch.
+
+Each run writes ``DIR/<name>.pt`` and ``DIR/<name>.run/`` (log.csv, curves.png);
+``DIR/summary.md`` and ``DIR/summary.json`` list each run's command, steps, wall
+seconds and best validation PSNR-mu. Progress (each run's step) is printed every
+``--report`` seconds.
+
+    python3 benchmarks/fair_training.py --out runs --minutes 7 --device cuda --groups fair continue
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+#: The one recipe of every run (``tespike train`` flags).
+RECIPE = ("--loss", "mu-l1", "--halve-every", "20", "--threads", "1", "--workers", "1", "--pool", "32",
+          "--refresh", "12", "--noise-fraction", "0.5", "--seed", "0")
+FAIR = [("net", "te"), ("net", "ml-msb"), ("net", "ml"),
+        ("spk2imgnet", "te"), ("spk2imgnet", "ml-msb"), ("bsf", "te"), ("bsf", "ml-msb"),
+        ("mambaspike", "te"), ("mambaspike", "ml-msb"), ("mambaspike1", "ml-msb")]
+
+
+def weights_file(method: str, camera: str) -> str:
+    return f"{camera}.pt" if method == "net" else f"{method}-{camera}.pt"
+
+
+def jobs(groups: list[str], lr: float, continue_lr: float) -> list[tuple[str, list[str]]]:
+    """(run name, ``tespike train`` arguments without --out/--minutes/--device) of each group."""
+    out = []
+    if "fair" in groups:
+        out += [(f"fair-{m}-{c}", ["--config", c, "--method", m, "--lr", str(lr)]) for m, c in FAIR]
+    if "continue" in groups:
+        shipped = ROOT / "recon" / "weights"
+        out += [(f"continue-net-{c}", ["--config", c, "--method", "net", "--lr", str(continue_lr),
+                                       "--init", str(shipped / weights_file("net", c))])
+                for c in ("te", "ml-msb", "ml")]
+    if "continue-baselines" in groups:
+        shipped = ROOT / "recon" / "weights"
+        # mambaspike (msb: 3 parsings) and mambaspike1 both start from the shipped one-branch file
+        source = {("mambaspike1", "ml-msb"): ("mambaspike", "ml-msb")}
+        out += [(f"continue-{m}-{c}", ["--config", c, "--method", m, "--lr", str(continue_lr),
+                                       "--init", str(shipped / weights_file(*source.get((m, c), (m, c))))])
+                for m, c in FAIR if m != "net"]
+    if "ablation" in groups:
+        out += [(f"ablation-{case}", ["--config", "te", "--ablation", str(case), "--lr", str(lr)])
+                for case in range(1, 7)]
+    return out
+
+
+def last_step(run: Path) -> int:
+    log = run / "log.csv"
+    if not log.is_file():
+        return 0
+    with open(log, "rb") as handle:
+        handle.seek(max(0, log.stat().st_size - 200))
+        tail = handle.read().decode(errors="replace").strip().splitlines()
+    try:
+        return int(tail[-1].split(",")[0])
+    except (IndexError, ValueError):
+        return 0
+
+
+def summary_row(name: str, out: Path, command: str, rc: int) -> dict:
+    row = {"run": name, "command": command, "exit": rc}
+    weights = out / f"{name}.pt"
+    if rc == 0 and weights.is_file():
+        sys.path.insert(0, str(ROOT))
+        from tespike.recon.learning.weights import read_weights
+        meta = read_weights(weights, "weights")["meta"]
+        row.update(steps=meta["steps"], wall_seconds=meta["wall_seconds"], parameters=meta["parameters"],
+                   validation=meta.get("validation"))
+    row["steps_run"] = last_step(out / f"{name}.run")
+    return row
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--out", required=True, help="folder of the runs (must not exist)")
+    parser.add_argument("--minutes", type=float, required=True, help="wall budget of every run")
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--groups", nargs="+", default=["fair"], choices=["fair", "continue", "continue-baselines", "ablation"])
+    parser.add_argument("--lr", type=float, default=5e-4, help="learning rate of runs from scratch")
+    parser.add_argument("--continue-lr", type=float, default=2e-4, help="learning rate of the continued runs")
+    parser.add_argument("--validate-every", type=int, default=250)
+    parser.add_argument("--steps", type=int, default=None, help="step budget too (the first reached ends a run)")
+    parser.add_argument("--pool", type=int, default=None, help="clips a step draws from (default: the recipe's)")
+    parser.add_argument("--only", nargs="*", default=None, help="run only these run names")
+    parser.add_argument("--report", type=float, default=30.0, help="seconds between progress lines")
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    if out.exists():
+        print(f"fair_training: --out {str(out)!r} exists (a runs folder is one run's)", file=sys.stderr)
+        return 2
+    out.mkdir(parents=True)
+    todo = [(n, a) for n, a in jobs(args.groups, args.lr, args.continue_lr) if args.only is None or n in args.only]
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    procs = {}
+    for name, extra in todo:
+        cmd = [sys.executable, "-m", "tespike", "train", *extra, *RECIPE, "--minutes", str(args.minutes),
+               "--device", args.device, "--validate-every", str(args.validate_every), "--progress", "off",
+               "--out", str(out / f"{name}.pt")]
+        if args.pool is not None:
+            cmd += ["--pool", str(args.pool)]
+        if args.steps is not None:
+            cmd += ["--steps", str(args.steps)]
+        log = open(out / f"{name}.log", "w")
+        procs[name] = (subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT), cmd, log)
+    print(f"{len(procs)} runs started, {args.minutes} min each, device {args.device}", flush=True)
+    start = time.monotonic()
+    while any(p.poll() is None for p, _, _ in procs.values()):
+        time.sleep(min(args.report, 5.0))
+        if int(time.monotonic() - start) % int(args.report) < 5:
+            steps = " ".join(f"{n}:{last_step(out / f'{n}.run')}" for n in procs)
+            print(f"[{time.monotonic() - start:5.0f} s] {steps}", flush=True)
+    rows = []
+    for name, (proc, cmd, log) in procs.items():
+        log.close()
+        shown = "tespike " + " ".join(shlex.quote(a) for a in cmd[3:])
+        rows.append(summary_row(name, out, shown, proc.returncode))
+    (out / "summary.json").write_text(json.dumps(rows, indent=1))
+    with open(out / "summary.md", "w") as handle:
+        handle.write("| run | exit | steps | wall s | parameters | best validation PSNR-mu (mean) |\n")
+        handle.write("| --- | ---: | ---: | ---: | ---: | ---: |\n")
+        for r in rows:
+            mean = (r.get("validation") or {}).get("mean")
+            handle.write(f"| {r['run']} | {r['exit']} | {r['steps_run']} | {r.get('wall_seconds', '-')} | "
+                         f"{r.get('parameters', '-')} | {'-' if mean is None else f'{mean:.2f}'} |\n")
+    print((out / "summary.md").read_text(), flush=True)
+    for r in rows:
+        if r["exit"] != 0:
+            tail = (out / f"{r['run']}.log").read_text().strip().splitlines()[-3:]
+            print(f"{r['run']} failed (exit {r['exit']}): " + " | ".join(tail), flush=True)
+    return 0 if all(r["exit"] == 0 for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
