@@ -70,3 +70,19 @@ def test_block_cells_count_every_synthesised_flip_flop(lanes):
     bits = probe.register_bits()
     for block in ("pixel", "timing", "control", "readout"):   # synthesis keeps every modelled bit here
         assert cells[block]["flops"] == bits[block], block
+
+
+@pytest.mark.skipif(not (shutil.which("yosys") and shutil.which("iverilog")), reason="Yosys and Icarus are needed")
+def test_gate_level_check_runs_the_synthesised_netlist():
+    """The netlist gives the golden beats (logic_check refuses otherwise); its gates toggle
+    more in light than in the dark, and the estimate is of the same order."""
+    from tespike.cosim.gate_activity import logic_check
+
+    L = TE.clocks_per_readout
+    dark = np.zeros((3 * L, 2, 3), np.int64)
+    bright = np.minimum(np.random.default_rng(2).poisson(3.0, (3 * L, 2, 3)), TE.input_max)
+    low, high = logic_check(TE, dark, 2), logic_check(TE, bright, 2)
+    assert set(high) == {"pixel", "readout", "timing", "control"}
+    assert high["pixel"]["measured"] > low["pixel"]["measured"] and high["pixel"]["gates"] > 0
+    assert low["timing"]["measured"] == high["timing"]["measured"] > 0       # the timing ignores the light
+    assert 0.2 < high["pixel"]["ratio"] < 5
