@@ -142,7 +142,7 @@ def model_name(config: SensorConfig, block: str, names: tuple[str, ...]) -> str:
     raise InputError(f"register {'/'.join(names)} of block {block}: not one the model counts ({', '.join(known)})")
 
 
-def _settled(tv) -> list[int | None]:
+def settled_values(tv) -> list[int | None]:
     """One value per time stamp (the last written), as integers (None for x or z bits)."""
     final = {}
     for time, value in tv:
@@ -150,7 +150,9 @@ def _settled(tv) -> list[int | None]:
     return [int(v, 2) if set(v) <= {"0", "1"} else None for _, v in sorted(final.items())]
 
 
-def _toggles(values: list[int | None], mask: int) -> int:
+def bit_changes(values: list[int | None], mask: int) -> int:
+    """Bit changes within ``mask`` between consecutive known values (the first value is the
+    initial state, not a change; an unknown value breaks the chain)."""
     total, previous = 0, None
     for value in values:
         if previous is not None and value is not None:
@@ -185,9 +187,9 @@ def vcd_activity(vcd_path, config: SensorConfig, verilog_text: str, top: str, st
         block = block_of(config, reg.module, reg.name, streaming)
         key = (block, model_name(config, block, reg.names))
         mask = sum(1 << i for i in reg.bits)
-        counts[key] = counts.get(key, 0) + _toggles(_settled(vcd[ref].tv), mask)
+        counts[key] = counts.get(key, 0) + bit_changes(settled_values(vcd[ref].tv), mask)
     for port, ref in outputs.items():
-        counts[("output", port)] = _toggles(_settled(vcd[ref].tv), (1 << ports[port]) - 1)
+        counts[("output", port)] = bit_changes(settled_values(vcd[ref].tv), (1 << ports[port]) - 1)
     return counts
 
 
@@ -212,8 +214,11 @@ def edges_after_reset(vcd_path, scope: str) -> int:
     """Rising edges of ``clk`` with ``rst`` low in the VCD of a run (the model's ``edges``)."""
     from vcdvcd import VCDVCD
 
-    from .vcd import _sampler, rising_edges
+    from .vcd import rising_edges
 
     vcd = VCDVCD(str(vcd_path), signals=[f"{scope}.clk", f"{scope}.rst"], store_tvs=True)
     edges = rising_edges(vcd[f"{scope}.clk"])
-    return int(np.sum(np.asarray(_sampler(vcd[f"{scope}.rst"], edges)) == "0"))
+    changes = vcd[f"{scope}.rst"].tv
+    times = np.array([t for t, _ in changes], np.int64)
+    before = np.searchsorted(times, edges, side="left") - 1   # rst as the edge samples it
+    return int(sum(1 for i in before if i >= 0 and changes[i][1] == "0"))

@@ -24,7 +24,7 @@ from tespike.golden.activity import BLOCKS
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
-from .activity import _settled, _toggles
+from .activity import bit_changes, settled_values
 from .synthesis import SynthesisError, yosys_missing
 
 
@@ -107,9 +107,9 @@ def vcd_gate_toggles(vcd_path, design: dict, top: str, config: SensorConfig, str
     toggles = {block: 0 for block in BLOCKS}
     gates = {block: 0 for block in BLOCKS}
     for ref, bits in refs.items():
-        values = _settled(vcd[ref].tv)
+        values = settled_values(vcd[ref].tv)
         for block, index in bits:
-            toggles[block] += _toggles(values, 1 << index)
+            toggles[block] += bit_changes(values, 1 << index)
             gates[block] += 1
     return toggles, gates
 
