@@ -97,7 +97,7 @@ def timing_states(config: SensorConfig, edges: int) -> dict[str, np.ndarray]:
     return {"divider": divider, "cycle": cycle, "primed": primed, "last": last, "frame_valid": last & primed}
 
 
-def _rule(config: SensorConfig, state: dict, charge, ccc: int, last: int, clear: int):
+def _rule(config: SensorConfig, state: dict, charge, ccc: int, last: int):
     """One clock of every pixel (SPEC section 3; the rule of rtl/verilog_stream.py): the next
     state and the word this clock would read out (section 4)."""
     c = config
@@ -120,8 +120,6 @@ def _rule(config: SensorConfig, state: dict, charge, ccc: int, last: int, clear:
         else:
             word, after = count, 0 * count
         nxt = {"acc": acc, "count": after if last else count}
-    if clear:
-        nxt = {key: 0 * value for key, value in nxt.items()}
     return nxt, word
 
 
@@ -176,8 +174,7 @@ def top_activity(config: SensorConfig, electrons: np.ndarray, lanes: int | None 
     n = lanes if streaming else 0
     for u in range(U):
         last, fv = int(timing["last"][u]), int(timing["frame_valid"][u])
-        clear = int(reset and u == 0)
-        nxt, word = _rule(c, state, charge[u], int(timing["cycle"][u]), last, clear)
+        nxt, word = _rule(c, state, charge[u], int(timing["cycle"][u]), last)
         if frame is not None:
             frame[u] = word
         if u >= start:
@@ -202,7 +199,7 @@ def top_activity(config: SensorConfig, electrons: np.ndarray, lanes: int | None 
             control[u + 1] = (sending, beat)
             lanes_out[u + 1, :min(n, P)] = held[:n]
     if frame is not None:                             # the word shown after the last edge
-        frame[U] = _rule(c, state, charge[U], int(timing["cycle"][U]), int(timing["last"][U]), 0)[1]
+        frame[U] = _rule(c, state, charge[U], int(timing["cycle"][U]), int(timing["last"][U]))[1]
 
     bits = {("pixel", "charge_sample"): c.input_bits}
     for name in names:
