@@ -18,6 +18,7 @@ arrays; use :mod:`tespike.cosim.verilator` for scale.
 
 from __future__ import annotations
 
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -34,6 +35,9 @@ TESTBENCH_TOP = "tespike_tb"
 _STIMULUS = "stimulus.hex"
 _CAPTURES = "captures.txt"
 _RESETS = "resets.txt"
+#: The VCD a run with ``vcd_path`` dumps (all signals under the top, scope ``tespike_tb.dut``).
+DUMP = "waves.vcd"
+DUT_SCOPE = f"{TESTBENCH_TOP}.dut"
 
 #: Half a pixel clock in ns (the testbench samples 1 ns after the inputs change).
 _HALF_PERIOD = 5
@@ -60,9 +64,11 @@ _OUTPUTS = {
 }
 
 
-def _testbench(top: str, charge_bits: int, output_bits: int, outputs: str, what: str) -> str:
-    """The one Verilog-2005 testbench; ``outputs`` picks the top's output ports (:data:`_OUTPUTS`)."""
+def _testbench(top: str, charge_bits: int, output_bits: int, outputs: str, what: str, dump: bool = False) -> str:
+    """The one Verilog-2005 testbench; ``outputs`` picks the top's output ports (:data:`_OUTPUTS`);
+    ``dump``: every signal of the top and below goes to :data:`DUMP` (a VCD)."""
     declare, connect, capture = _OUTPUTS[outputs]
+    dumping = f'    $dumpfile("{DUMP}");\n    $dumpvars(0, dut);\n' if dump else ""
     return f"""// tespike Icarus testbench for {top}: SPEC section 6 {what} only (generated).
 `timescale 1ns / 1ns
 module {TESTBENCH_TOP};
@@ -83,7 +89,7 @@ module {TESTBENCH_TOP};
     $readmemh("{_STIMULUS}", stimulus);
     $readmemb("{_RESETS}", resets);
     out = $fopen("{_CAPTURES}", "w");
-    clk = 1'b0;
+{dumping}    clk = 1'b0;
     rst = 1'b1;
     charge = {charge_bits}'d0;
     for (i = 0; i < {RESET_CLOCKS}; i = i + 1) begin
@@ -141,15 +147,16 @@ def _parse_captures(path: Path, what: str, word_port: str = "frame") -> tuple[np
     return np.asarray(clocks, np.int64), frames
 
 
-def _simulate(run: Run, verilog: str, what: str, work_dir) -> tuple[np.ndarray, list[str]]:
+def _simulate(run: Run, verilog: str, what: str, work_dir, vcd_path=None) -> tuple[np.ndarray, list[str]]:
     """Compile ``verilog`` with the top's testbench, run it on the stimulus (and ``rst`` = the
-    reset vector, :mod:`tespike.cosim.resets`); return the parsed captures."""
+    reset vector, :mod:`tespike.cosim.resets`); return the parsed captures. ``vcd_path``: the
+    run's VCD of every signal is moved there."""
     top, stimulus = run.top, run.stimulus
     T = stimulus.shape[0]
     iverilog = require_tool("iverilog", "iverilog")
     vvp = require_tool("vvp", "iverilog")
     testbench = _testbench(top.module, top.charge_bits, top.output_bits, top.outputs,
-                           "streaming ports" if top.streaming else "ports")
+                           "streaming ports" if top.streaming else "ports", vcd_path is not None)
     with tempfile.TemporaryDirectory(prefix="tespike-icarus-") as scratch:
         work = Path(work_dir) if work_dir is not None else Path(scratch)
         if not work.is_dir():
@@ -174,23 +181,26 @@ def _simulate(run: Run, verilog: str, what: str, work_dir) -> tuple[np.ndarray, 
         if ran.returncode != 0:
             raise SimulatorRunError(f"{what}: vvp failed (exit {ran.returncode}): "
                                     f"{first_error_line(ran.stderr + ran.stdout)}")
-        return _parse_captures(work / _CAPTURES, what, top.word_port)
+        captures = _parse_captures(work / _CAPTURES, what, top.word_port)
+        if vcd_path is not None:
+            shutil.move(work / DUMP, vcd_path)
+        return captures
 
 
-def _run(run: Run, verilog: str | None, work_dir):
+def _run(run: Run, verilog: str | None, work_dir, vcd_path=None):
     """Simulate ``run`` in Icarus (either top); its words, beats, or each segment's."""
     top = run.top
     if run.idle:
         return top.empty()
     what = top.describe("Icarus")
-    clocks, lines = _simulate(run, top.verilog() if verilog is None else verilog, what, work_dir)
+    clocks, lines = _simulate(run, top.verilog() if verilog is None else verilog, what, work_dir, vcd_path)
     firsts = [line[0] == "1" for line in lines] if top.streaming else []
     rows = hex_to_rows([line[1:] for line in lines] if top.streaming else lines, top.output_bits)
     return top.result(run, clocks, firsts, rows, what)
 
 
 def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Path | None = None,
-               verilog: str | None = None, resets=None):
+               verilog: str | None = None, resets=None, vcd_path: str | Path | None = None):
     """Simulate the generated Verilog of a (T, H, W) stimulus in Icarus; return words (K, H, W).
 
     ``work_dir`` keeps the Verilog, testbench, stimulus and captures there (an
@@ -199,9 +209,10 @@ def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Pa
     a hand-written model of the same ports). ``resets`` (T booleans): ``rst`` of
     every stimulus clock; the run is then checked segment by segment
     (:func:`tespike.cosim.resets.frame_segments`) and the result is a list of each
-    segment's words ``(n, H, W)``.
+    segment's words ``(n, H, W)``. ``vcd_path``: write a VCD of every signal of the top there
+    (scope :data:`DUT_SCOPE`; :mod:`tespike.cosim.activity` counts its toggles).
     """
-    return _run(prepare(config, stimulus, None, resets), verilog, work_dir)
+    return _run(prepare(config, stimulus, None, resets), verilog, work_dir, vcd_path)
 
 
 def icarus_stream_testbench(top: str, charge_bits: int, lane_bits: int) -> str:
@@ -211,13 +222,14 @@ def icarus_stream_testbench(top: str, charge_bits: int, lane_bits: int) -> str:
 
 
 def run_icarus_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,
-                      work_dir: str | Path | None = None, verilog: str | None = None, resets=None):
+                      work_dir: str | Path | None = None, verilog: str | None = None, resets=None,
+                      vcd_path: str | Path | None = None):
     """Simulate the streaming top (``--lanes N``) on a (T, H, W) stimulus; return beats (K, B, N).
 
     Equal to ``tespike.golden.beats.beats(golden words, N)`` for a correct array; the beat
     timing is held to SPEC section 6 (:func:`tespike.cosim.stream_ports.check_beats`).
     ``verilog`` replaces ``tespike.rtl.verilog_stream.stream_array_verilog(config, H, W, N)``.
     ``resets``: as :func:`run_icarus`; the result is then each segment's beats ``(n, N)``
-    (:func:`tespike.cosim.resets.beat_segments`).
+    (:func:`tespike.cosim.resets.beat_segments`). ``vcd_path``: as :func:`run_icarus`.
     """
-    return _run(prepare(config, stimulus, lanes, resets), verilog, work_dir)
+    return _run(prepare(config, stimulus, lanes, resets), verilog, work_dir, vcd_path)

@@ -84,3 +84,44 @@ def test_synthesize_refuses_bad_input_in_one_line(tmp_path, args, words):
 def test_synthesize_refuses_verilog_yosys_cannot_read(tmp_path):
     (tmp_path / "bad.v").write_text("module x(input a, output b); assign b = a &; endmodule\n")
     assert_refused(run_tespike("synthesize", "--verilog", tmp_path / "bad.v"), "yosys failed", "syntax error")
+
+
+def _stimulus_file(tmp_path, shape, clocks=240, name="E.npy"):
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    path = tmp_path / name
+    np.save(path, rng.poisson(50, (clocks, *shape)).astype(np.int64))
+    return path
+
+
+@needs_yosys
+@pytest.mark.skipif(not shutil.which("iverilog"), reason="Icarus Verilog is not installed")
+def test_synthesize_prices_the_toggles_of_a_run_checked_in_icarus(tmp_path):
+    path = _stimulus_file(tmp_path, (2, 3))
+    result = run_tespike("synthesize", "--config", "te", "--height", 2, "--width", 3, "--lanes", 2,
+                         "--stimulus", path, "--icarus")
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
+    assert "toggles equal to the Icarus VCD's in every block" in out, out
+    for block in ("pixel", "readout", "timing", "control", "output"):
+        row = re.search(rf"^{block}\s+(\d+)\s+(\d+)\s", out, re.M)
+        assert row and row.group(1) == row.group(2), (block, out)
+    assert re.search(r"^pixel\s+\d+\s+\d+\s+204\s+204\s", out, re.M), out      # 6 x 34 bits, all kept
+    assert re.search(r"pJ per readout, [\d.]+ pJ per pixel-readout", out), out
+
+
+@pytest.mark.parametrize("args, words", [
+    (("--config", "te", "--height", 2, "--width", 3, "--icarus"), ("--icarus", "--stimulus")),
+    (("--verilog", "A.v", "--stimulus", "E.npy"), ("--stimulus", "not --verilog")),
+    (("--config", "te", "--height", 3, "--width", 3, "--stimulus", "E.npy"), ("2 x 3", "--height 3")),
+    (("--config", "te", "--height", 33, "--width", 32, "--lanes", 8, "--stimulus", "big.npy", "--icarus"),
+     ("--icarus", "1056 pixels")),
+    (("--config", "te", "--height", 2, "--width", 3, "--stimulus", "short.npy"), ("T = 100", "multiple of L")),
+])
+def test_synthesize_refuses_a_bad_stimulus_in_one_line(tmp_path, args, words):
+    _stimulus_file(tmp_path, (2, 3))
+    _stimulus_file(tmp_path, (33, 32), name="big.npy")
+    _stimulus_file(tmp_path, (2, 3), clocks=100, name="short.npy")      # not a whole readout (L = 240)
+    args = tuple(tmp_path / a if str(a).endswith(".npy") else a for a in args)
+    assert_refused(run_tespike("synthesize", *args), *words)

@@ -1,0 +1,146 @@
+"""Energy of a readout from toggles and synthesised cells: a named first-order CV^2 model.
+
+Model :data:`SKY130_HD` ("CV^2, sky130_fd_sc_hd, 1.8 V"): dynamic energy only, every
+number below written where it is used and in docs/energy.md.
+
+* A node of capacitance C that makes one transition (0 -> 1 or 1 -> 0) costs on average
+  C V^2 / 2 from the supply (charging draws C V^2, half of it is stored and released on
+  the discharge): the textbook switching energy, P = alpha C V^2 f (Weste and Harris,
+  *CMOS VLSI Design*, 4th ed., section 5.1; Rabaey, *Digital Integrated Circuits*, ch. 5).
+* Supply V = 1.8 V: the nominal VDD of SkyWater's open 130 nm PDK, high-density library
+  ``sky130_fd_sc_hd`` (skywater-pdk.readthedocs.io, "SkyWater Foundry Provided Standard
+  Cell Libraries").
+* Unit capacitance C_in = 2.3 fF: one input pin of the library's smallest NAND,
+  ``sky130_fd_sc_hd__nand2_1`` (liberty: pin A 0.00225 pF at ff_n40C_1v76, 0.00220 pF at
+  ff_n40C_1v65; tt about the same), the load one gate input puts on a node.
+* Every other capacitance is a stated multiple of C_in (assumptions, not library data):
+  a logic node (a gate's output) is ``node_inputs`` = 3 C_in (a fan-out of two inputs plus
+  the driver's own diffusion and a short local wire, about one input's worth);
+  a flip-flop whose stored bit changes also switches ``flop_internal_inputs`` = 4 C_in of
+  master and slave latch nodes; every flip-flop's clock pin, its internal clock phases and
+  its share of the clock tree are ``clock_inputs`` = 4 C_in, charged and discharged on
+  every clock whatever the data (no clock gating), C V^2 per flip-flop per clock.
+* Combinational gates: no gate-level simulation here. A block's gates are taken to toggle,
+  per gate per clock, as often as its flip-flops do per bit per clock (the block's
+  register activity: toggles / register bits / clocks), so a block's gate toggles are
+  gates x register toggles / register bits. Glitches are not counted.
+* Output ports: one logic node per bit toggle; pads, bond wires and the long wires to
+  them are left out (their toggles are reported), as are the analog front end, leakage
+  (static power: excluded) and wires beyond the local-node share above.
+
+Integer counts in, float64 joules out.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from tespike.golden.activity import BLOCKS, Activity
+
+
+@dataclasses.dataclass(frozen=True)
+class EnergyModel:
+    """Per-event energies of a CV^2 model: supply ``vdd`` (V), unit capacitance ``c_input`` (F)
+    and the capacitances of a logic node, a flip-flop's internal nodes and its clock load in
+    units of ``c_input`` (module docstring)."""
+
+    name: str
+    vdd: float
+    c_input: float
+    node_inputs: float
+    flop_internal_inputs: float
+    clock_inputs: float
+
+    @property
+    def gate_toggle(self) -> float:
+        """J per toggle of one logic node (a gate output, an output port bit): C_node V^2 / 2."""
+        return 0.5 * self.node_inputs * self.c_input * self.vdd ** 2
+
+    @property
+    def flop_toggle(self) -> float:
+        """J per toggle of a flip-flop's stored bit: its output node and its internal latch nodes."""
+        return 0.5 * (self.node_inputs + self.flop_internal_inputs) * self.c_input * self.vdd ** 2
+
+    @property
+    def clock_per_flop(self) -> float:
+        """J per flip-flop per clock: its clock load charged and discharged, C_clk V^2."""
+        return self.clock_inputs * self.c_input * self.vdd ** 2
+
+
+#: The model of the docs: sky130_fd_sc_hd at 1.8 V, 2.3 fF unit input (module docstring).
+SKY130_HD = EnergyModel(name="CV^2, sky130_fd_sc_hd, 1.8 V", vdd=1.8, c_input=2.3e-15,
+                        node_inputs=3.0, flop_internal_inputs=4.0, clock_inputs=4.0)
+
+#: The parts of a block's energy.
+PARTS = ("data", "logic", "clock")
+
+
+def block_energy(toggles, register_bits: int, flops: int, gates: int, clocks: int,
+                 model: EnergyModel = SKY130_HD) -> dict[str, np.ndarray]:
+    """Energy (J, float64) of one block over ``clocks`` clocks: ``data`` (its register bit
+    toggles), ``logic`` (its gates, toggling at the register activity: gates x toggles /
+    register bits), ``clock`` (its synthesised flip-flops, every clock). ``toggles`` may be an
+    array (one entry per instance or per case; counts, or their means); the other counts are
+    per instance."""
+    toggles = np.asarray(toggles, np.float64)
+    data = toggles * model.flop_toggle
+    logic = gates * toggles / register_bits * model.gate_toggle if register_bits else 0.0 * toggles
+    clock = np.full_like(toggles, float(flops) * clocks * model.clock_per_flop)
+    return {"data": data, "logic": logic, "clock": clock}
+
+
+def block_cells(modules: dict, top: str, config, streaming: bool, control_bits: int) -> dict[str, dict[str, int]]:
+    """Flip-flops and gates (other cells) per block of a synthesised generated top
+    (:func:`tespike.cosim.synthesis.synthesize_hierarchy`'s ``modules``), every instance counted:
+    the pixel and its rule are ``pixel``, the readout cell ``readout``, the timing module
+    ``timing``, the top and its beat groups ``control``, except the top's own flip-flops past
+    the model's ``control_bits`` (the parallel top's per-pixel input registers): ``pixel``."""
+    from tespike.rtl.verilog import module_names
+    from tespike.rtl.verilog_stream import stream_module_names
+
+    names = stream_module_names(config) if streaming else module_names(config)
+    role = {names["pixel"]: "pixel", names["timing"]: "timing"}
+    if streaming:
+        role.update({names["rule"]: "pixel", names["cell"]: "readout", names["group"]: "control",
+                     names["group_end"]: "control"})
+    out = {block: {"flops": 0, "gates": 0} for block in BLOCKS}
+
+    def walk(name: str, times: int) -> None:
+        stat = modules[name]
+        flops, gates = stat["flops"], stat["cells"] - stat["flops"]
+        if name == top:
+            out["control"]["flops"] += min(flops, control_bits)
+            out["pixel"]["flops"] += max(0, flops - control_bits)
+            out["control"]["gates"] += gates
+        else:
+            block = role.get(name)
+            if block is None:
+                raise ValueError(f"module {name} of {top}: no block claims it")
+            out[block]["flops"] += times * flops
+            out[block]["gates"] += times * gates
+        for sub, count in stat["instances"].items():
+            walk(sub, times * count)
+
+    walk(top, 1)
+    return out
+
+
+def run_energy(activity: Activity, cells: dict[str, dict[str, int]],
+               model: EnergyModel = SKY130_HD) -> dict[str, dict[str, float]]:
+    """Energy (J) of each block over the run's counted edges: ``data``, ``logic``, ``clock`` and
+    ``total``; the output block is its port bit toggles at one logic node each."""
+    totals = activity.per_block()
+    bits = activity.register_bits()
+    out = {}
+    for block in BLOCKS:
+        if block == "output":
+            data = totals[block] * model.gate_toggle
+            out[block] = {"data": data, "logic": 0.0, "clock": 0.0, "total": data}
+            continue
+        parts = block_energy(totals[block], bits[block], cells[block]["flops"], cells[block]["gates"],
+                             activity.edges, model)
+        out[block] = {part: float(parts[part]) for part in PARTS}
+        out[block]["total"] = sum(out[block][part] for part in PARTS)
+    return out

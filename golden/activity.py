@@ -1,0 +1,231 @@
+"""Bit toggles of every register and output bus of the generated Verilog tops, per block.
+
+:mod:`tespike.golden.toggles` counts the pixel's own state; a chip switches more. This
+model follows the top that ``tespike verilog`` writes, edge by edge after its reset
+(the Icarus testbench's: power-up state, ``rst`` high for some clocks with no charge,
+then one stimulus row per rising edge), and counts the bit changes of
+
+* ``pixel``: each site's input register ``charge_sample`` (E bits) and its state
+  (``acc``, TE ``sfc`` / ``ovf`` / ``m``, ML ``count``; the streaming pixel's
+  registers are ``acc_q``, ``sfc_q``, ... and the parallel pixel's ``acc``, ``sfc``, ...);
+* ``readout``: the streaming top's readout cells ``held`` (Wd bits each, one per
+  site: the per-lane shift registers);
+* ``timing``: the S_h ``divider`` (when F > 1), the CCC register ``cycle`` (when
+  alpha > 1) and ``primed``;
+* ``control``: the top's ``rst_sample`` and the streaming beat counter
+  ``sending`` / ``beat``;
+* ``output``: the output ports, settled once per clock (streaming ``out_valid``,
+  ``out_first``, ``out_words`` per lane; parallel ``frame_valid`` and ``frame``,
+  the latter combinational from the pixel registers, per pixel).
+
+The registers' sequences follow SPEC sections 1, 3, 4 and 6 and the structure
+of :mod:`tespike.rtl.verilog_stream` / :mod:`tespike.rtl.verilog` (input register, rule,
+timing phase, shift-register readout, beat counter): the input register and the
+timing are whole-run numpy expressions; the pixel state and the readout cells one
+numpy step per clock over all sites. ``tests/test_golden_activity.py`` holds every
+count equal, block by block and register by register, to an Icarus VCD of the
+generated Verilog, and every flip-flop Yosys finds in that Verilog to a register
+named here. Glitches (several changes inside one clock) are not counted: one
+settled value per clock, as the VCD's last value at each time stamp.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .config import SensorConfig
+from .reference import msb_index
+
+#: The blocks of a generated top, in report order.
+BLOCKS = ("pixel", "readout", "timing", "control", "output")
+
+
+@dataclasses.dataclass
+class Activity:
+    """Toggles of one run of a generated top.
+
+    ``toggles[(block, name)]``: int64 array, one entry per instance of the register or
+    port (per site for pixel registers, readout cells and ``frame``; per lane for
+    ``out_words``; one for the rest). ``bits[(block, name)]``: its width in bits.
+    ``edges``: rising clock edges counted; ``readouts``: S_r strobes (``frame_valid``)
+    among them.
+    """
+
+    toggles: dict[tuple[str, str], np.ndarray]
+    bits: dict[tuple[str, str], int]
+    edges: int
+    readouts: int
+
+    def per_block(self) -> dict[str, int]:
+        """Total toggles of each block (every instance of every register or port)."""
+        out = {block: 0 for block in BLOCKS}
+        for (block, _), counts in self.toggles.items():
+            out[block] += int(counts.sum())
+        return out
+
+    def register_bits(self) -> dict[str, int]:
+        """Flip-flops each block's registers hold (the output ports are wires, 0)."""
+        out = {block: 0 for block in BLOCKS}
+        for (block, name), width in self.bits.items():
+            if block != "output":
+                out[block] += width * self.toggles[(block, name)].size
+        return out
+
+
+def _flips(old, new) -> np.ndarray:
+    return np.bitwise_count(np.asarray(old, np.int64) ^ np.asarray(new, np.int64)).astype(np.int64)
+
+
+def _sequence_toggles(states: np.ndarray, start: int) -> np.ndarray:
+    """Toggles of a register whose value before edge u is ``states[u]`` (u = 0..U, axis 0),
+    counting the edges u >= ``start``."""
+    return _flips(states[start:-1], states[start + 1:]).sum(axis=0)
+
+
+def timing_states(config: SensorConfig, edges: int) -> dict[str, np.ndarray]:
+    """The timing block before each edge u = 0..edges: it shows clock u - 1 (clock -1 after
+    reset: divider F - 1, CCC alpha, ``primed`` low), so ``divider = (u - 1) mod F``,
+    ``cycle = ((u - 1) mod L) div F + 1``; with the ``last`` and ``frame_valid`` it drives."""
+    F, L, alpha = config.clocks_per_tick, config.clocks_per_readout, config.alpha
+    clock = np.arange(edges + 1, dtype=np.int64) - 1
+    divider = clock % F
+    cycle = (clock % L) // F + 1
+    primed = (clock >= 0).astype(np.int64)
+    last = ((divider == F - 1) & (cycle == alpha)).astype(np.int64)
+    return {"divider": divider, "cycle": cycle, "primed": primed, "last": last, "frame_valid": last & primed}
+
+
+def _rule(config: SensorConfig, state: dict, charge, ccc: int, last: int):
+    """One clock of every pixel (SPEC section 3; the rule of rtl/verilog_stream.py): the next
+    state and the word this clock would read out (section 4)."""
+    c = config
+    q = state["acc"] + charge
+    spike = (q >= c.threshold).astype(np.int64)
+    acc = np.minimum(q - c.threshold * spike, c.acc_max)
+    if c.is_te:
+        total = state["sfc"] + (spike & (1 - state["ovf"]))
+        carry = total >> c.b1
+        ovf = state["ovf"] | carry
+        m = np.where(carry == 1, ccc, state["m"])
+        word = np.where(ovf == 1, (1 << c.d) | m, total & (c.p_max - 1))
+        nxt = {"acc": acc, "sfc": 0 * total if last else total & (c.p_max - 1),
+               "ovf": 0 * ovf if last else ovf, "m": m}
+    else:
+        count = np.minimum(state["count"] + spike, c.ml_max)
+        if c.is_msb:
+            word = msb_index(count)
+            after = np.where(word > 0, count - (1 << np.maximum(word - 1, 0)), 0)
+        else:
+            word, after = count, 0 * count
+        nxt = {"acc": acc, "count": after if last else count}
+    return nxt, word
+
+
+def pixel_register_names(config: SensorConfig) -> tuple[str, ...]:
+    """The pixel's state registers (SPEC section 3) in the order of :func:`_rule`'s state."""
+    return ("acc", "sfc", "ovf", "m") if config.is_te else ("acc", "count")
+
+
+def pixel_register_bits(config: SensorConfig) -> dict[str, int]:
+    c = config
+    if c.is_te:
+        return {"acc": c.acc_bits, "sfc": c.b1, "ovf": 1, "m": c.b2}
+    return {"acc": c.acc_bits, "count": c.ml_bits}
+
+
+def top_activity(config: SensorConfig, electrons: np.ndarray, lanes: int | None = None, *,
+                 edges: int | None = None, reset: bool = True, start: int = 0) -> Activity:
+    """Toggles of the generated top of an H x W array fed ``electrons`` (T, H, W) integers.
+
+    ``lanes``: the streaming top with N lanes (``tespike verilog --lanes N``); None: the
+    parallel top. ``edges``: rising edges with ``rst`` low to run (the stimulus, then zero
+    charge; default T + B + 1 streaming, T + 1 parallel: every word out). ``reset``: the run
+    begins with ``rst`` high for one clock or more (``rst_sample`` rises and falls: 2
+    toggles); otherwise straight from power-up. ``start``: count only the edges u >= start
+    (a window in steady state for per-readout figures).
+    """
+    c = config.check()
+    e = np.asarray(electrons, np.int64)
+    T, H, W = e.shape
+    P = H * W
+    streaming = lanes is not None
+    beats = -(-P // lanes) if streaming else 1
+    U = (T + (beats + 1 if streaming else 1)) if edges is None else int(edges)
+    if U < 0 or not 0 <= start <= U:
+        raise ValueError(f"edges = {U}, start = {start}: need 0 <= start <= edges")
+    charge = np.zeros((U + 1, P), np.int64)           # charge_sample before edge u: row u - 1
+    rows = min(T, U)
+    charge[1:rows + 1] = e[:rows].reshape(rows, P)
+    timing = timing_states(c, U)
+    names, widths = pixel_register_names(c), pixel_register_bits(c)
+
+    t = {("pixel", "charge_sample"): _sequence_toggles(charge, start)}
+    state = {name: np.zeros(P, np.int64) for name in names}
+    counts = {name: np.zeros(P, np.int64) for name in names}
+    held = np.zeros(P, np.int64)
+    held_count = np.zeros(P, np.int64)
+    frame = np.zeros((U + 1, P), np.int64) if not streaming else None
+    control = np.zeros((U + 1, 2), np.int64)          # sending, beat before edge u
+    lanes_out = np.zeros((U + 1, lanes if streaming else 1), np.int64)
+    beat_bits = max(1, beats.bit_length())
+    sending = beat = 0
+    n = lanes if streaming else 0
+    for u in range(U):
+        last, fv = int(timing["last"][u]), int(timing["frame_valid"][u])
+        nxt, word = _rule(c, state, charge[u], int(timing["cycle"][u]), last)
+        if frame is not None:
+            frame[u] = word
+        if u >= start:
+            for name in names:
+                counts[name] += _flips(state[name], nxt[name])
+        state = nxt
+        if streaming:
+            if fv:
+                new = word
+            elif sending:
+                new = np.concatenate([held[n:], np.zeros(min(n, P), np.int64)])
+            else:
+                new = held
+            if u >= start and new is not held:
+                held_count += _flips(held, new)
+            held = new
+            if fv:
+                sending, beat = 1, 0
+            elif sending:
+                sending = int(beat != beats - 1)
+                beat = (beat + 1) % (1 << beat_bits)
+            control[u + 1] = (sending, beat)
+            lanes_out[u + 1, :min(n, P)] = held[:n]
+    if frame is not None:                             # the word shown after the last edge
+        frame[U] = _rule(c, state, charge[U], int(timing["cycle"][U]), int(timing["last"][U]))[1]
+
+    bits = {("pixel", "charge_sample"): c.input_bits}
+    for name in names:
+        t[("pixel", name)] = counts[name]
+        bits[("pixel", name)] = widths[name]
+    if c.clocks_per_tick > 1:
+        t[("timing", "divider")] = _sequence_toggles(timing["divider"][:, None], start)
+        bits[("timing", "divider")] = (c.clocks_per_tick - 1).bit_length()
+    if c.alpha > 1:
+        t[("timing", "cycle")] = _sequence_toggles(timing["cycle"][:, None], start)
+        bits[("timing", "cycle")] = c.b2
+    t[("timing", "primed")] = _sequence_toggles(timing["primed"][:, None], start)
+    bits[("timing", "primed")] = 1
+    t[("control", "rst_sample")] = np.array([2 if reset and start == 0 else 0], np.int64)
+    bits[("control", "rst_sample")] = 1
+    if streaming:
+        t[("readout", "held")], bits[("readout", "held")] = held_count, c.word_bits
+        t[("control", "sending")] = _sequence_toggles(control[:, :1], start)
+        t[("control", "beat")] = _sequence_toggles(control[:, 1:], start)
+        bits[("control", "sending")], bits[("control", "beat")] = 1, beat_bits
+        first = control[:, :1] & (control[:, 1:] == 0)
+        ports = {"out_valid": (control[:, :1], 1), "out_first": (first, 1), "out_words": (lanes_out, c.word_bits)}
+    else:
+        valid = timing["frame_valid"][:, None]
+        ports = {"frame_valid": (valid, 1), "frame": (frame, c.word_bits)}
+    for name, (values, width) in ports.items():
+        t[("output", name)], bits[("output", name)] = _sequence_toggles(values, start), width
+    readouts = int(timing["frame_valid"][start:U].sum())
+    return Activity(t, bits, U - start, readouts)

@@ -1,0 +1,115 @@
+"""tespike.golden.activity: every register and output port of both generated tops, per block,
+equals a count of an Icarus VCD of the very Verilog ``tespike verilog`` writes."""
+
+import shutil
+
+import numpy as np
+import pytest
+
+from tespike.cosim.activity import flip_flops, model_counts, register_bits, vcd_activity, edges_after_reset
+from tespike.cosim.icarus import DUT_SCOPE, run_icarus, run_icarus_stream
+from tespike.cosim.tops import Top
+from tespike.golden.activity import BLOCKS, top_activity
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
+
+needs_tools = pytest.mark.skipif(not (shutil.which("iverilog") and shutil.which("yosys")),
+                                 reason="Icarus Verilog and Yosys are needed")
+
+TE = SensorConfig(mode="te", b1=2, b2=2, threshold=5, acc_bits=4, input_bits=3)
+ML = SensorConfig(mode="ml", b1=2, b2=2, ml_bits=3, threshold=4, acc_bits=4, input_bits=3)
+MSB = SensorConfig(mode="ml", b1=2, b2=2, ml_bits=3, ml_readout="msb", threshold=3, acc_bits=3, input_bits=3)
+TE_NO_CCC = SensorConfig(mode="te", b1=2, b2=1, clocks_per_tick=3, threshold=2, acc_bits=3, input_bits=2)
+ML_NO_DIVIDER = SensorConfig(mode="ml", b1=1, b2=2, clocks_per_tick=1, ml_bits=2, threshold=2,
+                             acc_bits=3, input_bits=2)
+
+#: (config, (H, W), lanes or None for the parallel top)
+CASES = [(TE, (2, 3), None), (TE, (2, 3), 1), (TE, (2, 3), 2), (TE, (2, 3), 8), (TE, (3, 4), 5),
+         (ML, (3, 4), None), (ML, (3, 4), 3), (ML, (2, 3), 4),
+         (MSB, (3, 4), None), (MSB, (3, 4), 2), (MSB, (2, 3), 6),
+         (TE_NO_CCC, (2, 3), None), (TE_NO_CCC, (2, 3), 3),
+         (ML_NO_DIVIDER, (2, 3), None), (ML_NO_DIVIDER, (2, 3), 2)]
+
+
+def _stimulus(config, shape, readouts, seed):
+    """Dark to saturating pixels: counters that stay low, overflow, saturate."""
+    rng = np.random.default_rng(seed)
+    n = shape[0] * shape[1]
+    rate = np.linspace(0, config.input_max, n)
+    e = rng.poisson(rate, (readouts * config.clocks_per_readout, n))
+    return np.minimum(e, config.input_max).reshape(-1, *shape)
+
+
+def _case_id(case):
+    config, (h, w), lanes = case
+    return f"{config}-{h}x{w}-{'parallel' if lanes is None else f'{lanes}lanes'}"
+
+
+@needs_tools
+@pytest.mark.parametrize("case", CASES, ids=_case_id)
+def test_every_block_equals_a_vcd_count_of_the_generated_verilog(case, tmp_path):
+    config, shape, lanes = case
+    e = _stimulus(config, shape, 4, sum(shape) + (lanes or 0))
+    top = Top(config, *shape, lanes)
+    text = top.verilog()
+    vcd = tmp_path / "run.vcd"
+    if lanes is None:
+        run_icarus(config, e, verilog=text, vcd_path=vcd)
+    else:
+        run_icarus_stream(config, e, lanes, verilog=text, vcd_path=vcd)
+    edges = edges_after_reset(vcd, DUT_SCOPE)
+    activity = top_activity(config, e, lanes, edges=edges)
+    found = vcd_activity(vcd, config, text, top.module, lanes is not None, DUT_SCOPE)
+    assert model_counts(activity) == found
+    blocks = {block: sum(n for (b, _), n in found.items() if b == block) for block in BLOCKS}
+    assert activity.per_block() == blocks
+    assert blocks["pixel"] > 0 and blocks["timing"] > 0 and blocks["output"] > 0
+    assert (blocks["readout"] > 0) == (lanes is not None)
+    # every flip-flop of the text is a register of the model, with the model's width
+    widths = {key: bits * activity.toggles[key].size for key, bits in activity.bits.items() if key[0] != "output"}
+    assert register_bits(text, top.module, config, lanes is not None) == widths
+    assert activity.register_bits() == {b: sum(n for (k, _), n in widths.items() if k == b) for b in BLOCKS}
+
+
+@needs_tools
+def test_a_register_the_model_does_not_know_is_refused(tmp_path):
+    top = Top(TE, 2, 3, 2)
+    text = top.verilog().replace("  always @(posedge clk) rst_sample <= rst;",
+                                 "  always @(posedge clk) rst_sample <= rst;\n"
+                                 "  reg spare = 1'b0;\n  always @(posedge clk) spare <= ~spare;", 1)
+    names = {reg.name for reg in flip_flops(text, top.module)[0]}
+    assert "spare" in names
+    e = _stimulus(TE, (2, 3), 1, 0)
+    vcd = tmp_path / "run.vcd"
+    run_icarus_stream(TE, e, 2, verilog=text, vcd_path=vcd)
+    with pytest.raises(InputError, match="spare"):
+        vcd_activity(vcd, TE, text, top.module, True, DUT_SCOPE)
+
+
+@pytest.mark.parametrize("lanes", [None, 2])
+@pytest.mark.parametrize("config", [TE, MSB], ids=str)
+def test_a_window_counts_exactly_its_edges(config, lanes):
+    e = _stimulus(config, (2, 3), 5, 3)
+    whole = top_activity(config, e, lanes)
+    split = config.clocks_per_readout + 3
+    head = top_activity(config, e, lanes, edges=split)
+    tail = top_activity(config, e, lanes, start=split)
+    for key, counts in whole.toggles.items():
+        assert np.array_equal(counts, head.toggles[key] + tail.toggles[key]), key
+    assert tail.edges == whole.edges - split and head.readouts + tail.readouts == whole.readouts == 5
+
+
+def test_no_light_toggles_only_the_clocks_structure():
+    """Dark, the pixels and the words never change: only timing, beat counter and reset sample do."""
+    config = TE
+    e = np.zeros((3 * config.clocks_per_readout, 2, 3), np.int64)
+    activity = top_activity(config, e, 2)
+    blocks = activity.per_block()
+    assert blocks["pixel"] == blocks["readout"] == 0
+    assert activity.toggles[("output", "out_words")].sum() == 0
+    F, L = config.clocks_per_tick, config.clocks_per_readout
+    edges = activity.edges
+    # the S_h divider counts 3, 0, 1, 2, 3, 0, ... (F = 4, 2 bits): 2 + 1 + 2 + 1 toggles per 4 edges
+    assert F == 4 and edges % 4 == 0
+    assert activity.toggles[("timing", "divider")][0] == 6 * edges // 4
+    assert activity.toggles[("control", "rst_sample")][0] == 2 and activity.readouts == e.shape[0] // L
