@@ -27,6 +27,7 @@ seconds and best validation PSNR-mu. Progress (each run's step) is printed every
 ``--report`` seconds.
 
     python3 benchmarks/fair_training.py --out runs --minutes 7 --device cuda --groups fair continue
+    python3 benchmarks/fair_training.py --plot runs --png curves.png     # validation against run time
 """
 
 from __future__ import annotations
@@ -103,10 +104,51 @@ def summary_row(name: str, out: Path, command: str, rc: int) -> dict:
     return row
 
 
+def validation_curve(run: Path) -> tuple[list[float], list[float]]:
+    """(wall seconds, mean validation PSNR-mu) of each validation of a run folder."""
+    with open(run / "validation.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    return [float(r["seconds"]) for r in rows], [float(r["mean"]) for r in rows]
+
+
+def plot(folder: Path, png: str) -> None:
+    """Validation PSNR-mu against each run's wall time, one panel per camera and one for the ablation."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sys.path.insert(0, str(ROOT))
+    from tespike.recon.pictures import save_figure
+    panels = {"TE": lambda n: n.endswith("-te") and not n.startswith("ablation"),
+              "ML msb": lambda n: n.endswith("-ml-msb"), "ML count": lambda n: n.endswith("-ml"),
+              "Table 3 ablation (TE)": lambda n: n.startswith("ablation")}
+    runs = sorted(p for p in folder.glob("*.run") if (p / "validation.csv").is_file())
+    if not runs:
+        raise SystemExit(f"fair_training: no run folder with a validation.csv in {str(folder)!r}")
+    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4.2), sharey=False)
+    for ax, (title, wanted) in zip(axes, panels.items()):
+        for run in runs:
+            name = run.name[:-len(".run")]
+            if wanted(name):
+                seconds, mean = validation_curve(run)
+                ax.plot(seconds, mean, "--" if name.startswith("continue") else "-", marker="o", ms=3,
+                        label=name)
+        ax.set_title(title)
+        ax.set_xlabel("wall seconds of the run")
+        ax.set_ylabel("validation PSNR-mu (dB, mean of 6 held-out cases)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    save_figure(fig, png)
+    print(f"wrote {png}")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--out", required=True, help="folder of the runs (must not exist)")
-    parser.add_argument("--minutes", type=float, required=True, help="wall budget of every run")
+    parser.add_argument("--plot", metavar="DIR", help="plot the validation curves of a runs folder (no training)")
+    parser.add_argument("--png", default="fair_training.png", help="the plot --plot writes")
+    parser.add_argument("--out", help="folder of the runs (must not exist)")
+    parser.add_argument("--minutes", type=float, help="wall budget of every run")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--groups", nargs="+", default=["fair"], choices=["fair", "continue", "continue-baselines", "ablation"])
     parser.add_argument("--lr", type=float, default=5e-4, help="learning rate of runs from scratch")
@@ -117,6 +159,11 @@ def main(argv=None) -> int:
     parser.add_argument("--only", nargs="*", default=None, help="run only these run names")
     parser.add_argument("--report", type=float, default=30.0, help="seconds between progress lines")
     args = parser.parse_args(argv)
+    if args.plot is not None:
+        plot(Path(args.plot), args.png)
+        return 0
+    if args.out is None or args.minutes is None:
+        parser.error("--out and --minutes are needed to train (or --plot DIR)")
     out = Path(args.out)
     if out.exists():
         print(f"fair_training: --out {str(out)!r} exists (a runs folder is one run's)", file=sys.stderr)

@@ -89,7 +89,8 @@ CALIBRATION_FLAT = 0.03
 #: Names in tables and plots: the paper's names for its two cameras.
 NAMES = {"ml-msb": "ML", "te": "TE", "ml": "ML-count", "te+eq12": "TE+dark12", "te+eq13": "TE+dark13"}
 #: Methods as the paper names them (``label``); other methods in capitals.
-METHOD_NAMES = {"tfp": "TFP", "tfi": "TFI", "spk2imgnet": "Spk2ImgNet", "bsf": "BSF", "mambaspike": "MambaSpike",
+METHOD_NAMES = {"tfp": "TFP", "tfi": "TFI", "spk2imgnet": "Spk2ImgNet", "bsf": "BSF", "mambaspike1": "MambaSpike1",
+                "mambaspike": "MambaSpike",
                 "net": "Net"}
 #: Metrics every evaluation computes; the others of recon.score.KEYS are asked for.
 BASIC_METRICS = ("psnr_mu", "ssim_mu")

@@ -29,7 +29,9 @@ from tespike.golden.config import PRESETS, SensorConfig
 from tespike.golden.errors import InputError
 
 #: Names of the learned methods in the paper's row order: its learned baselines, then the network.
-LEARNED = ("spk2imgnet", "bsf", "mambaspike", "net")
+#: ``mambaspike1`` is MambaSpike of one parsing branch, the paper's spade row on the msb camera
+#: (shipped for ml-msb only: on TE and the full count ``mambaspike`` has one branch already).
+LEARNED = ("spk2imgnet", "bsf", "mambaspike1", "mambaspike", "net")
 #: The folder of the shipped weights.
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 

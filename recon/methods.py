@@ -81,8 +81,10 @@ RECON_METHODS: dict[str, Method] = {
                          None, ("device",), frames=_learned_frames("spk2imgnet")),
     "bsf": Method("bsf", "BSF (Zhao et al. 2024, re-implemented), shipped weights",
                   None, ("device",), frames=_learned_frames("bsf")),
-    "mambaspike": Method("mambaspike", "MambaSpike (selective scan, re-implemented), shipped weights",
-                         None, ("device",), frames=_learned_frames("mambaspike")),
+    "mambaspike1": Method("mambaspike1", "MambaSpike of one parsing branch (the paper's spade row, msb "
+                          "camera), shipped weights", None, ("device",), frames=_learned_frames("mambaspike1")),
+    "mambaspike": Method("mambaspike", "MambaSpike (selective scan, re-implemented; several parsings on the "
+                         "msb camera), shipped weights", None, ("device",), frames=_learned_frames("mambaspike")),
     "net": Method("net", "the paper's network (section 5) with the shipped weights",
                   None, ("device",), frames=_learned_frames("net")),
 }

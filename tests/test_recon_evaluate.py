@@ -219,7 +219,7 @@ def test_missing_weights_are_noted_by_default_and_refused_when_named(empty_weigh
     text = table_markdown(evaluation)
     assert "| BSF_TE | no weights |" in text and "- BSF_TE: no bsf weights for the te camera" in text
     everything = evaluate([("a", light)], simulate, sensors=("te",), progress=False, repeats=1)   # methods=None
-    assert {m for m, _ in everything.missing} == {"spk2imgnet", "bsf", "mambaspike", "net"}
+    assert {m for m, _ in everything.missing} == {"spk2imgnet", "bsf", "mambaspike1", "mambaspike", "net"}
     assert [r.method for r in everything.results] == ["tfp", "tfi"]
 
 

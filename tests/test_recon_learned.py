@@ -39,7 +39,7 @@ def tiny_stream(rng, config=TE, shape=(5, 8, 8)):
 
 def test_registry_has_every_learned_method_as_a_spatial_method():
     assert tuple(RECON_METHODS) == ("tfp", "tfi", *LEARNED)
-    assert LEARNED == ("spk2imgnet", "bsf", "mambaspike", "net")
+    assert LEARNED == ("spk2imgnet", "bsf", "mambaspike1", "mambaspike", "net")
     for name in LEARNED:
         assert RECON_METHODS[name].frames is not None and RECON_METHODS[name].block is None
         assert "window" not in RECON_METHODS[name].options
