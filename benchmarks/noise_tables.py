@@ -53,8 +53,12 @@ def main() -> int:
     parser.add_argument("--sensor-seed", type=int, default=0)
     parser.add_argument("--methods", default=None, help="default: tfp, tfi and every learned method with TE weights")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch threads (default 1: on a shared 2-core machine more threads ran 10x slower)")
     add_png_arguments(parser, NAME)
     args = parser.parse_args()
+    import torch
+    torch.set_num_threads(args.threads)
     configs = paper_configs()
     te = configs["te"]
     methods = (tuple(m.strip() for m in args.methods.split(",")) if args.methods

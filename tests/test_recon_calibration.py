@@ -112,8 +112,9 @@ def test_file_round_trip(tmp_path):
 
 
 def test_reconstruct_with_calibration_and_weights(tmp_path):
-    """``reconstruct --calibration C.npz --weights W.pt``: the user's learned weights run, and their
-    output is corrected like any method's (not the shipped weights, not uncorrected)."""
+    """``reconstruct --calibration C.npz --weights W.pt``: the user's learned weights run on
+    input corrected by the calibration (not the shipped weights, not uncorrected, not an output
+    correction)."""
     import torch
 
     from tespike.recon.learned import method_classes
@@ -132,6 +133,36 @@ def test_reconstruct_with_calibration_and_weights(tmp_path):
     assert result.returncode == 0, result.stderr
     written = np.load(tmp_path / "r.npy")
     raw = reconstruct(flat, config, "bsf", weights=tmp_path / "mine.pt")
-    assert np.array_equal(written, correct(raw.copy(), c))
-    assert not np.array_equal(written, raw)
+    assert np.array_equal(written, reconstruct(flat, config, "bsf", weights=tmp_path / "mine.pt", calibration=c))
+    assert not np.array_equal(written, raw) and not np.array_equal(written, correct(raw.copy(), c))
     assert not np.array_equal(written, reconstruct(flat, config, "bsf", calibration=c))     # shipped weights
+
+
+def test_learned_methods_are_corrected_at_their_input():
+    """A learned method with a calibration equals the same module fed ``max(0, (x - dark) / gain)``
+    (a uniform calibration, applied by a wrapper module: an independent route), and differs
+    from correcting its output; TFP stays corrected at its output."""
+    import torch
+
+    from tespike.recon.learned import load_learned
+    from tespike.recon.learning.infer import reconstruct_model
+
+    class InputCorrected(torch.nn.Module):
+        def __init__(self, model, dark, gain):
+            super().__init__()
+            self.model, self.sizes, self.dark, self.gain = model, model.sizes, dark, gain
+
+        def forward(self, light, inside, spike_light):
+            return self.model(torch.clamp((light - self.dark) / self.gain, min=0), inside, spike_light)
+
+    config = SensorConfig()
+    words = simulate_scene(config, np.random.default_rng(4).uniform(0, 0.2, (5, 16, 24)), seed=5, sensor=SENSOR)
+    dark, gain = 0.004, 1.25
+    c = Calibration(np.full((16, 24), dark), np.full((16, 24), gain), config, 64, 64, 0.03)
+    model = load_learned(config, "net")
+    ours = reconstruct(words, config, "net", calibration=c)
+    assert np.array_equal(ours, reconstruct_model(model, words, config, tile=None, calibration=c))
+    wrapped = reconstruct_model(InputCorrected(model, np.float32(dark), np.float32(gain)), words, config, tile=None)
+    assert np.allclose(ours, wrapped, rtol=1e-5, atol=1e-7)
+    assert not np.allclose(ours, correct(reconstruct(words, config, "net"), c), rtol=1e-3, atol=1e-6)
+    assert np.array_equal(reconstruct(words, config, "tfp", calibration=c), correct(reconstruct(words, config, "tfp"), c))

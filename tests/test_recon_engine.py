@@ -10,7 +10,9 @@ from tespike.golden.errors import InputError
 from tespike.recon.engine.batches import ClipPool, draw_batch, draw_sample
 from tespike.recon.engine.clips import Clip, EngineRecipe, clip_light, draw_length, make_clip
 from tespike.recon.engine.deadleaves import DeadLeavesParams, _power_law, dead_leaves
-from tespike.recon.stream import key_span, span_inside
+import torch
+
+from tespike.recon.stream import decode_light, key_span, span_inside
 
 SMALL = EngineRecipe(height=24, width=24, long=(6, 12), short=(1, 5))
 
@@ -47,16 +49,17 @@ def test_clip_is_a_pure_function_of_recipe_config_and_index():
     assert other_seed.light.shape != a.light.shape or not np.array_equal(other_seed.light, a.light)
 
 
-def test_noisy_clips_target_the_light_their_pixels_saw():
-    """noise_fraction 1: every clip has a random sensor in NOISE_DRAW, target gain x I + dark;
-    noise_fraction 0 draws nothing more (the clips recipes always gave)."""
+def test_noisy_clips_carry_their_sensors_calibration():
+    """noise_fraction 1: every clip has a random sensor in NOISE_DRAW and its exact calibration
+    (mean dark rate and gain: a pixel sees gain x I + dark), target the scene light; noise_fraction 0
+    draws nothing more (the clips recipes always gave)."""
     from tespike.golden.noise import Sensor
     from tespike.recon.engine.clips import NOISE_DRAW, seen_light
     config = SensorConfig()
     noisy = EngineRecipe(**{**SMALL.to_dict(), "noise_fraction": 1.0})
     plain = make_clip(SMALL, config, 3)
     light, _, _ = clip_light(SMALL, 3)
-    assert np.array_equal(plain.light, light.astype(np.float32)) and plain.sensor is None
+    assert np.array_equal(plain.light, light.astype(np.float32)) and plain.sensor is None and plain.dark is None
     levels = []
     for i in range(6):
         clip = make_clip(noisy, config, i)
@@ -66,8 +69,9 @@ def test_noisy_clips_target_the_light_their_pixels_saw():
         assert n.dark_current in NOISE_DRAW["dark_current"] and 0.05 <= n.dark_level <= 6.0
         assert 0 <= n.prnu <= 0.05 and 0 <= n.dsnu <= 0.5
         scene, _, _ = clip_light(noisy, i)
-        assert np.allclose(clip.light, seen_light(clip.sensor, scene).astype(np.float32))
-        assert (clip.light > scene.astype(np.float32) * 0.8).all() and clip.light.min() > 0
+        assert np.array_equal(clip.light, scene.astype(np.float32))
+        assert np.allclose(clip.light * clip.gain + clip.dark, seen_light(clip.sensor, scene))
+        assert clip.dark.min() > 0 and 0.8 < clip.gain.min() <= clip.gain.max() < 1.2
     assert len(set(levels)) == 6
     with pytest.raises(InputError, match="noise_fraction"):
         EngineRecipe(noise_fraction=1.5)
@@ -133,7 +137,7 @@ def test_sample_is_the_padded_span_around_its_key():
     rng = np.random.default_rng(4)
     for _ in range(20):
         state = rng.bit_generator.state
-        sample, truth, inside = draw_sample(clip, 5, 8, rng)
+        sample, truth, inside, calibration = draw_sample(clip, 5, 8, rng)
         replay = np.random.default_rng()
         replay.bit_generator.state = state
         key = int(replay.integers(K))
@@ -145,6 +149,30 @@ def test_sample_is_the_padded_span_around_its_key():
         assert np.array_equal(sample, expected)
         assert np.array_equal(truth[0], expected[2])       # the key moment sits in the middle
         assert inside.tolist() == [0 <= t < K for t in range(key - 2, key + 3)]
+        assert np.array_equal(calibration[0], np.zeros((8, 8))) and np.array_equal(calibration[1], np.ones((8, 8)))
+    dark, gain = np.arange(H * W, dtype=np.float32).reshape(H, W), np.arange(H * W, dtype=np.float32).reshape(H, W) + 1
+    noisy = Clip(words.astype(np.float32), words, "test", 0, None, dark, gain)
+    for _ in range(10):            # the calibration is cropped and flipped with the words
+        sample, _, _, calibration = draw_sample(noisy, 5, 8, rng)
+        assert np.array_equal(calibration[0], sample[2] % (H * W)) and np.array_equal(calibration[1], calibration[0] + 1)
+
+
+def test_batches_correct_noisy_clips_as_inference_corrects_its_input():
+    """draw_batch's light is max(0, (decoded - dark) / gain) with the clip's own maps."""
+    import types
+
+    config = SensorConfig()
+    clip = make_clip(EngineRecipe(**{**SMALL.to_dict(), "noise_fraction": 1.0}), config, 0)
+    pool = types.SimpleNamespace(clips=[clip])
+    light, _, _ = draw_batch(pool, config, 5, 16, 2, np.random.default_rng(3))
+    rng = np.random.default_rng(3)
+    for b in range(2):
+        rng.integers(1)                                   # the clip drawn
+        words, _, _, calibration = draw_sample(clip, 5, 16, rng)
+        decoded = decode_light(words, config, dtype=torch.float32).numpy()
+        expected = np.maximum((decoded - calibration[0]) / calibration[1], 0)
+        assert np.allclose(light[b].numpy(), expected, rtol=1e-6, atol=1e-7)
+    assert (light.numpy() == 0).any()                    # the dark subtracted, floored at zero
 
 
 def test_pool_schedule_depends_on_the_step_only():

@@ -156,10 +156,12 @@ class ClipPool:
 
 
 def draw_sample(clip: Clip, span: int, crop: int, rng: np.random.Generator
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(words (span, c, c), truth (1, c, c), inside (span,)) at a random key moment, crop and flip of ``clip``.
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(words (span, c, c), truth (1, c, c), inside (span,), calibration (2, c, c)) at a random key
+    moment, crop and flip of ``clip``.
 
-    ``inside`` marks the span's readouts that lie in the clip (the others repeat its first or last).
+    ``inside`` marks the span's readouts that lie in the clip (the others repeat its first or last);
+    ``calibration`` is the crop's (dark, gain): the clip's sensor's, or (0, 1) for shot noise only.
     """
     K, H, W = clip.words.shape
     key = int(rng.integers(K))
@@ -167,17 +169,29 @@ def draw_sample(clip: Clip, span: int, crop: int, rng: np.random.Generator
     y, x = int(rng.integers(H - crop + 1)), int(rng.integers(W - crop + 1))
     words = clip.words[times, y:y + crop, x:x + crop]
     truth = clip.light[key, y:y + crop, x:x + crop][None]
+    if clip.dark is None:
+        calibration = np.stack([np.zeros((crop, crop), np.float32), np.ones((crop, crop), np.float32)])
+    else:
+        calibration = np.stack([clip.dark[y:y + crop, x:x + crop], clip.gain[y:y + crop, x:x + crop]])
     flips = [axis for axis in (-1, -2) if rng.integers(2)]
     if flips:
-        words, truth = np.flip(words, flips), np.flip(truth, flips)
-    return np.ascontiguousarray(words), np.ascontiguousarray(truth), span_inside(K, key, span)
+        words, truth, calibration = np.flip(words, flips), np.flip(truth, flips), np.flip(calibration, flips)
+    return (np.ascontiguousarray(words), np.ascontiguousarray(truth), span_inside(K, key, span),
+            np.ascontiguousarray(calibration))
 
 
 def draw_batch(pool: ClipPool, config: SensorConfig, span: int, crop: int, batch: int,
                rng: np.random.Generator, device: str = "cpu") -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """(decoded light (B, span, c, c), truth (B, 1, c, c), inside (B, span)) from random clips of the pool."""
+    """(decoded light (B, span, c, c), truth (B, 1, c, c), inside (B, span)) from random clips of the pool.
+
+    A noisy clip's decoded light is corrected by its sensor's calibration, ``max(0, (x - dark) / gain)``,
+    as inference corrects a learned method's input (:func:`tespike.recon.learning.infer.frame`); a clip
+    of shot noise only passes unchanged (its calibration is dark 0, gain 1)."""
     samples = [draw_sample(pool.clips[int(rng.integers(len(pool.clips)))], span, crop, rng)
                for _ in range(batch)]
-    words, truth, inside = (np.stack(part) for part in zip(*samples))
+    words, truth, inside, calibration = (np.stack(part) for part in zip(*samples))
     light = decode_light(words, config, device=device, dtype=torch.float32)
+    if (calibration[:, 0] != 0).any() or (calibration[:, 1] != 1).any():
+        dark, gain = torch.from_numpy(calibration).to(device)[:, :, None].unbind(1)
+        light = torch.clamp_min_((light - dark) / gain, 0)
     return light, torch.from_numpy(truth).to(device), torch.from_numpy(inside).to(device)

@@ -30,13 +30,13 @@ clips of every recipe before it): that share of clips is recorded by a sensor
 drawn at random over :data:`NOISE_DRAW` (:func:`draw_sensor`: the paper's eq. 12
 or eq. 13 dark current at 0.05 .. 6 x its level, log-uniform, so from almost
 none to beyond eq. 13; DSNU, hot pixels, PRNU and comparator offset uniform up
-to their bounds; its own sensor seed). The target of such a clip is the light
-its pixels saw, ``gain x I + dark`` (:func:`seen_light`; dark the pixel's mean
-dark rate in scene units), not ``I``: the learned methods are corrected by the
-sensor's calibration at their output (:mod:`tespike.recon.calibration`,
-``(x - dark) / gain``), so a network should reproduce what the pixel measured
-and leave the per-pixel correction, which it cannot know from one stream, to the
-calibration (docs/reconstruction.md "Calibration" has the measurements).
+to their bounds; its own sensor seed). Such a clip carries its sensor's
+calibration, the pixels' mean dark rate and gain (:func:`sensor_maps`), and the
+batches correct its decoded light with them, ``max(0, (x - dark) / gain)``, as
+inference corrects a learned method's input with a measured calibration
+(:mod:`tespike.recon.calibration`, :func:`tespike.recon.learning.infer.frame`); its
+target is the scene light ``I``. Correcting the input rather than the output was
+measured better for every learned method (docs/reconstruction.md "Calibration").
 """
 
 from __future__ import annotations
@@ -155,6 +155,8 @@ class Clip:
     family: str
     index: int
     sensor: object = None        # the golden.noise.Sensor of a noisy clip (None: shot noise only)
+    dark: np.ndarray | None = None    # float32 (H, W): its pixels' mean dark rate, scene units (noisy clips)
+    gain: np.ndarray | None = None    # float32 (H, W): its pixels' gain (noisy clips)
 
 
 def clip_rng(recipe: EngineRecipe, index: int, domain: int = TRAIN_DOMAIN) -> np.random.Generator:
@@ -231,12 +233,19 @@ def draw_sensor(rng: np.random.Generator):
     return Sensor(noise, int(rng.integers(1 << 62)))
 
 
-def seen_light(sensor, light: np.ndarray) -> np.ndarray:
-    """The light a sensor's pixels measure, ``gain x I + dark`` (scene units; dark the mean
-    dark rate): the target of a noisy clip (what the calibration then corrects)."""
+def sensor_maps(sensor, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """A sensor's exact calibration for frames of ``shape``: (mean dark rate in scene units per
+    readout, gain), float32 (H, W); a pixel measures ``gain x I + dark`` on average."""
     from tespike.golden.config import DESIGN_ELECTRONS
-    maps = sensor.maps(light.shape[1:])
-    return light * maps.gain + maps.mean_dark_electrons(sensor.noise) / DESIGN_ELECTRONS
+    maps = sensor.maps(shape)
+    dark = maps.mean_dark_electrons(sensor.noise) / DESIGN_ELECTRONS
+    return (np.broadcast_to(dark, shape).astype(np.float32), np.broadcast_to(maps.gain, shape).astype(np.float32))
+
+
+def seen_light(sensor, light: np.ndarray) -> np.ndarray:
+    """The light a sensor's pixels measure on average, ``gain x I + dark`` (scene units)."""
+    dark, gain = sensor_maps(sensor, light.shape[1:])
+    return light * gain + dark
 
 
 def make_clip(recipe: EngineRecipe, config: SensorConfig, index: int, *, domain: int = TRAIN_DOMAIN,
@@ -244,12 +253,12 @@ def make_clip(recipe: EngineRecipe, config: SensorConfig, index: int, *, domain:
     """Clip ``index`` of the recipe for ``config``: target light (float32) and its simulated words.
 
     With ``recipe.noise_fraction`` > 0 that share of clips is recorded by a random sensor
-    (:func:`draw_sensor`) and its target is :func:`seen_light`; no random number is drawn for
-    it otherwise, so recipes without noise give the clips they always gave."""
+    (:func:`draw_sensor`) and carries its calibration (:func:`sensor_maps`); no random number is
+    drawn for it otherwise, so recipes without noise give the clips they always gave."""
     light, family, rng = clip_light(recipe, index, domain=domain, deadleaves=deadleaves)
     sensor = None
     if recipe.noise_fraction > 0 and rng.uniform() < recipe.noise_fraction:
         sensor = draw_sensor(rng)
     words = simulate_scene(config, light, seed=rng, workers=1, sensor=sensor)
-    target = light if sensor is None else seen_light(sensor, light)
-    return Clip(target.astype(np.float32), words, family, index, sensor)
+    dark, gain = (None, None) if sensor is None else sensor_maps(sensor, light.shape[1:])
+    return Clip(light.astype(np.float32), words, family, index, sensor, dark, gain)

@@ -141,13 +141,16 @@ def blocks(height: int, width: int, model: torch.nn.Module, tile: int | str | No
 
 
 def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: int, *,
-          tile: int | str | None = None, device: str = "cpu") -> torch.Tensor:
+          tile: int | str | None = None, device: str = "cpu", correction=None) -> torch.Tensor:
     """The method's image (H, W) at readout ``key`` of the stream ``words`` (K, H, W).
 
     Only the readouts and pixels one tile needs are decoded at a time, so memory
     is bounded by the tile, not the frame. Readouts past either end repeat the
     first or last one; the frame is mirrored at its edges (:func:`mirrored_index`);
     with ``tile=None`` the whole mirrored frame is one tile (:func:`blocks`).
+    ``correction``: (dark, 1 / gain) float32 (H, W) tensors on ``device`` (a sensor's
+    calibration, :func:`input_correction`); each readout's decoded light becomes
+    ``max(0, (x - dark) / gain)`` before the model sees it.
     """
     sizes = model.sizes
     K, H, W = words.shape
@@ -157,13 +160,29 @@ def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: 
     for block in blocks(H, W, model, tile):
         light = decode_light(words[times[:, None, None], block.rows[None, :, None], block.cols[None, None, :]],
                              config, device=device, dtype=torch.float32)
+        if correction is not None:
+            pixels = (torch.from_numpy(block.rows)[:, None].to(device), torch.from_numpy(block.cols)[None].to(device))
+            dark, inverse_gain = (c[pixels] for c in correction)
+            light = torch.clamp_min_((light - dark) * inverse_gain, 0)
         out[block.frame] = model(light[None], inside, config.spike_light)[0, 0][block.result].float().cpu()
     return out
 
 
+def input_correction(calibration, device: str = "cpu"):
+    """A :class:`tespike.recon.calibration.Calibration` as :func:`frame`'s ``correction``
+    (None for None): the learned methods are corrected at their input, where the dark rate
+    is subtracted from light the model has not yet shaped (docs/reconstruction.md)."""
+    if calibration is None:
+        return None
+    return (torch.as_tensor(calibration.dark, dtype=torch.float32, device=device),
+            torch.as_tensor(1.0 / calibration.gain, dtype=torch.float32, device=device))
+
+
 def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, tile: int | str | None = "auto",
-                      device: str = "cpu", progress: bool = False, out: np.ndarray | None = None) -> np.ndarray:
-    """Any learned method's module (in eval mode) on a whole stream: float32 light (K, H, W)."""
+                      device: str = "cpu", progress: bool = False, out: np.ndarray | None = None,
+                      calibration=None) -> np.ndarray:
+    """Any learned method's module (in eval mode) on a whole stream: float32 light (K, H, W);
+    ``calibration`` (checked by the caller against the stream) corrects its input (:func:`frame`)."""
     if isinstance(words, torch.Tensor):
         words = words.cpu().numpy()
     if not isinstance(words, np.ndarray):
@@ -175,11 +194,12 @@ def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, ti
     if out.size == 0:
         return out
     model = model.to(device)
+    correction = input_correction(calibration, device)
     keys = range(K)
     if progress:
         from tqdm import tqdm
         keys = tqdm(keys, desc=f"reconstruct {type(model).__name__}", unit="frame")
     with torch.inference_mode():
         for k in keys:
-            out[k] = frame(model, words, config, k, tile=tile, device=device).numpy()
+            out[k] = frame(model, words, config, k, tile=tile, device=device, correction=correction).numpy()
     return out
