@@ -96,9 +96,47 @@ def test_a_hand_edit_fails_the_proof(mutant):
     assert not result.proved and result.detail.startswith("clock "), result
 
 
-@pytest.mark.parametrize("preset", ["ml", "ml-msb"])
-def test_ml_tops_are_proved(preset):
+#: ML hand edits: name -> (preset, design, edit of the generated text at small clocks, ml_bits = 3)
+ML_MUTANTS = {
+    "count saturates one early (parallel)": ("ml", "parallel", lambda t: _replace(
+        t, "count == 3'h7", "count == 3'h6")),
+    "count saturates one early (stream)": ("ml", "stream", lambda t: _replace(
+        t, "count[p] != 3'd7", "count[p] != 3'd6")),
+    "count not cleared at readout (stream)": ("ml", "stream", lambda t: _replace(
+        t, "count[p] = last ? 3'd0 : count_next;", "count[p] = count_next;")),
+    "msb remainder keeps the wrong bits (parallel)": ("ml-msb", "parallel", lambda t: _replace(
+        t, "| count_next[2:1]", "| count_next[2:2]")),
+    "msb index off by one (parallel)": ("ml-msb", "parallel", lambda t: _replace(
+        t, "count_next[2] ? 2'h3", "count_next[2] ? 2'h2")),
+    "msb remainder dropped (parallel)": ("ml-msb", "parallel", lambda t: re.sub(
+        r"(else if \(last\) begin\n\s+\\\$\d+\s+= )\{ 1'h0, [^}]*\};", r"\g<1>3'h0;", t, count=1)),
+    "msb takes 2^word, not 2^(word - 1) (stream)": ("ml-msb", "stream", lambda t: _replace(
+        t, "<< (word - 2'd1)", "<< word")),
+    "count saturates one early (msb stream)": ("ml-msb", "stream", lambda t: _replace(
+        t, "count[p] != 3'd7", "count[p] != 3'd6")),
+}
+
+
+def _ml_harness(preset: str, design: str, text: str | None = None):
     config = small_clocks(load_config(preset))
-    for harness in (parallel_harness(config, 1, 2), stream_harness(config, 1, 2, 1)):
-        result = prove_harness(preset, harness)
-        assert result.proved, result
+    if design == "parallel":
+        return parallel_harness(config, 2, 3, text)
+    return stream_harness(config, 2, 3, 2, text)
+
+
+@pytest.mark.parametrize("preset", ["ml", "ml-msb"])
+@pytest.mark.parametrize("design", ["parallel", "stream"])
+def test_ml_tops_are_proved(preset, design):
+    result = prove_harness(preset, _ml_harness(preset, design))
+    assert result.proved and result.method.startswith("unbounded"), result
+
+
+@pytest.mark.parametrize("mutant", list(ML_MUTANTS))
+def test_an_ml_hand_edit_fails_the_proof(mutant):
+    preset, design, edit = ML_MUTANTS[mutant]
+    config = small_clocks(load_config(preset))
+    text = design_text(config, 2, 3, None if design == "parallel" else 2)
+    edited = edit(text)
+    assert edited != text, mutant
+    result = prove_harness(mutant, _ml_harness(preset, design, edited))
+    assert not result.proved and result.detail.startswith("clock "), result
