@@ -1,8 +1,7 @@
 """Proofs of the generated Verilog tops, read from the very text ``tespike verilog`` writes.
 
 Each property is a Verilog harness beside the generated text (:func:`design_text`, the
-same generator calls as ``tespike verilog``), proved by ``yosys-smtbmc``
-(:mod:`tespike.cosim.formal.solver`). Only the tops' ports and the timing block's ports are used,
+same generator calls as ``tespike verilog``), proved by ABC (:mod:`tespike.cosim.formal.abc`). Only the tops' ports and the timing block's ports are used,
 never an internal name, so the proofs hold whatever structure produces those ports.
 
 * ``parallel-equiv`` (``<mode>_pixel_array``): ``frame_valid`` equals the SPEC reference's
@@ -23,10 +22,12 @@ never an internal name, so the proofs hold whatever structure produces those por
   ``last`` high, ``frame_valid`` low). Proved by k-induction (depth L + 2: L clocks of
   outputs pin the phase), so it holds for every input sequence of any length.
 
-The two equivalences are bounded model checks from power-up (the design's initial values;
-the reference powers up in its reset state): every input sequence of ``bound`` clocks, at
-least three readout intervals and the last interval's beats (:func:`bmc_bound`). They are
-not inductive without naming the design's internal registers, which these proofs avoid.
+Every harness starts from power-up (the design's initial values; the reference powers up
+in its reset state) and is proved for every input sequence of any length where ABC's
+unbounded engines finish (all default tops do), else for every sequence of ``bound`` clocks:
+at least three readout intervals and the last interval's beats (:func:`bmc_bound`). The
+harnesses name no internal register of the design; the unbounded engines find the match
+between the design's registers and the reference's themselves (signal correspondence).
 """
 
 from __future__ import annotations
