@@ -19,8 +19,10 @@ TE = small_clocks(load_config("te"))     # b1 = b2 = 2: F = 4, alpha = 3, L = 12
 
 
 def _timing_module(text: str) -> tuple[int, int]:
-    start = text.index("module te_readout_timing(")
-    return start, text.index("endmodule", start)
+    """The timing module of a generated text: ``te_array_timing`` (parallel) or ``te_readout_timing``."""
+    found = re.search(r"module te_(array|readout)_timing\(", text)
+    assert found, "no timing module in the text"
+    return found.start(), text.index("endmodule", found.start())
 
 
 def _in_timing(text: str, pattern: str, new: str, occurrence: int = 0) -> str:
@@ -40,9 +42,14 @@ def _replace(text: str, old: str, new: str) -> str:
 RESET_TO = r"(if \(rst\) begin\n\s+\\\$\d+\s+= )"
 #: name -> (design: "parallel" or "stream", edit of the generated text)
 MUTANTS = {
-    "S_h divider reset value": ("parallel", lambda t: _in_timing(t, RESET_TO + r"2'h3;", r"\g<1>2'h2;", 0)),
-    "S_h divider power-up value": ("parallel", lambda t: _in_timing(t, r"reg \[1:0\] divider = 2'h3;",
-                                                                   "reg [1:0] divider = 2'h0;")),
+    "S_h divider reset value": ("parallel", lambda t: _in_timing(t, RESET_TO + r"2'h0;", r"\g<1>2'h1;", 0)),
+    "S_h divider power-up value": ("parallel", lambda t: _in_timing(t, r"reg \[1:0\] divider = 2'h0;",
+                                                                   "reg [1:0] divider = 2'h3;")),
+    "CCC start after reset (parallel)": ("parallel", lambda t: _in_timing(t, RESET_TO + r"2'h1;", r"\g<1>2'h2;", 0)),
+    "frame_valid not cleared by rst (parallel)": ("parallel", lambda t: _in_timing(
+        t, RESET_TO + r"1'h0;", r"\g<1>1'h1;")),
+    "frame_valid combinational from last (parallel)": ("parallel", lambda t: _replace(
+        t, ".frame_valid(frame_valid));", ".frame_valid());\n  assign frame_valid = last;")),
     "CCC start after reset": ("stream", lambda t: _in_timing(t, RESET_TO + r"2'h3;", r"\g<1>2'h1;", 1)),
     "primed not cleared by rst": ("stream", lambda t: _in_timing(t, RESET_TO + r"1'h0;", r"\g<1>1'h1;")),
     "CCC bus registered, last not": ("parallel", lambda t: _replace(_replace(
@@ -58,8 +65,9 @@ MUTANTS = {
                                                                      "if (1'b0) begin\n      sending <= 1'b0;")),
     "pixels cleared by rst, not the sampled reset (stream)": ("stream", lambda t: _replace(
         t, "wire clear = rst_sample;", "wire clear = rst;")),
-    "pixels cleared by rst, not the sampled reset (parallel)": ("parallel", lambda t: _replace(
-        t, ".clear(rst_sample)", ".clear(rst)")),
+    "pixels cleared one edge after rst (parallel)": ("parallel", lambda t: _replace(_replace(
+        t, "  wire last;", "  wire last;\n  reg rst_late = 1'b0;\n  always @(posedge clk) rst_late <= rst;"),
+        ".clear(rst)", ".clear(rst_late)")),
     "two pixels' charge swapped (parallel)": ("parallel", lambda t: _replace(
         t, "charge[(r*W + c)*E +: E]", "charge[((r*W + c) ^ 1)*E +: E]")),
     "two pixels' charge swapped (stream)": ("stream", lambda t: _replace(
@@ -81,10 +89,14 @@ def test_generated_tops_are_proved(design):
     assert result.proved and result.method.startswith("unbounded"), result
 
 
-def test_timing_block_is_proved_and_its_reset_values_matter():
+def test_timing_blocks_are_proved_and_their_reset_values_matter():
     assert prove_harness("timing", timing_harness(TE)).proved
-    late = _in_timing(design_text(TE, 1, 1, None), RESET_TO + r"2'h3;", r"\g<1>2'h1;", 1)   # CCC after reset
+    late = _in_timing(design_text(TE, 1, 1, 1), RESET_TO + r"2'h3;", r"\g<1>2'h1;", 1)   # CCC after reset
     result = prove_harness("timing", timing_harness(TE, late))
+    assert not result.proved and "CCC" in result.detail, result
+    assert prove_harness("array-timing", timing_harness(TE, sampled_input=False)).proved
+    late = _in_timing(design_text(TE, 1, 1, None), RESET_TO + r"2'h1;", r"\g<1>2'h3;", 0)   # CCC after reset
+    result = prove_harness("array-timing", timing_harness(TE, late, sampled_input=False))
     assert not result.proved and "CCC" in result.detail, result
 
 
