@@ -15,10 +15,11 @@ with Yosys) then runs:
   left for ``pdr`` (0.01 s), and the TE tops at small clocks take 0.1-4 s.
 * where that does not finish (:data:`PDR_SECONDS`), ``scorr; dprove``: the same
   correspondence, then ``dprove``'s retiming, induction and interpolation
-  (``unbounded (scorr + dprove)``). It proves the TE tops at the presets' own clocks
-  (L = 240), where ``pdr`` does not finish: the reference clears ``m`` at readout and the
-  design keeps it, an equality that holds only while the flag is set, which signal
-  correspondence cannot state and IC3 must learn over 240-clock intervals.
+  (``unbounded (scorr + dprove)``). It proves the TE streaming tops at the presets' own
+  clocks (L = 240), where ``pdr`` does not finish in 120 s (the reference clears ``m`` at
+  readout and the design keeps it, an equality that holds only while the flag is set, which
+  signal correspondence cannot state and IC3 must learn over 240-clock intervals; the
+  registered parallel top at those clocks ``pdr`` proves in about 1.5 s).
   Why not yosys-smtbmc and z3 here: z3 4.8 and ABC's plain BMC did not finish the first
   readout of a 2 x 3 array (92,000 conflicts at frame 12), because an unrolled equivalence
   of two different structures gives a SAT solver no internal match to lean on; signal
@@ -48,10 +49,10 @@ TO_AIGER = ("prep -flatten -top proof_top; memory_map; opt -fast; "
 
 
 #: Seconds ``scorr; pdr`` gets (every top at small clocks took under 5 s, the ML tops at the
-#: presets' own clocks under 1 s; the TE tops at their own clocks did not finish in 120 s).
+#: presets' own clocks under 1 s; the TE streaming tops at their own clocks did not finish in 120 s).
 PDR_SECONDS = 20.0
-#: Seconds ``scorr; dprove`` gets before the bounded check takes over (the TE 1 x 1 tops at
-#: the presets' own clocks took 12-35 s on 2 loaded cores).
+#: Seconds ``scorr; dprove`` gets before the bounded check takes over (the TE 1 x 1 streaming
+#: tops at the presets' own clocks took 12-41 s in it on 2 loaded cores).
 DPROVE_SECONDS = 150.0
 
 #: The unbounded attempts in order: (method, ABC commands after ``strash``, seconds at most).
