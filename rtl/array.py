@@ -26,8 +26,12 @@ after the edge that samples its last charge, t = (k+1)L - 1, so they are sampled
 valid at the next rising edge (1 clock), as SPEC section 6 counts it. With L = 1,
 ``frame_valid`` is high on every clock after the first edge out of reset.
 
+The generated parallel Verilog top (:func:`tespike.rtl.verilog.top_verilog`) has the same
+ports, latency and words, drawn with its outputs straight from flip-flops and without the
+input register (see there for why).
+
 By default every pixel is a :class:`tespike.rtl.pixel.TEPixel` / :class:`MLPixel`
-submodule (the structure a sensor has, and what the Verilog top mirrors);
+submodule (the structure a sensor has);
 ``flat=True`` inlines the same pixel logic into one module, which the
 Amaranth simulator runs faster (measured on 2 loaded cores: 16 x 16 TE array,
 113 cycles/s with submodules, 184 flat).

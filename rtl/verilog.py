@@ -2,13 +2,24 @@
 
 The pixel and the timing block are generated once each from their Amaranth
 components (``amaranth.back.verilog.convert``); the array top is a small
-hand-written structural module, the Verilog form of :class:`tespike.rtl.array.PixelArray`:
-the input registers (``charge_sample``, one per pixel), the timing block once and the pixel module
-H x W times in nested ``generate`` loops over rows and columns, their words gathered
-into ``frame`` by one ``always @*`` loop (see :func:`top_verilog`). Its text does not
-grow with the array, so a 128 x 128 array is generated as fast as a 2 x 2 one. The
-array's pixel module is the pixel without its word register
-(``pixel_verilog(config, word_register=False)``, see :mod:`tespike.rtl.array`).
+hand-written structural module with the ports and clocks of
+:class:`tespike.rtl.array.PixelArray`, drawn with its outputs straight from flip-flops:
+the timing block once (``ReadoutTiming(sampled_input=False)``, module
+``<mode>_array_timing``: ``frame_valid`` is its register) and the pixel module H x W
+times in nested ``generate`` loops over rows and columns, each with its readout word
+register (``pixel_verilog(config)``, the form ``tespike prove`` proves as
+``rule-registered-word``), their words gathered into ``frame`` by one ``always @*``
+copy loop, wires only (see :func:`top_verilog`). Its text does not grow with the array,
+so a 128 x 128 array is generated as fast as a 2 x 2 one.
+
+Why no input register here (the Amaranth array has one): ``frame`` is valid in the clock
+after the edge that samples an interval's last charge (SPEC section 6's latency, fixed by
+the tests and ``tespike.cosim.formal.reference.PARALLEL_DELAY``), so a register that
+drives ``frame`` must load, at that very edge, a word that depends on the charge then on
+the port. The pixels therefore take ``charge`` from the port and are cleared by ``rst``
+itself, and the timing counts the clock on the port (reset: clock 0). The Amaranth array
+and the streaming top keep the input register (their words are combinational, or go to
+the readout's own registers).
 
 Lint: Amaranth's RTLIL backend deliberately trims the zero extension of
 unsigned operands (``a + b`` with a 9-bit ``a`` and a 16-bit ``b`` into a
@@ -37,9 +48,12 @@ WAIVED_LINT = ("WIDTH", "UNUSEDSIGNAL")
 
 
 def module_names(config: SensorConfig) -> dict[str, str]:
-    """Verilog module names: ``top``, ``pixel`` and ``timing``, prefixed by the mode."""
+    """Verilog module names, prefixed by the mode: ``top``, ``pixel``, ``timing`` (the sampled-input
+    timing block of the pixel and the streaming top) and ``array_timing`` (the parallel top's,
+    ``ReadoutTiming(sampled_input=False)``)."""
     mode = config.mode
-    return {"top": f"{mode}_pixel_array", "pixel": f"{mode}_pixel", "timing": f"{mode}_readout_timing"}
+    return {"top": f"{mode}_pixel_array", "pixel": f"{mode}_pixel", "timing": f"{mode}_readout_timing",
+            "array_timing": f"{mode}_array_timing"}
 
 
 def _waive(text: str) -> str:
@@ -127,10 +141,11 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
     """The hand-written structural top of an H x W array with exactly the SPEC section 6 ports.
 
     Pixel (r, c) is the instance ``row[r].col[c].pixel`` (rows or columns longer than
-    :data:`LOOP_BLOCK` add a block level, see :func:`generate_loop`); its word goes to
-    ``word[r*W + c]``, which one combinational loop copies to ``frame``: connected to
-    slices of ``frame`` directly, the words become, in Verilator 5.006, one chain of
-    H*W wide concatenations per clock (quadratic in the pixel count).
+    :data:`LOOP_BLOCK` add a block level, see :func:`generate_loop`); its word register
+    drives ``word[r*W + c]``, which one combinational loop copies to ``frame`` (wires
+    only): connected to slices of ``frame`` directly, the words become, in Verilator 5.006,
+    one chain of H*W wide concatenations per clock (quadratic in the pixel count).
+    ``frame_valid`` is the timing block's register.
     """
     config = checked_config(config)
     height, width = check_array_size(height, width)
@@ -142,10 +157,8 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
 
     def pixel(r, c, indent):
         index = f"({r}*W + {c})"
-        return (f"{indent}reg [E-1:0] charge_sample = {e}'d0;  // this pixel's input register\n"
-                f"{indent}always @(posedge clk) charge_sample <= charge[{index}*E +: E];\n"
-                f"{indent}{names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge_sample), "
-                f"{ccc_pin}.last(last),\n{indent}  .clear(rst_sample), .word(word[{index}]));\n")
+        return (f"{indent}{names['pixel']} pixel (.clk(clk), .rst(rst), .charge(charge[{index}*E +: E]), "
+                f"{ccc_pin}.last(last),\n{indent}  .clear(rst), .word(word[{index}]));\n")
 
     loops = generate_loop("r", height, "H", "row",
                   lambda r, ind: generate_loop("c", width, "W", "col", lambda c, i: pixel(r, c, i), ind), "    ")
@@ -156,8 +169,8 @@ def top_verilog(config: SensorConfig, height: int, width: int) -> str:
 // {names['top']}: {height} x {width} {'time-encoding' if te else 'multi-level counter'} pixels and one
 // readout timing block (tespike, SPEC section 6). Latency: frame_valid and frame
 // are valid one clock after the last pixel clock of each readout interval.
-// Every rising edge samples charge and rst into charge_sample and rst_sample; the
-// pixels compute from these registers and their own state (docs/rtl.md).
+// Outputs straight from flip-flops: frame is the pixels' word registers, frame_valid
+// the timing block's register. Each edge processes the charge on the port (docs/rtl.md).
 // config: {json.dumps(config.to_dict())}
 module {names['top']} (
   input  wire clk,                           // pixel clock, rising edge
@@ -170,19 +183,11 @@ module {names['top']} (
   localparam integer W = {width};
   localparam integer E = {e};
   localparam integer WD = {wd};
-{ccc_wire}  wire last;  // S_r: last pixel clock of the readout interval
-  // The input registers: the pixels compute from these, never from an input port.
-  // charge_sample is one E-bit register per pixel (in the pixel's generate block):
-  // one H*W*E-bit register would need an H*W*E-bit initial value, and above 4096
-  // paper pixels that is wider than the default --max-num-width (65536 bits) of
-  // the Verilator simulator.
-  reg rst_sample = 1'b0;  // clears the pixels at the edge after a reset edge
+{ccc_wire}  wire last;  // S_r: the clock on the port is the last of its readout interval
 
-  always @(posedge clk) rst_sample <= rst;
+  {names['array_timing']} timing (.clk(clk), .rst(rst), {ccc_pin}.last(last), .frame_valid(frame_valid));
 
-  {names['timing']} timing (.clk(clk), .rst(rst), {ccc_pin}.last(last), .frame_valid(frame_valid));
-
-  // The pixels' words, copied into frame by one loop. (With the word ports connected to
+  // The pixels' word registers, copied into frame by one loop. (With the word ports connected to
   // slices of frame, Verilator 5 builds frame as a chain of H*W concatenations per clock,
   // a cost quadratic in H*W; docs/rtl.md.)
   wire [WD-1:0] word [0:H*W-1];  // pixel (r, c) at word[r*W + c]
@@ -199,12 +204,12 @@ endmodule
 
 
 def array_verilog(config: SensorConfig, height: int, width: int) -> str:
-    """Verilog text of an H x W array: top ``te_pixel_array`` / ``ml_pixel_array`` with the
-    input register, the pixel module (instantiated H x W times; its word is combinational
-    from the input register and its state, see :mod:`tespike.rtl.array`) and the timing module (once)."""
+    """Verilog text of an H x W array: top ``te_pixel_array`` / ``ml_pixel_array``, the pixel
+    module with its word register (instantiated H x W times) and the timing module
+    ``<mode>_array_timing`` (once), outputs straight from flip-flops (module docstring)."""
     config = checked_config(config)
     top = top_verilog(config, height, width)       # refuses a bad size before any conversion
     names = module_names(config)
-    pixel, timing = convert_modules((pixel_class(config)(config, word_register=False), names["pixel"]),
-                             (ReadoutTiming(config), names["timing"]))
+    pixel, timing = convert_modules((pixel_class(config)(config), names["pixel"]),
+                                    (ReadoutTiming(config, sampled_input=False), names["array_timing"]))
     return "\n".join([top, pixel, timing])

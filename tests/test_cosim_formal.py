@@ -113,6 +113,8 @@ def test_command_refuses_bad_options_in_one_line():
     assert_refused(done, "cvc9")
     done = run_tespike("prove", "--depth", "0", timeout=60)
     assert_refused(done, "--depth")
+    done = run_tespike("prove", "--workers", "0", timeout=60)
+    assert_refused(done, "--workers")
 
 
 # -- the streaming Verilog top's pixel rule (rtl/verilog_stream.py) --------------------------------

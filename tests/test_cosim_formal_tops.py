@@ -19,8 +19,10 @@ TE = small_clocks(load_config("te"))     # b1 = b2 = 2: F = 4, alpha = 3, L = 12
 
 
 def _timing_module(text: str) -> tuple[int, int]:
-    start = text.index("module te_readout_timing(")
-    return start, text.index("endmodule", start)
+    """The timing module of a generated text: ``te_array_timing`` (parallel) or ``te_readout_timing``."""
+    found = re.search(r"module te_(array|readout)_timing\(", text)
+    assert found, "no timing module in the text"
+    return found.start(), text.index("endmodule", found.start())
 
 
 def _in_timing(text: str, pattern: str, new: str, occurrence: int = 0) -> str:
@@ -40,9 +42,14 @@ def _replace(text: str, old: str, new: str) -> str:
 RESET_TO = r"(if \(rst\) begin\n\s+\\\$\d+\s+= )"
 #: name -> (design: "parallel" or "stream", edit of the generated text)
 MUTANTS = {
-    "S_h divider reset value": ("parallel", lambda t: _in_timing(t, RESET_TO + r"2'h3;", r"\g<1>2'h2;", 0)),
-    "S_h divider power-up value": ("parallel", lambda t: _in_timing(t, r"reg \[1:0\] divider = 2'h3;",
-                                                                   "reg [1:0] divider = 2'h0;")),
+    "S_h divider reset value": ("parallel", lambda t: _in_timing(t, RESET_TO + r"2'h0;", r"\g<1>2'h1;", 0)),
+    "S_h divider power-up value": ("parallel", lambda t: _in_timing(t, r"reg \[1:0\] divider = 2'h0;",
+                                                                   "reg [1:0] divider = 2'h3;")),
+    "CCC start after reset (parallel)": ("parallel", lambda t: _in_timing(t, RESET_TO + r"2'h1;", r"\g<1>2'h2;", 0)),
+    "frame_valid not cleared by rst (parallel)": ("parallel", lambda t: _in_timing(
+        t, RESET_TO + r"1'h0;", r"\g<1>1'h1;")),
+    "frame_valid combinational from last (parallel)": ("parallel", lambda t: _replace(
+        t, ".frame_valid(frame_valid));", ".frame_valid());\n  assign frame_valid = last;")),
     "CCC start after reset": ("stream", lambda t: _in_timing(t, RESET_TO + r"2'h3;", r"\g<1>2'h1;", 1)),
     "primed not cleared by rst": ("stream", lambda t: _in_timing(t, RESET_TO + r"1'h0;", r"\g<1>1'h1;")),
     "CCC bus registered, last not": ("parallel", lambda t: _replace(_replace(
@@ -58,8 +65,9 @@ MUTANTS = {
                                                                      "if (1'b0) begin\n      sending <= 1'b0;")),
     "pixels cleared by rst, not the sampled reset (stream)": ("stream", lambda t: _replace(
         t, "wire clear = rst_sample;", "wire clear = rst;")),
-    "pixels cleared by rst, not the sampled reset (parallel)": ("parallel", lambda t: _replace(
-        t, ".clear(rst_sample)", ".clear(rst)")),
+    "pixels cleared one edge after rst (parallel)": ("parallel", lambda t: _replace(_replace(
+        t, "  wire last;", "  wire last;\n  reg rst_late = 1'b0;\n  always @(posedge clk) rst_late <= rst;"),
+        ".clear(rst)", ".clear(rst_late)")),
     "two pixels' charge swapped (parallel)": ("parallel", lambda t: _replace(
         t, "charge[(r*W + c)*E +: E]", "charge[((r*W + c) ^ 1)*E +: E]")),
     "two pixels' charge swapped (stream)": ("stream", lambda t: _replace(
@@ -81,10 +89,14 @@ def test_generated_tops_are_proved(design):
     assert result.proved and result.method.startswith("unbounded"), result
 
 
-def test_timing_block_is_proved_and_its_reset_values_matter():
+def test_timing_blocks_are_proved_and_their_reset_values_matter():
     assert prove_harness("timing", timing_harness(TE)).proved
-    late = _in_timing(design_text(TE, 1, 1, None), RESET_TO + r"2'h3;", r"\g<1>2'h1;", 1)   # CCC after reset
+    late = _in_timing(design_text(TE, 1, 1, 1), RESET_TO + r"2'h3;", r"\g<1>2'h1;", 1)   # CCC after reset
     result = prove_harness("timing", timing_harness(TE, late))
+    assert not result.proved and "CCC" in result.detail, result
+    assert prove_harness("array-timing", timing_harness(TE, sampled_input=False)).proved
+    late = _in_timing(design_text(TE, 1, 1, None), RESET_TO + r"2'h1;", r"\g<1>2'h3;", 0)   # CCC after reset
+    result = prove_harness("array-timing", timing_harness(TE, late, sampled_input=False))
     assert not result.proved and "CCC" in result.detail, result
 
 
@@ -96,9 +108,47 @@ def test_a_hand_edit_fails_the_proof(mutant):
     assert not result.proved and result.detail.startswith("clock "), result
 
 
-@pytest.mark.parametrize("preset", ["ml", "ml-msb"])
-def test_ml_tops_are_proved(preset):
+#: ML hand edits: name -> (preset, design, edit of the generated text at small clocks, ml_bits = 3)
+ML_MUTANTS = {
+    "count saturates one early (parallel)": ("ml", "parallel", lambda t: _replace(
+        t, "count == 3'h7", "count == 3'h6")),
+    "count saturates one early (stream)": ("ml", "stream", lambda t: _replace(
+        t, "count[p] != 3'd7", "count[p] != 3'd6")),
+    "count not cleared at readout (stream)": ("ml", "stream", lambda t: _replace(
+        t, "count[p] = last ? 3'd0 : count_next;", "count[p] = count_next;")),
+    "msb remainder keeps the wrong bits (parallel)": ("ml-msb", "parallel", lambda t: _replace(
+        t, "| count_next[2:1]", "| count_next[2:2]")),
+    "msb index off by one (parallel)": ("ml-msb", "parallel", lambda t: _replace(
+        t, "count_next[2] ? 2'h3", "count_next[2] ? 2'h2")),
+    "msb remainder dropped (parallel)": ("ml-msb", "parallel", lambda t: re.sub(
+        r"(else if \(last\) begin\n\s+\\\$\d+\s+= )\{ 1'h0, [^}]*\};", r"\g<1>3'h0;", t, count=1)),
+    "msb takes 2^word, not 2^(word - 1) (stream)": ("ml-msb", "stream", lambda t: _replace(
+        t, "<< (word - 2'd1)", "<< word")),
+    "count saturates one early (msb stream)": ("ml-msb", "stream", lambda t: _replace(
+        t, "count[p] != 3'd7", "count[p] != 3'd6")),
+}
+
+
+def _ml_harness(preset: str, design: str, text: str | None = None):
     config = small_clocks(load_config(preset))
-    for harness in (parallel_harness(config, 1, 2), stream_harness(config, 1, 2, 1)):
-        result = prove_harness(preset, harness)
-        assert result.proved, result
+    if design == "parallel":
+        return parallel_harness(config, 2, 3, text)
+    return stream_harness(config, 2, 3, 2, text)
+
+
+@pytest.mark.parametrize("preset", ["ml", "ml-msb"])
+@pytest.mark.parametrize("design", ["parallel", "stream"])
+def test_ml_tops_are_proved(preset, design):
+    result = prove_harness(preset, _ml_harness(preset, design))
+    assert result.proved and result.method.startswith("unbounded"), result
+
+
+@pytest.mark.parametrize("mutant", list(ML_MUTANTS))
+def test_an_ml_hand_edit_fails_the_proof(mutant):
+    preset, design, edit = ML_MUTANTS[mutant]
+    config = small_clocks(load_config(preset))
+    text = design_text(config, 2, 3, None if design == "parallel" else 2)
+    edited = edit(text)
+    assert edited != text, mutant
+    result = prove_harness(mutant, _ml_harness(preset, design, edited))
+    assert not result.proved and result.detail.startswith("clock "), result

@@ -54,9 +54,41 @@ def test_top_has_spec_ports_and_instances():
     assert re.search(r"module ml_pixel_array \(", text)
     assert "input  wire [134:0] charge" in text          # 3*5*9 bits
     assert "output wire [89:0] frame" in text            # 3*5*6 bits
-    assert text.count("module ml_pixel(") == 1 and text.count("module ml_readout_timing(") == 1
+    assert text.count("module ml_pixel(") == 1 and text.count("module ml_array_timing(") == 1
     assert "H = 3;" in text and "W = 5;" in text
     assert text.count("ml_pixel pixel (") == 1                # one instance line in a generate loop
+
+
+#: Flip-flop cell types after ``prep; opt`` (Yosys 0.23): a cone search stops at these.
+FLOPS = "$dff,$dffe,$sdff,$sdffe,$sdffce,$adff,$adffe,$dffsr,$dffsre,$aldff,$aldffe"
+
+
+def _cells_before_outputs(text: str, top: str, tmp_path) -> tuple[int, int]:
+    """Yosys (``prep -flatten; opt``): (cells in the input cone of ``frame`` and ``frame_valid``
+    stopped at flip-flops, i.e. logic between a register and an output; cells one step
+    before the outputs, their drivers)."""
+    (tmp_path / "top.v").write_text(text)
+    outputs = "o:frame o:frame_valid %u"
+    script = (f"read_verilog top.v; prep -flatten -top {top}; opt; "
+              f"tee -o logic.txt stat {outputs} %ci*:-{FLOPS}; tee -o drivers.txt stat {outputs} %ci2")
+    subprocess.run(["yosys", "-q", "-p", script], cwd=tmp_path, capture_output=True, text=True, check=True)
+    counts = [int(re.search(r"Number of cells:\s+(\d+)", (tmp_path / f).read_text()).group(1))
+              for f in ("logic.txt", "drivers.txt")]
+    return counts[0], counts[1]
+
+
+@pytest.mark.skipif(shutil.which("yosys") is None, reason="yosys not installed")
+@pytest.mark.parametrize("preset", ["te", "ml", "ml-msb"])
+def test_parallel_outputs_come_straight_from_flip_flops(preset, tmp_path):
+    """frame is the pixels' word registers, frame_valid the timing block's register (issue 26)."""
+    from tespike.golden.config import load_config
+    config = load_config(preset)
+    text = array_verilog(config, 2, 3)
+    top = f"{config.mode}_pixel_array"
+    logic, drivers = _cells_before_outputs(text, top, tmp_path)
+    assert logic == 0 and drivers > 0, (logic, drivers)
+    late = text.replace(".frame_valid(frame_valid));", ".frame_valid());\n  assign frame_valid = last;")
+    assert late != text and _cells_before_outputs(late, top, tmp_path)[0] > 0   # last's gates are seen
 
 
 def test_top_text_does_not_grow_with_the_array():

@@ -4,7 +4,8 @@ pixel rule against that pixel, and every generated Verilog top against a SPEC re
 HELP = ("prove the pixel equal to SPEC section 3's rule (yosys-smtbmc k-induction), the streaming "
         "Verilog top's pixel rule equivalent to it (Yosys sat), and every generated Verilog top "
         "(timing block, parallel and streaming tops, read from the text `tespike verilog` writes) "
-        "equal to a SPEC reference with reset free on every clock (ABC dprove, else BMC)")
+        "equal to a SPEC reference with reset free on every clock (ABC scorr + pdr or dprove, else BMC); "
+        "independent proofs run in --workers processes")
 
 PARTS = ("pixel", "tops")
 
@@ -22,11 +23,13 @@ def add_arguments(parser):
     parser.add_argument("--solver", default="z3", help="SMT solver for yosys-smtbmc (default z3)")
     parser.add_argument("--sizes", default="1x1,2x3,3x4", metavar="HxW,...",
                         help="array sizes of the tops at small clocks (b1 = b2 = 2, L = 12; default 1x1,2x3,3x4)")
-    parser.add_argument("--config-sizes", default="none", metavar="HxW,...",
-                        help="array sizes of the tops at each configuration's own clocks (default none: "
-                             "only its timing block; the presets' L = 240 makes even 1x1 take minutes)")
+    parser.add_argument("--config-sizes", default="1x1", metavar="HxW,...",
+                        help="array sizes of the tops at each configuration's own clocks and widths, beside "
+                             "its timing block (default 1x1; 'none': the timing block only)")
     parser.add_argument("--top-timeout", type=float, default=300.0, metavar="S",
                         help="seconds each top property may take (default 300)")
+    parser.add_argument("--workers", type=int, default=2,
+                        help="proofs run at once, each in its own process (default 2; 1: one after another)")
     parser.add_argument("--traces", metavar="DIR", default="tespike-prove-traces",
                         help="folder for counterexample VCDs of failed pixel properties "
                              "(default ./tespike-prove-traces; made only on a failure)")
@@ -67,38 +70,63 @@ def parse_sizes(flag: str, text: str) -> list[tuple[int, int]]:
     return sizes
 
 
-def _prove_pixel(name, config, args, traces, emit) -> tuple[int, int]:
+def _tasks(configs, args, sizes, config_sizes):
+    """Every proof of the run, in the order its lines are printed: ``("pixel", name, config, prop)``
+    and ``("top", label, config, prop, sizes)``; each is rebuilt from these values where it runs."""
+    from tespike.cosim.formal import properties
+    from tespike.cosim.formal.tops import small_clocks, top_properties
+
+    for name, config in configs.items():
+        if args.only != "tops":
+            for prop in properties(config):
+                yield ("pixel", name, config, prop)
+        if args.only != "pixel" and ":" not in name:      # the corners are pixel-only
+            for label, c, at in ((name, config, config_sizes), (f"{name}-small", small_clocks(config), sizes)):
+                for prop in top_properties(c, at):          # the timing block at least
+                    yield ("top", label, c, prop, at)
+
+
+def run_task(task, depth: int, solver: str, traces, top_timeout: float) -> tuple[bool, str]:
+    """Prove one task of :func:`_tasks`: ``(proved, the line that reports it)``."""
     from tespike.cosim.formal import properties, prove
 
-    count = failed = 0
-    for prop, build in properties(config).items():
-        result = prove(f"{name.replace(':', '-')}-{prop}", build(), depth=args.depth,
-                       solver=args.solver, trace_dir=traces)
-        method = "SAT (combinational)" if prop == "stream-pixel-rule" else f"k-induction depth {args.depth}"
-        count += 1
+    if task[0] == "pixel":
+        _, name, config, prop = task
+        result = prove(f"{name.replace(':', '-')}-{prop}", properties(config)[prop](), depth=depth,
+                       solver=solver, trace_dir=traces)
+        method = "SAT (combinational)" if prop == "stream-pixel-rule" else f"k-induction depth {depth}"
         if result.proved:
-            emit(f"{name} {prop}: proved, {method} ({result.seconds:.1f} s)")
-        else:
-            failed += 1
-            where = f"; counterexample {result.trace}" if result.trace else ""
-            emit(f"{name} {prop}: FAILED, {method}, in the {result.detail}{where}", always=True)
-    return count, failed
-
-
-def _prove_tops(name, config, sizes, args, emit) -> tuple[int, int]:
+            return True, f"{name} {prop}: proved, {method} ({result.seconds:.1f} s)"
+        where = f"; counterexample {result.trace}" if result.trace else ""
+        return False, f"{name} {prop}: FAILED, {method}, in the {result.detail}{where}"
     from tespike.cosim.formal.abc import prove_harness
     from tespike.cosim.formal.tops import top_properties
 
-    count = failed = 0
-    for prop, build in top_properties(config, sizes).items():
-        result = prove_harness(f"{name} {prop}", build(), timeout=args.top_timeout)
-        count += 1
-        if result.proved:
-            emit(f"{name} {prop}: proved, {result.method} ({result.seconds:.1f} s)")
-        else:
-            failed += 1
-            emit(f"{name} {prop}: FAILED, {result.method}, {result.detail} ({result.seconds:.1f} s)", always=True)
-    return count, failed
+    _, label, config, prop, sizes = task
+    result = prove_harness(f"{label} {prop}", top_properties(config, sizes)[prop](), timeout=top_timeout)
+    if result.proved:
+        return True, f"{label} {prop}: proved, {result.method} ({result.seconds:.1f} s)"
+    return False, f"{label} {prop}: FAILED, {result.method}, {result.detail} ({result.seconds:.1f} s)"
+
+
+def _results(tasks, workers: int, settings: tuple):
+    """``run_task`` of each task, in order; up to ``workers`` at once, each in a forked process
+    (every proof is its own Yosys/ABC/z3 run, independent of the others; fork keeps the
+    parent's modules as they are, patched ones included)."""
+    if workers == 1:
+        for task in tasks:
+            yield run_task(task, *settings)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"))
+    try:
+        futures = [pool.submit(run_task, task, *settings) for task in tasks]
+        for future in futures:
+            yield future.result()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def run(args) -> int:
@@ -106,34 +134,29 @@ def run(args) -> int:
     from pathlib import Path
 
     from tespike.cosim.formal import require_tools
-    from tespike.cosim.formal.tops import small_clocks
     from tespike.golden.errors import InputError
+
+    from .common import check_workers_argument
 
     if args.depth < 1:
         raise InputError(f"--depth {args.depth} must be >= 1")
     if not args.top_timeout > 0:
         raise InputError(f"--top-timeout {args.top_timeout} must be > 0")
+    check_workers_argument(args.workers)
     sizes = parse_sizes("--sizes", args.sizes)
     config_sizes = parse_sizes("--config-sizes", args.config_sizes)
     require_tools(args.solver)
     configs = targets(args.config, args.corners)
-    traces = Path(args.traces)
     start = time.perf_counter()
-
-    def emit(line: str, always: bool = False) -> None:
-        if always or not args.quiet:
-            print(line, flush=True)
-
+    tasks = list(_tasks(configs, args, sizes, config_sizes))
     count = failed = 0
-    for name, config in configs.items():
-        if args.only != "tops":
-            done = _prove_pixel(name, config, args, traces, emit)
-            count, failed = count + done[0], failed + done[1]
-        if args.only != "pixel" and ":" not in name:      # the corners are pixel-only
-            for label, c, at in ((name, config, config_sizes), (f"{name}-small", small_clocks(config), sizes)):
-                done = _prove_tops(label, c, at, args, emit)      # the timing block at least
-                count, failed = count + done[0], failed + done[1]
+    for proved, line in _results(tasks, args.workers, (args.depth, args.solver, Path(args.traces),
+                                                        args.top_timeout)):
+        count += 1
+        failed += not proved
+        if not proved or not args.quiet:
+            print(line, flush=True)
     if failed or not args.quiet:
         print(f"prove: {count - failed} of {count} properties proved, {len(configs)} configuration(s), "
-              f"{time.perf_counter() - start:.1f} s", flush=True)
+              f"{args.workers} worker(s), {time.perf_counter() - start:.1f} s", flush=True)
     return 1 if failed else 0

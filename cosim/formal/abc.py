@@ -5,15 +5,27 @@ memories to registers, undefined bits made free inputs, ``techmap``, ``aigmap``)
 AIGER file whose bad-state outputs are the harness's assertions. ABC (``yosys-abc``, shipped
 with Yosys) then runs:
 
-* ``dprove``: sequential equivalence by signal correspondence (registers of the design
-  found equal to the reference's are proved so by k-induction) and interpolation. Its
-  "equivalent" is a proof for every input sequence of any length, from the initial state
-  (``method`` ``unbounded``). This is what made the tops provable at all: yosys-smtbmc with
-  z3 4.8 and ABC's plain BMC did not finish the first readout of a 2 x 3 array (92,000
-  conflicts at frame 12), because an unrolled equivalence of two different structures gives a
-  SAT solver no internal match to lean on; ``dprove`` finds the match.
-* where ``dprove`` gives up (its frame or time limit), ``bmc3 -F bound``: every input
-  sequence of ``bound`` clocks (``method`` ``BMC <bound>``).
+* ``scorr; pdr``: signal correspondence (registers and nodes of the design proved equal to
+  the reference's by k-induction from the initial state, then merged), then property-directed
+  reachability (IC3) on what is left. A pass is a proof for every input sequence of any
+  length from the initial state (``method`` ``unbounded (scorr + pdr)``). This is what proves
+  the ML tops: ``dprove`` alone stalled on them (the ML count 1 x 1 top at small clocks, 28
+  registers and 210 AND gates, was undecided after 30 s in ``dprove``'s first reduction, and the 2 x 3
+  top then needed more than 90 s of BMC), while after ``scorr`` nothing of the ML miter is
+  left for ``pdr`` (0.01 s), and the TE tops at small clocks take 0.1-4 s.
+* where that does not finish (:data:`PDR_SECONDS`), ``scorr; dprove``: the same
+  correspondence, then ``dprove``'s retiming, induction and interpolation
+  (``unbounded (scorr + dprove)``). It proves the TE streaming tops at the presets' own
+  clocks (L = 240), where ``pdr`` does not finish in 120 s (the reference clears ``m`` at
+  readout and the design keeps it, an equality that holds only while the flag is set, which
+  signal correspondence cannot state and IC3 must learn over 240-clock intervals; the
+  registered parallel top at those clocks ``pdr`` proves in about 1.5 s).
+  Why not yosys-smtbmc and z3 here: z3 4.8 and ABC's plain BMC did not finish the first
+  readout of a 2 x 3 array (92,000 conflicts at frame 12), because an unrolled equivalence
+  of two different structures gives a SAT solver no internal match to lean on; signal
+  correspondence finds the match.
+* where neither finishes, ``bmc3 -F bound``: every input sequence of ``bound`` clocks
+  (``method`` ``BMC <bound>``, at least three readout intervals and the drain).
 
 A failed assertion is named by proving each assertion alone up to the failing frame
 (:func:`prove_harness`); the verdict lines of ABC are kept in ``detail``.
@@ -36,9 +48,16 @@ TO_AIGER = ("prep -flatten -top proof_top; memory_map; opt -fast; "
             "async2sync; dffunmap; aigmap; opt_clean")
 
 
-#: Seconds ``dprove`` gets before the bounded check takes over (it proves most tops in a few
-#: seconds; the ones it does not finish, it rarely finishes at all).
-DPROVE_SECONDS = 30.0
+#: Seconds ``scorr; pdr`` gets (every top at small clocks took under 5 s, the ML tops at the
+#: presets' own clocks under 1 s; the TE streaming tops at their own clocks did not finish in 120 s).
+PDR_SECONDS = 20.0
+#: Seconds ``scorr; dprove`` gets before the bounded check takes over (the TE 1 x 1 streaming
+#: tops at the presets' own clocks took 12-41 s in it on 2 loaded cores).
+DPROVE_SECONDS = 150.0
+
+#: The unbounded attempts in order: (method, ABC commands after ``strash``, seconds at most).
+UNBOUNDED = (("unbounded (scorr + pdr)", "scorr; pdr", PDR_SECONDS),
+             ("unbounded (scorr + dprove)", "scorr; dprove", DPROVE_SECONDS))
 
 
 @dataclass
@@ -46,7 +65,7 @@ class TopResult:
     name: str
     proved: bool
     seconds: float
-    method: str          # "unbounded (dprove)", "BMC <n>", or what was tried on a failure
+    method: str          # "unbounded (scorr + pdr)", "unbounded (scorr + dprove)", "BMC <n>"
     detail: str = ""     # failure: frame and assertion; undecided: why
 
 
@@ -95,18 +114,27 @@ def _bmc_passed(log: str, bound: int) -> bool:
 
 
 def prove_harness(name: str, harness: Harness, *, timeout: float = 300.0) -> TopResult:
-    """Prove one harness: ``dprove`` (unbounded), else BMC to the harness's bound."""
+    """Prove one harness: the :data:`UNBOUNDED` attempts in order, else BMC to the harness's bound,
+    all within ``timeout`` seconds."""
     start = time.perf_counter()
+
+    def left() -> float:
+        return timeout - (time.perf_counter() - start)
+
     with tempfile.TemporaryDirectory(prefix="tespike-prove-") as tmp:
         work = Path(tmp)
         aig = _aiger(harness, work, "top")
-        log, finished = _abc(aig, "dprove", min(DPROVE_SECONDS, timeout))
-        verdict, frame = _verdict(log) if finished else ("undecided", None)
-        method = "unbounded (dprove)"
+        verdict, frame = "undecided", None
+        for method, commands, seconds in UNBOUNDED:
+            if left() <= 1.0:
+                break
+            log, finished = _abc(aig, commands, min(seconds, left()))
+            verdict, frame = _verdict(log) if finished else ("undecided", None)
+            if verdict != "undecided":
+                break
         if verdict == "undecided":
             method = f"BMC {harness.steps}"
-            left = max(10.0, timeout - (time.perf_counter() - start))
-            log, finished = _abc(aig, f"bmc3 -F {harness.steps}", left)
+            log, finished = _abc(aig, f"bmc3 -F {harness.steps}", max(10.0, left()))
             found = _FAILED.search(log)
             if found:
                 verdict, frame = "failed", int(found.group(2))
@@ -114,7 +142,8 @@ def prove_harness(name: str, harness: Harness, *, timeout: float = 300.0) -> Top
                 verdict = "proved"
             else:
                 return TopResult(name, False, time.perf_counter() - start, method,
-                                 f"undecided: neither dprove nor BMC {harness.steps} finished in {timeout:.0f} s")
+                                 f"undecided: neither an unbounded proof nor BMC {harness.steps} "
+                                 f"finished in {timeout:.0f} s")
         if verdict == "proved":
             return TopResult(name, True, time.perf_counter() - start, method)
         which = _name_failure(harness, work, frame)
@@ -123,7 +152,9 @@ def prove_harness(name: str, harness: Harness, *, timeout: float = 300.0) -> Top
 
 
 def _name_failure(harness: Harness, work: Path, frame: int) -> str:
-    """The message of the first assertion that fails alone within ``frame`` + 1 clocks."""
+    """The message of the first assertion (in the harness's order) that fails alone: by
+    ``scorr; pdr`` (a few seconds where BMC of an equivalence to the failing clock takes tens),
+    else by BMC within ``frame`` + 1 clocks."""
     lines = harness.text.splitlines()
     for number, message in sorted(harness.messages.items()):
         alone = [line if k + 1 == number or k + 1 not in harness.messages else "" for k, line in enumerate(lines)]
@@ -132,7 +163,11 @@ def _name_failure(harness: Harness, work: Path, frame: int) -> str:
             aig = _aiger(single, work, f"alone{number}")
         except AbcError:
             continue
-        log, _ = _abc(aig, f"bmc3 -F {frame + 1}", 60)
-        if _FAILED.search(log):
-            return message
+        for commands, seconds in (("scorr; pdr", PDR_SECONDS), (f"bmc3 -F {frame + 1}", 60)):
+            log, finished = _abc(aig, commands, seconds)
+            verdict = _verdict(log)[0] if finished else "undecided"
+            if verdict == "failed":
+                return message
+            if verdict == "proved" and commands.endswith("pdr"):
+                break                      # holds for every input sequence: not this one
     return "an assertion (not named: none fails alone)"

@@ -1,8 +1,7 @@
 """Proofs of the generated Verilog tops, read from the very text ``tespike verilog`` writes.
 
 Each property is a Verilog harness beside the generated text (:func:`design_text`, the
-same generator calls as ``tespike verilog``), proved by ``yosys-smtbmc``
-(:mod:`tespike.cosim.formal.solver`). Only the tops' ports and the timing block's ports are used,
+same generator calls as ``tespike verilog``), proved by ABC (:mod:`tespike.cosim.formal.abc`). Only the tops' ports and the timing block's ports are used,
 never an internal name, so the proofs hold whatever structure produces those ports.
 
 * ``parallel-equiv`` (``<mode>_pixel_array``): ``frame_valid`` equals the SPEC reference's
@@ -16,17 +15,24 @@ never an internal name, so the proofs hold whatever structure produces those por
   word leaves twice), each beat the next ``N`` words in raster order (0 past the last
   pixel), ``out_first`` with beat 0 only, no beat of interval k + 1 before the last of k,
   the last beat sampled within 2L clocks of the interval's last clock.
-* ``timing`` (``<mode>_readout_timing``, the block every top holds once): its reset state
-  and phase: in the clock after the edge that samples ``e[t]`` (t = 0 the first edge with
-  ``rst`` low), CCC = j + 1 (j = (t mod L) div F), ``last`` iff t mod L = L - 1,
-  ``frame_valid`` = ``last`` except in the clock after a reset (t = -1: CCC alpha,
-  ``last`` high, ``frame_valid`` low). Proved by k-induction (depth L + 2: L clocks of
-  outputs pin the phase), so it holds for every input sequence of any length.
+* ``timing`` (``<mode>_readout_timing``, the streaming top's block, behind its input
+  register): its reset state and phase: in the clock after the edge that samples ``e[t]``
+  (t = 0 the first edge with ``rst`` low), CCC = j + 1 (j = (t mod L) div F), ``last`` iff
+  t mod L = L - 1, ``frame_valid`` = ``last`` except in the clock after a reset (t = -1:
+  CCC alpha, ``last`` high, ``frame_valid`` low).
+* ``array-timing`` (``<mode>_array_timing``, the parallel top's block, counting the clock
+  on the port): while the port carries ``e[t]``, CCC = j + 1 and ``last`` iff
+  t mod L = L - 1; ``frame_valid`` is ``last`` of the clock before, low in the clock after
+  a reset (which puts t = 0 on the port).
+  Both by k-induction (depth L + 2: L clocks of outputs pin the phase), so they hold for
+  every input sequence of any length.
 
-The two equivalences are bounded model checks from power-up (the design's initial values;
-the reference powers up in its reset state): every input sequence of ``bound`` clocks, at
-least three readout intervals and the last interval's beats (:func:`bmc_bound`). They are
-not inductive without naming the design's internal registers, which these proofs avoid.
+Every harness starts from power-up (the design's initial values; the reference powers up
+in its reset state) and is proved for every input sequence of any length where ABC's
+unbounded engines finish (all default tops do), else for every sequence of ``bound`` clocks:
+at least three readout intervals and the last interval's beats (:func:`bmc_bound`). The
+harnesses name no internal register of the design; the unbounded engines find the match
+between the design's registers and the reference's themselves (signal correspondence).
 """
 
 from __future__ import annotations
@@ -53,9 +59,10 @@ def top_name(config: SensorConfig, lanes: int | None) -> str:
     return f"{config.mode}_pixel_array" + ("" if lanes is None else "_stream")
 
 
-def timing_name(config: SensorConfig) -> str:
-    """The timing block's module name in the generated text."""
-    return f"{config.mode}_readout_timing"
+def timing_name(config: SensorConfig, sampled_input: bool = True) -> str:
+    """The timing block's module name in the generated text: ``<mode>_readout_timing`` (the
+    streaming top's, behind its input register) or ``<mode>_array_timing`` (the parallel top's)."""
+    return f"{config.mode}_{'readout' if sampled_input else 'array'}_timing"
 
 
 def bmc_bound(config: SensorConfig, height: int, width: int, lanes: int | None, intervals: int = 3) -> int:
@@ -172,33 +179,45 @@ def stream_harness(config: SensorConfig, height: int, width: int, lanes: int, de
     return Harness(text, messages, "bmc", bound or bmc_bound(c, height, width, n))
 
 
-def timing_harness(config: SensorConfig, design: str | None = None, depth: int | None = None) -> Harness:
-    """``timing``: the timing block's reset state and phase (see the module docstring), by
-    k-induction."""
+def timing_harness(config: SensorConfig, design: str | None = None, depth: int | None = None,
+                   sampled_input: bool = True) -> Harness:
+    """``timing``: a timing block's reset state and phase (see the module docstring), by
+    k-induction. ``sampled_input``: the streaming top's block (read from its text), whose
+    counters show the clock the input register holds; else the parallel top's
+    (``array-timing``), whose counters show the clock on the port (clock 0 after a reset) and
+    whose ``frame_valid`` is ``last`` one edge later, never in the clock after a reset."""
     c = config.check()
     F, alpha, L = c.clocks_per_tick, c.alpha, c.clocks_per_readout
-    design = design_text(c, 1, 1, None) if design is None else design
+    if design is None:
+        design = design_text(c, 1, 1, 1 if sampled_input else None)
     fb, jb = max(1, (F - 1).bit_length()), max(1, (alpha - 1).bit_length())
     ccc = f"  wire [{c.b2 - 1}:0] ccc;\n" if c.is_te else ""
     pin = ".ccc(ccc), " if c.is_te else ""
+    ph0, jj0 = (F - 1, alpha - 1) if sampled_input else (0, 0)
     head = (f"module proof_top (input wire clk, input wire rst);\n{ccc}  wire last, frame_valid;\n"
-            f"  {timing_name(c)} dut (.clk(clk), .rst(rst), {pin}.last(last), .frame_valid(frame_valid));\n"
-            f"  // the pixel clock t whose charge the last edge sampled: ph inside S_h, jj inside S_r;\n"
-            f"  // after a reset t = -1 (the interval's last clock) and no frame\n"
-            f"  reg [{fb - 1}:0] ph = {F - 1};\n  reg [{jb - 1}:0] jj = {alpha - 1};\n  reg primed = 0;\n"
+            f"  {timing_name(c, sampled_input)} dut (.clk(clk), .rst(rst), {pin}.last(last), "
+            f".frame_valid(frame_valid));\n"
+            f"  // the pixel clock t the counters describe: ph inside S_h, jj inside S_r; after a reset\n"
+            f"  // t = -1 (sampled input: the interval's last clock, no frame) or t = 0 (at the port)\n"
+            f"  reg [{fb - 1}:0] ph = {ph0};\n  reg [{jb - 1}:0] jj = {jj0};\n  reg primed = 0;\n"
+            f"  reg shown = 0;  // the reference's frame_valid at the port: last one edge later\n"
+            f"  wire ref_last = (ph == {F - 1}) && (jj == {alpha - 1});\n"
             f"  always @(posedge clk)\n"
-            f"    if (rst) begin ph <= {F - 1}; jj <= {alpha - 1}; primed <= 0; end\n"
+            f"    if (rst) begin ph <= {ph0}; jj <= {jj0}; primed <= 0; shown <= 0; end\n"
             f"    else begin\n"
             f"      ph <= (ph == {F - 1}) ? 0 : ph + 1'b1;\n"
             f"      if (ph == {F - 1}) jj <= (jj == {alpha - 1}) ? 0 : jj + 1'b1;\n"
             f"      primed <= 1;\n"
-            f"    end\n"
-            f"  wire ref_last = (ph == {F - 1}) && (jj == {alpha - 1});\n")
+            f"      shown <= ref_last;\n"
+            f"    end\n")
     a = _Asserts()
     if c.is_te:
-        a.add(f"ccc == jj + {c.b2}'d1", "CCC = j + 1 during S_h cycle j (alpha after a reset)")
-    a.add("last == ref_last", "last on clock L - 1 of each interval (and in the clock after a reset)")
-    a.add("frame_valid == (ref_last && primed)", "frame_valid with last, never in the clock after a reset")
+        a.add(f"ccc == jj + {c.b2}'d1", "CCC = j + 1 during S_h cycle j (after a reset: alpha, or 1 at the port)")
+    a.add("last == ref_last", "last on clock L - 1 of each interval")
+    if sampled_input:
+        a.add("frame_valid == (ref_last && primed)", "frame_valid with last, never in the clock after a reset")
+    else:
+        a.add("frame_valid == shown", "frame_valid one clock after last, never in the clock after a reset")
     text, messages = _assemble([design], head, a)
     return Harness(text, messages, "induction", depth or L + 2)
 
@@ -237,9 +256,10 @@ def lane_counts(config: SensorConfig, height: int, width: int) -> list[int]:
 
 
 def top_properties(config: SensorConfig, sizes) -> dict[str, object]:
-    """``{label: harness builder}`` of every generated top of ``config`` at ``sizes``: the timing
-    block once, the parallel top and the streaming top at each lane count of each size."""
-    props = {"timing": lambda: timing_harness(config)}
+    """``{label: harness builder}`` of every generated top of ``config`` at ``sizes``: the two timing
+    blocks once, the parallel top and the streaming top at each lane count of each size."""
+    props = {"timing": lambda: timing_harness(config),
+             "array-timing": lambda: timing_harness(config, sampled_input=False)}
     for h, w in sizes:
         props[f"parallel {h}x{w}"] = lambda h=h, w=w: parallel_harness(config, h, w)
         for n in lane_counts(config, h, w):
