@@ -2,7 +2,7 @@
 
 On held-out scenes recorded by a noisy TE sensor (the paper's eq. 12 or eq. 13 dark
 current, or a golden.noise JSON), calibrated from its own dark and flat streams as
-`tespike evaluate` does, every learned method with TE weights is scored (PSNR-mu)
+`tespike evaluate` does, TFI and every learned method with TE weights is scored (PSNR-mu)
 three ways: with shot noise alone; its output corrected, ``max(0, (x - dark) / gain)``
 on the image; and (the product's rule) its input corrected, the same on every
 readout's decoded light before the model sees it. TFP, corrected at its output
@@ -54,7 +54,7 @@ def main() -> int:
     noise = (SensorNoise(dark_current=args.dark, dark_level=args.level) if args.dark in ("eq12", "eq13")
              else load_noise(args.dark))
     sensor = Sensor(noise, args.sensor_seed)
-    methods = ["tfp"] + [m for m in available_methods([config]) if m in LEARNED]
+    methods = ["tfp", "tfi"] + [m for m in available_methods([config]) if m in LEARNED]
     rows = {m: {"clean": [], "output": [], "input": [], "seconds": 0.0} for m in methods}
     sequences = sequence_set("heldout", args.frames, args.height, args.width)[:args.sequences]
     for index, (name, light) in enumerate(sequences):

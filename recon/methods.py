@@ -38,10 +38,18 @@ def _tfp_block(words: torch.Tensor, config: SensorConfig, settings: ReconSetting
     return tfp(light, settings.radius)
 
 
-def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings) -> torch.Tensor:
+def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings,
+               correction: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
+    """TFI of a (K, P) block; ``correction`` (dark, 1 / gain) of its P pixels: each readout's light
+    is corrected first, ``max(0, (x - dark) / gain)``, and a readout spikes where light is left, so
+    the interval is that of the pixel's own light, not of its dark current."""
     light = decode_light(words, config, estimator=settings.estimator, device=settings.device,
                          dtype=settings.torch_dtype)
-    return tfi(light, words != 0, config.spike_light, settings.radius, settings.search)
+    if correction is None:
+        return tfi(light, words != 0, config.spike_light, settings.radius, settings.search)
+    dark, inverse_gain = (c.to(light.device, light.dtype) for c in correction)
+    light = torch.clamp_min_((light - dark) * inverse_gain, 0)
+    return tfi(light, light > 0, config.spike_light, settings.radius, settings.search)
 
 
 def _learned_frames(name: str) -> Callable:
@@ -69,6 +77,7 @@ class Method:
     block: Callable[[torch.Tensor, SensorConfig, ReconSettings], torch.Tensor] | None
     options: tuple[str, ...]        # ReconSettings fields the method uses
     frames: Callable | None = None
+    corrected_input: bool = False   # a calibration corrects its input (``block(..., correction)``), not its output
 
 
 #: name -> reconstruction method (not golden.fastsim's simulation methods). The learned
@@ -77,7 +86,7 @@ RECON_METHODS: dict[str, Method] = {
     "tfp": Method("tfp", "mean decoded light over the window (spike-firing rate)", _tfp_block,
                   ("window", "estimator", "chunk_elements", "device", "dtype")),
     "tfi": Method("tfi", "decoded spikes over the spike interval around each readout", _tfi_block,
-                  ("window", "estimator", "search", "chunk_elements", "device", "dtype")),
+                  ("window", "estimator", "search", "chunk_elements", "device", "dtype"), corrected_input=True),
     "spk2imgnet": Method("spk2imgnet", "Spk2ImgNet (Zhao et al. 2021, re-implemented), shipped weights",
                          None, ("device",), frames=_learned_frames("spk2imgnet")),
     "bsf": Method("bsf", "BSF (Zhao et al. 2024, re-implemented), shipped weights",
@@ -106,10 +115,11 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     learned method's weights file (None: the shipped ones; refused for TFP and TFI).
     ``calibration``: a :class:`tespike.recon.calibration.Calibration` of the sensor that recorded
     the stream; every method is then corrected for the pixels' dark rate and gain,
-    ``max(0, (x - dark) / gain)`` (:func:`tespike.recon.calibration.correct`): TFP and TFI at
-    their output (exact: both are linear in the decoded light they average), the learned
-    methods at their input, on the decoded light of every readout they see (measured better
-    by 1.2 to 6.9 dB PSNR-mu than correcting their output: docs/reconstruction.md "Calibration").
+    ``max(0, (x - dark) / gain)`` (:func:`tespike.recon.calibration.correct`): TFP at its output
+    (exact: it is linear in the decoded light it averages), TFI and the learned methods at their
+    input, on the decoded light of every readout (TFI's spike intervals then follow the pixel's
+    own light, not its dark current; measured better than an output correction for every one:
+    docs/reconstruction.md "Calibration").
     """
     if method not in RECON_METHODS:
         raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
@@ -139,14 +149,17 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
         return out
     if spec.frames is not None:             # a learned method: corrected at its input
         return spec.frames(words, config, settings, progress, out, weights, calibration)
+    if calibration is not None and spec.corrected_input:
+        return _reconstruct_raw(words, config, spec, settings, progress, out, calibration)
     if calibration is not None:
         from .calibration import correct
         return correct(_reconstruct_raw(words, config, spec, settings, progress, out), calibration)
     return _reconstruct_raw(words, config, spec, settings, progress, out)
 
 
-def _reconstruct_raw(words, config, spec, settings, progress, out) -> np.ndarray:
-    """A training-free method's own output into ``out`` (K, H, W), uncorrected."""
+def _reconstruct_raw(words, config, spec, settings, progress, out, calibration=None) -> np.ndarray:
+    """A training-free method's own output into ``out`` (K, H, W): uncorrected, or with ``calibration``
+    given to a method that corrects its input, corrected there."""
     method = spec.name
     K, H, W = out.shape
     flat = words.reshape(K, H * W)
@@ -159,7 +172,13 @@ def _reconstruct_raw(words, config, spec, settings, progress, out) -> np.ndarray
     with torch.inference_mode():
         for start in starts:
             block = as_word_tensor(flat[:, start:start + step], settings.device)
-            result = spec.block(block, config, settings)
+            if calibration is None:
+                result = spec.block(block, config, settings)
+            else:
+                pixels = slice(start, start + step)
+                result = spec.block(block, config, settings, (
+                    torch.as_tensor(calibration.dark.reshape(-1)[pixels]),
+                    torch.as_tensor(1.0 / calibration.gain.reshape(-1)[pixels])))
             out_flat[:, start:start + step] = result.to("cpu", torch.float32).numpy()
     return out
 

@@ -166,3 +166,24 @@ def test_learned_methods_are_corrected_at_their_input():
     assert np.allclose(ours, wrapped, rtol=1e-5, atol=1e-7)
     assert not np.allclose(ours, correct(reconstruct(words, config, "net"), c), rtol=1e-3, atol=1e-6)
     assert np.array_equal(reconstruct(words, config, "tfp", calibration=c), correct(reconstruct(words, config, "tfp"), c))
+
+
+def test_tfi_is_corrected_at_its_input():
+    """TFI with a calibration: every readout's light corrected, max(0, (x - dark) / gain), and its
+    spike intervals taken where light is left (the whole stream at once here, the product in
+    blocks of a few pixels); an output correction is a different estimate."""
+    import torch
+
+    from tespike.recon.stream import decode_light
+    from tespike.recon.tfi import tfi
+    config = SensorConfig()
+    dark_words, flat_words = _streams(config, 64)
+    c = estimate(dark_words, flat_words, config, 0.03)
+    light = np.random.default_rng(6).uniform(0, 0.05, (20, 6, 8))
+    words = simulate_scene(config, light, seed=8, sensor=SENSOR)
+    decoded = decode_light(torch.from_numpy(words.astype(np.int64)), config, dtype=torch.float32)
+    corrected = torch.clamp((decoded - torch.from_numpy(c.dark).float()) / torch.from_numpy(c.gain).float(), min=0)
+    expected = tfi(corrected, corrected > 0, config.spike_light, 4, "stream").numpy()
+    ours = reconstruct(words, config, "tfi", calibration=c, chunk_elements=20 * 5)
+    assert np.allclose(ours, expected, rtol=1e-5, atol=1e-8)
+    assert (corrected == 0).any() and not np.allclose(ours, correct(reconstruct(words, config, "tfi"), c))
