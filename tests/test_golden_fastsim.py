@@ -660,3 +660,21 @@ def test_window_groups_cover_each_pixel_once_at_a_length_it_allows():
                 assert (length - own).sum() <= window.MERGE_DRAWS
         if n > window.SMALL_GROUP:
             assert len(blocks) < np.unique(size).size or n >= 40000
+
+
+def test_clock_draws_take_tables_only_where_they_pay():
+    """Per-clock draws use the table sampler only with TABLE_DRAWS draws per distinct
+    integer mean; a call of a few hundred pixels with as many means (a wide-range
+    scene's windows) is numpy's own draws, bit for bit, and builds no table."""
+    config = SensorConfig.preset("te")
+    spread = np.random.default_rng(0).uniform(70.0, 160.0, 600)    # ~90 means, 8 clocks each
+    sim = SceneSimulator(config, (1, spread.size), rng=3)
+    assert not clock.tabled_call(spread, 8)
+    got = clock.clock_draws(sim, spread, 8)
+    assert np.array_equal(got, np.random.default_rng(3).poisson(spread[None, :], size=(8, spread.size)))
+    assert sim.sampler is None
+    few = np.repeat([70.5, 71.5], 300)                              # two means, 8 x 300 draws each
+    assert clock.tabled_call(few, 8) and not clock.tabled_call(few[:2], 8)
+    drawn = clock.clock_draws(sim, few, 8)
+    assert sim.sampler is not None and drawn.shape == (8, few.size)
+    assert abs(drawn.mean() - 71.0) < 4 * np.sqrt(71.0 / drawn.size)

@@ -22,6 +22,11 @@ from .words import ml_words
 #: Per-clock draws of one call below which numpy's sampler is used (no table).
 SMALL_DRAW = 4096
 
+#: Per-clock draws per distinct integer mean below which a call keeps numpy's sampler
+#: (:func:`tabled_call`; measured best of 256, 1024 and 4096 on the dim interiors and
+#: the drifting log-uniform scene of docs/simulator.md).
+TABLE_DRAWS = 1024
+
 #: Pixel clocks x pixels of per-clock electrons held at once (bounds memory).
 CLOCK_CHUNK_ELEMENTS = 1 << 21
 
@@ -92,13 +97,24 @@ def clock_draws(sim, lam, clocks):
     sampler per draw; same law to float64 precision, tables cut where the
     tail is below the per-clock budget); ``method="per-clock"``, the
     reference the shortcuts are tested against, and ``clock_stimulus``
-    keep numpy's ``Generator.poisson``, as do calls of fewer than SMALL_DRAW
-    draws (a table costs about 0.25 ms to build, 10^4 draws' worth)."""
-    if sim.method == "per-clock" or lam.size * clocks < SMALL_DRAW:
+    keep numpy's ``Generator.poisson``, as do the calls :func:`tabled_call` declines."""
+    if sim.method == "per-clock" or not tabled_call(lam, clocks):
         return sim.rng.poisson(lam[None, :], size=(clocks, lam.size))
     if sim.sampler is None:
         sim.sampler = PoissonSampler(sim.budget)
     return sim.sampler.draw(sim.rng, lam, clocks=clocks)
+
+
+def tabled_call(lam, clocks) -> bool:
+    """Whether ``clocks`` per-clock draws of each mean in ``lam`` go to the table sampler:
+    at least SMALL_DRAW draws, and at least TABLE_DRAWS per distinct integer mean (a
+    table costs 0.15-0.7 ms to build and a call of the sampler a fixed 0.2 ms or so,
+    numpy's sampler 45-65 ns a draw at these means: the window paths of a wide-range
+    scene make calls of a few hundred pixels with as many distinct means, which numpy
+    draws for less). Decided from the means alone (never from the cache or a draw):
+    both samplers have the Poisson law, so the choice changes a seed's stream only."""
+    draws = lam.size * clocks
+    return draws >= SMALL_DRAW and draws >= TABLE_DRAWS * np.unique(lam.astype(np.int64)).size
 
 
 def walk_clocks(sim, sel, e, words):
