@@ -678,3 +678,36 @@ def test_clock_draws_take_tables_only_where_they_pay():
     drawn = clock.clock_draws(sim, few, 8)
     assert sim.sampler is not None and drawn.shape == (8, few.size)
     assert abs(drawn.mean() - 71.0) < 4 * np.sqrt(71.0 / drawn.size)
+
+
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_EDGE_CONFIGS, ids=str)
+def test_walk_from_a_head_state_equals_the_cycle_exact_model(config):
+    """The per-clock path from a state part-way through the interval (after a head:
+    ``run_clocks(..., start)``, which walks few pixels) gives the cycle-exact model's
+    words, charges and msb remainders on the same electrons: counters part-full, TE
+    overflows latched in the head or reached in the rest, backlogs and clipping."""
+    rng = np.random.default_rng(21)
+    theta, n, L = config.threshold, 400, config.clocks_per_readout
+    for h in sorted({min(8, L // 2), L // 2} - {0}):
+        lam = np.exp(rng.uniform(np.log(0.005), np.log(1.5), n)) * theta
+        lam[:150] = rng.uniform(0.9, 1.15, 150) * theta                 # backlogs, clipping
+        e = np.minimum(rng.poisson(lam[None, :], size=(L, n)), config.input_max).astype(np.int64)
+        acc0 = rng.integers(0, config.acc_max + 1, n)
+        sfc0 = rng.integers(0, config.ml_max + 1, n) if config.is_msb else np.zeros(n, np.int64)
+        array = PixelArray(config, (1, n))
+        array.state.acc[0], array.state.sfc[0] = acc0, sfc0
+        array.feed(e[:h].reshape(h, 1, n))
+        start = array.state.copy()
+        exact = array.feed(e[h:].reshape(L - h, 1, n))[0, 0]
+        sim = SceneSimulator(config, (1, n), rng=0)
+        sim.carried[:], sim.sfc[:] = acc0, sfc0
+        words = np.full(n, -1, np.int64)
+        clock.run_clocks(sim, np.arange(n), e[h:], words, start)
+        assert np.array_equal(words, exact), h
+        assert np.array_equal(sim.carried, array.state.acc[0])
+        if config.is_msb:
+            assert np.array_equal(sim.sfc, array.state.sfc[0])
+        if config.is_te:                                                # both overflow cases met
+            over = (words >> config.d) == 1
+            assert start.ovf[0].any() == (config.p_max <= h)
+            assert (over & ~start.ovf[0]).any() == (config.p_max <= L)
