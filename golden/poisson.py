@@ -314,15 +314,16 @@ class PoissonSampler:
 
     def _append(self, name: str, parts: list[np.ndarray]) -> np.ndarray:
         """The bank ``name`` (``_value``, ``_first``, ``_cdf`` or ``_kval``) with ``parts``
-        appended: a view of the filled start of a buffer whose capacity at least doubles
-        when it fills, so that building n tables one call at a time copies the bank
-        O(n) times in all rather than once per call (a whole-bank concatenation per
-        call cost more than the builds on scenes with many distinct means)."""
+        appended: a view of the filled start of a buffer whose capacity doubles when it
+        fills (up to ``max_cache_bytes``), so that tables built a few per call are
+        copied about twice each on average, not with the whole bank on every call
+        (that cost more than the builds on scenes with many distinct means)."""
         bank = getattr(self, name)
         used, add = bank.size, sum(p.size for p in parts)
         buffer = self._banks.get(name)
         if buffer is None or used + add > buffer.size:
-            grown = np.empty(max(2 * (used + add), 1024), bank.dtype)
+            cap = max(used + add, self.max_cache_bytes // bank.itemsize)   # no bank outgrows the cache
+            grown = np.empty(min(max(2 * (used + add), 1024), cap), bank.dtype)
             grown[:used] = bank
             buffer = self._banks[name] = grown
         end = used
