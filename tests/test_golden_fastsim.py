@@ -711,3 +711,78 @@ def test_walk_from_a_head_state_equals_the_cycle_exact_model(config):
             over = (words >> config.d) == 1
             assert start.ovf[0].any() == (config.p_max <= h)
             assert (over & ~start.ovf[0]).any() == (config.p_max <= L)
+
+
+@pytest.mark.parametrize("config", [c for c in EDGE_CONFIGS if c.is_te], ids=str)
+def test_sure_te_overflow_on_the_event_path_matches_per_clock(config):
+    """Light on the event path that surely overflows a TE pixel (``mean_overflow`` and
+    up, where the overflow electron's light-time is drawn first, then the electrons
+    after it): words (the overflow tick's law), decoded mean and the carried residual
+    have the per-clock law over readouts, from the carried charges they leave; just
+    below the level (the Beta draw) too, and in one pixel and one readout."""
+    L, theta = config.clocks_per_readout, config.threshold
+    probe = SceneSimulator(config, (1, 1), rng=0, total_pixel_readouts=3 * 6000)
+    low, high = probe.levels.mean_overflow, probe.levels.mean_event * L
+    if not low < high:
+        pytest.skip("no light both on the event path and surely overflowing")
+    means = np.array([low, np.sqrt(low * high), high, 0.8 * low])      # the last: below the level
+    pixels = 1500
+    light = np.repeat(means / 42000, pixels)[None, :]
+    fast = SceneSimulator(config, light.shape, rng=61, total_pixel_readouts=3 * light.size)
+    full = SceneSimulator(config, light.shape, rng=62, method="per-clock", total_pixel_readouts=3 * light.size)
+    a, b = [], []
+    for _ in range(3):
+        a.append(fast.readout(light)[0])
+        b.append(full.readout(light)[0])
+    assert fast.path_counts["event"] == 3 * light.size, fast.path_counts
+    a, b = np.array(a), np.array(b)
+    for i in range(len(means)):
+        part = slice(i * pixels, (i + 1) * pixels)
+        if i < 3:
+            assert ((a[:, part] >> config.d) == 1).all()                # overflowed, all of them
+        tvd = 0.5 * np.abs(_histogram(a[:, part], config) - _histogram(b[:, part], config)).sum()
+        da, db = (decode_spikes(w[:, part], config).mean(axis=0) for w in (a, b))
+        se = np.sqrt(da.var() / pixels + db.var() / pixels)
+        assert tvd < 0.05 and abs(da.mean() - db.mean()) <= 4 * se + 1e-12, (means[i], tvd, da.mean(), db.mean())
+        ha, hb = (np.bincount(s.acc[part], minlength=theta) / pixels for s in (fast, full))
+        width = max(1, theta // 8)
+        ha, hb = (np.add.reduceat(h, np.arange(0, theta, width)) for h in (ha, hb))
+        assert 0.5 * np.abs(ha - hb).sum() < 0.05, means[i]
+    one = SceneSimulator(config, (1, 1), rng=3)
+    word = one.readout(np.array([[means[0] / 42000]]))[0, 0]
+    assert (word >> config.d) == 1 and 0 <= one.acc[0] < theta
+
+
+def test_sure_te_overflow_puts_the_overflow_electron_first():
+    """The arithmetic of the sure-overflow draw on given random numbers: the overflow
+    electron (``2^b1 theta - acc`` after the sync) at light-time G is in clock
+    ``floor(L G / expected)``, and the charge left is that of ``2^b1 theta`` plus the
+    electrons drawn after it."""
+    from tespike.golden.fastsim import interval
+
+    class Given:                                   # a generator that returns chosen numbers
+        def __init__(self):
+            self.calls = []
+
+        def standard_gamma(self, shape):
+            self.calls.append("gamma")
+            return 0.25 * shape + 0.5
+
+        def poisson(self, mean):
+            self.calls.append("poisson")
+            return np.floor(mean).astype(np.int64)
+
+    config = SensorConfig()
+    theta, L, F = config.threshold, config.clocks_per_readout, config.clocks_per_tick
+    sim = SceneSimulator(config, (1, 3), rng=0)
+    mean = np.full(3, 1.1 * sim.levels.mean_overflow)
+    sim.carried[:] = [0, 17, theta - 1]
+    sim.rng = Given()
+    words = np.zeros(3, np.int64)
+    interval.event_path(sim, slice(None), mean, np.zeros(3, np.int64), words)
+    need = config.p_max * theta - np.array([0, 17, theta - 1])
+    g = 0.25 * need + 0.5
+    after = np.floor(mean - g).astype(np.int64)
+    assert sim.rng.calls == ["gamma", "poisson"]
+    assert np.array_equal(words, (1 << config.d) | ((g / mean * L).astype(np.int64) // F + 1))
+    assert np.array_equal(sim.carried, after % theta)
