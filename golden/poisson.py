@@ -273,7 +273,8 @@ class PoissonSampler:
         one mean as for hundreds, and a scene's means come a few new ones per call)."""
         new = gs[self._lo[gs] < 0]
         if new.size:
-            blocks = np.unique(new // SUPPORT_BLOCK) * SUPPORT_BLOCK
+            blocks = np.sort(new // SUPPORT_BLOCK)           # (np.unique would import numpy.ma)
+            blocks = blocks[np.concatenate(([True], blocks[1:] != blocks[:-1]))] * SUPPORT_BLOCK
             new = (blocks[:, None] + np.arange(SUPPORT_BLOCK)).reshape(-1)
             new = new[(new <= self.max_tabled) & (self._lo[np.minimum(new, self.max_tabled)] < 0)]
             lo, hi = support(new, self.log_tail)

@@ -786,3 +786,35 @@ def test_sure_te_overflow_puts_the_overflow_electron_first():
     assert sim.rng.calls == ["gamma", "poisson"]
     assert np.array_equal(words, (1 << config.d) | ((g / mean * L).astype(np.int64) // F + 1))
     assert np.array_equal(sim.carried, after % theta)
+
+
+def test_distinct_values_equal_numpys_unique():
+    """``tespike.golden.fastsim.distinct``: the sorted distinct values and their counts,
+    as ``np.unique`` gives them (which the simulator avoids: its first call imports
+    numpy.ma in every worker process)."""
+    from tespike.golden.fastsim.distinct import distinct, distinct_counts
+    rng = np.random.default_rng(8)
+    for values in (rng.integers(0, 9, 500), rng.uniform(0, 1, 7), np.zeros(0, np.int64), np.full(3, 4.0),
+                   rng.integers(0, 3, (4, 5))):
+        want, counts = np.unique(values, return_counts=True)
+        got, got_counts = distinct_counts(values)
+        assert np.array_equal(got, want) and np.array_equal(got_counts, counts)
+        assert np.array_equal(distinct(values), want)
+
+
+def test_a_simulation_does_not_import_numpy_ma():
+    """A scene through every path (window blocks of many lengths, heads with
+    different needs, table and numpy draws) never imports numpy.ma, which costs a
+    forked worker 10-40 ms of CPU (``np.unique``'s first call imports it)."""
+    import subprocess
+    import sys
+    code = ("import sys, numpy as np\n"
+            "from tespike.golden.config import SensorConfig\n"
+            "from tespike.golden.fastsim import simulate_scene\n"
+            "rng = np.random.default_rng(0)\n"
+            "scene = 10.0 ** rng.uniform(-4, 1, (2, 64, 320))\n"
+            "for mode in ('te', 'ml', 'ml-msb'):\n"
+            "    simulate_scene(SensorConfig.preset(mode), scene, seed=1)\n"
+            "print('numpy.ma' in sys.modules)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert run.stdout.strip() == "False", run.stdout + run.stderr

@@ -18,6 +18,7 @@ from ..light import deterministic_clock_electrons, log_poisson_tail_below
 from ..poisson import PoissonSampler
 from ..reference import PixelState
 from ..sensor import PixelArray
+from .distinct import distinct
 from .words import ml_words
 
 #: Per-clock draws of one call below which numpy's sampler is used (no table).
@@ -115,7 +116,7 @@ def tabled_call(lam, clocks) -> bool:
     draws for less). Decided from the means alone (never from the cache or a draw):
     both samplers have the Poisson law, so the choice changes a seed's stream only."""
     draws = lam.size * clocks
-    return draws >= SMALL_DRAW and draws >= TABLE_DRAWS * np.unique(lam.astype(np.int64)).size
+    return draws >= SMALL_DRAW and draws >= TABLE_DRAWS * distinct(lam.astype(np.int64)).size
 
 
 def walk_clocks(sim, sel, e, words, start=None):
