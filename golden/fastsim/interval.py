@@ -86,7 +86,8 @@ def event_path(sim, sel, expected, dark, words):
         sure_mean = mean[sure]
         reached = light_time < sure_mean               # surely (bound); else drawn as below
         sure, need, light_time, sure_mean = sure[reached], need[reached], light_time[reached], sure_mean[reached]
-        mean = mean.copy()
+        if isinstance(sel, slice):
+            mean = mean.copy()                          # (a view of expected)
         mean[sure] = sure_mean - light_time            # the electrons after it
     total = sim.rng.poisson(mean)
     if sim.dark_model:
@@ -100,12 +101,11 @@ def event_path(sim, sel, expected, dark, words):
         sim.carried[sel] = residual
         ml_words(sim, sel, spikes, words)
         return
+    if sure.size:                                      # their words now; not among the Beta draws
+        at = np.minimum((light_time / sure_mean * L).astype(np.int64), L - 1)
+        spikes[sure] = -1
     over = np.flatnonzero(spikes >= c.p_max)
     if sure.size:
-        first = np.zeros(spikes.size, bool)
-        first[sure] = True
-        over = over[~first[over]]
-        at = np.minimum((light_time / sure_mean * L).astype(np.int64), L - 1)
         spikes[sure] = (1 << c.d) | (at // c.clocks_per_tick + 1)
     if over.size:
         n = c.p_max * theta - acc0[over]               # electron that makes the 2^b1-th spike
