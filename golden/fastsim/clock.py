@@ -116,7 +116,15 @@ def tabled_call(lam, clocks) -> bool:
     draws for less). Decided from the means alone (never from the cache or a draw):
     both samplers have the Poisson law, so the choice changes a seed's stream only."""
     draws = lam.size * clocks
-    return draws >= SMALL_DRAW and draws >= TABLE_DRAWS * distinct(lam.astype(np.int64)).size
+    if draws < SMALL_DRAW:
+        return False
+    g = lam.astype(np.int64)
+    low, high = int(g.min()), int(g.max())
+    if (high - low + 1) * TABLE_DRAWS <= draws:         # few enough whatever they are
+        return True
+    # count the distinct means: one bincount over their range where it is short, else a sort
+    count = np.count_nonzero(np.bincount(g - low)) if high - low < 1 << 16 else distinct(g).size
+    return draws >= TABLE_DRAWS * count
 
 
 def walk_clocks(sim, sel, e, words, start=None):
