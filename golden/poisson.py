@@ -72,6 +72,9 @@ CHUNK = 1 << 16
 #: Guide bytes of the tables of one call above which columns are drawn sorted by mean.
 LOCAL_BYTES = 1 << 20
 
+#: Means whose table ranges (:func:`support`) are found together, in aligned blocks.
+SUPPORT_BLOCK = 256
+
 #: Largest mean ``Generator.poisson`` accepts (numpy's POISSON_LAM_MAX).
 LAM_MAX = float(np.iinfo(np.int64).max - np.sqrt(np.iinfo(np.int64).max) * 10)
 
@@ -243,6 +246,7 @@ class PoissonSampler:
         self._first = np.zeros(0, np.int32)       # per bucket: first candidate, index into _cdf
         self._kval = np.zeros(0, np.int64)         # per CDF entry: the draw it stands for
         self._cdf = np.zeros(0, np.int64)
+        self._banks = {}                           # the buffers the four banks above are views of
         self._work = np.zeros(0, np.int64)
         self._mask = np.zeros(0, bool)
         self.build_seconds = 0.0
@@ -264,9 +268,15 @@ class PoissonSampler:
                 "value": np.maximum(value, -1), "first": self._first[gb:gb + (1 << bits) + 1] - co}
 
     def _sizes(self, gs: np.ndarray) -> np.ndarray:
-        """Table bytes of the means gs (supports computed once per mean)."""
+        """Table bytes of the means gs (supports computed once per mean, for whole
+        blocks of SUPPORT_BLOCK means at a time: a bisection costs about as much for
+        one mean as for hundreds, and a scene's means come a few new ones per call)."""
         new = gs[self._lo[gs] < 0]
         if new.size:
+            blocks = np.sort(new // SUPPORT_BLOCK)           # (np.unique would import numpy.ma)
+            blocks = blocks[np.concatenate(([True], blocks[1:] != blocks[:-1]))] * SUPPORT_BLOCK
+            new = (blocks[:, None] + np.arange(SUPPORT_BLOCK)).reshape(-1)
+            new = new[(new <= self.max_tabled) & (self._lo[np.minimum(new, self.max_tabled)] < 0)]
             lo, hi = support(new, self.log_tail)
             self._lo[new], self._hi[new] = lo, hi
             self._nbytes[new] = table_bytes(new, lo, hi)
@@ -284,7 +294,7 @@ class PoissonSampler:
             self.clear()
             self._work, self._mask, self.build_seconds = work, mask, spent
             missing = gs
-        value, first, cdf, kval = [self._value], [self._first], [self._cdf], [self._kval]
+        value, first, cdf, kval = [], [], [], []
         gbase, coff = self._value.size, self._cdf.size
         for g in missing.tolist():
             t = build_table(g, self.log_tail, int(self._lo[g]), int(self._hi[g]))
@@ -299,9 +309,29 @@ class PoissonSampler:
             kval.append(np.arange(t["lo"], t["lo"] + t["cdf"].size, dtype=np.int64))
             gbase += t["value"].size
             coff += t["cdf"].size
-        self._value, self._first, self._cdf, self._kval = (
-            np.concatenate(value), np.concatenate(first), np.concatenate(cdf), np.concatenate(kval))
+        for name, parts in (("_value", value), ("_first", first), ("_cdf", cdf), ("_kval", kval)):
+            setattr(self, name, self._append(name, parts))
         self.build_seconds += time.perf_counter() - t0
+
+    def _append(self, name: str, parts: list[np.ndarray]) -> np.ndarray:
+        """The bank ``name`` (``_value``, ``_first``, ``_cdf`` or ``_kval``) with ``parts``
+        appended: a view of the filled start of a buffer whose capacity doubles when it
+        fills (up to ``max_cache_bytes``), so that tables built a few per call are
+        copied about twice each on average, not with the whole bank on every call
+        (that cost more than the builds on scenes with many distinct means)."""
+        bank = getattr(self, name)
+        used, add = bank.size, sum(p.size for p in parts)
+        buffer = self._banks.get(name)
+        if buffer is None or used + add > buffer.size:
+            cap = max(used + add, self.max_cache_bytes // bank.itemsize)   # no bank outgrows the cache
+            grown = np.empty(min(max(2 * (used + add), 1024), cap), bank.dtype)
+            grown[:used] = bank
+            buffer = self._banks[name] = grown
+        end = used
+        for p in parts:
+            buffer[end:end + p.size] = p
+            end += p.size
+        return buffer[:end]
 
     def draw(self, rng: np.random.Generator, lam, clocks: int | None = None) -> np.ndarray:
         """Independent Poisson draws (int64): ``(clocks, n)`` with column j of mean

@@ -660,3 +660,161 @@ def test_window_groups_cover_each_pixel_once_at_a_length_it_allows():
                 assert (length - own).sum() <= window.MERGE_DRAWS
         if n > window.SMALL_GROUP:
             assert len(blocks) < np.unique(size).size or n >= 40000
+
+
+def test_clock_draws_take_tables_only_where_they_pay():
+    """Per-clock draws use the table sampler only with TABLE_DRAWS draws per distinct
+    integer mean; a call of a few hundred pixels with as many means (a wide-range
+    scene's windows) is numpy's own draws, bit for bit, and builds no table."""
+    config = SensorConfig.preset("te")
+    spread = np.random.default_rng(0).uniform(70.0, 160.0, 600)    # ~90 means, 8 clocks each
+    sim = SceneSimulator(config, (1, spread.size), rng=3)
+    assert not clock.tabled_call(spread, 8)
+    got = clock.clock_draws(sim, spread, 8)
+    assert np.array_equal(got, np.random.default_rng(3).poisson(spread[None, :], size=(8, spread.size)))
+    assert sim.sampler is None
+    few = np.repeat([70.5, 71.5], 300)                              # two means, 8 x 300 draws each
+    assert clock.tabled_call(few, 8) and not clock.tabled_call(few[:2], 8)
+    drawn = clock.clock_draws(sim, few, 8)
+    assert sim.sampler is not None and drawn.shape == (8, few.size)
+    assert abs(drawn.mean() - 71.0) < 4 * np.sqrt(71.0 / drawn.size)
+
+
+@pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_EDGE_CONFIGS, ids=str)
+def test_walk_from_a_head_state_equals_the_cycle_exact_model(config):
+    """The per-clock path from a state part-way through the interval (after a head:
+    ``run_clocks(..., start)``, which walks few pixels) gives the cycle-exact model's
+    words, charges and msb remainders on the same electrons: counters part-full, TE
+    overflows latched in the head or reached in the rest, backlogs and clipping."""
+    rng = np.random.default_rng(21)
+    theta, n, L = config.threshold, 400, config.clocks_per_readout
+    for h in sorted({min(8, L // 2), L // 2} - {0}):
+        lam = np.exp(rng.uniform(np.log(0.005), np.log(1.5), n)) * theta
+        lam[:150] = rng.uniform(0.9, 1.15, 150) * theta                 # backlogs, clipping
+        e = np.minimum(rng.poisson(lam[None, :], size=(L, n)), config.input_max).astype(np.int64)
+        acc0 = rng.integers(0, config.acc_max + 1, n)
+        sfc0 = rng.integers(0, config.ml_max + 1, n) if config.is_msb else np.zeros(n, np.int64)
+        array = PixelArray(config, (1, n))
+        array.state.acc[0], array.state.sfc[0] = acc0, sfc0
+        array.feed(e[:h].reshape(h, 1, n))
+        start = array.state.copy()
+        exact = array.feed(e[h:].reshape(L - h, 1, n))[0, 0]
+        sim = SceneSimulator(config, (1, n), rng=0)
+        sim.carried[:], sim.sfc[:] = acc0, sfc0
+        words = np.full(n, -1, np.int64)
+        clock.run_clocks(sim, np.arange(n), e[h:], words, start)
+        assert np.array_equal(words, exact), h
+        assert np.array_equal(sim.carried, array.state.acc[0])
+        if config.is_msb:
+            assert np.array_equal(sim.sfc, array.state.sfc[0])
+        if config.is_te:                                                # both overflow cases met
+            over = (words >> config.d) == 1
+            assert start.ovf[0].any() == (config.p_max <= h)
+            assert (over & ~start.ovf[0]).any() == (config.p_max <= L)
+
+
+@pytest.mark.parametrize("config", [c for c in EDGE_CONFIGS if c.is_te], ids=str)
+def test_sure_te_overflow_on_the_event_path_matches_per_clock(config):
+    """Light on the event path that surely overflows a TE pixel (``mean_overflow`` and
+    up, where the overflow electron's light-time is drawn first, then the electrons
+    after it): words (the overflow tick's law), decoded mean and the carried residual
+    have the per-clock law over readouts, from the carried charges they leave; just
+    below the level (the Beta draw) too, and in one pixel and one readout."""
+    L, theta = config.clocks_per_readout, config.threshold
+    probe = SceneSimulator(config, (1, 1), rng=0, total_pixel_readouts=3 * 6000)
+    low, high = probe.levels.mean_overflow, probe.levels.mean_event * L
+    if not low < high:
+        pytest.skip("no light both on the event path and surely overflowing")
+    means = np.array([low, np.sqrt(low * high), high, 0.8 * low])      # the last: below the level
+    pixels = 1500
+    light = np.repeat(means / 42000, pixels)[None, :]
+    fast = SceneSimulator(config, light.shape, rng=61, total_pixel_readouts=3 * light.size)
+    full = SceneSimulator(config, light.shape, rng=62, method="per-clock", total_pixel_readouts=3 * light.size)
+    a, b = [], []
+    for _ in range(3):
+        a.append(fast.readout(light)[0])
+        b.append(full.readout(light)[0])
+    assert fast.path_counts["event"] == 3 * light.size, fast.path_counts
+    a, b = np.array(a), np.array(b)
+    for i in range(len(means)):
+        part = slice(i * pixels, (i + 1) * pixels)
+        if i < 3:
+            assert ((a[:, part] >> config.d) == 1).all()                # overflowed, all of them
+        tvd = 0.5 * np.abs(_histogram(a[:, part], config) - _histogram(b[:, part], config)).sum()
+        da, db = (decode_spikes(w[:, part], config).mean(axis=0) for w in (a, b))
+        se = np.sqrt(da.var() / pixels + db.var() / pixels)
+        assert tvd < 0.05 and abs(da.mean() - db.mean()) <= 4 * se + 1e-12, (means[i], tvd, da.mean(), db.mean())
+        ha, hb = (np.bincount(s.acc[part], minlength=theta) / pixels for s in (fast, full))
+        width = max(1, theta // 8)
+        ha, hb = (np.add.reduceat(h, np.arange(0, theta, width)) for h in (ha, hb))
+        assert 0.5 * np.abs(ha - hb).sum() < 0.05, means[i]
+    one = SceneSimulator(config, (1, 1), rng=3)
+    word = one.readout(np.array([[means[0] / 42000]]))[0, 0]
+    assert (word >> config.d) == 1 and 0 <= one.acc[0] < theta
+
+
+def test_sure_te_overflow_puts_the_overflow_electron_first():
+    """The arithmetic of the sure-overflow draw on given random numbers: the overflow
+    electron (``2^b1 theta - acc`` after the sync) at light-time G is in clock
+    ``floor(L G / expected)``, and the charge left is that of ``2^b1 theta`` plus the
+    electrons drawn after it."""
+    from tespike.golden.fastsim import interval
+
+    class Given:                                   # a generator that returns chosen numbers
+        def __init__(self):
+            self.calls = []
+
+        def standard_gamma(self, shape):
+            self.calls.append("gamma")
+            return 0.25 * shape + 0.5
+
+        def poisson(self, mean):
+            self.calls.append("poisson")
+            return np.floor(mean).astype(np.int64)
+
+    config = SensorConfig()
+    theta, L, F = config.threshold, config.clocks_per_readout, config.clocks_per_tick
+    sim = SceneSimulator(config, (1, 3), rng=0)
+    mean = np.full(3, 1.1 * sim.levels.mean_overflow)
+    sim.carried[:] = [0, 17, theta - 1]
+    sim.rng = Given()
+    words = np.zeros(3, np.int64)
+    interval.event_path(sim, slice(None), mean, np.zeros(3, np.int64), words)
+    need = config.p_max * theta - np.array([0, 17, theta - 1])
+    g = 0.25 * need + 0.5
+    after = np.floor(mean - g).astype(np.int64)
+    assert sim.rng.calls == ["gamma", "poisson"]
+    assert np.array_equal(words, (1 << config.d) | ((g / mean * L).astype(np.int64) // F + 1))
+    assert np.array_equal(sim.carried, after % theta)
+
+
+def test_distinct_values_equal_numpys_unique():
+    """``tespike.golden.fastsim.distinct``: the sorted distinct values and their counts,
+    as ``np.unique`` gives them (which the simulator avoids: its first call imports
+    numpy.ma in every worker process)."""
+    from tespike.golden.fastsim.distinct import distinct, distinct_counts
+    rng = np.random.default_rng(8)
+    for values in (rng.integers(0, 9, 500), rng.uniform(0, 1, 7), np.zeros(0, np.int64), np.full(3, 4.0),
+                   rng.integers(0, 3, (4, 5))):
+        want, counts = np.unique(values, return_counts=True)
+        got, got_counts = distinct_counts(values)
+        assert np.array_equal(got, want) and np.array_equal(got_counts, counts)
+        assert np.array_equal(distinct(values), want)
+
+
+def test_a_simulation_does_not_import_numpy_ma():
+    """A scene through every path (window blocks of many lengths, heads with
+    different needs, table and numpy draws) never imports numpy.ma, which costs a
+    forked worker 10-40 ms of CPU (``np.unique``'s first call imports it)."""
+    import subprocess
+    import sys
+    code = ("import sys, numpy as np\n"
+            "from tespike.golden.config import SensorConfig\n"
+            "from tespike.golden.fastsim import simulate_scene\n"
+            "rng = np.random.default_rng(0)\n"
+            "scene = 10.0 ** rng.uniform(-4, 1, (2, 64, 320))\n"
+            "for mode in ('te', 'ml', 'ml-msb'):\n"
+            "    simulate_scene(SensorConfig.preset(mode), scene, seed=1)\n"
+            "print('numpy.ma' in sys.modules)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert run.stdout.strip() == "False", run.stdout + run.stderr

@@ -215,6 +215,24 @@ def test_deterministic_whatever_the_cache():
     assert abs(s1.mean() - lam.mean()) < 4 * math.sqrt(lam.mean() / s1.size)
 
 
+def test_tables_built_a_few_per_call_equal_tables_built_alone():
+    """Tables appended to the banks a few calls at a time (the banks grow by doubling,
+    their ranges found for blocks of means at once) are each the table built on its
+    own: same range, CDF and guide, whatever was built before or after it."""
+    sampler = PoissonSampler(LOG_TAIL)
+    rng = np.random.default_rng(5)
+    means = rng.permutation(np.arange(1, 700))[:120]
+    for chunk in np.array_split(means, 40):
+        sampler.draw(rng, chunk + 0.25, clocks=64)
+    fresh = PoissonSampler(LOG_TAIL)
+    for g in means.tolist():
+        got, alone = sampler.table(g), fresh.table(g)
+        fresh.clear()
+        assert got["lo"] == alone["lo"] and got["bits"] == alone["bits"], g
+        for key in ("cdf", "value", "first"):
+            np.testing.assert_array_equal(got[key], alone[key], err_msg=f"{g} {key}")
+
+
 def test_other_bit_generator():
     """A 32-bit bit generator (MT19937) goes through Generator.integers."""
     x = PoissonSampler(LOG_TAIL).draw(np.random.Generator(np.random.MT19937(4)), np.full(1000, 63.2), 100)

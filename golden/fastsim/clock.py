@@ -16,11 +16,18 @@ import numpy as np
 
 from ..light import deterministic_clock_electrons, log_poisson_tail_below
 from ..poisson import PoissonSampler
+from ..reference import PixelState
 from ..sensor import PixelArray
+from .distinct import distinct
 from .words import ml_words
 
 #: Per-clock draws of one call below which numpy's sampler is used (no table).
 SMALL_DRAW = 4096
+
+#: Per-clock draws per distinct integer mean below which a call keeps numpy's sampler
+#: (:func:`tabled_call`; measured best of 256, 1024 and 4096 on the dim interiors and
+#: the drifting log-uniform scene of docs/simulator.md).
+TABLE_DRAWS = 1024
 
 #: Pixel clocks x pixels of per-clock electrons held at once (bounds memory).
 CLOCK_CHUNK_ELEMENTS = 1 << 21
@@ -92,34 +99,74 @@ def clock_draws(sim, lam, clocks):
     sampler per draw; same law to float64 precision, tables cut where the
     tail is below the per-clock budget); ``method="per-clock"``, the
     reference the shortcuts are tested against, and ``clock_stimulus``
-    keep numpy's ``Generator.poisson``, as do calls of fewer than SMALL_DRAW
-    draws (a table costs about 0.25 ms to build, 10^4 draws' worth)."""
-    if sim.method == "per-clock" or lam.size * clocks < SMALL_DRAW:
+    keep numpy's ``Generator.poisson``, as do the calls :func:`tabled_call` declines."""
+    if sim.method == "per-clock" or not tabled_call(lam, clocks):
         return sim.rng.poisson(lam[None, :], size=(clocks, lam.size))
     if sim.sampler is None:
         sim.sampler = PoissonSampler(sim.budget)
     return sim.sampler.draw(sim.rng, lam, clocks=clocks)
 
 
-def walk_clocks(sim, sel, e, words):
-    """Pixels ``sel`` from the start of the interval on electrons ``e`` (L, n) by
-    :func:`walk` -> mask of the pixels settled there (their words and charges
-    written; the others untouched, for the cycle-exact model)."""
+def tabled_call(lam, clocks) -> bool:
+    """Whether ``clocks`` per-clock draws of each mean in ``lam`` go to the table sampler:
+    at least SMALL_DRAW draws, and at least TABLE_DRAWS per distinct integer mean (a
+    table costs 0.15-0.7 ms to build and a call of the sampler a fixed 0.2 ms or so,
+    numpy's sampler 45-65 ns a draw at these means: the window paths of a wide-range
+    scene make calls of a few hundred pixels with as many distinct means, which numpy
+    draws for less). Decided from the means alone (never from the cache or a draw):
+    both samplers have the Poisson law, so the choice changes a seed's stream only."""
+    draws = lam.size * clocks
+    if draws < SMALL_DRAW:
+        return False
+    g = lam.astype(np.int64)
+    low, high = int(g.min()), int(g.max())
+    if (high - low + 1) * TABLE_DRAWS <= draws:         # few enough whatever they are
+        return True
+    # count the distinct means: one bincount over their range where it is short, else a sort
+    count = np.count_nonzero(np.bincount(g - low)) if high - low < 1 << 16 else distinct(g).size
+    return draws >= TABLE_DRAWS * count
+
+
+def walk_clocks(sim, sel, e, words, start=None):
+    """Pixels ``sel`` on electrons ``e`` (clocks, n) by :func:`walk`, from the start of the
+    interval or from ``start`` (a (1, n) :class:`tespike.golden.reference.PixelState`
+    part-way through it, after a head) -> mask of the pixels settled there (their
+    words, charges and msb remainders written; the others untouched, for the
+    cycle-exact model)."""
     c = sim.config
-    settled, spikes, charge, at = walk(c, sim.carried[sel], e)
+    if start is None:
+        acc0, count0, need = sim.carried[sel], 0, None
+    else:
+        acc0, count0 = start.acc[0], start.sfc[0]
+        # TE: spikes still needed to overflow (none once it has: a count never reached)
+        need = np.where(start.ovf[0], e.shape[0] + 1, c.p_max - count0) if c.is_te else None
+    settled, spikes, charge, at = walk(c, acc0, e, need)
     done, total = sel[settled], spikes[settled]
     sim.carried[done] = charge[settled]
-    if not c.is_te:
+    if start is not None:
+        count0 = count0[settled]
+    if c.is_msb:
+        if start is not None:
+            sim.sfc[done] = count0                      # the head's counter: remainder and its spikes
         ml_words(sim, done, total, words)
         return settled
-    over = total >= c.p_max
-    words[done] = np.where(over, (1 << c.d) | (at[settled] // c.clocks_per_tick + 1), total)
+    if not c.is_te:
+        ml_words(sim, done, count0 + total, words)
+        return settled
+    h = 0 if start is None else start.clock
+    word = np.minimum(count0 + total, c.p_max)
+    late = at[settled] < e.shape[0]                     # overflow in these clocks
+    word[late] = (1 << c.d) | ((h + at[settled][late]) // c.clocks_per_tick + 1)
+    if start is not None:
+        early = start.ovf[0][settled]                   # overflowed in the head: its latched tick
+        word[early] = (1 << c.d) | start.m[0][settled][early]
+    words[done] = word
     return settled
 
 
-def walk(c, acc0, e):
+def walk(c, acc0, e, need=None):
     """Pixels from charge ``acc0`` (n,) over electrons ``e`` (clocks, n) from the start
-    of an interval: the trajectory of the cycle-exact model in a few array passes over
+    of an interval (or of its rest, after a head): the trajectory of the cycle-exact model in a few array passes over
     all clocks per phase instead of five per clock (whose Python cost dominates for
     few pixels).
 
@@ -144,7 +191,8 @@ def walk(c, acc0, e):
     Nothing is drawn or bounded: each phase is checked on the electrons themselves.
     Pixels still walking after MAX_PHASES phases are left to the cycle-exact model on
     the same electrons. -> (settled mask, spikes, end charge, TE: the 0-based clock of
-    spike 2^b1 or ``clocks`` where it did not fire), the last three valid where settled."""
+    spike ``need`` (per pixel; default 2^b1) or ``clocks`` where it did not fire), the
+    last three valid where settled."""
     theta, top = c.threshold, c.acc_max
     L, n = e.shape
     clocks = np.arange(L)[:, None]
@@ -153,6 +201,7 @@ def walk(c, acc0, e):
     spikes = np.zeros(n, np.int64)
     at = np.full(n, L, np.int64)                        # TE: 0-based clock of spike 2^b1 (L: none)
     settled = np.zeros(n, bool)
+    need = np.full(n, c.p_max, np.int64) if need is None else np.asarray(need, np.int64)
     active = np.arange(n)
     for phase in range(MAX_PHASES):
         if not active.size:
@@ -176,7 +225,7 @@ def walk(c, acc0, e):
             total = before + fired[last, cols]
             end = np.where(stops, top, after[last, cols])
             if c.is_te:
-                reach = later & (fired + before[None] >= c.p_max) & (clocks <= last)
+                reach = later & (fired + before[None] >= need[active][None]) & (clocks <= last)
                 at[active] = np.minimum(at[active], np.where(reach.any(axis=0), np.argmax(reach, axis=0), L))
         else:                                           # firing: until the first clock without a spike
             deficit = np.cumsum(np.where(later, theta - ea, 0), axis=0)
@@ -190,8 +239,9 @@ def walk(c, acc0, e):
             total = before + last + 1 - s0 - stops      # a spike in every clock but the stopping one
             end = np.where(stops, prev[last, cols] + ea[last, cols], x[-1])
             if c.is_te:
-                reach = s0 + c.p_max - before - 1           # clock of spike 2^b1 if all fire
-                hit = (before < c.p_max) & (reach <= last - stops)
+                goal = need[active]
+                reach = s0 + goal - before - 1              # clock of spike ``need`` if all fire
+                hit = (before < goal) & (reach <= last - stops)
                 at[active[hit]] = np.minimum(at[active[hit]], reach[hit])
         spikes[active], charge[active] = total, end
         done_clocks[active] = last + 1
@@ -206,11 +256,14 @@ def run_clocks(sim, sel, e, words, start=None):
     the literal rule of SPEC section 3) on electrons ``e`` (clocks, n) of pixels
     ``sel``, from the start of the interval or from ``start`` (a
     :class:`tespike.golden.reference.PixelState` of shape (1, n) part-way through it)."""
-    if start is None and sim.method == "fast" and 0 < sel.size <= WALK_PIXELS:
-        settled = walk_clocks(sim, sel, e, words)
+    if sim.method == "fast" and 0 < sel.size <= WALK_PIXELS:
+        settled = walk_clocks(sim, sel, e, words, start)
         if settled.all():
             return
-        sel, e = sel[~settled], e[:, ~settled]
+        left = ~settled
+        sel, e = sel[left], e[:, left]
+        if start is not None:
+            start = PixelState(start.clock, *(a[:, left] for a in (start.acc, start.sfc, start.ovf, start.m)))
     array = PixelArray(sim.config, (1, sel.size))
     if start is None:
         array.state.acc[0] = sim.carried[sel]

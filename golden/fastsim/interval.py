@@ -9,6 +9,12 @@
              positions over the L clocks, so the clock of the ``2^b1``-th spike
              (TE overflow) is ``floor(L * Beta(n, T - n + 1))`` with
              ``n = 2^b1 * theta - acc``, the n-th of T uniform order statistics.
+             Where the overflow is sure (light at least ``mean_overflow``, no dark
+             electrons), the n-th electron comes first instead: at light-time
+             ``G ~ Gamma(n)`` of the interval's ``expected`` (a Poisson process), in
+             clock ``floor(L G / expected)``, and ``T = n + Poisson(expected - G)``
+             (the electrons after it, independent of it): one Gamma draw and the
+             Poisson draw, where the Beta costs two Gammas besides.
 ``bright``   every clock surely gets at least ``theta`` electrons: a spike in every
              clock (word known), the accumulator only grows, so it ends at
              ``min(acc + sum(e) - L theta, 2^A - 1)``; ``sum(e)`` is
@@ -26,6 +32,8 @@ from ..light import log_poisson_tail_above, log_poisson_tail_below
 from .clock import clock_path
 from .bisection import largest_below, smallest_below
 from .codes import BRIGHT, EVENT
+
+_NONE = np.zeros(0, np.int64)
 from .words import firing_words, ml_words
 
 
@@ -45,6 +53,16 @@ def interval_levels(config: SensorConfig, budget: float) -> tuple[float, float, 
     return mean_event, mean_unclipped, lam_bright
 
 
+def overflow_level(config: SensorConfig, budget: float) -> float:
+    """Smallest interval mean at which a TE pixel surely gets the ``2^b1 theta`` electrons
+    of an overflow (from an empty accumulator, so from any charge below theta)."""
+    c = config
+    if not c.is_te:
+        return np.inf
+    n = c.p_max * c.threshold
+    return smallest_below(lambda m: log_poisson_tail_below(m, n - 1), budget, float(n))
+
+
 def classify_interval(levels, code, lam, mean, acc):
     """Mark the event and bright pixels in ``code`` (the others keep theirs): event
     from the light with dark electrons per clock ``mean`` and the charge ``acc``,
@@ -58,9 +76,24 @@ def event_path(sim, sel, expected, dark, words):
     c = sim.config
     theta, L = c.threshold, c.clocks_per_readout
     acc0 = sim.carried[sel]
-    total = sim.rng.poisson(expected[sel])
+    mean = expected[sel]
+    sure = _NONE
+    if c.is_te and not sim.dark_model:
+        sure = np.flatnonzero(mean >= sim.levels.mean_overflow)
+    if sure.size:                                      # the overflow electron first (module docstring)
+        need = c.p_max * theta - acc0[sure]
+        light_time = sim.rng.standard_gamma(need.astype(np.float64))
+        sure_mean = mean[sure]
+        reached = light_time < sure_mean               # surely (bound); else drawn as below
+        sure, need, light_time, sure_mean = sure[reached], need[reached], light_time[reached], sure_mean[reached]
+        if isinstance(sel, slice):
+            mean = mean.copy()                          # (a view of expected)
+        mean[sure] = sure_mean - light_time            # the electrons after it
+    total = sim.rng.poisson(mean)
     if sim.dark_model:
         total += dark[sel]
+    if sure.size:
+        total[sure] += need
     level = acc0 + total
     spikes = level // theta                            # (np.divmod is 3x slower on int64)
     residual = level - spikes * theta
@@ -68,7 +101,12 @@ def event_path(sim, sel, expected, dark, words):
         sim.carried[sel] = residual
         ml_words(sim, sel, spikes, words)
         return
+    if sure.size:                                      # their words now; not among the Beta draws
+        at = np.minimum((light_time / sure_mean * L).astype(np.int64), L - 1)
+        spikes[sure] = -1
     over = np.flatnonzero(spikes >= c.p_max)
+    if sure.size:
+        spikes[sure] = (1 << c.d) | (at // c.clocks_per_tick + 1)
     if over.size:
         n = c.p_max * theta - acc0[over]               # electron that makes the 2^b1-th spike
         t = total[over]

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..config import SensorConfig
 from .head import classify_head
-from .interval import classify_interval, interval_levels
+from .interval import classify_interval, interval_levels, overflow_level
 from .lazy import lazy_level
 from .window import classify_window, queue_level
 from .codes import CLOCK, LAZY
@@ -45,6 +45,7 @@ class PathLevels:
         self.config = config
         self.budget = budget
         self.mean_event, self.mean_unclipped, self.lam_bright = interval_levels(config, budget)
+        self.mean_overflow = overflow_level(config, budget)
         self.mean_lazy = lazy_level(config, budget, self.mean_event)
         self.rho_queue = queue_level(config, budget)
 

@@ -21,6 +21,7 @@ import numpy as np
 from ..config import SensorConfig
 from .clock import clock_draws, clock_path, fallback
 from .codes import FULL, QUEUE
+from .distinct import distinct, distinct_counts
 from .words import firing_words, ml_words
 
 #: Largest backlog bound the queue path accepts, and its shortest window.
@@ -107,7 +108,7 @@ def groups(sel, size):
     -> [(length, pixels)]."""
     if sel.size <= SMALL_GROUP:
         return [(int(size.max()), sel)] if sel.size else []
-    lengths, counts = np.unique(size, return_counts=True)
+    lengths, counts = distinct_counts(size)
     out, first = [], 0
     for j in range(1, lengths.size + 1):
         if j < lengths.size and (counts[first:j + 1] * (lengths[j] - lengths[first:j + 1])).sum() <= MERGE_DRAWS:
@@ -208,8 +209,8 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max):
     over &= ok
     span = clocks - w
     needs = need[over]
-    # one need for all (the queue path's 2^b1) skips np.unique's sort
-    for p in needs[:1] if needs.size and (needs == needs[0]).all() else np.unique(needs):
+    # one need for all (the queue path's 2^b1) skips the sort
+    for p in needs[:1] if needs.size and (needs == needs[0]).all() else distinct(needs):
         i = np.flatnonzero(over & (need == p))
         a, t = acc0[i], rest[i]
         shapes = np.empty((i.size, p + 1))
