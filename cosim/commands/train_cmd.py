@@ -56,8 +56,9 @@ def add_arguments(parser):
                              "light (default: the engine's 0.01 3)")
     parser.add_argument("--noise-fraction", type=float, default=None, metavar="P",
                         help="share of clips recorded by a random noisy sensor (dark current eq. 12/13 at 0.05..6 x, "
-                             "DSNU, hot pixels, PRNU, comparator offset; recon.engine.clips.NOISE_DRAW), whose "
-                             "target is the light the pixels saw (default 0: shot noise only)")
+                             "DSNU, hot pixels, PRNU, comparator offset; recon.engine.clips.NOISE_DRAW), its "
+                             "decoded light corrected by the sensor's exact calibration as inference corrects a "
+                             "learned method's input, target the scene light (default 0: shot noise only)")
     trainer("--workers", "data-engine processes making clips ahead (0: in this process)", type=int)
     trainer("--pool", "clips a step draws from", type=int)
     trainer("--refresh", "steps between two new clips entering the pool", type=int)
