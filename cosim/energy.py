@@ -95,16 +95,21 @@ def block_cells(modules: dict, top: str, config, streaming: bool, control_bits: 
     """Flip-flops and gates (other cells) per block of a synthesised generated top
     (:func:`tespike.cosim.synthesis.synthesize_hierarchy`'s ``modules``), every instance counted:
     the pixel and its rule are ``pixel``, the readout cell ``readout``, the timing module
-    ``timing``, the top and its beat groups ``control``, except the top's own flip-flops past
-    the model's ``control_bits`` (the parallel top's per-pixel input registers): ``pixel``."""
+    (streaming ``<mode>_readout_timing``, parallel ``<mode>_array_timing``) ``timing``, the top
+    and its beat groups ``control``, except the top's own flip-flops past the model's
+    ``control_bits`` (the streaming top's per-site input registers): ``pixel``. The parallel
+    top holds no flip-flop (its ``frame`` is the pixels' word registers, its ``frame_valid``
+    the timing module's), so ``control_bits`` is 0 there."""
     from tespike.rtl.verilog import module_names
     from tespike.rtl.verilog_stream import stream_module_names
 
-    names = stream_module_names(config) if streaming else module_names(config)
-    role = {names["pixel"]: "pixel", names["timing"]: "timing"}
     if streaming:
-        role.update({names["rule"]: "pixel", names["cell"]: "readout", names["group"]: "control",
-                     names["group_end"]: "control"})
+        names = stream_module_names(config)
+        role = {names["pixel"]: "pixel", names["timing"]: "timing", names["rule"]: "pixel",
+                names["cell"]: "readout", names["group"]: "control", names["group_end"]: "control"}
+    else:
+        names = module_names(config)
+        role = {names["pixel"]: "pixel", names["array_timing"]: "timing"}
     out = {block: {"flops": 0, "gates": 0} for block in BLOCKS}
 
     def walk(name: str, times: int) -> None:
