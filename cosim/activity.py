@@ -111,9 +111,9 @@ def _net_bits(owners: dict, net: str, q: list) -> list[int]:
 
 def block_of(config: SensorConfig, module: str, name: str, streaming: bool) -> str:
     """The block (:data:`tespike.golden.activity.BLOCKS`) of a register of ``module``: the pixel
-    modules' and the streaming top's per-site input registers are ``pixel``, the readout cell's
+    module's (the streaming one holds its input register) are ``pixel``, the readout cell's
     ``readout``, the timing module's (streaming ``<mode>_readout_timing``, parallel
-    ``<mode>_array_timing``) ``timing``, the top's own others ``control``."""
+    ``<mode>_array_timing``) ``timing``, the top's own ``control``."""
     from tespike.rtl.verilog import module_names
     from tespike.rtl.verilog_stream import stream_module_names
 
@@ -125,16 +125,15 @@ def block_of(config: SensorConfig, module: str, name: str, streaming: bool) -> s
     if streaming and module == names["cell"]:
         return "readout"
     if module == names["top"]:
-        return "pixel" if streaming and name.rsplit(".", 1)[-1] == "charge_sample" else "control"
+        return "control"
     raise InputError(f"register {name!r} of module {module!r}: no block of the {names['top']} holds it")
 
 
 def model_name(config: SensorConfig, block: str, names: tuple[str, ...], streaming: bool) -> str:
     """The register name :mod:`tespike.golden.activity` gives a register known in the Verilog as
-    ``names`` (the streaming pixel's registers carry a ``_q`` suffix: its rule's inputs, and its
-    top's input registers sit in the per-pixel generate blocks; the parallel pixel adds its
-    ``word_reg``, the parallel timing its ``frame_valid_reg``, and the parallel top has no
-    register of its own)."""
+    ``names`` (the streaming pixel's state registers carry a ``_q`` suffix: its rule's inputs;
+    the parallel pixel adds its ``word_reg``, the parallel timing its ``frame_valid_reg``, and
+    the parallel top has no register of its own)."""
     state = pixel_register_names(config)
     if streaming:
         known = {"pixel": ("charge_sample",) + state, "readout": ("held",),
