@@ -6,8 +6,8 @@ model follows the tops that ``tespike verilog`` writes, edge by edge after their
 then one stimulus row per rising edge), and counts the bit changes of
 
 * ``pixel``: each site's state (``acc``, TE ``sfc`` / ``ovf`` / ``m``, ML ``count``);
-  the streaming pixel's registers are ``acc_q``, ``sfc_q``, ... behind the top's input
-  register ``charge_sample`` (E bits per site, counted here); the parallel pixel's are
+  the streaming pixel's registers are ``acc_q``, ``sfc_q``, ... behind its input
+  register ``charge_sample`` (E bits, counted here); the parallel pixel's are
   ``acc``, ``sfc``, ... and its readout ``word_reg`` (Wd bits: ``frame`` is these
   registers), with no input register (its pixels take ``charge`` from the port);
 * ``readout``: the streaming top's readout cells ``held`` (Wd bits each, one per
