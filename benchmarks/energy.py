@@ -105,8 +105,7 @@ def cells_per_site(config: SensorConfig) -> dict:
     is synthesised once, so per-site figures do not depend on the array size)."""
     top = Top(config, 2, 3, 2)
     result = synthesize_hierarchy(top.verilog(), top.module)
-    probe = top_activity(config, np.zeros((config.clocks_per_readout, 2, 3), np.int64), 2)
-    cells = block_cells(result["modules"], result["top"], config, True, probe.register_bits()["control"])
+    cells = block_cells(result["modules"], result["top"], config, True)
     for block in ("pixel", "readout"):
         cells[block] = {key: value // 6 for key, value in cells[block].items()}
     return cells

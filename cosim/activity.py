@@ -111,35 +111,43 @@ def _net_bits(owners: dict, net: str, q: list) -> list[int]:
 
 def block_of(config: SensorConfig, module: str, name: str, streaming: bool) -> str:
     """The block (:data:`tespike.golden.activity.BLOCKS`) of a register of ``module``: the pixel
-    modules' and the top's per-site input registers are ``pixel``, the readout cell's
-    ``readout``, the timing module's ``timing``, the top's own others ``control``."""
+    module's (the streaming one holds its input register) are ``pixel``, the readout cell's
+    ``readout``, the timing module's (streaming ``<mode>_readout_timing``, parallel
+    ``<mode>_array_timing``) ``timing``, the top's own ``control``."""
     from tespike.rtl.verilog import module_names
     from tespike.rtl.verilog_stream import stream_module_names
 
     names = stream_module_names(config) if streaming else module_names(config)
     if module == names["pixel"]:
         return "pixel"
-    if module == names["timing"]:
+    if module == names["timing" if streaming else "array_timing"]:
         return "timing"
     if streaming and module == names["cell"]:
         return "readout"
     if module == names["top"]:
-        return "pixel" if name.rsplit(".", 1)[-1] == "charge_sample" else "control"
+        return "control"
     raise InputError(f"register {name!r} of module {module!r}: no block of the {names['top']} holds it")
 
 
-def model_name(config: SensorConfig, block: str, names: tuple[str, ...]) -> str:
+def model_name(config: SensorConfig, block: str, names: tuple[str, ...], streaming: bool) -> str:
     """The register name :mod:`tespike.golden.activity` gives a register known in the Verilog as
-    ``names`` (the streaming pixel's registers carry a ``_q`` suffix: its rule's inputs; the
-    parallel top's input registers sit in the per-pixel generate blocks)."""
-    known = {"pixel": ("charge_sample",) + pixel_register_names(config), "readout": ("held",),
-             "timing": ("divider", "cycle", "primed"), "control": ("rst_sample", "sending", "beat")}[block]
+    ``names`` (the streaming pixel's state registers carry a ``_q`` suffix: its rule's inputs;
+    the parallel pixel adds its ``word_reg``, the parallel timing its ``frame_valid_reg``, and
+    the parallel top has no register of its own)."""
+    state = pixel_register_names(config)
+    if streaming:
+        known = {"pixel": ("charge_sample",) + state, "readout": ("held",),
+                 "timing": ("divider", "cycle", "primed"), "control": ("rst_sample", "sending", "beat")}
+    else:
+        known = {"pixel": state + ("word_reg",), "readout": (), "timing": ("divider", "cycle", "frame_valid_reg"),
+                 "control": ()}
     for name in names:
         base = name.rsplit(".", 1)[-1]
-        for candidate in (base, base.removesuffix("_q")):
-            if candidate in known:
+        for candidate in (base, base.removesuffix("_q") if streaming else base):
+            if candidate in known[block]:
                 return candidate
-    raise InputError(f"register {'/'.join(names)} of block {block}: not one the model counts ({', '.join(known)})")
+    raise InputError(f"register {'/'.join(names)} of block {block}: not one the model counts "
+                     f"({', '.join(known[block]) or 'none'})")
 
 
 def settled_values(tv) -> list[int | None]:
@@ -185,7 +193,7 @@ def vcd_activity(vcd_path, config: SensorConfig, verilog_text: str, top: str, st
     counts: dict[tuple[str, str], int] = {}
     for reg, ref in wanted.items():
         block = block_of(config, reg.module, reg.name, streaming)
-        key = (block, model_name(config, block, reg.names))
+        key = (block, model_name(config, block, reg.names, streaming))
         mask = sum(1 << i for i in reg.bits)
         counts[key] = counts.get(key, 0) + bit_changes(settled_values(vcd[ref].tv), mask)
     for port, ref in outputs.items():
@@ -205,7 +213,7 @@ def register_bits(verilog_text: str, top: str, config: SensorConfig, streaming: 
     out: dict[tuple[str, str], int] = {}
     for reg in registers:
         block = block_of(config, reg.module, reg.name, streaming)
-        key = (block, model_name(config, block, reg.names))
+        key = (block, model_name(config, block, reg.names, streaming))
         out[key] = out.get(key, 0) + len(reg.bits)
     return out
 

@@ -91,35 +91,33 @@ def block_energy(toggles, register_bits: int, flops: int, gates: int, clocks: in
     return {"data": data, "logic": logic, "clock": clock}
 
 
-def block_cells(modules: dict, top: str, config, streaming: bool, control_bits: int) -> dict[str, dict[str, int]]:
+def block_cells(modules: dict, top: str, config, streaming: bool) -> dict[str, dict[str, int]]:
     """Flip-flops and gates (other cells) per block of a synthesised generated top
     (:func:`tespike.cosim.synthesis.synthesize_hierarchy`'s ``modules``), every instance counted:
     the pixel and its rule are ``pixel``, the readout cell ``readout``, the timing module
-    ``timing``, the top and its beat groups ``control``, except the top's own flip-flops past
-    the model's ``control_bits`` (the parallel top's per-pixel input registers): ``pixel``."""
+    (streaming ``<mode>_readout_timing``, parallel ``<mode>_array_timing``) ``timing``, the top
+    and its beat groups ``control`` (the parallel top holds no flip-flop: its ``frame`` is the
+    pixels' word registers, its ``frame_valid`` the timing module's)."""
     from tespike.rtl.verilog import module_names
     from tespike.rtl.verilog_stream import stream_module_names
 
-    names = stream_module_names(config) if streaming else module_names(config)
-    role = {names["pixel"]: "pixel", names["timing"]: "timing"}
     if streaming:
-        role.update({names["rule"]: "pixel", names["cell"]: "readout", names["group"]: "control",
-                     names["group_end"]: "control"})
+        names = stream_module_names(config)
+        role = {names["pixel"]: "pixel", names["timing"]: "timing", names["rule"]: "pixel",
+                names["cell"]: "readout", names["group"]: "control", names["group_end"]: "control"}
+    else:
+        names = module_names(config)
+        role = {names["pixel"]: "pixel", names["array_timing"]: "timing"}
     out = {block: {"flops": 0, "gates": 0} for block in BLOCKS}
 
     def walk(name: str, times: int) -> None:
         stat = modules[name]
         flops, gates = stat["flops"], stat["cells"] - stat["flops"]
-        if name == top:
-            out["control"]["flops"] += min(flops, control_bits)
-            out["pixel"]["flops"] += max(0, flops - control_bits)
-            out["control"]["gates"] += gates
-        else:
-            block = role.get(name)
-            if block is None:
-                raise ValueError(f"module {name} of {top}: no block claims it")
-            out[block]["flops"] += times * flops
-            out[block]["gates"] += times * gates
+        block = "control" if name == top else role.get(name)
+        if block is None:
+            raise ValueError(f"module {name} of {top}: no block claims it")
+        out[block]["flops"] += times * flops
+        out[block]["gates"] += times * gates
         for sub, count in stat["instances"].items():
             walk(sub, times * count)
 

@@ -63,7 +63,7 @@ def test_block_cells_count_every_synthesised_flip_flop(lanes):
     top = Top(TE, 2, 3, lanes)
     result = synthesize_hierarchy(top.verilog(), top.module, gate_sets=("cmos2",))
     probe = top_activity(TE, np.zeros((TE.clocks_per_readout, 2, 3), np.int64), lanes)
-    cells = block_cells(result["modules"], result["top"], TE, lanes is not None, probe.register_bits()["control"])
+    cells = block_cells(result["modules"], result["top"], TE, lanes is not None)
     total = hierarchy_total(result["modules"], result["top"])
     assert sum(c["flops"] for c in cells.values()) == total["flops"]
     assert sum(c["flops"] + c["gates"] for c in cells.values()) == total["cells"]

@@ -72,18 +72,23 @@ def test_every_block_equals_a_vcd_count_of_the_generated_verilog(case, tmp_path)
 
 
 @needs_tools
-def test_a_register_the_model_does_not_know_is_refused(tmp_path):
-    top = Top(TE, 2, 3, 2)
-    text = top.verilog().replace("  always @(posedge clk) rst_sample <= rst;",
-                                 "  always @(posedge clk) rst_sample <= rst;\n"
-                                 "  reg spare = 1'b0;\n  always @(posedge clk) spare <= ~spare;", 1)
+@pytest.mark.parametrize("lanes, anchor", [(2, "  always @(posedge clk) rst_sample <= rst;\n"),
+                                           (None, "  assign frame = words;\n")])
+def test_a_register_the_model_does_not_know_is_refused(lanes, anchor, tmp_path):
+    top = Top(TE, 2, 3, lanes)
+    text = top.verilog()
+    assert anchor in text
+    text = text.replace(anchor, anchor + "  reg spare = 1'b0;\n  always @(posedge clk) spare <= ~spare;\n", 1)
     names = {reg.name for reg in flip_flops(text, top.module)[0]}
     assert "spare" in names
     e = _stimulus(TE, (2, 3), 1, 0)
     vcd = tmp_path / "run.vcd"
-    run_icarus_stream(TE, e, 2, verilog=text, vcd_path=vcd)
+    if lanes is None:
+        run_icarus(TE, e, verilog=text, vcd_path=vcd)
+    else:
+        run_icarus_stream(TE, e, lanes, verilog=text, vcd_path=vcd)
     with pytest.raises(InputError, match="spare"):
-        vcd_activity(vcd, TE, text, top.module, True, DUT_SCOPE)
+        vcd_activity(vcd, TE, text, top.module, lanes is not None, DUT_SCOPE)
 
 
 @pytest.mark.parametrize("lanes", [None, 2])
@@ -113,3 +118,20 @@ def test_no_light_toggles_only_the_clocks_structure():
     assert F == 4 and edges % 4 == 0
     assert activity.toggles[("timing", "divider")][0] == 6 * edges // 4
     assert activity.toggles[("control", "rst_sample")][0] == 2 and activity.readouts == e.shape[0] // L
+
+
+def test_no_light_parallel_toggles_only_the_timing_and_frame_valid():
+    """Dark, the parallel top's pixels, word registers and frame never change, it has no
+    control register, and its reset state is its power-up state: only the timing counts."""
+    config = TE
+    L = config.clocks_per_readout
+    e = np.zeros((3 * L, 2, 3), np.int64)
+    activity = top_activity(config, e)
+    blocks = activity.per_block()
+    assert blocks["pixel"] == blocks["readout"] == blocks["control"] == 0
+    assert activity.register_bits()["control"] == 0
+    assert activity.toggles[("output", "frame")].sum() == 0
+    # frame_valid_reg (and the port) rises and falls once per readout (edges = T + 1: the
+    # last edge clears the third strobe)
+    assert activity.toggles[("timing", "frame_valid_reg")][0] == 2 * 3 == activity.toggles[("output", "frame_valid")][0]
+    assert activity.readouts == 3 and activity.edges == 3 * L + 1

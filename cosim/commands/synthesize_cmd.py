@@ -193,7 +193,7 @@ def energy_lines(config, stimulus, lanes, result: dict, text: str, icarus: bool)
         wrong = [b for b in BLOCKS if found[b] != toggles[b]]
         raise InputError(f"--icarus: the VCD's toggles differ from the model's in block {wrong[0]} "
                          f"({found[wrong[0]]} against {toggles[wrong[0]]})")
-    cells = block_cells(result["modules"], result["top"], config, lanes is not None, bits["control"])
+    cells = block_cells(result["modules"], result["top"], config, lanes is not None)
     energy = run_energy(activity, cells)
     K, P = max(activity.readouts, 1), stimulus.shape[1] * stimulus.shape[2]
     lines = [f"switching and energy of the run ({activity.edges} clocks after reset, {activity.readouts} "
