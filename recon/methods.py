@@ -114,12 +114,13 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     the images never need to fit in memory); it is returned. ``weights``: a
     learned method's weights file (None: the shipped ones; refused for TFP and TFI).
     ``calibration``: a :class:`tespike.recon.calibration.Calibration` of the sensor that recorded
-    the stream; every method is then corrected for the pixels' dark rate and gain,
-    ``max(0, (x - dark) / gain)`` (:func:`tespike.recon.calibration.correct`): TFP at its output
-    (exact: it is linear in the decoded light it averages), TFI and the learned methods at their
-    input, on the decoded light of every readout (TFI's spike intervals then follow the pixel's
-    own light, not its dark current; measured better than an output correction for every one:
-    docs/reconstruction.md "Calibration").
+    the stream; every method is then corrected for the pixels' dark rate and gain: TFP at its
+    output, ``max(0, (x - dark) / gain)`` (:func:`tespike.recon.calibration.correct`; exact, TFP
+    being linear in the decoded light it averages); TFI on every readout's decoded light, the same
+    floored at 0, its spike intervals then following the pixel's own light, not its dark current;
+    the learned methods on every readout's decoded light, ``(x - dark) / gain`` unfloored, their
+    image floored at 0 (:func:`tespike.recon.learning.infer.frame`). Each route was chosen by
+    measurement (docs/reconstruction.md "Calibration").
     """
     if method not in RECON_METHODS:
         raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")

@@ -139,9 +139,9 @@ def test_reconstruct_with_calibration_and_weights(tmp_path):
 
 
 def test_learned_methods_are_corrected_at_their_input():
-    """A learned method with a calibration equals the same module fed ``max(0, (x - dark) / gain)``
-    (a uniform calibration, applied by a wrapper module: an independent route), and differs
-    from correcting its output; TFP stays corrected at its output."""
+    """A learned method with a calibration equals the same module fed ``(x - dark) / gain`` (not
+    floored) with its image floored at 0 (a uniform calibration, applied by a wrapper module: an
+    independent route), and differs from correcting its output; TFP stays corrected at its output."""
     import torch
 
     from tespike.recon.learned import load_learned
@@ -153,7 +153,7 @@ def test_learned_methods_are_corrected_at_their_input():
             self.model, self.sizes, self.dark, self.gain = model, model.sizes, dark, gain
 
         def forward(self, light, inside, spike_light):
-            return self.model(torch.clamp((light - self.dark) / self.gain, min=0), inside, spike_light)
+            return self.model((light - self.dark) / self.gain, inside, spike_light).clamp(min=0)
 
     config = SensorConfig()
     words = simulate_scene(config, np.random.default_rng(4).uniform(0, 0.2, (5, 16, 24)), seed=5, sensor=SENSOR)

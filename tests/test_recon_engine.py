@@ -158,7 +158,7 @@ def test_sample_is_the_padded_span_around_its_key():
 
 
 def test_batches_correct_noisy_clips_as_inference_corrects_its_input():
-    """draw_batch's light is max(0, (decoded - dark) / gain) with the clip's own maps."""
+    """draw_batch's light is (decoded - dark) / gain with the clip's own maps, not floored."""
     import types
 
     config = SensorConfig()
@@ -170,9 +170,9 @@ def test_batches_correct_noisy_clips_as_inference_corrects_its_input():
         rng.integers(1)                                   # the clip drawn
         words, _, _, calibration = draw_sample(clip, 5, 16, rng)
         decoded = decode_light(words, config, dtype=torch.float32).numpy()
-        expected = np.maximum((decoded - calibration[0]) / calibration[1], 0)
+        expected = (decoded - calibration[0]) / calibration[1]
         assert np.allclose(light[b].numpy(), expected, rtol=1e-6, atol=1e-7)
-    assert (light.numpy() == 0).any()                    # the dark subtracted, floored at zero
+    assert (light.numpy() < 0).any()                     # the dark subtracted, not floored
 
 
 def test_pool_schedule_depends_on_the_step_only():

@@ -184,7 +184,7 @@ def draw_batch(pool: ClipPool, config: SensorConfig, span: int, crop: int, batch
                rng: np.random.Generator, device: str = "cpu") -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(decoded light (B, span, c, c), truth (B, 1, c, c), inside (B, span)) from random clips of the pool.
 
-    A noisy clip's decoded light is corrected by its sensor's calibration, ``max(0, (x - dark) / gain)``,
+    A noisy clip's decoded light is corrected by its sensor's calibration, ``(x - dark) / gain``,
     as inference corrects a learned method's input (:func:`tespike.recon.learning.infer.frame`); a clip
     of shot noise only passes unchanged (its calibration is dark 0, gain 1)."""
     samples = [draw_sample(pool.clips[int(rng.integers(len(pool.clips)))], span, crop, rng)
@@ -193,5 +193,5 @@ def draw_batch(pool: ClipPool, config: SensorConfig, span: int, crop: int, batch
     light = decode_light(words, config, device=device, dtype=torch.float32)
     if (calibration[:, 0] != 0).any() or (calibration[:, 1] != 1).any():
         dark, gain = torch.from_numpy(calibration).to(device)[:, :, None].unbind(1)
-        light = torch.clamp_min_((light - dark) / gain, 0)
+        light = (light - dark) / gain
     return light, torch.from_numpy(truth).to(device), torch.from_numpy(inside).to(device)

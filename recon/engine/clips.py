@@ -32,7 +32,7 @@ or eq. 13 dark current at 0.05 .. 6 x its level, log-uniform, so from almost
 none to beyond eq. 13; DSNU, hot pixels, PRNU and comparator offset uniform up
 to their bounds; its own sensor seed). Such a clip carries its sensor's
 calibration, the pixels' mean dark rate and gain (:func:`sensor_maps`), and the
-batches correct its decoded light with them, ``max(0, (x - dark) / gain)``, as
+batches correct its decoded light with them, ``(x - dark) / gain``, as
 inference corrects a learned method's input with a measured calibration
 (:mod:`tespike.recon.calibration`, :func:`tespike.recon.learning.infer.frame`); its
 target is the scene light ``I``. Correcting the input rather than the output was

@@ -150,7 +150,10 @@ def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: 
     with ``tile=None`` the whole mirrored frame is one tile (:func:`blocks`).
     ``correction``: (dark, 1 / gain) float32 (H, W) tensors on ``device`` (a sensor's
     calibration, :func:`input_correction`); each readout's decoded light becomes
-    ``max(0, (x - dark) / gain)`` before the model sees it.
+    ``(x - dark) / gain`` before the model sees it, negative where a readout caught less than
+    the mean dark charge (not floored: a floor at 0 would add a bias of about the dark rate to
+    every dim pixel, the light of one quantised readout being mostly 0 or one spike), and the
+    image is floored at 0.
     """
     sizes = model.sizes
     K, H, W = words.shape
@@ -163,8 +166,9 @@ def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: 
         if correction is not None:
             pixels = (torch.from_numpy(block.rows)[:, None].to(device), torch.from_numpy(block.cols)[None].to(device))
             dark, inverse_gain = (c[pixels] for c in correction)
-            light = torch.clamp_min_((light - dark) * inverse_gain, 0)
-        out[block.frame] = model(light[None], inside, config.spike_light)[0, 0][block.result].float().cpu()
+            light = (light - dark) * inverse_gain
+        image = model(light[None], inside, config.spike_light)[0, 0][block.result].float().cpu()
+        out[block.frame] = image if correction is None else image.clamp_min_(0)
     return out
 
 
