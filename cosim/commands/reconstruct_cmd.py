@@ -28,8 +28,9 @@ def add_arguments(parser):
     parser.add_argument("--search", choices=("stream", "window"), default="stream",
                         help="tfi only: look for the spike interval in the whole stream (default) or the window")
     parser.add_argument("--calibration", metavar="C.npz",
-                        help="a calibration of the sensor that recorded the stream ('tespike calibrate'): the "
-                             "output is corrected to (x - dark) / gain per pixel (every method)")
+                        help="a calibration of the sensor that recorded the stream ('tespike calibrate'): "
+                             "(x - dark) / gain per pixel, on TFP's output, on each readout's light for TFI "
+                             "and the learned methods (every method)")
     parser.add_argument("--threads", type=int, default=None,
                         help=f"torch CPU threads, 1..{MAX_THREADS} (default: torch's choice)")
 
