@@ -9,6 +9,7 @@ readout's decoded light before the model sees it. TFP, corrected at its output
 (exact for a windowed mean), is printed beside. Each row gives its run time.
 
     nice -n 10 python3 benchmarks/calibration_route.py [--sequences 2] [--dark eq12] [--level 1]
+        [--methods net] [--weights net=W.pt]
 """
 
 from __future__ import annotations
@@ -47,6 +48,9 @@ def main() -> int:
     parser.add_argument("--level", type=float, default=1.0, help="dark level x the model's (eq12 / eq13)")
     parser.add_argument("--sensor-seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--weights", action="append", default=[], metavar="METHOD=W.pt",
+                        help="score a learned method with this weights file instead of the shipped one")
+    parser.add_argument("--methods", default=None, help="comma-separated (default: tfp, tfi, every learned one)")
     args = parser.parse_args()
     import torch
     torch.set_num_threads(args.threads)
@@ -54,7 +58,9 @@ def main() -> int:
     noise = (SensorNoise(dark_current=args.dark, dark_level=args.level) if args.dark in ("eq12", "eq13")
              else load_noise(args.dark))
     sensor = Sensor(noise, args.sensor_seed)
-    methods = ["tfp", "tfi"] + [m for m in available_methods([config]) if m in LEARNED]
+    methods = (args.methods.split(",") if args.methods
+               else ["tfp", "tfi"] + [m for m in available_methods([config]) if m in LEARNED])
+    weights = dict(item.split("=", 1) for item in args.weights)
     rows = {m: {"clean": [], "output": [], "input": [], "seconds": 0.0} for m in methods}
     sequences = sequence_set("heldout", args.frames, args.height, args.width)[:args.sequences]
     for index, (name, light) in enumerate(sequences):
@@ -69,9 +75,10 @@ def main() -> int:
         for method in methods:
             start = time.perf_counter()
             row = rows[method]
-            row["clean"].append(score(reconstruct(clean, config, method)))
-            row["output"].append(score(correct(reconstruct(noisy, config, method), calibration)))
-            row["input"].append(score(reconstruct(noisy, config, method, calibration=calibration)))
+            own = {"weights": weights[method]} if method in weights else {}
+            row["clean"].append(score(reconstruct(clean, config, method, **own)))
+            row["output"].append(score(correct(reconstruct(noisy, config, method, **own), calibration)))
+            row["input"].append(score(reconstruct(noisy, config, method, calibration=calibration, **own)))
             row["seconds"] += time.perf_counter() - start
             print(f"{name} {method}: clean {row['clean'][-1]:.2f}, output corrected {row['output'][-1]:.2f}, "
                   f"input corrected {row['input'][-1]:.2f}", file=sys.stderr, flush=True)
