@@ -43,6 +43,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
 #: The one recipe of every run (``tespike train`` flags).
 RECIPE = ("--loss", "mu-l1", "--halve-every", "20", "--threads", "1", "--workers", "1", "--pool", "32",
           "--refresh", "12", "--noise-fraction", "0.5", "--seed", "0")
@@ -95,7 +96,6 @@ def summary_row(name: str, out: Path, command: str, rc: int) -> dict:
     row = {"run": name, "command": command, "exit": rc}
     weights = out / f"{name}.pt"
     if rc == 0 and weights.is_file():
-        sys.path.insert(0, str(ROOT))
         from tespike.recon.learning.weights import read_weights
         meta = read_weights(weights, "weights")["meta"]
         row.update(steps=meta["steps"], wall_seconds=meta["wall_seconds"], parameters=meta["parameters"],
@@ -117,7 +117,6 @@ def plot(folder: Path, png: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    sys.path.insert(0, str(ROOT))
     from tespike.recon.pictures import save_figure
     panels = {"TE": lambda n: n.endswith("-te") and not n.startswith("ablation"),
               "ML msb": lambda n: n.endswith("-ml-msb"), "ML count": lambda n: n.endswith("-ml"),
