@@ -135,11 +135,13 @@ def validation(args) -> None:
     for label, preset in SENSORS:
         config = SensorConfig.preset(preset)
         cases = validation_set(config)
-        rows = {m: validation_psnr(lambda w: reconstruct(w, config, m), cases) for m in ("tfp", "tfi")}
+        rows = {m: validation_psnr(lambda c: reconstruct(c.words, config, m, calibration=c.calibration), cases)
+                for m in ("tfp", "tfi")}
         for path in [Path(args.weights_dir) / f"{preset}.pt", *map(Path, args.compare)]:
             if path.is_file() and load_weights(path)[1] == config:
                 model = load_weights(path)[0]
-                rows[str(path)] = validation_psnr(lambda w: reconstruct_model(model, w, config, tile=None), cases)
+                rows[str(path)] = validation_psnr(lambda c: reconstruct_model(
+                    model, c.words, config, tile=None, calibration=c.calibration), cases)
         names = list(rows["tfp"])
         print(f"\n{label}: validation PSNR-mu (dB), every frame of each case")
         print("| method | " + " | ".join(names) + " |")
@@ -170,6 +172,9 @@ def candidates(args) -> None:
         print("| --- |" + " ---: |" * (len(names) + 2))
         for case in validation_set(config):
             light = decode_light(case.words, config, dtype=torch.float64)
+            if case.calibration is not None:          # a noisy case: corrected at the input, as inference does
+                c = case.calibration
+                light = (light - torch.from_numpy(c.dark)) / torch.from_numpy(c.gain)
             spans = torch.from_numpy(np.stack([key_span(len(light), k, span) for k in range(len(light))]))
             inside = torch.from_numpy(np.stack([span_inside(len(light), k, span) for k in range(len(light))]))
             estimates = key_estimates(light[spans], inside, config.spike_light)    # (K, estimates, H, W)

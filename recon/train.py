@@ -236,7 +236,8 @@ def validate(model: torch.nn.Module, cases, config: SensorConfig, device: str) -
     model.eval()
     try:
         with torch.inference_mode():
-            return validation_psnr(lambda words: reconstruct_model(model, words, config, tile=None, device=device),
+            return validation_psnr(lambda case: reconstruct_model(model, case.words, config, tile=None,
+                                                                  device=device, calibration=case.calibration),
                                    cases)
     finally:
         model.train(was_training)
@@ -301,13 +302,15 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
     if resume:
         state, saved = read_checkpoint(checkpoint)
         kept = {"steps": options.steps, "minutes": options.minutes, "device": options.device,
-                "threads": options.threads, "workers": options.workers}
+                "threads": options.threads, "workers": options.workers,
+                "init": saved.init}      # the warm start is in the checkpoint: --resume needs no --init
 
         def same(o: TrainOptions) -> TrainOptions:    # the recipe compared as resolved, not as typed
             return dataclasses.replace(o, **kept, checkpoint_seconds=0, recipe=o.data_recipe().to_dict())
         if same(saved) != same(options):
             raise InputError(f"checkpoint {str(checkpoint)!r} was made with other options; "
                              "resume with the same sensor, method, size, loss, recipe and seed")
+        options = dataclasses.replace(options, init=saved.init)     # the record names the run's warm start
         try:
             model.load_state_dict(state["model"])
             optimizer.load_state_dict(state["optimizer"])

@@ -50,10 +50,11 @@ def test_validation_scores_every_held_out_case():
     cases = validation_set(SensorConfig(), 16, 24)
     assert [c.label for c in cases] == [c.label for c in CASES]
     assert all(c.words.shape == c.light.shape for c in cases)
-    perfect = validation_psnr(lambda words: next(c.light for c in cases if c.words is words), cases)
+    perfect = validation_psnr(lambda case: case.light, cases)
     assert all(v == float("inf") for v in perfect.values())
-    rough = validation_psnr(lambda words: next(c.light for c in cases if c.words is words) * 1.5, cases)
+    rough = validation_psnr(lambda case: case.light * 1.5, cases)
     assert all(10 < v < 60 for v in rough.values())
+    assert set(rough) == {c.label for c in cases} | {"shot", "noisy", "mean"}
 
 
 def test_resume_continues_exactly(tmp_path):
@@ -150,6 +151,10 @@ def test_init_warm_starts_every_matching_tensor(tmp_path):
         warm_start(new, str(tmp_path / "old.pt"), "bsf")
     out = train(options(init=str(tmp_path / "old.pt")), tmp_path / "w.pt")
     assert load_weights(out)[2]["options"]["init"] == str(tmp_path / "old.pt")
+    # --resume continues a warm-started run without --init (its start is in the checkpoint) and records it
+    out = train(options(steps=6), tmp_path / "w.pt", resume=True)
+    meta = load_weights(out)[2]
+    assert meta["steps"] == 6 and meta["options"]["init"] == str(tmp_path / "old.pt")
 
 
 def test_init_refusals(tmp_path):

@@ -7,12 +7,19 @@ Every case is made from the validation seed domain (never a training seed):
   pan of 32 readouts;
 - dead leaves with held-out generator parameters (steeper size law, fewer and
   harder-edged objects, five to six decades): a long clip and a short one of
-  16 readouts, twice the design light.
+  16 readouts, twice the design light;
+- the same long pan and long dead-leaves clip recorded by a noisy sensor
+  (:data:`VALIDATION_SENSORS`: eq. 12 and eq. 13 dark current with DSNU, hot
+  pixels, PRNU and comparator offset, validation sensor seeds) and read through
+  its exact calibration, as the engine's noisy clips are and as inference corrects
+  a learned method's input: so selection sees what a noisy sensor costs.
 
-:func:`validation_set` returns light and words for one sensor configuration;
-:func:`validation_psnr` gives PSNR-mu (mu = 5000, each frame divided by the ground
-truth's peak) of every case over all its frames (the ends of each stream,
-where inference repeats the first or last readout, included) and their mean.
+:func:`validation_set` returns light, words and the noisy cases' calibration for
+one sensor configuration; :func:`validation_psnr` gives PSNR-mu (mu = 5000, each
+frame divided by the ground truth's peak) of every case over all its frames (the
+ends of each stream, where inference repeats the first or last readout, included),
+``shot`` and ``noisy``, the means of the shot-noise-only cases and of the noisy
+ones, and ``mean``, the mean of every case (the selection score).
 """
 
 from __future__ import annotations
@@ -26,7 +33,7 @@ import numpy as np
 from tespike.golden.config import SensorConfig
 from tespike.golden.fastsim import simulate_scene
 
-from .clips import HELDOUT_PANORAMA, VALIDATION_DOMAIN
+from .clips import HELDOUT_PANORAMA, VALIDATION_DOMAIN, sensor_maps
 from .deadleaves import DeadLeavesParams, dead_leaves
 
 #: Held-out generator parameters of the dead-leaves family (none of training's ranges' corners).
@@ -41,7 +48,16 @@ class Case:
     motion: str
     frames: int
     peak: float
+    sensor: str = ""     # a key of VALIDATION_SENSORS ("": shot noise only)
 
+
+#: The noisy validation sensors (fixed, inside the engine's NOISE_DRAW range; golden.noise.SensorNoise fields).
+VALIDATION_SENSORS = {
+    "eq12": {"dark_current": "eq12", "dark_level": 1.0, "dsnu": 0.3, "hot_pixels": 0.01, "hot_factor": 20.0,
+             "prnu": 0.03, "comparator_offset": 0.03},
+    "eq13": {"dark_current": "eq13", "dark_level": 1.0, "dsnu": 0.3, "hot_pixels": 0.01, "hot_factor": 20.0,
+             "prnu": 0.03, "comparator_offset": 0.03},
+}
 
 CASES = (
     Case("courtyard-pan", "panorama", "pan", 48, 1.0),
@@ -50,6 +66,8 @@ CASES = (
     Case("courtyard-short-32", "panorama", "pan", 32, 1.0),
     Case("deadleaves-heldout", "deadleaves", "", 48, 2.0),
     Case("deadleaves-short-16", "deadleaves", "", 16, 2.0),
+    Case("courtyard-pan-eq12", "panorama", "pan", 48, 1.0, "eq12"),
+    Case("deadleaves-heldout-eq13", "deadleaves", "", 48, 2.0, "eq13"),
 )
 
 
@@ -58,6 +76,7 @@ class ValidationCase:
     label: str
     light: np.ndarray        # float32 (K, H, W)
     words: np.ndarray
+    calibration: object = None    # a noisy case's exact Calibration (exact_calibration); None: shot noise only
 
 
 def case_light(case: Case, index: int, height: int, width: int) -> np.ndarray:
@@ -72,24 +91,45 @@ def case_light(case: Case, index: int, height: int, width: int) -> np.ndarray:
     return light * (case.peak / float(light.max()))
 
 
+def validation_sensor(case: Case, index: int):
+    """The :class:`tespike.golden.noise.Sensor` of a noisy case (its own validation sensor seed)."""
+    from tespike.golden.noise import Sensor, SensorNoise
+    seed = int(np.random.SeedSequence([VALIDATION_DOMAIN, index, 2]).generate_state(1, np.uint64)[0] >> 2)
+    return Sensor(SensorNoise(**VALIDATION_SENSORS[case.sensor]), seed)
+
+
+def exact_calibration(sensor, config: SensorConfig, shape: tuple[int, int]):
+    """A sensor's true per-pixel dark rate and gain as a :class:`tespike.recon.calibration.Calibration`
+    (estimator ``exact``: no readouts were taken), as the engine's noisy clips are corrected."""
+    from ..calibration import Calibration
+    dark, gain = sensor_maps(sensor, shape)
+    return Calibration(dark.astype(np.float64), gain.astype(np.float64), config, 0, 0, 0.0, estimator="exact")
+
+
 def validation_set(config: SensorConfig, height: int = 96, width: int = 128) -> list[ValidationCase]:
     """Every case of :data:`CASES` with its stream for ``config`` (validation seeds)."""
     out = []
     for index, case in enumerate(CASES):
         light = case_light(case, index, height, width)
         noise = np.random.default_rng(np.random.SeedSequence([VALIDATION_DOMAIN, index, 1]))
-        words = simulate_scene(config, light, seed=noise, workers=1)
-        out.append(ValidationCase(case.label, light.astype(np.float32), words))
+        sensor = validation_sensor(case, index) if case.sensor else None
+        words = simulate_scene(config, light, seed=noise, workers=1, sensor=sensor)
+        calibration = None if sensor is None else exact_calibration(sensor, config, light.shape[1:])
+        out.append(ValidationCase(case.label, light.astype(np.float32), words, calibration))
     return out
 
 
-def validation_psnr(reconstruct: Callable[[np.ndarray], np.ndarray],
-          cases: list[ValidationCase]) -> dict[str, float]:
-    """PSNR-mu (dB) of ``reconstruct(words) -> light`` on every case, and ``mean``."""
+def validation_psnr(reconstruct: Callable[[ValidationCase], np.ndarray],
+                    cases: list[ValidationCase]) -> dict[str, float]:
+    """PSNR-mu (dB) of ``reconstruct(case) -> light`` on every case; ``shot``, ``noisy`` and ``mean``."""
     from ..metrics import psnr_mu
     out = {}
     for case in cases:
-        values = psnr_mu(reconstruct(case.words), case.light)
+        values = psnr_mu(reconstruct(case), case.light)
         out[case.label] = float(np.mean(values[np.isfinite(values)])) if np.isfinite(values).any() else math.inf
+    for key, members in (("shot", [c for c in cases if c.calibration is None]),
+                         ("noisy", [c for c in cases if c.calibration is not None])):
+        if members:
+            out[key] = float(np.mean([out[c.label] for c in members]))
     out["mean"] = float(np.mean([out[c.label] for c in cases]))
     return out
