@@ -110,6 +110,34 @@ def test_user_folder_family(tmp_path):
         clip_light(EngineRecipe(**{**recipe.to_dict(), "height": 40}), 0)
 
 
+def test_user_panoramas_join_the_training_panoramas(tmp_path):
+    """A folder's .exr/.hdr panoramas are camera sources (the held-out courtyard left out or refused)."""
+    from tespike.recon.engine.clips import TRAIN_PANORAMAS, panorama_files
+    from tespike.recon.scenes import write_hdr
+    folder = tmp_path / "panos"
+    folder.mkdir()
+    image = np.full((64, 128, 3), 0.2, np.float32)
+    image[20:30, 40:60] = 50.0                       # a bright patch: the clip must come from this file
+    write_hdr(folder / "patch.hdr", image)
+    write_hdr(folder / "courtyard.hdr", image)
+    (folder / "notes.txt").write_text("not a panorama")
+    files = panorama_files(folder)
+    assert files == (str((folder / "patch.hdr").resolve()),)
+    recipe = EngineRecipe(height=16, width=16, long=(4, 4), short_fraction=0.0, weights=(("panorama", 1.0),),
+                          panoramas=files)
+    light, family, _ = clip_light(recipe, 0)
+    assert family == "panorama" and light.shape == (4, 16, 16)
+    assert EngineRecipe.from_dict(recipe.to_dict()) == recipe
+    with pytest.raises(InputError, match="held out"):
+        EngineRecipe(panoramas=TRAIN_PANORAMAS + (str(folder / "courtyard.hdr"),))
+    with pytest.raises(InputError, match="nor an .exr/.hdr file"):
+        EngineRecipe(panoramas=(str(folder / "missing.hdr"),))
+    with pytest.raises(InputError, match="holds no .exr/.hdr panorama"):
+        panorama_files(tmp_path / "panos" / "..")
+    with pytest.raises(InputError, match="not a folder"):
+        panorama_files(folder / "patch.hdr")
+
+
 def test_recipe_refusals():
     with pytest.raises(InputError, match="held out"):
         EngineRecipe(panoramas=("courtyard",))

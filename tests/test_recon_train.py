@@ -2,6 +2,7 @@
 
 import csv
 
+import numpy as np
 import pytest
 import torch
 
@@ -103,6 +104,8 @@ def test_cli_refusals(tmp_path):
     for low, high in (("0.3", "0.1"), ("0", "1"), ("1", "inf")):
         assert_refused(run_tespike("train", "--config", "te", "--peak", low, high, "--out", tmp_path / "w.pt",
                                    "--steps", "1"), f"--peak {low} {high}")
+    assert_refused(run_tespike("train", "--config", "te", "--panoramas", tmp_path / "none", "--out",
+                               tmp_path / "w.pt", "--steps", "1"), "--panoramas")
     assert not (tmp_path / "w.pt").exists()
 
 
@@ -116,6 +119,12 @@ def test_peak_sets_the_clips_brightness(tmp_path, monkeypatch):
     assert seen[0].data_recipe().peak == (0.01, 0.3)
     assert main(["train", "--out", str(tmp_path / "w.pt"), "--steps", "1", "-q"]) == 0
     assert seen[1].data_recipe().peak == EngineRecipe().peak
+    from tespike.recon.scenes import write_hdr
+    (tmp_path / "panos").mkdir()
+    write_hdr(tmp_path / "panos" / "hall.hdr", np.full((32, 64, 3), 0.5, np.float32))
+    assert main(["train", "--out", str(tmp_path / "w.pt"), "--steps", "1", "--panoramas", str(tmp_path / "panos"),
+                 "-q"]) == 0
+    assert seen[2].data_recipe().panoramas == EngineRecipe().panoramas + (str(tmp_path / "panos" / "hall.hdr"),)
 
 
 def test_method_and_crop_checked():

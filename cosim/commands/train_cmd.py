@@ -51,6 +51,10 @@ def add_arguments(parser):
     parser.add_argument("--minutes", type=float, default=None, help="wall-time budget in minutes")
     parser.add_argument("--hdr", action="append", default=[], metavar="DIR",
                         help="also train on this folder of .exr/.hdr frames (a quarter of the clips; repeatable)")
+    parser.add_argument("--panoramas", action="append", default=[], metavar="DIR",
+                        help="also move cameras over every equirectangular .exr/.hdr panorama of this folder "
+                             "(beside the four shipped training panoramas; a file named courtyard, the held-out "
+                             "panorama, is left out; repeatable)")
     parser.add_argument("--peak", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
                         help="the clips' brightest light, drawn log-uniformly in [LOW, HIGH] x the design "
                              "light (default: the engine's 0.01 3)")
@@ -96,6 +100,10 @@ def run(args) -> int:
     for folder in args.hdr:
         if not Path(folder).is_dir():
             raise InputError(f"--hdr {folder!r}: not a folder of .exr/.hdr frames")
+    panoramas = ()
+    if args.panoramas:
+        from tespike.recon.engine.clips import TRAIN_PANORAMAS, panorama_files
+        panoramas = TRAIN_PANORAMAS + tuple(f for folder in args.panoramas for f in panorama_files(folder))
     out = Path(args.out)
     preset = args.config in PRESETS
     config_input = {} if preset else {"--config": args.config}
@@ -112,6 +120,7 @@ def run(args) -> int:
     options = TrainOptions(sensor=args.config if preset else config.to_json(), ablation=args.ablation,
                            steps=args.steps, minutes=args.minutes, threads=args.threads,
                            recipe={"folders": tuple(args.hdr), **({"peak": tuple(args.peak)} if args.peak else {}),
+                                   **({"panoramas": panoramas} if panoramas else {}),
                                    **({"noise_fraction": args.noise_fraction} if args.noise_fraction else {})},
                            init=args.init, **given)
     command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])

@@ -13,8 +13,9 @@ Families (:data:`FAMILIES`), each a documented generator:
   radiance over up to six decades, textures, soft and sharp edges, object and
   camera motion, small bright and flickering sources);
 - ``panorama``: a camera path (pan, tilt, rotate, zoom or all) over one of the
-  training panoramas (never the held-out ``courtyard``), with 0..2 moving
-  bright sources;
+  training panoramas (the four shipped ones, never the held-out ``courtyard``,
+  and any equirectangular .exr/.hdr files the recipe names, e.g. a folder given
+  to ``tespike train --panoramas``), with 0..2 moving bright sources;
 - ``folder``: a random window and time span of a user folder of .exr/.hdr
   frames (``recipe.folders``), played forwards or backwards.
 
@@ -56,6 +57,8 @@ from .deadleaves import DeadLeavesParams, dead_leaves
 #: The panorama kept out of training: validation uses it.
 HELDOUT_PANORAMA = "courtyard"
 TRAIN_PANORAMAS = ("city", "forest", "studio", "sunset")
+#: Files a user's panorama folder contributes (``tespike train --panoramas DIR``).
+PANORAMA_SUFFIXES = (".exr", ".hdr")
 FAMILIES = ("deadleaves", "panorama", "folder")
 #: Seed domains: training clips and validation clips never share a seed.
 TRAIN_DOMAIN, VALIDATION_DOMAIN = 17, 23
@@ -85,7 +88,7 @@ class EngineRecipe:
     short: tuple[int, int] = (1, 47)         # readouts of a short stream (log-uniform)
     short_fraction: float = 0.3
     peak: tuple[float, float] = (0.01, 3.0)  # x the design light, log-uniform
-    panoramas: tuple[str, ...] = TRAIN_PANORAMAS
+    panoramas: tuple[str, ...] = TRAIN_PANORAMAS   # names of shipped ones and/or .exr/.hdr paths
     folders: tuple[str, ...] = ()            # user .exr/.hdr frame folders (family "folder")
     folder_weight: float = 0.25              # share of folder clips when folders are given
     seed: int = 0
@@ -93,7 +96,8 @@ class EngineRecipe:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "weights", tuple((str(n), float(w)) for n, w in self.weights))
-        object.__setattr__(self, "panoramas", tuple(self.panoramas))
+        object.__setattr__(self, "panoramas", tuple(p if p in TRAIN_PANORAMAS or p == HELDOUT_PANORAMA
+                                                    else str(Path(p).resolve()) for p in self.panoramas))
         object.__setattr__(self, "folders", tuple(str(Path(f).resolve()) for f in self.folders))
         for name, weight in self.weights:
             if name not in FAMILIES or name == "folder":
@@ -101,8 +105,14 @@ class EngineRecipe:
                                  "folders are given as folders)")
             if not weight >= 0:
                 raise InputError(f"engine family {name!r} weight {weight!r}: must be >= 0")
-        if HELDOUT_PANORAMA in self.panoramas:
-            raise InputError(f"engine recipe: panorama {HELDOUT_PANORAMA!r} is held out for validation")
+        for source in self.panoramas:
+            if source == HELDOUT_PANORAMA or (source not in TRAIN_PANORAMAS
+                                              and Path(source).stem.lower() == HELDOUT_PANORAMA):
+                raise InputError(f"engine recipe: panorama {source!r} is held out for validation")
+            if source not in TRAIN_PANORAMAS and not (Path(source).suffix.lower() in PANORAMA_SUFFIXES
+                                                       and Path(source).is_file()):
+                raise InputError(f"engine recipe: panorama {source!r} is neither one of "
+                                 f"{', '.join(TRAIN_PANORAMAS)} nor an .exr/.hdr file")
         for key in ("height", "width"):
             if type(getattr(self, key)) is not int or getattr(self, key) < 8:
                 raise InputError(f"engine recipe {key} = {getattr(self, key)!r}: must be an integer >= 8")
@@ -262,3 +272,18 @@ def make_clip(recipe: EngineRecipe, config: SensorConfig, index: int, *, domain:
     words = simulate_scene(config, light, seed=rng, workers=1, sensor=sensor)
     dark, gain = (None, None) if sensor is None else sensor_maps(sensor, light.shape[1:])
     return Clip(light.astype(np.float32), words, family, index, sensor, dark, gain)
+
+
+def panorama_files(folder: str | Path) -> tuple[str, ...]:
+    """Every equirectangular .exr/.hdr file of ``folder`` (sorted, absolute), refused in one line
+    when the folder is missing or holds none (``tespike train --panoramas``)."""
+    path = Path(folder)
+    if not path.is_dir():
+        raise InputError(f"--panoramas {str(folder)!r}: not a folder")
+    files = tuple(sorted(str(f.resolve()) for f in path.iterdir()
+                         if f.suffix.lower() in PANORAMA_SUFFIXES and f.is_file()
+                         and f.stem.lower() != HELDOUT_PANORAMA))
+    if not files:
+        raise InputError(f"--panoramas {str(folder)!r}: holds no .exr/.hdr panorama "
+                         f"(other than the held-out {HELDOUT_PANORAMA!r})")
+    return files

@@ -24,6 +24,7 @@ whole sequence is ``peak`` (paper appendix A.2.2).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 from pathlib import Path
@@ -59,9 +60,10 @@ def shipped_panorama_file(name: str) -> Path:
 
 
 def load_panorama(source: str | Path = "default", weights: str = DEFAULT_WEIGHTS) -> np.ndarray:
-    """Luminance of a panorama, float64 (H, W), >= 0 (see the module docstring)."""
-    from .hdr_io import read_image
+    """Luminance of a panorama, float64 (H, W), >= 0, read-only (see the module docstring).
 
+    A file is read once per process (:func:`file_luminance`): the data engine moves
+    cameras over the same panoramas clip after clip."""
     if str(source) == "default" or (str(source) in PANORAMAS and hdri_dir() is None):
         with np.load(shipped_panorama_file(str(source)), allow_pickle=False) as npz:
             return npz["luminance"].astype(np.float64)
@@ -70,12 +72,21 @@ def load_panorama(source: str | Path = "default", weights: str = DEFAULT_WEIGHTS
         if not path.is_file():
             raise InputError(f"panorama {str(source)!r} not found at {str(path)!r} "
                              "(set TESPIKE_HDRI_DIR to the folder holding the five .exr panoramas)")
-        return to_gray(read_image(path), weights, what=str(path))
-    path = Path(source)
-    if not path.is_file():
-        raise InputError(f"panorama {str(source)!r} is neither 'default', one of "
-                         f"{', '.join(PANORAMAS)}, nor an existing .exr/.hdr file")
-    return to_gray(read_image(path), weights, what=str(path))
+    else:
+        path = Path(source)
+        if not path.is_file():
+            raise InputError(f"panorama {str(source)!r} is neither 'default', one of "
+                             f"{', '.join(PANORAMAS)}, nor an existing .exr/.hdr file")
+    return file_luminance(str(path.resolve()), path.stat().st_mtime_ns, weights)
+
+
+@functools.lru_cache(maxsize=64)
+def file_luminance(path: str, mtime_ns: int, weights: str) -> np.ndarray:
+    """The luminance of one panorama file (read-only; cached by path and modification time)."""
+    from .hdr_io import read_image
+    luminance = to_gray(read_image(path), weights, what=path)
+    luminance.setflags(write=False)
+    return luminance
 
 
 def block_mean(image: np.ndarray, factor: int) -> np.ndarray:
