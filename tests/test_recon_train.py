@@ -195,3 +195,22 @@ def test_cli_keeps_no_copy_of_the_trainers_defaults(tmp_path, monkeypatch, capsy
     with pytest.raises(SystemExit):
         build_parser("train").parse_args(["train", "--help"])
     assert f"steps per epoch (default {defaults['steps_per_epoch']})" in " ".join(capsys.readouterr().out.split())
+
+
+def test_learning_rate_warms_up_then_halves_as_the_papers_schedule():
+    """Without warm-up the schedule is StepLR's exactly; with it the first steps ramp up linearly."""
+    from tespike.recon.train import lr_factor
+    plain = options(halve_every=2, steps_per_epoch=3)
+    parameter = torch.nn.Parameter(torch.zeros(1))
+    optimizer = torch.optim.SGD([parameter], lr=1.0)
+    steplr = torch.optim.lr_scheduler.StepLR(optimizer, 6, 0.5)
+    expected = []
+    for _ in range(20):
+        expected.append(optimizer.param_groups[0]["lr"])
+        optimizer.step()
+        steplr.step()
+    assert [lr_factor(plain, step) for step in range(20)] == expected
+    warm = options(halve_every=2, steps_per_epoch=3, warmup=4)
+    assert [lr_factor(warm, step) for step in range(8)] == [0.25, 0.5, 0.75, 1.0, 1.0, 1.0, 0.5, 0.5]
+    with pytest.raises(InputError, match="warmup"):
+        options(warmup=-1)

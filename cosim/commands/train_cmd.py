@@ -13,7 +13,7 @@ HELP = "train a learned reconstruction method for one sensor configuration (resu
 
 #: Flags whose default is the trainer's (their dest is the TrainOptions field).
 TRAINER_FLAGS = ("method", "size", "loss", "lr", "steps_per_epoch", "halve_every", "batch", "crop",
-                 "workers", "pool", "refresh", "validate_every", "seed", "device")
+                 "workers", "pool", "refresh", "validate_every", "seed", "device", "warmup")
 
 
 class _TrainerDefaults(argparse.HelpFormatter):
@@ -43,6 +43,8 @@ def add_arguments(parser):
                         help="train the paper's Table 3 ablation case 1..6 instead of the whole network")
     trainer("--loss", "l1 (paper eq. 7) or mu-l1 (after the mu-law)")
     trainer("--lr", "initial learning rate", type=float)
+    trainer("--warmup", "steps over which the learning rate ramps up linearly (for a warm start: --init's "
+                        "weights meet a fresh Adam state)", type=int)
     trainer("--steps-per-epoch", "steps per epoch", type=int)
     trainer("--halve-every", "epochs between learning-rate halvings", type=int)
     trainer("--batch", "batch size", type=int)
