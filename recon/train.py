@@ -232,10 +232,11 @@ def plot_curves(log_path: Path, validation_path: Path, png_path: Path, title: st
 
 def lr_factor(options: TrainOptions, step: int) -> float:
     """The learning rate at ``step`` over ``options.lr``: halved every ``halve_every`` epochs
-    (the paper's schedule) and, over the first ``warmup`` steps, ramped up linearly. A warm
-    start (``--init``) begins with a fresh Adam state, whose first steps move every weight by
-    about the learning rate whatever its gradient: measured, that cost a trained network 1.4
-    to 2 dB of validation in its first 250 steps (docs/fair-training.md)."""
+    (the paper's schedule) and, over the first ``warmup`` steps, ramped up linearly: a warm
+    start (``--init``) meets a fresh Adam state, whose first steps move every weight by about
+    the learning rate whatever its gradient. (Measured: it did not remove the 1.5 to 2 dB
+    validation dip of the shipped ML networks warm-started on noisy clips, which is the data's,
+    not the optimiser's: docs/fair-training.md.)"""
     ramp = min(1.0, (step + 1) / options.warmup) if options.warmup else 1.0
     return ramp * 0.5 ** (step // (options.steps_per_epoch * options.halve_every))
 

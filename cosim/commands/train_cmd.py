@@ -43,7 +43,7 @@ def add_arguments(parser):
                         help="train the paper's Table 3 ablation case 1..6 instead of the whole network")
     trainer("--loss", "l1 (paper eq. 7) or mu-l1 (after the mu-law)")
     trainer("--lr", "initial learning rate", type=float)
-    trainer("--warmup", "steps over which the learning rate ramps up linearly (for a warm start: --init's "
+    trainer("--warmup", "steps over which the learning rate ramps up linearly (a warm start's --init "
                         "weights meet a fresh Adam state)", type=int)
     trainer("--steps-per-epoch", "steps per epoch", type=int)
     trainer("--halve-every", "epochs between learning-rate halvings", type=int)
