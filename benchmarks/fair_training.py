@@ -27,6 +27,7 @@ seconds and best validation PSNR-mu. Progress (each run's step) is printed every
 ``--report`` seconds.
 
     python3 benchmarks/fair_training.py --out runs --minutes 7 --device cuda --groups fair continue
+    python3 benchmarks/fair_training.py --resume runs --minutes 11     # every run continued to 11 min in all
     python3 benchmarks/fair_training.py --plot runs --png curves.png     # validation against run time
 """
 
@@ -147,6 +148,8 @@ def main(argv=None) -> int:
     parser.add_argument("--plot", metavar="DIR", help="plot the validation curves of a runs folder (no training)")
     parser.add_argument("--png", default="fair_training.png", help="the plot --plot writes")
     parser.add_argument("--out", help="folder of the runs (must not exist)")
+    parser.add_argument("--resume", metavar="DIR", help="continue every run of a finished runs folder to --minutes "
+                        "in all (each its recorded command with --resume)")
     parser.add_argument("--minutes", type=float, help="wall budget of every run")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--groups", nargs="+", default=["fair"], choices=["fair", "continue", "continue-baselines", "ablation"])
@@ -161,6 +164,11 @@ def main(argv=None) -> int:
     if args.plot is not None:
         plot(Path(args.plot), args.png)
         return 0
+    if args.resume is not None:
+        if args.minutes is None:
+            parser.error("--resume DIR needs --minutes (the budget of each run, in all)")
+        commands = resumed(Path(args.resume), args.minutes, args.only)
+        return run_all(Path(args.resume), commands, args.minutes, args.device, args.report)
     if args.out is None or args.minutes is None:
         parser.error("--out and --minutes are needed to train (or --plot DIR)")
     out = Path(args.out)
@@ -169,9 +177,7 @@ def main(argv=None) -> int:
         return 2
     out.mkdir(parents=True)
     todo = [(n, a) for n, a in jobs(args.groups, args.lr, args.continue_lr) if args.only is None or n in args.only]
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
-    procs = {}
+    commands = {}
     for name, extra in todo:
         cmd = [sys.executable, "-m", "tespike", "train", *extra, *RECIPE, "--minutes", str(args.minutes),
                "--device", args.device, "--validate-every", str(args.validate_every), "--progress", "off",
@@ -180,13 +186,42 @@ def main(argv=None) -> int:
             cmd += ["--pool", str(args.pool)]
         if args.steps is not None:
             cmd += ["--steps", str(args.steps)]
-        log = open(out / f"{name}.log", "w")
+        commands[name] = cmd
+    return run_all(out, commands, args.minutes, args.device, args.report)
+
+
+def resumed(out: Path, minutes: float, only) -> dict[str, list[str]]:
+    """Each run of a runs folder's ``summary.json`` continued (``--resume``) to ``minutes`` in all:
+    its recorded command, without ``--init`` (the warm start is in its checkpoint)."""
+    summary = out / "summary.json"
+    if not summary.is_file():
+        raise SystemExit(f"fair_training: --resume {str(out)!r}: no summary.json (not a finished runs folder)")
+    commands = {}
+    for row in json.loads(summary.read_text()):
+        if only is not None and row["run"] not in only:
+            continue
+        args = shlex.split(row["command"])[1:]          # drop the leading "tespike"
+        if "--init" in args:
+            at = args.index("--init")
+            del args[at:at + 2]
+        args[args.index("--minutes") + 1] = str(minutes)
+        commands[row["run"]] = [sys.executable, "-m", "tespike", *args, "--resume"]
+    return commands
+
+
+def run_all(out: Path, commands: dict[str, list[str]], minutes: float, device: str, report: float) -> int:
+    """Start every run together, print their steps every ``report`` seconds, write the summary."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    procs = {}
+    for name, cmd in commands.items():
+        log = open(out / f"{name}.log", "a")
         procs[name] = (subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT), cmd, log)
-    print(f"{len(procs)} runs started, {args.minutes} min each, device {args.device}", flush=True)
+    print(f"{len(procs)} runs started, {minutes} min each, device {device}", flush=True)
     start = time.monotonic()
     while any(p.poll() is None for p, _, _ in procs.values()):
-        time.sleep(min(args.report, 5.0))
-        if int(time.monotonic() - start) % int(args.report) < 5:
+        time.sleep(min(report, 5.0))
+        if int(time.monotonic() - start) % int(report) < 5:
             steps = " ".join(f"{n}:{last_step(out / f'{n}.run')}" for n in procs)
             print(f"[{time.monotonic() - start:5.0f} s] {steps}", flush=True)
     rows = []
