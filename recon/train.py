@@ -4,7 +4,7 @@ Data come from the training-data engine (:mod:`tespike.recon.engine`): clips mad
 worker processes, never the same twice, deterministic from the seed; each step
 draws ``batch`` (clip, key moment, crop, flip) samples. The optimiser is Adam
 (beta 0.9 / 0.999); the learning rate halves every ``halve_every`` epochs of
-``steps_per_epoch`` steps (``torch.optim.lr_scheduler.StepLR``). Losses: ``l1``
+``steps_per_epoch`` steps, after an optional linear warm-up (:func:`lr_factor`). Losses: ``l1``
 (the paper's eq. 7) or ``mu-l1``, the L1 distance after the mu-law tone map of
 the metrics. Every ``validate_every`` steps the model is scored on the held-out
 validation set (:mod:`tespike.recon.engine.validation`); the weights kept are the best
