@@ -53,6 +53,22 @@ def interval_levels(config: SensorConfig, budget: float) -> tuple[float, float, 
     return mean_event, mean_unclipped, lam_bright
 
 
+def saturation_levels(config: SensorConfig, budget: float) -> tuple[float, float]:
+    """-> (``lam_top``: smallest photo-electrons per clock at which every clock's input
+    surely saturates at ``2^E - 1``; ``lam_full``: at which every clock surely gets
+    ``theta + 2^A - 1``, so that the accumulator is surely full after the first clock,
+    infinite where inputs saturate below that). Each bound falls with the light, so each
+    test is one comparison with its level."""
+    c = config
+    top = c.input_max
+    lam_top = smallest_below(lambda m: log_poisson_tail_below(m, top - 1), budget, float(top))
+    lam_full = np.inf
+    if top >= c.threshold + c.acc_max:
+        k = c.threshold + c.acc_max
+        lam_full = smallest_below(lambda m: log_poisson_tail_below(m, k - 1), budget, float(k))
+    return lam_top, lam_full
+
+
 def overflow_level(config: SensorConfig, budget: float) -> float:
     """Smallest interval mean at which a TE pixel surely gets the ``2^b1 theta`` electrons
     of an overflow (from an empty accumulator, so from any charge below theta)."""
@@ -125,14 +141,13 @@ def bright_path(sim, sel, expected, lam, dark, words):
     acc0 = sim.carried[sel]
     lam_s = lam[sel]
     end = np.full(sel.size, acc_max, np.int64)
+    levels = sim.levels
     # every clock saturated at 2^E - 1: a deterministic sum
-    all_top = log_poisson_tail_below(lam_s, top - 1) < sim.budget
+    all_top = lam_s >= levels.lam_top
     # accumulator surely full after the first clock: nothing to draw
-    full = np.zeros(sel.size, bool)
-    if top >= theta + acc_max:
-        full = log_poisson_tail_below(lam_s, theta + acc_max - 1) < sim.budget
+    full = lam_s >= levels.lam_full
     # no input can saturate: the sum is Poisson(expected) + dark
-    unclipped = log_poisson_tail_above(lam_s + dark[sel] / L, top + 1) < sim.budget
+    unclipped = (lam_s + dark[sel] / L if sim.dark_model else lam_s) <= levels.mean_unclipped
     need = ~full & ~all_top
     if (need & ~unclipped).any():
         # inputs that may or may not saturate: per clock (exact), rare in practice

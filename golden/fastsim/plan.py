@@ -20,7 +20,7 @@ import numpy as np
 
 from ..config import SensorConfig
 from .head import classify_head
-from .interval import classify_interval, interval_levels, overflow_level
+from .interval import classify_interval, interval_levels, overflow_level, saturation_levels
 from .lazy import lazy_level
 from .window import classify_window, queue_level
 from .codes import CLOCK, LAZY
@@ -46,6 +46,7 @@ class PathLevels:
         self.budget = budget
         self.mean_event, self.mean_unclipped, self.lam_bright = interval_levels(config, budget)
         self.mean_overflow = overflow_level(config, budget)
+        self.lam_top, self.lam_full = saturation_levels(config, budget)
         self.mean_lazy = lazy_level(config, budget, self.mean_event)
         self.rho_queue = queue_level(config, budget)
 
