@@ -60,15 +60,14 @@ class PathLevels:
         # else on the whole frame (whole-array passes are cheaper than gathers)
         few = 2 * n_lazy > n
         idx = np.flatnonzero(~lazy_mask) if few else slice(None)
-        code = np.full(n - n_lazy if few else n, CLOCK, np.int8)
-        classify_interval(self, code, lam[idx], mean[idx], acc[idx])
+        code = classify_interval(self, lam[idx], mean[idx], acc[idx])
         if few:
             path = np.full(n, LAZY, np.int8)
             path[idx] = code
         else:
             path = code
-            if n_lazy:
-                path[lazy_mask] = LAZY
+            if n_lazy:                                  # LAZY is code 0: a product, no masked store
+                path *= ~lazy_mask
         length = b_max = _NONE
         rest = np.flatnonzero(path == CLOCK)
         if rest.size:
