@@ -28,7 +28,7 @@ _NONE = np.zeros(0, np.int64)
 
 #: Largest backlog bound the queue path accepts, and its shortest window.
 MAX_BACKLOG = 64
-MIN_WINDOW = 8
+MIN_WINDOW = 4
 
 #: Pixels of one path processed as one group whatever their window lengths.
 SMALL_GROUP = 256
@@ -92,8 +92,10 @@ def queue_plan(levels, rho):
     # P(backlog >= b at the window) <= L exp(-s ((b - 1) theta + 1)): b_max + 1 is unlikely
     bound = np.floor(((np.log(L) - levels.budget) / s_queue - 1.0) / theta) + 1.0
     bound = np.maximum(bound, 0.0)
-    # the Lindley recursion drains b_max in about b_max / (1 - rho) clocks
-    return bound <= MAX_BACKLOG, bound, (bound + 3.0) / (1.0 - rho)
+    # the Lindley recursion drains b_max in about b_max / (1 - rho) clocks (a crossing's
+    # count over them varies by a fraction of one: one more crossing's drain is ample;
+    # a window that does not settle only sends its pixel per clock)
+    return bound <= MAX_BACKLOG, bound, (bound + 1.0) / (1.0 - rho)
 
 
 def round_window(clocks: np.ndarray) -> np.ndarray:
