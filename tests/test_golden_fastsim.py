@@ -828,6 +828,15 @@ def test_queue_draws_a_te_pixels_first_crossings_first():
     assert np.array_equal(rest, p * theta - acc0 + np.floor(lam * (L - w) - times[-1]).astype(np.int64))
     assert np.array_equal(drawn, np.broadcast_to(np.floor(lam).astype(np.int64), (w, 3)))
     assert ok.all() and (spikes >= p).all()
+    # a head's rest (fewer clocks, spikes still needed per pixel): each pixel its own count
+    rest_clocks, need = L - 40, np.array([3, 1, 3])
+    sim.rng = Given()
+    _, _, _, at, _, rest = window.queue_walk(sim, np.arange(3), w, lam, acc0, rest_clocks, need, np.zeros(3))
+    for j in range(3):
+        times = np.cumsum([0.9 * (theta - acc0[j]) + 3.0] + [0.9 * theta + 3.0] * (need[j] - 1))
+        cross = np.floor(times / lam[j]).astype(np.int64)
+        assert at[j] == (cross - np.arange(1, need[j] + 1)).max() + need[j], j
+        assert rest[j] == need[j] * theta - acc0[j] + np.floor(lam[j] * (rest_clocks - w) - times[-1]), j
 
 
 def test_distinct_values_equal_numpys_unique():
