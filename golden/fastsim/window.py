@@ -3,8 +3,10 @@
 ``queue``    light below one threshold per clock, no clipping (Lundberg bound):
              spikes follow the threshold crossings through a unit-rate queue;
              the last w clocks are drawn per clock to settle the backlog left
-             at readout, the TE overflow clock comes from Gamma-gap order
-             statistics of the first crossings (:func:`queue_walk`).
+             at readout (:func:`queue_walk`); the TE overflow clock comes from
+             the first crossings' light-times, drawn first where they surely
+             come before the window (:func:`first_crossings`), else from
+             Gamma-gap order statistics of the rest's electrons.
 ``full``     light above one threshold per clock and a spike in every clock
              sure (Lundberg bound on the walk from the carried charge): word
              known, accumulator from a window of the last clocks (:func:`full_walk`).
