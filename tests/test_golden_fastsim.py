@@ -788,6 +788,57 @@ def test_sure_te_overflow_puts_the_overflow_electron_first():
     assert np.array_equal(sim.carried, after % theta)
 
 
+def test_queue_draws_a_te_pixels_first_crossings_first():
+    """The arithmetic of the TE queue path's crossings on given random numbers: where
+    the 2^b1 crossings surely come before the window, crossing i comes at light-time
+    ``G_1 + .. + G_i`` (``G_1`` of shape ``theta - acc``, the others ``theta``), in clock
+    ``floor(time / lam)``; spike 2^b1 fires at ``max_i (c_i + 2^b1 - i)``; the rest holds
+    the crossings' electrons plus those drawn from the light left after the last."""
+    from tespike.golden.fastsim import window
+
+    class Given:                                   # a generator that returns chosen numbers
+        def __init__(self):
+            self.calls = []
+
+        def standard_gamma(self, shape, size=None, out=None):
+            self.calls.append("gamma")
+            value = np.broadcast_to(0.9 * np.asarray(shape, np.float64) + 3.0, size or np.shape(shape))
+            if out is None:
+                return value.copy()
+            out[...] = value
+            return out
+
+        def poisson(self, mean, size=None):
+            self.calls.append("poisson")
+            return np.broadcast_to(np.floor(mean).astype(np.int64), size or np.shape(mean)).copy()
+
+    config = SensorConfig()
+    theta, L, p = config.threshold, config.clocks_per_readout, config.p_max
+    sim = SceneSimulator(config, (1, 3), rng=0)
+    lam = np.array([0.4, 0.6, 0.85]) * theta                          # per clock, all queue light
+    acc0 = np.array([0, 17, theta - 1])
+    w = 8
+    sim.rng = Given()
+    ok, spikes, end, at, drawn, rest = window.queue_walk(sim, np.arange(3), w, lam, acc0, L,
+                                                         np.full(3, p), np.zeros(3))
+    assert sim.rng.calls == ["poisson", "gamma", "gamma", "poisson"]   # window, crossings, rest
+    times = np.cumsum(np.vstack([0.9 * (theta - acc0) + 3.0, np.full((p - 1, 3), 0.9 * theta + 3.0)]), axis=0)
+    cross = np.floor(times / lam).astype(np.int64)
+    assert np.array_equal(at, (cross - np.arange(1, p + 1)[:, None]).max(axis=0) + p)
+    assert np.array_equal(rest, p * theta - acc0 + np.floor(lam * (L - w) - times[-1]).astype(np.int64))
+    assert np.array_equal(drawn, np.broadcast_to(np.floor(lam).astype(np.int64), (w, 3)))
+    assert ok.all() and (spikes >= p).all()
+    # a head's rest (fewer clocks, spikes still needed per pixel): each pixel its own count
+    rest_clocks, need = L - 40, np.array([3, 1, 3])
+    sim.rng = Given()
+    _, _, _, at, _, rest = window.queue_walk(sim, np.arange(3), w, lam, acc0, rest_clocks, need, np.zeros(3))
+    for j in range(3):
+        times = np.cumsum([0.9 * (theta - acc0[j]) + 3.0] + [0.9 * theta + 3.0] * (need[j] - 1))
+        cross = np.floor(times / lam[j]).astype(np.int64)
+        assert at[j] == (cross - np.arange(1, need[j] + 1)).max() + need[j], j
+        assert rest[j] == need[j] * theta - acc0[j] + np.floor(lam[j] * (rest_clocks - w) - times[-1]), j
+
+
 def test_distinct_values_equal_numpys_unique():
     """``tespike.golden.fastsim.distinct``: the sorted distinct values and their counts,
     as ``np.unique`` gives them (which the simulator avoids: its first call imports

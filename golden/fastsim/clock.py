@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..light import deterministic_clock_electrons, log_poisson_tail_below
+from ..light import deterministic_clock_electrons
 from ..poisson import PoissonSampler
 from ..reference import PixelState
 from ..sensor import PixelArray
@@ -75,7 +75,7 @@ def clock_electrons(sim, expected, dark):
     c = sim.config
     L, top = c.clocks_per_readout, c.input_max
     lam = expected / L
-    sure = log_poisson_tail_below(lam, top - 1) < sim.budget
+    sure = lam >= sim.levels.lam_top                     # (its tail bound below budget)
     if sure.all():
         return np.full((L, expected.size), top, np.int64)
     draw = np.flatnonzero(~sure)

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..config import SensorConfig
 from .head import classify_head
-from .interval import classify_interval, interval_levels, overflow_level
+from .interval import classify_interval, interval_levels, overflow_level, saturation_levels
 from .lazy import lazy_level
 from .window import classify_window, queue_level
 from .codes import CLOCK, LAZY
@@ -46,6 +46,7 @@ class PathLevels:
         self.budget = budget
         self.mean_event, self.mean_unclipped, self.lam_bright = interval_levels(config, budget)
         self.mean_overflow = overflow_level(config, budget)
+        self.lam_top, self.lam_full = saturation_levels(config, budget)
         self.mean_lazy = lazy_level(config, budget, self.mean_event)
         self.rho_queue = queue_level(config, budget)
 
@@ -59,15 +60,14 @@ class PathLevels:
         # else on the whole frame (whole-array passes are cheaper than gathers)
         few = 2 * n_lazy > n
         idx = np.flatnonzero(~lazy_mask) if few else slice(None)
-        code = np.full(n - n_lazy if few else n, CLOCK, np.int8)
-        classify_interval(self, code, lam[idx], mean[idx], acc[idx])
+        code = classify_interval(self, lam[idx], mean[idx], acc[idx])
         if few:
             path = np.full(n, LAZY, np.int8)
             path[idx] = code
         else:
             path = code
-            if n_lazy:
-                path[lazy_mask] = LAZY
+            if n_lazy:                                  # LAZY is code 0: a product, no masked store
+                path *= ~lazy_mask
         length = b_max = _NONE
         rest = np.flatnonzero(path == CLOCK)
         if rest.size:

@@ -3,8 +3,10 @@
 ``queue``    light below one threshold per clock, no clipping (Lundberg bound):
              spikes follow the threshold crossings through a unit-rate queue;
              the last w clocks are drawn per clock to settle the backlog left
-             at readout, the TE overflow clock comes from Gamma-gap order
-             statistics of the first crossings (:func:`queue_walk`).
+             at readout (:func:`queue_walk`); the TE overflow clock comes from
+             the first crossings' light-times, drawn first where they surely
+             come before the window (:func:`first_crossings`), else from
+             Gamma-gap order statistics of the rest's electrons.
 ``full``     light above one threshold per clock and a spike in every clock
              sure (Lundberg bound on the walk from the carried charge): word
              known, accumulator from a window of the last clocks (:func:`full_walk`).
@@ -24,9 +26,11 @@ from .codes import FULL, QUEUE
 from .distinct import distinct, distinct_counts
 from .words import firing_words, ml_words
 
+_NONE = np.zeros(0, np.int64)
+
 #: Largest backlog bound the queue path accepts, and its shortest window.
 MAX_BACKLOG = 64
-MIN_WINDOW = 8
+MIN_WINDOW = 4
 
 #: Pixels of one path processed as one group whatever their window lengths.
 SMALL_GROUP = 256
@@ -90,8 +94,10 @@ def queue_plan(levels, rho):
     # P(backlog >= b at the window) <= L exp(-s ((b - 1) theta + 1)): b_max + 1 is unlikely
     bound = np.floor(((np.log(L) - levels.budget) / s_queue - 1.0) / theta) + 1.0
     bound = np.maximum(bound, 0.0)
-    # the Lindley recursion drains b_max in about b_max / (1 - rho) clocks
-    return bound <= MAX_BACKLOG, bound, (bound + 3.0) / (1.0 - rho)
+    # the Lindley recursion drains b_max in about b_max / (1 - rho) clocks (a crossing's
+    # count over them varies by a fraction of one: one more crossing's drain is ample;
+    # a window that does not settle only sends its pixel per clock)
+    return bound <= MAX_BACKLOG, bound, (bound + 1.0) / (1.0 - rho)
 
 
 def round_window(clocks: np.ndarray) -> np.ndarray:
@@ -185,12 +191,26 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max):
     of the last ``w`` clocks is at most ``b_max`` (per pixel, bound); the Lindley
     recursion over the window from 0 and from ``b_max`` agreeing settles the
     end backlog. TE: the clock of spike ``need`` (per pixel) when it fires,
-    from the first ``need`` crossings, all before the window.
+    from the first ``need`` crossings, all before the window (:func:`first_crossings`).
     -> (ok, spikes, end accumulator, that clock or -1, window, rest total);
     pixels not ``ok`` go per clock with the window and rest drawn."""
     c = sim.config
     theta = c.threshold
-    window, rest = window_draw(sim, sel, w, lam, clocks)
+    span = clocks - w
+    lam_s = lam[sel]
+    window = clock_draws(sim, lam_s, w)
+    rest_mean = lam_s * span
+    at = np.full(sel.size, -1, np.int64)
+    first = _NONE
+    if c.is_te:                                        # crossings surely before the window: drawn first
+        first = np.flatnonzero((need <= c.p_max) & (rest_mean >= sim.levels.mean_overflow))
+    if first.size:
+        at[first], reached, light_time = first_crossings(sim, lam_s[first], acc0[first], need[first], span)
+        first, light_time = first[reached], light_time[reached]
+        rest_mean[first] -= light_time                 # the electrons after the last of them
+    rest = sim.rng.poisson(rest_mean)
+    if first.size:
+        rest[first] += need[first] * theta - acc0[first]
     level0 = acc0 + rest                               # charge before the window
     levels = np.cumsum(window, axis=0)
     levels += level0
@@ -201,13 +221,15 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max):
     ok = b_lo == b_hi
     level_end = levels[-1]
     spikes = level_end // theta - b_lo
-    at = np.full(sel.size, -1, np.int64)
     if not c.is_te:
         return ok, spikes, level_end - theta * spikes, at, window, rest
     over = ok & (spikes >= need)
     ok &= ~over | ((need * theta - acc0) <= rest)       # the crossings' ranks lie in the rest
     over &= ok
-    span = clocks - w
+    late = np.ones(sel.size, bool)
+    late[first] = False                                 # (their crossings are drawn: at is set)
+    np.copyto(at, -1, where=~over)
+    over &= late
     needs = need[over]
     # one need for all (the queue path's 2^b1) skips the sort
     for p in needs[:1] if needs.size and (needs == needs[0]).all() else distinct(needs):
@@ -222,6 +244,40 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max):
         cross = np.minimum((position * span).astype(np.int64), span - 1)
         at[i] = (cross - np.arange(1, p + 1)).max(axis=1) + p   # s_p = max_i (c_i + p - i)
     return ok, spikes, level_end - theta * spikes, at, window, rest
+
+
+def first_crossings(sim, lam, acc0, need, span):
+    """TE pixels whose first ``need`` threshold crossings surely come in the first
+    ``span`` clocks (``lam span`` at least ``mean_overflow``): their electrons are a
+    unit-rate Poisson process in light-time (``lam`` per clock), so crossing i comes
+    ``Gamma(theta - acc0)`` (i = 1), then ``Gamma(theta)`` after the one before, in
+    clock ``c_i = floor(time / lam)``; the electrons after the last are
+    ``Poisson(lam span - time)``, independent of them (the caller draws them). One
+    Gamma draw per crossing, the middle ones of one shape (a scalar shape draws a third
+    faster than an array of shapes), where the rest total's order statistics took one
+    more and a normalisation. -> (the clock ``max_i (c_i + p - i)`` of spike ``p =
+    need``, whether the last crossing came within the span (surely; the others go the
+    order-statistics way), its light-time)."""
+    theta = sim.config.threshold
+    at = np.full(lam.size, -1, np.int64)
+    reached = np.zeros(lam.size, bool)
+    light_time = np.zeros(lam.size)
+    needs = distinct(need) if need.size and not (need == need[0]).all() else need[:1]
+    for p in needs.tolist():
+        i = np.flatnonzero(need == p) if needs.size > 1 else slice(None)
+        lam_i = lam[i]
+        times = np.empty((p, lam_i.size))
+        times[0] = sim.rng.standard_gamma((theta - acc0[i]).astype(np.float64))
+        if p > 1:
+            sim.rng.standard_gamma(float(theta), (p - 1, lam_i.size), out=times[1:])
+        np.cumsum(times, axis=0, out=times)
+        last = times[-1]
+        cross = np.minimum((times / lam_i).astype(np.int64), span - 1)
+        cross -= np.arange(1, p + 1)[:, None]
+        at[i] = cross.max(axis=0) + p                   # s_p = max_i (c_i + p - i)
+        reached[i] = last < lam_i * span
+        light_time[i] = last
+    return at, reached, light_time
 
 
 def full_path(sim, sel, w, lam, words):
