@@ -8,7 +8,8 @@ Every case is made from the validation seed domain (never a training seed):
 - dead leaves with held-out generator parameters (steeper size law, fewer and
   harder-edged objects, five to six decades): a long clip and a short one of
   16 readouts, twice the design light;
-- the same long pan and long dead-leaves clip recorded by a noisy sensor
+- a long pan of the same kind and a long held-out dead-leaves clip (their own
+  validation seeds, so other paths and objects) recorded by a noisy sensor
   (:data:`VALIDATION_SENSORS`: eq. 12 and eq. 13 dark current with DSNU, hot
   pixels, PRNU and comparator offset, validation sensor seeds) and read through
   its exact calibration, as the engine's noisy clips are and as inference corrects
