@@ -12,8 +12,12 @@ import numpy as np
 
 
 def distinct(values) -> np.ndarray:
-    """The distinct values of ``values`` (any shape), sorted."""
-    return distinct_counts(values)[0]
+    """The distinct values of ``values`` (any shape), sorted; one value without a sort where
+    all are equal (the common case of the TE spikes still needed: ``2^b1`` for every pixel)."""
+    flat = np.ravel(values)
+    if flat.size and (flat == flat[0]).all():
+        return flat[:1].copy()
+    return distinct_counts(flat)[0]
 
 
 def distinct_counts(values) -> tuple[np.ndarray, np.ndarray]:

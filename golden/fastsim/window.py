@@ -230,9 +230,7 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max):
     late[first] = False                                 # (their crossings are drawn: at is set)
     np.copyto(at, -1, where=~over)
     over &= late
-    needs = need[over]
-    # one need for all (the queue path's 2^b1) skips the sort
-    for p in needs[:1] if needs.size and (needs == needs[0]).all() else distinct(needs):
+    for p in distinct(need[over]):
         i = np.flatnonzero(over & (need == p))
         a, t = acc0[i], rest[i]
         shapes = np.empty((i.size, p + 1))
@@ -262,7 +260,7 @@ def first_crossings(sim, lam, acc0, need, span):
     at = np.full(lam.size, -1, np.int64)
     reached = np.zeros(lam.size, bool)
     light_time = np.zeros(lam.size)
-    needs = distinct(need) if need.size and not (need == need[0]).all() else need[:1]
+    needs = distinct(need)
     for p in needs.tolist():
         i = np.flatnonzero(need == p) if needs.size > 1 else slice(None)
         lam_i = lam[i]
