@@ -109,24 +109,31 @@ def _net_bits(owners: dict, net: str, q: list) -> list[int]:
     return out
 
 
-def block_of(config: SensorConfig, module: str, name: str, streaming: bool) -> str:
-    """The block (:data:`tespike.golden.activity.BLOCKS`) of a register of ``module``: the pixel
-    module's (the streaming one holds its input register) are ``pixel``, the readout cell's
-    ``readout``, the timing module's (streaming ``<mode>_readout_timing``, parallel
-    ``<mode>_array_timing``) ``timing``, the top's own ``control``."""
+def module_blocks(config: SensorConfig, streaming: bool) -> dict[str, str]:
+    """The block (:data:`tespike.golden.activity.BLOCKS`) of every module of a generated top: the
+    pixel (and the streaming pixel's combinational rule) ``pixel``, the readout cell ``readout``,
+    the timing module (streaming ``<mode>_readout_timing``, parallel ``<mode>_array_timing``)
+    ``timing``, the top and its beat groups ``control``. One map for the registers (here), the
+    gates (:mod:`tespike.cosim.gate_activity`) and the cells (:func:`tespike.cosim.energy.block_cells`)."""
     from tespike.rtl.verilog import module_names
     from tespike.rtl.verilog_stream import stream_module_names
 
-    names = stream_module_names(config) if streaming else module_names(config)
-    if module == names["pixel"]:
-        return "pixel"
-    if module == names["timing" if streaming else "array_timing"]:
-        return "timing"
-    if streaming and module == names["cell"]:
-        return "readout"
-    if module == names["top"]:
-        return "control"
-    raise InputError(f"register {name!r} of module {module!r}: no block of the {names['top']} holds it")
+    if streaming:
+        names = stream_module_names(config)
+        return {names["pixel"]: "pixel", names["rule"]: "pixel", names["cell"]: "readout",
+                names["timing"]: "timing", names["group"]: "control", names["group_end"]: "control",
+                names["top"]: "control"}
+    names = module_names(config)
+    return {names["pixel"]: "pixel", names["array_timing"]: "timing", names["top"]: "control"}
+
+
+def block_of(config: SensorConfig, module: str, name: str, streaming: bool) -> str:
+    """The block of a register ``name`` of ``module`` (:func:`module_blocks`); a module no block
+    claims is refused."""
+    blocks = module_blocks(config, streaming)
+    if module not in blocks:
+        raise InputError(f"register {name!r} of module {module!r}: no block of the generated top holds it")
+    return blocks[module]
 
 
 def model_name(config: SensorConfig, block: str, names: tuple[str, ...], streaming: bool) -> str:

@@ -93,35 +93,23 @@ def block_energy(toggles, register_bits: int, flops: int, gates: int, clocks: in
 
 def block_cells(modules: dict, top: str, config, streaming: bool) -> dict[str, dict[str, int]]:
     """Flip-flops and gates (other cells) per block of a synthesised generated top
-    (:func:`tespike.cosim.synthesis.synthesize_hierarchy`'s ``modules``), every instance counted:
-    the pixel and its rule are ``pixel``, the readout cell ``readout``, the timing module
-    (streaming ``<mode>_readout_timing``, parallel ``<mode>_array_timing``) ``timing``, the top
-    and its beat groups ``control`` (the parallel top holds no flip-flop: its ``frame`` is the
-    pixels' word registers, its ``frame_valid`` the timing module's)."""
-    from tespike.rtl.verilog import module_names
-    from tespike.rtl.verilog_stream import stream_module_names
+    (:func:`tespike.cosim.synthesis.synthesize_hierarchy`'s ``modules``), every instance counted,
+    each module under its block of :func:`tespike.cosim.activity.module_blocks` (the parallel top
+    holds no flip-flop: its ``frame`` is the pixels' word registers, its ``frame_valid`` the
+    timing module's)."""
+    from .activity import module_blocks
+    from .synthesis import instance_counts
 
-    if streaming:
-        names = stream_module_names(config)
-        role = {names["pixel"]: "pixel", names["timing"]: "timing", names["rule"]: "pixel",
-                names["cell"]: "readout", names["group"]: "control", names["group_end"]: "control"}
-    else:
-        names = module_names(config)
-        role = {names["pixel"]: "pixel", names["array_timing"]: "timing"}
+    blocks = module_blocks(config, streaming)
     out = {block: {"flops": 0, "gates": 0} for block in BLOCKS}
-
-    def walk(name: str, times: int) -> None:
-        stat = modules[name]
-        flops, gates = stat["flops"], stat["cells"] - stat["flops"]
-        block = "control" if name == top else role.get(name)
-        if block is None:
+    for name, times in instance_counts(modules, top).items():
+        if not times:
+            continue
+        if name not in blocks:
             raise ValueError(f"module {name} of {top}: no block claims it")
-        out[block]["flops"] += times * flops
-        out[block]["gates"] += times * gates
-        for sub, count in stat["instances"].items():
-            walk(sub, times * count)
-
-    walk(top, 1)
+        stat = modules[name]
+        out[blocks[name]]["flops"] += times * stat["flops"]
+        out[blocks[name]]["gates"] += times * (stat["cells"] - stat["flops"])
     return out
 
 

@@ -24,7 +24,7 @@ from tespike.golden.activity import BLOCKS
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
-from .activity import bit_changes, settled_values
+from .activity import bit_changes, module_blocks, settled_values
 from .synthesis import SynthesisError, yosys_missing
 
 
@@ -44,23 +44,10 @@ def gate_netlist(verilog_text: str, top: str, yosys: str = "yosys") -> tuple[str
         return (Path(tmp) / "gates.v").read_text(), json.loads((Path(tmp) / "gates.json").read_text())
 
 
-def _module_block(config: SensorConfig, module: str, streaming: bool) -> str:
-    from tespike.rtl.verilog import module_names
-    from tespike.rtl.verilog_stream import stream_module_names
-
-    names = stream_module_names(config) if streaming else module_names(config)
-    role = {names["pixel"]: "pixel", names["timing"]: "timing", names["top"]: "control"}
-    if streaming:
-        role.update({names["rule"]: "pixel", names["cell"]: "readout", names["group"]: "control",
-                     names["group_end"]: "control"})
-    if module not in role:
-        raise InputError(f"module {module!r}: no block of the {names['top']} holds it")
-    return role[module]
-
-
 def gate_outputs(design: dict, top: str, config: SensorConfig, streaming: bool) -> list[tuple[str, str, str, int]]:
     """Every gate output bit under ``top``: (block, instance path, net name, bit index)."""
     modules = design["modules"]
+    blocks = module_blocks(config, streaming)
     out = []
 
     def walk(module: str, path: str) -> None:
@@ -70,7 +57,9 @@ def gate_outputs(design: dict, top: str, config: SensorConfig, streaming: bool) 
             if not info.get("hide_name"):
                 for index, bit in enumerate(info["bits"]):
                     owner.setdefault(bit, (net, index))
-        block = _module_block(config, module, streaming)
+        if module not in blocks:
+            raise InputError(f"module {module!r}: no block of the generated top holds it")
+        block = blocks[module]
         for name, cell in data["cells"].items():
             kind = cell["type"]
             if kind in modules:

@@ -168,6 +168,18 @@ def hierarchy_total(modules: dict, name: str) -> dict:
     return total
 
 
+def instance_counts(modules: dict, top: str) -> dict[str, int]:
+    """How many times each module occurs in the design under ``top`` (0 for one it never uses)."""
+    counts = {name: 0 for name in modules}
+
+    def walk(name: str, times: int) -> None:
+        counts[name] += times
+        for sub, n in modules[name]["instances"].items():
+            walk(sub, times * n)
+    walk(top, 1)
+    return counts
+
+
 def top_module(modules: dict) -> str:
     """The one module no other module instantiates (the design's top), or ValueError."""
     used = {sub for stat in modules.values() for sub in stat["instances"]}

@@ -95,21 +95,9 @@ def _design(args):
             f"{top}, {height} x {width} pixels, {args.lanes} lanes")
 
 
-def instance_counts(modules: dict, top: str) -> dict[str, int]:
-    """How many times each module occurs in the design under ``top``."""
-    counts = {name: 0 for name in modules}
-
-    def walk(name, times):
-        counts[name] += times
-        for sub, n in modules[name]["instances"].items():
-            walk(sub, times * n)
-    walk(top, 1)
-    return counts
-
-
 def report_lines(result: dict, pixels: int | None) -> list[str]:
     """The printed report of :func:`tespike.cosim.synthesis.synthesize_hierarchy`'s result."""
-    from tespike.cosim.synthesis import hierarchy_total
+    from tespike.cosim.synthesis import hierarchy_total, instance_counts
     modules, top = result["modules"], result["top"]
     counts = instance_counts(modules, top)
     lines = [f"{'module':<28} {'instances':>9} {'cells':>7} {'flops':>6} {'transistors':>12}   "
