@@ -39,6 +39,7 @@ import torch  # noqa: E402
 from tespike.cosim.walltime import median_seconds  # noqa: E402
 from tespike.golden.config import SensorConfig  # noqa: E402
 from tespike.golden.fastsim import simulate_scene  # noqa: E402
+from tespike.recon.calibration import correct_input, input_correction  # noqa: E402
 from tespike.recon.methods import reconstruct  # noqa: E402
 from tespike.recon.metrics import psnr_mu  # noqa: E402
 from tespike.recon.learned import WEIGHTS_DIR  # noqa: E402
@@ -173,8 +174,7 @@ def candidates(args) -> None:
         for case in validation_set(config):
             light = decode_light(case.words, config, dtype=torch.float64)
             if case.calibration is not None:          # a noisy case: corrected at the input, as inference does
-                c = case.calibration
-                light = (light - torch.from_numpy(c.dark)) / torch.from_numpy(c.gain)
+                light = correct_input(light, input_correction(case.calibration, dtype=torch.float64))
             spans = torch.from_numpy(np.stack([key_span(len(light), k, span) for k in range(len(light))]))
             inside = torch.from_numpy(np.stack([span_inside(len(light), k, span) for k in range(len(light))]))
             estimates = key_estimates(light[spans], inside, config.spike_light)    # (K, estimates, H, W)

@@ -189,6 +189,28 @@ def correct(images: np.ndarray, calibration: Calibration) -> np.ndarray:
     return out
 
 
+def input_correction(calibration: Calibration | None, device: str = "cpu", dtype=None):
+    """``calibration`` as the (dark, 1 / gain) tensors (H, W) of :func:`correct_input` on ``device``,
+    float32 unless ``dtype`` says otherwise (None for None): TFI and the learned methods are
+    corrected at their input, where the dark rate is subtracted from light the method has not
+    yet shaped (docs/reconstruction.md)."""
+    if calibration is None:
+        return None
+    import torch
+    dtype = torch.float32 if dtype is None else dtype
+    return (torch.as_tensor(calibration.dark, dtype=dtype, device=device),
+            torch.as_tensor(1.0 / calibration.gain, dtype=dtype, device=device))
+
+
+def correct_input(light, correction):
+    """Each readout's decoded light ``x`` corrected to ``(x - dark) / gain``, ``correction`` being
+    (dark, 1 / gain) broadcast against ``light`` (:func:`input_correction`): not floored, for the
+    learned methods (a floor at 0 would add about the dark rate to every dim pixel) and their
+    training clips alike; TFI floors it."""
+    dark, inverse_gain = correction
+    return (light - dark) * inverse_gain
+
+
 def calibration_summary(calibration: Calibration) -> str:
     """One line: maps, readouts, mean dark (electrons per readout), gain spread, floored pixels."""
     c = calibration

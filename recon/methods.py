@@ -47,8 +47,8 @@ def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSetting
                          dtype=settings.torch_dtype)
     if correction is None:
         return tfi(light, words != 0, config.spike_light, settings.radius, settings.search)
-    dark, inverse_gain = (c.to(light.device, light.dtype) for c in correction)
-    light = torch.clamp_min_((light - dark) * inverse_gain, 0)
+    from .calibration import correct_input
+    light = torch.clamp_min_(correct_input(light, tuple(c.to(light.device, light.dtype) for c in correction)), 0)
     return tfi(light, light > 0, config.spike_light, settings.radius, settings.search)
 
 
@@ -167,6 +167,9 @@ def _reconstruct_raw(words, config, spec, settings, progress, out, calibration=N
     out_flat = out.reshape(K, H * W)
     step = max(1, settings.block_elements() // K)
     starts = range(0, H * W, step)
+    if calibration is not None:
+        from .calibration import input_correction
+        correction = [c.reshape(-1) for c in input_correction(calibration, dtype=torch.float64)]
     if progress:
         from tqdm import tqdm
         starts = tqdm(starts, desc=f"reconstruct {method}", unit="block")
@@ -177,9 +180,7 @@ def _reconstruct_raw(words, config, spec, settings, progress, out, calibration=N
                 result = spec.block(block, config, settings)
             else:
                 pixels = slice(start, start + step)
-                result = spec.block(block, config, settings, (
-                    torch.as_tensor(calibration.dark.reshape(-1)[pixels]),
-                    torch.as_tensor(1.0 / calibration.gain.reshape(-1)[pixels])))
+                result = spec.block(block, config, settings, tuple(c[pixels] for c in correction))
             out_flat[:, start:start + step] = result.to("cpu", torch.float32).numpy()
     return out
 

@@ -31,6 +31,7 @@ import torch
 
 from tespike.golden.config import SensorConfig
 
+from ..calibration import correct_input
 from ..stream import decode_light, key_span, span_inside
 from .clips import Clip, EngineRecipe, make_clip
 
@@ -193,5 +194,5 @@ def draw_batch(pool: ClipPool, config: SensorConfig, span: int, crop: int, batch
     light = decode_light(words, config, device=device, dtype=torch.float32)
     if (calibration[:, 0] != 0).any() or (calibration[:, 1] != 1).any():
         dark, gain = torch.from_numpy(calibration).to(device)[:, :, None].unbind(1)
-        light = (light - dark) / gain
+        light = correct_input(light, (dark, 1 / gain))
     return light, torch.from_numpy(truth).to(device), torch.from_numpy(inside).to(device)

@@ -36,6 +36,7 @@ import torch
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
+from ..calibration import correct_input, input_correction
 from ..reach import receptive_radius as derived_radius
 from ..stream import decode_light, key_span, output_images, span_inside
 
@@ -149,7 +150,7 @@ def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: 
     first or last one; the frame is mirrored at its edges (:func:`mirrored_index`);
     with ``tile=None`` the whole mirrored frame is one tile (:func:`blocks`).
     ``correction``: (dark, 1 / gain) float32 (H, W) tensors on ``device`` (a sensor's
-    calibration, :func:`input_correction`); each readout's decoded light becomes
+    calibration, :func:`tespike.recon.calibration.input_correction`); each readout's decoded light becomes
     ``(x - dark) / gain`` before the model sees it, negative where a readout caught less than
     the mean dark charge (not floored: a floor at 0 would add a bias of about the dark rate to
     every dim pixel, the light of one quantised readout being mostly 0 or one spike), and the
@@ -165,21 +166,10 @@ def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: 
                              config, device=device, dtype=torch.float32)
         if correction is not None:
             pixels = (torch.from_numpy(block.rows)[:, None].to(device), torch.from_numpy(block.cols)[None].to(device))
-            dark, inverse_gain = (c[pixels] for c in correction)
-            light = (light - dark) * inverse_gain
+            light = correct_input(light, tuple(c[pixels] for c in correction))
         image = model(light[None], inside, config.spike_light)[0, 0][block.result].float().cpu()
         out[block.frame] = image if correction is None else image.clamp_min_(0)
     return out
-
-
-def input_correction(calibration, device: str = "cpu"):
-    """A :class:`tespike.recon.calibration.Calibration` as :func:`frame`'s ``correction``
-    (None for None): the learned methods are corrected at their input, where the dark rate
-    is subtracted from light the model has not yet shaped (docs/reconstruction.md)."""
-    if calibration is None:
-        return None
-    return (torch.as_tensor(calibration.dark, dtype=torch.float32, device=device),
-            torch.as_tensor(1.0 / calibration.gain, dtype=torch.float32, device=device))
 
 
 def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, tile: int | str | None = "auto",
