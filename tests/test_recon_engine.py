@@ -54,7 +54,8 @@ def test_noisy_clips_carry_their_sensors_calibration():
     (mean dark rate and gain: a pixel sees gain x I + dark), target the scene light; noise_fraction 0
     draws nothing more (the clips recipes always gave)."""
     from tespike.golden.noise import Sensor
-    from tespike.recon.engine.clips import NOISE_DRAW, seen_light
+    from tespike.golden.config import DESIGN_ELECTRONS
+    from tespike.recon.engine.clips import NOISE_DRAW
     config = SensorConfig()
     noisy = EngineRecipe(**{**SMALL.to_dict(), "noise_fraction": 1.0})
     plain = make_clip(SMALL, config, 3)
@@ -70,7 +71,12 @@ def test_noisy_clips_carry_their_sensors_calibration():
         assert 0 <= n.prnu <= 0.05 and 0 <= n.dsnu <= 0.5
         scene, _, _ = clip_light(noisy, i)
         assert np.array_equal(clip.light, scene.astype(np.float32))
-        assert np.allclose(clip.light * clip.gain + clip.dark, seen_light(clip.sensor, scene))
+        # the maps against the simulator's own per-pixel noise: its gain, and the mean of its dark draws
+        pixels = clip.sensor.pixels(clip.dark.shape)
+        assert np.allclose(pixels.photo(np.ones(clip.dark.size)), clip.gain.reshape(-1), rtol=1e-6)
+        draws = np.random.default_rng(i)
+        drawn = sum(pixels.dark(clip.dark.size, draws) for _ in range(2000)) / (2000 * DESIGN_ELECTRONS)
+        assert np.allclose(drawn, clip.dark.reshape(-1), rtol=0.25)
         assert clip.dark.min() > 0 and 0.8 < clip.gain.min() <= clip.gain.max() < 1.2
     assert len(set(levels)) == 6
     with pytest.raises(InputError, match="noise_fraction"):

@@ -252,12 +252,6 @@ def sensor_maps(sensor, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]
     return (np.broadcast_to(dark, shape).astype(np.float32), np.broadcast_to(maps.gain, shape).astype(np.float32))
 
 
-def seen_light(sensor, light: np.ndarray) -> np.ndarray:
-    """The light a sensor's pixels measure on average, ``gain x I + dark`` (scene units)."""
-    dark, gain = sensor_maps(sensor, light.shape[1:])
-    return light * gain + dark
-
-
 def make_clip(recipe: EngineRecipe, config: SensorConfig, index: int, *, domain: int = TRAIN_DOMAIN,
               deadleaves: DeadLeavesParams = DeadLeavesParams()) -> Clip:
     """Clip ``index`` of the recipe for ``config``: target light (float32) and its simulated words.
