@@ -60,10 +60,11 @@ def shipped_panorama_file(name: str) -> Path:
 
 
 def load_panorama(source: str | Path = "default", weights: str = DEFAULT_WEIGHTS) -> np.ndarray:
-    """Luminance of a panorama, float64 (H, W), >= 0, read-only (see the module docstring).
+    """Luminance of a panorama, float64 (H, W), >= 0 (see the module docstring).
 
-    A file is read once per process (:func:`file_luminance`): the data engine moves
-    cameras over the same panoramas clip after clip."""
+    A full-size or user file is read once per process and returned read-only
+    (:func:`file_luminance`): the data engine moves cameras over the same panoramas clip
+    after clip. A shipped copy is small and returned as a new array each call."""
     if str(source) == "default" or (str(source) in PANORAMAS and hdri_dir() is None):
         with np.load(shipped_panorama_file(str(source)), allow_pickle=False) as npz:
             return npz["luminance"].astype(np.float64)
