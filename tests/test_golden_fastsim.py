@@ -869,3 +869,29 @@ def test_a_simulation_does_not_import_numpy_ma():
             "print('numpy.ma' in sys.modules)\n")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert run.stdout.strip() == "False", run.stdout + run.stderr
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB,
+                                    SensorConfig(b1=1, threshold=1400, acc_bits=12, clocks_per_tick=2)],
+                         ids=str)
+def test_event_path_under_a_mask_equals_the_gathered_path(config, monkeypatch):
+    """The event path run on the whole frame under a mask (where it holds most pixels)
+    gives the gathered path's words, charges and msb remainders bit for bit, from the
+    same generator state: the other pixels' means are 0, which draw nothing. The frame
+    mixes event light (some surely overflowing) with lazy, bright and near-threshold
+    pixels whose charge alone may pass an overflow's (2^b1 = 2 in the last config)."""
+    from tespike.golden.fastsim import simulator
+    rng = np.random.default_rng(5)
+    light = 10.0 ** rng.uniform(-3, 0.5, (6, 40, 50))
+    light[:, :, :35] = rng.uniform(0.02, 0.3, (6, 40, 35))              # most of the frame: event light
+
+    def run(share):
+        monkeypatch.setattr(simulator, "EVENT_MASK_SHARE", share)
+        sim = SceneSimulator(config, light.shape[1:], rng=11)
+        words = [sim.readout(frame) for frame in light]
+        return np.array(words), sim.carried.copy(), None if sim.sfc is None else sim.sfc.copy(), sim.path_counts
+
+    masked, gathered = run(2), run(0)                                  # share 0: never a mask
+    assert masked[3]["event"] > light.size // 2 and masked[3] == gathered[3]
+    for a, b in zip(masked[:3], gathered[:3]):
+        assert (a is None and b is None) or np.array_equal(a, b)

@@ -96,11 +96,21 @@ def classify_interval(levels, lam, mean, acc):
 
 
 def event_path(sim, sel, expected, dark, words):
-    """Event path of pixels ``sel``: flat indices, or ``slice(None)`` for the whole frame."""
+    """Event path of pixels ``sel``: flat indices, ``slice(None)`` for the whole frame,
+    or a boolean mask of the frame where the path holds most pixels. A mask runs the
+    path over the whole frame with the other pixels' means at 0 (a Poisson draw of mean
+    0 is 0 and consumes no random numbers, so the draws are those of the gathered
+    pixels, in the same order) and writes back under the mask: whole-array passes
+    instead of two gathers and two scatters of most of the frame."""
     c = sim.config
     theta, L = c.threshold, c.clocks_per_readout
-    acc0 = sim.carried[sel]
-    mean = expected[sel]
+    masked = isinstance(sel, np.ndarray) and sel.dtype == bool
+    if masked:
+        acc0 = sim.carried
+        mean = np.where(sel, expected, 0.0)
+    else:
+        acc0 = sim.carried[sel]
+        mean = expected[sel]
     sure = _NONE
     if c.is_te and not sim.dark_model:
         sure = np.flatnonzero(mean >= sim.levels.mean_overflow)
@@ -115,20 +125,26 @@ def event_path(sim, sel, expected, dark, words):
         mean[sure] = sure_mean - light_time            # the electrons after it
     total = sim.rng.poisson(mean)
     if sim.dark_model:
-        total += dark[sel]
+        total += dark if masked else dark[sel]
     if sure.size:
         total[sure] += need
     level = acc0 + total
     spikes = level // theta                            # (np.divmod is 3x slower on int64)
     residual = level - spikes * theta
     if not c.is_te:
-        sim.carried[sel] = residual
+        if masked:
+            np.copyto(sim.carried, residual, where=sel)
+        else:
+            sim.carried[sel] = residual
         ml_words(sim, sel, spikes, words)
         return
     if sure.size:                                      # their words now; not among the Beta draws
         at = np.minimum((light_time / sure_mean * L).astype(np.int64), L - 1)
         spikes[sure] = -1
-    over = np.flatnonzero(spikes >= c.p_max)
+    over = spikes >= c.p_max
+    if masked:
+        over &= sel                                 # (the others' charge alone may pass 2^b1 theta)
+    over = np.flatnonzero(over)
     if sure.size:
         spikes[sure] = (1 << c.d) | (at // c.clocks_per_tick + 1)
     if over.size:
@@ -137,8 +153,12 @@ def event_path(sim, sel, expected, dark, words):
         position = sim.rng.beta(n, t - n + 1)          # n-th of t uniform order statistics
         at = np.minimum((position * L).astype(np.int64), L - 1)
         spikes[over] = (1 << c.d) | (at // c.clocks_per_tick + 1)
-    sim.carried[sel] = residual                         # after acc0 (maybe a view) is used
-    words[sel] = spikes
+    if masked:
+        np.copyto(sim.carried, residual, where=sel)
+        np.copyto(words, spikes, where=sel)
+    else:
+        sim.carried[sel] = residual                     # after acc0 (maybe a view) is used
+        words[sel] = spikes
 
 
 def bright_path(sim, sel, expected, lam, dark, words):

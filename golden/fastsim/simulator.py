@@ -33,6 +33,11 @@ CHECKS = 8
 #: is read (beyond any child index a caller spawns in practice).
 PEEK_KEY = 0x7065656B
 
+#: The event path runs on the whole frame under a mask (:func:`.interval.event_path`)
+#: where it holds at least 1 / EVENT_MASK_SHARE of the pixels (passes over the others
+#: then cost less than gathering and scattering its own).
+EVENT_MASK_SHARE = 2
+
 #: How :class:`SceneSimulator` draws electrons: the fast paths, or per pixel clock everywhere.
 SIMULATION_METHODS = ("fast", "per-clock")
 
@@ -149,6 +154,8 @@ class SceneSimulator:
                 continue
             if code == EVENT and counts[code] == expected.size:
                 sel = slice(None)                          # the whole frame: no gather / scatter
+            elif code == EVENT and counts[code] * EVENT_MASK_SHARE >= expected.size:
+                sel = plan.path == code                    # most of the frame: a mask (event_path)
             else:
                 sel = np.flatnonzero(plan.path == code)
             if code == EVENT:

@@ -54,11 +54,20 @@ def firing_words(sim, sel, words):
 
 
 def ml_words(sim, sel, spikes, words):
-    """ML words of pixels ``sel`` (flat indices or a slice) from their spike
-    counts in the interval: the counter ``min(sfc + spikes, 2^ml_bits - 1)``
-    (it saturates one spike at a time, so the clipped sum is exact); count
-    reads it all, msb reads its top bit's index and keeps the remainder."""
+    """ML words of pixels ``sel`` (flat indices, a slice, or a boolean mask of the frame
+    with ``spikes`` over the whole frame) from their spike counts in the interval: the
+    counter ``min(sfc + spikes, 2^ml_bits - 1)`` (it saturates one spike at a time, so
+    the clipped sum is exact); count reads it all, msb reads its top bit's index and
+    keeps the remainder."""
     c = sim.config
+    if isinstance(sel, np.ndarray) and sel.dtype == bool:
+        count = np.minimum(spikes if not c.is_msb else sim.sfc + spikes, c.ml_max)
+        if not c.is_msb:
+            np.copyto(words, count, where=sel)
+            return
+        np.copyto(words, sim.tables.msb_word[count], where=sel)
+        np.copyto(sim.sfc, sim.tables.msb_rest[count], where=sel)
+        return
     if not c.is_msb:
         words[sel] = np.minimum(spikes, c.ml_max)
         return
