@@ -790,10 +790,13 @@ def test_sure_te_overflow_puts_the_overflow_electron_first():
 
 def test_queue_draws_a_te_pixels_first_crossings_first():
     """The arithmetic of the TE queue path's crossings on given random numbers: where
-    the 2^b1 crossings surely come before the window, crossing i comes at light-time
-    ``G_1 + .. + G_i`` (``G_1`` of shape ``theta - acc``, the others ``theta``), in clock
-    ``floor(time / lam)``; spike 2^b1 fires at ``max_i (c_i + 2^b1 - i)``; the rest holds
-    the crossings' electrons plus those drawn from the light left after the last."""
+    the 2^b1 = p crossings surely come before the window, crossing p comes at
+    light-time ``T = G(p theta - acc)``, in clock ``c_p = floor(T / lam)``, and the rest
+    holds the crossings' electrons plus those drawn from the light left after it.
+    Spike p fires within ``b_max`` clocks of ``c_p``: where those lie in one tick,
+    ``c_p`` is a clock of the word's tick and nothing more is drawn; elsewhere the
+    earlier crossings come at ``T`` times the shares of the gaps ``G_1`` (shape ``theta -
+    acc``), ``G_2..G_p`` (shape ``theta``), and spike p at ``max_i (c_i + p - i)``."""
     from tespike.golden.fastsim import window
 
     class Given:                                   # a generator that returns chosen numbers
@@ -812,31 +815,69 @@ def test_queue_draws_a_te_pixels_first_crossings_first():
             self.calls.append("poisson")
             return np.broadcast_to(np.floor(mean).astype(np.int64), size or np.shape(mean)).copy()
 
+    def drawn_way(acc0, lam, p, last):
+        gaps = np.cumsum([0.9 * (theta - acc0) + 3.0] + [0.9 * theta + 3.0] * (p - 1))
+        cross = np.floor(gaps * (last / gaps[-1]) / lam).astype(np.int64)
+        return (cross - np.arange(1, p + 1)).max() + p
+
     config = SensorConfig()
-    theta, L, p = config.threshold, config.clocks_per_readout, config.p_max
+    theta, L, p, per_tick = config.threshold, config.clocks_per_readout, config.p_max, config.clocks_per_tick
     sim = SceneSimulator(config, (1, 3), rng=0)
     lam = np.array([0.4, 0.6, 0.85]) * theta                          # per clock, all queue light
     acc0 = np.array([0, 17, theta - 1])
     w = 8
+    last = 0.9 * (p * theta - acc0) + 3.0
+    c_p = np.floor(last / lam).astype(np.int64)
     sim.rng = Given()
     ok, spikes, end, at, drawn, rest = window.queue_walk(sim, np.arange(3), w, lam, acc0, L,
                                                          np.full(3, p), np.zeros(3))
-    assert sim.rng.calls == ["poisson", "gamma", "gamma", "poisson"]   # window, crossings, rest
-    times = np.cumsum(np.vstack([0.9 * (theta - acc0) + 3.0, np.full((p - 1, 3), 0.9 * theta + 3.0)]), axis=0)
-    cross = np.floor(times / lam).astype(np.int64)
-    assert np.array_equal(at, (cross - np.arange(1, p + 1)[:, None]).max(axis=0) + p)
-    assert np.array_equal(rest, p * theta - acc0 + np.floor(lam * (L - w) - times[-1]).astype(np.int64))
+    assert sim.rng.calls == ["poisson", "gamma", "poisson"]           # window, crossing p, rest
+    assert np.array_equal(at, c_p)                                      # no backlog: one tick surely
+    assert np.array_equal(rest, p * theta - acc0 + np.floor(lam * (L - w) - last).astype(np.int64))
     assert np.array_equal(drawn, np.broadcast_to(np.floor(lam).astype(np.int64), (w, 3)))
     assert ok.all() and (spikes >= p).all()
+    # a backlog bound as long as a tick: every crossing drawn, given T
+    sim.rng = Given()
+    at, reached, light_time = window.first_crossings(sim, lam, acc0, np.full(3, p), L - w, np.full(3, per_tick))
+    assert sim.rng.calls == ["gamma", "gamma", "gamma"] and reached.all() and np.array_equal(light_time, last)
+    assert np.array_equal(at, [drawn_way(acc0[j], lam[j], p, last[j]) for j in range(3)])
+    # bunched crossings (the later gaps tiny): spike p waits behind the others; the
+    # recursion s_j = max(c_j, s_(j-1) + 1) on the crossings drawn given T
+    sim.rng = Given()
+    bunched = sim.rng.standard_gamma
+
+    def tiny(shape, size=None, out=None):
+        value = bunched(shape, size, out)
+        if size is not None:                               # the later gaps: one scalar shape
+            value[...] = 0.01 * theta
+        return value
+    sim.rng.standard_gamma = tiny
+    at, _, _ = window.first_crossings(sim, lam, acc0, np.full(3, p), L - w, np.full(3, per_tick))
+    for j in range(3):
+        gaps = np.cumsum([0.9 * (theta - acc0[j]) + 3.0] + [0.01 * theta] * (p - 1))
+        cross = np.floor(gaps * (last[j] / gaps[-1]) / lam[j]).astype(np.int64)
+        fired = cross[0]
+        for c_j in cross[1:]:
+            fired = max(c_j, fired + 1)
+        assert at[j] == fired and fired > cross[-1], j
+    # the tick decides, from the head's offset: c_p 2 clocks before a tick's end with b_max 1
+    # is sure; with b_max 2, or 1 clock later (an offset of 1), it is drawn
+    j = 0
+    for b_max, offset, drawn_again in ((1, per_tick - 2 - c_p[j] % per_tick, False),
+                                       (2, per_tick - 2 - c_p[j] % per_tick, True),
+                                       (1, per_tick - 1 - c_p[j] % per_tick, True)):
+        sim.rng = Given()
+        at, _, _ = window.first_crossings(sim, lam[:1], acc0[:1], np.full(1, p), L - w, np.full(1, b_max), offset)
+        assert (sim.rng.calls.count("gamma") > 1) == drawn_again, (b_max, offset)
+        assert at[0] == (drawn_way(acc0[j], lam[j], p, last[j]) if drawn_again else c_p[j])
     # a head's rest (fewer clocks, spikes still needed per pixel): each pixel its own count
     rest_clocks, need = L - 40, np.array([3, 1, 3])
     sim.rng = Given()
     _, _, _, at, _, rest = window.queue_walk(sim, np.arange(3), w, lam, acc0, rest_clocks, need, np.zeros(3))
     for j in range(3):
-        times = np.cumsum([0.9 * (theta - acc0[j]) + 3.0] + [0.9 * theta + 3.0] * (need[j] - 1))
-        cross = np.floor(times / lam[j]).astype(np.int64)
-        assert at[j] == (cross - np.arange(1, need[j] + 1)).max() + need[j], j
-        assert rest[j] == need[j] * theta - acc0[j] + np.floor(lam[j] * (rest_clocks - w) - times[-1]), j
+        last = 0.9 * (need[j] * theta - acc0[j]) + 3.0
+        assert at[j] == np.floor(last / lam[j]), j
+        assert rest[j] == need[j] * theta - acc0[j] + np.floor(lam[j] * (rest_clocks - w) - last), j
 
 
 def test_distinct_values_equal_numpys_unique():
@@ -895,3 +936,48 @@ def test_event_path_under_a_mask_equals_the_gathered_path(config, monkeypatch):
     assert masked[3]["event"] > light.size // 2 and masked[3] == gathered[3]
     for a, b in zip(masked[:3], gathered[:3]):
         assert (a is None and b is None) or np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("config, per_clock, pixels", [
+    (SensorConfig(), [0.5, 0.7, 0.8], 3000),
+    (SensorConfig(clocks_per_tick=4), [0.5, 0.7, 0.8], 3000),
+    (SensorConfig(clocks_per_tick=4, threshold=40, acc_bits=8), [0.5, 0.7, 0.8], 3000),
+    # a tick of one clock: the word is the spike's clock; a mean wait of 0.09 clock
+    (SensorConfig(b2=8, alpha=240, clocks_per_tick=1, threshold=10, acc_bits=8), [0.8], 20000),
+], ids=str)
+def test_queue_overflow_tick_matches_per_clock_near_tick_ends(config, per_clock, pixels, monkeypatch):
+    """TE queue light that surely overflows: the overflow word's tick has the
+    per-clock law, both where crossing 2^b1's clock settles it and where a backlog
+    may carry the spike into the next tick (the earlier crossings then drawn given
+    the last's light-time); short ticks make the second case common, and with a tick
+    of one clock and a low threshold the word is the spike's clock, queueing included."""
+    from tespike.golden.fastsim import window
+    calls = {"pixels": 0, "drawn": 0}
+    original = window.first_crossings
+
+    def spy(sim, lam, acc0, need, span, b_max, offset=0):
+        out = original(sim, lam, acc0, need, span, b_max, offset)
+        calls["pixels"] += lam.size
+        calls["drawn"] += int(np.count_nonzero(out[1] & (need > 1)
+                                               & ((offset + np.minimum((out[2] / lam).astype(np.int64), span - 1))
+                                                  % config.clocks_per_tick + b_max >= config.clocks_per_tick)))
+        return out
+
+    monkeypatch.setattr(window, "first_crossings", spy)
+    theta, L = config.threshold, config.clocks_per_readout
+    per_clock = np.asarray(per_clock)
+    light = np.repeat(per_clock * theta * L / 42000, pixels)[None, :]
+    fast = SceneSimulator(config, light.shape, rng=71)
+    full = SceneSimulator(config, light.shape, rng=72, method="per-clock")
+    a = np.array([fast.readout(light)[0] for _ in range(3)])
+    b = np.array([full.readout(light)[0] for _ in range(3)])
+    assert fast.path_counts["queue"] >= 0.9 * a.size and calls["pixels"] >= 0.9 * a.size, fast.path_counts
+    assert calls["drawn"] > 0.02 * a.size, calls
+    for i in range(len(per_clock)):
+        part = slice(i * pixels, (i + 1) * pixels)
+        wa, wb = a[:, part], b[:, part]
+        assert ((wa >> config.d) == 1).all() and ((wb >> config.d) == 1).all()
+        ta, tb = (w & ((1 << config.d) - 1) for w in (wa, wb))
+        se = np.sqrt(ta.var() / ta.size + tb.var() / tb.size)
+        tvd = 0.5 * np.abs(_histogram(wa, config) - _histogram(wb, config)).sum()
+        assert abs(ta.mean() - tb.mean()) <= 4 * se and tvd < 0.05, (per_clock[i], ta.mean(), tb.mean(), tvd)

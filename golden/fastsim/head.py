@@ -100,7 +100,7 @@ def head_path(sim, sel, h, expected, lam, words):
         for w, j in groups(i, size[i]):
             if tail is queue:
                 ok, got, end, at_clock, drawn, drawn_rest = queue_walk(sim, sel[j], w, lam, acc_h[j],
-                                                                              rest, need[j], b_max[j])
+                                                                              rest, need[j], b_max[j], h)
                 at[j[ok & (at_clock >= 0)]] = h + at_clock[ok & (at_clock >= 0)]
             else:
                 ok, end, drawn, drawn_rest = full_walk(sim, sel[j], w, lam, acc_h[j], rest)

@@ -180,7 +180,7 @@ def lindley_ends(walk: np.ndarray, *b0s: np.ndarray) -> list[np.ndarray]:
     return [walk[-1] - np.minimum(-b0, low) for b0 in b0s]
 
 
-def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max):
+def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max, offset=0):
     """``clocks`` clocks of light below one threshold per clock from charge
     ``acc0 < theta``, no clipping (bound): spikes follow the crossings of the
     threshold levels through a unit-rate queue.
@@ -191,7 +191,9 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max):
     of the last ``w`` clocks is at most ``b_max`` (per pixel, bound); the Lindley
     recursion over the window from 0 and from ``b_max`` agreeing settles the
     end backlog. TE: the clock of spike ``need`` (per pixel) when it fires,
-    from the first ``need`` crossings, all before the window (:func:`first_crossings`).
+    from the first ``need`` crossings, all before the window; where they surely
+    are, a clock of its tick (:func:`first_crossings`; ``offset``: the clocks of
+    the interval before these, a head's, for the tick).
     -> (ok, spikes, end accumulator, that clock or -1, window, rest total);
     pixels not ``ok`` go per clock with the window and rest drawn."""
     c = sim.config
@@ -205,7 +207,8 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max):
     if c.is_te:                                        # crossings surely before the window: drawn first
         first = np.flatnonzero((need <= c.p_max) & (rest_mean >= sim.levels.mean_overflow))
     if first.size:
-        at[first], reached, light_time = first_crossings(sim, lam_s[first], acc0[first], need[first], span)
+        at[first], reached, light_time = first_crossings(sim, lam_s[first], acc0[first], need[first], span,
+                                                         b_max[first], offset)
         first, light_time = first[reached], light_time[reached]
         rest_mean[first] -= light_time                 # the electrons after the last of them
     rest = sim.rng.poisson(rest_mean)
@@ -244,38 +247,43 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max):
     return ok, spikes, level_end - theta * spikes, at, window, rest
 
 
-def first_crossings(sim, lam, acc0, need, span):
+def first_crossings(sim, lam, acc0, need, span, b_max, offset=0):
     """TE pixels whose first ``need`` threshold crossings surely come in the first
     ``span`` clocks (``lam span`` at least ``mean_overflow``): their electrons are a
-    unit-rate Poisson process in light-time (``lam`` per clock), so crossing i comes
-    ``Gamma(theta - acc0)`` (i = 1), then ``Gamma(theta)`` after the one before, in
-    clock ``c_i = floor(time / lam)``; the electrons after the last are
-    ``Poisson(lam span - time)``, independent of them (the caller draws them). One
-    Gamma draw per crossing, the middle ones of one shape (a scalar shape draws a third
-    faster than an array of shapes), where the rest total's order statistics took one
-    more and a normalisation. -> (the clock ``max_i (c_i + p - i)`` of spike ``p =
-    need``, whether the last crossing came within the span (surely; the others go the
-    order-statistics way), its light-time)."""
-    theta = sim.config.threshold
-    at = np.full(lam.size, -1, np.int64)
-    reached = np.zeros(lam.size, bool)
-    light_time = np.zeros(lam.size)
-    needs = distinct(need)
+    unit-rate Poisson process in light-time (``lam`` per clock), so crossing ``p = need``
+    comes at ``T ~ Gamma(p theta - acc0)``, in clock ``c_p = floor(T / lam)``, and the
+    electrons after it are ``Poisson(lam span - T)``, independent of it (the caller draws
+    them). Spike p fires at ``s_p = max_i (c_i + p - i)``, in ``[c_p, c_p + b_max]`` (its
+    wait is at most the backlog at ``c_p``, which the queue path's bound caps at any clock
+    at ``b_max``), and the word reads only its tick (``clocks_per_tick`` clocks, the
+    interval starting ``offset`` clocks before these): where that range lies in one tick,
+    ``c_p`` is the answer; elsewhere the earlier crossings are drawn given ``T``: the
+    shares of ``T`` of the gaps (``Gamma(theta - acc0)``, then ``Gamma(theta)``, one scalar
+    shape, drawn a third faster) are a Dirichlet vector independent of their sum. One
+    Gamma draw per pixel, and ``p`` more for the few near a tick's end, where drawing
+    every crossing took ``p``. -> (a clock in the tick of spike ``p`` (the one ``max_i``
+    gives where it was drawn), whether crossing p came within the span (surely; the
+    others go the order-statistics way), its light-time)."""
+    c = sim.config
+    theta, per_tick = c.threshold, c.clocks_per_tick
+    last = sim.rng.standard_gamma((need * theta - acc0).astype(np.float64))
+    reached = last < lam * span
+    at = np.minimum((last / lam).astype(np.int64), span - 1)
+    unsure = reached & (need > 1) & ((offset + at) % per_tick + b_max >= per_tick)
+    draw = np.flatnonzero(unsure)
+    needs = distinct(need[draw]) if draw.size else _NONE
     for p in needs.tolist():
-        i = np.flatnonzero(need == p) if needs.size > 1 else slice(None)
-        lam_i = lam[i]
-        times = np.empty((p, lam_i.size))
-        times[0] = sim.rng.standard_gamma((theta - acc0[i]).astype(np.float64))
-        if p > 1:
-            sim.rng.standard_gamma(float(theta), (p - 1, lam_i.size), out=times[1:])
-        np.cumsum(times, axis=0, out=times)
-        last = times[-1]
-        cross = np.minimum((times / lam_i).astype(np.int64), span - 1)
+        i = draw[need[draw] == p] if needs.size > 1 else draw
+        gaps = np.empty((p, i.size))
+        gaps[0] = sim.rng.standard_gamma((theta - acc0[i]).astype(np.float64))
+        sim.rng.standard_gamma(float(theta), (p - 1, i.size), out=gaps[1:])
+        np.cumsum(gaps, axis=0, out=gaps)
+        times = gaps * (last[i] / gaps[-1])             # crossing i's light-time, given T
+        times[-1] = last[i]
+        cross = np.minimum((times / lam[i]).astype(np.int64), span - 1)
         cross -= np.arange(1, p + 1)[:, None]
         at[i] = cross.max(axis=0) + p                   # s_p = max_i (c_i + p - i)
-        reached[i] = last < lam_i * span
-        light_time[i] = last
-    return at, reached, light_time
+    return at, reached, last
 
 
 def full_path(sim, sel, w, lam, words):
