@@ -4,8 +4,10 @@ On held-out scenes recorded by a noisy TE sensor (the paper's eq. 12 or eq. 13 d
 current, or a golden.noise JSON), calibrated from its own dark and flat streams as
 `tespike evaluate` does, TFI and every learned method with TE weights is scored (PSNR-mu)
 three ways: with shot noise alone; its output corrected, ``max(0, (x - dark) / gain)``
-on the image; and (the product's rule) its input corrected, the same on every
-readout's decoded light before the model sees it. TFP, corrected at its output
+on the image; and (the product's rule) its input corrected: a learned method sees every
+readout's decoded light as ``(x - dark) / gain``, TFI the pixel's own charge, its decoded
+spikes less the dark rate re-coded as a pixel without dark current codes them
+(recon.calibration.dark_free_light), divided by the gain. TFP, corrected at its output
 (exact for a windowed mean), is printed beside. Each row gives its run time.
 
     nice -n 10 python3 benchmarks/calibration_route.py [--sequences 2] [--dark eq12] [--level 1]

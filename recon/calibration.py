@@ -12,9 +12,10 @@ and a reconstruction ``x`` of that pixel is corrected to the light
 
     light  = max(0, (x - dark) / gain)                    (:func:`correct`)
 
-which is exact for any method linear in the decoded light (TFP's windowed mean,
-TFI's count over an interval) and is applied to every method's output in one
-place (:func:`tespike.recon.methods.reconstruct`). Light below 0 after subtracting the
+which is exact for a method linear in the decoded light (TFP's windowed mean),
+applied in one place (:func:`tespike.recon.methods.reconstruct`); TFI and the
+learned methods are corrected at their input instead (:func:`dark_free_light`,
+:func:`correct_input`). Light below 0 after subtracting the
 dark rate is noise around darkness and is reported as 0 (the light is never
 negative).
 
@@ -206,9 +207,35 @@ def correct_input(light, correction):
     """Each readout's decoded light ``x`` corrected to ``(x - dark) / gain``, ``correction`` being
     (dark, 1 / gain) broadcast against ``light`` (:func:`input_correction`): not floored, for the
     learned methods (a floor at 0 would add about the dark rate to every dim pixel) and their
-    training clips alike; TFI floors it."""
+    training clips alike. TFI re-spikes it instead (:func:`dark_free_light`)."""
     dark, inverse_gain = correction
     return (light - dark) * inverse_gain
+
+
+def dark_free_light(spikes, dark, spike_light: float):
+    """Decoded spikes per readout (K, ...) of pixels whose dark rate is ``dark`` (light units per
+    readout, broadcast against ``spikes[0]``) -> the light (K, ...) of the pixels' own charge, coded
+    as a pixel without dark current codes it, for TFI (float64 throughout).
+
+    The net charge since the stream start, ``sum(spikes) - k dark``, is the pixel's own charge
+    (its residual carried, as the pixel carries its own); a readout fires where its high-water
+    mark (floored at 0) passes a new whole spike, and then carries all the net charge gained
+    since the previous firing readout. A readout that caught less than the dark rate leaves a
+    deficit that later readouts must fill: flooring each readout at 0 instead (``max(0, x - dark)``)
+    subtracted the dark rate only at readouts that fire, so a pixel firing every few readouts on
+    its dark charge kept most of that charge as light. Conserved: the light over the stream is
+    the high-water mark at the last firing readout, within one spike of the net charge unless the
+    net charge ends below its peak. With ``dark`` 0 the light is each readout's own (to rounding)."""
+    import torch
+    spikes = torch.as_tensor(spikes, dtype=torch.float64)
+    dark_spikes = torch.as_tensor(dark, dtype=torch.float64, device=spikes.device) / spike_light
+    from .tfi import running_max
+    high = running_max(torch.cumsum(spikes - dark_spikes, 0)).clamp_(min=0)
+    whole = torch.floor(high)
+    fires = whole > torch.cat([torch.zeros_like(whole[:1]), whole[:-1]])
+    reached = running_max(torch.where(fires, high, 0.0))     # the mark at the last firing readout
+    before = torch.cat([torch.zeros_like(reached[:1]), reached[:-1]])
+    return torch.where(fires, high - before, 0.0) * spike_light
 
 
 def calibration_summary(calibration: Calibration) -> str:

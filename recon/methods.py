@@ -27,7 +27,7 @@ from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
 from .settings import ReconSettings
-from .stream import as_word_tensor, decode_light, output_images
+from .stream import as_word_tensor, decode_light, decode_spikes, output_images
 from .tfi import tfi
 from .tfp import tfp
 
@@ -40,16 +40,20 @@ def _tfp_block(words: torch.Tensor, config: SensorConfig, settings: ReconSetting
 
 def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings,
                correction: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
-    """TFI of a (K, P) block; ``correction`` (dark, 1 / gain) of its P pixels: each readout's light
-    is corrected first, ``max(0, (x - dark) / gain)``, and a readout spikes where light is left, so
-    the interval is that of the pixel's own light, not of its dark current."""
-    light = decode_light(words, config, estimator=settings.estimator, device=settings.device,
-                         dtype=settings.torch_dtype)
+    """TFI of a (K, P) block; ``correction`` (dark, 1 / gain) of its P pixels: TFI of the pixels'
+    own charge, the decoded spikes less the dark rate re-coded as a pixel without dark current
+    codes them (:func:`tespike.recon.calibration.dark_free_light`), so the intervals are those of
+    the pixel's own light, not of its dark current; divided by the gain (TFI is linear in the
+    light of fixed intervals)."""
     if correction is None:
+        light = decode_light(words, config, estimator=settings.estimator, device=settings.device,
+                             dtype=settings.torch_dtype)
         return tfi(light, words != 0, config.spike_light, settings.radius, settings.search)
-    from .calibration import correct_input
-    light = torch.clamp_min_(correct_input(light, tuple(c.to(light.device, light.dtype) for c in correction)), 0)
-    return tfi(light, light > 0, config.spike_light, settings.radius, settings.search)
+    from .calibration import dark_free_light
+    dark, inverse_gain = (c.to(settings.device, torch.float64) for c in correction)
+    spikes = decode_spikes(words, config, estimator=settings.estimator, device=settings.device)
+    light = dark_free_light(spikes, dark, config.spike_light).to(settings.torch_dtype)
+    return tfi(light, light > 0, config.spike_light, settings.radius, settings.search) * inverse_gain.to(light.dtype)
 
 
 def _learned_frames(name: str) -> Callable:
@@ -116,8 +120,9 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     ``calibration``: a :class:`tespike.recon.calibration.Calibration` of the sensor that recorded
     the stream; every method is then corrected for the pixels' dark rate and gain: TFP at its
     output, ``max(0, (x - dark) / gain)`` (:func:`tespike.recon.calibration.correct`; exact, TFP
-    being linear in the decoded light it averages); TFI on every readout's decoded light, the same
-    floored at 0, its spike intervals then following the pixel's own light, not its dark current;
+    being linear in the decoded light it averages); TFI on its input, the decoded spikes less the
+    dark rate re-coded as a pixel without dark current codes them, its spike intervals then
+    following the pixel's own light, not its dark current, and divided by the gain;
     the learned methods on every readout's decoded light, ``(x - dark) / gain`` unfloored, their
     image floored at 0 (:func:`tespike.recon.learning.infer.frame`). Each route was chosen by
     measurement (docs/reconstruction.md "Calibration").
