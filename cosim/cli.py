@@ -195,7 +195,7 @@ def _run(args) -> tuple[int, bool]:
     try:
         return int(args.run(args) or 0), True
     except TespikeError as exc:
-        print(f"{prefix}: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"{prefix}: error: {_one_line(exc)}{_notes(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
     except OSError as exc:
         where = f" {exc.filename!r}:" if exc.filename else ""
