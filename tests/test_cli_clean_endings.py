@@ -268,3 +268,50 @@ def test_a_failed_dataset_build_leaves_no_store_or_says_what_it_resumes(capsys, 
     (tmp_path / "empty.zarr").mkdir()                             # a folder given empty stays, empty
     assert_refused(run_here(capsys, *args[:-1], tmp_path / "empty.zarr"), "f1.hdr")
     assert os.listdir(tmp_path / "empty.zarr") == []
+
+
+# ------------------------------------------------------------------ a signal after the output is in place
+def test_a_signal_after_the_output_is_in_place_says_it_is_whole(capsys, monkeypatch, tmp_path):
+    """Ctrl-C between the move into place and the end printed "interrupted" over a new, whole output."""
+    import tespike.cosim.console as console
+    np.save(tmp_path / "e.npy", np.full((TINY.clocks_per_readout * 3, 2, 2), 2, np.uint8))
+    (tmp_path / "c.json").write_text(json.dumps(TINY.to_dict()))
+    (tmp_path / "s.npz").write_bytes(b"previous run")
+
+    def interrupted(args, message):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(console, "report", interrupted)
+    result = run_here(capsys, "golden", "--config", tmp_path / "c.json", "--stimulus", tmp_path / "e.npy",
+                      "--out", tmp_path / "s.npz")
+    assert_refused(result, "interrupted after writing", f"{str(tmp_path / 's.npz')!r} whole")
+    assert np.load(tmp_path / "s.npz")["words"].shape == (3, 2, 2)
+    monkeypatch.undo()                                     # the next run starts with nothing written
+    (tmp_path / "bad.npy").write_bytes(b"")
+    assert_refused(run_here(capsys, "golden", "--config", tmp_path / "c.json", "--stimulus", tmp_path / "bad.npy",
+                            "--out", tmp_path / "t.npz"), "bad.npy")
+
+
+def test_only_a_finished_folder_counts_as_written_never_the_files_inside_its_temporary(tmp_path):
+    from tespike.golden.atomic import atomic_folder, atomic_output, finished_outputs
+    start = len(finished_outputs())
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_folder(tmp_path / "ev") as folder:
+            with atomic_output(folder / "table.md") as part:
+                Path(part).write_text("new")
+            raise KeyboardInterrupt
+    assert finished_outputs(start) == []
+    with atomic_folder(tmp_path / "ev") as folder:
+        with atomic_output(folder / "table.md") as part:
+            Path(part).write_text("new")
+    assert finished_outputs(start) == [str(tmp_path / "ev")]
+
+
+def test_a_signal_during_the_interpreters_exit_ends_it_without_a_traceback(tmp_path):
+    """After the command's line, Ctrl-C or SIGTERM end the process as the system does (torch's and
+    Dask's exit handlers take a second; a KeyboardInterrupt raised in one printed a traceback)."""
+    code = ("import signal, sys; sys.argv = ['tespike', 'scene', '--list']; from tespike.cosim.cli import main; "
+            "main(); print(signal.getsignal(signal.SIGINT) is signal.SIG_DFL, "
+            "signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert done.returncode == 0 and done.stdout.strip().endswith("True True"), done
