@@ -484,7 +484,7 @@ def run_interrupt(case: Case, at: float, signum: int, base: Path) -> tuple[bool,
             return False, f"output {case.out} changed: {first[:140]}"
         if case.out_kind == "none" and os.path.lexists(out) and not case.name.startswith(("train", "dataset")):
             return False, f"output {case.out} left: {first[:140]}"
-        if case.name.startswith("train") and os.path.lexists(out):
+        if case.name.startswith("train") and os.path.lexists(out) and "whole" not in first:
             return False, f"weights {case.out} written by an interrupted run: {first[:140]}"
         if case.name.startswith("train") and os.path.lexists(work / "T2.run") \
                 and not any(os.scandir(work / "T2.run")):
