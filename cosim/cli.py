@@ -171,11 +171,13 @@ def _notes(exc: BaseException) -> str:
     return " " + _one_line("; ".join(notes)) if notes else ""
 
 
-def _written(since: int) -> str:
+def _written(since: int, exc: BaseException) -> str:
     """An interrupted command's outputs that were already complete (a signal after the last one
-    was moved into place: the user sees "terminated" and must know the file is whole and new)."""
+    was moved into place: the user sees "terminated" and must know the file is whole and new),
+    less those its own note names (train's "checkpoint ... saved")."""
     from tespike.golden.atomic import finished_outputs
-    done = finished_outputs(since)
+    noted = " ".join(getattr(exc, "__notes__", ()))
+    done = [path for path in finished_outputs(since) if repr(path) not in noted]
     return f" after writing {_one_line(', '.join(repr(p) for p in done), 200)} whole" if done else ""
 
 
@@ -233,11 +235,11 @@ def _run(args) -> tuple[int, bool]:
             return 1, False
         raise
     except KeyboardInterrupt as exc:
-        print(f"{prefix}: interrupted{_written(start)}{_notes(exc)}", file=sys.stderr)
+        print(f"{prefix}: interrupted{_written(start, exc)}{_notes(exc)}", file=sys.stderr)
         return 130, False
     except Terminated as exc:
         import signal
-        print(f"{prefix}: terminated by {signal.Signals(exc.signum).name}{_written(start)}{_notes(exc)}",
+        print(f"{prefix}: terminated by {signal.Signals(exc.signum).name}{_written(start, exc)}{_notes(exc)}",
               file=sys.stderr)
         return 128 + exc.signum, False
 
