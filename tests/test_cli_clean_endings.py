@@ -315,3 +315,18 @@ def test_a_signal_during_the_interpreters_exit_ends_it_without_a_traceback(tmp_p
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
                           env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert done.returncode == 0 and done.stdout.strip().endswith("True True"), done
+
+
+def test_ctrl_c_while_the_command_loads_is_one_line():
+    """Ctrl-C in the first 0.2 s (numpy loading, before main's handling) printed a 20-line traceback."""
+    code = ("import runpy, sys, types\n"
+            "cli = types.ModuleType('tespike.cosim.cli')\n"
+            "def stopped(name):\n"
+            "    raise KeyboardInterrupt\n"
+            "cli.__getattr__ = stopped\n"
+            "import tespike.cosim\n"
+            "sys.modules['tespike.cosim.cli'] = cli\n"
+            "runpy.run_module('tespike', run_name='__main__')\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert done.returncode == 130 and done.stderr == "tespike: interrupted\n", done
