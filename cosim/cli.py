@@ -149,6 +149,17 @@ def _restore_signal_handlers(previous: dict) -> None:
         signal.signal(number, handler if handler is not None else signal.SIG_DFL)
 
 
+def _end_quietly() -> None:
+    """Once the command has ended (its line printed), Ctrl-C or SIGTERM during the interpreter's
+    exit (torch's and Dask's exit handlers can take a second) ends the process as the system
+    does, not with a KeyboardInterrupt traceback from an exit handler."""
+    import signal
+    for name in ("SIGINT", *CLEANUP_SIGNALS):
+        number = getattr(signal, name, None)
+        if number is not None and signal.getsignal(number) is not signal.SIG_IGN:    # nohup's stays
+            signal.signal(number, signal.SIG_DFL)
+
+
 def _one_line(exc: BaseException, limit: int = 300) -> str:
     text = " ".join(str(exc).split()) or type(exc).__name__
     return text if len(text) <= limit else text[:limit] + "..."
@@ -158,6 +169,16 @@ def _notes(exc: BaseException) -> str:
     """What the interrupted command noted on the exception (e.g. the checkpoint it saved), one line."""
     notes = getattr(exc, "__notes__", ())
     return " " + _one_line("; ".join(notes)) if notes else ""
+
+
+def _written(since: int, exc: BaseException) -> str:
+    """An interrupted command's outputs that were already complete (a signal after the last one
+    was moved into place: the user sees "terminated" and must know the file is whole and new),
+    less those its own note names (train's "checkpoint ... saved")."""
+    from tespike.golden.atomic import finished_outputs
+    noted = " ".join(getattr(exc, "__notes__", ()))
+    done = [path for path in finished_outputs(since) if repr(path) not in noted]
+    return f" after writing {_one_line(', '.join(repr(p) for p in done), 200)} whole" if done else ""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -181,6 +202,8 @@ def main(argv: list[str] | None = None) -> int:
             code, ok = _run(args)
     finally:              # main() called in-process (tests) leaves the caller's handlers as they were
         _restore_signal_handlers(previous)
+        if whole_process:
+            _end_quietly()
     if ok:            # only a run that succeeded shows its warnings; a refusal stays one line
         for warning in caught:
             warnings.showwarning(warning.message, warning.category, warning.filename, warning.lineno)
@@ -191,11 +214,13 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(args) -> tuple[int, bool]:
     """Run a sub-command; return (exit code, whether it ended normally)."""
+    from tespike.golden.atomic import finished_outputs
     prefix = f"tespike {args.command}"
+    start = len(finished_outputs())
     try:
         return int(args.run(args) or 0), True
     except TespikeError as exc:
-        print(f"{prefix}: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"{prefix}: error: {_one_line(exc)}{_notes(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
     except OSError as exc:
         where = f" {exc.filename!r}:" if exc.filename else ""
@@ -210,11 +235,12 @@ def _run(args) -> tuple[int, bool]:
             return 1, False
         raise
     except KeyboardInterrupt as exc:
-        print(f"{prefix}: interrupted{_notes(exc)}", file=sys.stderr)
+        print(f"{prefix}: interrupted{_written(start, exc)}{_notes(exc)}", file=sys.stderr)
         return 130, False
     except Terminated as exc:
         import signal
-        print(f"{prefix}: terminated by {signal.Signals(exc.signum).name}{_notes(exc)}", file=sys.stderr)
+        print(f"{prefix}: terminated by {signal.Signals(exc.signum).name}{_written(start, exc)}{_notes(exc)}",
+              file=sys.stderr)
         return 128 + exc.signum, False
 
 

@@ -51,6 +51,8 @@ WORKING_BYTES = 256 << 20
 #: Files the demo writes into its folder (checked before any work).
 OUTPUT_FILES = ("report.md", "verdict.txt", "I.npy", "E_crop.npy", "S_rtl.npz", "W.vcd", "W.gtkw",
                 "frame.png", "rtl_crop.png", "strips/")
+#: Names a demo's folder holds besides OUTPUT_FILES and the evaluation's: per-sensor streams, images.
+PER_SENSOR_FILES = ("S_*.npz", "R_*.npy")
 
 
 @dataclasses.dataclass
@@ -160,8 +162,29 @@ def check_options(out, *, frames, height, width, seed, crop, rtl_readouts, backe
     if unknown or not sensors or RTL_SENSOR not in sensors or len(set(sensors)) != len(sensors):
         raise InputError(f"--sensors {','.join(sensors)!r}: a list of distinct sensors among "
                          f"{', '.join(SENSORS)}, with {RTL_SENSOR!r} (the RTL's)")
-    check_output_dir(out, "--out", OUTPUT_FILES)
+    check_demo_folder(out)
     return crop, rtl_readouts
+
+
+def check_demo_folder(out) -> None:
+    """``--out``: new, empty, or a previous demo's folder, which the run replaces whole when it is
+    done (:func:`tespike.golden.atomic.atomic_folder`: killed or failing, the previous demo stays
+    untouched); never a folder holding anything else, which replacing it would delete."""
+    import fnmatch
+    import os
+
+    from tespike.golden.atomic import folder_holds_files
+    from tespike.golden.paths import check_output_dir
+    from tespike.recon.report import OUTPUT_FILES as EVALUATION_FILES
+    check_output_dir(out, "--out")
+    if not folder_holds_files(out):
+        return
+    names = OUTPUT_FILES + EVALUATION_FILES + PER_SENSOR_FILES
+    foreign = [name for name in sorted(os.listdir(out))
+               if not any(fnmatch.fnmatchcase(name, pattern.rstrip("/")) for pattern in names)]
+    if foreign:
+        raise InputError(f"--out {str(out)!r} holds {foreign[0]!r}, which no demo writes: choose a new or "
+                         "empty folder (a demo replaces its folder whole)")
 
 
 def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, crop, rtl_readouts,
@@ -224,154 +247,157 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     L = te.clocks_per_readout
     check_room(out, configs, frames=frames, height=height, width=width, crop=crop,
                rtl_readouts=rtl_readouts, vcd=backend == "amaranth", weights=ready)
-    out = Path(out)
-    out.mkdir(exist_ok=True)
-    progress = Progress(6, quiet)
-    if bars is None:
-        bars = not quiet and sys.stderr.isatty()
+    from tespike.golden.atomic import atomic_folder
+    given = out
+    with atomic_folder(given) as out:          # the folder is this run's whole, or the previous run's
+        progress = Progress(6, quiet)
+        if bars is None:
+            bars = not quiet and sys.stderr.isatty()
 
-    # 1. scene
-    started = progress.begin(f"scene: pan over the shipped CC0 panorama, {frames} x {height} x {width}")
-    light = make_scene("default", frames, height, width, seed=seed)
-    _save_npy(out / "I.npy", light)
-    progress.end("scene", started, [f"tespike scene --name default --frames {frames} --height {height} "
-                                    f"--width {width} --seed {seed} --out I.npy"])
+        # 1. scene
+        started = progress.begin(f"scene: pan over the shipped CC0 panorama, {frames} x {height} x {width}")
+        light = make_scene("default", frames, height, width, seed=seed)
+        _save_npy(out / "I.npy", light)
+        progress.end("scene", started, [f"tespike scene --name default --frames {frames} --height {height} "
+                                        f"--width {width} --seed {seed} --out I.npy"])
 
-    # 2. golden full frame; TE through the per-clock electrons the RTL crop will get
-    started = progress.begin("golden model, full frame: TE (per-clock electrons, cycle-exact), "
-                             "ML count and ML msb (fast simulator)")
-    y, x = choose_crop(light, crop)
-    streams = {}
-    array = PixelArray(te, (height, width))
-    words_te = np.empty((frames, height, width), np.int64)
-    crop_stimulus = np.empty((rtl_readouts * L, crop, crop), np.uint16)
-    electrons = iter_scene_stimulus(te, light, seed=seed)
-    if bars:
-        from tqdm import tqdm
-        electrons = tqdm(electrons, total=frames, desc="golden te", unit="readout", leave=False)
-    for k, e in enumerate(electrons):
-        words_te[k] = array.feed(e)[0]
-        if k < rtl_readouts:
-            crop_stimulus[k * L:(k + 1) * L] = e[:, y:y + crop, x:x + crop]
-    for label, config in configs.items():
-        streams[label] = words_te if label == RTL_SENSOR else simulate_scene(config, light, seed=seed)
-        save_stream(out / f"S_{label}.npz", streams[label], config)
-    _save_npy(out / "E_crop.npy", crop_stimulus)
-    commands = [f"tespike stimulus --config te --scene I.npy --seed {seed} --out E_te.npy   "
-                f"# {frames * L * height * width * 2 / 2**20:.0f} MiB",
-                "tespike golden --config te --stimulus E_te.npy --out S_te.npz",
-                f"tespike simulate --config te --scene I.npy --seed {seed} --method per-clock --out S_te.npz"
-                "   # the same words, without the file"]
-    commands += [f"tespike simulate --config {SENSORS[label]} --scene I.npy --seed {seed} --out S_{label}.npz"
-                 for label in configs if label != RTL_SENSOR]
-    progress.end("golden, full frame", started, commands)
+        # 2. golden full frame; TE through the per-clock electrons the RTL crop will get
+        started = progress.begin("golden model, full frame: TE (per-clock electrons, cycle-exact), "
+                                 "ML count and ML msb (fast simulator)")
+        y, x = choose_crop(light, crop)
+        streams = {}
+        array = PixelArray(te, (height, width))
+        words_te = np.empty((frames, height, width), np.int64)
+        crop_stimulus = np.empty((rtl_readouts * L, crop, crop), np.uint16)
+        electrons = iter_scene_stimulus(te, light, seed=seed)
+        if bars:
+            from tqdm import tqdm
+            electrons = tqdm(electrons, total=frames, desc="golden te", unit="readout", leave=False)
+        for k, e in enumerate(electrons):
+            words_te[k] = array.feed(e)[0]
+            if k < rtl_readouts:
+                crop_stimulus[k * L:(k + 1) * L] = e[:, y:y + crop, x:x + crop]
+        for label, config in configs.items():
+            streams[label] = words_te if label == RTL_SENSOR else simulate_scene(config, light, seed=seed)
+            save_stream(out / f"S_{label}.npz", streams[label], config)
+        _save_npy(out / "E_crop.npy", crop_stimulus)
+        commands = [f"tespike stimulus --config te --scene I.npy --seed {seed} --out E_te.npy   "
+                    f"# {frames * L * height * width * 2 / 2**20:.0f} MiB",
+                    "tespike golden --config te --stimulus E_te.npy --out S_te.npz",
+                    f"tespike simulate --config te --scene I.npy --seed {seed} --method per-clock --out S_te.npz"
+                    "   # the same words, without the file"]
+        commands += [f"tespike simulate --config {SENSORS[label]} --scene I.npy --seed {seed} --out S_{label}.npz"
+                     for label in configs if label != RTL_SENSOR]
+        progress.end("golden, full frame", started, commands)
 
-    # 3. RTL on the crop
-    started = progress.begin(f"RTL ({backend}): TE array of {crop} x {crop} pixels, {rtl_readouts} readouts "
-                             f"({rtl_readouts * L} clocks) at rows {y}.., columns {x}..")
-    expected = simulate(te, crop_stimulus)
-    consistent = bool(np.array_equal(expected, words_te[:rtl_readouts, y:y + crop, x:x + crop]))
-    if not consistent:           # the generator and the engine disagree: a bug, not a verdict
-        raise RuntimeError("golden on the crop stimulus differs from the full frame's crop")
-    rtl_info = {"backend": backend, "vcd": None}
-    if backend == "amaranth":
-        from tespike.cosim.rtlsim import rtl_run
-        from tespike.cosim.vcd import waveform_stream
-        run = rtl_run(te, crop_stimulus, vcd_path=out / "W.vcd", gtkw_path=out / "W.gtkw", flat=True,
-                      progress=bars)
-        read_started = time.perf_counter()
-        wave = waveform_stream(out / "W.vcd", te, (crop, crop))
-        rtl_info.update(vcd="W.vcd", gtkw="W.gtkw", latency=run.latency, cycles=run.cycles,
-                        sim_seconds=run.seconds, read_seconds=time.perf_counter() - read_started,
-                        live_equals_vcd=bool(np.array_equal(run.words, wave.words)),
-                        vcd_bytes=(out / "W.vcd").stat().st_size)
-        rtl_words = wave.words
-    else:
-        rtl_words = checked_words(run_backend(backend)(te, crop_stimulus), te, crop_stimulus, backend)
-    save_stream(out / "S_rtl.npz", rtl_words, te)
-    difference = first_difference(rtl_words, expected)
-    verdict = verdict_text(difference, backend, rtl_readouts, crop, (y, x))
-    write_text(out / "verdict.txt", verdict + "\n")
-    rerun = (f"tespike stimulus --config te --scene I.npy --seed {seed} --crop {y},{x},{crop},{crop} "
-             f"--readouts {rtl_readouts} --out E_crop.npy")
-    rtl_cmd = (f"tespike rtl-sim --config te --stimulus E_crop.npy --out S_rtl.npz --check"
-               + (" --vcd W.vcd" if backend == "amaranth" else f" --backend {backend}"))
-    progress.end(f"RTL ({backend})", started, [rerun, rtl_cmd])
-    if not quiet:
-        print(f"      RTL verdict: {verdict}", file=sys.stderr, flush=True)
+        # 3. RTL on the crop
+        started = progress.begin(f"RTL ({backend}): TE array of {crop} x {crop} pixels, {rtl_readouts} readouts "
+                                 f"({rtl_readouts * L} clocks) at rows {y}.., columns {x}..")
+        expected = simulate(te, crop_stimulus)
+        consistent = bool(np.array_equal(expected, words_te[:rtl_readouts, y:y + crop, x:x + crop]))
+        if not consistent:           # the generator and the engine disagree: a bug, not a verdict
+            raise RuntimeError("golden on the crop stimulus differs from the full frame's crop")
+        rtl_info = {"backend": backend, "vcd": None}
+        if backend == "amaranth":
+            from tespike.cosim.rtlsim import rtl_run
+            from tespike.cosim.vcd import waveform_stream
+            run = rtl_run(te, crop_stimulus, vcd_path=out / "W.vcd", gtkw_path=out / "W.gtkw", flat=True,
+                          progress=bars)
+            read_started = time.perf_counter()
+            wave = waveform_stream(out / "W.vcd", te, (crop, crop))
+            rtl_info.update(vcd="W.vcd", gtkw="W.gtkw", latency=run.latency, cycles=run.cycles,
+                            sim_seconds=run.seconds, read_seconds=time.perf_counter() - read_started,
+                            live_equals_vcd=bool(np.array_equal(run.words, wave.words)),
+                            vcd_bytes=(out / "W.vcd").stat().st_size)
+            rtl_words = wave.words
+        else:
+            rtl_words = checked_words(run_backend(backend)(te, crop_stimulus), te, crop_stimulus, backend)
+        save_stream(out / "S_rtl.npz", rtl_words, te)
+        difference = first_difference(rtl_words, expected)
+        verdict = verdict_text(difference, backend, rtl_readouts, crop, (y, x))
+        write_text(out / "verdict.txt", verdict + "\n")
+        rerun = (f"tespike stimulus --config te --scene I.npy --seed {seed} --crop {y},{x},{crop},{crop} "
+                 f"--readouts {rtl_readouts} --out E_crop.npy")
+        rtl_cmd = (f"tespike rtl-sim --config te --stimulus E_crop.npy --out S_rtl.npz --check"
+                   + (" --vcd W.vcd" if backend == "amaranth" else f" --backend {backend}"))
+        progress.end(f"RTL ({backend})", started, [rerun, rtl_cmd])
+        if not quiet:
+            print(f"      RTL verdict: {verdict}", file=sys.stderr, flush=True)
 
-    # 4. reconstruction: every method on every golden stream, and on the RTL's own stream
-    started = progress.begin("reconstruction: every method on every stream (run time: median of "
-                             f"{repeats}) and on the RTL stream")
-    from tespike.recon.evaluate import evaluate, label, scored_frames
-    from tespike.recon.report import write_outputs
-    from tespike.recon.methods import RECON_METHODS, available_methods, reconstruct
-    from tespike.recon.metrics import psnr_mu, ssim_mu
-    methods = available_methods(configs.values(), ready)     # learned ones only where there are weights
-    by_config = {configs[name]: streams[name] for name in configs}
-    evaluation = evaluate([("default", light)], lambda config, scene, rng: by_config[config],
-                          methods=methods, sensors=tuple(configs), configs=configs, window=window, seed=seed,
-                          progress=bars, keep=True, repeats=repeats, weights=chosen)
-    paths = write_outputs(evaluation, out)
-    for (_, mode, method), images in evaluation.images.items():
-        save_images(out / f"R_{method}_{mode}.npy", images)
-    peak = float(light.max())
-    truth = light[:rtl_readouts, y:y + crop, x:x + crop]
-    scored = scored_frames(rtl_readouts, window)
-    rtl_rows, rtl_images, golden_images = [], {}, {}
-    middle = (scored.start + scored.stop - 1) // 2
-    for method in methods:
-        seconds, images = median_seconds(lambda: reconstruct(rtl_words, te, method, window=window,
-                                                                  weights=chosen.get((method, RTL_SENSOR))), repeats)
-        save_images(out / f"R_{method}_rtl.npy", images)
-        full = evaluation.images["default", RTL_SENSOR, method][:rtl_readouts, y:y + crop, x:x + crop]
-        rtl_images[method], golden_images[method] = images[middle], full[middle]
-        rtl_rows.append({
-            "method": method,
-            "rtl_psnr": float(np.mean(psnr_mu(images[scored], truth[scored], peak=peak))),
-            "rtl_ssim": float(np.mean(ssim_mu(images[scored], truth[scored], peak=peak))),
-            "golden_psnr": float(np.mean(psnr_mu(full[scored], truth[scored], peak=peak))),
-            "golden_ssim": float(np.mean(ssim_mu(full[scored], truth[scored], peak=peak))),
-            "max_diff": float(np.max(np.abs(images[scored] - full[scored]))),
-            "ms_per_frame": 1e3 * seconds / rtl_readouts})
-    progress.end("reconstruction", started,
-                 [f"tespike reconstruct --stream S_{mode}.npz --method {method} "
-                  + (f"--window {window} " if "window" in RECON_METHODS[method].options else "")
-                  + f"--out R_{method}_{mode}.npy" for mode in list(configs) + ["rtl"] for method in methods]
-                 + [f"tespike evaluate --set default --frames {frames} --height {height} --width {width} "
-                    f"--seed {seed} --out eval   # Table 1 layout, TE and ML count, other noise draws"])
+        # 4. reconstruction: every method on every golden stream, and on the RTL's own stream
+        started = progress.begin("reconstruction: every method on every stream (run time: median of "
+                                 f"{repeats}) and on the RTL stream")
+        from tespike.recon.evaluate import evaluate, label, scored_frames
+        from tespike.recon.report import write_outputs
+        from tespike.recon.methods import RECON_METHODS, available_methods, reconstruct
+        from tespike.recon.metrics import psnr_mu, ssim_mu
+        methods = available_methods(configs.values(), ready)     # learned ones only where there are weights
+        by_config = {configs[name]: streams[name] for name in configs}
+        evaluation = evaluate([("default", light)], lambda config, scene, rng: by_config[config],
+                              methods=methods, sensors=tuple(configs), configs=configs, window=window, seed=seed,
+                              progress=bars, keep=True, repeats=repeats, weights=chosen)
+        paths = write_outputs(evaluation, out)
+        for (_, mode, method), images in evaluation.images.items():
+            save_images(out / f"R_{method}_{mode}.npy", images)
+        peak = float(light.max())
+        truth = light[:rtl_readouts, y:y + crop, x:x + crop]
+        scored = scored_frames(rtl_readouts, window)
+        rtl_rows, rtl_images, golden_images = [], {}, {}
+        middle = (scored.start + scored.stop - 1) // 2
+        for method in methods:
+            seconds, images = median_seconds(
+                lambda: reconstruct(rtl_words, te, method, window=window, weights=chosen.get((method, RTL_SENSOR))),
+                repeats)
+            save_images(out / f"R_{method}_rtl.npy", images)
+            full = evaluation.images["default", RTL_SENSOR, method][:rtl_readouts, y:y + crop, x:x + crop]
+            rtl_images[method], golden_images[method] = images[middle], full[middle]
+            rtl_rows.append({
+                "method": method,
+                "rtl_psnr": float(np.mean(psnr_mu(images[scored], truth[scored], peak=peak))),
+                "rtl_ssim": float(np.mean(ssim_mu(images[scored], truth[scored], peak=peak))),
+                "golden_psnr": float(np.mean(psnr_mu(full[scored], truth[scored], peak=peak))),
+                "golden_ssim": float(np.mean(ssim_mu(full[scored], truth[scored], peak=peak))),
+                "max_diff": float(np.max(np.abs(images[scored] - full[scored]))),
+                "ms_per_frame": 1e3 * seconds / rtl_readouts})
+        progress.end("reconstruction", started,
+                     [f"tespike reconstruct --stream S_{mode}.npz --method {method} "
+                      + (f"--window {window} " if "window" in RECON_METHODS[method].options else "")
+                      + f"--out R_{method}_{mode}.npy" for mode in list(configs) + ["rtl"] for method in methods]
+                     + [f"tespike evaluate --set default --frames {frames} --height {height} --width {width} "
+                        f"--seed {seed} --out eval   # Table 1 layout, TE and ML count, other noise draws"])
 
-    # 5. dynamic range and hardware cost
-    started = progress.begin("dynamic range (formula and measured)" + (" and hardware cost (Yosys)"
-                                                                       if hw_cost else ""))
-    ranges = dynamic_ranges(configs)
-    hardware = hardware_cost({k: c for k, c in configs.items() if k in ("te", "ml")}) if hw_cost else "not computed (--no-hw-cost)"
-    progress.end("dynamic range and hardware cost", started,
-                 ["python3 benchmarks/dynamic_range.py   # the full table, from a clone",
-                  "python3 benchmarks/hw_cost.py          # the full cost table, from a clone"])
+        # 5. dynamic range and hardware cost
+        started = progress.begin("dynamic range (formula and measured)" + (" and hardware cost (Yosys)"
+                                                                           if hw_cost else ""))
+        ranges = dynamic_ranges(configs)
+        hardware = (hardware_cost({k: c for k, c in configs.items() if k in ("te", "ml")}) if hw_cost
+                    else "not computed (--no-hw-cost)")
+        progress.end("dynamic range and hardware cost", started,
+                     ["python3 benchmarks/dynamic_range.py   # the full table, from a clone",
+                      "python3 benchmarks/hw_cost.py          # the full cost table, from a clone"])
 
-    # 6. pictures and report
-    started = progress.begin("pictures and report.md")
-    plot_frame(light, middle, (y, x, crop), out / "frame.png")
-    plot_rtl_crop(truth[middle], rtl_images, golden_images, peak, middle, out / "rtl_crop.png")
-    progress.end("pictures and report", started, [
-        "tespike view --input I.npy --out I.png",
-        "tespike view --input S_te.npz --out S_te.png",
-        "tespike view --input R_tfi_te.npy --out R_tfi_te.png --peak 1",
-        "gtkwave W.gtkw" if backend == "amaranth" else "# no waveform: only the amaranth backend writes one"])
-    report = report_markdown(
-        configs=configs, rtl_config=te, frames=frames, height=height, width=width, seed=seed, crop=(y, x, crop),
-        rtl_readouts=rtl_readouts, rtl_info=rtl_info, verdict=verdict, evaluation=evaluation,
-        rtl_rows=rtl_rows, scored=scored, ranges=ranges, hardware=hardware, stages=progress.stages,
-        total=time.perf_counter() - progress.start, window=window, methods=list(methods),
-        label=label)
-    write_text(out / "report.md", report)
+        # 6. pictures and report
+        started = progress.begin("pictures and report.md")
+        plot_frame(light, middle, (y, x, crop), out / "frame.png")
+        plot_rtl_crop(truth[middle], rtl_images, golden_images, peak, middle, out / "rtl_crop.png")
+        progress.end("pictures and report", started, [
+            "tespike view --input I.npy --out I.png",
+            "tespike view --input S_te.npz --out S_te.png",
+            "tespike view --input R_tfi_te.npy --out R_tfi_te.png --peak 1",
+            "gtkwave W.gtkw" if backend == "amaranth" else "# no waveform: only the amaranth backend writes one"])
+        report = report_markdown(
+            configs=configs, rtl_config=te, frames=frames, height=height, width=width, seed=seed, crop=(y, x, crop),
+            rtl_readouts=rtl_readouts, rtl_info=rtl_info, verdict=verdict, evaluation=evaluation,
+            rtl_rows=rtl_rows, scored=scored, ranges=ranges, hardware=hardware, stages=progress.stages,
+            total=time.perf_counter() - progress.start, window=window, methods=list(methods),
+            label=label)
+        write_text(out / "report.md", report)
 
     if not quiet:
         from tespike.recon.report import table_markdown
         print(table_markdown(evaluation), end="")
     print(f"RTL: {verdict}")
-    print(f"wrote {out}/: report.md, verdict.txt, I.npy, S_*.npz, R_*.npy, E_crop.npy, "
+    print(f"wrote {given}/: report.md, verdict.txt, I.npy, S_*.npz, R_*.npy, E_crop.npy, "
           + ("W.vcd, W.gtkw, " if backend == "amaranth" else "")
           + f"frame.png, rtl_crop.png, {paths['plot'].name}, strips/default.png, table.md "
             f"({time.perf_counter() - progress.start:.0f} s)")

@@ -36,6 +36,10 @@ from pathlib import Path
 ABC_GATE_SETS = ("cmos2", "cmos3", "cmos4", "gates")
 
 
+#: The name Yosys reads a design under (its messages say "design.v:12: ERROR: ...").
+DESIGN_FILE = "design.v"
+
+
 class SynthesisError(RuntimeError):
     """Yosys is missing, failed, or reported what cannot be read as a cost."""
 
@@ -217,8 +221,8 @@ def synthesize_hierarchy(verilog_text: str, top: str | None = None, yosys: str =
         raise SynthesisError(missing)
     with tempfile.TemporaryDirectory(prefix="tespike-synthesize-") as tmp:
         work = Path(tmp)
-        (work / "design.v").write_text(verilog_text)
-        steps = ["read_verilog design.v", f"synth -top {top}" if top else "synth -auto-top",
+        (work / DESIGN_FILE).write_text(verilog_text)
+        steps = [f"read_verilog {DESIGN_FILE}", f"synth -top {top}" if top else "synth -auto-top",
                  "setattr -mod -unset top", "tee -q -o generic.json stat -json",
                  "dfflegalize -cell $_DFF_P_ 01", "opt_clean", "design -save legal"]
         for gates in gate_sets:

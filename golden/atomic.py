@@ -27,6 +27,16 @@ from .paths import check_output_file
 _PART_NAME = 100          # characters of the output's name kept in the temporary's name
 
 
+#: Every output this process has moved into place whole, as the user named it, in order: an
+#: interrupted command says which of its outputs were already complete (:func:`finished_outputs`).
+_FINISHED: list[str] = []
+
+
+def finished_outputs(since: int = 0) -> list[str]:
+    """The outputs moved into place whole since the ``since``-th (``len(finished_outputs())`` marks a start)."""
+    return _FINISHED[since:]
+
+
 def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
@@ -112,6 +122,7 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
                 mode = (info.st_mode & 0o777) if info is not None else (0o666 & ~_umask())
                 os.chmod(tmp, mode)
                 os.replace(tmp, target)
+            _FINISHED.append(shown)
         except OSError as exc:
             if exc.filename not in (None, tmp, str(target)):
                 raise                              # about another file: the caller names it
@@ -187,6 +198,7 @@ def atomic_folder(path: str | Path, what: str = "--out") -> Iterator[Path]:
     except OSError as exc:
         raise _write_error(shown, exc) from None
     inside = str(tmp)
+    mark = len(_FINISHED)          # files written inside the temporary are not outputs yet
 
     def reworded(text: str) -> str:
         return text.replace(inside, shown.rstrip("/") or shown)
@@ -205,10 +217,14 @@ def atomic_folder(path: str | Path, what: str = "--out") -> Iterator[Path]:
                 os.rename(target, old / "previous")
                 os.rename(tmp, target)
                 os.rename(old, tmp)
+            del _FINISHED[mark:]
+            _FINISHED.append(shown)
         except InputError as exc:
             raise InputError(reworded(str(exc))) from None
         except OSError as exc:
             name = reworded(os.fspath(exc.filename)) if exc.filename else shown
             raise InputError(f"cannot write {name!r}: {exc.strerror or exc}") from None
     finally:
+        if _FINISHED[mark:] != [shown]:
+            del _FINISHED[mark:]
         shutil.rmtree(tmp, ignore_errors=True)

@@ -7,9 +7,11 @@ never leaves a half-written file; every reader refuses bad input with an
 
 from __future__ import annotations
 
+import contextlib
 import zipfile
 import zlib
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -20,7 +22,7 @@ from .errors import InputError, TespikeError
 from .paths import check_input_file
 
 __all__ = ["atomic_output", "check_scene", "check_stimulus", "load_npy", "load_scene", "load_stimulus",
-           "load_stream", "save_images", "save_stream", "scan_light", "unsigned_dtype", "word_dtype"]
+           "load_stream", "open_npz", "save_images", "save_stream", "scan_light", "unsigned_dtype", "word_dtype"]
 
 
 def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.ndarray:
@@ -219,6 +221,35 @@ def _stored_member(path: str | Path, name: str) -> np.ndarray | None:
                      order="F" if fortran else "C")
 
 
+#: What reading a truncated or corrupt .npz archive raises (numpy, zipfile, zlib).
+NPZ_ERRORS = (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error, NotImplementedError,
+              RuntimeError)
+
+
+@contextlib.contextmanager
+def open_npz(path: str | Path, what: str, holding: str = "") -> Iterator[np.lib.npyio.NpzFile]:
+    """``np.load`` of an .npz archive (``what`` file: stream, calibration...) whose members are read
+    inside the ``with``; any reading fault there (a truncated archive, a bad CRC, a .npy array, no
+    zip header) is one :class:`InputError` naming ``what`` and the file. ``holding`` says what the
+    archive should hold, for the refusal of a .npy array."""
+    shown = str(path)
+    check_input_file(path, what)
+    with open(path, "rb") as handle:
+        magic = handle.read(6)
+    if magic == b"\x93NUMPY":
+        raise InputError(f"{what} file {shown!r} is a .npy array, not an .npz archive"
+                         + (f" {holding}" if holding else ""))
+    if not magic.startswith(b"PK"):
+        raise InputError(f"{what} file {shown!r} is not a readable .npz archive (no zip header)")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            yield npz
+    except InputError:
+        raise
+    except NPZ_ERRORS as exc:
+        raise InputError(f"{what} file {shown!r} is not a readable .npz archive: {_first_line(exc)}") from None
+
+
 def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarray, SensorConfig]:
     """Read ``S.npz``; return ``(words, config)`` with the words checked legal.
 
@@ -229,29 +260,14 @@ def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarr
     on disk as a read-only memory map; compressed words are read into memory.
     """
     shown = str(path)
-    check_input_file(path, "stream")
-    with open(path, "rb") as handle:
-        magic = handle.read(6)
-    if magic == b"\x93NUMPY":
-        raise InputError(f"stream file {shown!r} is a .npy array, not an .npz archive "
-                         "holding 'words' and 'config'")
-    if not magic.startswith(b"PK"):
-        raise InputError(f"stream file {shown!r} is not a readable .npz archive (no zip header)")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            if "words" not in npz.files or "config" not in npz.files:
-                raise InputError(f"stream file {shown!r} must hold 'words' and 'config' "
-                                 f"(it holds {', '.join(npz.files) or 'nothing'})")
-            config_text = npz["config"]
-            words = _stored_member(path, "words.npy") if memory_map else None
-            if words is None:
-                words = npz["words"]
-    except InputError:
-        raise
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error,
-            NotImplementedError, RuntimeError) as exc:
-        raise InputError(f"stream file {shown!r} is not a readable .npz archive: "
-                         f"{_first_line(exc)}") from None
+    with open_npz(path, "stream", "holding 'words' and 'config'") as npz:
+        if "words" not in npz.files or "config" not in npz.files:
+            raise InputError(f"stream file {shown!r} must hold 'words' and 'config' "
+                             f"(it holds {', '.join(npz.files) or 'nothing'})")
+        config_text = npz["config"]
+        words = _stored_member(path, "words.npy") if memory_map else None
+        if words is None:
+            words = npz["words"]
     if config_text.ndim != 0 or config_text.dtype.kind not in "US":
         raise InputError(f"stream file {shown!r}: 'config' must be a 0-d string, "
                          f"not {config_text.dtype} {config_text.shape}")

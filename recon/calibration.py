@@ -132,21 +132,16 @@ def save_calibration(path: str | Path, calibration: Calibration) -> None:
 
 def load_calibration(path: str | Path) -> Calibration:
     """Read ``C.npz``, or one line naming the file and what is wrong."""
-    from tespike.golden.paths import check_input_file
+    from tespike.golden.io import open_npz
     shown = str(path)
-    check_input_file(path, "calibration")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            keys = ("dark", "gain", "config", "dark_readouts", "flat_readouts", "flat_light", "estimator",
-                    "floored", "overflow_share", "format")
-            missing = [k for k in keys if k not in npz.files]
-            if missing:
-                raise InputError(f"calibration file {shown!r} lacks {', '.join(missing)} "
-                                 "(write it with 'tespike calibrate')")
-            values = {k: npz[k] for k in keys}
-    except (OSError, ValueError, EOFError) as exc:
-        raise InputError(f"calibration file {shown!r} is not a readable .npz archive: "
-                         f"{' '.join(str(exc).split())[:200]}") from None
+    with open_npz(path, "calibration", "written by 'tespike calibrate'") as npz:
+        keys = ("dark", "gain", "config", "dark_readouts", "flat_readouts", "flat_light", "estimator",
+                "floored", "overflow_share", "format")
+        missing = [k for k in keys if k not in npz.files]
+        if missing:
+            raise InputError(f"calibration file {shown!r} lacks {', '.join(missing)} "
+                             "(write it with 'tespike calibrate')")
+        values = {k: npz[k] for k in keys}
     if str(values["format"]) != FORMAT:
         raise InputError(f"calibration file {shown!r} has format {str(values['format'])!r}, not {FORMAT!r}")
     dark, gain = np.asarray(values["dark"], np.float64), np.asarray(values["gain"], np.float64)

@@ -164,16 +164,21 @@ def read_checkpoint(path: Path) -> tuple[dict, "TrainOptions"]:
 
 def trim_log(path: Path, step: int) -> None:
     """Drop the rows of CSV log ``path`` after ``step`` (written by a run killed after its last
-    checkpoint, which a resumed run writes again); a missing log is left missing."""
+    checkpoint, which a resumed run writes again); a missing log is left missing, a log without
+    its header or with a row cut short is refused (the rows appended next would be unreadable)."""
     if not path.is_file():
         return
     try:
         with open(path, newline="") as handle:
-            rows = list(csv.reader(handle))
+            text = handle.read()
+        rows = list(csv.reader(text.splitlines()))
+        header_cut = len(rows) == 1 and not text.endswith("\n")
+        if not rows or rows[0][:1] != ["step"] or header_cut or any(len(row) != len(rows[0]) for row in rows):
+            raise ValueError("no header, or a row cut short")    # new rows would follow none, or a stub
         kept = rows[:1] + [row for row in rows[1:] if int(row[0]) <= step]
     except (ValueError, IndexError, csv.Error, UnicodeDecodeError):
         raise InputError(f"run log {str(path)!r} is damaged: move it away to resume") from None
-    if len(kept) < len(rows):
+    if len(kept) < len(rows) or not text.endswith("\n"):      # a row cut at its end: the next would join it
         with atomic_output(path) as tmp, open(tmp, "w", newline="") as handle:
             csv.writer(handle).writerows(kept)
 

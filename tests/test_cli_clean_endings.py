@@ -110,14 +110,20 @@ def copy_store(store, folder):
     return folder / "s.zarr"
 
 
-@pytest.mark.parametrize("damage", ["chunk", "array zarr.json", "sequence zarr.json"])
+@pytest.mark.parametrize("damage", ["chunk", "array zarr.json", "sequence zarr.json", "flipped chunk byte"])
 def test_a_damaged_store_file_is_named(capsys, tmp_path, store, damage):
     copy = copy_store(store, tmp_path)
     target = {"chunk": copy / "sun" / "light" / "c" / "0" / "0" / "0",
               "array zarr.json": copy / "sun" / "streams" / "te" / "zarr.json",
-              "sequence zarr.json": copy / "sun" / "zarr.json"}[damage]
-    with open(target, "r+b") as handle:
-        handle.truncate(20)
+              "sequence zarr.json": copy / "sun" / "zarr.json",
+              "flipped chunk byte": copy / "sun" / "light" / "c" / "0" / "0" / "0"}[damage]
+    if damage.startswith("flipped"):       # Blosc decompressed it into other values: the CRC-32C refuses it
+        data = bytearray(target.read_bytes())
+        data[len(data) // 2] ^= 0xFF
+        target.write_bytes(bytes(data))
+    else:
+        with open(target, "r+b") as handle:
+            handle.truncate(20)
     result = run_here(capsys, "evaluate", "--store", copy, "--methods", "tfp", "--out", tmp_path / "ev")
     assert_refused(result, repr(str(target)), "is damaged")
     assert not (tmp_path / "ev").exists()
@@ -179,3 +185,148 @@ def test_rtl_sim_names_the_vcd_when_its_disk_is_full(tmp_path):
         assert_refused(result, str(mount / "W.vcd"), "No space left")
         assert "W.gtkw" not in result.stderr
         assert os.listdir(mount) == [] and os.listdir(tmp_path / "other") == []
+
+
+# ------------------------------------------------------------------ found by benchmarks/fault_sweep.py
+def cut_in_half(source: Path, target: Path) -> Path:
+    data = source.read_bytes()
+    target.write_bytes(data[:len(data) // 2])
+    return target
+
+
+def flip_middle_byte(source: Path, target: Path) -> Path:
+    data = bytearray(source.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    target.write_bytes(bytes(data))
+    return target
+
+
+@pytest.mark.parametrize("damage", [cut_in_half, flip_middle_byte])
+def test_a_damaged_calibration_file_is_named(capsys, tmp_path, damage):
+    """C.npz is read like S.npz (tespike.golden.io.open_npz): a truncated archive or a bad CRC was a traceback."""
+    scene = tiny_scene(tmp_path)
+    assert run_here(capsys, "simulate", "--config", "te", "--scene", scene, "--out", tmp_path / "s.npz",
+                    "--seed", 1, "--quiet").returncode == 0
+    from tespike.golden.config import load_config
+    from tespike.recon.calibration import Calibration, save_calibration
+    maps = np.random.default_rng(2).uniform(0.5, 1.5, (16, 20))
+    save_calibration(tmp_path / "c.npz", Calibration(maps * 1e-3, maps, load_config("te"), 8, 8, 0.03))
+    bad = damage(tmp_path / "c.npz", tmp_path / "bad.npz")
+    result = run_here(capsys, "reconstruct", "--stream", tmp_path / "s.npz", "--method", "tfp",
+                      "--calibration", bad, "--out", tmp_path / "r.npy")
+    assert_refused(result, f"calibration file {str(bad)!r}", "not a readable .npz archive")
+    assert not (tmp_path / "r.npy").exists()
+
+
+def test_a_weights_file_with_a_flipped_byte_is_refused_not_loaded(capsys, tmp_path):
+    """torch.load checks no CRC: an altered byte of W.pt loaded as an altered weight."""
+    from tespike.golden.config import load_config
+    from tespike.recon.learned import weights_path
+    scene = tiny_scene(tmp_path)
+    assert run_here(capsys, "simulate", "--config", "te", "--scene", scene, "--out", tmp_path / "s.npz",
+                    "--seed", 1, "--quiet").returncode == 0
+    bad = flip_middle_byte(weights_path(load_config("te"), "net"), tmp_path / "w.pt")
+    result = run_here(capsys, "reconstruct", "--stream", tmp_path / "s.npz", "--method", "net",
+                      "--weights", bad, "--out", tmp_path / "r.npy")
+    assert_refused(result, f"--weights {str(bad)!r}", "fails its CRC check")
+    assert not (tmp_path / "r.npy").exists()
+
+
+def test_a_truncated_exr_frame_is_one_line_with_the_librarys_cause(tmp_path):
+    """OpenEXR prints its fault on the process's stderr beside the exception: two lines, the useful one first."""
+    from tespike.recon.scenes.hdr_io import write_exr
+    (tmp_path / "frames").mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(2):
+        write_exr(tmp_path / "frames" / f"f{k}.exr", rng.uniform(0.1, 2.0, (8, 8, 3)).astype(np.float32))
+    cut_in_half(tmp_path / "frames" / "f1.exr", tmp_path / "frames" / "f1.exr")
+    result = run_tespike("scene", "--folder", tmp_path / "frames", "--out", tmp_path / "i.npy")
+    assert_refused(result, f"cannot read EXR file {str(tmp_path / 'frames' / 'f1.exr')!r}", "corrupt")
+    assert result.stdout == "" and not (tmp_path / "i.npy").exists()
+
+
+def test_a_failed_dataset_build_leaves_no_store_or_says_what_it_resumes(capsys, tmp_path):
+    """A store that holds no complete sequence is removed; one that does is kept, and the line says so."""
+    from tespike.recon.scenes.hdr_io import write_hdr
+    rng = np.random.default_rng(0)
+    for name in ("a", "b"):
+        (tmp_path / "hdr" / name).mkdir(parents=True)
+        for k in range(2):
+            write_hdr(tmp_path / "hdr" / name / f"f{k}.hdr", rng.uniform(0.1, 2.0, (8, 8, 3)).astype(np.float32))
+    good = (tmp_path / "hdr" / "b" / "f1.hdr").read_bytes()
+    cut_in_half(tmp_path / "hdr" / "b" / "f1.hdr", tmp_path / "hdr" / "b" / "f1.hdr")
+    args = ("dataset", "--hdr", tmp_path / "hdr", "--config", "te", "--out", tmp_path / "d.zarr")
+    assert_refused(run_here(capsys, *args), "f1.hdr", f"store {str(tmp_path / 'd.zarr')!r} keeps 1 complete",
+                   "resumes")
+    assert (tmp_path / "d.zarr" / "a").is_dir()
+    (tmp_path / "hdr" / "b" / "f1.hdr").write_bytes(good)
+    assert run_here(capsys, *args).returncode == 0               # the rerun resumes it
+    for name in ("a", "b"):
+        cut_in_half(tmp_path / "hdr" / name / "f1.hdr", tmp_path / "hdr" / name / "f1.hdr")
+    assert_refused(run_here(capsys, *args[:-1], tmp_path / "new.zarr"), "f1.hdr")
+    assert not (tmp_path / "new.zarr").exists()
+    (tmp_path / "empty.zarr").mkdir()                             # a folder given empty stays, empty
+    assert_refused(run_here(capsys, *args[:-1], tmp_path / "empty.zarr"), "f1.hdr")
+    assert os.listdir(tmp_path / "empty.zarr") == []
+
+
+# ------------------------------------------------------------------ a signal after the output is in place
+def test_a_signal_after_the_output_is_in_place_says_it_is_whole(capsys, monkeypatch, tmp_path):
+    """Ctrl-C between the move into place and the end printed "interrupted" over a new, whole output."""
+    import tespike.cosim.console as console
+    np.save(tmp_path / "e.npy", np.full((TINY.clocks_per_readout * 3, 2, 2), 2, np.uint8))
+    (tmp_path / "c.json").write_text(json.dumps(TINY.to_dict()))
+    (tmp_path / "s.npz").write_bytes(b"previous run")
+
+    def interrupted(args, message):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(console, "report", interrupted)
+    result = run_here(capsys, "golden", "--config", tmp_path / "c.json", "--stimulus", tmp_path / "e.npy",
+                      "--out", tmp_path / "s.npz")
+    assert_refused(result, "interrupted after writing", f"{str(tmp_path / 's.npz')!r} whole")
+    assert np.load(tmp_path / "s.npz")["words"].shape == (3, 2, 2)
+    monkeypatch.undo()                                     # the next run starts with nothing written
+    (tmp_path / "bad.npy").write_bytes(b"")
+    assert_refused(run_here(capsys, "golden", "--config", tmp_path / "c.json", "--stimulus", tmp_path / "bad.npy",
+                            "--out", tmp_path / "t.npz"), "bad.npy")
+
+
+def test_only_a_finished_folder_counts_as_written_never_the_files_inside_its_temporary(tmp_path):
+    from tespike.golden.atomic import atomic_folder, atomic_output, finished_outputs
+    start = len(finished_outputs())
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_folder(tmp_path / "ev") as folder:
+            with atomic_output(folder / "table.md") as part:
+                Path(part).write_text("new")
+            raise KeyboardInterrupt
+    assert finished_outputs(start) == []
+    with atomic_folder(tmp_path / "ev") as folder:
+        with atomic_output(folder / "table.md") as part:
+            Path(part).write_text("new")
+    assert finished_outputs(start) == [str(tmp_path / "ev")]
+
+
+def test_a_signal_during_the_interpreters_exit_ends_it_without_a_traceback(tmp_path):
+    """After the command's line, Ctrl-C or SIGTERM end the process as the system does (torch's and
+    Dask's exit handlers take a second; a KeyboardInterrupt raised in one printed a traceback)."""
+    code = ("import signal, sys; sys.argv = ['tespike', 'scene', '--list']; from tespike.cosim.cli import main; "
+            "main(); print(signal.getsignal(signal.SIGINT) is signal.SIG_DFL, "
+            "signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert done.returncode == 0 and done.stdout.strip().endswith("True True"), done
+
+
+def test_ctrl_c_while_the_command_loads_is_one_line():
+    """Ctrl-C in the first 0.2 s (numpy loading, before main's handling) printed a 20-line traceback."""
+    code = ("import runpy, sys, types\n"
+            "cli = types.ModuleType('tespike.cosim.cli')\n"
+            "def stopped(name):\n"
+            "    raise KeyboardInterrupt\n"
+            "cli.__getattr__ = stopped\n"
+            "import tespike.cosim\n"
+            "sys.modules['tespike.cosim.cli'] = cli\n"
+            "runpy.run_module('tespike', run_name='__main__')\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert done.returncode == 130 and done.stderr == "tespike: interrupted\n", done

@@ -136,3 +136,26 @@ def test_demo_refuses_weights_for_none_of_its_sensors(tmp_path, capsys):
     code, _, err = run_here(capsys, "demo", *SMALL, "--weights", tmp_path / "w.pt", "--out", tmp_path / "d")
     assert code == 2 and "none of the sensors" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "d").exists()
+
+
+def test_an_interrupted_demo_leaves_the_previous_demo_whole(tmp_path, capsys, monkeypatch):
+    """The demo fills a temporary folder and swaps it in when done: stopped at its fifth stage it left the
+    previous demo's folder holding the new run's scene and streams beside the old report (two runs mixed)."""
+    import os
+
+    import tespike.cosim.demo as demo
+    from tests.test_cli_hardening import snapshot
+    args = ("demo", *SMALL, "--sensors", "te", "--no-hw-cost", "--quiet", "--out", tmp_path / "d")
+    assert run_here(capsys, *args)[0] == 0
+    before = snapshot(tmp_path)
+
+    def stopped(*_, **__):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(demo, "dynamic_ranges", stopped)
+    code, _, err = run_here(capsys, *args[:-4], "--seed", 5, "--quiet", "--out", tmp_path / "d")
+    assert code == 130 and err.strip() == "tespike demo: interrupted", err
+    assert snapshot(tmp_path) == before                                 # untouched, no temporary
+    (tmp_path / "d" / "notes.txt").write_text("mine")                   # replacing would delete it: refused
+    code, _, err = run_here(capsys, *args)
+    assert code == 2 and "'notes.txt'" in err and "new or empty folder" in err
+    assert sorted(os.listdir(tmp_path)) == ["d"]

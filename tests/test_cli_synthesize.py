@@ -69,7 +69,7 @@ def test_synthesize_a_verilog_file_finds_its_top(tmp_path):
 
 
 @pytest.mark.parametrize("args, words", [
-    (("--verilog", "missing.v"), ("missing.v", "no such file")),
+    (("--verilog", "missing.v"), ("missing.v", "does not exist")),
     (("--verilog", "A.v", "--config", "te"), ("--verilog", "not both")),
     (("--config", "te", "--height", 4), ("missing --width",)),
     (("--config", "te", "--height", 4, "--width", 4, "--lanes", 0), ("--lanes",)),
@@ -83,7 +83,12 @@ def test_synthesize_refuses_bad_input_in_one_line(tmp_path, args, words):
 @needs_yosys
 def test_synthesize_refuses_verilog_yosys_cannot_read(tmp_path):
     (tmp_path / "bad.v").write_text("module x(input a, output b); assign b = a &; endmodule\n")
-    assert_refused(run_tespike("synthesize", "--verilog", tmp_path / "bad.v"), "yosys failed", "syntax error")
+    result = run_tespike("synthesize", "--verilog", tmp_path / "bad.v")
+    assert_refused(result, f"--verilog '{tmp_path / 'bad.v'}'", "yosys failed", f"{tmp_path / 'bad.v'}:1:",
+                   "syntax error")
+    assert "design.v" not in result.stderr           # Yosys's copy of the file is never named
+    (tmp_path / "empty.v").write_bytes(b"")
+    assert_refused(run_tespike("synthesize", "--verilog", tmp_path / "empty.v"), "empty.v", "empty (0 bytes)")
 
 
 def _stimulus_file(tmp_path, shape, clocks=240, name="E.npy"):

@@ -191,7 +191,8 @@ def test_cli_refusals(tmp_path, capsys, rng):
     root = hdr_folder(tmp_path / "hdr", rng, sequences=(("odd", 2, 12, 12),))
     write_exr(root / "odd" / "f009.exr", np.ones((12, 13, 3), np.float32))
     refused(capsys, "dataset", "--hdr", root, "--config", "te", "--out", tmp_path / "o.zarr", "same size")
-    assert DatasetStore.open(tmp_path / "o.zarr").sequences() == []
+    assert not (tmp_path / "o.zarr").exists()          # it held no complete sequence: nothing to resume
+    DatasetStore.create_or_resume(str(tmp_path / "o.zarr"), seed=0, configs={"te": SensorConfig()})
     refused(capsys, "evaluate", "--store", tmp_path / "o.zarr", "--out", tmp_path / "ev", "no complete sequence")
     refused(capsys, "evaluate", "--store", tmp_path / "nope.zarr", "--out", tmp_path / "ev", "does not exist")
     refused(capsys, "evaluate", "--store", tmp_path / "o.zarr", "--set", "moderate", "--out", tmp_path / "ev", "--set")

@@ -65,6 +65,23 @@ def test_resume_does_not_repeat_the_killed_runs_rows(tmp_path):
     assert log_steps(log) == [1, 2, 3, 4]
 
 
+@pytest.mark.parametrize("cut", ["everything", "the header", "half a row", "the final newline"])
+def test_a_cut_run_log_is_refused_or_mended_never_appended_to(tmp_path, cut):
+    """A run log emptied or cut: new rows followed no header or joined a stub; a row whole but for
+    its newline is kept and the log rewritten."""
+    train(options(steps=2), tmp_path / "w.pt")
+    log = tmp_path / "w.run" / "log.csv"
+    text = log.read_text()
+    log.write_text({"everything": "", "the header": text[:4], "half a row": text[:-12],
+                    "the final newline": text.rstrip()}[cut])
+    if cut == "the final newline":
+        train(options(steps=3), tmp_path / "w.pt", resume=True)
+        assert log_steps(log) == [1, 2, 3]
+        return
+    with pytest.raises(InputError, match=r"run log '.*log\.csv' is damaged"):
+        train(options(steps=3), tmp_path / "w.pt", resume=True)
+
+
 def test_a_run_folder_removed_during_training_keeps_the_weights(tmp_path, monkeypatch):
     import tespike.recon.train as trainer
     draw, calls = trainer.draw_batch, []
@@ -163,3 +180,22 @@ def test_ctrl_c_is_one_line_and_leaves_no_empty_run_folder(tmp_path):
     run = tmp_path / "w.run"
     assert not run.exists() or (run / "checkpoint.pt").is_file(), os.listdir(run)
     assert not (tmp_path / "w.pt").exists()
+
+
+def test_a_bad_frame_of_hdr_is_named_as_the_user_typed_its_folder(capsys, monkeypatch, tmp_path):
+    """The recipe records folders absolute (a resumed run may start elsewhere); the refusal names the
+    frame under the folder as given, as every other command does."""
+    import numpy as np
+
+    from tespike.cosim.cli import main
+    from tespike.recon.scenes import write_hdr
+    (tmp_path / "frames").mkdir()
+    for k in range(2):
+        write_hdr(tmp_path / "frames" / f"f{k}.hdr", np.full((16, 16, 3), 0.5, np.float32))
+    (tmp_path / "frames" / "f1.hdr").write_bytes(b"")
+    monkeypatch.chdir(tmp_path)
+    code = main(["train", "--config", "te", "--hdr", "frames", "--steps", "1", "--batch", "1", "--crop", "16",
+                 "--workers", "0", "--out", "t.pt"])
+    result = subprocess.CompletedProcess([], code, "", capsys.readouterr().err)
+    assert_refused(result, "'frames/f1.hdr'", "empty")
+    assert str(tmp_path) not in result.stderr and not (tmp_path / "t.pt").exists()

@@ -58,7 +58,8 @@ def run(args) -> int:
 
     from tespike.cosim.console import report
     from tespike.cosim.dataset.cluster import Runner, check_workers
-    from tespike.cosim.dataset.build import build_dataset, hdr_sources, scene_sources
+    from tespike.cosim.dataset.build import (build_dataset, discard_unfinished_store, hdr_sources,
+                                             new_local_store, scene_sources)
     from tespike.golden.errors import InputError
 
     check_workers(args.workers, args.scheduler)
@@ -81,10 +82,15 @@ def run(args) -> int:
     if not sources:
         raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     start = time.perf_counter()
-    with Runner(args.workers, args.scheduler) as runner:
-        report(args, f"dataset: {len(sources)} sequence(s) x {len(configs)} sensor(s) on {runner.where}")
-        counts = build_dataset(args.out, sources, configs, args.seed, runner, chunk_frames=args.chunk_frames,
-                               report=lambda name: report(args, f"dataset: {name} complete"))
+    made = new_local_store(args.out)
+    try:
+        with Runner(args.workers, args.scheduler) as runner:
+            report(args, f"dataset: {len(sources)} sequence(s) x {len(configs)} sensor(s) on {runner.where}")
+            counts = build_dataset(args.out, sources, configs, args.seed, runner, chunk_frames=args.chunk_frames,
+                                   report=lambda name: report(args, f"dataset: {name} complete"))
+    except BaseException:
+        discard_unfinished_store(args.out, made)      # the workers have stopped: nothing writes there now
+        raise
     seconds = time.perf_counter() - start
     report(args, f"wrote {counts['done']} sequence(s) to {args.out} ({counts['skipped']} already complete), "
                  f"{counts['pixel_readouts']} pixel-readouts in {seconds:.1f} s")

@@ -43,10 +43,9 @@ MAX_ICARUS_PIXELS = 1024
 
 def _design(args):
     """(Verilog text, top name or None, pixels or None, a one-line description) from the arguments."""
-    from pathlib import Path
-
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
+    from tespike.golden.paths import check_input_file
     from tespike.rtl.array import check_array_size
 
     generated = [flag for flag, value in (("--config", args.config), ("--height", args.height),
@@ -59,9 +58,7 @@ def _design(args):
                              "--width, not --verilog")
         if generated:
             raise InputError(f"--verilog and {' '.join(generated)}: give a Verilog file or a generated top, not both")
-        path = Path(args.verilog)
-        if not path.is_file():
-            raise InputError(f"--verilog {args.verilog}: no such file")
+        path = check_input_file(args.verilog, "--verilog")
         return path.read_text(errors="replace"), args.top, None, f"{args.verilog}"
     if args.top is not None:
         raise InputError("--top names a module of --verilog; a generated top is named by its configuration")
@@ -202,7 +199,7 @@ def energy_lines(config, stimulus, lanes, result: dict, text: str, icarus: bool)
 
 
 def run(args) -> int:
-    from tespike.cosim.synthesis import SynthesisError, synthesize_hierarchy
+    from tespike.cosim.synthesis import DESIGN_FILE, SynthesisError, synthesize_hierarchy
     from tespike.golden.errors import InputError
 
     text, top, pixels, what = _design(args)
@@ -210,8 +207,10 @@ def run(args) -> int:
     print(f"synthesize: {what} (yosys synth, hierarchy kept)", flush=True)
     try:
         result = synthesize_hierarchy(text, top)
-    except SynthesisError as exc:
-        raise InputError(str(exc)) from None
+    except SynthesisError as exc:     # about --verilog: named as given, never as Yosys's copy
+        if args.verilog is None:
+            raise InputError(str(exc)) from None
+        raise InputError(f"--verilog {args.verilog!r}: {str(exc).replace(DESIGN_FILE, args.verilog)}") from None
     print("\n".join(report_lines(result, pixels)))
     if stimulus is not None:
         from tespike.golden.config import load_config

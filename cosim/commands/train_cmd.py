@@ -126,6 +126,14 @@ def run(args) -> int:
                                    **({"noise_fraction": args.noise_fraction} if args.noise_fraction else {})},
                            init=args.init, **given)
     command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
-    train(options, out, resume=args.resume, progress=progress_wanted(args), command=command)
+    try:
+        train(options, out, resume=args.resume, progress=progress_wanted(args), command=command)
+    except InputError as exc:     # the recipe holds folders made absolute: name them as the user typed them
+        text = str(exc)
+        for folder in (*args.hdr, *(args.panoramas or ())):
+            text = text.replace(str(Path(folder).resolve()), folder.rstrip("/") or folder)
+        if text == str(exc):
+            raise
+        raise InputError(text) from None
     report(args, f"wrote {out} (run log, loss curve and checkpoint in {out.with_suffix('.run')})")
     return 0

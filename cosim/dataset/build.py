@@ -31,6 +31,7 @@ axis), never ``simulate_scene``'s forked workers.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 from pathlib import Path
@@ -267,18 +268,57 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
         raise InputError("no sensor configuration: give --config at least once")
     store = DatasetStore.create_or_resume(url, seed=seed, configs=configs, tile=tile,
                                           chunk_frames=chunk_frames)
-    graphs, skipped, pixel_readouts = [], 0, 0
-    for source in sources:
-        graph, streams = sequence_graph(store, source)
-        if graph is None:
-            skipped += 1
-        else:
-            graphs.append(graph)
-            pixel_readouts += int(np.prod(source.shape)) * streams
-    done = 0
-    for _, name in run(graphs):
-        done += 1
-        if report is not None:
-            report(name)
+    graphs, skipped, pixel_readouts, done = [], 0, 0, 0
+    try:
+        for source in sources:
+            graph, streams = sequence_graph(store, source)
+            if graph is None:
+                skipped += 1
+            else:
+                graphs.append(graph)
+                pixel_readouts += int(np.prod(source.shape)) * streams
+        for _, name in run(graphs):
+            done += 1
+            if report is not None:
+                report(name)
+    except BaseException as exc:       # a bad frame, Ctrl-C, a lost cluster: say what a rerun resumes
+        if done + skipped:
+            exc.add_note(f"(store {os.fspath(url)!r} keeps {done + skipped} complete sequence(s); "
+                         "the same command resumes it)")
+        raise
     return {"done": done, "skipped": skipped, "pixel_readouts": pixel_readouts,
             "store": os.fspath(url)}
+
+
+def new_local_store(url: str) -> str | None:
+    """``"new"`` where the local store ``url`` does not exist, ``"empty"`` where it is an empty
+    folder (a store this run would make), else None (a store to resume, or a remote one)."""
+    url = os.fspath(url)
+    if "://" in url:
+        return None
+    if not os.path.lexists(url):
+        return "new"
+    return "empty" if os.path.isdir(url) and not os.path.islink(url) and not os.listdir(url) else None
+
+
+def discard_unfinished_store(url: str, made: str | None) -> None:
+    """After a failed or interrupted build (its workers stopped): remove the store this run made
+    (``made`` from :func:`new_local_store`; an "empty" folder given is emptied, not removed) if it
+    holds no complete sequence, so that a run that made nothing leaves nothing."""
+    import shutil
+    if made is None or not os.path.isdir(url):
+        return
+    try:
+        if DatasetStore.open(url).sequences(complete=True):
+            return                                   # resumable work: kept, and the error says so
+    except (InputError, OSError, ValueError, KeyError):
+        pass                                         # not even a readable store yet
+    if made == "new":
+        shutil.rmtree(url, ignore_errors=True)
+        return
+    for entry in os.scandir(url):
+        if entry.is_dir(follow_symlinks=False):
+            shutil.rmtree(entry.path, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                os.unlink(entry.path)

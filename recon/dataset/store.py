@@ -12,7 +12,8 @@ any URL Zarr opens, shared by every machine that writes or reads it)::
                                   attrs: config (JSON), seed, seed_key, complete
 
 Arrays are chunked as (``chunk_frames``, ``tile``) and compressed (Blosc zstd,
-bit shuffle). The simulation tile (default 256 x 256) is part of the format:
+bit shuffle), each compressed chunk followed by its CRC-32C (stores made before have none and
+read as they did). The simulation tile (default 256 x 256) is part of the format:
 each tile of each stream is simulated with its own random stream, seeded by
 :func:`tile_seed` from the root seed, a SHA-256 of the sequence name and the
 configuration JSON, and the tile's position, so a store is bit-identical
@@ -81,9 +82,11 @@ def tiles(height: int, width: int, tile: tuple[int, int] = TILE) -> list[tuple[i
             for r in range(-(-height // th)) for c in range(-(-width // tw))]
 
 
-def _compressor():
-    from zarr.codecs import BloscCodec
-    return BloscCodec(cname="zstd", clevel=3, shuffle="bitshuffle")
+def _compressors():
+    """Blosc zstd with bit shuffle, then a CRC-32C of each compressed chunk: Blosc checks nothing,
+    so a flipped byte of a chunk decompressed into other values (and scores) without one."""
+    from zarr.codecs import BloscCodec, Crc32cCodec
+    return (BloscCodec(cname="zstd", clevel=3, shuffle="bitshuffle"), Crc32cCodec())
 
 
 def _zarr_open_group(url: str, mode: str):
@@ -192,7 +195,7 @@ class DatasetStore:
             complete = path in group and bool(group[path].attrs.get("complete", False))
             if not complete:
                 array = group.create_array(path, shape=(K, H, W), chunks=chunks, dtype=dtype,
-                                           compressors=_compressor(), fill_value=0, overwrite=True)
+                                           compressors=_compressors(), fill_value=0, overwrite=True)
                 if key in self.configs:
                     config = self.configs[key]
                     array.attrs.update({"config": config.to_json(), "seed": self.seed,

@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import pickle
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -49,9 +50,29 @@ def write_torch_file(path: str | Path, payload: Any) -> None:
         Path(tmp).write_bytes(buffer.getbuffer())
 
 
+def _check_crcs(path: str | Path, what: str, kind: str) -> None:
+    """Refuse a torch zip archive a member of which fails its CRC (a flipped or lost byte); an
+    archive zipfile cannot open at all is left to ``torch.load``, which names its own fault."""
+    try:
+        archive = zipfile.ZipFile(path)
+    except (OSError, zipfile.BadZipFile, ValueError, EOFError):
+        return
+    try:
+        with archive:
+            damaged = archive.testzip()
+    except (OSError, zipfile.BadZipFile, ValueError, EOFError, NotImplementedError, zlib.error) as exc:
+        cause = " ".join(str(exc).split())[:100] or type(exc).__name__
+        raise InputError(f"{what} {str(path)!r} is not a {kind} (a damaged archive: {cause})") from None
+    if damaged is not None:
+        raise InputError(f"{what} {str(path)!r} is not a {kind} (a damaged archive: member {damaged!r} "
+                         "fails its CRC check)")
+
+
 def read_torch_file(path: str | Path, what: str, kind: str) -> Any:
     """``torch.load(path, weights_only=True)`` on the CPU; a one-line refusal naming ``what`` (a flag or a
-    role), the file and the cause where it cannot be read or is no torch file of ``kind``."""
+    role), the file and the cause where it cannot be read or is no torch file of ``kind``. The
+    archive's CRCs are checked first: ``torch.load`` does not, and would load an altered byte."""
+    _check_crcs(path, what, kind)
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
     except OSError as exc:

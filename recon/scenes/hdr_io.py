@@ -18,8 +18,12 @@ already applied to the pixels, so the reader divides them out.
 
 from __future__ import annotations
 
+import contextlib
+import os
 import re
+import sys
 from pathlib import Path
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -244,6 +248,31 @@ def write_hdr(path: str | Path, image: np.ndarray, *, rle: bool = True) -> None:
 
 
 # ---------------------------------------------------------------- OpenEXR
+@contextlib.contextmanager
+def _library_output() -> Iterator[Callable[[], str]]:
+    """Hold what a C library writes on file descriptors 1 and 2 (OpenEXR prints its faults and
+    warnings there, beside the exception it raises); yields a function giving the first line
+    held, so that a refusal stays one line on stderr and carries the library's cause."""
+    import tempfile
+    sys.stdout.flush()
+    sys.stderr.flush()
+    with tempfile.TemporaryFile() as held:
+        saved = [os.dup(1), os.dup(2)]
+        os.dup2(held.fileno(), 1)
+        os.dup2(held.fileno(), 2)
+
+        def first_line() -> str:
+            held.seek(0)
+            lines = held.read(4096).decode("utf-8", "replace").strip().splitlines()
+            return " ".join(lines[0].split()) if lines else ""
+        try:
+            yield first_line
+        finally:
+            for number, copy in zip((1, 2), saved):
+                os.dup2(copy, number)
+                os.close(copy)
+
+
 def read_exr(path: str | Path) -> np.ndarray:
     """Read an OpenEXR file -> float32 (H, W, 3) RGB or (H, W) for a luminance-only 'Y' file."""
     import OpenEXR
@@ -251,11 +280,17 @@ def read_exr(path: str | Path) -> np.ndarray:
     path = str(path)
     if not Path(path).is_file():
         raise InputError(f"cannot read EXR file {path!r}: no such file")
-    try:
-        with OpenEXR.File(path) as handle:
-            channels = {name: np.asarray(ch.pixels) for name, ch in handle.channels().items()}
-    except Exception as exc:  # the binding raises plain Exceptions for corrupt files
-        raise InputError(f"cannot read EXR file {path!r}: {exc}") from None
+    with _library_output() as said:
+        try:
+            with OpenEXR.File(path) as handle:
+                channels = {name: np.asarray(ch.pixels) for name, ch in handle.channels().items()}
+            failure = None
+        except Exception as exc:  # the binding raises plain Exceptions for corrupt files
+            failure = " ".join(str(exc).split())
+            said_first = said()
+    if failure is not None:        # the library's own line says more ("found corrupt leader")
+        cause = said_first.removeprefix(f"{path}: ") or failure
+        raise InputError(f"cannot read EXR file {path!r}: {cause[:200]}")
     for name in ("RGB", "RGBA"):
         if name in channels:
             return channels[name][..., :3].astype(np.float32)

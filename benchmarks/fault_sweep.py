@@ -1,0 +1,566 @@
+"""Fault sweep of the ``tespike`` command: truncated inputs and interrupted runs (issue 28, item 6).
+
+A tool, not a test: in a temporary folder it makes one small valid input of every kind the
+commands read (configuration JSON, noise JSON, scene I.npy, stimulus E.npy, stream S.npz,
+calibration C.npz, reconstruction R.npy, shipped and trained weights .pt, a training
+checkpoint, a dataset store's chunk and ``zarr.json`` files, .hdr / .exr frame folders, a
+Verilog file), then
+
+* **truncation**: for every (command, input) pair cuts the input at 0 bytes, 1 byte, half,
+  all but one byte, and flips the middle byte, runs the command with a timeout and checks
+  that it ends cleanly;
+* **interruption**: sends SIGINT to the process group (Ctrl-C) and SIGTERM to the command
+  (``kill``) of every long command at several moments.
+
+A clean ending: exit status non-zero, stderr exactly one line without "Traceback" that names
+the input (its path as given), the output (pre-created where it may exist) untouched and no
+``.part`` temporary beside it, and no process of the command's session left. A flipped byte
+may be harmless where the file stays a valid file of its kind (a changed pixel value: the
+command then succeeds, and the table says so). Prints one row per case and a count; exits 1
+if any case misbehaves.
+
+    python3 benchmarks/fault_sweep.py                    # everything, about 10 minutes on 2 cores
+    python3 benchmarks/fault_sweep.py --only reconstruct --no-interrupt
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+MODES = ("empty", "1byte", "half", "less1", "flip")
+TIMEOUT = 120
+
+
+# ------------------------------------------------------------------ running a command
+@dataclass
+class Outcome:
+    code: int | None
+    stderr: str
+    stdout: str
+    orphans: list[str]
+    seconds: float
+
+
+def _env() -> dict:
+    return dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def _session_processes(sid: int) -> list[str]:
+    """Live processes of session ``sid`` (the command's own and every child it started); a zombie
+    (exited, waiting for init to reap it) is not one."""
+    done = subprocess.run(["ps", "-eo", "pid=,sid=,stat=,args="], capture_output=True, text=True)
+    left = []
+    for line in done.stdout.splitlines():
+        parts = line.split(None, 3)
+        if len(parts) >= 3 and parts[1] == str(sid) and not parts[2].startswith("Z"):
+            left.append(line.strip()[:120])
+    return left
+
+
+def _left_behind(sid: int, grace: float = 3.0) -> list[str]:
+    """The session's processes still alive ``grace`` seconds after the command ended (a worker
+    that ends when its pipe closes gets that long)."""
+    end = time.monotonic() + grace
+    while True:
+        left = _session_processes(sid)
+        if not left or time.monotonic() > end:
+            return left
+        time.sleep(0.2)
+
+
+def _default_sigint() -> None:
+    """SIGINT as a terminal's command gets it: a sweep started in the background (``&``) has it
+    ignored, which its children would inherit (Python then never raises KeyboardInterrupt)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def run_command(argv: list[str], cwd: Path, *, signal_at: float | None = None, signum: int = signal.SIGINT,
+                group: bool = True, timeout: float = TIMEOUT) -> Outcome:
+    """Run ``python3 -m tespike ARGV`` in a session of its own, optionally signalled after ``signal_at`` s."""
+    start = time.monotonic()
+    proc = subprocess.Popen(["nice", "-n", "10", sys.executable, "-m", "tespike", *argv], cwd=cwd, env=_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=_default_sigint)
+    if signal_at is not None and signal_at < 0:         # mid-output: as soon as a temporary appears
+        while proc.poll() is None and not parts_left(cwd) and time.monotonic() - start < timeout:
+            time.sleep(0.02)
+        if proc.poll() is None:
+            (os.killpg if group else os.kill)(proc.pid, signum)
+    elif signal_at is not None:
+        try:
+            proc.wait(signal_at)
+        except subprocess.TimeoutExpired:
+            (os.killpg if group else os.kill)(proc.pid, signum)
+    try:
+        stdout, stderr = proc.communicate(timeout=timeout)
+        code = proc.returncode
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        stdout, stderr = proc.communicate()
+        code = None
+    orphans = _left_behind(proc.pid)
+    for line in orphans:                     # never leave them running
+        try:
+            os.kill(int(line.split()[0]), signal.SIGKILL)
+        except (ProcessLookupError, ValueError):
+            pass
+    return Outcome(code, stderr, stdout, orphans, time.monotonic() - start)
+
+
+# ------------------------------------------------------------------ the output's state
+def state(path: Path) -> dict:
+    """Every entry at and under ``path`` with a hash of its bytes ({} when absent)."""
+    if not os.path.lexists(path):
+        return {}
+    if path.is_file():
+        return {".": hashlib.sha1(path.read_bytes()).hexdigest()}
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(path):
+        for name in dirnames + filenames:
+            full = Path(dirpath, name)
+            out[str(full.relative_to(path))] = hashlib.sha1(full.read_bytes()).hexdigest() if full.is_file() else "d"
+    return out
+
+
+def parts_beside(path: Path) -> list[str]:
+    folder = path.parent
+    return sorted(p.name for p in folder.iterdir() if p.name.endswith(".part")) if folder.is_dir() else []
+
+
+def precreate(path: Path, kind: str) -> None:
+    """A previous run's output at ``path``: a file, or a folder with one file."""
+    if kind == "file":
+        path.write_bytes(b"previous run")
+    elif kind == "folder":
+        path.mkdir()
+        (path / "table.md").write_text("previous run")      # a name a results folder holds
+
+
+# ------------------------------------------------------------------ inputs
+def tespike(cwd: Path, *argv) -> None:
+    done = subprocess.run([sys.executable, "-m", "tespike", *map(str, argv)], cwd=cwd, env=_env(),
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"fault_sweep: making an input failed: tespike {' '.join(map(str, argv))}: {done.stderr}")
+
+
+def make_inputs(base: Path) -> None:
+    """One small valid input of every kind under ``base/valid``."""
+    from tespike.golden.config import load_config
+    from tespike.recon.scenes.hdr_io import write_exr, write_hdr
+
+    v = base / "valid"
+    v.mkdir()
+    (v / "cfg.json").write_text(json.dumps(load_config("te").to_dict(), indent=1))
+    (v / "noise.json").write_text('{"dark_current": "eq12", "dark_level": 2.0, "dsnu": 0.3}')
+    tespike(v, "scene", "--name", "default", "--frames", 12, "--height", 16, "--width", 16, "--out", "I.npy", "-q")
+    tespike(v, "simulate", "--config", "te", "--scene", "I.npy", "--out", "S.npz", "--seed", 1, "-q")
+    tespike(v, "stimulus", "--config", "te", "--scene", "I.npy", "--out", "E.npy", "--seed", 1,
+            "--crop", "0,0,4,4", "--readouts", 2, "--quiet")
+    tespike(v, "reconstruct", "--stream", "S.npz", "--method", "tfp", "--out", "R.npy", "-q")
+    np.save(v / "dark.npy", np.zeros((12, 16, 16), np.float32))
+    np.save(v / "flat.npy", np.full((12, 16, 16), 0.03, np.float32))
+    for name in ("dark", "flat"):
+        tespike(v, "simulate", "--config", "te", "--scene", f"{name}.npy", "--out", f"{name}.npz", "--seed", 2,
+                "--noise", "noise.json", "--sensor-seed", 3, "-q")
+    tespike(v, "calibrate", "--dark", "dark.npz", "--flat", "flat.npz", "--flat-light", 0.03, "--out", "C.npz",
+            "--quiet")
+    shutil.copy(ROOT / "recon" / "weights" / "te.pt", v / "W.pt")
+    tespike(v, "train", "--config", "te", "--steps", 2, "--batch", 1, "--crop", 32, "--workers", 0,
+            "--validate-every", 1000, "--out", "T.pt", "-q")
+    rng = np.random.default_rng(0)
+    for kind, writer in (("hdr", write_hdr), ("exr", write_exr)):
+        folder = v / "frames" / kind
+        folder.mkdir(parents=True)
+        for k in range(3):
+            writer(folder / f"f{k}.{kind}", rng.uniform(0.05, 2.0, (16, 16, 3)).astype(np.float32))
+    tespike(v, "dataset", "--scene", "default", "--frames", 4, "--height", 16, "--width", 16, "--config", "te",
+            "--out", "D.zarr", "-q")
+    tespike(v, "verilog", "--config", "te", "--height", 2, "--width", 2, "--out", "A.v", "-q")
+
+
+def copy_inputs(valid: Path, work: Path) -> None:
+    for entry in valid.iterdir():
+        if entry.is_dir():
+            shutil.copytree(entry, work / entry.name, symlinks=True)
+        else:
+            shutil.copy2(entry, work / entry.name)
+
+
+def store_members(store: Path) -> dict[str, str]:
+    """The dataset store's files the sweep corrupts: root and array zarr.json, one chunk."""
+    chunks = sorted(p for p in store.rglob("*") if p.is_file() and "c" in p.relative_to(store).parts[:-1])
+    members = {"zarr.json": "zarr.json"}
+    arrays = sorted(p for p in store.rglob("zarr.json") if p.parent != store and (p.parent / "c").exists())
+    if arrays:
+        members["array zarr.json"] = str(arrays[0].relative_to(store))
+    if chunks:
+        members["chunk"] = str(chunks[0].relative_to(store))
+    return members
+
+
+def corrupt(path: Path, mode: str) -> str:
+    """Cut or flip ``path`` in place; returns what was done."""
+    data = path.read_bytes()
+    n = len(data)
+    if mode == "empty":
+        path.write_bytes(b"")
+    elif mode == "1byte":
+        path.write_bytes(data[:1])
+    elif mode == "half":
+        path.write_bytes(data[: n // 2])
+    elif mode == "less1":
+        path.write_bytes(data[: n - 1])
+    elif mode == "flip":
+        middle = n // 2
+        path.write_bytes(data[:middle] + bytes([data[middle] ^ 0xFF]) + data[middle + 1:])
+    return mode
+
+
+def still_valid(path: Path) -> bool:
+    """Whether a flipped file is still a valid file of its kind (a flip in the data, not the format)."""
+    suffix = path.suffix
+    try:
+        if suffix == ".json":
+            json.loads(path.read_text())
+            return True
+        if suffix == ".npy":
+            array = np.load(path)
+            return bool(np.isfinite(array).all()) if array.dtype.kind == "f" else True
+        if suffix == ".hdr":
+            return True                      # a changed pixel (Radiance RLE has no checksum)
+        if suffix == ".exr":                 # stored uncompressed where ZIP does not pay: a changed pixel
+            from tespike.recon.scenes.hdr_io import read_exr
+            return bool(np.isfinite(read_exr(path)).all())
+        if suffix == ".v":
+            return True                      # a changed character: judged by yosys
+    except Exception:
+        return False
+    return False
+
+
+# ------------------------------------------------------------------ the cases
+@dataclass
+class Case:
+    """One (command, input) pair: argv with ``{in}`` where the corrupted input goes, ``{out}`` the output."""
+    name: str
+    source: str                  # path under valid/ of the input (file or folder)
+    argv: list[str]
+    member: str | None = None    # for a folder input: the file inside it to corrupt
+    out: str | None = "out"      # output path name; None: the command writes nothing
+    out_kind: str = "file"       # file / folder / none (do not pre-create)
+    modes: tuple[str, ...] = MODES
+    extra: dict = field(default_factory=dict)
+
+
+EVAL = ["evaluate", "--set", "none", "--methods", "tfp", "--repeats", "1", "--ml-count-config", "none",
+        "--progress", "off"]
+
+
+def truncation_cases(valid: Path) -> list[Case]:
+    members = store_members(valid / "D.zarr")
+    cases = [
+        Case("golden config", "cfg.json", ["golden", "--config", "{in}", "--stimulus", "E.npy", "--out", "{out}"],
+             out="S.npz"),
+        Case("golden stimulus", "E.npy", ["golden", "--config", "te", "--stimulus", "{in}", "--out", "{out}"],
+             out="S.npz"),
+        Case("simulate config", "cfg.json", ["simulate", "--config", "{in}", "--scene", "I.npy", "--out", "{out}",
+                                             "--seed", "1"], out="S.npz"),
+        Case("simulate scene", "I.npy", ["simulate", "--config", "te", "--scene", "{in}", "--out", "{out}",
+                                         "--seed", "1"], out="S.npz"),
+        Case("simulate noise", "noise.json", ["simulate", "--config", "te", "--scene", "I.npy", "--noise", "{in}",
+                                              "--out", "{out}", "--seed", "1"], out="S.npz"),
+        Case("simulate scene workers", "I.npy", ["simulate", "--config", "te", "--scene", "{in}", "--out", "{out}",
+                                                 "--seed", "1", "--workers", "2"], out="S.npz", modes=("half",)),
+        Case("stimulus scene", "I.npy", ["stimulus", "--config", "te", "--scene", "{in}", "--out", "{out}",
+                                         "--seed", "1", "--readouts", "2"], out="E.npy"),
+        Case("rtl-sim stimulus", "E.npy", ["rtl-sim", "--config", "te", "--stimulus", "{in}", "--out", "{out}"],
+             out="S.npz"),
+        Case("verilog config", "cfg.json", ["verilog", "--config", "{in}", "--height", "2", "--width", "2",
+                                            "--out", "{out}"], out="A.v"),
+        Case("synthesize verilog", "A.v", ["synthesize", "--verilog", "{in}"], out=None, out_kind="none"),
+        Case("calibrate dark", "dark.npz", ["calibrate", "--dark", "{in}", "--flat", "flat.npz", "--flat-light",
+                                            "0.03", "--out", "{out}"], out="C.npz"),
+        Case("calibrate flat", "flat.npz", ["calibrate", "--dark", "dark.npz", "--flat", "{in}", "--flat-light",
+                                            "0.03", "--out", "{out}"], out="C.npz"),
+        Case("reconstruct stream", "S.npz", ["reconstruct", "--stream", "{in}", "--method", "tfp", "--out", "{out}"],
+             out="R.npy"),
+        Case("reconstruct shipped weights", "W.pt", ["reconstruct", "--stream", "S.npz", "--method", "net",
+                                                     "--weights", "{in}", "--out", "{out}"], out="R.npy"),
+        Case("reconstruct trained weights", "T.pt", ["reconstruct", "--stream", "S.npz", "--method", "net",
+                                                     "--weights", "{in}", "--out", "{out}"], out="R.npy"),
+        Case("reconstruct calibration", "C.npz", ["reconstruct", "--stream", "dark.npz", "--method", "tfp",
+                                                  "--calibration", "{in}", "--out", "{out}"], out="R.npy"),
+        Case("score reference", "I.npy", ["score", "--reference", "{in}", "--estimate", "R.npy",
+                                          "--metrics", "psnr_mu"], out=None, out_kind="none"),
+        Case("score estimate", "R.npy", ["score", "--reference", "I.npy", "--estimate", "{in}",
+                                         "--metrics", "psnr_mu"], out=None, out_kind="none"),
+        Case("view scene", "I.npy", ["view", "--input", "{in}", "--out", "{out}"], out="v.png"),
+        Case("view stream", "S.npz", ["view", "--input", "{in}", "--out", "{out}"], out="v.png"),
+        Case("view stimulus", "E.npy", ["view", "--input", "{in}", "--config", "te", "--out", "{out}"], out="v.png"),
+        Case("view each", "R.npy", ["view", "--input", "{in}", "--each", "--out", "{out}"], out="vdir",
+             out_kind="folder"),
+        Case("scene hdr", "frames/hdr", ["scene", "--folder", "{in}", "--out", "{out}"], member="f1.hdr",
+             out="I2.npy"),
+        Case("scene exr", "frames/exr", ["scene", "--folder", "{in}", "--out", "{out}"], member="f1.exr",
+             out="I2.npy"),
+        Case("evaluate scene", "I.npy", EVAL + ["--scene", "{in}", "--out", "{out}", "--force"], out="ev",
+             out_kind="folder"),
+        Case("evaluate folder", "frames/hdr", EVAL + ["--folder", "{in}", "--frames", "3", "--out", "{out}",
+                                                      "--force"], member="f1.hdr", out="ev", out_kind="folder"),
+        Case("evaluate weights", "T.pt", EVAL[:4] + ["tfp,net", "--repeats", "1", "--ml-count-config", "none",
+                                                    "--progress", "off", "--scene", "I.npy", "--weights", "{in}",
+                                                    "--out", "{out}", "--force"], out="ev", out_kind="folder"),
+        Case("evaluate sensor noise", "noise.json", EVAL + ["--scene", "I.npy", "--sensor-noise", "{in}",
+                                                            "--out", "{out}", "--force"], out="ev",
+             out_kind="folder"),
+        Case("train config", "cfg.json", ["train", "--config", "{in}", "--steps", "2", "--batch", "1", "--crop",
+                                          "32", "--workers", "0", "--out", "{out}"], out="T2.pt", out_kind="none"),
+        Case("train init", "T.pt", ["train", "--config", "te", "--init", "{in}", "--steps", "2", "--batch", "1",
+                                    "--crop", "32", "--workers", "0", "--out", "{out}"], out="T2.pt",
+             out_kind="none"),
+        Case("train hdr", "frames/hdr", ["train", "--config", "te", "--hdr", "{in}", "--steps", "2", "--batch", "1",
+                                         "--crop", "16", "--workers", "0", "--out", "{out}"], member="f1.hdr",
+             out="T2.pt", out_kind="none"),
+        Case("train resume", "T.run", ["train", "--config", "te", "--steps", "3", "--batch", "1", "--crop", "32",
+                                          "--workers", "0", "--resume", "--out", "{out}"],
+             member="checkpoint.pt", out="T.pt", out_kind="resume"),
+        *[Case(f"train resume {member}", "T.run", ["train", "--config", "te", "--steps", "3", "--batch", "1",
+                                                   "--crop", "32", "--workers", "0", "--resume", "--out", "{out}"],
+               member=member, out="T.pt", out_kind="resume")
+          for member in ("log.csv", "validation.csv", "best.pt")],
+        Case("dataset resume zarr.json", "D.zarr", ["dataset", "--scene", "default", "--frames", "4", "--height",
+                                                    "16", "--width", "16", "--config", "te", "--out", "{in}"],
+             member="zarr.json", out=None, out_kind="none"),
+        Case("dataset hdr", "frames", ["dataset", "--hdr", "{in}", "--frames", "3", "--config", "te",
+                                       "--out", "{out}"], member="hdr/f1.hdr", out="D2.zarr", out_kind="none"),
+        Case("dataset config", "cfg.json", ["dataset", "--scene", "default", "--frames", "4", "--height", "16",
+                                            "--width", "16", "--config", "{in}", "--out", "{out}"], out="D2.zarr",
+             out_kind="none"),
+    ]
+    for label, member in members.items():
+        cases.append(Case(f"evaluate store {label}", "D.zarr", ["evaluate", "--store", "{in}", "--methods", "tfp",
+                                                                "--progress", "off", "--out", "{out}", "--force"],
+                          member=member, out="ev", out_kind="folder"))
+    return cases
+
+
+def run_truncation(case: Case, mode: str, base: Path) -> tuple[bool, str]:
+    """Run one corrupted case in a fresh copy of the inputs; (passed, what happened)."""
+    work = Path(tempfile.mkdtemp(dir=base, prefix="case."))
+    copy_inputs(base / "valid", work)
+    given = case.source
+    target = work / given / case.member if case.member else work / given
+    last_byte = target.read_bytes()[-1:]
+    corrupt(target, mode)
+    out = work / case.out if case.out else None
+    if out is not None and case.out_kind in ("file", "folder"):
+        if out.exists():
+            shutil.rmtree(out) if out.is_dir() else out.unlink()
+        precreate(out, case.out_kind)
+    elif out is not None and case.out_kind == "none" and os.path.lexists(out):
+        shutil.rmtree(out) if out.is_dir() else out.unlink()
+    before = state(out) if out is not None else {}
+    run_before = state(work / "T.run") if case.out_kind == "resume" else {}
+    argv = [a.replace("{in}", given).replace("{out}", case.out or "") for a in case.argv]
+    outcome = run_command(argv, work)
+    try:
+        blank_cut = mode == "less1" and last_byte.isspace()
+        return judge(case, mode, outcome, work, target, given, out, before, run_before, blank_cut)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def names(line: str, given: str) -> bool:
+    """Whether ``line`` names the path ``given`` as the user typed it (or a file inside it)."""
+    return re.search(r"(^|[\s'\"(])" + re.escape(given) + r"([\s'\":/),]|$)", line) is not None
+
+
+def judge(case, mode, outcome, work, target, given, out, before, run_before, blank_cut) -> tuple[bool, str]:
+    lines = outcome.stderr.strip().splitlines()
+    first = lines[0] if lines else ""
+    if outcome.code is None:
+        return False, f"timed out after {TIMEOUT} s"
+    if outcome.orphans:
+        return False, f"left {len(outcome.orphans)} process(es): {outcome.orphans[0]}"
+    if outcome.code == 0:
+        if mode == "flip" and still_valid(target):
+            return True, "harmless: the flipped byte leaves a valid file (a changed value); run succeeded"
+        if blank_cut:
+            return True, "harmless: the byte cut is the text's final blank; run succeeded"
+        return False, f"exit 0 on a corrupted input{': ' + first if first else ''}"
+    if "Traceback" in outcome.stderr:
+        return False, f"traceback: {lines[-1][:160] if lines else ''}"
+    if len(lines) != 1:
+        return False, f"{len(lines)} lines on stderr: {first[:100]} ... {lines[-1][:100] if lines else ''}"
+    if not names(first, given):
+        return False, f"does not name {given!r} as given: {first[:200]}"
+    if out is not None and case.out_kind in ("file", "folder") and state(out) != before:
+        return False, f"output {case.out} changed: {first[:160]}"
+    if out is not None and case.out_kind == "none" and os.path.lexists(out) and "resumes it" not in first:
+        return False, f"output {case.out} left behind: {first[:160]}"     # a store kept to resume says so
+    if case.out_kind == "resume" and state(work / "T.pt") != before:
+        return False, f"weights {case.out} changed: {first[:160]}"
+    if out is not None and parts_beside(out):
+        return False, f"temporaries left: {parts_beside(out)}"
+    return True, first[:200]
+
+
+# ------------------------------------------------------------------ interruptions
+def interrupt_cases() -> list[Case]:
+    """Long commands, each run until a signal; ``out`` is pre-created where the command may replace it."""
+    return [
+        Case("simulate --workers 2", "", ["simulate", "--config", "te", "--scene", "big.npy", "--out", "S.npz",
+                                          "--seed", "1", "--workers", "2", "--progress", "off"], out="S.npz"),
+        Case("evaluate", "", EVAL[:4] + ["tfp,tfi", "--repeats", "1", "--ml-count-config", "none", "--progress",
+                                         "off", "--set", "default", "--frames", "12", "--height", "32", "--width",
+                                         "32", "--out", "ev", "--force"], out="ev", out_kind="folder"),
+        Case("evaluate --store --workers 2", "", ["evaluate", "--store", "D.zarr", "--methods", "tfp,tfi",
+                                                  "--progress", "off", "--workers", "2",
+                                                  "--out", "ev", "--force"], out="ev", out_kind="folder"),
+        Case("train", "", ["train", "--config", "te", "--steps", "40", "--batch", "1", "--crop", "32",
+                           "--workers", "1", "--progress", "off", "--out", "T2.pt"], out="T2.pt", out_kind="none"),
+        Case("dataset --workers 2", "", ["dataset", "--scene", "default", "--frames", "12", "--height", "32",
+                                         "--width", "32", "--config", "te", "--config", "ml", "--workers", "2",
+                                         "--progress", "off", "--out", "D2.zarr"], out="D2.zarr", out_kind="none"),
+        Case("reconstruct net", "", ["reconstruct", "--stream", "S.npz", "--method", "net", "--out", "R.npy",
+                                     "--progress", "off"], out="R.npy"),
+        Case("rtl-sim --vcd", "", ["rtl-sim", "--config", "te", "--stimulus", "E.npy", "--out", "S2.npz",
+                                   "--vcd", "W.vcd", "--progress", "off"], out="S2.npz"),
+        Case("calibrate", "", ["calibrate", "--dark", "dark.npz", "--flat", "flat.npz", "--flat-light", "0.03",
+                               "--out", "C.npz", "--progress", "off"], out="C.npz"),
+        Case("demo", "", ["demo", "--out", "demo", "--frames", "10", "--height", "32", "--width", "32",
+                          "--crop", "11", "--repeats", "1", "--sensors", "te", "--no-hw-cost", "--quiet"],
+             out="demo", out_kind="folder"),
+    ]
+
+
+def run_interrupt(case: Case, at: float, signum: int, base: Path) -> tuple[bool, str]:
+    work = Path(tempfile.mkdtemp(dir=base, prefix="int."))
+    copy_inputs(base / "valid", work)
+    out = work / case.out
+    if case.out_kind in ("file", "folder"):
+        if out.exists():
+            shutil.rmtree(out) if out.is_dir() else out.unlink()
+        precreate(out, case.out_kind)
+    before = state(out)
+    outcome = run_command(case.argv, work, signal_at=at, signum=signum, group=signum == signal.SIGINT)
+    try:
+        lines = outcome.stderr.strip().splitlines()
+        first = lines[0] if lines else ""
+        if outcome.code is None:
+            return False, "timed out"
+        if outcome.orphans:
+            return False, f"left {len(outcome.orphans)} process(es): {outcome.orphans[0]}"
+        if outcome.code == 0:
+            return True, f"finished before the signal ({outcome.seconds:.1f} s)"
+        if outcome.code == -signum and not lines and not parts_left(work):
+            if state(out) == before:
+                return True, (f"killed before its handlers were set or after they were restored "
+                              f"(exit {outcome.code}); output untouched")
+            if "wrote" in outcome.stdout:
+                return True, f"killed after it finished and wrote its output whole (exit {outcome.code})"
+        if "Traceback" in outcome.stderr:
+            return False, f"traceback ({len(lines)} lines): {lines[-1][:140] if lines else ''}"
+        if len(lines) != 1:
+            return False, (f"exit {outcome.code}, {len(lines)} lines on stderr: {first[:100]} ... "
+                           f"{lines[-1][:100] if lines else ''}")
+        if case.out_kind in ("file", "folder") and state(out) != before and "whole" not in first:
+            return False, f"output {case.out} changed: {first[:140]}"
+        if case.out_kind == "none" and os.path.lexists(out) and not case.name.startswith(("train", "dataset")):
+            return False, f"output {case.out} left: {first[:140]}"
+        if case.name.startswith("train") and os.path.lexists(out) and "whole" not in first:
+            return False, f"weights {case.out} written by an interrupted run: {first[:140]}"
+        if case.name.startswith("train") and os.path.lexists(work / "T2.run") \
+                and not any(os.scandir(work / "T2.run")):
+            return False, f"empty run folder left: {first[:140]}"
+        left = parts_left(work)
+        if left:
+            return False, f"temporaries left: {left[:3]}"
+        return True, first[:160]
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def parts_left(work: Path) -> list[str]:
+    """``.part`` temporaries anywhere under ``work``."""
+    return [str(p.relative_to(work)) for p in work.rglob("*.part")]
+
+
+def make_long_inputs(valid: Path) -> None:
+    """A scene large enough that ``simulate --workers 2`` takes a few seconds."""
+    tespike(valid, "scene", "--name", "default", "--frames", 24, "--height", 192, "--width", 256,
+            "--out", "big.npy", "-q")
+
+
+# ------------------------------------------------------------------ main
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--only", help="run only the cases whose name contains this text")
+    parser.add_argument("--no-truncate", action="store_true", help="skip the truncation sweep")
+    parser.add_argument("--no-interrupt", action="store_true", help="skip the interruption sweep")
+    parser.add_argument("--moments", default="0.3,1,3,8,part",
+                        help="seconds after start to signal, 'part': as soon as an output's temporary appears "
+                             "(default 0.3,1,3,8,part)")
+    parser.add_argument("--modes", default=",".join(MODES), help=f"truncations (default {','.join(MODES)})")
+    parser.add_argument("--inputs", metavar="DIR",
+                        help="keep the valid inputs in DIR/valid and reuse them on the next run (default: a "
+                             "temporary folder, removed)")
+    args = parser.parse_args()
+    base = Path(args.inputs) if args.inputs else Path(tempfile.mkdtemp(prefix="fault_sweep."))
+    rows: list[tuple[str, str, bool, str]] = []
+    try:
+        if not (base / "valid" / "done").exists():
+            shutil.rmtree(base / "valid", ignore_errors=True)
+            base.mkdir(parents=True, exist_ok=True)
+            make_inputs(base)
+            (base / "valid" / "done").write_text("")
+        if not args.no_truncate:
+            modes = args.modes.split(",")
+            for case in truncation_cases(base / "valid"):
+                if args.only and args.only not in case.name:
+                    continue
+                for mode in case.modes:
+                    if mode not in modes:
+                        continue
+                    ok, what = run_truncation(case, mode, base)
+                    rows.append((case.name, mode, ok, what))
+                    print(f"{'ok  ' if ok else 'FAIL'} {case.name:32} {mode:6} {what}", flush=True)
+        if not args.no_interrupt:
+            if not (base / "valid" / "big.npy").exists():
+                make_long_inputs(base / "valid")
+            moments = [-1.0 if m == "part" else float(m) for m in args.moments.split(",")]
+            for case in interrupt_cases():
+                if args.only and args.only not in case.name:
+                    continue
+                for at in moments:
+                    for signum in (signal.SIGINT, signal.SIGTERM):
+                        ok, what = run_interrupt(case, at, signum, base)
+                        label = f"{signal.Signals(signum).name}@{'part' if at < 0 else f'{at:g}s'}"
+                        rows.append((case.name, label, ok, what))
+                        print(f"{'ok  ' if ok else 'FAIL'} {case.name:32} {label:12} {what}", flush=True)
+    finally:
+        if not args.inputs:
+            shutil.rmtree(base, ignore_errors=True)
+    failed = [r for r in rows if not r[2]]
+    print(f"\n{len(rows)} cases: {len(rows) - len(failed)} passed, {len(failed)} failed")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
