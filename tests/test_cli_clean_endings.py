@@ -309,12 +309,15 @@ def test_only_a_finished_folder_counts_as_written_never_the_files_inside_its_tem
 def test_a_signal_during_the_interpreters_exit_ends_it_without_a_traceback(tmp_path):
     """After the command's line, Ctrl-C or SIGTERM end the process as the system does (torch's and
     Dask's exit handlers take a second; a KeyboardInterrupt raised in one printed a traceback)."""
-    code = ("import signal, sys; sys.argv = ['tespike', 'scene', '--list']; from tespike.cosim.cli import main; "
-            "main(); print(signal.getsignal(signal.SIGINT) is signal.SIG_DFL, "
-            "signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
-                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
-    assert done.returncode == 0 and done.stdout.strip().endswith("True True"), done
+    for start, want in (("SIG_DFL", "True True"), ("SIG_IGN", "False True")):   # nohup's SIG_IGN stays
+        code = (f"import signal, sys; signal.signal(signal.SIGINT, signal.{start}); "
+                "signal.signal(signal.SIGTERM, signal.SIG_DFL); "
+                "sys.argv = ['tespike', 'scene', '--list']; from tespike.cosim.cli import main; "
+                "main(); print(signal.getsignal(signal.SIGINT) is signal.SIG_DFL, "
+                "signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)")
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                              env=dict(os.environ, PYTHONPATH=str(ROOT)))
+        assert done.returncode == 0 and done.stdout.strip().endswith(want), (start, done)
 
 
 def test_ctrl_c_while_the_command_loads_is_one_line():
