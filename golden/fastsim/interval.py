@@ -34,7 +34,7 @@ from .bisection import largest_below, smallest_below
 from .codes import BRIGHT, CLOCK, EVENT
 
 _NONE = np.zeros(0, np.int64)
-from .words import firing_words, ml_words
+from .words import firing_words, gather, is_mask, ml_words, put
 
 
 def interval_levels(config: SensorConfig, budget: float) -> tuple[float, float, float]:
@@ -104,13 +104,9 @@ def event_path(sim, sel, expected, dark, words):
     instead of two gathers and two scatters of most of the frame."""
     c = sim.config
     theta, L = c.threshold, c.clocks_per_readout
-    masked = isinstance(sel, np.ndarray) and sel.dtype == bool
-    if masked:
-        acc0 = sim.carried
-        mean = np.where(sel, expected, 0.0)
-    else:
-        acc0 = sim.carried[sel]
-        mean = expected[sel]
+    masked = is_mask(sel)
+    acc0 = gather(sim.carried, sel)
+    mean = np.where(sel, expected, 0.0) if masked else expected[sel]
     sure = _NONE
     if c.is_te and not sim.dark_model:
         sure = np.flatnonzero(mean >= sim.levels.mean_overflow)
@@ -125,17 +121,14 @@ def event_path(sim, sel, expected, dark, words):
         mean[sure] = sure_mean - light_time            # the electrons after it
     total = sim.rng.poisson(mean)
     if sim.dark_model:
-        total += dark if masked else dark[sel]
+        total += gather(dark, sel)
     if sure.size:
         total[sure] += need
     level = acc0 + total
     spikes = level // theta                            # (np.divmod is 3x slower on int64)
     residual = level - spikes * theta
     if not c.is_te:
-        if masked:
-            np.copyto(sim.carried, residual, where=sel)
-        else:
-            sim.carried[sel] = residual
+        put(sim.carried, sel, residual)
         ml_words(sim, sel, spikes, words)
         return
     if sure.size:                                      # their words now; not among the Beta draws
@@ -153,12 +146,8 @@ def event_path(sim, sel, expected, dark, words):
         position = sim.rng.beta(n, t - n + 1)          # n-th of t uniform order statistics
         at = np.minimum((position * L).astype(np.int64), L - 1)
         spikes[over] = (1 << c.d) | (at // c.clocks_per_tick + 1)
-    if masked:
-        np.copyto(sim.carried, residual, where=sel)
-        np.copyto(words, spikes, where=sel)
-    else:
-        sim.carried[sel] = residual                     # after acc0 (maybe a view) is used
-        words[sel] = spikes
+    put(sim.carried, sel, residual)                    # after acc0 (maybe a view) is used
+    put(words, sel, spikes)
 
 
 def bright_path(sim, sel, expected, lam, dark, words):

@@ -53,6 +53,27 @@ def firing_words(sim, sel, words):
         words[sel] = sim.tables.bright_word
 
 
+def is_mask(sel) -> bool:
+    """Whether pixels ``sel`` are a boolean mask of the frame (the event path's whole-frame
+    form) rather than flat indices or a slice."""
+    return isinstance(sel, np.ndarray) and sel.dtype == bool
+
+
+def gather(values, sel):
+    """``values`` of pixels ``sel``: under a mask the whole frame (the path runs on every pixel
+    and writes back under the mask), else ``values[sel]``."""
+    return values if is_mask(sel) else values[sel]
+
+
+def put(target, sel, values):
+    """Write ``values`` of pixels ``sel`` into ``target``: under a mask from whole-frame values,
+    else by index (or slice)."""
+    if is_mask(sel):
+        np.copyto(target, values, where=sel)
+    else:
+        target[sel] = values
+
+
 def ml_words(sim, sel, spikes, words):
     """ML words of pixels ``sel`` (flat indices, a slice, or a boolean mask of the frame
     with ``spikes`` over the whole frame) from their spike counts in the interval: the
@@ -60,17 +81,9 @@ def ml_words(sim, sel, spikes, words):
     the clipped sum is exact); count reads it all, msb reads its top bit's index and
     keeps the remainder."""
     c = sim.config
-    if isinstance(sel, np.ndarray) and sel.dtype == bool:
-        count = np.minimum(spikes if not c.is_msb else sim.sfc + spikes, c.ml_max)
-        if not c.is_msb:
-            np.copyto(words, count, where=sel)
-            return
-        np.copyto(words, sim.tables.msb_word[count], where=sel)
-        np.copyto(sim.sfc, sim.tables.msb_rest[count], where=sel)
-        return
     if not c.is_msb:
-        words[sel] = np.minimum(spikes, c.ml_max)
+        put(words, sel, np.minimum(spikes, c.ml_max))
         return
-    count = np.minimum(sim.sfc[sel] + spikes, c.ml_max)
-    words[sel] = sim.tables.msb_word[count]
-    sim.sfc[sel] = sim.tables.msb_rest[count]
+    count = np.minimum(gather(sim.sfc, sel) + spikes, c.ml_max)
+    put(words, sel, sim.tables.msb_word[count])
+    put(sim.sfc, sel, sim.tables.msb_rest[count])
