@@ -8,10 +8,19 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def _checkout_env() -> dict:
+    return dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
 def run_tespike(*args, timeout=600) -> subprocess.CompletedProcess:
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     return subprocess.run([sys.executable, "-m", "tespike", *map(str, args)], capture_output=True,
-                          text=True, env=env, timeout=timeout)
+                          text=True, env=_checkout_env(), timeout=timeout)
+
+
+def run_python(code: str, timeout=600) -> subprocess.CompletedProcess:
+    """``python -c code`` in a fresh interpreter that imports this checkout's tespike."""
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                          env=_checkout_env(), timeout=timeout)
 
 
 def assert_refused(result: subprocess.CompletedProcess, *words: str) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from tespike.golden.errors import InputError
-from tests.cli import ROOT, assert_refused, run_tespike
+from tests.cli import ROOT, assert_refused, run_python, run_tespike
 from tests.test_cli_hardening import TINY, small_tmpfs, snapshot
 
 EVALUATE = ("evaluate", "--set", "none", "--methods", "tfp", "--repeats", "1", "--ml-count-config", "none")
@@ -315,8 +315,7 @@ def test_a_signal_during_the_interpreters_exit_ends_it_without_a_traceback(tmp_p
                 "sys.argv = ['tespike', 'scene', '--list']; from tespike.cosim.cli import main; "
                 "main(); print(signal.getsignal(signal.SIGINT) is signal.SIG_DFL, "
                 "signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)")
-        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
-                              env=dict(os.environ, PYTHONPATH=str(ROOT)))
+        done = run_python(code)
         assert done.returncode == 0 and done.stdout.strip().endswith(want), (start, done)
 
 
@@ -330,6 +329,5 @@ def test_ctrl_c_while_the_command_loads_is_one_line():
             "import tespike.cosim\n"
             "sys.modules['tespike.cosim.cli'] = cli\n"
             "runpy.run_module('tespike', run_name='__main__')\n")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
-                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    done = run_python(code)
     assert done.returncode == 130 and done.stderr == "tespike: interrupted\n", done
