@@ -233,3 +233,40 @@ def test_worker_processes_make_the_same_clips():
             assert a.index == b.index and np.array_equal(a.words, b.words)
     finally:
         remote.close()
+
+
+def test_a_killed_trainer_leaves_no_worker_and_no_notice(tmp_path):
+    """A trainer killed outright (SIGKILL: nothing of it runs) leaves neither its clip worker
+    (which watches its parent) nor a line on stderr (the resource tracker still removes the
+    pool's semaphores, without its UserWarning)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    script = ("import os, sys, time\n"
+              "from tespike.golden.config import SensorConfig\n"
+              "from tespike.recon.engine.batches import ClipPool\n"
+              "from tespike.recon.engine.clips import EngineRecipe\n"
+              f"pool = ClipPool(EngineRecipe(**{SMALL.__dict__!r}), SensorConfig(), capacity=2, refresh=1, workers=1)\n"
+              "pool.advance_to(1)\n"
+              "print(os.getpid(), flush=True)\n"
+              "time.sleep(60)\n")
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        assert proc.stdout.readline().strip() == str(proc.pid)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(30)
+        err = proc.stderr.read()                    # EOF once every process holding stderr has ended
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert err == "", err
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        left = subprocess.run(["ps", "-o", "pid=", "-s", str(proc.pid)], capture_output=True, text=True).stdout.split()
+        if not left:
+            break
+        time.sleep(0.2)
+    assert not left, f"processes of the killed trainer still running: {left}"

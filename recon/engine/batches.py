@@ -47,18 +47,53 @@ PARENT_POLL = 0.2
 
 def _worker_init(parent: int) -> None:
     """A worker runs at lower priority and ends when the trainer is gone, however it ended (even
-    killed, with no chance to end its workers)."""
+    killed, with no chance to end its workers), without a word once it is gone."""
+    import sys
     try:
         os.nice(5)              # the trainer keeps priority on a shared machine
     except OSError:
         pass
+    sys.stderr = _WhileParent(sys.stderr, parent)
     threading.Thread(target=_exit_without, args=(parent,), daemon=True).start()
+
+
+class _WhileParent:
+    """A worker's stderr that writes only while the trainer that started it lives: a trainer killed
+    outright breaks the pipe the worker sends its clip on, and the pool would print that
+    ``BrokenPipeError`` to the user's terminal after the kill (nobody is left to read it). A
+    clip's own error still reaches the trainer, which raises it."""
+
+    def __init__(self, stream, parent: int):
+        self._stream, self._parent = stream, parent
+
+    def write(self, text: str) -> int:
+        return self._stream.write(text) if os.getppid() == self._parent else len(text)
+
+    def flush(self) -> None:
+        if os.getppid() == self._parent:
+            self._stream.flush()
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
 
 
 def _exit_without(parent: int) -> None:
     while os.getppid() == parent:
         time.sleep(PARENT_POLL)
     os._exit(0)                 # quietly: nobody is left to take the clip being made
+
+
+#: The resource tracker's notice of the pool's semaphores, which it removes itself when the trainer
+#: is killed (SIGKILL, no chance to close the pool): a line on the user's terminal after the kill.
+_TRACKER_NOTICE = "ignore::UserWarning:multiprocessing.resource_tracker"
+
+
+def _quiet_resource_tracker() -> None:
+    """The resource tracker (a process of its own, started with the pool) inherits this interpreter's
+    ``-W`` options: it still cleans up after a killed trainer, without a warning on stderr."""
+    import sys
+    if _TRACKER_NOTICE not in sys.warnoptions:
+        sys.warnoptions.append(_TRACKER_NOTICE)
 
 
 @contextlib.contextmanager
@@ -85,6 +120,7 @@ class ClipSource:
         self.prefetch = max(1, prefetch)
         self.pool = None
         if workers > 0:
+            _quiet_resource_tracker()
             with _ctrl_c_ignored():         # the workers inherit it from their first instruction on
                 self.pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_worker_init,
                                                                       initargs=(os.getpid(),))
