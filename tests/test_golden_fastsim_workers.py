@@ -216,3 +216,42 @@ def test_a_worker_that_cannot_be_forked_leaves_its_stripes_to_this_process(monke
     monkeypatch.setattr(os, "fork", fork_once)
     assert np.array_equal(simulate_scene(SensorConfig(), scene, seed=2, workers=4), expected)
     assert forks == [1]
+
+
+def test_workers_stop_when_the_command_is_killed_outright():
+    """A command killed with SIGKILL cannot end its workers: each stops at its next readout
+    instead of simulating the rest of its stripes for nobody."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    script = ("import os, sys, numpy as np\n"
+              "from tespike.golden.config import SensorConfig\n"
+              "from tespike.golden.fastsim import simulate_scene\n"
+              "scene = np.broadcast_to(np.float32(0.05), (4000, 64, 2048))\n"   # 2 stripes, about a minute
+              "print(os.getpid(), flush=True)\n"
+              "simulate_scene(SensorConfig(), scene, seed=0, workers=2)\n")
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+
+    def session():
+        out = subprocess.run(["ps", "-o", "pid=", "-s", str(proc.pid)], capture_output=True, text=True).stdout
+        return [int(p) for p in out.split()]
+
+    try:
+        assert proc.stdout.readline().strip() == str(proc.pid)
+        deadline = time.monotonic() + 60
+        while len(session()) < 2 and time.monotonic() < deadline:      # the worker is forked
+            time.sleep(0.1)
+        assert len(session()) == 2, session()
+        time.sleep(0.5)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+        deadline = time.monotonic() + 10
+        while session() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not session(), f"workers still simulating after the command was killed: {session()}"
+        assert proc.stderr.read() == ""
+    finally:
+        for pid in session():
+            os.kill(pid, signal.SIGKILL)

@@ -65,7 +65,9 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
     reads out rows ``rows[i]``), each walked through the readouts in order; with
     several workers, ``workers - 1`` forked processes take stripes ``j, j + workers,
     ...`` and write their words into a shared anonymous memory map (processes, not
-    threads: the simulator's Python work holds the GIL for a large share of its time)."""
+    threads: the simulator's Python work holds the GIL for a large share of its time).
+    A worker stops at its next readout once this process is gone (killed outright: it
+    had no chance to end them)."""
     import mmap
     K, H, W = scene.shape
     workers = check_workers(workers, len(rows)) if hasattr(os, "fork") else check_workers(workers, 1)
@@ -78,16 +80,18 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
         words = np.frombuffer(mmap.mmap(-1, max(1, K * H * W * dtype.itemsize)), dtype,
                               count=K * H * W).reshape(K, H, W)
 
-    def run(mine, readouts):
+    def run(mine, readouts, parent=None):
         # light in the scene's own dtype: readout converts it to float64 once (electrons_per_readout)
         for k in readouts:
+            if parent is not None and os.getppid() != parent:
+                os._exit(1)                              # a worker whose command was killed outright
             light = np.asarray(scene[k])
             if workers == 1:
                 scan_light(light)
             for i in mine:
                 words[k, rows[i]] = sims[i].readout(light[rows[i]])
 
-    children = {}
+    children, parent = {}, os.getpid()
     try:
         for j in range(1, workers):
             try:
@@ -97,7 +101,7 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
             if pid == 0:                                 # worker: its stripes, then leave at once
                 status = 1
                 try:
-                    run(range(j, len(rows), workers), range(K))
+                    run(range(j, len(rows), workers), range(K), parent)
                     status = 0
                 except Exception:                        # (an interrupt: exit 1 quietly)
                     import traceback
