@@ -18,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import re
-import subprocess
 import tempfile
 from pathlib import Path
 
@@ -28,6 +27,7 @@ from tespike.golden.activity import Activity, pixel_register_names
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
+from . import children
 from .synthesis import SynthesisError, yosys_missing
 
 
@@ -51,7 +51,7 @@ def _design_json(verilog_text: str, top: str, yosys: str = "yosys") -> dict:
     with tempfile.TemporaryDirectory(prefix="tespike-activity-") as tmp:
         (Path(tmp) / "design.v").write_text(verilog_text)
         script = f"read_verilog design.v; hierarchy -top {top}; proc; write_json design.json"
-        done = subprocess.run([yosys, "-q", "-p", script], cwd=tmp, capture_output=True, text=True)
+        done = children.run([yosys, "-q", "-p", script], cwd=tmp, capture_output=True, text=True)
         if done.returncode != 0:
             lines = (done.stderr or done.stdout).strip().splitlines()
             raise SynthesisError(f"yosys could not read {top}: {lines[-1] if lines else 'no message'}")

@@ -23,7 +23,6 @@ import io
 import os
 import re
 import shutil
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -31,6 +30,7 @@ from pathlib import Path
 from tespike.golden.errors import InputError
 
 from .cocotb_bench import Settings
+from . import children
 from .outside import (SimulatorBuildError, SimulatorMissingError, cache_entry, content_hash,
                       default_cache_root, first_error_line, top_module)
 
@@ -75,7 +75,7 @@ def _simulator_version(simulator: str) -> str:
             raise SimulatorMissingError(f"{tool!r} is not on PATH; install it (Debian/Ubuntu: "
                                         f"apt-get install {package})")
     flag = "-V" if simulator == "icarus" else "--version"
-    result = subprocess.run([tools[0], flag], capture_output=True, text=True)
+    result = children.run([tools[0], flag], capture_output=True, text=True)
     return (result.stdout or result.stderr).splitlines()[0] if (result.stdout or result.stderr) else ""
 
 

@@ -16,7 +16,6 @@ value per clock (zero-delay: no glitches), and filed under its block as
 from __future__ import annotations
 
 import json
-import subprocess
 import tempfile
 from pathlib import Path
 
@@ -24,6 +23,7 @@ from tespike.golden.activity import BLOCKS
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
+from . import children
 from .activity import bit_changes, module_blocks, settled_values
 from .synthesis import SynthesisError, yosys_missing
 
@@ -37,7 +37,7 @@ def gate_netlist(verilog_text: str, top: str, yosys: str = "yosys") -> tuple[str
         (Path(tmp) / "design.v").write_text(verilog_text)
         script = (f"read_verilog design.v; synth -top {top}; rename -enumerate; "
                   "write_verilog -noattr gates.v; write_json gates.json")
-        done = subprocess.run([yosys, "-q", "-p", script], cwd=tmp, capture_output=True, text=True)
+        done = children.run([yosys, "-q", "-p", script], cwd=tmp, capture_output=True, text=True)
         if done.returncode != 0:
             lines = (done.stderr or done.stdout).strip().splitlines()
             raise SynthesisError(f"yosys could not synthesise {top}: {lines[-1] if lines else 'no message'}")

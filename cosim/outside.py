@@ -33,6 +33,8 @@ import numpy as np
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import TespikeError
 
+from . import children
+
 #: Clocks with ``rst`` high before pixel clock t = 0 (synchronous reset needs >= 1 edge).
 RESET_CLOCKS = 2
 
@@ -210,4 +212,4 @@ def cache_entry(root: Path, key: str) -> Iterator[tuple[Path, bool]]:
 
 def run_process(argv: list[str], *, cwd: Path | None = None, timeout: float | None = None
                 ) -> subprocess.CompletedProcess:
-    return subprocess.run(argv, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+    return children.run(argv, cwd=cwd, capture_output=True, text=True, timeout=timeout)

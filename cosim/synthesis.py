@@ -32,6 +32,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from . import children
+
 #: ABC gate sets tried for the transistor estimate (all have entries in Yosys's CMOS table).
 ABC_GATE_SETS = ("cmos2", "cmos3", "cmos4", "gates")
 
@@ -90,7 +92,7 @@ def synthesize(verilog_text: str, top: str, yosys: str = "yosys",
         for gates in gate_sets:
             steps += ["design -load legal", f"abc -g {gates}", "opt_clean",
                       f"tee -q -o {tmp}/{gates}.json stat -json -tech cmos"]
-        result = subprocess.run([yosys, "-q", "-p", "; ".join(steps)], capture_output=True, text=True)
+        result = children.run([yosys, "-q", "-p", "; ".join(steps)], capture_output=True, text=True)
         if result.returncode != 0:
             lines = (result.stderr or result.stdout).strip().splitlines()
             raise SynthesisError(f"yosys failed on {top}: {lines[-1] if lines else 'no message'}")
@@ -197,7 +199,7 @@ def _run_measured(command: list[str], cwd: Path) -> tuple[int, str, dict]:
     """Run ``command``; return (exit code, its output, wall seconds, CPU seconds and peak resident MB
     of that one child process, from ``os.wait4``)."""
     start = time.perf_counter()
-    proc = subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = children.popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     output = proc.stdout.read()
     proc.stdout.close()
     _, status, usage = os.wait4(proc.pid, 0)

@@ -37,6 +37,7 @@ from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.golden.io import atomic_output
 
+from . import children
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, cache_entry, content_hash,
                       default_cache_root, first_error_line, pack_rows, require_tool, words_per_row)
 from .tops import Run, Top, prepare
@@ -257,7 +258,7 @@ int main(int argc, char** argv) {{
 
 def verilator_version() -> str:
     exe = require_tool("verilator", "verilator")
-    result = subprocess.run([exe, "--version"], capture_output=True, text=True)
+    result = children.run([exe, "--version"], capture_output=True, text=True)
     return result.stdout.strip()
 
 
@@ -344,8 +345,8 @@ def _keep_runtime(obj: Path, runtime: Path, cxx_opt: str = CXX_OPT) -> None:
         "pch/verilated.h.gch:\n"
         "\tln -sf $(VERILATOR_ROOT)/include/verilated.h pch/verilated.h\n"
         "\t$(CXX) $(CXXFLAGS) $(CPPFLAGS) $(OPT_FAST) -x c++-header pch/verilated.h -o $@\n")
-    made = subprocess.run(["make", "-f", "pch.mk", f"OPT_FAST={cxx_opt}", "pch/verilated.h.gch"],
-                          cwd=obj, capture_output=True, text=True)
+    made = children.run(["make", "-f", "pch.mk", f"OPT_FAST={cxx_opt}", "pch/verilated.h.gch"],
+                        cwd=obj, capture_output=True, text=True)
     if made.returncode == 0 and (pch_tmp / "verilated.h.gch").is_file():
         shutil.move(str(pch_tmp), staging / "pch")
     try:
@@ -385,7 +386,7 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
             reuse = _reuse_runtime(runtime, work / "obj")
             argv = [exe, *flags, *reuse, "-j", str(build_jobs()), "-Mdir", "obj", "array.v",
                     "harness.cpp"]
-            result = subprocess.run(argv, cwd=work, capture_output=True, text=True)
+            result = children.run(argv, cwd=work, capture_output=True, text=True)
             (work / "build.log").write_text(" ".join(argv) + "\n" + result.stdout + result.stderr)
             if result.returncode != 0 or not (work / "obj" / _EXECUTABLE).is_file():
                 failed_log = root / f"{key}.failed.log"
@@ -447,7 +448,7 @@ def run_executable(executable: Path, stim_path: Path, cap_path: Path, clocks: in
     argv = [str(executable), str(stim_path), str(clocks), str(expected), str(flush), str(cap_path), str(every)]
     if resets_path is not None:
         argv.append(str(resets_path))
-    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as process:
+    with children.popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as process:
         try:
             if progress:
                 from tqdm import tqdm

@@ -118,9 +118,14 @@ def _results(tasks, workers: int, settings: tuple):
             yield run_task(task, *settings)
         return
     import multiprocessing
+    import os
     from concurrent.futures import ProcessPoolExecutor
 
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"))
+    from tespike.cosim.children import end_with_parent
+
+    # a worker (and through it its tools) ends with the command, even one killed outright
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                               initializer=end_with_parent, initargs=(os.getpid(),))
     try:
         futures = [pool.submit(run_task, task, *settings) for task in tasks]
         for future in futures:

@@ -40,6 +40,7 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from .. import children
 from .tops import Harness
 
 #: Yosys passes from the harness's Verilog to an AIGER model with the assertions as bad states.
@@ -75,8 +76,8 @@ class AbcError(RuntimeError):
 
 def _aiger(harness: Harness, work: Path, name: str) -> Path:
     (work / f"{name}.v").write_text(harness.text)
-    done = subprocess.run(["yosys", "-q", "-p", f"read_verilog -formal {name}.v; {TO_AIGER}; "
-                           f"write_aiger -zinit {name}.aig"], cwd=work, capture_output=True, text=True)
+    done = children.run(["yosys", "-q", "-p", f"read_verilog -formal {name}.v; {TO_AIGER}; "
+                         f"write_aiger -zinit {name}.aig"], cwd=work, capture_output=True, text=True)
     if done.returncode != 0:
         lines = [line for line in (done.stderr + done.stdout).splitlines() if "ERROR" in line]
         raise AbcError(f"yosys failed on the harness: {(lines or ['no message'])[0].strip()}")
@@ -86,8 +87,8 @@ def _aiger(harness: Harness, work: Path, name: str) -> Path:
 def _abc(aig: Path, commands: str, timeout: float) -> tuple[str, bool]:
     """(ABC's output, whether it finished within ``timeout`` seconds)."""
     try:
-        done = subprocess.run(["yosys-abc", "-c", f"read_aiger {aig.name}; strash; {commands}"],
-                              cwd=aig.parent, capture_output=True, text=True, timeout=timeout)
+        done = children.run(["yosys-abc", "-c", f"read_aiger {aig.name}; strash; {commands}"],
+                            cwd=aig.parent, capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return "", False
     return done.stdout + done.stderr, True

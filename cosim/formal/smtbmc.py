@@ -23,6 +23,8 @@ from pathlib import Path
 
 from tespike.golden.errors import TespikeError
 
+from .. import children
+
 SOLVERS = {"z3": "z3"}
 #: Tools the proof needs: executable -> Debian package.
 TOOLS = {"yosys": "yosys", "yosys-smtbmc": "yosys", "yosys-abc": "yosys"}
@@ -74,7 +76,7 @@ class Result:
 
 
 def run_tool(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
+    return children.run(cmd, cwd=cwd, capture_output=True, text=True)
 
 
 def _failed_assertion(log: str, messages: dict[str, str]) -> str:

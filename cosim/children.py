@@ -1,0 +1,61 @@
+"""Outside tools and worker processes end with the command that started them.
+
+A command killed outright (SIGKILL, the kernel's out-of-memory killer) runs no
+handler, so what it started would run on for nobody: Yosys, a solver, a
+simulator or a proof worker, for minutes. On Linux each such child asks the
+kernel for SIGKILL when its parent goes (``prctl(PR_SET_PDEATHSIG)``), and one
+whose parent is already gone when it asks leaves at once. Elsewhere nothing
+changes. Every outside tool of :mod:`tespike.cosim` is started through
+:func:`run` or :func:`popen`; the proof workers call :func:`end_with_parent`.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+import signal
+import subprocess
+import sys
+
+#: ``PR_SET_PDEATHSIG`` of ``<linux/prctl.h>``.
+PR_SET_PDEATHSIG = 1
+
+
+def _prctl():
+    """libc's ``prctl`` (Linux), looked up once in the parent: a forked child calls it and nothing else."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        prctl = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    prctl.argtypes = (ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong)
+    prctl.restype = ctypes.c_int
+    return prctl
+
+
+_PRCTL = _prctl()
+
+
+def end_with_parent(parent: int) -> None:
+    """In a child process of ``parent``: get SIGKILL when the parent goes, and leave now if it
+    already has (it may have gone between the fork and this call)."""
+    if _PRCTL is not None:
+        _PRCTL(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != parent:
+        os._exit(1)
+
+
+def _preexec(parent: int):
+    return (lambda: end_with_parent(parent)) if _PRCTL is not None else None
+
+
+def run(argv, **kwargs) -> subprocess.CompletedProcess:
+    """``subprocess.run`` of a child that ends with this process."""
+    return subprocess.run(argv, preexec_fn=_preexec(os.getpid()), **kwargs)
+
+
+def popen(argv, **kwargs) -> subprocess.Popen:
+    """``subprocess.Popen`` of a child that ends with this process."""
+    return subprocess.Popen(argv, preexec_fn=_preexec(os.getpid()), **kwargs)

@@ -1,0 +1,92 @@
+"""Outside tools and proof workers end with a command killed outright (tespike.cosim.children).
+
+SIGKILL runs no handler of the command, so only the kernel can end what it
+started; each test kills a small Python "command" and watches its child.
+"""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+
+
+def _running(pid: int) -> bool:
+    """Whether ``pid`` is a live process (a zombie waiting to be reaped has ended)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return False
+
+
+def _kill_command_and_watch(body: str, seconds: float = 10.0) -> bool:
+    """Run ``body`` (Python that prints its child's pid and waits), SIGKILL it, and say
+    whether the child is still running ``seconds`` later (it is killed afterwards)."""
+    proc = subprocess.Popen([sys.executable, "-c", body], stdout=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    child = None
+    try:
+        child = int(proc.stdout.readline())
+        assert _running(child)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+        deadline = time.monotonic() + seconds
+        while _running(child) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return _running(child)
+    finally:
+        if child is not None and _running(child):
+            os.kill(child, signal.SIGKILL)
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_a_plain_child_outlives_its_killed_parent():
+    """The premise: without the request, the kernel leaves the child running."""
+    body = ("import subprocess\n"
+            "p = subprocess.Popen(['sleep', '30'])\n"
+            "print(p.pid, flush=True)\n"
+            "p.wait()\n")
+    assert _kill_command_and_watch(body, seconds=1.0)
+
+
+@pytest.mark.parametrize("start", ["run", "popen"])
+def test_a_tool_ends_with_the_command_killed_outright(start):
+    if start == "popen":
+        body = ("from tespike.cosim import children\n"
+                "p = children.popen(['sleep', '30'])\n"
+                "print(p.pid, flush=True)\n"
+                "p.wait()\n")
+    else:                                   # run() blocks: the tool prints its own pid
+        body = ("from tespike.cosim import children\n"
+                "children.run(['sh', '-c', 'echo $$; exec sleep 30'])\n")
+    assert not _kill_command_and_watch(body)
+
+
+def test_a_proof_worker_ends_with_the_command_killed_outright():
+    """``tespike prove --workers N``'s pool: each worker asks to end with the command."""
+    body = ("import multiprocessing, os, time\n"
+            "from concurrent.futures import ProcessPoolExecutor\n"
+            "from tespike.cosim.children import end_with_parent\n"
+            "def task():\n"
+            "    print(os.getpid(), flush=True)\n"
+            "    time.sleep(30)\n"
+            "pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context('fork'),\n"
+            "                           initializer=end_with_parent, initargs=(os.getpid(),))\n"
+            "pool.submit(task).result()\n")
+    assert not _kill_command_and_watch(body)
+
+
+def test_a_child_whose_parent_is_already_gone_leaves():
+    """The request comes after the fork: a child whose parent went in between leaves at once."""
+    body = ("import os, sys\n"
+            "from tespike.cosim.children import end_with_parent\n"
+            "end_with_parent(os.getppid() + 1 if os.getppid() != 1 else 2)\n"
+            "print('still here')\n")
+    done = subprocess.run([sys.executable, "-c", body], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1 and done.stdout == ""
