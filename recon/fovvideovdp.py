@@ -18,15 +18,13 @@ Licence: pyfvvdp is CC BY-NC 4.0 (non-commercial), unlike this MIT project.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
 
 from tespike.golden.errors import InputError
 from tespike.golden.resources import require_memory
 from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay
-from tespike.recon.metrics import as_frames, frame_peaks, frame_stacks
+from tespike.recon.metrics import as_frames, display_peak, frame_stacks
 
 #: Memory per pixel of one frame pyfvvdp judges (measured: about 220 bytes at 2048 x 2048).
 BYTES_PER_PIXEL = 256
@@ -62,12 +60,7 @@ def fovvideovdp(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY, p
     K, H, W = rshape
     if K == 0 or H < 2 or W < 2:
         raise InputError(f"FovVideoVDP needs frames of at least 2 x 2 pixels, got shape {rshape}")
-    if peak is None:
-        peak = float(frame_peaks(reference, K, H, W, device).max())
-        if peak <= 0:
-            raise InputError("the reference is all zero: it has no peak to show on the display")
-    elif not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
-        raise InputError(f"peak = {peak!r}: must be a finite number > 0")
+    peak = display_peak(reference, peak, K, H, W, device)
     require_memory(H * W * BYTES_PER_PIXEL, f"FovVideoVDP of {H} x {W} frames")
     metric = _metric(display, device)
     values = np.empty(K, dtype=np.float64)

@@ -53,7 +53,7 @@ import torch
 from tespike.golden.errors import InputError
 from tespike.golden.resources import require_memory
 from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay
-from tespike.recon.metrics import as_frames, frame_peaks, frame_stacks, pu21_encode
+from tespike.recon.metrics import as_frames, display_peak, frame_stacks, pu21_encode
 
 N_SCALES = 5
 N_ORIENTATIONS = 4
@@ -167,12 +167,7 @@ def hdr_vqm_scores(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY
     K, H, W = rshape
     if K == 0 or H == 0 or W == 0:
         raise InputError(f"HDR-VQM needs at least one pixel, got frames of shape {rshape}")
-    if peak is None:
-        peak = float(frame_peaks(reference, K, H, W, device).max())
-        if peak <= 0:
-            raise InputError("the reference is all zero: it has no peak to show on the display")
-    elif not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
-        raise InputError(f"peak = {peak!r}: must be a finite number > 0")
+    peak = display_peak(reference, peak, K, H, W, device)
     per_fft = max(1, FFT_PIXELS // (H * W))
     require_memory(H * W * (BYTES_PER_PIXEL + BYTES_PER_FFT_PIXEL * per_fft),
                    f"HDR-VQM of {H} x {W} frames")

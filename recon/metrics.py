@@ -87,8 +87,7 @@ def normalise(pred: torch.Tensor, gt: torch.Tensor, peak=None) -> tuple[torch.Te
             raise InputError(f"ground-truth frame {frame} is all zero: its peak cannot normalise "
                              "(pass peak= explicitly)")
     else:
-        if not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
-            raise InputError(f"peak = {peak!r}: must be a finite number > 0")
+        check_peak(peak)
         if gt.numel() and float(gt.max()) > peak:
             raise InputError(f"peak = {peak!r} is below the ground truth's maximum {float(gt.max())!r}: "
                              "the ground truth would be clipped")
@@ -172,6 +171,24 @@ def frame_stacks(estimate, reference, metric: str):
     return estimate, reference, single, rshape
 
 
+def check_peak(peak) -> None:
+    """Refuse a given ``peak`` (the light a metric takes as the top of its range) unless a finite number > 0."""
+    if not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
+        raise InputError(f"peak = {peak!r}: must be a finite number > 0")
+
+
+def display_peak(reference, peak, K: int, H: int, W: int, device) -> float:
+    """The reference light a display metric (HDR-VQM, FovVideoVDP) shows at the display's peak:
+    ``peak`` when given, else the reference's maximum over all its K frames (refused if all zero)."""
+    if peak is None:
+        peak = float(frame_peaks(reference, K, H, W, device).max())
+        if peak <= 0:
+            raise InputError("the reference is all zero: it has no peak to show on the display")
+    else:
+        check_peak(peak)
+    return peak
+
+
 def frame_peaks(gt, K: int, H: int, W: int, device) -> torch.Tensor:
     """Per-frame maximum of the ground truth, computed band by band."""
     peaks = torch.empty(K, dtype=torch.float64, device=device)
@@ -219,8 +236,7 @@ def _banded(pred, gt, stat, *, halo: int = 0, peak=None, normalised: bool = True
                 raise InputError(f"ground-truth frame {frame} is all zero: its peak cannot normalise "
                                  "(pass peak= explicitly)")
         else:
-            if not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
-                raise InputError(f"peak = {peak!r}: must be a finite number > 0")
+            check_peak(peak)
             scales = torch.full((K,), float(peak), dtype=torch.float64, device=device)
     out_rows = H - 2 * halo
     frames_per = max(1, CHUNK_PIXELS // max(1, out_rows * W))

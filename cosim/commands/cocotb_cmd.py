@@ -4,15 +4,14 @@ Drives only the SPEC section 6 ports and compares every word with the golden
 model (:mod:`tespike.cosim.cocotb_bench`); one line per simulator, exit 1 if any fails.
 """
 
-from .common import add_config_argument
+from .common import add_array_arguments, add_config_argument
 
 HELP = "check the array Verilog with the cocotb testbench (golden model as scoreboard) in Icarus / Verilator / ..."
 
 
 def add_arguments(parser):
     add_config_argument(parser)
-    parser.add_argument("--height", required=True, type=int, help="pixel rows H >= 1")
-    parser.add_argument("--width", required=True, type=int, help="pixel columns W >= 1")
+    add_array_arguments(parser, lanes_use=" (its beats checked against the golden model's words in beat order)")
     parser.add_argument("--simulator", nargs="+", default=["icarus", "verilator"],
                         help="cocotb simulator names (default: icarus verilator; any cocotb knows, "
                              "e.g. questa, xcelium, vcs)")
@@ -22,8 +21,6 @@ def add_arguments(parser):
                                            "(default: --readouts intervals of a mixed Poisson stimulus)")
     parser.add_argument("--readouts", type=int, default=3, help="readout intervals of the default stimulus")
     parser.add_argument("--seed", type=int, default=0, help="seed of the default stimulus")
-    parser.add_argument("--lanes", type=int, help="test the streaming top (tespike verilog --lanes N): "
-                                                  "its beats against the golden model's words in beat order")
     parser.add_argument("--resets", help="also reset mid-run: 'sweep' (rst at every phase of an interval "
                                          "and of its beats, charge flowing throughout) or R.npy (one 0/1 per "
                                          "stimulus clock); each segment is checked from zero state")

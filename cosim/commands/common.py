@@ -11,6 +11,18 @@ def add_config_argument(parser, *, required: bool = True, default: str | None = 
                         help=CONFIG_HELP + (f" (default {default})" if default else ""))
 
 
+def add_array_arguments(parser, *, required: bool = True, what: str = "", lanes_use: str = "") -> None:
+    """``--height``, ``--width`` and ``--lanes``: the generated pixel array and which top (SPEC section 6) a
+    command writes, synthesises or tests; ``what`` ends the size help (a limit, or what else it needs),
+    ``lanes_use`` says what the command does with the streaming top."""
+    parser.add_argument("--height", required=required, type=int, default=None, help=f"pixel rows H >= 1{what}")
+    parser.add_argument("--width", required=required, type=int, default=None, help=f"pixel columns W >= 1{what}")
+    parser.add_argument("--lanes", type=int, default=None,
+                        help="the streaming top (SPEC section 6): N words per beat in raster order, "
+                             "N >= ceil(H * W / L) so one interval's beats fit in one readout interval"
+                             f"{lanes_use}; without it the parallel top")
+
+
 def add_light_arguments(parser, *, out_help: str, seed_help: str, no_noise_help: str) -> None:
     """The light front end of ``simulate`` and ``stimulus``: config, scene, out, seed, dark current, noise."""
     add_config_argument(parser)

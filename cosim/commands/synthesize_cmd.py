@@ -12,7 +12,7 @@ counts the same toggles in an Icarus VCD of the generated text and refuses the r
 block differs.
 """
 
-from .common import add_config_argument
+from .common import add_array_arguments, add_config_argument
 
 HELP = ("Yosys generic synthesis (hierarchy kept) of a generated top or a Verilog file: cells, "
         "flip-flops and transistors per block, time and peak memory")
@@ -20,11 +20,7 @@ HELP = ("Yosys generic synthesis (hierarchy kept) of a generated top or a Verilo
 
 def add_arguments(parser):
     add_config_argument(parser, required=False)
-    parser.add_argument("--height", type=int, default=None, help="pixel rows H >= 1 (with --config)")
-    parser.add_argument("--width", type=int, default=None, help="pixel columns W >= 1 (with --config)")
-    parser.add_argument("--lanes", type=int, default=None,
-                        help="the streaming top with N lanes (as tespike verilog --lanes); "
-                             "without it the parallel top")
+    add_array_arguments(parser, required=False, what=" (with --config)")
     parser.add_argument("--verilog", default=None, help="A.v: synthesise this file instead of a generated top")
     parser.add_argument("--top", default=None, help="top module of --verilog (default: the one not instantiated)")
     parser.add_argument("--stimulus", default=None,

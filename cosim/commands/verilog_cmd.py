@@ -1,6 +1,6 @@
 """``tespike verilog``: Verilog of an H x W TE or ML pixel array (SPEC section 6)."""
 
-from .common import add_config_argument
+from .common import add_array_arguments, add_config_argument
 
 HELP = ("write the Verilog of an H x W pixel array (top te_pixel_array / ml_pixel_array; "
         "with --lanes N the streaming top te_pixel_array_stream / ml_pixel_array_stream)")
@@ -19,11 +19,7 @@ MAX_STREAM_PIXELS = 1 << 18
 
 def add_arguments(parser):
     add_config_argument(parser)
-    parser.add_argument("--height", required=True, type=int, help="pixel rows H >= 1 (H x W <= 65536)")
-    parser.add_argument("--width", required=True, type=int, help="pixel columns W >= 1 (H x W <= 65536)")
-    parser.add_argument("--lanes", type=int, default=None,
-                        help="streaming readout (SPEC section 6): N words per beat, raster order; "
-                             "N >= ceil(H * W / L) so one interval's beats fit in one readout interval")
+    add_array_arguments(parser, what=" (H x W <= 65536; 262144 with --lanes)")
     parser.add_argument("--out", required=True, help="A.v to write")
 
 

@@ -100,6 +100,18 @@ class _Asserts:
         return text, messages
 
 
+def _proof_top(charge_bits: int) -> str:
+    """The header of an equivalence harness: ``proof_top`` with the free inputs every clock."""
+    return f"module proof_top (input wire clk, input wire rst, input wire [{charge_bits - 1}:0] charge);\n"
+
+
+def _on_inputs(module: str, name: str, **outputs: str) -> str:
+    """An instance of ``module`` (the top under proof or the SPEC reference) on the harness's free
+    ``clk``, ``rst`` and ``charge``, each of its ``outputs`` (port=net) on a net of the harness."""
+    pins = "".join(f", .{port}({net})" for port, net in outputs.items())
+    return f"  {module} {name} (.clk(clk), .rst(rst), .charge(charge){pins});\n"
+
+
 def _assemble(parts: list[str], body_head: str, asserts: _Asserts, body_tail: str = "") -> tuple[str, dict]:
     prefix = "\n".join(parts) + "\n" + body_head
     text, messages = asserts.render(prefix.count("\n") + 1)
@@ -112,13 +124,11 @@ def parallel_harness(config: SensorConfig, height: int, width: int, design: str 
     c = config.check()
     P, E, wd = height * width, c.input_bits, c.word_bits
     design = design_text(c, height, width, None) if design is None else design
-    head = (f"module proof_top (input wire clk, input wire rst, input wire [{P * E - 1}:0] charge);\n"
-            f"  wire dut_valid;\n  wire [{P * wd - 1}:0] dut_frame;\n"
-            f"  {top_name(c, None)} dut (.clk(clk), .rst(rst), .charge(charge), "
-            f".frame_valid(dut_valid), .frame(dut_frame));\n"
-            f"  wire done, ref_valid;\n  wire [{P * wd - 1}:0] words, ref_frame;\n"
-            f"  spec_reference ref (.clk(clk), .rst(rst), .charge(charge), .done(done), .words(words), "
-            f".frame_valid(ref_valid), .frame(ref_frame));\n")
+    head = (_proof_top(P * E) + f"  wire dut_valid;\n  wire [{P * wd - 1}:0] dut_frame;\n"
+            + _on_inputs(top_name(c, None), "dut", frame_valid="dut_valid", frame="dut_frame")
+            + f"  wire done, ref_valid;\n  wire [{P * wd - 1}:0] words, ref_frame;\n"
+            + _on_inputs("spec_reference", "ref", done="done", words="words", frame_valid="ref_valid",
+                         frame="ref_frame"))
     a = _Asserts()
     a.add("dut_valid == ref_valid", "frame_valid on the reference's clocks (latency, reset, one per interval)")
     a.add("!ref_valid || dut_frame == ref_frame", "frame equals the reference's words while frame_valid")
@@ -137,20 +147,18 @@ def stream_harness(config: SensorConfig, height: int, width: int, lanes: int, de
     bb = max(1, B.bit_length())
     ab = (2 * L + 2).bit_length()
     design = design_text(c, height, width, n) if design is None else design
-    head = (f"module proof_top (input wire clk, input wire rst, input wire [{P * E - 1}:0] charge);\n"
-            f"  wire out_valid, out_first;\n  wire [{n * wd - 1}:0] out_words;\n"
-            f"  {top_name(c, n)} dut (.clk(clk), .rst(rst), .charge(charge), .out_valid(out_valid), "
-            f".out_first(out_first), .out_words(out_words));\n"
-            f"  wire done, ref_valid, ref_first, ref_fv;\n"
+    head = (_proof_top(P * E) + f"  wire out_valid, out_first;\n  wire [{n * wd - 1}:0] out_words;\n"
+            + _on_inputs(top_name(c, n), "dut", out_valid="out_valid", out_first="out_first", out_words="out_words")
+            + f"  wire done, ref_valid, ref_first, ref_fv;\n"
             f"  wire [{P * wd - 1}:0] words, ref_frame;\n  wire [{n * wd - 1}:0] ref_words, beat_words;\n"
             # the contract monitor: a queue of the intervals whose words are outstanding
             f"  reg q0v = 0, q1v = 0;\n  reg [{P * wd - 1}:0] q0w = 0, q1w = 0;\n"
             f"  reg [{ab - 1}:0] age0 = 0, age1 = 0;  // clocks since the interval's last edge\n"
             f"  reg [{bb - 1}:0] sent = 0;            // beats of the head interval seen\n"
-            f"  spec_reference ref (.clk(clk), .rst(rst), .charge(charge), .done(done), .words(words), "
-            f".frame_valid(ref_fv), .frame(ref_frame), .out_valid(ref_valid), .out_first(ref_first), "
-            f".out_words(ref_words), .beat_index(sent), .beat_source(q0w), .beat_words(beat_words));\n"
-            f"  wire pop = out_valid && q0v && sent == {bb}'d{B - 1};\n"
+            + _on_inputs("spec_reference", "ref", done="done", words="words", frame_valid="ref_fv",
+                         frame="ref_frame", out_valid="ref_valid", out_first="ref_first", out_words="ref_words",
+                         beat_index="sent", beat_source="q0w", beat_words="beat_words")
+            + f"  wire pop = out_valid && q0v && sent == {bb}'d{B - 1};\n"
             f"  wire hv = pop ? q1v : q0v;\n"
             f"  wire [{ab - 1}:0] top_age = {ab}'d{2 * L + 1};\n"
             f"  always @(posedge clk)\n"

@@ -31,66 +31,42 @@ from typing import ClassVar
 import torch
 from torch import nn
 
-from ..learning.align import PyramidAlign
 from ..learning.layers import conv3
 from ..learning.mulaw import compress_
-from ..learning.sizes import SizesMixin, SubstreamSizes
-from ..pictures import MU
 from ..reach import Support, support, union
-from .common import AlignedBaseline, ResBlock, check_input
+from .common import AlignedBaseline, BaselineSizes, BaselineWindows, ResBlock
 from .represent import firing_rates
 
 
 @dataclasses.dataclass(frozen=True)
-class BSFSizes(SizesMixin, SubstreamSizes):
+class BSFSizes(BaselineSizes, BaselineWindows):
     """Every size of BSF.
 
     ``substreams`` sub-spans of ``window`` readouts ``stride`` apart (span 61);
     ``orders``: firing-rate orders (spikes spanned; order 1 is the inverse
     of the spike interval); ``threshold``: light x readouts per virtual spike
     (scene units; 1 = one spike per readout at the design light);
-    ``channels``; ``blocks``: dilated residual blocks of the encoder
-    (dilations 1, 2, 1, 2, ...); ``recon_blocks``; ``levels``, ``dcn_kernel``,
-    ``offset_groups``, ``max_offset``: the pyramid alignment;
+    ``blocks``: dilated residual blocks of the encoder (dilations 1, 2, 1, 2, ...);
     ``attention_radius``: the local cross-attention's neighbourhood is
-    (2 r + 1)^2 pixels of each level; ``unshuffle``; ``mu``.
+    (2 r + 1)^2 pixels of each level; the rest: :class:`BaselineSizes`.
     """
 
-    PRESETS: ClassVar[dict] = {
-        "cpu": {"unshuffle": 4, "channels": 16, "blocks": 2, "recon_blocks": 1, "offset_groups": 1},
-        "paper": {"unshuffle": 1, "channels": 64, "blocks": 4, "recon_blocks": 3, "offset_groups": 4},
-    }
+    PAPER: ClassVar[dict] = {"unshuffle": 1, "channels": 64, "blocks": 4, "recon_blocks": 3, "offset_groups": 4}
     LABEL: ClassVar[str] = "bsf"
 
-    substreams: int = 5
-    window: int = 21
-    stride: int = 10
     orders: tuple[int, ...] = (1, 4, 16)
     threshold: float = 1.0
-    unshuffle: int = 4
-    channels: int = 16
     blocks: int = 2
-    recon_blocks: int = 1
-    levels: int = 3
-    dcn_kernel: int = 3
-    offset_groups: int = 1
-    max_offset: float = 8.0
     attention_radius: int = 2
-    mu: float = MU
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         self._need_substreams("sub-span")
-        self._need_ints("unshuffle", "channels", "levels", "dcn_kernel", "offset_groups", "attention_radius")
-        self._need_ints("blocks", "recon_blocks", least=0)
-        self._need("dcn_kernel", self.dcn_kernel % 2 == 1, "odd")
+        self._need_ints("attention_radius")
+        self._need_ints("blocks", least=0)
         self._need("orders", isinstance(self.orders, tuple) and len(self.orders) >= 1
                    and all(type(k) is int and k >= 1 for k in self.orders), "a tuple of integers >= 1")
-        self._need("channels", self.channels % self.offset_groups == 0, "a multiple of offset_groups")
-        self._need_positive("threshold", "max_offset", "mu")
-
-    @property
-    def pyramid_factor(self) -> int:
-        return self.unshuffle << (self.levels - 1)
+        self._need_positive("threshold")
 
 
 class MultiOrderEncoder(nn.Module):
@@ -129,25 +105,16 @@ class BSF(AlignedBaseline):
     """(N, 61, H, W) decoded light -> (N, 1, H, W) light at the key moment (readout 30)."""
 
     def __init__(self, sizes: BSFSizes = BSFSizes()):
-        super().__init__()
-        self.sizes = s = sizes
-        c = s.channels
-        self.encoder = MultiOrderEncoder(s)
-        self.build_tail(PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset, cascade=True,
-                                     attention_radius=s.attention_radius), s.substreams)
+        super().__init__(sizes)
+        self.encoder = MultiOrderEncoder(sizes)
+        self.build_tail(sizes.substreams, attention_radius=sizes.attention_radius)
 
-    def forward(self, light: torch.Tensor, inside: torch.Tensor | None, spike_light: float) -> torch.Tensor:
-        """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
-        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/learning/head.py."""
+    def features(self, light: torch.Tensor) -> torch.Tensor:
+        """Multi-order firing rates, mu-law compressed, encoded per sub-span: (N, S, C, h, w)."""
         s = self.sizes
-        check_input(light, s.span, s.pyramid_factor)
         rates = firing_rates(light, s.orders, s.threshold)                    # (N, orders, span, H, W)
-        code = compress_(rates, s.mu)                                           # in place (no gradient)
-        feats = self.encoder(code)
-        return self.tail(feats, light, inside, spike_light)
+        return self.encoder(compress_(rates, s.mu))                             # compressed in place (no gradient)
 
-    def support(self, light: Support) -> Support:
-        """:meth:`forward` on supports (the firing rates are per pixel)."""
-        feats = self.encoder.support(light)
-        return self.tail_support(feats, light)
-
+    def features_support(self, light: Support) -> Support:
+        """:meth:`features` on supports (the firing rates are per pixel)."""
+        return self.encoder.support(light)

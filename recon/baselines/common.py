@@ -1,4 +1,4 @@
-"""What the three learned baselines share: input checks, centred windows, residual blocks, and their tail.
+"""What the three learned baselines share: input checks, windows, residual blocks, their tail and its sizes.
 
 Every baseline takes the project's one stream format into learned methods,
 (N, span, H, W) decoded light in scene units (``tespike.recon.stream.decode_light``),
@@ -16,12 +16,15 @@ stably on HDR scenes.
 
 from __future__ import annotations
 
+import dataclasses
+
 import torch
 from torch import nn
 
 from ..learning.align import PyramidAlign
 from ..learning.head import BlendHead
 from ..learning.layers import conv3
+from ..learning.sizes import PyramidSizes, SubstreamSizes
 from ..reach import Support, support
 
 
@@ -55,29 +58,66 @@ class ResBlock(nn.Module):
         return x.union(support(self.body, x))
 
 
-class AlignedBaseline(nn.Module):
-    """A baseline's tail: (N, S, C, h, w) features, key in the middle -> (N, 1, H, W) light.
+@dataclasses.dataclass(frozen=True)
+class BaselineSizes(PyramidSizes):
+    """The sizes of a baseline's tail (:class:`AlignedBaseline`) beyond :class:`PyramidSizes`:
+    ``offset_groups`` of the alignment's deformable convolutions (channels a multiple of them)
+    and ``recon_blocks``, the residual blocks after fusion."""
 
-    A subclass builds its own feature extraction, then calls :meth:`build_tail`
-    (parts are made in this order: a seeded initialisation depends on it), and
-    ends its ``forward`` and ``support`` with :meth:`tail` and :meth:`tail_support`.
-    Its sizes give ``channels``, ``recon_blocks``, ``unshuffle`` and ``mu``.
+    offset_groups: int = 1
+    recon_blocks: int = 1
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._need_ints("offset_groups")
+        self._need_ints("recon_blocks", least=0)
+        self._need("channels", self.channels % self.offset_groups == 0, "a multiple of offset_groups")
+
+
+@dataclasses.dataclass(frozen=True)
+class BaselineWindows(SubstreamSizes):
+    """The windows Spk2ImgNet and BSF read: 5 of 21 readouts, 10 apart (61 readouts, the TE
+    paper's variant of both, the key window in the middle)."""
+
+    substreams: int = 5
+    window: int = 21
+    stride: int = 10
+
+
+class AlignedBaseline(nn.Module):
+    """A baseline: (N, span, H, W) decoded light -> (N, 1, H, W) light at the key moment (readout span // 2).
+
+    A subclass reads the light into (N, S, C, h, w) features, the key's in the middle, its own
+    way: it builds those parts after ``super().__init__(sizes)``, then calls :meth:`build_tail`
+    (parts are made in this order: a seeded initialisation depends on it), and defines
+    ``features(light)`` and, on supports, ``features_support(light)``. The rest is the tail
+    all three share (align, fuse, reconstruct, head). Its sizes are a :class:`BaselineSizes`
+    with ``span``.
     """
 
-    def build_tail(self, align: PyramidAlign, count: int) -> None:
-        """``align``: the method's pyramid alignment; ``count``: the sub-streams' features it aligns."""
+    def __init__(self, sizes: BaselineSizes):
+        super().__init__()
+        self.sizes = sizes
+
+    def build_tail(self, count: int, **align_parts) -> None:
+        """``count``: the sub-streams' features to align; ``align_parts``: the method's own parts of
+        its cascaded pyramid alignment (:class:`tespike.recon.learning.align.PyramidAlign`)."""
         s, c = self.sizes, self.sizes.channels
-        self.align = align
+        self.align = PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset, cascade=True,
+                                  **align_parts)
         self.fuse = nn.Sequential(nn.Conv2d(count * c, c, 1), nn.LeakyReLU(0.1))
         self.reconstruct = nn.Sequential(*[ResBlock(c) for _ in range(s.recon_blocks)])
         self.head = BlendHead(c, s.unshuffle, s.mu)
 
-    def tail(self, feats: torch.Tensor, light: torch.Tensor, inside: torch.Tensor | None,
-             spike_light: float) -> torch.Tensor:
-        """Align, fuse, reconstruct, head (``inside``, ``spike_light``: the head's)."""
+    def forward(self, light: torch.Tensor, inside: torch.Tensor | None, spike_light: float) -> torch.Tensor:
+        """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
+        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/learning/head.py."""
+        check_input(light, self.sizes.span, self.sizes.pyramid_factor)
+        feats = self.features(light)
         fused = self.reconstruct(self.fuse(self.align(feats).flatten(1, 2)))
         return self.head(fused, light, inside, spike_light)
 
-    def tail_support(self, feats: Support, light: Support) -> Support:
-        """:meth:`tail` on supports."""
-        return self.head.support(support(self.reconstruct, support(self.fuse, self.align.support(feats))), light)
+    def support(self, light: Support) -> Support:
+        """:meth:`forward` on supports."""
+        feats = self.align.support(self.features_support(light))
+        return self.head.support(support(self.reconstruct, support(self.fuse, feats)), light)

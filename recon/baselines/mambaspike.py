@@ -41,12 +41,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ..learning.align import PyramidAlign
 from ..learning.mulaw import compress_
-from ..learning.sizes import SizesMixin
-from ..pictures import MU
 from ..reach import Support, support, union
-from .common import AlignedBaseline, check_input
+from .common import AlignedBaseline, BaselineSizes
 from .represent import firing_rates
 from .scan import MambaBlock
 
@@ -57,28 +54,23 @@ MSB_PARSINGS = 3
 
 
 @dataclasses.dataclass(frozen=True)
-class MambaSpikeSizes(SizesMixin):
+class MambaSpikeSizes(BaselineSizes):
     """Every size of MambaSpike.
 
     ``span``-readout input (``readouts``, odd; 61); ``parsings``: parsing
     branches (1 for TE, as the TE paper; more for ML); ``temporal_patch``:
     readouts per temporal token (odd); ``moments`` token features ``moment_stride``
-    tokens apart go to the alignment; ``channels``; ``expand``, ``state``,
-    ``head_dim``, ``chunk``: the Mamba blocks (inner width expand x channels,
-    state size, channels per decay head, scan chunk); ``temporal_blocks``,
+    tokens apart go to the alignment; ``expand``, ``state``, ``head_dim``,
+    ``chunk``: the Mamba blocks (inner width expand x channels, state size,
+    channels per decay head, scan chunk); ``temporal_blocks``,
     ``spatial_blocks``; ``scan_window``: side of a spatial scan window
-    (pixels at 1 / unshuffle); ``levels``, ``dcn_kernel``, ``offset_groups``,
-    ``max_offset``, ``filter_kernel``: the pyramid alignment and its adaptive
-    filter; ``recon_blocks``; ``threshold``: the interval's virtual spike
-    (scene units x readouts); ``unshuffle``; ``mu``.
+    (pixels at 1 / unshuffle); ``filter_kernel``: the alignment's adaptive
+    filter; ``threshold``: the interval's virtual spike (scene units x
+    readouts); the rest: :class:`BaselineSizes`.
     """
 
-    PRESETS: ClassVar[dict] = {
-        "cpu": {"unshuffle": 4, "channels": 16, "temporal_patch": 5, "moment_stride": 3, "chunk": 13,
-                "temporal_blocks": 1, "spatial_blocks": 1, "recon_blocks": 1},
-        "paper": {"unshuffle": 2, "channels": 96, "state": 16, "temporal_patch": 1, "moment_stride": 10,
-                  "temporal_blocks": 4, "spatial_blocks": 4, "recon_blocks": 1, "offset_groups": 8},
-    }
+    PAPER: ClassVar[dict] = {"unshuffle": 2, "channels": 96, "state": 16, "temporal_patch": 1, "moment_stride": 10,
+                             "temporal_blocks": 4, "spatial_blocks": 4, "recon_blocks": 1, "offset_groups": 8}
     LABEL: ClassVar[str] = "mambaspike"
 
     readouts: int = 61
@@ -86,8 +78,6 @@ class MambaSpikeSizes(SizesMixin):
     temporal_patch: int = 5
     moments: int = 5
     moment_stride: int = 3
-    unshuffle: int = 4
-    channels: int = 16
     expand: int = 2
     state: int = 8
     head_dim: int = 8
@@ -95,28 +85,21 @@ class MambaSpikeSizes(SizesMixin):
     temporal_blocks: int = 1
     spatial_blocks: int = 1
     scan_window: int = 8
-    levels: int = 3
-    dcn_kernel: int = 3
-    offset_groups: int = 1
-    max_offset: float = 8.0
     filter_kernel: int = 3
-    recon_blocks: int = 1
     threshold: float = 1.0
-    mu: float = MU
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         self._need_ints("readouts", "parsings", "temporal_patch", "moments", "moment_stride",
-                        "unshuffle", "channels", "expand", "state", "head_dim", "chunk", "scan_window",
-                        "levels", "dcn_kernel", "offset_groups", "filter_kernel")
-        self._need_ints("temporal_blocks", "spatial_blocks", "recon_blocks", least=0)
-        for key in ("readouts", "temporal_patch", "moments", "dcn_kernel", "filter_kernel"):
+                        "expand", "state", "head_dim", "chunk", "scan_window", "filter_kernel")
+        self._need_ints("temporal_blocks", "spatial_blocks", least=0)
+        for key in ("readouts", "temporal_patch", "moments", "filter_kernel"):
             self._need(key, getattr(self, key) % 2 == 1, "odd (centred on the key moment)")
         self._need("moment_stride", (self.moments // 2) * self.moment_stride <= self.tokens // 2,
                    f"such that the moments lie within the {self.tokens} tokens")
-        self._need("channels", self.channels % self.offset_groups == 0, "a multiple of offset_groups")
         self._need("head_dim", (self.expand * self.channels) % self.head_dim == 0,
                    "a divisor of expand x channels")
-        self._need_positive("max_offset", "threshold", "mu")
+        self._need_positive("threshold")
 
     @classmethod
     def for_camera(cls, name: str, config):
@@ -246,32 +229,24 @@ class MambaSpike(AlignedBaseline):
     """(N, 61, H, W) decoded light -> (N, 1, H, W) light at the key moment (readout 30)."""
 
     def __init__(self, sizes: MambaSpikeSizes = MambaSpikeSizes()):
-        super().__init__()
-        self.sizes = s = sizes
-        c = s.channels
+        super().__init__(sizes)
+        s, c = sizes, sizes.channels
         self.parsings = nn.ModuleList(ParsingBranch(s, 4.0 ** p) for p in range(s.parsings))
         self.merge = nn.Conv2d(s.parsings * c, c, 1) if s.parsings > 1 else None
         self.spatial = nn.Sequential(*[WindowScan(s, columns=bool(i % 2)) for i in range(s.spatial_blocks)])
-        self.build_tail(PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset, cascade=True,
-                                     filter_kernel=s.filter_kernel), s.moments)
+        self.build_tail(s.moments, filter_kernel=s.filter_kernel)
 
-    def forward(self, light: torch.Tensor, inside: torch.Tensor | None, spike_light: float) -> torch.Tensor:
-        """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
-        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/learning/head.py."""
-        s = self.sizes
-        check_input(light, s.span, s.pyramid_factor)
+    def features(self, light: torch.Tensor) -> torch.Tensor:
+        """The parsings' temporal scans, merged, then the spatial scans: (N, moments, C, h, w)."""
         feats = [branch(light) for branch in self.parsings]                 # (N, M, C, h, w) each
         n, m, c, h, w = feats[0].shape
         if self.merge is not None:
             feats = [self.merge(torch.cat(feats, 2).reshape(n * m, -1, h, w)).reshape(n, m, c, h, w)]
-        feats = self.spatial(feats[0].reshape(n * m, c, h, w)).reshape(n, m, c, h, w)
-        return self.tail(feats, light, inside, spike_light)
+        return self.spatial(feats[0].reshape(n * m, c, h, w)).reshape(n, m, c, h, w)
 
-    def support(self, light: Support) -> Support:
-        """:meth:`forward` on supports."""
+    def features_support(self, light: Support) -> Support:
+        """:meth:`features` on supports."""
         feats = union(*(branch.support(light) for branch in self.parsings))
         if self.merge is not None:
             feats = support(self.merge, feats)
-        feats = support(self.spatial, feats)
-        return self.tail_support(feats, light)
-
+        return support(self.spatial, feats)

@@ -31,64 +31,36 @@ from typing import ClassVar
 import torch
 from torch import nn
 
-from ..learning.align import PyramidAlign
 from ..learning.layers import conv3
 from ..learning.mulaw import compress
-from ..learning.sizes import SizesMixin, SubstreamSizes
-from ..pictures import MU
 from ..reach import Support, support, union
-from .common import AlignedBaseline, ResBlock, centred, check_input
+from .common import AlignedBaseline, BaselineSizes, BaselineWindows, ResBlock, centred
 
 
 @dataclasses.dataclass(frozen=True)
-class Spk2ImgNetSizes(SizesMixin, SubstreamSizes):
+class Spk2ImgNetSizes(BaselineSizes, BaselineWindows):
     """Every size of Spk2ImgNet.
 
     ``substreams`` windows of ``window`` readouts ``stride`` apart (span
     (substreams - 1) * stride + window = 61); ``lengths``: the temporal lengths
-    (odd, <= window) of the adaptive representation; ``channels``: feature
-    width; ``blocks``: residual blocks of feature extraction;
-    ``recon_blocks``: residual blocks after fusion; ``levels``, ``dcn_kernel``,
-    ``offset_groups``, ``max_offset`` (pixels of a level; offsets are
-    max_offset * tanh): the pyramid alignment; ``unshuffle``: frame folding;
-    ``mu``: the mu-law.
+    (odd, <= window) of the adaptive representation; ``blocks``: residual blocks
+    of feature extraction; the rest (feature width, the pyramid alignment, frame
+    folding, the mu-law, the blocks after fusion): :class:`BaselineSizes`.
     """
 
-    PRESETS: ClassVar[dict] = {
-        "cpu": {"unshuffle": 4, "channels": 16, "blocks": 2, "recon_blocks": 1, "offset_groups": 1},
-        "paper": {"unshuffle": 1, "channels": 64, "blocks": 13, "recon_blocks": 10, "offset_groups": 8},
-    }
+    PAPER: ClassVar[dict] = {"unshuffle": 1, "channels": 64, "blocks": 13, "recon_blocks": 10, "offset_groups": 8}
     LABEL: ClassVar[str] = "spk2imgnet"
 
-    substreams: int = 5
-    window: int = 21
-    stride: int = 10
     lengths: tuple[int, ...] = (5, 11, 21)
-    unshuffle: int = 4
-    channels: int = 16
     blocks: int = 2
-    recon_blocks: int = 1
-    levels: int = 3
-    dcn_kernel: int = 3
-    offset_groups: int = 1
-    max_offset: float = 8.0
-    mu: float = MU
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         self._need_substreams("window")
-        self._need_ints("unshuffle", "channels", "levels", "dcn_kernel", "offset_groups")
-        self._need_ints("blocks", "recon_blocks", least=0)
-        self._need("dcn_kernel", self.dcn_kernel % 2 == 1, "odd")
+        self._need_ints("blocks", least=0)
         self._need("lengths", isinstance(self.lengths, tuple) and len(self.lengths) >= 1
                    and all(type(k) is int and k >= 1 and k % 2 == 1 and k <= self.window for k in self.lengths),
                    "a tuple of odd integers from 1 to window")
-        self._need("channels", self.channels % self.offset_groups == 0, "a multiple of offset_groups")
-        self._need_positive("max_offset", "mu")
-
-    @property
-    def pyramid_factor(self) -> int:
-        """H and W must be multiples of this (the fold and the pyramid's halvings)."""
-        return self.unshuffle << (self.levels - 1)
 
 
 class AdaptiveRepresentation(nn.Module):
@@ -122,29 +94,20 @@ class Spk2ImgNet(AlignedBaseline):
     """(N, 61, H, W) decoded light -> (N, 1, H, W) light at the key moment (readout 30)."""
 
     def __init__(self, sizes: Spk2ImgNetSizes = Spk2ImgNetSizes()):
-        super().__init__()
-        self.sizes = s = sizes
-        c = s.channels
-        self.represent = AdaptiveRepresentation(s)
-        self.extract = nn.Sequential(conv3(c, c), nn.LeakyReLU(0.1), *[ResBlock(c) for _ in range(s.blocks)])
-        self.build_tail(PyramidAlign(c, s.levels, s.dcn_kernel, s.offset_groups, s.max_offset, cascade=True),
-                        s.substreams)
+        super().__init__(sizes)
+        c = sizes.channels
+        self.represent = AdaptiveRepresentation(sizes)
+        self.extract = nn.Sequential(conv3(c, c), nn.LeakyReLU(0.1), *[ResBlock(c) for _ in range(sizes.blocks)])
+        self.build_tail(sizes.substreams)
 
-    def forward(self, light: torch.Tensor, inside: torch.Tensor | None, spike_light: float) -> torch.Tensor:
-        """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
-        the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/learning/head.py."""
+    def features(self, light: torch.Tensor) -> torch.Tensor:
+        """Each window's adaptive representation, then residual extraction: (N, S, C, h, w)."""
         s = self.sizes
-        check_input(light, s.span, s.pyramid_factor)
-        n = light.shape[0]
         code = compress(light, s.mu)                                    # the windows are slices of it
         feats = torch.stack([self.represent(code[:, start:start + s.window])
                              for start in range(0, s.substreams * s.stride, s.stride)], 1)
-        feats = self.extract(feats.flatten(0, 1))
-        feats = feats.reshape(n, s.substreams, *feats.shape[1:])
-        return self.tail(feats, light, inside, spike_light)
+        return self.extract(feats.flatten(0, 1)).unflatten(0, feats.shape[:2])
 
-    def support(self, light: Support) -> Support:
-        """:meth:`forward` on supports (windows and the mu-law act per pixel)."""
-        feats = support(self.extract, support(self.represent, light))
-        return self.tail_support(feats, light)
-
+    def features_support(self, light: Support) -> Support:
+        """:meth:`features` on supports (windows and the mu-law act per pixel)."""
+        return support(self.extract, support(self.represent, light))

@@ -1,11 +1,15 @@
-"""What every learned method's sizes dataclass shares: presets by name, JSON round trip, one-line checks.
+"""What every learned method's sizes dataclass shares: presets by name, JSON round trip, one-line checks,
+the sizes of the pyramid alignment and of the sub-streams.
 
-A method's sizes are a frozen dataclass that subclasses :class:`SizesMixin`,
-sets ``PRESETS`` (name -> keyword arguments) and ``LABEL`` (how an error names
-it), and checks itself in ``__post_init__`` with :meth:`SizesMixin._need` and
-friends. The sizes travel in every weights file (``to_dict``), so a file
-written before a field was renamed still loads: :data:`RENAMED` maps the old
-names to the new.
+A method's sizes are a frozen dataclass that subclasses :class:`PyramidSizes`
+(every learned method here aligns features on a pyramid; with
+:class:`SubstreamSizes` where it reads sub-streams), sets ``PAPER`` (the paper's size,
+keyword arguments over the defaults, which are the shipped CPU size) and ``LABEL`` (how an
+error names it), and checks its own fields in ``__post_init__`` after
+``super().__post_init__()`` with :meth:`SizesMixin._need` and friends. The
+sizes travel in every weights file (``to_dict``) and are read back by field
+name, so a file written before a field was renamed still loads: :data:`RENAMED`
+maps the old names to the new.
 """
 
 from __future__ import annotations
@@ -15,15 +19,20 @@ from typing import Any, ClassVar, Mapping
 
 from tespike.golden.errors import InputError
 
+from ..pictures import MU
+
 #: Old field name -> its name now, for sizes read from files written before the rename
 #: (the baselines' ``windows`` / ``step`` are the network's ``substreams`` / ``stride``).
 RENAMED = {"windows": "substreams", "step": "stride"}
+#: The sizes every learned method is built in: ``cpu``, the shipped one (its defaults), and the paper's.
+PRESETS = ("cpu", "paper")
 
 
 class SizesMixin:
     """``preset``, ``to_dict``, ``from_dict`` and checks for a frozen sizes dataclass."""
 
-    PRESETS: ClassVar[dict[str, dict[str, Any]]] = {}
+    #: The paper's size: keyword arguments over the defaults, which are the shipped CPU size.
+    PAPER: ClassVar[dict[str, Any]] = {}
     LABEL: ClassVar[str] = "method"
 
     def _need(self, key: str, ok: bool, rule: str) -> None:
@@ -49,9 +58,10 @@ class SizesMixin:
 
     @classmethod
     def preset(cls, name: str):
-        if name not in cls.PRESETS:
-            raise InputError(f"unknown {cls.LABEL} size {name!r} (known: {', '.join(cls.PRESETS)})")
-        return cls(**cls.PRESETS[name])
+        """The size ``name`` of :data:`PRESETS`: ``cpu`` (the defaults) or ``paper`` (:attr:`PAPER`)."""
+        if name not in PRESETS:
+            raise InputError(f"unknown {cls.LABEL} size {name!r} (known: {', '.join(PRESETS)})")
+        return cls(**cls.PAPER) if name == "paper" else cls()
 
     @classmethod
     def for_camera(cls, name: str, config):
@@ -79,8 +89,9 @@ class SizesMixin:
 @dataclasses.dataclass(frozen=True)
 class SubstreamSizes:
     """The sub-streams a method reads around the key moment (the paper's eq. 4): ``substreams``
-    (odd, the key one in the middle) of ``window`` readouts, their starts ``stride`` apart.
-    A method's sizes inherit these three fields first (with their own defaults)."""
+    (odd, the key one in the middle) of ``window`` readouts, their starts ``stride`` apart. The
+    defaults are the network's, 5 of 13 readouts 12 apart (61 readouts); a method reading other
+    sub-streams redeclares them (the baselines' windows)."""
 
     substreams: int = 5
     window: int = 13
@@ -90,3 +101,30 @@ class SubstreamSizes:
     def span(self) -> int:
         """Readouts seen around the key moment: (substreams - 1) * stride + window."""
         return (self.substreams - 1) * self.stride + self.window
+
+
+@dataclasses.dataclass(frozen=True)
+class PyramidSizes(SizesMixin):
+    """The sizes every learned method here shares: features of ``channels`` at 1 / ``unshuffle`` of
+    the frame (a pixel-unshuffle: no pixel dropped), aligned on a pyramid of ``levels`` levels by
+    deformable convolutions of ``dcn_kernel`` taps a side (odd) whose offsets are at most
+    ``max_offset`` pixels of their level (``max_offset * tanh``: stable training, a finite
+    receptive field, exact tiled inference); ``mu``: the mu-law that compresses the HDR light
+    before the first layer. The defaults are the shipped CPU size."""
+
+    unshuffle: int = 4
+    channels: int = 16
+    levels: int = 3
+    dcn_kernel: int = 3
+    max_offset: float = 8.0
+    mu: float = MU
+
+    def __post_init__(self) -> None:
+        self._need_ints("unshuffle", "channels", "levels", "dcn_kernel")
+        self._need("dcn_kernel", self.dcn_kernel % 2 == 1, "odd")
+        self._need_positive("max_offset", "mu")
+
+    @property
+    def pyramid_factor(self) -> int:
+        """H and W must be multiples of this: the fold and the pyramid's halvings."""
+        return self.unshuffle << (self.levels - 1)
