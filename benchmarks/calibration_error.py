@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
+from benchmarks.plotfile import add_png_arguments, write_plot  # noqa: E402
 from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
 from tespike.golden.fastsim import simulate_scene  # noqa: E402
 from tespike.golden.noise import Sensor, SensorNoise  # noqa: E402
@@ -97,7 +97,6 @@ def main() -> int:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from tespike.recon.pictures import save_figure
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for name in SENSORS:
         seconds = [results[name, k]["seconds"] for k in counts]
@@ -113,9 +112,7 @@ def main() -> int:
         ax.legend()
         ax.grid(True, which="both", alpha=0.3)
     fig.suptitle(f"calibration error against run time (readouts annotated), {args.size} x {args.size} TE")
-    path = png_path(args, NAME)
-    save_figure(fig, path)
-    print(f"wrote {path}")
+    write_plot(fig, args, NAME)
     return 0
 
 

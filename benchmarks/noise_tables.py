@@ -25,7 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
+from benchmarks.plotfile import add_png_arguments, write_plot  # noqa: E402
 from tespike.golden.fastsim import simulate_scene  # noqa: E402
 from tespike.golden.noise import Sensor, SensorNoise, load_noise  # noqa: E402
 from tespike.recon.evaluate import CALIBRATED, METHOD_NAMES, default_noise_sensors, evaluate, paper_configs  # noqa: E402
@@ -93,7 +93,6 @@ def main() -> int:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from tespike.recon.pictures import save_figure
     sweep = sorted([(1.0, "te+eq12")] + [(level, f"te+eq12x{level:g}") for level in levels])
     x = [level for level, _ in sweep]
     fig, ax = plt.subplots(figsize=(8, 5))
@@ -109,9 +108,7 @@ def main() -> int:
            title=f"held-out scenes ({args.frames} x {args.height} x {args.width}): dotted = shot noise only")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, ncol=2)
-    path = png_path(args, NAME)
-    save_figure(fig, path)
-    print(f"wrote {path}")
+    write_plot(fig, args, NAME)
     return 0
 
 

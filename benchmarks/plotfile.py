@@ -24,3 +24,12 @@ def png_path(args, name: str, flag: str = "--png") -> str:
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     setattr(args, attribute, path)
     return path
+
+
+def write_plot(fig, args, name: str, flag: str = "--png") -> str:
+    """Save ``fig`` where :func:`png_path` says and say so on stdout -> the path."""
+    from tespike.recon.pictures import save_figure
+    path = png_path(args, name, flag)
+    save_figure(fig, path)
+    print(f"wrote {path}")
+    return path
