@@ -11,27 +11,30 @@ import numpy as np
 
 def largest_below(bound, budget, hi):
     """Largest m in [0, hi] (to 2^-64 of the bracket) with bound(m) < budget, bound increasing."""
-    lo = 0.0
-    if not bound(np.array([lo]))[0] < budget:
-        return -1.0
-    for _ in range(64):
-        mid = 0.5 * (lo + hi)
-        if bound(np.array([mid]))[0] < budget:
-            lo = mid
-        else:
-            hi = mid
-    return lo
+    ok = _below(bound, budget)
+    return _boundary(ok, 0.0, hi) if ok(0.0) else -1.0
 
 
 def smallest_below(bound, budget, lo):
     """Smallest m >= lo with bound(m) < budget (to 2^-64 of the bracket), bound decreasing."""
+    ok = _below(bound, budget)
     hi = max(2.0 * lo, 1.0)
-    while not bound(np.array([hi]))[0] < budget:
+    while not ok(hi):
         hi *= 2.0
+    return _boundary(ok, hi, lo)
+
+
+def _below(bound, budget):
+    return lambda m: bound(np.array([m]))[0] < budget
+
+
+def _boundary(ok, good, bad):
+    """The point next to the boundary, on ``good``'s side, between ``good`` (ok holds) and
+    ``bad`` (it fails): 64 halvings of the bracket."""
     for _ in range(64):
-        mid = 0.5 * (lo + hi)
-        if bound(np.array([mid]))[0] < budget:
-            hi = mid
+        mid = 0.5 * (good + bad)
+        if ok(mid):
+            good = mid
         else:
-            lo = mid
-    return hi
+            bad = mid
+    return good
