@@ -195,6 +195,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     previous = _install_signal_handlers()
+    if whole_process:                 # removes the run's temporaries should it be killed outright
+        from tespike.golden.atomic import start_janitor
+        start_janitor()
     import warnings
     try:
         with warnings.catch_warnings(record=True) as caught:

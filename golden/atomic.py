@@ -2,18 +2,23 @@
 
 Every writer of the project goes through :func:`atomic_output` (re-exported by
 :mod:`tespike.golden.io`), so a failed or interrupted run never leaves a half-written
-file. Standard library only, below :mod:`tespike.golden.config` and :mod:`tespike.golden.io`,
-which both use it.
+file. A run killed outright (SIGKILL: no handler, no ``finally``) leaves none either:
+each temporary is registered with a small janitor process (:class:`_Janitor`) that
+removes what is still registered once the run is gone. Standard library only, below
+:mod:`tespike.golden.config` and :mod:`tespike.golden.io`, which both use it.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import errno
 import os
 import re
 import shutil
 import stat
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 from typing import Iterator
@@ -32,9 +37,90 @@ _PART_NAME = 100          # characters of the output's name kept in the temporar
 _FINISHED: list[str] = []
 
 
+def start_janitor() -> None:
+    """Start the process that removes this process's temporaries should it be killed outright
+    (:class:`_Janitor`; best effort, started anyway with the first temporary)."""
+    _Janitor.start()
+
+
 def finished_outputs(since: int = 0) -> list[str]:
     """The outputs moved into place whole since the ``since``-th (``len(finished_outputs())`` marks a start)."""
     return _FINISHED[since:]
+
+
+#: The janitor: reads ``+HEX`` (a temporary made) and ``-HEX`` (settled) lines, the paths'
+#: bytes in hex, and once its input ends (the run is over, however it ended) removes every
+#: path still registered. In a session of its own, so a signal to the run's process group
+#: (Ctrl-C, a kill of the group) leaves it to clean up.
+_JANITOR_CODE = r"""
+import os, shutil, sys
+held = set()
+for line in sys.stdin.buffer:
+    line = line.strip()
+    if line[:1] == b"+":
+        held.add(bytes.fromhex(line[1:].decode()))
+    elif line[:1] == b"-":
+        held.discard(bytes.fromhex(line[1:].decode()))
+for path in held:
+    if os.path.isdir(path) and not os.path.islink(path):
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+"""
+
+
+class _Janitor:
+    """This process's janitor (started with its first temporary; a forked child starts its own).
+    Best effort: where it cannot start, temporaries are still removed by ``finally`` and, after
+    a kill, by the next run at that path (:func:`_remove_stale_parts`)."""
+
+    _process: subprocess.Popen | None = None
+    _owner: int | None = None
+
+    @classmethod
+    def start(cls) -> None:
+        """Start this process's janitor now (a command does, before its work): started with
+        the first temporary instead, it could still be starting when a kill comes."""
+        cls._send(b"")
+
+    @classmethod
+    def _send(cls, line: bytes) -> None:
+        if cls._owner != os.getpid():
+            cls._owner, cls._process = os.getpid(), None
+            try:
+                cls._process = subprocess.Popen([sys.executable, "-I", "-S", "-c", _JANITOR_CODE],
+                                                stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                                stderr=subprocess.DEVNULL, start_new_session=True)
+            except OSError:
+                return
+            atexit.register(cls._close)
+        if cls._process is not None and line:
+            try:
+                cls._process.stdin.write(line)
+                cls._process.stdin.flush()
+            except (OSError, ValueError):
+                cls._process = None
+
+    @classmethod
+    def hold(cls, path: str | Path) -> None:
+        """Remove ``path`` if this process ends before :meth:`release`."""
+        cls._send(b"+" + os.fsencode(os.fspath(path)).hex().encode() + b"\n")
+
+    @classmethod
+    def release(cls, path: str | Path) -> None:
+        cls._send(b"-" + os.fsencode(os.fspath(path)).hex().encode() + b"\n")
+
+    @classmethod
+    def _close(cls) -> None:
+        """At a normal exit: end the janitor (nothing is registered any more) and reap it."""
+        process, cls._process = cls._process, None
+        if process is not None and cls._owner == os.getpid():
+            with contextlib.suppress(OSError, ValueError, subprocess.TimeoutExpired):
+                process.stdin.close()
+                process.wait(5)
 
 
 def _umask() -> int:
@@ -113,6 +199,7 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
         os.close(fd)
     except OSError as exc:
         raise _write_error(shown, exc) from None
+    _Janitor.hold(tmp)
     try:
         try:
             yield tmp
@@ -130,6 +217,7 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
     finally:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        _Janitor.release(tmp)
 
 
 def _write_through(tmp: str, target: Path, shown: str) -> None:
@@ -197,6 +285,7 @@ def atomic_folder(path: str | Path, what: str = "--out") -> Iterator[Path]:
         os.chmod(tmp, 0o777 & ~_umask())
     except OSError as exc:
         raise _write_error(shown, exc) from None
+    _Janitor.hold(tmp)
     inside = str(tmp)
     mark = len(_FINISHED)          # files written inside the temporary are not outputs yet
 
@@ -228,3 +317,4 @@ def atomic_folder(path: str | Path, what: str = "--out") -> Iterator[Path]:
         if _FINISHED[mark:] != [shown]:
             del _FINISHED[mark:]
         shutil.rmtree(tmp, ignore_errors=True)
+        _Janitor.release(tmp)

@@ -178,14 +178,16 @@ def _default_signal_dispositions():
         signal.signal(signum, signal.SIG_DFL)
 
 
-def long_rtl_run(folder):
-    """An rtl-sim run with a VCD, long enough to be interrupted while writing."""
+def long_rtl_run(folder, session=False):
+    """An rtl-sim run with a VCD, long enough to be interrupted while writing (``session``: in a
+    session and process group of its own)."""
     np.save(folder / "long.npy", np.full((TINY.clocks_per_readout * 4000, 2, 2), 3, np.uint8))
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     return subprocess.Popen([sys.executable, "-m", "tespike", "rtl-sim", "--config", str(folder / "c.json"),
                              "--stimulus", str(folder / "long.npy"), "--out", str(folder / "w.npz"),
                              "--vcd", str(folder / "w.vcd")], env=env, stderr=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True, preexec_fn=_default_signal_dispositions)
+                            stdout=subprocess.PIPE, text=True, preexec_fn=_default_signal_dispositions,
+                            start_new_session=session)
 
 
 def wait_for_part(folder, process, timeout=120):
@@ -210,19 +212,80 @@ def test_termination_signals_remove_the_temporaries(files, signum):
     assert set(os.listdir(files)) == before | {"long.npy"}
 
 
-def test_temporary_left_by_sigkill_is_removed_by_the_next_run(files):
-    process = long_rtl_run(files)
+def _parts(folder):
+    return [name for name in os.listdir(folder) if name.endswith(".part")]
+
+
+def _gone(folder, timeout=10.0):
+    """Whether the temporaries under ``folder`` are gone within ``timeout`` seconds (the
+    janitor removes them once the killed run's pipe closes: a few milliseconds)."""
+    end = time.monotonic() + timeout
+    while _parts(folder) and time.monotonic() < end:
+        time.sleep(0.02)
+    return not _parts(folder)
+
+
+@pytest.mark.parametrize("group", [False, True], ids=["the command", "its process group"])
+def test_sigkill_leaves_no_temporary(files, group):
+    """Killed outright (no handler runs), alone or with its whole process group: the
+    janitor (golden.atomic) removes the run's temporaries; no output appears."""
+    before = set(os.listdir(files))
+    process = long_rtl_run(files, session=group)
     wait_for_part(files, process)
+    assert all(name.startswith((".w.vcd.", ".w.gtkw.", ".w.npz.")) for name in _parts(files))
+    os.killpg(process.pid, signal.SIGKILL) if group else process.kill()
+    process.communicate()
+    assert _gone(files), _parts(files)
+    assert set(os.listdir(files)) == before | {"long.npy"}
+
+
+def test_sigkill_while_a_results_folder_is_built_keeps_the_previous_one(tmp_path):
+    """``atomic_folder`` (evaluate, demo) killed outright mid-build: the previous results stay
+    whole and the half-built hidden folder goes."""
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "table.md").write_text("previous run")
+    script = ("import os, sys, time\n"
+              "from tespike.golden.atomic import atomic_folder\n"
+              "with atomic_folder(%r) as tmp:\n"
+              "    (tmp / 'table.md').write_text('half')\n"
+              "    print('building', flush=True)\n"
+              "    time.sleep(60)\n") % str(tmp_path / "out")
+    process = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True,
+                               env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert process.stdout.readline() == "building\n"
+    assert _parts(tmp_path)
     process.kill()
     process.communicate()
-    parts = [name for name in os.listdir(files) if name.endswith(".part")]
-    assert parts and all(name.startswith((".w.vcd.", ".w.gtkw.")) for name in parts)
-    assert not (files / "w.vcd").exists()                        # never mistaken for output
+    assert _gone(tmp_path), _parts(tmp_path)
+    assert os.listdir(tmp_path) == ["out"] and (tmp_path / "out" / "table.md").read_text() == "previous run"
+
+
+def test_temporary_left_by_a_killed_run_is_removed_by_the_next_run(files):
+    """Where no janitor could run (power loss, the janitor killed too): the next run at that path
+    removes a temporary whose process is gone, and never takes it for output."""
+    stale = files / ".w.vcd.999999999.abcdefgh.part"
+    stale.write_bytes(b"half a VCD")
     np.save(files / "short.npy", np.zeros((TINY.clocks_per_readout, 1, 1), np.uint8))
     result = run_tespike("rtl-sim", "--config", files / "c.json", "--stimulus", files / "short.npy",
                          "--out", files / "w.npz", "--vcd", files / "w.vcd")
     assert result.returncode == 0, result.stderr
-    assert not [name for name in os.listdir(files) if name.endswith(".part")]
+    assert not _parts(files) and (files / "w.vcd").read_bytes() != b"half a VCD"
+
+
+def test_the_janitor_ends_with_a_run_that_ends_normally(tmp_path):
+    """A run that ends normally leaves no janitor behind (it is reaped at exit)."""
+    script = ("import os\n"
+              "from tespike.golden.atomic import _Janitor, atomic_output\n"
+              "with atomic_output(os.path.join(%r, 'o.bin')) as tmp:\n"
+              "    open(tmp, 'wb').write(b'x')\n"
+              "print(_Janitor._process.pid)\n") % str(tmp_path)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert done.returncode == 0 and done.stderr == "", done.stderr
+    janitor = int(done.stdout)
+    with pytest.raises(ProcessLookupError):
+        os.kill(janitor, 0)
+    assert os.listdir(tmp_path) == ["o.bin"]
 
 
 def test_stale_temporary_of_a_live_process_is_kept(tmp_path):
