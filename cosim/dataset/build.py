@@ -245,13 +245,15 @@ def sequence_graph(store: DatasetStore, source: Source):
 
 
 def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, SensorConfig], seed: int, run, *,
-               chunk_frames: int = CHUNK_FRAMES, tile: tuple[int, int] = TILE, report=None) -> dict:
+               chunk_frames: int = CHUNK_FRAMES, tile: tuple[int, int] = TILE, report=None, notice=None) -> dict:
     """Write every source into the store at ``url`` (made or resumed) with every configuration.
 
     ``run`` is a :class:`tespike.cosim.dataset.cluster.Runner`; ``report(name)`` is
-    called as each sequence completes. Returns counts: ``done`` (sequences
-    written now), ``skipped`` (already complete), ``pixel_readouts`` (simulated
-    now, summed over the streams).
+    called as each sequence completes, ``notice(text)`` for each sequence a resumed
+    store held complete but with a damaged chunk (its CRC-32C fails), which is rebuilt.
+    Returns counts: ``done`` (sequences written now, rebuilt ones included),
+    ``skipped`` (already complete), ``pixel_readouts`` (simulated now, summed over
+    the streams), ``rebuilt`` (names of the damaged sequences rebuilt).
     """
     if type(seed) is not int or seed < 0:
         raise InputError(f"--seed {seed!r} must be an integer >= 0")
@@ -277,6 +279,11 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
             else:
                 graphs.append(graph)
                 pixel_readouts += int(np.prod(source.shape)) * streams
+            damaged = store.rebuilt.get(source.name)
+            if damaged and notice is not None:
+                notice(f"sequence {source.name!r} was complete but chunk {damaged[0]!r}"
+                       f"{f' and {len(damaged) - 1} more' if len(damaged) > 1 else ''} fails its CRC-32C "
+                       "check: rebuilding its array")
         for _, name in run(graphs):
             done += 1
             if report is not None:
@@ -287,7 +294,7 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
                          "the same command resumes it)")
         raise
     return {"done": done, "skipped": skipped, "pixel_readouts": pixel_readouts,
-            "store": os.fspath(url)}
+            "store": os.fspath(url), "rebuilt": sorted(store.rebuilt)}
 
 
 def new_local_store(url: str) -> str | None:
