@@ -160,6 +160,19 @@ def _end_quietly() -> None:
             signal.signal(number, signal.SIG_DFL)
 
 
+#: What a RuntimeError (torch's allocator) or an ImportError (a shared library that could not be
+#: mapped) says when memory, not the program, was at fault.
+OUT_OF_MEMORY = ("can't allocate memory", "not enough memory", "Cannot allocate memory",
+                 "failed to map segment from shared object")
+
+
+def _memory_limit() -> str:
+    """The address-space limit the process runs under, for an out-of-memory line ('' if none)."""
+    import resource
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    return "" if soft == resource.RLIM_INFINITY else f" within the address-space limit (ulimit -v) of {soft >> 20} MB"
+
+
 def _one_line(exc: BaseException, limit: int = 300) -> str:
     text = " ".join(str(exc).split()) or type(exc).__name__
     return text if len(text) <= limit else text[:limit] + "..."
@@ -227,13 +240,13 @@ def _run(args) -> tuple[int, bool]:
         print(f"{prefix}: error:{where} {_one_line(exc.strerror or exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
     except MemoryError:
-        print(f"{prefix}: error: out of memory", file=sys.stderr)
+        print(f"{prefix}: error: out of memory{_memory_limit()}", file=sys.stderr)
         return 1, False
-    except RuntimeError as exc:
-        if "can't allocate memory" in str(exc) or "not enough memory" in str(exc):
-            print(f"{prefix}: error: out of memory ({_one_line(exc, 160)})", file=sys.stderr)
-            return 1, False
-        raise
+    except (RuntimeError, ImportError) as exc:     # torch's failed allocation; a library that cannot be mapped
+        if not any(words in str(exc) for words in OUT_OF_MEMORY):
+            raise
+        print(f"{prefix}: error: out of memory{_memory_limit()} ({_one_line(exc, 160)})", file=sys.stderr)
+        return 1, False
     except KeyboardInterrupt as exc:
         print(f"{prefix}: interrupted{_written(start, exc)}{_notes(exc)}", file=sys.stderr)
         return 130, False

@@ -42,31 +42,93 @@ def check_workers(workers: int | None, scheduler: str | None) -> None:
 #: (sent to the whole foreground group) never reaches its workers (each printed its traceback:
 #: 63 lines for two); it prints the scheduler's address, then runs until its stdin closes,
 #: which happens however this command ends (a SIGKILL included), so no worker outlives it.
+#: A watcher thread reads stdin from the start: a cluster still starting when the command ends
+#: (a start that hangs: with few file handles Dask's scheduler spins for ever), or one that does
+#: not close in 30 s, ends with its whole session at once.
 LOCAL_CLUSTER = """
-import logging, sys
+import logging, os, signal, sys, threading
+started, ended, closed = threading.Event(), threading.Event(), threading.Event()
+def watch():
+    sys.stdin.read()
+    ended.set()
+    if not started.is_set() or not closed.wait(30):
+        os.killpg(0, signal.SIGKILL)
+threading.Thread(target=watch, daemon=True).start()
 from distributed import LocalCluster
 cluster = LocalCluster(n_workers=int(sys.argv[1]), threads_per_worker=1, processes=True, host="127.0.0.1",
                        dashboard_address="127.0.0.1:0", worker_dashboard_address="127.0.0.1:0",
                        silence_logs=logging.CRITICAL)
+started.set()
 print(cluster.scheduler_address, flush=True)
-sys.stdin.read()
+ended.wait()
 cluster.close(timeout=10)
+closed.set()
 """
 #: Seconds a local cluster is given to start, and to stop before its processes are killed.
 START_SECONDS = 120
 STOP_SECONDS = 30
+#: Open files a local cluster's process needs: about this many, plus FILES_PER_WORKER per
+#: worker (measured: 2 workers start with 40 open files, not with 38; 4 with 64, not with 56).
+CLUSTER_FILES = 28
+FILES_PER_WORKER = 8
+#: What a failed start's error output says when the system, not Dask, was short of something.
+STARVED = ("Too many open files", "No space left on device", "File too large", "Cannot allocate memory",
+           "MemoryError", "No usable temporary directory", "failed to map segment")
+
+
+def _check_file_handles(workers: int) -> None:
+    """Refuse a cluster the open-file limit (``ulimit -n``) cannot hold: its start fails a few
+    layers down in Dask ("Nanny failed to start"), or, with very few, hangs."""
+    import resource
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    needed = CLUSTER_FILES + FILES_PER_WORKER * workers
+    if soft != resource.RLIM_INFINITY and soft < needed:
+        raise InputError(f"a local Dask cluster of {workers} worker processes needs about {needed} open files, "
+                         f"but the limit (ulimit -n) is {soft}: raise it or use fewer --workers")
+
+
+def _failed_start(workers: int, returncode, errors: list[str]) -> InputError:
+    """One line for a cluster that did not start: the cause from its error output (the deepest
+    starvation it names, else its last line)."""
+    lines = [line.strip() for line in errors if line.strip()]
+    cause = next((line for line in reversed(lines) if any(word in line for word in STARVED)),
+                 lines[-1] if lines else f"exit status {returncode}")
+    cause = cause.removeprefix("RuntimeError: Cluster failed to start: ")
+    if "No usable temporary directory" in cause:
+        cause = _temporary_directory_fault() or cause
+    return InputError(f"cannot start a local Dask cluster of {workers} worker processes: {cause[:200]}")
+
+
+def _temporary_directory_fault() -> str | None:
+    """Why the temporary directory cannot be written (Python's own message hides the errno)."""
+    import tempfile
+    folder = os.environ.get("TMPDIR") or "/tmp"
+    try:
+        with tempfile.TemporaryFile(dir=folder) as probe:
+            probe.write(b"\0" * 4096)
+            probe.flush()
+            os.fsync(probe.fileno())
+    except OSError as exc:
+        return f"cannot write its temporary directory {folder!r}: {exc.strerror or exc}"
+    return None
 
 
 def _start_local_cluster(workers: int, interrupted):
     """(process, scheduler address) of a local cluster of ``workers`` processes (:data:`LOCAL_CLUSTER`);
     ``interrupted()`` is called while it starts (a Ctrl-C ends the wait at once)."""
+    import collections
     import select
     import subprocess
     import sys
+    import threading
     import time
+    _check_file_handles(workers)
     process = subprocess.Popen([sys.executable, "-c", LOCAL_CLUSTER, str(workers)], stdin=subprocess.PIPE,
-                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                start_new_session=True)
+    errors: collections.deque[str] = collections.deque(maxlen=400)      # its last lines, read as they come
+    reader = threading.Thread(target=lambda: errors.extend(process.stderr), daemon=True)
+    reader.start()
     try:
         end = time.monotonic() + START_SECONDS
         while not select.select([process.stdout], [], [], POLL_SECONDS)[0]:
@@ -78,10 +140,10 @@ def _start_local_cluster(workers: int, interrupted):
     except BaseException:
         _stop_local_cluster(process, at_once=True)
         raise
-    if not address:
-        _stop_local_cluster(process)
-        raise InputError(f"cannot start a local Dask cluster of {workers} worker processes "
-                         f"(exit status {process.returncode})")
+    if not address:                    # it ended: what its start left (half-started workers) goes too
+        _stop_local_cluster(process, at_once=True)
+        reader.join(5)
+        raise _failed_start(workers, process.returncode, list(errors))
     return process, address
 
 
