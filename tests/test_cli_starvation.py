@@ -13,6 +13,7 @@ import pytest
 
 from tests.cli import ROOT, assert_refused
 from tests.test_cli_clean_endings import run_here
+from tests.test_cli_hardening import small_tmpfs
 
 
 def run_limited(code: str, limits: dict, timeout: float = 120) -> subprocess.CompletedProcess:
@@ -54,9 +55,10 @@ def test_an_address_space_too_small_to_start_is_one_line():
     assert done.returncode == 0 and "default" in done.stdout, done.stderr      # room to start: it starts
 
 
-def test_torch_that_cannot_be_mapped_is_out_of_memory_in_one_line(tmp_path):
+def test_torch_without_room_is_out_of_memory_in_one_line(tmp_path):
     """Room for numpy but not for torch: ``reconstruct --method net`` printed the ImportError's traceback
-    ("libtorch_cpu.so: failed to map segment from shared object")."""
+    ("libtorch_cpu.so: failed to map segment from shared object"), or, with a little more room, died of
+    SIGABRT (torch's import throws std::bad_alloc from C++). Torch is now tried in a child first."""
     import numpy as np
     np.save(tmp_path / "e.npy", np.full((240 * 3, 4, 4), 2, np.uint8))
     limit = start_address_space() + (80 << 20)
@@ -64,7 +66,8 @@ def test_torch_that_cannot_be_mapped_is_out_of_memory_in_one_line(tmp_path):
     assert run_limited(ENTRY.format(args=args), {resource.RLIMIT_AS: limit}).returncode == 0
     args = ["reconstruct", "--stream", str(tmp_path / "s.npz"), "--method", "net", "--out", str(tmp_path / "r.npy")]
     done = run_limited(ENTRY.format(args=args), {resource.RLIMIT_AS: limit})
-    assert_refused(done, "tespike reconstruct: error: out of memory within the address-space limit", "failed to map")
+    assert_refused(done, "tespike reconstruct: error: out of memory within the address-space limit",
+                   "torch cannot be loaded: it does not fit in")
     assert not (tmp_path / "r.npy").exists() and not [p for p in os.listdir(tmp_path) if p.endswith(".part")]
 
 
@@ -133,3 +136,44 @@ def test_a_local_cluster_whose_start_hangs_ends_with_the_command(tmp_path):
         except ProcessLookupError:
             pass
         process.wait()
+
+
+def test_a_full_disk_under_the_training_log_names_the_log(capsys, tmp_path):
+    """log.csv is appended through a buffer: the full disk surfaced at its close as an OSError naming
+    no file ("tespike train: error: No space left on device")."""
+    with small_tmpfs(tmp_path / "small", "1m") as mount:
+        (mount / "filler").write_bytes(b"\0" * (os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize))
+        result = run_here(capsys, "train", "--config", "te", "--steps", "1", "--batch", "1", "--crop", "16",
+                          "--workers", "0", "--pool", "1", "--validate-every", "0", "--out", mount / "t.pt")
+        assert_refused(result, f"{str(mount / 't.run' / 'log.csv')!r}", "No space left on device")
+        assert sorted(os.listdir(mount)) == ["filler"]            # no weights, no run folder left
+
+
+def test_a_fault_after_an_output_is_in_place_says_it_is_whole(capsys, monkeypatch, tmp_path):
+    """train writes its weights, then its checkpoint: a full disk at the checkpoint read as if the run
+    had written nothing, over new, whole weights."""
+    import tespike.cosim.commands.scene_cmd as scene_cmd
+    from tespike.golden.io import atomic_output
+
+    def writes_then_fails(args):
+        with atomic_output(tmp_path / "w.pt") as part:
+            open(part, "wb").write(b"weights")
+        raise OSError(28, os.strerror(28), str(tmp_path / "t.run" / "checkpoint.pt"))
+    monkeypatch.setattr(scene_cmd, "run", writes_then_fails)
+    assert_refused(run_here(capsys, "scene", "--list"), "checkpoint.pt", "No space left on device",
+                   f"(after writing {str(tmp_path / 'w.pt')!r} whole)")
+
+
+def test_no_usable_temporary_directory_names_the_folder_and_the_cause(capsys, monkeypatch, tmp_path):
+    """Python's tempfile says "No usable temporary directory found in [...]" whatever the cause (a full
+    disk, a file-size limit): the line now names the folder and the errno's words."""
+    import tespike.cosim.commands.scene_cmd as scene_cmd
+
+    def no_temporary(args):
+        raise FileNotFoundError(2, f"No usable temporary directory found in ['{mount}', '/tmp']")
+    monkeypatch.setattr(scene_cmd, "run", no_temporary)
+    with small_tmpfs(tmp_path / "small", "64k") as mount:
+        (mount / "filler").write_bytes(b"\0" * (os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize))
+        monkeypatch.setenv("TMPDIR", str(mount))
+        assert_refused(run_here(capsys, "scene", "--list"),
+                       f"cannot write a temporary file in {str(mount)!r}: No space left on device")

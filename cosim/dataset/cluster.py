@@ -95,22 +95,9 @@ def _failed_start(workers: int, returncode, errors: list[str]) -> InputError:
                  lines[-1] if lines else f"exit status {returncode}")
     cause = cause.removeprefix("RuntimeError: Cluster failed to start: ")
     if "No usable temporary directory" in cause:
-        cause = _temporary_directory_fault() or cause
+        from tespike.golden.paths import temporary_directory_fault
+        cause = temporary_directory_fault() or cause
     return InputError(f"cannot start a local Dask cluster of {workers} worker processes: {cause[:200]}")
-
-
-def _temporary_directory_fault() -> str | None:
-    """Why the temporary directory cannot be written (Python's own message hides the errno)."""
-    import tempfile
-    folder = os.environ.get("TMPDIR") or "/tmp"
-    try:
-        with tempfile.TemporaryFile(dir=folder) as probe:
-            probe.write(b"\0" * 4096)
-            probe.flush()
-            os.fsync(probe.fileno())
-    except OSError as exc:
-        return f"cannot write its temporary directory {folder!r}: {exc.strerror or exc}"
-    return None
 
 
 def _start_local_cluster(workers: int, interrupted):
