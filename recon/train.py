@@ -23,7 +23,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
-import errno
 import functools
 import math
 import shutil
@@ -34,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from tespike.golden.atomic import NO_ROOM
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.golden.io import atomic_output
@@ -184,10 +184,6 @@ def trim_log(path: Path, step: int) -> None:
             csv.writer(handle).writerows(kept)
 
 
-#: Errors of a write that ran out of room (a full disk, a file-size limit, a quota).
-_NO_ROOM = (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)
-
-
 @contextlib.contextmanager
 def appending(path: Path):
     """A CSV log appended to ``path`` (not replaced: it grows with the run): a write that runs out of
@@ -196,7 +192,7 @@ def appending(path: Path):
         with open(path, "a", newline="") as handle:
             yield handle
     except OSError as exc:
-        if exc.filename is None and exc.errno in _NO_ROOM:
+        if exc.filename is None and exc.errno in NO_ROOM:
             raise OSError(exc.errno, exc.strerror, str(path)) from None
         raise
 

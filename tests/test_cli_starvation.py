@@ -177,3 +177,15 @@ def test_no_usable_temporary_directory_names_the_folder_and_the_cause(capsys, mo
         monkeypatch.setenv("TMPDIR", str(mount))
         assert_refused(run_here(capsys, "scene", "--list"),
                        f"cannot write a temporary file in {str(mount)!r}: No space left on device")
+
+
+@pytest.mark.parametrize("room", [0, 12 * 1024])
+def test_a_full_disk_under_a_dataset_store_names_the_store(capsys, tmp_path, room):
+    """Zarr writes a store's files itself: a full disk was "tespike dataset: error: No space left on
+    device", naming nothing; the half-made store goes, as for any failed first build."""
+    with small_tmpfs(tmp_path / "small", "1m") as mount:
+        (mount / "filler").write_bytes(b"\0" * (os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize - room))
+        result = run_here(capsys, "dataset", "--scene", "sun", "--frames", "4", "--height", "16", "--width", "16",
+                          "--config", "te", "--out", mount / "d.zarr")
+        assert_refused(result, f"cannot write dataset store {str(mount / 'd.zarr')!r}: No space left on device")
+        assert os.listdir(mount) == ["filler"]

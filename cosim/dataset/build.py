@@ -39,6 +39,7 @@ from typing import Sequence
 
 import numpy as np
 
+from tespike.golden.atomic import NO_ROOM
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.recon.dataset.store import (CHUNK_FRAMES, TILE, DatasetStore, check_name, mark_complete,
@@ -268,10 +269,10 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
         raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     if not configs:
         raise InputError("no sensor configuration: give --config at least once")
-    store = DatasetStore.create_or_resume(url, seed=seed, configs=configs, tile=tile,
-                                          chunk_frames=chunk_frames)
     graphs, skipped, pixel_readouts, done = [], 0, 0, 0
     try:
+        store = DatasetStore.create_or_resume(url, seed=seed, configs=configs, tile=tile,
+                                              chunk_frames=chunk_frames)
         for source in sources:
             graph, streams = sequence_graph(store, source)
             if graph is None:
@@ -289,9 +290,14 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
             if report is not None:
                 report(name)
     except BaseException as exc:       # a bad frame, Ctrl-C, a lost cluster: say what a rerun resumes
+        full = isinstance(exc, OSError) and exc.filename is None and exc.errno in NO_ROOM
+        if full:                       # Zarr's writes (here or on a worker) name no file
+            exc = InputError(f"cannot write dataset store {os.fspath(url)!r}: {exc.strerror}")
         if done + skipped:
             exc.add_note(f"(store {os.fspath(url)!r} keeps {done + skipped} complete sequence(s); "
                          "the same command resumes it)")
+        if full:
+            raise exc from None
         raise
     return {"done": done, "skipped": skipped, "pixel_readouts": pixel_readouts,
             "store": os.fspath(url), "rebuilt": sorted(store.rebuilt)}
