@@ -772,6 +772,24 @@ def judge_starved(case: Case, kind: str, outcome: Outcome, work: Path, out: Path
 
 
 # ------------------------------------------------------------------ main
+def print_summary(rows: list[tuple[str, str, bool, str]]) -> None:
+    """Passed / run per case and family (the label before its ``@`` or ``=``: a truncation mode,
+    SIGINT / SIGTERM, disk / fsize / nofile / as)."""
+    families: dict[str, None] = {}
+    table: dict[str, dict[str, list[int]]] = {}
+    for name, label, ok, _ in rows:
+        family = re.split("[@=]", label)[0]
+        families.setdefault(family)
+        cell = table.setdefault(name, {}).setdefault(family, [0, 0])
+        cell[0] += ok
+        cell[1] += 1
+    width = max((len(name) for name in table), default=4) + 2
+    print("\n" + "case".ljust(width) + "".join(f"{family:>10}" for family in families))
+    for name, cells in table.items():
+        print(name.ljust(width) + "".join(f"{'%d/%d' % tuple(cells[f]) if f in cells else '':>10}"
+                                          for f in families))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--only", help="run only the cases whose name contains this text")
@@ -844,6 +862,7 @@ def main() -> int:
         if not args.inputs:
             shutil.rmtree(base, ignore_errors=True)
     failed = [r for r in rows if not r[2]]
+    print_summary(rows)
     print(f"\n{len(rows)} cases: {len(rows) - len(failed)} passed, {len(failed)} failed")
     return 1 if failed else 0
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 import os
 import resource
 import sys
-from importlib.abc import MetaPathFinder
 
 #: Libraries tried in a child first.
 GUARDED = ("torch",)
@@ -67,8 +66,9 @@ def _refusal(name: str, limit: int) -> str | None:
     return None
 
 
-class _Guard(MetaPathFinder):
-    """A finder that checks the room for each guarded library on its first import, then lets it load."""
+class _Guard:
+    """A finder of ``sys.meta_path`` (``find_spec`` is all one needs): checks the room for each
+    guarded library on its first import, then lets the usual finders load it."""
 
     def __init__(self):
         self.checked: set[str] = set()
