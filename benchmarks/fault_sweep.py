@@ -594,7 +594,7 @@ MEMORY_ROOM = (0.3, 0.5, 0.7, 0.85, 0.95)
 #: What a starved command's line must say, per kind.
 STARVE_CAUSE = {"disk": r"No space left on device|disk is full|is free on its file system",
                 "fsize": r"File too large|too large",
-                "files": r"[Tt]oo many open files|file handles",
+                "files": r"[Tt]oo many open files|open files|file handles",
                 "memory": r"out of memory|[Mm]emory"}
 FULL = "full"            # the starved folder under the case's work folder: every output goes there
 

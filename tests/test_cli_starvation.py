@@ -110,6 +110,9 @@ def test_a_cluster_that_fails_to_start_names_the_cause_from_its_errors():
                                                 "OSError: [Errno 24] Too many open files")
     assert str(_failed_start(3, 1, ["RuntimeError: Cluster failed to start: bad port\n"])).endswith(": bad port")
     assert str(_failed_start(2, 1, [])).endswith("processes: exit status 1")
+    logged = ["Traceback (most recent call last):\n", "MemoryError\n",
+              "2026-11-26 10:27:45,233 - distributed.process - INFO - reaping stray process <SpawnProcess>\n"]
+    assert str(_failed_start(2, 1, logged)).endswith("processes: MemoryError")    # the cause, not Dask's log
 
 
 def test_a_local_cluster_whose_start_hangs_ends_with_the_command(tmp_path):

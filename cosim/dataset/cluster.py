@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 from typing import Iterator, Sequence
 
 from tespike.golden.errors import InputError
@@ -76,6 +77,12 @@ STARVED = ("Too many open files", "No space left on device", "File too large", "
            "MemoryError", "No usable temporary directory", "failed to map segment")
 
 
+#: Dask's log lines ("2026-01-01 10:00:00,000 - distributed.process - INFO - ...") and a traceback's
+#: last line ("OSError: ...", "distributed.comm.core.CommClosedError: ...").
+_LOG_LINE = re.compile(r"\d{4}-\d\d-\d\d [\d:,]+ - [\w.]+ - [A-Z]+ - ")
+_EXCEPTION_LINE = re.compile(r"[\w.]*(Error|Exception|Interrupt|Exit)\b")
+
+
 def _check_file_handles(workers: int) -> None:
     """Refuse a cluster the open-file limit (``ulimit -n``) cannot hold: its start fails a few
     layers down in Dask ("Nanny failed to start"), or, with very few, hangs."""
@@ -90,9 +97,10 @@ def _check_file_handles(workers: int) -> None:
 def _failed_start(workers: int, returncode, errors: list[str]) -> InputError:
     """One line for a cluster that did not start: the cause from its error output (the deepest
     starvation it names, else its last line)."""
-    lines = [line.strip() for line in errors if line.strip()]
+    lines = [line.strip() for line in errors if line.strip() and not _LOG_LINE.match(line)]
+    exceptions = [line for line in lines if _EXCEPTION_LINE.match(line)]
     cause = next((line for line in reversed(lines) if any(word in line for word in STARVED)),
-                 lines[-1] if lines else f"exit status {returncode}")
+                 (exceptions or lines or [f"exit status {returncode}"])[-1])
     cause = cause.removeprefix("RuntimeError: Cluster failed to start: ")
     if "No usable temporary directory" in cause:
         from tespike.golden.paths import temporary_directory_fault
@@ -218,8 +226,11 @@ class Runner:
                     first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
                     raise InputError(f"cannot reach the Dask scheduler {self.address!r}: {first}") from None
             else:
+                import logging
+
                 from distributed import Client
                 self.cluster, address = _start_local_cluster(self.workers, self._interrupts.check)
+                logging.getLogger("distributed").setLevel(logging.ERROR)     # its warnings break the one line
                 self.client = Client(address)
             self._interrupts.check()          # a Ctrl-C during the start ends the run here
         except BaseException as exc:
@@ -236,6 +247,16 @@ class Runner:
         finally:
             self.client = self.cluster = None
             self._interrupts.restore()
+
+    def _result(self, future):
+        """A finished future's result, looking for a Ctrl-C meanwhile: gathering it from a worker that
+        died (out of memory) reschedules it, and a plain ``result()`` then blocked past any Ctrl-C."""
+        while True:
+            self._interrupts.check()
+            try:
+                return future.result(timeout=POLL_SECONDS * 10)
+            except TimeoutError:
+                continue
 
     def __call__(self, tasks: Sequence) -> Iterator[tuple[int, object]]:
         """Run ``dask.delayed`` tasks; yield (index in ``tasks``, result) as each finishes.
@@ -262,6 +283,6 @@ class Runner:
                 if not batch:
                     time.sleep(POLL_SECONDS)
                 for future in batch:
-                    yield index_of[id(future)], future.result()
+                    yield index_of[id(future)], self._result(future)
         finally:
             self.client.cancel(futures)
