@@ -113,6 +113,10 @@ def test_a_cluster_that_fails_to_start_names_the_cause_from_its_errors():
     logged = ["Traceback (most recent call last):\n", "MemoryError\n",
               "2026-11-26 10:27:45,233 - distributed.process - INFO - reaping stray process <SpawnProcess>\n"]
     assert str(_failed_start(2, 1, logged)).endswith("processes: MemoryError")    # the cause, not Dask's log
+    nanny = ["RuntimeError: can't start new thread\n", "AssertionError: Status.starting\n",
+             "RuntimeError: Nanny failed to start.\n", logged[-1]]
+    assert str(_failed_start(2, 1, nanny)).endswith(": RuntimeError: can't start new thread "
+                                                    "(out of memory or of processes)")
 
 
 def test_a_local_cluster_whose_start_hangs_ends_with_the_command(tmp_path):

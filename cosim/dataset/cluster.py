@@ -52,8 +52,8 @@ started, ended, closed = threading.Event(), threading.Event(), threading.Event()
 def watch():
     sys.stdin.read()
     ended.set()
-    if not started.is_set() or not closed.wait(30):
-        os.killpg(0, signal.SIGKILL)
+    if not started.is_set() or not closed.wait(30):      # its own session's group: never its caller's
+        os.killpg(0, signal.SIGKILL) if os.getpgrp() == os.getpid() else os.kill(os.getpid(), signal.SIGKILL)
 threading.Thread(target=watch, daemon=True).start()
 from distributed import LocalCluster
 cluster = LocalCluster(n_workers=int(sys.argv[1]), threads_per_worker=1, processes=True, host="127.0.0.1",
@@ -74,7 +74,7 @@ CLUSTER_FILES = 28
 FILES_PER_WORKER = 8
 #: What a failed start's error output says when the system, not Dask, was short of something.
 STARVED = ("Too many open files", "No space left on device", "File too large", "Cannot allocate memory",
-           "MemoryError", "No usable temporary directory", "failed to map segment")
+           "MemoryError", "No usable temporary directory", "failed to map segment", "can't start new thread")
 
 
 #: Dask's log lines ("2026-01-01 10:00:00,000 - distributed.process - INFO - ...") and a traceback's
@@ -97,11 +97,14 @@ def _check_file_handles(workers: int) -> None:
 def _failed_start(workers: int, returncode, errors: list[str]) -> InputError:
     """One line for a cluster that did not start: the cause from its error output (the deepest
     starvation it names, else its last line)."""
+    every = [_LOG_LINE.sub("", line).strip() for line in errors if line.strip()]     # a worker's, logged
     lines = [line.strip() for line in errors if line.strip() and not _LOG_LINE.match(line)]
     exceptions = [line for line in lines if _EXCEPTION_LINE.match(line)]
-    cause = next((line for line in reversed(lines) if any(word in line for word in STARVED)),
+    cause = next((line for line in reversed(every) if any(word in line for word in STARVED)),
                  (exceptions or lines or [f"exit status {returncode}"])[-1])
     cause = cause.removeprefix("RuntimeError: Cluster failed to start: ")
+    if cause.endswith("can't start new thread"):          # a thread's stack did not fit
+        cause += " (out of memory or of processes)"
     if "No usable temporary directory" in cause:
         from tespike.golden.paths import temporary_directory_fault
         cause = temporary_directory_fault() or cause
