@@ -19,6 +19,8 @@ import sys
 GUARDED = ("torch",)
 #: What a child's failed import prints when the address space, not the library, was at fault.
 _NO_ROOM_WORDS = ("alloc", "memory", "Memory", "map segment", "pthread_create", "can't start new thread")
+#: Seconds the trial import may take (torch: about 2 on an idle machine).
+PROBE_SECONDS = 120
 #: Address space kept free beyond the library's own mappings (its first tensors, threads).
 MARGIN = 64 << 20
 
@@ -49,9 +51,12 @@ def _refusal(name: str, limit: int) -> str | None:
     import subprocess
     try:
         done = subprocess.run([sys.executable, "-c", _PROBE.format(name=name)], capture_output=True, text=True,
-                              stdin=subprocess.DEVNULL, env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
+                              stdin=subprocess.DEVNULL, env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)),
+                              timeout=PROBE_SECONDS)
     except OSError:
         return None                       # no process to try it in: the import itself will tell
+    except subprocess.TimeoutExpired:     # a start short of room can hang (OpenBLAS's threads)
+        return f"{name} did not load within {PROBE_SECONDS} s under the address-space limit"
     left = max(0, limit - _vm_size())
     if done.returncode != 0:
         if done.returncode < 0 or any(word in done.stderr for word in _NO_ROOM_WORDS):

@@ -10,6 +10,8 @@ import sys
 
 #: Address space a started command needs beyond what importing it takes (its first arrays).
 START_MARGIN = 16 << 20
+#: Seconds the trial start may take (a few tenths normally).
+PROBE_SECONDS = 60
 #: What a failed start under an address-space limit prints when memory was what it lacked.
 _MEMORY_WORDS = ("memory", "Memory", "map segment", "pthread_create", "allocat")
 
@@ -65,9 +67,11 @@ def _address_space_refusal() -> str | None:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))   # this process's tespike
     try:
         done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env,
-                              stdin=subprocess.DEVNULL)
+                              stdin=subprocess.DEVNULL, timeout=PROBE_SECONDS)
     except OSError:                    # no process to try it in: the import itself will tell
         return None
+    except subprocess.TimeoutExpired:  # OpenBLAS short of threads' room can hang its start
+        return _starved()
     if done.returncode == 0 or not any(word in done.stderr for word in _MEMORY_WORDS):
         return None
     return _starved()
