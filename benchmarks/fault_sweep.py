@@ -1,4 +1,4 @@
-"""Fault sweep of the ``tespike`` command: truncated inputs and interrupted runs (issue 28, item 6).
+"""Fault sweep of the ``tespike`` command: truncated inputs, interrupted and starved runs (issue 28, item 6).
 
 A tool, not a test: in a temporary folder it makes one small valid input of every kind the
 commands read (configuration JSON, noise JSON, scene I.npy, stimulus E.npy, stream S.npz,
@@ -10,22 +10,29 @@ Verilog file), then
   all but one byte, and flips the middle byte, runs the command with a timeout and checks
   that it ends cleanly;
 * **interruption**: sends SIGINT to the process group (Ctrl-C) and SIGTERM to the command
-  (``kill``) of every long command at several moments.
+  (``kill``) of every long command at several moments;
+* **starvation** (cases named ``starve ...``): runs every long command once unstarved (what
+  it writes, its VmPeak), then with its outputs on a small tmpfs (also its TMPDIR) filled to
+  leave part of that room, under RLIMIT_FSIZE, RLIMIT_NOFILE and RLIMIT_AS at several levels.
 
 A clean ending: exit status non-zero, stderr exactly one line without "Traceback" that names
-the input (its path as given), the output (pre-created where it may exist) untouched and no
-``.part`` temporary beside it, and no process of the command's session left. A flipped byte
-may be harmless where the file stays a valid file of its kind (a changed pixel value: the
-command then succeeds, and the table says so). Prints one row per case and a count; exits 1
-if any case misbehaves.
+the input (its path as given; a starved run: tespike's line naming the file or resource and
+the cause), the output (pre-created where it may exist) untouched and no ``.part``
+temporary beside it, and no process of the command's session (or working in its folder)
+left. A flipped byte may be harmless where the file stays a valid file of its kind (a
+changed pixel value: the command then succeeds, and the table says so), as may a starved
+run the limit did not reach. Prints one row per case and a count; exits 1 if any case
+misbehaves.
 
-    python3 benchmarks/fault_sweep.py                    # everything, about 10 minutes on 2 cores
+    python3 benchmarks/fault_sweep.py                    # everything, about 40 minutes on 2 cores
     python3 benchmarks/fault_sweep.py --only reconstruct --no-interrupt
+    python3 benchmarks/fault_sweep.py --only starve --starve files,memory   # the starvation family, part of it
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import json
 import os
@@ -35,6 +42,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,12 +80,30 @@ def _session_processes(sid: int) -> list[str]:
     return left
 
 
-def _left_behind(sid: int, grace: float = 3.0) -> list[str]:
-    """The session's processes still alive ``grace`` seconds after the command ended (a worker
-    that ends when its pipe closes gets that long)."""
+def _working_in(folder: Path) -> list[str]:
+    """Live processes whose working folder is ``folder`` or below: what the command started in
+    a session of its own (a local Dask cluster) is found there."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            where = os.readlink(entry / "cwd")
+            status = (entry / "stat").read_text().rsplit(")", 1)[1].split()[0]
+            args = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if status != "Z" and (where == str(folder) or where.startswith(str(folder) + os.sep)):
+            found.append(f"{entry.name} {args}"[:120])
+    return found
+
+
+def _left_behind(sid: int, folder: Path, grace: float = 3.0) -> list[str]:
+    """The command's processes still alive ``grace`` seconds after it ended (a worker that ends
+    when its pipe closes gets that long): those of its session and any working in ``folder``."""
     end = time.monotonic() + grace
     while True:
-        left = _session_processes(sid)
+        left = sorted(set(_session_processes(sid)) | set(_working_in(folder)))
         if not left or time.monotonic() > end:
             return left
         time.sleep(0.2)
@@ -89,13 +115,48 @@ def _default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+def _starting(limits: dict[int, int]):
+    """The child's set-up before ``exec``: default SIGINT, then the resource limits ``limits``
+    (``resource.RLIMIT_*`` -> soft and hard value). SIGXFSZ is ignored so that a file over
+    RLIMIT_FSIZE fails its write with EFBIG (an OSError) rather than killing the process."""
+    def start() -> None:
+        import resource
+        _default_sigint()
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        for which, value in limits.items():
+            resource.setrlimit(which, (value, value))
+    return start
+
+
+def _vm_peak(pid: int) -> int:
+    """The process's largest address space so far (VmPeak, bytes); 0 once it has ended."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmPeak:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
+
+
 def run_command(argv: list[str], cwd: Path, *, signal_at: float | None = None, signum: int = signal.SIGINT,
-                group: bool = True, timeout: float = TIMEOUT) -> Outcome:
-    """Run ``python3 -m tespike ARGV`` in a session of its own, optionally signalled after ``signal_at`` s."""
+                group: bool = True, timeout: float = TIMEOUT, limits: dict[int, int] | None = None,
+                watch: list[int] | None = None, env: dict | None = None) -> Outcome:
+    """Run ``python3 -m tespike ARGV`` in a session of its own, optionally signalled after ``signal_at`` s,
+    under the resource ``limits``; ``watch`` (a list) gets the command's VmPeak appended."""
     start = time.monotonic()
-    proc = subprocess.Popen(["nice", "-n", "10", sys.executable, "-m", "tespike", *argv], cwd=cwd, env=_env(),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=_default_sigint)
+    proc = subprocess.Popen(["nice", "-n", "10", sys.executable, "-m", "tespike", *argv], cwd=cwd,
+                            env=dict(_env(), **(env or {})), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True, preexec_fn=_starting(limits or {}))
+    if watch is not None:                   # polled beside communicate() (which drains the pipes)
+        def poll() -> None:
+            peak = 0
+            while proc.poll() is None:
+                peak = max(peak, _vm_peak(proc.pid))
+                time.sleep(0.02)
+            watch.append(peak)
+        watcher = threading.Thread(target=poll, daemon=True)
+        watcher.start()
     if signal_at is not None and signal_at < 0:         # mid-output: as soon as a temporary appears
         while proc.poll() is None and not parts_left(cwd) and time.monotonic() - start < timeout:
             time.sleep(0.02)
@@ -113,7 +174,9 @@ def run_command(argv: list[str], cwd: Path, *, signal_at: float | None = None, s
         os.killpg(proc.pid, signal.SIGKILL)
         stdout, stderr = proc.communicate()
         code = None
-    orphans = _left_behind(proc.pid)
+    if watch is not None:
+        watcher.join(5)
+    orphans = _left_behind(proc.pid, cwd)
     for line in orphans:                     # never leave them running
         try:
             os.kill(int(line.split()[0]), signal.SIGKILL)
@@ -347,6 +410,10 @@ def truncation_cases(valid: Path) -> list[Case]:
         Case("dataset resume zarr.json", "D.zarr", ["dataset", "--scene", "default", "--frames", "4", "--height",
                                                     "16", "--width", "16", "--config", "te", "--out", "{in}"],
              member="zarr.json", out=None, out_kind="none"),
+        *[Case(f"dataset resume {label}", "D.zarr", ["dataset", "--scene", "default", "--frames", "4", "--height",
+                                                     "16", "--width", "16", "--config", "te", "--out", "{in}"],
+               member=member, out=None, out_kind="none")
+          for label, member in members.items() if label in ("chunk", "array zarr.json")],
         Case("dataset hdr", "frames", ["dataset", "--hdr", "{in}", "--frames", "3", "--config", "te",
                                        "--out", "{out}"], member="hdr/f1.hdr", out="D2.zarr", out_kind="none"),
         Case("dataset config", "cfg.json", ["dataset", "--scene", "default", "--frames", "4", "--height", "16",
@@ -399,6 +466,8 @@ def judge(case, mode, outcome, work, target, given, out, before, run_before, bla
     if outcome.orphans:
         return False, f"left {len(outcome.orphans)} process(es): {outcome.orphans[0]}"
     if outcome.code == 0:
+        if "rebuilding its array" in outcome.stdout:            # a resumed store's damaged chunk
+            return True, "rebuilt: " + outcome.stdout.splitlines()[1][:160]
         if mode == "flip" and still_valid(target):
             return True, "harmless: the flipped byte leaves a valid file (a changed value); run succeeded"
         if blank_cut:
@@ -508,12 +577,227 @@ def make_long_inputs(valid: Path) -> None:
             "--out", "big.npy", "-q")
 
 
+# ------------------------------------------------------------------ starvation
+#: What a long command is starved of: its output's disk filling up (a small tmpfs, also the
+#: TMPDIR), a file-size limit (RLIMIT_FSIZE: EFBIG), few file handles (RLIMIT_NOFILE: EMFILE)
+#: and little memory (RLIMIT_AS: MemoryError, failed allocations).
+STARVE_KINDS = ("disk", "fsize", "files", "memory")
+#: Free room left on the output's disk, as a fraction of what the command writes there.
+DISK_ROOM = (0.0, 0.3, 0.7, 0.95)
+#: RLIMIT_FSIZE as a fraction of the command's largest output file.
+FSIZE_ROOM = (0.0, 0.5)
+#: RLIMIT_NOFILE values: Python and numpy start with 12, a Dask cluster needs many more.
+FILE_HANDLES = (12, 20, 32, 64)
+#: RLIMIT_AS as a fraction of the command's VmPeak in an unlimited run (the interpreter and its
+#: imports take the first part: low values starve the start, high ones the work's last allocations).
+MEMORY_ROOM = (0.3, 0.5, 0.7, 0.85, 0.95)
+#: What a starved command's line must say, per kind.
+STARVE_CAUSE = {"disk": r"No space left on device|disk is full|is free on its file system",
+                "fsize": r"File too large|too large",
+                "files": r"[Tt]oo many open files|open files|file handles",
+                "memory": r"out of memory|[Mm]emory"}
+FULL = "full"            # the starved folder under the case's work folder: every output goes there
+
+
+def starve_cases() -> list[Case]:
+    """Long commands writing under ``full/`` (``out``: the output there, pre-created where it may exist)."""
+    f = FULL
+    return [
+        Case("starve simulate --workers 2", "", ["simulate", "--config", "te", "--scene", "big.npy", "--out",
+                                                 f"{f}/S.npz", "--seed", "1", "--workers", "2"], out=f"{f}/S.npz"),
+        Case("starve stimulus", "", ["stimulus", "--config", "te", "--scene", "I.npy", "--out", f"{f}/E.npy",
+                                     "--seed", "1", "--readouts", "4"], out=f"{f}/E.npy"),
+        Case("starve evaluate", "", EVAL[:4] + ["tfp,tfi", "--repeats", "1", "--ml-count-config", "none",
+                                                "--progress", "off", "--set", "default", "--frames", "12",
+                                                "--height", "32", "--width", "32", "--out", f"{f}/ev", "--force"],
+             out=f"{f}/ev", out_kind="folder"),
+        Case("starve evaluate --store --workers 2", "", ["evaluate", "--store", "D.zarr", "--methods", "tfp,tfi",
+                                                         "--progress", "off", "--workers", "2", "--out", f"{f}/ev",
+                                                         "--force"], out=f"{f}/ev", out_kind="folder"),
+        Case("starve train", "", ["train", "--config", "te", "--steps", "2", "--batch", "1", "--crop", "32",
+                                  "--workers", "1", "--pool", "2", "--validate-every", "0", "--progress", "off",
+                                  "--out", f"{f}/T2.pt"],
+             out=f"{f}/T2.pt", out_kind="none"),
+        Case("starve dataset --workers 2", "", ["dataset", "--scene", "default", "--frames", "12", "--height", "32",
+                                                "--width", "32", "--config", "te", "--config", "ml", "--workers",
+                                                "2", "--progress", "off", "--out", f"{f}/D2.zarr"],
+             out=f"{f}/D2.zarr", out_kind="none"),
+        Case("starve reconstruct net", "", ["reconstruct", "--stream", "S.npz", "--method", "net", "--out",
+                                            f"{f}/R.npy", "--progress", "off"], out=f"{f}/R.npy"),
+        Case("starve rtl-sim --vcd", "", ["rtl-sim", "--config", "te", "--stimulus", "E.npy", "--out",
+                                          f"{f}/S2.npz", "--vcd", f"{f}/W.vcd", "--progress", "off"],
+             out=f"{f}/S2.npz"),
+        Case("starve calibrate", "", ["calibrate", "--dark", "dark.npz", "--flat", "flat.npz", "--flat-light",
+                                      "0.03", "--out", f"{f}/C.npz", "--progress", "off"], out=f"{f}/C.npz"),
+        Case("starve demo", "", ["demo", "--out", f"{f}/demo", "--frames", "10", "--height", "32", "--width",
+                                 "32", "--crop", "11", "--repeats", "1", "--sensors", "te", "--no-hw-cost",
+                                 "--quiet"], out=f"{f}/demo", out_kind="folder"),
+    ]
+
+
+@dataclass
+class Appetite:
+    """What a command takes when nothing is starved: bytes under ``full/``, its largest file, VmPeak."""
+    written: int
+    largest: int
+    vm_peak: int
+    seconds: float
+
+
+def sizes_under(folder: Path) -> list[int]:
+    return [p.stat().st_size for p in folder.rglob("*") if p.is_file() and not p.is_symlink()]
+
+
+def measure(case: Case, base: Path) -> Appetite | str:
+    """Run ``case`` unstarved; its appetite, or why it could not be measured."""
+    work = Path(tempfile.mkdtemp(dir=base, prefix="measure."))
+    try:
+        copy_inputs(base / "valid", work)
+        (work / FULL).mkdir()
+        peaks: list[int] = []
+        outcome = run_command(case.argv, work, watch=peaks)
+        if outcome.code != 0:
+            return f"the unstarved run failed (exit {outcome.code}): {outcome.stderr.strip()[-300:]}"
+        sizes = sizes_under(work / FULL)
+        return Appetite(sum(sizes), max(sizes, default=0), max(peaks, default=0), outcome.seconds)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def tmpfs(folder: Path, size: int):
+    """A tmpfs of ``size`` bytes mounted at ``folder`` (None where this system does not allow it)."""
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={max(size, 1 << 16)}", "tmpfs", str(folder)],
+                          capture_output=True)
+    if done.returncode != 0:
+        yield None
+        return
+    try:
+        yield folder
+    finally:
+        if subprocess.run(["umount", str(folder)], capture_output=True).returncode != 0:
+            subprocess.run(["umount", "-l", str(folder)], capture_output=True)
+
+
+def fill(folder: Path, leave: int) -> None:
+    """Fill ``folder``'s file system so that about ``leave`` bytes stay free."""
+    info = os.statvfs(folder)
+    extra = info.f_bavail * info.f_frsize - leave
+    block = b"\0" * (1 << 20)
+    with open(folder / ".filler", "wb") as out:
+        while extra > 0:
+            extra -= out.write(block[:min(extra, len(block))])
+
+
+def starve_levels(kinds: list[str], appetite: Appetite) -> list[tuple[str, str, dict[int, int], int | None]]:
+    """(kind, label, resource limits, free bytes on a full disk or None) for every starved run of a command."""
+    import resource
+    levels = []
+    if "disk" in kinds:
+        for room in DISK_ROOM:
+            free = int(room * appetite.written)
+            levels.append(("disk", f"disk@{room:g}", {}, free))
+    if "fsize" in kinds:
+        for room in FSIZE_ROOM:
+            levels.append(("fsize", f"fsize@{room:g}", {resource.RLIMIT_FSIZE: int(room * appetite.largest)}, None))
+    if "files" in kinds:
+        for handles in FILE_HANDLES:
+            levels.append(("files", f"nofile={handles}", {resource.RLIMIT_NOFILE: handles}, None))
+    if "memory" in kinds:
+        for room in MEMORY_ROOM:
+            levels.append(("memory", f"as@{room:g}", {resource.RLIMIT_AS: int(room * appetite.vm_peak)}, None))
+    return levels
+
+
+def run_starved(case: Case, kind: str, limits: dict[int, int], free: int | None, appetite: Appetite,
+                base: Path) -> tuple[bool, str]:
+    """Run ``case`` starved of ``kind``; (passed, what happened)."""
+    work = Path(tempfile.mkdtemp(dir=base, prefix="starve."))
+    full = work / FULL
+    full.mkdir()
+    copy_inputs(base / "valid", work)
+    size = 2 * appetite.written + (8 << 20) if free is not None else 0
+    try:
+        with (tmpfs(full, size) if free is not None else contextlib.nullcontext(full)) as mount:
+            if mount is None:
+                return True, "skipped: cannot mount a tmpfs here"
+            out = work / case.out
+            if case.out_kind in ("file", "folder"):
+                precreate(out, case.out_kind)
+            before = state(out)
+            env = {}
+            if free is not None:
+                fill(full, free)
+                env["TMPDIR"] = str(full)          # a full disk is full for the command's temporaries too
+            outcome = run_command(case.argv, work, limits=limits, env=env)
+            (full / ".filler").unlink(missing_ok=True)
+            return judge_starved(case, kind, outcome, work, out, before)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def judge_starved(case: Case, kind: str, outcome: Outcome, work: Path, out: Path, before: dict) -> tuple[bool, str]:
+    lines = outcome.stderr.strip().splitlines()
+    first = lines[0] if lines else ""
+    left = parts_left(work)
+    if outcome.code is None:
+        return False, f"timed out after {TIMEOUT} s"
+    if outcome.orphans:
+        return False, f"left {len(outcome.orphans)} process(es): {outcome.orphans[0]}"
+    if left:
+        return False, f"temporaries left: {left[:3]}"
+    if outcome.code == 0:
+        return True, f"finished within the limit ({outcome.seconds:.1f} s)"
+    if outcome.code < 0:
+        return False, (f"killed by {signal.Signals(-outcome.code).name}: "
+                       f"{lines[-1][:140] if lines else 'nothing on stderr'}")
+    if "Traceback" in outcome.stderr:
+        return False, f"traceback ({len(lines)} lines): {lines[-1][:140] if lines else ''}"
+    if len(lines) != 1:
+        return False, f"exit {outcome.code}, {len(lines)} lines on stderr: {first[:100]} ... {lines[-1][:100]}"
+    if not first.startswith("tespike"):
+        return False, f"a line that is not tespike's: {first[:160]}"      # e.g. OpenBLAS's own, exiting from C
+    if not re.search(STARVE_CAUSE[kind], first):
+        return False, f"does not say the cause ({kind}): {first[:160]}"
+    if kind in ("disk", "fsize") and "'" not in first:
+        return False, f"names no file: {first[:160]}"
+    if case.out_kind in ("file", "folder") and state(out) != before and "whole" not in first:
+        return False, f"output {case.out} changed: {first[:140]}"
+    if case.out_kind == "none" and os.path.lexists(out) and "whole" not in first:
+        return False, f"output {case.out} written by a failed run: {first[:140]}"
+    run_folder = out.with_suffix(".run")
+    if case.name.startswith("starve train") and os.path.lexists(run_folder) and not any(os.scandir(run_folder)):
+        return False, f"empty run folder left: {first[:140]}"
+    return True, first[:200]
+
+
 # ------------------------------------------------------------------ main
+def print_summary(rows: list[tuple[str, str, bool, str]]) -> None:
+    """Passed / run per case and family (the label before its ``@`` or ``=``: a truncation mode,
+    SIGINT / SIGTERM, disk / fsize / nofile / as)."""
+    families: dict[str, None] = {}
+    table: dict[str, dict[str, list[int]]] = {}
+    for name, label, ok, _ in rows:
+        family = re.split("[@=]", label)[0]
+        families.setdefault(family)
+        cell = table.setdefault(name, {}).setdefault(family, [0, 0])
+        cell[0] += ok
+        cell[1] += 1
+    width = max((len(name) for name in table), default=4) + 2
+    print("\n" + "case".ljust(width) + "".join(f"{family:>10}" for family in families))
+    for name, cells in table.items():
+        print(name.ljust(width) + "".join(f"{'%d/%d' % tuple(cells[f]) if f in cells else '':>10}"
+                                          for f in families))
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--only", help="run only the cases whose name contains this text")
     parser.add_argument("--no-truncate", action="store_true", help="skip the truncation sweep")
     parser.add_argument("--no-interrupt", action="store_true", help="skip the interruption sweep")
+    parser.add_argument("--no-starve", action="store_true", help="skip the starvation sweep")
+    parser.add_argument("--starve", default=",".join(STARVE_KINDS),
+                        help=f"what long commands are starved of (default {','.join(STARVE_KINDS)})")
     parser.add_argument("--moments", default="0.3,1,3,8,part",
                         help="seconds after start to signal, 'part': as soon as an output's temporary appears "
                              "(default 0.3,1,3,8,part)")
@@ -522,6 +806,7 @@ def main() -> int:
                         help="keep the valid inputs in DIR/valid and reuse them on the next run (default: a "
                              "temporary folder, removed)")
     args = parser.parse_args()
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(143))     # unmount and clean up on the way out
     base = Path(args.inputs) if args.inputs else Path(tempfile.mkdtemp(prefix="fault_sweep."))
     rows: list[tuple[str, str, bool, str]] = []
     try:
@@ -554,10 +839,30 @@ def main() -> int:
                         label = f"{signal.Signals(signum).name}@{'part' if at < 0 else f'{at:g}s'}"
                         rows.append((case.name, label, ok, what))
                         print(f"{'ok  ' if ok else 'FAIL'} {case.name:32} {label:12} {what}", flush=True)
+        if not args.no_starve:
+            if not (base / "valid" / "big.npy").exists():
+                make_long_inputs(base / "valid")
+            kinds = args.starve.split(",")
+            for case in starve_cases():
+                if args.only and args.only not in case.name:
+                    continue
+                appetite = measure(case, base)
+                if isinstance(appetite, str):
+                    rows.append((case.name, "unstarved", False, appetite))
+                    print(f"FAIL {case.name:32} {'unstarved':12} {appetite}", flush=True)
+                    continue
+                print(f"     {case.name:32} {'unstarved':12} writes {appetite.written} B (largest file "
+                      f"{appetite.largest} B), VmPeak {appetite.vm_peak >> 20} MiB, {appetite.seconds:.1f} s",
+                      flush=True)
+                for kind, label, limits, free in starve_levels(kinds, appetite):
+                    ok, what = run_starved(case, kind, limits, free, appetite, base)
+                    rows.append((case.name, label, ok, what))
+                    print(f"{'ok  ' if ok else 'FAIL'} {case.name:32} {label:12} {what}", flush=True)
     finally:
         if not args.inputs:
             shutil.rmtree(base, ignore_errors=True)
     failed = [r for r in rows if not r[2]]
+    print_summary(rows)
     print(f"\n{len(rows)} cases: {len(rows) - len(failed)} passed, {len(failed)} failed")
     return 1 if failed else 0
 

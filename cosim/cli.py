@@ -160,6 +160,21 @@ def _end_quietly() -> None:
             signal.signal(number, signal.SIG_DFL)
 
 
+#: What a RuntimeError (torch's allocator) or an ImportError (a shared library that could not be
+#: mapped) says when memory, not the program, was at fault.
+OUT_OF_MEMORY = ("can't allocate memory", "not enough memory", "Cannot allocate memory",
+                 "failed to map segment from shared object")
+#: ... and what counts so only under an address-space limit (oneDNN's words for a failed allocation).
+OUT_OF_MEMORY_UNDER_LIMIT = ("could not create a primitive",)
+
+
+def _memory_limit() -> str:
+    """The address-space limit the process runs under, for an out-of-memory line ('' if none)."""
+    import resource
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    return "" if soft == resource.RLIM_INFINITY else f" within the address-space limit (ulimit -v) of {soft >> 20} MB"
+
+
 def _one_line(exc: BaseException, limit: int = 300) -> str:
     text = " ".join(str(exc).split()) or type(exc).__name__
     return text if len(text) <= limit else text[:limit] + "..."
@@ -171,14 +186,25 @@ def _notes(exc: BaseException) -> str:
     return " " + _one_line("; ".join(notes)) if notes else ""
 
 
-def _written(since: int, exc: BaseException) -> str:
-    """An interrupted command's outputs that were already complete (a signal after the last one
-    was moved into place: the user sees "terminated" and must know the file is whole and new),
-    less those its own note names (train's "checkpoint ... saved")."""
+def _written(since: int, exc: BaseException) -> list[str]:
+    """A failed or interrupted command's outputs that were already complete (a fault after the
+    last one was moved into place: the user must know the file is whole and new), less those
+    its own message or note names (train's "checkpoint ... saved", "wrote the weights to ...")."""
     from tespike.golden.atomic import finished_outputs
-    noted = " ".join(getattr(exc, "__notes__", ()))
-    done = [path for path in finished_outputs(since) if repr(path) not in noted]
+    said = str(exc) + " ".join(getattr(exc, "__notes__", ()))
+    return [path for path in finished_outputs(since) if repr(path) not in said]
+
+
+def _after(since: int, exc: BaseException) -> str:
+    """`` after writing 'S.npz' whole`` for an interrupted command's line ('' if nothing was)."""
+    done = _written(since, exc)
     return f" after writing {_one_line(', '.join(repr(p) for p in done), 200)} whole" if done else ""
+
+
+def _before(since: int, exc: BaseException) -> str:
+    """`` (after writing 'T.pt' whole)`` for a failed command's line ('' if nothing was)."""
+    after = _after(since, exc)
+    return f" ({after.strip()})" if after else ""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -195,6 +221,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     previous = _install_signal_handlers()
+    from .library_room import guard_imports
+    guard_imports()                   # under ulimit -v only: torch's import is tried in a child first
     if whole_process:                 # removes the run's temporaries should it be killed outright
         from tespike.golden.atomic import start_janitor
         start_janitor()
@@ -223,26 +251,37 @@ def _run(args) -> tuple[int, bool]:
     try:
         return int(args.run(args) or 0), True
     except TespikeError as exc:
-        print(f"{prefix}: error: {_one_line(exc)}{_notes(exc)}", file=sys.stderr)
+        print(f"{prefix}: error: {_one_line(exc)}{_notes(exc)}{_before(start, exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
     except OSError as exc:
         where = f" {exc.filename!r}:" if exc.filename else ""
-        print(f"{prefix}: error:{where} {_one_line(exc.strerror or exc)}", file=sys.stderr)
+        cause = _one_line(exc.strerror or exc)
+        if "No usable temporary directory" in cause:       # tempfile's words hide the cause
+            from tespike.golden.paths import temporary_directory_fault
+            cause = temporary_directory_fault() or cause
+        print(f"{prefix}: error:{where} {cause}{_before(start, exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
-    except MemoryError:
-        print(f"{prefix}: error: out of memory", file=sys.stderr)
+    except MemoryError as exc:        # numpy's says what it could not allocate; library_room's, what is left
+        detail = f" ({_one_line(exc, 200)})" if str(exc) else ""
+        print(f"{prefix}: error: out of memory{_memory_limit()}{detail}{_before(start, exc)}", file=sys.stderr)
         return 1, False
-    except RuntimeError as exc:
-        if "can't allocate memory" in str(exc) or "not enough memory" in str(exc):
-            print(f"{prefix}: error: out of memory ({_one_line(exc, 160)})", file=sys.stderr)
+    except (RuntimeError, ImportError) as exc:     # torch's failed allocation; a library that cannot be mapped
+        if isinstance(exc, RuntimeError) and str(exc) == "can't start new thread":   # threading's, out of room
+            print(f"{prefix}: error: cannot start a thread: out of memory or of processes{_memory_limit()}"
+                  f"{_before(start, exc)}", file=sys.stderr)
             return 1, False
-        raise
+        if not any(words in str(exc) for words in OUT_OF_MEMORY) and \
+                not (_memory_limit() and any(words in str(exc) for words in OUT_OF_MEMORY_UNDER_LIMIT)):
+            raise
+        print(f"{prefix}: error: out of memory{_memory_limit()} ({_one_line(exc, 160)}){_before(start, exc)}",
+              file=sys.stderr)
+        return 1, False
     except KeyboardInterrupt as exc:
-        print(f"{prefix}: interrupted{_written(start, exc)}{_notes(exc)}", file=sys.stderr)
+        print(f"{prefix}: interrupted{_after(start, exc)}{_notes(exc)}", file=sys.stderr)
         return 130, False
     except Terminated as exc:
         import signal
-        print(f"{prefix}: terminated by {signal.Signals(exc.signum).name}{_written(start, exc)}{_notes(exc)}",
+        print(f"{prefix}: terminated by {signal.Signals(exc.signum).name}{_after(start, exc)}{_notes(exc)}",
               file=sys.stderr)
         return 128 + exc.signum, False
 

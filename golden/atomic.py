@@ -32,6 +32,12 @@ from .paths import check_output_file
 _PART_NAME = 100          # characters of the output's name kept in the temporary's name
 
 
+#: Errors of a write that ran out of room: a full disk, a file-size limit (EFBIG), a quota. A
+#: buffered write raises them at a later flush or close, often as an OSError naming no file,
+#: which the writer then names (:func:`tespike.recon.train.appending`, the dataset build).
+NO_ROOM = (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)
+
+
 #: Every output this process has moved into place whole, as the user named it, in order: an
 #: interrupted command says which of its outputs were already complete (:func:`finished_outputs`).
 _FINISHED: list[str] = []

@@ -208,3 +208,21 @@ def check_results_dir(path: str | os.PathLike, names: tuple[str, ...], force: bo
         raise InputError(f"{what} {text!r} holds a previous run's results: give --force to replace them "
                          "(the new run replaces the folder whole when it is done), or another folder")
     return folder
+
+
+def temporary_directory_fault() -> str | None:
+    """Why the temporary directory (``$TMPDIR``, else ``/tmp``) cannot take a file, or None.
+
+    Python's ``tempfile`` says only "No usable temporary directory found in [...]" (an
+    ENOENT) when every candidate fails its trial write, whatever the cause: a full disk
+    (ENOSPC), a file-size limit (EFBIG), a read-only one. This names the folder and the cause.
+    """
+    import tempfile
+    folder = os.environ.get("TMPDIR") or "/tmp"
+    try:
+        with tempfile.TemporaryFile(dir=folder) as probe:
+            probe.write(b"\0" * 4096)
+            probe.flush()
+    except OSError as exc:
+        return f"cannot write a temporary file in {folder!r}: {exc.strerror or exc}"
+    return None

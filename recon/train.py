@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from tespike.golden.atomic import NO_ROOM
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.golden.io import atomic_output
@@ -181,6 +182,19 @@ def trim_log(path: Path, step: int) -> None:
     if len(kept) < len(rows) or not text.endswith("\n"):      # a row cut at its end: the next would join it
         with atomic_output(path) as tmp, open(tmp, "w", newline="") as handle:
             csv.writer(handle).writerows(kept)
+
+
+@contextlib.contextmanager
+def appending(path: Path):
+    """A CSV log appended to ``path`` (not replaced: it grows with the run): a write that runs out of
+    room fails at a buffered flush or at the close, as an OSError naming no file; it names ``path``."""
+    try:
+        with open(path, "a", newline="") as handle:
+            yield handle
+    except OSError as exc:
+        if exc.filename is None and exc.errno in NO_ROOM:
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
+        raise
 
 
 def json_state(generator: np.random.Generator) -> dict:
@@ -391,7 +405,7 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
         scores = validate(model, cases, config, options.device)
         run_folder_kept()
         new_file = not validation_path.exists()
-        with open(validation_path, "a", newline="") as handle:
+        with appending(validation_path) as handle:
             writer = csv.writer(handle)
             if new_file:
                 writer.writerow(["step", *scores, "seconds"])
@@ -412,7 +426,7 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
     last_save = time.monotonic()
     new_log = not log_path.exists()
     try:
-        with open(log_path, "a", newline="") as handle:
+        with appending(log_path) as handle:
             log = csv.writer(handle)
             if new_log:
                 log.writerow(["step", "epoch", "lr", "loss", "seconds"])

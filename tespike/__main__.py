@@ -1,10 +1,5 @@
-"""``python3 -m tespike``: the ``tespike`` command."""
+"""``python3 -m tespike``: the ``tespike`` command, through the same entry as the installed script."""
 
-try:              # Ctrl-C while numpy loads, before the command's own handling: one line, no traceback
-    from tespike.cosim.cli import main
-except KeyboardInterrupt:
-    import sys
-    print("tespike: interrupted", file=sys.stderr)
-    raise SystemExit(130) from None
+from tespike.entry import main
 
 raise SystemExit(main())

@@ -331,3 +331,41 @@ def test_ctrl_c_while_the_command_loads_is_one_line():
             "runpy.run_module('tespike', run_name='__main__')\n")
     done = run_python(code)
     assert done.returncode == 130 and done.stderr == "tespike: interrupted\n", done
+
+
+def test_the_installed_script_goes_through_the_same_early_ctrl_c_handling():
+    """The console script called ``tespike.cosim.cli:main``, which imports numpy before any handling:
+    Ctrl-C in the installed ``tespike``'s first 0.2 s was a traceback. It now calls the light entry
+    that ``python3 -m tespike`` uses; this runs the script's own code (pip writes
+    ``sys.exit(main())`` after importing the entry point's function)."""
+    import tomllib
+    script = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]["tespike"]
+    module, function = script.split(":")
+    assert module == "tespike.entry"
+    code = ("import sys, types\n"
+            "cli = types.ModuleType('tespike.cosim.cli')\n"
+            "def stopped(name):\n"
+            "    raise KeyboardInterrupt\n"
+            "cli.__getattr__ = stopped\n"
+            "import tespike.cosim\n"
+            "sys.modules['tespike.cosim.cli'] = cli\n"
+            f"from {module} import {function}\n"
+            f"sys.exit({function}())\n")
+    done = run_python(code)
+    assert done.returncode == 130 and done.stderr == "tespike: interrupted\n", done
+    heavy = run_python(f"import sys; import {module}; print(sorted(m for m in ('numpy', 'torch', 'tespike.cosim.cli') "
+                       "if m in sys.modules))")
+    assert heavy.stdout.strip() == "[]", heavy          # nothing heavy before the handling is in place
+
+
+def test_ctrl_c_while_the_arguments_are_read_is_one_line(monkeypatch, capsys):
+    """Outside the command's own handling (building the parser, reading the arguments) Ctrl-C was a traceback."""
+    import tespike.cosim.cli as cli
+    from tespike.entry import main
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(cli, "build_parser", stopped)
+    monkeypatch.setattr(sys, "argv", ["tespike", "scene", "--list"])
+    assert main() == 130
+    assert capsys.readouterr().err == "tespike: interrupted\n"

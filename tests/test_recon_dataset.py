@@ -41,7 +41,7 @@ def build(url, sources, seed=7, configs=CONFIGS, **kwargs):
 def test_single_tile_stream_is_simulate_scene_with_the_tile_seed(tmp_path):
     counts = build(tmp_path / "s.zarr", scene_sources(["moderate"], 10, 24, 32), seed=5)
     assert counts == {"done": 1, "skipped": 0, "pixel_readouts": 2 * 10 * 24 * 32,
-                      "store": str(tmp_path / "s.zarr")}
+                      "store": str(tmp_path / "s.zarr"), "rebuilt": []}
     store = DatasetStore.open(tmp_path / "s.zarr")
     light = make_scene("moderate", 10, 24, 32, seed=0)
     assert store.light("moderate").dtype == np.float32
@@ -98,6 +98,30 @@ def test_resume_redoes_only_unfinished_parts_and_readers_ignore_them(tmp_path, r
     for kwargs in ({"seed": 8}, {"configs": {"te": CONFIGS["te"]}}, {"tile": (16, 16)}):
         with pytest.raises(InputError, match="resume with the same settings"):
             build(tmp_path / "cut.zarr", sources, **{"tile": (8, 8), **kwargs})
+
+
+def test_resume_rebuilds_a_complete_sequence_whose_chunk_is_damaged(tmp_path, capsys):
+    """A resumed build kept complete sequences unread: a truncated or altered chunk stayed, and only
+    ``evaluate --store`` found it (its CRC-32C). The resume now checks them and rebuilds the array."""
+    import shutil
+    args = ["dataset", "--scene", "sun", "--scene", "default", "--frames", "6", "--height", "16", "--width", "16",
+            "--config", "te", "--config", "ml"]
+    assert main([*args, "--out", str(tmp_path / "ref.zarr"), "--quiet"]) == 0
+    shutil.copytree(tmp_path / "ref.zarr", tmp_path / "cut.zarr")
+    light = tmp_path / "cut.zarr" / "sun" / "light" / "c" / "0" / "0" / "0"
+    words = tmp_path / "cut.zarr" / "sun" / "streams" / "ml" / "c" / "0" / "0" / "0"
+    data = bytearray(light.read_bytes())
+    data[len(data) // 2] ^= 0x01
+    light.write_bytes(bytes(data))
+    words.write_bytes(words.read_bytes()[:10])
+    capsys.readouterr()
+    assert main([*args, "--out", str(tmp_path / "cut.zarr")]) == 0
+    out = capsys.readouterr().out
+    assert f"sequence 'sun' was complete but chunk {str(light)!r} and 1 more fails its CRC-32C check" in out, out
+    assert "(1 already complete, 1 rebuilt for a damaged chunk)" in out, out
+    assert compare_stores(tmp_path / "ref.zarr", tmp_path / "cut.zarr") == []
+    assert main([*args, "--out", str(tmp_path / "cut.zarr")]) == 0          # nothing left to rebuild
+    assert "(2 already complete)" in capsys.readouterr().out
 
 
 def test_tiled_scores_equal_whole_frame_scores(tmp_path):

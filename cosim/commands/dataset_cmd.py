@@ -87,11 +87,13 @@ def run(args) -> int:
         with Runner(args.workers, args.scheduler) as runner:
             report(args, f"dataset: {len(sources)} sequence(s) x {len(configs)} sensor(s) on {runner.where}")
             counts = build_dataset(args.out, sources, configs, args.seed, runner, chunk_frames=args.chunk_frames,
-                                   report=lambda name: report(args, f"dataset: {name} complete"))
+                                   report=lambda name: report(args, f"dataset: {name} complete"),
+                                   notice=lambda text: report(args, f"dataset: {text}"))
     except BaseException:
         discard_unfinished_store(args.out, made)      # the workers have stopped: nothing writes there now
         raise
     seconds = time.perf_counter() - start
-    report(args, f"wrote {counts['done']} sequence(s) to {args.out} ({counts['skipped']} already complete), "
+    rebuilt = f", {len(counts['rebuilt'])} rebuilt for a damaged chunk" if counts["rebuilt"] else ""
+    report(args, f"wrote {counts['done']} sequence(s) to {args.out} ({counts['skipped']} already complete{rebuilt}), "
                  f"{counts['pixel_readouts']} pixel-readouts in {seconds:.1f} s")
     return 0

@@ -39,6 +39,7 @@ from typing import Sequence
 
 import numpy as np
 
+from tespike.golden.atomic import NO_ROOM
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.recon.dataset.store import (CHUNK_FRAMES, TILE, DatasetStore, check_name, mark_complete,
@@ -245,13 +246,15 @@ def sequence_graph(store: DatasetStore, source: Source):
 
 
 def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, SensorConfig], seed: int, run, *,
-               chunk_frames: int = CHUNK_FRAMES, tile: tuple[int, int] = TILE, report=None) -> dict:
+               chunk_frames: int = CHUNK_FRAMES, tile: tuple[int, int] = TILE, report=None, notice=None) -> dict:
     """Write every source into the store at ``url`` (made or resumed) with every configuration.
 
     ``run`` is a :class:`tespike.cosim.dataset.cluster.Runner`; ``report(name)`` is
-    called as each sequence completes. Returns counts: ``done`` (sequences
-    written now), ``skipped`` (already complete), ``pixel_readouts`` (simulated
-    now, summed over the streams).
+    called as each sequence completes, ``notice(text)`` for each sequence a resumed
+    store held complete but with a damaged chunk (its CRC-32C fails), which is rebuilt.
+    Returns counts: ``done`` (sequences written now, rebuilt ones included),
+    ``skipped`` (already complete), ``pixel_readouts`` (simulated now, summed over
+    the streams), ``rebuilt`` (names of the damaged sequences rebuilt).
     """
     if type(seed) is not int or seed < 0:
         raise InputError(f"--seed {seed!r} must be an integer >= 0")
@@ -266,10 +269,10 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
         raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     if not configs:
         raise InputError("no sensor configuration: give --config at least once")
-    store = DatasetStore.create_or_resume(url, seed=seed, configs=configs, tile=tile,
-                                          chunk_frames=chunk_frames)
     graphs, skipped, pixel_readouts, done = [], 0, 0, 0
     try:
+        store = DatasetStore.create_or_resume(url, seed=seed, configs=configs, tile=tile,
+                                              chunk_frames=chunk_frames)
         for source in sources:
             graph, streams = sequence_graph(store, source)
             if graph is None:
@@ -277,17 +280,27 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
             else:
                 graphs.append(graph)
                 pixel_readouts += int(np.prod(source.shape)) * streams
+            damaged = store.rebuilt.get(source.name)
+            if damaged and notice is not None:
+                notice(f"sequence {source.name!r} was complete but chunk {damaged[0]!r}"
+                       f"{f' and {len(damaged) - 1} more' if len(damaged) > 1 else ''} fails its CRC-32C "
+                       "check: rebuilding its array")
         for _, name in run(graphs):
             done += 1
             if report is not None:
                 report(name)
     except BaseException as exc:       # a bad frame, Ctrl-C, a lost cluster: say what a rerun resumes
+        full = isinstance(exc, OSError) and exc.filename is None and exc.errno in NO_ROOM
+        if full:                       # Zarr's writes (here or on a worker) name no file
+            exc = InputError(f"cannot write dataset store {os.fspath(url)!r}: {exc.strerror}")
         if done + skipped:
             exc.add_note(f"(store {os.fspath(url)!r} keeps {done + skipped} complete sequence(s); "
                          "the same command resumes it)")
+        if full:
+            raise exc from None
         raise
     return {"done": done, "skipped": skipped, "pixel_readouts": pixel_readouts,
-            "store": os.fspath(url)}
+            "store": os.fspath(url), "rebuilt": sorted(store.rebuilt)}
 
 
 def new_local_store(url: str) -> str | None:

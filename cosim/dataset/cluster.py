@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 from typing import Iterator, Sequence
 
 from tespike.golden.errors import InputError
@@ -42,31 +43,90 @@ def check_workers(workers: int | None, scheduler: str | None) -> None:
 #: (sent to the whole foreground group) never reaches its workers (each printed its traceback:
 #: 63 lines for two); it prints the scheduler's address, then runs until its stdin closes,
 #: which happens however this command ends (a SIGKILL included), so no worker outlives it.
+#: A watcher thread reads stdin from the start: a cluster still starting when the command ends
+#: (a start that hangs: with few file handles Dask's scheduler spins for ever), or one that does
+#: not close in 30 s, ends with its whole session at once.
 LOCAL_CLUSTER = """
-import logging, sys
+import logging, os, signal, sys, threading
+started, ended, closed = threading.Event(), threading.Event(), threading.Event()
+def watch():
+    sys.stdin.read()
+    ended.set()
+    if not started.is_set() or not closed.wait(30):      # its own session's group: never its caller's
+        os.killpg(0, signal.SIGKILL) if os.getpgrp() == os.getpid() else os.kill(os.getpid(), signal.SIGKILL)
+threading.Thread(target=watch, daemon=True).start()
 from distributed import LocalCluster
 cluster = LocalCluster(n_workers=int(sys.argv[1]), threads_per_worker=1, processes=True, host="127.0.0.1",
                        dashboard_address="127.0.0.1:0", worker_dashboard_address="127.0.0.1:0",
                        silence_logs=logging.CRITICAL)
+started.set()
 print(cluster.scheduler_address, flush=True)
-sys.stdin.read()
+ended.wait()
 cluster.close(timeout=10)
+closed.set()
 """
 #: Seconds a local cluster is given to start, and to stop before its processes are killed.
 START_SECONDS = 120
 STOP_SECONDS = 30
+#: Open files a local cluster's process needs: about this many, plus FILES_PER_WORKER per
+#: worker (measured: 2 workers start with 40 open files, not with 38; 4 with 64, not with 56).
+CLUSTER_FILES = 28
+FILES_PER_WORKER = 8
+#: What a failed start's error output says when the system, not Dask, was short of something.
+STARVED = ("Too many open files", "No space left on device", "File too large", "Cannot allocate memory",
+           "MemoryError", "No usable temporary directory", "failed to map segment", "can't start new thread")
+
+
+#: Dask's log lines ("2026-01-01 10:00:00,000 - distributed.process - INFO - ...") and a traceback's
+#: last line ("OSError: ...", "distributed.comm.core.CommClosedError: ...").
+_LOG_LINE = re.compile(r"\d{4}-\d\d-\d\d [\d:,]+ - [\w.]+ - [A-Z]+ - ")
+_EXCEPTION_LINE = re.compile(r"[\w.]*(Error|Exception|Interrupt|Exit)\b")
+
+
+def _check_file_handles(workers: int) -> None:
+    """Refuse a cluster the open-file limit (``ulimit -n``) cannot hold: its start fails a few
+    layers down in Dask ("Nanny failed to start"), or, with very few, hangs."""
+    import resource
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    needed = CLUSTER_FILES + FILES_PER_WORKER * workers
+    if soft != resource.RLIM_INFINITY and soft < needed:
+        raise InputError(f"a local Dask cluster of {workers} worker processes needs about {needed} open files, "
+                         f"but the limit (ulimit -n) is {soft}: raise it or use fewer --workers")
+
+
+def _failed_start(workers: int, returncode, errors: list[str]) -> InputError:
+    """One line for a cluster that did not start: the cause from its error output (the deepest
+    starvation it names, else its last line)."""
+    every = [_LOG_LINE.sub("", line).strip() for line in errors if line.strip()]     # a worker's, logged
+    lines = [line.strip() for line in errors if line.strip() and not _LOG_LINE.match(line)]
+    exceptions = [line for line in lines if _EXCEPTION_LINE.match(line)]
+    cause = next((line for line in reversed(every) if any(word in line for word in STARVED)),
+                 (exceptions or lines or [f"exit status {returncode}"])[-1])
+    cause = cause.removeprefix("RuntimeError: Cluster failed to start: ")
+    if cause.endswith("can't start new thread"):          # a thread's stack did not fit
+        cause += " (out of memory or of processes)"
+    if "No usable temporary directory" in cause:
+        from tespike.golden.paths import temporary_directory_fault
+        cause = temporary_directory_fault() or cause
+    return InputError(f"cannot start a local Dask cluster of {workers} worker processes: {cause[:200]}")
 
 
 def _start_local_cluster(workers: int, interrupted):
     """(process, scheduler address) of a local cluster of ``workers`` processes (:data:`LOCAL_CLUSTER`);
     ``interrupted()`` is called while it starts (a Ctrl-C ends the wait at once)."""
+    import collections
     import select
     import subprocess
     import sys
+    import threading
     import time
+    _check_file_handles(workers)
     process = subprocess.Popen([sys.executable, "-c", LOCAL_CLUSTER, str(workers)], stdin=subprocess.PIPE,
-                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                start_new_session=True)
+    errors: collections.deque[str] = collections.deque(maxlen=400)      # its last lines, read as they come
+    reader = threading.Thread(target=lambda: errors.extend(process.stderr), daemon=True)
+    reader.start()
     try:
         end = time.monotonic() + START_SECONDS
         while not select.select([process.stdout], [], [], POLL_SECONDS)[0]:
@@ -78,10 +138,10 @@ def _start_local_cluster(workers: int, interrupted):
     except BaseException:
         _stop_local_cluster(process, at_once=True)
         raise
-    if not address:
-        _stop_local_cluster(process)
-        raise InputError(f"cannot start a local Dask cluster of {workers} worker processes "
-                         f"(exit status {process.returncode})")
+    if not address:                    # it ended: what its start left (half-started workers) goes too
+        _stop_local_cluster(process, at_once=True)
+        reader.join(5)
+        raise _failed_start(workers, process.returncode, list(errors))
     return process, address
 
 
@@ -169,8 +229,11 @@ class Runner:
                     first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
                     raise InputError(f"cannot reach the Dask scheduler {self.address!r}: {first}") from None
             else:
+                import logging
+
                 from distributed import Client
                 self.cluster, address = _start_local_cluster(self.workers, self._interrupts.check)
+                logging.getLogger("distributed").setLevel(logging.ERROR)     # its warnings break the one line
                 self.client = Client(address)
             self._interrupts.check()          # a Ctrl-C during the start ends the run here
         except BaseException as exc:
@@ -187,6 +250,16 @@ class Runner:
         finally:
             self.client = self.cluster = None
             self._interrupts.restore()
+
+    def _result(self, future):
+        """A finished future's result, looking for a Ctrl-C meanwhile: gathering it from a worker that
+        died (out of memory) reschedules it, and a plain ``result()`` then blocked past any Ctrl-C."""
+        while True:
+            self._interrupts.check()
+            try:
+                return future.result(timeout=POLL_SECONDS * 10)
+            except TimeoutError:
+                continue
 
     def __call__(self, tasks: Sequence) -> Iterator[tuple[int, object]]:
         """Run ``dask.delayed`` tasks; yield (index in ``tasks``, result) as each finishes.
@@ -213,6 +286,6 @@ class Runner:
                 if not batch:
                     time.sleep(POLL_SECONDS)
                 for future in batch:
-                    yield index_of[id(future)], future.result()
+                    yield index_of[id(future)], self._result(future)
         finally:
             self.client.cancel(futures)

@@ -109,6 +109,8 @@ class DatasetStore:
         self.configs = {name: SensorConfig.from_dict(d) for name, d in attrs["configs"].items()}
         self.tile = tuple(attrs["tile"])
         self.chunk_frames = int(attrs["chunk_frames"])
+        #: sequence -> chunk files found damaged by :meth:`prepare_sequence`, whose arrays it made anew
+        self.rebuilt: dict[str, list[str]] = {}
 
     # -- opening --------------------------------------------------------------
     @classmethod
@@ -192,7 +194,15 @@ class DatasetStore:
                   **{f"streams/{c}": word_dtype(config) for c, config in self.configs.items()}}
         for path, dtype in arrays.items():
             key = path.split("/")[-1]
-            complete = path in group and bool(group[path].attrs.get("complete", False))
+            with reading(self.url, f"{name}/{path}"):
+                complete = path in group and bool(group[path].attrs.get("complete", False))
+            damaged = damaged_chunks(self.url, f"{name}/{path}") if complete else []
+            if damaged:              # kept work is verified: a damaged chunk's array is made again
+                self.rebuilt.setdefault(name, []).extend(damaged)
+                complete = False
+                if done["sequence"]:
+                    group.attrs.update(complete=False)          # readers skip it until rebuilt
+                    done["sequence"] = False
             if not complete:
                 array = group.create_array(path, shape=(K, H, W), chunks=chunks, dtype=dtype,
                                            compressors=_compressors(), fill_value=0, overwrite=True)
@@ -308,6 +318,29 @@ def damaged_file(url: str, path: str = "") -> str | None:
     except _DAMAGE:
         return None
     return None
+
+
+def damaged_chunks(url: str, path: str) -> list[str]:
+    """Chunk files of the array at ``path`` of a local store whose CRC-32C does not match their
+    bytes (a truncated or altered chunk), without decompressing any: a resumed build keeps
+    complete arrays, so it checks them first (about the cost of reading the files once).
+    Empty for an array stored without CRCs (older stores) and for a store that is not a folder."""
+    import google_crc32c
+    folder = Path(url, *path.split("/"))
+    if not folder.is_dir():
+        return []
+    with reading(url, path):
+        meta = json.loads((folder / "zarr.json").read_bytes())
+    if not any(isinstance(codec, dict) and codec.get("name") == "crc32c" for codec in meta.get("codecs", ())):
+        return []
+    bad = []
+    for chunk in sorted((folder / "c").rglob("*")) if (folder / "c").is_dir() else ():
+        if not chunk.is_file() or chunk.name.endswith(".partial"):
+            continue
+        data = chunk.read_bytes()
+        if len(data) < 4 or google_crc32c.value(data[:-4]) != int.from_bytes(data[-4:], "little"):
+            bad.append(str(chunk))
+    return bad
 
 
 def mark_complete(url: str, path: str, **attrs) -> None:

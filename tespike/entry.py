@@ -1,0 +1,77 @@
+"""The ``tespike`` command's entry point (the installed script and ``python3 -m tespike``).
+
+It imports nothing heavy, so the command's clean endings hold from its first instant:
+Ctrl-C while numpy loads (the first 0.2 s) is one line, not a traceback, and a process
+whose address space (``ulimit -v``) cannot hold Python and numpy is refused in one line
+instead of numpy's 40-line import error or OpenBLAS's messages and exit from C.
+"""
+
+import sys
+
+#: Address space a started command needs beyond what importing it takes (its first arrays).
+START_MARGIN = 16 << 20
+#: Seconds the trial start may take (a few tenths normally).
+PROBE_SECONDS = 60
+#: What a failed start under an address-space limit prints when memory was what it lacked.
+_MEMORY_WORDS = ("memory", "Memory", "map segment", "pthread_create", "allocat")
+
+
+def main() -> int:
+    """Run ``tespike`` with the process's arguments; the exit status."""
+    try:
+        refusal = _address_space_refusal()
+        if refusal:
+            print(f"tespike: error: {refusal}", file=sys.stderr)
+            return 1
+        from tespike.cosim.cli import main as command
+    except KeyboardInterrupt:          # while numpy loads, before the command's own handling
+        print("tespike: interrupted", file=sys.stderr)
+        return 130
+    except MemoryError:
+        print(f"tespike: error: {_starved()}", file=sys.stderr)
+        return 1
+    except ImportError as exc:         # a library that could not be mapped into the address space
+        if _address_space_limit() is None or not any(word in str(exc) for word in _MEMORY_WORDS):
+            raise
+        print(f"tespike: error: {_starved()}", file=sys.stderr)
+        return 1
+    try:
+        return command()
+    except KeyboardInterrupt:          # while the arguments are read, outside the command's handling
+        print("tespike: interrupted", file=sys.stderr)
+        return 130
+
+
+def _address_space_limit() -> int | None:
+    """The soft RLIMIT_AS in bytes (``ulimit -v``), None when unlimited."""
+    import resource
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    return None if soft == resource.RLIM_INFINITY else soft
+
+
+def _starved() -> str:
+    limit = _address_space_limit()
+    where = f" within the address-space limit (ulimit -v) of {limit >> 20} MB" if limit is not None else ""
+    return f"out of memory: Python and numpy cannot start{where}"
+
+
+def _address_space_refusal() -> str | None:
+    """Under an address-space limit only: whether the command can start, tried in a child
+    process (about 0.2 s). Numpy's OpenBLAS reserves about 40 MB per core at import and, when
+    that fails, prints its own lines and may end the process from C, past any handling here."""
+    if _address_space_limit() is None:
+        return None
+    import os
+    import subprocess
+    probe = f"import mmap, tespike.cosim.cli\nmmap.mmap(-1, {START_MARGIN})\n"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))   # this process's tespike
+    try:
+        done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env,
+                              stdin=subprocess.DEVNULL, timeout=PROBE_SECONDS)
+    except OSError:                    # no process to try it in: the import itself will tell
+        return None
+    except subprocess.TimeoutExpired:  # OpenBLAS short of threads' room can hang its start
+        return _starved()
+    if done.returncode == 0 or not any(word in done.stderr for word in _MEMORY_WORDS):
+        return None
+    return _starved()

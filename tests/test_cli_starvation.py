@@ -1,0 +1,198 @@
+"""A command starved of memory, file handles or disk ends in one line naming the resource and
+the cause (issue 28, item 6): no traceback, no process left, nothing half-written.
+(``benchmarks/fault_sweep.py --only starve`` starves every long command at many levels.)
+"""
+
+import os
+import resource
+import signal
+import subprocess
+import sys
+
+import pytest
+
+from tests.cli import ROOT, assert_refused
+from tests.test_cli_clean_endings import run_here
+from tests.test_cli_hardening import small_tmpfs
+
+
+def run_limited(code: str, limits: dict, timeout: float = 120) -> subprocess.CompletedProcess:
+    """``python -c code`` (this checkout's tespike) under the resource ``limits``, SIGXFSZ ignored
+    as a starved shell's command would have it (a write past RLIMIT_FSIZE then fails with EFBIG)."""
+    def starve():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        for which, value in limits.items():
+            resource.setrlimit(which, (value, value))
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env,
+                          preexec_fn=starve, timeout=timeout)
+
+
+def start_address_space() -> int:
+    """Bytes of address space a process that has imported the command takes here (numpy's
+    OpenBLAS reserves about 40 MB per core, so it depends on the machine)."""
+    code = ("import tespike.cosim.cli\n"
+            "print([l for l in open('/proc/self/status') if l.startswith('VmPeak')][0].split()[1])")
+    done = run_limited(code, {})
+    assert done.returncode == 0, done.stderr
+    return int(done.stdout) * 1024
+
+
+ENTRY = "import sys; sys.argv = ['tespike', *{args!r}]; from tespike.entry import main; sys.exit(main())"
+
+
+def test_an_address_space_too_small_to_start_is_one_line():
+    """Below what numpy needs to load, the start was numpy's 40-line ImportError, OpenBLAS's own
+    lines and exit from C, or a MemoryError traceback, depending on the limit."""
+    need = start_address_space()
+    for share in (0.3, 0.6, 0.9):
+        limit = int(need * share)
+        done = run_limited(ENTRY.format(args=["scene", "--list"]), {resource.RLIMIT_AS: limit})
+        assert_refused(done, "tespike: error: out of memory: Python and numpy cannot start",
+                       f"address-space limit (ulimit -v) of {limit >> 20} MB")
+        assert done.returncode == 1 and done.stdout == ""
+    done = run_limited(ENTRY.format(args=["scene", "--list"]), {resource.RLIMIT_AS: need + (64 << 20)})
+    assert done.returncode == 0 and "default" in done.stdout, done.stderr      # room to start: it starts
+
+
+def test_torch_without_room_is_out_of_memory_in_one_line(tmp_path):
+    """Room for numpy but not for torch: ``reconstruct --method net`` printed the ImportError's traceback
+    ("libtorch_cpu.so: failed to map segment from shared object"), or, with a little more room, died of
+    SIGABRT (torch's import throws std::bad_alloc from C++). Torch is now tried in a child first."""
+    import numpy as np
+    np.save(tmp_path / "e.npy", np.full((240 * 3, 4, 4), 2, np.uint8))
+    limit = start_address_space() + (80 << 20)
+    args = ["golden", "--config", "te", "--stimulus", str(tmp_path / "e.npy"), "--out", str(tmp_path / "s.npz"), "-q"]
+    assert run_limited(ENTRY.format(args=args), {resource.RLIMIT_AS: limit}).returncode == 0
+    args = ["reconstruct", "--stream", str(tmp_path / "s.npz"), "--method", "net", "--out", str(tmp_path / "r.npy")]
+    done = run_limited(ENTRY.format(args=args), {resource.RLIMIT_AS: limit})
+    assert_refused(done, "tespike reconstruct: error: out of memory within the address-space limit",
+                   "torch cannot be loaded: it does not fit in")
+    assert not (tmp_path / "r.npy").exists() and not [p for p in os.listdir(tmp_path) if p.endswith(".part")]
+
+
+def test_only_an_import_error_about_memory_is_read_as_out_of_memory(capsys, monkeypatch):
+    """The out-of-memory reading must not hide a genuine import bug (a missing module stays a traceback)."""
+    import tespike.cosim.commands.scene_cmd as scene_cmd
+
+    def unmappable(args):
+        raise ImportError("libtorch_cpu.so: failed to map segment from shared object")
+    monkeypatch.setattr(scene_cmd, "run", unmappable)
+    assert_refused(run_here(capsys, "scene", "--list"), "tespike scene: error: out of memory", "failed to map")
+
+    def missing(args):
+        raise ImportError("No module named 'tespike.golden.nothing'")
+    monkeypatch.setattr(scene_cmd, "run", missing)
+    with pytest.raises(ImportError, match="nothing"):
+        run_here(capsys, "scene", "--list")
+
+
+def test_a_cluster_the_open_file_limit_cannot_hold_is_refused_before_it_starts(tmp_path):
+    """With ``ulimit -n 12`` the local cluster's start hung for ever (its process then outlived the
+    command); with 20 or 32 it said "cannot start ... (exit status 1)", naming no cause."""
+    code = ("import sys; sys.argv = ['tespike', 'dataset', '--scene', 'sun', '--frames', '2', '--height', '8', "
+            f"'--width', '8', '--config', 'te', '--workers', '2', '--out', {str(tmp_path / 'd.zarr')!r}]\n"
+            "from tespike.entry import main; sys.exit(main())")
+    for handles in (12, 32):
+        done = run_limited(code, {resource.RLIMIT_NOFILE: handles}, timeout=60)
+        assert_refused(done, "local Dask cluster of 2 worker processes needs about",
+                       f"the limit (ulimit -n) is {handles}")
+        assert not (tmp_path / "d.zarr").exists()
+
+
+def test_a_cluster_that_fails_to_start_names_the_cause_from_its_errors():
+    from tespike.cosim.dataset.cluster import _failed_start
+    errors = ["Traceback (most recent call last):\n", '  File "x.py", line 1\n',
+              "OSError: [Errno 24] Too many open files\n", "\n",
+              "The above exception was the direct cause of the following exception:\n",
+              "RuntimeError: Nanny failed to start.\n"]
+    assert str(_failed_start(2, 1, errors)) == ("cannot start a local Dask cluster of 2 worker processes: "
+                                                "OSError: [Errno 24] Too many open files")
+    assert str(_failed_start(3, 1, ["RuntimeError: Cluster failed to start: bad port\n"])).endswith(": bad port")
+    assert str(_failed_start(2, 1, [])).endswith("processes: exit status 1")
+    logged = ["Traceback (most recent call last):\n", "MemoryError\n",
+              "2026-11-26 10:27:45,233 - distributed.process - INFO - reaping stray process <SpawnProcess>\n"]
+    assert str(_failed_start(2, 1, logged)).endswith("processes: MemoryError")    # the cause, not Dask's log
+    nanny = ["RuntimeError: can't start new thread\n", "AssertionError: Status.starting\n",
+             "RuntimeError: Nanny failed to start.\n", logged[-1]]
+    assert str(_failed_start(2, 1, nanny)).endswith(": RuntimeError: can't start new thread "
+                                                    "(out of memory or of processes)")
+
+
+def test_a_local_cluster_whose_start_hangs_ends_with_the_command(tmp_path):
+    """With 12 file handles Dask's start spins for ever; the cluster's process read its stdin (the
+    command's end) only after the start, so it outlived a killed command. It now watches from the start."""
+    from tespike.cosim.dataset.cluster import LOCAL_CLUSTER
+
+    def starve():
+        resource.setrlimit(resource.RLIMIT_NOFILE, (12, 12))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    process = subprocess.Popen([sys.executable, "-c", LOCAL_CLUSTER, "2"], stdin=subprocess.PIPE,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+                               start_new_session=True, preexec_fn=starve)
+    try:
+        try:
+            process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            pass
+        process.stdin.close()                    # the command ended
+        process.wait(timeout=20)
+    finally:
+        try:
+            os.killpg(process.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        process.wait()
+
+
+def test_a_full_disk_under_the_training_log_names_the_log(capsys, tmp_path):
+    """log.csv is appended through a buffer: the full disk surfaced at its close as an OSError naming
+    no file ("tespike train: error: No space left on device")."""
+    with small_tmpfs(tmp_path / "small", "1m") as mount:
+        (mount / "filler").write_bytes(b"\0" * (os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize))
+        result = run_here(capsys, "train", "--config", "te", "--steps", "1", "--batch", "1", "--crop", "16",
+                          "--workers", "0", "--pool", "1", "--validate-every", "0", "--out", mount / "t.pt")
+        assert_refused(result, f"{str(mount / 't.run' / 'log.csv')!r}", "No space left on device")
+        assert sorted(os.listdir(mount)) == ["filler"]            # no weights, no run folder left
+
+
+def test_a_fault_after_an_output_is_in_place_says_it_is_whole(capsys, monkeypatch, tmp_path):
+    """train writes its weights, then its checkpoint: a full disk at the checkpoint read as if the run
+    had written nothing, over new, whole weights."""
+    import tespike.cosim.commands.scene_cmd as scene_cmd
+    from tespike.golden.io import atomic_output
+
+    def writes_then_fails(args):
+        with atomic_output(tmp_path / "w.pt") as part:
+            open(part, "wb").write(b"weights")
+        raise OSError(28, os.strerror(28), str(tmp_path / "t.run" / "checkpoint.pt"))
+    monkeypatch.setattr(scene_cmd, "run", writes_then_fails)
+    assert_refused(run_here(capsys, "scene", "--list"), "checkpoint.pt", "No space left on device",
+                   f"(after writing {str(tmp_path / 'w.pt')!r} whole)")
+
+
+def test_no_usable_temporary_directory_names_the_folder_and_the_cause(capsys, monkeypatch, tmp_path):
+    """Python's tempfile says "No usable temporary directory found in [...]" whatever the cause (a full
+    disk, a file-size limit): the line now names the folder and the errno's words."""
+    import tespike.cosim.commands.scene_cmd as scene_cmd
+
+    def no_temporary(args):
+        raise FileNotFoundError(2, f"No usable temporary directory found in ['{mount}', '/tmp']")
+    monkeypatch.setattr(scene_cmd, "run", no_temporary)
+    with small_tmpfs(tmp_path / "small", "64k") as mount:
+        (mount / "filler").write_bytes(b"\0" * (os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize))
+        monkeypatch.setenv("TMPDIR", str(mount))
+        assert_refused(run_here(capsys, "scene", "--list"),
+                       f"cannot write a temporary file in {str(mount)!r}: No space left on device")
+
+
+@pytest.mark.parametrize("room", [0, 12 * 1024])
+def test_a_full_disk_under_a_dataset_store_names_the_store(capsys, tmp_path, room):
+    """Zarr writes a store's files itself: a full disk was "tespike dataset: error: No space left on
+    device", naming nothing; the half-made store goes, as for any failed first build."""
+    with small_tmpfs(tmp_path / "small", "1m") as mount:
+        (mount / "filler").write_bytes(b"\0" * (os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize - room))
+        result = run_here(capsys, "dataset", "--scene", "sun", "--frames", "4", "--height", "16", "--width", "16",
+                          "--config", "te", "--out", mount / "d.zarr")
+        assert_refused(result, f"cannot write dataset store {str(mount / 'd.zarr')!r}: No space left on device")
+        assert os.listdir(mount) == ["filler"]
