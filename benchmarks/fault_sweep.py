@@ -9,8 +9,11 @@ Verilog file), then
 * **truncation**: for every (command, input) pair cuts the input at 0 bytes, 1 byte, half,
   all but one byte, and flips the middle byte, runs the command with a timeout and checks
   that it ends cleanly;
-* **interruption**: sends SIGINT to the process group (Ctrl-C) and SIGTERM to the command
-  (``kill``) of every long command at several moments;
+* **interruption**: sends SIGINT to the process group (Ctrl-C), SIGTERM to the command
+  (``kill``) and SIGKILL to the command (``kill -9``, the out-of-memory killer) of every long
+  command at several moments; killed outright it can print nothing, so there a clean ending
+  is: nothing on stderr, no process left, no temporary left (its janitor removes them) and
+  the output the previous one or a whole new one;
 * **starvation** (cases named ``starve ...``): runs every long command once unstarved (what
   it writes, its VmPeak), then with its outputs on a small tmpfs (also its TMPDIR) filled to
   leave part of that room, under RLIMIT_FSIZE, RLIMIT_NOFILE and RLIMIT_AS at several levels.
@@ -530,6 +533,8 @@ def run_interrupt(case: Case, at: float, signum: int, base: Path) -> tuple[bool,
     before = state(out)
     outcome = run_command(case.argv, work, signal_at=at, signum=signum, group=signum == signal.SIGINT)
     try:
+        if signum == signal.SIGKILL:
+            return judge_kill(case, outcome, work, out, before)
         lines = outcome.stderr.strip().splitlines()
         first = lines[0] if lines else ""
         if outcome.code is None:
@@ -564,6 +569,51 @@ def run_interrupt(case: Case, at: float, signum: int, base: Path) -> tuple[bool,
         return True, first[:160]
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+def judge_kill(case: Case, outcome: Outcome, work: Path, out: Path, before: dict) -> tuple[bool, str]:
+    """A command killed outright (SIGKILL to it alone: no handler runs, so it prints nothing):
+    nothing on stderr (a worker's traceback or a tool's notice would show), no process left, no
+    temporary left once its janitor has had a moment, and its output the previous one or a
+    whole new one (it was moved into place before the kill)."""
+    if outcome.code is None:
+        return False, "timed out"
+    if outcome.code == 0:
+        return True, f"finished before the signal ({outcome.seconds:.1f} s)"
+    if outcome.orphans:
+        return False, f"left {len(outcome.orphans)} process(es): {outcome.orphans[0]}"
+    if outcome.stderr.strip():
+        lines = outcome.stderr.strip().splitlines()
+        return False, f"{len(lines)} lines on stderr after the kill: {lines[-1][:140]}"
+    end = time.monotonic() + 2.0                       # the janitor removes them within milliseconds
+    while parts_left(work) and time.monotonic() < end:
+        time.sleep(0.05)
+    left = parts_left(work)
+    if left:
+        return False, f"temporaries left: {left[:3]}"
+    if state(out) == before:
+        return True, f"killed (exit {outcome.code}); output untouched, nothing left"
+    if whole_output(out):
+        return True, f"killed (exit {outcome.code}) after its output was in place whole"
+    return False, f"output {case.out} changed and not whole"
+
+
+def whole_output(path: Path) -> bool:
+    """Whether ``path`` is a complete output: a zip (S.npz, C.npz, weights) whose members check, an
+    array that loads, a results folder without temporaries, another file that is not empty."""
+    import zipfile
+    if path.is_dir():
+        return any(path.iterdir()) and not list(path.rglob("*.part"))
+    try:
+        if path.suffix in (".npz", ".pt"):
+            with zipfile.ZipFile(path) as archive:
+                return archive.testzip() is None
+        if path.suffix == ".npy":
+            np.load(path, mmap_mode="r")
+            return True
+        return path.stat().st_size > 0
+    except Exception:
+        return False
 
 
 def parts_left(work: Path) -> list[str]:
@@ -834,7 +884,7 @@ def main() -> int:
                 if args.only and args.only not in case.name:
                     continue
                 for at in moments:
-                    for signum in (signal.SIGINT, signal.SIGTERM):
+                    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
                         ok, what = run_interrupt(case, at, signum, base)
                         label = f"{signal.Signals(signum).name}@{'part' if at < 0 else f'{at:g}s'}"
                         rows.append((case.name, label, ok, what))
