@@ -185,3 +185,36 @@ def test_unreachable_scheduler_is_refused_in_one_line(tmp_path, monkeypatch):
     assert result.returncode == 2, result
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "cannot reach the Dask scheduler" in lines[0], result.stderr
+
+
+def test_a_local_cluster_ends_at_once_with_a_command_killed_outright():
+    """SIGKILL to the command: its local cluster (a session of its own) sees its pipe close with
+    its command gone and ends its whole session at once, without a graceful close nobody awaits."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    script = ("from tespike.cosim.dataset.cluster import _start_local_cluster\n"
+              "process, address = _start_local_cluster(2, lambda: None)\n"
+              "print(process.pid, flush=True)\n"
+              "import time; time.sleep(120)\n")
+    command = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+
+    def session(sid):                                       # live processes (a zombie has ended)
+        out = subprocess.run(["ps", "-o", "pid=,stat=", "-s", str(sid)], capture_output=True, text=True).stdout
+        return [line.split()[0] for line in out.splitlines() if line.split() and not line.split()[1].startswith("Z")]
+
+    cluster = None
+    try:
+        cluster = int(command.stdout.readline())
+        assert len(session(cluster)) >= 3                       # the cluster's process and its workers
+        command.kill()
+        command.wait(10)
+        start = time.monotonic()
+        while session(cluster) and time.monotonic() - start < 20:
+            time.sleep(0.05)
+        assert not session(cluster), session(cluster)
+        assert time.monotonic() - start < 2.0                   # at once, not a 10 s graceful close
+    finally:
+        if cluster is not None and session(cluster):
+            os.killpg(cluster, signal.SIGKILL)

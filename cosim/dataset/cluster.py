@@ -44,15 +44,17 @@ def check_workers(workers: int | None, scheduler: str | None) -> None:
 #: 63 lines for two); it prints the scheduler's address, then runs until its stdin closes,
 #: which happens however this command ends (a SIGKILL included), so no worker outlives it.
 #: A watcher thread reads stdin from the start: a cluster still starting when the command ends
-#: (a start that hangs: with few file handles Dask's scheduler spins for ever), or one that does
-#: not close in 30 s, ends with its whole session at once.
+#: (a start that hangs: with few file handles Dask's scheduler spins for ever), one whose command
+#: is gone (killed outright: nobody waits for a graceful close), or one that does not close in
+#: 30 s, ends with its whole session at once.
 LOCAL_CLUSTER = """
 import logging, os, signal, sys, threading
 started, ended, closed = threading.Event(), threading.Event(), threading.Event()
+command = os.getppid()
 def watch():
     sys.stdin.read()
     ended.set()
-    if not started.is_set() or not closed.wait(30):      # its own session's group: never its caller's
+    if not started.is_set() or os.getppid() != command or not closed.wait(30):   # its own session's group
         os.killpg(0, signal.SIGKILL) if os.getpgrp() == os.getpid() else os.kill(os.getpid(), signal.SIGKILL)
 threading.Thread(target=watch, daemon=True).start()
 from distributed import LocalCluster
