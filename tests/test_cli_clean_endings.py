@@ -319,16 +319,19 @@ def test_a_signal_during_the_interpreters_exit_ends_it_without_a_traceback(tmp_p
         assert done.returncode == 0 and done.stdout.strip().endswith(want), (start, done)
 
 
+#: Python that makes importing ``tespike.cosim.cli`` (numpy loading) meet a Ctrl-C.
+CLI_IMPORT_INTERRUPTED = ("import sys, types\n"
+                          "cli = types.ModuleType('tespike.cosim.cli')\n"
+                          "def stopped(name):\n"
+                          "    raise KeyboardInterrupt\n"
+                          "cli.__getattr__ = stopped\n"
+                          "import tespike.cosim\n"
+                          "sys.modules['tespike.cosim.cli'] = cli\n")
+
+
 def test_ctrl_c_while_the_command_loads_is_one_line():
     """Ctrl-C in the first 0.2 s (numpy loading, before main's handling) printed a 20-line traceback."""
-    code = ("import runpy, sys, types\n"
-            "cli = types.ModuleType('tespike.cosim.cli')\n"
-            "def stopped(name):\n"
-            "    raise KeyboardInterrupt\n"
-            "cli.__getattr__ = stopped\n"
-            "import tespike.cosim\n"
-            "sys.modules['tespike.cosim.cli'] = cli\n"
-            "runpy.run_module('tespike', run_name='__main__')\n")
+    code = CLI_IMPORT_INTERRUPTED + "import runpy\nrunpy.run_module('tespike', run_name='__main__')\n"
     done = run_python(code)
     assert done.returncode == 130 and done.stderr == "tespike: interrupted\n", done
 
@@ -342,15 +345,7 @@ def test_the_installed_script_goes_through_the_same_early_ctrl_c_handling():
     script = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]["tespike"]
     module, function = script.split(":")
     assert module == "tespike.entry"
-    code = ("import sys, types\n"
-            "cli = types.ModuleType('tespike.cosim.cli')\n"
-            "def stopped(name):\n"
-            "    raise KeyboardInterrupt\n"
-            "cli.__getattr__ = stopped\n"
-            "import tespike.cosim\n"
-            "sys.modules['tespike.cosim.cli'] = cli\n"
-            f"from {module} import {function}\n"
-            f"sys.exit({function}())\n")
+    code = CLI_IMPORT_INTERRUPTED + f"from {module} import {function}\nsys.exit({function}())\n"
     done = run_python(code)
     assert done.returncode == 130 and done.stderr == "tespike: interrupted\n", done
     heavy = run_python(f"import sys; import {module}; print(sorted(m for m in ('numpy', 'torch', 'tespike.cosim.cli') "
