@@ -170,9 +170,9 @@ OUT_OF_MEMORY_UNDER_LIMIT = ("could not create a primitive",)
 
 def _memory_limit() -> str:
     """The address-space limit the process runs under, for an out-of-memory line ('' if none)."""
-    import resource
-    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    return "" if soft == resource.RLIM_INFINITY else f" within the address-space limit (ulimit -v) of {soft >> 20} MB"
+    from tespike.golden.resources import address_space_limit
+    limit = address_space_limit()
+    return "" if limit is None else f" within the address-space limit (ulimit -v) of {limit >> 20} MB"
 
 
 def _one_line(exc: BaseException, limit: int = 300) -> str:

@@ -12,8 +12,9 @@ as one line. Without a limit nothing is installed and imports cost nothing more.
 from __future__ import annotations
 
 import os
-import resource
 import sys
+
+from tespike.golden.resources import address_space_limit, mapped_bytes
 
 #: Libraries tried in a child first.
 GUARDED = ("torch",)
@@ -23,14 +24,6 @@ _NO_ROOM_WORDS = ("alloc", "memory", "Memory", "map segment", "pthread_create", 
 PROBE_SECONDS = 120
 #: Address space kept free beyond the library's own mappings (its first tensors, threads).
 MARGIN = 64 << 20
-
-
-def _vm_size() -> int:
-    with open("/proc/self/status") as status:
-        for line in status:
-            if line.startswith("VmSize:"):
-                return int(line.split()[1]) * 1024
-    return 0
 
 
 _PROBE = """
@@ -57,7 +50,7 @@ def _refusal(name: str, limit: int) -> str | None:
         return None                       # no process to try it in: the import itself will tell
     except subprocess.TimeoutExpired:     # a start short of room can hang (OpenBLAS's threads)
         return f"{name} did not load within {PROBE_SECONDS} s under the address-space limit"
-    left = max(0, limit - _vm_size())
+    left = max(0, limit - mapped_bytes())
     if done.returncode != 0:
         if done.returncode < 0 or any(word in done.stderr for word in _NO_ROOM_WORDS):
             return f"{name} cannot be loaded: it does not fit in {left >> 20} MB of address space"
@@ -82,8 +75,8 @@ class _Guard:
         if fullname not in GUARDED or fullname in self.checked:
             return None
         self.checked.add(fullname)       # (removing itself here would skip the next finder of the loop)
-        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-        refusal = None if soft == resource.RLIM_INFINITY else _refusal(fullname, soft)
+        limit = address_space_limit()
+        refusal = None if limit is None else _refusal(fullname, limit)
         if refusal:
             raise MemoryError(refusal)
         return None                       # the usual finders load it
@@ -91,8 +84,7 @@ class _Guard:
 
 def guard_imports() -> None:
     """Under an address-space limit, check :data:`GUARDED` libraries' room before they load."""
-    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    if soft == resource.RLIM_INFINITY or any(name in sys.modules for name in GUARDED) \
+    if address_space_limit() is None or any(name in sys.modules for name in GUARDED) \
             or any(isinstance(finder, _Guard) for finder in sys.meta_path):
         return
     sys.meta_path.insert(0, _Guard())

@@ -34,7 +34,8 @@ def _meminfo(key: str) -> int | None:
     return None
 
 
-def _mapped_bytes() -> int:
+def mapped_bytes() -> int:
+    """Bytes of address space this process has mapped (``VmSize``; 0 if unknown)."""
     try:
         for line in Path("/proc/self/status").read_text().splitlines():
             if line.startswith("VmSize:"):
@@ -53,10 +54,16 @@ def available_memory() -> int | None:
     high, current = _read_int("/sys/fs/cgroup/memory.max"), _read_int("/sys/fs/cgroup/memory.current")
     if high is not None and current is not None:
         limits.append(max(0, high - current))
-    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    if soft != resource.RLIM_INFINITY:
-        limits.append(max(0, soft - _mapped_bytes()))
+    limit = address_space_limit()
+    if limit is not None:
+        limits.append(max(0, limit - mapped_bytes()))
     return min(limits) if limits else None
+
+
+def address_space_limit() -> int | None:
+    """The soft address-space limit (``ulimit -v``, RLIMIT_AS) in bytes, None when unlimited."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    return None if soft == resource.RLIM_INFINITY else soft
 
 
 def gigabytes(n: int) -> str:

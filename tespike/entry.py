@@ -43,7 +43,9 @@ def main() -> int:
 
 
 def _address_space_limit() -> int | None:
-    """The soft RLIMIT_AS in bytes (``ulimit -v``), None when unlimited."""
+    """The soft RLIMIT_AS in bytes (``ulimit -v``), None when unlimited (as
+    ``tespike.golden.resources.address_space_limit``, which cannot be imported here:
+    ``tespike.golden`` loads numpy)."""
     import resource
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)
     return None if soft == resource.RLIM_INFINITY else soft
