@@ -90,10 +90,6 @@ class _Janitor:
     def start(cls) -> None:
         """Start this process's janitor now (a command does, before its work): started with
         the first temporary instead, it could still be starting when a kill comes."""
-        cls._send(b"")
-
-    @classmethod
-    def _send(cls, line: bytes) -> None:
         if cls._owner != os.getpid():
             cls._owner, cls._process = os.getpid(), None
             try:
@@ -103,21 +99,25 @@ class _Janitor:
             except OSError:
                 return
             atexit.register(cls._close)
-        if cls._process is not None and line:
-            try:
-                cls._process.stdin.write(line)
-                cls._process.stdin.flush()
-            except (OSError, ValueError):
-                cls._process = None
 
     @classmethod
     def hold(cls, path: str | Path) -> None:
         """Remove ``path`` if this process ends before :meth:`release`."""
-        cls._send(b"+" + os.fsencode(os.fspath(path)).hex().encode() + b"\n")
+        cls._send(b"+", path)
 
     @classmethod
     def release(cls, path: str | Path) -> None:
-        cls._send(b"-" + os.fsencode(os.fspath(path)).hex().encode() + b"\n")
+        cls._send(b"-", path)
+
+    @classmethod
+    def _send(cls, mark: bytes, path: str | Path) -> None:
+        cls.start()
+        if cls._process is not None:
+            try:
+                cls._process.stdin.write(mark + os.fsencode(os.fspath(path)).hex().encode() + b"\n")
+                cls._process.stdin.flush()
+            except (OSError, ValueError):
+                cls._process = None
 
     @classmethod
     def _close(cls) -> None:
