@@ -880,6 +880,98 @@ def test_queue_draws_a_te_pixels_first_crossings_first():
         assert rest[j] == need[j] * theta - acc0[j] + np.floor(lam[j] * (rest_clocks - w) - last), j
 
 
+class _ByClock:
+    """A generator that returns chosen numbers: a per-clock electron count that depends
+    on the mean and on the clock's distance from the window's end (so a window padded
+    at its start gets the numbers of the same window drawn alone), the floor of a total's
+    mean, and ``0.9 shape + 3`` for a Gamma draw."""
+
+    def poisson(self, mean, size=None):
+        mean = np.broadcast_to(np.asarray(mean, np.float64), size or np.shape(mean))
+        if mean.ndim < 2:
+            return np.floor(mean).astype(np.int64)
+        from_end = np.arange(mean.shape[0])[::-1, None]
+        return np.floor(mean * (0.55 + 0.3 * ((7 * from_end) % 5))).astype(np.int64)
+
+    def standard_gamma(self, shape, size=None, out=None):
+        value = np.broadcast_to(0.9 * np.asarray(shape, np.float64) + 3.0, size or np.shape(shape))
+        if out is None:
+            return value.copy()
+        out[...] = value
+        return out
+
+    def multinomial(self, n, p):
+        raise AssertionError("no fallback expected")
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB], ids=str)
+def test_padded_windows_give_each_pixel_its_own_windows_outcome(config):
+    """Queue and full windows of several lengths run as one block padded at its start
+    (``tespike.golden.fastsim.window.window_rows``): on the same numbers, each pixel's
+    outcome (settled or not, spikes, end charge, TE overflow clock, its electrons and
+    rest total) is that of its own window drawn alone, from the interval's start and
+    from a head's rest alike."""
+    from tespike.golden.fastsim import window
+    theta, L = config.threshold, config.clocks_per_readout
+    sim = SceneSimulator(config, (1, 12), rng=0)
+    sim.rng = _ByClock()
+    rho = np.array([0.35, 0.5, 0.62, 0.7, 0.78, 0.85, 0.9, 0.45, 0.55, 0.66, 0.8, 0.88])
+    lam, acc0 = rho * theta, np.array([0, 5, 40, 90, theta - 1, 17, 0, 60, 130, 3, 100, 150])
+    keep, bound, length = window.queue_plan(sim.levels, rho)
+    own = window.round_window(length).astype(np.int64)
+    w = int(own.max())
+    assert keep.all() and own.min() < w and np.unique(own).size > 3
+    for clocks, offset, need in ((L, 0, np.full(12, config.p_max)), (L - 40, 40, np.arange(12) % 4 + 1)):
+        padded = window.queue_walk(sim, np.arange(12), w, lam, acc0, clocks, need, bound, offset, own)
+        for j in range(12):
+            alone = window.queue_walk(sim, np.array([j]), int(own[j]), lam, acc0[j:j + 1], clocks,
+                                      need[j:j + 1], bound[j:j + 1], offset)
+            for name, a, b in zip(("ok", "spikes", "end", "at"), padded[:4], alone[:4]):
+                assert a[j] == b[0], (name, j, offset)
+            assert np.array_equal(padded[4][w - own[j]:, j], alone[4][:, 0]) and padded[4][:w - own[j], j].sum() == 0
+            assert padded[5][j] == alone[5][0]
+    lam_full = np.array([1.15, 1.3, 1.6, 2.0, 2.5, 1.2]) * theta
+    acc_full = np.array([config.acc_max, 300, 200, 120, 80, 400]) % (config.acc_max + 1)
+    keep, length = window.full_plan(sim.levels, lam_full, acc_full)
+    own = window.round_window(length).astype(np.int64)
+    w = int(own.max())
+    assert own.min() < w
+    padded = window.full_walk(sim, np.arange(6), w, lam_full, acc_full, L, own)
+    for j in range(6):
+        alone = window.full_walk(sim, np.array([j]), int(own[j]), lam_full, acc_full[j:j + 1], L)
+        assert padded[0][j] == alone[0][0] and padded[1][j] == alone[1][0], j
+        assert np.array_equal(padded[2][w - own[j]:, j], alone[2][:, 0]) and padded[3][j] == alone[3][0]
+
+
+def test_padded_windows_that_do_not_settle_go_per_clock_with_their_own_clocks(monkeypatch):
+    """Full windows of several lengths padded into one block whose outcome is not
+    settled go per clock (``tespike.golden.fastsim.clock.fallback``, one call per window
+    length) on each pixel's own window and rest: with every full window made to fail,
+    the words and carried charge keep the cycle-exact model's law."""
+    from tespike.golden.fastsim import window
+    config = SensorConfig(mode="ml")
+    theta, L = config.threshold, config.clocks_per_readout
+    real, seen = window.full_walk, []
+
+    def unsettled(sim, sel, w, lam, acc0, clocks, own=None):
+        ok, end, drawn, rest = real(sim, sel, w, lam, acc0, clocks, own)
+        seen.append(own is not None and own.min() < w)
+        return np.zeros_like(ok), end, drawn, rest
+    monkeypatch.setattr(window, "full_walk", unsettled)
+    levels = np.array([1.15, 1.3, 1.6, 2.0, 2.5]) * theta * L / 42000
+    readouts, pixels = 60, 50                           # a block of at most SMALL_GROUP pixels: one, padded
+    scene = np.broadcast_to(levels[None, :, None], (readouts, levels.size, pixels)).copy()
+    sim = SceneSimulator(config, scene.shape[1:], rng=5)
+    fast = np.stack([sim.readout(scene[k]) for k in range(readouts)])
+    assert any(seen) and sim.path_counts["fallback"] >= sim.path_counts["full"] > 0
+    exact = simulate(config, poisson_stimulus(config, scene, 6))
+    for i in range(levels.size):
+        a, b = fast[:, i].astype(np.float64), exact[:, i].astype(np.float64)
+        z = (a.mean() - b.mean()) / np.sqrt(a.var() / a.size + b.var() / b.size + 1e-24)
+        tvd = 0.5 * np.abs(_histogram(fast[:, i], config) - _histogram(exact[:, i], config)).sum()
+        assert abs(z) < 4 and tvd < 0.05, (i, z, tvd)
+
+
 def test_distinct_values_equal_numpys_unique():
     """``tespike.golden.fastsim.distinct``: the sorted distinct values and their counts,
     as ``np.unique`` gives them (which the simulator avoids: its first call imports

@@ -107,15 +107,17 @@ def clock_draws(sim, lam, clocks):
     return sim.sampler.draw(sim.rng, lam, clocks=clocks)
 
 
-def tabled_call(lam, clocks) -> bool:
-    """Whether ``clocks`` per-clock draws of each mean in ``lam`` go to the table sampler:
+def tabled_call(lam, clocks, draws=None) -> bool:
+    """Whether ``clocks`` per-clock draws of each mean in ``lam`` (``draws`` of them in all
+    where the windows are padded to ``clocks``: :func:`tespike.golden.fastsim.window.window_draws`)
+    go to the table sampler:
     at least SMALL_DRAW draws, and at least TABLE_DRAWS per distinct integer mean (a
     table costs 0.15-0.7 ms to build and a call of the sampler a fixed 0.2 ms or so,
     numpy's sampler 45-65 ns a draw at these means: the window paths of a wide-range
     scene make calls of a few hundred pixels with as many distinct means, which numpy
     draws for less). Decided from the means alone (never from the cache or a draw):
     both samplers have the Poisson law, so the choice changes a seed's stream only."""
-    draws = lam.size * clocks
+    draws = lam.size * clocks if draws is None else draws
     if draws < SMALL_DRAW:
         return False
     g = lam.astype(np.int64)
@@ -263,7 +265,7 @@ def run_clocks(sim, sel, e, words, start=None):
         left = ~settled
         sel, e = sel[left], e[:, left]
         if start is not None:
-            start = PixelState(start.clock, *(a[:, left] for a in (start.acc, start.sfc, start.ovf, start.m)))
+            start = state_columns(start, left)
     array = PixelArray(sim.config, (1, sel.size))
     if start is None:
         array.state.acc[0] = sim.carried[sel]
@@ -277,17 +279,30 @@ def run_clocks(sim, sel, e, words, start=None):
         sim.sfc[sel] = array.state.sfc[0]
 
 
-def fallback(sim, sel, window, rest, words, start=None):
+def state_columns(state, i):
+    """Pixels ``i`` of a (1, n) :class:`tespike.golden.reference.PixelState` (copies)."""
+    return PixelState(state.clock, *(a[:, i] for a in (state.acc, state.sfc, state.ovf, state.m)))
+
+
+def fallback(sim, sel, window, rest, words, start=None, own=None):
     """Per-clock path for pixels whose window did not settle their outcome:
     the drawn window and rest total are kept (the rest spread as a uniform
     multinomial, which is its law given the total), so nothing is redrawn.
     ``start``: the pixels' state part-way through the interval (after a
-    head, :mod:`.head`); by default the start of the interval."""
+    head, :mod:`.head`); by default the start of the interval. ``own``: each
+    pixel's window length where windows of several lengths were padded into one
+    block (:func:`tespike.golden.fastsim.window.window_rows`): its last ``own[j]`` rows."""
     if not sel.size:
+        return
+    w = window.shape[0]
+    if own is not None and own.min() < w:              # (rare: one call per window length)
+        for length in distinct(own).tolist():
+            part = np.flatnonzero(own == length)
+            fallback(sim, sel[part], window[w - length:, part], rest[part], words,
+                     None if start is None else state_columns(start, part))
         return
     c = sim.config
     clocks = c.clocks_per_readout - (start.clock if start is not None else 0)
-    w = window.shape[0]
     head = sim.rng.multinomial(rest, np.full(clocks - w, 1.0 / (clocks - w)))
     e = np.minimum(np.concatenate([head.T, window], axis=0), c.input_max)
     sim.path_counts["fallback"] += sel.size

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..reference import PixelState
 from ..sensor import PixelArray
-from .clock import clock_draws, fallback, run_clocks, walk
+from .clock import clock_draws, fallback, run_clocks, state_columns, walk
 from .window import full_plan, full_walk, groups, queue_plan, queue_walk, round_window
 from .codes import HEAD
 from .words import ml_words
@@ -98,12 +98,13 @@ def head_path(sim, sel, h, expected, lam, words):
     for tail in (queue, full):
         i = np.flatnonzero(tail)
         for w, j in groups(i, size[i]):
+            own = size[j].astype(np.int64)
             if tail is queue:
                 ok, got, end, at_clock, drawn, drawn_rest = queue_walk(sim, sel[j], w, lam, acc_h[j],
-                                                                              rest, need[j], b_max[j], h)
+                                                                              rest, need[j], b_max[j], h, own)
                 at[j[ok & (at_clock >= 0)]] = h + at_clock[ok & (at_clock >= 0)]
             else:
-                ok, end, drawn, drawn_rest = full_walk(sim, sel[j], w, lam, acc_h[j], rest)
+                ok, end, drawn, drawn_rest = full_walk(sim, sel[j], w, lam, acc_h[j], rest, own)
                 got = np.full(j.size, rest, np.int64)   # a spike in every clock of the rest
                 hit = ok & (rest >= need[j])
                 at[j[hit]] = h + need[j[hit]] - 1
@@ -111,13 +112,13 @@ def head_path(sim, sel, h, expected, lam, words):
             spikes[j[ok]] = got[ok]
             bad = j[~ok]
             if bad.size:
-                fallback(sim, sel[bad], drawn[:, ~ok], drawn_rest[~ok], words, head_state(st, bad, h))
+                fallback(sim, sel[bad], drawn[:, ~ok], drawn_rest[~ok], words, state_columns(st, bad), own[~ok])
                 settled[bad] = False
     slow = np.flatnonzero(~event & ~queue & ~full)
     if slow.size:
         e = np.minimum(clock_draws(sim, lam_s[slow], rest), c.input_max)
         sim.path_counts["fallback"] += slow.size
-        run_clocks(sim, sel[slow], e, words, head_state(st, slow, h))
+        run_clocks(sim, sel[slow], e, words, state_columns(st, slow))
         settled[slow] = False
     done = np.flatnonzero(settled)
     if c.is_te:
@@ -160,9 +161,3 @@ def run_head(c, acc0, sfc0, e):
             getattr(state, name)[0, rest] = getattr(array.state, name)[0]
     return state
 
-
-def head_state(pixels, i, h):
-    """The state of pixels ``i`` of a head's (1, n) :class:`tespike.golden.reference.PixelState`
-    ``pixels``, at clock ``h``."""
-    return PixelState(h, pixels.acc[:, i].copy(), pixels.sfc[:, i].copy(),
-                      pixels.ovf[:, i].copy(), pixels.m[:, i].copy())

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import SensorConfig
-from .clock import clock_draws, clock_path, fallback
+from .clock import clock_draws, clock_path, fallback, tabled_call
 from .codes import FULL, QUEUE
 from .distinct import distinct, distinct_counts
 from .words import firing_words, ml_words
@@ -35,8 +35,10 @@ MIN_WINDOW = 4
 #: Pixels of one path processed as one group whatever their window lengths.
 SMALL_GROUP = 256
 
-#: Per-clock draws a block of neighbouring window lengths may add by running at its
-#: longest (about the cost of one more call of a window path: half a millisecond).
+#: Padding entries a block of neighbouring window lengths may add by running at its
+#: longest (each pixel keeps its own window: :func:`window_rows`): about the cost of one
+#: more call of a window path, half a millisecond, where the table sampler draws the
+#: padding too (:func:`window_draws`; numpy's sampler skips it for about 7 ns an entry).
 MERGE_DRAWS = 16384
 
 
@@ -108,9 +110,10 @@ def round_window(clocks: np.ndarray) -> np.ndarray:
 
 def groups(sel, size):
     """Pixels ``sel`` (any index array) grouped by window (or head) length ``size``, in
-    blocks that each run at their longest length (a longer window or head is as exact,
-    only dearer): a few pixels go together, and neighbouring lengths share a block while
-    the draws it adds stay below MERGE_DRAWS, about what one more call costs
+    blocks of one length, their longest (a window path pads the shorter windows, each
+    pixel keeping its own: :func:`window_rows`; a head runs at the block's length, as
+    exact, only dearer): a few pixels go together, and neighbouring lengths share a block
+    while the padding it adds stays below MERGE_DRAWS, about what one more call costs
     -> [(length, pixels)]."""
     if sel.size <= SMALL_GROUP:
         return [(int(size.max()), sel)] if sel.size else []
@@ -138,30 +141,55 @@ def window_path(sim, code, sel, plan, expected, dark, lam, words):
         sim.path_counts["clock"] += int(too_long.sum())
         clock_path(sim, sel[too_long], expected, dark, words)
     for w, group in groups(sel[~too_long], size[~too_long]):
+        own = plan.length[group].astype(np.int64)
         if code == QUEUE:
-            queue_path(sim, group, w, plan.b_max[group], lam, words)
+            queue_path(sim, group, w, plan.b_max[group], lam, words, own)
         else:
-            full_path(sim, group, w, lam, words)
+            full_path(sim, group, w, lam, words, own)
 
 
-def window_draw(sim, sel, w, lam, clocks=None):
-    """Electrons of the last ``w`` of ``clocks`` clocks (default L; iid Poisson),
-    ``(w, n)`` clock-major, and the total of the other ``clocks - w``; the order
+def window_rows(w: int, own: np.ndarray) -> np.ndarray:
+    """``(w, n)`` bool: the rows of a block of ``w`` clocks that are pixel j's own window,
+    its last ``own[j]`` clocks (the rows before them are padding: no electrons, no clock)."""
+    return np.arange(w)[:, None] >= (w - own)[None, :]
+
+
+def window_draw(sim, sel, w, lam, clocks=None, own=None):
+    """Electrons of each pixel's last ``own[j]`` of ``clocks`` clocks (default L; iid
+    Poisson; ``own`` default ``w``), ``(w, n)`` clock-major with the padding rows of
+    :func:`window_rows` at 0, and the total of the other ``clocks - own[j]``; the order
     in which independent clocks are drawn does not change their law."""
     clocks = sim.config.clocks_per_readout if clocks is None else clocks
-    window = clock_draws(sim, lam[sel], w)
-    rest = sim.rng.poisson(lam[sel] * (clocks - w))
+    window = window_draws(sim, lam[sel], w, own)
+    rest = sim.rng.poisson(lam[sel] * (clocks - (w if own is None else own)))
     return window, rest
 
 
-def queue_path(sim, sel, w, b_max, lam, words):
+def window_draws(sim, lam, w, own=None):
+    """Per-clock electrons of windows of ``own[j]`` clocks (default all ``w``) in one
+    ``(w, n)`` block: column j's last ``own[j]`` rows iid Poisson(lam[j]), its padding rows
+    0. numpy's sampler gets a mean of 0 there (a 0 without a draw, about 7 ns an entry);
+    the table sampler, where :func:`tabled_call` takes the call, draws the block whole and
+    the padding is zeroed (draws thrown away are independent of those kept)."""
+    if own is None or own.min() >= w:
+        return clock_draws(sim, lam, w)
+    rows = window_rows(w, own)
+    if tabled_call(lam, w, int(own.sum())):
+        window = clock_draws(sim, lam, w)
+        window *= rows
+        return window
+    return sim.rng.poisson(np.where(rows, lam[None, :], 0.0))
+
+
+def queue_path(sim, sel, w, b_max, lam, words, own=None):
     """Light below one threshold per clock and no clipping (bound): spikes
     and the accumulator from :func:`queue_walk` over the whole interval
-    (window ``w`` clocks, backlog bounds ``b_max``)."""
+    (windows of ``own`` clocks in a block of ``w``, backlog bounds ``b_max``)."""
     c = sim.config
     ok, spikes, end, at, window, rest = queue_walk(
-        sim, sel, w, lam, sim.carried[sel], c.clocks_per_readout, np.full(sel.size, c.p_max, np.int64), b_max)
-    fallback(sim, sel[~ok], window[:, ~ok], rest[~ok], words)
+        sim, sel, w, lam, sim.carried[sel], c.clocks_per_readout, np.full(sel.size, c.p_max, np.int64), b_max,
+        own=own)
+    fallback(sim, sel[~ok], window[:, ~ok], rest[~ok], words, own=None if own is None else own[~ok])
     done = sel[ok]
     sim.carried[done] = end[ok]
     if not c.is_te:
@@ -180,7 +208,7 @@ def lindley_ends(walk: np.ndarray, *b0s: np.ndarray) -> list[np.ndarray]:
     return [walk[-1] - np.minimum(-b0, low) for b0 in b0s]
 
 
-def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max, offset=0):
+def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max, offset=0, own=None):
     """``clocks`` clocks of light below one threshold per clock from charge
     ``acc0 < theta``, no clipping (bound): spikes follow the crossings of the
     threshold levels through a unit-rate queue.
@@ -193,21 +221,25 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max, offset=0):
     end backlog. TE: the clock of spike ``need`` (per pixel) when it fires,
     from the first ``need`` crossings, all before the window; where they surely
     are, a clock of its tick (:func:`first_crossings`; ``offset``: the clocks of
-    the interval before these, a head's, for the tick).
+    the interval before these, a head's, for the tick). ``own``: each pixel's window
+    length (default ``w``), its last ``own[j]`` rows of the block (:func:`window_rows`):
+    a padding row has no electrons and serves no crossing, so the walk stays at 0 there,
+    which leaves the Lindley minimum (``min(-b0, ...)``, ``b0 >= 0``) unchanged.
     -> (ok, spikes, end accumulator, that clock or -1, window, rest total);
     pixels not ``ok`` go per clock with the window and rest drawn."""
     c = sim.config
     theta = c.threshold
-    span = clocks - w
     lam_s = lam[sel]
-    window = clock_draws(sim, lam_s, w)
+    span = clocks - (w if own is None else own)       # clocks before each pixel's window
+    window = window_draws(sim, lam_s, w, own)
     rest_mean = lam_s * span
     at = np.full(sel.size, -1, np.int64)
     first = _NONE
     if c.is_te:                                        # crossings surely before the window: drawn first
         first = np.flatnonzero((need <= c.p_max) & (rest_mean >= sim.levels.mean_overflow))
     if first.size:
-        at[first], reached, light_time = first_crossings(sim, lam_s[first], acc0[first], need[first], span,
+        at[first], reached, light_time = first_crossings(sim, lam_s[first], acc0[first], need[first],
+                                                         span if own is None else span[first],
                                                          b_max[first], offset)
         first, light_time = first[reached], light_time[reached]
         rest_mean[first] -= light_time                 # the electrons after the last of them
@@ -219,7 +251,11 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max, offset=0):
     levels += level0
     # the queue's walk W_k = crossings up to window clock k, minus k
     walk = levels // theta
-    walk -= (level0 // theta + 1) + np.arange(w)[:, None]
+    if own is None or own.min() >= w:
+        walk -= (level0 // theta + 1) + np.arange(w)[:, None]
+    else:                                              # clocks served: 0 on the padding rows
+        walk -= level0 // theta
+        walk -= np.maximum(np.arange(1, w + 1)[:, None] - (w - own)[None, :], 0)
     b_lo, b_hi = lindley_ends(walk, np.zeros(sel.size, np.int64), b_max.astype(np.int64))
     ok = b_lo == b_hi
     level_end = levels[-1]
@@ -242,7 +278,8 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max, offset=0):
         shapes[:, p] = t - (p * theta - a) + 1
         gaps = sim.rng.standard_gamma(shapes)
         position = np.cumsum(gaps[:, :p], axis=1) / gaps.sum(axis=1, keepdims=True)
-        cross = np.minimum((position * span).astype(np.int64), span - 1)
+        span_i = span if own is None else span[i][:, None]
+        cross = np.minimum((position * span_i).astype(np.int64), span_i - 1)
         at[i] = (cross - np.arange(1, p + 1)).max(axis=1) + p   # s_p = max_i (c_i + p - i)
     return ok, spikes, level_end - theta * spikes, at, window, rest
 
@@ -261,7 +298,7 @@ def first_crossings(sim, lam, acc0, need, span, b_max, offset=0):
     shares of ``T`` of the gaps (``Gamma(theta - acc0)``, then ``Gamma(theta)``, one scalar
     shape, drawn a third faster) are a Dirichlet vector independent of their sum. One
     Gamma draw per pixel, and ``p`` more for the few near a tick's end, where drawing
-    every crossing took ``p``. -> (a clock in the tick of spike ``p`` (the one ``max_i``
+    every crossing took ``p``. ``span``: one number, or one per pixel. -> (a clock in the tick of spike ``p`` (the one ``max_i``
     gives where it was drawn), whether crossing p came within the span (surely; the
     others go the order-statistics way), its light-time)."""
     c = sim.config
@@ -280,40 +317,46 @@ def first_crossings(sim, lam, acc0, need, span, b_max, offset=0):
         np.cumsum(gaps, axis=0, out=gaps)
         times = gaps * (last[i] / gaps[-1])             # crossing i's light-time, given T
         times[-1] = last[i]
-        cross = np.minimum((times / lam[i]).astype(np.int64), span - 1)
+        span_i = span if np.ndim(span) == 0 else span[i]     # (per pixel where windows differ)
+        cross = np.minimum((times / lam[i]).astype(np.int64), span_i - 1)
         cross -= np.arange(1, p + 1)[:, None]
         at[i] = cross.max(axis=0) + p                   # s_p = max_i (c_i + p - i)
     return at, reached, last
 
 
-def full_path(sim, sel, w, lam, words):
+def full_path(sim, sel, w, lam, words, own=None):
     """Light above one threshold per clock, a spike in every clock (bound):
     the word is known and the accumulator comes from :func:`full_walk`."""
-    ok, end, window, rest = full_walk(sim, sel, w, lam, sim.carried[sel], sim.config.clocks_per_readout)
-    fallback(sim, sel[~ok], window[:, ~ok], rest[~ok], words)
+    ok, end, window, rest = full_walk(sim, sel, w, lam, sim.carried[sel], sim.config.clocks_per_readout, own)
+    fallback(sim, sel[~ok], window[:, ~ok], rest[~ok], words, own=None if own is None else own[~ok])
     done = sel[ok]
     sim.carried[done] = end[ok]
     firing_words(sim, done, words)
 
 
-def full_walk(sim, sel, w, lam, acc0, clocks):
+def full_walk(sim, sel, w, lam, acc0, clocks, own=None):
     """End accumulator of ``clocks`` clocks that surely all fire (bound): the
     walk ``acc0 + sum(e - theta)`` held at or below ``2^A - 1`` ends at
     ``min(acc0 - R, acc_max - M)``, R the sum of ``theta - e`` and M its
     largest suffix sum. M is read from a window of the last ``w`` clocks
-    where the rest provably cannot exceed it (bound) -> (ok, end, window, rest):
-    pixels not ``ok`` go per clock with the window and rest drawn."""
+    where the rest provably cannot exceed it (bound); ``own``: each pixel's window
+    length (default ``w``), whose padding rows (:func:`window_rows`) add no deficit
+    -> (ok, end, window, rest): pixels not ``ok`` go per clock with the window and
+    rest drawn."""
     c = sim.config
     theta, acc_max = c.threshold, c.acc_max
-    window, rest = window_draw(sim, sel, w, lam, clocks)
-    deficit = theta - window
+    window, rest = window_draw(sim, sel, w, lam, clocks, own)
+    if own is None or own.min() >= w:
+        deficit = theta - window
+    else:
+        deficit = window_rows(w, own) * theta - window
     suffix = np.cumsum(deficit[::-1], axis=0)
     m_win = np.maximum(suffix.max(axis=0), 0)
     r_win = suffix[-1]
     lam_s = lam[sel]
     s = 2.0 * (lam_s - theta) / lam_s
     ok = -s * (m_win + 1 - r_win) < sim.budget
-    total_deficit = r_win + (clocks - w) * theta - rest
+    total_deficit = r_win + (clocks - (w if own is None else own)) * theta - rest
     end = np.minimum(acc0 - total_deficit, acc_max - m_win)
     # under the sure event every clock fires, so end >= 0; clip only guards
     # the 2^-64 failure event against an illegal state
