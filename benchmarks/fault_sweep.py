@@ -332,6 +332,7 @@ class Case:
     out_kind: str = "file"       # file / folder / none (do not pre-create)
     modes: tuple[str, ...] = MODES
     extra: dict = field(default_factory=dict)
+    env: dict = field(default_factory=dict)     # environment of the command, ``{work}`` its folder
 
 
 EVAL = ["evaluate", "--set", "none", "--methods", "tfp", "--repeats", "1", "--ml-count-config", "none",
@@ -519,6 +520,12 @@ def interrupt_cases() -> list[Case]:
         Case("demo", "", ["demo", "--out", "demo", "--frames", "10", "--height", "32", "--width", "32",
                           "--crop", "11", "--repeats", "1", "--sensors", "te", "--no-hw-cost", "--quiet"],
              out="demo", out_kind="folder"),
+    ] + [  # an empty build cache each run: the simulator built (make, the compilers), then run
+        Case(f"cocotb {simulator}", "", ["cocotb", "--config", "te", "--height", "8", "--width", "8",
+                                         "--readouts", "40", "--simulator", simulator, "--work-dir", "cw",
+                                         "--progress", "off"],
+             out="nothing", out_kind="none", env={"TESPIKE_CACHE": "{work}/cache"})
+        for simulator in ("icarus", "verilator")
     ]
 
 
@@ -531,7 +538,8 @@ def run_interrupt(case: Case, at: float, signum: int, base: Path) -> tuple[bool,
             shutil.rmtree(out) if out.is_dir() else out.unlink()
         precreate(out, case.out_kind)
     before = state(out)
-    outcome = run_command(case.argv, work, signal_at=at, signum=signum, group=signum == signal.SIGINT)
+    outcome = run_command(case.argv, work, signal_at=at, signum=signum, group=signum == signal.SIGINT,
+                          env={k: v.replace("{work}", str(work)) for k, v in case.env.items()})
     try:
         if signum == signal.SIGKILL:
             return judge_kill(case, outcome, work, out, before)

@@ -7,6 +7,11 @@ kernel for SIGKILL when its parent goes (``prctl(PR_SET_PDEATHSIG)``), and one
 whose parent is already gone when it asks leaves at once. Elsewhere nothing
 changes. Every outside tool of :mod:`tespike.cosim` is started through
 :func:`run` or :func:`popen`; the proof workers call :func:`end_with_parent`.
+A tool that starts tools of its own (a build through make, whose compilers the
+signal does not reach) runs in a process group of its own through
+:func:`run_group`: the group is killed when the tool returns or is interrupted,
+and by the command's janitor (:func:`tespike.golden.atomic.hold_process_group`)
+when the command is killed outright.
 """
 
 from __future__ import annotations
@@ -59,3 +64,35 @@ def run(argv, **kwargs) -> subprocess.CompletedProcess:
 def popen(argv, **kwargs) -> subprocess.Popen:
     """``subprocess.Popen`` of a child that ends with this process."""
     return subprocess.Popen(argv, preexec_fn=_preexec(os.getpid()), **kwargs)
+
+
+def run_group(argv, **kwargs) -> subprocess.CompletedProcess:
+    """``subprocess.run`` of a child in a process group of its own that ends with this process,
+    everything it started included: the group is killed once the child has returned (a
+    compiler make left behind) or this process is interrupted, and by the janitor should this
+    process be killed outright. Ctrl-C reaches only this process, which ends the group."""
+    from tespike.golden.atomic import hold_process_group, release_process_group
+    options = {k: v for k, v in kwargs.items() if k not in ("input", "timeout", "check", "capture_output")}
+    if kwargs.get("capture_output"):                   # (as subprocess.run reads its options)
+        options["stdout"] = options["stderr"] = subprocess.PIPE
+    if kwargs.get("input") is not None:
+        options["stdin"] = subprocess.PIPE
+    process = subprocess.Popen(argv, preexec_fn=_preexec(os.getpid()), process_group=0, **options)
+    try:
+        hold_process_group(process.pid)
+        out, err = process.communicate(kwargs.get("input"), timeout=kwargs.get("timeout"))
+    finally:
+        try:
+            os.killpg(process.pid, signal.SIGKILL)
+        except OSError:                      # (the group is gone: nothing was left in it)
+            pass
+        process.wait()
+        for stream in (process.stdin, process.stdout, process.stderr):
+            if stream is not None:
+                stream.close()
+        release_process_group(process.pid)
+    done = subprocess.CompletedProcess(argv, process.returncode, out, err)
+    if kwargs.get("check"):
+        done.check_returncode()
+    return done
+

@@ -25,6 +25,7 @@ import re
 import shutil
 import sys
 import tempfile
+import types
 from pathlib import Path
 
 from tespike.golden.errors import InputError
@@ -104,6 +105,22 @@ def _outside_pytest():
             os.environ["PYTEST_CURRENT_TEST"] = saved
 
 
+@contextlib.contextmanager
+def _children_end_with_us():
+    """cocotb's runner starts the compiler, make and the simulator with ``subprocess.run``;
+    within this block they run through :func:`tespike.cosim.children.run_group` instead, so that
+    a command killed outright or interrupted leaves no simulator or compiler running."""
+    import cocotb.runner as module
+    real = module.subprocess
+    module.subprocess = types.SimpleNamespace(**{name: getattr(real, name) for name in dir(real)
+                                                 if not name.startswith("__")})
+    module.subprocess.run = children.run_group
+    try:
+        yield
+    finally:
+        module.subprocess = real
+
+
 def _runner(simulator: str):
     import warnings
     with warnings.catch_warnings():      # "Python runners ... are an experimental feature"
@@ -138,7 +155,7 @@ def build(verilog_path: Path, top: str, simulator: str, cache_root: Path | None 
         source = final / "array.v"
         source.write_text(text)
         try:
-            with _outside_pytest(), _quiet(final / "commands.txt"):
+            with _outside_pytest(), _quiet(final / "commands.txt"), _children_end_with_us():
                 _runner(simulator).build(verilog_sources=[source], hdl_toplevel=top, build_dir=final,
                                          build_args=BUILD_ARGS.get(simulator, []), always=True,
                                          log_file=log)
@@ -194,7 +211,7 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
         runner = _runner(simulator)
         from cocotb.runner import get_results
         try:
-            with _outside_pytest(), _quiet(test_dir / f"{simulator}-commands.txt"):
+            with _outside_pytest(), _quiet(test_dir / f"{simulator}-commands.txt"), _children_end_with_us():
                 runner.test(test_module=TEST_MODULE, hdl_toplevel=top, hdl_toplevel_lang="verilog",
                             build_dir=build_dir,
                             test_dir=test_dir, results_xml=str(results), extra_env=settings.to_env(),

@@ -49,24 +49,46 @@ def start_janitor() -> None:
     _Janitor.start()
 
 
+def hold_process_group(group: int) -> None:
+    """Have the janitor kill process group ``group`` should this process end before
+    :func:`release_process_group` (an outside tool and what it started: make's compilers)."""
+    _Janitor._line(b"g%d" % group)
+
+
+def release_process_group(group: int) -> None:
+    """The process group ``group`` has ended (its tool returned and was cleaned up)."""
+    _Janitor._line(b"e%d" % group)
+
+
 def finished_outputs(since: int = 0) -> list[str]:
     """The outputs moved into place whole since the ``since``-th (``len(finished_outputs())`` marks a start)."""
     return _FINISHED[since:]
 
 
 #: The janitor: reads ``+HEX`` (a temporary made) and ``-HEX`` (settled) lines, the paths'
-#: bytes in hex, and once its input ends (the run is over, however it ended) removes every
-#: path still registered. In a session of its own, so a signal to the run's process group
-#: (Ctrl-C, a kill of the group) leaves it to clean up.
+#: bytes in hex, and ``gPGID`` / ``ePGID`` lines (an outside tool's process group started,
+#: ended: :func:`hold_process_group`), and once its input ends (the run is over, however it
+#: ended) kills every process group and removes every path still registered. In a session
+#: of its own, so a signal to the run's process group (Ctrl-C, a kill of the group) leaves
+#: it to clean up.
 _JANITOR_CODE = r"""
-import os, shutil, sys
-held = set()
+import os, shutil, signal, sys
+held, groups = set(), set()
 for line in sys.stdin.buffer:
     line = line.strip()
     if line[:1] == b"+":
         held.add(bytes.fromhex(line[1:].decode()))
     elif line[:1] == b"-":
         held.discard(bytes.fromhex(line[1:].decode()))
+    elif line[:1] == b"g":
+        groups.add(int(line[1:]))
+    elif line[:1] == b"e":
+        groups.discard(int(line[1:]))
+for group in groups:
+    try:
+        os.killpg(group, signal.SIGKILL)
+    except OSError:
+        pass
 for path in held:
     if os.path.isdir(path) and not os.path.islink(path):
         shutil.rmtree(path, ignore_errors=True)
@@ -111,10 +133,14 @@ class _Janitor:
 
     @classmethod
     def _send(cls, mark: bytes, path: str | Path) -> None:
+        cls._line(mark + os.fsencode(os.fspath(path)).hex().encode())
+
+    @classmethod
+    def _line(cls, line: bytes) -> None:
         cls.start()
         if cls._process is not None:
             try:
-                cls._process.stdin.write(mark + os.fsencode(os.fspath(path)).hex().encode() + b"\n")
+                cls._process.stdin.write(line + b"\n")
                 cls._process.stdin.flush()
             except (OSError, ValueError):
                 cls._process = None

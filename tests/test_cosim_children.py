@@ -90,3 +90,48 @@ def test_a_child_whose_parent_is_already_gone_leaves():
             "print('still here')\n")
     done = subprocess.run([sys.executable, "-c", body], capture_output=True, text=True, timeout=60)
     assert done.returncode == 1 and done.stdout == ""
+
+
+#: A tool that starts a tool of its own (as make starts the compiler) and prints that one's pid.
+_GRANDCHILD_TOOL = "['sh', '-c', 'sleep 30 & echo $!; wait']"
+
+
+@pytest.mark.parametrize("start, left", [("run", True), ("run_group", False)])
+def test_what_a_tool_started_ends_with_the_command_killed_outright(start, left):
+    """The signal the kernel sends a tool when the command goes does not reach what the tool
+    started (make's compilers: ``run`` leaves it running, the control); ``run_group`` puts the
+    tool in a process group of its own, which the command's janitor kills."""
+    body = ("from tespike.golden.atomic import start_janitor\n"
+            "from tespike.cosim import children\n"
+            "start_janitor()\n"
+            f"children.{start}({_GRANDCHILD_TOOL})\n")
+    assert _kill_command_and_watch(body, seconds=1.0 if left else 10.0) == left
+
+
+def test_what_a_tool_started_ends_with_an_interrupted_command():
+    """Ctrl-C reaches the command alone (the tool's group is its own): the command ends the
+    group, the tool and what it started, and the interrupt goes on."""
+    body = ("import os, signal, threading, time\n"
+            "from tespike.cosim import children\n"
+            "threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGINT)).start()\n"
+            "try:\n"
+            f"    children.run_group({_GRANDCHILD_TOOL}, stdout=open('/dev/stderr', 'w'))\n"
+            "except KeyboardInterrupt:\n"
+            "    print('interrupted', flush=True)\n")
+    done = subprocess.run([sys.executable, "-c", body], capture_output=True, text=True, timeout=60)
+    assert done.stdout == "interrupted\n", (done.stdout, done.stderr)
+    grandchild = int(done.stderr.split()[0])
+    time.sleep(0.2)
+    assert not _running(grandchild)
+
+
+def test_run_group_returns_what_run_returns():
+    """Output, status and the check of ``subprocess.run``; the group ends with the tool."""
+    from tespike.cosim import children
+    done = children.run_group(["sh", "-c", "echo out; echo err >&2; exit 3"], capture_output=True, text=True)
+    assert (done.returncode, done.stdout, done.stderr) == (3, "out\n", "err\n")
+    with pytest.raises(subprocess.CalledProcessError):
+        children.run_group(["false"], check=True)
+    done = children.run_group([sys.executable, "-c", "import sys; print(sys.stdin.read())"], input="in",
+                              capture_output=True, text=True)
+    assert done.stdout == "in\n"
