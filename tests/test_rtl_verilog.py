@@ -221,3 +221,30 @@ def test_array_above_4096_pixels_lints_under_verilators_defaults(tmp_path):
     (tmp_path / "A.v").write_text(array_verilog(SensorConfig(), 64, 128))
     lint = run(["verilator", "--lint-only", "-Wall", "A.v"], tmp_path)
     assert lint.returncode == 0 and "%Warning" not in lint.stderr, lint.stderr[:2000]
+
+
+def test_an_interrupt_while_yosys_runs_leaves_no_process_and_no_open_pipe():
+    """Amaranth's Yosys helper waits for Yosys with ``communicate``: an interrupt there (Ctrl-C,
+    SIGTERM) kills and closes the Yosys process (it used to run on, its pipes left for Python
+    to warn of at exit)."""
+    import subprocess
+    import sys
+    body = ("import gc, os, signal, threading, warnings\n"
+            "warnings.simplefilter('always')\n"
+            "from tespike.golden.config import SensorConfig\n"
+            "from tespike.rtl.verilog import array_verilog\n"
+            "from amaranth._toolchain import yosys\n"
+            "started = []\n"
+            "real = yosys.subprocess.Popen\n"
+            "threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT)).start()\n"
+            "try:\n"
+            "    array_verilog(SensorConfig(), 3, 3)\n"
+            "except KeyboardInterrupt:\n"
+            "    print('interrupted')\n"
+            "gc.collect()\n"
+            "with open(f'/proc/{os.getpid()}/task/{os.getpid()}/children') as f:\n"
+            "    children = f.read().split()\n"
+            "print('children', len(children), 'restored', yosys.subprocess.Popen is real)\n")
+    done = subprocess.run([sys.executable, "-c", body], capture_output=True, text=True, timeout=120)
+    assert done.stdout == "interrupted\nchildren 0 restored True\n", (done.stdout, done.stderr)
+    assert "ResourceWarning" not in done.stderr, done.stderr
