@@ -259,6 +259,8 @@ def _run(args) -> tuple[int, bool]:
         if "No usable temporary directory" in cause:       # tempfile's words hide the cause
             from tespike.golden.paths import temporary_directory_fault
             cause = temporary_directory_fault() or cause
+        from tespike.golden.resources import file_handles_fault
+        cause = file_handles_fault(exc) or cause
         print(f"{prefix}: error:{where} {cause}{_before(start, exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
     except MemoryError as exc:        # numpy's says what it could not allocate; library_room's, what is left

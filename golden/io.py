@@ -8,6 +8,7 @@ never leaves a half-written file; every reader refuses bad input with an
 from __future__ import annotations
 
 import contextlib
+import errno
 import zipfile
 import zlib
 from pathlib import Path
@@ -31,6 +32,7 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
     try:
         array = np.load(path, allow_pickle=False, mmap_mode=mmap_mode)
     except (OSError, ValueError, EOFError) as exc:
+        _refuse_starved(exc, what, path)
         raise InputError(f"{what} file {str(path)!r} is not a readable .npy array: "
                          f"{_first_line(exc)}") from None
     if not isinstance(array, np.ndarray):
@@ -247,7 +249,19 @@ def open_npz(path: str | Path, what: str, holding: str = "") -> Iterator[np.lib.
     except InputError:
         raise
     except NPZ_ERRORS as exc:
+        _refuse_starved(exc, what, path)
         raise InputError(f"{what} file {shown!r} is not a readable .npz archive: {_first_line(exc)}") from None
+
+
+def _refuse_starved(exc: BaseException, what: str, path) -> None:
+    """A read that failed for want of file handles or memory, not for the file: one line saying so
+    (instead of calling the file unreadable)."""
+    if not isinstance(exc, OSError):
+        return
+    from .resources import file_handles_fault
+    cause = file_handles_fault(exc) or ("out of memory" if exc.errno == errno.ENOMEM else None)
+    if cause:
+        raise InputError(f"cannot read {what} file {str(path)!r}: {cause}") from None
 
 
 def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarray, SensorConfig]:

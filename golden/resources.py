@@ -10,6 +10,7 @@ refuses, naming both sizes, a job whose estimate is larger.
 from __future__ import annotations
 
 import ctypes
+import errno
 import resource
 from pathlib import Path
 
@@ -64,6 +65,18 @@ def address_space_limit() -> int | None:
     """The soft address-space limit (``ulimit -v``, RLIMIT_AS) in bytes, None when unlimited."""
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)
     return None if soft == resource.RLIM_INFINITY else soft
+
+
+def file_handles_fault(exc: OSError) -> str | None:
+    """The cause of an OSError that ran out of file handles, with the limit that was reached (the
+    system's words, "Too many open files", name neither); None for any other error."""
+    if exc.errno == errno.EMFILE:
+        soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+        shown = "unlimited" if soft == resource.RLIM_INFINITY else str(soft)
+        return f"too many open files (this process may hold {shown}: the open-file limit, ulimit -n)"
+    if exc.errno == errno.ENFILE:
+        return "too many open files in the system (its open-file table is full)"
+    return None
 
 
 def gigabytes(n: int) -> str:

@@ -9,8 +9,10 @@ import signal
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
+from tespike.golden.errors import InputError
 from tests.cli import ROOT, assert_refused
 from tests.test_cli_clean_endings import run_here
 from tests.test_cli_hardening import small_tmpfs
@@ -196,3 +198,38 @@ def test_a_full_disk_under_a_dataset_store_names_the_store(capsys, tmp_path, roo
                           "--config", "te", "--out", mount / "d.zarr")
         assert_refused(result, f"cannot write dataset store {str(mount / 'd.zarr')!r}: No space left on device")
         assert os.listdir(mount) == ["filler"]
+
+
+def test_running_out_of_file_handles_names_the_limit(tmp_path):
+    """The system's words ("Too many open files") name no file and no limit: the line says which
+    limit was reached and its value (training's data workers, torch's libraries and the run's
+    files need more handles than a starved shell gives), and a read that failed for want of
+    handles does not call the file unreadable."""
+    code = ENTRY.format(args=["train", "--config", "te", "--steps", "1", "--batch", "1", "--crop", "32",
+                              "--workers", "1", "--progress", "off", "--out", str(tmp_path / "T.pt")])
+    refused = 0
+    for handles in (12, 16):                     # (where the command starves depends on the machine)
+        done = run_limited(code, {resource.RLIMIT_NOFILE: handles}, timeout=120)
+        if done.returncode == 0:
+            continue
+        refused += 1
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and "Traceback" not in done.stderr, done.stderr
+        assert f"too many open files (this process may hold {handles}: the open-file limit, ulimit -n)" \
+            in lines[0], lines[0]
+    assert refused
+    from tespike.golden import atomic, io
+    error = atomic._write_error("out.npz", OSError(24, "Too many open files"))
+    assert "cannot write 'out.npz': too many open files (this process may hold" in str(error)
+    scene = tmp_path / "I.npy"
+    np.save(scene, np.zeros((1, 2, 2)))
+    real = np.load
+
+    def starved(*args, **kwargs):
+        raise OSError(24, "Too many open files")
+    try:
+        np.load = starved
+        with pytest.raises(InputError, match="cannot read scene file .*: too many open files"):
+            io.load_npy(scene, "scene")
+    finally:
+        np.load = real
