@@ -26,6 +26,7 @@ has no dark to remove): what it gains there is a different estimator, not a cali
 from __future__ import annotations
 
 import argparse
+import time
 import dataclasses
 import sys
 from pathlib import Path
@@ -110,6 +111,7 @@ def main() -> int:
                                     dark_level=1.0 if model == "eq13" else float(model))
         sensor = Sensor(noise, args.sensor_seed)
         scores: dict[str, list[float]] = {}
+        times: dict[str, list[float]] = {}
         for index, (name, light) in enumerate(sequences):
             light = np.asarray(light, np.float32)
             shape = light.shape[1:]
@@ -123,9 +125,13 @@ def main() -> int:
             def score(key, images):
                 scores.setdefault(key, []).append(float(np.mean(psnr_mu(images[frames], light[frames]))))
             for statistic, dark in dark_maps(dark_spikes, calibration, sensor, config).items():
-                fixed = dataclasses.replace(calibration, dark=np.asarray(dark, np.float64))
+                fixed = dataclasses.replace(calibration, dark=np.asarray(dark, np.float64), dark_law=None)
                 for method in ("tfp", "tfi"):
                     score(f"{method} {statistic}", reconstruct(noisy, config, method, calibration=fixed))
+            for method in ("tfp", "tfi"):
+                start = time.perf_counter()
+                score(f"{method} law", reconstruct(noisy, config, method, calibration=calibration))
+                times.setdefault(method, []).append(time.perf_counter() - start)
             score("tfp winsorised", winsorised_tfp(decode_spikes(noisy, config), dark_spikes, calibration.gain,
                                                    config, frames))
             score("tfp clean", reconstruct(clean, config, "tfp"))
