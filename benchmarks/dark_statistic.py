@@ -12,7 +12,9 @@ with the calibration's gain and each dark map:
 - ``trim5``, ``trim10``, ``trim20``: the mean of each pixel's dark readouts with 5, 10, 20 %
   cut from each end (a robust statistic a calibration file could carry);
 
-and TFP once more with an outlier rule applied where the correction is applied,
+the calibration's dark law (``law``, recon.darklaw: the product's calibrated TFP and TFI,
+timed: the last two columns, seconds per sequence on one torch thread), and TFP once more with
+an outlier rule applied where the correction is applied,
 ``winsorised``: each readout's decoded spikes clipped at the window's median plus the
 pixel's dark spread (99th percentile less median of its dark readouts) plus three times the
 square root of the median's own light, less the mean of the dark readouts clipped at their
@@ -139,10 +141,11 @@ def main() -> int:
                                                          np.ones(shape), config, frames))
         if header is None:
             header = list(scores)
-            print("| dark | " + " | ".join(header) + " |")
-            print("| :--- |" + " ---: |" * len(header))
+            print("| dark | " + " | ".join(header) + " | tfp law s | tfi law s |")
+            print("| :--- |" + " ---: |" * (len(header) + 2))
         label = "eq. 13" if model == "eq13" else f"eq. 12 x {float(model):g}"
-        print(f"| {label} | " + " | ".join(f"{np.mean(scores[key]):.2f}" for key in header) + " |", flush=True)
+        print(f"| {label} | " + " | ".join(f"{np.mean(scores[key]):.2f}" for key in header) + " | "
+              + " | ".join(f"{np.mean(times[m]):.2f}" for m in ("tfp", "tfi")) + " |", flush=True)
     return 0
 
 

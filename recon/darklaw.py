@@ -170,6 +170,7 @@ def law_light(light: torch.Tensor, spike_light: float, atoms: torch.Tensor, ceil
 
 
 def _law_light_block(light, spike_light, atoms, ceiling, radius, dtype):
+    """:func:`law_light` of one block of pixels."""
     light = light.to(torch.float64)
     K = light.shape[0]
     if K == 0:
@@ -182,7 +183,6 @@ def _law_light_block(light, spike_light, atoms, ceiling, radius, dtype):
     count = (hi - lo).to(torch.float64).view(K, 1)
     offsets = [0] + [s * j for j in range(1, r + 1) for s in (-1, 1)]      # TFP's order of summation
     valid = {j: ((k + j >= 0) & (k + j < K)).view(K, 1) for j in offsets}
-    shifted = {j: law.shifted(j) for j in offsets}
 
     def window_sum(values):
         csum = torch.cat([torch.zeros_like(values[:1]), values.cumsum(0)])
@@ -199,13 +199,14 @@ def _law_light_block(light, spike_light, atoms, ceiling, radius, dtype):
             better = total > best
             best, lam = torch.where(better, total, best), torch.where(better, level, lam)
     plain = (window_sum(y) / count - law.mean).clamp(min=GRID[0])
-    total = sum(torch.where(valid[j], shifted[j].log_likelihood(plain), 0.0) for j in offsets)
+    total = sum(torch.where(valid[j], law.shifted(j).log_likelihood(plain), 0.0) for j in offsets)
     lam = torch.where(total > best, plain, lam)
     for _ in range(EM_STEPS - 1):
-        own = sum(torch.where(valid[j], shifted[j].y - shifted[j].expected_dark(lam), 0.0) for j in offsets)
+        own = sum(torch.where(valid[j], _shifted(y, j) - law.shifted(j).expected_dark(lam), 0.0) for j in offsets)
         lam = (own / count).clamp(min=GRID[0])
-    own_light = {j: (_shifted(light, j) - shifted[j].expected_dark(lam) * spike_light) for j in offsets}
-    total = own_light[0].to(dtype)
+    own = light - law.expected_dark(lam) * spike_light            # readout k's own light at its window's lam
+    total = own.to(dtype)
     for j in offsets[1:]:
-        total = torch.where(valid[j], total + own_light[j].to(dtype), total)
-    return total / count.to(dtype), own_light[0]
+        total = torch.where(valid[j], total + (_shifted(light, j) - law.shifted(j).expected_dark(lam)
+                                               * spike_light).to(dtype), total)
+    return total / count.to(dtype), own

@@ -138,12 +138,17 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     the images never need to fit in memory); it is returned. ``weights``: a
     learned method's weights file (None: the shipped ones; refused for TFP and TFI).
     ``calibration``: a :class:`tespike.recon.calibration.Calibration` of the sensor that recorded
-    the stream; every method is then corrected for the pixels' dark rate and gain: TFP at its
-    output, ``max(0, (x - dark) / gain)`` (:func:`tespike.recon.calibration.correct`; exact, TFP
-    being linear in the decoded light it averages); TFI on its input, the decoded spikes less the
-    dark rate re-coded as a pixel without dark current codes them, its spike intervals then
-    following the pixel's own light, not its dark current, and divided by the gain;
-    the learned methods on every readout's decoded light, ``(x - dark) / gain`` unfloored, their
+    the stream; every method is then corrected for the pixels' dark rate and gain. With the
+    calibration's dark law (``calibration.dark_law``): TFP as the window's light estimated under
+    the law (:func:`tespike.recon.darklaw.law_light`; exactly TFP's windowed mean where the law
+    holds no dark charge), TFI on the pixel's own charge, each readout less its expected dark
+    charge under the law, re-coded as a pixel without dark current codes it, both divided by the
+    gain. Without a law: TFP at its output, ``max(0, (x - dark) / gain)``
+    (:func:`tespike.recon.calibration.correct`; exact, TFP being linear in the decoded light it
+    averages); TFI on its input, the decoded spikes less the dark rate re-coded as a pixel without
+    dark current codes them, its spike intervals then following the pixel's own light, not its
+    dark current, and divided by the gain. Either way
+    the learned methods are corrected on every readout's decoded light, ``(x - dark) / gain`` unfloored, their
     image floored at 0 (:func:`tespike.recon.learning.infer.frame`). Each route was chosen by
     measurement (docs/reconstruction.md "Calibration").
     """
