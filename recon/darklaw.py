@@ -84,7 +84,7 @@ class DarkLaw:
         self.ceiling = ceiling.to(y.device, torch.float64)
         Q, P = atoms.shape
         self.y = y
-        self.top, self.low = atoms.max(0).values, atoms.min(0).values
+        self.low = atoms.min(0).values
         self.mean = atoms.mean(0)
         # equal atoms merged (a TE pixel's are mostly a few whole spike counts): (P, U) values, weights
         ordered = atoms.t().sort(1).values
@@ -102,9 +102,9 @@ class DarkLaw:
         self.charged = torch.where(inside, bulk_mean, self.atoms)   # the dark charge each atom is given
         self.bulk_mean = bulk_mean.squeeze(1)
         self.start = torch.where(inside, self.atoms, 0.0).max(1).values    # where the upper tail starts
-        self.ok = (x >= 0) & (weight > 0)
-        self.x = torch.where(self.ok, x, 0.0)
-        self.base = torch.where(self.ok, (weight / Q).log() - torch.lgamma(self.x + 1), -math.inf)
+        ok = (x >= 0) & (weight > 0)                                # Poisson(lam) can give the rest
+        self.x = torch.where(ok, x, 0.0)
+        self.base = torch.where(ok, (weight / Q).log() - torch.lgamma(self.x + 1), -math.inf)
         log_tau = -math.log(2 * Q)
         self.log_up = torch.where(self.start > 0, log_tau + self.start.clamp(min=1e-300).log(), -math.inf)
         self.log_low = torch.where(self.low > 0, log_tau - self.low.clamp(min=1e-300).log(), -math.inf)
@@ -114,7 +114,7 @@ class DarkLaw:
         other = object.__new__(DarkLaw)
         other.__dict__.update(self.__dict__)
         index = torch.arange(self.y.shape[0], device=self.y.device).add(j).clamp(0, self.y.shape[0] - 1)
-        other.y, other.ok, other.x, other.base = self.y[index], self.ok[index], self.x[index], self.base[index]
+        other.y, other.x, other.base = self.y[index], self.x[index], self.base[index]
         return other
 
     def _parts(self, lam):
