@@ -12,7 +12,9 @@ with the calibration's gain and each dark map:
 - ``trim5``, ``trim10``, ``trim20``: the mean of each pixel's dark readouts with 5, 10, 20 %
   cut from each end (a robust statistic a calibration file could carry);
 
-and TFP once more with an outlier rule applied where the correction is applied,
+the calibration's dark law (``law``, recon.darklaw: the product's calibrated TFP and TFI,
+timed: the last two columns, seconds per sequence on one torch thread), and TFP once more with
+an outlier rule applied where the correction is applied,
 ``winsorised``: each readout's decoded spikes clipped at the window's median plus the
 pixel's dark spread (99th percentile less median of its dark readouts) plus three times the
 square root of the median's own light, less the mean of the dark readouts clipped at their
@@ -26,6 +28,7 @@ has no dark to remove): what it gains there is a different estimator, not a cali
 from __future__ import annotations
 
 import argparse
+import time
 import dataclasses
 import sys
 from pathlib import Path
@@ -110,6 +113,7 @@ def main() -> int:
                                     dark_level=1.0 if model == "eq13" else float(model))
         sensor = Sensor(noise, args.sensor_seed)
         scores: dict[str, list[float]] = {}
+        times: dict[str, list[float]] = {}
         for index, (name, light) in enumerate(sequences):
             light = np.asarray(light, np.float32)
             shape = light.shape[1:]
@@ -123,9 +127,13 @@ def main() -> int:
             def score(key, images):
                 scores.setdefault(key, []).append(float(np.mean(psnr_mu(images[frames], light[frames]))))
             for statistic, dark in dark_maps(dark_spikes, calibration, sensor, config).items():
-                fixed = dataclasses.replace(calibration, dark=np.asarray(dark, np.float64))
+                fixed = dataclasses.replace(calibration, dark=np.asarray(dark, np.float64), dark_law=None)
                 for method in ("tfp", "tfi"):
                     score(f"{method} {statistic}", reconstruct(noisy, config, method, calibration=fixed))
+            for method in ("tfp", "tfi"):
+                start = time.perf_counter()
+                score(f"{method} law", reconstruct(noisy, config, method, calibration=calibration))
+                times.setdefault(method, []).append(time.perf_counter() - start)
             score("tfp winsorised", winsorised_tfp(decode_spikes(noisy, config), dark_spikes, calibration.gain,
                                                    config, frames))
             score("tfp clean", reconstruct(clean, config, "tfp"))
@@ -133,10 +141,11 @@ def main() -> int:
                                                          np.ones(shape), config, frames))
         if header is None:
             header = list(scores)
-            print("| dark | " + " | ".join(header) + " |")
-            print("| :--- |" + " ---: |" * len(header))
+            print("| dark | " + " | ".join(header) + " | tfp law s | tfi law s |")
+            print("| :--- |" + " ---: |" * (len(header) + 2))
         label = "eq. 13" if model == "eq13" else f"eq. 12 x {float(model):g}"
-        print(f"| {label} | " + " | ".join(f"{np.mean(scores[key]):.2f}" for key in header) + " |", flush=True)
+        print(f"| {label} | " + " | ".join(f"{np.mean(scores[key]):.2f}" for key in header) + " | "
+              + " | ".join(f"{np.mean(times[m]):.2f}" for m in ("tfp", "tfi")) + " |", flush=True)
     return 0
 
 

@@ -19,6 +19,14 @@ learned methods are corrected at their input instead (:func:`dark_free_light`,
 dark rate is noise around darkness and is reported as 0 (the light is never
 negative).
 
+A mean cannot subtract a dark charge that changes from readout to readout (the
+paper's eq. 13), so :func:`estimate` also keeps each pixel's **dark law**, the
+quantiles of its dark spikes per readout (:func:`estimate_dark_law`,
+:mod:`tespike.recon.darklaw`), and calibrated TFP and TFI estimate the light of a
+window under it (:func:`tespike.recon.darklaw.law_light`): with no dark current in
+the calibration that is exactly TFP's windowed mean; a calibration without a law
+(``dark_law`` None: a format-1 file, or maps known exactly) corrects by the mean.
+
 The mean decoded light is an unbiased rate estimate wherever the decoding
 conserves spikes: the TE word without overflow (below ``2^b1`` spikes per
 readout: for the paper's TE camera a flat below 2^4 x 175 / 42000 = 0.067),
@@ -33,14 +41,18 @@ File ``C.npz`` (``np.savez``): ``dark`` (H, W) float64, light units (1 = 42000
 electrons) per readout; ``gain`` (H, W) float64, relative to the nominal pixel;
 ``config``: the JSON text of the full :class:`tespike.golden.config.SensorConfig` the
 streams were recorded with; ``dark_readouts``, ``flat_readouts`` (int), ``flat_light``
-(float), ``estimator`` (text), ``floored`` (int), ``overflow_share`` (float), and
-``format`` = :data:`FORMAT`. A calibration applies only to streams of the same
+(float), ``estimator`` (text), ``floored`` (int), ``overflow_share`` (float);
+``dark_law`` (Q, H, W) float32, decoded dark spikes per readout at the quantile levels
+(i + 0.5) / Q (Q = 0: no law); ``dark_tail`` (float), the largest dark readout over its
+pixel's mean atom; and ``format`` = :data:`FORMAT`. A file of :data:`FORMAT_MEAN_ONLY`
+(no law) is read as a calibration without a law. A calibration applies only to streams of the same
 configuration and frame size (:func:`check_matches`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +64,9 @@ from tespike.golden.errors import InputError, TespikeError
 #: The estimator written into every calibration file.
 ESTIMATOR = "mean-decoded"
 #: Version tag of the file format.
-FORMAT = "tespike-calibration-1"
+FORMAT = "tespike-calibration-2"
+#: The previous format: the same maps without the dark law (read, corrected by the mean dark rate).
+FORMAT_MEAN_ONLY = "tespike-calibration-1"
 #: Smallest gain a pixel is given (a pixel below it is dead or was not lit enough).
 MIN_GAIN = 0.05
 #: Readouts decoded at once (bounds memory to this many float64 frames).
@@ -72,6 +86,11 @@ class Calibration:
     estimator: str = ESTIMATOR
     floored: int = 0
     overflow_share: float = 0.0
+    #: (Q, H, W) float32, decoded dark spikes per readout at Q quantile levels (recon.darklaw), or
+    #: None: only the mean dark rate is known (TFP and TFI then subtract it)
+    dark_law: np.ndarray | None = None
+    #: the reach of the law's tail: the largest dark readout over its pixel's mean atom (recon.darklaw)
+    dark_tail: float = 0.0
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -97,6 +116,26 @@ def overflow_share(words, config: SensorConfig) -> float:
     return count / words.size
 
 
+def estimate_dark_law(words, config: SensorConfig, atoms: int | None = None) -> tuple[np.ndarray, float]:
+    """Per-pixel dark law of the dark stream ``words`` (K, H, W): (atoms, H, W) float32 quantiles of
+    its decoded spikes per readout (:func:`tespike.recon.darklaw.law_atoms`), rows at a time, and the
+    reach of its tail: the largest dark readout over its pixel's mean atom, over the frame (0 where
+    no pixel saw dark charge)."""
+    from .darklaw import LAW_ATOMS, law_atoms
+    atoms = LAW_ATOMS if atoms is None else atoms
+    K, H, W = words.shape
+    out = np.empty((atoms, H, W), np.float32)
+    reach = 0.0
+    rows = max(1, (CHUNK_READOUTS * H * W) // max(1, K * W))     # the memory of CHUNK_READOUTS frames
+    for top in range(0, H, rows):
+        spikes = decode_spikes(np.asarray(words[:, top:top + rows]), config)
+        law = out[:, top:top + rows] = law_atoms(spikes, atoms)
+        mean = law.astype(np.float64).mean(0)
+        if (mean > 0).any():
+            reach = max(reach, float((spikes.max(0)[mean > 0] / mean[mean > 0]).max()))
+    return out, reach
+
+
 def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) -> Calibration:
     """Dark stream (K_d, H, W) and flat stream (K_f, H, W) of one sensor, the flat's light
     (scene units) -> :class:`Calibration`."""
@@ -114,7 +153,7 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
     floored = int(np.count_nonzero(raw_gain < MIN_GAIN))
     return Calibration(dark, np.maximum(raw_gain, MIN_GAIN), config, int(dark_words.shape[0]),
                        int(flat_words.shape[0]), float(flat_light), ESTIMATOR, floored,
-                       overflow_share(flat_words, config))
+                       overflow_share(flat_words, config), *estimate_dark_law(dark_words, config))
 
 
 def save_calibration(path: str | Path, calibration: Calibration) -> None:
@@ -127,6 +166,9 @@ def save_calibration(path: str | Path, calibration: Calibration) -> None:
                      dark_readouts=np.int64(c.dark_readouts), flat_readouts=np.int64(c.flat_readouts),
                      flat_light=np.float64(c.flat_light), estimator=np.array(c.estimator),
                      floored=np.int64(c.floored), overflow_share=np.float64(c.overflow_share),
+                     dark_law=(np.zeros((0, *c.shape), np.float32) if c.dark_law is None
+                               else np.asarray(c.dark_law, np.float32)),
+                     dark_tail=np.float64(c.dark_tail),
                      format=np.array(FORMAT))
 
 
@@ -142,20 +184,35 @@ def load_calibration(path: str | Path) -> Calibration:
             raise InputError(f"calibration file {shown!r} lacks {', '.join(missing)} "
                              "(write it with 'tespike calibrate')")
         values = {k: npz[k] for k in keys}
-    if str(values["format"]) != FORMAT:
-        raise InputError(f"calibration file {shown!r} has format {str(values['format'])!r}, not {FORMAT!r}")
+        version = str(values["format"])
+        if version not in (FORMAT, FORMAT_MEAN_ONLY):
+            raise InputError(f"calibration file {shown!r} has format {version!r}, not {FORMAT!r} "
+                             f"(or {FORMAT_MEAN_ONLY!r})")
+        if version == FORMAT and "dark_law" not in npz.files:
+            raise InputError(f"calibration file {shown!r} lacks dark_law (write it with 'tespike calibrate')")
+        law = np.asarray(npz["dark_law"]) if version == FORMAT else None
+        tail = float(npz["dark_tail"]) if version == FORMAT and "dark_tail" in npz.files else math.nan
+        if version == FORMAT and not (np.isfinite(tail) and tail >= 0):
+            raise InputError(f"calibration file {shown!r}: dark_tail must be a finite number >= 0 "
+                             "(write it with 'tespike calibrate')")
     dark, gain = np.asarray(values["dark"], np.float64), np.asarray(values["gain"], np.float64)
     if dark.ndim != 2 or dark.shape != gain.shape or not (np.isfinite(dark).all() and np.isfinite(gain).all()) \
             or (gain <= 0).any():
         raise InputError(f"calibration file {shown!r}: dark and gain must be finite (H, W) maps of one "
                          "shape, gain > 0")
+    if law is not None:
+        if law.dtype != np.float32 or law.ndim != 3 or law.shape[1:] != dark.shape \
+                or not np.isfinite(law).all() or (law < 0).any():
+            raise InputError(f"calibration file {shown!r}: dark_law must be float32 (Q, H, W) of the maps' "
+                             f"frame size, finite and >= 0, not {law.dtype} {law.shape}")
+        law = law if law.shape[0] else None
     try:
         config = SensorConfig.from_json(str(values["config"]))
     except TespikeError as exc:
         raise InputError(f"calibration file {shown!r}: {exc}") from None
     return Calibration(dark, gain, config, int(values["dark_readouts"]), int(values["flat_readouts"]),
                        float(values["flat_light"]), str(values["estimator"]), int(values["floored"]),
-                       float(values["overflow_share"]))
+                       float(values["overflow_share"]), law, tail if law is not None else 0.0)
 
 
 def check_matches(calibration: Calibration, config: SensorConfig, shape: tuple[int, int],
@@ -241,4 +298,6 @@ def calibration_summary(calibration: Calibration) -> str:
             f"readouts (flat light {c.flat_light:g}): dark {DESIGN_ELECTRONS * c.dark.mean():.0f} e-/readout "
             f"mean ({DESIGN_ELECTRONS * np.median(c.dark):.0f} median), gain {c.gain.mean():.4f} +- "
             f"{c.gain.std():.4f}, {c.floored} pixels floored at gain {MIN_GAIN}, "
-            f"{100 * c.overflow_share:.2f} % overflow words in the flat")
+            f"{100 * c.overflow_share:.2f} % overflow words in the flat"
+            + ("" if c.dark_law is None else f", dark law of {c.dark_law.shape[0]} quantiles "
+               f"(tail to {c.dark_tail:.1f} x the mean)"))

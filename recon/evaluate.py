@@ -45,7 +45,8 @@ dark level, non-uniformity, gain spread), get a table of their own
 sensor reconstructed with its calibration (:mod:`tespike.recon.calibration`): per sequence
 frame size, :data:`CALIBRATION_READOUTS` dark readouts and as many under a flat
 light of :data:`CALIBRATION_FLAT`, simulated with the sensor (its own noise
-seed), estimate the per-pixel dark rate and gain that correct every method's output.
+seed), estimate the per-pixel dark rate, dark law and gain that correct every method
+(recon.methods.reconstruct says where each method is corrected).
 
 Metrics: PSNR-mu and SSIM-mu always; ``metrics=`` adds any further column of
 :data:`tespike.recon.score.KEYS` (PU21-PSNR, HDR-VQM, FovVideoVDP, conventions in

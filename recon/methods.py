@@ -32,26 +32,45 @@ from .tfi import tfi
 from .tfp import tfp
 
 
-def _tfp_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings) -> torch.Tensor:
-    light = decode_light(words, config, estimator=settings.estimator, device=settings.device,
-                         dtype=settings.torch_dtype)
-    return tfp(light, settings.radius)
+def _tfp_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings,
+               correction: tuple | None = None) -> torch.Tensor:
+    """TFP of a (K, P) block; ``correction`` (dark, 1 / gain, dark law atoms (Q, P)) of its P pixels:
+    the window's own light under the pixels' dark law (:func:`tespike.recon.darklaw.law_light`),
+    divided by the gain, floored at 0."""
+    if correction is None:
+        light = decode_light(words, config, estimator=settings.estimator, device=settings.device,
+                             dtype=settings.torch_dtype)
+        return tfp(light, settings.radius)
+    from .darklaw import law_light
+    _, inverse_gain, (atoms, ceiling) = correction
+    light = decode_light(words, config, estimator=settings.estimator, device=settings.device)
+    own, _ = law_light(light, config.spike_light, atoms, ceiling, settings.radius, settings.torch_dtype)
+    return (own * inverse_gain.to(settings.device, own.dtype)).clamp_(min=0)
 
 
 def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings,
-               correction: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
-    """TFI of a (K, P) block; ``correction`` (dark, 1 / gain) of its P pixels: TFI of the pixels'
-    own charge, the decoded spikes less the dark rate re-coded as a pixel without dark current
-    codes them (:func:`tespike.recon.calibration.dark_free_light`), so the intervals are those of
-    the pixel's own light, not of its dark current; divided by the gain (TFI is linear in the
-    light of fixed intervals)."""
+               correction: tuple | None = None) -> torch.Tensor:
+    """TFI of a (K, P) block; ``correction`` (dark, 1 / gain, dark law atoms (Q, P) or None) of its
+    P pixels: TFI of the pixels' own charge, re-coded as a pixel without dark current codes it
+    (:func:`tespike.recon.calibration.dark_free_light`), so the intervals are those of the pixel's
+    own light, not of its dark current; divided by the gain (TFI is linear in the light of fixed
+    intervals). The own charge of a readout is its decoded spikes less its expected dark charge
+    under the pixel's dark law at its window's light (:func:`tespike.recon.darklaw.law_light`),
+    or less the mean dark rate where the calibration has no law."""
     if correction is None:
         light = decode_light(words, config, estimator=settings.estimator, device=settings.device,
                              dtype=settings.torch_dtype)
         return tfi(light, words != 0, config.spike_light, settings.radius, settings.search)
     from .calibration import dark_free_light
-    dark, inverse_gain = (c.to(settings.device, torch.float64) for c in correction)
-    spikes = decode_spikes(words, config, estimator=settings.estimator, device=settings.device)
+    dark, inverse_gain = (c.to(settings.device, torch.float64) for c in correction[:2])
+    law = correction[2] if len(correction) > 2 else None
+    if law is None:
+        spikes = decode_spikes(words, config, estimator=settings.estimator, device=settings.device)
+    else:
+        from .darklaw import law_light
+        decoded = decode_light(words, config, estimator=settings.estimator, device=settings.device)
+        _, own = law_light(decoded, config.spike_light, *law, settings.radius)
+        spikes, dark = own / config.spike_light, torch.zeros_like(dark)
     light = dark_free_light(spikes, dark, config.spike_light).to(settings.torch_dtype)
     return tfi(light, light > 0, config.spike_light, settings.radius, settings.search) * inverse_gain.to(light.dtype)
 
@@ -82,13 +101,14 @@ class Method:
     options: tuple[str, ...]        # ReconSettings fields the method uses
     frames: Callable | None = None
     corrected_input: bool = False   # a calibration corrects its input (``block(..., correction)``), not its output
+    law_input: bool = False         # so does a calibration with a dark law (TFP: its law-aware window light)
 
 
 #: name -> reconstruction method (not golden.fastsim's simulation methods). The learned
 #: ones ignore ``window``: they see the span their sizes fix (:func:`tespike.recon.learned.method_span`).
 RECON_METHODS: dict[str, Method] = {
     "tfp": Method("tfp", "mean decoded light over the window (spike-firing rate)", _tfp_block,
-                  ("window", "estimator", "chunk_elements", "device", "dtype")),
+                  ("window", "estimator", "chunk_elements", "device", "dtype"), law_input=True),
     "tfi": Method("tfi", "decoded spikes over the spike interval around each readout", _tfi_block,
                   ("window", "estimator", "search", "chunk_elements", "device", "dtype"), corrected_input=True),
     "spk2imgnet": Method("spk2imgnet", "Spk2ImgNet (Zhao et al. 2021, re-implemented), shipped weights",
@@ -118,12 +138,17 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     the images never need to fit in memory); it is returned. ``weights``: a
     learned method's weights file (None: the shipped ones; refused for TFP and TFI).
     ``calibration``: a :class:`tespike.recon.calibration.Calibration` of the sensor that recorded
-    the stream; every method is then corrected for the pixels' dark rate and gain: TFP at its
-    output, ``max(0, (x - dark) / gain)`` (:func:`tespike.recon.calibration.correct`; exact, TFP
-    being linear in the decoded light it averages); TFI on its input, the decoded spikes less the
-    dark rate re-coded as a pixel without dark current codes them, its spike intervals then
-    following the pixel's own light, not its dark current, and divided by the gain;
-    the learned methods on every readout's decoded light, ``(x - dark) / gain`` unfloored, their
+    the stream; every method is then corrected for the pixels' dark rate and gain. With the
+    calibration's dark law (``calibration.dark_law``): TFP as the window's light estimated under
+    the law (:func:`tespike.recon.darklaw.law_light`; exactly TFP's windowed mean where the law
+    holds no dark charge), TFI on the pixel's own charge, each readout less its expected dark
+    charge under the law, re-coded as a pixel without dark current codes it, both divided by the
+    gain. Without a law: TFP at its output, ``max(0, (x - dark) / gain)``
+    (:func:`tespike.recon.calibration.correct`; exact, TFP being linear in the decoded light it
+    averages); TFI on its input, the decoded spikes less the dark rate re-coded as a pixel without
+    dark current codes them, its spike intervals then following the pixel's own light, not its
+    dark current, and divided by the gain. Either way
+    the learned methods are corrected on every readout's decoded light, ``(x - dark) / gain`` unfloored, their
     image floored at 0 (:func:`tespike.recon.learning.infer.frame`). Each route was chosen by
     measurement (docs/reconstruction.md "Calibration").
     """
@@ -155,7 +180,7 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
         return out
     if spec.frames is not None:             # a learned method: corrected at its input
         return spec.frames(words, config, settings, progress, out, weights, calibration)
-    if calibration is not None and spec.corrected_input:
+    if calibration is not None and (spec.corrected_input or (spec.law_input and calibration.dark_law is not None)):
         return _reconstruct_raw(words, config, spec, settings, progress, out, calibration)
     if calibration is not None:
         from .calibration import correct
@@ -175,6 +200,10 @@ def _reconstruct_raw(words, config, spec, settings, progress, out, calibration=N
     if calibration is not None:
         from .calibration import input_correction
         correction = [c.reshape(-1) for c in input_correction(calibration, dtype=torch.float64)]
+        law = calibration.dark_law
+        if law is not None:                 # the atoms (Q, H W) and the tail's ceiling (H W), spikes
+            atoms = torch.as_tensor(np.asarray(law, np.float32)).reshape(law.shape[0], -1).to(settings.device)
+            law = (atoms, calibration.dark_tail * atoms.to(torch.float64).mean(0))
     if progress:
         from tqdm import tqdm
         starts = tqdm(starts, desc=f"reconstruct {method}", unit="block")
@@ -185,7 +214,9 @@ def _reconstruct_raw(words, config, spec, settings, progress, out, calibration=N
                 result = spec.block(block, config, settings)
             else:
                 pixels = slice(start, start + step)
-                result = spec.block(block, config, settings, tuple(c[pixels] for c in correction))
+                result = spec.block(block, config, settings, (*(c[pixels] for c in correction),
+                                                              None if law is None else
+                                                              (law[0][:, pixels], law[1][pixels])))
             out_flat[:, start:start + step] = result.to("cpu", torch.float32).numpy()
     return out
 

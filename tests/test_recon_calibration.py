@@ -185,14 +185,18 @@ def test_tfi_is_corrected_at_its_input():
     """TFI with a calibration: TFI of the pixel's own charge (decoded spikes less the dark rate,
     carried from readout to readout, a readout firing where the charge passes a new whole spike,
     a readout-by-readout loop here, the product vectorised in blocks of a few pixels), divided by
-    the gain; an output correction and the old per-readout floor are different estimates."""
+    the gain; an output correction and the old per-readout floor are different estimates. The
+    calibration here carries only the mean dark rate (a format-1 file; with a dark law the readout's
+    dark charge is its expectation under the law, tests/test_recon_darklaw.py)."""
+    import dataclasses
+
     import torch
 
     from tespike.recon.stream import decode_light, decode_spikes
     from tespike.recon.tfi import tfi
     config = SensorConfig()
     dark_words, flat_words = _streams(config, 64)
-    c = estimate(dark_words, flat_words, config, 0.03)
+    c = dataclasses.replace(estimate(dark_words, flat_words, config, 0.03), dark_law=None)
     light = np.random.default_rng(6).uniform(0, 0.05, (20, 6, 8))
     words = simulate_scene(config, light, seed=8, sensor=SENSOR)
     spikes = decode_spikes(torch.from_numpy(words.astype(np.int64)), config).numpy().reshape(20, -1)
