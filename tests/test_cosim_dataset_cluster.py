@@ -218,3 +218,59 @@ def test_a_local_cluster_ends_at_once_with_a_command_killed_outright():
     finally:
         if cluster is not None and session(cluster):
             os.killpg(cluster, signal.SIGKILL)
+
+
+def test_a_local_cluster_that_lost_every_worker_ends_the_run_in_one_line(monkeypatch):
+    """Starved of memory, a local cluster's workers die and their nannies with them, and the tasks
+    would wait for ever: with no worker for NO_WORKER_SECONDS the run ends, naming the cause its
+    error output gives; with workers, a task slower than that is waited for."""
+    import distributed
+
+    from tespike.cosim.dataset import cluster
+    from tespike.golden.errors import InputError
+
+    class Future:                                     # finishes ``seconds`` after it is made
+        def __init__(self, seconds):
+            self.done_at = time.monotonic() + seconds
+
+        def result(self, timeout=None):
+            return "done"
+
+    class Completed:
+        def __init__(self, futures):
+            self.left = list(futures)
+
+        def is_empty(self):
+            return not self.left
+
+        def next_batch(self, block=False):
+            batch = [f for f in self.left if time.monotonic() >= f.done_at]
+            self.left = [f for f in self.left if f not in batch]
+            return batch
+
+    class Client:
+        def __init__(self, workers, seconds):
+            self.workers, self.seconds = workers, seconds
+
+        def compute(self, tasks, retries=0):
+            return [Future(self.seconds) for _ in tasks]
+
+        def scheduler_info(self):
+            return {"workers": dict.fromkeys(range(self.workers))}
+
+        def cancel(self, futures):
+            pass
+
+    monkeypatch.setattr(distributed, "as_completed", Completed)
+    monkeypatch.setattr(cluster, "NO_WORKER_SECONDS", 0.3)
+    monkeypatch.setattr(cluster, "POLL_SECONDS", 0.01)
+    runner = cluster.Runner(workers=2)
+    runner.cluster = type("Process", (), {})()
+    runner.cluster.errors = ["2026-11-26 10:00:00,000 - distributed.nanny - ERROR - Failed to start process",
+                             "MemoryError: Unable to allocate internal buffer."]
+    runner.client = Client(0, 60.0)
+    with pytest.raises(InputError, match="lost all its 2 worker processes and could not restart them: "
+                                         "MemoryError: Unable to allocate internal buffer"):
+        list(runner([object(), object()]))
+    runner.client = Client(2, 0.6)
+    assert list(runner([object()])) == [(0, "done")]

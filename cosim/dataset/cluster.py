@@ -70,6 +70,9 @@ closed.set()
 #: Seconds a local cluster is given to start, and to stop before its processes are killed.
 START_SECONDS = 120
 STOP_SECONDS = 30
+#: Seconds a local cluster may run tasks with no worker left before the run is given up (its
+#: nannies restart a dead worker within a few seconds; starved of memory, the nannies die too).
+NO_WORKER_SECONDS = 20
 #: Open files a local cluster's process needs: about this many, plus FILES_PER_WORKER per
 #: worker (measured: 2 workers start with 40 open files, not with 38; 4 with 64, not with 56).
 CLUSTER_FILES = 28
@@ -97,20 +100,31 @@ def _check_file_handles(workers: int) -> None:
 
 
 def _failed_start(workers: int, returncode, errors: list[str]) -> InputError:
-    """One line for a cluster that did not start: the cause from its error output (the deepest
-    starvation it names, else its last line)."""
+    """One line for a cluster that did not start: the cause from its error output (:func:`_cause`)."""
+    return InputError(f"cannot start a local Dask cluster of {workers} worker processes: "
+                      f"{_cause(errors, returncode)[:240]}")
+
+
+def _cause(errors: list[str], returncode=None) -> str:
+    """The cause a cluster's error output gives: the deepest starvation it names, else its last
+    exception or line; under an address-space limit, with that limit when memory is not named."""
     every = [_LOG_LINE.sub("", line).strip() for line in errors if line.strip()]     # a worker's, logged
     lines = [line.strip() for line in errors if line.strip() and not _LOG_LINE.match(line)]
     exceptions = [line for line in lines if _EXCEPTION_LINE.match(line)]
-    cause = next((line for line in reversed(every) if any(word in line for word in STARVED)),
-                 (exceptions or lines or [f"exit status {returncode}"])[-1])
+    starved = next((line for line in reversed(every) if any(word in line for word in STARVED)), None)
+    cause = starved or (exceptions or lines or [f"exit status {returncode}"])[-1]
     cause = cause.removeprefix("RuntimeError: Cluster failed to start: ")
     if cause.endswith("can't start new thread"):          # a thread's stack did not fit
         cause += " (out of memory or of processes)"
     if "No usable temporary directory" in cause:
         from tespike.golden.paths import temporary_directory_fault
         cause = temporary_directory_fault() or cause
-    return InputError(f"cannot start a local Dask cluster of {workers} worker processes: {cause[:200]}")
+    from tespike.golden.resources import address_space_limit
+    limit = address_space_limit()
+    if starved is None and limit is not None:           # its processes died where memory ran out
+        cause = (f"most likely out of memory within the address-space limit (ulimit -v) of {limit >> 20} MB "
+                 f"(its last error: {cause[:120]})")
+    return cause
 
 
 def _start_local_cluster(workers: int, interrupted):
@@ -129,6 +143,7 @@ def _start_local_cluster(workers: int, interrupted):
     errors: collections.deque[str] = collections.deque(maxlen=400)      # its last lines, read as they come
     reader = threading.Thread(target=lambda: errors.extend(process.stderr), daemon=True)
     reader.start()
+    process.errors, process.reader = errors, reader                     # (read again if its workers die)
     try:
         end = time.monotonic() + START_SECONDS
         while not select.select([process.stdout], [], [], POLL_SECONDS)[0]:
@@ -163,6 +178,12 @@ def _stop_local_cluster(process, at_once: bool = False) -> None:
         with contextlib.suppress(OSError):
             os.killpg(process.pid, signal.SIGKILL)     # its own session: only the processes it started
         process.wait()
+    reader = getattr(process, "reader", None)
+    if reader is not None:
+        reader.join(5)                                 # its error output read to the end (or left)
+    if not (reader is not None and reader.is_alive()):
+        with contextlib.suppress(OSError):
+            process.stderr.close()
 
 
 class _Interrupts:
@@ -282,11 +303,17 @@ class Runner:
         index_of = {id(future): index for index, future in enumerate(futures)}
         try:
             finished = as_completed(futures)
+            workers_seen = time.monotonic()
             while not finished.is_empty():
                 self._interrupts.check()
                 batch = finished.next_batch(block=False)
                 if not batch:
                     time.sleep(POLL_SECONDS)
+                    if self.cluster is None or self.client.scheduler_info().get("workers"):
+                        workers_seen = time.monotonic()
+                    elif time.monotonic() - workers_seen > NO_WORKER_SECONDS:
+                        raise InputError(f"the local Dask cluster lost all its {self.workers} worker processes "
+                                         f"and could not restart them: {_cause(list(self.cluster.errors))}")
                 for future in batch:
                     yield index_of[id(future)], self._result(future)
         finally:
