@@ -111,6 +111,26 @@ def _ctrl_c_ignored():
         signal.signal(signal.SIGINT, previous)
 
 
+def _end_workers_started(before: set) -> None:
+    """The worker processes a pool started before its own start failed (one of its three handler
+    threads could not start: out of memory): killed and reaped, so that none, still reading its
+    start-up data from a trainer that has gone, prints that traceback after the trainer's one line.
+    A worker-handler thread the pool did start would start new workers in their place: it is
+    stopped first, as ``Pool.terminate`` stops it (its ``_state``; the pool object itself never
+    reached the caller)."""
+    from multiprocessing import pool as pools
+    handler = getattr(pools.Pool._handle_workers, "__func__", pools.Pool._handle_workers)   # (a classmethod)
+    for thread in threading.enumerate():
+        target = getattr(thread, "_target", None)
+        if target is not None and getattr(target, "__func__", target) is handler:
+            thread._state = pools.TERMINATE
+            thread.join(5)
+    for process in multiprocessing.active_children():
+        if process not in before:
+            process.kill()
+            process.join(5)
+
+
 class ClipSource:
     """Clips ``start, start + 1, ...`` in order, made ahead on worker processes."""
 
@@ -121,9 +141,14 @@ class ClipSource:
         self.pool = None
         if workers > 0:
             _quiet_resource_tracker()
-            with _ctrl_c_ignored():         # the workers inherit it from their first instruction on
-                self.pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_worker_init,
-                                                                      initargs=(os.getpid(),))
+            before = set(multiprocessing.active_children())
+            try:
+                with _ctrl_c_ignored():     # the workers inherit it from their first instruction on
+                    self.pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_worker_init,
+                                                                          initargs=(os.getpid(),))
+            except BaseException:
+                _end_workers_started(before)
+                raise
         self.pending: collections.deque = collections.deque()
         self.submitted = start
         self.waited = 0.0
