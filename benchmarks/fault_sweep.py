@@ -821,8 +821,8 @@ def judge_starved(case: Case, kind: str, outcome: Outcome, work: Path, out: Path
         return False, f"names no file: {first[:160]}"
     if case.out_kind in ("file", "folder") and state(out) != before and "whole" not in first:
         return False, f"output {case.out} changed: {first[:140]}"
-    if case.out_kind == "none" and os.path.lexists(out) and "whole" not in first:
-        return False, f"output {case.out} written by a failed run: {first[:140]}"
+    if case.out_kind == "none" and os.path.lexists(out) and "whole" not in first and "resumes" not in first:
+        return False, f"output {case.out} written by a failed run: {first[:140]}"     # (a resumable store says so)
     run_folder = out.with_suffix(".run")
     if case.name.startswith("starve train") and os.path.lexists(run_folder) and not any(os.scandir(run_folder)):
         return False, f"empty run folder left: {first[:140]}"

@@ -261,21 +261,23 @@ def _run(args) -> tuple[int, bool]:
             cause = temporary_directory_fault() or cause
         from tespike.golden.resources import file_handles_fault
         cause = file_handles_fault(exc) or cause
-        print(f"{prefix}: error:{where} {cause}{_before(start, exc)}", file=sys.stderr)
+        print(f"{prefix}: error:{where} {cause}{_notes(exc)}{_before(start, exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
     except MemoryError as exc:        # numpy's says what it could not allocate; library_room's, what is left
         detail = f" ({_one_line(exc, 200)})" if str(exc) else ""
-        print(f"{prefix}: error: out of memory{_memory_limit()}{detail}{_before(start, exc)}", file=sys.stderr)
+        print(f"{prefix}: error: out of memory{_memory_limit()}{detail}{_notes(exc)}{_before(start, exc)}",
+              file=sys.stderr)
         return 1, False
     except (RuntimeError, ImportError) as exc:     # torch's failed allocation; a library that cannot be mapped
         if isinstance(exc, RuntimeError) and str(exc) == "can't start new thread":   # threading's, out of room
             print(f"{prefix}: error: cannot start a thread: out of memory or of processes{_memory_limit()}"
-                  f"{_before(start, exc)}", file=sys.stderr)
+                  f"{_notes(exc)}{_before(start, exc)}", file=sys.stderr)
             return 1, False
         if not any(words in str(exc) for words in OUT_OF_MEMORY) and \
                 not (_memory_limit() and any(words in str(exc) for words in OUT_OF_MEMORY_UNDER_LIMIT)):
             raise
-        print(f"{prefix}: error: out of memory{_memory_limit()} ({_one_line(exc, 160)}){_before(start, exc)}",
+        print(f"{prefix}: error: out of memory{_memory_limit()} ({_one_line(exc, 160)}){_notes(exc)}"
+              f"{_before(start, exc)}",
               file=sys.stderr)
         return 1, False
     except KeyboardInterrupt as exc:

@@ -222,3 +222,19 @@ def test_cli_refusals(tmp_path, capsys, rng):
     refused(capsys, "evaluate", "--store", tmp_path / "o.zarr", "--set", "moderate", "--out", tmp_path / "ev", "--set")
     refused(capsys, "evaluate", "--workers", 2, "--out", tmp_path / "ev", "--store")
     assert not (tmp_path / "ev").exists()
+
+
+def test_a_failure_after_the_build_says_the_store_is_kept_for_a_resume(tmp_path, capsys, monkeypatch):
+    """A run that fails once its sequences are complete (here: while its cluster closes, as one
+    starved of memory can) keeps the store and says so in its line, as a failure during the build does."""
+    from tespike.cosim.dataset import cluster
+
+    def failing_exit(self, *exc):
+        raise RuntimeError("can't start new thread")
+    monkeypatch.setattr(cluster.Runner, "__exit__", failing_exit)
+    out = tmp_path / "D.zarr"
+    code, _, err = run_here(capsys, "dataset", "--scene", "default", "--frames", "4", "--height", "16", "--width",
+                            "16", "--config", "te", "--progress", "off", "--out", out)
+    assert code != 0 and len(err.strip().splitlines()) == 1, err
+    assert f"(store {str(out)!r} keeps 1 complete sequence(s); the same command resumes it)" in err, err
+    assert out.is_dir()

@@ -89,8 +89,11 @@ def run(args) -> int:
             counts = build_dataset(args.out, sources, configs, args.seed, runner, chunk_frames=args.chunk_frames,
                                    report=lambda name: report(args, f"dataset: {name} complete"),
                                    notice=lambda text: report(args, f"dataset: {text}"))
-    except BaseException:
-        discard_unfinished_store(args.out, made)      # the workers have stopped: nothing writes there now
+    except BaseException as exc:
+        kept = discard_unfinished_store(args.out, made)   # the workers have stopped: nothing writes there now
+        if kept and not any("the same command resumes" in note for note in getattr(exc, "__notes__", ())):
+            exc.add_note(f"(store {args.out!r} keeps {kept} complete sequence(s); "    # failed after the build
+                         "the same command resumes it)")
         raise
     seconds = time.perf_counter() - start
     rebuilt = f", {len(counts['rebuilt'])} rebuilt for a damaged chunk" if counts["rebuilt"] else ""

@@ -314,24 +314,27 @@ def new_local_store(url: str) -> str | None:
     return "empty" if os.path.isdir(url) and not os.path.islink(url) and not os.listdir(url) else None
 
 
-def discard_unfinished_store(url: str, made: str | None) -> None:
+def discard_unfinished_store(url: str, made: str | None) -> int:
     """After a failed or interrupted build (its workers stopped): remove the store this run made
     (``made`` from :func:`new_local_store`; an "empty" folder given is emptied, not removed) if it
-    holds no complete sequence, so that a run that made nothing leaves nothing."""
+    holds no complete sequence, so that a run that made nothing leaves nothing -> the complete
+    sequences of a store kept (0 where it was removed or emptied, or not this run's)."""
     import shutil
     if made is None or not os.path.isdir(url):
-        return
+        return 0
     try:
-        if DatasetStore.open(url).sequences(complete=True):
-            return                                   # resumable work: kept, and the error says so
+        complete = DatasetStore.open(url).sequences(complete=True)
+        if complete:
+            return len(complete)                     # resumable work: kept, and the error says so
     except (InputError, OSError, ValueError, KeyError):
         pass                                         # not even a readable store yet
     if made == "new":
         shutil.rmtree(url, ignore_errors=True)
-        return
+        return 0
     for entry in os.scandir(url):
         if entry.is_dir(follow_symlinks=False):
             shutil.rmtree(entry.path, ignore_errors=True)
         else:
             with contextlib.suppress(OSError):
                 os.unlink(entry.path)
+    return 0
