@@ -195,10 +195,8 @@ def _write_error(path: str, exc: OSError) -> InputError:
     from .resources import file_handles_fault
     if exc.errno is None and "requested" in str(exc):          # numpy's short write: a full disk
         reason = f"short write ({exc}); is the disk full?"
-    elif file_handles_fault(exc):
-        reason = file_handles_fault(exc)
     else:
-        reason = exc.strerror or str(exc) or type(exc).__name__
+        reason = file_handles_fault(exc) or exc.strerror or str(exc) or type(exc).__name__
     return InputError(f"cannot write {path!r}: {reason}")
 
 

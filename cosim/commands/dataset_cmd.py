@@ -59,7 +59,7 @@ def run(args) -> int:
     from tespike.cosim.console import report
     from tespike.cosim.dataset.cluster import Runner, check_workers
     from tespike.cosim.dataset.build import (build_dataset, discard_unfinished_store, hdr_sources,
-                                             new_local_store, scene_sources)
+                                             new_local_store, note_resumable, scene_sources)
     from tespike.golden.errors import InputError
 
     check_workers(args.workers, args.scheduler)
@@ -91,9 +91,7 @@ def run(args) -> int:
                                    notice=lambda text: report(args, f"dataset: {text}"))
     except BaseException as exc:
         kept = discard_unfinished_store(args.out, made)   # the workers have stopped: nothing writes there now
-        if kept and not any("the same command resumes" in note for note in getattr(exc, "__notes__", ())):
-            exc.add_note(f"(store {args.out!r} keeps {kept} complete sequence(s); "    # failed after the build
-                         "the same command resumes it)")
+        note_resumable(exc, args.out, kept)               # (also for a failure after the build)
         raise
     seconds = time.perf_counter() - start
     rebuilt = f", {len(counts['rebuilt'])} rebuilt for a damaged chunk" if counts["rebuilt"] else ""

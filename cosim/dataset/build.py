@@ -293,9 +293,7 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
         full = isinstance(exc, OSError) and exc.filename is None and exc.errno in NO_ROOM
         if full:                       # Zarr's writes (here or on a worker) name no file
             exc = InputError(f"cannot write dataset store {os.fspath(url)!r}: {exc.strerror}")
-        if done + skipped:
-            exc.add_note(f"(store {os.fspath(url)!r} keeps {done + skipped} complete sequence(s); "
-                         "the same command resumes it)")
+        note_resumable(exc, url, done + skipped)
         if full:
             raise exc from None
         raise
@@ -312,6 +310,16 @@ def new_local_store(url: str) -> str | None:
     if not os.path.lexists(url):
         return "new"
     return "empty" if os.path.isdir(url) and not os.path.islink(url) and not os.listdir(url) else None
+
+
+#: The end of the note a failed build's error carries when its store keeps complete sequences.
+RESUMES = "the same command resumes it)"
+
+
+def note_resumable(exc: BaseException, url: str, complete: int) -> None:
+    """Say on ``exc``, once, that store ``url`` keeps ``complete`` (> 0) complete sequences a rerun resumes."""
+    if complete and not any(note.endswith(RESUMES) for note in getattr(exc, "__notes__", ())):
+        exc.add_note(f"(store {os.fspath(url)!r} keeps {complete} complete sequence(s); {RESUMES}")
 
 
 def discard_unfinished_store(url: str, made: str | None) -> int:

@@ -178,10 +178,8 @@ def _stop_local_cluster(process, at_once: bool = False) -> None:
         with contextlib.suppress(OSError):
             os.killpg(process.pid, signal.SIGKILL)     # its own session: only the processes it started
         process.wait()
-    reader = getattr(process, "reader", None)
-    if reader is not None:
-        reader.join(5)                                 # its error output read to the end (or left)
-    if not (reader is not None and reader.is_alive()):
+    process.reader.join(5)                             # its error output read to the end (or left)
+    if not process.reader.is_alive():
         with contextlib.suppress(OSError):
             process.stderr.close()
 
