@@ -10,7 +10,8 @@ changes. Every outside tool of :mod:`tespike.cosim` is started through
 A tool that starts tools of its own (a build through make, whose compilers the
 signal does not reach) runs in a process group of its own through
 :func:`run_group`: the group is killed when the tool returns or is interrupted,
-and by the command's janitor (:func:`tespike.golden.atomic.hold_process_group`)
+and by the command's janitor (:func:`tespike.golden.atomic.process_group_holder`,
+which the tool's process registers itself before its exec)
 when the command is killed outright.
 """
 
@@ -71,15 +72,21 @@ def run_group(argv, **kwargs) -> subprocess.CompletedProcess:
     everything it started included: the group is killed once the child has returned (a
     compiler make left behind) or this process is interrupted, and by the janitor should this
     process be killed outright. Ctrl-C reaches only this process, which ends the group."""
-    from tespike.golden.atomic import hold_process_group, release_process_group
+    from tespike.golden.atomic import process_group_holder, release_process_group
     options = {k: v for k, v in kwargs.items() if k not in ("input", "timeout", "check", "capture_output")}
     if kwargs.get("capture_output"):                   # (as subprocess.run reads its options)
         options["stdout"] = options["stderr"] = subprocess.PIPE
     if kwargs.get("input") is not None:
         options["stdin"] = subprocess.PIPE
-    process = subprocess.Popen(argv, preexec_fn=_preexec(os.getpid()), process_group=0, **options)
+    parent, hold = os.getpid(), process_group_holder()
+
+    def start_in_group() -> None:
+        if _PRCTL is not None:
+            end_with_parent(parent)
+        hold()
+
+    process = subprocess.Popen(argv, preexec_fn=start_in_group, process_group=0, **options)
     try:
-        hold_process_group(process.pid)
         out, err = process.communicate(kwargs.get("input"), timeout=kwargs.get("timeout"))
     finally:
         try:

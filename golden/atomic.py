@@ -49,10 +49,24 @@ def start_janitor() -> None:
     _Janitor.start()
 
 
-def hold_process_group(group: int) -> None:
-    """Have the janitor kill process group ``group`` should this process end before
-    :func:`release_process_group` (an outside tool and what it started: make's compilers)."""
-    _Janitor._line(b"g%d" % group)
+def process_group_holder():
+    """A function for a child to call between fork and exec (``preexec_fn``, after it has made
+    its own process group): it has the janitor kill that group should this process end before
+    :func:`release_process_group`. Registered by the child itself, the group is held before
+    the tool can start anything; registered by the parent after the start, a kill in between
+    would leave what the tool started (make's compilers) running. The child writes one line
+    to the janitor's pipe with ``os.write`` (atomic, and no lock a fork may have left held)."""
+    _Janitor.start()
+    process = _Janitor._process
+    fd = process.stdin.fileno() if process is not None else None
+
+    def hold() -> None:
+        if fd is not None:
+            try:
+                os.write(fd, b"g%d\n" % os.getpid())
+            except OSError:
+                pass
+    return hold
 
 
 def release_process_group(group: int) -> None:
@@ -67,7 +81,7 @@ def finished_outputs(since: int = 0) -> list[str]:
 
 #: The janitor: reads ``+HEX`` (a temporary made) and ``-HEX`` (settled) lines, the paths'
 #: bytes in hex, and ``gPGID`` / ``ePGID`` lines (an outside tool's process group started,
-#: ended: :func:`hold_process_group`), and once its input ends (the run is over, however it
+#: ended: :func:`process_group_holder`), and once its input ends (the run is over, however it
 #: ended) kills every process group and removes every path still registered. In a session
 #: of its own, so a signal to the run's process group (Ctrl-C, a kill of the group) leaves
 #: it to clean up.

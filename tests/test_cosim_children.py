@@ -108,6 +108,23 @@ def test_what_a_tool_started_ends_with_the_command_killed_outright(start, left):
     assert _kill_command_and_watch(body, seconds=1.0 if left else 10.0) == left
 
 
+def test_a_kill_right_after_the_tool_starts_still_ends_what_it_started():
+    """The group is held by the janitor before the tool runs, not after ``Popen`` returns: here
+    the command is killed the moment the tool has started, before it could say anything more."""
+    body = ("import os, signal, subprocess, time\n"
+            "from tespike.golden.atomic import start_janitor\n"
+            "from tespike.cosim import children\n"
+            "start_janitor()\n"
+            "popen = subprocess.Popen\n"
+            "def killed_on_return(*args, **kwargs):\n"
+            "    process = popen(*args, **kwargs)\n"
+            "    time.sleep(0.5)\n"
+            "    os.kill(os.getpid(), signal.SIGKILL)\n"
+            "children.subprocess.Popen = killed_on_return\n"
+            f"children.run_group({_GRANDCHILD_TOOL})\n")
+    assert not _kill_command_and_watch(body)
+
+
 def test_what_a_tool_started_ends_with_an_interrupted_command():
     """Ctrl-C reaches the command alone (the tool's group is its own): the command ends the
     group, the tool and what it started, and the interrupt goes on."""
