@@ -229,22 +229,29 @@ def test_an_interrupt_while_yosys_runs_leaves_no_process_and_no_open_pipe():
     to warn of at exit)."""
     import subprocess
     import sys
-    body = ("import gc, os, signal, threading, warnings\n"
+    body = ("import gc, os, signal, threading, time, warnings\n"
             "warnings.simplefilter('always')\n"
             "from tespike.golden.config import SensorConfig\n"
             "from tespike.rtl.verilog import array_verilog\n"
             "from amaranth._toolchain import yosys\n"
             "started = []\n"
             "real = yosys.subprocess.Popen\n"
-            "threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT)).start()\n"
+            "main = threading.get_ident()\n"
+            "def children():\n"
+            "    with open(f'/proc/{os.getpid()}/task/{os.getpid()}/children') as f:\n"
+            "        return f.read().split()\n"
+            "def interrupt_once_yosys_runs():\n"   # (a fixed delay may come before or after it)
+            "    while not children():\n"
+            "        time.sleep(0.01)\n"
+            "    time.sleep(0.2)\n"
+            "    signal.pthread_kill(main, signal.SIGINT)\n"
+            "threading.Thread(target=interrupt_once_yosys_runs, daemon=True).start()\n"
             "try:\n"
             "    array_verilog(SensorConfig(), 3, 3)\n"
             "except KeyboardInterrupt:\n"
             "    print('interrupted')\n"
             "gc.collect()\n"
-            "with open(f'/proc/{os.getpid()}/task/{os.getpid()}/children') as f:\n"
-            "    children = f.read().split()\n"
-            "print('children', len(children), 'restored', yosys.subprocess.Popen is real)\n")
+            "print('children', len(children()), 'restored', yosys.subprocess.Popen is real)\n")
     done = subprocess.run([sys.executable, "-c", body], capture_output=True, text=True, timeout=120)
     assert done.stdout == "interrupted\nchildren 0 restored True\n", (done.stdout, done.stderr)
     assert "ResourceWarning" not in done.stderr, done.stderr
