@@ -270,3 +270,31 @@ def test_a_killed_trainer_leaves_no_worker_and_no_notice(tmp_path):
             break
         time.sleep(0.2)
     assert not left, f"processes of the killed trainer still running: {left}"
+
+
+def test_ctrl_c_while_the_workers_start_ends_the_start_and_leaves_no_worker():
+    """Ctrl-C is held, not ignored, while the clip workers start (they must not answer it
+    themselves): one that comes then is answered once the start is over (it was lost, and a
+    run went on for its minutes), and no worker outlives the pool."""
+    import subprocess
+    import sys
+    script = ("import multiprocessing, os, signal\n"
+              "from multiprocessing import context\n"
+              "from tespike.golden.config import SensorConfig\n"
+              "from tespike.recon.engine.batches import ClipSource\n"
+              "from tespike.recon.engine.clips import EngineRecipe\n"
+              "signal.signal(signal.SIGINT, signal.default_int_handler)\n"   # (a background job ignores it)
+              "start = context.SpawnContext.Pool\n"
+              "def pressed_while_starting(self, *args, **kwargs):\n"
+              "    os.kill(os.getpid(), signal.SIGINT)\n"
+              "    return start(self, *args, **kwargs)\n"
+              "context.SpawnContext.Pool = pressed_while_starting\n"
+              "try:\n"
+              f"    ClipSource(EngineRecipe(**{SMALL.__dict__!r}), SensorConfig(), workers=1)\n"
+              "    print('not interrupted')\n"
+              "except KeyboardInterrupt:\n"
+              "    print('interrupted')\n"
+              "print('workers left', len(multiprocessing.active_children()))\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.stdout == "interrupted\nworkers left 0\n", (done.stdout, done.stderr)
+    assert done.stderr == "", done.stderr

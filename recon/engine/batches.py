@@ -49,6 +49,9 @@ def _worker_init(parent: int) -> None:
     """A worker runs at lower priority and ends when the trainer is gone, however it ended (even
     killed, with no chance to end its workers), without a word once it is gone."""
     import sys
+    signal.signal(signal.SIGINT, signal.SIG_IGN)      # (the trainer answers Ctrl-C: _ctrl_c_held)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     try:
         os.nice(5)              # the trainer keeps priority on a shared machine
     except OSError:
@@ -97,18 +100,30 @@ def _quiet_resource_tracker() -> None:
 
 
 @contextlib.contextmanager
-def _ctrl_c_ignored():
-    """SIGINT ignored while the workers start: Ctrl-C reaches a terminal's whole process group, and
-    the trainer, not each worker, answers it (ending the workers); an ignored signal stays ignored
-    across the workers' exec. Only the main thread can change it (elsewhere nothing changes)."""
-    if threading.current_thread() is not threading.main_thread():
+def _ctrl_c_held():
+    """Ctrl-C held while the workers start, then answered: it reaches a terminal's whole process
+    group, and the trainer, not each worker, answers it (ending the workers). SIGINT is blocked in
+    this thread, a mask the workers inherit across their exec (each then ignores it and unblocks
+    it, :func:`_worker_init`, which discards one already pending), and a SIGINT that comes in the
+    meantime (through this thread's mask on unblocking, or through another thread's) is only
+    noted; once the start is over it is raised again through the handler that was there before.
+    (Ignored instead, it was lost, and the run went on.) Only the main thread can change the
+    handlers (elsewhere nothing changes)."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
         yield
         return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from multiprocessing import resource_tracker
+    resource_tracker.ensure_running()    # (its start, inside, would unblock SIGINT: it blocks and unblocks)
+    held = []
+    previous = signal.signal(signal.SIGINT, lambda number, frame: held.append(number))
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)     # (one held here is noted now)
         signal.signal(signal.SIGINT, previous)
+    if held:
+        signal.raise_signal(signal.SIGINT)
 
 
 def _end_workers_started(before: set) -> None:
@@ -143,11 +158,14 @@ class ClipSource:
             _quiet_resource_tracker()
             before = set(multiprocessing.active_children())
             try:
-                with _ctrl_c_ignored():     # the workers inherit it from their first instruction on
+                with _ctrl_c_held():        # the workers inherit it from their first instruction on
                     self.pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_worker_init,
                                                                           initargs=(os.getpid(),))
             except BaseException:
-                _end_workers_started(before)
+                if self.pool is not None:   # started; a Ctrl-C held during the start came in
+                    self.close()
+                else:
+                    _end_workers_started(before)
                 raise
         self.pending: collections.deque = collections.deque()
         self.submitted = start
