@@ -159,9 +159,11 @@ def test_ctrl_c_during_a_store_evaluation_on_workers_is_one_line_and_leaves_no_p
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     first = process.stdout.readline()                  # printed once the cluster is up
     assert "local cluster of 2 worker processes" in first, first
-    time.sleep(1.0)
-    started = descendants(process.pid)                 # the cluster's process and its workers
+    end = time.monotonic() + 60
+    while len(started := descendants(process.pid)) < 3 and time.monotonic() < end:
+        time.sleep(0.2)                                # the cluster's process and its workers
     assert len(started) >= 3, started
+    time.sleep(0.5)
     os.killpg(process.pid, signal.SIGINT)              # as a terminal's Ctrl-C: the whole group
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 130, stderr

@@ -125,21 +125,36 @@ def test_a_kill_right_after_the_tool_starts_still_ends_what_it_started():
     assert not _kill_command_and_watch(body)
 
 
-def test_what_a_tool_started_ends_with_an_interrupted_command():
+def test_what_a_tool_started_ends_with_an_interrupted_command(tmp_path):
     """Ctrl-C reaches the command alone (the tool's group is its own): the command ends the
-    group, the tool and what it started, and the interrupt goes on."""
+    group, the tool and what it started, and the interrupt goes on. The interrupt comes once
+    the tool has said what it started (a fixed delay may come before, on a loaded machine)."""
+    said = tmp_path / "grandchild"
     body = ("import os, signal, threading, time\n"
             "from tespike.cosim import children\n"
-            "threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGINT)).start()\n"
-            "try:\n"
-            f"    children.run_group({_GRANDCHILD_TOOL}, stdout=open('/dev/stderr', 'w'))\n"
-            "except KeyboardInterrupt:\n"
-            "    print('interrupted', flush=True)\n")
-    done = subprocess.run([sys.executable, "-c", body], capture_output=True, text=True, timeout=60)
-    assert done.stdout == "interrupted\n", (done.stdout, done.stderr)
-    grandchild = int(done.stderr.split()[0])
-    time.sleep(0.2)
-    assert not _running(grandchild)
+            "main = threading.get_ident()\n"
+            "def interrupt_once_started():\n"
+            f"    while not os.path.getsize({str(said)!r}):\n"
+            "        time.sleep(0.01)\n"
+            "    signal.pthread_kill(main, signal.SIGINT)\n"
+            f"with open({str(said)!r}, 'w') as said:\n"
+            "    threading.Thread(target=interrupt_once_started, daemon=True).start()\n"
+            "    try:\n"
+            "        children.run_group(['sh', '-c', 'sleep 300 & echo $!; wait'], stdout=said)\n"
+            "    except KeyboardInterrupt:\n"
+            "        print('interrupted', flush=True)\n")
+    try:                                   # (left running, the tool would wait 300 s: a timeout)
+        done = subprocess.run([sys.executable, "-c", body], capture_output=True, text=True, timeout=60)
+        assert done.stdout == "interrupted\n", (done.stdout, done.stderr)
+        grandchild = int(said.read_text().split()[0])
+        deadline = time.monotonic() + 10
+        while _running(grandchild) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not _running(grandchild)
+    finally:
+        for pid in said.read_text().split():
+            if _running(int(pid)):
+                os.kill(int(pid), signal.SIGKILL)
 
 
 def test_run_group_returns_what_run_returns():
