@@ -151,7 +151,6 @@ def test_stream_pixel_rule_is_the_tops_text_and_equivalent(preset, tmp_path):
     result = prove(f"{preset}-stream-pixel-rule", stream_rule_equivalence(config), depth=1,
                    solver="z3", trace_dir=tmp_path)
     assert result.proved, result.detail
-    assert result.seconds < 30
 
 
 @pytest.mark.parametrize("preset,old,new", [(p, o, n) for p, edits in MUTATIONS.items() for o, n in edits])
