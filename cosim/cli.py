@@ -165,7 +165,7 @@ def _end_quietly() -> None:
 OUT_OF_MEMORY = ("can't allocate memory", "not enough memory", "Cannot allocate memory",
                  "failed to map segment from shared object")
 #: ... and what counts so only under an address-space limit (oneDNN's words for a failed allocation).
-OUT_OF_MEMORY_UNDER_LIMIT = ("could not create a primitive",)
+OUT_OF_MEMORY_UNDER_LIMIT = ("could not create a primitive", "could not execute a primitive")
 
 
 def _memory_limit() -> str:

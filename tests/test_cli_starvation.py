@@ -73,6 +73,24 @@ def test_torch_without_room_is_out_of_memory_in_one_line(tmp_path):
     assert not (tmp_path / "r.npy").exists() and not [p for p in os.listdir(tmp_path) if p.endswith(".part")]
 
 
+@pytest.mark.parametrize("words", ["could not create a primitive", "could not execute a primitive"])
+def test_onednn_failing_under_an_address_space_limit_is_out_of_memory(capsys, monkeypatch, words):
+    """oneDNN's words when it could not allocate (a convolution's primitive made, or run: train at
+    85 % of its peak, during the backward pass) are out of memory under a limit, a bug otherwise."""
+    import tespike.cosim.commands.scene_cmd as scene_cmd
+    import tespike.golden.resources as resources
+
+    def starved(args):
+        raise RuntimeError(words)
+    monkeypatch.setattr(scene_cmd, "run", starved)
+    monkeypatch.setattr(resources, "address_space_limit", lambda: 900 << 20)
+    assert_refused(run_here(capsys, "scene", "--list"), "tespike scene: error: out of memory within the "
+                   "address-space limit (ulimit -v) of 900 MB", words)
+    monkeypatch.setattr(resources, "address_space_limit", lambda: None)
+    with pytest.raises(RuntimeError, match=words):
+        run_here(capsys, "scene", "--list")
+
+
 def test_only_an_import_error_about_memory_is_read_as_out_of_memory(capsys, monkeypatch):
     """The out-of-memory reading must not hide a genuine import bug (a missing module stays a traceback)."""
     import tespike.cosim.commands.scene_cmd as scene_cmd
