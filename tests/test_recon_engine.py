@@ -298,3 +298,28 @@ def test_ctrl_c_while_the_workers_start_ends_the_start_and_leaves_no_worker():
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert done.stdout == "interrupted\nworkers left 0\n", (done.stdout, done.stderr)
     assert done.stderr == "", done.stderr
+
+
+def test_a_pool_whose_terminate_refuses_still_ends_its_workers(monkeypatch):
+    """Starved of memory, a pool thread can die; ``Pool.terminate`` then raises its own
+    AssertionError, which hid the error being handled under a traceback: the source kills
+    its workers itself and raises nothing of its own."""
+    from multiprocessing import pool as pools
+
+    from tespike.recon.engine.batches import ClipSource
+
+    def refuse(self):                      # as the real one fails: its finaliser spent, no worker ended
+        self._terminate.cancel()
+        raise AssertionError("Cannot have cache with result_hander not alive")
+    source = ClipSource(SMALL, SensorConfig(), workers=1)
+    workers = list(source.pool._pool)
+    monkeypatch.setattr(pools.Pool, "terminate", refuse)
+    try:
+        source.close()
+        assert source.pool is None
+        assert all(not process.is_alive() for process in workers)
+    finally:
+        monkeypatch.undo()
+        for process in workers:
+            if process.is_alive():
+                process.kill()

@@ -190,10 +190,21 @@ class ClipSource:
         return clip
 
     def close(self) -> None:
-        if self.pool is not None:
-            self.pool.terminate()
-            self.pool.join()
-            self.pool = None
+        """End the workers. Where a pool thread died (starved of memory while a clip came in),
+        ``Pool.terminate`` refuses with its own ``AssertionError`` (its result handler gone with
+        results pending), which would hide the error being handled under a traceback: the
+        workers are then killed and reaped directly."""
+        pool, self.pool = self.pool, None
+        if pool is None:
+            return
+        try:
+            pool.terminate()
+            pool.join()
+        except (AssertionError, RuntimeError, OSError):
+            for process in getattr(pool, "_pool", ()):
+                with contextlib.suppress(OSError, ValueError):
+                    process.kill()
+                    process.join(5)
 
     def __enter__(self):
         return self
