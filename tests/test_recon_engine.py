@@ -304,6 +304,7 @@ def test_a_pool_whose_terminate_refuses_still_ends_its_workers(monkeypatch):
     """Starved of memory, a pool thread can die; ``Pool.terminate`` then raises its own
     AssertionError, which hid the error being handled under a traceback: the source kills
     its workers itself and raises nothing of its own."""
+    import time
     from multiprocessing import pool as pools
 
     from tespike.recon.engine.batches import ClipSource
@@ -315,9 +316,12 @@ def test_a_pool_whose_terminate_refuses_still_ends_its_workers(monkeypatch):
     workers = list(source.pool._pool)
     monkeypatch.setattr(pools.Pool, "terminate", refuse)
     try:
+        pool = source.pool
         source.close()
         assert source.pool is None
         assert all(not process.is_alive() for process in workers)
+        time.sleep(0.5)                                 # no worker started in their place
+        assert all(process in workers for process in pool._pool), "the pool started new workers"
     finally:
         monkeypatch.undo()
         for process in workers:

@@ -192,8 +192,8 @@ class ClipSource:
     def close(self) -> None:
         """End the workers. Where a pool thread died (starved of memory while a clip came in),
         ``Pool.terminate`` refuses with its own ``AssertionError`` (its result handler gone with
-        results pending), which would hide the error being handled under a traceback: the
-        workers are then killed and reaped directly."""
+        results pending), which would hide the error being handled under a traceback: its worker
+        handler is then stopped and the workers killed and reaped directly."""
         pool, self.pool = self.pool, None
         if pool is None:
             return
@@ -201,6 +201,10 @@ class ClipSource:
             pool.terminate()
             pool.join()
         except (AssertionError, RuntimeError, OSError):
+            from multiprocessing import pool as pools
+            handler = getattr(pool, "_worker_handler", None)
+            if handler is not None:          # (else it would start workers in place of those killed)
+                handler._state = pools.TERMINATE
             for process in getattr(pool, "_pool", ()):
                 with contextlib.suppress(OSError, ValueError):
                     process.kill()
