@@ -135,6 +135,13 @@ class DarkLaw:
         bulk, up, low, _ = self._parts(lam)
         return torch.logaddexp(torch.logsumexp(bulk, -1), torch.logaddexp(up, low)) - lam
 
+    def upper_tail_share(self, lam: torch.Tensor) -> torch.Tensor:
+        """The posterior probability (K, P) that each readout's dark charge is in the law's upper tail
+        (its excess over ``lam`` then the dark charge), given ``y`` and ``lam``."""
+        bulk, up, low, _ = self._parts(lam)
+        total = torch.logaddexp(torch.logsumexp(bulk, -1), torch.logaddexp(up, low))
+        return (up - total).exp()
+
     def expected_dark(self, lam: torch.Tensor) -> torch.Tensor:
         """The dark charge each readout is given (spikes): the bulk's mean for a bulk atom or the lower
         tail, its atom for a tail atom, ``y - lam`` for the upper tail, weighted by their posterior
@@ -154,22 +161,30 @@ def _shifted(x: torch.Tensor, j: int) -> torch.Tensor:
 
 
 def law_light(light: torch.Tensor, spike_light: float, atoms: torch.Tensor, ceiling: torch.Tensor, radius: int,
-              dtype: torch.dtype = torch.float32) -> tuple[torch.Tensor, torch.Tensor]:
+              dtype: torch.dtype = torch.float32, mean_dark: torch.Tensor | None = None
+              ) -> tuple[torch.Tensor, torch.Tensor]:
     """Decoded light (K, P) of pixels with dark law ``atoms`` (Q, P) -> (the window's own light,
     TFP's windows of ``2 radius + 1`` readouts truncated at the ends, in ``dtype``; each readout's
     own light, its decoded light less its expected dark charge at its window's level, float64).
+
+    ``mean_dark``: the pixels' mean dark rate (P,), light units. Each readout's own light is then
+    its decoded light less that rate, except in the share of its posterior that puts its dark
+    charge in the law's upper tail (:meth:`DarkLaw.upper_tail_share`), where it is less that charge:
+    the mean-rate correction the learned methods were trained with, with only what a mean cannot
+    absorb taken out (:func:`tespike.recon.learning.infer.law_input`); exactly the mean rate's
+    where the law has no tail.
 
     Scene units throughout (``spike_light`` = the light of one spike in one readout). Pixels are
     taken in blocks of :data:`BLOCK_ELEMENTS` readouts x atoms (bounded memory)."""
     K, P = light.shape
     step = max(1, BLOCK_ELEMENTS // max(1, K * (atoms.shape[0] + 2)))
     parts = [_law_light_block(light[:, s:s + step], spike_light, atoms[:, s:s + step], ceiling[s:s + step],
-                              radius, dtype)
+                              radius, dtype, None if mean_dark is None else mean_dark[s:s + step])
              for s in range(0, P, step)] or [(light.to(dtype), light.to(torch.float64))]
     return torch.cat([p[0] for p in parts], 1), torch.cat([p[1] for p in parts], 1)
 
 
-def _law_light_block(light, spike_light, atoms, ceiling, radius, dtype):
+def _law_light_block(light, spike_light, atoms, ceiling, radius, dtype, mean_dark=None):
     """:func:`law_light` of one block of pixels."""
     light = light.to(torch.float64)
     K = light.shape[0]
@@ -209,4 +224,7 @@ def _law_light_block(light, spike_light, atoms, ceiling, radius, dtype):
     for j in offsets[1:]:
         total = torch.where(valid[j], total + (_shifted(light, j) - law.shifted(j).expected_dark(lam)
                                                * spike_light).to(dtype), total)
+    if mean_dark is not None:
+        share = law.upper_tail_share(lam)
+        own = light - (share * (y - lam) * spike_light + (1 - share) * mean_dark.to(torch.float64))
     return total / count.to(dtype), own

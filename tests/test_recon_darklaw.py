@@ -120,3 +120,27 @@ def test_file_round_trip_old_format_and_refusals(tmp_path):
         np.savez(tmp_path / name, **written)
         with pytest.raises(InputError, match=message):
             load_calibration(tmp_path / name)
+
+
+def test_a_learned_method_sees_the_law_input_and_without_dark_charge_the_mean_rate_input():
+    """The learned methods take each readout's own light under the law (recon.learning.infer.law_input).
+    A law without dark charge gives the mean-rate input (decoded light over the gain) exactly, so the
+    network's images are those of the mean-rate calibration; a readout of 40 dark spikes in a dark
+    pixel's window reaches the input at under a tenth of the mean-rate input's 40 spikes less the
+    dark rate."""
+    from tespike.recon.learning.infer import law_input
+    from tespike.recon.stream import decode_light
+    config = SensorConfig()
+    clean = _calibrated(config, Sensor(SensorNoise(prnu=0.05), seed=2), (8, 8), readouts=16)
+    words = simulate_scene(config, np.random.default_rng(3).uniform(0, 0.2, (6, 8, 8)), seed=6)
+    plain = decode_light(words, config).numpy() / clean.gain
+    assert np.allclose(law_input(words, config, clean).numpy(), plain, rtol=1e-6, atol=0)
+    mean_only = dataclasses.replace(clean, dark_law=None)
+    assert np.allclose(reconstruct(words, config, "net", calibration=clean),
+                       reconstruct(words, config, "net", calibration=mean_only), rtol=1e-4, atol=1e-6)
+    c = _calibrated(config, EQ13, (4, 4))
+    dark = simulate_scene(config, np.zeros((9, 4, 4)), seed=4, sensor=EQ13)
+    dark[4] = (1 << 4) | 6                             # the overflow word of 240 / 6 = 40 spikes
+    own = law_input(dark, config, c).numpy()[4] * c.gain / config.spike_light
+    mean_rate = 40 - c.dark / config.spike_light
+    assert (mean_rate > 30).all() and (own < 0.1 * mean_rate).all(), own
