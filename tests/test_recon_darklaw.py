@@ -144,3 +144,23 @@ def test_a_learned_method_sees_the_law_input_and_without_dark_charge_the_mean_ra
     own = law_input(dark, config, c).numpy()[4] * c.gain / config.spike_light
     mean_rate = 40 - c.dark / config.spike_light
     assert (mean_rate > 30).all() and (own < 0.1 * mean_rate).all(), own
+
+
+def test_the_law_input_is_made_a_block_of_readouts_at_a_time_as_the_whole_streams():
+    """recon.learning.infer.LawInputs: blocks of readouts, each read with its windows' readouts around
+    it, give the whole stream's law input (to float rounding), and blocks the keys have passed go."""
+    from tespike.recon.learning.infer import LawInputs, law_input
+    config = SensorConfig()
+    c = _calibrated(config, EQ13, (5, 6), readouts=64)
+    words = simulate_scene(config, np.random.default_rng(4).uniform(0, 0.05, (23, 5, 6)), seed=7, sensor=EQ13)
+    whole = law_input(words, config, c).numpy()
+    assert (whole != (law_input(words, config, dataclasses.replace(c, dark_law=np.zeros_like(c.dark_law),
+                                                                   dark_tail=0.0)).numpy())).any()
+    inputs = LawInputs(words, config, c, block=4)
+    rows, cols = np.array([4, 0, 0, 2]), np.arange(6)[::-1]
+    for key in range(23):
+        times = np.clip(np.arange(9) + key - 4, 0, 22)
+        got = inputs(times, rows, cols).numpy()
+        assert np.allclose(got, whole[times][:, rows][:, :, cols], rtol=1e-6, atol=1e-9), key
+        assert len(inputs.blocks) <= 4
+    assert np.allclose(law_input(words, config, c, readouts=(5, 9)).numpy(), whole[5:9], rtol=1e-6, atol=1e-9)

@@ -143,7 +143,7 @@ def blocks(height: int, width: int, model: torch.nn.Module, tile: int | str | No
 
 def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: int, *,
           tile: int | str | None = None, device: str = "cpu", correction=None,
-          light: torch.Tensor | None = None) -> torch.Tensor:
+          inputs: "LawInputs | None" = None) -> torch.Tensor:
     """The method's image (H, W) at readout ``key`` of the stream ``words`` (K, H, W).
 
     Only the readouts and pixels one tile needs are decoded at a time, so memory
@@ -155,8 +155,8 @@ def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: 
     ``(x - dark) / gain`` before the model sees it, negative where a readout caught less than
     the mean dark charge (not floored: a floor at 0 would add a bias of about the dark rate to
     every dim pixel, the light of one quantised readout being mostly 0 or one spike), and the
-    image is floored at 0. ``light``: the whole stream's input, already corrected (K, H, W)
-    float32 (:func:`law_input`), read instead of ``words`` and ``correction``; the image is
+    image is floored at 0. ``inputs``: the stream's corrected input by readout indices
+    (:class:`LawInputs`), read instead of decoding ``words`` with ``correction``; the image is
     floored at 0.
     """
     sizes = model.sizes
@@ -165,17 +165,16 @@ def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: 
     inside = torch.from_numpy(span_inside(K, key, sizes.span))[None].to(device)
     out = torch.empty((H, W), dtype=torch.float32)
     for block in blocks(H, W, model, tile):
-        if light is not None:
-            seen = light[torch.from_numpy(times)[:, None, None], torch.from_numpy(block.rows)[None, :, None],
-                         torch.from_numpy(block.cols)[None, None, :]].to(device)
+        if inputs is not None:
+            seen = inputs(times, block.rows, block.cols).to(device)
         else:
             seen = decode_light(words[times[:, None, None], block.rows[None, :, None], block.cols[None, None, :]],
                                 config, device=device, dtype=torch.float32)
-        if correction is not None and light is None:
+        if correction is not None and inputs is None:
             pixels = (torch.from_numpy(block.rows)[:, None].to(device), torch.from_numpy(block.cols)[None].to(device))
             seen = correct_input(seen, tuple(c[pixels] for c in correction))
         image = model(seen[None], inside, config.spike_light)[0, 0][block.result].float().cpu()
-        out[block.frame] = image if correction is None and light is None else image.clamp_min_(0)
+        out[block.frame] = image if correction is None and inputs is None else image.clamp_min_(0)
     return out
 
 
@@ -184,7 +183,7 @@ def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, ti
                       calibration=None) -> np.ndarray:
     """Any learned method's module (in eval mode) on a whole stream: float32 light (K, H, W);
     ``calibration`` (checked by the caller against the stream) corrects its input: by the mean dark
-    rate and the gain (:func:`frame`), or, where it carries a dark law, by the law (:func:`law_input`)."""
+    rate and the gain (:func:`frame`), or, where it carries a dark law, by the law (:class:`LawInputs`)."""
     if isinstance(words, torch.Tensor):
         words = words.cpu().numpy()
     if not isinstance(words, np.ndarray):
@@ -197,7 +196,7 @@ def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, ti
         return out
     model = model.to(device)
     correction = input_correction(calibration, device)
-    light = None if calibration is None or calibration.dark_law is None else law_input(words, config, calibration)
+    inputs = None if calibration is None or calibration.dark_law is None else LawInputs(words, config, calibration)
     keys = range(K)
     if progress:
         from tqdm import tqdm
@@ -205,11 +204,12 @@ def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, ti
     with torch.inference_mode():
         for k in keys:
             out[k] = frame(model, words, config, k, tile=tile, device=device, correction=correction,
-                           light=light).numpy()
+                           inputs=inputs).numpy()
     return out
 
 
-def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int = 9) -> torch.Tensor:
+def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int = 9,
+              readouts: tuple[int, int] | None = None) -> torch.Tensor:
     """A learned method's input under a calibration with a dark law, (K, H, W) float32, unfloored:
     each readout's decoded light less the pixel's mean dark rate over the gain (the input the
     methods were trained with, :func:`frame`), except where the pixel's law puts the readout's dark
@@ -217,21 +217,56 @@ def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int 
     readouts: that share of the readout loses the charge itself (:func:`tespike.recon.darklaw.law_light`
     with ``mean_dark``), where the mean rate left most of it for the method to read as light. Exactly
     the mean-rate input where the law has no tail. Held-out eq. 13 PSNR-mu +0.7 to +1.3 dB, every eq.
-    12 level within 0.06 dB (docs/reconstruction.md). Held whole (the size of the
-    output), the float64 work in blocks of pixels."""
+    12 level within 0.06 dB (docs/reconstruction.md).
+
+    ``readouts``: ``(start, stop)``, only those readouts (their windows read the stream around them,
+    so the values are the whole stream's to float rounding); the float64 work runs in blocks of pixels."""
     from ..darklaw import BLOCK_ELEMENTS, law_light
     K, H, W = words.shape
-    flat = np.asarray(words).reshape(K, H * W)
+    start, stop = (0, K) if readouts is None else readouts
+    radius = window // 2
+    first, last = max(0, start - radius), min(K, stop + radius)          # the windows' readouts
+    flat = np.asarray(words[first:last]).reshape(last - first, H * W)
     atoms = torch.as_tensor(np.asarray(calibration.dark_law, np.float32)).reshape(calibration.dark_law.shape[0], -1)
     ceiling = calibration.dark_tail * atoms.to(torch.float64).mean(0)
     inverse_gain = torch.as_tensor(1.0 / calibration.gain, dtype=torch.float64).reshape(-1)
     mean_dark = torch.as_tensor(calibration.dark, dtype=torch.float64).reshape(-1)
-    out = torch.empty((K, H * W), dtype=torch.float32)
-    step = max(1, BLOCK_ELEMENTS // max(1, K))          # pixels decoded in float64 at once (bounded memory)
+    out = torch.empty((stop - start, H * W), dtype=torch.float32)
+    step = max(1, BLOCK_ELEMENTS // max(1, last - first))   # pixels decoded in float64 at once (bounded memory)
     for s in range(0, H * W, step):
         pixels = slice(s, s + step)
         light = decode_light(flat[:, pixels], config, dtype=torch.float64)
-        _, own = law_light(light, config.spike_light, atoms[:, pixels], ceiling[pixels], window // 2,
+        _, own = law_light(light, config.spike_light, atoms[:, pixels], ceiling[pixels], radius,
                            mean_dark=mean_dark[pixels])
-        out[:, pixels] = own * inverse_gain[pixels]
-    return out.reshape(K, H, W)
+        out[:, pixels] = own[start - first:stop - first] * inverse_gain[pixels]
+    return out.reshape(stop - start, H, W)
+
+
+class LawInputs:
+    """:func:`law_input` of a whole stream, read by readout indices as the key readouts move on:
+    made :data:`LAW_BLOCK` readouts at a time, and a block dropped once the keys have passed it,
+    so memory holds a few blocks of frames, not the stream (the images, too, may be a file)."""
+
+    def __init__(self, words: np.ndarray, config: SensorConfig, calibration, window: int = 9,
+                 block: int | None = None):
+        self.words, self.config, self.calibration, self.window = words, config, calibration, window
+        self.block = LAW_BLOCK if block is None else block
+        self.blocks: dict[int, torch.Tensor] = {}
+
+    def __call__(self, times: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> torch.Tensor:
+        """The input of readouts ``times`` (any order, repeats allowed) at pixels ``rows`` x ``cols``
+        (index arrays): (len(times), len(rows), len(cols))."""
+        K = self.words.shape[0]
+        needed = sorted(set((np.asarray(times) // self.block).tolist()))
+        for b in [b for b in self.blocks if b < needed[0]]:
+            del self.blocks[b]                          # keys only move on
+        for b in needed:
+            if b not in self.blocks:
+                span = (b * self.block, min(K, (b + 1) * self.block))
+                self.blocks[b] = law_input(self.words, self.config, self.calibration, self.window, span)
+        index = torch.as_tensor(np.array(rows))[:, None], torch.as_tensor(np.array(cols))[None, :]
+        return torch.stack([self.blocks[t // self.block][t % self.block][index] for t in np.asarray(times).tolist()])
+
+
+#: Readouts of the law input made at once (:class:`LawInputs`).
+LAW_BLOCK = 16
