@@ -161,39 +161,55 @@ def _shifted(x: torch.Tensor, j: int) -> torch.Tensor:
 
 
 def law_light(light: torch.Tensor, spike_light: float, atoms: torch.Tensor, ceiling: torch.Tensor, radius: int,
-              dtype: torch.dtype = torch.float32, mean_dark: torch.Tensor | None = None
-              ) -> tuple[torch.Tensor, torch.Tensor]:
+              dtype: torch.dtype = torch.float32) -> tuple[torch.Tensor, torch.Tensor]:
     """Decoded light (K, P) of pixels with dark law ``atoms`` (Q, P) -> (the window's own light,
     TFP's windows of ``2 radius + 1`` readouts truncated at the ends, in ``dtype``; each readout's
     own light, its decoded light less its expected dark charge at its window's level, float64).
 
-    ``mean_dark``: the pixels' mean dark rate (P,), light units. Each readout's own light is then
-    its decoded light less that rate, except in the share of its posterior that puts its dark
-    charge in the law's upper tail (:meth:`DarkLaw.upper_tail_share`), where it is less that charge:
-    the mean-rate correction the learned methods were trained with, with only what a mean cannot
-    absorb taken out (:func:`tespike.recon.learning.infer.law_input`); exactly the mean rate's
-    where the law has no tail.
-
     Scene units throughout (``spike_light`` = the light of one spike in one readout). Pixels are
     taken in blocks of :data:`BLOCK_ELEMENTS` readouts x atoms (bounded memory)."""
-    K, P = light.shape
-    step = max(1, BLOCK_ELEMENTS // max(1, K * (atoms.shape[0] + 2)))
-    parts = [_law_light_block(light[:, s:s + step], spike_light, atoms[:, s:s + step], ceiling[s:s + step],
-                              radius, dtype, None if mean_dark is None else mean_dark[s:s + step])
-             for s in range(0, P, step)] or [(light.to(dtype), light.to(torch.float64))]
+    parts = [_law_light_block(light[:, s], spike_light, atoms[:, s], ceiling[s], radius, dtype)
+             for s in _pixel_blocks(light.shape, atoms.shape[0])] or [(light.to(dtype), light.to(torch.float64))]
     return torch.cat([p[0] for p in parts], 1), torch.cat([p[1] for p in parts], 1)
 
 
-def _law_light_block(light, spike_light, atoms, ceiling, radius, dtype, mean_dark=None):
-    """:func:`law_light` of one block of pixels."""
-    light = light.to(torch.float64)
-    K = light.shape[0]
-    if K == 0:
-        return light.to(dtype), light
-    y = light / spike_light
+def tail_free_light(light: torch.Tensor, spike_light: float, atoms: torch.Tensor, ceiling: torch.Tensor,
+                    radius: int, mean_dark: torch.Tensor) -> torch.Tensor:
+    """Decoded light (K, P) of pixels with dark law ``atoms`` (Q, P) and mean dark rate ``mean_dark``
+    (P,), light units -> each readout's light less that rate, except in the share of its posterior that
+    puts its dark charge in the law's upper tail at its window's level (:meth:`DarkLaw.upper_tail_share`;
+    the window as :func:`law_light`'s), where it is less that charge: the mean-rate correction the
+    learned methods were trained with, with only what a mean cannot absorb taken out
+    (:func:`tespike.recon.learning.infer.law_input`); exactly the mean rate's where the law has no
+    tail. float64, pixels in blocks as :func:`law_light`'s."""
+    parts = []
+    for s in _pixel_blocks(light.shape, atoms.shape[0]):
+        block = light[:, s].to(torch.float64)
+        if block.shape[0] == 0:
+            parts.append(block)
+            continue
+        law, y, lam, _ = _window_level(block / spike_light, atoms[:, s], ceiling[s], radius)
+        share = law.upper_tail_share(lam)
+        parts.append(block - (share * (y - lam) * spike_light + (1 - share) * mean_dark[s].to(torch.float64)))
+    return torch.cat(parts, 1) if parts else light.to(torch.float64)
+
+
+def _pixel_blocks(shape: tuple[int, int], atoms: int) -> list[slice]:
+    """Slices of the P pixels of (K, P) light taken together: :data:`BLOCK_ELEMENTS` readouts x atoms."""
+    K, P = shape
+    step = max(1, BLOCK_ELEMENTS // max(1, K * (atoms + 2)))
+    return [slice(s, s + step) for s in range(0, P, step)]
+
+
+def _window_level(y, atoms, ceiling, radius):
+    """The law of readouts ``y`` (K, P) spikes (K > 0) and each readout's window level ``lam`` (K, P):
+    the best of the grid's levels and the mean-subtracted candidate by the window's likelihood,
+    refined by expectation-maximisation -> (law, y, lam, (offsets, valid, count)), the
+    last the window's geometry in TFP's order of summation."""
     law = DarkLaw(y, atoms, ceiling)
+    K = y.shape[0]
     r = min(radius, K - 1)
-    k = torch.arange(K, device=light.device)
+    k = torch.arange(K, device=y.device)
     lo, hi = (k - radius).clamp(min=0), (k + radius + 1).clamp(max=K)
     count = (hi - lo).to(torch.float64).view(K, 1)
     offsets = [0] + [s * j for j in range(1, r + 1) for s in (-1, 1)]      # TFP's order of summation
@@ -203,10 +219,9 @@ def _law_light_block(light, spike_light, atoms, ceiling, radius, dtype, mean_dar
         csum = torch.cat([torch.zeros_like(values[:1]), values.cumsum(0)])
         return csum[hi] - csum[lo]
 
-    # the best of the grid's levels and the mean-subtracted candidate, by the window's likelihood
     best, lam = None, None
     for g in GRID:
-        level = torch.tensor(g, dtype=torch.float64, device=light.device)
+        level = torch.tensor(g, dtype=torch.float64, device=y.device)
         total = window_sum(law.log_likelihood(level))
         if best is None:
             best, lam = total, level.expand_as(total)
@@ -219,12 +234,18 @@ def _law_light_block(light, spike_light, atoms, ceiling, radius, dtype, mean_dar
     for _ in range(EM_STEPS - 1):
         own = sum(torch.where(valid[j], _shifted(y, j) - law.shifted(j).expected_dark(lam), 0.0) for j in offsets)
         lam = (own / count).clamp(min=GRID[0])
+    return law, y, lam, (offsets, valid, count)
+
+
+def _law_light_block(light, spike_light, atoms, ceiling, radius, dtype):
+    """:func:`law_light` of one block of pixels."""
+    light = light.to(torch.float64)
+    if light.shape[0] == 0:
+        return light.to(dtype), light
+    law, _, lam, (offsets, valid, count) = _window_level(light / spike_light, atoms, ceiling, radius)
     own = light - law.expected_dark(lam) * spike_light            # readout k's own light at its window's lam
     total = own.to(dtype)
     for j in offsets[1:]:
         total = torch.where(valid[j], total + (_shifted(light, j) - law.shifted(j).expected_dark(lam)
                                                * spike_light).to(dtype), total)
-    if mean_dark is not None:
-        share = law.upper_tail_share(lam)
-        own = light - (share * (y - lam) * spike_light + (1 - share) * mean_dark.to(torch.float64))
     return total / count.to(dtype), own

@@ -148,9 +148,9 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
     averages); TFI on its input, the decoded spikes less the dark rate re-coded as a pixel without
     dark current codes them, its spike intervals then following the pixel's own light, not its
     dark current, and divided by the gain. The learned methods are corrected on every readout's
-    decoded light, unfloored, their image floored at 0: with a law, each readout's own light under
-    it over the gain (:func:`tespike.recon.learning.infer.law_input`), without one
-    ``(x - dark) / gain`` (:func:`tespike.recon.learning.infer.frame`). Each route was chosen by
+    decoded light, unfloored, their image floored at 0: ``(x - dark) / gain``
+    (:func:`tespike.recon.learning.infer.frame`), and with a law, a readout the law puts in its upper
+    tail less that charge instead (:func:`tespike.recon.learning.infer.law_input`). Each route was chosen by
     measurement (docs/reconstruction.md "Calibration").
     """
     if method not in RECON_METHODS:

@@ -123,7 +123,8 @@ def test_file_round_trip_old_format_and_refusals(tmp_path):
 
 
 def test_a_learned_method_sees_the_law_input_and_without_dark_charge_the_mean_rate_input():
-    """The learned methods take each readout's own light under the law (recon.learning.infer.law_input).
+    """The learned methods' input under a law (recon.learning.infer.law_input): the mean-rate input, and
+    a readout the law puts in its upper tail less that charge.
     A law without dark charge gives the mean-rate input (decoded light over the gain) exactly, so the
     network's images are those of the mean-rate calibration; a readout of 40 dark spikes in a dark
     pixel's window reaches the input at under a tenth of the mean-rate input's 40 spikes less the

@@ -156,8 +156,8 @@ def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: 
     the mean dark charge (not floored: a floor at 0 would add a bias of about the dark rate to
     every dim pixel, the light of one quantised readout being mostly 0 or one spike), and the
     image is floored at 0. ``inputs``: the stream's corrected input by readout indices
-    (:class:`LawInputs`), read instead of decoding ``words`` with ``correction``; the image is
-    floored at 0.
+    (:class:`LawInputs`), read instead of decoding ``words`` (``correction`` then None); the image
+    is floored at 0.
     """
     sizes = model.sizes
     K, H, W = words.shape
@@ -170,7 +170,7 @@ def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: 
         else:
             seen = decode_light(words[times[:, None, None], block.rows[None, :, None], block.cols[None, None, :]],
                                 config, device=device, dtype=torch.float32)
-        if correction is not None and inputs is None:
+        if correction is not None:
             pixels = (torch.from_numpy(block.rows)[:, None].to(device), torch.from_numpy(block.cols)[None].to(device))
             seen = correct_input(seen, tuple(c[pixels] for c in correction))
         image = model(seen[None], inside, config.spike_light)[0, 0][block.result].float().cpu()
@@ -195,8 +195,8 @@ def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, ti
     if out.size == 0:
         return out
     model = model.to(device)
-    correction = input_correction(calibration, device)
     inputs = None if calibration is None or calibration.dark_law is None else LawInputs(words, config, calibration)
+    correction = input_correction(calibration, device) if inputs is None else None
     keys = range(K)
     if progress:
         from tqdm import tqdm
@@ -214,14 +214,14 @@ def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int 
     each readout's decoded light less the pixel's mean dark rate over the gain (the input the
     methods were trained with, :func:`frame`), except where the pixel's law puts the readout's dark
     charge in its upper tail (eq. 13's short dark intervals) at the light of its window of ``window``
-    readouts: that share of the readout loses the charge itself (:func:`tespike.recon.darklaw.law_light`
-    with ``mean_dark``), where the mean rate left most of it for the method to read as light. Exactly
+    readouts: that share of the readout loses the charge itself (:func:`tespike.recon.darklaw.tail_free_light`),
+    where the mean rate left most of it for the method to read as light. Exactly
     the mean-rate input where the law has no tail. Held-out eq. 13 PSNR-mu +0.7 to +1.3 dB, every eq.
     12 level within 0.06 dB (docs/reconstruction.md).
 
     ``readouts``: ``(start, stop)``, only those readouts (their windows read the stream around them,
     so the values are the whole stream's to float rounding); the float64 work runs in blocks of pixels."""
-    from ..darklaw import BLOCK_ELEMENTS, law_light
+    from ..darklaw import BLOCK_ELEMENTS, tail_free_light
     K, H, W = words.shape
     start, stop = (0, K) if readouts is None else readouts
     radius = window // 2
@@ -236,8 +236,8 @@ def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int 
     for s in range(0, H * W, step):
         pixels = slice(s, s + step)
         light = decode_light(flat[:, pixels], config, dtype=torch.float64)
-        _, own = law_light(light, config.spike_light, atoms[:, pixels], ceiling[pixels], radius,
-                           mean_dark=mean_dark[pixels])
+        own = tail_free_light(light, config.spike_light, atoms[:, pixels], ceiling[pixels], radius,
+                              mean_dark[pixels])
         out[:, pixels] = own[start - first:stop - first] * inverse_gain[pixels]
     return out.reshape(stop - start, H, W)
 
