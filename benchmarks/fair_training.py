@@ -158,6 +158,10 @@ def main(argv=None) -> int:
     parser.add_argument("--validate-every", type=int, default=250)
     parser.add_argument("--steps", type=int, default=None, help="step budget too (the first reached ends a run)")
     parser.add_argument("--pool", type=int, default=None, help="clips a step draws from (default: the recipe's)")
+    parser.add_argument("--noisy-input", choices=("mean", "law"), default=None,
+                        help="what noisy clips' methods see (tespike train --noisy-input; default: the recipe's mean)")
+    parser.add_argument("--engine-workers", type=int, default=None, metavar="N",
+                        help="engine processes of every run (default: the recipe's 1; a few runs on many cores)")
     parser.add_argument("--only", nargs="*", default=None, help="run only these run names")
     parser.add_argument("--report", type=float, default=30.0, help="seconds between progress lines")
     args = parser.parse_args(argv)
@@ -184,6 +188,10 @@ def main(argv=None) -> int:
                "--out", str(out / f"{name}.pt")]
         if args.pool is not None:
             cmd += ["--pool", str(args.pool)]
+        if args.noisy_input is not None:
+            cmd += ["--noisy-input", args.noisy_input]
+        if args.engine_workers is not None:
+            cmd += ["--workers", str(args.engine_workers)]
         if args.steps is not None:
             cmd += ["--steps", str(args.steps)]
         commands[name] = cmd

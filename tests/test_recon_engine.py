@@ -81,6 +81,8 @@ def test_noisy_clips_carry_their_sensors_calibration():
     assert len(set(levels)) == 6
     with pytest.raises(InputError, match="noise_fraction"):
         EngineRecipe(noise_fraction=1.5)
+    with pytest.raises(InputError, match="noisy_input"):
+        EngineRecipe(noisy_input="median")
 
 
 def test_peaks_lengths_and_families_are_drawn_in_their_ranges():
@@ -191,22 +193,54 @@ def test_sample_is_the_padded_span_around_its_key():
         assert np.array_equal(calibration[0], sample[2] % (H * W)) and np.array_equal(calibration[1], calibration[0] + 1)
 
 
-def test_batches_correct_noisy_clips_as_inference_corrects_its_input():
-    """draw_batch's light is (decoded - dark) / gain with the clip's own maps, not floored."""
+def test_batches_give_noisy_clips_the_input_inference_gives_them():
+    """With noisy_input "law" a noisy clip's batch input is inference's input for its stream under its
+    sensor's calibration (law_input of the whole stream: mean rate and gain, less the dark law's upper
+    tail), cut at the sample's readouts, crop and flips; with "mean" the same clip (the same words) is
+    (decoded - dark) / gain with its exact maps."""
+    import dataclasses
     import types
 
+    from tespike.recon.learning.infer import law_input
+
     config = SensorConfig()
-    clip = make_clip(EngineRecipe(**{**SMALL.to_dict(), "noise_fraction": 1.0}), config, 0)
-    pool = types.SimpleNamespace(clips=[clip])
-    light, _, _ = draw_batch(pool, config, 5, 16, 2, np.random.default_rng(3))
+    recipe = EngineRecipe(**{**SMALL.to_dict(), "noise_fraction": 1.0, "long": (20, 24), "short_fraction": 0.0,
+                             "noisy_input": "law"})
+    clip = next(c for c in (make_clip(recipe, config, i) for i in range(12))
+                if c.sensor.noise.dark_current == "eq13")
+    assert clip.calibration.dark_law is not None and clip.calibration.dark_readouts == 256
+    pool = types.SimpleNamespace(clips=[clip], law_inputs={})
+    light, _, _ = draw_batch(pool, config, 5, 16, 3, np.random.default_rng(3))
+    whole = law_input(clip.words, config, clip.calibration).numpy()
+    mean_rate = (decode_light(clip.words, config).numpy() - clip.dark) / clip.gain
     rng = np.random.default_rng(3)
-    for b in range(2):
+    tail_removed = False
+    for b in range(3):
         rng.integers(1)                                   # the clip drawn
-        words, _, _, calibration = draw_sample(clip, 5, 16, rng)
-        decoded = decode_light(words, config, dtype=torch.float32).numpy()
-        expected = (decoded - calibration[0]) / calibration[1]
-        assert np.allclose(light[b].numpy(), expected, rtol=1e-6, atol=1e-7)
+        state = rng.bit_generator.state
+        words, _, _, _ = draw_sample(clip, 5, 16, rng)
+        replay = np.random.default_rng()
+        replay.bit_generator.state = state
+        key = int(replay.integers(clip.words.shape[0]))
+        y, x = int(replay.integers(24 - 15)), int(replay.integers(24 - 15))
+        flips = [axis for axis in (-1, -2) if replay.integers(2)]
+        times = key_span(clip.words.shape[0], key, 5)
+        cut = lambda a: np.flip(a[times, y:y + 16, x:x + 16], flips) if flips else a[times, y:y + 16, x:x + 16]
+        assert np.array_equal(light[b].numpy(), cut(whole))
+        tail_removed |= bool((cut(mean_rate) - cut(whole) > 1e-3).any())
+    assert tail_removed                                   # eq. 13's tail: not the mean-rate input
     assert (light.numpy() < 0).any()                     # the dark subtracted, not floored
+    mean_only = make_clip(dataclasses.replace(recipe, noisy_input="mean"), config, clip.index)
+    assert mean_only.calibration is None and np.array_equal(mean_only.words, clip.words)
+    assert np.array_equal(mean_only.dark, clip.dark) and np.array_equal(mean_only.gain, clip.gain)
+    light, _, _ = draw_batch(types.SimpleNamespace(clips=[mean_only], law_inputs={}), config, 5, 16, 2,
+                             np.random.default_rng(4))
+    rng = np.random.default_rng(4)
+    for b in range(2):
+        rng.integers(1)
+        words, _, _, calibration = draw_sample(mean_only, 5, 16, rng)
+        expected = (decode_light(words, config, dtype=torch.float32).numpy() - calibration[0]) / calibration[1]
+        assert np.allclose(light[b].numpy(), expected, rtol=1e-6, atol=1e-7)
 
 
 def test_pool_schedule_depends_on_the_step_only():

@@ -65,6 +65,12 @@ def add_arguments(parser):
                              "DSNU, hot pixels, PRNU, comparator offset; recon.engine.clips.NOISE_DRAW), its "
                              "decoded light corrected by the sensor's exact calibration as inference corrects a "
                              "learned method's input, target the scene light (default 0: shot noise only)")
+    parser.add_argument("--noisy-input", choices=("mean", "law"), default=None,
+                        help="what a noisy clip's method sees: its light less the sensor's mean dark rate, over "
+                             "its gain (mean, the default: every shipped file's training), or also less the dark "
+                             "law's upper tail, as inference reads a stream whose calibration has a dark law "
+                             "(law: a 256-readout dark stream per noisy clip, and the input made in the trainer; "
+                             "about 25 s a 128 x 128 clip on one CPU core, fast on a GPU)")
     trainer("--workers", "data-engine processes making clips ahead (0: in this process)", type=int)
     trainer("--pool", "clips a step draws from", type=int)
     trainer("--refresh", "steps between two new clips entering the pool", type=int)
@@ -123,7 +129,8 @@ def run(args) -> int:
                            steps=args.steps, minutes=args.minutes, threads=args.threads,
                            recipe={"folders": tuple(args.hdr), **({"peak": tuple(args.peak)} if args.peak else {}),
                                    **({"panoramas": panoramas} if panoramas else {}),
-                                   **({"noise_fraction": args.noise_fraction} if args.noise_fraction else {})},
+                                   **({"noise_fraction": args.noise_fraction} if args.noise_fraction else {}),
+                                   **({"noisy_input": args.noisy_input} if args.noisy_input else {})},
                            init=args.init, **given)
     command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     try:

@@ -239,54 +239,90 @@ class ClipPool:
         # clip i lives in slot i % capacity, whatever step the pool was made at
         self.clips: list[Clip] = [clips[(slot - first) % capacity] for slot in range(capacity)]
         self.made = first + capacity              # index of the next clip to enter
+        self.law_inputs: dict[int, torch.Tensor] = {}     # clip index -> its law input (clip_law_input)
 
     def advance_to(self, step: int) -> None:
         """Let in every clip scheduled up to ``step``."""
         while self.made < self.capacity + step // self.refresh:
-            self.clips[self.made % self.capacity] = next(self.source)
+            slot = self.made % self.capacity
+            self.law_inputs.pop(self.clips[slot].index, None)
+            self.clips[slot] = next(self.source)
             self.made += 1
 
     def close(self) -> None:
         self.source.close()
 
 
-def draw_sample(clip: Clip, span: int, crop: int, rng: np.random.Generator
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def clip_law_input(pool, clip: Clip, config: SensorConfig, device: str | torch.device = "cpu"):
+    """A noisy clip's input under its sensor's calibration, (K, H, W) float32 on ``device``, made on
+    the first draw and kept while the clip is in the pool (``pool.law_inputs``): exactly what
+    inference gives a learned method reading the clip's stream with that calibration
+    (:func:`tespike.recon.learning.infer.law_input`, the whole stream). None for a clip without a
+    dark law (shot noise only, or a clip carrying only mean maps)."""
+    calibration = clip.calibration
+    if calibration is None or getattr(calibration, "dark_law", None) is None:
+        return None
+    made = pool.law_inputs.get(clip.index)
+    if made is None:
+        from ..learning.infer import law_input
+        made = pool.law_inputs[clip.index] = law_input(clip.words, config, calibration, device=device)
+    return made
+
+
+def draw_sample(clip: Clip, span: int, crop: int, rng: np.random.Generator, law_light=None):
     """(words (span, c, c), truth (1, c, c), inside (span,), calibration (2, c, c)) at a random key
     moment, crop and flip of ``clip``.
 
     ``inside`` marks the span's readouts that lie in the clip (the others repeat its first or last);
     ``calibration`` is the crop's (dark, gain): the clip's sensor's, or (0, 1) for shot noise only.
+    ``law_light``: the clip's input under its calibration (:func:`clip_law_input`, a tensor), cut in
+    place of the words (the same readouts, crop and flips; the same random numbers drawn).
     """
     K, H, W = clip.words.shape
     key = int(rng.integers(K))
     times = key_span(K, key, span)
     y, x = int(rng.integers(H - crop + 1)), int(rng.integers(W - crop + 1))
-    words = clip.words[times, y:y + crop, x:x + crop]
     truth = clip.light[key, y:y + crop, x:x + crop][None]
     if clip.dark is None:
         calibration = np.stack([np.zeros((crop, crop), np.float32), np.ones((crop, crop), np.float32)])
     else:
         calibration = np.stack([clip.dark[y:y + crop, x:x + crop], clip.gain[y:y + crop, x:x + crop]])
     flips = [axis for axis in (-1, -2) if rng.integers(2)]
+    if law_light is not None:
+        seen = law_light[torch.as_tensor(times, device=law_light.device), y:y + crop, x:x + crop]
+        seen = seen.flip(flips) if flips else seen
+    else:
+        seen = clip.words[times, y:y + crop, x:x + crop]
+        seen = np.ascontiguousarray(np.flip(seen, flips) if flips else seen)
     if flips:
-        words, truth, calibration = np.flip(words, flips), np.flip(truth, flips), np.flip(calibration, flips)
-    return (np.ascontiguousarray(words), np.ascontiguousarray(truth), span_inside(K, key, span),
-            np.ascontiguousarray(calibration))
+        truth, calibration = np.flip(truth, flips), np.flip(calibration, flips)
+    return (seen, np.ascontiguousarray(truth), span_inside(K, key, span), np.ascontiguousarray(calibration))
 
 
 def draw_batch(pool: ClipPool, config: SensorConfig, span: int, crop: int, batch: int,
                rng: np.random.Generator, device: str = "cpu") -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(decoded light (B, span, c, c), truth (B, 1, c, c), inside (B, span)) from random clips of the pool.
 
-    A noisy clip's decoded light is corrected by its sensor's calibration, ``(x - dark) / gain``,
-    as inference corrects a learned method's input (:func:`tespike.recon.learning.infer.frame`); a clip
-    of shot noise only passes unchanged (its calibration is dark 0, gain 1)."""
-    samples = [draw_sample(pool.clips[int(rng.integers(len(pool.clips)))], span, crop, rng)
-               for _ in range(batch)]
-    words, truth, inside, calibration = (np.stack(part) for part in zip(*samples))
-    light = decode_light(words, config, device=device, dtype=torch.float32)
-    if (calibration[:, 0] != 0).any() or (calibration[:, 1] != 1).any():
-        dark, gain = torch.from_numpy(calibration).to(device)[:, :, None].unbind(1)
-        light = correct_input(light, (dark, 1 / gain))
+    A noisy clip's input is what inference gives a learned method reading its stream with its
+    sensor's calibration (:func:`clip_law_input`); a clip with mean maps only is corrected by them,
+    ``(x - dark) / gain`` (:func:`tespike.recon.learning.infer.frame`); a clip of shot noise only
+    passes unchanged (its calibration is dark 0, gain 1)."""
+    samples = []
+    for _ in range(batch):
+        clip = pool.clips[int(rng.integers(len(pool.clips)))]
+        samples.append(draw_sample(clip, span, crop, rng, clip_law_input(pool, clip, config, device)))
+    seen, truth, inside, calibration = zip(*samples)
+    truth, inside, calibration = np.stack(truth), np.stack(inside), np.stack(calibration)
+    coded = [b for b, part in enumerate(seen) if isinstance(part, np.ndarray)]
+    light = torch.empty((batch, span, crop, crop), dtype=torch.float32, device=device)
+    if coded:
+        decoded = decode_light(np.stack([seen[b] for b in coded]), config, device=device, dtype=torch.float32)
+        mean_only = calibration[coded]
+        if (mean_only[:, 0] != 0).any() or (mean_only[:, 1] != 1).any():
+            dark, gain = torch.from_numpy(np.ascontiguousarray(mean_only)).to(device)[:, :, None].unbind(1)
+            decoded = correct_input(decoded, (dark, 1 / gain))
+        light[coded] = decoded
+    for b, part in enumerate(seen):
+        if not isinstance(part, np.ndarray):
+            light[b] = part.to(device)
     return light, torch.from_numpy(truth).to(device), torch.from_numpy(inside).to(device)

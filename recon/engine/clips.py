@@ -31,11 +31,14 @@ clips of every recipe before it): that share of clips is recorded by a sensor
 drawn at random over :data:`NOISE_DRAW` (:func:`draw_sensor`: the paper's eq. 12
 or eq. 13 dark current at 0.05 .. 6 x its level, log-uniform, so from almost
 none to beyond eq. 13; DSNU, hot pixels, PRNU and comparator offset uniform up
-to their bounds; its own sensor seed). Such a clip carries its sensor's
-calibration, the pixels' mean dark rate and gain (:func:`sensor_maps`), and the
-batches correct its decoded light with them, ``(x - dark) / gain``, as
-inference corrects a learned method's input with a measured calibration
-(:mod:`tespike.recon.calibration`, :func:`tespike.recon.learning.infer.frame`); its
+to their bounds; its own sensor seed). Such a clip carries its sensor's exact
+mean dark rate and gain (:func:`sensor_maps`), and the batches correct its decoded
+light with them, ``(x - dark) / gain`` (``noisy_input`` ``mean``, the default and
+every shipped file's training); with ``noisy_input`` ``law`` it also carries the
+dark law of a dark stream of :data:`DARK_READOUTS` readouts that the sensor
+records (:func:`sensor_calibration`), and the batches give the method exactly the
+input inference gives it under such a calibration
+(:func:`tespike.recon.learning.infer.law_input`: less the law's upper tail). Its
 target is the scene light ``I``. Correcting the input rather than the output was
 measured better for every learned method (docs/reconstruction.md "Calibration").
 """
@@ -64,6 +67,11 @@ FAMILIES = ("deadleaves", "panorama", "folder")
 TRAIN_DOMAIN, VALIDATION_DOMAIN = 17, 23
 #: The range noisy clips' sensors are drawn over (:func:`draw_sensor`): dark level x the
 #: model's, log-uniform; the others uniform in [0, high] (golden.noise.SensorNoise fields).
+#: What a noisy clip's method sees (``EngineRecipe.noisy_input``): ``mean``, its decoded light
+#: corrected by its sensor's exact mean dark rate and gain (every shipped file's training);
+#: ``law``, also less the dark law's upper tail, exactly as inference reads a stream under a
+#: calibration with a law (:func:`sensor_calibration`; measured: docs/fair-training.md).
+NOISY_INPUTS = ("mean", "law")
 NOISE_DRAW = {"dark_current": ("eq12", "eq13"), "dark_level": (0.05, 6.0), "dsnu": (0.0, 0.5),
               "hot_pixels": (0.0, 0.02), "hot_factor": (5.0, 50.0), "prnu": (0.0, 0.05),
               "comparator_offset": (0.0, 0.05)}
@@ -93,6 +101,7 @@ class EngineRecipe:
     folder_weight: float = 0.25              # share of folder clips when folders are given
     seed: int = 0
     noise_fraction: float = 0.0              # share of clips from a random noisy sensor (NOISE_DRAW)
+    noisy_input: str = "mean"                # what a noisy clip's method sees: NOISY_INPUTS
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "weights", tuple((str(n), float(w)) for n, w in self.weights))
@@ -124,6 +133,9 @@ class EngineRecipe:
         if not 0 <= self.short_fraction <= 1 or not 0 <= self.folder_weight <= 1 \
                 or not 0 <= self.noise_fraction <= 1:
             raise InputError("engine recipe short_fraction, folder_weight and noise_fraction must lie in [0, 1]")
+        if self.noisy_input not in NOISY_INPUTS:
+            raise InputError(f"engine recipe noisy_input = {self.noisy_input!r}: must be one of "
+                             f"{', '.join(NOISY_INPUTS)}")
         if sum(w for _, w in self.weights) <= 0 and not self.folders:
             raise InputError("engine recipe: every family weight is 0 and no folder is given")
 
@@ -167,6 +179,9 @@ class Clip:
     sensor: object = None        # the golden.noise.Sensor of a noisy clip (None: shot noise only)
     dark: np.ndarray | None = None    # float32 (H, W): its pixels' mean dark rate, scene units (noisy clips)
     gain: np.ndarray | None = None    # float32 (H, W): its pixels' gain (noisy clips)
+    #: a noisy clip's :class:`tespike.recon.calibration.Calibration` (:func:`sensor_calibration`): these
+    #: maps and the dark law of its sensor's dark stream, as inference reads a calibrated stream
+    calibration: object = None
 
 
 def clip_rng(recipe: EngineRecipe, index: int, domain: int = TRAIN_DOMAIN) -> np.random.Generator:
@@ -252,20 +267,47 @@ def sensor_maps(sensor, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]
     return (np.broadcast_to(dark, shape).astype(np.float32), np.broadcast_to(maps.gain, shape).astype(np.float32))
 
 
+#: Readouts of the dark stream a noisy clip's sensor is calibrated with (:func:`sensor_calibration`):
+#: as many as the held-out benchmarks' calibrations take (docs/reconstruction.md).
+DARK_READOUTS = 256
+
+
+def sensor_calibration(sensor, config: SensorConfig, shape: tuple[int, int], seed,
+                       dark_readouts: int = DARK_READOUTS):
+    """A sensor's calibration as the learned methods read it: the exact per-pixel mean dark rate and
+    gain (:func:`sensor_maps`, estimator ``exact``) and the dark law of a dark stream of
+    ``dark_readouts`` readouts that the sensor records (``seed``: its shot and dark noise), as
+    ``tespike calibrate`` keeps it (:func:`tespike.recon.calibration.estimate_dark_law`): the law
+    inference corrects a learned method's input with (:func:`tespike.recon.learning.infer.law_input`)."""
+    from ..calibration import Calibration, estimate_dark_law
+    dark, gain = sensor_maps(sensor, shape)
+    dark_words = simulate_scene(config, np.zeros((dark_readouts, *shape)), seed=seed, workers=1, sensor=sensor)
+    law, tail = estimate_dark_law(dark_words, config)
+    return Calibration(dark.astype(np.float64), gain.astype(np.float64), config, dark_readouts, 0, 0.0,
+                       estimator="exact", dark_law=law, dark_tail=tail)
+
+
 def make_clip(recipe: EngineRecipe, config: SensorConfig, index: int, *, domain: int = TRAIN_DOMAIN,
               deadleaves: DeadLeavesParams = DeadLeavesParams()) -> Clip:
     """Clip ``index`` of the recipe for ``config``: target light (float32) and its simulated words.
 
     With ``recipe.noise_fraction`` > 0 that share of clips is recorded by a random sensor
-    (:func:`draw_sensor`) and carries its calibration (:func:`sensor_maps`); no random number is
-    drawn for it otherwise, so recipes without noise give the clips they always gave."""
+    (:func:`draw_sensor`) and carries its exact mean maps (:func:`sensor_maps`) and, with
+    ``recipe.noisy_input`` ``law``, its calibration with a dark law (:func:`sensor_calibration`); no
+    random number is drawn for it otherwise, so recipes without noise give the clips they always gave."""
     light, family, rng = clip_light(recipe, index, domain=domain, deadleaves=deadleaves)
     sensor = None
     if recipe.noise_fraction > 0 and rng.uniform() < recipe.noise_fraction:
         sensor = draw_sensor(rng)
     words = simulate_scene(config, light, seed=rng, workers=1, sensor=sensor)
-    dark, gain = (None, None) if sensor is None else sensor_maps(sensor, light.shape[1:])
-    return Clip(light.astype(np.float32), words, family, index, sensor, dark, gain)
+    if sensor is None:
+        return Clip(light.astype(np.float32), words, family, index)
+    if recipe.noisy_input == "mean":          # no random number drawn: the clips every mean recipe gave
+        dark, gain = sensor_maps(sensor, light.shape[1:])
+        return Clip(light.astype(np.float32), words, family, index, sensor, dark, gain)
+    calibration = sensor_calibration(sensor, config, light.shape[1:], rng)
+    return Clip(light.astype(np.float32), words, family, index, sensor, calibration.dark.astype(np.float32),
+                calibration.gain.astype(np.float32), calibration)
 
 
 def panorama_files(folder: str | Path) -> tuple[str, ...]:

@@ -12,8 +12,9 @@ Every case is made from the validation seed domain (never a training seed):
   validation seeds, so other paths and objects) recorded by a noisy sensor
   (:data:`VALIDATION_SENSORS`: eq. 12 and eq. 13 dark current with DSNU, hot
   pixels, PRNU and comparator offset, validation sensor seeds) and read through
-  its exact calibration, as the engine's noisy clips are and as inference corrects
-  a learned method's input: so selection sees what a noisy sensor costs.
+  its calibration (exact maps, the dark law of a dark stream it records), as the
+  engine's noisy clips are and as inference reads a calibrated stream: so
+  selection sees what a noisy sensor costs.
 
 :func:`validation_set` returns light, words and the noisy cases' calibration for
 one sensor configuration; :func:`validation_psnr` gives PSNR-mu (mu = 5000, each
@@ -34,7 +35,7 @@ import numpy as np
 from tespike.golden.config import SensorConfig
 from tespike.golden.fastsim import simulate_scene
 
-from .clips import HELDOUT_PANORAMA, VALIDATION_DOMAIN, sensor_maps
+from .clips import HELDOUT_PANORAMA, VALIDATION_DOMAIN, sensor_calibration
 from .deadleaves import DeadLeavesParams, dead_leaves
 
 #: Held-out generator parameters of the dead-leaves family (none of training's ranges' corners).
@@ -77,7 +78,7 @@ class ValidationCase:
     label: str
     light: np.ndarray        # float32 (K, H, W)
     words: np.ndarray
-    calibration: object = None    # a noisy case's exact Calibration (exact_calibration); None: shot noise only
+    calibration: object = None    # a noisy case's Calibration (validation_calibration); None: shot noise only
 
 
 def case_light(case: Case, index: int, height: int, width: int) -> np.ndarray:
@@ -99,12 +100,11 @@ def validation_sensor(case: Case, index: int):
     return Sensor(SensorNoise(**VALIDATION_SENSORS[case.sensor]), seed)
 
 
-def exact_calibration(sensor, config: SensorConfig, shape: tuple[int, int]):
-    """A sensor's true per-pixel dark rate and gain as a :class:`tespike.recon.calibration.Calibration`
-    (estimator ``exact``: no readouts were taken), as the engine's noisy clips are corrected."""
-    from ..calibration import Calibration
-    dark, gain = sensor_maps(sensor, shape)
-    return Calibration(dark.astype(np.float64), gain.astype(np.float64), config, 0, 0, 0.0, estimator="exact")
+def validation_calibration(case: Case, index: int, config: SensorConfig, shape: tuple[int, int]):
+    """A noisy case's calibration (:func:`tespike.recon.engine.clips.sensor_calibration`: its sensor's
+    exact maps and the dark law of a dark stream it records, on the case's own validation seed)."""
+    seed = np.random.default_rng(np.random.SeedSequence([VALIDATION_DOMAIN, index, 3]))
+    return sensor_calibration(validation_sensor(case, index), config, shape, seed)
 
 
 def validation_set(config: SensorConfig, height: int = 96, width: int = 128) -> list[ValidationCase]:
@@ -115,7 +115,7 @@ def validation_set(config: SensorConfig, height: int = 96, width: int = 128) -> 
         noise = np.random.default_rng(np.random.SeedSequence([VALIDATION_DOMAIN, index, 1]))
         sensor = validation_sensor(case, index) if case.sensor else None
         words = simulate_scene(config, light, seed=noise, workers=1, sensor=sensor)
-        calibration = None if sensor is None else exact_calibration(sensor, config, light.shape[1:])
+        calibration = None if sensor is None else validation_calibration(case, index, config, light.shape[1:])
         out.append(ValidationCase(case.label, light.astype(np.float32), words, calibration))
     return out
 

@@ -195,7 +195,8 @@ def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, ti
     if out.size == 0:
         return out
     model = model.to(device)
-    inputs = None if calibration is None or calibration.dark_law is None else LawInputs(words, config, calibration)
+    inputs = (None if calibration is None or calibration.dark_law is None
+              else LawInputs(words, config, calibration, device=device))
     correction = input_correction(calibration, device) if inputs is None else None
     keys = range(K)
     if progress:
@@ -209,7 +210,7 @@ def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, ti
 
 
 def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int = 9,
-              readouts: tuple[int, int] | None = None) -> torch.Tensor:
+              readouts: tuple[int, int] | None = None, device: str | torch.device = "cpu") -> torch.Tensor:
     """A learned method's input under a calibration with a dark law, (K, H, W) float32, unfloored:
     each readout's decoded light less the pixel's mean dark rate over the gain (the input the
     methods were trained with, :func:`frame`), except where the pixel's law puts the readout's dark
@@ -220,22 +221,24 @@ def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int 
     12 level within 0.06 dB (docs/reconstruction.md).
 
     ``readouts``: ``(start, stop)``, only those readouts (their windows read the stream around them,
-    so the values are the whole stream's to float rounding); the float64 work runs in blocks of pixels."""
+    so the values are the whole stream's to float rounding); the float64 work runs in blocks of pixels,
+    on ``device`` (the result stays there)."""
     from ..darklaw import BLOCK_ELEMENTS, tail_free_light
     K, H, W = words.shape
     start, stop = (0, K) if readouts is None else readouts
     radius = window // 2
     first, last = max(0, start - radius), min(K, stop + radius)          # the windows' readouts
     flat = np.asarray(words[first:last]).reshape(last - first, H * W)
-    atoms = torch.as_tensor(np.asarray(calibration.dark_law, np.float32)).reshape(calibration.dark_law.shape[0], -1)
+    atoms = torch.as_tensor(np.asarray(calibration.dark_law, np.float32), device=device)
+    atoms = atoms.reshape(calibration.dark_law.shape[0], -1)
     ceiling = calibration.dark_tail * atoms.to(torch.float64).mean(0)
-    inverse_gain = torch.as_tensor(1.0 / calibration.gain, dtype=torch.float64).reshape(-1)
-    mean_dark = torch.as_tensor(calibration.dark, dtype=torch.float64).reshape(-1)
-    out = torch.empty((stop - start, H * W), dtype=torch.float32)
+    inverse_gain = torch.as_tensor(1.0 / calibration.gain, dtype=torch.float64, device=device).reshape(-1)
+    mean_dark = torch.as_tensor(calibration.dark, dtype=torch.float64, device=device).reshape(-1)
+    out = torch.empty((stop - start, H * W), dtype=torch.float32, device=device)
     step = max(1, BLOCK_ELEMENTS // max(1, last - first))   # pixels decoded in float64 at once (bounded memory)
     for s in range(0, H * W, step):
         pixels = slice(s, s + step)
-        light = decode_light(flat[:, pixels], config, dtype=torch.float64)
+        light = decode_light(flat[:, pixels], config, dtype=torch.float64, device=device)
         own = tail_free_light(light, config.spike_light, atoms[:, pixels], ceiling[pixels], radius,
                               mean_dark[pixels])
         out[:, pixels] = own[start - first:stop - first] * inverse_gain[pixels]
@@ -248,8 +251,9 @@ class LawInputs:
     so memory holds a few blocks of frames, not the stream (the images, too, may be a file)."""
 
     def __init__(self, words: np.ndarray, config: SensorConfig, calibration, window: int = 9,
-                 block: int | None = None):
+                 block: int | None = None, device: str | torch.device = "cpu"):
         self.words, self.config, self.calibration, self.window = words, config, calibration, window
+        self.device = device
         self.block = LAW_BLOCK if block is None else block
         self.blocks: dict[int, torch.Tensor] = {}
 
@@ -263,8 +267,10 @@ class LawInputs:
         for b in needed:
             if b not in self.blocks:
                 span = (b * self.block, min(K, (b + 1) * self.block))
-                self.blocks[b] = law_input(self.words, self.config, self.calibration, self.window, span)
-        index = torch.as_tensor(np.array(rows))[:, None], torch.as_tensor(np.array(cols))[None, :]
+                self.blocks[b] = law_input(self.words, self.config, self.calibration, self.window, span,
+                                           self.device)
+        index = (torch.as_tensor(np.array(rows), device=self.device)[:, None],
+                 torch.as_tensor(np.array(cols), device=self.device)[None, :])
         return torch.stack([self.blocks[t // self.block][t % self.block][index] for t in np.asarray(times).tolist()])
 
 
