@@ -26,7 +26,7 @@ import torch
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
-from .settings import ReconSettings
+from .settings import DEFAULT_WINDOW, ReconSettings
 from .stream import as_word_tensor, decode_light, decode_spikes, output_images
 from .tfi import tfi
 from .tfp import tfp
@@ -124,7 +124,7 @@ RECON_METHODS: dict[str, Method] = {
 }
 
 
-def reconstruct(words, config: SensorConfig, method: str, *, window: int = 9,
+def reconstruct(words, config: SensorConfig, method: str, *, window: int = DEFAULT_WINDOW,
                 device: str = "cpu", progress: bool = False, out: np.ndarray | None = None,
                 calibration=None, weights=None, **options) -> np.ndarray:
     """Stream words (K, H, W) -> reconstructed light, float32 (K, H, W), scene units.

@@ -65,13 +65,13 @@ PANORAMA_SUFFIXES = (".exr", ".hdr")
 FAMILIES = ("deadleaves", "panorama", "folder")
 #: Seed domains: training clips and validation clips never share a seed.
 TRAIN_DOMAIN, VALIDATION_DOMAIN = 17, 23
-#: The range noisy clips' sensors are drawn over (:func:`draw_sensor`): dark level x the
-#: model's, log-uniform; the others uniform in [0, high] (golden.noise.SensorNoise fields).
 #: What a noisy clip's method sees (``EngineRecipe.noisy_input``): ``mean``, its decoded light
 #: corrected by its sensor's exact mean dark rate and gain (every shipped file's training);
 #: ``law``, also less the dark law's upper tail, exactly as inference reads a stream under a
 #: calibration with a law (:func:`sensor_calibration`; measured: docs/fair-training.md).
 NOISY_INPUTS = ("mean", "law")
+#: The range noisy clips' sensors are drawn over (:func:`draw_sensor`): dark level x the
+#: model's, log-uniform; the others uniform in [0, high] (golden.noise.SensorNoise fields).
 NOISE_DRAW = {"dark_current": ("eq12", "eq13"), "dark_level": (0.05, 6.0), "dsnu": (0.0, 0.5),
               "hot_pixels": (0.0, 0.02), "hot_factor": (5.0, 50.0), "prnu": (0.0, 0.05),
               "comparator_offset": (0.0, 0.05)}

@@ -38,6 +38,7 @@ from tespike.golden.errors import InputError
 
 from ..calibration import correct_input, input_correction
 from ..reach import receptive_radius as derived_radius
+from ..settings import DEFAULT_WINDOW
 from ..stream import decode_light, key_span, output_images, span_inside
 
 
@@ -209,7 +210,7 @@ def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, ti
     return out
 
 
-def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int = 9,
+def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int = DEFAULT_WINDOW,
               readouts: tuple[int, int] | None = None, device: str | torch.device = "cpu") -> torch.Tensor:
     """A learned method's input under a calibration with a dark law, (K, H, W) float32, unfloored:
     each readout's decoded light less the pixel's mean dark rate over the gain (the input the
@@ -250,7 +251,7 @@ class LawInputs:
     made :data:`LAW_BLOCK` readouts at a time, and a block dropped once the keys have passed it,
     so memory holds a few blocks of frames, not the stream (the images, too, may be a file)."""
 
-    def __init__(self, words: np.ndarray, config: SensorConfig, calibration, window: int = 9,
+    def __init__(self, words: np.ndarray, config: SensorConfig, calibration, window: int = DEFAULT_WINDOW,
                  block: int | None = None, device: str | torch.device = "cpu"):
         self.words, self.config, self.calibration, self.window = words, config, calibration, window
         self.device = device
