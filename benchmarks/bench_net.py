@@ -22,6 +22,7 @@ count) and CPU latency at 384 x 512 (torch.utils.benchmark, per thread count)
 for the CPU default and the paper size; and the plain-torch DCN against conv2d.
 
     python3 benchmarks/bench_net.py [--quality] [--complexity] [--weights-dir DIR] [--ablation-dir DIR]
+    python3 benchmarks/bench_net.py --validation [--extended] [--compare W.pt ...]
 """
 
 from __future__ import annotations
@@ -135,14 +136,14 @@ def validation(args) -> None:
     from tespike.recon.engine.validation import validation_psnr, validation_set
     for label, preset in SENSORS:
         config = SensorConfig.preset(preset)
-        cases = validation_set(config)
+        cases = validation_set(config, extended=args.extended)
         rows = {m: validation_psnr(lambda c: reconstruct(c.words, config, m, calibration=c.calibration), cases)
                 for m in ("tfp", "tfi")}
         for path in [Path(args.weights_dir) / f"{preset}.pt", *map(Path, args.compare)]:
             if path.is_file() and load_weights(path)[1] == config:
                 model = load_weights(path)[0]
                 rows[str(path)] = validation_psnr(lambda c: reconstruct_model(
-                    model, c.words, config, tile=None, calibration=c.calibration), cases)
+                    model, c.words, config, tile=None, calibration=c.calibration, inputs=c.law_inputs()), cases)
         names = list(rows["tfp"])
         print(f"\n{label}: validation PSNR-mu (dB), every frame of each case")
         print("| method | " + " | ".join(names) + " |")
@@ -234,6 +235,9 @@ def main() -> None:
                         help="only the training's held-out validation set (TFP, TFI, the weights)")
     parser.add_argument("--candidates", action="store_true",
                         help="only the output head's training-free estimates, their initial blend and the oracle")
+    parser.add_argument("--extended", action="store_true",
+                        help="with --validation: also the six extended noisy cases (dim light, strong dark "
+                             "current; recon.engine.validation.EXTENDED_CASES)")
     parser.add_argument("--compare", nargs="*", default=[], metavar="PT",
                         help="with --validation: also score these weights files (each on its own sensor)")
     parser.add_argument("--weights-dir", default=str(WEIGHTS_DIR),

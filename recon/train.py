@@ -269,7 +269,8 @@ def validate(model: torch.nn.Module, cases, config: SensorConfig, device: str) -
     try:
         with torch.inference_mode():
             return validation_psnr(lambda case: reconstruct_model(model, case.words, config, tile=None,
-                                                                  device=device, calibration=case.calibration),
+                                                                  device=device, calibration=case.calibration,
+                                                                  inputs=case.law_inputs(device)),
                                    cases)
     finally:
         model.train(was_training)

@@ -58,6 +58,51 @@ def test_validation_scores_every_held_out_case():
     assert set(rough) == {c.label for c in cases} | {"shot", "noisy", "mean"}
 
 
+def test_the_extended_validation_cases_add_noisy_sensors_inside_the_engine_range():
+    """The extended set keeps the eight selection cases' streams and adds noisy cases whose sensors lie
+    inside the range the engine draws training sensors from (NOISE_DRAW)."""
+    from tespike.recon.engine.clips import NOISE_DRAW
+    from tespike.recon.engine.validation import CASES, EXTENDED_CASES, VALIDATION_SENSORS, validation_set
+    for name, fields in VALIDATION_SENSORS.items():
+        for key, value in fields.items():
+            allowed = NOISE_DRAW[key]
+            assert (value in allowed) if isinstance(value, str) else allowed[0] <= value <= allowed[1], (name, key)
+    assert all(case.sensor for case in EXTENDED_CASES)
+    config = SensorConfig()
+    base, extended = validation_set(config, 8, 12), validation_set(config, 8, 12, extended=True)
+    assert [c.label for c in extended] == [c.label for c in CASES + EXTENDED_CASES]
+    assert len({c.label for c in extended}) == len(extended)
+    assert all(np.array_equal(a.words, b.words) for a, b in zip(base, extended))
+
+
+def test_validation_makes_each_noisy_case_law_input_once(monkeypatch):
+    """A run scores every checkpoint on the same noisy streams: each case's law input is made at its
+    first use on a device and served again (the images equal those made afresh); inputs of another
+    stream are refused."""
+    import tespike.recon.learning.infer as infer
+    from tespike.recon.engine.validation import validation_set
+    from tespike.recon.train import validate
+    config = SensorConfig.preset("te")
+    cases = [c for c in validation_set(config, 16, 24) if c.calibration is not None]
+    assert len(cases) >= 2 and all(c.calibration.dark_law is not None for c in cases)
+    made = []
+    original = infer.law_input
+    monkeypatch.setattr(infer, "law_input", lambda *a, **k: made.append(a[0]) or original(*a, **k))
+    from tespike.recon.learned import weights_path
+    model = load_weights(weights_path(config, "net"))[0]
+    first = validate(model, cases, config, "cpu")
+    calls = len(made)
+    assert calls >= len(cases)
+    assert validate(model, cases, config, "cpu") == first and len(made) == calls
+    fresh = infer.reconstruct_model(model, cases[0].words, config, tile=None, calibration=cases[0].calibration)
+    kept = infer.reconstruct_model(model, cases[0].words, config, tile=None, calibration=cases[0].calibration,
+                                   inputs=cases[0].law_inputs())
+    assert np.array_equal(fresh, kept)
+    with pytest.raises(ValueError, match="another stream"):
+        infer.reconstruct_model(model, cases[1].words, config, tile=None, calibration=cases[1].calibration,
+                                inputs=cases[0].law_inputs())
+
+
 def test_resume_continues_exactly(tmp_path):
     cache = tmp_path / "cache"
     straight = train(options(steps=4), tmp_path / "a.pt")

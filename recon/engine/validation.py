@@ -16,6 +16,9 @@ Every case is made from the validation seed domain (never a training seed):
   engine's noisy clips are and as inference reads a calibrated stream: so
   selection sees what a noisy sensor costs.
 
+:data:`EXTENDED_CASES` add six noisy cases for benchmarks only (dim light under strong
+dark current, other levels and spreads); selection keeps the eight above.
+
 :func:`validation_set` returns light, words and the noisy cases' calibration for
 one sensor configuration; :func:`validation_psnr` gives PSNR-mu (mu = 5000, each
 frame divided by the ground truth's peak) of every case over all its frames (the
@@ -59,6 +62,15 @@ VALIDATION_SENSORS = {
              "prnu": 0.03, "comparator_offset": 0.03},
     "eq13": {"dark_current": "eq13", "dark_level": 1.0, "dsnu": 0.3, "hot_pixels": 0.01, "hot_factor": 20.0,
              "prnu": 0.03, "comparator_offset": 0.03},
+    # the extended set's sensors (EXTENDED_CASES): other levels and spreads inside NOISE_DRAW
+    "eq13-0.6-nu": {"dark_current": "eq13", "dark_level": 0.6, "dsnu": 0.2, "hot_pixels": 0.005,
+                    "hot_factor": 20.0, "prnu": 0.02, "comparator_offset": 0.02},
+    "eq12-3": {"dark_current": "eq12", "dark_level": 3.0, "dsnu": 0.4, "hot_pixels": 0.015, "hot_factor": 10.0,
+               "prnu": 0.04, "comparator_offset": 0.01},
+    "eq13-2": {"dark_current": "eq13", "dark_level": 2.0, "dsnu": 0.1, "hot_pixels": 0.0, "hot_factor": 5.0,
+               "prnu": 0.01, "comparator_offset": 0.04},
+    "eq12-0.3": {"dark_current": "eq12", "dark_level": 0.3, "dsnu": 0.5, "hot_pixels": 0.02, "hot_factor": 40.0,
+                 "prnu": 0.05, "comparator_offset": 0.05},
 }
 
 CASES = (
@@ -72,6 +84,18 @@ CASES = (
     Case("deadleaves-heldout-eq13", "deadleaves", "", 48, 2.0, "eq13"),
 )
 
+#: Six more noisy cases, for benchmarks (``bench_net.py --validation --extended``), not for selection:
+#: dim light under strong dark current, where the validation's two noisy cases (bright) say little,
+#: at other dark levels and spreads. Their seeds follow CASES' (index 8 on), so CASES' are unchanged.
+EXTENDED_CASES = (
+    Case("courtyard-mixed-0.3-eq13", "panorama", "mixed", 48, 0.3, "eq13"),
+    Case("courtyard-zoom-0.03-eq12", "panorama", "zoom", 48, 0.03, "eq12"),
+    Case("deadleaves-0.5-eq13x0.6nu", "deadleaves", "", 48, 0.5, "eq13-0.6-nu"),
+    Case("courtyard-pan-0.1-eq12x3", "panorama", "pan", 48, 0.1, "eq12-3"),
+    Case("deadleaves-short-16-eq13x2", "deadleaves", "", 16, 1.0, "eq13-2"),
+    Case("courtyard-mixed-1-eq12x0.3", "panorama", "mixed", 48, 1.0, "eq12-0.3"),
+)
+
 
 @dataclasses.dataclass(frozen=True)
 class ValidationCase:
@@ -79,6 +103,21 @@ class ValidationCase:
     light: np.ndarray        # float32 (K, H, W)
     words: np.ndarray
     calibration: object = None    # a noisy case's Calibration (validation_calibration); None: shot noise only
+    config: SensorConfig | None = None
+    _law: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)
+
+    def law_inputs(self, device="cpu"):
+        """The learned methods' input of a noisy case (:class:`tespike.recon.learning.infer.LawInputs`,
+        every block kept), made on ``device`` at its first use and kept: a run scores every
+        checkpoint on the same streams, and the law costs about 10 s a case on one CPU core.
+        None for a shot-noise case or a calibration without a dark law."""
+        if self.calibration is None or self.calibration.dark_law is None:
+            return None
+        key = str(device)
+        if key not in self._law:
+            from ..learning.infer import LawInputs
+            self._law[key] = LawInputs(self.words, self.config, self.calibration, device=device, keep=True)
+        return self._law[key]
 
 
 def case_light(case: Case, index: int, height: int, width: int) -> np.ndarray:
@@ -107,16 +146,18 @@ def validation_calibration(case: Case, index: int, config: SensorConfig, shape: 
     return sensor_calibration(validation_sensor(case, index), config, shape, seed)
 
 
-def validation_set(config: SensorConfig, height: int = 96, width: int = 128) -> list[ValidationCase]:
-    """Every case of :data:`CASES` with its stream for ``config`` (validation seeds)."""
+def validation_set(config: SensorConfig, height: int = 96, width: int = 128, *,
+                   extended: bool = False) -> list[ValidationCase]:
+    """Every case of :data:`CASES` (and, ``extended``, of :data:`EXTENDED_CASES`) with its stream for
+    ``config`` (validation seeds)."""
     out = []
-    for index, case in enumerate(CASES):
+    for index, case in enumerate(CASES + (EXTENDED_CASES if extended else ())):
         light = case_light(case, index, height, width)
         noise = np.random.default_rng(np.random.SeedSequence([VALIDATION_DOMAIN, index, 1]))
         sensor = validation_sensor(case, index) if case.sensor else None
         words = simulate_scene(config, light, seed=noise, workers=1, sensor=sensor)
         calibration = None if sensor is None else validation_calibration(case, index, config, light.shape[1:])
-        out.append(ValidationCase(case.label, light.astype(np.float32), words, calibration))
+        out.append(ValidationCase(case.label, light.astype(np.float32), words, calibration, config))
     return out
 
 

@@ -181,10 +181,12 @@ def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: 
 
 def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, tile: int | str | None = "auto",
                       device: str = "cpu", progress: bool = False, out: np.ndarray | None = None,
-                      calibration=None) -> np.ndarray:
+                      calibration=None, inputs: "LawInputs | None" = None) -> np.ndarray:
     """Any learned method's module (in eval mode) on a whole stream: float32 light (K, H, W);
     ``calibration`` (checked by the caller against the stream) corrects its input: by the mean dark
-    rate and the gain (:func:`frame`), or, where it carries a dark law, by the law (:class:`LawInputs`)."""
+    rate and the gain (:func:`frame`), or, where it carries a dark law, by the law (:class:`LawInputs`).
+    ``inputs``: that stream's :class:`LawInputs` made by the caller (``keep=True``: the validation
+    set scores every checkpoint on the same streams, and the law costs seconds a clip on a CPU)."""
     if isinstance(words, torch.Tensor):
         words = words.cpu().numpy()
     if not isinstance(words, np.ndarray):
@@ -196,8 +198,11 @@ def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, ti
     if out.size == 0:
         return out
     model = model.to(device)
-    inputs = (None if calibration is None or calibration.dark_law is None
-              else LawInputs(words, config, calibration, device=device))
+    if inputs is not None and (inputs.words is not words or inputs.calibration is not calibration
+                               or inputs.config != config):
+        raise ValueError("reconstruct_model: inputs were made for another stream or calibration")
+    if inputs is None and calibration is not None and calibration.dark_law is not None:
+        inputs = LawInputs(words, config, calibration, device=device)
     correction = input_correction(calibration, device) if inputs is None else None
     keys = range(K)
     if progress:
@@ -249,13 +254,15 @@ def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int 
 class LawInputs:
     """:func:`law_input` of a whole stream, read by readout indices as the key readouts move on:
     made :data:`LAW_BLOCK` readouts at a time, and a block dropped once the keys have passed it,
-    so memory holds a few blocks of frames, not the stream (the images, too, may be a file)."""
+    so memory holds a few blocks of frames, not the stream (the images, too, may be a file);
+    with ``keep`` every block made is kept, so the object can serve the stream again."""
 
     def __init__(self, words: np.ndarray, config: SensorConfig, calibration, window: int = DEFAULT_WINDOW,
-                 block: int | None = None, device: str | torch.device = "cpu"):
+                 block: int | None = None, device: str | torch.device = "cpu", keep: bool = False):
         self.words, self.config, self.calibration, self.window = words, config, calibration, window
         self.device = device
         self.block = LAW_BLOCK if block is None else block
+        self.keep = keep
         self.blocks: dict[int, torch.Tensor] = {}
 
     def __call__(self, times: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> torch.Tensor:
@@ -263,7 +270,7 @@ class LawInputs:
         (index arrays): (len(times), len(rows), len(cols))."""
         K = self.words.shape[0]
         needed = sorted(set((np.asarray(times) // self.block).tolist()))
-        for b in [b for b in self.blocks if b < needed[0]]:
+        for b in [b for b in self.blocks if b < needed[0] and not self.keep]:
             del self.blocks[b]                          # keys only move on
         for b in needed:
             if b not in self.blocks:
