@@ -109,7 +109,8 @@ class ValidationCase:
     def law_inputs(self, device="cpu"):
         """The learned methods' input of a noisy case (:class:`tespike.recon.learning.infer.LawInputs`,
         every block kept), made on ``device`` at its first use and kept: a run scores every
-        checkpoint on the same streams, and the law costs about 10 s a case on one CPU core.
+        checkpoint on the same streams, and the law is most of a CPU validation's time (the network's,
+        on one core: 97 s the first time, 45 s after; docs/fair-training.md).
         None for a shot-noise case or a calibration without a dark law."""
         if self.calibration is None or self.calibration.dark_law is None:
             return None
