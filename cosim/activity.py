@@ -180,8 +180,8 @@ def vcd_activity(vcd_path, config: SensorConfig, verilog_text: str, top: str, st
                  scope: str) -> dict[tuple[str, str], int]:
     """Toggles per (block, register or port name) in the VCD of a run of ``verilog_text``, summed
     over instances; the top is at ``scope`` (e.g. ``tespike_tb.dut``)."""
-    from vcdvcd import VCDVCD
-
+    from .vcd import vcd_reader
+    VCDVCD = vcd_reader()
     registers, ports = flip_flops(verilog_text, top)
     header = VCDVCD(str(vcd_path), only_sigs=True)
     by_base = {re.sub(r"\[\d+:\d+\]$", "", ref): ref for ref in header.references_to_ids}
@@ -227,9 +227,8 @@ def register_bits(verilog_text: str, top: str, config: SensorConfig, streaming: 
 
 def edges_after_reset(vcd_path, scope: str) -> int:
     """Rising edges of ``clk`` with ``rst`` low in the VCD of a run (the model's ``edges``)."""
-    from vcdvcd import VCDVCD
-
-    from .vcd import rising_edges
+    from .vcd import rising_edges, vcd_reader
+    VCDVCD = vcd_reader()
 
     vcd = VCDVCD(str(vcd_path), signals=[f"{scope}.clk", f"{scope}.rst"], store_tvs=True)
     edges = rising_edges(vcd[f"{scope}.clk"])

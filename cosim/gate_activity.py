@@ -79,8 +79,8 @@ def vcd_gate_toggles(vcd_path, design: dict, top: str, config: SensorConfig, str
     """(gate output toggles per block, gate outputs per block) in the VCD of a run of the netlist."""
     import re
 
-    from vcdvcd import VCDVCD
-
+    from .vcd import vcd_reader
+    VCDVCD = vcd_reader()
     outputs = gate_outputs(design, top, config, streaming)
     header = VCDVCD(str(vcd_path), only_sigs=True)
     by_base = {re.sub(r"\[\d+:\d+\]$", "", ref): ref for ref in header.references_to_ids}

@@ -49,8 +49,28 @@ class Waveform:
     edges: int              # rising clock edges with reset low in the waveform
 
 
+def vcd_reader():
+    """vcdvcd's ``VCDVCD`` class, the one way this project imports it. vcdvcd sets SIGPIPE to
+    the system's default on import (for its own command line), after which any later write to a
+    closed pipe (a pool or Dask worker gone, a reader of stdout that left) kills this process
+    silently, with no line and no cleanup: the disposition is put back as it was."""
+    import importlib
+    import signal
+    import sys
+    import threading
+    if "vcdvcd" not in sys.modules and threading.current_thread() is threading.main_thread():
+        previous = signal.getsignal(signal.SIGPIPE)
+        try:
+            importlib.import_module("vcdvcd")
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGPIPE, previous)
+    from vcdvcd import VCDVCD     # (elsewhere than the main thread vcdvcd cannot change it either)
+    return VCDVCD
+
+
 def _load(path, names):
-    from vcdvcd import VCDVCD
+    VCDVCD = vcd_reader()
     try:
         return VCDVCD(str(path), signals=list(names), store_tvs=True)
     except FileNotFoundError:
@@ -125,7 +145,7 @@ PIXEL_SIGNALS = ("charge", "acc", "spike", "sfc", "ovf", "m", "count", "last", "
 
 def _var_sizes(vcd_path) -> dict[str, int]:
     """Every variable of the VCD header: full name -> width (vcdvcd drops ``[n:0]``)."""
-    from vcdvcd import VCDVCD
+    VCDVCD = vcd_reader()
     header = VCDVCD(str(vcd_path), only_sigs=True)
     return {ref: int(header.data[code].size) for ref, code in header.references_to_ids.items()}
 
@@ -260,8 +280,7 @@ def bit_toggles(vcd_path, suffixes: tuple[str, ...]) -> dict[str, int]:
     with x or z bits counts nothing, and nor does the first value: the initial state).
     The golden model's :func:`tespike.golden.toggles.count_toggles` is checked against this.
     """
-    from vcdvcd import VCDVCD
-
+    VCDVCD = vcd_reader()
     sizes = _var_sizes(vcd_path)
     names = [name for name in sizes if any(name.endswith("." + s) for s in suffixes)]
     if not names:

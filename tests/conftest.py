@@ -26,6 +26,20 @@ def empty_weights_dir(tmp_path, monkeypatch):
     return folder
 
 
+@pytest.fixture(autouse=True)
+def sigpipe_left_as_it_was():
+    """No test may change how this process meets a closed pipe: with SIGPIPE at the system's
+    default (what importing vcdvcd itself does), a later write to a pool worker's pipe killed the
+    whole suite without a line. Put back, and the test that changed it fails."""
+    import signal
+    before = signal.getsignal(signal.SIGPIPE)
+    yield
+    after = signal.getsignal(signal.SIGPIPE)
+    if after != before:
+        signal.signal(signal.SIGPIPE, before)
+        pytest.fail(f"the test changed SIGPIPE's disposition from {before!r} to {after!r}")
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

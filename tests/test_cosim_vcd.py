@@ -132,7 +132,8 @@ def test_reader_refuses_a_wrong_shape(rng, tmp_path):
 
 
 def test_reset_is_held_before_clock_zero(rng, tmp_path):
-    from vcdvcd import VCDVCD
+    from tespike.cosim.vcd import vcd_reader
+    VCDVCD = vcd_reader()
     config = SensorConfig(b1=2, b2=2, threshold=20)
     rtl_run(config, threshold_stimulus(config, rng, 1, 1, 1), vcd_path=tmp_path / "w.vcd")
     vcd = VCDVCD(str(tmp_path / "w.vcd"))
@@ -152,3 +153,19 @@ def test_gtkw_of_the_flat_array_shows_pixel_00(rng, tmp_path):
     for name in ("px_0_0_acc", "px_0_0_sfc", "px_0_0_ovf", "px_0_0_m[", "px_0_0_word"):
         assert f"bench.top.array.{name}" in text, name
     assert "px_1_1_" not in text
+
+
+def test_reading_a_waveform_leaves_sigpipe_as_it_was():
+    """vcdvcd sets SIGPIPE to the system's default on import; the one import of it
+    (:func:`tespike.cosim.vcd.vcd_reader`) puts it back, so a closed pipe stays an error the
+    command reports, not a silent death (a fresh interpreter: this one may have imported it)."""
+    import subprocess
+    import sys
+    code = ("import signal; from tespike.cosim.vcd import vcd_reader; vcd_reader(); "
+            "print(signal.getsignal(signal.SIGPIPE) == signal.SIG_IGN)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.stdout.strip() == "True", done.stderr
+    plain = subprocess.run([sys.executable, "-c", "import signal, vcdvcd; "
+                            "print(signal.getsignal(signal.SIGPIPE) == signal.SIG_DFL)"],
+                           capture_output=True, text=True, timeout=60)
+    assert plain.stdout.strip() == "True"                       # (the premise: vcdvcd alone changes it)

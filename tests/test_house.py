@@ -191,6 +191,15 @@ def test_rooms_import_only_their_floors():
     assert up == []
 
 
+def test_vcdvcd_is_imported_in_one_place():
+    """Importing vcdvcd changes SIGPIPE for the whole process: only :func:`tespike.cosim.vcd.vcd_reader`
+    imports it, and puts that back."""
+    direct = [f"{path.relative_to(ROOT)}: {module}" for name, path in MODULES.items()
+              for module, _ in _imports(name, path) if module.split(".")[0] == "vcdvcd"
+              and name != "tespike.cosim.vcd"]
+    assert direct == []
+
+
 def test_rooms_are_imported_as_tespike_modules():
     bare = []
     for folder in PACKAGES + ("tests", "benchmarks"):
