@@ -131,7 +131,8 @@ def test_what_a_tool_started_ends_with_an_interrupted_command(tmp_path):
     the tool has said what it started (a fixed delay may come before, on a loaded machine)."""
     said = tmp_path / "grandchild"
     body = ("import os, signal, threading, time\n"
-            "from tespike.cosim import children\n"
+            "signal.signal(signal.SIGINT, signal.default_int_handler)\n"   # (as a terminal's; inherited ignored in
+            "from tespike.cosim import children\n"                        # a shell's background job)
             "main = threading.get_ident()\n"
             "def interrupt_once_started():\n"
             f"    while not os.path.getsize({str(said)!r}):\n"
