@@ -230,6 +230,7 @@ def test_an_interrupt_while_yosys_runs_leaves_no_process_and_no_open_pipe():
     import subprocess
     import sys
     body = ("import gc, os, signal, threading, time, warnings\n"
+            "signal.signal(signal.SIGINT, signal.default_int_handler)\n"   # (a background job inherits it ignored)
             "warnings.simplefilter('always')\n"
             "from tespike.golden.config import SensorConfig\n"
             "from tespike.rtl.verilog import array_verilog\n"
