@@ -29,6 +29,11 @@ __all__ = ["atomic_output", "check_scene", "check_stimulus", "load_npy", "load_s
 def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.ndarray:
     """One .npy array (never a pickle or an archive), or one line naming ``what`` and the file."""
     check_input_file(path, what)
+    magic = _magic(path, what)
+    if magic.startswith(b"PK"):
+        raise InputError(f"{what} file {str(path)!r} holds an archive, not one .npy array")
+    if magic != b"\x93NUMPY":                          # (np.load would try it as a pickle and say so)
+        raise InputError(f"{what} file {str(path)!r} is not a readable .npy array (no .npy header)")
     try:
         array = np.load(path, allow_pickle=False, mmap_mode=mmap_mode)
     except (OSError, ValueError, EOFError) as exc:
@@ -40,6 +45,16 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
             array.close()
         raise InputError(f"{what} file {str(path)!r} holds an archive, not one .npy array")
     return array
+
+
+def _magic(path, what: str) -> bytes:
+    """The first six bytes of an input file (.npy and .npz files are told apart by them)."""
+    try:
+        with open(path, "rb") as handle:
+            return handle.read(6)
+    except OSError as exc:
+        _refuse_starved(exc, what, path)
+        raise InputError(f"cannot read {what} file {str(path)!r}: {_first_line(exc)}") from None
 
 
 def _first_line(exc: BaseException, limit: int = 200) -> str:
@@ -236,8 +251,7 @@ def open_npz(path: str | Path, what: str, holding: str = "") -> Iterator[np.lib.
     archive should hold, for the refusal of a .npy array."""
     shown = str(path)
     check_input_file(path, what)
-    with open(path, "rb") as handle:
-        magic = handle.read(6)
+    magic = _magic(path, what)
     if magic == b"\x93NUMPY":
         raise InputError(f"{what} file {shown!r} is a .npy array, not an .npz archive"
                          + (f" {holding}" if holding else ""))

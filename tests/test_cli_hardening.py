@@ -472,6 +472,17 @@ def test_pickles_never_loaded(files):
                                    "--out", files / "o.npy"), "obj.npz")
 
 
+def test_npy_without_its_header_is_named_as_such(files):
+    """A file without the .npy magic is said to lack it (numpy alone would call it a pickle)."""
+    (files / "x.npy").write_bytes(b"x")
+    (files / "zip.npy").write_bytes((files / "s.npz").read_bytes())
+    for name, words in (("x.npy", ("no .npy header",)), ("zip.npy", ("holds an archive",))):
+        result = refused_without_change(files, golden_args(files, files / "o.npz", stimulus=files / name),
+                                        name, *words)
+        assert "pickle" not in result.stderr
+        refused_without_change(files, ("view", "--input", files / name, "--out", files / "o.png"), name, *words)
+
+
 def test_big_endian_and_fortran_inputs_equal_native(files):
     native = np.load(files / "e.npy")
     np.save(files / "be.npy", native.astype(">u2"))

@@ -38,26 +38,19 @@ def add_arguments(parser):
 
 def load_light(path, config_spec=None, estimator="ratio"):
     """(light (K, H, W) float64, what) from any of the project's array files."""
-    from pathlib import Path
-
     import numpy as np
 
     from tespike.golden.config import DESIGN_ELECTRONS, load_config
     from tespike.golden.decode import decode_light
     from tespike.golden.errors import InputError
-    from tespike.golden.io import load_scene, load_stimulus, load_stream
+    from tespike.golden.io import load_npy, load_scene, load_stimulus, load_stream
 
     from tespike.golden.paths import check_input_file
     path = check_input_file(path, "--input")        # exists, and is a regular file
     if path.suffix == ".npz":
         words, config = load_stream(path)
         return decode_light(words, config, estimator).astype(np.float64), f"stream ({config}), decoded"
-    try:
-        header = np.load(path, mmap_mode="r", allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"--input {str(path)!r} is not a readable .npy or .npz file: {exc}") from None
-    if not isinstance(header, np.ndarray):
-        raise InputError(f"--input {str(path)!r} is an archive without 'words': not a stream S.npz")
+    header = load_npy(path, "--input", mmap_mode="r")
     if header.dtype.kind in "iu":
         if config_spec is None:
             raise InputError(f"--input {str(path)!r} holds integers (a stimulus E.npy): give --config "
