@@ -1,6 +1,7 @@
 """tespike.recon.engine: dead leaves, clips (families, peak, length), the pool's schedule, samples' edge padding."""
 
 import math
+import multiprocessing
 
 import numpy as np
 import pytest
@@ -332,6 +333,34 @@ def test_ctrl_c_while_the_workers_start_ends_the_start_and_leaves_no_worker():
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert done.stdout == "interrupted\nworkers left 0\n", (done.stdout, done.stderr)
     assert done.stderr == "", done.stderr
+
+
+def test_a_pool_whose_start_fails_leaves_no_worker(monkeypatch):
+    """A pool whose start fails after its workers started (a handler thread that cannot start,
+    out of memory) never reaches the source: the source finds and ends those workers itself, and
+    the pool's worker handler starts none in their place."""
+    import threading
+    import time
+    from multiprocessing import pool as pools
+
+    from tespike.recon.engine.batches import ClipSource
+
+    start = threading.Thread.start
+
+    def last_handler_fails(thread):                     # the pool's third thread, its workers started
+        if getattr(thread, "_target", None) is pools.Pool._handle_results:
+            raise RuntimeError("can't start new thread")
+        start(thread)
+    before = set(multiprocessing.active_children())
+    monkeypatch.setattr(threading.Thread, "start", last_handler_fails)
+    with pytest.raises(RuntimeError, match="can't start new thread"):
+        ClipSource(SMALL, SensorConfig(), workers=1)
+    monkeypatch.undo()
+    time.sleep(0.5)                                     # no worker started in their place
+    assert set(multiprocessing.active_children()) <= before
+    handler = getattr(pools.Pool._handle_workers, "__func__")
+    assert not any(getattr(getattr(t, "_target", None), "__func__", None) is handler and t.is_alive()
+                   for t in threading.enumerate())
 
 
 def test_a_pool_whose_terminate_refuses_still_ends_its_workers(monkeypatch):

@@ -128,22 +128,33 @@ def _ctrl_c_held():
 
 def _end_workers_started(before: set) -> None:
     """The worker processes a pool started before its own start failed (one of its three handler
-    threads could not start: out of memory): killed and reaped, so that none, still reading its
-    start-up data from a trainer that has gone, prints that traceback after the trainer's one line.
-    A worker-handler thread the pool did start would start new workers in their place: it is
-    stopped first, as ``Pool.terminate`` stops it (its ``_state``; the pool object itself never
-    reached the caller)."""
+    threads could not start: out of memory): ended by :func:`_kill_workers`, so that none, still
+    reading its start-up data from a trainer that has gone, prints that traceback after the
+    trainer's one line. The pool object never reached the caller: its worker-handler thread is
+    found among the threads and its workers among the children started since ``before``."""
     from multiprocessing import pool as pools
-    handler = getattr(pools.Pool._handle_workers, "__func__", pools.Pool._handle_workers)   # (a classmethod)
-    for thread in threading.enumerate():
-        target = getattr(thread, "_target", None)
-        if target is not None and getattr(target, "__func__", target) is handler:
-            thread._state = pools.TERMINATE
-            thread.join(5)
-    for process in multiprocessing.active_children():
-        if process not in before:
+    def function(target):                      # (the handler is a classmethod: its function)
+        return getattr(target, "__func__", target)
+    handlers = [thread for thread in threading.enumerate()
+                if function(getattr(thread, "_target", None)) is function(pools.Pool._handle_workers)]
+    _kill_workers(handlers, [process for process in multiprocessing.active_children() if process not in before])
+
+
+def _kill_workers(handlers, processes) -> None:
+    """End a pool's workers without ``Pool.terminate``: its worker-handler threads ``handlers``
+    told to stop first (as ``terminate`` tells them, by their ``_state``; one left running starts
+    new workers in place of those killed), then each of ``processes`` killed and reaped, then the
+    handlers joined (a handler waits on its workers' ends, so it leaves once they are gone)."""
+    from multiprocessing import pool as pools
+    for thread in handlers:
+        thread._state = pools.TERMINATE
+    for process in processes:
+        with contextlib.suppress(OSError, ValueError):
             process.kill()
             process.join(5)
+    for thread in handlers:
+        if thread is not threading.current_thread() and thread.is_alive():
+            thread.join(5)
 
 
 class ClipSource:
@@ -201,14 +212,8 @@ class ClipSource:
             pool.terminate()
             pool.join()
         except (AssertionError, RuntimeError, OSError):
-            from multiprocessing import pool as pools
             handler = getattr(pool, "_worker_handler", None)
-            if handler is not None:          # (else it would start workers in place of those killed)
-                handler._state = pools.TERMINATE
-            for process in getattr(pool, "_pool", ()):
-                with contextlib.suppress(OSError, ValueError):
-                    process.kill()
-                    process.join(5)
+            _kill_workers([handler] if handler is not None else [], list(getattr(pool, "_pool", ())))
 
     def __enter__(self):
         return self
