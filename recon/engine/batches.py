@@ -265,7 +265,7 @@ def clip_law_input(pool, clip: Clip, config: SensorConfig, device: str | torch.d
     (:func:`tespike.recon.learning.infer.law_input`, the whole stream). None for a clip without a
     dark law (shot noise only, or a clip carrying only mean maps)."""
     calibration = clip.calibration
-    if calibration is None or getattr(calibration, "dark_law", None) is None:
+    if calibration is None or calibration.dark_law is None:
         return None
     made = pool.law_inputs.get(clip.index)
     if made is None:
