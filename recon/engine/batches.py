@@ -244,7 +244,7 @@ class ClipPool:
         # clip i lives in slot i % capacity, whatever step the pool was made at
         self.clips: list[Clip] = [clips[(slot - first) % capacity] for slot in range(capacity)]
         self.made = first + capacity              # index of the next clip to enter
-        self.law_inputs: dict[int, torch.Tensor] = {}     # clip index -> its law input (clip_law_input)
+        self.law_inputs: dict = {}                # clip index -> its law input (clip_law_input)
 
     def advance_to(self, step: int) -> None:
         """Let in every clip scheduled up to ``step``."""
@@ -259,18 +259,19 @@ class ClipPool:
 
 
 def clip_law_input(pool, clip: Clip, config: SensorConfig, device: str | torch.device = "cpu"):
-    """A noisy clip's input under its sensor's calibration, (K, H, W) float32 on ``device``, made on
-    the first draw and kept while the clip is in the pool (``pool.law_inputs``): exactly what
-    inference gives a learned method reading the clip's stream with that calibration
-    (:func:`tespike.recon.learning.infer.law_input`, the whole stream). None for a clip without a
-    dark law (shot noise only, or a clip carrying only mean maps)."""
+    """A noisy clip's input under its sensor's calibration: the :class:`tespike.recon.learning.infer.LawInputs`
+    that inference reads a stream through, made as one block of the whole clip (computed at the first
+    draw, on ``device``) and kept while the clip is in the pool (``pool.law_inputs``), so a batch holds
+    exactly what inference gives a learned method reading the clip's stream with that calibration.
+    None for a clip without a dark law (shot noise only, or a clip carrying only mean maps)."""
     calibration = clip.calibration
     if calibration is None or calibration.dark_law is None:
         return None
     made = pool.law_inputs.get(clip.index)
     if made is None:
-        from ..learning.infer import law_input
-        made = pool.law_inputs[clip.index] = law_input(clip.words, config, calibration, device=device)
+        from ..learning.infer import LawInputs
+        made = pool.law_inputs[clip.index] = LawInputs(clip.words, config, calibration, device=device,
+                                                       block=clip.words.shape[0], keep=True)
     return made
 
 
@@ -280,8 +281,8 @@ def draw_sample(clip: Clip, span: int, crop: int, rng: np.random.Generator, law_
 
     ``inside`` marks the span's readouts that lie in the clip (the others repeat its first or last);
     ``calibration`` is the crop's (dark, gain): the clip's sensor's, or (0, 1) for shot noise only.
-    ``law_light``: the clip's input under its calibration (:func:`clip_law_input`, a tensor), cut in
-    place of the words (the same readouts, crop and flips; the same random numbers drawn).
+    ``law_light``: the clip's input under its calibration (:func:`clip_law_input`), cut in place of
+    the words (the same readouts, crop and flips; the same random numbers drawn).
     """
     K, H, W = clip.words.shape
     key = int(rng.integers(K))
@@ -294,7 +295,7 @@ def draw_sample(clip: Clip, span: int, crop: int, rng: np.random.Generator, law_
         calibration = np.stack([clip.dark[y:y + crop, x:x + crop], clip.gain[y:y + crop, x:x + crop]])
     flips = [axis for axis in (-1, -2) if rng.integers(2)]
     if law_light is not None:
-        seen = law_light[torch.as_tensor(times, device=law_light.device), y:y + crop, x:x + crop]
+        seen = law_light(times, np.arange(y, y + crop), np.arange(x, x + crop))
         seen = seen.flip(flips) if flips else seen
     else:
         seen = clip.words[times, y:y + crop, x:x + crop]
