@@ -535,6 +535,22 @@ def test_progress_bars_only_on_a_terminal_or_when_asked(files):
     assert result.returncode == 0 and "golden" in result.stderr
 
 
+def test_stimulus_follows_the_progress_flag(files, monkeypatch, capsys):
+    """``stimulus`` draws its bar as ``--progress`` says (it read the terminal alone before)."""
+    import tqdm
+
+    from tespike.cosim import cli
+
+    bars = []
+    monkeypatch.setattr(tqdm, "tqdm", lambda iterable, **kw: bars.append(kw["desc"]) or iterable)
+    for choice, expected in (("on", ["stimulus"]), ("off", []), ("auto", [])):   # (stderr is not a terminal)
+        bars.clear()
+        assert cli.main(["stimulus", "--config", "te", "--scene", str(files / "i.npy"), "--seed", "1",
+                         "--out", str(files / f"e_{choice}.npy"), "--quiet", "--progress", choice]) == 0
+        assert bars == expected, choice
+    capsys.readouterr()
+
+
 def test_refusal_after_a_warning_is_still_one_line(monkeypatch, capsys):
     import warnings
     import types

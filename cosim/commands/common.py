@@ -30,7 +30,8 @@ def add_light_arguments(parser, *, out_help: str, seed_help: str, no_noise_help:
                         help="I.npy: float (K, H, W) light per readout interval, 1.0 = design light")
     parser.add_argument("--out", required=True, help=out_help)
     parser.add_argument("--seed", type=int, default=None, help=seed_help)
-    parser.add_argument("--dark-current", choices=("none", "eq12", "eq13"), default="none",
+    from tespike.golden.light import DARK_CURRENT_MODELS
+    parser.add_argument("--dark-current", choices=("none",) + DARK_CURRENT_MODELS, default="none",
                         help="dark current model of the paper's eq. 12 or 13 (default: none)")
     parser.add_argument("--no-noise", action="store_true", help=no_noise_help)
     parser.add_argument("--noise", metavar="N.json",
@@ -39,6 +40,18 @@ def add_light_arguments(parser, *, out_help: str, seed_help: str, no_noise_help:
     parser.add_argument("--sensor-seed", type=int, default=None,
                         help="with --noise: the sensor whose per-pixel maps are used (default 0); streams of "
                              "one sensor seed come from one physical sensor")
+
+
+def light_front_end(args):
+    """The checked light options of ``simulate`` and ``stimulus`` -> the :class:`tespike.golden.noise.Sensor`
+    of ``--noise`` (None without it): a negative ``--seed``, and ``--no-noise`` with a random
+    ``--dark-current``, refused in one line."""
+    from tespike.golden.errors import InputError
+    if args.seed is not None and args.seed < 0:
+        raise InputError(f"--seed {args.seed}: must be >= 0")
+    if args.no_noise and args.dark_current != "none":
+        raise InputError(f"--dark-current {args.dark_current} is random; it cannot be combined with --no-noise")
+    return sensor_argument(args)
 
 
 def sensor_argument(args):

@@ -1,6 +1,6 @@
 """``tespike simulate``: scene light I.npy -> readout stream S.npz, with photon shot noise."""
 
-from .common import MAX_WORKERS, add_light_arguments, check_workers_argument, sensor_argument
+from .common import MAX_WORKERS, add_light_arguments, check_workers_argument, light_front_end
 
 HELP = "simulate the sensor on a light scene I.npy (photon shot noise; fast, exact in distribution)"
 
@@ -9,7 +9,8 @@ def add_arguments(parser):
     add_light_arguments(parser, out_help="S.npz to write: readout words and the full config",
                         seed_help="seed of the random generator (default: fresh entropy)",
                         no_noise_help="no shot noise: deliver the expected electrons deterministically")
-    parser.add_argument("--method", choices=("fast", "per-clock"), default="fast",
+    from tespike.golden.fastsim.simulator import SIMULATION_METHODS
+    parser.add_argument("--method", choices=SIMULATION_METHODS, default="fast",
                         help="'per-clock' draws electrons every pixel clock (slow; for checking)")
     parser.add_argument("--workers", type=int, default=None,
                         help=f"processes simulating the frame's stripes, 1..{MAX_WORKERS} (default: the "
@@ -19,7 +20,6 @@ def add_arguments(parser):
 def run(args) -> int:
     from tespike.cosim.console import progress_wanted, report
     from tespike.golden.config import load_config
-    from tespike.golden.errors import InputError
     from tespike.golden.fastsim import simulate_scene
     from tespike.golden.io import load_scene, save_stream, word_dtype
     from tespike.cosim.room import require_room
@@ -28,10 +28,8 @@ def run(args) -> int:
     check_workers_argument(args.workers)                # before the scene is read and scanned
     check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config})
     config = load_config(args.config)
-    sensor = sensor_argument(args)
+    sensor = light_front_end(args)
     scene = load_scene(args.scene, memory_map=True)     # read one readout at a time
-    if args.seed is not None and args.seed < 0:
-        raise InputError(f"--seed {args.seed}: must be >= 0")
     K, H, W = scene.shape
     size = K * H * W * word_dtype(config).itemsize          # the words, in memory and in S.npz
     require_room(f"the stream of {K} readouts of {H} x {W} words", memory=size, disk={args.out: size})

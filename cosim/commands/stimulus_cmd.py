@@ -18,7 +18,7 @@ K * L * H * W values, so the command refuses sizes above ``--max-bytes``;
 it is written one readout interval at a time into a memory-mapped file.
 """
 
-from .common import add_light_arguments, sensor_argument
+from .common import add_light_arguments, light_front_end
 
 HELP = "turn a light scene I.npy into the per-clock electron stimulus E.npy of golden / rtl-sim"
 
@@ -40,8 +40,8 @@ def add_arguments(parser):
 
 def run(args) -> int:
     import itertools
-    import sys
 
+    from tespike.cosim.console import progress_wanted
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
     from tespike.golden.fastsim import iter_scene_stimulus
@@ -52,11 +52,7 @@ def run(args) -> int:
     from tespike.golden.paths import check_outputs
     check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config})
     config = load_config(args.config)
-    if args.seed is not None and args.seed < 0:
-        raise InputError(f"--seed {args.seed}: must be >= 0")
-    if args.no_noise and args.dark_current != "none":
-        raise InputError(f"--dark-current {args.dark_current} is random; it cannot be combined with --no-noise")
-    sensor = sensor_argument(args)
+    sensor = light_front_end(args)
     scene = load_scene(args.scene, memory_map=True)
     K, H, W = scene.shape
     rows, cols = slice(0, H), slice(0, W)
@@ -85,7 +81,7 @@ def run(args) -> int:
     # the whole scene sets the generator's budget, so the first K readouts are those of the full stimulus
     stream = itertools.islice(iter_scene_stimulus(config, scene, seed=args.seed, dark_current=args.dark_current,
                                                   noise=not args.no_noise, sensor=sensor), K)
-    if sys.stderr.isatty() and K > 1:
+    if progress_wanted(args) and K > 1:
         from tqdm import tqdm
         stream = tqdm(stream, total=K, desc="stimulus", unit="readout", delay=2.0, leave=False)
     require_room(f"the stimulus of {K * L} x {H} x {W} {dtype} values", disk={args.out: size})
