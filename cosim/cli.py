@@ -13,7 +13,7 @@ import argparse
 import importlib
 import sys
 
-from tespike.golden.errors import TespikeError
+from tespike.golden.errors import TespikeError, one_line
 
 from .console import progress_wanted, report  # noqa: F401  (what command modules print)
 
@@ -175,15 +175,10 @@ def _memory_limit() -> str:
     return "" if limit is None else f" within the address-space limit (ulimit -v) of {limit >> 20} MB"
 
 
-def _one_line(exc: BaseException, limit: int = 300) -> str:
-    text = " ".join(str(exc).split()) or type(exc).__name__
-    return text if len(text) <= limit else text[:limit] + "..."
-
-
 def _notes(exc: BaseException) -> str:
     """What the interrupted command noted on the exception (e.g. the checkpoint it saved), one line."""
     notes = getattr(exc, "__notes__", ())
-    return " " + _one_line("; ".join(notes)) if notes else ""
+    return " " + one_line("; ".join(notes), 300) if notes else ""
 
 
 def _written(since: int, exc: BaseException) -> list[str]:
@@ -198,7 +193,7 @@ def _written(since: int, exc: BaseException) -> list[str]:
 def _after(since: int, exc: BaseException) -> str:
     """`` after writing 'S.npz' whole`` for an interrupted command's line ('' if nothing was)."""
     done = _written(since, exc)
-    return f" after writing {_one_line(', '.join(repr(p) for p in done), 200)} whole" if done else ""
+    return f" after writing {one_line(', '.join(repr(p) for p in done))} whole" if done else ""
 
 
 def _before(since: int, exc: BaseException) -> str:
@@ -221,16 +216,19 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     previous = _install_signal_handlers()
-    from .library_room import guard_imports
-    guard_imports()                   # under ulimit -v only: torch's import is tried in a child first
-    if whole_process:                 # removes the run's temporaries should it be killed outright
-        from tespike.golden.atomic import start_janitor
-        start_janitor()
+
+    def prepare():                    # (in _run: a stop while preparing ends in its one line too)
+        from .library_room import guard_imports
+        guard_imports()               # under ulimit -v only: torch's import is tried in a child first
+        if whole_process:             # removes the run's temporaries should it be killed outright
+            from tespike.golden.atomic import start_janitor
+            start_janitor()
     import warnings
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            code, ok = _run(args)
+            code, ok = _run(args, prepare, lambda: (_restore_signal_handlers(previous),
+                                                    whole_process and _end_quietly()))
     finally:              # main() called in-process (tests) leaves the caller's handlers as they were
         _restore_signal_handlers(previous)
         if whole_process:
@@ -243,19 +241,24 @@ def main(argv: list[str] | None = None) -> int:
     return code
 
 
-def _run(args) -> tuple[int, bool]:
-    """Run a sub-command; return (exit code, whether it ended normally)."""
+def _run(args, prepare=lambda: None, ended=lambda: None) -> tuple[int, bool]:
+    """Run a sub-command after ``prepare``; return (exit code, whether it ended normally). ``ended``
+    runs once the command has returned (the caller's signal handlers back: a stop after it ends
+    the process as the system does, never with a traceback from outside this function)."""
     from tespike.golden.atomic import finished_outputs
     prefix = f"tespike {args.command}"
     start = len(finished_outputs())
     try:
-        return int(args.run(args) or 0), True
+        prepare()
+        code = int(args.run(args) or 0)
+        ended()
+        return code, True
     except TespikeError as exc:
-        print(f"{prefix}: error: {_one_line(exc)}{_notes(exc)}{_before(start, exc)}", file=sys.stderr)
+        print(f"{prefix}: error: {one_line(exc, 300)}{_notes(exc)}{_before(start, exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
     except OSError as exc:
         where = f" {exc.filename!r}:" if exc.filename else ""
-        cause = _one_line(exc.strerror or exc)
+        cause = one_line(exc.strerror or exc, 300)
         if "No usable temporary directory" in cause:       # tempfile's words hide the cause
             from tespike.golden.paths import temporary_directory_fault
             cause = temporary_directory_fault() or cause
@@ -264,7 +267,7 @@ def _run(args) -> tuple[int, bool]:
         print(f"{prefix}: error:{where} {cause}{_notes(exc)}{_before(start, exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
     except MemoryError as exc:        # numpy's says what it could not allocate; library_room's, what is left
-        detail = f" ({_one_line(exc, 200)})" if str(exc) else ""
+        detail = f" ({one_line(exc)})" if str(exc) else ""
         print(f"{prefix}: error: out of memory{_memory_limit()}{detail}{_notes(exc)}{_before(start, exc)}",
               file=sys.stderr)
         return 1, False
@@ -276,7 +279,7 @@ def _run(args) -> tuple[int, bool]:
         if not any(words in str(exc) for words in OUT_OF_MEMORY) and \
                 not (_memory_limit() and any(words in str(exc) for words in OUT_OF_MEMORY_UNDER_LIMIT)):
             raise
-        print(f"{prefix}: error: out of memory{_memory_limit()} ({_one_line(exc, 160)}){_notes(exc)}"
+        print(f"{prefix}: error: out of memory{_memory_limit()} ({one_line(exc, 160)}){_notes(exc)}"
               f"{_before(start, exc)}",
               file=sys.stderr)
         return 1, False

@@ -16,10 +16,12 @@ import errno
 import os
 import re
 import shutil
+import signal
 import stat
 import subprocess
 import sys
 import tempfile
+import threading
 from pathlib import Path
 from typing import Iterator
 
@@ -252,11 +254,13 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
             yield tmp
             if through:
                 _write_through(tmp, target, shown)
+                _FINISHED.append(shown)
             else:
                 mode = (info.st_mode & 0o777) if info is not None else (0o666 & ~_umask())
                 os.chmod(tmp, mode)
-                os.replace(tmp, target)
-            _FINISHED.append(shown)
+                with _stops_held():
+                    os.replace(tmp, target)
+                    _FINISHED.append(shown)
         except OSError as exc:
             if exc.filename not in (None, tmp, str(target)):
                 raise                              # about another file: the caller names it
@@ -265,6 +269,32 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         _Janitor.release(tmp)
+
+
+#: Signals that stop a command, held while an output is committed (:func:`_stops_held`).
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+@contextlib.contextmanager
+def _stops_held():
+    """Ctrl-C, SIGTERM and SIGHUP held while an output is renamed into place and recorded as
+    written, then raised again through the handlers they would have met: a command stopped there
+    reports the output as written (:func:`finished_outputs`), never a replaced file it does not
+    name. Only the main thread can change the handlers (elsewhere nothing is held)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held, previous = [], {}
+    for number in STOP_SIGNALS:
+        if signal.getsignal(number) not in (signal.SIG_IGN, None):
+            previous[number] = signal.signal(number, lambda signum, frame: held.append(signum))
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        for number in held:
+            signal.raise_signal(number)
 
 
 def _write_through(tmp: str, target: Path, shown: str) -> None:
@@ -342,19 +372,21 @@ def atomic_folder(path: str | Path, what: str = "--out") -> Iterator[Path]:
     try:
         try:
             yield tmp
-            if not os.path.lexists(target):
-                os.rename(tmp, target)
-            elif not folder_holds_files(target) and target.is_dir():
-                os.replace(tmp, target)            # an empty folder is replaced in one step
-            elif _exchange(str(tmp), str(target)):
-                pass                               # tmp now holds the previous run: removed below
-            else:
-                old = Path(tempfile.mkdtemp(prefix=f".{stem}.{os.getpid()}.", suffix=".part", dir=target.parent))
-                os.rename(target, old / "previous")
-                os.rename(tmp, target)
-                os.rename(old, tmp)
-            del _FINISHED[mark:]
-            _FINISHED.append(shown)
+            with _stops_held():                    # (the two renames below are one step to a stop)
+                if not os.path.lexists(target):
+                    os.rename(tmp, target)
+                elif not folder_holds_files(target) and target.is_dir():
+                    os.replace(tmp, target)        # an empty folder is replaced in one step
+                elif _exchange(str(tmp), str(target)):
+                    pass                           # tmp now holds the previous run: removed below
+                else:
+                    old = Path(tempfile.mkdtemp(prefix=f".{stem}.{os.getpid()}.", suffix=".part",
+                                                dir=target.parent))
+                    os.rename(target, old / "previous")
+                    os.rename(tmp, target)
+                    os.rename(old, tmp)
+                del _FINISHED[mark:]
+                _FINISHED.append(shown)
         except InputError as exc:
             raise InputError(reworded(str(exc))) from None
         except OSError as exc:

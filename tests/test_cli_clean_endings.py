@@ -308,6 +308,54 @@ def test_only_a_finished_folder_counts_as_written_never_the_files_inside_its_tem
     assert finished_outputs(start) == [str(tmp_path / "ev")]
 
 
+@pytest.mark.parametrize("folder", [False, True])
+def test_a_stop_during_the_rename_comes_after_the_output_is_recorded(tmp_path, monkeypatch, folder):
+    """SIGTERM (or Ctrl-C) between an output's rename and its record is held: the command stops
+    after, naming the output as written, not with a replaced file it calls unwritten."""
+    import tespike.golden.atomic as atomic
+
+    class Stopped(Exception):
+        pass
+
+    def stop(signum, frame):
+        raise Stopped
+    real = {name: getattr(atomic.os, name) for name in ("replace", "rename")}
+
+    def then_signalled(name):
+        def move(*args, **kwargs):
+            real[name](*args, **kwargs)
+            os.kill(os.getpid(), signal.SIGTERM)     # its handler runs at the next bytecode
+        return move
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        start = len(atomic.finished_outputs())
+        target = tmp_path / ("ev" if folder else "s.txt")
+        for name in real:
+            monkeypatch.setattr(atomic.os, name, then_signalled(name))
+        with pytest.raises(Stopped):
+            with (atomic.atomic_folder if folder else atomic.atomic_output)(target) as part:
+                (Path(part) / "t.md" if folder else Path(part)).write_text("new")
+        monkeypatch.undo()
+        assert atomic.finished_outputs(start) == [str(target)]
+        assert (target / "t.md" if folder else target).read_text() == "new"
+        assert signal.getsignal(signal.SIGTERM) is stop
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def test_a_stop_while_the_command_prepares_is_its_one_line(tmp_path, monkeypatch, capsys):
+    """SIGTERM while the command prepares its run (the import guard, the janitor's start) ends in
+    the command's one line, as anywhere in the run: it escaped as a traceback before."""
+    from tespike.cosim import cli, library_room
+
+    monkeypatch.setattr(library_room, "guard_imports", lambda: os.kill(os.getpid(), signal.SIGTERM))
+    np.save(tmp_path / "i.npy", np.full((1, 4, 4), 0.1))
+    assert cli.main(["simulate", "--config", "te", "--scene", str(tmp_path / "i.npy"),
+                     "--out", str(tmp_path / "s.npz")]) == 128 + signal.SIGTERM
+    assert capsys.readouterr().err.splitlines() == ["tespike simulate: terminated by SIGTERM"]
+    assert not (tmp_path / "s.npz").exists()
+
+
 def test_a_signal_during_the_interpreters_exit_ends_it_without_a_traceback(tmp_path):
     """After the command's line, Ctrl-C or SIGTERM end the process as the system does (torch's and
     Dask's exit handlers take a second; a KeyboardInterrupt raised in one printed a traceback)."""
