@@ -203,7 +203,8 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
         if not verilog_path.is_file():
             raise InputError(f"Verilog file {str(verilog_path)!r} does not exist")
         build_dir = build(verilog_path, top, simulator, cache_root)
-        test_dir = Path(work_dir) if work_dir is not None else Path(scratch) / "run"
+        # absolute: the simulator runs in test_dir and reads the results file's path from there
+        test_dir = Path(work_dir).resolve() if work_dir is not None else Path(scratch) / "run"
         test_dir.mkdir(parents=True, exist_ok=True)
         log, results = test_dir / f"{simulator}.log", test_dir / f"{simulator}-results.xml"
         if _ROOT not in sys.path:

@@ -86,6 +86,18 @@ def test_cocotb_bench_accepts_any_fixed_latency(tmp_path):
     assert result.passed and '"latency": 2' in result.message, result.message
 
 
+@needs("icarus")
+def test_cocotb_work_dir_may_be_relative(tmp_path, monkeypatch):
+    """A relative work folder (``--work-dir logs``) holds the run: the results file was looked
+    for under the folder twice over (the simulator runs inside it), and every run failed."""
+    monkeypatch.chdir(tmp_path)
+    config = SensorConfig(b1=2, b2=2, clocks_per_tick=3, threshold=30)
+    (tmp_path / "ok.v").write_text(spec_model_verilog(config, 2, 3))
+    result = run_cocotb(Settings(config, 2, 3), "icarus", verilog_path="ok.v", work_dir="logs")
+    assert result.passed, result.message
+    assert (tmp_path / "logs" / "icarus-results.xml").is_file()
+
+
 def test_first_difference_names_readout_and_pixel():
     expected = np.zeros((2, 2, 3), np.int64)
     got = expected.copy()
