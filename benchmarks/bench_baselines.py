@@ -29,19 +29,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import torch  # noqa: E402
 import torch.utils.benchmark as benchmark  # noqa: E402
-from torch.utils.flop_counter import FlopCounterMode  # noqa: E402
 
 from tespike.recon.baselines import BASELINES  # noqa: E402
-from tespike.recon.learned import receptive_radius  # noqa: E402
+from tespike.recon.complexity import FLOP_HEIGHT, FLOP_WIDTH, PAPER_TABLE10, flops_per_frame  # noqa: E402
+from tespike.recon.learned import method_radius  # noqa: E402
 from tespike.recon.learning.layers import parameter_count  # noqa: E402
 from tespike.recon.net.model import TESpikeNet  # noqa: E402
 from tespike.recon.net.sizes import NetSizes  # noqa: E402
-
-#: The paper's Table 10: parameters, FLOPs, testing time (GPU).
-TABLE10 = {"spk2imgnet": ("3.760M", "1.955T", "0.418s"), "bsf": ("2.071M", "0.887T", "0.231s"),
-           "mambaspike": ("4.418M", "1.919T", "0.004s"), "net": ("6.479M", "3.711T", "0.005s")}
-HEIGHT, WIDTH = 384, 512
-
 
 def build(method: str, size: str) -> torch.nn.Module:
     if method == "net":
@@ -50,12 +44,10 @@ def build(method: str, size: str) -> torch.nn.Module:
     return model_cls(sizes_cls.preset(size))
 
 
-def flops(method: str, size: str) -> int:
-    model = build(method, size).to("meta")
-    counter = FlopCounterMode(display=False)
-    with torch.no_grad(), counter:
-        model(torch.empty(1, model.sizes.span, HEIGHT, WIDTH, device="meta"), None, 1.0)   # any one-spike light
-    return counter.get_total_flops()
+def paper_row(method: str) -> str:
+    """The paper's Table 10 row of a method: parameters, FLOPs, testing time (GPU)."""
+    row = PAPER_TABLE10[method]
+    return f"{row.parameters / 1e6:.3f}M, {row.flops / 1e12:.3f}T, {row.seconds:.3f}s"
 
 
 def seconds(model: torch.nn.Module, height: int, width: int, threads: int, min_run_time: float) -> float:
@@ -76,23 +68,24 @@ def main() -> None:
     args = parser.parse_args()
     torch.manual_seed(0)
     reference = {}
-    print(f"| method | size | parameters | GFLOPs / {HEIGHT} x {WIDTH} frame | receptive radius (px) | "
+    print(f"| method | size | parameters | GFLOPs / {FLOP_HEIGHT} x {FLOP_WIDTH} frame | receptive radius (px) | "
           "threads | CPU s / frame | / net cpu | paper Table 10 (params, FLOPs, GPU time) |")
     print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
     for method in args.methods:
         for size in args.sizes:
             model = build(method, size).eval().to(memory_format=torch.channels_last)
-            count = flops(method, size)
-            radius = receptive_radius(model.sizes)
+            count = flops_per_frame(model)
+            radius = method_radius(model.sizes)
             for threads in args.threads:
                 if size == "cpu":
-                    secs, note = seconds(model, HEIGHT, WIDTH, threads, args.min_run_time), ""
+                    secs, note = seconds(model, FLOP_HEIGHT, FLOP_WIDTH, threads, args.min_run_time), ""
                 else:
-                    secs, note = 16 * seconds(model, HEIGHT // 4, WIDTH // 4, threads, args.min_run_time), " (x16)"
+                    secs = 16 * seconds(model, FLOP_HEIGHT // 4, FLOP_WIDTH // 4, threads, args.min_run_time)
+                    note = " (x16)"
                 if method == "net" and size == "cpu":
                     reference[threads] = secs
                 ratio = f"{secs / reference[threads]:.2f}" if threads in reference else "-"
-                paper = ", ".join(TABLE10[method]) if size == "paper" else ""
+                paper = paper_row(method) if size == "paper" else ""
                 print(f"| {method} | {size} | {parameter_count(model):,} | {count / 1e9:.1f} | "
                       f"{radius} | {threads} | {secs:.3f}{note} | {ratio} | {paper} |",
                       flush=True)

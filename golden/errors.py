@@ -11,3 +11,11 @@ class ConfigError(TespikeError, ValueError):
 
 class InputError(TespikeError, ValueError):
     """A stimulus, scene, stream or other input file breaks SPEC section 6."""
+
+
+def one_line(exc: BaseException | str, limit: int = 200) -> str:
+    """An exception's message (or a message) as one short line, for refusals that quote a cause:
+    whitespace collapsed, the exception's type name when it says nothing, cut with ``...``
+    past ``limit`` characters."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= limit else text[:limit] + "..."

@@ -19,7 +19,7 @@ import numpy as np
 from .atomic import atomic_output
 from .config import SensorConfig
 from .decode import check_words
-from .errors import InputError, TespikeError
+from .errors import InputError, TespikeError, one_line
 from .paths import check_input_file
 
 __all__ = ["atomic_output", "check_scene", "check_stimulus", "load_npy", "load_scene", "load_stimulus",
@@ -39,7 +39,7 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
     except (OSError, ValueError, EOFError) as exc:
         _refuse_starved(exc, what, path)
         raise InputError(f"{what} file {str(path)!r} is not a readable .npy array: "
-                         f"{_first_line(exc)}") from None
+                         f"{one_line(exc)}") from None
     if not isinstance(array, np.ndarray):
         if hasattr(array, "close"):
             array.close()
@@ -54,13 +54,7 @@ def _magic(path, what: str) -> bytes:
             return handle.read(6)
     except OSError as exc:
         _refuse_starved(exc, what, path)
-        raise InputError(f"cannot read {what} file {str(path)!r}: {_first_line(exc)}") from None
-
-
-def _first_line(exc: BaseException, limit: int = 200) -> str:
-    """An exception's message cut to one short line (for messages about bad files)."""
-    text = " ".join(str(exc).split()) or type(exc).__name__
-    return text if len(text) <= limit else text[:limit] + "..."
+        raise InputError(f"cannot read {what} file {str(path)!r}: {one_line(exc)}") from None
 
 
 def check_stimulus(stimulus: np.ndarray, config: SensorConfig, *, whole_readouts: bool = True,
@@ -264,7 +258,7 @@ def open_npz(path: str | Path, what: str, holding: str = "") -> Iterator[np.lib.
         raise
     except NPZ_ERRORS as exc:
         _refuse_starved(exc, what, path)
-        raise InputError(f"{what} file {shown!r} is not a readable .npz archive: {_first_line(exc)}") from None
+        raise InputError(f"{what} file {shown!r} is not a readable .npz archive: {one_line(exc)}") from None
 
 
 def _refuse_starved(exc: BaseException, what: str, path) -> None:

@@ -40,6 +40,14 @@ from .io import check_scene, unsigned_dtype
 #: Dark-current models of the paper's appendix A.2.5.
 DARK_CURRENT_MODELS = ("eq12", "eq13")
 
+#: Mean and standard deviation of the normal draw of each dark model: eq. 12
+#: draws the dark electrons per readout interval, eq. 13 the interval between
+#: dark spikes (paper ref. [62]), which :func:`eq13_dark_per_readout` turns into electrons.
+DARK_NORMAL = {"eq12": (400.0, 50.0), "eq13": (140.0, 50.0)}
+
+#: Eq. 13: dark electrons per readout are ``EQ13_CHARGE / x`` clipped to ``[0, EQ13_CAP]``.
+EQ13_CHARGE, EQ13_CAP = 60000.0, 15000.0
+
 #: Natural log of the failure probability allowed for a whole scene: 2^-64.
 LOG_SCENE_FAILURE = -64.0 * math.log(2.0)
 
@@ -92,15 +100,19 @@ def dark_electrons(model: str | None, shape, rng: np.random.Generator, *,
     model = check_dark_current(model)
     if model is None:
         return np.zeros(shape, np.int64)
-    x = rng.normal(400.0, 50.0, shape) if model == "eq12" else rng.normal(140.0, 50.0, shape)
-    if model == "eq12":
-        per = np.maximum(x, 0.0)
-    else:
-        with np.errstate(divide="ignore"):
-            per = np.clip(np.where(x > 0, 60000.0 / np.where(x > 0, x, 1.0), 0.0), 0.0, 15000.0)
+    x = rng.normal(*DARK_NORMAL[model], shape)
+    per = np.maximum(x, 0.0) if model == "eq12" else eq13_dark_per_readout(x)
     if scale is not None:
         per = per * scale
     return np.rint(per).astype(np.int64)
+
+
+def eq13_dark_per_readout(x: np.ndarray) -> np.ndarray:
+    """Eq. 13's dark electrons per readout (before rounding) for spike intervals ``x``:
+    ``EQ13_CHARGE / x`` clipped to ``[0, EQ13_CAP]``, and 0 where ``x <= 0``; shared by the
+    draw and by :func:`tespike.golden.noise.model_mean`, which integrates its mean."""
+    with np.errstate(divide="ignore"):
+        return np.clip(np.where(x > 0, EQ13_CHARGE / np.where(x > 0, x, 1.0), 0.0), 0.0, EQ13_CAP)
 
 
 # -- rigorous tail bounds (natural logs) ---------------------------------------

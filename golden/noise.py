@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .light import check_dark_current, dark_electrons
+from .light import DARK_NORMAL, check_dark_current, dark_electrons, eq13_dark_per_readout
 
 #: Bounds of each option (inclusive): name -> (lowest, highest).
 NOISE_RANGES = {
@@ -235,17 +235,16 @@ def pixel_noise(dark_current: str | None, sensor: Sensor | None, shape: tuple[in
 
 @functools.lru_cache(maxsize=None)
 def model_mean(model: str | None) -> float:
-    """Mean dark electrons per readout of a dark model before rounding: 400 for eq. 12;
-    for eq. 13 the mean of ``clip(60000 / x, 0, 15000)``, ``x ~ N(140, 50)``, ``0`` for ``x <= 0``
-    (midpoint rule on 2 x 10^6 points over 12 standard deviations)."""
+    """Mean dark electrons per readout of a dark model before rounding: eq. 12's normal mean;
+    for eq. 13 the mean of :func:`~tespike.golden.light.eq13_dark_per_readout` over its normal
+    interval draw (midpoint rule on 2 x 10^6 points over 12 standard deviations)."""
     model = check_dark_current(model)
     if model is None:
         return 0.0
+    mean, sd = DARK_NORMAL[model]
     if model == "eq12":
-        return 400.0
-    x = np.linspace(140.0 - 600.0, 140.0 + 600.0, 2_000_001)
+        return mean
+    x = np.linspace(mean - 12 * sd, mean + 12 * sd, 2_000_001)
     mid, dx = 0.5 * (x[1:] + x[:-1]), x[1] - x[0]
-    density = np.exp(-0.5 * ((mid - 140.0) / 50.0) ** 2) / (50.0 * math.sqrt(2 * math.pi))
-    with np.errstate(divide="ignore"):
-        value = np.where(mid > 0, np.clip(60000.0 / np.where(mid > 0, mid, 1.0), 0.0, 15000.0), 0.0)
-    return float((value * density).sum() * dx)
+    density = np.exp(-0.5 * ((mid - mean) / sd) ** 2) / (sd * math.sqrt(2 * math.pi))
+    return float((eq13_dark_per_readout(mid) * density).sum() * dx)

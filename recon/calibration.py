@@ -71,6 +71,10 @@ FORMAT_MEAN_ONLY = "tespike-calibration-1"
 MIN_GAIN = 0.05
 #: Readouts decoded at once (bounds memory to this many float64 frames).
 CHUNK_READOUTS = 32
+#: Readouts of each calibration stream (dark and flat) the project records: the evaluation's
+#: sensors (:mod:`tespike.recon.evaluate`) and the training clips' dark laws
+#: (:func:`tespike.recon.engine.clips.sensor_calibration`) are calibrated alike.
+CALIBRATION_READOUTS = 256
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,6 +100,15 @@ class Calibration:
     def shape(self) -> tuple[int, int]:
         return tuple(self.dark.shape)
 
+    def law_tensors(self, device="cpu"):
+        """The dark law on ``device``: its atoms (Q, H W) float32 and the tail's ceiling (H W) float64,
+        ``dark_tail`` x each pixel's mean atom, spikes per readout; built here once for calibrated
+        TFP and TFI (:func:`tespike.recon.methods.reconstruct`) and the learned methods' input."""
+        import torch
+        atoms = torch.as_tensor(np.asarray(self.dark_law, np.float32), device=device)
+        atoms = atoms.reshape(self.dark_law.shape[0], -1)
+        return atoms, self.dark_tail * atoms.to(torch.float64).mean(0)
+
 
 def mean_decoded_light(words, config: SensorConfig) -> np.ndarray:
     """Per-pixel mean decoded light (scene units) over the readouts of ``words`` (K, H, W)."""
@@ -110,7 +123,7 @@ def overflow_share(words, config: SensorConfig) -> float:
     """Share of TE overflow words in ``words`` (0 for ML)."""
     if not config.is_te:
         return 0.0
-    flag = 1 << max(config.b1, config.b2)
+    flag = 1 << config.d                    # the overflow flag bit above the TE payload (golden's rule)
     count = sum(int(np.count_nonzero(np.asarray(words[s:s + CHUNK_READOUTS]) >= flag))
                 for s in range(0, words.shape[0], CHUNK_READOUTS))
     return count / words.size

@@ -43,7 +43,7 @@ or any sensor of ``noise_sensors=`` (a :class:`tespike.golden.noise.Sensor` per 
 dark level, non-uniformity, gain spread), get a table of their own
 (:func:`tespike.recon.report.noise_markdown`). A sensor ``<noise sensor>+cal`` is the same
 sensor reconstructed with its calibration (:mod:`tespike.recon.calibration`): per sequence
-frame size, :data:`CALIBRATION_READOUTS` dark readouts and as many under a flat
+frame size, :data:`~tespike.recon.calibration.CALIBRATION_READOUTS` dark readouts and as many under a flat
 light of :data:`CALIBRATION_FLAT`, simulated with the sensor (its own noise
 seed), estimate the per-pixel dark rate, dark law and gain that correct every method
 (recon.methods.reconstruct says where each method is corrected).
@@ -74,6 +74,7 @@ from tespike.golden.errors import InputError
 from tespike.golden.io import check_scene
 from tespike.golden.resources import require_memory
 
+from .calibration import CALIBRATION_READOUTS
 from .settings import DEFAULT_WINDOW, check_window
 
 #: Sensors evaluated by default: the paper's Table 1 columns (ML = the msb camera
@@ -83,9 +84,8 @@ SENSORS = ("ml-msb", "te", "ml")
 NOISE_SENSORS = {"te+eq12": ("te", "eq12"), "te+eq13": ("te", "eq13")}
 #: Suffix of a noise sensor reconstructed with its calibration (``"te+eq12+cal"``).
 CALIBRATED = "+cal"
-#: Readouts of each calibration stream (dark and flat) and the flat's light, scene units
-#: (below the TE overflow level; benchmarks/calibration_error.py measured the error).
-CALIBRATION_READOUTS = 256
+#: The flat calibration stream's light, scene units (below the TE overflow level;
+#: benchmarks/calibration_error.py measured the error); each stream has CALIBRATION_READOUTS readouts.
 CALIBRATION_FLAT = 0.03
 #: Names in tables and plots: the paper's names for its two cameras.
 NAMES = {"ml-msb": "ML", "te": "TE", "ml": "ML-count", "te+eq12": "TE+dark12", "te+eq13": "TE+dark13"}

@@ -9,7 +9,7 @@ its sizes dataclass is a :class:`tespike.recon.learning.sizes.SizesMixin` with
 alignment, deformable convolution, mu-law, weights file, tiled inference) is
 :mod:`tespike.recon.learning`; one trainer (:mod:`tespike.recon.train`) and one data engine
 (:mod:`tespike.recon.engine`) serve them all. Each module reports how far its output
-pixels reach (:func:`receptive_radius`, derived by :mod:`tespike.recon.reach`).
+pixels reach (:func:`method_radius`, derived by :mod:`tespike.recon.reach`).
 
 Shipped weights live in :data:`WEIGHTS_DIR`, one file per method and sensor
 preset: ``<preset>.pt`` for the project's network (``net``), ``<method>-<preset>.pt``
@@ -50,7 +50,7 @@ def method_classes(name: str) -> tuple[type, type]:
     return methods[name]
 
 
-def receptive_radius(sizes) -> int:
+def method_radius(sizes) -> int:
     """Frame pixels an output pixel of the learned method of ``sizes`` can reach (an upper bound;
     :func:`tespike.recon.learning.infer.module_radius`)."""
     from .learning.infer import module_radius

@@ -201,10 +201,7 @@ def _reconstruct_raw(words, config, spec, settings, progress, out, calibration=N
     if calibration is not None:
         from .calibration import input_correction
         correction = [c.reshape(-1) for c in input_correction(calibration, dtype=torch.float64)]
-        law = calibration.dark_law
-        if law is not None:                 # the atoms (Q, H W) and the tail's ceiling (H W), spikes
-            atoms = torch.as_tensor(np.asarray(law, np.float32)).reshape(law.shape[0], -1).to(settings.device)
-            law = (atoms, calibration.dark_tail * atoms.to(torch.float64).mean(0))
+        law = None if calibration.dark_law is None else calibration.law_tensors(settings.device)
     if progress:
         from tqdm import tqdm
         starts = tqdm(starts, desc=f"reconstruct {method}", unit="block")

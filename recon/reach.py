@@ -169,6 +169,6 @@ def support(module: nn.Module, *inputs: Support) -> Support:
     raise TypeError(f"no reach rule for {type(module).__name__}: give it a support() method beside its forward")
 
 
-def receptive_radius(model: nn.Module) -> int:
+def derive_radius(model: nn.Module) -> int:
     """Frame pixels an output pixel of ``model`` (a learned method's module) can reach, an upper bound."""
     return support(model, FRAME).radius

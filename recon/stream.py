@@ -1,4 +1,4 @@
-"""Spike streams in torch: loading, decoding by lookup table, sub-streams (paper eq. 4).
+"""Spike streams in torch: decoding by lookup table, and the span of readouts a learned method sees.
 
 Decoding uses exactly :mod:`tespike.golden.decode`: for each configuration (and
 estimator) a table over every code a word of ``config.word_bits`` bits can
@@ -11,7 +11,6 @@ illegal in the table and refused, as :func:`tespike.golden.decode.check_words` d
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -20,10 +19,6 @@ from tespike.golden.config import SensorConfig
 from tespike.golden.decode import check_words, decode_light as golden_decode_light
 from tespike.golden.decode import decode_spikes as golden_decode_spikes
 from tespike.golden.errors import InputError
-from tespike.golden.io import load_stream as golden_load_stream
-
-#: Edge rules of :func:`substreams` for windows that reach past the stream.
-EDGES = ("shift", "replicate", "error")
 
 
 def legal_codes(config: SensorConfig) -> np.ndarray:
@@ -130,51 +125,6 @@ def output_images(shape: tuple[int, int, int], out: np.ndarray | None = None) ->
     return out
 
 
-def load_stream(path: str | Path, device: str | torch.device = "cpu") -> tuple[torch.Tensor, SensorConfig]:
-    """Read S.npz with :func:`tespike.golden.io.load_stream` (checked legal); words as int64 on ``device``."""
-    words, config = golden_load_stream(path)
-    return as_word_tensor(words, device), config
-
-
-def window_starts(length: int, centres, radius: int, edge: str = "shift") -> torch.Tensor:
-    """First readout of the window ``[t - radius, t + radius]`` around each key moment ``t``.
-
-    Edge rules for windows that reach past either end of a stream of ``length``
-    readouts:
-
-    - ``"shift"``: the window keeps its 2 * radius + 1 readouts and is moved
-      inside the stream, so the key moment is no longer at its centre (near the
-      start it sits left of centre, near the end right of centre). Needs
-      ``length >= 2 * radius + 1``.
-    - ``"replicate"``: handled by :func:`substreams` (indices clamped, so the
-      first / last readout repeats); the start returned here is ``t - radius``
-      and may be negative.
-    - ``"error"``: refuse any window that does not fit.
-    """
-    if edge not in EDGES:
-        raise InputError(f"edge = {edge!r}: must be one of {', '.join(EDGES)}")
-    if type(radius) is not int or radius < 0:
-        raise InputError(f"radius = {radius!r}: must be an integer >= 0")
-    centres = torch.as_tensor(centres, dtype=torch.int64)
-    if centres.numel() and (int(centres.min()) < 0 or int(centres.max()) >= length):
-        raise InputError(f"key moments must lie in 0..{length - 1} (stream of {length} readouts), "
-                         f"got {int(centres.min())}..{int(centres.max())}")
-    starts = centres - radius
-    span = 2 * radius + 1
-    if edge == "shift":
-        if length < span:
-            raise InputError(f"stream of {length} readouts is shorter than one window of "
-                             f"{span} readouts (edge = 'shift' cannot move it inside)")
-        starts = starts.clamp(0, length - span)
-    elif edge == "error" and centres.numel():
-        outside = (starts < 0) | (starts + span > length)
-        if bool(outside.any()):
-            t = int(centres[outside][0])
-            raise InputError(f"window of radius {radius} around key moment {t} reaches past the "
-                             f"stream of {length} readouts (edge = 'error')")
-    return starts
-
-
 def key_span(length: int, key: int, span: int) -> np.ndarray:
     """Readout indices of the ``span`` readouts centred on ``key`` in a stream of ``length``,
     the first or last readout repeated past either end (so a stream of one readout works).
@@ -188,18 +138,3 @@ def span_inside(length: int, key: int, span: int) -> np.ndarray:
     """(span,) bool: which readouts of :func:`key_span` lie in the stream (the others repeat an end)."""
     times = np.arange(span) + key - span // 2
     return (times >= 0) & (times < length)
-
-
-def substreams(stream: torch.Tensor, centres, radius: int, edge: str = "shift") -> torch.Tensor:
-    """Sub-streams ``S_i = {S(t)}_{t = t_i - radius}^{t_i + radius}`` (paper eq. 4).
-
-    ``stream`` is (K, ...) along time (words or decoded light); returns
-    (len(centres), 2 * radius + 1, ...). See :func:`window_starts` for the
-    edge rules; every sub-stream has the same length.
-    """
-    length = stream.shape[0]
-    starts = window_starts(length, centres, radius, edge).to(stream.device)
-    index = starts[:, None] + torch.arange(2 * radius + 1, device=stream.device)[None, :]
-    if edge == "replicate":
-        index = index.clamp(0, length - 1)
-    return stream[index]

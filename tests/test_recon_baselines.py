@@ -10,7 +10,7 @@ from tespike.golden.config import SensorConfig
 
 from tespike.golden.errors import InputError
 from tespike.recon.baselines import BASELINES, PAPER_PARAMETERS
-from tespike.recon.learned import receptive_radius
+from tespike.recon.learned import method_radius
 from tespike.recon.learning.align import LocalCrossAttention, PyramidAlign, neighbourhood
 from tespike.recon.learning.layers import parameter_count, substreams
 from tespike.recon.baselines.represent import LENGTHS, firing_rates, window_means
@@ -170,11 +170,11 @@ def test_paper_parameter_count(name):
 
 @pytest.mark.parametrize("name", NAMES)
 @torch.no_grad()
-def test_receptive_radius_bounds_the_field(name):
+def test_method_radius_bounds_the_field(name):
     """A pixel beyond the radius leaves the centre alone; a change near the centre moves it."""
     changes = {"parsings": 1, "unshuffle": 1, "channels": 4} if name == "mambaspike" else {}
     model = randomise(small(name, **changes)).double()
-    radius = receptive_radius(model.sizes)
+    radius = method_radius(model.sizes)
     f = model.sizes.pyramid_factor
     side = -(-(2 * radius + 2 * f + 2) // f) * f
     light = hdr_light((1, 61, side, side)).double()

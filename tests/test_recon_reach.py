@@ -8,7 +8,7 @@ from torch import nn
 
 from tespike.golden.config import SensorConfig
 from tespike.recon.baselines import BASELINES
-from tespike.recon.learned import learned_methods, receptive_radius
+from tespike.recon.learned import learned_methods, method_radius
 from tespike.recon.net.features import MSFEG
 from tespike.recon.net.model import TESpikeNet
 from tespike.recon.net.sizes import NetSizes
@@ -46,7 +46,7 @@ def test_a_size_change_changes_the_derived_reach(name, changes):
     _, sizes_cls = learned_methods()[name]
     base = sizes_cls.preset("cpu")
     grown = dataclasses.replace(base, **changes)
-    assert receptive_radius(grown) != receptive_radius(base)
+    assert method_radius(grown) != method_radius(base)
 
 
 def test_a_kernel_change_in_a_module_changes_the_reach(monkeypatch):
@@ -92,7 +92,7 @@ def test_the_bound_holds_and_is_tight(name):
     """Offsets at their bound: a row just beyond the radius leaves the centre bit-identical (float64),
     and a row at 3/4 of the radius still moves it (the bound is not far looser than the field)."""
     model = saturated(small_model(name), -1.0)          # taps pulled up: the field reaches farthest above
-    radius = receptive_radius(model.sizes)
+    radius = method_radius(model.sizes)
     f = model.sizes.pyramid_factor
     side = -(-(2 * radius + 2 * f + 8) // f) * f
     light = hdr_light((1, model.sizes.span, side, side)).double()

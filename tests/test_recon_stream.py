@@ -7,8 +7,8 @@ import torch
 import tespike.golden.decode as gd
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
-from tespike.golden.io import save_stream
 from tespike.recon import stream
+from tespike.recon.learning.layers import substreams
 from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
 WIDE_CONFIGS = [
@@ -83,40 +83,14 @@ def test_non_integer_words_refused():
         stream.decode_light(torch.zeros((2, 2, 2)), config)
 
 
-def test_load_stream(tmp_path, rng):
-    config = SensorConfig(mode="ml", ml_bits=3)
-    words = rng.integers(0, 8, size=(4, 2, 3))
-    save_stream(tmp_path / "S.npz", words, config)
-    loaded, cfg = stream.load_stream(tmp_path / "S.npz")
-    assert cfg == config and loaded.dtype == torch.int64 and torch.equal(loaded, torch.from_numpy(words))
-    with pytest.raises(InputError, match="does not exist"):
-        stream.load_stream(tmp_path / "missing.npz")
-
-
-def test_substreams_inside_are_eq4():
-    s = torch.arange(20).view(20, 1, 1) * 10
-    subs = stream.substreams(s, [5, 10], 2)
-    assert subs.shape == (2, 5, 1, 1)
-    assert subs[:, :, 0, 0].tolist() == [[30, 40, 50, 60, 70], [80, 90, 100, 110, 120]]
-
-
-def test_substreams_edges():
-    s = torch.arange(10)
-    assert stream.substreams(s, [0, 1, 9], 2, "shift").tolist() == \
-        [[0, 1, 2, 3, 4], [0, 1, 2, 3, 4], [5, 6, 7, 8, 9]]
-    assert stream.substreams(s, [0, 9], 2, "replicate").tolist() == [[0, 0, 0, 1, 2], [7, 8, 9, 9, 9]]
-    assert stream.substreams(s, [2, 7], 2, "error").tolist() == [[0, 1, 2, 3, 4], [5, 6, 7, 8, 9]]
-    with pytest.raises(InputError, match="key moment 1 reaches past"):
-        stream.substreams(s, [2, 1], 2, "error")
-    with pytest.raises(InputError, match="shorter than one window"):
-        stream.substreams(s[:4], [0], 2, "shift")
-    assert stream.substreams(s[:2], [0, 1], 2, "replicate").tolist() == [[0, 0, 0, 1, 1], [0, 0, 1, 1, 1]]
-    with pytest.raises(InputError, match="key moments must lie in 0..9"):
-        stream.substreams(s, [10], 1)
-    with pytest.raises(InputError, match="edge"):
-        stream.substreams(s, [3], 1, "wrap")
-    with pytest.raises(InputError, match="radius"):
-        stream.substreams(s, [3], -1)
+def test_key_span_substreams_are_eq4():
+    """The network's sub-streams of a key span: eq. 4 inside the stream, the last readout repeated past its end."""
+    s = torch.arange(20.0).view(20, 1, 1)
+    inner = substreams(s[stream.key_span(20, 10, 9)][None], 3, 3, 3)[0, :, :, 0, 0]
+    assert inner.tolist() == [[6, 7, 8], [9, 10, 11], [12, 13, 14]]          # the middle one centred on 10
+    edge = substreams(s[stream.key_span(20, 18, 9)][None], 3, 3, 3)[0, :, :, 0, 0]
+    assert edge.tolist() == [[14, 15, 16], [17, 18, 19], [19, 19, 19]]
+    assert stream.span_inside(20, 18, 9).tolist() == [True] * 6 + [False] * 3
 
 
 def test_msb_table_is_the_msb_worth():

@@ -65,6 +65,7 @@ def add_arguments(parser):
                              "DSNU, hot pixels, PRNU, comparator offset; recon.engine.clips.NOISE_DRAW), its "
                              "decoded light corrected by the sensor's exact calibration as inference corrects a "
                              "learned method's input, target the scene light (default 0: shot noise only)")
+    # 256: tespike.recon.calibration.CALIBRATION_READOUTS, typed here so the parser imports no recon
     parser.add_argument("--noisy-input", choices=("mean", "law"), default=None,
                         help="what a noisy clip's method sees: its light less the sensor's mean dark rate, over "
                              "its gain (mean, the default: every shipped file's training), or also less the dark "

@@ -4,7 +4,7 @@ Each takes (N, span, H, W) decoded light (the project's stream format into
 every learned method, TE and ML alike) and returns (N, 1, H, W) light at the
 key moment ``span // 2``; how far an output pixel reaches is derived from each
 module (``support`` methods beside ``forward``, :mod:`tespike.recon.reach`;
-:func:`tespike.recon.learned.receptive_radius` for every learned method).
+:func:`tespike.recon.learned.method_radius` for every learned method).
 """
 
 from __future__ import annotations
@@ -23,7 +23,8 @@ BASELINES: dict[str, tuple[type[nn.Module], type]] = {
     "mambaspike1": (MambaSpike, MambaSpikeOneBranchSizes),
 }
 
-#: Parameters of each method in the paper's Table 10 (its TE version: MambaSpike of one parsing branch).
+#: Parameters of each method in the paper's Table 10 (its TE version: MambaSpike of one parsing branch);
+#: the whole table is :data:`tespike.recon.complexity.PAPER_TABLE10`, built on these.
 PAPER_PARAMETERS = {"spk2imgnet": 3_760_000, "bsf": 2_071_000, "mambaspike": 4_418_000, "mambaspike1": 4_418_000}
 
 __all__ = ["BASELINES", "PAPER_PARAMETERS", "Spk2ImgNet", "Spk2ImgNetSizes", "BSF",

@@ -31,7 +31,7 @@ from typing import ClassVar
 import torch
 from torch import nn
 
-from ..learning.layers import conv3
+from ..learning.layers import conv3, substreams
 from ..learning.mulaw import compress
 from ..reach import Support, support, union
 from .common import AlignedBaseline, BaselineSizes, BaselineWindows, ResBlock, centred
@@ -103,9 +103,8 @@ class Spk2ImgNet(AlignedBaseline):
     def features(self, light: torch.Tensor) -> torch.Tensor:
         """Each window's adaptive representation, then residual extraction: (N, S, C, h, w)."""
         s = self.sizes
-        code = compress(light, s.mu)                                    # the windows are slices of it
-        feats = torch.stack([self.represent(code[:, start:start + s.window])
-                             for start in range(0, s.substreams * s.stride, s.stride)], 1)
+        windows = substreams(compress(light, s.mu), s.substreams, s.window, s.stride)
+        feats = torch.stack([self.represent(window) for window in windows.unbind(1)], 1)
         return self.extract(feats.flatten(0, 1)).unflatten(0, feats.shape[:2])
 
     def features_support(self, light: Support) -> Support:

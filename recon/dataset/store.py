@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, one_line
 from tespike.golden.io import word_dtype
 
 FORMAT = "tespike-dataset"
@@ -284,8 +284,7 @@ def reading(url: str, path: str = ""):
         where = damaged_file(str(url), path)
         if where is None:
             raise
-        cause = " ".join(str(exc).split())[:160] or type(exc).__name__
-        raise InputError(f"dataset store file {where!r} is damaged ({cause}); remove its sequence's "
+        raise InputError(f"dataset store file {where!r} is damaged ({one_line(exc, 160)}); remove its sequence's "
                          "folder and run tespike dataset again to rebuild it") from None
 
 

@@ -35,7 +35,8 @@ to their bounds; its own sensor seed). Such a clip carries its sensor's exact
 mean dark rate and gain (:func:`sensor_maps`), and the batches correct its decoded
 light with them, ``(x - dark) / gain`` (``noisy_input`` ``mean``, the default and
 every shipped file's training); with ``noisy_input`` ``law`` it also carries the
-dark law of a dark stream of :data:`DARK_READOUTS` readouts that the sensor
+dark law of a dark stream of :data:`~tespike.recon.calibration.CALIBRATION_READOUTS` readouts
+(as many as the held-out benchmarks' calibrations take) that the sensor
 records (:func:`sensor_calibration`), and the batches give the method exactly the
 input inference gives it under such a calibration
 (:func:`tespike.recon.learning.infer.law_input`: less the law's upper tail). Its
@@ -55,6 +56,7 @@ from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.golden.fastsim import simulate_scene
 
+from ..calibration import CALIBRATION_READOUTS
 from .deadleaves import DeadLeavesParams, dead_leaves
 
 #: The panorama kept out of training: validation uses it.
@@ -267,13 +269,8 @@ def sensor_maps(sensor, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]
     return (np.broadcast_to(dark, shape).astype(np.float32), np.broadcast_to(maps.gain, shape).astype(np.float32))
 
 
-#: Readouts of the dark stream a noisy clip's sensor is calibrated with (:func:`sensor_calibration`):
-#: as many as the held-out benchmarks' calibrations take (docs/reconstruction.md).
-DARK_READOUTS = 256
-
-
 def sensor_calibration(sensor, config: SensorConfig, shape: tuple[int, int], seed,
-                       dark_readouts: int = DARK_READOUTS):
+                       dark_readouts: int = CALIBRATION_READOUTS):
     """A sensor's calibration as the learned methods read it: the exact per-pixel mean dark rate and
     gain (:func:`sensor_maps`, estimator ``exact``) and the dark law of a dark stream of
     ``dark_readouts`` readouts that the sensor records (``seed``: its shot and dark noise), as

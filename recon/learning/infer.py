@@ -9,7 +9,7 @@ method's pyramid factor (the convolutions' zero padding then meets scene
 content, not a cliff: +0.9 dB on 16 x 16 crops, docs/network.md), and cut into
 tiles whose cores are computed with :func:`tile_margin` pixels more on every
 side: the receptive radius derived from the module itself
-(:func:`receptive_radius`, :mod:`tespike.recon.reach`), rounded up to the pyramid
+(:func:`module_radius`, :mod:`tespike.recon.reach`), rounded up to the pyramid
 factor, so a tiled result equals the whole-frame one to float rounding
 (``tests/test_recon_learning_infer.py``).
 
@@ -37,7 +37,7 @@ from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
 from ..calibration import correct_input, input_correction
-from ..reach import receptive_radius as derived_radius
+from ..reach import derive_radius
 from ..settings import DEFAULT_WINDOW
 from ..stream import decode_light, key_span, output_images, span_inside
 
@@ -47,17 +47,12 @@ def module_radius(module_class: type, sizes) -> int:
     """Frame pixels an output pixel of ``module_class(sizes)`` can reach (an upper bound).
 
     Derived from the module built from ``sizes`` (on the meta device: no memory,
-    no weights) by :func:`tespike.recon.reach.receptive_radius`, so any change of a kernel,
+    no weights) by :func:`tespike.recon.reach.derive_radius`, so any change of a kernel,
     a level, an offset bound or a window shows in it.
     """
     with torch.device("meta"):
         model = module_class(sizes)
-    return derived_radius(model)
-
-
-def receptive_radius(model: torch.nn.Module) -> int:
-    """:func:`module_radius` of a learned method's module (its class and sizes)."""
-    return module_radius(type(model), model.sizes)
+    return derive_radius(model)
 
 
 #: Pixels of the frame mirrored beyond each edge before the network sees it (:func:`mirrored_index`).
@@ -67,7 +62,7 @@ MIRROR_BORDER = 8
 def tile_margin(model: torch.nn.Module) -> int:
     """Overlap added on every side of a tile: the derived receptive radius rounded up to the pyramid factor."""
     f = model.sizes.pyramid_factor
-    return -(-receptive_radius(model) // f) * f
+    return -(-module_radius(type(model), model.sizes) // f) * f
 
 
 #: The default tile core, in margins (:func:`default_tile`).
@@ -235,9 +230,7 @@ def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int 
     radius = window // 2
     first, last = max(0, start - radius), min(K, stop + radius)          # the windows' readouts
     flat = np.asarray(words[first:last]).reshape(last - first, H * W)
-    atoms = torch.as_tensor(np.asarray(calibration.dark_law, np.float32), device=device)
-    atoms = atoms.reshape(calibration.dark_law.shape[0], -1)
-    ceiling = calibration.dark_tail * atoms.to(torch.float64).mean(0)
+    atoms, ceiling = calibration.law_tensors(device)
     inverse_gain = torch.as_tensor(1.0 / calibration.gain, dtype=torch.float64, device=device).reshape(-1)
     mean_dark = torch.as_tensor(calibration.dark, dtype=torch.float64, device=device).reshape(-1)
     out = torch.empty((stop - start, H * W), dtype=torch.float32, device=device)

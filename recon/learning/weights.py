@@ -20,7 +20,7 @@ from typing import Any
 import torch
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, one_line
 from tespike.golden.io import atomic_output
 
 #: Keys every weights file holds.
@@ -61,8 +61,7 @@ def _check_crcs(path: str | Path, what: str, kind: str) -> None:
         with archive:
             damaged = archive.testzip()
     except (OSError, zipfile.BadZipFile, ValueError, EOFError, NotImplementedError, zlib.error) as exc:
-        cause = " ".join(str(exc).split())[:100] or type(exc).__name__
-        raise InputError(f"{what} {str(path)!r} is not a {kind} (a damaged archive: {cause})") from None
+        raise InputError(f"{what} {str(path)!r} is not a {kind} (a damaged archive: {one_line(exc, 100)})") from None
     if damaged is not None:
         raise InputError(f"{what} {str(path)!r} is not a {kind} (a damaged archive: member {damaged!r} "
                          "fails its CRC check)")

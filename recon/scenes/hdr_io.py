@@ -27,7 +27,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, one_line
 from tespike.golden.io import atomic_output
 from tespike.golden.paths import check_input_file
 
@@ -286,11 +286,10 @@ def read_exr(path: str | Path) -> np.ndarray:
                 channels = {name: np.asarray(ch.pixels) for name, ch in handle.channels().items()}
             failure = None
         except Exception as exc:  # the binding raises plain Exceptions for corrupt files
-            failure = " ".join(str(exc).split())
+            failure = exc
             said_first = said()
     if failure is not None:        # the library's own line says more ("found corrupt leader")
-        cause = said_first.removeprefix(f"{path}: ") or failure
-        raise InputError(f"cannot read EXR file {path!r}: {cause[:200]}")
+        raise InputError(f"cannot read EXR file {path!r}: {one_line(said_first.removeprefix(f'{path}: ') or failure)}")
     for name in ("RGB", "RGBA"):
         if name in channels:
             return channels[name][..., :3].astype(np.float32)
