@@ -33,6 +33,7 @@ import numpy as np
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
+from tespike.recon.settings import DEFAULT_WINDOW, check_window
 
 #: Sensors of the golden full frame: file label -> config preset (paper section 6.1 and eq. 10),
 #: in :data:`tespike.recon.evaluate.SENSORS` order: the paper's ML (msb) camera, TE, the full-count ML camera.
@@ -128,7 +129,6 @@ def check_options(out, *, frames, height, width, seed, crop, rtl_readouts, backe
                   sensors) -> tuple[int, int]:
     """Refuse a bad option in one line; return (crop, RTL readouts) with their defaults resolved."""
     from tespike.cosim.backends import NAMES
-    from tespike.golden.paths import check_output_dir
     from tespike.recon.scenes import MAX_VOXELS
 
     for key, value, low in (("--frames", frames, 1), ("--height", height, 1), ("--width", width, 1),
@@ -156,8 +156,7 @@ def check_options(out, *, frames, height, width, seed, crop, rtl_readouts, backe
         raise InputError(f"--rtl-readouts {rtl_readouts}: more than the {frames} frames of the scene")
     if backend not in NAMES:
         raise InputError(f"--backend {backend!r}: one of {', '.join(NAMES)}")
-    if window < 1 or window % 2 == 0:
-        raise InputError(f"--window {window}: must be an odd integer >= 1")
+    check_window(window, "--window")
     unknown = [name for name in sensors if name not in SENSORS]
     if unknown or not sensors or RTL_SENSOR not in sensors or len(set(sensors)) != len(sensors):
         raise InputError(f"--sensors {','.join(sensors)!r}: a list of distinct sensors among "
@@ -213,7 +212,7 @@ def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, 
 # ---------------------------------------------------------------- the demo
 def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed: int = 0,
              crop: int | None = None, rtl_readouts: int | None = None,
-             backend: str = "amaranth", repeats: int = 3, window: int = 9, hw_cost: bool = True,
+             backend: str = "amaranth", repeats: int = 3, window: int = DEFAULT_WINDOW, hw_cost: bool = True,
              sensors=tuple(SENSORS), quiet: bool = False, bars: bool | None = None, weights=()) -> int:
     """Run every stage into folder ``out``; 0 if the RTL stream is bit-identical to golden, else 1.
 
@@ -318,7 +317,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         write_text(out / "verdict.txt", verdict + "\n")
         rerun = (f"tespike stimulus --config te --scene I.npy --seed {seed} --crop {y},{x},{crop},{crop} "
                  f"--readouts {rtl_readouts} --out E_crop.npy")
-        rtl_cmd = (f"tespike rtl-sim --config te --stimulus E_crop.npy --out S_rtl.npz --check"
+        rtl_cmd = ("tespike rtl-sim --config te --stimulus E_crop.npy --out S_rtl.npz --check"
                    + (" --vcd W.vcd" if backend == "amaranth" else f" --backend {backend}"))
         progress.end(f"RTL ({backend})", started, [rerun, rtl_cmd])
         if not quiet:
@@ -337,8 +336,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                               methods=methods, sensors=tuple(configs), configs=configs, window=window, seed=seed,
                               progress=bars, keep=True, repeats=repeats, weights=chosen)
         paths = write_outputs(evaluation, out)
-        for (_, mode, method), images in evaluation.images.items():
-            save_images(out / f"R_{method}_{mode}.npy", images)
+        for (_, sensor, method), images in evaluation.images.items():
+            save_images(out / f"R_{method}_{sensor}.npy", images)
         peak = float(light.max())
         truth = light[:rtl_readouts, y:y + crop, x:x + crop]
         scored = scored_frames(rtl_readouts, window)
@@ -360,9 +359,9 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                 "max_diff": float(np.max(np.abs(images[scored] - full[scored]))),
                 "ms_per_frame": 1e3 * seconds / rtl_readouts})
         progress.end("reconstruction", started,
-                     [f"tespike reconstruct --stream S_{mode}.npz --method {method} "
+                     [f"tespike reconstruct --stream S_{sensor}.npz --method {method} "
                       + (f"--window {window} " if "window" in RECON_METHODS[method].options else "")
-                      + f"--out R_{method}_{mode}.npy" for mode in list(configs) + ["rtl"] for method in methods]
+                      + f"--out R_{method}_{sensor}.npy" for sensor in list(configs) + ["rtl"] for method in methods]
                      + [f"tespike evaluate --set default --frames {frames} --height {height} --width {width} "
                         f"--seed {seed} --out eval   # Table 1 layout, TE and ML count, other noise draws"])
 

@@ -340,17 +340,21 @@ def safe_name(name: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name) or "sequence"
 
 
-def write_outputs(evaluation: Evaluation, out: str | Path) -> dict[str, Path]:
-    """Write table.md, table.csv, results.csv, quality_vs_time.png and strips/<seq>.png into ``out``."""
+def write_outputs(evaluation: Evaluation, out: str | Path, *, plot: bool = True) -> dict[str, Path]:
+    """Write table.md, table.csv, results.csv, quality_vs_time.png and strips/<seq>.png into ``out``
+    -> the paths written (key ``plot`` for the plot, ``strip:<sequence>`` for the strips).
+    ``plot=False`` leaves the quality-against-run-time plot out (an evaluation over a dataset
+    store, whose scores come from many workers, has no comparable run times)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "strips").mkdir(exist_ok=True)
-    paths = {"table.md": out / "table.md", "table.csv": out / "table.csv",
-             "results.csv": out / "results.csv", "plot": out / "quality_vs_time.png"}
+    paths = {"table.md": out / "table.md", "table.csv": out / "table.csv", "results.csv": out / "results.csv"}
     write_text(paths["table.md"], table_markdown(evaluation))
     write_text(paths["table.csv"], table_csv(evaluation))
     write_text(paths["results.csv"], results_csv(evaluation))
-    plot_quality_vs_time(evaluation, paths["plot"])
+    if plot:
+        paths["plot"] = out / "quality_vs_time.png"
+        plot_quality_vs_time(evaluation, paths["plot"])
     used: set[str] = set()
     for sequence in evaluation.strips:
         stem = safe_name(sequence)

@@ -13,7 +13,7 @@ import numbers
 import numpy as np
 
 from tespike.golden.decode import ESTIMATORS
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, one_line
 
 #: Readouts per window of the training-free methods (paper section 6.4).
 DEFAULT_WINDOW = 9
@@ -23,6 +23,18 @@ def check_window(window, what: str = "window") -> None:
     """The one window rule: an odd integer >= 1 (readouts centred on the key moment)."""
     if type(window) is not int or window < 1 or window % 2 == 0:
         raise InputError(f"{what} {window!r}: must be an odd integer >= 1 (readouts centred on the key moment)")
+
+
+def check_device(device) -> None:
+    """Refuse, in one line, a torch device that cannot hold a tensor on this machine (a misspelt
+    name, cuda without a GPU, the data-less meta device), before any work is done on it."""
+    import torch
+    if str(device).startswith("meta"):
+        raise InputError(f"device = {device!r}: the meta device holds no data")
+    try:
+        torch.empty(0, device=device)
+    except (RuntimeError, TypeError, AssertionError) as exc:
+        raise InputError(f"device = {device!r}: not a usable torch device ({one_line(exc)})") from None
 
 
 #: TFI search modes: the whole stream (default) or the window around the key moment.
@@ -64,16 +76,9 @@ class ReconSettings:
             raise InputError(f"estimator = {self.estimator!r}: must be one of {', '.join(ESTIMATORS)}")
         if self.search not in TFI_SEARCH:
             raise InputError(f"search = {self.search!r}: must be one of {', '.join(TFI_SEARCH)}")
-        import torch
         if self.dtype not in ("float32", "float64"):
             raise InputError(f"dtype = {self.dtype!r}: must be 'float32' or 'float64'")
-        if str(self.device).startswith("meta"):
-            raise InputError(f"device = {self.device!r}: the meta device holds no data")
-        try:
-            torch.empty(0, device=self.device)
-        except (RuntimeError, TypeError, AssertionError) as exc:
-            reason = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else type(exc).__name__
-            raise InputError(f"device = {self.device!r}: not a usable torch device ({reason})") from None
+        check_device(self.device)
 
     def block_elements(self) -> int:
         """Readouts x pixels per block: ``chunk_elements``, or by default 2^19 on one

@@ -30,6 +30,7 @@ TABLE_VDP_FRAMES = 4
 from tespike.recon.settings import DEFAULT_WINDOW  # noqa: E402  (after the constants the help quotes)
 
 from .common import MAX_THREADS  # noqa: E402
+from .reconstruct_cmd import METHOD_CHOICES  # noqa: E402
 
 HELP = ("simulate sequences with the paper's TE and ML (msb readout) sensors and the full-count ML "
         "camera, reconstruct with every method, write Table 1 (Markdown, CSV), a quality-against-run-time "
@@ -57,7 +58,7 @@ def add_arguments(parser):
     parser.add_argument("--width", type=int, default=None,
                         help=f"columns of built-in sequences (default {DEFAULTS[2]}; --table {TABLE_DEFAULTS[2]})")
     parser.add_argument("--methods", default=None,
-                        help="comma-separated reconstruction methods: tfp, tfi, spk2imgnet, bsf, mambaspike1, mambaspike, net "
+                        help=f"comma-separated reconstruction methods: {', '.join(METHOD_CHOICES)} "
                              f"(default {','.join(DEFAULT_METHODS)}: a few minutes on 2 cores; a learned one "
                              "without weights for a sensor is noted, not run)")
     parser.add_argument("--weights", action="append", default=[], metavar="W.pt",
@@ -119,10 +120,12 @@ def run(args) -> int:
 
     from .common import check_threads_argument, publish_results
     from tespike.recon.evaluate import evaluate
-    from tespike.recon.report import OUTPUT_FILES, write_outputs
+    from tespike.recon.report import OUTPUT_FILES
     from tespike.recon.scenes import load_hdr_sequence
     from tespike.recon.scenes.heldout import sequence_set
+    from tespike.recon.settings import check_device
 
+    check_device(args.device)                           # before any sequence is simulated
     if args.store or args.workers is not None or args.scheduler:
         for flag, value in (("--table", args.table), ("--noise", args.noise), ("--metrics", args.metrics),
                             ("--sensor-noise", args.sensor_noise), ("--calibrate", args.calibrate),
@@ -167,8 +170,8 @@ def run(args) -> int:
     if ml_count != "none":
         wanted.append(("--ml-count-config", ml_count, "ml", ("ml", "count")))
     configs = {}
-    for option, value, mode, (kind, readout) in wanted:
-        config = configs[mode] = load_config(value)
+    for option, value, sensor, (kind, readout) in wanted:
+        config = configs[sensor] = load_config(value)
         if (config.mode, config.ml_readout) != (kind, readout):
             raise ConfigError(f"{option} {value!r} has mode {config.mode!r}, ml_readout {config.ml_readout!r}; "
                               f"expected mode {kind!r}" + (f", ml_readout {readout!r}" if kind == "ml" else ""))
@@ -213,5 +216,4 @@ def run(args) -> int:
     if args.table:
         from tespike.recon.complexity import measure
         evaluation.complexity = measure(evaluation.methods, configs["te"])
-    return publish_results(args, evaluation, write_outputs,
-                           ("table.md", "table.csv", "results.csv", "quality_vs_time.png"))
+    return publish_results(args, evaluation)

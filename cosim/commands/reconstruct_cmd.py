@@ -1,31 +1,33 @@
 """``tespike reconstruct``: a stream S.npz to reconstructed light R.npy (TFP, TFI, the learned methods)."""
 
 from tespike.recon.learned import LEARNED
+from tespike.recon.settings import DEFAULT_WINDOW, TFI_SEARCH
 
 from .common import MAX_THREADS
 
-HELP = "reconstruct light images R.npy from a TE or ML stream S.npz (tfp, tfi, spk2imgnet, bsf, mambaspike, net)"
-
 #: The keys of recon.methods.RECON_METHODS (named here without importing torch, so refusals are quick).
 METHOD_CHOICES = ("tfp", "tfi", *LEARNED)
+
+HELP = f"reconstruct light images R.npy from a TE or ML stream S.npz ({', '.join(METHOD_CHOICES)})"
 
 
 def add_arguments(parser):
     parser.add_argument("--stream", required=True, help="S.npz: readout words and the full config")
     parser.add_argument("--method", required=True,
                         help="tfp (mean decoded light over the window), tfi (spike interval), the paper's "
-                             "learned baselines spk2imgnet, bsf, mambaspike, or net (the paper's network); "
+                             "learned baselines spk2imgnet, bsf, mambaspike1 (MambaSpike of one parsing), "
+                             "mambaspike, or net (the paper's network); "
                              "learned methods use the shipped weights of the stream's preset (te, ml, ml-msb) "
                              "or --weights")
     parser.add_argument("--out", required=True, help="R.npy to write: float32 (K, H, W) light, I = 1 is 42000 e-")
     parser.add_argument("--window", type=int, default=None,
-                        help="tfp/tfi: readouts per window, odd (default 9, paper 6.4); learned methods see the "
+                        help=f"tfp/tfi: readouts per window, odd (default {DEFAULT_WINDOW}, paper 6.4); learned methods see the "
                              "span of readouts their sizes fix")
     parser.add_argument("--weights", default=None, metavar="W.pt",
                         help="learned methods: this weights file ('tespike train --out W.pt') instead of the "
                              "shipped one; it must hold the method and be trained for the stream's configuration")
     parser.add_argument("--device", default="cpu", help="torch device (default cpu)")
-    parser.add_argument("--search", choices=("stream", "window"), default="stream",
+    parser.add_argument("--search", choices=TFI_SEARCH, default="stream",
                         help="tfi only: look for the spike interval in the whole stream (default) or the window")
     parser.add_argument("--calibration", metavar="C.npz",
                         help="a calibration of the sensor that recorded the stream ('tespike calibrate'): "

@@ -14,7 +14,7 @@ def run_store(args) -> int:
     from tespike.cosim.commands.common import publish_results
     from tespike.golden.errors import InputError
     from tespike.golden.paths import check_results_dir
-    from tespike.recon.dataset.evaluate import evaluate_store, write_store_outputs
+    from tespike.recon.dataset.evaluate import evaluate_store
     from tespike.recon.report import OUTPUT_FILES
 
     from .cluster import Runner, check_workers
@@ -33,4 +33,4 @@ def run_store(args) -> int:
         print(f"evaluate: {args.store} on {runner.where}", flush=True)
         evaluation = evaluate_store(args.store, runner, methods=methods, window=args.window,
                                     device=args.device)
-    return publish_results(args, evaluation, write_store_outputs, ("table.md", "table.csv", "results.csv"))
+    return publish_results(args, evaluation, plot=False)

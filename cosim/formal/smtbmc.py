@@ -91,8 +91,8 @@ def _failed_assertion(log: str, messages: dict[str, str]) -> str:
 
 
 def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Result:
-    """Prove one harness by k-induction (base case and induction step, both ``depth`` long);
-    an :class:`Equivalence` by one SAT call (:func:`prove_equivalence`)."""
+    """Prove one harness by k-induction with yosys-smtbmc (base case and induction step, both
+    ``depth`` long); :func:`tespike.cosim.formal.prove` sends an equivalence elsewhere first."""
     from amaranth.back import rtlil
 
     start = time.perf_counter()

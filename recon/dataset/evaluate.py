@@ -5,8 +5,7 @@ PSNR-mu and SSIM-mu per frame after dividing by the sequence's peak, frames
 whose window reaches past the sequence not scored, frame means averaged per
 sequence, then over sequences), on the streams already in the store instead
 of freshly simulated ones, and the output files are those of ``tespike
-evaluate`` (:func:`tespike.recon.report.table_markdown`, ``table_csv``,
-``results_csv``, ``plot_strip``).
+evaluate`` (:func:`tespike.recon.report.write_outputs` without its plot).
 
 A frame that fits in one :data:`EVAL_TILE` is scored by one task with
 :func:`tespike.recon.metrics.psnr_mu` / ``ssim_mu`` on whole frames, exactly as the
@@ -28,7 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -36,6 +34,7 @@ import numpy as np
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
+from ..settings import DEFAULT_WINDOW
 from .store import DatasetStore, open_array, reading, tiles
 
 #: Largest frame (rows, cols) scored whole by one task; larger frames are tiled.
@@ -135,7 +134,7 @@ def _combine(parts: list[dict], height: int, width: int) -> tuple[np.ndarray, np
     return psnr, ssum / ((height - 2 * h) * (width - 2 * h))
 
 
-def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, window: int = 9,
+def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, window: int = DEFAULT_WINDOW,
                    device: str = "cpu", tile: tuple[int, int] = EVAL_TILE,
                    options: dict[str, dict] | None = None):
     """Score every complete sequence x sensor x method of the store -> :class:`tespike.recon.evaluate.Evaluation`.
@@ -233,26 +232,3 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
                 strip[sensor, method] = image
         evaluation.strips[sequence] = strip
     return evaluation
-
-
-def write_store_outputs(evaluation, out: str | Path) -> dict[str, Path]:
-    """table.md, table.csv, results.csv and strips/<sequence>.png (no timing plot: see the module)."""
-    from tespike.recon.pictures import write_text
-    from tespike.recon.report import plot_strip, results_csv, safe_name, table_csv, table_markdown
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "strips").mkdir(exist_ok=True)
-    paths = {"table.md": out / "table.md", "table.csv": out / "table.csv", "results.csv": out / "results.csv"}
-    write_text(paths["table.md"], table_markdown(evaluation))
-    write_text(paths["table.csv"], table_csv(evaluation))
-    write_text(paths["results.csv"], results_csv(evaluation))
-    used: set[str] = set()
-    for sequence in evaluation.strips:
-        stem = safe_name(sequence)
-        while stem in used:
-            stem += "_"
-        used.add(stem)
-        paths[f"strip:{sequence}"] = out / "strips" / f"{stem}.png"
-        plot_strip(evaluation, sequence, paths[f"strip:{sequence}"])
-    return paths
