@@ -212,6 +212,9 @@ def main(argv: list[str] | None = None) -> int:
     args, unknown = parser.parse_known_args(argv)
     if unknown:       # named by the sub-command's parser: "tespike train: ... (see tespike train --help)"
         getattr(args, "command_parser", parser).error(f"unrecognized arguments: {' '.join(unknown)}")
+    repeated = _repeated_option(getattr(args, "command_parser", parser), argv)
+    if repeated:      # argparse keeps the last value and drops the others without a word
+        getattr(args, "command_parser", parser).error(f"{repeated} is given more than once: give it once")
     if args.command is None:          # only top-level options, e.g. "tespike -q"
         parser.print_help()
         return 0
@@ -239,6 +242,27 @@ def main(argv: list[str] | None = None) -> int:
     elif whole_process:   # ... also at interpreter exit (e.g. a coroutine the interruption left)
         warnings.simplefilter("ignore")
     return code
+
+
+def _repeated_option(parser, argv: list[str]) -> str | None:
+    """The first option of ``parser`` that takes one value and appears twice in ``argv`` (its
+    spellings as typed, e.g. ``--out``), or None; repeatable options (``append``) and switches
+    may repeat."""
+    import argparse
+    single = {option: action.dest for action in parser._actions if type(action) is argparse._StoreAction
+              for option in action.option_strings}
+    seen: dict[str, str] = {}
+    for token in argv:
+        if token == "--":
+            break
+        name = token.split("=", 1)[0]
+        dest = single.get(name)
+        if dest is None:
+            continue
+        if dest in seen:
+            return seen[dest] if seen[dest] == name else f"{seen[dest]} / {name}"
+        seen[dest] = name
+    return None
 
 
 def _run(args, prepare=lambda: None, ended=lambda: None) -> tuple[int, bool]:

@@ -42,14 +42,17 @@ def _short(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
 
 
-def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    """object_pairs_hook of json.loads: a key given twice is refused, not silently overwritten."""
-    data: dict[str, Any] = {}
-    for key, value in pairs:
-        if key in data:
-            raise ConfigError(f"config key {key!r} is given twice")
-        data[key] = value
-    return data
+def unique_keys(what: str = "config key"):
+    """An object_pairs_hook of json.loads: a key given twice is refused (``what`` names it in the
+    message, e.g. "config key"), not silently overwritten by the last."""
+    def hook(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        data: dict[str, Any] = {}
+        for key, value in pairs:
+            if key in data:
+                raise ConfigError(f"{what} {key!r} is given twice")
+            data[key] = value
+        return data
+    return hook
 
 
 def _default_threshold(mode: str, b1: int, alpha: int, ml_bits: int) -> int:
@@ -143,7 +146,7 @@ class SensorConfig:
     def from_json(cls, text: str) -> "SensorConfig":
         """Parse JSON text; refuse duplicate keys, deep nesting and huge numbers in one line."""
         try:
-            data = json.loads(text, object_pairs_hook=_unique_keys)
+            data = json.loads(text, object_pairs_hook=unique_keys())
         except json.JSONDecodeError as exc:
             raise ConfigError(f"configuration is not valid JSON: {exc}") from None
         except ConfigError:

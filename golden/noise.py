@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .config import unique_keys
 from .errors import InputError
 from .light import DARK_NORMAL, check_dark_current, dark_electrons, eq13_dark_per_readout
 
@@ -126,7 +127,8 @@ def load_noise(path: str | Path) -> SensorNoise:
     from .paths import check_input_file
     check_input_file(path, "sensor noise")
     try:
-        values = json.loads(Path(path).read_text())
+        values = json.loads(Path(path).read_text(),
+                            object_pairs_hook=unique_keys(f"sensor noise file {str(path)!r}: key"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(f"sensor noise file {str(path)!r} is not readable JSON: {exc}") from None
     return SensorNoise.from_dict(values, f"sensor noise file {str(path)!r}")

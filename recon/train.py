@@ -42,6 +42,7 @@ from .engine.batches import ClipPool, draw_batch
 from .engine.clips import EngineRecipe
 from .learned import load_weights, method_classes
 from .learning.layers import parameter_count
+from .settings import check_device
 from .learning.mulaw import compress
 from .learning.weights import cpu_state, read_torch_file, read_weights, save_weights, write_torch_file
 from .pictures import MU
@@ -87,6 +88,8 @@ class TrainOptions:
         for key in ("halve_every", "steps_per_epoch", "batch", "crop", "pool", "refresh"):
             if type(getattr(self, key)) is not int or getattr(self, key) < 1:
                 raise InputError(f"{key} = {getattr(self, key)!r}: must be an integer >= 1")
+        if type(self.seed) is not int or not 0 <= self.seed < 1 << 63:
+            raise InputError(f"seed = {self.seed!r}: must be an integer in 0..2^63 - 1")
         for key in ("workers", "validate_every", "warmup"):
             if type(getattr(self, key)) is not int or getattr(self, key) < 0:
                 raise InputError(f"{key} = {getattr(self, key)!r}: must be an integer >= 0")
@@ -307,6 +310,7 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
     after a step, the run saves its checkpoint first and says so in a note on
     the exception; one that made nothing removes the run folder it created.
     """
+    check_device(options.device)       # (here, not in the options: a checkpoint's saved device may be absent)
     out = Path(out)
     work = Path(work_dir) if work_dir is not None else out.with_suffix(".run")
     created = not work.exists()

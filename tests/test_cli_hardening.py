@@ -447,9 +447,16 @@ def test_corrupt_stream_files(files, kind):
     (("golden", "--config", "te"), ["required", "--help"]),
     (("simulate", "--seed", "abc"), ["--seed", "--help"]),
     (("nonsense",), ["nonsense", "--help"]),
+    (("simulate", "--config", "ml", "--config=te", "--scene", "i.npy", "--out", "o.npz"),
+     ["--config", "more than once"]),
+    (("scene", "--frames", "3", "--frames", "4"), ["--frames", "more than once"]),
+    (("train", "--seed", "-1"), ["seed = -1", "0..2^63 - 1"]),
+    (("train", "--seed", str(10 ** 23)), ["seed", "0..2^63 - 1"]),
+    (("train", "--device", "bogus"), ["device = 'bogus'", "not a usable torch device"]),
 ])
 def test_argument_errors_are_one_line(files, args, words):
     extra = {"reconstruct": ("--stream", files / "s.npz", "--out", files / "o.npy"),
+             "train": ("--out", files / "W.pt", "--steps", 1, "--validate-every", 0),
              "scene": ("--out", files / "o.npy"), "verilog": ("--out", files / "o.v"),
              "evaluate": ("--scene", files / "i.npy", "--out", files / "ev")}.get(args[0], ())
     result = refused_without_change(files, (*args, *extra), *words)
@@ -472,6 +479,12 @@ def test_pickles_never_loaded(files):
                                    "--out", files / "o.npy"), "obj.npz")
 
 
+def test_noise_file_refuses_a_key_given_twice(files):
+    (files / "n.json").write_text('{"prnu": 0.01, "prnu": 0.02}')
+    refused_without_change(files, ("simulate", "--config", "te", "--scene", files / "i.npy", "--noise",
+                                   files / "n.json", "--out", files / "o.npz"), "n.json", "'prnu' is given twice")
+
+
 def test_npy_without_its_header_is_named_as_such(files):
     """A file without the .npy magic is said to lack it (numpy alone would call it a pickle)."""
     (files / "x.npy").write_bytes(b"x")
@@ -481,6 +494,23 @@ def test_npy_without_its_header_is_named_as_such(files):
                                         name, *words)
         assert "pickle" not in result.stderr
         refused_without_change(files, ("view", "--input", files / name, "--out", files / "o.png"), name, *words)
+
+
+def test_view_and_the_light_front_end_never_overwrite_an_input(files):
+    """view checks its outputs against its inputs (same path, a link, a frame file of --each), and
+    simulate / stimulus count --noise among their inputs."""
+    (files / "i.png").write_bytes((files / "i.npy").read_bytes())
+    os.symlink(files / "i.npy", files / "link.png")
+    (files / "d").mkdir()
+    os.symlink(files / "i.npy", files / "d" / "frame_0001.png")
+    for args, words in ((("--input", files / "i.png", "--out", files / "i.png"), ("--input",)),
+                        (("--input", files / "i.npy", "--out", files / "link.png"), ("--input",)),
+                        (("--input", files / "i.npy", "--out", files / "d", "--each"), ("frame 1", "--input"))):
+        refused_without_change(files, ("view", *args), *words, "refusing to overwrite an input")
+    (files / "n.npz").write_text('{"prnu": 0.01}')
+    for command in ("simulate", "stimulus"):
+        refused_without_change(files, (command, "--config", "te", "--scene", files / "i.npy", "--noise",
+                                       files / "n.npz", "--out", files / "n.npz"), "--noise", "refusing")
 
 
 def test_big_endian_and_fortran_inputs_equal_native(files):

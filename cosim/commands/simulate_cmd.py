@@ -26,7 +26,7 @@ def run(args) -> int:
     from tespike.golden.paths import check_outputs
 
     check_workers_argument(args.workers)                # before the scene is read and scanned
-    check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config})
+    check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config, "--noise": args.noise})
     config = load_config(args.config)
     sensor = light_front_end(args)
     scene = load_scene(args.scene, memory_map=True)     # read one readout at a time

@@ -50,7 +50,7 @@ def run(args) -> int:
     from tespike.cosim.room import require_room, reserved_memmap
 
     from tespike.golden.paths import check_outputs
-    check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config})
+    check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config, "--noise": args.noise})
     config = load_config(args.config)
     sensor = light_front_end(args)
     scene = load_scene(args.scene, memory_map=True)

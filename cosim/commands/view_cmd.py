@@ -101,7 +101,9 @@ def run(args) -> int:
 
     from tespike.golden.errors import InputError
     from tespike.golden.io import atomic_output
+    from tespike.golden.paths import check_outputs
 
+    inputs = {"--input": args.input, "--config": args.config}
     if args.peak is not None and not (math.isfinite(args.peak) and args.peak > 0):
         raise InputError(f"--peak {args.peak}: must be a finite number > 0")
     if not (math.isfinite(args.mu) and args.mu > 0):
@@ -116,8 +118,12 @@ def run(args) -> int:
         raise InputError(f"--out {str(out)!r}: a contact sheet is a .png file (or give --each and a folder)")
     elif not (out.parent if str(out.parent) else Path(".")).is_dir():
         raise InputError(f"--out {str(out)!r}: directory {str(out.parent)!r} does not exist")
+    if not args.each:
+        check_outputs({"--out": args.out}, inputs)
     light, what = load_light(args.input, args.config, args.estimator)
     frames = pick_frames(args.frames, light.shape[0], args.each)
+    if args.each and out.is_dir():                  # (a frame file there may be an input, or a link to one)
+        check_outputs({f"--out (frame {k})": out / f"frame_{k:04d}.png" for k in frames}, inputs)
     shown = light[frames]
     peak = args.peak if args.peak is not None else float(shown.max())
     if peak <= 0:
