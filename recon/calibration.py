@@ -69,6 +69,9 @@ FORMAT = "tespike-calibration-2"
 FORMAT_MEAN_ONLY = "tespike-calibration-1"
 #: Smallest gain a pixel is given (a pixel below it is dead or was not lit enough).
 MIN_GAIN = 0.05
+#: Median gain above which :func:`estimate` refuses the flat's stated light (no sensor's
+#: non-uniformity comes near it: the flat was recorded at another light than the one stated).
+MAX_GAIN = 1 / MIN_GAIN
 #: Readouts decoded at once (bounds memory to this many float64 frames).
 CHUNK_READOUTS = 32
 #: Readouts of each calibration stream (dark and flat) the project records: the evaluation's
@@ -162,7 +165,12 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
         raise InputError(f"dark stream frames {dark_words.shape[1:]} and flat stream frames "
                          f"{flat_words.shape[1:]} differ: both must come from the same sensor")
     dark = mean_decoded_light(dark_words, config)
-    raw_gain = (mean_decoded_light(flat_words, config) - dark) / float(flat_light)
+    shown = mean_decoded_light(flat_words, config) - dark
+    if float(np.median(shown)) > MAX_GAIN * float(flat_light):
+        raise InputError(f"flat light {flat_light:g}: the flat stream's pixels read {float(np.median(shown)):.4g} "
+                         f"(median, less the dark), above {MAX_GAIN:g} times it: state the light the flat "
+                         "was recorded at (1 = design light)")
+    raw_gain = shown / float(flat_light)
     floored = int(np.count_nonzero(raw_gain < MIN_GAIN))
     return Calibration(dark, np.maximum(raw_gain, MIN_GAIN), config, int(dark_words.shape[0]),
                        int(flat_words.shape[0]), float(flat_light), ESTIMATOR, floored,

@@ -61,6 +61,10 @@ def test_refusals_and_floor():
     dark, flat = _streams(config, 4)
     with pytest.raises(InputError, match="flat light"):
         estimate(dark, flat, config, 0.0)
+    for stated in (1e-300, 0.03 / 25):                      # far below what the flat shows (it was 0.03)
+        with pytest.raises(InputError, match="above 20 times it"):
+            estimate(dark, flat, config, stated)
+    estimate(dark, flat, config, 0.03 / 15)                 # within the factor: a calibration
     with pytest.raises(InputError, match="differ"):
         estimate(dark, flat[:, :3], config, 0.03)
     c = estimate(dark, dark, config, 0.03)                  # a "flat" with no light: every gain floored

@@ -110,9 +110,12 @@ def test_exr_round_trip(tmp_path, rng):
 
 
 def test_gray_weights_and_clipping():
-    pixel = np.array([[[1.0, 2.0, 4.0], [-0.5, 1.0, 0.0]]])
+    pixel = np.array([[[1.0, 2.0, 4.0], [-0.03, 1.0, 0.0]]])     # a dip below 0 of 0.75 % of the peak: clipped
     assert np.allclose(to_gray(pixel), [[0.2126 + 1.4304 + 0.2888, 0.7152]])
     assert np.allclose(to_gray(pixel, "rec601"), [[0.299 + 1.174 + 0.456, 0.587]])
+    pixel[0, 1, 0] = -0.5                                              # 12.5 % of it: not light
+    with pytest.raises(InputError, match="negative values down to -0.5"):
+        to_gray(pixel)
     with pytest.raises(InputError, match="weights"):
         to_gray(pixel, "srgb-ish")
     with pytest.raises(InputError, match="non-finite"):

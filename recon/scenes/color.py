@@ -21,14 +21,18 @@ LUMA_WEIGHTS = {
     "rec601": (0.299, 0.587, 0.114),
 }
 DEFAULT_WEIGHTS = "rec709"
+#: Deepest negative value, as a share of an image's peak, that :func:`to_gray` clips at 0
+#: (a lossy HDR file's dip below zero); a deeper one is refused.
+NEGATIVE_SHARE = 0.01
 
 
 def to_gray(image: np.ndarray, weights: str = DEFAULT_WEIGHTS, *, what: str = "image") -> np.ndarray:
     """Linear RGB ``(..., H, W, 3)`` or gray ``(..., H, W)`` -> float64 luminance ``(..., H, W)``.
 
     Negative values (a few pixels of lossy-compressed HDR files dip just below
-    zero) are clipped at 0 *before* mixing; non-finite values are refused.
-    A trailing axis of 3 is read as RGB, one of 1 as gray.
+    zero) are clipped at 0 *before* mixing, down to :data:`NEGATIVE_SHARE` of the
+    image's peak; deeper ones, and non-finite values, are refused (that is not
+    light). A trailing axis of 3 is read as RGB, one of 1 as gray.
     """
     if weights not in LUMA_WEIGHTS:
         raise InputError(f"unknown grayscale weights {weights!r} (known: {', '.join(LUMA_WEIGHTS)})")
@@ -38,6 +42,9 @@ def to_gray(image: np.ndarray, weights: str = DEFAULT_WEIGHTS, *, what: str = "i
     image = image.astype(np.float64, copy=False)
     if image.size and not np.isfinite(image).all():
         raise InputError(f"{what}: holds non-finite values (NaN or infinity)")
+    if image.size and image.min() < -NEGATIVE_SHARE * max(float(image.max()), 0.0):
+        raise InputError(f"{what}: holds negative values down to {float(image.min()):.4g}, beyond "
+                         f"{NEGATIVE_SHARE:g} of its peak {max(float(image.max()), 0.0):.4g}: not light")
     if image.ndim >= 3 and image.shape[-1] == 3:
         rgb = np.maximum(image, 0.0)
         return rgb @ np.asarray(LUMA_WEIGHTS[weights], np.float64)
