@@ -51,7 +51,7 @@ def _check_word_block(words: np.ndarray, config: SensorConfig, where) -> None:
         bad = (w < 0) | (w > config.ml_max)
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise InputError(f"readout word {int(w[index])} at index {where(index)} is not a legal "
+        raise InputError(f"readout word {int(words[index])} at index {where(index)} is not a legal "
                          f"{config.mode.upper()} word for this configuration ({config})")
 
 

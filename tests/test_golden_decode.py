@@ -62,3 +62,11 @@ def test_residual_estimator_less_biased_than_ratio_on_constant_light():
     residual_bias, _ = estimator_error(c, "residual", light, readouts=30, replicas=2, seed=3)
     assert np.abs(residual_bias).mean() < 0.8 * np.abs(ratio_bias).mean()
     assert (ratio_bias < 0.01).all()          # the paper's rule reads every overflow code low
+
+
+def test_a_refused_word_is_named_as_stored():
+    """A uint64 word above 2^63 is named with its own value (the int64 view read -1)."""
+    from tespike.golden.decode import check_words
+    for value in (2 ** 64 - 1, 2 ** 63 + 17):
+        with pytest.raises(InputError, match=f"readout word {value} at index \\(0, 0, 1\\)"):
+            check_words(np.array([[[0, value]]], np.uint64), SensorConfig())
