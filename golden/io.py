@@ -303,7 +303,10 @@ def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarr
     if 0 in words.shape:
         raise InputError(f"stream file {shown!r}: 'words' shape {words.shape} is empty "
                          "(K, H and W must be at least 1)")
-    check_words(words, config)
+    try:
+        check_words(words, config)
+    except InputError as exc:
+        raise InputError(f"stream file {shown!r}: {exc}") from None
     return words, config
 
 

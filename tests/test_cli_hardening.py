@@ -479,6 +479,15 @@ def test_pickles_never_loaded(files):
                                    "--out", files / "o.npy"), "obj.npz")
 
 
+def test_an_illegal_word_names_its_stream_file(files):
+    with np.load(files / "s.npz") as npz:
+        words = npz["words"].copy()
+    words[0, 0, 0] = np.iinfo(words.dtype).max               # no word of this configuration
+    np.savez(files / "bad.npz", words=words, config=np.array(TINY.to_json()))
+    refused_without_change(files, ("reconstruct", "--stream", files / "bad.npz", "--method", "tfp",
+                                   "--out", files / "o.npy"), "stream file", "bad.npz", "is not a legal")
+
+
 def test_noise_file_refuses_a_key_given_twice(files):
     (files / "n.json").write_text('{"prnu": 0.01, "prnu": 0.02}')
     refused_without_change(files, ("simulate", "--config", "te", "--scene", files / "i.npy", "--noise",
