@@ -165,7 +165,7 @@ def load_scene(path: str | Path, *, memory_map: bool = False, what: str | None =
     """
     name = "scene" if what is None else what
     scene = load_npy(path, name, mmap_mode="r")
-    name = name if what is None else f"{what} {str(path)!r}"       # values refused naming the file
+    name = f"{name} file {str(path)!r}"                             # values refused naming the file
     scene = check_scene(scene, scan_values=False, what=name)
     if scene.shape[0] == 0:
         raise InputError(f"scene file {str(path)!r} has K = 0 readout intervals (nothing to simulate)"

@@ -63,7 +63,7 @@ def load_light(path, config_spec=None, estimator="ratio"):
         return per_readout / DESIGN_ELECTRONS, f"stimulus, electrons per readout / {DESIGN_ELECTRONS}"
     if config_spec is not None:
         raise InputError("--config applies to a stimulus E.npy only (a light file carries no config)")
-    return load_scene(path), "light"
+    return load_scene(path, what="--input"), "light"
 
 
 def pick_frames(spec, count, each):
