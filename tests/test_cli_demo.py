@@ -119,7 +119,10 @@ def test_demo_is_deterministic(tmp_path, capsys):
                                         (("--rtl-readouts", 11), "--rtl-readouts"),
                                         (("--sensors", "ml"), "--sensors"), (("--sensors", "te,xx"), "--sensors")])
 def test_demo_refuses_bad_options(tmp_path, capsys, args, word):
-    code, _, err = run_here(capsys, "demo", *SMALL, *args, "--out", tmp_path / "d")
+    given = dict(zip(SMALL[::2], SMALL[1::2]))
+    given.update(zip(args[::2], args[1::2]))         # (an option given twice is refused on its own)
+    code, _, err = run_here(capsys, "demo", *(item for pair in given.items() for item in pair),
+                            "--out", tmp_path / "d")
     assert code == 2 and word in err and len(err.strip().splitlines()) == 1
 
 

@@ -219,6 +219,9 @@ def test_cli_refusals(tmp_path, capsys, rng):
     DatasetStore.create_or_resume(str(tmp_path / "o.zarr"), seed=0, configs={"te": SensorConfig()})
     refused(capsys, "evaluate", "--store", tmp_path / "o.zarr", "--out", tmp_path / "ev", "no complete sequence")
     refused(capsys, "evaluate", "--store", tmp_path / "nope.zarr", "--out", tmp_path / "ev", "does not exist")
+    code, out_text, _ = run_here(capsys, "evaluate", "--store", tmp_path / "taken", "--out", tmp_path / "ev")
+    assert code == 2 and out_text == ""                    # refused before the "evaluate: ... on" line
+    refused(capsys, "evaluate", "--store", tmp_path / "taken", "--out", tmp_path / "ev", "is a folder but not a dataset store")
     refused(capsys, "evaluate", "--store", tmp_path / "o.zarr", "--set", "moderate", "--out", tmp_path / "ev", "--set")
     refused(capsys, "evaluate", "--workers", 2, "--out", tmp_path / "ev", "--store")
     assert not (tmp_path / "ev").exists()

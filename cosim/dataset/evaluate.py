@@ -29,6 +29,8 @@ def run_store(args) -> int:
     check_workers(args.workers, args.scheduler)
     check_results_dir(args.out, OUTPUT_FILES, args.force)
     methods = None if args.methods is None else [m.strip() for m in args.methods.split(",") if m.strip()]
+    from tespike.recon.dataset.store import DatasetStore
+    DatasetStore.open(args.store)                       # a missing or foreign store refused before any line
     with Runner(args.workers, args.scheduler) as runner:
         print(f"evaluate: {args.store} on {runner.where}", flush=True)
         evaluation = evaluate_store(args.store, runner, methods=methods, window=args.window,

@@ -94,7 +94,10 @@ def _zarr_open_group(url: str, mode: str):
     try:
         return zarr.open_group(url, mode=mode)
     except FileNotFoundError:
-        raise InputError(f"dataset store {url!r} does not exist") from None
+        import os
+        there = "://" not in url and os.path.isdir(url)      # a local folder without a store's zarr.json
+        raise InputError(f"dataset store {url!r} " + ("is a folder but not a dataset store (it holds no zarr.json)"
+                                                     if there else "does not exist")) from None
     except (ValueError, TypeError, KeyError) as exc:      # not a Zarr v3 group, bad JSON
         raise InputError(f"{url!r} is not a readable Zarr store: {exc}") from None
 
