@@ -218,9 +218,9 @@ def load_calibration(path: str | Path) -> Calibration:
                              "(write it with 'tespike calibrate')")
     dark, gain = np.asarray(values["dark"], np.float64), np.asarray(values["gain"], np.float64)
     if dark.ndim != 2 or dark.shape != gain.shape or not (np.isfinite(dark).all() and np.isfinite(gain).all()) \
-            or (gain <= 0).any():
+            or (gain <= 0).any() or (dark < 0).any():
         raise InputError(f"calibration file {shown!r}: dark and gain must be finite (H, W) maps of one "
-                         "shape, gain > 0")
+                         "shape, dark >= 0 (a mean of decoded light) and gain > 0")
     if law is not None:
         if law.dtype != np.float32 or law.ndim != 3 or law.shape[1:] != dark.shape \
                 or not np.isfinite(law).all() or (law < 0).any():

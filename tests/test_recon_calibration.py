@@ -113,6 +113,10 @@ def test_file_round_trip(tmp_path):
     save_calibration(tmp_path / "c.npz", c)
     back = load_calibration(tmp_path / "c.npz")
     assert np.array_equal(back.gain, c.gain) and back.flat_light == 0.03 and back.overflow_share == c.overflow_share
+    import dataclasses
+    save_calibration(tmp_path / "neg.npz", dataclasses.replace(c, dark=c.dark - 5.0))   # no decoded light is < 0
+    with pytest.raises(InputError, match="dark >= 0"):
+        load_calibration(tmp_path / "neg.npz")
 
 
 def test_reconstruct_with_calibration_and_weights(tmp_path):
