@@ -2,22 +2,25 @@
 
 HELP = "write a light sequence I.npy: a built-in scene by name, or a folder of .exr/.hdr frames"
 
+#: Defaults of a built-in scene's options (refused beside --folder, so they default to None there).
+BUILT_IN = {"name": "default", "height": 96, "width": 128, "seed": 0}
+
 
 def add_arguments(parser):
-    parser.add_argument("--name", default="default",
+    parser.add_argument("--name", default=None,
                         help="built-in scene (see --list); default: the shipped panorama, panned")
     parser.add_argument("--folder", help="instead of --name: a folder of .exr/.hdr frames, sorted by name")
     parser.add_argument("--frames", type=int, default=24,
                         help="readout intervals K (default 24; with --folder: at most this many frames)")
-    parser.add_argument("--height", type=int, default=96, help="rows H (default 96)")
-    parser.add_argument("--width", type=int, default=128, help="columns W (default 128)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--height", type=int, default=None, help=f"rows H (default {BUILT_IN['height']})")
+    parser.add_argument("--width", type=int, default=None, help=f"columns W (default {BUILT_IN['width']})")
+    parser.add_argument("--seed", type=int, default=None, help=f"random seed (default {BUILT_IN['seed']})")
     parser.add_argument("--peak", type=float, default=1.0,
                         help="brightest pixel of the sequence, in design light (default 1.0)")
     parser.add_argument("--motion", help="camera motion of panorama scenes: pan (default), tilt, rotate, "
                         "zoom or mixed")
     parser.add_argument("--sources", type=int, help="moving bright sources added to a panorama scene")
-    parser.add_argument("--weights", default="rec709", help="grayscale weights for --folder: rec709 or rec601")
+    parser.add_argument("--weights", default=None, help="grayscale weights for --folder: rec709 (default) or rec601")
     parser.add_argument("--crop", metavar="HxW", help="--folder: centre-crop every frame to H x W (e.g. 384x512)")
     parser.add_argument("--downscale", type=int, default=1,
                         help="--folder: area-average N x N blocks after cropping (default 1)")
@@ -36,6 +39,7 @@ def run(args) -> int:
     from tespike.golden.paths import check_outputs
     from tespike.cosim.room import require_room
     from tespike.recon.scenes import SCENES, load_hdr_sequence, make_scene
+    from tespike.recon.scenes.color import DEFAULT_WEIGHTS
 
     if args.list:
         for name, (_, summary) in SCENES.items():
@@ -45,10 +49,19 @@ def run(args) -> int:
         raise InputError("--out is required (the I.npy to write)")
     if not args.folder:
         for flag, given in (("--crop", args.crop is not None), ("--downscale", args.downscale != 1),
-                            ("--weights", args.weights != "rec709")):
+                            ("--weights", args.weights is not None)):
             if given:
                 raise InputError(f"{flag} applies to --folder only (a built-in scene is made at "
                                  "--height x --width)")
+    else:                                               # (a folder's frames fix these)
+        for flag, key in (("--name", "name"), ("--height", "height"), ("--width", "width"), ("--seed", "seed"),
+                          ("--motion", "motion"), ("--sources", "sources")):
+            if getattr(args, key) is not None:
+                raise InputError(f"{flag} applies to built-in scenes only (--folder's frames fix the "
+                                 "sequence; --crop and --downscale size it)")
+    for key, default in BUILT_IN.items():
+        if getattr(args, key) is None:
+            setattr(args, key, default)
     if not (math.isfinite(args.peak) and args.peak > 0):
         raise InputError(f"--peak {args.peak!r}: must be a finite number > 0")
     check_outputs({"--out": args.out})
@@ -61,7 +74,9 @@ def run(args) -> int:
                 crop = ()
             if len(crop) != 2:
                 raise InputError(f"--crop {args.crop!r} must be HxW, e.g. 384x512")
-        light = load_hdr_sequence(args.folder, weights=args.weights, peak=args.peak,
+        if args.frames < 1:
+            raise InputError(f"--frames {args.frames}: must be >= 1")
+        light = load_hdr_sequence(args.folder, weights=args.weights or DEFAULT_WEIGHTS, peak=args.peak,
                                   max_frames=args.frames, crop=crop, downscale=args.downscale,
                                   progress=progress_wanted(args))
     else:
