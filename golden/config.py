@@ -32,6 +32,9 @@ KEYS = ("mode", "b1", "b2", "alpha", "clocks_per_tick", "threshold",
 MODES = ("te", "ml")
 #: What an ML readout takes from the counter (SPEC section 3): all of it, or its msb's worth.
 ML_READOUTS = ("count", "msb")
+#: Keys added after files were first written: a recorded configuration without one reads as its
+#: default (SPEC section 6: a stream without ``ml_readout`` is a count camera's).
+ADDED_KEYS = ("ml_readout",)
 #: Named presets of ``--config``: each mode's defaults, and the paper's msb ML camera.
 PRESETS = {"te": {"mode": "te"}, "ml": {"mode": "ml"}, "ml-msb": {"mode": "ml", "ml_readout": "msb"}}
 
@@ -117,6 +120,9 @@ class SensorConfig:
                 f"{clocks * alpha} must be <= 2^24 = {MAX_CLOCKS_PER_READOUT}")
         fill("threshold", _default_threshold(self.mode, b1, alpha, ml_bits))
         theta = need_int("threshold", 1, None, ">= 1")
+        if self.acc_bits is None and theta.bit_length() + 1 > 62:     # (the derived width, named by its cause)
+            raise ConfigError(f"config key 'threshold' = {_short(theta)}: must be < 2^61 "
+                              f"(its accumulator would need acc_bits = {theta.bit_length() + 1}, at most 62)")
         fill("acc_bits", theta.bit_length() + 1)
         acc_bits = need_int("acc_bits", 1, 62, "in 1..62")
         if (1 << acc_bits) - 1 < theta:
@@ -143,8 +149,11 @@ class SensorConfig:
         return cls(**dict(data))
 
     @classmethod
-    def from_json(cls, text: str) -> "SensorConfig":
-        """Parse JSON text; refuse duplicate keys, deep nesting and huge numbers in one line."""
+    def from_json(cls, text: str, *, whole: bool = False) -> "SensorConfig":
+        """Parse JSON text; refuse duplicate keys, deep nesting and huge numbers in one line.
+        ``whole=True`` is for the configuration a file records (a stream's, a calibration's: SPEC
+        section 6, "every key of section 2"): a missing key is refused, not given its default,
+        except those older files may lack (:data:`ADDED_KEYS`)."""
         try:
             data = json.loads(text, object_pairs_hook=unique_keys())
         except json.JSONDecodeError as exc:
@@ -156,6 +165,11 @@ class SensorConfig:
         except ValueError as exc:        # an integer of more than sys.get_int_max_str_digits() digits
             reason = str(exc).split(";")[0].split(":")[-1].strip() if "digits" in str(exc) else str(exc)
             raise ConfigError(f"configuration JSON holds a number too long to read ({reason})") from None
+        if whole and isinstance(data, Mapping):
+            missing = [key for key in KEYS if key not in data and key not in ADDED_KEYS]
+            if missing:
+                raise ConfigError(f"configuration lacks key{'s' * (len(missing) > 1)} "
+                                  f"{', '.join(map(repr, missing))} (a recorded configuration holds every key)")
         return cls.from_dict(data)
 
     @classmethod

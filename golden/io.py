@@ -294,7 +294,7 @@ def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarr
         raise InputError(f"stream file {shown!r}: 'config' must be a 0-d string, "
                          f"not {config_text.dtype} {config_text.shape}")
     try:
-        config = SensorConfig.from_json(str(config_text))
+        config = SensorConfig.from_json(str(config_text), whole=True)
     except TespikeError as exc:
         raise InputError(f"stream file {shown!r}: {exc}") from None
     if words.dtype.kind not in "iu" or words.ndim != 3:

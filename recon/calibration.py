@@ -228,7 +228,7 @@ def load_calibration(path: str | Path) -> Calibration:
                              f"frame size, finite and >= 0, not {law.dtype} {law.shape}")
         law = law if law.shape[0] else None
     try:
-        config = SensorConfig.from_json(str(values["config"]))
+        config = SensorConfig.from_json(str(values["config"]), whole=True)
     except TespikeError as exc:
         raise InputError(f"calibration file {shown!r}: {exc}") from None
     return Calibration(dark, gain, config, int(values["dark_readouts"]), int(values["flat_readouts"]),

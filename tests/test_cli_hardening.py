@@ -490,6 +490,18 @@ def test_an_illegal_word_names_its_stream_file(files):
                                    "--out", files / "o.npy"), "stream file", "bad.npz", "is not a legal")
 
 
+def test_a_stream_whose_config_lacks_a_key_is_refused(files):
+    """A stream records the full configuration it was made with (SPEC section 6): one missing a key
+    is refused naming it, not decoded with that key's default."""
+    with np.load(files / "s.npz") as npz:
+        words = npz["words"].copy()
+    partial = json.loads(TINY.to_json())
+    del partial["threshold"]
+    np.savez(files / "part.npz", words=words, config=np.array(json.dumps(partial)))
+    refused_without_change(files, ("reconstruct", "--stream", files / "part.npz", "--method", "tfp",
+                                   "--out", files / "o.npy"), "part.npz", "lacks key 'threshold'")
+
+
 def test_noise_file_refuses_a_key_given_twice(files):
     (files / "n.json").write_text('{"prnu": 0.01, "prnu": 0.02}')
     refused_without_change(files, ("simulate", "--config", "te", "--scene", files / "i.npy", "--noise",

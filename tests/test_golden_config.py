@@ -43,6 +43,24 @@ def test_config_without_ml_readout_reads_as_count():
     assert SensorConfig.from_dict(old).ml_readout == "count"
 
 
+def test_a_recorded_configuration_must_hold_every_key_but_those_added_later():
+    """SPEC section 6: a stream's config is the full configuration used; only ml_readout, added
+    after streams were first written, may be missing (and reads as "count")."""
+    whole = SensorConfig(mode="ml").to_dict()
+    del whole["ml_readout"]
+    assert SensorConfig.from_json(json.dumps(whole), whole=True).ml_readout == "count"
+    del whole["b1"], whole["threshold"]
+    assert SensorConfig.from_json(json.dumps(whole)) == SensorConfig(mode="ml")     # a config file may omit keys
+    with pytest.raises(ConfigError, match="lacks keys 'b1', 'threshold'"):
+        SensorConfig.from_json(json.dumps(whole), whole=True)
+
+
+def test_a_threshold_too_large_for_any_accumulator_is_named_itself():
+    assert SensorConfig(threshold=2 ** 61 - 1).acc_bits == 62
+    with pytest.raises(ConfigError, match=r"'threshold' = .*must be < 2\^61"):
+        SensorConfig(threshold=2 ** 61)
+
+
 def test_dependent_defaults():
     c = SensorConfig(b1=2, b2=3)
     assert (c.alpha, c.clocks_per_tick, c.threshold) == (7, 4, 42000 // 28)
@@ -54,6 +72,7 @@ def test_dependent_defaults():
     ({"alpha": 0}, "alpha"), ({"clocks_per_tick": 0}, "clocks_per_tick"),
     ({"clocks_per_tick": 2 ** 24}, "clocks_per_tick"), ({"threshold": 0}, "threshold"),
     ({"acc_bits": 63}, "acc_bits"), ({"threshold": 8, "acc_bits": 3}, "acc_bits"),
+    ({"threshold": 2 ** 70}, "threshold"), ({"threshold": 2 ** 61}, "threshold"),
     ({"input_bits": 33}, "input_bits"), ({"ml_bits": 0}, "ml_bits"), ({"b1": 4.0}, "b1"),
     ({"b1": True}, "b1"), ({"mode": "xx"}, "mode"), ({"colour": 1}, "colour"),
 ])
