@@ -55,6 +55,22 @@ def test_refusals(tmp_path):
     assert not list(tmp_path.glob("*.png")) and not list(tmp_path.glob(".*"))
 
 
+def test_an_option_that_would_be_ignored_is_refused(tmp_path):
+    """--config reads a stimulus, --estimator decodes a stream, --columns lays out a sheet: given
+    where it has no effect, each is refused rather than silently ignored."""
+    _files(tmp_path)
+    view = ("view", "--out", tmp_path / "v.png")
+    assert_refused(run_tespike(*view, "--input", tmp_path / "S.npz", "--config", "ml"), "--config", "S.npz")
+    assert_refused(run_tespike(*view, "--input", tmp_path / "I.npy", "--estimator", "midpoint"), "--estimator")
+    assert_refused(run_tespike(*view, "--input", tmp_path / "E.npy", "--config", "te", "--estimator", "ratio"),
+                   "--estimator")
+    assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "f", "--each",
+                               "--columns", "3"), "--columns")
+    assert not list(tmp_path.glob("*.png")) and not (tmp_path / "f").exists()
+    result = run_tespike(*view, "--input", tmp_path / "S.npz", "--estimator", "midpoint", "--columns", "2")
+    assert result.returncode == 0, result.stderr
+
+
 def test_the_default_mu_is_the_metrics_mu():
     from tespike.cosim.cli import build_parser
     assert build_parser("view").parse_args(["view", "--input", "x.npy", "--out", "y.png"]).mu == MU

@@ -18,6 +18,8 @@ HELP = "write tone-mapped PNGs (contact sheet or one per frame) of I.npy, S.npz,
 
 #: Frames on a contact sheet unless --frames says otherwise (evenly spaced).
 DEFAULT_SHEET_FRAMES = 12
+#: Frames per row of a contact sheet unless --columns says otherwise.
+DEFAULT_COLUMNS = 6
 
 
 def add_arguments(parser):
@@ -30,14 +32,18 @@ def add_arguments(parser):
     parser.add_argument("--each", action="store_true", help="one PNG per frame instead of a contact sheet")
     parser.add_argument("--peak", type=float, help="light mapped to white (default: the frames' maximum)")
     parser.add_argument("--mu", type=float, default=MU, help=f"mu of the mu-law (default {MU:g})")
-    parser.add_argument("--columns", type=int, default=6, help="frames per row of the sheet (default 6)")
+    parser.add_argument("--columns", type=int, help=f"frames per row of the sheet (default {DEFAULT_COLUMNS}; "
+                                                    "not with --each)")
     parser.add_argument("--config", help="config of a stimulus E.npy (its clocks per readout L)")
     parser.add_argument("--quiet", action="store_true", help="print nothing on success")
-    parser.add_argument("--estimator", default="ratio", help="decoder estimator for a stream (default ratio)")
+    parser.add_argument("--estimator", help="decoder estimator for a stream S.npz only (default ratio; "
+                                            "known: ratio, midpoint, residual)")
 
 
-def load_light(path, config_spec=None, estimator="ratio"):
-    """(light (K, H, W) float64, what) from any of the project's array files."""
+def load_light(path, config_spec=None, estimator=None):
+    """(light (K, H, W) float64, what) from any of the project's array files. ``config_spec`` is for
+    a stimulus and ``estimator`` for a stream only: given for another kind of file, each is refused
+    (it would be ignored)."""
     import numpy as np
 
     from tespike.golden.config import DESIGN_ELECTRONS, load_config
@@ -48,8 +54,13 @@ def load_light(path, config_spec=None, estimator="ratio"):
     from tespike.golden.paths import check_input_file
     path = check_input_file(path, "--input")        # exists, and is a regular file
     if path.suffix == ".npz":
+        if config_spec is not None:
+            raise InputError(f"--config applies to a stimulus E.npy only (the stream {str(path)!r} "
+                             "carries its own configuration)")
         words, config = load_stream(path)
-        return decode_light(words, config, estimator).astype(np.float64), f"stream ({config}), decoded"
+        return decode_light(words, config, estimator or "ratio").astype(np.float64), f"stream ({config}), decoded"
+    if estimator is not None:
+        raise InputError(f"--estimator applies to a stream S.npz only ({str(path)!r} is not one)")
     header = load_npy(path, "--input", mmap_mode="r")
     if header.dtype.kind in "iu":
         if config_spec is None:
@@ -108,7 +119,9 @@ def run(args) -> int:
         raise InputError(f"--peak {args.peak}: must be a finite number > 0")
     if not (math.isfinite(args.mu) and args.mu > 0):
         raise InputError(f"--mu {args.mu}: must be a finite number > 0")
-    if args.columns < 1:
+    if args.columns is not None and args.each:
+        raise InputError("--columns applies to a contact sheet only (--each writes one PNG per frame)")
+    if args.columns is not None and args.columns < 1:
         raise InputError(f"--columns {args.columns}: must be >= 1")
     out = Path(args.out)
     if args.each:
@@ -145,7 +158,7 @@ def run(args) -> int:
             print(f"wrote {len(frames)} frame(s) to {out}/frame_NNNN.png ({what}, peak {peak:.4g}, mu {args.mu:g})")
         return 0
     K, H, W = mapped.shape
-    columns = min(args.columns, K)
+    columns = min(args.columns or DEFAULT_COLUMNS, K)
     rows = -(-K // columns)
     size = 2.2 / max(H, W)
     fig, axes = plt.subplots(rows, columns, squeeze=False,
