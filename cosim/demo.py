@@ -328,7 +328,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                                  f"{repeats}) and on the RTL stream")
         from tespike.recon.evaluate import evaluate, label, scored_frames
         from tespike.recon.report import write_outputs
-        from tespike.recon.methods import RECON_METHODS, available_methods, reconstruct
+        from tespike.recon.methods import available_methods, reconstruct, uses_window
         from tespike.recon.metrics import psnr_mu, ssim_mu
         methods = available_methods(configs.values(), ready)     # learned ones only where there are weights
         by_config = {configs[name]: streams[name] for name in configs}
@@ -360,7 +360,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                 "ms_per_frame": 1e3 * seconds / rtl_readouts})
         progress.end("reconstruction", started,
                      [f"tespike reconstruct --stream S_{sensor}.npz --method {method} "
-                      + (f"--window {window} " if "window" in RECON_METHODS[method].options else "")
+                      + (f"--window {window} " if uses_window(method) else "")
                       + f"--out R_{method}_{sensor}.npy" for sensor in list(configs) + ["rtl"] for method in methods]
                      + [f"tespike evaluate --set default --frames {frames} --height {height} --width {width} "
                         f"--seed {seed} --out eval   # Table 1 layout, TE and ML count, other noise draws"])

@@ -44,6 +44,7 @@ def test_evaluate_refuses(tmp_path, capsys):
     refused(capsys, "evaluate", "--ml-config", "ml", "--out", out, "ml_readout 'count'")
     refused(capsys, "evaluate", "--ml-count-config", "ml-msb", "--out", out, "--ml-count-config")
     refused(capsys, "evaluate", "--set", "none", "--scene", tmp_path / "no.npy", "--out", out, "no.npy")
+    refused(capsys, "evaluate", "--sensor-seed", 3, "--out", out, "--sensor-seed")     # no noise sensor: ignored
     assert not out.exists()
 
 

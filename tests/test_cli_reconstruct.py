@@ -41,6 +41,8 @@ def test_refusals(tmp_path, rng):
         (("--stream", stream, "--method", "tfp", "--window", "4"), ("--window 4", "odd integer")),
         (("--stream", stream, "--method", "tfp", "--device", "cuda:7"), ("device",)),
         (("--stream", stream, "--method", "tfp", "--search", "window"), ("--search",)),
+        (("--stream", stream, "--method", "tfi", "--window", "5"), ("--window", "--search window")),
+        (("--stream", stream, "--method", "tfp", "--window", "23"), ("--window 23", "11-readout", "21 readouts")),
     ]
     for args, words in cases:
         assert_refused(run_tespike("reconstruct", *args, "--out", out), *words)

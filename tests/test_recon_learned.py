@@ -138,6 +138,15 @@ def test_cli_reconstruct_with_weights_the_user_trained(empty_weights_dir, tmp_pa
         assert not out.exists()
 
 
+def test_evaluate_refuses_weights_for_a_method_it_does_not_run(tmp_path, capsys):
+    """--weights of a method not in --methods would be ignored: refused, naming the method."""
+    path, _ = save_tiny(tmp_path, "bsf", TE, file_name="mine.pt")
+    code, _, err = run_here(capsys, "evaluate", "--methods", "tfp", "--weights", path, "--out", tmp_path / "ev")
+    lines = err.strip().splitlines()
+    assert code != 0 and len(lines) == 1 and "bsf is not among the methods" in lines[0], err
+    assert not (tmp_path / "ev").exists()
+
+
 def test_weights_by_sensor(tmp_path):
     from tespike.recon.learned import weights_by_sensor
     te_file, _ = save_tiny(tmp_path, "bsf", TE, file_name="a.pt")

@@ -73,8 +73,9 @@ def add_arguments(parser):
     parser.add_argument("--sensor-noise", action="append", default=[], metavar="N.json",
                         help="add a TE noise sensor described by N.json (golden.noise: dark level, DSNU, hot "
                              "pixels, PRNU, comparator offset), named by the file's stem, to the noise table")
-    parser.add_argument("--sensor-seed", type=int, default=0,
-                        help="sensor seed of every noise sensor (default 0): its per-pixel maps")
+    parser.add_argument("--sensor-seed", type=int, default=None,
+                        help="sensor seed of every noise sensor (default 0): its per-pixel maps (needs --noise "
+                             "or --sensor-noise)")
     parser.add_argument("--calibrate", action="store_true",
                         help="add a calibrated row per method for every noise sensor (its own dark and flat "
                              "streams, recon.calibration)")
@@ -128,7 +129,8 @@ def run(args) -> int:
     check_device(args.device)                           # before any sequence is simulated
     if args.store or args.workers is not None or args.scheduler:
         for flag, value in (("--table", args.table), ("--noise", args.noise), ("--metrics", args.metrics),
-                            ("--sensor-noise", args.sensor_noise), ("--calibrate", args.calibrate),
+                            ("--sensor-noise", args.sensor_noise), ("--sensor-seed", args.sensor_seed),
+                            ("--calibrate", args.calibrate),
                             ("--vdp-frames", args.vdp_frames), ("--threads", args.threads), ("--repeats", args.repeats)):
             if value not in (None, False, []):          # []: no --sensor-noise given
                 raise InputError(f"{flag} does not apply with --store (a store's streams are scored as they are)")
@@ -175,16 +177,20 @@ def run(args) -> int:
         if (config.mode, config.ml_readout) != (kind, readout):
             raise ConfigError(f"{option} {value!r} has mode {config.mode!r}, ml_readout {config.ml_readout!r}; "
                               f"expected mode {kind!r}" + (f", ml_readout {readout!r}" if kind == "ml" else ""))
-    if args.sensor_seed < 0:
-        raise InputError(f"--sensor-seed {args.sensor_seed}: must be >= 0")
+    sensor_seed = 0 if args.sensor_seed is None else args.sensor_seed
+    if sensor_seed < 0:
+        raise InputError(f"--sensor-seed {sensor_seed}: must be >= 0")
+    if args.sensor_seed is not None and not (args.noise or args.sensor_noise):
+        raise InputError("--sensor-seed draws a noise sensor's per-pixel maps: give --noise or --sensor-noise "
+                         "(without one it would be ignored)")
     noise_sensors = {}          # sensor key -> golden.noise.Sensor
     if args.noise:              # the paper's Tables 6 to 9: its TE camera with dark current
-        noise_sensors.update(default_noise_sensors(args.sensor_seed))
+        noise_sensors.update(default_noise_sensors(sensor_seed))
     for path in args.sensor_noise:
         key = f"te+{Path(path).stem}"
         if key in noise_sensors or key in configs or key in NOISE_SENSORS or key.endswith(CALIBRATED):
             raise InputError(f"--sensor-noise {path}: the sensor name {key!r} is taken; rename the file")
-        noise_sensors[key] = Sensor(load_noise(path), args.sensor_seed)
+        noise_sensors[key] = Sensor(load_noise(path), sensor_seed)
     if args.calibrate and not noise_sensors:
         raise InputError("--calibrate needs a noise sensor: --noise or --sensor-noise N.json")
     configs.update({sensor: configs["te"] for sensor in noise_sensors})
@@ -192,6 +198,10 @@ def run(args) -> int:
         configs.update({sensor + CALIBRATED: configs["te"] for sensor in noise_sensors})
     from tespike.recon.learned import weights_by_sensor
     weights = weights_by_sensor(args.weights, configs)
+    unrun = sorted({method for method, _ in weights} - set(methods if methods is not None else DEFAULT_METHODS))
+    if unrun:
+        raise InputError(f"--weights: {unrun[0]} weights given, but {unrun[0]} is not among the methods "
+                         "evaluated (add it to --methods; the file would be ignored)")
     sequences = [] if args.set == "none" else sequence_set(args.set, frames, height, width)
     for path in args.scene:          # memory-mapped: read one slice at a time
         sequences.append((Path(path).stem, load_scene(path, memory_map=True)))

@@ -21,7 +21,7 @@ def add_arguments(parser):
                              "or --weights")
     parser.add_argument("--out", required=True, help="R.npy to write: float32 (K, H, W) light, I = 1 is 42000 e-")
     parser.add_argument("--window", type=int, default=None,
-                        help=f"tfp/tfi: readouts per window, odd (default {DEFAULT_WINDOW}, paper 6.4); learned methods see the "
+                        help=f"tfp, and tfi with --search window: readouts per window, odd (default {DEFAULT_WINDOW}, paper 6.4); learned methods see the "
                              "span of readouts their sizes fix")
     parser.add_argument("--weights", default=None, metavar="W.pt",
                         help="learned methods: this weights file ('tespike train --out W.pt') instead of the "
@@ -54,6 +54,9 @@ def run(args) -> int:
         from tespike.recon.learned import method_span
         raise InputError(f"--window applies to methods 'tfp' and 'tfi'; {args.method!r} sees the "
                          f"{method_span(args.method)} readouts its sizes fix")
+    if args.method == "tfi" and args.window is not None and args.search != "window":
+        raise InputError("--window applies to tfi with --search window only (tfi searches the whole stream "
+                         "by default, whatever the window)")
     window = DEFAULT_WINDOW if args.window is None else args.window
     check_window(window, "--window")
     check_threads_argument(args.threads)
@@ -65,6 +68,9 @@ def run(args) -> int:
                   {"--stream": args.stream, "--calibration": args.calibration, "--weights": args.weights})
     words, config = load_stream(args.stream, memory_map=True)     # stays on disk
     K, H, W = words.shape
+    if args.window is not None and window > 2 * K - 1:      # (every window is cut to the stream's ends)
+        raise InputError(f"--window {window}: wider than any window of this {K}-readout stream "
+                         f"({2 * K - 1} readouts at most; a wider one changes nothing)")
     calibration = None
     if args.calibration is not None:
         from tespike.recon.calibration import check_matches, load_calibration
