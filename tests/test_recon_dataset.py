@@ -189,9 +189,10 @@ def test_cli_dataset_and_evaluate_store(tmp_path, capsys):
 
 def refused(capsys, *args_and_word):
     *args, word = args_and_word
-    code, _, err = run_here(capsys, *args)
+    code, out, err = run_here(capsys, *args)
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1 and word in lines[0], err
+    assert out == "", out              # refused before the command says what it will do
 
 
 def test_cli_refusals(tmp_path, capsys, rng):
@@ -214,7 +215,9 @@ def test_cli_refusals(tmp_path, capsys, rng):
     # frames of different sizes in one sequence: refused by the task that reads them
     root = hdr_folder(tmp_path / "hdr", rng, sequences=(("odd", 2, 12, 12),))
     write_exr(root / "odd" / "f009.exr", np.ones((12, 13, 3), np.float32))
-    refused(capsys, "dataset", "--hdr", root, "--config", "te", "--out", tmp_path / "o.zarr", "same size")
+    code, out_text, err = run_here(capsys, "dataset", "--hdr", root, "--config", "te", "--out", tmp_path / "o.zarr")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "same size" in err, err
+    assert out_text.startswith("dataset: 1 sequence(s)")    # (found while the frames are read: after the plan)
     assert not (tmp_path / "o.zarr").exists()          # it held no complete sequence: nothing to resume
     DatasetStore.create_or_resume(str(tmp_path / "o.zarr"), seed=0, configs={"te": SensorConfig()})
     refused(capsys, "evaluate", "--store", tmp_path / "o.zarr", "--out", tmp_path / "ev", "no complete sequence")

@@ -85,10 +85,11 @@ def run(args) -> int:
     made = new_local_store(args.out)
     try:
         with Runner(args.workers, args.scheduler) as runner:
-            report(args, f"dataset: {len(sources)} sequence(s) x {len(configs)} sensor(s) on {runner.where}")
             counts = build_dataset(args.out, sources, configs, args.seed, runner, chunk_frames=args.chunk_frames,
                                    report=lambda name: report(args, f"dataset: {name} complete"),
-                                   notice=lambda text: report(args, f"dataset: {text}"))
+                                   notice=lambda text: report(args, f"dataset: {text}"),
+                                   starting=lambda: report(args, f"dataset: {len(sources)} sequence(s) x "
+                                                             f"{len(configs)} sensor(s) on {runner.where}"))
     except BaseException as exc:
         kept = discard_unfinished_store(args.out, made)   # the workers have stopped: nothing writes there now
         note_resumable(exc, args.out, kept)               # (also for a failure after the build)

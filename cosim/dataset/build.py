@@ -246,12 +246,15 @@ def sequence_graph(store: DatasetStore, source: Source):
 
 
 def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, SensorConfig], seed: int, run, *,
-               chunk_frames: int = CHUNK_FRAMES, tile: tuple[int, int] = TILE, report=None, notice=None) -> dict:
+               chunk_frames: int = CHUNK_FRAMES, tile: tuple[int, int] = TILE, report=None, notice=None,
+               starting=None) -> dict:
     """Write every source into the store at ``url`` (made or resumed) with every configuration.
 
     ``run`` is a :class:`tespike.cosim.dataset.cluster.Runner`; ``report(name)`` is
     called as each sequence completes, ``notice(text)`` for each sequence a resumed
-    store held complete but with a damaged chunk (its CRC-32C fails), which is rebuilt.
+    store held complete but with a damaged chunk (its CRC-32C fails), which is rebuilt;
+    ``starting()`` once the store is made or resumed and every sequence checked, before any is
+    simulated (so a refusal comes before the command says what it will do).
     Returns counts: ``done`` (sequences written now, rebuilt ones included),
     ``skipped`` (already complete), ``pixel_readouts`` (simulated now, summed over
     the streams), ``rebuilt`` (names of the damaged sequences rebuilt).
@@ -285,6 +288,8 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
                 notice(f"sequence {source.name!r} was complete but chunk {damaged[0]!r}"
                        f"{f' and {len(damaged) - 1} more' if len(damaged) > 1 else ''} fails its CRC-32C "
                        "check: rebuilding its array")
+        if starting is not None:
+            starting()
         for _, name in run(graphs):
             done += 1
             if report is not None:

@@ -32,7 +32,6 @@ def run_store(args) -> int:
     from tespike.recon.dataset.store import DatasetStore
     DatasetStore.open(args.store)                       # a missing or foreign store refused before any line
     with Runner(args.workers, args.scheduler) as runner:
-        print(f"evaluate: {args.store} on {runner.where}", flush=True)
-        evaluation = evaluate_store(args.store, runner, methods=methods, window=args.window,
-                                    device=args.device)
+        evaluation = evaluate_store(args.store, runner, methods=methods, window=args.window, device=args.device,
+                                    starting=lambda: print(f"evaluate: {args.store} on {runner.where}", flush=True))
     return publish_results(args, evaluation, plot=False)

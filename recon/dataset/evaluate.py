@@ -136,12 +136,14 @@ def _combine(parts: list[dict], height: int, width: int) -> tuple[np.ndarray, np
 
 def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, window: int = DEFAULT_WINDOW,
                    device: str = "cpu", tile: tuple[int, int] = EVAL_TILE,
-                   options: dict[str, dict] | None = None):
+                   options: dict[str, dict] | None = None, starting=None):
     """Score every complete sequence x sensor x method of the store -> :class:`tespike.recon.evaluate.Evaluation`.
 
     ``run`` runs ``dask.delayed`` tasks (:class:`tespike.cosim.dataset.cluster.Runner`);
     sensors are the store's configurations, in its order (they are the table's
-    column groups); ``options`` as in :func:`tespike.recon.evaluate.evaluate`.
+    column groups); ``options`` as in :func:`tespike.recon.evaluate.evaluate`. ``starting()`` is called
+    once every sequence, method and weights file is checked, before any task runs (a refusal comes
+    before the command says what it will do).
     """
     from dask import delayed
 
@@ -203,6 +205,8 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
                         tasks.append(delayed(score_tile, pure=False)(*args, rows, cols,
                                                                      dask_key_name=f"{name}-{r}-{c}"))
                         keys.append((sequence, sensor, method, (rows, cols)))
+    if starting is not None:
+        starting()
     outputs: list = [None] * len(tasks)
     for index, result in run(tasks):
         outputs[index] = result
