@@ -6,6 +6,8 @@ functions; nothing else re-implements the formula.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from .config import SensorConfig
@@ -16,8 +18,61 @@ from .errors import InputError
 CHECK_CHUNK_WORDS = 1 << 22
 
 
+def _msb_top_count(config: SensorConfig) -> int:
+    """The largest count an msb camera's counter can hold at a readout: the counter keeps
+    ``count - 2^(bit_length(count) - 1)`` and gains at most L spikes an interval (one a pixel
+    clock, SPEC section 3), saturating at 2^ml_bits - 1. Iterated from an empty counter to the
+    fixed point of the largest remainder (a remainder from any count up to the top)."""
+    L, top, rest = config.clocks_per_readout, config.ml_max, 0
+    while True:
+        count = min(top, rest + L)
+        half = 1 << (count.bit_length() - 1)
+        largest = max(count - half, (half >> 1) - 1 if half > 1 else 0)   # from the top, or from just below half
+        if largest <= rest:
+            return count
+        rest = largest
+
+
+@functools.lru_cache(maxsize=64)
+def legal_words(config: SensorConfig) -> np.ndarray:
+    """Every word the configured sensor can emit, ascending int64 (read-only): SPEC section 4's
+    word set narrowed by section 3's at most one spike a pixel clock. A TE count word is at most
+    min(2^b1 - 1, L); an overflow at CCC value m needs 2^b1 spikes within m * F clocks, so
+    m >= ceil(2^b1 / F) (none at all when 2^b1 > L); an ML count is at most min(2^ml_bits - 1, L)
+    ("no count can exceed L"); an msb word is at most the bit length of the largest count the
+    counter can hold with its carried remainder."""
+    L = config.clocks_per_readout
+    if config.is_te:
+        counts = np.arange(min(config.p_max - 1, L) + 1, dtype=np.int64)
+        earliest = (config.p_max - 1) // config.clocks_per_tick + 1
+        overflow = (1 << config.d) | np.arange(earliest, config.alpha + 1, dtype=np.int64)
+        words = np.concatenate([counts, overflow])
+    elif config.is_msb:
+        words = np.arange(_msb_top_count(config).bit_length() + 1, dtype=np.int64)
+    else:
+        words = np.arange(min(config.ml_max, L) + 1, dtype=np.int64)
+    words.setflags(write=False)
+    return words
+
+
+@functools.lru_cache(maxsize=64)
+def _legal_table(config: SensorConfig) -> np.ndarray:
+    """legal[word] over every word of the configuration's word width."""
+    table = np.zeros(1 << config.word_bits, bool)
+    table[legal_words(config)] = True
+    table.setflags(write=False)
+    return table
+
+
+def _word_ranges(words: np.ndarray) -> str:
+    """'0..15, 17..31' for ascending words."""
+    breaks = np.flatnonzero(np.diff(words) != 1)
+    starts, ends = np.r_[words[:1], words[breaks + 1]], np.r_[words[breaks], words[-1:]]
+    return ", ".join(f"{a}..{b}" if b > a else f"{a}" for a, b in zip(starts.tolist(), ends.tolist()))
+
+
 def check_words(words: np.ndarray, config: SensorConfig) -> np.ndarray:
-    """Refuse any word that the configured sensor cannot emit (SPEC section 4).
+    """Refuse any word that the configured sensor cannot emit (:func:`legal_words`).
 
     Checked in slices of about :data:`CHECK_CHUNK_WORDS` words along the first
     axis, so the memory it needs is bounded whatever the stream's size.
@@ -40,19 +95,15 @@ def check_words(words: np.ndarray, config: SensorConfig) -> np.ndarray:
 
 def _check_word_block(words: np.ndarray, config: SensorConfig, where) -> None:
     w = words.astype(np.int64)
-    if config.is_te:
-        flag = w >> config.d
-        value = w & ((1 << config.d) - 1)
-        bad = (w < 0) | (flag > 1) | ((flag == 0) & (value >= config.p_max)) | \
-              ((flag == 1) & ((value < 1) | (value > config.alpha)))
-    elif config.is_msb:
-        bad = (w < 0) | (w > config.ml_bits)
-    else:
-        bad = (w < 0) | (w > config.ml_max)
+    table = _legal_table(config)
+    inside = (w >= 0) & (w < table.size)
+    bad = ~inside
+    bad[inside] = ~table[w[inside]]
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])
         raise InputError(f"readout word {int(words[index])} at index {where(index)} is not a legal "
-                         f"{config.mode.upper()} word for this configuration ({config})")
+                         f"{config.mode.upper()} word for this configuration ({config}; it emits "
+                         f"{_word_ranges(legal_words(config))})")
 
 
 def _te_fields(words: np.ndarray, config: SensorConfig) -> tuple[np.ndarray, np.ndarray]:

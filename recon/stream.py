@@ -16,22 +16,14 @@ import numpy as np
 import torch
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.decode import check_words, decode_light as golden_decode_light
+from tespike.golden.decode import check_words, decode_light as golden_decode_light, legal_words
 from tespike.golden.decode import decode_spikes as golden_decode_spikes
 from tespike.golden.errors import InputError
 
 
 def legal_codes(config: SensorConfig) -> np.ndarray:
-    """Every word the configured sensor can emit (SPEC section 4), ascending, int64."""
-    if config.is_te:
-        counts = np.arange(config.p_max, dtype=np.int64)                     # flag 0: sfc
-        overflow = (1 << config.d) | np.arange(1, config.alpha + 1, dtype=np.int64)
-        codes = np.concatenate([counts, overflow])
-    elif config.is_msb:
-        codes = np.arange(config.ml_bits + 1, dtype=np.int64)                # msb index 0..B
-    else:
-        codes = np.arange(config.ml_max + 1, dtype=np.int64)
-    return check_words(codes, config)      # golden agrees every one is legal
+    """Every word the configured sensor can emit, ascending, int64 (golden's :func:`legal_words`)."""
+    return legal_words(config)
 
 
 @functools.lru_cache(maxsize=64)

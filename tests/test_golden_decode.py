@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.decode import decode_light, decode_spikes
+from tespike.golden.decode import decode_light, decode_spikes, legal_words
+from tespike.golden.sensor import simulate
 from tespike.golden.errors import InputError
 
 
@@ -22,10 +23,40 @@ def test_te_illegal_words_refused(word):
 
 
 def test_ml_decode_and_refusal():
-    c = SensorConfig(mode="ml")
-    assert np.array_equal(decode_spikes(np.arange(256), c), np.arange(256))
-    with pytest.raises(InputError):
-        decode_spikes(np.array([256]), c)
+    c = SensorConfig(mode="ml")                 # L = 240 clocks: no count above 240 (one spike a clock)
+    assert np.array_equal(decode_spikes(np.arange(241), c), np.arange(241))
+    for word in (241, 255, 256):
+        with pytest.raises(InputError, match=f"readout word {word} .*not a legal ML word"):
+            decode_spikes(np.array([word]), c)
+
+
+def test_a_te_overflow_earlier_than_2_to_the_b1_clocks_allow_is_refused():
+    """F = 4 clocks a tick: 16 spikes take 16 clocks, so an overflow latches CCC 4 at the earliest."""
+    c = SensorConfig(clocks_per_tick=4)
+    assert decode_spikes(np.array([16 | 4]), c)[0] == 16 * 15 / 4
+    with pytest.raises(InputError, match="readout word 19 "):
+        decode_spikes(np.array([16 | 3]), c)
+    short = SensorConfig(clocks_per_tick=1)     # L = 15 < 16: no overflow at all, counts up to 15
+    assert legal_words(short).tolist() == list(range(16))
+
+
+@pytest.mark.parametrize("config", [
+    SensorConfig(b1=2, b2=2), SensorConfig(b1=3, b2=2, clocks_per_tick=2), SensorConfig(b1=3, b2=3, clocks_per_tick=1),
+    SensorConfig(mode="ml", b1=2, b2=2, ml_bits=3), SensorConfig(mode="ml", b1=2, b2=2, ml_bits=5),
+    SensorConfig(mode="ml", b1=2, b2=2, ml_bits=5, ml_readout="msb"),
+    SensorConfig(mode="ml", b1=2, b2=2, ml_bits=8, ml_readout="msb"),
+    SensorConfig(mode="ml", b1=1, b2=2, clocks_per_tick=5, ml_bits=8, ml_readout="msb"),
+], ids=str)
+def test_legal_words_are_exactly_what_the_golden_sensor_emits(config):
+    """Pixels firing with every probability a clock (0 to 1, sustained for the msb counter's carry)
+    emit every legal word and nothing else: the word set follows the pixel rule, not the word width."""
+    rng = np.random.default_rng(7)
+    L, K = config.clocks_per_readout, 40
+    chance = np.linspace(0.0, 1.0, 64)
+    fires = rng.random((K * L, 8, 64)) < chance
+    stimulus = np.where(fires, config.threshold, 0).astype(np.int64)
+    words = simulate(config, stimulus)
+    assert np.array_equal(np.unique(words), legal_words(config))
 
 
 def test_estimators_on_hand_worked_words():
@@ -45,7 +76,7 @@ def test_estimators_on_hand_worked_words():
     assert decode_spikes(np.array([4 | 1]), wide, "ratio")[0] == 12.0
     ml = SensorConfig(mode="ml")
     for name in ("ratio", "midpoint", "residual"):
-        assert np.array_equal(decode_spikes(np.arange(256), ml, name), np.arange(256))
+        assert np.array_equal(decode_spikes(np.arange(241), ml, name), np.arange(241))
 
 
 def test_unknown_estimator_refused():
