@@ -19,6 +19,15 @@ def progress_wanted(args) -> bool:
     return sys.stderr.isatty()
 
 
+def bar(desc: str, unit: str = "readout", total: int | None = None):
+    """A progress hook for the libraries (``golden`` draws nothing itself: it depends on numpy
+    alone): wraps an iterable in a tqdm bar on stderr, shown after two seconds, gone when done."""
+    def wrap(items):
+        from tqdm import tqdm
+        return tqdm(items, total=total, desc=desc, unit=unit, delay=2.0, leave=False)
+    return wrap
+
+
 def report(args, message: str) -> None:
     """The one line a command prints on stdout on success (silenced by ``--quiet``)."""
     if not getattr(args, "quiet", False):

@@ -191,6 +191,19 @@ def test_rooms_import_only_their_floors():
     assert up == []
 
 
+def test_golden_stands_on_numpy_and_the_standard_library_alone():
+    """The bit-exact model runs wherever numpy does: any other outside import (a progress bar
+    included, which the commands pass in as a hook) is a house fault."""
+    import sys
+    outside = []
+    for name, path in MODULES.items():
+        if _room(name) != "golden":
+            continue
+        for module, _ in _imports(name, path):
+            top = module.split(".")[0]
+            if top not in ("tespike", "numpy", "__future__") and top not in sys.stdlib_module_names:
+                outside.append(f"{path.relative_to(ROOT)}: {module}")
+    assert outside == []
 def test_vcdvcd_is_imported_in_one_place():
     """Importing vcdvcd changes SIGPIPE for the whole process: only :func:`tespike.cosim.vcd.vcd_reader`
     imports it, and puts that back."""

@@ -18,7 +18,7 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from tespike.cosim.console import progress_wanted, report
+    from tespike.cosim.console import bar, progress_wanted, report
     from tespike.golden.config import load_config
     from tespike.golden.fastsim import simulate_scene
     from tespike.golden.io import load_scene, save_stream, word_dtype
@@ -35,7 +35,8 @@ def run(args) -> int:
     require_room(f"the stream of {K} readouts of {H} x {W} words", memory=size, disk={args.out: size})
     words = simulate_scene(config, scene, seed=args.seed, dark_current=args.dark_current,
                            noise=not args.no_noise, method=args.method,
-                           progress=progress_wanted(args), workers=args.workers, sensor=sensor)
+                           progress=bar("simulate") if progress_wanted(args) else None, workers=args.workers,
+                           sensor=sensor)
     save_stream(args.out, words, config)
     K, H, W = words.shape
     report(args, f"wrote {args.out}: {K} readouts of {H} x {W} {config.mode.upper()} words")

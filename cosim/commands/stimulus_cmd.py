@@ -41,7 +41,7 @@ def add_arguments(parser):
 def run(args) -> int:
     import itertools
 
-    from tespike.cosim.console import progress_wanted
+    from tespike.cosim.console import bar, progress_wanted
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
     from tespike.golden.fastsim import iter_scene_stimulus
@@ -82,8 +82,7 @@ def run(args) -> int:
     stream = itertools.islice(iter_scene_stimulus(config, scene, seed=args.seed, dark_current=args.dark_current,
                                                   noise=not args.no_noise, sensor=sensor), K)
     if progress_wanted(args) and K > 1:
-        from tqdm import tqdm
-        stream = tqdm(stream, total=K, desc="stimulus", unit="readout", delay=2.0, leave=False)
+        stream = bar("stimulus", total=K)(stream)
     require_room(f"the stimulus of {K * L} x {H} x {W} {dtype} values", disk={args.out: size})
     with atomic_output(args.out) as tmp:
         out = reserved_memmap(tmp, dtype, (K * L, H, W))

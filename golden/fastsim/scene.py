@@ -43,14 +43,15 @@ def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None
 
 def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
                    dark_current: str | None = None, noise: bool = True,
-                   progress: bool = False, method: str = "fast",
+                   progress=None, method: str = "fast",
                    workers: int | None = 1, sensor=None) -> np.ndarray:
     """Scene light ``(K, H, W)`` -> readout words ``(K, H, W)`` (smallest word dtype).
 
     ``seed``: int, numpy Generator or ``None`` (fresh entropy). ``method="per-clock"``
     draws electrons per pixel clock everywhere (slow; the reference the fast
-    paths are tested against). ``progress`` shows a tqdm bar on stderr for runs
-    longer than a few seconds. The noisy fast method simulates horizontal
+    paths are tested against). ``progress``: None, or a function that wraps the
+    iterable of readout indices and reports as it is walked (``tespike simulate`` passes a
+    tqdm bar, :func:`tespike.cosim.console.bar`). The noisy fast method simulates horizontal
     stripes (:func:`stripe_simulators`) on ``workers`` processes (this one and
     forked ones; ``None``: the cores available, at most the stripe count; 1 by
     default, so a library caller that runs threads of its own, e.g. torch,
@@ -73,11 +74,7 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
                          method=method, total_pixel_readouts=scene.size, sensor=sensor)
     words = np.empty((K, H, W), word_dtype(config))
-    readouts = range(K)
-    if progress:
-        from tqdm import tqdm
-        readouts = tqdm(readouts, desc="simulate", unit="readout", delay=2.0, leave=False)
-    for k in readouts:
+    for k in (progress or iter)(range(K)):
         words[k] = sim.readout(check_scene(np.asarray(scene[k:k + 1]))[0])
     return words
 

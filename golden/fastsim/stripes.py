@@ -111,10 +111,7 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
                 finally:
                     os._exit(status)
             children[pid] = j
-        readouts = range(K)
-        if progress:                                     # (after the fork: tqdm starts a thread)
-            from tqdm import tqdm
-            readouts = tqdm(readouts, desc="simulate", unit="readout", delay=2.0, leave=False)
+        readouts = (progress or iter)(range(K))         # (after the fork: a bar may start a thread)
         taken = set(children.values())
         run([i for i in range(len(rows)) if i % workers not in taken], readouts)
     except BaseException:
