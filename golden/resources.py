@@ -16,6 +16,11 @@ from pathlib import Path
 
 from .errors import InputError
 
+#: Most worker processes any command starts (``simulate``, ``prove``, ``dataset`` and ``evaluate
+#: --store``'s local cluster, ``train``'s data engine): each costs a Python process, and a typo
+#: of a few zeros would otherwise fork until memory is gone.
+MAX_WORKERS = 256
+
 
 def _read_int(path: str) -> int | None:
     try:

@@ -36,7 +36,8 @@ import torch
 from tespike.golden.atomic import NO_ROOM
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
-from tespike.golden.io import atomic_output
+from tespike.golden.io import atomic_output, word_dtype
+from tespike.golden.resources import MAX_WORKERS, require_memory
 
 from .engine.batches import ClipPool, draw_batch
 from .engine.clips import EngineRecipe
@@ -93,6 +94,8 @@ class TrainOptions:
         for key in ("workers", "validate_every", "warmup"):
             if type(getattr(self, key)) is not int or getattr(self, key) < 0:
                 raise InputError(f"{key} = {getattr(self, key)!r}: must be an integer >= 0")
+        if self.workers > MAX_WORKERS:
+            raise InputError(f"workers = {self.workers}: must be in 0..{MAX_WORKERS} (data-engine processes)")
         if self.steps is None and self.minutes is None:
             raise InputError("give a budget: steps or minutes")
         self.sizes()                    # an unknown method, size or ablation case is refused here
@@ -311,6 +314,11 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
     the exception; one that made nothing removes the run folder it created.
     """
     check_device(options.device)       # (here, not in the options: a checkpoint's saved device may be absent)
+    recipe = options.data_recipe()     # the clip pool's words and light, before anything is built
+    clip_bytes = max(recipe.long[1], recipe.short[1]) * recipe.height * recipe.width * (
+        4 + word_dtype(options.config()).itemsize)
+    require_memory(options.pool * clip_bytes, f"a pool of {options.pool} clips of up to "
+                                              f"{max(recipe.long[1], recipe.short[1])} x {recipe.height} x {recipe.width}")
     out = Path(out)
     work = Path(work_dir) if work_dir is not None else out.with_suffix(".run")
     created = not work.exists()

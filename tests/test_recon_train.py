@@ -151,7 +151,12 @@ def test_cli_refusals(tmp_path):
                                    "--steps", "1"), f"--peak {low} {high}")
     assert_refused(run_tespike("train", "--config", "te", "--panoramas", tmp_path / "none", "--out",
                                tmp_path / "w.pt", "--steps", "1"), "--panoramas")
-    assert not (tmp_path / "w.pt").exists()
+    # a typo of a few zeros: refused before any process is started or any clip is made
+    assert_refused(run_tespike("train", "--config", "te", "--workers", "100000", "--out", tmp_path / "w.pt",
+                               "--steps", "1"), "workers = 100000", "0..256")
+    assert_refused(run_tespike("train", "--config", "te", "--pool", "10000000", "--workers", "0",
+                               "--out", tmp_path / "w.pt", "--steps", "1"), "a pool of 10000000 clips", "memory")
+    assert not (tmp_path / "w.pt").exists() and not (tmp_path / "w.run").exists()
 
 
 def test_peak_sets_the_clips_brightness(tmp_path, monkeypatch):

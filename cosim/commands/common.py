@@ -1,6 +1,7 @@
 """Argument blocks several sub-commands share, so their names and help read the same everywhere."""
 
 from tespike.golden.config import PRESETS
+from tespike.golden.resources import MAX_WORKERS  # noqa: F401  (one limit for every command's --workers)
 
 CONFIG_HELP = "JSON config file, or a preset: " + " / ".join(PRESETS)
 
@@ -75,8 +76,6 @@ def sensor_argument(args):
     return Sensor(noise, 0 if args.sensor_seed is None else args.sensor_seed)
 
 
-#: Most worker processes ``simulate --workers`` accepts.
-MAX_WORKERS = 256
 #: Most torch CPU threads any command's ``--threads`` accepts (reconstruct, evaluate, train).
 MAX_THREADS = 256
 

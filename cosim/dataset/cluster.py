@@ -31,9 +31,12 @@ POLL_SECONDS = 0.1
 
 
 def check_workers(workers: int | None, scheduler: str | None) -> None:
-    """Refuse ``--workers`` below 1 and ``--workers`` together with ``--scheduler``."""
-    if workers is not None and (type(workers) is not int or workers < 1):
-        raise InputError(f"--workers {workers!r} must be an integer >= 1")
+    """Refuse ``--workers`` outside the commands' one range (1..MAX_WORKERS) and ``--workers``
+    together with ``--scheduler``."""
+    from tespike.cosim.commands.common import check_workers_argument
+    if workers is not None and type(workers) is not int:
+        raise InputError(f"--workers {workers!r} must be an integer")
+    check_workers_argument(workers)
     if workers is not None and scheduler:
         raise InputError("--workers and --scheduler exclude each other "
                          "(an existing cluster has its own workers)")
