@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.decode import check_words, decode_light as golden_decode_light, legal_words
+from tespike.golden.decode import decode_light as golden_decode_light, legal_words
 from tespike.golden.decode import decode_spikes as golden_decode_spikes
 from tespike.golden.errors import InputError
 
