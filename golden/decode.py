@@ -18,39 +18,21 @@ from .errors import InputError
 CHECK_CHUNK_WORDS = 1 << 22
 
 
-def _msb_top_count(config: SensorConfig) -> int:
-    """The largest count an msb camera's counter can hold at a readout: the counter keeps
-    ``count - 2^(bit_length(count) - 1)`` and gains at most L spikes an interval (one a pixel
-    clock, SPEC section 3), saturating at 2^ml_bits - 1. Iterated from an empty counter to the
-    fixed point of the largest remainder (a remainder from any count up to the top)."""
-    L, top, rest = config.clocks_per_readout, config.ml_max, 0
-    while True:
-        count = min(top, rest + L)
-        half = 1 << (count.bit_length() - 1)
-        largest = max(count - half, (half >> 1) - 1 if half > 1 else 0)   # from the top, or from just below half
-        if largest <= rest:
-            return count
-        rest = largest
-
-
 @functools.lru_cache(maxsize=64)
 def legal_words(config: SensorConfig) -> np.ndarray:
-    """Every word the configured sensor can emit, ascending int64 (read-only): SPEC section 4's
-    word set narrowed by section 3's at most one spike a pixel clock. A TE count word is at most
-    min(2^b1 - 1, L); an overflow at CCC value m needs 2^b1 spikes within m * F clocks, so
-    m >= ceil(2^b1 / F) (none at all when 2^b1 > L); an ML count is at most min(2^ml_bits - 1, L)
-    ("no count can exceed L"); an msb word is at most the bit length of the largest count the
-    counter can hold with its carried remainder."""
-    L = config.clocks_per_readout
+    """Every word of the configuration's word set (SPEC section 4), ascending int64 (read-only):
+    TE counts 0..2^b1 - 1 and overflow words ``(1 << d) | m`` for m = 1..alpha; ML counts
+    0..2^ml_bits - 1; msb words 0..ml_bits. The set is SPEC's contract, not what one pixel can
+    reach: with one spike a pixel clock at most, counts above L and overflows before 2^b1 clocks
+    never come from the sensor (docs/spec.md), yet decode as section 5 says."""
     if config.is_te:
-        counts = np.arange(min(config.p_max - 1, L) + 1, dtype=np.int64)
-        earliest = (config.p_max - 1) // config.clocks_per_tick + 1
-        overflow = (1 << config.d) | np.arange(earliest, config.alpha + 1, dtype=np.int64)
+        counts = np.arange(config.p_max, dtype=np.int64)
+        overflow = (1 << config.d) | np.arange(1, config.alpha + 1, dtype=np.int64)
         words = np.concatenate([counts, overflow])
     elif config.is_msb:
-        words = np.arange(_msb_top_count(config).bit_length() + 1, dtype=np.int64)
+        words = np.arange(config.ml_bits + 1, dtype=np.int64)
     else:
-        words = np.arange(min(config.ml_max, L) + 1, dtype=np.int64)
+        words = np.arange(config.ml_max + 1, dtype=np.int64)
     words.setflags(write=False)
     return words
 
@@ -72,7 +54,7 @@ def _word_ranges(words: np.ndarray) -> str:
 
 
 def check_words(words: np.ndarray, config: SensorConfig) -> np.ndarray:
-    """Refuse any word that the configured sensor cannot emit (:func:`legal_words`).
+    """Refuse any word outside the configuration's word set (:func:`legal_words`).
 
     Checked in slices of about :data:`CHECK_CHUNK_WORDS` words along the first
     axis, so the memory it needs is bounded whatever the stream's size.
@@ -102,7 +84,7 @@ def _check_word_block(words: np.ndarray, config: SensorConfig, where) -> None:
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])
         raise InputError(f"readout word {int(words[index])} at index {where(index)} is not a legal "
-                         f"{config.mode.upper()} word for this configuration ({config}; it emits "
+                         f"{config.mode.upper()} word for this configuration ({config}; its words are "
                          f"{_word_ranges(legal_words(config))})")
 
 

@@ -22,7 +22,7 @@ from tespike.golden.errors import InputError
 
 
 def legal_codes(config: SensorConfig) -> np.ndarray:
-    """Every word the configured sensor can emit, ascending, int64 (golden's :func:`legal_words`)."""
+    """Every word of the configuration's word set (SPEC section 4), ascending, int64 (golden's :func:`legal_words`)."""
     return legal_words(config)
 
 

@@ -23,21 +23,32 @@ def test_te_illegal_words_refused(word):
 
 
 def test_ml_decode_and_refusal():
-    c = SensorConfig(mode="ml")                 # L = 240 clocks: no count above 240 (one spike a clock)
-    assert np.array_equal(decode_spikes(np.arange(241), c), np.arange(241))
-    for word in (241, 255, 256):
-        with pytest.raises(InputError, match=f"readout word {word} .*not a legal ML word"):
-            decode_spikes(np.array([word]), c)
+    c = SensorConfig(mode="ml")
+    assert np.array_equal(decode_spikes(np.arange(256), c), np.arange(256))
+    with pytest.raises(InputError, match=r"readout word 256 .*not a legal ML word.*its words are 0\.\.255"):
+        decode_spikes(np.array([256]), c)
 
 
-def test_a_te_overflow_earlier_than_2_to_the_b1_clocks_allow_is_refused():
-    """F = 4 clocks a tick: 16 spikes take 16 clocks, so an overflow latches CCC 4 at the earliest."""
-    c = SensorConfig(clocks_per_tick=4)
-    assert decode_spikes(np.array([16 | 4]), c)[0] == 16 * 15 / 4
-    with pytest.raises(InputError, match="readout word 19 "):
-        decode_spikes(np.array([16 | 3]), c)
-    short = SensorConfig(clocks_per_tick=1)     # L = 15 < 16: no overflow at all, counts up to 15
-    assert legal_words(short).tolist() == list(range(16))
+def _reachable(config):
+    """The words one pixel can emit, by hand: at most one spike a pixel clock (SPEC section 3), so
+    a TE count is at most L and an overflow at CCC m needs 2^b1 spikes within m * F clocks; an ML
+    count is at most L; the msb counter keeps count - 2^(bit_length - 1) and gains at most L an
+    interval, up to the fixed point of its largest remainder."""
+    L = config.clocks_per_readout
+    if config.is_te:
+        earliest = (config.p_max - 1) // config.clocks_per_tick + 1
+        return list(range(min(config.p_max - 1, L) + 1)) + \
+            [(1 << config.d) | m for m in range(earliest, config.alpha + 1)]
+    if not config.is_msb:
+        return list(range(min(config.ml_max, L) + 1))
+    rest = 0
+    while True:
+        count = min(config.ml_max, rest + L)
+        half = 1 << (count.bit_length() - 1)
+        largest = max(count - half, half // 2 - 1)
+        if largest <= rest:
+            return list(range(count.bit_length() + 1))
+        rest = largest
 
 
 @pytest.mark.parametrize("config", [
@@ -47,16 +58,16 @@ def test_a_te_overflow_earlier_than_2_to_the_b1_clocks_allow_is_refused():
     SensorConfig(mode="ml", b1=2, b2=2, ml_bits=8, ml_readout="msb"),
     SensorConfig(mode="ml", b1=1, b2=2, clocks_per_tick=5, ml_bits=8, ml_readout="msb"),
 ], ids=str)
-def test_legal_words_are_exactly_what_the_golden_sensor_emits(config):
+def test_the_golden_sensor_emits_legal_words_and_all_it_can_reach(config):
     """Pixels firing with every probability a clock (0 to 1, sustained for the msb counter's carry)
-    emit every legal word and nothing else: the word set follows the pixel rule, not the word width."""
+    emit exactly the words one spike a clock allows: all legal (SPEC section 4's set), which is
+    wider where L is short (counts above L, overflows earlier than 2^b1 clocks allow)."""
     rng = np.random.default_rng(7)
     L, K = config.clocks_per_readout, 40
-    chance = np.linspace(0.0, 1.0, 64)
-    fires = rng.random((K * L, 8, 64)) < chance
-    stimulus = np.where(fires, config.threshold, 0).astype(np.int64)
-    words = simulate(config, stimulus)
-    assert np.array_equal(np.unique(words), legal_words(config))
+    fires = rng.random((K * L, 8, 64)) < np.linspace(0.0, 1.0, 64)
+    words = simulate(config, np.where(fires, config.threshold, 0).astype(np.int64))
+    assert np.unique(words).tolist() == _reachable(config)
+    assert set(_reachable(config)) <= set(legal_words(config).tolist())
 
 
 def test_estimators_on_hand_worked_words():
@@ -76,7 +87,7 @@ def test_estimators_on_hand_worked_words():
     assert decode_spikes(np.array([4 | 1]), wide, "ratio")[0] == 12.0
     ml = SensorConfig(mode="ml")
     for name in ("ratio", "midpoint", "residual"):
-        assert np.array_equal(decode_spikes(np.arange(241), ml, name), np.arange(241))
+        assert np.array_equal(decode_spikes(np.arange(256), ml, name), np.arange(256))
 
 
 def test_unknown_estimator_refused():
