@@ -12,6 +12,7 @@ numbers as titles) or, with ``--each``, one grayscale PNG per frame at the
 array's own resolution.
 """
 
+from tespike.golden.decode import ESTIMATORS
 from tespike.recon.pictures import MU
 
 HELP = "write tone-mapped PNGs (contact sheet or one per frame) of I.npy, S.npz, R.npy or E.npy"
@@ -36,8 +37,8 @@ def add_arguments(parser):
                                                     "not with --each)")
     parser.add_argument("--config", help="config of a stimulus E.npy (its clocks per readout L)")
     parser.add_argument("--quiet", action="store_true", help="print nothing on success")
-    parser.add_argument("--estimator", help="decoder estimator for a stream S.npz only (default ratio; "
-                                            "known: ratio, midpoint, residual)")
+    parser.add_argument("--estimator", choices=tuple(ESTIMATORS),
+                        help="decoder estimator for a stream S.npz only (default ratio)")
 
 
 def load_light(path, config_spec=None, estimator=None):
