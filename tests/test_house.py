@@ -204,6 +204,8 @@ def test_golden_stands_on_numpy_and_the_standard_library_alone():
             if top not in ("tespike", "numpy", "__future__") and top not in sys.stdlib_module_names:
                 outside.append(f"{path.relative_to(ROOT)}: {module}")
     assert outside == []
+
+
 def test_vcdvcd_is_imported_in_one_place():
     """Importing vcdvcd changes SIGPIPE for the whole process: only :func:`tespike.cosim.vcd.vcd_reader`
     imports it, and puts that back."""
