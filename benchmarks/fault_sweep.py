@@ -335,8 +335,13 @@ class Case:
     env: dict = field(default_factory=dict)     # environment of the command, ``{work}`` its folder
 
 
-EVAL = ["evaluate", "--set", "none", "--methods", "tfp", "--repeats", "1", "--ml-count-config", "none",
-        "--progress", "off"]
+def evaluate_argv(methods: str, *more: str) -> list[str]:
+    """A small ``tespike evaluate`` with ``methods``, each option once (one given twice is refused)."""
+    return ["evaluate", "--methods", methods, "--repeats", "1", "--ml-count-config", "none", "--progress", "off",
+            *more]
+
+
+EVAL = evaluate_argv("tfp", "--set", "none")
 
 
 def truncation_cases(valid: Path) -> list[Case]:
@@ -390,9 +395,8 @@ def truncation_cases(valid: Path) -> list[Case]:
              out_kind="folder"),
         Case("evaluate folder", "frames/hdr", EVAL + ["--folder", "{in}", "--frames", "3", "--out", "{out}",
                                                       "--force"], member="f1.hdr", out="ev", out_kind="folder"),
-        Case("evaluate weights", "T.pt", EVAL[:4] + ["tfp,net", "--repeats", "1", "--ml-count-config", "none",
-                                                    "--progress", "off", "--scene", "I.npy", "--weights", "{in}",
-                                                    "--out", "{out}", "--force"], out="ev", out_kind="folder"),
+        Case("evaluate weights", "T.pt", evaluate_argv("tfp,net", "--set", "none", "--scene", "I.npy", "--weights", "{in}",
+                                                    "--out", "{out}", "--force"), out="ev", out_kind="folder"),
         Case("evaluate sensor noise", "noise.json", EVAL + ["--scene", "I.npy", "--sensor-noise", "{in}",
                                                             "--out", "{out}", "--force"], out="ev",
              out_kind="folder"),
@@ -500,9 +504,8 @@ def interrupt_cases() -> list[Case]:
     return [
         Case("simulate --workers 2", "", ["simulate", "--config", "te", "--scene", "big.npy", "--out", "S.npz",
                                           "--seed", "1", "--workers", "2", "--progress", "off"], out="S.npz"),
-        Case("evaluate", "", EVAL[:4] + ["tfp,tfi", "--repeats", "1", "--ml-count-config", "none", "--progress",
-                                         "off", "--set", "default", "--frames", "12", "--height", "32", "--width",
-                                         "32", "--out", "ev", "--force"], out="ev", out_kind="folder"),
+        Case("evaluate", "", evaluate_argv("tfp,tfi", "--set", "default", "--frames", "12", "--height", "32", "--width",
+                                         "32", "--out", "ev", "--force"), out="ev", out_kind="folder"),
         Case("evaluate --store --workers 2", "", ["evaluate", "--store", "D.zarr", "--methods", "tfp,tfi",
                                                   "--progress", "off", "--workers", "2",
                                                   "--out", "ev", "--force"], out="ev", out_kind="folder"),
@@ -665,9 +668,8 @@ def starve_cases() -> list[Case]:
                                                  f"{f}/S.npz", "--seed", "1", "--workers", "2"], out=f"{f}/S.npz"),
         Case("starve stimulus", "", ["stimulus", "--config", "te", "--scene", "I.npy", "--out", f"{f}/E.npy",
                                      "--seed", "1", "--readouts", "4"], out=f"{f}/E.npy"),
-        Case("starve evaluate", "", EVAL[:4] + ["tfp,tfi", "--repeats", "1", "--ml-count-config", "none",
-                                                "--progress", "off", "--set", "default", "--frames", "12",
-                                                "--height", "32", "--width", "32", "--out", f"{f}/ev", "--force"],
+        Case("starve evaluate", "", evaluate_argv("tfp,tfi", "--set", "default", "--frames", "12",
+                                                "--height", "32", "--width", "32", "--out", f"{f}/ev", "--force"),
              out=f"{f}/ev", out_kind="folder"),
         Case("starve evaluate --store --workers 2", "", ["evaluate", "--store", "D.zarr", "--methods", "tfp,tfi",
                                                          "--progress", "off", "--workers", "2", "--out", f"{f}/ev",
