@@ -328,7 +328,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                                  f"{repeats}) and on the RTL stream")
         from tespike.recon.evaluate import evaluate, label, scored_frames
         from tespike.recon.report import write_outputs
-        from tespike.recon.methods import available_methods, reconstruct, uses_window
+        from tespike.recon.methods import available_methods, reconstruct
+        from tespike.recon.settings import uses_window
         from tespike.recon.metrics import psnr_mu, ssim_mu
         methods = available_methods(configs.values(), ready)     # learned ones only where there are weights
         by_config = {configs[name]: streams[name] for name in configs}

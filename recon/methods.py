@@ -104,12 +104,6 @@ class Method:
     law_input: bool = False         # so does a calibration with a dark law (TFP: its law-aware window light)
 
 
-def uses_window(method: str, search: str = "stream") -> bool:
-    """Whether ``method`` reads the ``window`` setting: TFP always, TFI only when it searches the
-    window (``search="window"``; the whole stream otherwise), the learned methods never."""
-    return method == "tfp" or (method == "tfi" and search == "window")
-
-
 #: name -> reconstruction method (not golden.fastsim's simulation methods). The learned
 #: ones ignore ``window``: they see the span their sizes fix (:func:`tespike.recon.learned.method_span`).
 RECON_METHODS: dict[str, Method] = {

@@ -98,3 +98,9 @@ class ReconSettings:
     def radius(self) -> int:
         """Window radius omega_h of the paper's eq. 4: window = 2 * radius + 1."""
         return self.window // 2
+
+
+def uses_window(method: str, search: str = "stream") -> bool:
+    """Whether ``method`` reads the ``window`` setting: TFP always, TFI only when it searches the
+    window (``search="window"``; the whole stream otherwise), the learned methods never."""
+    return method == "tfp" or (method == "tfi" and search == "window")

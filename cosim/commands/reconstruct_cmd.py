@@ -42,7 +42,7 @@ def run(args) -> int:
     from tespike.golden.errors import InputError
     from tespike.golden.io import atomic_output, load_stream
     from tespike.golden.paths import check_outputs
-    from tespike.recon.settings import DEFAULT_WINDOW, check_window
+    from tespike.recon.settings import DEFAULT_WINDOW, check_window, uses_window
 
     from .common import check_threads_argument
     from tespike.cosim.room import require_room, reserved_memmap
@@ -54,7 +54,7 @@ def run(args) -> int:
         from tespike.recon.learned import method_span
         raise InputError(f"--window applies to methods 'tfp' and 'tfi'; {args.method!r} sees the "
                          f"{method_span(args.method)} readouts its sizes fix")
-    if args.method == "tfi" and args.window is not None and args.search != "window":
+    if args.method == "tfi" and args.window is not None and not uses_window("tfi", args.search):
         raise InputError("--window applies to tfi with --search window only (tfi searches the whole stream "
                          "by default, whatever the window)")
     window = DEFAULT_WINDOW if args.window is None else args.window
