@@ -222,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def prepare():                    # (in _run: a stop while preparing ends in its one line too)
         from .library_room import guard_imports
-        guard_imports()               # under ulimit -v only: torch's import is tried in a child first
+        guard_imports()               # torch loads with the stops held (and, under ulimit -v, is tried in a child first)
         if whole_process:             # removes the run's temporaries should it be killed outright
             from tespike.golden.atomic import start_janitor
             start_janitor()

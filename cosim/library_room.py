@@ -1,12 +1,19 @@
-"""Room in the address space for a library that aborts from C when it runs out of it.
+"""Room and quiet for a library whose start cannot be stopped or refused from Python.
 
-Under an address-space limit (``ulimit -v``, RLIMIT_AS) torch's import throws
-``std::bad_alloc`` from a static initialiser when its libraries do not fit: the
-process dies of SIGABRT, past any handling in Python. So, under such a limit only,
-:func:`guard_imports` tries the import in a child process first (which inherits the
-limit) and measures what it maps; when it cannot fit in what is left here, the
-import raises :class:`MemoryError` with the sizes, which the command line prints
-as one line. Without a limit nothing is installed and imports cost nothing more.
+Two faults of torch's import kill the process from C++, past any handling in Python:
+
+- Under an address-space limit (``ulimit -v``, RLIMIT_AS) its static initialisers throw
+  ``std::bad_alloc`` when its libraries do not fit (SIGABRT). So, under such a limit only,
+  the import is tried in a child process first (which inherits the limit) and what it maps is
+  measured; when it cannot fit in what is left here, the import raises :class:`MemoryError`
+  with the sizes, which the command line prints as one line.
+- Ctrl-C or SIGTERM while it loads raise in Python code that its C++ start called (pybind11),
+  which ends in ``std::terminate`` and 77 lines of a C++ trace (SIGABRT; seen in the fault
+  sweep with SIGTERM 0.9 s into ``evaluate --store``). So the load runs with the stops held
+  (:func:`tespike.golden.atomic.stops_held`): a stop meanwhile ends the command, with its one
+  line, once the library has loaded (about 2 s on an idle machine).
+
+:func:`guard_imports` installs one finder of ``sys.meta_path`` that does both.
 """
 
 from __future__ import annotations
@@ -14,9 +21,10 @@ from __future__ import annotations
 import os
 import sys
 
+from tespike.golden.atomic import stops_held
 from tespike.golden.resources import address_space_limit, mapped_bytes
 
-#: Libraries tried in a child first.
+#: Libraries whose room is checked (under a limit) and whose load runs with the stops held.
 GUARDED = ("torch",)
 #: What a child's failed import prints when the address space, not the library, was at fault.
 _NO_ROOM_WORDS = ("alloc", "memory", "Memory", "map segment", "pthread_create", "can't start new thread")
@@ -64,9 +72,32 @@ def _refusal(name: str, limit: int) -> str | None:
     return None
 
 
+class _HeldLoader:
+    """A library's own loader, whose ``exec_module`` runs with the stops held; everything else
+    (``get_resource_reader``, ``is_package`` ...) is the library's loader's."""
+
+    def __init__(self, loader):
+        self.loader = loader
+
+    def __getattr__(self, name):
+        return getattr(self.loader, name)
+
+    def create_module(self, spec):
+        return self.loader.create_module(spec)
+
+    def exec_module(self, module):
+        try:
+            with stops_held():
+                self.loader.exec_module(module)
+        finally:               # the module keeps its own loader, as if this one had never been
+            module.__loader__ = self.loader
+            if getattr(module, "__spec__", None) is not None:
+                module.__spec__.loader = self.loader
+
+
 class _Guard:
-    """A finder of ``sys.meta_path`` (``find_spec`` is all one needs): checks the room for each
-    guarded library on its first import, then lets the usual finders load it."""
+    """A finder of ``sys.meta_path``: on a guarded library's first import, checks its room
+    (under an address-space limit) and hands back the usual finders' spec with its load held."""
 
     def __init__(self):
         self.checked: set[str] = set()
@@ -79,12 +110,21 @@ class _Guard:
         refusal = None if limit is None else _refusal(fullname, limit)
         if refusal:
             raise MemoryError(refusal)
-        return None                       # the usual finders load it
+        for finder in sys.meta_path:     # the finders that would have found it, this one aside
+            if finder is self or not hasattr(finder, "find_spec"):
+                continue
+            spec = finder.find_spec(fullname, path, target)
+            if spec is not None:
+                if spec.loader is not None and hasattr(spec.loader, "exec_module"):
+                    spec.loader = _HeldLoader(spec.loader)
+                return spec
+        return None
 
 
 def guard_imports() -> None:
-    """Under an address-space limit, check :data:`GUARDED` libraries' room before they load."""
-    if address_space_limit() is None or any(name in sys.modules for name in GUARDED) \
+    """Check :data:`GUARDED` libraries' room before they load (under an address-space limit) and
+    load them with the stops held; once per process, and not for a library already loaded."""
+    if all(name in sys.modules for name in GUARDED) \
             or any(isinstance(finder, _Guard) for finder in sys.meta_path):
         return
     sys.meta_path.insert(0, _Guard())

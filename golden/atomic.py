@@ -258,7 +258,7 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
             else:
                 mode = (info.st_mode & 0o777) if info is not None else (0o666 & ~_umask())
                 os.chmod(tmp, mode)
-                with _stops_held():
+                with stops_held():
                     os.replace(tmp, target)
                     _FINISHED.append(shown)
         except OSError as exc:
@@ -271,12 +271,13 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
         _Janitor.release(tmp)
 
 
-#: Signals that stop a command, held while an output is committed (:func:`_stops_held`).
+#: Signals that stop a command, held while an output is committed (:func:`stops_held`) or a
+#: library whose start cannot be interrupted is loading (``cosim.library_room``).
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 @contextlib.contextmanager
-def _stops_held():
+def stops_held():
     """Ctrl-C, SIGTERM and SIGHUP held while an output is renamed into place and recorded as
     written, then raised again through the handlers they would have met: a command stopped there
     reports the output as written (:func:`finished_outputs`), never a replaced file it does not
@@ -372,7 +373,7 @@ def atomic_folder(path: str | Path, what: str = "--out") -> Iterator[Path]:
     try:
         try:
             yield tmp
-            with _stops_held():                    # (the two renames below are one step to a stop)
+            with stops_held():                    # (the two renames below are one step to a stop)
                 if not os.path.lexists(target):
                     os.rename(tmp, target)
                 elif not folder_holds_files(target) and target.is_dir():

@@ -356,6 +356,36 @@ def test_a_stop_while_the_command_prepares_is_its_one_line(tmp_path, monkeypatch
     assert not (tmp_path / "s.npz").exists()
 
 
+def test_a_stop_while_a_guarded_library_loads_comes_once_it_has_loaded(tmp_path, monkeypatch):
+    """SIGTERM 0.9 s into ``evaluate --store`` met torch's import and raised inside code its C++
+    start had called: pybind11 ended the process with std::terminate (SIGABRT, 77 lines). A guarded
+    library loads with the stops held; the stop is raised once it has loaded, and the module
+    keeps its own loader."""
+    from tespike.cosim import cli, library_room
+
+    (tmp_path / "stopped_library.py").write_text(
+        "import os, signal\nos.kill(os.getpid(), signal.SIGTERM)\nLOADED = True\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(sys, "meta_path", [f for f in sys.meta_path if not isinstance(f, library_room._Guard)])
+    monkeypatch.setattr(library_room, "GUARDED", ("stopped_library",))
+    monkeypatch.setattr(library_room, "address_space_limit", lambda: None)    # (no room check here)
+    monkeypatch.delitem(sys.modules, "stopped_library", raising=False)
+    library_room.guard_imports()
+    seen = []
+
+    def stop(signum, frame):
+        seen.append(sys.modules["stopped_library"])
+        raise cli.Terminated(signum)
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        with pytest.raises(cli.Terminated):
+            import stopped_library  # noqa: F401
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert len(seen) == 1 and seen[0].LOADED
+    assert type(seen[0].__loader__).__name__ == "SourceFileLoader" and seen[0].__spec__.loader is seen[0].__loader__
+
+
 def test_a_signal_during_the_interpreters_exit_ends_it_without_a_traceback(tmp_path):
     """After the command's line, Ctrl-C or SIGTERM end the process as the system does (torch's and
     Dask's exit handlers take a second; a KeyboardInterrupt raised in one printed a traceback)."""
