@@ -18,8 +18,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import re
-import tempfile
-from pathlib import Path
 
 import numpy as np
 
@@ -27,8 +25,7 @@ from tespike.golden.activity import Activity, pixel_register_names
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
-from . import children
-from .synthesis import SynthesisError, yosys_missing
+from .synthesis import SynthesisError, yosys_run
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,17 +42,9 @@ class FlipFlops:
 
 
 def _design_json(verilog_text: str, top: str, yosys: str = "yosys") -> dict:
-    missing = yosys_missing(yosys)
-    if missing:
-        raise SynthesisError(missing)
-    with tempfile.TemporaryDirectory(prefix="tespike-activity-") as tmp:
-        (Path(tmp) / "design.v").write_text(verilog_text)
-        script = f"read_verilog design.v; hierarchy -top {top}; proc; write_json design.json"
-        done = children.run([yosys, "-q", "-p", script], cwd=tmp, capture_output=True, text=True)
-        if done.returncode != 0:
-            lines = (done.stderr or done.stdout).strip().splitlines()
-            raise SynthesisError(f"yosys could not read {top}: {lines[-1] if lines else 'no message'}")
-        return json.loads((Path(tmp) / "design.json").read_text())
+    with yosys_run(verilog_text, [f"hierarchy -top {top}", "proc", "write_json design.json"],
+                   f"yosys could not read {top}", yosys, "tespike-activity-") as (work, _):
+        return json.loads((work / "design.json").read_text())
 
 
 def flip_flops(verilog_text: str, top: str, yosys: str = "yosys") -> tuple[list[FlipFlops], dict[str, int]]:

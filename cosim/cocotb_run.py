@@ -33,7 +33,8 @@ from tespike.golden.errors import InputError
 from .cocotb_bench import Settings
 from . import children
 from .outside import (SimulatorBuildError, SimulatorMissingError, cache_entry, content_hash,
-                      default_cache_root, first_error_line, top_module)
+                      default_cache_root, first_error_line)
+from .tops import Top
 
 #: The test module cocotb loads in the simulator.
 TEST_MODULE = "tespike.cosim.cocotb_bench"
@@ -180,14 +181,10 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
     """
     cocotb_version()
     _runner(simulator)                     # refuse an unknown simulator,
-    if settings.lanes is None:
-        top = top_module(settings.config)
-    else:
+    if settings.lanes is not None:
         from tespike.golden.beats import check_lanes
-
-        from .stream_ports import stream_top_module
         check_lanes(settings.config, settings.height, settings.width, settings.lanes)
-        top = stream_top_module(settings.config)
+    top = Top(settings.config, settings.height, settings.width, settings.lanes).module
     settings.inputs()                      # and a bad stimulus or reset vector, before building anything
     with tempfile.TemporaryDirectory(prefix="tespike-cocotb-") as scratch:
         if verilog_path is None:

@@ -23,25 +23,15 @@ from tespike.golden.activity import BLOCKS
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
-from . import children
 from .activity import bit_changes, module_blocks, settled_values
-from .synthesis import SynthesisError, yosys_missing
+from .synthesis import SynthesisError, yosys_run
 
 
 def gate_netlist(verilog_text: str, top: str, yosys: str = "yosys") -> tuple[str, dict]:
     """(the synthesised gate netlist as Verilog, Yosys's JSON of the same design)."""
-    missing = yosys_missing(yosys)
-    if missing:
-        raise SynthesisError(missing)
-    with tempfile.TemporaryDirectory(prefix="tespike-gates-") as tmp:
-        (Path(tmp) / "design.v").write_text(verilog_text)
-        script = (f"read_verilog design.v; synth -top {top}; rename -enumerate; "
-                  "write_verilog -noattr gates.v; write_json gates.json")
-        done = children.run([yosys, "-q", "-p", script], cwd=tmp, capture_output=True, text=True)
-        if done.returncode != 0:
-            lines = (done.stderr or done.stdout).strip().splitlines()
-            raise SynthesisError(f"yosys could not synthesise {top}: {lines[-1] if lines else 'no message'}")
-        return (Path(tmp) / "gates.v").read_text(), json.loads((Path(tmp) / "gates.json").read_text())
+    steps = [f"synth -top {top}", "rename -enumerate", "write_verilog -noattr gates.v", "write_json gates.json"]
+    with yosys_run(verilog_text, steps, f"yosys could not synthesise {top}", yosys, "tespike-gates-") as (work, _):
+        return (work / "gates.v").read_text(), json.loads((work / "gates.json").read_text())
 
 
 def gate_outputs(design: dict, top: str, config: SensorConfig, streaming: bool) -> list[tuple[str, str, str, int]]:

@@ -59,11 +59,6 @@ class SimulatorRunError(OutsideSimulatorError):
 
 
 # -- the SPEC ports ----------------------------------------------------------------
-def top_module(config: SensorConfig) -> str:
-    """SPEC section 6: ``te_pixel_array`` or ``ml_pixel_array``."""
-    return "te_pixel_array" if config.is_te else "ml_pixel_array"
-
-
 def words_per_row(pixels: int, bits: int) -> int:
     """32-bit words holding one flat port of ``pixels * bits`` bits."""
     return (pixels * bits + 31) // 32

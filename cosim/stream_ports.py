@@ -24,11 +24,6 @@ from tespike.golden.beats import beat_count
 from .outside import SimulatorRunError, unpack_rows
 
 
-def stream_top_module(config: SensorConfig) -> str:
-    """SPEC section 6: ``te_pixel_array_stream`` or ``ml_pixel_array_stream``."""
-    return ("te" if config.is_te else "ml") + "_pixel_array_stream"
-
-
 def check_beats(clocks, firsts, lane_rows, config: SensorConfig, height: int, width: int, lanes: int,
                 readouts: int, what: str) -> tuple[np.ndarray, int]:
     """Captured beats -> ``(K, B, N)`` int64 words and the largest latency of a last beat.

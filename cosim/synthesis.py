@@ -23,6 +23,7 @@ multiplies them out by instance counts.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -77,28 +78,46 @@ def yosys_missing(yosys: str = "yosys") -> str | None:
     return None if shutil.which(yosys) else f"Yosys ({yosys!r}) is not installed"
 
 
+@contextlib.contextmanager
+def yosys_run(verilog_text: str, steps: list[str], failure: str, yosys: str = "yosys", prefix: str = "tespike-yosys-"):
+    """Yosys on ``verilog_text`` (read as :data:`DESIGN_FILE` in a fresh folder, the script's
+    working folder) running ``steps``: the one place every Yosys flow here (synthesis, the
+    switching netlists, the register map) starts it. Yields (the folder, the run's wall and CPU
+    seconds and peak resident MB) while the folder lives; a missing Yosys or a failed run
+    raises :class:`SynthesisError` saying ``failure`` and Yosys's first error line."""
+    missing = yosys_missing(yosys)
+    if missing:
+        raise SynthesisError(missing)
+    with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
+        work = Path(tmp)
+        (work / DESIGN_FILE).write_text(verilog_text)
+        code, output, run = _run_measured([yosys, "-q", "-p", "; ".join([f"read_verilog {DESIGN_FILE}", *steps])],
+                                          work)
+        if code != 0:
+            errors = [line for line in output.splitlines() if "ERROR" in line] or output.strip().splitlines()[-1:]
+            raise SynthesisError(f"{failure}: {errors[0].strip() if errors else f'exit code {code}'}")
+        yield work, run
+
+
+def mapping_steps(gate_sets: tuple[str, ...]) -> list[str]:
+    """The cost flow after ``synth``: the generic report (``generic.json``), then every flip-flop
+    legalised to a plain D flip-flop and the logic mapped to each ABC gate set, each reported
+    with Yosys's CMOS transistor table (``<gates>.json``)."""
+    steps = ["tee -q -o generic.json stat -json", "dfflegalize -cell $_DFF_P_ 01", "opt_clean", "design -save legal"]
+    for gates in gate_sets:
+        steps += ["design -load legal", f"abc -g {gates}", "opt_clean", f"tee -q -o {gates}.json stat -json -tech cmos"]
+    return steps
+
+
 def synthesize(verilog_text: str, top: str, yosys: str = "yosys",
                gate_sets: tuple[str, ...] = ABC_GATE_SETS) -> dict:
     """Synthesize module ``top``; return cells, flops, ``transistors`` (smallest estimate
     over ``gate_sets``) and ``transistors_max`` (largest). Raises :class:`SynthesisError`."""
-    missing = yosys_missing(yosys)
-    if missing:
-        raise SynthesisError(missing)
-    with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / "design.v"
-        src.write_text(verilog_text)
-        steps = [f"read_verilog {src}", f"synth -top {top}", f"tee -q -o {tmp}/generic.json stat -json",
-                 "dfflegalize -cell $_DFF_P_ 01", "opt_clean", "design -save legal"]
-        for gates in gate_sets:
-            steps += ["design -load legal", f"abc -g {gates}", "opt_clean",
-                      f"tee -q -o {tmp}/{gates}.json stat -json -tech cmos"]
-        result = children.run([yosys, "-q", "-p", "; ".join(steps)], capture_output=True, text=True)
-        if result.returncode != 0:
-            lines = (result.stderr or result.stdout).strip().splitlines()
-            raise SynthesisError(f"yosys failed on {top}: {lines[-1] if lines else 'no message'}")
+    with yosys_run(verilog_text, [f"synth -top {top}", *mapping_steps(gate_sets)],
+                   f"yosys failed on {top}", yosys) as (work, _):
         try:
-            generic = parse_stat((Path(tmp) / "generic.json").read_text())
-            mapped = {g: parse_stat((Path(tmp) / f"{g}.json").read_text()) for g in gate_sets}
+            generic = parse_stat((work / "generic.json").read_text())
+            mapped = {g: parse_stat((work / f"{g}.json").read_text()) for g in gate_sets}
         except (OSError, ValueError, KeyError) as exc:
             raise SynthesisError(f"{top}: {exc}") from None
     for gates, stat in mapped.items():
@@ -218,22 +237,8 @@ def synthesize_hierarchy(verilog_text: str, top: str | None = None, yosys: str =
     flow of :func:`synthesize`) and ``run`` (wall and CPU seconds and peak memory of Yosys).
     ``top=None``: the module no other instantiates. Raises :class:`SynthesisError`.
     """
-    missing = yosys_missing(yosys)
-    if missing:
-        raise SynthesisError(missing)
-    with tempfile.TemporaryDirectory(prefix="tespike-synthesize-") as tmp:
-        work = Path(tmp)
-        (work / DESIGN_FILE).write_text(verilog_text)
-        steps = [f"read_verilog {DESIGN_FILE}", f"synth -top {top}" if top else "synth -auto-top",
-                 "setattr -mod -unset top", "tee -q -o generic.json stat -json",
-                 "dfflegalize -cell $_DFF_P_ 01", "opt_clean", "design -save legal"]
-        for gates in gate_sets:
-            steps += ["design -load legal", f"abc -g {gates}", "opt_clean",
-                      f"tee -q -o {gates}.json stat -json -tech cmos"]
-        code, output, run = _run_measured([yosys, "-q", "-p", "; ".join(steps)], work)
-        if code != 0:
-            errors = [line for line in output.splitlines() if "ERROR" in line] or output.strip().splitlines()[-1:]
-            raise SynthesisError(f"yosys failed: {errors[0].strip() if errors else f'exit code {code}'}")
+    steps = [f"synth -top {top}" if top else "synth -auto-top", "setattr -mod -unset top", *mapping_steps(gate_sets)]
+    with yosys_run(verilog_text, steps, "yosys failed", yosys, "tespike-synthesize-") as (work, run):
         try:
             modules = parse_stat_modules((work / "generic.json").read_text())
             mapped = {g: parse_stat_modules((work / f"{g}.json").read_text()) for g in gate_sets}

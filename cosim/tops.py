@@ -24,9 +24,11 @@ from tespike.golden.config import SensorConfig
 from tespike.golden.io import check_stimulus
 from tespike.golden.beats import beat_count, check_lanes
 
-from .outside import check_captures, top_module, unpack_rows
+from tespike.rtl.names import module_names, stream_module_names
+
+from .outside import check_captures, unpack_rows
 from .resets import beat_segments, check_resets, frame_segments, segments
-from .stream_ports import check_beats, flush_clocks, stream_top_module
+from .stream_ports import check_beats, flush_clocks
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,8 +46,8 @@ class Top:
 
     @property
     def module(self) -> str:
-        """The Verilog module name SPEC section 6 gives it."""
-        return stream_top_module(self.config) if self.streaming else top_module(self.config)
+        """The Verilog module name SPEC section 6 gives it (:mod:`tespike.rtl.names`)."""
+        return (stream_module_names if self.streaming else module_names)(self.config)["top"]
 
     @property
     def outputs(self) -> str:

@@ -42,20 +42,12 @@ from tespike.golden.config import SensorConfig
 from tespike.golden.errors import ConfigError
 
 from .array import check_array_size
+from .names import module_names
 from .pixel import pixel_class
 from .timing import ReadoutTiming
 
 #: Verilator warnings waived inside the Amaranth-generated modules (reason above).
 WAIVED_LINT = ("WIDTH", "UNUSEDSIGNAL")
-
-
-def module_names(config: SensorConfig) -> dict[str, str]:
-    """Verilog module names, prefixed by the mode: ``top``, ``pixel``, ``timing`` (the sampled-input
-    timing block of the pixel and the streaming top) and ``array_timing`` (the parallel top's,
-    ``ReadoutTiming(sampled_input=False)``)."""
-    mode = config.mode
-    return {"top": f"{mode}_pixel_array", "pixel": f"{mode}_pixel", "timing": f"{mode}_readout_timing",
-            "array_timing": f"{mode}_array_timing"}
 
 
 def _waive(text: str) -> str:

@@ -58,22 +58,11 @@ from tespike.golden.beats import beat_count, check_lanes
 
 from .array import check_array_size
 from .timing import ReadoutTiming
-from .verilog import genvar_names, generate_loop, checked_config, convert_modules, module_names
+from .names import stream_module_names
+from .verilog import genvar_names, generate_loop, checked_config, convert_modules
 
 #: A one-bit one, zero-extended by :func:`_zext` for the msb readout's power of two.
 ONE_BIT = "1'b1"
-
-
-def stream_module_names(config: SensorConfig) -> dict[str, str]:
-    """Module names of the streaming Verilog: ``top`` (``<mode>_pixel_array_stream``),
-    ``timing``, ``pixel`` (one site's pixel), ``rule`` (its combinational rule) and ``cell``
-    (one readout cell)."""
-    names = module_names(config)
-    mode = config.mode
-    return {"top": names["top"] + "_stream", "timing": names["timing"], "pixel": f"{mode}_stream_pixel",
-            "rule": f"{mode}{'_msb' if config.is_msb else ''}_stream_pixel_rule",
-            "cell": f"{mode}_readout_cell", "group": f"{mode}_beat_group",
-            "group_end": f"{mode}_beat_group_end"}
 
 
 def _zext(expr: str, width: int, to: int) -> str:
@@ -401,7 +390,7 @@ def stream_top_verilog(config: SensorConfig, height: int, width: int, lanes: int
     config = checked_config(config)
     pixels, beats, beat_bits = _geometry(config, height, width, lanes)
     names = stream_module_names(config)
-    n, wd, e = lanes, config.word_bits, config.input_bits
+    n = lanes
     end_sites = pixels - (beats - 1) * n
     te = config.is_te
     pins = f".clk(clk), .rst(rst), .clear(clear), {'.ccc(ccc), ' if te else ''}.last(last), " \
@@ -454,7 +443,6 @@ def stream_loop_verilog(config: SensorConfig, height: int, width: int, lanes: in
     docstring). Not for synthesis: :func:`stream_top_verilog` is the design."""
     config = checked_config(config)
     pixels, beats, beat_bits = _geometry(config, height, width, lanes)
-    names = stream_module_names(config)
     decls, body = _pixel_rule(config, RULE_INDENT)
     top = (_header(config, height, width, lanes,
                    "Simulation view (one clocked loop over memories); the design is the instance view.", False)

@@ -6,7 +6,7 @@ import pytest
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import TespikeError
 from tespike.cosim.outside import (SimulatorRunError, cache_entry, check_captures, content_hash,
-                           first_error_line, hex_to_rows, pack_rows, rows_to_hex, top_module,
+                           first_error_line, hex_to_rows, pack_rows, rows_to_hex,
                            unpack_rows, words_per_row)
 
 
@@ -102,6 +102,10 @@ def test_cache_entry_reports_done(tmp_path):
         assert done
 
 
-def test_top_module_names():
-    assert top_module(SensorConfig()) == "te_pixel_array"
-    assert top_module(SensorConfig(mode="ml")) == "ml_pixel_array"
+def test_every_harness_names_spec_sections_tops():
+    """SPEC section 6's top names, written once (tespike.rtl.names) and read by every harness."""
+    from tespike.cosim.tops import Top
+    for mode, top in (("te", "te_pixel_array"), ("ml", "ml_pixel_array")):
+        config = SensorConfig(mode=mode)
+        assert Top(config, 2, 2).module == top
+        assert Top(config, 2, 2, lanes=1).module == top + "_stream"

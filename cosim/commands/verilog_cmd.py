@@ -42,10 +42,9 @@ def run(args) -> int:
         raise InputError(f"--height {args.height} x --width {args.width} = {pixels} "
                          f"pixels: at most {limit} (e.g. {example}) are supported"
                          + ("" if args.lanes is None else " with --lanes"))
-    mode = "te" if config.is_te else "ml"
     if args.lanes is None:
-        from tespike.rtl.verilog import array_verilog
-        text, what = array_verilog(config, args.height, args.width), f"{mode}_pixel_array"
+        from tespike.rtl.verilog import array_verilog, module_names
+        text, what = array_verilog(config, args.height, args.width), module_names(config)["top"]
     else:
         from tespike.golden.beats import beat_count, check_lanes
         try:
@@ -54,9 +53,9 @@ def run(args) -> int:
             raise
         except ValueError as exc:                 # ConfigError: name the flag
             raise InputError(f"--{exc}") from None
-        from tespike.rtl.verilog_stream import stream_array_verilog
+        from tespike.rtl.verilog_stream import stream_array_verilog, stream_module_names
         text = stream_array_verilog(config, args.height, args.width, args.lanes)
-        what = (f"{mode}_pixel_array_stream, {args.lanes} lanes, "
+        what = (f"{stream_module_names(config)['top']}, {args.lanes} lanes, "
                 f"{beat_count(pixels, args.lanes)} beats per readout interval")
     with atomic_output(args.out) as tmp:
         Path(tmp).write_text(text)

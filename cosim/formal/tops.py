@@ -41,6 +41,7 @@ import re
 from dataclasses import dataclass
 
 from tespike.golden.config import SensorConfig
+from tespike.rtl.names import module_names, stream_module_names
 
 from .reference import PARALLEL_DELAY, STREAM_DELAY, reference_verilog
 
@@ -52,17 +53,6 @@ def design_text(config: SensorConfig, height: int, width: int, lanes: int | None
         return array_verilog(config, height, width)
     from tespike.rtl.verilog_stream import stream_array_verilog
     return stream_array_verilog(config, height, width, lanes)
-
-
-def top_name(config: SensorConfig, lanes: int | None) -> str:
-    """SPEC section 6's top name: ``te_pixel_array`` / ``ml_pixel_array``, ``_stream`` with lanes."""
-    return f"{config.mode}_pixel_array" + ("" if lanes is None else "_stream")
-
-
-def timing_name(config: SensorConfig, sampled_input: bool = True) -> str:
-    """The timing block's module name in the generated text: ``<mode>_readout_timing`` (the
-    streaming top's, behind its input register) or ``<mode>_array_timing`` (the parallel top's)."""
-    return f"{config.mode}_{'readout' if sampled_input else 'array'}_timing"
 
 
 def bmc_bound(config: SensorConfig, height: int, width: int, lanes: int | None, intervals: int = 3) -> int:
@@ -125,7 +115,7 @@ def parallel_harness(config: SensorConfig, height: int, width: int, design: str 
     P, E, wd = height * width, c.input_bits, c.word_bits
     design = design_text(c, height, width, None) if design is None else design
     head = (_proof_top(P * E) + f"  wire dut_valid;\n  wire [{P * wd - 1}:0] dut_frame;\n"
-            + _on_inputs(top_name(c, None), "dut", frame_valid="dut_valid", frame="dut_frame")
+            + _on_inputs(module_names(c)["top"], "dut", frame_valid="dut_valid", frame="dut_frame")
             + f"  wire done, ref_valid;\n  wire [{P * wd - 1}:0] words, ref_frame;\n"
             + _on_inputs("spec_reference", "ref", done="done", words="words", frame_valid="ref_valid",
                          frame="ref_frame"))
@@ -148,7 +138,7 @@ def stream_harness(config: SensorConfig, height: int, width: int, lanes: int, de
     ab = (2 * L + 2).bit_length()
     design = design_text(c, height, width, n) if design is None else design
     head = (_proof_top(P * E) + f"  wire out_valid, out_first;\n  wire [{n * wd - 1}:0] out_words;\n"
-            + _on_inputs(top_name(c, n), "dut", out_valid="out_valid", out_first="out_first", out_words="out_words")
+            + _on_inputs(stream_module_names(c)["top"], "dut", out_valid="out_valid", out_first="out_first", out_words="out_words")
             + f"  wire done, ref_valid, ref_first, ref_fv;\n"
             f"  wire [{P * wd - 1}:0] words, ref_frame;\n  wire [{n * wd - 1}:0] ref_words, beat_words;\n"
             # the contract monitor: a queue of the intervals whose words are outstanding
@@ -203,7 +193,7 @@ def timing_harness(config: SensorConfig, design: str | None = None, depth: int |
     pin = ".ccc(ccc), " if c.is_te else ""
     ph0, jj0 = (F - 1, alpha - 1) if sampled_input else (0, 0)
     head = (f"module proof_top (input wire clk, input wire rst);\n{ccc}  wire last, frame_valid;\n"
-            f"  {timing_name(c, sampled_input)} dut (.clk(clk), .rst(rst), {pin}.last(last), "
+            f"  {module_names(c)['timing' if sampled_input else 'array_timing']} dut (.clk(clk), .rst(rst), {pin}.last(last), "
             f".frame_valid(frame_valid));\n"
             f"  // the pixel clock t the counters describe: ph inside S_h, jj inside S_r; after a reset\n"
             f"  // t = -1 (sampled input: the interval's last clock, no frame) or t = 0 (at the port)\n"
