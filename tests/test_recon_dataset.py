@@ -212,13 +212,14 @@ def test_cli_refusals(tmp_path, capsys, rng):
     (tmp_path / "taken" / "keep.txt").write_text("mine")
     refused(capsys, "dataset", "--scene", "sun", "--config", "te", "--out", tmp_path / "taken", "not a dataset store")
     assert (tmp_path / "taken" / "keep.txt").read_text() == "mine"
-    # frames of different sizes in one sequence: refused by the task that reads them
+    # frames of different sizes in one sequence: refused from the frames' headers, before the
+    # plan line (it was found by the task that read the frame, after the plan was printed)
     root = hdr_folder(tmp_path / "hdr", rng, sequences=(("odd", 2, 12, 12),))
     write_exr(root / "odd" / "f009.exr", np.ones((12, 13, 3), np.float32))
     code, out_text, err = run_here(capsys, "dataset", "--hdr", root, "--config", "te", "--out", tmp_path / "o.zarr")
-    assert code == 2 and len(err.strip().splitlines()) == 1 and "same size" in err, err
-    assert out_text.startswith("dataset: 1 sequence(s)")    # (found while the frames are read: after the plan)
-    assert not (tmp_path / "o.zarr").exists()          # it held no complete sequence: nothing to resume
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "f009.exr' is 12 x 13" in err, err
+    assert out_text == ""
+    assert not (tmp_path / "o.zarr").exists()
     DatasetStore.create_or_resume(str(tmp_path / "o.zarr"), seed=0, configs={"te": SensorConfig()})
     refused(capsys, "evaluate", "--store", tmp_path / "o.zarr", "--out", tmp_path / "ev", "no complete sequence")
     refused(capsys, "evaluate", "--store", tmp_path / "nope.zarr", "--out", tmp_path / "ev", "does not exist")

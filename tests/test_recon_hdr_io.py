@@ -149,6 +149,26 @@ def test_folder_sorted_by_name_numbers_as_numbers(tmp_path):
     assert load_hdr_sequence(tmp_path, max_frames=2, peak=3.0).max() == 3.0
 
 
+def test_a_frames_size_comes_from_its_header_as_reading_it_gives(tmp_path):
+    """frame_size reads only the header (EXR data window, Radiance resolution line, columns-first
+    orientation transposed) and agrees with the decoded frame; a header that is not one is refused."""
+    from tespike.recon.scenes.hdr_io import frame_size, read_image
+    write_exr(tmp_path / "rgb.exr", _frame(1.0, (5, 10)))
+    write_exr(tmp_path / "y.exr", np.ones((3, 9), np.float32))
+    for name in ("rgb.exr", "y.exr"):
+        assert frame_size(tmp_path / name) == read_image(tmp_path / name).shape[:2]
+    pixels = b"".join(bytes([128, 64, 32, 129]) for _ in range(2 * 3))     # flat (no run-length) scanlines
+    for line, shape in ((b"-Y 2 +X 3", (2, 3)), (b"+X 2 -Y 3", (3, 2))):
+        path = tmp_path / f"{shape[0]}x{shape[1]}.hdr"
+        path.write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n" + line + b"\n" + pixels)
+        assert frame_size(path) == read_image(path).shape[:2] == shape
+    (tmp_path / "cut.hdr").write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4")
+    (tmp_path / "cut.exr").write_bytes((tmp_path / "rgb.exr").read_bytes()[:40])
+    for name, words in (("cut.hdr", "missing resolution line"), ("cut.exr", "cannot read EXR file")):
+        with pytest.raises(InputError, match=words):
+            frame_size(tmp_path / name)
+
+
 def test_folder_errors(tmp_path):
     with pytest.raises(InputError, match="does not exist"):
         load_hdr_sequence(tmp_path / "missing")

@@ -68,11 +68,11 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
     """Every sub-folder of ``folder`` holding HDR frames is one sequence, named after it.
 
     Hidden sub-folders (``.name``) are skipped; a sub-folder without frames is
-    refused, as is a folder without sub-folders. The first frame of each
-    sequence is read for its size (the tasks check every other frame).
+    refused, as is a folder without sub-folders, and a sequence whose frames' headers give
+    different sizes (before anything is planned); the first frame of each is decoded.
     """
     from tespike.recon.scenes import LUMA_WEIGHTS
-    from tespike.recon.scenes.hdr_io import list_frames
+    from tespike.recon.scenes.hdr_io import list_frames, sequence_size
 
     folder = Path(folder)
     if weights not in LUMA_WEIGHTS:
@@ -88,7 +88,8 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
         paths = list_frames(sub)
         if max_frames is not None:
             paths = paths[:max_frames]
-        height, width = read_gray(str(paths[0]), weights).shape
+        height, width = sequence_size(paths, f"sequence {sub.name!r}")   # every frame, before the plan
+        read_gray(str(paths[0]), weights)                                  # (its channels: one frame decoded)
         sources.append(Source(sub.name, (len(paths), height, width), f"hdr:{sub.name} ({weights})",
                               frames=tuple(str(p) for p in paths), weights=weights))
     return sources

@@ -273,23 +273,32 @@ def _library_output() -> Iterator[Callable[[], str]]:
                 os.close(copy)
 
 
-def read_exr(path: str | Path) -> np.ndarray:
-    """Read an OpenEXR file -> float32 (H, W, 3) RGB or (H, W) for a luminance-only 'Y' file."""
+def _exr_contents(path: str, header_only: bool = False) -> dict:
+    """The OpenEXR file ``path``'s channels (name -> pixels), or with ``header_only`` its header
+    (no pixel decoded); a missing or corrupt file is one line (the library's own words where it
+    printed them: "found corrupt leader")."""
     import OpenEXR
 
-    path = str(path)
     if not Path(path).is_file():
         raise InputError(f"cannot read EXR file {path!r}: no such file")
     with _library_output() as said:
         try:
-            with OpenEXR.File(path) as handle:
-                channels = {name: np.asarray(ch.pixels) for name, ch in handle.channels().items()}
+            with OpenEXR.File(path, header_only=header_only) as handle:
+                contents = dict(handle.header()) if header_only else \
+                    {name: np.asarray(ch.pixels) for name, ch in handle.channels().items()}
             failure = None
         except Exception as exc:  # the binding raises plain Exceptions for corrupt files
             failure = exc
             said_first = said()
-    if failure is not None:        # the library's own line says more ("found corrupt leader")
+    if failure is not None:
         raise InputError(f"cannot read EXR file {path!r}: {one_line(said_first.removeprefix(f'{path}: ') or failure)}")
+    return contents
+
+
+def read_exr(path: str | Path) -> np.ndarray:
+    """Read an OpenEXR file -> float32 (H, W, 3) RGB or (H, W) for a luminance-only 'Y' file."""
+    path = str(path)
+    channels = _exr_contents(path)
     for name in ("RGB", "RGBA"):
         if name in channels:
             return channels[name][..., :3].astype(np.float32)
@@ -328,6 +337,51 @@ def read_image(path: str | Path) -> np.ndarray:
         return read_hdr(path)
     raise InputError(f"{str(path)!r}: unknown HDR file type {suffix!r} "
                      f"(known: {', '.join(FRAME_SUFFIXES)})")
+
+
+def frame_size(path: str | Path) -> tuple[int, int]:
+    """(H, W) of one HDR frame from its header alone (no pixel is decoded), as :func:`read_image`
+    would give it: a sequence's frames are checked for one size before any work starts."""
+    check_input_file(path, "HDR frame")
+    path = str(path)
+    suffix = Path(path).suffix.lower()
+    if suffix == ".exr":
+        header = _exr_contents(path, header_only=True)
+        try:
+            low, high = header["dataWindow"]
+            return int(high[1]) - int(low[1]) + 1, int(high[0]) - int(low[0]) + 1
+        except (KeyError, TypeError, ValueError, IndexError):
+            raise InputError(f"cannot read EXR file {path!r}: its header has no data window") from None
+    if suffix not in FRAME_SUFFIXES:
+        raise InputError(f"{path!r}: unknown HDR file type {suffix!r} (known: {', '.join(FRAME_SUFFIXES)})")
+    data = b""
+    try:
+        with open(path, "rb") as handle:
+            while True:              # the header is a few hundred bytes: read until it parses
+                chunk = handle.read(1 << 16)
+                data += chunk
+                try:
+                    _, _, (_, axis1, n1, _, n2) = _parse_header(data, path)
+                    break
+                except InputError:
+                    if not chunk:
+                        raise
+    except OSError as exc:
+        raise InputError(f"cannot read HDR file {path!r}: {exc.strerror}") from None
+    return (n1, n2) if axis1 == b"Y" else (n2, n1)
+
+
+def sequence_size(paths: list, what: str) -> tuple[int, int]:
+    """(H, W) of every frame of a sequence (``what`` names it), from the frames' headers alone:
+    a frame of another size is refused naming both, before any frame is decoded."""
+    first = frame_size(paths[0])
+    for path in paths[1:]:
+        size = frame_size(path)
+        if size != first:
+            raise InputError(f"frame {str(path)!r} is {size[0]} x {size[1]}, but the first frame of {what} "
+                             f"({str(paths[0])!r}) is {first[0]} x {first[1]}; all frames of a sequence must "
+                             "have the same size")
+    return first
 
 
 def _natural_key(name: str) -> list:
@@ -385,15 +439,12 @@ def load_hdr_sequence(folder: str | Path, *, weights: str = DEFAULT_WEIGHTS, pea
         paths = paths[:max_frames]
     if type(downscale) is not int or downscale < 1:
         raise InputError(f"downscale = {downscale!r} must be an integer >= 1")
+    size = sequence_size(paths, f"HDR sequence {str(folder)!r}")
     frames = []
-    first_shape = None
     for path in tqdm(paths, desc="reading frames", unit="frame", disable=not progress):
         gray = to_gray(read_image(path), weights, what=f"frame {str(path)!r}")
-        if first_shape is None:
-            first_shape = gray.shape
-        elif gray.shape != first_shape:
-            raise InputError(f"frame {str(path)!r} is {gray.shape[0]} x {gray.shape[1]}, but "
-                             f"{str(paths[0])!r} is {first_shape[0]} x {first_shape[1]}; "
-                             "all frames of a sequence must have the same size")
+        if gray.shape != size:          # (changed since its header was read)
+            raise InputError(f"frame {str(path)!r} is {gray.shape[0]} x {gray.shape[1]}, but its header "
+                             f"said {size[0]} x {size[1]}")
         frames.append(_crop_and_shrink(gray, crop, downscale, f"frame {str(path)!r}").astype(np.float32))
     return normalise_sequence(np.stack(frames), peak, what=f"HDR sequence {str(folder)!r}")
