@@ -295,6 +295,12 @@ def _run(args, prepare=lambda: None, ended=lambda: None) -> tuple[int, bool]:
         print(f"{prefix}: error: out of memory{_memory_limit()}{detail}{_notes(exc)}{_before(start, exc)}",
               file=sys.stderr)
         return 1, False
+    except SystemError as exc:        # under ulimit -v: an import whose allocation failed in C ("returned NULL
+        if not _memory_limit():       # without setting an exception", seen importing dask); elsewhere a bug
+            raise
+        print(f"{prefix}: error: out of memory{_memory_limit()} ({one_line(exc, 160)}){_notes(exc)}"
+              f"{_before(start, exc)}", file=sys.stderr)
+        return 1, False
     except (RuntimeError, ImportError) as exc:     # torch's failed allocation; a library that cannot be mapped
         if isinstance(exc, RuntimeError) and str(exc) == "can't start new thread":   # threading's, out of room
             print(f"{prefix}: error: cannot start a thread: out of memory or of processes{_memory_limit()}"

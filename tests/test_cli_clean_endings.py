@@ -444,3 +444,25 @@ def test_ctrl_c_while_the_arguments_are_read_is_one_line(monkeypatch, capsys):
     monkeypatch.setattr(sys, "argv", ["tespike", "scene", "--list"])
     assert main() == 130
     assert capsys.readouterr().err == "tespike: interrupted\n"
+
+
+def test_an_import_that_fails_in_c_under_an_address_space_limit_is_out_of_memory(monkeypatch, capsys):
+    """``import dask`` under ``ulimit -v`` 800 MB failed with CPython's SystemError ("returned NULL
+    without setting an exception": an allocation failed in C) and a traceback. Under a limit it is
+    the out-of-memory line; without one it stays a traceback (a bug to report, not a fault of the
+    machine)."""
+    from tespike.cosim import cli
+    from tespike.golden import resources
+
+    def failed(args):
+        raise SystemError("<function _find_and_load at 0x7f> returned NULL without setting an exception")
+    args = cli.build_parser("scene").parse_args(["scene", "--list"])
+    args.run = failed
+    monkeypatch.setattr(resources, "address_space_limit", lambda: 800 << 20)
+    assert cli._run(args) == (1, False)
+    assert capsys.readouterr().err.splitlines() == [
+        "tespike scene: error: out of memory within the address-space limit (ulimit -v) of 800 MB "
+        "(<function _find_and_load at 0x7f> returned NULL without setting an exception)"]
+    monkeypatch.setattr(resources, "address_space_limit", lambda: None)
+    with pytest.raises(SystemError):
+        cli._run(args)

@@ -275,3 +275,29 @@ def test_a_local_cluster_that_lost_every_worker_ends_the_run_in_one_line(monkeyp
         list(runner([object(), object()]))
     runner.client = Client(2, 0.6)
     assert list(runner([object()])) == [(0, "done")]
+
+
+def test_a_cluster_whose_reader_thread_cannot_start_leaves_no_process_and_no_pipe(monkeypatch):
+    """Under ``ulimit -v`` the thread that reads the cluster's errors could not start: the command
+    printed its line, then the interpreter's exit warned of three unclosed pipes, and the cluster's
+    process was left to notice its closed stdin. Now the cluster goes, its pipes closed."""
+    import threading
+
+    from tespike.cosim.dataset import cluster
+
+    started = []
+    real_popen = subprocess.Popen
+
+    def popen(*args, **kwargs):
+        started.append(real_popen(*args, **kwargs))
+        return started[-1]
+
+    def cannot_start(self):
+        raise RuntimeError("can't start new thread")
+    monkeypatch.setattr(subprocess, "Popen", popen)
+    monkeypatch.setattr(threading.Thread, "start", cannot_start)
+    with pytest.raises(RuntimeError, match="can't start new thread"):
+        cluster._start_local_cluster(1, lambda: None)
+    (process,) = started
+    assert process.returncode is not None
+    assert process.stdin.closed and process.stdout.closed and process.stderr.closed

@@ -145,9 +145,9 @@ def _start_local_cluster(workers: int, interrupted):
                                start_new_session=True)
     errors: collections.deque[str] = collections.deque(maxlen=400)      # its last lines, read as they come
     reader = threading.Thread(target=lambda: errors.extend(process.stderr), daemon=True)
-    reader.start()
     process.errors, process.reader = errors, reader                     # (read again if its workers die)
     try:
+        reader.start()                 # (a thread that cannot start, out of memory: the cluster goes too)
         end = time.monotonic() + START_SECONDS
         while not select.select([process.stdout], [], [], POLL_SECONDS)[0]:
             interrupted()
@@ -181,7 +181,8 @@ def _stop_local_cluster(process, at_once: bool = False) -> None:
         with contextlib.suppress(OSError):
             os.killpg(process.pid, signal.SIGKILL)     # its own session: only the processes it started
         process.wait()
-    process.reader.join(5)                             # its error output read to the end (or left)
+    if process.reader.ident is not None:               # (started: its error output read to the end, or left)
+        process.reader.join(5)
     if not process.reader.is_alive():
         with contextlib.suppress(OSError):
             process.stderr.close()
