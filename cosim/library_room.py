@@ -26,8 +26,11 @@ from tespike.golden.resources import address_space_limit, mapped_bytes
 
 #: Libraries whose room is checked (under a limit) and whose load runs with the stops held.
 GUARDED = ("torch",)
-#: What a child's failed import prints when the address space, not the library, was at fault.
-_NO_ROOM_WORDS = ("alloc", "memory", "Memory", "map segment", "pthread_create", "can't start new thread")
+#: What a child's failed import prints when the address space, not the library, was at fault
+#: (CPython's SystemError there is an allocation that failed in C: torch's import under ulimit -v
+#: 617 MB printed "error return without exception set", and the import here then aborted).
+_NO_ROOM_WORDS = ("alloc", "memory", "Memory", "map segment", "pthread_create", "can't start new thread",
+                  "SystemError")
 #: Seconds the trial import may take (torch: about 2 on an idle machine).
 PROBE_SECONDS = 120
 #: Address space kept free beyond the library's own mappings (its first tensors, threads).

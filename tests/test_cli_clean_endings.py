@@ -466,3 +466,15 @@ def test_an_import_that_fails_in_c_under_an_address_space_limit_is_out_of_memory
     monkeypatch.setattr(resources, "address_space_limit", lambda: None)
     with pytest.raises(SystemError):
         cli._run(args)
+
+
+def test_a_trial_import_that_fails_in_c_refuses_the_library(tmp_path, monkeypatch):
+    """Under ``ulimit -v`` 617 MB torch's trial import in a child failed with CPython's SystemError
+    (an allocation that failed in C), read as "another failure": the import here went ahead and
+    aborted the process (std::bad_alloc). A SystemError in the trial means no room."""
+    from tespike.cosim import library_room
+
+    (tmp_path / "starved_library.py").write_text("raise SystemError('error return without exception set')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    refusal = library_room._refusal("starved_library", 600 << 20)
+    assert refusal is not None and refusal.startswith("starved_library cannot be loaded: it does not fit in")
