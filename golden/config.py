@@ -45,6 +45,23 @@ def _short(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
 
 
+def parse_json(text: str | bytes, what: str, error: type = ConfigError, keys: str | None = None) -> Any:
+    """A user's JSON text -> its value; ``what`` names it in the one line that refuses it: not JSON,
+    a key given twice (named as ``keys`` KEY, by default "``what``: key" KEY), nesting too deep for
+    the parser (a RecursionError) or an integer too long to convert (Python's digit limit)."""
+    try:
+        return json.loads(text, object_pairs_hook=unique_keys(keys or f"{what}: key"))
+    except json.JSONDecodeError as exc:
+        raise error(f"{what} is not valid JSON: {exc}") from None
+    except ConfigError as exc:
+        raise error(str(exc)) from None
+    except RecursionError:
+        raise error(f"{what} is nested too deeply to read as JSON") from None
+    except ValueError as exc:        # an integer of more than sys.get_int_max_str_digits() digits
+        reason = str(exc).split(";")[0].split(":")[-1].strip() if "digits" in str(exc) else str(exc)
+        raise error(f"{what} holds a number too long to read ({reason})") from None
+
+
 def unique_keys(what: str = "config key"):
     """An object_pairs_hook of json.loads: a key given twice is refused (``what`` names it in the
     message, e.g. "config key"), not silently overwritten by the last."""
@@ -154,17 +171,7 @@ class SensorConfig:
         ``whole=True`` is for the configuration a file records (a stream's, a calibration's: SPEC
         section 6, "every key of section 2"): a missing key is refused, not given its default,
         except those older files may lack (:data:`ADDED_KEYS`)."""
-        try:
-            data = json.loads(text, object_pairs_hook=unique_keys())
-        except json.JSONDecodeError as exc:
-            raise ConfigError(f"configuration is not valid JSON: {exc}") from None
-        except ConfigError:
-            raise
-        except RecursionError:
-            raise ConfigError("configuration JSON is nested too deeply") from None
-        except ValueError as exc:        # an integer of more than sys.get_int_max_str_digits() digits
-            reason = str(exc).split(";")[0].split(":")[-1].strip() if "digits" in str(exc) else str(exc)
-            raise ConfigError(f"configuration JSON holds a number too long to read ({reason})") from None
+        data = parse_json(text, "configuration", keys="config key")
         if whole and isinstance(data, Mapping):
             missing = [key for key in KEYS if key not in data and key not in ADDED_KEYS]
             if missing:

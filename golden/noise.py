@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import unique_keys
+from .config import parse_json
 from .errors import InputError
 from .light import DARK_NORMAL, check_dark_current, dark_electrons, eq13_dark_per_readout
 
@@ -126,11 +126,12 @@ def load_noise(path: str | Path) -> SensorNoise:
     """``N.json`` -> :class:`SensorNoise`, or one line naming the file and the problem."""
     from .paths import check_input_file
     check_input_file(path, "sensor noise")
+    what = f"sensor noise file {str(path)!r}"
     try:
-        values = json.loads(Path(path).read_text(),
-                            object_pairs_hook=unique_keys(f"sensor noise file {str(path)!r}: key"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"sensor noise file {str(path)!r} is not readable JSON: {exc}") from None
+        text = Path(path).read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{what} is not readable JSON: {exc}") from None
+    values = parse_json(text, what, InputError)
     return SensorNoise.from_dict(values, f"sensor noise file {str(path)!r}")
 
 

@@ -129,6 +129,22 @@ def test_a_damaged_store_file_is_named(capsys, tmp_path, store, damage):
     assert not (tmp_path / "ev").exists()
 
 
+@pytest.mark.parametrize("where", ["root", "array"])
+def test_a_store_json_nested_too_deeply_is_one_line(capsys, tmp_path, store, where):
+    """A ``zarr.json`` of 100000 nested lists: Python's JSON parser raises RecursionError, which
+    escaped as a traceback from ``evaluate --store`` and from ``dataset`` resuming the store."""
+    copy = copy_store(store, tmp_path)
+    target = copy / "zarr.json" if where == "root" else copy / "sun" / "streams" / "te" / "zarr.json"
+    target.write_text("[" * 100000 + "]" * 100000)
+    result = run_here(capsys, "evaluate", "--store", copy, "--methods", "tfp", "--out", tmp_path / "ev")
+    assert_refused(result, repr(str(copy) if where == "root" else str(target)),
+                   "nested too deeply" if where == "root" else "is damaged")
+    if where == "root":
+        result = run_here(capsys, "dataset", "--scene", "sun", "--frames", 10, "--height", 16, "--width", 20,
+                          "--config", "te", "--out", copy)
+        assert_refused(result, repr(str(copy)), "nested too deeply")
+
+
 def descendants(pid: int) -> set[int]:
     """Every process below ``pid`` (children, their children, ...)."""
     listing = subprocess.run(["ps", "-eo", "pid=,ppid="], capture_output=True, text=True).stdout

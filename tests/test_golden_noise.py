@@ -70,7 +70,13 @@ def test_json_round_trip_and_refusals(tmp_path):
         path.write_text(json.dumps(values))
         with pytest.raises(InputError, match=words):
             load_noise(path)
-    path.write_text("{")
+    for text, words in (("{", "is not valid JSON"), ('{"dsnu": 0.1, "dsnu": 0.2}', "key 'dsnu' is given twice"),
+                        ("[" * 100000 + "]" * 100000, "nested too deeply"),      # (RecursionError escaped)
+                        ('{"dsnu": ' + "9" * 5000 + "}", "number too long")):    # (Python's digit limit)
+        path.write_text(text)
+        with pytest.raises(InputError, match=words):
+            load_noise(path)
+    path.write_bytes(b"\xff\xfe{")
     with pytest.raises(InputError, match="not readable JSON"):
         load_noise(path)
     with pytest.raises(InputError, match="sensor seed"):

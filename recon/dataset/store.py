@@ -89,17 +89,24 @@ def _compressors():
     return (BloscCodec(cname="zstd", clevel=3, shuffle="bitshuffle"), Crc32cCodec())
 
 
-def _zarr_open_group(url: str, mode: str):
+def _zarr_open_group(url: str, mode: str, missing_ok: bool = False):
+    """The store's root group, or one line saying why it cannot be read (``missing_ok``: None
+    where there is no store yet)."""
     import zarr
     try:
         return zarr.open_group(url, mode=mode)
     except FileNotFoundError:
+        if missing_ok:
+            return None
         import os
         there = "://" not in url and os.path.isdir(url)      # a local folder without a store's zarr.json
         raise InputError(f"dataset store {url!r} " + ("is a folder but not a dataset store (it holds no zarr.json)"
                                                      if there else "does not exist")) from None
     except (ValueError, TypeError, KeyError) as exc:      # not a Zarr v3 group, bad JSON
-        raise InputError(f"{url!r} is not a readable Zarr store: {exc}") from None
+        raise InputError(f"{url!r} is not a readable Zarr store: {one_line(exc, 200)}") from None
+    except RecursionError:                                # JSON nested too deeply for the parser
+        raise InputError(f"{url!r} is not a readable Zarr store: its zarr.json is nested too deeply "
+                         "to read as JSON") from None
 
 
 class DatasetStore:
@@ -141,12 +148,7 @@ class DatasetStore:
         attrs = {"format": FORMAT, "version": VERSION, "seed": int(seed),
                  "configs": {name: c.to_dict() for name, c in configs.items()},
                  "tile": [int(t) for t in tile], "chunk_frames": int(chunk_frames)}
-        try:
-            group = zarr.open_group(url, mode="r+")
-        except FileNotFoundError:
-            group = None
-        except (ValueError, TypeError, KeyError) as exc:
-            raise InputError(f"{url!r} exists and is not a readable Zarr store: {exc}") from None
+        group = _zarr_open_group(url, "r+", missing_ok=True)
         if group is None:
             import os
             if "://" not in url and os.path.exists(url) and (not os.path.isdir(url) or os.listdir(url)):
@@ -305,7 +307,7 @@ def damaged_file(url: str, path: str = "") -> str | None:
             json.loads(meta.read_bytes())
         except FileNotFoundError:
             continue
-        except (OSError, ValueError):
+        except (OSError, ValueError, RecursionError):     # (nested too deeply for the parser)
             return str(meta)
     try:
         import itertools
