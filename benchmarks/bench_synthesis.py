@@ -26,7 +26,8 @@ sys.path.insert(0, str(ROOT))
 from tespike.cosim.synthesis import hierarchy_total, synthesize_hierarchy  # noqa: E402
 from tespike.golden.config import load_config  # noqa: E402
 from tespike.golden.beats import min_lanes  # noqa: E402
-from tespike.rtl.verilog_stream import stream_array_verilog, stream_module_names  # noqa: E402
+from tespike.rtl.names import stream_module_names  # noqa: E402
+from tespike.rtl.verilog_stream import stream_array_verilog  # noqa: E402
 
 
 def size(text: str) -> tuple[int, int]:

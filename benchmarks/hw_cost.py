@@ -97,7 +97,8 @@ def state_bits(config: SensorConfig, word_register: bool = True) -> int:
 
 
 def measure(config: SensorConfig) -> dict:
-    from tespike.rtl.verilog import module_names, pixel_verilog, timing_verilog
+    from tespike.rtl.names import module_names
+    from tespike.rtl.verilog import pixel_verilog, timing_verilog
 
     names = module_names(config)
     small = counting_only(config)

@@ -104,8 +104,7 @@ def module_blocks(config: SensorConfig, streaming: bool) -> dict[str, str]:
     the timing module (streaming ``<mode>_readout_timing``, parallel ``<mode>_array_timing``)
     ``timing``, the top and its beat groups ``control``. One map for the registers (here), the
     gates (:mod:`tespike.cosim.gate_activity`) and the cells (:func:`tespike.cosim.energy.block_cells`)."""
-    from tespike.rtl.verilog import module_names
-    from tespike.rtl.verilog_stream import stream_module_names
+    from tespike.rtl.names import module_names, stream_module_names
 
     if streaming:
         names = stream_module_names(config)

@@ -106,7 +106,8 @@ def hardware_cost(configs: dict[str, SensorConfig], yosys: str = "yosys") -> lis
     """Per sensor: Yosys cells, flip-flops and transistor estimates (:func:`tespike.cosim.synthesis.synthesize`)
     of one pixel and of the shared timing block. A string says why there is no table (Yosys
     missing, failing, or reporting no usable estimate): the report says so instead of crashing."""
-    from tespike.rtl.verilog import module_names, pixel_verilog, timing_verilog
+    from tespike.rtl.names import module_names
+    from tespike.rtl.verilog import pixel_verilog, timing_verilog
 
     from .synthesis import SynthesisError, synthesize, yosys_missing
     missing = yosys_missing(yosys)

@@ -74,7 +74,8 @@ def _design(args):
         raise InputError(f"--height {height} x --width {width} = {pixels} pixels: at most {limit} are supported"
                          + ("" if args.lanes is None else " with --lanes"))
     if args.lanes is None:
-        from tespike.rtl.verilog import array_verilog, module_names
+        from tespike.rtl.names import module_names
+        from tespike.rtl.verilog import array_verilog
         return (array_verilog(config, height, width), module_names(config)["top"], pixels,
                 f"{module_names(config)['top']}, {height} x {width} pixels")
     from tespike.golden.beats import check_lanes
@@ -82,7 +83,8 @@ def _design(args):
         check_lanes(config, height, width, args.lanes)
     except ValueError as exc:
         raise InputError(f"--{exc}") from None
-    from tespike.rtl.verilog_stream import stream_array_verilog, stream_module_names
+    from tespike.rtl.names import stream_module_names
+    from tespike.rtl.verilog_stream import stream_array_verilog
     top = stream_module_names(config)["top"]
     return (stream_array_verilog(config, height, width, args.lanes), top, pixels,
             f"{top}, {height} x {width} pixels, {args.lanes} lanes")

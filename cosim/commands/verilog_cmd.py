@@ -43,7 +43,8 @@ def run(args) -> int:
                          f"pixels: at most {limit} (e.g. {example}) are supported"
                          + ("" if args.lanes is None else " with --lanes"))
     if args.lanes is None:
-        from tespike.rtl.verilog import array_verilog, module_names
+        from tespike.rtl.names import module_names
+        from tespike.rtl.verilog import array_verilog
         text, what = array_verilog(config, args.height, args.width), module_names(config)["top"]
     else:
         from tespike.golden.beats import beat_count, check_lanes
@@ -53,7 +54,8 @@ def run(args) -> int:
             raise
         except ValueError as exc:                 # ConfigError: name the flag
             raise InputError(f"--{exc}") from None
-        from tespike.rtl.verilog_stream import stream_array_verilog, stream_module_names
+        from tespike.rtl.names import stream_module_names
+        from tespike.rtl.verilog_stream import stream_array_verilog
         text = stream_array_verilog(config, args.height, args.width, args.lanes)
         what = (f"{stream_module_names(config)['top']}, {args.lanes} lanes, "
                 f"{beat_count(pixels, args.lanes)} beats per readout interval")
