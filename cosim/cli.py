@@ -295,19 +295,17 @@ def _run(args, prepare=lambda: None, ended=lambda: None) -> tuple[int, bool]:
         print(f"{prefix}: error: out of memory{_memory_limit()}{detail}{_notes(exc)}{_before(start, exc)}",
               file=sys.stderr)
         return 1, False
-    except SystemError as exc:        # under ulimit -v: an import whose allocation failed in C ("returned NULL
-        if not _memory_limit():       # without setting an exception", seen importing dask); elsewhere a bug
-            raise
-        print(f"{prefix}: error: out of memory{_memory_limit()} ({one_line(exc, 160)}){_notes(exc)}"
-              f"{_before(start, exc)}", file=sys.stderr)
-        return 1, False
-    except (RuntimeError, ImportError) as exc:     # torch's failed allocation; a library that cannot be mapped
-        if isinstance(exc, RuntimeError) and str(exc) == "can't start new thread":   # threading's, out of room
+    except (RuntimeError, ImportError, SystemError) as exc:   # torch's failed allocation; a library that
+        if isinstance(exc, RuntimeError) and str(exc) == "can't start new thread":   # cannot be mapped; ...
             print(f"{prefix}: error: cannot start a thread: out of memory or of processes{_memory_limit()}"
                   f"{_notes(exc)}{_before(start, exc)}", file=sys.stderr)
             return 1, False
-        if not any(words in str(exc) for words in OUT_OF_MEMORY) and \
-                not (_memory_limit() and any(words in str(exc) for words in OUT_OF_MEMORY_UNDER_LIMIT)):
+        if isinstance(exc, SystemError):   # ... under ulimit -v, an allocation that failed in C ("returned NULL
+            memory = bool(_memory_limit())  # without setting an exception": import dask); elsewhere a bug
+        else:
+            memory = any(words in str(exc) for words in OUT_OF_MEMORY) or \
+                bool(_memory_limit() and any(words in str(exc) for words in OUT_OF_MEMORY_UNDER_LIMIT))
+        if not memory:
             raise
         print(f"{prefix}: error: out of memory{_memory_limit()} ({one_line(exc, 160)}){_notes(exc)}"
               f"{_before(start, exc)}",
