@@ -132,7 +132,7 @@ def load_noise(path: str | Path) -> SensorNoise:
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{what} is not readable JSON: {exc}") from None
     values = parse_json(text, what, InputError)
-    return SensorNoise.from_dict(values, f"sensor noise file {str(path)!r}")
+    return SensorNoise.from_dict(values, what)
 
 
 @dataclasses.dataclass(frozen=True)

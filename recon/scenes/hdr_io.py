@@ -354,18 +354,18 @@ def frame_size(path: str | Path) -> tuple[int, int]:
             raise InputError(f"cannot read EXR file {path!r}: its header has no data window") from None
     if suffix not in FRAME_SUFFIXES:
         raise InputError(f"{path!r}: unknown HDR file type {suffix!r} (known: {', '.join(FRAME_SUFFIXES)})")
-    data = b""
     try:
         with open(path, "rb") as handle:
-            while True:              # the header is a few hundred bytes: read until it parses
-                chunk = handle.read(1 << 16)
-                data += chunk
-                try:
+            data = handle.read(1 << 12)
+            while True:              # the header is a few hundred bytes: read until it parses, doubling
+                try:                 # what is read (a file with no header end costs its size, once)
                     _, _, (_, axis1, n1, _, n2) = _parse_header(data, path)
                     break
                 except InputError:
-                    if not chunk:
+                    more = handle.read(len(data))
+                    if not more:
                         raise
+                    data += more
     except OSError as exc:
         raise InputError(f"cannot read HDR file {path!r}: {exc.strerror}") from None
     return (n1, n2) if axis1 == b"Y" else (n2, n1)
