@@ -148,6 +148,20 @@ def test_not_a_weights_file_is_refused(tmp_path):
         load_weights(bad)
 
 
+@pytest.mark.parametrize("keep", ["one byte", "half", "all but one byte"])
+def test_a_cut_short_weights_file_is_named_in_our_words(tmp_path, keep):
+    """torch's own first line for a cut-short file speaks of weights_only defaults or of an
+    internal assert, cut mid-word: the refusal says what the file is instead."""
+    whole = weights_path(SensorConfig.preset("te")).read_bytes()
+    cut = tmp_path / "cut.pt"
+    cut.write_bytes(whole[:{"one byte": 1, "half": len(whole) // 2, "all but one byte": len(whole) - 1}[keep]])
+    with pytest.raises(InputError) as refused:
+        load_weights(cut)
+    message = str(refused.value)
+    assert "not a zip archive as torch writes: cut short, or another format" in message
+    assert "weights_only" not in message and "PytorchStreamReader" not in message
+
+
 # -- the shipped weights, through the command line ---------------------------------------------
 from tests.cli import assert_refused, run_tespike  # noqa: E402
 

@@ -77,9 +77,20 @@ def read_torch_file(path: str | Path, what: str, kind: str) -> Any:
     except OSError as exc:
         raise InputError(f"cannot read {what} {str(path)!r}: {exc.strerror or exc}") from None
     except (RuntimeError, EOFError, ValueError, pickle.UnpicklingError, zipfile.BadZipFile) as exc:
-        cause = "the file is empty" if Path(path).stat().st_size == 0 else \
-            (str(exc).splitlines()[0][:100] if str(exc) else type(exc).__name__)
-        raise InputError(f"{what} {str(path)!r} is not a {kind} (truncated or another format: {cause})") from None
+        raise InputError(f"{what} {str(path)!r} is not a {kind} ({_load_fault(path, exc)})") from None
+
+
+def _load_fault(path: str | Path, exc: BaseException) -> str:
+    """Why ``torch.load`` refused ``path``, in our words where the file's form says it: torch's own
+    first line for a cut-short file speaks of ``weights_only`` defaults or of an internal assert."""
+    try:
+        if Path(path).stat().st_size == 0:
+            return "the file is empty"
+        if not zipfile.is_zipfile(path):
+            return "not a zip archive as torch writes: cut short, or another format"
+    except OSError:
+        pass
+    return f"another format: {one_line(str(exc).splitlines()[0] if str(exc) else exc, 100)}"
 
 
 def read_weights(path: str | Path, what: str = "weights") -> dict[str, Any]:
