@@ -96,8 +96,8 @@ class _VersionAction(argparse.Action):
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The whole command line; with ``only`` (a sub-command's name) just that
-    sub-command's part, which spares a run importing and building the other
-    thirteen (about 30 ms of a ``tespike simulate`` that may take 0.5 s)."""
+    sub-command's part, which spares a run importing and building the others (about 30 ms
+    of a ``tespike simulate`` that may take 0.5 s)."""
     parser = Parser(
         prog="tespike",
         description="Time-encoding spike camera: golden model, RTL, co-simulation and reconstruction.",

@@ -28,10 +28,18 @@ from pathlib import Path
 from tespike.golden.config import PRESETS, SensorConfig
 from tespike.golden.errors import InputError
 
-#: Names of the learned methods in the paper's row order: its learned baselines, then the network.
-#: ``mambaspike1`` is MambaSpike of one parsing branch, the paper's spade row on the msb camera
+#: The learned methods in the paper's row order, its learned baselines then the network: name -> what
+#: it is. ``mambaspike1`` is MambaSpike of one parsing branch, the paper's spade row on the msb camera
 #: (shipped for ml-msb only: on TE and the full count ``mambaspike`` has one branch already).
-LEARNED = ("spk2imgnet", "bsf", "mambaspike1", "mambaspike", "net")
+LEARNED_SUMMARIES = {
+    "spk2imgnet": "Spk2ImgNet (Zhao et al. 2021, re-implemented)",
+    "bsf": "BSF (Zhao et al. 2024, re-implemented)",
+    "mambaspike1": "MambaSpike of one parsing branch (the paper's spade row, msb camera)",
+    "mambaspike": "MambaSpike (selective scan, re-implemented; several parsings on the msb camera)",
+    "net": "the paper's network (section 5)",
+}
+#: Names of the learned methods, in that order.
+LEARNED = tuple(LEARNED_SUMMARIES)
 #: The folder of the shipped weights.
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 

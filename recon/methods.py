@@ -7,8 +7,8 @@ method, with bounded memory either way:
 
 - TFP and TFI work along time, pixel by pixel: the stream is processed in
   blocks of pixels, and results do not depend on the block size;
-- the learned methods (the project's network ``net`` and the paper's baselines
-  ``spk2imgnet``, ``bsf``, ``mambaspike``, :mod:`tespike.recon.learned`) are spatial:
+- the learned methods (the project's network ``net`` and the paper's baselines,
+  :data:`tespike.recon.learned.LEARNED`) are spatial:
   each image comes from the span of readouts their sizes fix around it, over
   whole tiles (:func:`tespike.recon.learning.infer.reconstruct_model`), with the shipped
   weights of the stream's sensor preset (:func:`tespike.recon.learned.weights_path`) or
@@ -26,7 +26,8 @@ import torch
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 
-from .settings import DEFAULT_WINDOW, ReconSettings
+from .learned import LEARNED_SUMMARIES
+from .settings import DEFAULT_WINDOW, TRAINING_FREE, ReconSettings
 from .stream import as_word_tensor, decode_light, decode_spikes, output_images
 from .tfi import tfi
 from .tfp import tfp
@@ -107,20 +108,12 @@ class Method:
 #: name -> reconstruction method (not golden.fastsim's simulation methods). The learned
 #: ones ignore ``window``: they see the span their sizes fix (:func:`tespike.recon.learned.method_span`).
 RECON_METHODS: dict[str, Method] = {
-    "tfp": Method("tfp", "mean decoded light over the window (spike-firing rate)", _tfp_block,
+    "tfp": Method("tfp", TRAINING_FREE["tfp"], _tfp_block,
                   ("window", "estimator", "chunk_elements", "device", "dtype"), law_input=True),
-    "tfi": Method("tfi", "decoded spikes over the spike interval around each readout", _tfi_block,
+    "tfi": Method("tfi", TRAINING_FREE["tfi"], _tfi_block,
                   ("window", "estimator", "search", "chunk_elements", "device", "dtype"), corrected_input=True),
-    "spk2imgnet": Method("spk2imgnet", "Spk2ImgNet (Zhao et al. 2021, re-implemented), shipped weights",
-                         None, ("device",), frames=_learned_frames("spk2imgnet")),
-    "bsf": Method("bsf", "BSF (Zhao et al. 2024, re-implemented), shipped weights",
-                  None, ("device",), frames=_learned_frames("bsf")),
-    "mambaspike1": Method("mambaspike1", "MambaSpike of one parsing branch (the paper's spade row, msb "
-                          "camera), shipped weights", None, ("device",), frames=_learned_frames("mambaspike1")),
-    "mambaspike": Method("mambaspike", "MambaSpike (selective scan, re-implemented; several parsings on the "
-                         "msb camera), shipped weights", None, ("device",), frames=_learned_frames("mambaspike")),
-    "net": Method("net", "the paper's network (section 5) with the shipped weights",
-                  None, ("device",), frames=_learned_frames("net")),
+    **{name: Method(name, summary, None, ("device",), frames=_learned_frames(name))
+       for name, summary in LEARNED_SUMMARIES.items()},
 }
 
 

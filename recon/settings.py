@@ -37,6 +37,11 @@ def check_device(device) -> None:
         raise InputError(f"device = {device!r}: not a usable torch device ({one_line(exc)})") from None
 
 
+#: The training-free methods: name -> what it computes (their code: :data:`tespike.recon.methods.RECON_METHODS`;
+#: named here, without torch, so that the command line lists and checks them quickly).
+TRAINING_FREE = {"tfp": "mean decoded light over the window (spike-firing rate)",
+                 "tfi": "decoded spikes over the spike interval around each readout"}
+
 #: TFI search modes: the whole stream (default) or the window around the key moment.
 TFI_SEARCH = ("stream", "window")
 

@@ -119,7 +119,8 @@ def run(args) -> int:
     from tespike.golden.io import load_scene
     from tespike.golden.paths import check_results_dir
 
-    from .common import check_threads_argument, publish_results
+    from .common import check_threads_argument
+    from .results import publish_results
     from tespike.recon.evaluate import evaluate
     from tespike.recon.report import OUTPUT_FILES
     from tespike.recon.scenes import load_hdr_sequence

@@ -1,12 +1,12 @@
 """``tespike reconstruct``: a stream S.npz to reconstructed light R.npy (TFP, TFI, the learned methods)."""
 
-from tespike.recon.learned import LEARNED
-from tespike.recon.settings import DEFAULT_WINDOW, TFI_SEARCH
+from tespike.recon.learned import LEARNED, LEARNED_SUMMARIES
+from tespike.recon.settings import DEFAULT_WINDOW, TFI_SEARCH, TRAINING_FREE
 
 from .common import MAX_THREADS
 
 #: The keys of recon.methods.RECON_METHODS (named here without importing torch, so refusals are quick).
-METHOD_CHOICES = ("tfp", "tfi", *LEARNED)
+METHOD_CHOICES = (*TRAINING_FREE, *LEARNED)
 
 HELP = f"reconstruct light images R.npy from a TE or ML stream S.npz ({', '.join(METHOD_CHOICES)})"
 
@@ -14,11 +14,10 @@ HELP = f"reconstruct light images R.npy from a TE or ML stream S.npz ({', '.join
 def add_arguments(parser):
     parser.add_argument("--stream", required=True, help="S.npz: readout words and the full config")
     parser.add_argument("--method", required=True,
-                        help="tfp (mean decoded light over the window), tfi (spike interval), the paper's "
-                             "learned baselines spk2imgnet, bsf, mambaspike1 (MambaSpike of one parsing), "
-                             "mambaspike, or net (the paper's network); "
-                             "learned methods use the shipped weights of the stream's preset (te, ml, ml-msb) "
-                             "or --weights")
+                        help="; ".join(f"{name}: {summary}" for name, summary in
+                                       {**TRAINING_FREE, **LEARNED_SUMMARIES}.items())
+                        + ". A learned method uses the weights shipped for the stream's preset where there "
+                          "are some (recon/weights/), or --weights")
     parser.add_argument("--out", required=True, help="R.npy to write: float32 (K, H, W) light, I = 1 is 42000 e-")
     parser.add_argument("--window", type=int, default=None,
                         help=f"tfp, and tfi with --search window: readouts per window, odd (default {DEFAULT_WINDOW}, paper 6.4); learned methods see the "
@@ -31,8 +30,11 @@ def add_arguments(parser):
                         help="tfi only: look for the spike interval in the whole stream (default) or the window")
     parser.add_argument("--calibration", metavar="C.npz",
                         help="a calibration of the sensor that recorded the stream ('tespike calibrate'): "
-                             "(x - dark) / gain per pixel, on TFP's output, on each readout's light for TFI "
-                             "and the learned methods (every method)")
+                             "every method corrected for each pixel's dark current and gain; with the dark "
+                             "law 'tespike calibrate' writes, TFP estimates each window's light under the "
+                             "law, TFI and the learned methods take it out of each readout's light; a "
+                             "calibration without a law (format 1) corrects TFP's output by (x - dark) / gain "
+                             "(docs/reconstruction.md, 'Calibration')")
     parser.add_argument("--threads", type=int, default=None,
                         help=f"torch CPU threads, 1..{MAX_THREADS} (default: torch's choice)")
 

@@ -77,7 +77,7 @@ def add_arguments(parser):
     trainer("--refresh", "steps between two new clips entering the pool", type=int)
     trainer("--validate-every", "steps between validations on the held-out set (0: never)", type=int)
     trainer("--seed", "seed of the draws and of the initial weights", type=int)
-    trainer("--device", "torch device (cuda where there is one)")
+    trainer("--device", "torch device: cpu, or cuda on a machine that has one")
     parser.add_argument("--threads", type=int, default=1,
                         help=f"torch CPU threads, 1..{MAX_THREADS} (default 1: two runs share two cores better "
                              "than one run; "

@@ -11,7 +11,7 @@ SIMULATION_OPTIONS = {"set": "heldout", "scene": [], "folder": [], "frames": Non
 
 def run_store(args) -> int:
 
-    from tespike.cosim.commands.common import publish_results
+    from tespike.cosim.commands.results import publish_results
     from tespike.golden.errors import InputError
     from tespike.golden.paths import check_results_dir
     from tespike.recon.dataset.evaluate import evaluate_store
