@@ -42,11 +42,16 @@ def msb_index(sfc: np.ndarray) -> np.ndarray:
     return np.where(sfc > 0, np.frexp(sfc.astype(np.float64))[1], 0).astype(np.int64)
 
 
+def overflow_word(config: SensorConfig, m):
+    """SPEC section 4: the TE word of an overflow latched in tick ``m`` (1..alpha), ``(1 << d) | m``."""
+    return (1 << config.d) | m
+
+
 def readout_word(config: SensorConfig, sfc: np.ndarray, ovf: np.ndarray, m: np.ndarray) -> np.ndarray:
-    """SPEC section 4: TE ``(1 << d) | m`` on overflow else ``sfc``; ML ``sfc`` (count)
+    """SPEC section 4: TE :func:`overflow_word` on overflow else ``sfc``; ML ``sfc`` (count)
     or ``bit_length(sfc)`` (msb)."""
     if config.is_te:
-        return np.where(ovf, (1 << config.d) | m, sfc).astype(np.int64)
+        return np.where(ovf, overflow_word(config, m), sfc).astype(np.int64)
     if config.is_msb:
         return msb_index(sfc)
     return sfc.astype(np.int64)

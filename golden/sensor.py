@@ -31,7 +31,7 @@ import numpy as np
 
 from .config import SensorConfig
 from .io import check_stimulus
-from .reference import PixelState, msb_index
+from .reference import PixelState, msb_index, overflow_word
 
 #: Pixel clocks x pixels processed at once by :func:`simulate` (bounds memory).
 DEFAULT_CHUNK_ELEMENTS = 1 << 22
@@ -288,7 +288,7 @@ class PixelArray:
                     before = after
                     continue
                 if config.is_te:
-                    words[k - 1] = np.where(ovf, (1 << config.d) | m, sfc)
+                    words[k - 1] = np.where(ovf, overflow_word(config, m), sfc)
                 else:
                     words[k - 1] = sfc
                 sfc[:] = 0

@@ -16,10 +16,10 @@ import numpy as np
 
 from ..light import deterministic_clock_electrons
 from ..poisson import PoissonSampler
-from ..reference import PixelState
+from ..reference import PixelState, overflow_word
 from ..sensor import PixelArray
 from .distinct import distinct
-from .words import ml_words
+from .words import ml_words, overflow_clock_word
 
 #: Per-clock draws of one call below which numpy's sampler is used (no table).
 SMALL_DRAW = 4096
@@ -158,10 +158,10 @@ def walk_clocks(sim, sel, e, words, start=None):
     h = 0 if start is None else start.clock
     word = np.minimum(count0 + total, c.p_max)
     late = at[settled] < e.shape[0]                     # overflow in these clocks
-    word[late] = (1 << c.d) | ((h + at[settled][late]) // c.clocks_per_tick + 1)
+    word[late] = overflow_clock_word(c, h + at[settled][late])
     if start is not None:
         early = start.ovf[0][settled]                   # overflowed in the head: its latched tick
-        word[early] = (1 << c.d) | start.m[0][settled][early]
+        word[early] = overflow_word(c, start.m[0][settled][early])
     words[done] = word
     return settled
 

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..reference import PixelState
+from ..reference import PixelState, overflow_word
 from ..sensor import PixelArray
 from .clock import clock_draws, fallback, run_clocks, state_columns, walk
 from .window import full_plan, full_walk, groups, queue_plan, queue_walk, round_window
 from .codes import HEAD
-from .words import ml_words
+from .words import ml_words, overflow_clock_word
 
 
 def classify_head(levels, idx, lam, mean, dark, acc, path, length):
@@ -124,9 +124,9 @@ def head_path(sim, sel, h, expected, lam, words):
     if c.is_te:
         word = np.minimum(sfc_h[done] + spikes[done], c.p_max)
         late = at[done] >= 0
-        word[late] = (1 << c.d) | (at[done][late] // c.clocks_per_tick + 1)
+        word[late] = overflow_clock_word(c, at[done][late])
         early = ovf[done]
-        word[early] = (1 << c.d) | m[done][early]
+        word[early] = overflow_word(c, m[done][early])
         words[sel[done]] = word
     elif c.is_msb:
         sim.sfc[sel[done]] = sfc_h[done]

@@ -32,9 +32,7 @@ from ..light import log_poisson_tail_above, log_poisson_tail_below
 from .clock import clock_path
 from .bisection import largest_below, smallest_below
 from .codes import BRIGHT, CLOCK, EVENT
-
-_NONE = np.zeros(0, np.int64)
-from .words import firing_words, gather, is_mask, ml_words, put
+from .words import NO_PIXELS, firing_words, gather, is_mask, ml_words, overflow_clock_word, put
 
 
 def interval_levels(config: SensorConfig, budget: float) -> tuple[float, float, float]:
@@ -107,7 +105,7 @@ def event_path(sim, sel, expected, dark, words):
     masked = is_mask(sel)
     acc0 = gather(sim.carried, sel)
     mean = np.where(sel, expected, 0.0) if masked else expected[sel]
-    sure = _NONE
+    sure = NO_PIXELS
     if c.is_te and not sim.dark_model:
         sure = np.flatnonzero(mean >= sim.levels.mean_overflow)
     if sure.size:                                      # the overflow electron first (module docstring)
@@ -139,13 +137,13 @@ def event_path(sim, sel, expected, dark, words):
         over &= sel                                 # (the others' charge alone may pass 2^b1 theta)
     over = np.flatnonzero(over)
     if sure.size:
-        spikes[sure] = (1 << c.d) | (at // c.clocks_per_tick + 1)
+        spikes[sure] = overflow_clock_word(c, at)
     if over.size:
         n = c.p_max * theta - acc0[over]               # electron that makes the 2^b1-th spike
         t = total[over]
         position = sim.rng.beta(n, t - n + 1)          # n-th of t uniform order statistics
         at = np.minimum((position * L).astype(np.int64), L - 1)
-        spikes[over] = (1 << c.d) | (at // c.clocks_per_tick + 1)
+        spikes[over] = overflow_clock_word(c, at)
     put(sim.carried, sel, residual)                    # after acc0 (maybe a view) is used
     put(words, sel, spikes)
 

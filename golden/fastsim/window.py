@@ -24,9 +24,7 @@ from ..config import SensorConfig
 from .clock import clock_draws, clock_path, fallback, tabled_call
 from .codes import FULL, QUEUE
 from .distinct import distinct, distinct_counts
-from .words import firing_words, ml_words
-
-_NONE = np.zeros(0, np.int64)
+from .words import NO_PIXELS, firing_words, ml_words, overflow_clock_word
 
 #: Largest backlog bound the queue path accepts, and its shortest window.
 MAX_BACKLOG = 64
@@ -195,7 +193,7 @@ def queue_path(sim, sel, w, b_max, lam, words, own=None):
     if not c.is_te:
         ml_words(sim, done, spikes[ok], words)
         return
-    words[done] = np.where(at[ok] >= 0, (1 << c.d) | (at[ok] // c.clocks_per_tick + 1), spikes[ok])
+    words[done] = np.where(at[ok] >= 0, overflow_clock_word(c, at[ok]), spikes[ok])
 
 
 def lindley_ends(walk: np.ndarray, *b0s: np.ndarray) -> list[np.ndarray]:
@@ -234,7 +232,7 @@ def queue_walk(sim, sel, w, lam, acc0, clocks, need, b_max, offset=0, own=None):
     window = window_draws(sim, lam_s, w, own)
     rest_mean = lam_s * span
     at = np.full(sel.size, -1, np.int64)
-    first = _NONE
+    first = NO_PIXELS
     if c.is_te:                                        # crossings surely before the window: drawn first
         first = np.flatnonzero((need <= c.p_max) & (rest_mean >= sim.levels.mean_overflow))
     if first.size:
@@ -308,7 +306,7 @@ def first_crossings(sim, lam, acc0, need, span, b_max, offset=0):
     at = np.minimum((last / lam).astype(np.int64), span - 1)
     unsure = reached & (need > 1) & ((offset + at) % per_tick + b_max >= per_tick)
     draw = np.flatnonzero(unsure)
-    needs = distinct(need[draw]) if draw.size else _NONE
+    needs = distinct(need[draw]) if draw.size else NO_PIXELS
     for p in needs.tolist():
         i = draw[need[draw] == p] if needs.size > 1 else draw
         gaps = np.empty((p, i.size))

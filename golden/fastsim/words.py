@@ -16,7 +16,7 @@ import functools
 import numpy as np
 
 from ..config import SensorConfig
-from ..reference import msb_index
+from ..reference import msb_index, overflow_word
 
 
 class WordTables:
@@ -28,7 +28,7 @@ class WordTables:
         c = self.config = config
         if c.is_te:
             ovf_clock = c.p_max - 1                       # spike in every clock
-            self.bright_word = ((1 << c.d) | (ovf_clock // c.clocks_per_tick + 1)
+            self.bright_word = (overflow_clock_word(c, ovf_clock)
                                 if c.p_max <= c.clocks_per_readout else c.clocks_per_readout)
         else:
             self.bright_word = min(c.clocks_per_readout, c.ml_max)
@@ -37,6 +37,12 @@ class WordTables:
             self.msb_word = msb_index(count)
             self.msb_rest = count - np.where(count > 0, np.left_shift(1, np.maximum(self.msb_word - 1, 0)), 0)
             self.msb_word.flags.writeable = self.msb_rest.flags.writeable = False
+
+
+def overflow_clock_word(config: SensorConfig, clock):
+    """TE word of an overflow (the 2^b1-th spike) in 0-based clock ``clock`` of the interval: its tick
+    ``clock // clocks_per_tick + 1`` latched (:func:`tespike.golden.reference.overflow_word`)."""
+    return overflow_word(config, clock // config.clocks_per_tick + 1)
 
 
 @functools.lru_cache(maxsize=16)
@@ -51,6 +57,11 @@ def firing_words(sim, sel, words):
         ml_words(sim, sel, sim.config.clocks_per_readout, words)
     else:
         words[sel] = sim.tables.bright_word
+
+
+#: No pixels: an empty flat index array (read-only), for a path's optional subsets.
+NO_PIXELS = np.zeros(0, np.int64)
+NO_PIXELS.flags.writeable = False
 
 
 def is_mask(sel) -> bool:
