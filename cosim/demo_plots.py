@@ -19,7 +19,7 @@ def plot_frame(light: np.ndarray, frame: int, crop: tuple[int, int, int], path: 
     import matplotlib.pyplot as plt
     from matplotlib.patches import Rectangle
 
-    from tespike.recon.pictures import save_figure, tone_map
+    from tespike.recon.pictures import MU, save_figure, tone_map
     y, x, size = crop
     H, W = light.shape[1:]
     fig, axis = plt.subplots(figsize=(6.4, 6.4 * H / W + 0.5))
@@ -30,7 +30,7 @@ def plot_frame(light: np.ndarray, frame: int, crop: tuple[int, int, int], path: 
                   textcoords="offset points", va="top")
     axis.set_xticks([])
     axis.set_yticks([])
-    axis.set_title(f"ground truth, frame {frame}: μ-law (μ = 5000) of light / sequence peak; "
+    axis.set_title(f"ground truth, frame {frame}: μ-law (μ = {MU:g}) of light / sequence peak; "
                    f"RTL crop rows {y}..{y + size - 1}, columns {x}..{x + size - 1}", fontsize=8)
     fig.tight_layout()
     save_figure(fig, path)
@@ -44,7 +44,7 @@ def plot_rtl_crop(truth: np.ndarray, rtl_images: dict, golden_images: dict, peak
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from tespike.recon.pictures import ERROR_RANGE, save_figure, tone_map
+    from tespike.recon.pictures import ERROR_RANGE, MU, save_figure, tone_map
     methods = list(rtl_images)
     gt = tone_map(truth, peak)
     fig, axes = plt.subplots(3, 1 + len(methods), squeeze=False, figsize=(2.1 * (1 + len(methods)) + 0.6, 6.6))
@@ -66,7 +66,7 @@ def plot_rtl_crop(truth: np.ndarray, rtl_images: dict, golden_images: dict, peak
     for axis in axes.flat:
         axis.set_xticks([])
         axis.set_yticks([])
-    fig.suptitle(f"RTL crop, frame {frame}: μ-law (μ = 5000) of light / sequence peak", fontsize=9)
+    fig.suptitle(f"RTL crop, frame {frame}: μ-law (μ = {MU:g}) of light / sequence peak", fontsize=9)
     fig.tight_layout()
     if shown is not None:
         bar = fig.colorbar(shown, cax=axes[2, 0].inset_axes([0.42, 0.05, 0.12, 0.9]))

@@ -34,6 +34,7 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
 
     import torch
 
+    from tespike.recon.pictures import MU
     from tespike.recon.report import table_markdown
     y, x, size = crop
     te = rtl_config
@@ -87,7 +88,7 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
                      f"{row['golden_psnr']:.2f} | {row['golden_ssim']:.3f} | {row['max_diff']:.3g} | "
                      f"{row['ms_per_frame']:.3f} |")
     lines += ["", "## Quality per method and sensor (golden full frame)", "",
-              f"PSNR-μ / SSIM-μ (μ = 5000, after division by the ground truth's peak), frames "
+              f"PSNR-μ / SSIM-μ (μ = {MU:g}, after division by the ground truth's peak), frames "
               f"{evaluation.window // 2}..{frames - 1 - evaluation.window // 2} scored; run time per frame "
               f"is the median of {evaluation.repeats} runs with {evaluation.threads} torch thread(s) (single "
               "runs vary several-fold on a shared machine). Methods: every one of the registry "

@@ -38,10 +38,11 @@ KEYS = ("psnr_mu", "ssim_mu", "psnr_pu21", "hdr_vqm", "fovvideovdp")
 def columns(display: HdrDisplay = DEFAULT_DISPLAY) -> tuple[Column, ...]:
     """The columns (in :data:`KEYS` order) with their labels for ``display``."""
     from tespike.recon.metrics import DEFAULT_NITS_PER_UNIT
+    from tespike.recon.pictures import MU
     shown = f"HDR display {display.peak_nits:g} cd/m^2"
     return (
-        Column("psnr_mu", "PSNR-mu (dB, mu=5000)", True),
-        Column("ssim_mu", "SSIM-mu (mu=5000)", True),
+        Column("psnr_mu", f"PSNR-mu (dB, mu={MU:g})", True),
+        Column("ssim_mu", f"SSIM-mu (mu={MU:g})", True),
         Column("psnr_pu21", f"PU21-PSNR (dB, I=1 at {DEFAULT_NITS_PER_UNIT:g} cd/m^2)", True),
         Column("hdr_vqm", f"HDR-VQM ({shown}, lower is better)", False),
         Column("fovvideovdp", f"FovVideoVDP (JOD, {shown})", True),

@@ -21,16 +21,16 @@ from tespike.golden.decode import decode_spikes as golden_decode_spikes
 from tespike.golden.errors import InputError
 
 
-def legal_codes(config: SensorConfig) -> np.ndarray:
-    """Every word of the configuration's word set (SPEC section 4), ascending, int64 (golden's :func:`legal_words`)."""
-    return legal_words(config)
-
-
 @functools.lru_cache(maxsize=64)
-def _tables(config: SensorConfig, estimator: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(light, spikes, legal) over all 2^word_bits codes; illegal entries are NaN / False."""
+def code_tables(config: SensorConfig, estimator: str = "ratio") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lookup tables indexed by the code: light (scene units), spikes, legal (read-only numpy, over all
+    2^word_bits codes; illegal entries NaN / False), from golden's decoder on its legal words.
+
+    Built once per (configuration, estimator) and cached (configurations are
+    immutable and hashable).
+    """
     size = 1 << config.word_bits
-    codes = legal_codes(config)
+    codes = legal_words(config)
     light = np.full(size, np.nan)
     spikes = np.full(size, np.nan)
     legal = np.zeros(size, bool)
@@ -40,15 +40,6 @@ def _tables(config: SensorConfig, estimator: str) -> tuple[np.ndarray, np.ndarra
     for table in (light, spikes, legal):
         table.setflags(write=False)
     return light, spikes, legal
-
-
-def code_tables(config: SensorConfig, estimator: str = "ratio") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Lookup tables indexed by the code: light (scene units), spikes, legal (read-only numpy).
-
-    Built once per (configuration, estimator) and cached (configurations are
-    immutable and hashable).
-    """
-    return _tables(config, estimator)
 
 
 def as_word_tensor(words, device: str | torch.device = "cpu") -> torch.Tensor:
@@ -71,8 +62,7 @@ def _refuse(w: torch.Tensor, bad: torch.Tensor, config: SensorConfig):
                      f"{config.mode.upper()} word for this configuration ({config})")
 
 
-def _gather(table: np.ndarray, legal: np.ndarray, words, config: SensorConfig,
-            device, dtype: torch.dtype) -> torch.Tensor:
+def _gather(table: np.ndarray, words, config: SensorConfig, device, dtype: torch.dtype) -> torch.Tensor:
     """table[words] on ``device``; any illegal word (NaN in the table) or one out of range is refused."""
     signed = (words.dtype.is_signed if isinstance(words, torch.Tensor)
               else np.asarray(words).dtype.kind == "i")
@@ -97,15 +87,13 @@ def decode_light(words, config: SensorConfig, *, estimator: str = "ratio",
 
     With ``dtype=torch.float32`` each value is golden's float64 value rounded once.
     """
-    light, _, legal = code_tables(config, estimator)
-    return _gather(light, legal, words, config, device, dtype)
+    return _gather(code_tables(config, estimator)[0], words, config, device, dtype)
 
 
 def decode_spikes(words, config: SensorConfig, *, estimator: str = "ratio",
                   device: str | torch.device = "cpu", dtype: torch.dtype = torch.float64) -> torch.Tensor:
     """Words -> spikes per readout interval, equal to :func:`tespike.golden.decode.decode_spikes`."""
-    _, spikes, legal = code_tables(config, estimator)
-    return _gather(spikes, legal, words, config, device, dtype)
+    return _gather(code_tables(config, estimator)[1], words, config, device, dtype)
 
 
 def output_images(shape: tuple[int, int, int], out: np.ndarray | None = None) -> np.ndarray:

@@ -9,8 +9,8 @@ from tests.cli import assert_refused, run_tespike
 
 
 def make_stream(tmp_path, rng, config=SensorConfig()):
-    from tespike.recon.stream import legal_codes
-    words = rng.choice(legal_codes(config), size=(11, 3, 4))
+    from tespike.golden.decode import legal_words
+    words = rng.choice(legal_words(config), size=(11, 3, 4))
     path = tmp_path / "S.npz"
     save_stream(path, words, config)
     return path, words, config

@@ -17,7 +17,7 @@ from tespike.golden.errors import InputError
 from tespike.golden.io import save_stream
 from tespike.recon.learned import LEARNED, method_classes, method_span, weights_path
 from tespike.recon.methods import RECON_METHODS, available_methods, missing_weights, reconstruct
-from tespike.recon.stream import legal_codes
+from tespike.golden.decode import legal_words
 
 TE, ML = SensorConfig.preset("te"), SensorConfig.preset("ml")
 
@@ -34,7 +34,7 @@ def save_tiny(folder, method, config, file_name=None, seed=0):
 
 
 def tiny_stream(rng, config=TE, shape=(5, 8, 8)):
-    return rng.choice(legal_codes(config), size=shape)
+    return rng.choice(legal_words(config), size=shape)
 
 
 def test_registry_has_every_learned_method_as_a_spatial_method():

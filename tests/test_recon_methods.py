@@ -13,7 +13,7 @@ from tespike.recon.methods import RECON_METHODS, reconstruct
 #: The training-free methods, which work pixel by pixel along time on any configuration
 #: (the network is tested in tests/test_recon_net_*.py, on the presets it has weights for).
 PIXEL_METHODS = sorted(name for name, method in RECON_METHODS.items() if method.block is not None)
-from tespike.recon.stream import legal_codes
+from tespike.golden.decode import legal_words
 from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
 TE, ML, MSB = SensorConfig(), SensorConfig(mode="ml"), SensorConfig.preset("ml-msb")
@@ -109,25 +109,25 @@ def test_extreme_streams_every_edge_config(config, rng):
     zeros = np.zeros((7, 2, 3), np.uint16)
     assert np.all(reconstruct(zeros, config, "tfp") == 0)
     assert np.allclose(reconstruct(zeros, config, "tfi"), u / 7, rtol=1e-6)
-    top = max(legal_codes(config), key=lambda c: decode_light(np.array([c]), config)[0])
+    top = max(legal_words(config), key=lambda c: decode_light(np.array([c]), config)[0])
     full = np.full((7, 2, 3), top)
     value = np.float32(decode_light(np.array([top]), config)[0])
     for method in PIXEL_METHODS:
         assert np.allclose(reconstruct(full, config, method), value, rtol=1e-6, atol=0)
-    words = rng.choice(legal_codes(config), size=(12, 3, 2))
+    words = rng.choice(legal_words(config), size=(12, 3, 2))
     a = reconstruct(words, config, "tfi", window=3, search="window")
     b = reconstruct(torch.from_numpy(words), config, "tfi", window=3, search="window", chunk_elements=5)
     assert np.array_equal(a, b) and np.isfinite(a).all() and (a >= 0).all()
 
 
 def test_tfp_window_1_is_the_decoded_stream(rng):
-    words = rng.choice(legal_codes(TE), size=(9, 4, 5))
+    words = rng.choice(legal_words(TE), size=(9, 4, 5))
     assert np.array_equal(reconstruct(words, TE, "tfp", window=1),
                           decode_light(words, TE).astype(np.float32))
 
 
 def test_block_size_does_not_change_results(rng):
-    words = rng.choice(legal_codes(ML), size=(20, 7, 5))
+    words = rng.choice(legal_words(ML), size=(20, 7, 5))
     for method in PIXEL_METHODS:
         ref = reconstruct(words, ML, method)
         assert np.array_equal(ref, reconstruct(words, ML, method, chunk_elements=1))

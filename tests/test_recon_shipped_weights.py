@@ -33,9 +33,9 @@ def shipped() -> list[tuple[str, str]]:
 def stream(preset: str) -> np.ndarray:
     """Legal words of ``preset``, a third of the pixels dark (zero words: the head's one-spike bound)."""
     from tespike.golden.config import SensorConfig
-    from tespike.recon.stream import legal_codes
+    from tespike.golden.decode import legal_words
     rng = np.random.default_rng(7)
-    words = rng.choice(legal_codes(SensorConfig.preset(preset)), size=SHAPE)
+    words = rng.choice(legal_words(SensorConfig.preset(preset)), size=SHAPE)
     return np.where(rng.random(SHAPE) < 0.33, 0, words).astype(np.uint8)
 
 

@@ -68,7 +68,7 @@ def test_every_illegal_code_refused(config):
 
 @pytest.mark.parametrize("config", CONFIGS, ids=str)
 def test_decode_random_stream_equals_golden(config, rng):
-    codes = stream.legal_codes(config)
+    codes = gd.legal_words(config)
     words = rng.choice(codes, size=(5, 3, 4))
     assert np.array_equal(stream.decode_light(words, config).numpy(), gd.decode_light(words, config))
     assert stream.decode_light(words, config, dtype=torch.float32).dtype == torch.float32
@@ -95,7 +95,7 @@ def test_key_span_substreams_are_eq4():
 def test_msb_table_is_the_msb_worth():
     """ML msb (eq. 10): codes 0..B only, code j > 0 is 2^(j - 1) spikes; 9 and up are refused."""
     config = SensorConfig.preset("ml-msb")
-    assert stream.legal_codes(config).tolist() == list(range(9))
+    assert gd.legal_words(config).tolist() == list(range(9))
     assert stream.decode_spikes(np.arange(9), config).tolist() == [0, 1, 2, 4, 8, 16, 32, 64, 128]
     with pytest.raises(InputError, match="readout word 9 at index"):
         stream.decode_light(np.array([3, 9]), config)
