@@ -57,12 +57,12 @@ def run(args) -> int:
     import time
 
     from tespike.cosim.console import report
-    from tespike.cosim.dataset.cluster import Runner, check_workers
+    from tespike.cosim.dataset.cluster import Runner, check_cluster_options
     from tespike.cosim.dataset.build import (build_dataset, discard_unfinished_store, hdr_sources,
                                              new_local_store, note_resumable, scene_sources)
     from tespike.golden.errors import InputError
 
-    check_workers(args.workers, args.scheduler)
+    check_cluster_options(args.workers, args.scheduler)
     if not args.config:
         raise InputError("--config is required (te, ml, ml-msb or a JSON file; repeatable)")
     if args.frames is not None and args.frames < 1:

@@ -30,7 +30,7 @@ RETRIES = 2
 POLL_SECONDS = 0.1
 
 
-def check_workers(workers: int | None, scheduler: str | None) -> None:
+def check_cluster_options(workers: int | None, scheduler: str | None) -> None:
     """Refuse ``--workers`` outside the commands' one range (1..MAX_WORKERS) and ``--workers``
     together with ``--scheduler``."""
     from tespike.cosim.commands.common import check_workers_argument
@@ -223,7 +223,7 @@ class Runner:
     """Context manager: ``with Runner(workers, scheduler) as run: for i, r in run(tasks): ...``."""
 
     def __init__(self, workers: int | None = None, scheduler: str | None = None):
-        check_workers(workers, scheduler)
+        check_cluster_options(workers, scheduler)
         import dask
         self.address = scheduler or (dask.config.get("scheduler-address", None) if workers is None else None)
         self.workers = 1 if workers is None else workers

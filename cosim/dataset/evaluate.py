@@ -17,7 +17,7 @@ def run_store(args) -> int:
     from tespike.recon.dataset.evaluate import evaluate_store
     from tespike.recon.report import OUTPUT_FILES
 
-    from .cluster import Runner, check_workers
+    from .cluster import Runner, check_cluster_options
 
     if not args.store:
         raise InputError("--workers and --scheduler need --store (the serial evaluation simulates "
@@ -26,7 +26,7 @@ def run_store(args) -> int:
         if getattr(args, key) != default:
             raise InputError(f"--{key.replace('_', '-')} cannot be combined with --store "
                              "(the store holds the sequences and their streams)")
-    check_workers(args.workers, args.scheduler)
+    check_cluster_options(args.workers, args.scheduler)
     check_results_dir(args.out, OUTPUT_FILES, args.force)
     methods = None if args.methods is None else [m.strip() for m in args.methods.split(",") if m.strip()]
     from tespike.recon.dataset.store import DatasetStore

@@ -16,7 +16,7 @@ from ..io import check_scene, word_dtype
 from ..noise import pixel_noise
 from ..resources import keep_freed_memory
 from .simulator import SceneSimulator, check_method
-from .stripes import check_workers, run_stripes, spawn_generators, stripe_slices
+from .stripes import run_stripes, spawn_generators, stripe_slices, worker_count
 
 
 def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None,
@@ -70,7 +70,7 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
         rows, sims = stripe_simulators(config, (H, W), seed=seed, dark_current=dark_current,
                                        total_pixel_readouts=scene.size, sensor=sensor)
         return run_stripes(rows, sims, scene, word_dtype(config), workers=workers, progress=progress)
-    check_workers(workers, 1)
+    worker_count(workers, 1)                            # (refuses a bad count; one process here)
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
                          method=method, total_pixel_readouts=scene.size, sensor=sensor)
     words = np.empty((K, H, W), word_dtype(config))

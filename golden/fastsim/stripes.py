@@ -51,7 +51,7 @@ def spawn_generators(seed, n: int) -> list[np.random.Generator]:
     return [np.random.Generator(np.random.SFC64(child)) for child in seed.spawn(n)]
 
 
-def check_workers(workers, limit: int) -> int:
+def worker_count(workers, limit: int) -> int:
     """Worker processes: ``None`` -> the cores this process may run on, at most ``limit``;
     otherwise a positive integer (capped at ``limit``: more would idle)."""
     if workers is None:
@@ -72,7 +72,7 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
     had no chance to end them)."""
     import mmap
     K, H, W = scene.shape
-    workers = check_workers(workers, len(rows)) if hasattr(os, "fork") else check_workers(workers, 1)
+    workers = worker_count(workers, len(rows)) if hasattr(os, "fork") else worker_count(workers, 1)
     dtype = np.dtype(dtype)
     if workers == 1:
         words = np.empty((K, H, W), dtype)
