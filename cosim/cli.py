@@ -14,6 +14,7 @@ import importlib
 import sys
 
 from tespike.golden.errors import TespikeError, one_line
+from tespike.golden.resources import address_space_text
 
 from .console import progress_wanted, report  # noqa: F401  (what command modules print)
 
@@ -168,13 +169,6 @@ OUT_OF_MEMORY = ("can't allocate memory", "not enough memory", "Cannot allocate 
 OUT_OF_MEMORY_UNDER_LIMIT = ("could not create a primitive", "could not execute a primitive")
 
 
-def _memory_limit() -> str:
-    """The address-space limit the process runs under, for an out-of-memory line ('' if none)."""
-    from tespike.golden.resources import address_space_limit
-    limit = address_space_limit()
-    return "" if limit is None else f" within the address-space limit (ulimit -v) of {limit >> 20} MB"
-
-
 def _notes(exc: BaseException) -> str:
     """What the interrupted command noted on the exception (e.g. the checkpoint it saved), one line."""
     notes = getattr(exc, "__notes__", ())
@@ -292,22 +286,22 @@ def _run(args, prepare=lambda: None, ended=lambda: None) -> tuple[int, bool]:
         return EXIT_BAD_INPUT, False
     except MemoryError as exc:        # numpy's says what it could not allocate; library_room's, what is left
         detail = f" ({one_line(exc)})" if str(exc) else ""
-        print(f"{prefix}: error: out of memory{_memory_limit()}{detail}{_notes(exc)}{_before(start, exc)}",
+        print(f"{prefix}: error: out of memory{address_space_text()}{detail}{_notes(exc)}{_before(start, exc)}",
               file=sys.stderr)
         return 1, False
     except (RuntimeError, ImportError, SystemError) as exc:   # torch's failed allocation; a library that
         if isinstance(exc, RuntimeError) and str(exc) == "can't start new thread":   # cannot be mapped; ...
-            print(f"{prefix}: error: cannot start a thread: out of memory or of processes{_memory_limit()}"
+            print(f"{prefix}: error: cannot start a thread: out of memory or of processes{address_space_text()}"
                   f"{_notes(exc)}{_before(start, exc)}", file=sys.stderr)
             return 1, False
         if isinstance(exc, SystemError):   # ... under ulimit -v, an allocation that failed in C ("returned NULL
-            memory = bool(_memory_limit())  # without setting an exception": import dask); elsewhere a bug
+            memory = bool(address_space_text())  # without setting an exception": import dask); elsewhere a bug
         else:
             memory = any(words in str(exc) for words in OUT_OF_MEMORY) or \
-                bool(_memory_limit() and any(words in str(exc) for words in OUT_OF_MEMORY_UNDER_LIMIT))
+                bool(address_space_text() and any(words in str(exc) for words in OUT_OF_MEMORY_UNDER_LIMIT))
         if not memory:
             raise
-        print(f"{prefix}: error: out of memory{_memory_limit()} ({one_line(exc, 160)}){_notes(exc)}"
+        print(f"{prefix}: error: out of memory{address_space_text()} ({one_line(exc, 160)}){_notes(exc)}"
               f"{_before(start, exc)}",
               file=sys.stderr)
         return 1, False

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Mapping
 
 from tespike.golden.errors import InputError
-from tespike.golden.resources import require_memory
+from tespike.golden.resources import require_memory, size_text
 
 
 def _existing_folder(path: str | os.PathLike) -> Path:
@@ -57,14 +57,6 @@ def require_disk(outputs: Mapping[str | os.PathLike, int], what: str) -> None:
         if needed > free:
             raise InputError(f"cannot write {os.fspath(path)!r}: {what} needs about {size_text(needed)}, "
                              f"but only {size_text(free)} is free on its file system")
-
-
-def size_text(n: int) -> str:
-    """Bytes for people: '512 B', '3.2 kB', '983.0 kB', '1.2 GB' (powers of 1024)."""
-    for unit, scale in (("GB", 1 << 30), ("MB", 1 << 20), ("kB", 1 << 10)):
-        if n >= scale:
-            return f"{n / scale:.1f} {unit}"
-    return f"{n} B"
 
 
 def _is_stream(path) -> bool:

@@ -72,6 +72,14 @@ def address_space_limit() -> int | None:
     return None if soft == resource.RLIM_INFINITY else soft
 
 
+def address_space_text() -> str:
+    """The address-space limit this process runs under, for an out-of-memory line: ' within the
+    address-space limit (ulimit -v) of N MB', or '' where there is none. (``tespike.entry`` says the
+    same before numpy may load, in its own words.)"""
+    limit = address_space_limit()
+    return "" if limit is None else f" within the address-space limit (ulimit -v) of {limit >> 20} MB"
+
+
 def file_handles_fault(exc: OSError) -> str | None:
     """The cause of an OSError that ran out of file handles, with the limit that was reached (the
     system's words, "Too many open files", name neither); None for any other error."""
@@ -84,8 +92,12 @@ def file_handles_fault(exc: OSError) -> str | None:
     return None
 
 
-def gigabytes(n: int) -> str:
-    return f"{n / 2 ** 30:.1f} GB" if n >= 2 ** 28 else f"{n / 2 ** 20:.0f} MB"
+def size_text(n: int) -> str:
+    """Bytes for people: '512 B', '3.2 kB', '983.0 kB', '1.2 GB' (powers of 1024)."""
+    for unit, scale in (("GB", 1 << 30), ("MB", 1 << 20), ("kB", 1 << 10)):
+        if n >= scale:
+            return f"{n / scale:.1f} {unit}"
+    return f"{n} B"
 
 
 def require_memory(needed: int, what: str) -> None:
@@ -93,8 +105,8 @@ def require_memory(needed: int, what: str) -> None:
     more memory than is available, in one line naming both sizes."""
     free = available_memory()
     if free is not None and needed > free:
-        raise InputError(f"{what} needs about {gigabytes(needed)} of memory, "
-                         f"but only {gigabytes(free)} is available")
+        raise InputError(f"{what} needs about {size_text(needed)} of memory, "
+                         f"but only {size_text(free)} is available")
 
 
 #: glibc mallopt parameters (malloc.h) and the values :func:`keep_freed_memory` sets.

@@ -646,7 +646,7 @@ def test_evaluate_refuses_up_front_when_memory_is_short(files, monkeypatch):
     from tespike.golden import resources
     from tespike.recon.evaluate import evaluate
     monkeypatch.setattr(resources, "available_memory", lambda: 1 << 20)
-    with pytest.raises(InputError, match=r"needs about .* of memory, but only 1 MB is available"):
+    with pytest.raises(InputError, match=r"needs about .* of memory, but only 1\.0 MB is available"):
         evaluate([("x", np.ones((4, 16, 16)))], lambda config, light, rng: None, methods=["tfp"],
                  progress=False)
 

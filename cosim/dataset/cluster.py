@@ -122,11 +122,10 @@ def _cause(errors: list[str], returncode=None) -> str:
     if "No usable temporary directory" in cause:
         from tespike.golden.paths import temporary_directory_fault
         cause = temporary_directory_fault() or cause
-    from tespike.golden.resources import address_space_limit
-    limit = address_space_limit()
-    if starved is None and limit is not None:           # its processes died where memory ran out
-        cause = (f"most likely out of memory within the address-space limit (ulimit -v) of {limit >> 20} MB "
-                 f"(its last error: {cause[:120]})")
+    from tespike.golden.resources import address_space_text
+    limit = address_space_text()
+    if starved is None and limit:                       # its processes died where memory ran out
+        cause = f"most likely out of memory{limit} (its last error: {cause[:120]})"
     return cause
 
 
