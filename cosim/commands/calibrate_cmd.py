@@ -16,7 +16,6 @@ def add_arguments(parser):
     parser.add_argument("--flat-light", required=True, type=float,
                         help="the flat's light, scene units (1 = design light, 42000 e- per readout)")
     parser.add_argument("--out", required=True, help="C.npz to write: dark and gain maps, config, readouts")
-    parser.add_argument("--quiet", "-q", action="store_true", help="print nothing on success")
 
 
 def run(args) -> int:

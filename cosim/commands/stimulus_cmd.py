@@ -35,7 +35,6 @@ def add_arguments(parser):
     parser.add_argument("--crop", metavar="Y,X,H,W",
                         help="keep only rows Y..Y+H-1 and columns X..X+W-1 (same electrons as the full stimulus)")
     parser.add_argument("--readouts", type=int, help="keep only the first K readout intervals")
-    parser.add_argument("--quiet", action="store_true", help="print nothing on success")
 
 
 def run(args) -> int:

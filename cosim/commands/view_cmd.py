@@ -36,7 +36,6 @@ def add_arguments(parser):
     parser.add_argument("--columns", type=int, help=f"frames per row of the sheet (default {DEFAULT_COLUMNS}; "
                                                     "not with --each)")
     parser.add_argument("--config", help="config of a stimulus E.npy (its clocks per readout L)")
-    parser.add_argument("--quiet", action="store_true", help="print nothing on success")
     parser.add_argument("--estimator", choices=tuple(ESTIMATORS),
                         help="decoder estimator for a stream S.npz only (default ratio)")
 
