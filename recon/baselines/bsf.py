@@ -34,12 +34,12 @@ from torch import nn
 from ..learning.layers import conv3
 from ..learning.mulaw import compress_
 from ..reach import Support, support, union
-from .common import AlignedBaseline, BaselineSizes, BaselineWindows, ResBlock
+from .common import AlignedBaseline, BaselineSizes, BaselineSubstreams, ResBlock
 from .represent import firing_rates
 
 
 @dataclasses.dataclass(frozen=True)
-class BSFSizes(BaselineSizes, BaselineWindows):
+class BSFSizes(BaselineSizes, BaselineSubstreams):
     """Every size of BSF.
 
     ``substreams`` sub-spans of ``window`` readouts ``stride`` apart (span 61);
@@ -61,7 +61,7 @@ class BSFSizes(BaselineSizes, BaselineWindows):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        self._need_substreams("sub-span")
+        self._need_substreams()
         self._need_ints("attention_radius")
         self._need_ints("blocks", least=0)
         self._need("orders", isinstance(self.orders, tuple) and len(self.orders) >= 1

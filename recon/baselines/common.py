@@ -75,9 +75,9 @@ class BaselineSizes(PyramidSizes):
 
 
 @dataclasses.dataclass(frozen=True)
-class BaselineWindows(SubstreamSizes):
-    """The windows Spk2ImgNet and BSF read: 5 of 21 readouts, 10 apart (61 readouts, the TE
-    paper's variant of both, the key window in the middle)."""
+class BaselineSubstreams(SubstreamSizes):
+    """The sub-streams Spk2ImgNet and BSF read (their papers' windows and sub-spans): 5 of 21
+    readouts, 10 apart (61 readouts, the TE paper's variant of both, the key one in the middle)."""
 
     substreams: int = 5
     window: int = 21

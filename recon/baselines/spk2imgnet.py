@@ -34,11 +34,11 @@ from torch import nn
 from ..learning.layers import conv3, substreams
 from ..learning.mulaw import compress
 from ..reach import Support, support, union
-from .common import AlignedBaseline, BaselineSizes, BaselineWindows, ResBlock, centred
+from .common import AlignedBaseline, BaselineSizes, BaselineSubstreams, ResBlock, centred
 
 
 @dataclasses.dataclass(frozen=True)
-class Spk2ImgNetSizes(BaselineSizes, BaselineWindows):
+class Spk2ImgNetSizes(BaselineSizes, BaselineSubstreams):
     """Every size of Spk2ImgNet.
 
     ``substreams`` windows of ``window`` readouts ``stride`` apart (span
@@ -56,7 +56,7 @@ class Spk2ImgNetSizes(BaselineSizes, BaselineWindows):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        self._need_substreams("window")
+        self._need_substreams()
         self._need_ints("blocks", least=0)
         self._need("lengths", isinstance(self.lengths, tuple) and len(self.lengths) >= 1
                    and all(type(k) is int and k >= 1 and k % 2 == 1 and k <= self.window for k in self.lengths),

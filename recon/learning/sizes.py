@@ -44,10 +44,10 @@ class SizesMixin:
             value = getattr(self, key)
             self._need(key, type(value) is int and value >= least, f"an integer >= {least}")
 
-    def _need_substreams(self, what: str) -> None:
-        """The fields of :class:`SubstreamSizes` (each sub-stream called ``what`` in a refusal)."""
+    def _need_substreams(self) -> None:
+        """The fields of :class:`SubstreamSizes`."""
         self._need_ints("substreams", "window", "stride")
-        self._need("substreams", self.substreams % 2 == 1, f"odd (the key {what} sits in the middle)")
+        self._need("substreams", self.substreams % 2 == 1, "odd (the key sub-stream sits in the middle)")
         self._need("window", self.window % 2 == 1, "odd (centred on its moment)")
 
     def _need_positive(self, *keys: str) -> None:
@@ -91,7 +91,7 @@ class SubstreamSizes:
     """The sub-streams a method reads around the key moment (the paper's eq. 4): ``substreams``
     (odd, the key one in the middle) of ``window`` readouts, their starts ``stride`` apart. The
     defaults are the network's, 5 of 13 readouts 12 apart (61 readouts); a method reading other
-    sub-streams redeclares them (the baselines' windows)."""
+    sub-streams redeclares them (Spk2ImgNet's and BSF's: :class:`tespike.recon.baselines.common.BaselineSubstreams`)."""
 
     substreams: int = 5
     window: int = 13

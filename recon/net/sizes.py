@@ -56,7 +56,7 @@ class NetSizes(PyramidSizes, SubstreamSizes):
     def __post_init__(self) -> None:
         super().__post_init__()
         need = self._need
-        self._need_substreams("sub-stream")
+        self._need_substreams()
         self._need_ints("heads", "attention_window")
         need("attention_window", self.attention_window % 2 == 1, "odd")
         need("channels", self.channels % 4 == 0 and self.channels % self.heads == 0,
