@@ -46,6 +46,20 @@ def test_registry_has_every_learned_method_as_a_spatial_method():
         assert method_span(name) == method_classes(name)[1].preset("cpu").span
 
 
+@pytest.mark.parametrize("name", LEARNED)
+def test_every_learned_module_refuses_an_input_of_the_wrong_shape(name):
+    """One rule for every module (the sizes' check_input): (N, span, H, W), H and W multiples of the
+    pyramid factor; anything else is refused before a layer runs."""
+    module, sizes_class = method_classes(name)
+    sizes = sizes_class.preset("cpu")
+    model = module(sizes).eval()
+    span, f = sizes.span, sizes.pyramid_factor
+    for bad in (torch.zeros(span, f, f), torch.zeros(1, span + 2, f, f), torch.zeros(1, span, f + 1, f),
+                torch.zeros(1, span, f, 2 * f - 1)):
+        with pytest.raises(ValueError, match="need"):
+            model(bad, None, 0.01)
+
+
 def test_weights_folder_is_beside_the_registry():
     folder = Path(recon.learned.__file__).resolve().parent / "weights"
     assert recon.learned.WEIGHTS_DIR == folder

@@ -28,15 +28,6 @@ from ..learning.sizes import PyramidSizes, SubstreamSizes
 from ..reach import Support, support
 
 
-def check_input(light: torch.Tensor, span: int, factor: int) -> None:
-    """Refuse an input of the wrong span or a frame size that is not a multiple of ``factor``."""
-    if light.dim() != 4:
-        raise ValueError(f"input has shape {tuple(light.shape)}: need (N, {span}, H, W)")
-    n, s, h, w = light.shape
-    if s != span or h % factor or w % factor:
-        raise ValueError(f"input (N, {s}, {h}, {w}): need span {span} and H, W multiples of {factor}")
-
-
 def centred(x: torch.Tensor, length: int) -> torch.Tensor:
     """(N, T, ...) -> the ``length`` readouts around the middle of T (T and length odd)."""
     start = (x.shape[1] - length) // 2
@@ -112,7 +103,7 @@ class AlignedBaseline(nn.Module):
     def forward(self, light: torch.Tensor, inside: torch.Tensor | None, spike_light: float) -> torch.Tensor:
         """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
         the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/learning/head.py."""
-        check_input(light, self.sizes.span, self.sizes.pyramid_factor)
+        self.sizes.check_input(light)
         feats = self.features(light)
         fused = self.reconstruct(self.fuse(self.align(feats).flatten(1, 2)))
         return self.head(fused, light, inside, spike_light)

@@ -128,3 +128,13 @@ class PyramidSizes(SizesMixin):
     def pyramid_factor(self) -> int:
         """H and W must be multiples of this: the fold and the pyramid's halvings."""
         return self.unshuffle << (self.levels - 1)
+
+    def check_input(self, light) -> None:
+        """Refuse a module input that is not (N, span, H, W) with H and W multiples of
+        :attr:`pyramid_factor` (``span``: the method's, from its sub-streams or its own rule)."""
+        if light.dim() != 4:
+            raise ValueError(f"input has shape {tuple(light.shape)}: need (N, {self.span}, H, W)")
+        _, span, h, w = light.shape
+        if span != self.span or h % self.pyramid_factor or w % self.pyramid_factor:
+            raise ValueError(f"input (N, {span}, {h}, {w}): need span {self.span} and H, W multiples of "
+                             f"{self.pyramid_factor}")

@@ -50,10 +50,8 @@ class TESpikeNet(nn.Module):
         """``inside`` (N, span) bool: the readouts that lie in the stream (None: all); ``spike_light``:
         the sensor's light of one spike per readout (``SensorConfig.spike_light``); see recon/learning/head.py."""
         s = self.sizes
-        n, span, h, w = light.shape
-        if span != s.span or h % s.pyramid_factor or w % s.pyramid_factor:
-            raise ValueError(f"input (N, {span}, {h}, {w}): need span {s.span} and H, W multiples of "
-                             f"{s.pyramid_factor}")
+        s.check_input(light)
+        n, _, h, w = light.shape
         subs_light = substreams(light, s.substreams, s.window, s.stride)
         key_light = subs_light[:, s.substreams // 2]
         subs = compress(subs_light, s.mu)
