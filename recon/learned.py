@@ -109,10 +109,7 @@ def load_learned(config: SensorConfig, method: str, weights: str | Path | None =
     method or was trained for another configuration."""
     path = weights_path(config, method) if weights is None else Path(weights)
     what = "weights" if weights is None else "--weights"
-    model, trained_for, _ = load_weights(path, what)
-    wanted = method_classes(method)[0]
-    if type(model) is not wanted:
-        raise InputError(f"{what} {str(path)!r} hold a {type(model).__name__}, not {method}'s {wanted.__name__}")
+    model, trained_for, _ = load_weights(path, what, method)
     if trained_for != config:
         raise InputError(f"{method} {what} {str(path)!r} were trained for {trained_for}, the stream is {config}")
     return model
@@ -138,15 +135,22 @@ def _load_cached(path: str, mtime: float, what: str):
     return model, payload["config"], payload["meta"]
 
 
-def load_weights(path: str | Path, what: str = "weights"):
+def load_weights(path: str | Path, what: str = "weights", method: str | None = None):
     """(module in eval mode, the sensor configuration it was trained for, how it was made) of any learned
-    method's weights file; ``what`` names the file in a refusal (a flag, or "weights")."""
+    method's weights file; ``what`` names the file in a refusal (a flag, or "weights"); ``method``: the
+    method the file must hold (refused in one line where it holds another's module)."""
     path = Path(path)
     try:
         mtime = path.stat().st_mtime
     except OSError as exc:
         raise InputError(f"cannot read {what} {str(path)!r}: {exc.strerror}") from None
-    return _load_cached(str(path), mtime, what)
+    loaded = _load_cached(str(path), mtime, what)
+    if method is not None:
+        wanted = method_classes(method)[0]
+        if type(loaded[0]) is not wanted:
+            raise InputError(f"{what} {str(path)!r} holds a {type(loaded[0]).__name__}, not {method}'s "
+                             f"{wanted.__name__}")
+    return loaded
 
 
 def weights_by_sensor(paths, configs) -> dict[tuple[str, str], Path]:

@@ -288,10 +288,7 @@ def warm_start(model: torch.nn.Module, path: str, method: str) -> list[str]:
     A network whose head changed keeps what it learned elsewhere (features,
     alignment, refinement) and trains its new parts from their initial values.
     """
-    source, _, _ = load_weights(path, "--init")
-    wanted = method_classes(method)[0]
-    if type(source) is not wanted:
-        raise InputError(f"--init {path!r} holds a {type(source).__name__}, not {method}'s {wanted.__name__}")
+    source, _, _ = load_weights(path, "--init", method)
     saved, own = source.state_dict(), model.state_dict()
     copied = [name for name, value in saved.items() if name in own and own[name].shape == value.shape]
     if not copied:

@@ -91,7 +91,7 @@ def test_missing_weights_are_refused_naming_the_file_and_the_training(empty_weig
 
 def test_weights_of_another_method_or_sensor_are_refused(empty_weights_dir, rng):
     save_tiny(empty_weights_dir, "spk2imgnet", TE, file_name="bsf-te.pt")
-    with pytest.raises(InputError, match="hold a Spk2ImgNet, not bsf's BSF"):
+    with pytest.raises(InputError, match="holds a Spk2ImgNet, not bsf.s BSF"):
         reconstruct(tiny_stream(rng), TE, "bsf")
     save_tiny(empty_weights_dir, "spk2imgnet", ML, file_name="spk2imgnet-te.pt")
     with pytest.raises(InputError, match="were trained for"):
@@ -141,7 +141,7 @@ def test_cli_reconstruct_with_weights_the_user_trained(empty_weights_dir, tmp_pa
     out.unlink()
     save_stream(tmp_path / "T.npz", tiny_stream(rng), TE)
     (tmp_path / "empty.pt").write_bytes(b"")
-    for args, word in [(("--stream", stream, "--method", "net", "--weights", path), "hold a BSF, not net's"),
+    for args, word in [(("--stream", stream, "--method", "net", "--weights", path), "holds a BSF, not net's"),
                        (("--stream", tmp_path / "T.npz", "--method", "bsf", "--weights", path), "were trained for"),
                        (("--stream", stream, "--method", "tfi", "--weights", path), "--weights applies"),
                        (("--stream", stream, "--method", "bsf", "--weights", tmp_path / "empty.pt"), "empty"),
