@@ -30,12 +30,13 @@ import torch
 from torch import nn
 
 from ..reach import Support, support
+from ..settings import DEFAULT_WINDOW
 from .mulaw import compress, expand
 
 #: Radii (readouts either side of the key) of the centred means the head chooses among.
 RADII = (0, 1, 2, 4, 7, 12, 20, 30)
-#: Initial logits: TFI and TFP's 9-readout mean first (the bias of an untrained head).
-INITIAL_LOGITS = {"tfi": 2.0, 4: 1.0}
+#: Initial logits: TFI and TFP's mean over its default window first (the bias of an untrained head).
+INITIAL_LOGITS = {"tfi": 2.0, DEFAULT_WINDOW // 2: 1.0}
 
 
 def estimate_count() -> int:
