@@ -33,11 +33,9 @@ import numpy as np
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
+from tespike.recon.evaluate import SENSORS  # the golden full frame's: presets, the paper's msb ML camera, TE, ML count
 from tespike.recon.settings import DEFAULT_WINDOW, check_window
 
-#: Sensors of the golden full frame: file label -> config preset (paper section 6.1 and eq. 10),
-#: in :data:`tespike.recon.evaluate.SENSORS` order: the paper's ML (msb) camera, TE, the full-count ML camera.
-SENSORS = {"ml-msb": "ml-msb", "te": "te", "ml": "ml"}
 #: The sensor the RTL runs (the paper's subject).
 RTL_SENSOR = "te"
 #: Crop and readouts the README's demo uses; unless given, each is at most the frame's
@@ -214,7 +212,7 @@ def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, 
 def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed: int = 0,
              crop: int | None = None, rtl_readouts: int | None = None,
              backend: str = "amaranth", repeats: int = 3, window: int = DEFAULT_WINDOW, hw_cost: bool = True,
-             sensors=tuple(SENSORS), quiet: bool = False, bars: bool | None = None, weights=()) -> int:
+             sensors=SENSORS, quiet: bool = False, bars: bool | None = None, weights=()) -> int:
     """Run every stage into folder ``out``; 0 if the RTL stream is bit-identical to golden, else 1.
 
     ``crop`` / ``rtl_readouts``: None for :data:`DEFAULT_CROP` / :data:`DEFAULT_RTL_READOUTS`
@@ -240,7 +238,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     crop, rtl_readouts = check_options(out, frames=frames, height=height, width=width, seed=seed, crop=crop,
                                        rtl_readouts=rtl_readouts, backend=backend, repeats=repeats,
                                        window=window, sensors=sensors)
-    configs = {label: load_config(SENSORS[label]) for label in sensors}
+    configs = {label: load_config(label) for label in sensors}
     chosen = weights_by_sensor(weights, configs)                        # (method, sensor) -> file
     ready = {(method, configs[sensor]): path for (method, sensor), path in chosen.items()}
     te = configs[RTL_SENSOR]
@@ -286,7 +284,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                     "tespike golden --config te --stimulus E_te.npy --out S_te.npz",
                     f"tespike simulate --config te --scene I.npy --seed {seed} --method per-clock --out S_te.npz"
                     "   # the same words, without the file"]
-        commands += [f"tespike simulate --config {SENSORS[label]} --scene I.npy --seed {seed} --out S_{label}.npz"
+        commands += [f"tespike simulate --config {label} --scene I.npy --seed {seed} --out S_{label}.npz"
                      for label in configs if label != RTL_SENSOR]
         progress.end("golden, full frame", started, commands)
 

@@ -212,7 +212,7 @@ def noise_markdown(evaluation: Evaluation) -> list[str]:
 
 def table_csv(evaluation: Evaluation) -> str:
     """Table 1 as CSV, one row per method: method, then per sensor (key as in
-    :data:`SENSORS`: ``ml-msb``, ``te``, ``ml``, and the noise sensors) name, every
+    :data:`tespike.recon.evaluate.SENSORS`: ``ml-msb``, ``te``, ``ml``, and the noise sensors) name, every
     metric, ms_per_frame; then, with the complexity measured, its columns."""
     summary = evaluation.summary()
     buffer = io.StringIO()
