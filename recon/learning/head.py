@@ -31,6 +31,7 @@ from torch import nn
 
 from ..reach import Support, support
 from ..settings import DEFAULT_WINDOW
+from .layers import conv3
 from .mulaw import compress, expand
 
 #: Radii (readouts either side of the key) of the centred means the head chooses among.
@@ -122,7 +123,7 @@ class BlendHead(nn.Module):
         self.mu = float(mu)
         self.estimates = estimate_count()
         outputs = self.estimates + 1                       # logits, then the correction
-        self.conv = nn.Conv2d(channels, outputs * unshuffle ** 2, 3, padding=1)
+        self.conv = conv3(channels, outputs * unshuffle ** 2)
         self.shuffle = nn.PixelShuffle(unshuffle)
         nn.init.zeros_(self.conv.weight)
         with torch.no_grad():

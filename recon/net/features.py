@@ -13,6 +13,7 @@ import torch
 from torch import nn
 
 from ..reach import Support, support, union
+from ..learning.layers import conv3
 
 #: The paper's eq. 8: Sobel G_x, Sobel G_y and the Laplacian L.
 GRADIENT_KERNELS = torch.tensor([
@@ -67,7 +68,7 @@ class MSFEG(nn.Module):
         self.gradient = GradientFilters(window) if gradient else None
         grad_channels = channels // 2 if gradient else 0
         self.gradient_proj = nn.Conv2d(3 * folded, grad_channels, 1) if gradient else None
-        self.fuse = nn.Conv2d(branch * len(self.KERNELS) + grad_channels, channels, 3, padding=1)
+        self.fuse = conv3(branch * len(self.KERNELS) + grad_channels, channels)
         self.act = nn.LeakyReLU(0.1)
 
     def folded_forward(self, x: torch.Tensor) -> torch.Tensor:

@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from ..learning.head import BlendHead
-from ..learning.layers import substreams
+from ..learning.layers import conv3, substreams
 from ..learning.mulaw import compress, expand
 from ..reach import Support, support
 from .align import SPA
@@ -41,7 +41,7 @@ class TESpikeNet(nn.Module):
         if s.head == "blend":
             self.head = BlendHead(s.channels, s.unshuffle, s.mu)
         else:                                   # "mean": a correction to the key sub-stream's mean
-            self.head = nn.Conv2d(s.channels, s.unshuffle ** 2, 3, padding=1)
+            self.head = conv3(s.channels, s.unshuffle ** 2)
             self.shuffle = nn.PixelShuffle(s.unshuffle)
             nn.init.zeros_(self.head.weight)    # start from the temporal mean
             nn.init.zeros_(self.head.bias)

@@ -25,6 +25,7 @@ from torch import nn
 
 from ..reach import Support, support, union
 from .features import channels_last
+from ..learning.layers import conv3
 
 
 def box_mean(x: torch.Tensor, size: int) -> torch.Tensor:
@@ -44,8 +45,8 @@ class IntensityFeature(nn.Module):
     def __init__(self, window: int, channels: int, unshuffle: int = 1):
         super().__init__()
         self.unshuffle = nn.PixelUnshuffle(unshuffle)
-        self.convs = nn.Sequential(nn.Conv2d((window + 1) * unshuffle ** 2, channels, 3, padding=1),
-                                   nn.ReLU(), nn.Conv2d(channels, channels, 3, padding=1))
+        self.convs = nn.Sequential(conv3((window + 1) * unshuffle ** 2, channels),
+                                   nn.ReLU(), conv3(channels, channels))
 
     def forward(self, substream: torch.Tensor, mean: torch.Tensor) -> torch.Tensor:
         return self.convs(channels_last(self.unshuffle(torch.cat((mean, substream), 1))))
