@@ -451,7 +451,7 @@ def test_corrupt_stream_files(files, kind):
      ["--config", "more than once"]),
     (("scene", "--frames", "3", "--frames", "4"), ["--frames", "more than once"]),
     (("scene", "--folder", "hdr", "--seed", "5"), ["--seed", "built-in scenes only"]),
-    (("scene", "--weights", "rec709"), ["--weights", "--folder only"]),
+    (("scene", "--grayscale", "rec709"), ["--grayscale", "--folder only"]),
     (("train", "--seed", "-1"), ["seed = -1", "0..2^63 - 1"]),
     (("train", "--seed", str(10 ** 23)), ["seed", "0..2^63 - 1"]),
     (("train", "--device", "bogus"), ["device = 'bogus'", "not a usable torch device"]),

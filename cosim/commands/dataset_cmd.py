@@ -15,8 +15,8 @@ def add_arguments(parser):
                              "frames (default all)")
     parser.add_argument("--height", type=int, default=96, help="rows of built-in scenes (default 96)")
     parser.add_argument("--width", type=int, default=128, help="columns of built-in scenes (default 128)")
-    parser.add_argument("--weights", default="rec709", help="grayscale weights of HDR frames: rec709 "
-                                                            "(default) or rec601")
+    parser.add_argument("--grayscale", default="rec709", help="luminance weights of HDR frames: rec709 "
+                                                              "(default) or rec601")
     parser.add_argument("--config", metavar="C", action="append", default=[],
                         help="sensor: te, ml, ml-msb or a JSON file (repeatable; streams are named "
                              "after the preset or the file's stem)")
@@ -77,7 +77,7 @@ def run(args) -> int:
     configs = sensor_configs(args.config)
     sources = []
     for folder in args.hdr:
-        sources += hdr_sources(folder, weights=args.weights, max_frames=args.frames)
+        sources += hdr_sources(folder, weights=args.grayscale, max_frames=args.frames)
     sources += scene_sources(args.scene, args.frames or 24, args.height, args.width)
     if not sources:
         raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")

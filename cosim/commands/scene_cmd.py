@@ -20,7 +20,8 @@ def add_arguments(parser):
     parser.add_argument("--motion", help="camera motion of panorama scenes: pan (default), tilt, rotate, "
                         "zoom or mixed")
     parser.add_argument("--sources", type=int, help="moving bright sources added to a panorama scene")
-    parser.add_argument("--weights", default=None, help="grayscale weights for --folder: rec709 (default) or rec601")
+    parser.add_argument("--grayscale", default=None, help="--folder: luminance weights of the frames, rec709 "
+                                                          "(default) or rec601")
     parser.add_argument("--crop", metavar="HxW", help="--folder: centre-crop every frame to H x W (e.g. 384x512)")
     parser.add_argument("--downscale", type=int, default=1,
                         help="--folder: area-average N x N blocks after cropping (default 1)")
@@ -49,7 +50,7 @@ def run(args) -> int:
         raise InputError("--out is required (the I.npy to write)")
     if not args.folder:
         for flag, given in (("--crop", args.crop is not None), ("--downscale", args.downscale != 1),
-                            ("--weights", args.weights is not None)):
+                            ("--grayscale", args.grayscale is not None)):
             if given:
                 raise InputError(f"{flag} applies to --folder only (a built-in scene is made at "
                                  "--height x --width)")
@@ -76,7 +77,7 @@ def run(args) -> int:
                 raise InputError(f"--crop {args.crop!r} must be HxW, e.g. 384x512")
         if args.frames < 1:
             raise InputError(f"--frames {args.frames}: must be >= 1")
-        light = load_hdr_sequence(args.folder, weights=args.weights or DEFAULT_WEIGHTS, peak=args.peak,
+        light = load_hdr_sequence(args.folder, weights=args.grayscale or DEFAULT_WEIGHTS, peak=args.peak,
                                   max_frames=args.frames, crop=crop, downscale=args.downscale,
                                   progress=progress_wanted(args))
     else:
