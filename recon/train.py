@@ -57,7 +57,7 @@ ETA = 0.7
 class TrainOptions:
     """One training run. ``minutes`` and ``steps`` are budgets (the first reached ends it)."""
 
-    sensor: str = "te"                  # preset name or the JSON text of a configuration
+    config: str = "te"                  # preset name or the JSON text of a configuration (--config)
     method: str = "net"                 # a learned method of recon.learned
     size: str = "cpu"
     ablation: int | None = None         # the paper's Table 3 case 1..6 (None: the whole network)
@@ -111,15 +111,16 @@ class TrainOptions:
         if self.minutes is not None and not (self.minutes > 0 and math.isfinite(self.minutes)):
             raise InputError(f"minutes = {self.minutes!r}: must be a finite number > 0")
 
-    def config(self) -> SensorConfig:
+    def sensor_config(self) -> SensorConfig:
+        """The :class:`SensorConfig` of ``config``."""
         from tespike.golden.config import PRESETS
-        if self.sensor in PRESETS:
-            return SensorConfig.preset(self.sensor)
-        return SensorConfig.from_json(self.sensor)
+        if self.config in PRESETS:
+            return SensorConfig.preset(self.config)
+        return SensorConfig.from_json(self.config)
 
     def sizes(self):
         module, sizes_class = method_classes(self.method)
-        sizes = sizes_class.for_camera(self.size, self.config())
+        sizes = sizes_class.for_camera(self.size, self.sensor_config())
         if self.ablation is None:
             return sizes
         if self.method != "net":
@@ -163,8 +164,11 @@ def read_checkpoint(path: Path) -> tuple[dict, "TrainOptions"]:
     if not isinstance(state, dict) or any(key not in state for key in CHECKPOINT_KEYS):
         raise InputError(f"checkpoint {str(path)!r} is not a checkpoint of tespike train")
     try:
-        return state, TrainOptions(**state["options"])
-    except (TypeError, InputError) as exc:
+        options = dict(state["options"])
+        if "sensor" in options and "config" not in options:     # (a checkpoint written before the rename)
+            options["config"] = options.pop("sensor")
+        return state, TrainOptions(**options)
+    except (TypeError, ValueError, InputError) as exc:
         raise InputError(f"checkpoint {str(path)!r} holds options this trainer cannot take "
                          f"({str(exc).splitlines()[0][:100]})") from None
 
@@ -313,7 +317,7 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
     check_device(options.device)       # (here, not in the options: a checkpoint's saved device may be absent)
     recipe = options.data_recipe()     # the clip pool's words and light, before anything is built
     clip_bytes = max(recipe.long[1], recipe.short[1]) * recipe.height * recipe.width * (
-        4 + word_dtype(options.config()).itemsize)
+        4 + word_dtype(options.sensor_config()).itemsize)
     require_memory(options.pool * clip_bytes, f"a pool of {options.pool} clips of up to "
                                               f"{max(recipe.long[1], recipe.short[1])} x {recipe.height} x {recipe.width}")
     out = Path(out)
@@ -334,7 +338,7 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
     validation_path, best_path = work / "validation.csv", work / "best.pt"
     if options.threads is not None:
         torch.set_num_threads(options.threads)
-    config, sizes = options.config(), options.sizes()
+    config, sizes = options.sensor_config(), options.sizes()
     torch.manual_seed(options.seed)
     generator = np.random.default_rng(options.seed)
     model = options.model().to(options.device).to(memory_format=torch.channels_last)
@@ -405,7 +409,7 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
     def save_checkpoint() -> None:
         run_folder_kept()
         _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options, best)
-        plot_curves(log_path, validation_path, work / "curves.png", f"{options.method} {options.sensor}")
+        plot_curves(log_path, validation_path, work / "curves.png", f"{options.method} {options.config}")
 
     validated = None
 
@@ -431,7 +435,7 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
     bar = None
     if show:
         from tqdm import tqdm
-        bar = tqdm(total=options.steps, initial=step, desc=f"train {options.method} {options.sensor}",
+        bar = tqdm(total=options.steps, initial=step, desc=f"train {options.method} {options.config}",
                    unit="step")
     last_save = time.monotonic()
     new_log = not log_path.exists()

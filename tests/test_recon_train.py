@@ -264,3 +264,21 @@ def test_learning_rate_warms_up_then_halves_as_the_papers_schedule():
     assert [lr_factor(warm, step) for step in range(8)] == [0.25, 0.5, 0.75, 1.0, 1.0, 1.0, 0.5, 0.5]
     with pytest.raises(InputError, match="warmup"):
         options(warmup=-1)
+
+
+def test_a_checkpoint_written_before_the_options_rename_is_read(tmp_path):
+    """TrainOptions.sensor is now ``config`` (the --config it was given): a checkpoint that still says
+    ``sensor`` resumes with it; options that are not a mapping are one line naming the file."""
+    import dataclasses
+
+    from tespike.recon.learning.weights import write_torch_file
+    from tespike.recon.train import CHECKPOINT_KEYS, TrainOptions, read_checkpoint
+    old = dataclasses.asdict(TrainOptions(config="ml-msb", steps=3))
+    old["sensor"] = old.pop("config")
+    path = tmp_path / "checkpoint.pt"
+    write_torch_file(path, {**dict.fromkeys(CHECKPOINT_KEYS, 0), "options": old})
+    _, options = read_checkpoint(path)
+    assert options.config == "ml-msb" and options.sensor_config() == SensorConfig.preset("ml-msb")
+    write_torch_file(path, {**dict.fromkeys(CHECKPOINT_KEYS, 0), "options": "te"})
+    with pytest.raises(InputError, match="checkpoint.*holds options this trainer cannot take"):
+        read_checkpoint(path)

@@ -126,7 +126,7 @@ def run(args) -> int:
     from tespike.recon.train import TrainOptions, train
 
     given = {flag: getattr(args, flag) for flag in TRAINER_FLAGS if hasattr(args, flag)}
-    options = TrainOptions(sensor=args.config if preset else config.to_json(), ablation=args.ablation,
+    options = TrainOptions(config=args.config if preset else config.to_json(), ablation=args.ablation,
                            steps=args.steps, minutes=args.minutes, threads=args.threads,
                            recipe={"folders": tuple(args.hdr), **({"peak": tuple(args.peak)} if args.peak else {}),
                                    **({"panoramas": panoramas} if panoramas else {}),
