@@ -53,6 +53,18 @@ def _word_ranges(words: np.ndarray) -> str:
     return ", ".join(f"{a}..{b}" if b > a else f"{a}" for a, b in zip(starts.tolist(), ends.tolist()))
 
 
+def check_word_dtype(dtype) -> None:
+    """Refuse readout words whose dtype (numpy's, or a torch tensor's, told by its name) is not an
+    integer type, in one line."""
+    try:
+        dtype = np.dtype(dtype)
+        integer = dtype.kind in "iu"
+    except TypeError:                                  # a torch dtype: torch.int64, torch.uint8, ...
+        integer = str(dtype).startswith(("torch.int", "torch.uint"))
+    if not integer:
+        raise InputError(f"readout words dtype {dtype} is not an integer type")
+
+
 def check_words(words: np.ndarray, config: SensorConfig) -> np.ndarray:
     """Refuse any word outside the configuration's word set (:func:`legal_words`).
 
@@ -60,8 +72,7 @@ def check_words(words: np.ndarray, config: SensorConfig) -> np.ndarray:
     axis, so the memory it needs is bounded whatever the stream's size.
     """
     words = np.asarray(words)
-    if words.dtype.kind not in "iu":
-        raise InputError(f"readout words dtype {words.dtype} is not an integer type")
+    check_word_dtype(words.dtype)
     if not words.size:
         return words
     if words.ndim == 0:

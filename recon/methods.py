@@ -24,6 +24,7 @@ import numpy as np
 import torch
 
 from tespike.golden.config import SensorConfig
+from tespike.golden.decode import check_word_dtype
 from tespike.golden.errors import InputError
 
 from .learned import LEARNED_SUMMARIES
@@ -161,8 +162,7 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = DEFAU
     else:
         words = np.asarray(words)
         shape = words.shape
-        if words.dtype.kind not in "iu":
-            raise InputError(f"readout words dtype {words.dtype} is not an integer type")
+        check_word_dtype(words.dtype)
     if len(shape) != 3:
         raise InputError(f"stream words shape {shape} must be (K, H, W)")
     K, H, W = shape

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.decode import decode_light as golden_decode_light, legal_words
+from tespike.golden.decode import check_word_dtype, decode_light as golden_decode_light, legal_words
 from tespike.golden.decode import decode_spikes as golden_decode_spikes
 from tespike.golden.errors import InputError
 
@@ -45,12 +45,10 @@ def code_tables(config: SensorConfig, estimator: str = "ratio") -> tuple[np.ndar
 def as_word_tensor(words, device: str | torch.device = "cpu") -> torch.Tensor:
     """Integer words (numpy of any integer dtype, or a tensor) -> int64 tensor on ``device``."""
     if isinstance(words, torch.Tensor):
-        if words.dtype.is_floating_point or words.dtype.is_complex or words.dtype == torch.bool:
-            raise InputError(f"readout words dtype {words.dtype} is not an integer type")
+        check_word_dtype(words.dtype)
         return words.to(device=device, dtype=torch.int64)
     words = np.asarray(words)
-    if words.dtype.kind not in "iu":
-        raise InputError(f"readout words dtype {words.dtype} is not an integer type")
+    check_word_dtype(words.dtype)
     if words.dtype == np.uint64 and words.size and int(words.max()) > np.iinfo(np.int64).max:
         raise InputError(f"readout word {int(words.max())} does not fit in int64")
     return torch.from_numpy(words.astype(np.int64, copy=False)).to(device)
