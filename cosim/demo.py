@@ -50,6 +50,8 @@ WORKING_BYTES = 256 << 20
 #: Files the demo writes into its folder (checked before any work).
 OUTPUT_FILES = ("report.md", "verdict.txt", "I.npy", "E_crop.npy", "S_rtl.npz", "W.vcd", "W.gtkw",
                 "frame.png", "rtl_crop.png", "strips/")
+#: Files every finished demo's folder holds (it is written whole): a folder without them is not one.
+DEMO_MARKERS = ("report.md", "verdict.txt")
 #: Names a demo's folder holds besides OUTPUT_FILES and the evaluation's: per-sensor streams, images.
 PER_SENSOR_FILES = ("S_*.npz", "R_*.npy")
 
@@ -165,9 +167,10 @@ def check_options(out, *, frames, height, width, seed, crop, rtl_readouts, backe
 
 
 def check_demo_folder(out) -> None:
-    """``--out``: new, empty, or a previous demo's folder, which the run replaces whole when it is
-    done (:func:`tespike.golden.atomic.atomic_folder`: killed or failing, the previous demo stays
-    untouched); never a folder holding anything else, which replacing it would delete."""
+    """``--out``: new, empty, or a previous demo's folder (holding :data:`DEMO_MARKERS`), which the run
+    replaces whole when it is done (:func:`tespike.golden.atomic.atomic_folder`: killed or failing, the
+    previous demo stays untouched); never a folder holding anything else, nor another command's
+    results (an evaluation's, whose names a demo shares), which replacing it would delete."""
     import fnmatch
     import os
 
@@ -183,6 +186,10 @@ def check_demo_folder(out) -> None:
     if foreign:
         raise InputError(f"--out {str(out)!r} holds {foreign[0]!r}, which no demo writes: choose a new or "
                          "empty folder (a demo replaces its folder whole)")
+    if not any(os.path.isfile(os.path.join(out, marker)) for marker in DEMO_MARKERS):
+        raise InputError(f"--out {str(out)!r} holds results that are no demo's (no {' or '.join(DEMO_MARKERS)}: "
+                         "an evaluation's?): choose a new or empty folder (a demo replaces only a previous "
+                         "demo's folder)")
 
 
 def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, crop, rtl_readouts,
