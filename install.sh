@@ -1,5 +1,5 @@
 #!/bin/sh
-# Install tespike and the outside tools it drives (Icarus Verilog, Verilator, Yosys).
+# Install tespike and the outside tools it drives (Icarus Verilog, Verilator, Yosys, z3, boolector).
 # Debian packages need root (or sudo); Python packages go to the active interpreter.
 set -eu
 cd "$(dirname "$0")"
