@@ -170,6 +170,10 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
         raise InputError(f"flat light {flat_light:g}: the flat stream's pixels read {float(np.median(shown)):.4g} "
                          f"(median, less the dark), above {MAX_GAIN:g} times it: state the light the flat "
                          "was recorded at (1 = design light)")
+    if float(np.median(shown)) < MIN_GAIN * float(flat_light):
+        raise InputError(f"flat light {flat_light:g}: the flat stream's pixels read {float(np.median(shown)):.4g} "
+                         f"(median, less the dark), below {MIN_GAIN:g} times it: no brighter than the dark "
+                         "stream (were --dark and --flat swapped, or the flat recorded without light?)")
     raw_gain = shown / float(flat_light)
     floored = int(np.count_nonzero(raw_gain < MIN_GAIN))
     return Calibration(dark, np.maximum(raw_gain, MIN_GAIN), config, int(dark_words.shape[0]),
@@ -237,16 +241,17 @@ def load_calibration(path: str | Path) -> Calibration:
 
 
 def check_matches(calibration: Calibration, config: SensorConfig, shape: tuple[int, int],
-                  what: str = "the stream") -> None:
-    """Refuse, in one line, a calibration made for another configuration or frame size."""
+                  what: str = "the stream", name: str = "the calibration") -> None:
+    """Refuse, in one line naming both (``name``: the calibration, e.g. its file), a calibration made
+    for another configuration or frame size than ``what``."""
     if calibration.config != config:
         mine, theirs = calibration.config.to_dict(), config.to_dict()
         key = next(k for k in mine if mine[k] != theirs.get(k))
-        raise InputError(f"calibration is for another sensor configuration than {what}: "
-                         f"{key} = {mine[key]!r} there, {theirs.get(key)!r} here")
+        raise InputError(f"{name} is for another sensor configuration than {what}: "
+                         f"{key} = {mine[key]!r} in the calibration, {theirs.get(key)!r} in {what}")
     if tuple(shape) != calibration.shape:
-        raise InputError(f"calibration maps are {calibration.shape[0]} x {calibration.shape[1]}, "
-                         f"{what}'s frames {shape[0]} x {shape[1]}")
+        raise InputError(f"{name} holds maps of {calibration.shape[0]} x {calibration.shape[1]} pixels, "
+                         f"{what} frames of {shape[0]} x {shape[1]}")
 
 
 def correct(images: np.ndarray, calibration: Calibration) -> np.ndarray:

@@ -67,9 +67,12 @@ def test_refusals_and_floor():
     estimate(dark, flat, config, 0.03 / 15)                 # within the factor: a calibration
     with pytest.raises(InputError, match="differ"):
         estimate(dark, flat[:, :3], config, 0.03)
-    c = estimate(dark, dark, config, 0.03)                  # a "flat" with no light: every gain floored
-    assert c.floored == dark[0].size and (c.gain == MIN_GAIN).all()
-    with pytest.raises(InputError, match="threshold = 175 there, 100 here"):
+    for flat_of_nothing in (dark, dark[::-1]):              # a "flat" with no light (or the two swapped)
+        with pytest.raises(InputError, match="no brighter than the dark stream .*swapped"):
+            estimate(dark, flat_of_nothing, config, 0.03)
+    c = estimate(dark, flat, config, 0.03 * 19)             # light overstated 19 x: the dimmer pixels floored
+    assert 0 < c.floored < dark[0].size and c.gain.min() == MIN_GAIN
+    with pytest.raises(InputError, match="threshold = 175 in the calibration, 100 in the stream"):
         reconstruct(dark, SensorConfig(threshold=100), "tfp", calibration=c)
     with pytest.raises(InputError, match="6 x 8"):
         reconstruct(dark[:, :2], config, "tfp", calibration=c)

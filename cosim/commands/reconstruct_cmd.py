@@ -77,7 +77,7 @@ def run(args) -> int:
     if args.calibration is not None:
         from tespike.recon.calibration import check_matches, load_calibration
         calibration = load_calibration(args.calibration)
-        check_matches(calibration, config, (H, W), f"stream {args.stream}")
+        check_matches(calibration, config, (H, W), f"stream {args.stream!r}", f"calibration {args.calibration!r}")
     require_room(f"the {K} images of {H} x {W} pixels", disk={args.out: 4 * K * H * W})
 
     import torch
