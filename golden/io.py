@@ -58,28 +58,29 @@ def _magic(path, what: str) -> bytes:
 
 
 def check_stimulus(stimulus: np.ndarray, config: SensorConfig, *, whole_readouts: bool = True,
-                   scan_values: bool = True) -> np.ndarray:
+                   scan_values: bool = True, what: str = "stimulus") -> np.ndarray:
     """Refuse a per-clock electron array that SPEC section 3 does not allow.
 
     It must be a numpy integer array (a float or bool array is refused even when
     its values are whole) of shape ``(T, H, W)`` with every value in
     ``[0, 2^input_bits - 1]`` and, unless ``whole_readouts`` is false, T a
     multiple of L. ``scan_values=False`` checks only dtype and shape (for a
-    caller that checks the values slice by slice). Returns the array unchanged.
+    caller that checks the values slice by slice). ``what`` names the array in refusals (e.g.
+    ``stimulus file 'E.npy'``). Returns the array unchanged.
     """
     if not isinstance(stimulus, np.ndarray):
-        raise InputError(f"stimulus must be a numpy array, not {type(stimulus).__name__}")
+        raise InputError(f"{what} must be a numpy array, not {type(stimulus).__name__}")
     if stimulus.dtype.kind not in "iu":
-        raise InputError(f"stimulus dtype {stimulus.dtype} is not an integer type "
+        raise InputError(f"{what} dtype {stimulus.dtype} is not an integer type "
                          "(float and bool arrays are refused even when whole)")
     if stimulus.ndim != 3:
-        raise InputError(f"stimulus shape {stimulus.shape} must be (T, H, W)")
+        raise InputError(f"{what} shape {stimulus.shape} must be (T, H, W)")
     clocks, height, width = stimulus.shape
     if height < 1 or width < 1:
-        raise InputError(f"stimulus shape {stimulus.shape}: H and W must be at least 1")
+        raise InputError(f"{what} shape {stimulus.shape}: H and W must be at least 1")
     L = config.clocks_per_readout
     if whole_readouts and clocks % L:
-        raise InputError(f"stimulus has T = {clocks} pixel clocks, not a multiple of "
+        raise InputError(f"{what} has T = {clocks} pixel clocks, not a multiple of "
                          f"L = clocks_per_tick * alpha = {L}")
     if scan_values and stimulus.size:
         # A dtype that cannot hold a bad value is not scanned (a pass over a large
@@ -88,10 +89,10 @@ def check_stimulus(stimulus: np.ndarray, config: SensorConfig, *, whole_readouts
         low = 0 if info.min >= 0 else int(stimulus.min())
         high = 0 if info.max <= config.input_max else int(stimulus.max())
         if low < 0:
-            raise InputError(f"stimulus value {low} is negative (electrons per clock must be "
+            raise InputError(f"{what} value {low} is negative (electrons per clock must be "
                              f"in 0..2^input_bits - 1 = {config.input_max})")
         if high > config.input_max:
-            raise InputError(f"stimulus value {high} exceeds 2^input_bits - 1 = {config.input_max} "
+            raise InputError(f"{what} value {high} exceeds 2^input_bits - 1 = {config.input_max} "
                              f"(input_bits = {config.input_bits})")
     return stimulus
 
@@ -105,12 +106,13 @@ def load_stimulus(path: str | Path, config: SensorConfig) -> np.ndarray:
     stimulus = load_npy(path, "stimulus", mmap_mode="r")
     if stimulus.ndim == 3 and stimulus.shape[0] == 0:
         raise InputError(f"stimulus file {str(path)!r} has T = 0 pixel clocks (no readout to make)")
+    what = f"stimulus file {str(path)!r}"
     if stimulus.ndim != 3 or stimulus.dtype.kind not in "iu":
-        return check_stimulus(stimulus, config)
-    check_stimulus(stimulus, config, scan_values=False)     # dtype, shape and T rules
+        return check_stimulus(stimulus, config, what=what)
+    check_stimulus(stimulus, config, scan_values=False, what=what)     # dtype, shape and T rules
     step = max(1, (1 << 24) // max(1, stimulus[0].size))
     for start in range(0, stimulus.shape[0], step):
-        check_stimulus(stimulus[start:start + step], config, whole_readouts=False)
+        check_stimulus(stimulus[start:start + step], config, whole_readouts=False, what=what)
     return stimulus
 
 
