@@ -50,8 +50,8 @@ WORKING_BYTES = 256 << 20
 #: Files the demo writes into its folder (checked before any work).
 OUTPUT_FILES = ("report.md", "verdict.txt", "I.npy", "E_crop.npy", "S_rtl.npz", "W.vcd", "W.gtkw",
                 "frame.png", "rtl_crop.png", "strips/")
-#: Files every finished demo's folder holds (it is written whole): a folder without them is not one.
-DEMO_MARKERS = ("report.md", "verdict.txt")
+#: The demo's scene (:func:`tespike.recon.scenes.make_scene`), and the name of its sequence and strip.
+DEMO_SCENE = "default"
 #: Names a demo's folder holds besides OUTPUT_FILES and the evaluation's: per-sensor streams, images.
 PER_SENSOR_FILES = ("S_*.npz", "R_*.npy")
 
@@ -167,10 +167,10 @@ def check_options(out, *, frames, height, width, seed, crop, rtl_readouts, backe
 
 
 def check_demo_folder(out) -> None:
-    """``--out``: new, empty, or a previous demo's folder (holding :data:`DEMO_MARKERS`), which the run
-    replaces whole when it is done (:func:`tespike.golden.atomic.atomic_folder`: killed or failing, the
-    previous demo stays untouched); never a folder holding anything else, nor another command's
-    results (an evaluation's, whose names a demo shares), which replacing it would delete."""
+    """``--out``: new, empty, or a previous demo's folder, which the run replaces whole when it is
+    done (:func:`tespike.golden.atomic.atomic_folder`: killed or failing, the previous demo stays
+    untouched); never a folder holding anything else, which replacing it would delete: a file no demo
+    writes, at the top or among the strips (an evaluation's strips are named after its sequences)."""
     import fnmatch
     import os
 
@@ -186,10 +186,13 @@ def check_demo_folder(out) -> None:
     if foreign:
         raise InputError(f"--out {str(out)!r} holds {foreign[0]!r}, which no demo writes: choose a new or "
                          "empty folder (a demo replaces its folder whole)")
-    if not any(os.path.isfile(os.path.join(out, marker)) for marker in DEMO_MARKERS):
-        raise InputError(f"--out {str(out)!r} holds results that are no demo's (no {' or '.join(DEMO_MARKERS)}: "
-                         "an evaluation's?): choose a new or empty folder (a demo replaces only a previous "
-                         "demo's folder)")
+    strips = os.path.join(out, "strips")
+    if os.path.isdir(strips):                    # an evaluation's strips are named after its sequences
+        foreign = sorted(set(os.listdir(strips)) - {f"{DEMO_SCENE}.png"})
+        if foreign:
+            raise InputError(f"--out {str(out)!r} holds 'strips/{foreign[0]}', which no demo writes (an "
+                             "evaluation's results?): choose a new or empty folder (a demo replaces its "
+                             "folder whole)")
 
 
 def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, crop, rtl_readouts,
@@ -261,7 +264,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
 
         # 1. scene
         started = progress.begin(f"scene: pan over the shipped CC0 panorama, {frames} x {height} x {width}")
-        light = make_scene("default", frames, height, width, seed=seed)
+        light = make_scene(DEMO_SCENE, frames, height, width, seed=seed)
         _save_npy(out / "I.npy", light)
         progress.end("scene", started, [f"tespike scene --name default --frames {frames} --height {height} "
                                         f"--width {width} --seed {seed} --out I.npy"])
@@ -339,7 +342,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         from tespike.recon.metrics import psnr_mu, ssim_mu
         methods = available_methods(configs.values(), ready)     # learned ones only where there are weights
         by_config = {configs[name]: streams[name] for name in configs}
-        evaluation = evaluate([("default", light)], lambda config, scene, rng: by_config[config],
+        evaluation = evaluate([(DEMO_SCENE, light)], lambda config, scene, rng: by_config[config],
                               methods=methods, sensors=tuple(configs), configs=configs, window=window, seed=seed,
                               progress=bars, keep=True, repeats=repeats, weights=chosen)
         paths = write_outputs(evaluation, out)
@@ -355,7 +358,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                 lambda: reconstruct(rtl_words, te, method, window=window, weights=chosen.get((method, RTL_SENSOR))),
                 repeats)
             save_images(out / f"R_{method}_rtl.npy", images)
-            full = evaluation.images["default", RTL_SENSOR, method][:rtl_readouts, y:y + crop, x:x + crop]
+            full = evaluation.images[DEMO_SCENE, RTL_SENSOR, method][:rtl_readouts, y:y + crop, x:x + crop]
             rtl_images[method], golden_images[method] = images[middle], full[middle]
             rtl_rows.append({
                 "method": method,

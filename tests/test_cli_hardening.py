@@ -671,16 +671,16 @@ def run_in_process(capsys, *args):
 
 def test_demo_replaces_only_a_previous_demos_folder(tmp_path):
     """An evaluation's results folder holds names a demo also writes (table.md, strips/): the demo
-    replaced it whole, deleting its strips; only a folder holding a finished demo's report may go."""
-    from tespike.cosim.demo import check_demo_folder
+    replaced it whole, deleting its strips; a strip no demo writes is now refused, a demo's kept."""
+    from tespike.cosim.demo import DEMO_SCENE, check_demo_folder
     evaluation = tmp_path / "eval"
     (evaluation / "strips").mkdir(parents=True)
     for name in ("table.md", "table.csv", "results.csv", "strips/video.png"):
         (evaluation / name).write_text("x")
-    with pytest.raises(InputError, match="results that are no demo's .*new or empty folder"):
+    with pytest.raises(InputError, match="holds 'strips/video.png', which no demo writes.*new or empty folder"):
         check_demo_folder(evaluation)
-    (evaluation / "report.md").write_text("# demo")
-    check_demo_folder(evaluation)                                       # a previous demo's: replaced
+    (evaluation / "strips" / "video.png").rename(evaluation / "strips" / f"{DEMO_SCENE}.png")
+    check_demo_folder(evaluation)                                       # a previous demo's names: replaced
     check_demo_folder(tmp_path / "new")                                 # new
     (tmp_path / "empty").mkdir()
     check_demo_folder(tmp_path / "empty")                               # empty
