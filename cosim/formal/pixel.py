@@ -180,7 +180,7 @@ def bounds_harness(config: SensorConfig, pixel_factory):
     """No counter wraps silently, every overflow is recorded, every word is legal (SPEC
     section 4), under the readout timing of SPEC section 1 (``ccc = j + 1``, ``last`` on
     the interval's last clock), modelled here by a tick divider and an S_h counter."""
-    from amaranth.hdl import Assert, Assume, Const, Mux, Signal
+    from amaranth.hdl import Assert, Assume, Mux, Signal
 
     h = _Harness(config, pixel_factory, word_register=False)
     m, p = h.m, h.pixel

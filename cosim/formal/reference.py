@@ -98,7 +98,7 @@ def _delay(name: str, width: int, source: str, stages: int, what: str) -> tuple[
         return "", source
     regs = "".join(f"  reg [{width - 1}:0] {name}{s} = 0;\n" for s in range(stages))
     shift = "".join(f"      {name}{s} <= {source if s == 0 else f'{name}{s - 1}'};\n" for s in range(stages))
-    return (regs + f"  always @(posedge clk)\n    if (rst) begin\n"
+    return (regs + "  always @(posedge clk)\n    if (rst) begin\n"
             + "".join(f"      {name}{s} <= 0;\n" for s in range(stages))
             + f"    end else begin  // {what}\n{shift}    end\n"), f"{name}{stages - 1}"
 
@@ -115,7 +115,7 @@ def reference_verilog(config: SensorConfig, height: int, width: int, lanes: int 
     words = "{" + ", ".join(f"p{p}_word" for p in reversed(range(P))) + "}"
     fv_decl, fv = _delay("fv_d", 1, "done", parallel_delay, "the parallel top's latency")
     fr_decl, fr = _delay("frame_d", P * wd, "words", parallel_delay, "the parallel top's latency")
-    ports = [f"input wire clk", "input wire rst", f"input wire [{P * E - 1}:0] charge",
+    ports = ["input wire clk", "input wire rst", f"input wire [{P * E - 1}:0] charge",
              "output reg done = 0", f"output reg [{P * wd - 1}:0] words = 0",
              "output wire frame_valid", f"output wire [{P * wd - 1}:0] frame"]
     stream = ""
