@@ -32,7 +32,7 @@ def test_golden_command_writes_spec_stream(tmp_path, rng):
 def test_golden_refuses_bad_stimulus_without_output(tmp_path, stimulus, words):
     np.save(tmp_path / "e.npy", stimulus)
     result = run_tespike("golden", "--config", "te", "--stimulus", tmp_path / "e.npy", "--out", tmp_path / "s.npz")
-    assert_refused(result, *words)
+    assert_refused(result, *words, f"stimulus file {str(tmp_path / 'e.npy')!r}")      # the file named
     assert not list(tmp_path.glob("s.npz*")) and not list(tmp_path.glob(".s.npz*"))
 
 
@@ -55,7 +55,7 @@ def test_golden_refuses_bad_config(tmp_path):
 def test_golden_refuses_more_bad_stimuli(tmp_path, stimulus, words):
     np.save(tmp_path / "e.npy", stimulus)
     result = run_tespike("golden", "--config", "te", "--stimulus", tmp_path / "e.npy", "--out", tmp_path / "s.npz")
-    assert_refused(result, *words)
+    assert_refused(result, *words, f"stimulus file {str(tmp_path / 'e.npy')!r}")
     assert not list(tmp_path.glob("*s.npz*"))
 
 
