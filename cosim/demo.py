@@ -266,7 +266,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         started = progress.begin(f"scene: pan over the shipped CC0 panorama, {frames} x {height} x {width}")
         light = make_scene(DEMO_SCENE, frames, height, width, seed=seed)
         _save_npy(out / "I.npy", light)
-        progress.end("scene", started, [f"tespike scene --name default --frames {frames} --height {height} "
+        progress.end("scene", started, [f"tespike scene --name {DEMO_SCENE} --frames {frames} --height {height} "
                                         f"--width {width} --seed {seed} --out I.npy"])
 
         # 2. golden full frame; TE through the per-clock electrons the RTL crop will get
@@ -408,7 +408,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     print(f"RTL: {verdict}")
     print(f"wrote {given}/: report.md, verdict.txt, I.npy, S_*.npz, R_*.npy, E_crop.npy, "
           + ("W.vcd, W.gtkw, " if backend == "amaranth" else "")
-          + f"frame.png, rtl_crop.png, {paths['plot'].name}, strips/default.png, table.md "
+          + f"frame.png, rtl_crop.png, {paths['plot'].name}, strips/{DEMO_SCENE}.png, table.md "
             f"({time.perf_counter() - progress.start:.0f} s)")
     return 0 if difference is None else 1
 

@@ -46,7 +46,7 @@ import dataclasses
 import numpy as np
 
 from .config import SensorConfig
-from .reference import msb_index, overflow_word
+from .reference import msb_index, readout_word
 
 #: The blocks of a generated top, in report order.
 BLOCKS = ("pixel", "readout", "timing", "control", "output")
@@ -128,8 +128,9 @@ def _rule(config: SensorConfig, state: dict, charge, ccc: int, last: int):
         carry = total >> c.b1
         ovf = state["ovf"] | carry
         m = np.where(carry == 1, ccc, state["m"])
-        word = np.where(ovf == 1, overflow_word(c, m), total & (c.p_max - 1))
-        nxt = {"acc": acc, "sfc": 0 * total if last else total & (c.p_max - 1),
+        count = total & (c.p_max - 1)
+        word = readout_word(c, count, ovf, m)
+        nxt = {"acc": acc, "sfc": 0 * total if last else count,
                "ovf": 0 * ovf if last else ovf, "m": m}
     else:
         count = np.minimum(state["count"] + spike, c.ml_max)

@@ -50,8 +50,8 @@ def overflow_word(config: SensorConfig, m):
 def readout_word(config: SensorConfig, sfc: np.ndarray, ovf: np.ndarray, m: np.ndarray) -> np.ndarray:
     """SPEC section 4: TE :func:`overflow_word` on overflow else ``sfc``; ML ``sfc`` (count)
     or ``bit_length(sfc)`` (msb)."""
-    if config.is_te:
-        return np.where(ovf, overflow_word(config, m), sfc).astype(np.int64)
+    if config.is_te:                                 # (np.where's array is new: no copy needed)
+        return np.where(ovf, overflow_word(config, m), sfc).astype(np.int64, copy=False)
     if config.is_msb:
         return msb_index(sfc)
     return sfc.astype(np.int64)

@@ -31,7 +31,7 @@ import numpy as np
 
 from .config import SensorConfig
 from .io import check_stimulus
-from .reference import PixelState, msb_index, overflow_word
+from .reference import PixelState, msb_index, readout_word
 
 #: Pixel clocks x pixels processed at once by :func:`simulate` (bounds memory).
 DEFAULT_CHUNK_ELEMENTS = 1 << 22
@@ -287,10 +287,7 @@ class PixelArray:
                     sfc -= np.where(sfc > 0, np.left_shift(1, np.maximum(words[k - 1] - 1, 0)), 0)
                     before = after
                     continue
-                if config.is_te:
-                    words[k - 1] = np.where(ovf, overflow_word(config, m), sfc)
-                else:
-                    words[k - 1] = sfc
+                words[k - 1] = readout_word(config, sfc, ovf, m)
                 sfc[:] = 0
                 ovf[:] = False
                 m[:] = 0

@@ -29,7 +29,7 @@ import dataclasses
 import numpy as np
 
 from .config import SensorConfig
-from .reference import msb_index, overflow_word
+from .reference import msb_index, readout_word
 
 
 @dataclasses.dataclass
@@ -93,7 +93,7 @@ def count_toggles(config: SensorConfig, electrons: np.ndarray) -> Toggles:
             m_next = np.where(carry == 1, (t % L) // F + 1, m)
             sfc_next = total & (p_max - 1)
             if last:
-                word = np.where(ovf_next == 1, overflow_word(config, m_next), sfc_next)
+                word = readout_word(config, sfc_next, ovf_next, m_next)
                 sfc_next, ovf_next = zeros(), zeros()
             counts["sfc"] += _flips(sfc, sfc_next)
             counts["ovf"] += _flips(ovf, ovf_next)
