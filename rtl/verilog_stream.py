@@ -65,6 +65,18 @@ from .verilog import genvar_names, generate_loop, checked_config, convert_module
 ONE_BIT = "1'b1"
 
 
+def _zero_fill(pad: str) -> str:
+    """The end group's assignment to the last beat: its cells, then ``pad`` (the zeros of the lanes
+    past the last pixel, SPEC section 6) where it has fewer cells than lanes. That replication
+    grows with the lanes (up to MAX_LANES x Wd bits), past the 8 Kibit Verilator takes for a
+    mistake: waived for this one line."""
+    if not pad:
+        return "  assign beat_bus[B - 1] = end_held;\n"
+    return ("  /* verilator lint_off WIDTHCONCAT */\n"
+            f"  assign beat_bus[B - 1] = {pad};\n"
+            "  /* verilator lint_on WIDTHCONCAT */\n")
+
+
 def _zext(expr: str, width: int, to: int) -> str:
     """``expr`` of ``width`` bits zero-extended to ``to`` bits (no zero-width replication)."""
     return expr if to == width else f"{{{{{to - width}{{1'b0}}}}, {expr}}}"
@@ -416,8 +428,7 @@ def stream_top_verilog(config: SensorConfig, height: int, width: int, lanes: int
 {f"  genvar {', '.join(genvar_names('j', beats - 1))};{chr(10)}  generate{chr(10)}{full}  endgenerate{chr(10)}" if full else ""}\
   {names['group_end']} group_end ({pins}
     .charge(charge[(B - 1)*N*E +: S*E]), .held(end_held));
-  assign beat_bus[B - 1] = {pad or "end_held"};
-  assign out_words = beat_bus[0];
+{_zero_fill(pad)}  assign out_words = beat_bus[0];
 endmodule
 """)
     parts = [top]

@@ -30,17 +30,14 @@ def add_arguments(parser):
 def run(args) -> int:
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
-    from tespike.rtl.array import check_array_size
 
     from tespike.cosim.cocotb_bench import Settings
     from tespike.cosim.cocotb_run import run_cocotb
 
+    from .common import check_array_arguments
+
     config = load_config(args.config)
-    check_array_size(args.height, args.width)
-    from .verilog_cmd import MAX_PIXELS           # the array cocotb tests is tespike verilog's
-    if args.height * args.width > MAX_PIXELS:
-        raise InputError(f"--height {args.height} x --width {args.width}: the array is tespike verilog's, "
-                         f"at most {MAX_PIXELS} pixels")
+    check_array_arguments(config, args.height, args.width, args.lanes)   # the tops tespike verilog writes
     if args.stimulus is None:           # the default stimulus, int64 electrons per pixel clock
         from tespike.cosim.room import require_room
         L = config.clocks_per_readout
@@ -51,12 +48,6 @@ def run(args) -> int:
                      memory=8 * clocks * args.height * args.width)
     if args.readouts < 1:
         raise InputError(f"--readouts {args.readouts}: must be >= 1")
-    if args.lanes is not None:
-        from tespike.golden.beats import check_lanes
-        try:
-            check_lanes(config, args.height, args.width, args.lanes)
-        except ValueError as exc:
-            raise InputError(f"--{exc}") from None
     settings = Settings(config, args.height, args.width, args.readouts, args.seed, args.stimulus, args.lanes,
                         args.resets)
     failed = 0

@@ -24,6 +24,40 @@ def add_array_arguments(parser, *, required: bool = True, what: str = "", lanes_
                              f"{lanes_use}; without it the parallel top")
 
 
+#: Largest parallel top a command writes, synthesises or tests: 65536 pixels. Its charge and frame
+#: ports are H * W * E and H * W * Wd bits wide (up to 2^21 bits at E = 32); larger arrays take
+#: minutes to convert and give ports beyond what the simulators here read well.
+MAX_PIXELS = 1 << 16
+
+#: Largest streaming top (``--lanes``): 262144 pixels (e.g. 512 x 512), beyond the paper's
+#: 400 x 250 sensor. Its Verilog has no port or literal that grows with the words (only
+#: ``charge``, H * W * E bits, as SPEC section 6 fixes), and Verilator builds it in time that
+#: grows with H + W (docs/outside-simulators.md, "Sensor size").
+MAX_STREAM_PIXELS = 1 << 18
+
+
+def check_array_arguments(config, height, width, lanes) -> tuple[int, int]:
+    """Refuse ``--height``, ``--width`` and ``--lanes`` of a generated top in one line naming the flag:
+    sizes not integers >= 1, more pixels than the top's limit (MAX_PIXELS, MAX_STREAM_PIXELS with
+    ``--lanes``), lanes whose beats do not fit a readout interval (SPEC section 6). -> (height, width)."""
+    from tespike.golden.beats import check_lanes
+    from tespike.golden.errors import InputError
+    for flag, value in (("--height", height), ("--width", width)):
+        if type(value) is not int or value < 1:
+            raise InputError(f"{flag} {value}: must be an integer >= 1")
+    pixels = height * width
+    limit, example = (MAX_PIXELS, "256 x 256") if lanes is None else (MAX_STREAM_PIXELS, "512 x 512")
+    if pixels > limit:
+        raise InputError(f"--height {height} x --width {width} = {pixels} pixels: at most {limit} "
+                         f"(e.g. {example}) are supported" + ("" if lanes is None else " with --lanes"))
+    if lanes is not None:
+        try:
+            check_lanes(config, height, width, lanes)
+        except ValueError as exc:                      # ConfigError "lanes = N: ...": name the flag
+            raise InputError(f"--lanes {lanes}: {str(exc).split(': ', 1)[1]}") from None
+    return height, width
+
+
 def add_light_arguments(parser, *, out_help: str, seed_help: str, no_noise_help: str) -> None:
     """The light front end of ``simulate`` and ``stimulus``: config, scene, out, seed, dark current, noise."""
     add_config_argument(parser)

@@ -42,7 +42,8 @@ def _design(args):
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
     from tespike.golden.paths import check_input_file
-    from tespike.rtl.array import check_array_size
+
+    from .common import check_array_arguments
 
     generated = [flag for flag, value in (("--config", args.config), ("--height", args.height),
                                           ("--width", args.width), ("--lanes", args.lanes)) if value is not None]
@@ -63,26 +64,13 @@ def _design(args):
     if missing:
         raise InputError(f"missing {' '.join(missing)}: give --config, --height and --width, or --verilog")
     config = load_config(args.config)
-    try:
-        height, width = check_array_size(args.height, args.width)
-    except ValueError as exc:
-        raise InputError(f"--{exc}") from None
-    from .verilog_cmd import MAX_PIXELS, MAX_STREAM_PIXELS
+    height, width = check_array_arguments(config, args.height, args.width, args.lanes)
     pixels = height * width
-    limit = MAX_PIXELS if args.lanes is None else MAX_STREAM_PIXELS
-    if pixels > limit:
-        raise InputError(f"--height {height} x --width {width} = {pixels} pixels: at most {limit} are supported"
-                         + ("" if args.lanes is None else " with --lanes"))
     if args.lanes is None:
         from tespike.rtl.names import module_names
         from tespike.rtl.verilog import array_verilog
         return (array_verilog(config, height, width), module_names(config)["top"], pixels,
                 f"{module_names(config)['top']}, {height} x {width} pixels")
-    from tespike.golden.beats import check_lanes
-    try:
-        check_lanes(config, height, width, args.lanes)
-    except ValueError as exc:
-        raise InputError(f"--{exc}") from None
     from tespike.rtl.names import stream_module_names
     from tespike.rtl.verilog_stream import stream_array_verilog
     top = stream_module_names(config)["top"]
