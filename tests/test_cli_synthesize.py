@@ -130,3 +130,15 @@ def test_synthesize_refuses_a_bad_stimulus_in_one_line(tmp_path, args, words):
     _stimulus_file(tmp_path, (2, 3), clocks=100, name="short.npy")      # not a whole readout (L = 240)
     args = tuple(tmp_path / a if str(a).endswith(".npy") else a for a in args)
     assert_refused(run_tespike("synthesize", *args), *words)
+
+
+@needs_yosys
+def test_quiet_synthesize_prints_nothing_and_still_refuses(tmp_path):
+    """--quiet: "print nothing on stdout on success" holds here too (the report was printed whatever
+    --quiet said); a refusal is still its one line on stderr."""
+    quiet = run_tespike("synthesize", "--config", "te", "--height", 1, "--width", 2, "--quiet")
+    assert quiet.returncode == 0 and quiet.stdout == "" and quiet.stderr == "", quiet.stderr
+    loud = run_tespike("synthesize", "--config", "te", "--height", 1, "--width", 2)
+    assert loud.returncode == 0 and "flops" in loud.stdout, loud.stderr
+    refused = run_tespike("synthesize", "--config", "te", "--height", 0, "--width", 2, "--quiet")
+    assert_refused(refused, "--height 0", ">= 1")

@@ -28,6 +28,7 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
+    from tespike.cosim.console import report
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
 
@@ -54,6 +55,10 @@ def run(args) -> int:
     for simulator in args.simulator:
         result = run_cocotb(settings, simulator, verilog_path=args.verilog, work_dir=args.work_dir)
         verdict = "pass" if result.passed else "FAIL"
-        print(f"tespike cocotb: {simulator}: {verdict}: {result.message} (log: {result.log})")
+        line = f"tespike cocotb: {simulator}: {verdict}: {result.message} (log: {result.log})"
+        if result.passed:
+            report(args, line)
+        else:
+            print(line, flush=True)                 # a failure is printed, --quiet or not
         failed += not result.passed
     return 1 if failed else 0

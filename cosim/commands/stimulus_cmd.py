@@ -40,7 +40,7 @@ def add_arguments(parser):
 def run(args) -> int:
     import itertools
 
-    from tespike.cosim.console import bar, progress_wanted
+    from tespike.cosim.console import bar, progress_wanted, report
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
     from tespike.golden.fastsim import iter_scene_stimulus
@@ -91,7 +91,6 @@ def run(args) -> int:
             out.flush()
         finally:
             del out
-    if not args.quiet:
-        print(f"wrote {args.out}: {K * L} x {H} x {W} {dtype} electrons per pixel clock "
-              f"(K = {K} readouts of L = {L} clocks, seed {args.seed})")
+    report(args, f"wrote {args.out}: {K * L} x {H} x {W} {dtype} electrons per pixel clock "
+                 f"(K = {K} readouts of L = {L} clocks, seed {args.seed})")
     return 0

@@ -185,20 +185,22 @@ def energy_lines(config, stimulus, lanes, result: dict, text: str, icarus: bool)
 
 
 def run(args) -> int:
+    from tespike.cosim.console import report
     from tespike.cosim.synthesis import DESIGN_FILE, SynthesisError, synthesize_hierarchy
     from tespike.golden.errors import InputError
 
     text, top, pixels, what = _design(args)
     stimulus = _stimulus(args)
-    print(f"synthesize: {what} (yosys synth, hierarchy kept)", flush=True)
+    report(args, f"synthesize: {what} (yosys synth, hierarchy kept)")
     try:
         result = synthesize_hierarchy(text, top)
     except SynthesisError as exc:     # about --verilog: named as given, never as Yosys's copy
         if args.verilog is None:
             raise InputError(str(exc)) from None
         raise InputError(f"--verilog {args.verilog!r}: {str(exc).replace(DESIGN_FILE, args.verilog)}") from None
-    print("\n".join(report_lines(result, pixels)))
+    report(args, "\n".join(report_lines(result, pixels)))
     if stimulus is not None:
         from tespike.golden.config import load_config
-        print("\n".join(energy_lines(load_config(args.config), stimulus, args.lanes, result, text, args.icarus)))
+        report(args, "\n".join(energy_lines(load_config(args.config), stimulus, args.lanes, result, text,
+                                            args.icarus)))
     return 0

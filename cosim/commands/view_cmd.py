@@ -110,6 +110,7 @@ def run(args) -> int:
     import math
     from pathlib import Path
 
+    from tespike.cosim.console import report
     from tespike.golden.errors import InputError
     from tespike.golden.io import atomic_output
     from tespike.golden.paths import check_outputs
@@ -154,8 +155,8 @@ def run(args) -> int:
         for k, image in zip(frames, mapped):
             with atomic_output(out / f"frame_{k:04d}.png") as tmp:
                 plt.imsave(tmp, image, cmap="gray", vmin=0.0, vmax=1.0, format="png")
-        if not args.quiet:
-            print(f"wrote {len(frames)} frame(s) to {out}/frame_NNNN.png ({what}, peak {peak:.4g}, mu {args.mu:g})")
+        report(args, f"wrote {len(frames)} frame(s) to {out}/frame_NNNN.png ({what}, peak {peak:.4g}, "
+                     f"mu {args.mu:g})")
         return 0
     K, H, W = mapped.shape
     columns = min(args.columns or DEFAULT_COLUMNS, K)
@@ -172,6 +173,5 @@ def run(args) -> int:
                  fontsize=8)
     fig.tight_layout()
     save_figure(fig, out)
-    if not args.quiet:
-        print(f"wrote {out}: {len(frames)} frame(s) of {Path(args.input).name} ({what})")
+    report(args, f"wrote {out}: {len(frames)} frame(s) of {Path(args.input).name} ({what})")
     return 0

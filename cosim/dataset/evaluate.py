@@ -12,6 +12,7 @@ SIMULATION_OPTIONS = {"set": "heldout", "scene": [], "folder": [], "frames": Non
 def run_store(args) -> int:
 
     from tespike.cosim.commands.results import publish_results
+    from tespike.cosim.console import report
     from tespike.golden.errors import InputError
     from tespike.golden.paths import check_results_dir
     from tespike.recon.dataset.evaluate import evaluate_store
@@ -33,5 +34,5 @@ def run_store(args) -> int:
     DatasetStore.open(args.store)                       # a missing or foreign store refused before any line
     with Runner(args.workers, args.scheduler) as runner:
         evaluation = evaluate_store(args.store, runner, methods=methods, window=args.window, device=args.device,
-                                    starting=lambda: print(f"evaluate: {args.store} on {runner.where}", flush=True))
+                                    starting=lambda: report(args, f"evaluate: {args.store} on {runner.where}"))
     return publish_results(args, evaluation, plot=False)
