@@ -12,7 +12,7 @@ from typing import Iterator
 
 import numpy as np
 
-from .outside import RESET_CLOCKS, pack_rows, unpack_rows, words_per_row  # noqa: F401  (re-exported)
+from .outside import pack_rows, unpack_rows, words_per_row
 
 #: Clock period given to the simulator (1 MHz); only the waveform's time axis sees it.
 CLOCK_PERIOD_S = 1e-6

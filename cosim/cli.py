@@ -16,7 +16,6 @@ import sys
 from tespike.golden.errors import TespikeError, one_line
 from tespike.golden.resources import address_space_text
 
-from .console import progress_wanted, report  # noqa: F401  (what command modules print)
 
 #: sub-command -> module under cosim.commands
 COMMANDS = {

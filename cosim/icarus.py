@@ -5,7 +5,7 @@
 Verilog and one Verilog-2005 testbench (:func:`_testbench`, its output ports
 taken from :class:`tespike.cosim.tops.Top`) that drives only the SPEC section 6 ports:
 it reads the stimulus rows with ``$readmemh`` (and the reset vector with
-``$readmemb``), holds ``rst`` for :data:`~cosim.outside.RESET_CLOCKS` clocks,
+``$readmemb``), holds ``rst`` for :data:`~tespike.cosim.outside.RESET_CLOCKS` clocks,
 then per pixel clock puts the row on ``charge`` (and its ``rst``), waits for the
 logic to settle, samples the outputs (``frame_valid`` / ``frame``, or
 ``out_valid`` / ``out_first`` / ``out_words``) and gives the rising edge. Every capture is written with
@@ -213,12 +213,6 @@ def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Pa
     (scope :data:`DUT_SCOPE`; :mod:`tespike.cosim.activity` counts its toggles).
     """
     return _run(prepare(config, stimulus, None, resets), verilog, work_dir, vcd_path)
-
-
-def icarus_stream_testbench(top: str, charge_bits: int, lane_bits: int) -> str:
-    """Testbench of the streaming ports (``--lanes N``): each clock with ``out_valid`` high writes
-    ``<clock> <out_first> <out_words in hex>``; READOUTS is the number of beats expected."""
-    return _testbench(top, charge_bits, lane_bits, "beats", "streaming ports")
 
 
 def run_icarus_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,

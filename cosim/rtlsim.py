@@ -36,8 +36,8 @@ from tespike.golden.errors import ConfigError
 from tespike.golden.io import atomic_output
 from tespike.golden.beats import check_lanes
 
-from .benchbus import (ARRAY_SCOPE, CLOCK_PERIOD_FS, CLOCK_PERIOD_S, RESET_CLOCKS,  # noqa: F401
-                       frame_rows, iter_packed_charge, unpack_frames)
+from .benchbus import ARRAY_SCOPE, CLOCK_PERIOD_S, frame_rows, iter_packed_charge, unpack_frames
+from .outside import RESET_CLOCKS
 from .stream_ports import check_beats
 from .tops import Run, prepare
 from .vcd import dump_path, write_gtkw

@@ -5,7 +5,7 @@
 400 x 250 sensor) write the top's Verilog and one C++ harness
 (:func:`harness_cpp`, its output ports taken from :class:`tespike.cosim.tops.Top`) that
 knows nothing but the SPEC section 6 ports: it holds ``rst`` for
-:data:`~cosim.outside.RESET_CLOCKS` clocks, then applies one stimulus row (and
+:data:`~tespike.cosim.outside.RESET_CLOCKS` clocks, then applies one stimulus row (and
 its ``rst``, with a reset vector) per pixel clock, samples the outputs before
 every rising edge at which ``frame_valid`` / ``out_valid`` is high, and writes
 what it saw to a binary file. The build (``verilator --cc --exe --build -O3``)

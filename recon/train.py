@@ -49,8 +49,6 @@ from .learning.weights import cpu_state, read_torch_file, read_weights, save_wei
 from .pictures import MU
 
 LOSSES = ("l1", "mu-l1")
-#: Quantum efficiency of the paper's eq. 7 (its output is divided by it).
-ETA = 0.7
 
 
 @dataclasses.dataclass(frozen=True)

@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from tespike.cosim.rtlsim import CLOCK_PERIOD_FS, RESET_CLOCKS, RTLProtocolError, rtl_run
+from tespike.cosim.benchbus import CLOCK_PERIOD_FS
+from tespike.cosim.outside import RESET_CLOCKS
+from tespike.cosim.rtlsim import RTLProtocolError, rtl_run
 from tespike.cosim.vcd import rising_edges, waveform_stream, write_gtkw
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError

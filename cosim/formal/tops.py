@@ -37,7 +37,6 @@ between the design's registers and the reference's themselves (signal correspond
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 
 from tespike.golden.config import SensorConfig
@@ -218,15 +217,6 @@ def timing_harness(config: SensorConfig, design: str | None = None, depth: int |
         a.add("frame_valid == shown", "frame_valid one clock after last, never in the clock after a reset")
     text, messages = _assemble([design], head, a)
     return Harness(text, messages, "induction", depth or L + 2)
-
-
-def failed_message(log: str, harness: Harness) -> str:
-    """The message of the first assertion ``yosys-smtbmc`` names as failed (by its line)."""
-    for line in log.splitlines():
-        found = re.search(r"Assert failed in \S+: \S+?:(\d+)\.", line)
-        if found:
-            return harness.messages.get(int(found.group(1)), f"assertion at line {found.group(1)}")
-    return "no failed assertion named in the log"
 
 
 # -- what ``tespike prove`` runs on the tops ---------------------------------------------------

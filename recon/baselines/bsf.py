@@ -15,12 +15,13 @@ The paper's pipeline, in its order:
    with growing dilation;
 3. pyramid alignment of every sub-span's feature to the key's with
    deformable convolution whose offsets come from a local cross-attention
-   between key and reference at each level (:class:`.align.LocalCrossAttention`);
+   between key and reference at each level (:class:`tespike.recon.learning.align.LocalCrossAttention`);
 4. fusion and reconstruction.
 
-Adapted here (docs/baselines.md): inputs and output in the mu-law domain
-with a correction to the key window's mean light (common.py); ``unshuffle``
-folds the frame for a CPU size.
+Adapted here (docs/baselines.md): input in the mu-law domain; the output is
+the shared head of every learned method (:class:`tespike.recon.learning.head.BlendHead`,
+after common.py's tail): a per-pixel blend of training-free estimates plus a
+correction; ``unshuffle`` folds the frame for a CPU size.
 """
 
 from __future__ import annotations

@@ -27,8 +27,9 @@ Spk2ImgNet/EDVR's pyramid alignment), and are listed in docs/baselines.md.
    columns, alternating), so the receptive field stays bounded;
 4. pyramid alignment of every moment to the key with the project's DCN,
    each level followed by an adaptive per-pixel filter;
-5. fusion and reconstruction (residual blocks, one output convolution), as
-   a correction to the key window's mean light in the mu-law domain.
+5. fusion and reconstruction (residual blocks), then the shared head of every
+   learned method (:class:`tespike.recon.learning.head.BlendHead`, after common.py's
+   tail): a per-pixel blend of training-free estimates plus a correction.
 """
 
 from __future__ import annotations

@@ -17,8 +17,9 @@ The paper's pipeline, in its order:
    output convolution).
 
 Adapted here (see docs/baselines.md): the input is decoded light, compressed
-with the mu-law; the output is a correction, in that compressed domain, to
-the compressed mean light of the key window, expanded back (common.py);
+with the mu-law; the output is the shared head of every learned method
+(:class:`tespike.recon.learning.head.BlendHead`, after common.py's tail): a
+per-pixel blend of training-free estimates plus a correction;
 ``unshuffle`` folds the frame for a CPU size (pixel-unshuffle, every pixel
 kept), a u x u convolution of stride u embedding each temporal length first.
 """
