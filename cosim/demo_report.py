@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+from tespike.golden.config import DESIGN_ELECTRONS
+
 from .synthesis import ABC_GATE_SETS, span
 
 def verdict_text(difference, backend: str, readouts: int, crop: int, corner) -> str:
@@ -41,7 +43,7 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
     lines = ["# tespike demo report", "",
              f"Scene: the shipped CC0 panorama (Greg Zaal, HDRI Haven; `recon/data/README.md`), panned: "
              f"{frames} readout intervals of {height} x {width} pixels, brightest pixel = design light "
-             f"(I = 1: 42000 electrons per readout interval), seed {seed}. Photon shot noise: Poisson "
+             f"(I = 1: {DESIGN_ELECTRONS} electrons per readout interval), seed {seed}. Photon shot noise: Poisson "
              f"electrons per pixel clock. Machine: {platform.machine()}, {torch.get_num_threads()} torch "
              f"thread(s), Python {platform.python_version()}. Total {total:.0f} s.", "",
              "## Configuration", "",

@@ -71,7 +71,7 @@ import numpy as np
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
-from tespike.golden.io import check_scene
+from tespike.golden.io import check_scene, word_dtype
 from tespike.golden.resources import require_memory
 
 from .calibration import CALIBRATION_READOUTS
@@ -323,8 +323,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
         if peak <= 0:
             raise InputError(f"sequence {name!r} is all zero: its peak cannot normalise the metrics")
         K, H, W = light.shape
-        word_bytes = max(np.dtype(np.uint16 if configs[m].word_bits > 8 else np.uint8).itemsize
-                         for m in sensors)
+        word_bytes = max(word_dtype(configs[m]).itemsize for m in sensors)
         kept = len(sensors) * (word_bytes + 4 * len(methods)) if keep else 0
         require_memory(K * H * W * (word_bytes + 4 + kept) + WORKING_BYTES,
                        f"evaluating sequence {name!r} ({K} x {H} x {W})")

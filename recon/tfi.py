@@ -41,6 +41,8 @@ from __future__ import annotations
 
 import torch
 
+from .settings import TFI_SEARCH
+
 
 def _index_dtype(K: int) -> torch.dtype:
     """Narrowest signed integer type holding -K..K (memory traffic dominates the scans)."""
@@ -76,8 +78,8 @@ def tfi(light: torch.Tensor, nonzero: torch.Tensor, spike_light: float, radius: 
     not 0; ``spike_light``: light of one spike in one readout (threshold /
     42000); ``radius``: window radius (used only when ``search == "window"``).
     """
-    if search not in ("stream", "window"):
-        raise ValueError(f"search = {search!r}: must be 'stream' or 'window'")
+    if search not in TFI_SEARCH:
+        raise ValueError(f"search = {search!r}: must be one of {', '.join(TFI_SEARCH)}")
     K = light.shape[0]
     if not light.dtype.is_floating_point:
         light = light.to(torch.float64)

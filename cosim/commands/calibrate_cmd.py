@@ -7,6 +7,8 @@ both with the sensor's ``--noise`` and ``--sensor-seed``; ``--flat-light`` state
 that level. The file format is :mod:`tespike.recon.calibration`'s.
 """
 
+from tespike.golden.config import DESIGN_ELECTRONS
+
 HELP = "estimate a sensor's per-pixel dark rate and gain C.npz from a dark and a flat stream"
 
 
@@ -14,7 +16,7 @@ def add_arguments(parser):
     parser.add_argument("--dark", required=True, help="D.npz: a stream recorded in the dark")
     parser.add_argument("--flat", required=True, help="F.npz: a stream of the same sensor under uniform light")
     parser.add_argument("--flat-light", required=True, type=float,
-                        help="the flat's light, scene units (1 = design light, 42000 e- per readout)")
+                        help=f"the flat's light, scene units (1 = design light, {DESIGN_ELECTRONS} e- per readout)")
     parser.add_argument("--out", required=True, help="C.npz to write: dark and gain maps, config, readouts")
 
 

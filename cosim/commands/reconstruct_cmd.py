@@ -1,5 +1,6 @@
 """``tespike reconstruct``: a stream S.npz to reconstructed light R.npy (TFP, TFI, the learned methods)."""
 
+from tespike.golden.config import DESIGN_ELECTRONS
 from tespike.recon.learned import LEARNED, LEARNED_SUMMARIES
 from tespike.recon.settings import DEFAULT_WINDOW, TFI_SEARCH, TRAINING_FREE
 
@@ -18,7 +19,7 @@ def add_arguments(parser):
                                        {**TRAINING_FREE, **LEARNED_SUMMARIES}.items())
                         + ". A learned method uses the weights shipped for the stream's preset where there "
                           "are some (recon/weights/), or --weights")
-    parser.add_argument("--out", required=True, help="R.npy to write: float32 (K, H, W) light, I = 1 is 42000 e-")
+    parser.add_argument("--out", required=True, help=f"R.npy to write: float32 (K, H, W) light, I = 1 is {DESIGN_ELECTRONS} e-")
     parser.add_argument("--window", type=int, default=None,
                         help=f"tfp, and tfi with --search window: readouts per window, odd (default {DEFAULT_WINDOW}, paper 6.4); learned methods see the "
                              "span of readouts their sizes fix")
