@@ -154,6 +154,26 @@ def calibrate_sensor(simulate: Simulate, config: SensorConfig, noise_sensor, sha
     return estimate(dark, flat, config, CALIBRATION_FLAT)
 
 
+def check_methods(methods: Sequence[str]) -> tuple[str, ...]:
+    """Refuse an empty method list or a name not in :data:`tespike.recon.methods.RECON_METHODS`
+    (both evaluations: :func:`evaluate` and :func:`tespike.recon.dataset.evaluate.evaluate_store`)."""
+    from .methods import RECON_METHODS
+    methods = tuple(methods)
+    for method in methods:
+        if method not in RECON_METHODS:
+            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
+    if not methods:
+        raise InputError("no reconstruction method to evaluate")
+    return methods
+
+
+def check_peak(sequence: str, peak: float) -> float:
+    """Refuse a sequence whose peak light is not above 0: it normalises the metrics (Table 1)."""
+    if not peak > 0:
+        raise InputError(f"sequence {sequence!r} is all zero: its peak cannot normalise the metrics")
+    return peak
+
+
 def learned_span(methods: Sequence[str]) -> int | None:
     """The longest span of readouts the learned ones of ``methods`` see (None: none is learned)."""
     from .learned import LEARNED, method_span
@@ -263,12 +283,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
         missing = "note" if methods is None else "refuse"
     if missing not in ("note", "refuse"):
         raise InputError(f"missing = {missing!r}: must be 'note' or 'refuse'")
-    methods = tuple(RECON_METHODS) if methods is None else tuple(methods)
-    for method in methods:
-        if method not in RECON_METHODS:
-            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
-    if not methods:
-        raise InputError("no reconstruction method to evaluate")
+    methods = check_methods(RECON_METHODS if methods is None else methods)
     unknown = [key for key in metrics if key not in KEYS]
     if unknown:
         raise InputError(f"unknown metric {unknown[0]!r} (known: {', '.join(KEYS)})")
@@ -320,8 +335,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
            tqdm(total=total, desc="evaluate", unit="step", disable=not progress))
     for index, (name, light) in enumerate(sequences):
         light, peak = _checked_sequence(name, light)   # checked slice by slice, never copied whole
-        if peak <= 0:
-            raise InputError(f"sequence {name!r} is all zero: its peak cannot normalise the metrics")
+        check_peak(name, peak)
         K, H, W = light.shape
         word_bytes = max(word_dtype(configs[m]).itemsize for m in sensors)
         kept = len(sensors) * (word_bytes + 4 * len(methods)) if keep else 0

@@ -125,6 +125,11 @@ def test_evaluate_table_refuses(tmp_path, capsys, empty_weights_dir):   # no wei
     refused(capsys, "evaluate", "--table", "--frames", 0, "--out", out, "--frames 0")
     refused(capsys, "evaluate", "--table", "--threads", 0, "--out", out, "--threads 0")
     refused(capsys, "evaluate", "--table", "--store", tmp_path / "s.zarr", "--out", out, "--table does not apply")
+    # every option --store does not take, the simulation's included, refused away from its default (one list)
+    for flag, value in (("--seed", 3), ("--te-config", "ml"), ("--frames", 5), ("--set", "default"),
+                        ("--ml-count-config", "none"), ("--scene", "i.npy")):
+        refused(capsys, "evaluate", flag, value, "--store", tmp_path / "s.zarr", "--out", out,
+                f"{flag} does not apply with --store")
     refused(capsys, "evaluate", "--methods", "tfp,bsf", "--set", "default", "--frames", 4, "--height", 24, "--width", 24,
             "--out", out, "bsf-ml-msb.pt' is missing")
     assert not out.exists()

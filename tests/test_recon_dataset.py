@@ -245,3 +245,26 @@ def test_a_failure_after_the_build_says_the_store_is_kept_for_a_resume(tmp_path,
     assert code != 0 and len(err.strip().splitlines()) == 1, err
     assert f"(store {str(out)!r} keeps 1 complete sequence(s); the same command resumes it)" in err, err
     assert out.is_dir()
+
+
+def test_store_scores_the_frames_the_serial_evaluation_scores_with_a_learned_method(tmp_path):
+    """A sequence longer than a learned method's span: both evaluations score only the frames whose
+    span lies inside it (the store scored the window's frames, so its cells differed from the
+    serial evaluation's)."""
+    from tespike.recon.evaluate import evaluate, learned_span, scored_frames
+
+    frames = 66
+    build(tmp_path / "s.zarr", scene_sources(["moderate"], frames, 16, 16), seed=3, configs={"te": CONFIGS["te"]})
+    store = DatasetStore.open(tmp_path / "s.zarr")
+    words = store.words("moderate", "te").compute()
+    serial = evaluate([("moderate", store.light("moderate").compute())], lambda config, light, rng: words,
+                      methods=["tfp", "net"], sensors=("te",), configs={"te": CONFIGS["te"]}, progress=False,
+                      repeats=1)
+    with Runner() as run:
+        stored = evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp", "net"])
+    expected = scored_frames(frames, 9, learned_span(["net"]))
+    assert expected.stop - expected.start < frames - 8          # the span, not the window, decides
+    assert stored.span == serial.span == learned_span(["net"])
+    for a, b in zip(serial.results, stored.results):
+        assert a.method == b.method and a.frames_scored == b.frames_scored == expected.stop - expected.start
+        assert a.psnr_mu == pytest.approx(b.psnr_mu, abs=1e-3) and a.ssim_mu == pytest.approx(b.ssim_mu, abs=1e-4)

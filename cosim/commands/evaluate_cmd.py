@@ -37,6 +37,67 @@ HELP = ("simulate sequences with the paper's TE and ML (msb readout) sensors and
         "plot and image strips")
 
 
+#: What ``--store`` takes besides itself: the store's streams are scored as they are, so every
+#: other option (picking, simulating or timing sequences, your own weights) is refused away from
+#: its default (:func:`check_store_options`).
+STORE_OPTIONS = ("store", "workers", "scheduler", "methods", "window", "device", "out", "force")
+
+
+def check_store_options(args) -> None:
+    """Refuse, with ``--store``, any option of this command not in STORE_OPTIONS that is not at its
+    default: the defaults are read from this module's own parser, so they are typed once."""
+    import argparse
+
+    from tespike.golden.errors import InputError
+    parser = argparse.ArgumentParser(add_help=False)
+    add_arguments(parser)
+    for action in parser._actions:                      # (argparse lists no other way to walk them)
+        if action.dest in STORE_OPTIONS or getattr(args, action.dest) == action.default:
+            continue
+        flag = action.option_strings[0]
+        if action.dest == "weights":
+            raise InputError("--weights does not apply with --store (its tasks use the shipped weights); "
+                             "evaluate without --store to use your own")
+        raise InputError(f"{flag} does not apply with --store (the store holds the sequences and their "
+                         "streams, and scores them as they are)")
+
+
+def _named_methods(args) -> list[str]:
+    """``--methods`` as a list (refused when it names none)."""
+    from tespike.golden.errors import InputError
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    if not methods:
+        raise InputError(f"--methods {args.methods!r} names no method (give e.g. tfp,tfi)")
+    return methods
+
+
+def _run_store(args) -> int:
+    """``--store``: score a dataset store's streams on a Dask cluster
+    (:func:`tespike.recon.dataset.evaluate.evaluate_store`); every option it does not take refused first."""
+    from tespike.cosim.console import report
+    from tespike.cosim.dataset.cluster import Runner, check_cluster_options
+    from tespike.golden.errors import InputError
+    from tespike.golden.paths import check_results_dir
+    from tespike.recon.dataset.evaluate import evaluate_store
+    from tespike.recon.dataset.store import DatasetStore
+    from tespike.recon.report import OUTPUT_FILES
+
+    from .results import publish_results
+
+    if not args.store:
+        raise InputError("--workers and --scheduler need --store (the serial evaluation simulates "
+                         "in this process)")
+    check_store_options(args)
+    check_cluster_options(args.workers, args.scheduler)
+    check_results_dir(args.out, OUTPUT_FILES, args.force)
+    methods = None if args.methods is None else _named_methods(args)
+    DatasetStore.open(args.store)                       # a missing or foreign store refused before any line
+    with Runner(args.workers, args.scheduler) as runner:
+        evaluation = evaluate_store(args.store, runner, methods=methods, window=args.window, device=args.device,
+                                    starting=lambda: report(args, f"evaluate: {args.store} on {runner.where}"))
+    return publish_results(args, evaluation, plot=False)
+
+
 def add_arguments(parser):
     parser.add_argument("--out", required=True, help="folder for table.md, table.csv, results.csv, "
                                                      "quality_vs_time.png and strips/ (new or empty; "
@@ -129,17 +190,7 @@ def run(args) -> int:
 
     check_device(args.device)                           # before any sequence is simulated
     if args.store or args.workers is not None or args.scheduler:
-        for flag, value in (("--table", args.table), ("--noise", args.noise), ("--metrics", args.metrics),
-                            ("--sensor-noise", args.sensor_noise), ("--sensor-seed", args.sensor_seed),
-                            ("--calibrate", args.calibrate),
-                            ("--vdp-frames", args.vdp_frames), ("--threads", args.threads), ("--repeats", args.repeats)):
-            if value not in (None, False, []):          # []: no --sensor-noise given
-                raise InputError(f"{flag} does not apply with --store (a store's streams are scored as they are)")
-        if args.weights:
-            raise InputError("--weights does not apply with --store (its tasks use the shipped weights); "
-                             "evaluate without --store to use your own")
-        from tespike.cosim.dataset.evaluate import run_store
-        return run_store(args)
+        return _run_store(args)
     from tespike.golden.noise import Sensor, load_noise
     from tespike.recon.evaluate import CALIBRATED, NOISE_SENSORS, default_noise_sensors
     from tespike.recon.score import KEYS
@@ -156,9 +207,7 @@ def run(args) -> int:
         raise InputError(f"--vdp-frames {vdp_frames}: must be an integer >= 1")
     methods = list(TABLE_METHODS) if args.table else None       # None: DEFAULT_METHODS, noted if missing
     if args.methods is not None:
-        methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-        if not methods:
-            raise InputError(f"--methods {args.methods!r} names no method (give e.g. tfp,tfi)")
+        methods = _named_methods(args)
     metrics = list(KEYS) if args.table else []
     if args.metrics is not None:
         metrics = [m.strip() for m in args.metrics.split(",") if m.strip()]

@@ -1,2 +1,3 @@
-"""Dataset work on Dask: the runner (:mod:`.cluster`), building a store by simulating its sequences
-(:mod:`.build`), and the command-line side of store evaluation (:mod:`.evaluate`)."""
+"""Dataset work on Dask: the runner (:mod:`.cluster`) and building a store by simulating its
+sequences (:mod:`.build`); ``tespike evaluate --store`` (:mod:`tespike.cosim.commands.evaluate_cmd`)
+scores one with :func:`tespike.recon.dataset.evaluate.evaluate_store`."""

@@ -2,7 +2,8 @@
 
 The measures are those of :func:`tespike.recon.evaluate.evaluate` (paper Table 1:
 PSNR-mu and SSIM-mu per frame after dividing by the sequence's peak, frames
-whose window reaches past the sequence not scored, frame means averaged per
+whose window, or learned span, reaches past the sequence not scored
+(:func:`tespike.recon.evaluate.scored_frames`), frame means averaged per
 sequence, then over sequences), on the streams already in the store instead
 of freshly simulated ones, and the output files are those of ``tespike
 evaluate`` (:func:`tespike.recon.report.write_outputs` without its plot).
@@ -147,7 +148,8 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     """
     from dask import delayed
 
-    from tespike.recon.evaluate import Evaluation, Measurement, scored_frames
+    from tespike.recon.evaluate import (Evaluation, Measurement, check_methods, check_peak, learned_span,
+                                        scored_frames)
     from tespike.recon.methods import RECON_METHODS, available_methods, missing_weights
     from tespike.recon.settings import ReconSettings
 
@@ -160,11 +162,7 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     methods = available_methods(store.configs.values()) if methods is None else tuple(methods)
     if tiled and not named:
         methods = tuple(m for m in methods if RECON_METHODS[m].block is not None)
-    for method in methods:
-        if method not in RECON_METHODS:
-            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
-    if not methods:
-        raise InputError("no reconstruction method to evaluate")
+    methods = check_methods(methods)
     spatial = [m for m in methods if RECON_METHODS[m].block is None]
     if tiled and spatial:
         raise InputError(f"method {spatial[0]!r} is spatial: sequence {tiled[0]!r} has frames larger than the "
@@ -178,16 +176,16 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     if not sequences:
         raise InputError(f"dataset store {store.url!r} holds no complete sequence")
     h = _halo()
+    learned = learned_span(methods)                      # frames scored as the serial evaluation scores them
     tasks, keys, plan = [], [], {}
     for sequence in sequences:
         info = store.info(sequence)
-        K, H, W, peak = info["frames"], info["height"], info["width"], float(info["peak"])
-        if not peak > 0:
-            raise InputError(f"sequence {sequence!r} is all zero: its peak cannot normalise the metrics")
+        K, H, W = info["frames"], info["height"], info["width"]
+        peak = check_peak(sequence, float(info["peak"]))
         if min(H, W) < 2 * h + 1:
             raise InputError(f"sequence {sequence!r} is {H} x {W}: SSIM needs frames of at least "
                              f"{2 * h + 1} x {2 * h + 1} pixels")
-        frames = scored_frames(K, window)
+        frames = scored_frames(K, window, learned)
         span = (frames.start, frames.stop)
         middle = (frames.start + frames.stop - 1) // 2
         whole = H <= tile[0] and W <= tile[1]
@@ -214,7 +212,7 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     for key, result in zip(keys, outputs):
         by_cell.setdefault(key[:3], []).append((key[3], result))
 
-    evaluation = Evaluation([], methods, tuple(store.configs), window)
+    evaluation = Evaluation([], methods, tuple(store.configs), window, span=learned)
     for sequence in sequences:
         H, W, peak, middle, span = plan[sequence]
         with reading(store.url, f"{sequence}/light"):
