@@ -21,7 +21,8 @@ import re
 
 import numpy as np
 
-from tespike.golden.activity import Activity, pixel_register_names
+from tespike.golden.activity import Activity
+from tespike.golden.toggles import pixel_register_names
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 

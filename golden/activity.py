@@ -46,7 +46,7 @@ import dataclasses
 import numpy as np
 
 from .config import SensorConfig
-from .reference import msb_index, readout_word
+from .toggles import flips, pixel_register_bits, pixel_register_names, register_step
 
 #: The blocks of a generated top, in report order.
 BLOCKS = ("pixel", "readout", "timing", "control", "output")
@@ -84,14 +84,10 @@ class Activity:
         return out
 
 
-def _flips(old, new) -> np.ndarray:
-    return np.bitwise_count(np.asarray(old, np.int64) ^ np.asarray(new, np.int64)).astype(np.int64)
-
-
 def _sequence_toggles(states: np.ndarray, start: int) -> np.ndarray:
     """Toggles of a register whose value before edge u is ``states[u]`` (u = 0..U, axis 0),
     counting the edges u >= ``start``."""
-    return _flips(states[start:-1], states[start + 1:]).sum(axis=0)
+    return flips(states[start:-1], states[start + 1:]).sum(axis=0)
 
 
 def timing_states(config: SensorConfig, edges: int, *, sampled_input: bool = True) -> dict[str, np.ndarray]:
@@ -114,45 +110,6 @@ def timing_states(config: SensorConfig, edges: int, *, sampled_input: bool = Tru
     else:
         out["frame_valid"] = np.concatenate([np.zeros(1, np.int64), last[:-1]])
     return out
-
-
-def _rule(config: SensorConfig, state: dict, charge, ccc: int, last: int):
-    """One clock of every pixel (SPEC section 3; the rule of rtl/verilog_stream.py): the next
-    state and the word this clock would read out (section 4)."""
-    c = config
-    q = state["acc"] + charge
-    spike = (q >= c.threshold).astype(np.int64)
-    acc = np.minimum(q - c.threshold * spike, c.acc_max)
-    if c.is_te:
-        total = state["sfc"] + (spike & (1 - state["ovf"]))
-        carry = total >> c.b1
-        ovf = state["ovf"] | carry
-        m = np.where(carry == 1, ccc, state["m"])
-        count = total & (c.p_max - 1)
-        word = readout_word(c, count, ovf, m)
-        nxt = {"acc": acc, "sfc": 0 * total if last else count,
-               "ovf": 0 * ovf if last else ovf, "m": m}
-    else:
-        count = np.minimum(state["count"] + spike, c.ml_max)
-        if c.is_msb:
-            word = msb_index(count)
-            after = np.where(word > 0, count - (1 << np.maximum(word - 1, 0)), 0)
-        else:
-            word, after = count, 0 * count
-        nxt = {"acc": acc, "count": after if last else count}
-    return nxt, word
-
-
-def pixel_register_names(config: SensorConfig) -> tuple[str, ...]:
-    """The pixel's state registers (SPEC section 3) in the order of :func:`_rule`'s state."""
-    return ("acc", "sfc", "ovf", "m") if config.is_te else ("acc", "count")
-
-
-def pixel_register_bits(config: SensorConfig) -> dict[str, int]:
-    c = config
-    if c.is_te:
-        return {"acc": c.acc_bits, "sfc": c.b1, "ovf": 1, "m": c.b2}
-    return {"acc": c.acc_bits, "count": c.ml_bits}
 
 
 def top_activity(config: SensorConfig, electrons: np.ndarray, lanes: int | None = None, *,
@@ -200,10 +157,10 @@ def top_activity(config: SensorConfig, electrons: np.ndarray, lanes: int | None 
     n = lanes if streaming else 0
     for u in range(U):
         last, fv = int(timing["last"][u]), int(timing["frame_valid"][u])
-        nxt, word = _rule(c, state, charge[u], int(timing["cycle"][u]), last)
+        nxt, word = register_step(c, state, charge[u], int(timing["cycle"][u]), bool(last))
         if u >= start:
             for name in names:
-                counts[name] += _flips(state[name], nxt[name])
+                counts[name] += flips(state[name], nxt[name])
         state = nxt
         if not streaming:
             frame[u + 1] = word if last else frame[u]
@@ -215,7 +172,7 @@ def top_activity(config: SensorConfig, electrons: np.ndarray, lanes: int | None 
         else:
             new = held
         if u >= start and new is not held:
-            held_count += _flips(held, new)
+            held_count += flips(held, new)
         held = new
         if fv:
             sending, beat = 1, 0

@@ -42,6 +42,12 @@ def msb_index(sfc: np.ndarray) -> np.ndarray:
     return np.where(sfc > 0, np.frexp(sfc.astype(np.float64))[1], 0).astype(np.int64)
 
 
+def msb_remainder(count: np.ndarray, word: np.ndarray) -> np.ndarray:
+    """SPEC section 4, msb readout: the count left after the readout of ``word`` (its
+    :func:`msb_index`): that power of two leaves, the remainder counts on."""
+    return count - np.where(word > 0, np.left_shift(1, np.maximum(word - 1, 0)), 0)
+
+
 def overflow_word(config: SensorConfig, m):
     """SPEC section 4: the TE word of an overflow latched in tick ``m`` (1..alpha), ``(1 << d) | m``."""
     return (1 << config.d) | m
@@ -87,7 +93,7 @@ def step_reference(config: SensorConfig, stimulus: np.ndarray,
             word = readout_word(config, state.sfc, state.ovf, state.m)
             words.append(word)
             if config.is_msb:       # that power of two leaves; the remainder counts on
-                state.sfc -= np.where(word > 0, np.left_shift(1, np.maximum(word - 1, 0)), 0)
+                state.sfc = msb_remainder(state.sfc, word)
                 continue
             state.sfc[:] = 0
             state.ovf[:] = False

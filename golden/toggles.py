@@ -29,7 +29,7 @@ import dataclasses
 import numpy as np
 
 from .config import SensorConfig
-from .reference import msb_index, readout_word
+from .reference import msb_remainder, readout_word
 
 
 @dataclasses.dataclass
@@ -59,8 +59,50 @@ class Toggles:
         return self.flops / k, self.counters / k, self.word / k
 
 
-def _flips(old: np.ndarray, new: np.ndarray) -> np.ndarray:
-    return np.bitwise_count(old ^ new).astype(np.int64)
+def flips(old, new) -> np.ndarray:
+    """Bits that differ between register values ``old`` and ``new`` (int64 popcount of the xor)."""
+    return np.bitwise_count(np.asarray(old, np.int64) ^ np.asarray(new, np.int64)).astype(np.int64)
+
+
+def pixel_register_names(config: SensorConfig) -> tuple[str, ...]:
+    """The pixel's state registers (SPEC section 3) in the order of :func:`register_step`'s state."""
+    return ("acc", "sfc", "ovf", "m") if config.is_te else ("acc", "count")
+
+
+def pixel_register_bits(config: SensorConfig) -> dict[str, int]:
+    """Width of each of the pixel's state registers."""
+    c = config
+    if c.is_te:
+        return {"acc": c.acc_bits, "sfc": c.b1, "ovf": 1, "m": c.b2}
+    return {"acc": c.acc_bits, "count": c.ml_bits}
+
+
+def register_step(config: SensorConfig, state: dict, charge, ccc: int, last: bool):
+    """One clock of every pixel's registers (SPEC section 3 as the RTL holds it: the TE counter
+    is b1 bits, its carry the flag, so after an overflow it holds 0; ``m`` is not cleared at
+    readout). ``state``: {name: (n,) int64} of :func:`pixel_register_names`; ``ccc``: the
+    tick this clock is in (1..alpha); ``last``: the interval's last clock. -> (the next
+    state, the word read out at this clock (SPEC section 4) if ``last``, else None)."""
+    c = config
+    q = state["acc"] + charge
+    spike = (q >= c.threshold).astype(np.int64)
+    acc = np.minimum(q - c.threshold * spike, c.acc_max)
+    word = None
+    if c.is_te:
+        total = state["sfc"] + (spike & (1 - state["ovf"]))
+        carry = total >> c.b1
+        ovf = state["ovf"] | carry
+        m = np.where(carry == 1, ccc, state["m"])
+        count = total & (c.p_max - 1)
+        if last:
+            word = readout_word(c, count, ovf, m)
+            count, ovf = 0 * count, 0 * ovf
+        return {"acc": acc, "sfc": count, "ovf": ovf, "m": m}, word
+    count = np.minimum(state["count"] + spike, c.ml_max)
+    if last:
+        word = readout_word(c, count, None, None)
+        count = msb_remainder(count, word) if c.is_msb else 0 * count
+    return {"acc": acc, "count": count}, word
 
 
 def count_toggles(config: SensorConfig, electrons: np.ndarray) -> Toggles:
@@ -71,47 +113,18 @@ def count_toggles(config: SensorConfig, electrons: np.ndarray) -> Toggles:
     L, F = config.clocks_per_readout, config.clocks_per_tick
     if T % L:
         raise ValueError(f"{T} clocks is not a whole number of readout intervals (L = {L})")
-    theta, top = config.threshold, config.acc_max
-    zeros = lambda: np.zeros(n, np.int64)                                   # noqa: E731
-    acc, sfc, ovf, m, word_reg = zeros(), zeros(), zeros(), zeros(), zeros()
-    names = ("acc", "sfc", "ovf", "m") if config.is_te else ("acc", "count")
-    counts = {name: zeros() for name in names}
-    word_count = zeros()
+    names = pixel_register_names(config)
+    state = {name: np.zeros(n, np.int64) for name in names}
+    counts = {name: np.zeros(n, np.int64) for name in names}
+    word_reg, word_count = np.zeros(n, np.int64), np.zeros(n, np.int64)
     words = np.empty((T // L, n), np.int64)
-    p_max = config.p_max if config.is_te else 0
     for t in range(T):
-        q = acc + e[t]
-        s = (q >= theta).astype(np.int64)
-        new_acc = np.minimum(q - theta * s, top)
-        counts["acc"] += _flips(acc, new_acc)
-        acc = new_acc
-        last = t % L == L - 1
-        if config.is_te:
-            total = sfc + (s & (1 - ovf))
-            carry = (total == p_max).astype(np.int64)
-            ovf_next = ovf | carry
-            m_next = np.where(carry == 1, (t % L) // F + 1, m)
-            sfc_next = total & (p_max - 1)
-            if last:
-                word = readout_word(config, sfc_next, ovf_next, m_next)
-                sfc_next, ovf_next = zeros(), zeros()
-            counts["sfc"] += _flips(sfc, sfc_next)
-            counts["ovf"] += _flips(ovf, ovf_next)
-            counts["m"] += _flips(m, m_next)
-            sfc, ovf, m = sfc_next, ovf_next, m_next
-        else:
-            count_next = np.minimum(sfc + s, config.ml_max)
-            if last:
-                if config.is_msb:
-                    word = msb_index(count_next).astype(np.int64)
-                    count_next = np.where(word > 0, count_next - (1 << np.maximum(word - 1, 0)), 0)
-                else:
-                    word = count_next
-                    count_next = zeros()
-            counts["count"] += _flips(sfc, count_next)
-            sfc = count_next
-        if last:
-            word_count += _flips(word_reg, word)
+        nxt, word = register_step(config, state, e[t], (t % L) // F + 1, t % L == L - 1)
+        for name in names:
+            counts[name] += flips(state[name], nxt[name])
+        state = nxt
+        if word is not None:
+            word_count += flips(word_reg, word)
             word_reg = word
             words[t // L] = word
     return Toggles(counts, word_count, words, T // L)
