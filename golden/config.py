@@ -193,6 +193,14 @@ class SensorConfig:
         want the refusal before building anything)."""
         return SensorConfig.from_dict(self.to_dict())
 
+    @staticmethod
+    def checked(config, what: str = "configuration") -> "SensorConfig":
+        """``config`` re-validated (:meth:`check`), or a :class:`ConfigError` naming ``what`` when it is no
+        SensorConfig (a block or writer that builds from it: the RTL, the Verilog writers)."""
+        if not isinstance(config, SensorConfig):
+            raise ConfigError(f"{what}: configuration must be a SensorConfig, not {type(config).__name__}")
+        return config.check()
+
     # -- serialisation ------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         return {key: getattr(self, key) for key in KEYS}

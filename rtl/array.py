@@ -62,9 +62,7 @@ class PixelArray(wiring.Component):
     """H x W TE or ML pixels wired to one :class:`ReadoutTiming` (SPEC section 6 ports)."""
 
     def __init__(self, config: SensorConfig, height: int, width: int, *, flat: bool = False):
-        if not isinstance(config, SensorConfig):
-            raise ConfigError(f"PixelArray: configuration must be a SensorConfig, not {type(config).__name__}")
-        self.config = config.check()
+        self.config = SensorConfig.checked(config, "PixelArray")
         self.height, self.width = check_array_size(height, width)
         self.flat = bool(flat)
         n = height * width

@@ -53,9 +53,7 @@ from tespike.golden.errors import ConfigError
 
 def check_pixel_config(config: SensorConfig, mode: str, what: str) -> SensorConfig:
     """Re-validate ``config`` and refuse a mode the block cannot build."""
-    if not isinstance(config, SensorConfig):
-        raise ConfigError(f"{what}: configuration must be a SensorConfig, not {type(config).__name__}")
-    config = config.check()
+    config = SensorConfig.checked(config, what)
     if config.mode != mode:
         raise ConfigError(f"config key 'mode' = {config.mode!r}: {what} needs mode {mode!r}")
     return config

@@ -38,7 +38,6 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import ConfigError
 from tespike.golden.beats import beat_count, check_lanes
 
 from .array import PixelArray, check_array_size
@@ -53,10 +52,7 @@ class StreamingPixelArray(wiring.Component):
     """H x W pixels, one timing block and a double-buffered N-lane readout (SPEC section 6)."""
 
     def __init__(self, config: SensorConfig, height: int, width: int, lanes: int, *, flat: bool = False):
-        if not isinstance(config, SensorConfig):
-            raise ConfigError(f"StreamingPixelArray: configuration must be a SensorConfig, "
-                              f"not {type(config).__name__}")
-        self.config = config.check()
+        self.config = SensorConfig.checked(config, "StreamingPixelArray")
         self.height, self.width = check_array_size(height, width)
         self.lanes = check_lanes(self.config, height, width, lanes)
         self.flat = bool(flat)

@@ -31,7 +31,6 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import Out
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import ConfigError
 
 
 class ReadoutTiming(wiring.Component):
@@ -45,9 +44,7 @@ class ReadoutTiming(wiring.Component):
     """
 
     def __init__(self, config: SensorConfig, *, sampled_input: bool = True):
-        if not isinstance(config, SensorConfig):
-            raise ConfigError(f"ReadoutTiming: configuration must be a SensorConfig, not {type(config).__name__}")
-        self.config = config.check()
+        self.config = SensorConfig.checked(config, "ReadoutTiming")
         self.sampled_input = bool(sampled_input)
         ports = {"last": Out(1), "frame_valid": Out(1)}
         if self.config.is_te:

@@ -39,7 +39,6 @@ import re
 import types
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import ConfigError
 
 from .array import check_array_size
 from .names import module_names
@@ -120,9 +119,7 @@ def convert_modules(*named_components) -> list[str]:
 
 def checked_config(config) -> SensorConfig:
     """``config`` checked (a :class:`SensorConfig` the RTL can build), or :class:`ConfigError`."""
-    if not isinstance(config, SensorConfig):
-        raise ConfigError(f"configuration must be a SensorConfig, not {type(config).__name__}")
-    return config.check()
+    return SensorConfig.checked(config, "Verilog")
 
 
 def pixel_verilog(config: SensorConfig, name: str | None = None, *, word_register: bool = True) -> str:

@@ -68,3 +68,21 @@ def test_array_widest_datapath_equals_golden(rng):
     words, _ = rtl_array_words(config, stim)
     golden = step_reference(config, stim)[0]
     assert np.array_equal(words, golden) and golden.any()
+
+
+def test_every_block_refuses_a_configuration_that_is_no_sensor_config():
+    """One check (``SensorConfig.checked``) for every block and writer that builds from a configuration,
+    each naming itself."""
+    from tespike.rtl.array import PixelArray
+    from tespike.rtl.pixel import TEPixel
+    from tespike.rtl.stream import StreamingPixelArray
+    from tespike.rtl.timing import ReadoutTiming
+    from tespike.rtl.verilog import array_verilog
+    not_config = {"mode": "te"}
+    for build, name in ((lambda: PixelArray(not_config, 1, 1), "PixelArray"),
+                        (lambda: StreamingPixelArray(not_config, 1, 1, 1), "StreamingPixelArray"),
+                        (lambda: ReadoutTiming(not_config), "ReadoutTiming"),
+                        (lambda: TEPixel(not_config), "TEPixel"),
+                        (lambda: array_verilog(not_config, 1, 1), "Verilog")):
+        with pytest.raises(ConfigError, match=f"^{name}: configuration must be a SensorConfig, not dict$"):
+            build()
