@@ -41,7 +41,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tespike.cosim.synthesis import ABC_GATE_SETS, span, synthesize  # noqa: E402
+from tespike.cosim.synthesis import ABC_GATE_SETS, synthesize, transistor_range as span  # noqa: E402
 from tespike.golden.config import SensorConfig  # noqa: E402
 
 #: Pixels per array used to amortise the timing block.

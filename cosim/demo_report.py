@@ -11,7 +11,7 @@ import math
 
 from tespike.golden.config import DESIGN_ELECTRONS
 
-from .synthesis import ABC_GATE_SETS, span
+from .synthesis import ABC_GATE_SETS, transistor_range
 
 def verdict_text(difference, backend: str, readouts: int, crop: int, corner) -> str:
     """The RTL's verdict in one line: bit-identical, or the first difference
@@ -127,8 +127,8 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
                   "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
         for row in hardware:
             p, t = row["pixel"], row["timing"]
-            lines.append(f"| {row['sensor']} | {p['cells']} | {p['flops']} | {span(p)} | "
-                         f"{t['cells']} | {t['flops']} | {span(t)} |")
+            lines.append(f"| {row['sensor']} | {p['cells']} | {p['flops']} | {transistor_range(p)} | "
+                         f"{t['cells']} | {t['flops']} | {transistor_range(t)} |")
     lines += ["", "## Run time of every stage", "", "| stage | seconds |", "| --- | ---: |"]
     lines += [f"| {stage.name} | {stage.seconds:.1f} |" for stage in stages]
     lines += [f"| total | {total:.1f} |", "", "## Rerun each step with the individual commands", "",

@@ -1,8 +1,10 @@
 """Yosys synthesis of the project's Verilog: cells, flip-flops and a CMOS transistor estimate.
 
-One function, :func:`synthesize`, for both the demo's small cost table
-(:mod:`tespike.cosim.demo`) and the full study (``benchmarks/hw_cost.py``,
-``docs/hardware-cost.md``). ``synth -top <module>; stat`` counts cells of
+Two flows share one Yosys run (:func:`yosys_run`), one cost script (:func:`mapping_steps`) and
+one reading of its reports: :func:`synthesize` costs one module as a whole (the demo's small
+cost table, :mod:`tespike.cosim.demo`, and the full study, ``benchmarks/hw_cost.py``,
+``docs/hardware-cost.md``); :func:`synthesize_hierarchy` (below) costs every module of a
+generated top. ``synth -top <module>; stat`` counts cells of
 Yosys's internal gate library and flip-flops; then every flip-flop is legalised
 to a plain D flip-flop (reset and enable become gates), the logic is mapped by
 ABC to each gate set of :data:`ABC_GATE_SETS` and counted with
@@ -62,15 +64,39 @@ def parse_stat(json_text: str) -> dict:
             raise ValueError(f"Yosys stat report has no 'design' and {len(modules)} modules")
         design = next(iter(modules.values()))
     by_type = design.get("num_cells_by_type", {})
-    flops = sum(n for kind, n in by_type.items() if "DFF" in kind or "DLATCH" in kind)
-    transistors = design.get("estimated_num_transistors")
-    if transistors is not None:
-        text = str(transistors)
-        if not text.isdigit():
-            raise ValueError(f"Yosys transistor estimate {text!r} is incomplete (a cell type has no CMOS cost)")
-        transistors = int(text)
-    return {"cells": int(design["num_cells"]), "flops": flops, "transistors": transistors,
+    return {"cells": int(design["num_cells"]), "flops": _flops(by_type),
+            "transistors": _transistors(design.get("estimated_num_transistors"), "Yosys"),
             "by_type": dict(by_type)}
+
+
+def _flops(by_type: dict) -> int:
+    """Flip-flops among cells counted by type (every DFF and DLATCH kind)."""
+    return sum(n for kind, n in by_type.items() if "DFF" in kind or "DLATCH" in kind)
+
+
+def _transistors(estimate, what: str, submodules: bool = False) -> int | None:
+    """Yosys's ``estimated_num_transistors`` as a number (None where it made none), refused
+    (ValueError naming ``what``) where it is marked incomplete (``"1574+"``: a cell type has no CMOS
+    cost), except, with ``submodules``, the "+" of a module whose uncosted cells are its submodules'
+    instances (:func:`parse_stat_modules`)."""
+    if estimate is None:
+        return None
+    text = str(estimate)
+    number = text[:-1] if submodules and text.endswith("+") else text
+    if not number.isdigit():
+        raise ValueError(f"{what} transistor estimate {text!r} is incomplete (a cell type has no CMOS cost)")
+    return int(number)
+
+
+def _estimate_range(name: str, flops: int, mapped: dict[str, dict]) -> tuple[int, int]:
+    """(smallest, largest) transistor estimate of ``name`` over its ABC mappings ``mapped``
+    (gate set -> its report), refused where a mapping changed the flip-flop count ``flops``."""
+    for gates, stat in mapped.items():
+        if stat["flops"] != flops:
+            raise SynthesisError(f"{name}: flip-flop count changed in the {gates} mapping "
+                                 f"({flops} -> {stat['flops']})")
+    estimates = [stat["transistors"] for stat in mapped.values()]
+    return min(estimates), max(estimates)
 
 
 def yosys_missing(yosys: str = "yosys") -> str | None:
@@ -120,16 +146,11 @@ def synthesize(verilog_text: str, top: str, yosys: str = "yosys",
             mapped = {g: parse_stat((work / f"{g}.json").read_text()) for g in gate_sets}
         except (OSError, ValueError, KeyError) as exc:
             raise SynthesisError(f"{top}: {exc}") from None
-    for gates, stat in mapped.items():
-        if stat["flops"] != generic["flops"]:
-            raise SynthesisError(f"{top}: flip-flop count changed in the {gates} mapping "
-                                 f"({generic['flops']} -> {stat['flops']})")
-    estimates = [stat["transistors"] for stat in mapped.values()]
-    return {"cells": generic["cells"], "flops": generic["flops"],
-            "transistors": min(estimates), "transistors_max": max(estimates)}
+    low, high = _estimate_range(top, generic["flops"], mapped)
+    return {"cells": generic["cells"], "flops": generic["flops"], "transistors": low, "transistors_max": high}
 
 
-def span(stat: dict) -> str:
+def transistor_range(stat: dict) -> str:
     """Transistor estimate as 'min' or 'min-max' over the ABC mappings."""
     lo, hi = stat["transistors"], stat["transistors_max"]
     return f"{lo}" if lo == hi else f"{lo}-{hi}"
@@ -162,16 +183,10 @@ def parse_stat_modules(json_text: str) -> dict:
         strange = [t for t in gates if not (t.startswith("$_") and t.endswith("_"))]
         if strange:
             raise ValueError(f"module {raw.lstrip(chr(92))}: cell types {strange} are neither gates nor modules")
-        transistors = design.get("estimated_num_transistors")
-        if transistors is not None:
-            text = str(transistors)
-            number = text[:-1] if text.endswith("+") and instances else text
-            if not number.isdigit():
-                raise ValueError(f"module {raw.lstrip(chr(92))}: transistor estimate {text!r} is incomplete")
-            transistors = int(number)
+        transistors = _transistors(design.get("estimated_num_transistors"), f"module {raw.lstrip(chr(92))}:",
+                                   submodules=bool(instances))
         out[raw.lstrip("\\")] = {"cells": sum(gates.values()), "by_type": gates, "instances": instances,
-                                 "flops": sum(n for t, n in gates.items() if "DFF" in t or "DLATCH" in t),
-                                 "transistors": transistors}
+                                 "flops": _flops(gates), "transistors": transistors}
     return out
 
 
@@ -246,10 +261,6 @@ def synthesize_hierarchy(verilog_text: str, top: str | None = None, yosys: str =
         except (OSError, ValueError, KeyError) as exc:
             raise SynthesisError(str(exc)) from None
     for name, stat in modules.items():
-        for gates, other in mapped.items():
-            if other[name]["flops"] != stat["flops"]:
-                raise SynthesisError(f"{name}: flip-flop count changed in the {gates} mapping "
-                                     f"({stat['flops']} -> {other[name]['flops']})")
-        estimates = [other[name]["transistors"] for other in mapped.values()]
-        stat["transistors"], stat["transistors_max"] = min(estimates), max(estimates)
+        stat["transistors"], stat["transistors_max"] = _estimate_range(
+            name, stat["flops"], {gates: other[name] for gates, other in mapped.items()})
     return {"top": top, "modules": modules, "run": run}

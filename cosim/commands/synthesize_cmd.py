@@ -80,7 +80,7 @@ def _design(args):
 
 def report_lines(result: dict, pixels: int | None) -> list[str]:
     """The printed report of :func:`tespike.cosim.synthesis.synthesize_hierarchy`'s result."""
-    from tespike.cosim.synthesis import hierarchy_total, instance_counts
+    from tespike.cosim.synthesis import hierarchy_total, instance_counts, transistor_range
     modules, top = result["modules"], result["top"]
     counts = instance_counts(modules, top)
     lines = [f"{'module':<28} {'instances':>9} {'cells':>7} {'flops':>6} {'transistors':>12}   "
@@ -89,22 +89,20 @@ def report_lines(result: dict, pixels: int | None) -> list[str]:
         if counts[name] == 0:
             continue
         stat = modules[name]
-        lo, hi = stat["transistors"], stat["transistors_max"]
         subs = ", ".join(f"{n} x {s}" for s, n in stat["instances"].items())
         lines.append(f"{name:<28} {counts[name]:>9} {stat['cells']:>7} {stat['flops']:>6} "
-                     f"{(str(lo) if lo == hi else f'{lo}-{hi}'):>12}" + (f"   + {subs}" if subs else ""))
+                     f"{transistor_range(stat):>12}" + (f"   + {subs}" if subs else ""))
     lines.append("cells by type (own, one instance):")
     for name in sorted(modules, key=lambda n: (-counts[n], n)):
         if counts[name] and modules[name]["by_type"]:
             kinds = ", ".join(f"{k.strip('$_')} {n}" for k, n in sorted(modules[name]["by_type"].items()))
             lines.append(f"  {name}: {kinds}")
     total = hierarchy_total(modules, top)
-    lo, hi = total["transistors"], total["transistors_max"]
     lines.append(f"total {top}: {total['cells']} cells, {total['flops']} flip-flops, "
-                 f"{lo if lo == hi else f'{lo}-{hi}'} transistors (estimate)")
+                 f"{transistor_range(total)} transistors (estimate)")
     if pixels:
         lines.append(f"per pixel: {total['cells'] / pixels:.1f} cells, {total['flops'] / pixels:.2f} flip-flops, "
-                     f"{lo / pixels:.0f}-{hi / pixels:.0f} transistors")
+                     f"{total['transistors'] / pixels:.0f}-{total['transistors_max'] / pixels:.0f} transistors")
     run = result["run"]
     lines.append(f"yosys: {run['seconds']:.1f} s wall, {run['cpu_seconds']:.1f} s CPU, "
                  f"peak {run['peak_mb']:.0f} MB")
