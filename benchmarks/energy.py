@@ -37,7 +37,6 @@ register activity) is checked at gate level on a 2 x 3 top for the paper's camer
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path

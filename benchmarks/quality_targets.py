@@ -26,7 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from tespike.golden.fastsim import simulate_scene  # noqa: E402
-from tespike.recon.pictures import tone_map  # noqa: E402
+from tespike.recon.mulaw import tone_map  # noqa: E402
 from tespike.recon.evaluate import evaluate, label, scored_frames  # noqa: E402
 from tespike.recon.report import table_markdown, write_outputs  # noqa: E402
 from tespike.recon.scenes.heldout import sequence_set  # noqa: E402
@@ -157,7 +157,7 @@ def main(argv=None) -> int:
     print("\nper sequence (PSNR-mu dB; margin = TE - ML (msb)):")
     by = {(r.sequence, r.sensor, r.method): r.psnr_mu for r in evaluation.results}
     for name, _ in sequences:
-        cells = [f"{label(method, mode)} {by[name, mode, method]:.2f}"
+        cells = [f"{label(method, sensor)} {by[name, sensor, method]:.2f}"
                  for method in evaluation.methods for sensor in evaluation.sensors]
         margins = [f"{method.upper()} {by[name, 'te', method] - by[name, 'ml-msb', method]:+.2f}"
                    for method in evaluation.methods]

@@ -1,6 +1,6 @@
 """The demo's two pictures: the frame with the RTL crop marked, and the crop's reconstructions.
 
-Both tone-map light with :func:`tespike.recon.pictures.tone_map` (mu-law of light / the
+Both tone-map light with :func:`tespike.recon.mulaw.tone_map` (mu-law of light / the
 sequence's peak, as every picture of the project) and save through
 :func:`tespike.recon.pictures.save_figure`.
 """
@@ -19,7 +19,8 @@ def plot_frame(light: np.ndarray, frame: int, crop: tuple[int, int, int], path: 
     import matplotlib.pyplot as plt
     from matplotlib.patches import Rectangle
 
-    from tespike.recon.pictures import MU, save_figure, tone_map
+    from tespike.recon.mulaw import MU, tone_map
+    from tespike.recon.pictures import save_figure
     y, x, size = crop
     H, W = light.shape[1:]
     fig, axis = plt.subplots(figsize=(6.4, 6.4 * H / W + 0.5))
@@ -44,7 +45,8 @@ def plot_rtl_crop(truth: np.ndarray, rtl_images: dict, golden_images: dict, peak
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from tespike.recon.pictures import ERROR_RANGE, MU, save_figure, tone_map
+    from tespike.recon.mulaw import MU, tone_map
+    from tespike.recon.pictures import ERROR_RANGE, save_figure
     methods = list(rtl_images)
     gt = tone_map(truth, peak)
     fig, axes = plt.subplots(3, 1 + len(methods), squeeze=False, figsize=(2.1 * (1 + len(methods)) + 0.6, 6.6))

@@ -36,7 +36,7 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
 
     import torch
 
-    from tespike.recon.pictures import MU
+    from tespike.recon.mulaw import MU
     from tespike.recon.report import table_markdown
     y, x, size = crop
     te = rtl_config

@@ -36,8 +36,7 @@ import torch
 
 from tespike.golden.errors import InputError
 
-from .learning.mulaw import compress
-from .pictures import MU  # noqa: F401  (the paper's mu, one constant for pictures and metrics)
+from .mulaw import MU, compress  # noqa: F401  (MU: the paper's mu, read here by the metrics' callers)
 
 SSIM_SIGMA = 1.5
 SSIM_TRUNCATE = 3.5
@@ -97,7 +96,7 @@ def normalise(pred: torch.Tensor, gt: torch.Tensor, peak=None) -> tuple[torch.Te
 
 def mu_law(h: torch.Tensor, mu: float = MU) -> torch.Tensor:
     """Tone map T(H) = log(1 + mu H) / log(1 + mu) (paper eq. 11), H in [0, 1]: the learned
-    methods' own mu-law (:func:`tespike.recon.learning.mulaw.compress`), with the paper's mu by default."""
+    methods' own mu-law (:func:`tespike.recon.mulaw.compress`), with the paper's mu by default."""
     return compress(h, mu)
 
 

@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from .evaluate import BASIC_METRICS, CALIBRATED, NOISE_SENSORS, Evaluation, Measurement, label, name
-from .pictures import ERROR_RANGE, MU, save_figure, tone_map, write_text
+from .mulaw import MU, tone_map
+from .pictures import ERROR_RANGE, save_figure, write_text
 
 #: Sensors that get a column of Table 1; any other evaluated sensor gets extra rows.
 COLUMNS = ("ml-msb", "te")

@@ -38,7 +38,7 @@ KEYS = ("psnr_mu", "ssim_mu", "psnr_pu21", "hdr_vqm", "fovvideovdp")
 def columns(display: HdrDisplay = DEFAULT_DISPLAY) -> tuple[Column, ...]:
     """The columns (in :data:`KEYS` order) with their labels for ``display``."""
     from tespike.recon.metrics import DEFAULT_NITS_PER_UNIT
-    from tespike.recon.pictures import MU
+    from tespike.recon.mulaw import MU
     shown = f"HDR display {display.peak_nits:g} cd/m^2"
     return (
         Column("psnr_mu", f"PSNR-mu (dB, mu={MU:g})", True),

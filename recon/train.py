@@ -44,9 +44,8 @@ from .engine.clips import EngineRecipe
 from .learned import load_weights, method_classes
 from .learning.layers import parameter_count
 from .settings import check_device
-from .learning.mulaw import compress
+from .mulaw import MU, compress
 from .learning.weights import cpu_state, read_torch_file, read_weights, save_weights, write_torch_file
-from .pictures import MU
 
 LOSSES = ("l1", "mu-l1")
 

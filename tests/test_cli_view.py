@@ -6,7 +6,7 @@ from matplotlib.image import imread
 from tespike.golden.config import SensorConfig
 from tespike.golden.fastsim import scene_stimulus, simulate_scene
 from tespike.golden.io import save_stream
-from tespike.recon.pictures import MU, tone_map
+from tespike.recon.mulaw import MU, tone_map
 from tests.cli import assert_refused, run_tespike
 
 

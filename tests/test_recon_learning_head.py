@@ -9,8 +9,8 @@ import torch
 from tespike.golden.config import SensorConfig
 from tespike.golden.fastsim import simulate_scene
 from tespike.recon.learning.head import INITIAL_LOGITS, RADII, BlendHead, key_estimates, spike_interval_light
-from tespike.recon.learning.mulaw import compress, expand
-from tespike.recon.pictures import MU
+from tespike.recon.mulaw import compress, expand
+from tespike.recon.mulaw import MU
 from tespike.recon.stream import decode_light
 from tespike.recon.tfi import tfi
 from tespike.recon.tfp import tfp

@@ -10,7 +10,7 @@ from tespike.recon.baselines.common import BaselineSizes
 from tespike.recon.learned import LEARNED, WEIGHTS_DIR, method_classes
 from tespike.recon.learning.sizes import PRESETS, PyramidSizes
 from tespike.recon.learning.weights import read_weights
-from tespike.recon.pictures import MU
+from tespike.recon.mulaw import MU
 
 #: A bad value of each shared field and the rule its refusal states.
 BAD = {

@@ -128,16 +128,16 @@ def test_twelve_decades_and_huge_light(rng):
 
 
 def test_one_mu_law_for_metrics_pictures_and_learned_methods():
-    """One constant mu and one torch mu-law (recon.learning.mulaw.compress) serve the metrics;
+    """One constant mu and one torch mu-law (recon.mulaw.compress) serve the metrics;
     the numpy tone map of the pictures is its twin for code that runs without torch."""
-    from tespike.recon import pictures
-    from tespike.recon.learning.mulaw import compress
-    assert metrics.MU is pictures.MU
+    from tespike.recon import mulaw
+    from tespike.recon.mulaw import compress
+    assert metrics.MU is mulaw.MU
     h = torch.linspace(0, 1, 101, dtype=torch.float64)
-    assert torch.equal(metrics.mu_law(h), compress(h, pictures.MU))
-    assert np.allclose(pictures.tone_map(h.numpy(), 1.0), metrics.mu_law(h).numpy(), rtol=0, atol=1e-15)
+    assert torch.equal(metrics.mu_law(h), compress(h, mulaw.MU))
+    assert np.allclose(mulaw.tone_map(h.numpy(), 1.0), metrics.mu_law(h).numpy(), rtol=0, atol=1e-15)
     # the in-place twin the baselines use on their large firing-rate stacks
-    from tespike.recon.learning.mulaw import compress_
+    from tespike.recon.mulaw import compress_
     light = torch.cat((torch.tensor([-0.5, 0.0]), torch.logspace(-6, 1, 50)))
     work = light.clone()
     assert compress_(work, 5000.0) is work and torch.equal(work, compress(light, 5000.0))

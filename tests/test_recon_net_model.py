@@ -13,7 +13,7 @@ from tespike.recon.learning.align import AlignLevel
 from tespike.recon.net.align import SPA
 from tespike.recon.net.features import GRADIENT_KERNELS, MSFEG, GradientFilters
 from tespike.recon.learning.layers import parameter_count, substreams
-from tespike.recon.learning.mulaw import compress, expand
+from tespike.recon.mulaw import compress, expand
 from tespike.recon.net.model import TESpikeNet
 from tespike.recon.net.refine import GuidedAttention, IntensityFeature, box_mean
 from tespike.recon.net.sizes import SWITCHES, NetSizes

@@ -5,7 +5,7 @@ Input by content: ``S.npz`` (a stream: words decoded to light per readout with
 reconstruction ``R.npy``: light, 1.0 = design light), an integer ``.npy`` (a
 stimulus ``E.npy``: electrons per readout interval, summed over its L clocks
 with ``--config``, shown in design-light units). Tone mapping is the project's
-(:func:`tespike.recon.pictures.tone_map`): divide by the peak (default: the largest
+(:func:`tespike.recon.mulaw.tone_map`): divide by the peak (default: the largest
 value of the frames shown; give ``--peak`` to compare files on one scale),
 clip to [0, 1], mu-law with mu = 5000. Writes a contact sheet (one PNG, frame
 numbers as titles) or, with ``--each``, one grayscale PNG per frame at the
@@ -13,7 +13,7 @@ array's own resolution.
 """
 
 from tespike.golden.decode import ESTIMATORS
-from tespike.recon.pictures import MU
+from tespike.recon.mulaw import MU
 
 HELP = "write tone-mapped PNGs (contact sheet or one per frame) of I.npy, S.npz, R.npy or E.npy"
 
@@ -143,7 +143,8 @@ def run(args) -> int:
     if peak <= 0:
         raise InputError(f"--input {args.input!r}: every frame shown is 0 (give --peak to map it anyway)")
 
-    from tespike.recon.pictures import save_figure, tone_map
+    from tespike.recon.mulaw import tone_map
+    from tespike.recon.pictures import save_figure
     mapped = tone_map(shown, peak, args.mu)
 
     import matplotlib

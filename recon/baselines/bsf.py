@@ -33,7 +33,7 @@ import torch
 from torch import nn
 
 from ..learning.layers import conv3
-from ..learning.mulaw import compress_
+from ..mulaw import compress_
 from ..reach import Support, support, union
 from .common import AlignedBaseline, BaselineSizes, BaselineSubstreams, ResBlock
 from .represent import firing_rates

@@ -4,7 +4,7 @@ Every baseline takes the project's one stream format into learned methods,
 (N, span, H, W) decoded light in scene units (``tespike.recon.stream.decode_light``),
 key moment at ``span // 2``, and returns (N, 1, H, W) light at the key moment.
 HDR light is compressed with the project's mu-law before the first layer
-(:mod:`tespike.recon.learning.mulaw`), as the project's network does. Each reads its
+(:mod:`tespike.recon.mulaw`), as the project's network does. Each reads its
 sub-streams into features its own way, then ends in the same tail
 (:class:`AlignedBaseline`): pyramid alignment to the key
 (:class:`tespike.recon.learning.align.PyramidAlign`), a 1 x 1 fusion, residual

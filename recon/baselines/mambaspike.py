@@ -42,7 +42,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ..learning.mulaw import compress_
+from ..mulaw import compress_
 from ..reach import Support, support, union
 from .common import AlignedBaseline, BaselineSizes
 from .represent import firing_rates

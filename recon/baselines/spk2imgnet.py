@@ -33,7 +33,7 @@ import torch
 from torch import nn
 
 from ..learning.layers import conv3, substreams
-from ..learning.mulaw import compress
+from ..mulaw import compress
 from ..reach import Support, support, union
 from .common import AlignedBaseline, BaselineSizes, BaselineSubstreams, ResBlock, centred
 

@@ -32,7 +32,7 @@ from torch import nn
 from ..reach import Support, support
 from ..settings import DEFAULT_WINDOW
 from .layers import conv3
-from .mulaw import compress, expand
+from ..mulaw import compress, expand
 
 #: Radii (readouts either side of the key) of the centred means the head chooses among.
 RADII = (0, 1, 2, 4, 7, 12, 20, 30)

@@ -19,7 +19,7 @@ from typing import Any, ClassVar, Mapping
 
 from tespike.golden.errors import InputError
 
-from ..pictures import MU
+from ..mulaw import MU
 
 #: Old field name -> its name now, for sizes read from files written before the rename
 #: (the baselines' ``windows`` / ``step`` are the network's ``substreams`` / ``stride``).

@@ -20,7 +20,7 @@ from torch import nn
 
 from ..learning.head import BlendHead
 from ..learning.layers import conv3, substreams
-from ..learning.mulaw import compress, expand
+from ..mulaw import compress, expand
 from ..reach import Support, support
 from .align import SPA
 from .features import MSFEG
