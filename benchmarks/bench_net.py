@@ -164,7 +164,8 @@ def candidates(args) -> None:
     from tespike.recon.engine.validation import validation_set
     from tespike.recon.metrics import mu_law
     from tespike.recon.learning.head import BlendHead, RADII, key_estimates
-    from tespike.recon.stream import decode_light, key_span, span_inside
+    from tespike.recon.decoding import decode_light
+    from tespike.recon.learning.span import key_span, span_inside
     names = [f"mean {2 * r + 1}" for r in RADII] + ["tfi"]
     span = NetSizes().span
     for label, preset in SENSORS:

@@ -312,6 +312,15 @@ def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarr
     return words, config
 
 
+def images_array(shape: tuple[int, int, int], out: np.ndarray | None = None) -> np.ndarray:
+    """The float32 (K, H, W) array of an ``R.npy`` a reconstruction fills: ``out`` checked, or a new one."""
+    if out is None:
+        return np.empty(shape, np.float32)
+    if out.shape != tuple(shape) or out.dtype != np.float32:
+        raise InputError(f"out must be float32 {tuple(shape)}, not {out.dtype} {out.shape}")
+    return out
+
+
 def save_images(path: str | Path, images: np.ndarray) -> None:
     """Write ``R.npy``: float32 (K, H, W) reconstructed light, atomically."""
     images = np.asarray(images, dtype=np.float32)

@@ -26,10 +26,11 @@ import torch
 from tespike.golden.config import SensorConfig
 from tespike.golden.decode import check_word_dtype
 from tespike.golden.errors import InputError
+from tespike.golden.io import images_array
 
+from .decoding import as_word_tensor, decode_light, decode_spikes
 from .learned import LEARNED_SUMMARIES
 from .settings import DEFAULT_WINDOW, TRAINING_FREE, ReconSettings
-from .stream import as_word_tensor, decode_light, decode_spikes, output_images
 from .tfi import tfi
 from .tfp import tfp
 
@@ -169,7 +170,7 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = DEFAU
     if calibration is not None:
         from .calibration import check_matches
         check_matches(calibration, config, (H, W))
-    out = output_images((K, H, W), out)
+    out = images_array((K, H, W), out)
     if out.size == 0:
         return out
     if spec.frames is not None:             # a learned method: corrected at its input

@@ -7,7 +7,7 @@ import shutil
 import pytest
 
 from tespike.cosim.formal.abc import prove_harness
-from tespike.cosim.formal.tops import (design_text, parallel_harness, small_clocks, stream_harness,
+from tespike.cosim.formal.tops import (design_text, verilog_parallel_harness, small_clocks, verilog_stream_harness,
                                timing_harness)
 from tespike.golden.config import load_config
 
@@ -79,8 +79,8 @@ MUTANTS = {
 def _harness(design: str, text: str | None = None):
     """2 x 3 pixels; the stream with 2 lanes (3 beats, none padded) ."""
     if design == "parallel":
-        return parallel_harness(TE, 2, 3, text)
-    return stream_harness(TE, 2, 3, 2, text)
+        return verilog_parallel_harness(TE, 2, 3, text)
+    return verilog_stream_harness(TE, 2, 3, 2, text)
 
 
 @pytest.mark.parametrize("design", ["parallel", "stream"])
@@ -132,8 +132,8 @@ ML_MUTANTS = {
 def _ml_harness(preset: str, design: str, text: str | None = None):
     config = small_clocks(load_config(preset))
     if design == "parallel":
-        return parallel_harness(config, 2, 3, text)
-    return stream_harness(config, 2, 3, 2, text)
+        return verilog_parallel_harness(config, 2, 3, text)
+    return verilog_stream_harness(config, 2, 3, 2, text)
 
 
 @pytest.mark.parametrize("preset", ["ml", "ml-msb"])

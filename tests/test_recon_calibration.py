@@ -203,7 +203,7 @@ def test_tfi_is_corrected_at_its_input():
 
     import torch
 
-    from tespike.recon.stream import decode_light, decode_spikes
+    from tespike.recon.decoding import decode_light, decode_spikes
     from tespike.recon.tfi import tfi
     config = SensorConfig()
     dark_words, flat_words = _streams(config, 64)

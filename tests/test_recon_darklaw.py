@@ -130,7 +130,7 @@ def test_a_learned_method_sees_the_law_input_and_without_dark_charge_the_mean_ra
     pixel's window reaches the input at under a tenth of the mean-rate input's 40 spikes less the
     dark rate."""
     from tespike.recon.learning.infer import law_input
-    from tespike.recon.stream import decode_light
+    from tespike.recon.decoding import decode_light
     config = SensorConfig()
     clean = _calibrated(config, Sensor(SensorNoise(prnu=0.05), seed=2), (8, 8), readouts=16)
     words = simulate_scene(config, np.random.default_rng(3).uniform(0, 0.2, (6, 8, 8)), seed=6)

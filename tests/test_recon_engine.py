@@ -13,7 +13,8 @@ from tespike.recon.engine.clips import Clip, EngineRecipe, clip_light, draw_leng
 from tespike.recon.engine.deadleaves import DeadLeavesParams, _power_law, dead_leaves
 import torch
 
-from tespike.recon.stream import decode_light, key_span, span_inside
+from tespike.recon.decoding import decode_light
+from tespike.recon.learning.span import key_span, span_inside
 
 SMALL = EngineRecipe(height=24, width=24, long=(6, 12), short=(1, 5))
 

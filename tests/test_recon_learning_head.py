@@ -11,7 +11,7 @@ from tespike.golden.fastsim import simulate_scene
 from tespike.recon.learning.head import INITIAL_LOGITS, RADII, BlendHead, key_estimates, spike_interval_light
 from tespike.recon.mulaw import compress, expand
 from tespike.recon.mulaw import MU
-from tespike.recon.stream import decode_light
+from tespike.recon.decoding import decode_light
 from tespike.recon.tfi import tfi
 from tespike.recon.tfp import tfp
 
@@ -90,7 +90,7 @@ def test_extreme_light_is_finite():
 
 def stream_spans(light: torch.Tensor, span: int = 61) -> tuple[torch.Tensor, torch.Tensor]:
     """Every key's padded span and its inside mask, as inference builds them."""
-    from tespike.recon.stream import key_span, span_inside
+    from tespike.recon.learning.span import key_span, span_inside
     K = light.shape[0]
     spans = torch.stack([light[key_span(K, k, span)] for k in range(K)])
     inside = torch.from_numpy(np.stack([span_inside(K, k, span) for k in range(K)]))

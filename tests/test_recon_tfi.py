@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig
-from tespike.recon.stream import decode_light
+from tespike.recon.decoding import decode_light
 from tespike.recon.tfi import tfi
 
 TE = SensorConfig()                 # theta 175, d = 4

@@ -18,14 +18,14 @@ from typing import Callable
 
 from tespike.golden.config import SensorConfig
 
-from .pixel import (STREAM_ARRAY, bounds_harness, corners, rule_harness, stream_harness,
+from .pixel import (STREAM_ARRAY, bounds_harness, corners, rule_harness, amaranth_stream_harness,
                     stream_lanes)
 from .rule_equivalence import Equivalence, prove_equivalence, stream_rule_equivalence
 from .smtbmc import SOLVERS, TOOLS, ProofToolError, Result, require_tools
 from .smtbmc import prove as _prove_harness
 
 __all__ = ["SOLVERS", "TOOLS", "ProofToolError", "Result", "corners", "properties", "prove",
-           "require_tools", "rule_harness", "bounds_harness", "stream_harness",
+           "require_tools", "rule_harness", "bounds_harness", "amaranth_stream_harness",
            "stream_rule_equivalence", "STREAM_ARRAY", "stream_lanes"]
 
 
@@ -46,7 +46,7 @@ def properties(config: SensorConfig, pixel_factory=None) -> dict[str, Callable[[
         "rule": lambda: rule_harness(config, pixel_factory, word_register=False),
         "rule-registered-word": lambda: rule_harness(config, pixel_factory, word_register=True),
         "bounds": lambda: bounds_harness(config, pixel_factory),
-        **({} if config.is_msb else {"stream": lambda: stream_harness(config, *STREAM_ARRAY,
+        **({} if config.is_msb else {"stream": lambda: amaranth_stream_harness(config, *STREAM_ARRAY,
                                                                       stream_lanes(config))}),
         "stream-pixel-rule": lambda: stream_rule_equivalence(config, pixel_factory),
     }

@@ -254,7 +254,7 @@ def stream_lanes(config: SensorConfig) -> int:
 
 
 # -- the streaming readout ---------------------------------------------------------------------
-def stream_harness(config: SensorConfig, height: int, width: int, lanes: int, stream_factory=None):
+def amaranth_stream_harness(config: SensorConfig, height: int, width: int, lanes: int, stream_factory=None):
     """SPEC section 6's streaming readout: each interval's words leave exactly once, in raster
     order in beats of ``lanes`` words (0 past the last pixel), ``first`` with beat 0 only, all
     before the next interval's words arrive, the last within 2L clocks of the interval's end.

@@ -107,7 +107,7 @@ def _assemble(parts: list[str], body_head: str, asserts: _Asserts, body_tail: st
     return prefix + text + body_tail + "endmodule\n", messages
 
 
-def parallel_harness(config: SensorConfig, height: int, width: int, design: str | None = None,
+def verilog_parallel_harness(config: SensorConfig, height: int, width: int, design: str | None = None,
                      bound: int | None = None) -> Harness:
     """``parallel-equiv``: the parallel top against the SPEC reference (see the module docstring)."""
     c = config.check()
@@ -125,7 +125,7 @@ def parallel_harness(config: SensorConfig, height: int, width: int, design: str 
     return Harness(text, messages, "bmc", bound or bmc_bound(c, height, width, None))
 
 
-def stream_harness(config: SensorConfig, height: int, width: int, lanes: int, design: str | None = None,
+def verilog_stream_harness(config: SensorConfig, height: int, width: int, lanes: int, design: str | None = None,
                    bound: int | None = None) -> Harness:
     """``stream-equiv``: the streaming top against the SPEC reference and the streaming contract
     (see the module docstring)."""
@@ -249,7 +249,7 @@ def top_properties(config: SensorConfig, sizes) -> dict[str, object]:
     props = {"timing": lambda: timing_harness(config),
              "array-timing": lambda: timing_harness(config, sampled_input=False)}
     for h, w in sizes:
-        props[f"parallel {h}x{w}"] = lambda h=h, w=w: parallel_harness(config, h, w)
+        props[f"parallel {h}x{w}"] = lambda h=h, w=w: verilog_parallel_harness(config, h, w)
         for n in lane_counts(config, h, w):
-            props[f"stream {h}x{w} N={n}"] = lambda h=h, w=w, n=n: stream_harness(config, h, w, n)
+            props[f"stream {h}x{w} N={n}"] = lambda h=h, w=w, n=n: verilog_stream_harness(config, h, w, n)
     return props

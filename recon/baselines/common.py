@@ -1,7 +1,7 @@
 """What the three learned baselines share: input checks, windows, residual blocks, their tail and its sizes.
 
 Every baseline takes the project's one stream format into learned methods,
-(N, span, H, W) decoded light in scene units (``tespike.recon.stream.decode_light``),
+(N, span, H, W) decoded light in scene units (``tespike.recon.decoding.decode_light``),
 key moment at ``span // 2``, and returns (N, 1, H, W) light at the key moment.
 HDR light is compressed with the project's mu-law before the first layer
 (:mod:`tespike.recon.mulaw`), as the project's network does. Each reads its

@@ -11,8 +11,8 @@ which clips a step can draw from depends only on the step, never on how fast
 the workers were, so a run is a pure function of its seed and resumes
 exactly (the pool is re-made from the step). Each sample is a key moment drawn
 anywhere in a clip (its span padded at the stream's ends by repeating the
-first or last readout, exactly as inference does: :func:`tespike.recon.stream.key_span`, and marked as
-padding by :func:`tespike.recon.stream.span_inside`),
+first or last readout, exactly as inference does: :func:`tespike.recon.learning.span.key_span`, and marked as
+padding by :func:`tespike.recon.learning.span.span_inside`),
 a random crop and random flips.
 """
 
@@ -32,7 +32,8 @@ import torch
 from tespike.golden.config import SensorConfig
 
 from ..calibration import correct_input
-from ..stream import decode_light, key_span, span_inside
+from ..decoding import decode_light
+from ..learning.span import key_span, span_inside
 from .clips import Clip, EngineRecipe, make_clip
 
 

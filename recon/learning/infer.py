@@ -35,11 +35,13 @@ import torch
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
+from tespike.golden.io import images_array
 
 from ..calibration import correct_input, input_correction
+from ..decoding import decode_light
 from ..reach import derive_radius
 from ..settings import DEFAULT_WINDOW
-from ..stream import decode_light, key_span, output_images, span_inside
+from .span import key_span, span_inside
 
 
 @functools.lru_cache(maxsize=64)
@@ -189,7 +191,7 @@ def reconstruct_model(model: torch.nn.Module, words, config: SensorConfig, *, ti
     if words.ndim != 3:
         raise InputError(f"stream words shape {words.shape} must be (K, H, W)")
     K, H, W = words.shape
-    out = output_images((K, H, W), out)
+    out = images_array((K, H, W), out)
     if out.size == 0:
         return out
     model = model.to(device)

@@ -1,4 +1,4 @@
-"""tespike.recon.stream: lookup-table decoding equals golden.decode on every code; sub-streams (eq. 4)."""
+"""tespike.recon.decoding: lookup-table decoding equals golden.decode on every code; sub-streams (eq. 4)."""
 
 import numpy as np
 import pytest
@@ -7,7 +7,8 @@ import torch
 import tespike.golden.decode as gd
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
-from tespike.recon import stream
+from tespike.recon import decoding
+from tespike.recon.learning import span
 from tespike.recon.learning.layers import substreams
 from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
@@ -33,14 +34,14 @@ def _golden_legal(code: int, config) -> bool:
 @pytest.mark.parametrize("config", CONFIGS, ids=str)
 def test_table_equals_golden_on_every_code(config):
     codes = np.arange(1 << config.word_bits)
-    light, spikes, legal = stream.code_tables(config)
+    light, spikes, legal = decoding.code_tables(config)
     assert light.shape == spikes.shape == legal.shape == codes.shape
     ok = codes[legal]
     assert np.array_equal(light[ok], gd.decode_light(ok, config))          # bit-equal float64
     assert np.array_equal(spikes[ok], gd.decode_spikes(ok, config))
     # the torch gather gives the same numbers
-    assert torch.equal(stream.decode_light(ok, config), torch.from_numpy(gd.decode_light(ok, config)))
-    assert torch.equal(stream.decode_spikes(ok, config), torch.from_numpy(gd.decode_spikes(ok, config)))
+    assert torch.equal(decoding.decode_light(ok, config), torch.from_numpy(gd.decode_light(ok, config)))
+    assert torch.equal(decoding.decode_spikes(ok, config), torch.from_numpy(gd.decode_spikes(ok, config)))
     # legality agrees with golden's check_words code by code (all codes on small words,
     # a random sample of illegal ones on the widest)
     illegal = codes[~legal]
@@ -57,45 +58,45 @@ def test_table_equals_golden_on_every_code(config):
 
 @pytest.mark.parametrize("config", CONFIGS[:6] + MSB_EDGE_CONFIGS[:3], ids=str)
 def test_every_illegal_code_refused(config):
-    _, _, legal = stream.code_tables(config)
+    _, _, legal = decoding.code_tables(config)
     for code in np.flatnonzero(~legal)[:50]:
         with pytest.raises(InputError, match=f"readout word {code} at index"):
-            stream.decode_light(np.array([[[0, code]]]), config)
+            decoding.decode_light(np.array([[[0, code]]]), config)
     for code in (-1, 1 << config.word_bits, 1 << 40):
         with pytest.raises(InputError, match="not a legal"):
-            stream.decode_light(np.array([code], np.int64), config)
+            decoding.decode_light(np.array([code], np.int64), config)
 
 
 @pytest.mark.parametrize("config", CONFIGS, ids=str)
 def test_decode_random_stream_equals_golden(config, rng):
     codes = gd.legal_words(config)
     words = rng.choice(codes, size=(5, 3, 4))
-    assert np.array_equal(stream.decode_light(words, config).numpy(), gd.decode_light(words, config))
-    assert stream.decode_light(words, config, dtype=torch.float32).dtype == torch.float32
+    assert np.array_equal(decoding.decode_light(words, config).numpy(), gd.decode_light(words, config))
+    assert decoding.decode_light(words, config, dtype=torch.float32).dtype == torch.float32
 
 
 def test_non_integer_words_refused():
     config = SensorConfig()
     with pytest.raises(InputError, match="not an integer"):
-        stream.decode_light(np.zeros((2, 2, 2), np.float32), config)
+        decoding.decode_light(np.zeros((2, 2, 2), np.float32), config)
     with pytest.raises(InputError, match="not an integer"):
-        stream.decode_light(torch.zeros((2, 2, 2)), config)
+        decoding.decode_light(torch.zeros((2, 2, 2)), config)
 
 
 def test_key_span_substreams_are_eq4():
     """The network's sub-streams of a key span: eq. 4 inside the stream, the last readout repeated past its end."""
     s = torch.arange(20.0).view(20, 1, 1)
-    inner = substreams(s[stream.key_span(20, 10, 9)][None], 3, 3, 3)[0, :, :, 0, 0]
+    inner = substreams(s[span.key_span(20, 10, 9)][None], 3, 3, 3)[0, :, :, 0, 0]
     assert inner.tolist() == [[6, 7, 8], [9, 10, 11], [12, 13, 14]]          # the middle one centred on 10
-    edge = substreams(s[stream.key_span(20, 18, 9)][None], 3, 3, 3)[0, :, :, 0, 0]
+    edge = substreams(s[span.key_span(20, 18, 9)][None], 3, 3, 3)[0, :, :, 0, 0]
     assert edge.tolist() == [[14, 15, 16], [17, 18, 19], [19, 19, 19]]
-    assert stream.span_inside(20, 18, 9).tolist() == [True] * 6 + [False] * 3
+    assert span.span_inside(20, 18, 9).tolist() == [True] * 6 + [False] * 3
 
 
 def test_msb_table_is_the_msb_worth():
     """ML msb (eq. 10): codes 0..B only, code j > 0 is 2^(j - 1) spikes; 9 and up are refused."""
     config = SensorConfig.preset("ml-msb")
     assert gd.legal_words(config).tolist() == list(range(9))
-    assert stream.decode_spikes(np.arange(9), config).tolist() == [0, 1, 2, 4, 8, 16, 32, 64, 128]
+    assert decoding.decode_spikes(np.arange(9), config).tolist() == [0, 1, 2, 4, 8, 16, 32, 64, 128]
     with pytest.raises(InputError, match="readout word 9 at index"):
-        stream.decode_light(np.array([3, 9]), config)
+        decoding.decode_light(np.array([3, 9]), config)

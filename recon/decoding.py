@@ -1,4 +1,4 @@
-"""Spike streams in torch: decoding by lookup table, and the span of readouts a learned method sees.
+"""Readout words decoded in torch, by lookup table: light and spikes per readout, on any device.
 
 Decoding uses exactly :mod:`tespike.golden.decode`: for each configuration (and
 estimator) a table over every code a word of ``config.word_bits`` bits can
@@ -92,27 +92,3 @@ def decode_spikes(words, config: SensorConfig, *, estimator: str = "ratio",
                   device: str | torch.device = "cpu", dtype: torch.dtype = torch.float64) -> torch.Tensor:
     """Words -> spikes per readout interval, equal to :func:`tespike.golden.decode.decode_spikes`."""
     return _gather(code_tables(config, estimator)[1], words, config, device, dtype)
-
-
-def output_images(shape: tuple[int, int, int], out: np.ndarray | None = None) -> np.ndarray:
-    """The float32 (K, H, W) array a reconstruction fills: ``out`` checked, or a new one."""
-    if out is None:
-        return np.empty(shape, np.float32)
-    if out.shape != tuple(shape) or out.dtype != np.float32:
-        raise InputError(f"out must be float32 {tuple(shape)}, not {out.dtype} {out.shape}")
-    return out
-
-
-def key_span(length: int, key: int, span: int) -> np.ndarray:
-    """Readout indices of the ``span`` readouts centred on ``key`` in a stream of ``length``,
-    the first or last readout repeated past either end (so a stream of one readout works).
-
-    The one rule of every learned method, in training and at inference alike.
-    """
-    return np.clip(np.arange(span) + key - span // 2, 0, length - 1)
-
-
-def span_inside(length: int, key: int, span: int) -> np.ndarray:
-    """(span,) bool: which readouts of :func:`key_span` lie in the stream (the others repeat an end)."""
-    times = np.arange(span) + key - span // 2
-    return (times >= 0) & (times < length)
