@@ -118,16 +118,17 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
         return False
 
 
-def check_distinct(inputs: Mapping[str, str | os.PathLike | None],
-                   outputs: Mapping[str, str | os.PathLike | None]) -> None:
+def check_distinct(inputs, outputs: Mapping[str, str | os.PathLike | None]) -> None:
     """Refuse an output that is an input file or another output, naming both.
 
-    Keys are the flags (``"--stimulus"``), values the paths (``None`` skipped).
+    Keys are the flags (``"--stimulus"``), values the paths (``None`` skipped); ``inputs`` may
+    also be (flag, path) pairs, for the many files of one flag (the frames of a folder).
     An input that is not an existing file (a preset name such as ``--config te``)
     cannot be overwritten and is skipped.
     """
+    pairs = inputs.items() if isinstance(inputs, Mapping) else inputs
     outs = [(flag, os.fspath(p)) for flag, p in outputs.items() if p is not None]
-    ins = [(flag, os.fspath(p)) for flag, p in inputs.items()
+    ins = [(flag, os.fspath(p)) for flag, p in pairs
            if p is not None and os.path.lexists(os.fspath(p))]
     for i, (oflag, out) in enumerate(outs):
         for iflag, inp in ins:
@@ -140,10 +141,10 @@ def check_distinct(inputs: Mapping[str, str | os.PathLike | None],
                                  "two outputs cannot share a file")
 
 
-def check_outputs(outputs: Mapping[str, str | os.PathLike | None],
-                  inputs: Mapping[str, str | os.PathLike | None] | None = None) -> None:
+def check_outputs(outputs: Mapping[str, str | os.PathLike | None], inputs=None) -> None:
     """Every output path of a command checked (:func:`check_output_file`) and kept apart
-    from the inputs (:func:`check_distinct`), before any output is written."""
+    from the inputs (:func:`check_distinct`: a mapping, or (flag, path) pairs), before any
+    output is written."""
     for flag, path in outputs.items():
         if path is not None:
             check_output_file(path, flag)

@@ -324,15 +324,18 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
     try:
         return _train(options, out, work, resume, progress, command)
     except BaseException:
-        if created and work.is_dir() and not (work / "checkpoint.pt").exists():
+        if created and work.is_dir() and not (work / RUN_FILES[0]).exists():
             shutil.rmtree(work, ignore_errors=True)        # nothing to resume: leave no empty folder
         raise
 
 
+#: What a run writes into its run folder (``OUT.run/``): checkpoint, logs, best weights, curves.
+RUN_FILES = ("checkpoint.pt", "log.csv", "validation.csv", "best.pt", "curves.png")
+
+
 def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress: bool | None,
            command: str) -> Path:
-    checkpoint, log_path = work / "checkpoint.pt", work / "log.csv"
-    validation_path, best_path = work / "validation.csv", work / "best.pt"
+    checkpoint, log_path, validation_path, best_path, curves_path = (work / name for name in RUN_FILES)
     if options.threads is not None:
         torch.set_num_threads(options.threads)
     config, sizes = options.sensor_config(), options.sizes()
@@ -406,7 +409,7 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
     def save_checkpoint() -> None:
         run_folder_kept()
         _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options, best)
-        plot_curves(log_path, validation_path, work / "curves.png", f"{options.method} {options.config}")
+        plot_curves(log_path, validation_path, curves_path, f"{options.method} {options.config}")
 
     validated = None
 

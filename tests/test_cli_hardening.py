@@ -845,3 +845,29 @@ def test_the_version_is_looked_up_only_when_asked(monkeypatch, capsys):
     with pytest.raises(SystemExit) as stop:
         cli.main(["--version"])
     assert stop.value.code == 0 and capsys.readouterr().out == "tespike 9.9\n"
+
+
+def test_scene_and_train_never_write_over_a_frame_they_read(tmp_path):
+    """scene --folder and train --hdr / --panoramas compared --out with nothing they read: each wrote its
+    output over one of the folder's frames (rc 0); train's run folder files likewise over an input there."""
+    from tespike.recon.scenes import write_hdr
+    for folder in ("video", "hdr/seq", "pano"):
+        (tmp_path / folder).mkdir(parents=True)
+    for k in range(2):
+        write_hdr(tmp_path / f"video/{k:03d}.hdr", np.full((32, 48, 3), 0.01 + k, np.float32))
+        write_hdr(tmp_path / f"hdr/seq/{k:03d}.hdr", np.full((64, 64, 3), 0.02 + k, np.float32))
+    write_hdr(tmp_path / "pano/p.hdr", np.full((64, 128, 3), 0.05, np.float32))
+    (tmp_path / "link.npy").symlink_to(tmp_path / "video/001.hdr")
+    (tmp_path / "run.run").mkdir()
+    (tmp_path / "run.run/log.csv").write_text('{"mode": "te"}')
+    refused_without_change(tmp_path, ("scene", "--folder", tmp_path / "video", "--out", tmp_path / "video/000.hdr"),
+                           "a frame of --folder", "refusing to overwrite an input")
+    refused_without_change(tmp_path, ("scene", "--folder", tmp_path / "video", "--out", tmp_path / "link.npy"),
+                           "a frame of --folder", "001.hdr")
+    budget = ("--steps", 1, "--crop", 32, "--batch", 1, "--workers", 0, "--pool", 1)
+    refused_without_change(tmp_path, ("train", "--config", "te", "--hdr", tmp_path / "hdr/seq",
+                                      "--out", tmp_path / "hdr/seq/000.hdr", *budget), "a frame of --hdr")
+    refused_without_change(tmp_path, ("train", "--config", "te", "--panoramas", tmp_path / "pano",
+                                      "--out", tmp_path / "pano/p.hdr", *budget), "a panorama of --panoramas")
+    refused_without_change(tmp_path, ("train", "--config", tmp_path / "run.run/log.csv", "--out", tmp_path / "run.pt",
+                                      *budget), "the run folder's log.csv", "--config")

@@ -37,9 +37,10 @@ def run(args) -> int:
     from tespike.cosim.console import progress_wanted, report
     from tespike.golden.errors import InputError
     from tespike.golden.io import atomic_output
-    from tespike.golden.paths import check_outputs
+    from tespike.golden.paths import check_distinct, check_outputs
     from tespike.cosim.room import require_room
     from tespike.recon.scenes import SCENES, load_hdr_sequence, make_scene
+    from tespike.recon.scenes.hdr_io import list_frames
     from tespike.recon.scenes.color import DEFAULT_WEIGHTS
 
     if args.list:
@@ -77,6 +78,7 @@ def run(args) -> int:
                 raise InputError(f"--crop {args.crop!r} must be HxW, e.g. 384x512")
         if args.frames < 1:
             raise InputError(f"--frames {args.frames}: must be >= 1")
+        check_distinct([("a frame of --folder", frame) for frame in list_frames(args.folder)], {"--out": args.out})
         light = load_hdr_sequence(args.folder, weights=args.grayscale or DEFAULT_WEIGHTS, peak=args.peak,
                                   max_frames=args.frames, crop=crop, downscale=args.downscale,
                                   progress=progress_wanted(args))

@@ -87,6 +87,14 @@ def add_arguments(parser):
     parser.add_argument("--resume", action="store_true", help="continue from OUT.run/checkpoint.pt")
 
 
+def _frame_files(folder: str) -> list:
+    """Every HDR file under a ``--hdr`` or ``--panoramas`` folder (at any depth)."""
+    from pathlib import Path
+
+    from tespike.recon.scenes.hdr_io import FRAME_SUFFIXES
+    return [p for p in Path(folder).rglob("*") if p.suffix.lower() in FRAME_SUFFIXES and p.is_file()]
+
+
 def run(args) -> int:
     import shlex
     import sys
@@ -95,7 +103,7 @@ def run(args) -> int:
     from tespike.golden.config import PRESETS, load_config
     from tespike.cosim.console import progress_wanted, report
     from tespike.golden.errors import InputError
-    from tespike.golden.paths import check_output_dir, check_outputs
+    from tespike.golden.paths import check_distinct, check_output_dir, check_outputs
 
     config = load_config(args.config)
     if args.steps is None and args.minutes is None:
@@ -120,10 +128,18 @@ def run(args) -> int:
         raise InputError(f"--init {args.init!r}: no such weights file")
     if args.init is not None and args.resume:
         raise InputError("--init starts a new run; --resume continues one: give one of them")
-    check_outputs({"--out": args.out}, {**config_input, **({"--init": args.init} if args.init else {})})
-    check_output_dir(out.with_suffix(".run"), "--out's run folder")
 
-    from tespike.recon.train import TrainOptions, train
+    from tespike.recon.train import RUN_FILES, TrainOptions, train
+
+    # --out and the run folder's files are never one of the files the run reads (or its folders hold)
+    inputs = [*config_input.items(), *([("--init", args.init)] if args.init else []),
+              *(("a frame of --hdr", frame) for folder in args.hdr for frame in _frame_files(folder)),
+              *(("a panorama of --panoramas", panorama)
+                for panorama in (*(f for folder in args.panoramas for f in _frame_files(folder)), *panoramas))]
+    check_outputs({"--out": args.out}, inputs)
+    check_output_dir(out.with_suffix(".run"), "--out's run folder")
+    run_folder = out.with_suffix(".run")
+    check_distinct(inputs, {f"the run folder's {name}": run_folder / name for name in RUN_FILES})
 
     given = {flag: getattr(args, flag) for flag in TRAINER_FLAGS if hasattr(args, flag)}
     options = TrainOptions(config=args.config if preset else config.to_json(), ablation=args.ablation,
