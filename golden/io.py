@@ -36,8 +36,8 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
         raise InputError(f"{what} file {str(path)!r} is not a readable .npy array (no .npy header)")
     try:
         array = np.load(path, allow_pickle=False, mmap_mode=mmap_mode)
-    except (OSError, ValueError, EOFError) as exc:
-        _refuse_starved(exc, what, path)
+    except (OSError, ValueError, EOFError, OverflowError) as exc:   # (Overflow: a header shape whose
+        _refuse_starved(exc, what, path)                            # product is negative, memory-mapped)
         raise InputError(f"{what} file {str(path)!r} is not a readable .npy array: "
                          f"{one_line(exc)}") from None
     if not isinstance(array, np.ndarray):

@@ -871,3 +871,17 @@ def test_scene_and_train_never_write_over_a_frame_they_read(tmp_path):
                                       "--out", tmp_path / "pano/p.hdr", *budget), "a panorama of --panoramas")
     refused_without_change(tmp_path, ("train", "--config", tmp_path / "run.run/log.csv", "--out", tmp_path / "run.pt",
                                       *budget), "the run folder's log.csv", "--config")
+
+
+@pytest.mark.parametrize("shape", ["(2, -8, 8)", "(-2, 8, 8)"])
+def test_npy_header_with_a_negative_dimension_is_named(files, shape):
+    """A header shape with an odd count of negative dimensions passed numpy's own check and failed
+    memory-mapping it with a traceback (OverflowError) in every reader that maps its file."""
+    header = f"{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}"
+    header = header + " " * (118 - len(header)) + "\n"
+    (files / "neg.npy").write_bytes(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode()
+                                    + b"\0" * 512)
+    refused_without_change(files, ("simulate", "--config", "te", "--scene", files / "neg.npy",
+                                   "--out", files / "o.npz"), "scene file", "neg.npy")
+    refused_without_change(files, ("golden", "--config", files / "c.json", "--stimulus", files / "neg.npy",
+                                   "--out", files / "o.npz"), "stimulus file", "neg.npy")
