@@ -58,7 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.decode import decode_spikes
+from tespike.golden.decode import decode_light, decode_spikes, legal_words
 from tespike.golden.errors import InputError, TespikeError
 
 #: The estimator written into every calibration file.
@@ -220,24 +220,63 @@ def load_calibration(path: str | Path) -> Calibration:
         if version == FORMAT and not (np.isfinite(tail) and tail >= 0):
             raise InputError(f"calibration file {shown!r}: dark_tail must be a finite number >= 0 "
                              "(write it with 'tespike calibrate')")
+    try:
+        config = SensorConfig.from_json(str(values["config"]), whole=True)
+    except TespikeError as exc:
+        raise InputError(f"calibration file {shown!r}: {exc}") from None
+    for name in ("dark", "gain"):
+        if values[name].dtype.kind != "f":
+            raise InputError(f"calibration file {shown!r}: {name} must be a float (H, W) map, not {values[name].dtype}")
     dark, gain = np.asarray(values["dark"], np.float64), np.asarray(values["gain"], np.float64)
-    if dark.ndim != 2 or dark.shape != gain.shape or not (np.isfinite(dark).all() and np.isfinite(gain).all()) \
-            or (gain <= 0).any() or (dark < 0).any():
-        raise InputError(f"calibration file {shown!r}: dark and gain must be finite (H, W) maps of one "
-                         "shape, dark >= 0 (a mean of decoded light) and gain > 0")
+    if dark.ndim != 2 or dark.shape != gain.shape or not (np.isfinite(dark).all() and np.isfinite(gain).all()):
+        raise InputError(f"calibration file {shown!r}: dark and gain must be finite (H, W) maps of one shape")
+    numbers = _checked_numbers(shown, values, dark.size)
+    # what 'tespike calibrate' can write: dark a mean of decoded light, gain (flat - dark) / flat light
+    # floored at MIN_GAIN; no word decodes above ``top``
+    top = float(decode_light(legal_words(config), config).max())
+    if (dark < 0).any() or (dark > top).any():
+        raise InputError(f"calibration file {shown!r}: dark must lie in [0, {top:g}] (a mean of decoded light; "
+                         f"found {float(dark.min()):g} to {float(dark.max()):g})")
+    high = top / numbers["flat_light"] * (1 + 1e-9)
+    if (gain < MIN_GAIN).any() or (gain > high).any():
+        raise InputError(f"calibration file {shown!r}: gain must lie in [{MIN_GAIN:g}, {high:.6g}] (the flat's "
+                         f"light over {numbers['flat_light']:g}, floored at {MIN_GAIN:g}; found "
+                         f"{float(gain.min()):g} to {float(gain.max()):g})")
     if law is not None:
         if law.dtype != np.float32 or law.ndim != 3 or law.shape[1:] != dark.shape \
                 or not np.isfinite(law).all() or (law < 0).any():
             raise InputError(f"calibration file {shown!r}: dark_law must be float32 (Q, H, W) of the maps' "
                              f"frame size, finite and >= 0, not {law.dtype} {law.shape}")
+        if law.shape[0] == 1 or (np.diff(law, axis=0) < 0).any():
+            raise InputError(f"calibration file {shown!r}: dark_law must hold Q >= 2 quantiles of each pixel "
+                             f"in ascending order (or none), not {law.shape[0]}"
+                             + ("" if law.shape[0] == 1 else " out of order"))
         law = law if law.shape[0] else None
-    try:
-        config = SensorConfig.from_json(str(values["config"]), whole=True)
-    except TespikeError as exc:
-        raise InputError(f"calibration file {shown!r}: {exc}") from None
-    return Calibration(dark, gain, config, int(values["dark_readouts"]), int(values["flat_readouts"]),
-                       float(values["flat_light"]), str(values["estimator"]), int(values["floored"]),
-                       float(values["overflow_share"]), law, tail if law is not None else 0.0)
+    return Calibration(dark, gain, config, numbers["dark_readouts"], numbers["flat_readouts"],
+                       numbers["flat_light"], ESTIMATOR, numbers["floored"], numbers["overflow_share"],
+                       law, tail if law is not None else 0.0)
+
+
+def _checked_numbers(shown: str, values: dict, pixels: int) -> dict:
+    """The calibration file's scalars, each refused in one line naming it where 'tespike calibrate'
+    could not have written it."""
+    out = {}
+    for name, kind, ok, rule in (("dark_readouts", int, lambda v: v >= 1, "an integer >= 1"),
+                                 ("flat_readouts", int, lambda v: v >= 1, "an integer >= 1"),
+                                 ("flat_light", float, lambda v: math.isfinite(v) and v > 0, "a finite number > 0"),
+                                 ("floored", int, lambda v: 0 <= v <= pixels, f"an integer in 0..{pixels}"),
+                                 ("overflow_share", float, lambda v: 0 <= v <= 1, "a number in [0, 1]")):
+        value = values[name]
+        good = value.ndim == 0 and value.dtype.kind in ("iu" if kind is int else "iuf")
+        if good:
+            out[name] = kind(value)
+            good = ok(out[name])
+        if not good:
+            raise InputError(f"calibration file {shown!r}: {name} must be {rule}, not {value!r}")
+    if str(values["estimator"]) != ESTIMATOR:
+        raise InputError(f"calibration file {shown!r}: estimator {str(values['estimator'])!r} unknown "
+                         f"(tespike calibrate writes {ESTIMATOR!r})")
+    return out
 
 
 def check_matches(calibration: Calibration, config: SensorConfig, shape: tuple[int, int],

@@ -118,8 +118,33 @@ def test_file_round_trip(tmp_path):
     assert np.array_equal(back.gain, c.gain) and back.flat_light == 0.03 and back.overflow_share == c.overflow_share
     import dataclasses
     save_calibration(tmp_path / "neg.npz", dataclasses.replace(c, dark=c.dark - 5.0))   # no decoded light is < 0
-    with pytest.raises(InputError, match="dark >= 0"):
+    with pytest.raises(InputError, match=r"dark must lie in \[0, 1\]"):
         load_calibration(tmp_path / "neg.npz")
+
+
+@pytest.mark.parametrize("member, value, words", [
+    ("gain", lambda c: np.full(c.gain.shape, 1e-308), "gain must lie in"),          # TFP and TFI wrote inf
+    ("gain", lambda c: np.full(c.gain.shape, 1e308), "gain must lie in"),
+    ("dark", lambda c: np.full(c.dark.shape, 1e308), "dark must lie in"),           # the network wrote NaN
+    ("dark", lambda c: np.full(c.dark.shape, "a"), "dark must be a float"),         # a traceback
+    ("gain", lambda c: c.gain.astype(np.complex128), "gain must be a float"),       # the imaginary part dropped
+    ("dark_law", lambda c: c.dark_law[:1], "Q >= 2"),
+    ("dark_law", lambda c: c.dark_law[::-1].copy(), "ascending"),
+    ("estimator", lambda c: np.array("bogus"), "estimator 'bogus' unknown"),
+    ("dark_readouts", lambda c: np.array(0), "dark_readouts must be an integer >= 1"),
+    ("flat_light", lambda c: np.array(np.nan), "flat_light must be a finite number > 0"),
+    ("flat_light", lambda c: np.array(-1.0), "flat_light must be a finite number > 0"),
+])
+def test_a_calibration_tespike_calibrate_could_not_write_is_refused(tmp_path, member, value, words):
+    """Finite but absurd maps and numbers made R.npy files of inf or NaN (rc 0), or a traceback."""
+    config = SensorConfig()
+    c = estimate(*_streams(config, 8), config, 0.03)
+    save_calibration(tmp_path / "c.npz", c)
+    members = dict(np.load(tmp_path / "c.npz"))
+    members[member] = value(c)
+    np.savez(tmp_path / "bad.npz", **members)
+    with pytest.raises(InputError, match=f"calibration file .*bad.npz.*{words}"):
+        load_calibration(tmp_path / "bad.npz")
 
 
 def test_reconstruct_with_calibration_and_weights(tmp_path):
