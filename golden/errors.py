@@ -1,5 +1,7 @@
 """Errors that name what was wrong; the command line prints them as one line."""
 
+import re
+
 
 class TespikeError(Exception):
     """Base of every refusal the project makes on purpose (bad config, bad input)."""
@@ -13,9 +15,13 @@ class InputError(TespikeError, ValueError):
     """A stimulus, scene, stream or other input file breaks SPEC section 6."""
 
 
+#: A terminal's escape sequence (colour, bold) in a library's message: never part of a quoted cause.
+_ESCAPE = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")
+
+
 def one_line(exc: BaseException | str, limit: int = 200) -> str:
     """An exception's message (or a message) as one short line, for refusals that quote a cause:
-    whitespace collapsed, the exception's type name when it says nothing, cut with ``...``
-    past ``limit`` characters."""
-    text = " ".join(str(exc).split()) or type(exc).__name__
+    terminal escape sequences dropped, whitespace collapsed, the exception's type name when it says
+    nothing, cut with ``...`` past ``limit`` characters."""
+    text = " ".join(_ESCAPE.sub("", str(exc)).split()) or type(exc).__name__
     return text if len(text) <= limit else text[:limit] + "..."

@@ -26,7 +26,7 @@ import functools
 from pathlib import Path
 
 from tespike.golden.config import PRESETS, SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, one_line
 
 #: The learned methods in the paper's row order, its learned baselines then the network: name -> what
 #: it is. ``mambaspike1`` is MambaSpike of one parsing branch, the paper's spade row on the msb camera
@@ -126,11 +126,18 @@ def _load_cached(path: str, mtime: float, what: str):
         model = module(sizes_class.from_dict(payload["sizes"]))
     except InputError as exc:
         raise InputError(f"{what} {path!r}: {exc}") from None
+    state = payload["state_dict"]
+    if isinstance(state, dict):              # a diverged run's weights would make a light file of NaN
+        bad = next((name for name, tensor in state.items() if isinstance(tensor, torch.Tensor)
+                    and tensor.is_floating_point() and not bool(torch.isfinite(tensor).all())), None)
+        if bad is not None:
+            raise InputError(f"{what} {path!r}: tensor {bad!r} holds a value that is not finite "
+                             "(a training that diverged?)")
     try:
-        model.load_state_dict(payload["state_dict"])
+        model.load_state_dict(state)
     except (RuntimeError, TypeError, AttributeError) as exc:
         raise InputError(f"{what} {path!r} do not fit a {payload['method']} module "
-                         f"({str(exc).splitlines()[0][:100]})") from None
+                         f"({one_line(exc, 300)})") from None      # (torch's first line names no tensor)
     model.eval().to(memory_format=torch.channels_last)
     return model, payload["config"], payload["meta"]
 

@@ -35,7 +35,7 @@ import torch
 
 from tespike.golden.atomic import NO_ROOM
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, one_line
 from tespike.golden.io import atomic_output, word_dtype
 from tespike.golden.resources import MAX_WORKERS, require_memory
 
@@ -167,7 +167,7 @@ def read_checkpoint(path: Path) -> tuple[dict, "TrainOptions"]:
         return state, TrainOptions(**options)
     except (TypeError, ValueError, InputError) as exc:
         raise InputError(f"checkpoint {str(path)!r} holds options this trainer cannot take "
-                         f"({str(exc).splitlines()[0][:100]})") from None
+                         f"({one_line(exc, 300)})") from None
 
 
 def trim_log(path: Path, step: int) -> None:
@@ -365,8 +365,7 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
             generator.bit_generator.state = state["generator"]
             torch.set_rng_state(state["torch_rng"])
         except (RuntimeError, KeyError, TypeError, ValueError) as exc:
-            raise InputError(f"checkpoint {str(checkpoint)!r} does not fit this run "
-                             f"({str(exc).splitlines()[0][:100] if str(exc) else type(exc).__name__})") from None
+            raise InputError(f"checkpoint {str(checkpoint)!r} does not fit this run ({one_line(exc, 300)})") from None
         if best is not None:
             best_weights = read_weights(best_path, "the run's best weights")
         for log in (log_path, validation_path):

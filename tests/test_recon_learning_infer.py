@@ -162,6 +162,27 @@ def test_a_cut_short_weights_file_is_named_in_our_words(tmp_path, keep):
     assert "weights_only" not in message and "PytorchStreamReader" not in message
 
 
+@pytest.mark.parametrize("fault, words", [
+    ("sizes none", "network sizes must be a mapping of size keys, not NoneType"),     # a traceback before
+    ("nan tensor", "tensor 'encoder.embed.weight' holds a value that is not finite"),   # an R.npy of NaN, rc 0
+    ("short tensor", "size mismatch for encoder.embed.weight"),                         # torch's first line alone
+])
+def test_weights_that_cannot_give_light_are_refused_naming_why(tmp_path, fault, words):
+    import torch
+    payload = torch.load(weights_path(SensorConfig.preset("te")), weights_only=True)
+    state = dict(payload["state_dict"])
+    if fault == "sizes none":
+        payload = {**payload, "sizes": None}
+    elif fault == "nan tensor":
+        state["encoder.embed.weight"] = state["encoder.embed.weight"] * float("nan")
+    else:
+        state["encoder.embed.weight"] = state["encoder.embed.weight"][:1]
+    torch.save({**payload, "state_dict": state} if fault != "sizes none" else payload, tmp_path / "w.pt")
+    with pytest.raises(InputError, match="w.pt") as refused:
+        load_weights(tmp_path / "w.pt")
+    assert words in str(refused.value)
+
+
 # -- the shipped weights, through the command line ---------------------------------------------
 from tests.cli import assert_refused, run_tespike  # noqa: E402
 

@@ -75,6 +75,8 @@ class SizesMixin:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]):
+        if not isinstance(data, Mapping):
+            raise InputError(f"{cls.LABEL} sizes must be a mapping of size keys, not {type(data).__name__}")
         fields = {f.name for f in dataclasses.fields(cls)}
         data = {RENAMED.get(key, key) if RENAMED.get(key) in fields else key: value for key, value in data.items()}
         unknown = sorted(set(data) - fields)

@@ -90,7 +90,7 @@ def _load_fault(path: str | Path, exc: BaseException) -> str:
             return "not a zip archive as torch writes: cut short, or another format"
     except OSError:
         pass
-    return f"another format: {one_line(str(exc).splitlines()[0] if str(exc) else exc, 100)}"
+    return f"another format: {one_line(str(exc).splitlines()[0] if str(exc) else exc, 300)}"
 
 
 def read_weights(path: str | Path, what: str = "weights") -> dict[str, Any]:
