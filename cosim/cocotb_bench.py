@@ -137,12 +137,10 @@ class Settings:
                                         len(resets) // self.config.clocks_per_readout, self.height, self.width)
                 return stim, resets
         else:
-            try:
-                resets = np.load(self.resets, allow_pickle=False)
-            except (OSError, ValueError) as exc:
-                raise InputError(f"reset vector {self.resets!r}: cannot read it as .npy ({exc})") from None
+            from tespike.golden.io import load_npy
+            resets = load_npy(self.resets, "--resets")          # (one line naming the file for any fault)
         stim = self.stimulus()
-        return stim, check_resets(resets, stim.shape[0])
+        return stim, check_resets(resets, stim.shape[0], None if self.resets == "sweep" else self.resets)
 
     def stimulus(self) -> np.ndarray:
         if self.stimulus_path is None:

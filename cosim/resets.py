@@ -65,15 +65,20 @@ class Segment:
         return max(0, stop - self.start) // L
 
 
-def check_resets(resets, clocks: int) -> np.ndarray | None:
-    """``resets`` as a (T,) bool array (0/1 integers or booleans), or None; one line if it is not one."""
+def check_resets(resets, clocks: int, path: str | None = None) -> np.ndarray | None:
+    """``resets`` as a (T,) bool array (0/1 integers or booleans), or None; one line if it is not one,
+    naming its file ``path`` where it was read from one."""
     if resets is None:
         return None
     arr = np.asarray(resets)
+    what = "reset vector" if path is None else f"reset vector file {str(path)!r}"
     if arr.shape != (clocks,):
-        raise InputError(f"reset vector of shape {arr.shape}: want one value per stimulus clock, ({clocks},)")
-    if arr.dtype.kind not in "biu" or ((arr != 0) & (arr != 1)).any():
-        raise InputError("reset vector: every value must be 0 or 1 (rst low or high at that clock)")
+        raise InputError(f"{what} has shape {arr.shape}: want one value per stimulus clock, ({clocks},)")
+    if arr.dtype.kind not in "biu":
+        raise InputError(f"{what} holds {arr.dtype} values: want integers or booleans, 0 or 1 "
+                         "(rst low or high at that clock)")
+    if ((arr != 0) & (arr != 1)).any():
+        raise InputError(f"{what}: every value must be 0 or 1 (rst low or high at that clock)")
     return arr.astype(bool)
 
 

@@ -70,6 +70,22 @@ def test_bad_reset_vectors_are_refused(bad, match):
         check_resets(bad, 4)
 
 
+def test_a_reset_vector_file_is_read_as_every_npy_input_and_named(tmp_path):
+    """--resets went to np.load directly: an empty file was an EOFError traceback, an archive was "of
+    shape (1,)" and no refusal named the file."""
+    from tespike.cosim.cocotb_bench import Settings
+    from tespike.golden.config import SensorConfig
+    (tmp_path / "empty.npy").write_bytes(b"")
+    with open(tmp_path / "archive.npy", "wb") as handle:
+        np.savez(handle, a=np.zeros(3))
+    np.save(tmp_path / "float.npy", np.zeros(2 * SensorConfig().clocks_per_readout))
+    for name, words in (("empty.npy", "is empty"), ("archive.npy", "holds an archive"),
+                        ("float.npy", "holds float64 values")):
+        settings = Settings(SensorConfig(), 1, 1, 2, 0, None, None, str(tmp_path / name))
+        with pytest.raises(InputError, match=f"{name}'.*{words}|{words}.*{name}"):
+            settings.inputs()
+
+
 def _frames(clocks, n=1):
     return np.zeros((len(clocks), n), np.uint32)
 
