@@ -254,6 +254,7 @@ def open_npz(path: str | Path, what: str, holding: str = "") -> Iterator[np.lib.
     if not magic.startswith(b"PK"):
         raise InputError(f"{what} file {shown!r} is not a readable .npz archive (no zip header)")
     try:
+        _check_member_sizes(path)
         with np.load(path, allow_pickle=False) as npz:
             yield npz
     except InputError:
@@ -261,6 +262,24 @@ def open_npz(path: str | Path, what: str, holding: str = "") -> Iterator[np.lib.
     except NPZ_ERRORS as exc:
         _refuse_starved(exc, what, path)
         raise InputError(f"{what} file {shown!r} is not a readable .npz archive: {one_line(exc)}") from None
+
+
+def _check_member_sizes(path: str | Path) -> None:
+    """Refuse (ValueError) an .npy member whose header's shape needs more bytes than the member holds,
+    read from its first bytes and the archive's directory before numpy allocates the shape: a
+    400-byte archive declaring 9 TiB was reported as running out of memory."""
+    with zipfile.ZipFile(path) as archive:
+        for info in archive.infolist():
+            if not info.filename.endswith(".npy") or info.flag_bits & 0x1:
+                continue
+            with archive.open(info) as member:
+                version = np.lib.format.read_magic(member)
+                read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                               else np.lib.format.read_array_header_2_0)
+                shape, _, dtype = read_header(member)
+                header = member.tell()
+            if not dtype.hasobject and header + int(np.prod(shape, dtype=object)) * dtype.itemsize > info.file_size:
+                raise ValueError(f"member {info.filename!r} is shorter than its header's shape {shape}")
 
 
 def _refuse_starved(exc: BaseException, what: str, path) -> None:

@@ -84,3 +84,23 @@ def test_scan_light_refuses_as_check_scene_does_without_converting(dtype, values
     else:
         assert np.all(light >= 0)
         scan_light(light)
+
+
+def test_a_compressed_member_declaring_more_than_it_holds_is_named_not_out_of_memory(tmp_path):
+    """A 400-byte compressed S.npz whose words header declares (100000, 10000, 10000) was reported
+    as "out of memory" (numpy allocated the shape first), naming no file."""
+    import io
+    import zipfile
+
+    from tespike.golden.io import load_stream
+    config_member = io.BytesIO()
+    np.save(config_member, np.array(SensorConfig().to_json()))
+    header = "{'descr': '|u1', 'fortran_order': False, 'shape': (100000, 10000, 10000), }"
+    header = header + " " * (118 - len(header)) + "\n"
+    with zipfile.ZipFile(tmp_path / "big.npz", "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("words.npy", b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode()
+                         + b"\0" * 256)
+        archive.writestr("config.npy", config_member.getvalue())
+    with pytest.raises(InputError, match=r"stream file '.*big.npz' .*member 'words.npy' is shorter than its "
+                                         r"header's shape \(100000, 10000, 10000\)"):
+        load_stream(tmp_path / "big.npz")
