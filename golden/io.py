@@ -311,13 +311,7 @@ def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarr
         words = _stored_member(path, "words.npy") if memory_map else None
         if words is None:
             words = npz["words"]
-    if config_text.ndim != 0 or config_text.dtype.kind not in "US":
-        raise InputError(f"stream file {shown!r}: 'config' must be a 0-d string, "
-                         f"not {config_text.dtype} {config_text.shape}")
-    try:
-        config = SensorConfig.from_json(str(config_text), whole=True)
-    except TespikeError as exc:
-        raise InputError(f"stream file {shown!r}: {exc}") from None
+    config = config_member(config_text, f"stream file {shown!r}")
     if words.dtype.kind not in "iu" or words.ndim != 3:
         raise InputError(f"stream file {shown!r}: 'words' must be an integer (K, H, W) array, "
                          f"not {words.dtype} {words.shape}")
@@ -329,6 +323,23 @@ def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarr
     except InputError as exc:
         raise InputError(f"stream file {shown!r}: {exc}") from None
     return words, config
+
+
+def config_member(value: np.ndarray, what: str) -> SensorConfig:
+    """The configuration an .npz file holds as its ``config`` member (a 0-d string of JSON; bytes are
+    read as UTF-8), or one line starting with ``what`` (the file)."""
+    if value.ndim != 0 or value.dtype.kind not in "US":
+        raise InputError(f"{what}: 'config' must be a 0-d string, not {value.dtype} {value.shape}")
+    text = value.item()
+    if isinstance(text, bytes):
+        try:
+            text = text.decode("utf-8")
+        except UnicodeDecodeError:
+            raise InputError(f"{what}: 'config' holds bytes that are not UTF-8 text") from None
+    try:
+        return SensorConfig.from_json(text, whole=True)
+    except TespikeError as exc:
+        raise InputError(f"{what}: {exc}") from None
 
 
 def images_array(shape: tuple[int, int, int], out: np.ndarray | None = None) -> np.ndarray:

@@ -119,7 +119,12 @@ class SensorNoise:
         dark = values.get("dark_current", None)
         if dark is not None and not isinstance(dark, str):
             raise InputError(f"{what}: dark_current = {dark!r} must be 'none', 'eq12' or 'eq13'")
-        return cls(**values)
+        try:
+            return cls(**values)
+        except InputError as exc:                  # a value's own check: say which file holds it
+            if what == "sensor noise":
+                raise
+            raise InputError(f"{what}: {str(exc).removeprefix('sensor noise ')}") from None
 
 
 def load_noise(path: str | Path) -> SensorNoise:

@@ -59,7 +59,7 @@ import numpy as np
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.decode import decode_light, decode_spikes, legal_words
-from tespike.golden.errors import InputError, TespikeError
+from tespike.golden.errors import InputError
 
 #: The estimator written into every calibration file.
 ESTIMATOR = "mean-decoded"
@@ -199,7 +199,7 @@ def save_calibration(path: str | Path, calibration: Calibration) -> None:
 
 def load_calibration(path: str | Path) -> Calibration:
     """Read ``C.npz``, or one line naming the file and what is wrong."""
-    from tespike.golden.io import open_npz
+    from tespike.golden.io import config_member, open_npz
     shown = str(path)
     with open_npz(path, "calibration", "written by 'tespike calibrate'") as npz:
         keys = ("dark", "gain", "config", "dark_readouts", "flat_readouts", "flat_light", "estimator",
@@ -220,10 +220,7 @@ def load_calibration(path: str | Path) -> Calibration:
         if version == FORMAT and not (np.isfinite(tail) and tail >= 0):
             raise InputError(f"calibration file {shown!r}: dark_tail must be a finite number >= 0 "
                              "(write it with 'tespike calibrate')")
-    try:
-        config = SensorConfig.from_json(str(values["config"]), whole=True)
-    except TespikeError as exc:
-        raise InputError(f"calibration file {shown!r}: {exc}") from None
+    config = config_member(values["config"], f"calibration file {shown!r}")
     for name in ("dark", "gain"):
         if values[name].dtype.kind != "f":
             raise InputError(f"calibration file {shown!r}: {name} must be a float (H, W) map, not {values[name].dtype}")

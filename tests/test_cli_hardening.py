@@ -502,6 +502,15 @@ def test_a_stream_whose_config_lacks_a_key_is_refused(files):
                                    "--out", files / "o.npy"), "part.npz", "lacks key 'threshold'")
 
 
+@pytest.mark.parametrize("text, words", [('{"dsnu": -0.2}', "dsnu = -0.2"),
+                                         ('{"dark_current": "eq99"}', "'eq99' unknown")])
+def test_noise_file_value_refusals_name_the_file(files, text, words):
+    """A value's own check (range, model name) named neither the file nor the flag."""
+    (files / "n.json").write_text(text)
+    refused_without_change(files, ("simulate", "--config", "te", "--scene", files / "i.npy", "--noise",
+                                   files / "n.json", "--out", files / "o.npz"), "sensor noise file", "n.json", words)
+
+
 def test_noise_file_refuses_a_key_given_twice(files):
     (files / "n.json").write_text('{"prnu": 0.01, "prnu": 0.02}')
     refused_without_change(files, ("simulate", "--config", "te", "--scene", files / "i.npy", "--noise",

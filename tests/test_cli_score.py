@@ -123,11 +123,15 @@ def test_refusals(tmp_path, rng):
                                    *extra), *words)
 
     np.save(tmp_path / "short.npy", reference[:, 1:])
-    refused("shape", estimate_path=tmp_path / "short.npy")
+    refused("shape", str(tmp_path / "short.npy"), estimate_path=tmp_path / "short.npy")
     bad = reference.copy()
     bad[2, 3, 4] = np.nan
     np.save(tmp_path / "nan.npy", bad)
-    refused("estimate", "non-finite", estimate_path=tmp_path / "nan.npy")
+    refused("estimate", "non-finite", str(tmp_path / "nan.npy"), estimate_path=tmp_path / "nan.npy")
+    np.save(tmp_path / "int.npy", reference.astype(np.int32))
+    refused("estimate file", str(tmp_path / "int.npy"), "not a float type", estimate_path=tmp_path / "int.npy")
+    np.save(tmp_path / "4d.npy", reference[None])
+    refused("estimate file", str(tmp_path / "4d.npy"), "(K, H, W)", estimate_path=tmp_path / "4d.npy")
     refused("reference", "non-finite", reference_path=tmp_path / "nan.npy")
     np.save(tmp_path / "neg.npy", reference - 0.5)
     refused("reference", str(tmp_path / "neg.npy"), "negative", reference_path=tmp_path / "neg.npy")

@@ -104,3 +104,17 @@ def test_a_compressed_member_declaring_more_than_it_holds_is_named_not_out_of_me
     with pytest.raises(InputError, match=r"stream file '.*big.npz' .*member 'words.npy' is shorter than its "
                                          r"header's shape \(100000, 10000, 10000\)"):
         load_stream(tmp_path / "big.npz")
+
+
+def test_a_config_member_stored_as_bytes_is_read_as_utf8(tmp_path):
+    """np.array(text.encode()) is a 0-d string array too (dtype S): it was read as "b'{...}'" and
+    refused as "not valid JSON"."""
+    from tespike.golden.io import load_stream
+    config = SensorConfig()
+    words = np.zeros((2, 3, 4), np.uint8)
+    np.savez(tmp_path / "s.npz", words=words, config=np.array(config.to_json().encode()))
+    back, read = load_stream(tmp_path / "s.npz")
+    assert read == config and np.array_equal(back, words)
+    np.savez(tmp_path / "bad.npz", words=words, config=np.array(b"\xff\xfe"))
+    with pytest.raises(InputError, match="bad.npz.*'config' holds bytes that are not UTF-8"):
+        load_stream(tmp_path / "bad.npz")

@@ -54,9 +54,10 @@ def load_estimate(path):
     from tespike.golden.io import load_npy
     estimate = load_npy(path, "estimate", mmap_mode="r")
     if estimate.dtype.kind != "f":
-        raise InputError(f"estimate dtype {estimate.dtype} is not a float type (light must be a float array)")
+        raise InputError(f"estimate file {str(path)!r} holds {estimate.dtype}, not a float type "
+                         "(light must be a float array)")
     if estimate.ndim != 3:
-        raise InputError(f"estimate shape {estimate.shape} must be (K, H, W)")
+        raise InputError(f"estimate file {str(path)!r} holds shape {estimate.shape}: must be (K, H, W)")
     return estimate
 
 
@@ -88,7 +89,8 @@ def run(args) -> int:
     reference = load_scene(args.reference, memory_map=True, what="reference")
     estimate = load_estimate(args.estimate)
     if estimate.shape != reference.shape:
-        raise InputError(f"estimate shape {estimate.shape} != reference shape {reference.shape}")
+        raise InputError(f"estimate file {str(args.estimate)!r} holds shape {estimate.shape}, reference file "
+                         f"{str(args.reference)!r} {reference.shape}: they must be equal")
     frames = frame_range(args.frames, reference.shape[0])
     ref = reference[frames.start:frames.stop]          # memory maps: the metrics read them in bands
     est = estimate[frames.start:frames.stop]
@@ -98,8 +100,8 @@ def run(args) -> int:
     for k in range(0, len(frames), step):
         e = np.asarray(est[k:k + step], dtype=np.float64)
         if not np.isfinite(e).all():
-            raise InputError(f"estimate holds a non-finite value ({e[~np.isfinite(e)][0]}); "
-                             "light must be finite")
+            raise InputError(f"estimate file {str(args.estimate)!r} holds a non-finite value "
+                             f"({e[~np.isfinite(e)][0]}); light must be finite")
         negative += int((e < 0).sum())
         lowest = min(lowest, float(e.min()))
         frame_peaks = np.max(ref[k:k + step], axis=(1, 2))
