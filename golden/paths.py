@@ -80,6 +80,9 @@ def check_output_file(path: str | os.PathLike, what: str | None = None) -> Path:
     label = f"{what} {text!r}" if what else repr(text)
     if not text:
         raise InputError(f"{what or 'output'}: empty path")
+    if text.endswith(os.sep) and not os.path.isdir(text):     # (a directory's name, not a file's)
+        raise InputError(f"cannot write {label}: a path ending in {os.sep!r} names a directory "
+                         "(name a file)")
     target = resolve_output(text)
     try:
         info = os.stat(target)

@@ -68,6 +68,11 @@ def golden_args(folder, out, stimulus=None, config=None):
             "--out", out)
 
 
+def test_a_file_output_ending_in_a_separator_is_refused(files):
+    """``--out o.npz/`` names a directory that does not exist: it was written as the file ``o.npz``."""
+    refused_without_change(files, golden_args(files, str(files / "o.npz") + "/"), "o.npz/", "names a directory")
+
+
 @pytest.mark.parametrize("flag", ["--stimulus", "--config"])
 def test_output_equal_to_an_input_is_refused_naming_both(files, flag):
     target = files / ("e.npy" if flag == "--stimulus" else "c.json")

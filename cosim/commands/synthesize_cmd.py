@@ -189,16 +189,15 @@ def run(args) -> int:
 
     text, top, pixels, what = _design(args)
     stimulus = _stimulus(args)
-    report(args, f"synthesize: {what} (yosys synth, hierarchy kept)")
     try:
         result = synthesize_hierarchy(text, top)
     except SynthesisError as exc:     # about --verilog: named as given, never as Yosys's copy
         if args.verilog is None:
             raise InputError(str(exc)) from None
         raise InputError(f"--verilog {args.verilog!r}: {str(exc).replace(DESIGN_FILE, args.verilog)}") from None
-    report(args, "\n".join(report_lines(result, pixels)))
+    lines = [f"synthesize: {what} (yosys synth, hierarchy kept)", *report_lines(result, pixels)]
     if stimulus is not None:
         from tespike.golden.config import load_config
-        report(args, "\n".join(energy_lines(load_config(args.config), stimulus, args.lanes, result, text,
-                                            args.icarus)))
+        lines += energy_lines(load_config(args.config), stimulus, args.lanes, result, text, args.icarus)
+    report(args, "\n".join(lines))               # (all at the end: a refusal leaves stdout empty)
     return 0
