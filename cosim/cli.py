@@ -211,6 +211,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:          # only top-level options, e.g. "tespike -q"
         parser.print_help()
         return 0
+    args.argv = argv                  # the command line as given (a run records how it was made)
     previous = _install_signal_handlers()
 
     def prepare():                    # (in _run: a stop while preparing ends in its one line too)

@@ -163,10 +163,13 @@ def test_peak_sets_the_clips_brightness(tmp_path, monkeypatch):
     import tespike.recon.train as trainer
     from tespike.cosim.cli import main
 
-    seen = []
-    monkeypatch.setattr(trainer, "train", lambda options, out, **kw: seen.append(options))
+    seen, commands = [], []
+    monkeypatch.setattr(trainer, "train", lambda options, out, **kw: (seen.append(options),
+                                                                     commands.append(kw["command"])))
     assert main(["train", "--out", str(tmp_path / "w.pt"), "--steps", "1", "--peak", "0.01", "0.3", "-q"]) == 0
     assert seen[0].data_recipe().peak == (0.01, 0.3)
+    # the run records the command it was given (in-process too: it recorded the host's sys.argv)
+    assert commands[0] == f"tespike train --out {tmp_path / 'w.pt'} --steps 1 --peak 0.01 0.3 -q"
     assert main(["train", "--out", str(tmp_path / "w.pt"), "--steps", "1", "-q"]) == 0
     assert seen[1].data_recipe().peak == EngineRecipe().peak
     from tespike.recon.scenes import write_hdr

@@ -97,7 +97,6 @@ def _frame_files(folder: str) -> list:
 
 def run(args) -> int:
     import shlex
-    import sys
     from pathlib import Path
 
     from tespike.golden.config import PRESETS, load_config
@@ -149,7 +148,7 @@ def run(args) -> int:
                                    **({"noise_fraction": args.noise_fraction} if args.noise_fraction else {}),
                                    **({"noisy_input": args.noisy_input} if args.noisy_input else {})},
                            init=args.init, **given)
-    command = "tespike train " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    command = "tespike " + " ".join(shlex.quote(a) for a in args.argv)   # (main's argv: in-process too)
     try:
         train(options, out, resume=args.resume, progress=progress_wanted(args), command=command)
     except InputError as exc:     # the recipe holds folders made absolute: name them as the user typed them
