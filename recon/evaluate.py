@@ -167,7 +167,7 @@ def check_methods(methods: Sequence[str]) -> tuple[str, ...]:
     return methods
 
 
-def check_peak(sequence: str, peak: float) -> float:
+def check_sequence_peak(sequence: str, peak: float) -> float:
     """Refuse a sequence whose peak light is not above 0: it normalises the metrics (Table 1)."""
     if not peak > 0:
         raise InputError(f"sequence {sequence!r} is all zero: its peak cannot normalise the metrics")
@@ -335,7 +335,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
            tqdm(total=total, desc="evaluate", unit="step", disable=not progress))
     for index, (name, light) in enumerate(sequences):
         light, peak = _checked_sequence(name, light)   # checked slice by slice, never copied whole
-        check_peak(name, peak)
+        check_sequence_peak(name, peak)
         K, H, W = light.shape
         word_bytes = max(word_dtype(configs[m]).itemsize for m in sensors)
         kept = len(sensors) * (word_bytes + 4 * len(methods)) if keep else 0

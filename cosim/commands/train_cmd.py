@@ -109,8 +109,8 @@ def run(args) -> int:
         raise InputError("give a budget: --steps N or --minutes M")
     check_threads_argument(args.threads)
     if args.peak is not None:
-        from tespike.recon.engine.clips import check_peak
-        check_peak(args.peak, "--peak {:g} {:g}".format(*args.peak))
+        from tespike.recon.engine.clips import check_peak_range
+        check_peak_range(args.peak, "--peak {:g} {:g}".format(*args.peak))
     if args.noise_fraction is not None and not 0 <= args.noise_fraction <= 1:
         raise InputError(f"--noise-fraction {args.noise_fraction}: must lie in [0, 1]")
     for folder in args.hdr:

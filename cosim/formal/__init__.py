@@ -21,15 +21,15 @@ from tespike.golden.config import SensorConfig
 from .pixel import (STREAM_ARRAY, bounds_harness, corners, rule_harness, amaranth_stream_harness,
                     stream_lanes)
 from .rule_equivalence import Equivalence, prove_equivalence, stream_rule_equivalence
-from .smtbmc import SOLVERS, TOOLS, ProofToolError, Result, require_tools
+from .smtbmc import SOLVERS, TOOLS, ProofToolError, ProofResult, require_tools
 from .smtbmc import prove as _prove_harness
 
-__all__ = ["SOLVERS", "TOOLS", "ProofToolError", "Result", "corners", "properties", "prove",
+__all__ = ["SOLVERS", "TOOLS", "ProofToolError", "ProofResult", "corners", "properties", "prove",
            "require_tools", "rule_harness", "bounds_harness", "amaranth_stream_harness",
            "stream_rule_equivalence", "STREAM_ARRAY", "stream_lanes"]
 
 
-def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Result:
+def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> ProofResult:
     """Prove one pixel property: a harness by k-induction (base case and induction step, both
     ``depth`` long); a ``stream-pixel-rule`` equivalence by one SAT call."""
     if isinstance(harness, Equivalence):

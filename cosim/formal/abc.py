@@ -37,10 +37,11 @@ import re
 import subprocess
 import tempfile
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 from .. import children
+from .smtbmc import ProofResult
 from .tops import Harness
 
 #: Yosys passes from the harness's Verilog to an AIGER model with the assertions as bad states.
@@ -59,15 +60,6 @@ DPROVE_SECONDS = 150.0
 #: The unbounded attempts in order: (method, ABC commands after ``strash``, seconds at most).
 UNBOUNDED = (("unbounded (scorr + pdr)", "scorr; pdr", PDR_SECONDS),
              ("unbounded (scorr + dprove)", "scorr; dprove", DPROVE_SECONDS))
-
-
-@dataclass
-class TopResult:
-    name: str
-    proved: bool
-    seconds: float
-    method: str          # "unbounded (scorr + pdr)", "unbounded (scorr + dprove)", "BMC <n>"
-    detail: str = ""     # failure: frame and assertion; undecided: why
 
 
 class AbcError(RuntimeError):
@@ -114,7 +106,7 @@ def _bmc_passed(log: str, bound: int) -> bool:
     return bool(found) and int(found.group(1)) >= bound
 
 
-def prove_harness(name: str, harness: Harness, *, timeout: float = 300.0) -> TopResult:
+def prove_harness(name: str, harness: Harness, *, timeout: float = 300.0) -> ProofResult:
     """Prove one harness: the :data:`UNBOUNDED` attempts in order, else BMC to the harness's bound,
     all within ``timeout`` seconds."""
     start = time.perf_counter()
@@ -142,14 +134,14 @@ def prove_harness(name: str, harness: Harness, *, timeout: float = 300.0) -> Top
             elif finished and _bmc_passed(log, harness.steps):
                 verdict = "proved"
             else:
-                return TopResult(name, False, time.perf_counter() - start, method,
-                                 f"undecided: neither an unbounded proof nor BMC {harness.steps} "
-                                 f"finished in {timeout:.0f} s")
+                return ProofResult(name, False, time.perf_counter() - start, method=method,
+                                   detail=f"undecided: neither an unbounded proof nor BMC {harness.steps} "
+                                          f"finished in {timeout:.0f} s")
         if verdict == "proved":
-            return TopResult(name, True, time.perf_counter() - start, method)
+            return ProofResult(name, True, time.perf_counter() - start, method=method)
         which = _name_failure(harness, work, frame)
-        return TopResult(name, False, time.perf_counter() - start, method,
-                         f"clock {frame}: {which}")
+        return ProofResult(name, False, time.perf_counter() - start, method=method,
+                           detail=f"clock {frame}: {which}")
 
 
 def _name_failure(harness: Harness, work: Path, frame: int) -> str:

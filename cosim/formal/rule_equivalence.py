@@ -12,7 +12,7 @@ from pathlib import Path
 
 from tespike.golden.config import SensorConfig
 
-from .smtbmc import ProofToolError, Result, run_tool
+from .smtbmc import ProofToolError, ProofResult, run_tool
 
 # -- the streaming Verilog top's pixel rule ---------------------------------------------------
 class Equivalence:
@@ -73,7 +73,7 @@ def _counterexample(log: str) -> str:
     return f"{', '.join(differ) or 'outputs differ'} at {' '.join(inputs)}"
 
 
-def prove_equivalence(name: str, eq: Equivalence, trace_dir: Path) -> Result:
+def prove_equivalence(name: str, eq: Equivalence, trace_dir: Path) -> ProofResult:
     """Yosys ``miter -equiv`` + ``sat -prove-asserts``: the rule module of the streaming top
     against the Amaranth pixel (built without its word register, as the arrays use it) cut at
     its registers. Purely combinational, so one SAT call is the proof (no induction)."""
@@ -105,7 +105,7 @@ def prove_equivalence(name: str, eq: Equivalence, trace_dir: Path) -> Result:
         done = run_tool(["yosys", "-p", script], work)
         log = done.stdout + done.stderr
         if done.returncode == 0 and "SAT proof finished - no model found: SUCCESS!" in log:
-            return Result(name, True, time.perf_counter() - start)
+            return ProofResult(name, True, time.perf_counter() - start)
         if "SAT proof finished - model found: FAIL!" not in log:
             errors = [line for line in log.splitlines() if "ERROR" in line] or log.strip().splitlines()[-1:]
             raise ProofToolError(f"{name}: yosys failed: {errors[0] if errors else 'no output'}")
@@ -114,7 +114,7 @@ def prove_equivalence(name: str, eq: Equivalence, trace_dir: Path) -> Result:
             trace_dir.mkdir(parents=True, exist_ok=True)
             trace = trace_dir / f"{name}.vcd"
             shutil.copyfile(work / "trace.vcd", trace)
-        return Result(name, False, time.perf_counter() - start,
+        return ProofResult(name, False, time.perf_counter() - start,
                       f"equivalence check: {_counterexample(log)}", trace)
 
 

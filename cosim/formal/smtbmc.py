@@ -67,12 +67,16 @@ def _yosys_checks(text: str) -> tuple[str, dict[str, str]]:
 
 
 @dataclass
-class Result:
+class ProofResult:
+    """One property's verdict, whichever engine proved it (yosys-smtbmc here, ABC for the tops:
+    :func:`tespike.cosim.formal.abc.prove_harness`)."""
+
     name: str
     proved: bool
     seconds: float
-    detail: str = ""          # failure: which step and assertion
-    trace: Path | None = None  # failure: the counterexample VCD
+    detail: str = ""           # failure: which step or frame and assertion; undecided: why
+    trace: Path | None = None  # failure (yosys-smtbmc): the counterexample VCD
+    method: str = ""           # ABC: "unbounded (scorr + pdr)", "unbounded (scorr + dprove)", "BMC <n>"
 
 
 def run_tool(cmd: list[str], cwd: Path) -> subprocess.CompletedProcess:
@@ -90,7 +94,7 @@ def _failed_assertion(log: str, messages: dict[str, str]) -> str:
     return "no failed assertion named in the log"
 
 
-def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Result:
+def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> ProofResult:
     """Prove one harness by k-induction with yosys-smtbmc (base case and induction step, both
     ``depth`` long); :func:`tespike.cosim.formal.prove` sends an equivalence elsewhere first."""
     from amaranth.back import rtlil
@@ -123,8 +127,8 @@ def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Re
                 trace_dir.mkdir(parents=True, exist_ok=True)
                 trace = trace_dir / f"{name}.vcd"
                 shutil.copyfile(vcd, trace)
-            return Result(name, False, time.perf_counter() - start,
+            return ProofResult(name, False, time.perf_counter() - start,
                           f"{step}: {_failed_assertion(done.stdout, messages)}", trace)
-    return Result(name, True, time.perf_counter() - start)
+    return ProofResult(name, True, time.perf_counter() - start)
 
 

@@ -148,8 +148,8 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     """
     from dask import delayed
 
-    from tespike.recon.evaluate import (Evaluation, Measurement, check_methods, check_peak, learned_span,
-                                        scored_frames)
+    from tespike.recon.evaluate import (Evaluation, Measurement, check_methods, check_sequence_peak,
+                                        learned_span, scored_frames)
     from tespike.recon.methods import RECON_METHODS, available_methods, missing_weights
     from tespike.recon.settings import ReconSettings
 
@@ -181,7 +181,7 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     for sequence in sequences:
         info = store.info(sequence)
         K, H, W = info["frames"], info["height"], info["width"]
-        peak = check_peak(sequence, float(info["peak"]))
+        peak = check_sequence_peak(sequence, float(info["peak"]))
         if min(H, W) < 2 * h + 1:
             raise InputError(f"sequence {sequence!r} is {H} x {W}: SSIM needs frames of at least "
                              f"{2 * h + 1} x {2 * h + 1} pixels")

@@ -79,7 +79,7 @@ NOISE_DRAW = {"dark_current": ("eq12", "eq13"), "dark_level": (0.05, 6.0), "dsnu
               "comparator_offset": (0.0, 0.05)}
 
 
-def check_peak(peak, name: str) -> None:
+def check_peak_range(peak, name: str) -> None:
     """A clips' peak range ``(low, high)`` (x the design light), refused in one line
     naming ``name`` unless ``0 < low <= high`` and finite (the recipe and ``--peak``)."""
     low, high = peak
@@ -131,7 +131,7 @@ class EngineRecipe:
             lo, hi = getattr(self, key)
             if not (type(lo) is int and type(hi) is int and 1 <= lo <= hi):
                 raise InputError(f"engine recipe {key} = {(lo, hi)!r}: need integers 1 <= low <= high")
-        check_peak(self.peak, f"engine recipe peak = {self.peak!r}")
+        check_peak_range(self.peak, f"engine recipe peak = {self.peak!r}")
         if not 0 <= self.short_fraction <= 1 or not 0 <= self.folder_weight <= 1 \
                 or not 0 <= self.noise_fraction <= 1:
             raise InputError("engine recipe short_fraction, folder_weight and noise_fraction must lie in [0, 1]")
