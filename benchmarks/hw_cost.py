@@ -41,7 +41,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tespike.cosim.synthesis import ABC_GATE_SETS, synthesize, transistor_range as span  # noqa: E402
+from tespike.cosim.synthesis import ABC_GATE_SETS, synthesize_module, transistor_range as span  # noqa: E402
 from tespike.golden.config import SensorConfig  # noqa: E402
 
 #: Pixels per array used to amortise the timing block.
@@ -106,10 +106,10 @@ def measure(config: SensorConfig) -> dict:
         "config": config,
         "word_bits": config.word_bits,
         "dr_db": dynamic_range_db(config),
-        "full": synthesize(pixel_verilog(config), names["pixel"]),
-        "counting": synthesize(pixel_verilog(small), names["pixel"]),
-        "nobuffer": synthesize(pixel_verilog(small, word_register=False), names["pixel"]),
-        "timing": synthesize(timing_verilog(config), names["timing"]),
+        "full": synthesize_module(pixel_verilog(config), names["pixel"]),
+        "counting": synthesize_module(pixel_verilog(small), names["pixel"]),
+        "nobuffer": synthesize_module(pixel_verilog(small, word_register=False), names["pixel"]),
+        "timing": synthesize_module(timing_verilog(config), names["timing"]),
         "toggles": activity(config),
     }
     for key, cfg, registered in (("full", config, True), ("counting", small, True), ("nobuffer", small, False)):

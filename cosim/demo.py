@@ -103,13 +103,13 @@ def choose_crop(light: np.ndarray, size: int) -> tuple[int, int]:
 
 # ---------------------------------------------------------------- hardware cost
 def hardware_cost(configs: dict[str, SensorConfig], yosys: str = "yosys") -> list[dict] | str:
-    """Per sensor: Yosys cells, flip-flops and transistor estimates (:func:`tespike.cosim.synthesis.synthesize`)
+    """Per sensor: Yosys cells, flip-flops and transistor estimates (:func:`tespike.cosim.synthesis.synthesize_module`)
     of one pixel and of the shared timing block. A string says why there is no table (Yosys
     missing, failing, or reporting no usable estimate): the report says so instead of crashing."""
     from tespike.rtl.names import module_names
     from tespike.rtl.verilog import pixel_verilog, timing_verilog
 
-    from .synthesis import SynthesisError, synthesize, yosys_missing
+    from .synthesis import SynthesisError, synthesize_module, yosys_missing
     missing = yosys_missing(yosys)
     if missing:
         return missing
@@ -118,8 +118,8 @@ def hardware_cost(configs: dict[str, SensorConfig], yosys: str = "yosys") -> lis
         names = module_names(config)
         try:
             rows.append({"sensor": label, "config": config,
-                         "pixel": synthesize(pixel_verilog(config), names["pixel"], yosys),
-                         "timing": synthesize(timing_verilog(config), names["timing"], yosys)})
+                         "pixel": synthesize_module(pixel_verilog(config), names["pixel"], yosys),
+                         "timing": synthesize_module(timing_verilog(config), names["timing"], yosys)})
         except SynthesisError as exc:
             return f"{label}: {exc}"
     return rows

@@ -1,7 +1,7 @@
 """Yosys synthesis of the project's Verilog: cells, flip-flops and a CMOS transistor estimate.
 
 Two flows share one Yosys run (:func:`yosys_run`), one cost script (:func:`mapping_steps`) and
-one reading of its reports: :func:`synthesize` costs one module as a whole (the demo's small
+one reading of its reports: :func:`synthesize_module` costs one module as a whole (the demo's small
 cost table, :mod:`tespike.cosim.demo`, and the full study, ``benchmarks/hw_cost.py``,
 ``docs/hardware-cost.md``); :func:`synthesize_hierarchy` (below) costs every module of a
 generated top. ``synth -top <module>; stat`` counts cells of
@@ -135,7 +135,7 @@ def mapping_steps(gate_sets: tuple[str, ...]) -> list[str]:
     return steps
 
 
-def synthesize(verilog_text: str, top: str, yosys: str = "yosys",
+def synthesize_module(verilog_text: str, top: str, yosys: str = "yosys",
                gate_sets: tuple[str, ...] = ABC_GATE_SETS) -> dict:
     """Synthesize module ``top``; return cells, flops, ``transistors`` (smallest estimate
     over ``gate_sets``) and ``transistors_max`` (largest). Raises :class:`SynthesisError`."""
@@ -249,7 +249,7 @@ def synthesize_hierarchy(verilog_text: str, top: str | None = None, yosys: str =
 
     Returns ``top``, ``modules`` (per module its own cells by type, flip-flops, submodule
     instances and own transistor estimates, smallest and largest over ``gate_sets``, by the
-    flow of :func:`synthesize`) and ``run`` (wall and CPU seconds and peak memory of Yosys).
+    flow of :func:`synthesize_module`) and ``run`` (wall and CPU seconds and peak memory of Yosys).
     ``top=None``: the module no other instantiates. Raises :class:`SynthesisError`.
     """
     steps = [f"synth -top {top}" if top else "synth -auto-top", "setattr -mod -unset top", *mapping_steps(gate_sets)]

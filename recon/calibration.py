@@ -61,8 +61,9 @@ from tespike.golden.config import SensorConfig
 from tespike.golden.decode import decode_light, decode_spikes, legal_words
 from tespike.golden.errors import InputError
 
-#: The estimator written into every calibration file.
-ESTIMATOR = "mean-decoded"
+#: How every calibration file's maps were estimated (its "estimator" member; not a decoding rule of
+#: tespike.golden.decode.ESTIMATORS).
+CALIBRATION_ESTIMATOR = "mean-decoded"
 #: Version tag of the file format.
 FORMAT = "tespike-calibration-2"
 #: The previous format: the same maps without the dark law (read, corrected by the mean dark rate).
@@ -90,7 +91,7 @@ class Calibration:
     dark_readouts: int
     flat_readouts: int
     flat_light: float
-    estimator: str = ESTIMATOR
+    estimator: str = CALIBRATION_ESTIMATOR
     floored: int = 0
     overflow_share: float = 0.0
     #: (Q, H, W) float32, decoded dark spikes per readout at Q quantile levels (recon.darklaw), or
@@ -177,7 +178,7 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
     raw_gain = shown / float(flat_light)
     floored = int(np.count_nonzero(raw_gain < MIN_GAIN))
     return Calibration(dark, np.maximum(raw_gain, MIN_GAIN), config, int(dark_words.shape[0]),
-                       int(flat_words.shape[0]), float(flat_light), ESTIMATOR, floored,
+                       int(flat_words.shape[0]), float(flat_light), CALIBRATION_ESTIMATOR, floored,
                        overflow_share(flat_words, config), *estimate_dark_law(dark_words, config))
 
 
@@ -250,7 +251,7 @@ def load_calibration(path: str | Path) -> Calibration:
                              + ("" if law.shape[0] == 1 else " out of order"))
         law = law if law.shape[0] else None
     return Calibration(dark, gain, config, numbers["dark_readouts"], numbers["flat_readouts"],
-                       numbers["flat_light"], ESTIMATOR, numbers["floored"], numbers["overflow_share"],
+                       numbers["flat_light"], CALIBRATION_ESTIMATOR, numbers["floored"], numbers["overflow_share"],
                        law, tail if law is not None else 0.0)
 
 
@@ -270,9 +271,9 @@ def _checked_numbers(shown: str, values: dict, pixels: int) -> dict:
             good = ok(out[name])
         if not good:
             raise InputError(f"calibration file {shown!r}: {name} must be {rule}, not {value!r}")
-    if str(values["estimator"]) != ESTIMATOR:
+    if str(values["estimator"]) != CALIBRATION_ESTIMATOR:
         raise InputError(f"calibration file {shown!r}: estimator {str(values['estimator'])!r} unknown "
-                         f"(tespike calibrate writes {ESTIMATOR!r})")
+                         f"(tespike calibrate writes {CALIBRATION_ESTIMATOR!r})")
     return out
 
 

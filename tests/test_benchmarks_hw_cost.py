@@ -85,7 +85,7 @@ def test_claims_follow_the_numbers():
 def test_synthesized_ml_pixel_has_exactly_its_state_bits():
     from tespike.rtl.verilog import pixel_verilog
     config = hw_cost.counting_only(SensorConfig(mode="ml", b1=2, b2=2, ml_bits=5))
-    stat = hw_cost.synthesize(pixel_verilog(config), "ml_pixel")
+    stat = hw_cost.synthesize_module(pixel_verilog(config), "ml_pixel")
     assert stat["flops"] == hw_cost.state_bits(config) == 1 + 5 + 5
     assert 16 * stat["flops"] < stat["transistors"] <= stat["transistors_max"]
 
@@ -95,7 +95,7 @@ def test_synthesized_msb_pixel_has_exactly_its_state_bits():
     """The msb pixel: the count's flip-flops and a bit_length(B) word, no hidden state."""
     from tespike.rtl.verilog import pixel_verilog
     config = hw_cost.counting_only(SensorConfig(mode="ml", ml_readout="msb", b1=2, b2=2, ml_bits=5))
-    stat = hw_cost.synthesize(pixel_verilog(config), "ml_pixel")
+    stat = hw_cost.synthesize_module(pixel_verilog(config), "ml_pixel")
     assert stat["flops"] == hw_cost.state_bits(config) == 1 + 5 + 3
 
 

@@ -8,7 +8,7 @@ import pytest
 from tespike.golden.errors import InputError
 from tespike.recon.baselines.common import BaselineSizes
 from tespike.recon.learned import LEARNED, WEIGHTS_DIR, method_classes
-from tespike.recon.learning.sizes import PRESETS, PyramidSizes
+from tespike.recon.learning.sizes import SIZE_PRESETS, PyramidSizes
 from tespike.recon.learning.weights import read_weights
 from tespike.recon.mulaw import MU
 
@@ -38,7 +38,7 @@ def test_every_method_shares_the_pyramid_fields_and_their_checks(name):
 @pytest.mark.parametrize("name", LEARNED)
 def test_the_cpu_preset_is_the_defaults_and_the_paper_preset_differs(name):
     sizes_cls = method_classes(name)[1]
-    assert PRESETS == ("cpu", "paper")
+    assert SIZE_PRESETS == ("cpu", "paper")
     assert sizes_cls.preset("cpu") == sizes_cls()
     paper = sizes_cls.preset("paper")
     assert paper == sizes_cls(**sizes_cls.PAPER) != sizes_cls()

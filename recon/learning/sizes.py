@@ -25,7 +25,7 @@ from ..mulaw import MU
 #: (the baselines' ``windows`` / ``step`` are the network's ``substreams`` / ``stride``).
 RENAMED = {"windows": "substreams", "step": "stride"}
 #: The sizes every learned method is built in: ``cpu``, the shipped one (its defaults), and the paper's.
-PRESETS = ("cpu", "paper")
+SIZE_PRESETS = ("cpu", "paper")
 
 
 class SizesMixin:
@@ -58,9 +58,9 @@ class SizesMixin:
 
     @classmethod
     def preset(cls, name: str):
-        """The size ``name`` of :data:`PRESETS`: ``cpu`` (the defaults) or ``paper`` (:attr:`PAPER`)."""
-        if name not in PRESETS:
-            raise InputError(f"unknown {cls.LABEL} size {name!r} (known: {', '.join(PRESETS)})")
+        """The size ``name`` of :data:`SIZE_PRESETS`: ``cpu`` (the defaults) or ``paper`` (:attr:`PAPER`)."""
+        if name not in SIZE_PRESETS:
+            raise InputError(f"unknown {cls.LABEL} size {name!r} (known: {', '.join(SIZE_PRESETS)})")
         return cls(**cls.PAPER) if name == "paper" else cls()
 
     @classmethod
