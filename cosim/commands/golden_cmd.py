@@ -7,6 +7,8 @@ dtype). A progress bar on stderr appears for runs of more than a few chunks
 when stderr is a terminal (``--progress on`` forces it).
 """
 
+from tespike.golden.sensor import DEFAULT_CHUNK_ELEMENTS
+
 from .common import add_config_argument
 
 HELP = "run the bit-exact golden model on a per-clock electron stimulus E.npy"
@@ -20,23 +22,19 @@ def add_arguments(parser):
     parser.add_argument("--stimulus", required=True, help="E.npy: integer (T, H, W) electrons per pixel clock")
     parser.add_argument("--out", required=True, help="S.npz to write: readout words and the full config")
     parser.add_argument("--chunk-elements", type=int, default=None, metavar="N",
-                        help="pixel clocks x pixels per chunk (bounds memory; default 2^22)")
-    parser.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
-                        help="progress bar on stderr (auto: on a terminal, for runs of more than a few chunks)")
+                        help=f"pixel clocks x pixels per chunk (bounds memory; default {DEFAULT_CHUNK_ELEMENTS})")
 
 
 def run(args) -> int:
     import numpy as np
 
-    import sys
-
-    from tespike.cosim.console import report
+    from tespike.cosim.console import progress_wanted, report
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
     from tespike.golden.io import load_stimulus, save_stream, word_dtype
     from tespike.golden.paths import check_outputs
     from tespike.cosim.room import require_room
-    from tespike.golden.sensor import DEFAULT_CHUNK_ELEMENTS, PixelArray, iter_chunks
+    from tespike.golden.sensor import PixelArray, iter_chunks
 
     check_outputs({"--out": args.out}, {"--stimulus": args.stimulus, "--config": args.config})
     config = load_config(args.config)
@@ -47,24 +45,22 @@ def run(args) -> int:
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
     size = (T // L) * H * W * word_dtype(config).itemsize      # the words, in memory and in S.npz
-    chunk = min(T, max(1, chunk_elements // max(1, H * W * L)) * L) * H * W * stimulus.itemsize
+    clocks_per_chunk = max(1, chunk_elements // max(1, H * W * L)) * L
+    chunk = min(T, clocks_per_chunk) * H * W * stimulus.itemsize
     require_room(f"the stream of {T // L} readouts of {H} x {W} words", memory=size + chunk,
                  disk={args.out: size})     # one chunk of the stimulus is read into memory at a time
     words = np.empty((T // L, H, W), word_dtype(config))
     chunks = iter_chunks(stimulus, config, chunk_elements)
-    clocks_per_chunk = max(1, chunk_elements // max(1, H * W * L)) * L
-    n_chunks = -(-T // clocks_per_chunk)
-    show = args.progress == "on" or (args.progress == "auto" and n_chunks > PROGRESS_MIN_CHUNKS
-                                     and sys.stderr.isatty())
+    show = progress_wanted(args) and (args.progress == "on" or -(-T // clocks_per_chunk) > PROGRESS_MIN_CHUNKS)
     array = PixelArray(config, (H, W))
     done = 0
     from tqdm import tqdm
-    with tqdm(total=T // L, unit="readout", desc="golden", disable=not show, leave=False) as bar:
+    with tqdm(total=T // L, unit="readout", desc="golden", disable=not show, leave=False) as shown:
         for chunk in chunks:
             part = array.feed(np.asarray(chunk))
             words[done:done + len(part)] = part
             done += len(part)
-            bar.update(len(part))
+            shown.update(len(part))
     save_stream(args.out, words, config)
     report(args, f"wrote {args.out}: {T // L} readouts of {H} x {W} {config.mode.upper()} words")
     return 0
