@@ -2,8 +2,8 @@
 
 The ML column is the paper's ML camera, the msb readout of its eq. 10; the
 full-count ML camera is reported as extra rows beneath (``--ml-count-config none``
-leaves it out). ``--table`` is the paper's Tables 1 and 2 whole: its rows (TFI,
-TFP, Spk2ImgNet, BSF, MambaSpike of one parsing (ML), MambaSpike, the network), every metric of the project,
+leaves it out). ``--table`` is the paper's Tables 1 and 2 whole: its rows
+(:data:`TABLE_METHODS`), every metric of the project,
 parameters, FLOPs and run time with its Table 10 beside, sized to finish on the
 built-in held-out set in 15 minutes on 2 cores (:data:`TABLE_DEFAULTS`);
 ``--noise`` adds its Tables 6 to 9 (the TE camera with dark current),
@@ -126,8 +126,9 @@ def add_arguments(parser):
                         help="a learned method's weights file ('tespike train --out W.pt') used instead of the "
                              "shipped ones for the sensor it was trained for (repeatable; not with --store)")
     parser.add_argument("--table", action="store_true",
-                        help="the paper's Tables 1 and 2 whole: rows TFI, TFP, Spk2ImgNet, BSF, MambaSpike1 (one parsing, ML), MambaSpike, net; "
-                             "every metric; parameters, FLOPs, run time and the paper's Table 10 beside")
+                        help=f"the paper's Tables 1 and 2 whole: rows {', '.join(TABLE_METHODS)} (mambaspike1: "
+                             "one parsing, ML); every metric; parameters, FLOPs, run time and the paper's "
+                             "Table 10 beside")
     parser.add_argument("--noise", action="store_true",
                         help="also the paper's Tables 6 to 9: the TE camera with the dark current of eq. 12 and "
                              "of eq. 13")
