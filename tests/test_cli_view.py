@@ -74,3 +74,17 @@ def test_an_option_that_would_be_ignored_is_refused(tmp_path):
 def test_the_default_mu_is_the_metrics_mu():
     from tespike.cosim.cli import build_parser
     assert build_parser("view").parse_args(["view", "--input", "x.npy", "--out", "y.png"]).mu == MU
+
+
+def test_each_never_leaves_an_earlier_runs_frames_beside_its_own(tmp_path):
+    """--each into a folder of an earlier run left its extra frame files beside the new ones: one folder,
+    two runs. Frames this run replaces are fine (the same run again); others are refused, nothing written."""
+    _files(tmp_path)
+    args = ("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "frames", "--each")
+    assert run_tespike(*args).returncode == 0                                   # frames 0..4
+    again = run_tespike(*args)
+    assert again.returncode == 0, again.stderr                                  # replaces them all
+    before = {p.name: p.read_bytes() for p in (tmp_path / "frames").iterdir()}
+    assert_refused(run_tespike(*args, "--frames", "0:2"), "frame_0002.png", "2 more frame file(s)",
+                   "mix two runs")
+    assert {p.name: p.read_bytes() for p in (tmp_path / "frames").iterdir()} == before

@@ -138,6 +138,13 @@ def run(args) -> int:
     frames = pick_frames(args.frames, light.shape[0], args.each)
     if args.each and out.is_dir():                  # (a frame file there may be an input, or a link to one)
         check_outputs({f"--out (frame {k})": out / f"frame_{k:04d}.png" for k in frames}, inputs)
+        # every frame file already there is one this run replaces: the folder never mixes two runs' frames
+        written = {f"frame_{k:04d}.png" for k in frames}
+        stale = sorted(p.name for p in out.glob("frame_*.png") if p.name not in written)
+        if stale:
+            raise InputError(f"--out {str(out)!r} holds {stale[0]}" + (f" and {len(stale) - 1} more frame file(s)"
+                             if len(stale) > 1 else "") + " this run would not replace: it would mix two "
+                             "runs' frames (give an empty folder, or remove them)")
     shown = light[frames]
     peak = args.peak if args.peak is not None else float(shown.max())
     if peak <= 0:
