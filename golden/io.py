@@ -201,6 +201,16 @@ def save_stream(path: str | Path, words: np.ndarray, config: SensorConfig) -> No
                      config=np.array(config.to_json()))
 
 
+def _npy_header(member) -> tuple[tuple[int, ...], bool, np.dtype, int | None]:
+    """(shape, Fortran order, dtype, the header's length in bytes or None) of the .npy array an open
+    archive member starts with, read from its first bytes."""
+    version = np.lib.format.read_magic(member)
+    read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                   else np.lib.format.read_array_header_2_0)
+    shape, fortran, dtype = read_header(member)
+    return shape, fortran, dtype, member.tell() if hasattr(member, "tell") else None
+
+
 def _stored_member(path: str | Path, name: str) -> np.ndarray | None:
     """A read-only memory map of an uncompressed (``np.savez``) ``.npy`` member, after its
     CRC is verified by streaming through it; ``None`` if the member is compressed."""
@@ -209,11 +219,7 @@ def _stored_member(path: str | Path, name: str) -> np.ndarray | None:
         if info.compress_type != zipfile.ZIP_STORED or info.flag_bits & 0x1:
             return None
         with archive.open(info) as member:            # reading to the end checks the CRC
-            version = np.lib.format.read_magic(member)
-            read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                           else np.lib.format.read_array_header_2_0)
-            shape, fortran, dtype = read_header(member)
-            header = member.tell() if hasattr(member, "tell") else None
+            shape, fortran, dtype, header = _npy_header(member)
             while member.read(1 << 22):
                 pass
     if header is None or dtype.hasobject:
@@ -273,12 +279,8 @@ def _check_member_sizes(path: str | Path) -> None:
             if not info.filename.endswith(".npy") or info.flag_bits & 0x1:
                 continue
             with archive.open(info) as member:
-                version = np.lib.format.read_magic(member)
-                read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                               else np.lib.format.read_array_header_2_0)
-                shape, _, dtype = read_header(member)
-                header = member.tell()
-            if not dtype.hasobject and header + int(np.prod(shape, dtype=object)) * dtype.itemsize > info.file_size:
+                shape, _, dtype, header = _npy_header(member)
+            if header is not None and not dtype.hasobject and header + int(np.prod(shape, dtype=object)) * dtype.itemsize > info.file_size:
                 raise ValueError(f"member {info.filename!r} is shorter than its header's shape {shape}")
 
 

@@ -324,13 +324,15 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
     try:
         return _train(options, out, work, resume, progress, command)
     except BaseException:
-        if created and work.is_dir() and not (work / RUN_FILES[0]).exists():
+        if created and work.is_dir() and not (work / CHECKPOINT).exists():
             shutil.rmtree(work, ignore_errors=True)        # nothing to resume: leave no empty folder
         raise
 
 
-#: What a run writes into its run folder (``OUT.run/``): checkpoint, logs, best weights, curves.
-RUN_FILES = ("checkpoint.pt", "log.csv", "validation.csv", "best.pt", "curves.png")
+#: The run folder's checkpoint (``OUT.run/``), what ``--resume`` continues from.
+CHECKPOINT = "checkpoint.pt"
+#: What a run writes into its run folder: checkpoint, logs, best weights, curves.
+RUN_FILES = (CHECKPOINT, "log.csv", "validation.csv", "best.pt", "curves.png")
 
 
 def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress: bool | None,

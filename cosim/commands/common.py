@@ -54,7 +54,7 @@ def check_array_arguments(config, height, width, lanes) -> tuple[int, int]:
         try:
             check_lanes(config, height, width, lanes)
         except ValueError as exc:                      # ConfigError "lanes = N: ...": name the flag
-            raise InputError(f"--lanes {lanes}: {str(exc).split(': ', 1)[1]}") from None
+            raise InputError(f"--lanes {lanes}: {str(exc).partition(': ')[2] or exc}") from None
     return height, width
 
 

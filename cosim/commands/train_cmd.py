@@ -116,10 +116,10 @@ def run(args) -> int:
     for folder in args.hdr:
         if not Path(folder).is_dir():
             raise InputError(f"--hdr {folder!r}: not a folder of .exr/.hdr frames")
-    panoramas = ()
+    panoramas = shipped = ()
     if args.panoramas:
-        from tespike.recon.engine.clips import TRAIN_PANORAMAS, panorama_files
-        panoramas = TRAIN_PANORAMAS + tuple(f for folder in args.panoramas for f in panorama_files(folder))
+        from tespike.recon.engine.clips import TRAIN_PANORAMAS as shipped, panorama_files
+        panoramas = shipped + tuple(f for folder in args.panoramas for f in panorama_files(folder))
     out = Path(args.out)
     preset = args.config in PRESETS
     config_input = {} if preset else {"--config": args.config}
@@ -131,13 +131,15 @@ def run(args) -> int:
     from tespike.recon.train import RUN_FILES, TrainOptions, train
 
     # --out and the run folder's files are never one of the files the run reads (or its folders hold)
+    # (every file of the folders, the held-out panorama too; the shipped panoramas beside them)
     inputs = [*config_input.items(), *([("--init", args.init)] if args.init else []),
               *(("a frame of --hdr", frame) for folder in args.hdr for frame in _frame_files(folder)),
-              *(("a panorama of --panoramas", panorama)
-                for panorama in (*(f for folder in args.panoramas for f in _frame_files(folder)), *panoramas))]
+              *(("a panorama of --panoramas", panorama) for folder in args.panoramas
+                for panorama in _frame_files(folder)),
+              *(("a shipped panorama", panorama) for panorama in shipped)]
     check_outputs({"--out": args.out}, inputs)
-    check_output_dir(out.with_suffix(".run"), "--out's run folder")
     run_folder = out.with_suffix(".run")
+    check_output_dir(run_folder, "--out's run folder")
     check_distinct(inputs, {f"the run folder's {name}": run_folder / name for name in RUN_FILES})
 
     given = {flag: getattr(args, flag) for flag in TRAINER_FLAGS if hasattr(args, flag)}
