@@ -104,7 +104,7 @@ def event_path(sim, sel, expected, dark, words):
     theta, L = c.threshold, c.clocks_per_readout
     masked = is_mask(sel)
     acc0 = gather(sim.carried, sel)
-    mean = np.where(sel, expected, 0.0) if masked else expected[sel]
+    mean = expected * sel if masked else expected[sel]  # (half the time of np.where)
     sure = NO_PIXELS
     if c.is_te and not sim.dark_model:
         sure = np.flatnonzero(mean >= sim.levels.mean_overflow)
