@@ -14,3 +14,7 @@ if [ -n "$missing" ]; then
 fi
 python3 -m pip install -q torch==2.13.0          # pinned: the CPU build (a looser pin pulls CUDA)
 python3 -m pip install -q -e '.[test]'
+# Bytecode compiled once, as a wheel install does: an editable install leaves it to each
+# run, and where PYTHONDONTWRITEBYTECODE is set every command compiled its ~40 modules
+# again (about 0.1 s of each `tespike simulate`; python3 benchmarks/bench_startup.py).
+python3 -m compileall -q golden rtl recon cosim tespike
