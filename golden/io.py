@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import os
 import zipfile
 import zlib
 from pathlib import Path
@@ -44,6 +45,16 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
         if hasattr(array, "close"):
             array.close()
         raise InputError(f"{what} file {str(path)!r} holds an archive, not one .npy array")
+    try:
+        with open(path, "rb") as handle:               # np.load ignores bytes after the array
+            header = _npy_header(handle)[3]
+            extra = os.fstat(handle.fileno()).st_size - header - array.nbytes
+    except (OSError, ValueError) as exc:
+        _refuse_starved(exc, what, path)
+        raise InputError(f"{what} file {str(path)!r} is not a readable .npy array: {one_line(exc)}") from None
+    if extra:
+        raise InputError(f"{what} file {str(path)!r} holds {extra} bytes after its {array.dtype} "
+                         f"{array.shape} array (a corrupt or concatenated file)")
     return array
 
 

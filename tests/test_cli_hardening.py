@@ -899,3 +899,15 @@ def test_npy_header_with_a_negative_dimension_is_named(files, shape):
                                    "--out", files / "o.npz"), "scene file", "neg.npy")
     refused_without_change(files, ("golden", "--config", files / "c.json", "--stimulus", files / "neg.npy",
                                    "--out", files / "o.npz"), "stimulus file", "neg.npy")
+
+
+def test_npy_with_bytes_after_its_array_is_named(files):
+    """np.load reads an .npy array and ignores whatever follows it: a file with bytes after its
+    array (two arrays concatenated, a corrupt write) was simulated as if whole."""
+    for name in ("i.npy", "e.npy"):
+        with open(files / name, "ab") as handle:
+            handle.write(b"\0" * 7)
+    refused_without_change(files, ("simulate", "--config", "te", "--scene", files / "i.npy",
+                                   "--out", files / "o.npz"), "scene file", "i.npy", "7 bytes after")
+    refused_without_change(files, ("golden", "--config", files / "c.json", "--stimulus", files / "e.npy",
+                                   "--out", files / "o.npz"), "stimulus file", "e.npy", "7 bytes after")

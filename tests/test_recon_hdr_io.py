@@ -221,13 +221,16 @@ def test_folder_crop_and_downscale(tmp_path):
     write_exr(tmp_path / "a.exr", image)
     light = load_hdr_sequence(tmp_path, crop=(4, 6), peak=float(image[1:5, 2:8].max()))
     assert np.array_equal(light[0], image[1:5, 2:8])
-    shrunk = load_hdr_sequence(tmp_path, downscale=4)
+    shrunk = load_hdr_sequence(tmp_path, crop=(4, 8), downscale=4)
     assert shrunk.shape == (1, 1, 2)
-    assert np.allclose(shrunk[0] * image[:4, :8].reshape(1, 4, 2, 4).mean(axis=(1, 3)).max(),
-                       image[:4, :8].reshape(1, 4, 2, 4).mean(axis=(1, 3)))
+    blocks = image[1:5, 1:9].reshape(1, 4, 2, 4).mean(axis=(1, 3))
+    assert np.allclose(shrunk[0] * blocks.max(), blocks)
     with pytest.raises(InputError, match="cannot crop"):
         load_hdr_sequence(tmp_path, crop=(7, 4))
     with pytest.raises(InputError, match="smaller than one"):
         load_hdr_sequence(tmp_path, downscale=7)
+    with pytest.raises(InputError, match=r"6 x 10 is not a whole number of 4 x 4 blocks.*crop it to 4x8"):
+        load_hdr_sequence(tmp_path, downscale=4)            # rows 5-6 and columns 9-10 were dropped
+    assert load_hdr_sequence(tmp_path, crop=(6, 8), downscale=2).shape == (1, 3, 4)
     with pytest.raises(InputError, match="downscale"):
         load_hdr_sequence(tmp_path, downscale=0)

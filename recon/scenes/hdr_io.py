@@ -400,21 +400,36 @@ def list_frames(folder: str | Path) -> list[Path]:
     return sorted(frames, key=lambda p: _natural_key(p.name))
 
 
-def _crop_and_shrink(gray: np.ndarray, crop: tuple[int, int] | None, downscale: int, what: str) -> np.ndarray:
+def _check_crop_and_blocks(size: tuple[int, int], crop: tuple[int, int] | None, downscale: int,
+                           what: str) -> None:
+    """Refuse a crop larger than frames of ``size``, or a cropped size that is not a whole
+    number of ``downscale`` x ``downscale`` blocks (rows or columns would be dropped)."""
     if crop is not None:
         height, width = crop
-        if height < 1 or width < 1 or height > gray.shape[0] or width > gray.shape[1]:
-            raise InputError(f"{what}: cannot crop {height} x {width} out of "
-                             f"{gray.shape[0]} x {gray.shape[1]}")
+        if height < 1 or width < 1 or height > size[0] or width > size[1]:
+            raise InputError(f"{what}: cannot crop {height} x {width} out of {size[0]} x {size[1]}")
+        size = crop
+    if downscale > 1:
+        height, width = (n // downscale * downscale for n in size)
+        if height == 0 or width == 0:
+            raise InputError(f"{what}: {size[0]} x {size[1]} is smaller than one "
+                             f"{downscale} x {downscale} block")
+        if (height, width) != tuple(size):
+            raise InputError(f"{what}: {size[0]} x {size[1]} is not a whole number of {downscale} x "
+                             f"{downscale} blocks (the last rows or columns would be dropped): crop it to "
+                             f"{height}x{width} first, or downscale by a factor of both sides")
+
+
+def _crop_and_shrink(gray: np.ndarray, crop: tuple[int, int] | None, downscale: int) -> np.ndarray:
+    """A frame centre-cropped to ``crop`` and area-averaged over ``downscale`` blocks (both
+    checked by :func:`_check_crop_and_blocks`)."""
+    if crop is not None:
+        height, width = crop
         top, left = (gray.shape[0] - height) // 2, (gray.shape[1] - width) // 2
         gray = gray[top:top + height, left:left + width]
     if downscale > 1:
-        height, width = (n // downscale * downscale for n in gray.shape)
-        if height == 0 or width == 0:
-            raise InputError(f"{what}: {gray.shape[0]} x {gray.shape[1]} is smaller than one "
-                             f"{downscale} x {downscale} block")
-        gray = gray[:height, :width].reshape(height // downscale, downscale,
-                                             width // downscale, downscale).mean(axis=(1, 3))
+        height, width = gray.shape
+        gray = gray.reshape(height // downscale, downscale, width // downscale, downscale).mean(axis=(1, 3))
     return gray
 
 
@@ -426,8 +441,8 @@ def load_hdr_sequence(folder: str | Path, *, weights: str = DEFAULT_WEIGHTS, pea
     Frames are sorted by name, converted to grayscale (:func:`to_gray`, negatives
     clipped at 0), optionally centre-cropped to ``crop`` = (H, W) (the paper
     crops its test frames to 512 x 384) and area-averaged over ``downscale``
-    x ``downscale`` blocks (it resizes training frames; rows and columns
-    that do not fill a block are dropped), and the whole sequence is divided by
+    x ``downscale`` blocks (it resizes training frames; the cropped size must be a
+    whole number of blocks: nothing is dropped), and the whole sequence is divided by
     its largest pixel (paper appendix A.2.2). All frames must have the same size.
     """
     from tqdm import tqdm
@@ -440,11 +455,12 @@ def load_hdr_sequence(folder: str | Path, *, weights: str = DEFAULT_WEIGHTS, pea
     if type(downscale) is not int or downscale < 1:
         raise InputError(f"downscale = {downscale!r} must be an integer >= 1")
     size = sequence_size(paths, f"HDR sequence {str(folder)!r}")
+    _check_crop_and_blocks(size, crop, downscale, f"HDR sequence {str(folder)!r}")
     frames = []
     for path in tqdm(paths, desc="reading frames", unit="frame", disable=not progress):
         gray = to_gray(read_image(path), weights, what=f"frame {str(path)!r}")
         if gray.shape != size:          # (changed since its header was read)
             raise InputError(f"frame {str(path)!r} is {gray.shape[0]} x {gray.shape[1]}, but its header "
                              f"said {size[0]} x {size[1]}")
-        frames.append(_crop_and_shrink(gray, crop, downscale, f"frame {str(path)!r}").astype(np.float32))
+        frames.append(_crop_and_shrink(gray, crop, downscale).astype(np.float32))
     return normalise_sequence(np.stack(frames), peak, what=f"HDR sequence {str(folder)!r}")
