@@ -88,3 +88,46 @@ def test_each_never_leaves_an_earlier_runs_frames_beside_its_own(tmp_path):
     assert_refused(run_tespike(*args, "--frames", "0:2"), "frame_0002.png", "2 more frame file(s)",
                    "mix two runs")
     assert {p.name: p.read_bytes() for p in (tmp_path / "frames").iterdir()} == before
+
+
+def test_each_replaces_its_folder_whole_and_keeps_what_is_not_its_own(tmp_path):
+    """--each wrote frame by frame into the folder: killed part-way through a second run, the folder
+    held the new run's first frames beside the old run's last. The frames are now written into a
+    temporary folder swapped in at the end; a folder holding anything but frames this run writes
+    again is refused, so the swap removes nothing of the user's."""
+    _files(tmp_path)
+    args = ("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "frames", "--each")
+    assert run_tespike(*args).returncode == 0
+    first = {p.name: p.read_bytes() for p in (tmp_path / "frames").iterdir()}
+    (tmp_path / "frames" / "notes.txt").write_text("mine")
+    assert_refused(run_tespike(*args), "notes.txt", "not a frame")
+    (tmp_path / "frames" / "notes.txt").unlink()
+    again = run_tespike(*args, "--mu", "50")
+    assert again.returncode == 0, again.stderr
+    second = {p.name: p.read_bytes() for p in (tmp_path / "frames").iterdir()}
+    assert second.keys() == first.keys() and second != first
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".part")]
+
+
+def test_each_killed_leaves_the_previous_frames_whole(tmp_path):
+    """A run killed while writing frames leaves the earlier run's folder as it was."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    _files(tmp_path)
+    np.save(tmp_path / "long.npy", np.random.default_rng(0).uniform(0, 1, (400, 24, 24)).astype(np.float32))
+    args = ["view", "--input", str(tmp_path / "long.npy"), "--out", str(tmp_path / "frames"), "--each"]
+    assert run_tespike(*args).returncode == 0
+    before = {p.name: p.read_bytes() for p in (tmp_path / "frames").iterdir()}
+    process = subprocess.Popen([sys.executable, "-m", "tespike", *args, "--mu", "50"],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and process.poll() is None:   # kill it once it writes frames
+        if any(len(list(p.glob("frame_*.png"))) > 20 for p in tmp_path.glob(".frames.*.part")):
+            process.send_signal(signal.SIGKILL)
+            break
+        time.sleep(0.01)
+    process.wait()
+    assert process.returncode == -signal.SIGKILL, "the run ended before it could be killed mid-way"
+    assert {p.name: p.read_bytes() for p in (tmp_path / "frames").iterdir()} == before

@@ -108,11 +108,11 @@ def pick_frames(spec, count, each):
 
 def run(args) -> int:
     import math
+    import re
     from pathlib import Path
 
     from tespike.cosim.console import report
     from tespike.golden.errors import InputError
-    from tespike.golden.io import atomic_output
     from tespike.golden.paths import check_outputs
 
     inputs = {"--input": args.input, "--config": args.config}
@@ -138,9 +138,14 @@ def run(args) -> int:
     frames = pick_frames(args.frames, light.shape[0], args.each)
     if args.each and out.is_dir():                  # (a frame file there may be an input, or a link to one)
         check_outputs({f"--out (frame {k})": out / f"frame_{k:04d}.png" for k in frames}, inputs)
-        # every frame file already there is one this run replaces: the folder never mixes two runs' frames
+        # the folder is replaced whole (atomic_folder): it may hold only frames this run writes again,
+        # so that nothing else is removed and no folder mixes two runs' frames
         written = {f"frame_{k:04d}.png" for k in frames}
-        stale = sorted(p.name for p in out.glob("frame_*.png") if p.name not in written)
+        stale = sorted(p.name for p in out.iterdir() if p.name not in written)
+        other = [name for name in stale if not re.fullmatch(r"frame_\d{4,}\.png", name)]
+        if other:
+            raise InputError(f"--out {str(out)!r} holds {other[0]}, not a frame: --each makes the folder this "
+                             "run's frames alone (give an empty or new folder)")
         if stale:
             raise InputError(f"--out {str(out)!r} holds {stale[0]}" + (f" and {len(stale) - 1} more frame file(s)"
                              if len(stale) > 1 else "") + " this run would not replace: it would mix two "
@@ -159,10 +164,10 @@ def run(args) -> int:
     import matplotlib.pyplot as plt
 
     if args.each:
-        out.mkdir(exist_ok=True)
-        for k, image in zip(frames, mapped):
-            with atomic_output(out / f"frame_{k:04d}.png") as tmp:
-                plt.imsave(tmp, image, cmap="gray", vmin=0.0, vmax=1.0, format="png")
+        from tespike.golden.atomic import atomic_folder
+        with atomic_folder(out) as folder:              # killed or failing: the previous frames stay whole
+            for k, image in zip(frames, mapped):
+                plt.imsave(folder / f"frame_{k:04d}.png", image, cmap="gray", vmin=0.0, vmax=1.0, format="png")
         report(args, f"wrote {len(frames)} frame(s) to {out}/frame_NNNN.png ({what}, peak {peak:.4g}, "
                      f"mu {args.mu:g})")
         return 0
