@@ -80,6 +80,7 @@ def check_output_file(path: str | os.PathLike, what: str | None = None) -> Path:
     label = f"{what} {text!r}" if what else repr(text)
     if not text:
         raise InputError(f"{what or 'output'}: empty path")
+    _refuse_control_characters(text, label)
     if text.endswith(os.sep) and not os.path.isdir(text):     # (a directory's name, not a file's)
         raise InputError(f"cannot write {label}: a path ending in {os.sep!r} names a directory "
                          "(name a file)")
@@ -98,8 +99,8 @@ def check_output_file(path: str | os.PathLike, what: str | None = None) -> Path:
         if not stat.S_ISREG(info.st_mode):
             raise InputError(f"cannot write {label}: it is {kind(info.st_mode)}"
                              + (" (name a file inside it)" if stat.S_ISDIR(info.st_mode) else ""))
-        if not os.access(target, os.W_OK):
-            raise InputError(f"cannot write {label}: the file is read-only")
+        if not os.access(target, os.W_OK) or not info.st_mode & 0o222:   # (root may write any file:
+            raise InputError(f"cannot write {label}: the file is read-only")  # its mode says no to all)
     directory = target.parent
     if not directory.is_dir():
         shown = os.path.dirname(text) or "."
@@ -144,6 +145,15 @@ def check_distinct(inputs, outputs: Mapping[str, str | os.PathLike | None]) -> N
                                  "two outputs cannot share a file")
 
 
+def _refuse_control_characters(text: str, label: str) -> None:
+    """Refuse an output path holding a control character: the command's success line names its
+    outputs, and a newline there would split it (the refusal quotes it with repr, on one line)."""
+    control = next((c for c in text if ord(c) < 32 or ord(c) == 127), None)
+    if control is not None:
+        raise InputError(f"cannot write {label}: the path holds the control character {control!r} "
+                         "(name one without)")
+
+
 def check_outputs(outputs: Mapping[str, str | os.PathLike | None], inputs=None) -> None:
     """Every output path of a command checked (:func:`check_output_file`) and kept apart
     from the inputs (:func:`check_distinct`: a mapping, or (flag, path) pairs), before any
@@ -160,6 +170,7 @@ def check_output_dir(path: str | os.PathLike, what: str = "--out",
     (relative names written inside it) are checked like single outputs, and a
     name ending in ``/`` must be a directory or absent."""
     text = os.fspath(path)
+    _refuse_control_characters(text, f"{what} {text!r}")
     folder = Path(text)
     if os.path.lexists(text) and not folder.is_dir():
         raise InputError(f"cannot write {what} {text!r}: it exists and is not a directory")

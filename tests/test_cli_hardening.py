@@ -911,3 +911,20 @@ def test_npy_with_bytes_after_its_array_is_named(files):
                                    "--out", files / "o.npz"), "scene file", "i.npy", "7 bytes after")
     refused_without_change(files, ("golden", "--config", files / "c.json", "--stimulus", files / "e.npy",
                                    "--out", files / "o.npz"), "stimulus file", "e.npy", "7 bytes after")
+
+
+def test_output_path_with_a_control_character_is_refused(files):
+    """The success line names the outputs: a newline in --out split it in two (a reader of the line
+    took half a path); a control character in an output path is refused, quoted on one line."""
+    result = refused_without_change(files, golden_args(files, files / "a\nb.npz"), "control character", "'\\n'")
+    assert len(result.stderr.strip().splitlines()) == 1
+    refused_without_change(files, ("demo", "--out", files / "d\tx"), "control character", "'\\t'")
+
+
+def test_a_read_only_output_file_is_refused_even_for_root(files):
+    """A file whose mode grants no one write access is refused for every user: root's os.access
+    said yes and the file was replaced."""
+    (files / "kept.npz").write_bytes(b"mine")
+    os.chmod(files / "kept.npz", 0o444)
+    refused_without_change(files, golden_args(files, files / "kept.npz"), "kept.npz", "read-only")
+    assert (files / "kept.npz").read_bytes() == b"mine"
