@@ -928,3 +928,11 @@ def test_a_read_only_output_file_is_refused_even_for_root(files):
     os.chmod(files / "kept.npz", 0o444)
     refused_without_change(files, golden_args(files, files / "kept.npz"), "kept.npz", "read-only")
     assert (files / "kept.npz").read_bytes() == b"mine"
+
+
+def test_scene_list_refuses_the_options_it_would_ignore(files):
+    """scene --list printed the list and ignored --out (and every other option) without a word."""
+    refused_without_change(files, ("scene", "--list", "--out", files / "i2.npy"), "--list", "--out given")
+    refused_without_change(files, ("scene", "--list", "--downscale", "2"), "--downscale given")
+    listed = run_tespike("scene", "--list")
+    assert listed.returncode == 0 and listed.stdout.startswith("default")

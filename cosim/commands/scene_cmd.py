@@ -44,6 +44,12 @@ def run(args) -> int:
     from tespike.recon.scenes.color import DEFAULT_WEIGHTS
 
     if args.list:
+        common = {"list", "quiet", "progress", "run", "command", "command_parser", "argv"}
+        given = [key for key, value in vars(args).items()
+                 if key not in common and value != args.command_parser.get_default(key)]
+        if given:
+            raise InputError(f"--list prints the built-in scenes and takes no other option "
+                             f"(--{given[0].replace('_', '-')} given)")
         for name, (_, summary) in SCENES.items():
             print(f"{name:10s} {summary}")
         return 0
