@@ -298,6 +298,37 @@ def warm_start(model: torch.nn.Module, path: str, method: str) -> list[str]:
     return copied
 
 
+def step_memory(options: TrainOptions) -> int:
+    """A lower bound on the bytes of one training step on the CPU, measured rather than guessed:
+    the tensors autograd keeps for the backward pass (each storage once), counted by
+    ``saved_tensors_hooks`` in forward passes of one sample at two small crops, grow with the
+    crop's area (fitted on the two, which leaves out what does not grow: the weights) and with
+    the batch; the parameters' four copies (weights, gradients, Adam's two moments) beside
+    them. All of it is alive when the forward pass ends, so a run needing more memory than is
+    free cannot fit (peaks measured 2-3x this bound at batch 4, crop 96, and batch 16, crop 128)."""
+    config, sizes = options.sensor_config(), options.sizes()
+    model = options.model()
+    factor = sizes.pyramid_factor
+    small = factor * max(1, 16 // factor)
+
+    def saved(crop: int) -> int:
+        storages: dict[int, int] = {}
+
+        def keep(tensor):
+            storage = tensor.untyped_storage()
+            storages[storage.data_ptr()] = max(storages.get(storage.data_ptr(), 0), storage.nbytes())
+            return tensor
+        light = torch.rand(1, sizes.span, crop, crop)
+        inside = torch.ones(1, sizes.span, dtype=torch.bool)
+        with torch.autograd.graph.saved_tensors_hooks(keep, lambda tensor: tensor):
+            model(light, inside, config.spike_light)
+        return sum(storages.values())
+
+    per_pixel = max(0.0, (saved(4 * small) - saved(2 * small)) / (12 * small ** 2))
+    parameters = sum(p.numel() * p.element_size() for p in model.parameters())
+    return int(per_pixel * options.batch * options.crop ** 2) + 4 * parameters
+
+
 class RunFolderGone(InputError):
     """The run folder vanished during training (the weights were saved to the output first)."""
 
@@ -315,8 +346,12 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
     recipe = options.data_recipe()     # the clip pool's words and light, before anything is built
     clip_bytes = max(recipe.long[1], recipe.short[1]) * recipe.height * recipe.width * (
         4 + word_dtype(options.sensor_config()).itemsize)
-    require_memory(options.pool * clip_bytes, f"a pool of {options.pool} clips of up to "
-                                              f"{max(recipe.long[1], recipe.short[1])} x {recipe.height} x {recipe.width}")
+    pool_bytes = options.pool * clip_bytes
+    require_memory(pool_bytes, f"a pool of {options.pool} clips of up to "
+                               f"{max(recipe.long[1], recipe.short[1])} x {recipe.height} x {recipe.width}")
+    if options.device == "cpu":        # (a GPU's memory is its own: torch names what does not fit there)
+        require_memory(pool_bytes + step_memory(options), f"training {options.method} at batch {options.batch}, "
+                                                          f"crop {options.crop} (and its clip pool)")
     out = Path(out)
     work = Path(work_dir) if work_dir is not None else out.with_suffix(".run")
     created = not work.exists()

@@ -199,3 +199,21 @@ def test_a_bad_frame_of_hdr_is_named_as_the_user_typed_its_folder(capsys, monkey
     result = subprocess.CompletedProcess([], code, "", capsys.readouterr().err)
     assert_refused(result, "'frames/f1.hdr'", "empty")
     assert str(tmp_path) not in result.stderr and not (tmp_path / "t.pt").exists()
+
+
+def test_a_batch_that_cannot_fit_is_refused_before_anything_starts(tmp_path):
+    """train --batch 100000 started its data engine and was killed by the kernel's out-of-memory
+    killer (exit 137, no word); the step's memory is now bounded below up front (the tensors a
+    forward pass keeps for backward, measured on two small crops) and refused in one line."""
+    result = subprocess.run([sys.executable, "-m", "tespike", "train", "--config", "te", "--out",
+                             str(tmp_path / "w.pt"), "--batch", "100000", "--crop", "128", "--steps", "1",
+                             "--workers", "0"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert_refused(result, "training net at batch 100000, crop 128", "memory")
+    assert not list(tmp_path.iterdir())
+
+
+def test_the_step_memory_bound_grows_with_batch_and_crop_area():
+    from tespike.recon.train import step_memory
+    small, batch, crop = (step_memory(options(batch=b, crop=c)) for b, c in ((2, 16), (4, 16), (4, 32)))
+    assert 0 < small < batch < crop
+    assert abs((crop - batch) - 6 * (batch - small)) <= 8             # batch x crop area, plus what does not grow
