@@ -12,6 +12,15 @@ def add_config_argument(parser, *, required: bool = True, default: str | None = 
                         help=CONFIG_HELP + (f" (default {default})" if default else ""))
 
 
+def options_given(parser, args, keep=()) -> list[tuple[str, str]]:
+    """(flag, dest) of every option of ``parser`` that ``args`` holds away from its default, those
+    whose dest is in ``keep`` aside: the options a mode that takes no others would drop. The
+    defaults are the parser's own, so they are typed once."""
+    return [(action.option_strings[0], action.dest) for action in parser._actions   # (argparse lists
+            if action.option_strings and action.dest not in keep                   # no other way)
+            and getattr(args, action.dest, action.default) != action.default]
+
+
 def add_array_arguments(parser, *, required: bool = True, what: str = "", lanes_use: str = "") -> None:
     """``--height``, ``--width`` and ``--lanes``: the generated pixel array and which top (SPEC section 6) a
     command writes, synthesises or tests; ``what`` ends the size help (a limit, or what else it needs),

@@ -29,7 +29,7 @@ TABLE_VDP_FRAMES = 4
 
 from tespike.recon.settings import DEFAULT_WINDOW  # noqa: E402  (after the constants the help quotes)
 
-from .common import MAX_THREADS  # noqa: E402
+from .common import MAX_THREADS, options_given  # noqa: E402
 from .reconstruct_cmd import METHOD_CHOICES  # noqa: E402
 
 HELP = ("simulate sequences with the paper's TE and ML (msb readout) sensors and the full-count ML "
@@ -51,11 +51,8 @@ def check_store_options(args) -> None:
     from tespike.golden.errors import InputError
     parser = argparse.ArgumentParser(add_help=False)
     add_arguments(parser)
-    for action in parser._actions:                      # (argparse lists no other way to walk them)
-        if action.dest in STORE_OPTIONS or getattr(args, action.dest) == action.default:
-            continue
-        flag = action.option_strings[0]
-        if action.dest == "weights":
+    for flag, dest in options_given(parser, args, keep=STORE_OPTIONS)[:1]:
+        if dest == "weights":
             raise InputError("--weights does not apply with --store (its tasks use the shipped weights); "
                              "evaluate without --store to use your own")
         raise InputError(f"{flag} does not apply with --store (the store holds the sequences and their "

@@ -37,6 +37,8 @@ def run(args) -> int:
     from tespike.cosim.console import progress_wanted, report
     from tespike.golden.errors import InputError
     from tespike.golden.io import atomic_output
+
+    from .common import options_given
     from tespike.golden.paths import check_distinct, check_outputs
     from tespike.cosim.room import require_room
     from tespike.recon.scenes import SCENES, load_hdr_sequence, make_scene
@@ -44,12 +46,9 @@ def run(args) -> int:
     from tespike.recon.scenes.color import DEFAULT_WEIGHTS
 
     if args.list:
-        common = {"list", "quiet", "progress", "run", "command", "command_parser", "argv"}
-        given = [key for key, value in vars(args).items()
-                 if key not in common and value != args.command_parser.get_default(key)]
+        given = options_given(args.command_parser, args, keep=("list", "quiet", "progress"))
         if given:
-            raise InputError(f"--list prints the built-in scenes and takes no other option "
-                             f"(--{given[0].replace('_', '-')} given)")
+            raise InputError(f"--list prints the built-in scenes and takes no other option ({given[0][0]} given)")
         for name, (_, summary) in SCENES.items():
             print(f"{name:10s} {summary}")
         return 0
