@@ -42,6 +42,7 @@ from tespike.golden.resources import MAX_WORKERS, require_memory
 from .engine.batches import ClipPool, draw_batch
 from .engine.clips import EngineRecipe
 from .learned import load_weights, method_classes
+from .learning.head import FLOORS, set_floor
 from .learning.layers import parameter_count
 from .settings import check_device
 from .mulaw import MU, compress
@@ -77,10 +78,13 @@ class TrainOptions:
     recipe: dict = dataclasses.field(default_factory=dict)
     init: str | None = None             # weights file to start from (its tensors of matching name and shape)
     warmup: int = 0                     # steps of linear learning-rate warm-up (0: none)
+    floor: str = "clamp"                # the head's floor in training (recon.learning.head.FLOORS)
 
     def __post_init__(self) -> None:
         if self.loss not in LOSSES:
             raise InputError(f"loss = {self.loss!r}: must be one of {', '.join(LOSSES)}")
+        if self.floor not in FLOORS:
+            raise InputError(f"floor = {self.floor!r}: must be one of {', '.join(FLOORS)}")
         if not (self.lr > 0 and math.isfinite(self.lr)):
             raise InputError(f"learning rate {self.lr!r} must be a finite number > 0")
         for key in ("halve_every", "steps_per_epoch", "batch", "crop", "pool", "refresh"):
@@ -125,7 +129,7 @@ class TrainOptions:
         return sizes.ablation(self.ablation)
 
     def model(self) -> torch.nn.Module:
-        return method_classes(self.method)[0](self.sizes())
+        return set_floor(method_classes(self.method)[0](self.sizes()), self.floor)
 
     def data_recipe(self) -> EngineRecipe:
         return EngineRecipe.from_dict({**self.recipe, "seed": self.seed})

@@ -115,3 +115,52 @@ def test_inside_must_hold_the_key():
         key_estimates(light, torch.tensor([[True, True, False, True, True]]), 1.0)
     with pytest.raises(ValueError, match="shape"):
         key_estimates(light, torch.ones(1, 4, dtype=torch.bool), 1.0)
+
+
+def test_straight_through_floor_pulls_negative_codes_back_and_changes_no_output():
+    """A code driven below zero gives zero light under both floors; in training only the
+    straight-through floor lets the loss reach it (the clamp's gradient is zero there), and in
+    eval mode the two heads are one function."""
+    from tespike.recon.learning.head import FLOORS, set_floor
+
+    torch.manual_seed(0)
+    head = BlendHead(8, 2, MU)
+    with torch.no_grad():
+        head.conv.weight.normal_(0, 0.1)
+        head.conv.bias[-4:] = -3.0                # the correction channels: every code far below 0
+    feature, light = torch.randn(2, 8, 4, 4), torch.rand(2, 13, 8, 8) * 0.01
+    truth = torch.full((2, 1, 8, 8), 0.005)
+    grads, outputs = {}, {}
+    for floor in FLOORS:
+        set_floor(head, floor).train()
+        head.zero_grad()
+        out = head(feature, light, None, TE.spike_light)
+        (compress(out, MU) - compress(truth, MU)).abs().mean().backward()
+        grads[floor] = head.conv.bias.grad[-4:].clone()
+        head.eval()
+        with torch.no_grad():
+            outputs[floor] = head(feature, light, None, TE.spike_light)
+        assert float(out.detach().abs().max()) == 0.0
+    assert float(grads["clamp"].abs().max()) == 0.0
+    assert bool((grads["straight-through"] < 0).all())            # descent raises the correction
+    assert torch.equal(outputs["clamp"], outputs["straight-through"])
+    with pytest.raises(ValueError, match="floor"):
+        set_floor(head, "relu")
+
+
+def test_train_command_offers_the_heads_floors():
+    """tespike train's --floor choices (typed in the parser, which imports no recon) are FLOORS,
+    and TrainOptions refuses another in one line."""
+    from tespike.cosim.cli import build_parser
+    from tespike.golden.errors import InputError
+    from tespike.recon.learning.head import FLOORS
+    from tespike.recon.train import TrainOptions
+
+    parser = build_parser("train")
+    for floor in FLOORS:
+        assert parser.parse_args(["train", "--out", "w.pt", "--steps", "1", "--floor", floor]).floor == floor
+    with pytest.raises(SystemExit):
+        parser.parse_args(["train", "--out", "w.pt", "--steps", "1", "--floor", "relu"])
+    assert TrainOptions(steps=1, floor="straight-through").model().head.floor == "straight-through"
+    with pytest.raises(InputError, match="floor"):
+        TrainOptions(steps=1, floor="relu")

@@ -13,7 +13,7 @@ HELP = "train a learned reconstruction method for one sensor configuration (resu
 
 #: Flags whose default is the trainer's (their dest is the TrainOptions field).
 TRAINER_FLAGS = ("method", "size", "loss", "lr", "steps_per_epoch", "halve_every", "batch", "crop",
-                 "workers", "pool", "refresh", "validate_every", "seed", "device", "warmup")
+                 "workers", "pool", "refresh", "validate_every", "seed", "device", "warmup", "floor")
 
 
 class _TrainerDefaults(argparse.HelpFormatter):
@@ -45,6 +45,9 @@ def add_arguments(parser):
     trainer("--lr", "initial learning rate", type=float)
     trainer("--warmup", "steps over which the learning rate ramps up linearly (a warm start's --init "
                         "weights meet a fresh Adam state)", type=int)
+    trainer("--floor", "the output's floor of zero light in training: clamp (no gradient below it) or "
+                       "straight-through (clamped, the gradient passed as if not; inference is the same)",
+            choices=("clamp", "straight-through"))
     trainer("--steps-per-epoch", "steps per epoch", type=int)
     trainer("--halve-every", "epochs between learning-rate halvings", type=int)
     trainer("--batch", "batch size", type=int)

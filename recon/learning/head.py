@@ -38,6 +38,12 @@ from ..mulaw import compress, expand
 RADII = (0, 1, 2, 4, 7, 12, 20, 30)
 #: Initial logits: TFI and TFP's mean over its default window first (the bias of an untrained head).
 INITIAL_LOGITS = {"tfi": 2.0, DEFAULT_WINDOW // 2: 1.0}
+#: How the code meets its floor (no light below 0) in training: ``clamp`` passes no gradient
+#: below it, so a pixel whose code went negative on true light is never pulled back;
+#: ``straight-through`` clamps the same in the forward pass and passes the gradient as if
+#: unclamped (what the loss says of the clamped output reaches the code). Inference and
+#: validation (eval mode) clamp alike under both.
+FLOORS = ("clamp", "straight-through")
 
 
 def estimate_count() -> int:
@@ -122,6 +128,7 @@ class BlendHead(nn.Module):
         super().__init__()
         self.mu = float(mu)
         self.estimates = estimate_count()
+        self.floor = "clamp"                               # FLOORS; set for training by set_floor
         outputs = self.estimates + 1                       # logits, then the correction
         self.conv = conv3(channels, outputs * unshuffle ** 2)
         self.shuffle = nn.PixelShuffle(unshuffle)
@@ -139,8 +146,21 @@ class BlendHead(nn.Module):
         out = self.shuffle(self.conv(feature))
         weights = torch.softmax(out[:, :self.estimates], 1)
         codes = compress(key_estimates(light, inside, spike_light), self.mu)
-        return expand((weights * codes).sum(1, keepdim=True) + out[:, self.estimates:], self.mu)
+        code = (weights * codes).sum(1, keepdim=True) + out[:, self.estimates:]
+        if self.training and self.floor == "straight-through":
+            code = code + (code.clamp(min=0) - code).detach()
+        return expand(code, self.mu)
 
     def support(self, feature: Support, light: Support) -> Support:
         """The estimates are per pixel of the light; the weights and correction come from the feature."""
         return support(self.shuffle, support(self.conv, feature)).union(light)
+
+
+def set_floor(model: nn.Module, floor: str) -> nn.Module:
+    """Set every :class:`BlendHead` of ``model`` to one of :data:`FLOORS` (training only); return it."""
+    if floor not in FLOORS:
+        raise ValueError(f"floor {floor!r}: must be one of {', '.join(FLOORS)}")
+    for module in model.modules():
+        if isinstance(module, BlendHead):
+            module.floor = floor
+    return model
