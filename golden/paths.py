@@ -202,8 +202,10 @@ def check_output_dir(path: str | os.PathLike, what: str = "--out",
 def check_results_dir(path: str | os.PathLike, names: tuple[str, ...], force: bool,
                       what: str = "--out") -> Path:
     """A folder a command fills whole (:func:`tespike.golden.atomic.atomic_folder`): new or empty;
-    holding a previous run's results (only ``names``, a trailing ``/`` for a folder) only
-    with ``force``; never a folder holding anything else, which replacing it would delete."""
+    holding a previous run's results only with ``force``; never a folder holding anything else,
+    which replacing it would delete. ``names``: the results' files; ``dir/`` a folder of them,
+    whose files must each match a ``dir/PATTERN`` of ``names`` (no pattern: the folder is empty)."""
+    import fnmatch
     folder = check_output_dir(path, what)
     text = os.fspath(path)
     if not folder.is_dir():
@@ -214,11 +216,27 @@ def check_results_dir(path: str | os.PathLike, names: tuple[str, ...], force: bo
         raise InputError(f"cannot read {what} {text!r}: {_reason(exc)}") from None
     if not present:
         return folder
-    allowed = {name.rstrip("/") for name in names}
+    allowed = {name.rstrip("/") for name in names if "/" not in name.rstrip("/")}
+    patterns: dict[str, list[str]] = {}
+    for name in names:
+        head, _, pattern = name.partition("/")
+        if pattern:
+            patterns.setdefault(head, []).append(pattern)
     foreign = [name for name in present if name not in allowed]
+    for name in present:
+        inner = folder / name
+        if name in allowed and inner.is_dir() and not inner.is_symlink():
+            try:
+                entries = sorted(os.listdir(inner))
+            except OSError as exc:
+                raise InputError(f"cannot read {what} {text!r}'s folder {name!r}: {_reason(exc)}") from None
+            foreign += [f"{name}/{entry}" for entry in entries
+                        if not ((inner / entry).is_file() and not (inner / entry).is_symlink()
+                                and any(fnmatch.fnmatchcase(entry, p) for p in patterns.get(name, ())))]
     if foreign:
+        shown = ", ".join(n for n in names if "/" not in n.rstrip("/") or n.endswith("/"))
         raise InputError(f"{what} {text!r} holds {foreign[0]!r}, which is not one of a results folder's "
-                         f"files ({', '.join(names)}): choose a new or empty folder")
+                         f"files ({shown}): choose a new or empty folder")
     if not force:
         raise InputError(f"{what} {text!r} holds a previous run's results: give --force to replace them "
                          "(the new run replaces the folder whole when it is done), or another folder")

@@ -21,8 +21,9 @@ from .pictures import ERROR_RANGE, save_figure, write_text
 
 #: Sensors that get a column of Table 1; any other evaluated sensor gets extra rows.
 COLUMNS = ("ml-msb", "te")
-#: Files :func:`write_outputs` writes into its folder (besides strips/<sequence>.png).
-OUTPUT_FILES = ("table.md", "table.csv", "results.csv", "quality_vs_time.png", "strips/")
+#: Files :func:`write_outputs` writes into its folder (``strips/*.png``: one strip per sequence;
+#: :func:`tespike.golden.paths.check_results_dir` reads the folder pattern).
+OUTPUT_FILES = ("table.md", "table.csv", "results.csv", "quality_vs_time.png", "strips/", "strips/*.png")
 #: Short column titles of the metrics (the full labels, units and display: :func:`metric_notes`).
 HEADERS = {"psnr_mu": "PSNR-μ ↑", "ssim_mu": "SSIM-μ ↑", "psnr_pu21": "PU21-PSNR (dB) ↑",
            "hdr_vqm": "HDR-VQM ↓", "fovvideovdp": "FovVideoVDP (JOD) ↑"}

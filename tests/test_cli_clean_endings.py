@@ -58,6 +58,26 @@ def test_evaluate_refuses_a_previous_runs_folder_without_force_and_never_a_forei
     assert snapshot(tmp_path) == before
 
 
+def test_evaluate_force_never_deletes_a_file_of_the_strips_folder_no_evaluation_writes(capsys, tmp_path):
+    """--force replaced the folder whole after checking its top level only: the run's own input
+    scene and configuration, kept in OUT/strips/, were deleted by the swap (exit 0). Every file of
+    strips/ must be a strip (a .png) for --force to replace it."""
+    scene = tiny_scene(tmp_path)
+    out = tmp_path / "ev"
+    assert run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--quiet").returncode == 0
+    mine = out / "strips" / "mine.npy"
+    mine.write_bytes(scene.read_bytes())
+    (out / "strips" / "te.json").write_text(json.dumps({"b1": 4}))
+    before = snapshot(tmp_path)
+    assert_refused(run_here(capsys, *EVALUATE, "--scene", mine, "--te-config", out / "strips" / "te.json",
+                            "--out", out, "--force"), "'strips/mine.npy'", "new or empty folder")
+    assert snapshot(tmp_path) == before
+    mine.unlink()
+    (out / "strips" / "te.json").unlink()
+    (out / "strips" / "deeper").mkdir()
+    assert_refused(run_here(capsys, *EVALUATE, "--scene", scene, "--out", out, "--force"), "'strips/deeper'")
+
+
 def test_atomic_folder_leaves_the_previous_run_whole_or_the_new_one_whole(tmp_path):
     from tespike.golden.atomic import atomic_folder
     out = tmp_path / "ev"
