@@ -55,6 +55,20 @@ def test_empty_or_truncated_files_are_named(tmp_path):
             train(options(steps=2), tmp_path / "w.pt", resume=True)
 
 
+@pytest.mark.parametrize("text", [b"hello\n", b"step,epoch,lr,loss,seconds\n1,1,0.0001,0.05,0.3\n",
+                                  b"\x80\x02}q\x00.", b"PK\x03\x04 cut"])
+def test_a_text_or_foreign_file_as_weights_is_named(tmp_path, text):
+    """torch's loader for files that are not zip archives read text as its legacy pickle and
+    failed with KeyError: 101 ("hello") or IndexError (a run's log.csv): a traceback from
+    reconstruct, evaluate and demo --weights, train --init and a text checkpoint on --resume."""
+    from tespike.recon.learning.weights import read_weights
+    (tmp_path / "w.txt").write_bytes(text)
+    with pytest.raises(InputError, match=r"weights '.*w\.txt' is not a tespike weights file \(.*\)$"):
+        read_weights(tmp_path / "w.txt")
+    with pytest.raises(InputError, match=r"--init '.*w\.txt' is not a tespike weights file"):
+        train(options(steps=1, init=str(tmp_path / "w.txt")), tmp_path / "e.pt")
+
+
 def test_resume_does_not_repeat_the_killed_runs_rows(tmp_path):
     """Rows a killed run logged after its last checkpoint are written again by the resumed run: once."""
     train(options(steps=2), tmp_path / "w.pt")

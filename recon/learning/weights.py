@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import pickle
+import struct
 import zipfile
 import zlib
 from pathlib import Path
@@ -77,6 +78,10 @@ def read_torch_file(path: str | Path, what: str, kind: str) -> Any:
     except OSError as exc:
         raise InputError(f"cannot read {what} {str(path)!r}: {exc.strerror or exc}") from None
     except (RuntimeError, EOFError, ValueError, pickle.UnpicklingError, zipfile.BadZipFile) as exc:
+        raise InputError(f"{what} {str(path)!r} is not a {kind} ({_load_fault(path, exc)})") from None
+    except (KeyError, IndexError, TypeError, AttributeError, UnicodeDecodeError, struct.error) as exc:
+        # torch's loader for files that are not zip archives (its legacy format) reads any bytes
+        # as that format's pickle and fails on text with these (e.g. KeyError: 101 on "hello")
         raise InputError(f"{what} {str(path)!r} is not a {kind} ({_load_fault(path, exc)})") from None
 
 
