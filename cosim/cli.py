@@ -180,7 +180,8 @@ def _written(since: int, exc: BaseException) -> list[str]:
     its own message or note names (train's "checkpoint ... saved", "wrote the weights to ...")."""
     from tespike.golden.atomic import finished_outputs
     said = str(exc) + " ".join(getattr(exc, "__notes__", ()))
-    return [path for path in finished_outputs(since) if repr(path) not in said]
+    # each file once, where it was first written (train rewrites best.pt and curves.png at every validation)
+    return [path for path in dict.fromkeys(finished_outputs(since)) if repr(path) not in said]
 
 
 def _after(since: int, exc: BaseException) -> str:

@@ -514,3 +514,18 @@ def test_a_trial_import_that_fails_in_c_refuses_the_library(tmp_path, monkeypatc
     monkeypatch.syspath_prepend(str(tmp_path))
     refusal = library_room._refusal("starved_library", 600 << 20)
     assert refusal is not None and refusal.startswith("starved_library cannot be loaded: it does not fit in")
+
+
+def test_an_interrupted_commands_line_names_each_file_written_once(tmp_path):
+    """train rewrites best.pt and curves.png at every validation: its Ctrl-C line listed them once
+    per validation ('best.pt', 'curves.png', 'best.pt', 'curves.png', ...)."""
+    from tespike.cosim.cli import _after
+    from tespike.golden.atomic import finished_outputs
+    from tespike.golden.io import atomic_output
+    since = len(finished_outputs())
+    for _ in range(3):
+        for name in ("best.pt", "curves.png"):
+            with atomic_output(tmp_path / name) as tmp:
+                Path(tmp).write_bytes(b"x")
+    line = _after(since, KeyboardInterrupt())
+    assert line == f" after writing {str(tmp_path / 'best.pt')!r}, {str(tmp_path / 'curves.png')!r} whole"
