@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import parse_json
-from .errors import InputError
+from .errors import InputError, one_line
 from .light import DARK_NORMAL, check_dark_current, dark_electrons, eq13_dark_per_readout
 
 #: Bounds of each option (inclusive): name -> (lowest, highest).
@@ -80,10 +80,12 @@ class SensorNoise:
         object.__setattr__(self, "dark_current", check_dark_current(self.dark_current))
         for key, (low, high) in NOISE_RANGES.items():
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise InputError(f"sensor noise {key} = {value!r}: must be a finite number")
+            # (an int of any size is finite: math.isfinite would overflow on one past float's range)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                    not (isinstance(value, int) or math.isfinite(value)):
+                raise InputError(f"sensor noise {key} = {one_line(repr(value), 40)}: must be a finite number")
             if not low <= value <= high:
-                raise InputError(f"sensor noise {key} = {value!r}: must be in [{low:g}, {high:g}]")
+                raise InputError(f"sensor noise {key} = {one_line(repr(value), 40)}: must be in [{low:g}, {high:g}]")
             object.__setattr__(self, key, float(value))
         if self.dark_current is None and (self.dsnu or self.hot_pixels or self.dark_level != 1.0):
             raise InputError("sensor noise: dark_level, dsnu and hot_pixels shape the dark current; "
@@ -116,6 +118,9 @@ class SensorNoise:
         unknown = sorted(set(values) - known)
         if unknown:
             raise InputError(f"{what}: unknown key {unknown[0]!r} (known: {', '.join(sorted(known))})")
+        null = [key for key, value in values.items() if value is None]
+        if null:               # JSON null is not "use the default", as in a configuration
+            raise InputError(f"{what}: {null[0]} = null: give its value or leave the key out")
         dark = values.get("dark_current", None)
         if dark is not None and not isinstance(dark, str):
             raise InputError(f"{what}: dark_current = {dark!r} must be 'none', 'eq12' or 'eq13'")

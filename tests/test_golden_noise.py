@@ -72,7 +72,10 @@ def test_json_round_trip_and_refusals(tmp_path):
             load_noise(path)
     for text, words in (("{", "is not valid JSON"), ('{"dsnu": 0.1, "dsnu": 0.2}', "key 'dsnu' is given twice"),
                         ("[" * 100000 + "]" * 100000, "nested too deeply"),      # (RecursionError escaped)
-                        ('{"dsnu": ' + "9" * 5000 + "}", "number too long")):    # (Python's digit limit)
+                        ('{"dsnu": ' + "9" * 5000 + "}", "number too long"),     # (Python's digit limit)
+                        ('{"prnu": 1' + "0" * 400 + "}", r"prnu = 1000.*\.\.\.: must be in \[0, 0.5\]$"),
+                        ('{"dark_current": null}', "dark_current = null"),        # (OverflowError escaped)
+                        ('{"dark_current": "eq12", "dsnu": null}', "dsnu = null")):
         path.write_text(text)
         with pytest.raises(InputError, match=words):
             load_noise(path)
