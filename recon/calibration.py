@@ -217,7 +217,9 @@ def load_calibration(path: str | Path) -> Calibration:
         if version == FORMAT and "dark_law" not in npz.files:
             raise InputError(f"calibration file {shown!r} lacks dark_law (write it with 'tespike calibrate')")
         law = np.asarray(npz["dark_law"]) if version == FORMAT else None
-        tail = float(npz["dark_tail"]) if version == FORMAT and "dark_tail" in npz.files else math.nan
+        stored = np.asarray(npz["dark_tail"]) if version == FORMAT and "dark_tail" in npz.files else None
+        tail = float(stored) if stored is not None and stored.ndim == 0 and stored.dtype.kind in "iuf" \
+            else math.nan                   # (a string, an array or a complex number: refused below)
         if version == FORMAT and not (np.isfinite(tail) and tail >= 0):
             raise InputError(f"calibration file {shown!r}: dark_tail must be a finite number >= 0 "
                              "(write it with 'tespike calibrate')")

@@ -113,6 +113,11 @@ def test_file_round_trip_old_format_and_refusals(tmp_path):
            "neg.npz": ({"dark_law": -values["dark_law"]}, "dark_law must be float32"),
            "f64.npz": ({"dark_law": values["dark_law"].astype(np.float64)}, "dark_law must be float32"),
            "tail.npz": ({"dark_tail": np.float64(np.nan)}, "dark_tail"),
+           # (a traceback from float() on an array or a complex; a string named the archive unreadable)
+           "tail1.npz": ({"dark_tail": np.array([0.0])}, "dark_tail must be a finite number"),
+           "tail2.npz": ({"dark_tail": np.array([])}, "dark_tail must be a finite number"),
+           "tail3.npz": ({"dark_tail": np.complex128(1)}, "dark_tail must be a finite number"),
+           "tail4.npz": ({"dark_tail": np.array("abc")}, "dark_tail must be a finite number"),
            "nolaw.npz": ({"format": np.array("tespike-calibration-2"), "dark_law": None}, "lacks dark_law"),
            "fmt.npz": ({"format": np.array("tespike-calibration-9")}, "has format")}
     for name, (change, message) in bad.items():
