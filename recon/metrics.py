@@ -55,7 +55,9 @@ def as_frames(x, name: str, device) -> torch.Tensor:
     """A (K, H, W) or (H, W) array or tensor as a float64 tensor on ``device``; ``name`` in refusals."""
     if not isinstance(x, torch.Tensor):
         x = np.asarray(x)
-        if not x.dtype.isnative:           # torch takes native byte order only (big-endian .npy files)
+        if x.dtype.kind == "f" and x.dtype.itemsize > 8:   # long double: torch has no such type
+            x = x.astype(np.float64)
+        elif not x.dtype.isnative:         # torch takes native byte order only (big-endian .npy files)
             x = x.astype(x.dtype.newbyteorder("="))
         elif not x.flags.writeable:        # a read-only memory map: copy the (small) band
             x = x.copy()

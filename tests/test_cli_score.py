@@ -162,3 +162,14 @@ def test_big_endian_and_fortran_files_score_like_native(tmp_path, capsys, rng):
                                            reference.astype(">f8"), names=("Rb.npy", "Ib.npy")))[0]
     for key in native["per_frame"]:
         assert np.allclose(other["per_frame"][key], native["per_frame"][key], rtol=1e-5), key
+
+
+def test_long_double_files_score_like_float64(tmp_path, capsys, rng):
+    """A long-double .npy passed the float check and then failed in torch (no such type): a traceback."""
+    reference = rng.uniform(0.01, 1.0, (2, 16, 20))
+    estimate = reference * rng.lognormal(0, 0.1, reference.shape)
+    native = score_json(capsys, *write_pair(tmp_path, estimate, reference))[0]
+    long = score_json(capsys, *write_pair(tmp_path, estimate.astype(np.longdouble), reference.astype(np.longdouble),
+                                          names=("Rl.npy", "Il.npy")))[0]
+    for key in native["per_frame"]:
+        assert np.allclose(long["per_frame"][key], native["per_frame"][key], rtol=1e-12), key
