@@ -229,6 +229,22 @@ def top_module(modules: dict) -> str:
     return roots[0]
 
 
+def design_top(verilog_text: str, yosys: str = "yosys") -> str:
+    """The one module of ``verilog_text`` no other instantiates, read by Yosys before any synthesis
+    (``synth -auto-top`` would pick one of several tops and drop the others without a word), or
+    :class:`SynthesisError` naming them."""
+    with yosys_run(verilog_text, ["hierarchy", "tee -q -o design.json stat -json"], "yosys failed", yosys,
+                   "tespike-top-") as (work, _):
+        try:
+            modules = _stat_json((work / "design.json").read_text()).get("modules") or {}
+            names = {raw.lstrip("\\") for raw in modules}
+            return top_module({raw.lstrip("\\"): {"instances": {t.lstrip("\\") for t in stat.get("num_cells_by_type", {})
+                                                                  if t.lstrip("\\") in names}}
+                               for raw, stat in modules.items()})
+        except (OSError, ValueError, KeyError, AttributeError) as exc:
+            raise SynthesisError(str(exc)) from None
+
+
 def _run_measured(command: list[str], cwd: Path) -> tuple[int, str, dict]:
     """Run ``command``; return (exit code, its output, wall seconds, CPU seconds and peak resident MB
     of that one child process, from ``os.wait4``)."""
@@ -252,12 +268,13 @@ def synthesize_hierarchy(verilog_text: str, top: str | None = None, yosys: str =
     flow of :func:`synthesize_module`) and ``run`` (wall and CPU seconds and peak memory of Yosys).
     ``top=None``: the module no other instantiates. Raises :class:`SynthesisError`.
     """
-    steps = [f"synth -top {top}" if top else "synth -auto-top", "setattr -mod -unset top", *mapping_steps(gate_sets)]
+    if top is None:
+        top = design_top(verilog_text, yosys)
+    steps = [f"synth -top {top}", "setattr -mod -unset top", *mapping_steps(gate_sets)]
     with yosys_run(verilog_text, steps, "yosys failed", yosys, "tespike-synthesize-") as (work, run):
         try:
             modules = parse_stat_modules((work / "generic.json").read_text())
             mapped = {g: parse_stat_modules((work / f"{g}.json").read_text()) for g in gate_sets}
-            top = top or top_module(modules)
         except (OSError, ValueError, KeyError) as exc:
             raise SynthesisError(str(exc)) from None
     for name, stat in modules.items():

@@ -68,6 +68,19 @@ def test_synthesize_a_verilog_file_finds_its_top(tmp_path):
     assert "total pair: 2 cells, 2 flip-flops" in result.stdout, result.stdout
 
 
+@needs_yosys
+def test_synthesize_refuses_a_file_of_two_tops_unless_one_is_named(tmp_path):
+    """Yosys's synth -auto-top picked one of two tops and the report dropped the other (exit 0)."""
+    (tmp_path / "two.v").write_text("module m1(input a, output b); assign b = a; endmodule\n"
+                                    "module m2(input a, output b); assign b = ~a; endmodule\n")
+    assert_refused(run_tespike("synthesize", "--verilog", tmp_path / "two.v"), "2 top modules (m1, m2)", "name one")
+    named = run_tespike("synthesize", "--verilog", tmp_path / "two.v", "--top", "m2")
+    assert named.returncode == 0 and "total m2: 1 cells" in named.stdout, named.stderr
+    for top in ("", "m1; shell touch x", "1m"):       # (an empty one was read as none given)
+        assert_refused(run_tespike("synthesize", "--verilog", tmp_path / "two.v", "--top", top),
+                       f"--top {top!r}", "not a Verilog module name")
+
+
 @pytest.mark.parametrize("args, words", [
     (("--verilog", "missing.v"), ("missing.v", "does not exist")),
     (("--verilog", "A.v", "--config", "te"), ("--verilog", "not both")),

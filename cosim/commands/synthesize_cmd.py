@@ -39,6 +39,8 @@ MAX_ICARUS_PIXELS = 1024
 
 def _design(args):
     """(Verilog text, top name or None, pixels or None, a one-line description) from the arguments."""
+    import re
+
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
     from tespike.golden.paths import check_input_file
@@ -56,6 +58,10 @@ def _design(args):
         if generated:
             raise InputError(f"--verilog and {' '.join(generated)}: give a Verilog file or a generated top, not both")
         path = check_input_file(args.verilog, "--verilog")
+        if args.top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", args.top):
+            # (a Verilog identifier: the name goes into Yosys's script, where ';' would start a command)
+            raise InputError(f"--top {args.top!r}: not a Verilog module name (letters, digits, _ and $, "
+                             "not starting with a digit)")
         return path.read_text(errors="replace"), args.top, None, f"{args.verilog}"
     if args.top is not None:
         raise InputError("--top names a module of --verilog; a generated top is named by its configuration")
