@@ -48,6 +48,9 @@ def test_refusals(tmp_path):
     assert_refused(run_tespike("view", "--input", tmp_path / "E.npy", "--out", tmp_path / "e.png"), "--config")
     assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.png",
                                "--frames", "7"), "frame 7")
+    for spec in ("0:99", "-1:", "1:-1", "3:3", "5:2"):     # (a Python slice clipped or wrapped them: exit 0)
+        assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.png",
+                                   f"--frames={spec}"), f"--frames {spec!r}", "0 <= a < b")
     assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.jpg"), ".png")
     assert_refused(run_tespike("view", "--input", tmp_path / "x.npy", "--out", tmp_path / "i.png"), "x.npy")
     assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.png",

@@ -135,3 +135,23 @@ def check_threads_argument(threads: int | None) -> None:
     from tespike.golden.errors import InputError
     if threads is not None and not 1 <= threads <= MAX_THREADS:
         raise InputError(f"--threads {threads}: must be in 1..{MAX_THREADS}")
+
+
+def frame_range(spec, count: int) -> range:
+    """Frames selected by ``--frames a:b`` among ``count`` (a default 0, b default
+    ``count``, b excluded): inside the files, never clipped to them (``score``, ``view``)."""
+    from tespike.golden.errors import InputError
+    if spec is None:
+        return range(count)
+    parts = spec.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        a, b = (int(x) if x.strip() else None for x in parts)
+    except ValueError:
+        raise InputError(f"--frames {spec!r}: must be 'a:b' with integers a < b (b excluded)") from None
+    a = 0 if a is None else a
+    b = count if b is None else b
+    if not 0 <= a < b <= count:
+        raise InputError(f"--frames {spec!r}: needs 0 <= a < b <= {count} (the files hold {count} frames)")
+    return range(a, b)

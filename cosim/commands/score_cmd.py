@@ -29,25 +29,6 @@ def add_arguments(parser):
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
 
 
-def frame_range(spec, count: int) -> range:
-    """Frames selected by ``--frames a:b`` among ``count``."""
-    from tespike.golden.errors import InputError
-    if spec is None:
-        return range(count)
-    parts = spec.split(":")
-    try:
-        if len(parts) != 2:
-            raise ValueError
-        a, b = (int(x) if x.strip() else None for x in parts)
-    except ValueError:
-        raise InputError(f"--frames {spec!r}: must be 'a:b' with integers a < b (b excluded)") from None
-    a = 0 if a is None else a
-    b = count if b is None else b
-    if not 0 <= a < b <= count:
-        raise InputError(f"--frames {spec!r}: needs 0 <= a < b <= {count} (the files hold {count} frames)")
-    return range(a, b)
-
-
 def load_estimate(path):
     """R.npy as a read-only map; refused unless a float (K, H, W) array."""
     from tespike.golden.errors import InputError
@@ -91,6 +72,8 @@ def run(args) -> int:
     if estimate.shape != reference.shape:
         raise InputError(f"estimate file {str(args.estimate)!r} holds shape {estimate.shape}, reference file "
                          f"{str(args.reference)!r} {reference.shape}: they must be equal")
+    from .common import frame_range
+
     frames = frame_range(args.frames, reference.shape[0])
     ref = reference[frames.start:frames.stop]          # memory maps: the metrics read them in bands
     est = estimate[frames.start:frames.stop]

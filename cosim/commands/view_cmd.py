@@ -90,12 +90,11 @@ def pick_frames(spec, count, each):
         return sorted({int(i) for i in np.linspace(0, count - 1, min(count, DEFAULT_SHEET_FRAMES))})
     if spec == "all":
         return list(range(count))
+    if ":" in spec:                   # (as score reads it: no Python slice, which clipped 0:99 and took -1:)
+        from .common import frame_range
+        return list(frame_range(spec, count))
     try:
-        if ":" in spec:
-            a, b = (int(x) if x else None for x in spec.split(":"))
-            frames = list(range(count))[slice(a, b)]
-        else:
-            frames = [int(x) for x in spec.split(",")]
+        frames = [int(x) for x in spec.split(",")]
     except ValueError:
         raise InputError(f"--frames {spec!r}: must be 'all', 'a:b' or a comma list of integers") from None
     bad = [f for f in frames if not 0 <= f < count]
