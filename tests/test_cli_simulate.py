@@ -37,8 +37,9 @@ def test_simulate_options(tmp_path):
     np.save(tmp_path / "i.npy", np.full((3, 2, 2), 0.2))
     for extra in (["--no-noise"], ["--dark-current", "eq12"], ["--dark-current", "eq13"],
                   ["--method", "per-clock"]):
+        seed = [] if extra == ["--no-noise"] else ["--seed", "1"]
         result = run_tespike("simulate", "--config", "ml", "--scene", tmp_path / "i.npy",
-                             "--out", tmp_path / "s.npz", "--seed", "1", *extra)
+                             "--out", tmp_path / "s.npz", *seed, *extra)
         assert result.returncode == 0, (extra, result.stderr)
         words, config = load_stream(tmp_path / "s.npz")
         assert config == SensorConfig(mode="ml") and words.shape == (3, 2, 2)
@@ -81,6 +82,9 @@ def test_simulate_refuses_bad_files_and_config(tmp_path):
                                "--out", tmp_path / "s.npz", "--seed", "-3"), "--seed")
     assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
                                "--out", tmp_path / "s.npz", "--no-noise", "--dark-current", "eq12"), "eq12")
+    for command in ("simulate", "stimulus"):    # (the seed was reported and changed nothing)
+        assert_refused(run_tespike(command, "--config", "te", "--scene", tmp_path / "i.npy",
+                                   "--out", tmp_path / "s.npz", "--no-noise", "--seed", "7"), "--seed", "--no-noise")
     assert _no_output(tmp_path)
 
 

@@ -89,12 +89,14 @@ def add_light_arguments(parser, *, out_help: str, seed_help: str, no_noise_help:
 def light_front_end(args):
     """The checked light options of ``simulate`` and ``stimulus`` -> the :class:`tespike.golden.noise.Sensor`
     of ``--noise`` (None without it): a negative ``--seed``, and ``--no-noise`` with a random
-    ``--dark-current``, refused in one line."""
+    ``--dark-current`` or a ``--seed`` it would ignore, refused in one line."""
     from tespike.golden.errors import InputError
     if args.seed is not None and args.seed < 0:
         raise InputError(f"--seed {args.seed}: must be >= 0")
     if args.no_noise and args.dark_current != "none":
         raise InputError(f"--dark-current {args.dark_current} is random; it cannot be combined with --no-noise")
+    if args.no_noise and args.seed is not None:
+        raise InputError("--seed seeds the noise; with --no-noise nothing is drawn (it would be ignored)")
     return sensor_argument(args)
 
 
