@@ -268,3 +268,20 @@ def test_store_scores_the_frames_the_serial_evaluation_scores_with_a_learned_met
     for a, b in zip(serial.results, stored.results):
         assert a.method == b.method and a.frames_scored == b.frames_scored == expected.stop - expected.start
         assert a.psnr_mu == pytest.approx(b.psnr_mu, abs=1e-3) and a.ssim_mu == pytest.approx(b.ssim_mu, abs=1e-4)
+
+
+@pytest.mark.parametrize("extra, words", [
+    (("--scene", "sun", "--grayscale", "rec601"), ("--grayscale", "--hdr")),
+    (("--hdr", "HDR", "--height", "16"), ("--height", "--scene")),
+    (("--hdr", "HDR", "--width", "16"), ("--width", "--scene")),
+])
+def test_an_option_of_a_source_not_given_is_refused(tmp_path, capsys, extra, words):
+    """--grayscale with built-in scenes only, or --height / --width with HDR folders only, was
+    dropped without a word (the store was that of a run without it)."""
+    import re
+    (tmp_path / "HDR").mkdir()
+    extra = tuple(str(tmp_path / a) if a == "HDR" else a for a in extra)
+    assert main(["dataset", *extra, "--config", "te", "--out", str(tmp_path / "d.zarr")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and re.search(".*".join(words), err), err
+    assert not (tmp_path / "d.zarr").exists()

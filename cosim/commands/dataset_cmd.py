@@ -4,6 +4,10 @@ HELP = ("simulate every sequence of a folder of HDR frame folders (and/or built-
         "every sensor configuration into a Zarr dataset store, locally or on a Dask cluster")
 
 
+#: Rows and columns of the built-in scenes (--scene) unless --height / --width say otherwise.
+SCENE_SIZE = (96, 128)
+
+
 def add_arguments(parser):
     parser.add_argument("--hdr", metavar="DIR", action="append", default=[],
                         help="folder with one sub-folder of .exr/.hdr frames per sequence "
@@ -13,10 +17,10 @@ def add_arguments(parser):
     parser.add_argument("--frames", type=int, default=None,
                         help="built-in scenes: readouts (default 24); HDR folders: at most this many "
                              "frames (default all)")
-    parser.add_argument("--height", type=int, default=96, help="rows of built-in scenes (default 96)")
-    parser.add_argument("--width", type=int, default=128, help="columns of built-in scenes (default 128)")
-    parser.add_argument("--grayscale", default="rec709", help="luminance weights of HDR frames: rec709 "
-                                                              "(default) or rec601")
+    parser.add_argument("--height", type=int, default=None, help=f"rows of built-in scenes (default {SCENE_SIZE[0]})")
+    parser.add_argument("--width", type=int, default=None, help=f"columns of built-in scenes (default {SCENE_SIZE[1]})")
+    parser.add_argument("--grayscale", default=None, help="luminance weights of HDR frames: rec709 "
+                                                          "(default) or rec601")
     parser.add_argument("--config", metavar="C", action="append", default=[],
                         help="sensor: te, ml, ml-msb or a JSON file (repeatable; streams are named "
                              "after the preset or the file's stem)")
@@ -74,11 +78,22 @@ def run(args) -> int:
     if "://" not in args.out:          # a local store: its folder can be checked before any work
         from tespike.golden.paths import check_output_dir
         check_output_dir(args.out, "--out")
+    # options of one kind of source, given without it, would be dropped: refused
+    if args.grayscale is not None and not args.hdr:
+        raise InputError("--grayscale weighs the colours of --hdr frames; built-in scenes are grey already "
+                         "(give --hdr DIR, or leave --grayscale out)")
+    for flag, value in (("--height", args.height), ("--width", args.width)):
+        if value is not None and not args.scene:
+            raise InputError(f"{flag} sizes the built-in scenes of --scene; --hdr frames keep their own size "
+                             f"(give --scene NAME, or leave {flag} out)")
     configs = sensor_configs(args.config)
     sources = []
     for folder in args.hdr:
-        sources += hdr_sources(folder, weights=args.grayscale, max_frames=args.frames)
-    sources += scene_sources(args.scene, args.frames or 24, args.height, args.width)
+        grey = {} if args.grayscale is None else {"weights": args.grayscale}   # (hdr_sources' default)
+        sources += hdr_sources(folder, max_frames=args.frames, **grey)
+    height, width = (SCENE_SIZE[0] if args.height is None else args.height,
+                     SCENE_SIZE[1] if args.width is None else args.width)
+    sources += scene_sources(args.scene, args.frames or 24, height, width)
     if not sources:
         raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     start = time.perf_counter()
