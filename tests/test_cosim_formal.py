@@ -115,6 +115,10 @@ def test_command_refuses_bad_options_in_one_line():
     assert_refused(done, "--depth")
     done = run_tespike("prove", "--workers", "0", timeout=60)
     assert_refused(done, "--workers")
+    # the other part's options with --only were dropped without a word (exit 0)
+    for only, option in (("pixel", ("--sizes", "2x2")), ("pixel", ("--config-sizes", "none")),
+                         ("pixel", ("--top-timeout", "1")), ("tops", ("--depth", "5")), ("tops", ("--corners",))):
+        assert_refused(run_tespike("prove", "--only", only, *option, timeout=60), option[0], f"--only {only}")
 
 
 # -- the streaming Verilog top's pixel rule (rtl/verilog_stream.py) --------------------------------

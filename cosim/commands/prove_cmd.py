@@ -8,6 +8,9 @@ HELP = ("prove the pixel equal to SPEC section 3's rule (yosys-smtbmc k-inductio
         "independent proofs run in --workers processes")
 
 PARTS = ("pixel", "tops")
+#: Options only the pixel's proofs use, and only the tops' (``--only`` refuses the other part's).
+PIXEL_OPTIONS = ("corners", "depth", "solver", "traces")
+TOP_OPTIONS = ("sizes", "config_sizes", "top_timeout")
 
 
 def add_arguments(parser):
@@ -143,6 +146,13 @@ def run(args) -> int:
 
     from .common import check_workers_argument
 
+    if args.only is not None:           # the other part's options would be dropped without a word
+        from .common import options_given
+        other = PIXEL_OPTIONS if args.only == "tops" else TOP_OPTIONS
+        given = [flag for flag, dest in options_given(args.command_parser, args) if dest in other]
+        if given:
+            part = "the pixel's proofs" if args.only == "tops" else "the tops' proofs"
+            raise InputError(f"{given[0]} belongs to {part}, which --only {args.only} leaves out")
     if args.depth < 1:
         raise InputError(f"--depth {args.depth} must be >= 1")
     if not args.top_timeout > 0:
