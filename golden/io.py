@@ -283,16 +283,28 @@ def open_npz(path: str | Path, what: str, holding: str = "") -> Iterator[np.lib.
 
 def _check_member_sizes(path: str | Path) -> None:
     """Refuse (ValueError) an .npy member whose header's shape needs more bytes than the member holds,
-    read from its first bytes and the archive's directory before numpy allocates the shape: a
-    400-byte archive declaring 9 TiB was reported as running out of memory."""
+    read from its first bytes and the archive's directory before numpy allocates the shape (a
+    400-byte archive declaring 9 TiB was reported as running out of memory), or fewer (numpy
+    ignores bytes after the array, as a bare .npy's are refused: :func:`load_npy`); and an
+    archive holding one member name twice (numpy reads the last, unseen by most zip tools)."""
     with zipfile.ZipFile(path) as archive:
+        names = archive.namelist()
+        twice = sorted({name for name in names if names.count(name) > 1})
+        if twice:
+            raise ValueError(f"member {twice[0]!r} is stored twice")
         for info in archive.infolist():
             if not info.filename.endswith(".npy") or info.flag_bits & 0x1:
                 continue
             with archive.open(info) as member:
                 shape, _, dtype, header = _npy_header(member)
-            if header is not None and not dtype.hasobject and header + int(np.prod(shape, dtype=object)) * dtype.itemsize > info.file_size:
+            if header is None or dtype.hasobject:
+                continue
+            size = header + int(np.prod(shape, dtype=object)) * dtype.itemsize
+            if size > info.file_size:
                 raise ValueError(f"member {info.filename!r} is shorter than its header's shape {shape}")
+            if size < info.file_size:
+                raise ValueError(f"member {info.filename!r} holds {info.file_size - size} bytes after its "
+                                 f"{shape} array")
 
 
 def _refuse_starved(exc: BaseException, what: str, path) -> None:

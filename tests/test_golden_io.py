@@ -106,6 +106,38 @@ def test_a_compressed_member_declaring_more_than_it_holds_is_named_not_out_of_me
         load_stream(tmp_path / "big.npz")
 
 
+@pytest.mark.parametrize("compression", [0, 8])            # stored (np.savez) and deflated
+def test_a_member_with_bytes_after_its_array_or_a_name_stored_twice_is_refused(tmp_path, compression):
+    """numpy ignored bytes after an .npz member's array (a bare .npy's are refused) and read the
+    last of two members of one name (the first is what most zip tools show): both were accepted."""
+    import io
+    import warnings
+    import zipfile
+
+    from tespike.golden.io import load_stream
+    config = SensorConfig()
+
+    def member(array):
+        buffer = io.BytesIO()
+        np.save(buffer, array)
+        return buffer.getvalue()
+    words = np.zeros((2, 3, 4), np.uint8)
+    with zipfile.ZipFile(tmp_path / "tail.npz", "w", compression) as archive:
+        archive.writestr("words.npy", member(words) + b"junk")
+        archive.writestr("config.npy", member(np.array(config.to_json())))
+    with pytest.raises(InputError, match=r"'.*tail\.npz' .*member 'words.npy' holds 4 bytes after its \(2, 3, 4\) array"):
+        load_stream(tmp_path / "tail.npz")
+    with zipfile.ZipFile(tmp_path / "twice.npz", "w", compression) as archive, warnings.catch_warnings():
+        warnings.simplefilter("ignore")                      # (zipfile warns of the duplicate name)
+        archive.writestr("words.npy", member(words + 1))
+        archive.writestr("words.npy", member(words))
+        archive.writestr("config.npy", member(np.array(config.to_json())))
+    with pytest.raises(InputError, match=r"'.*twice\.npz' .*member 'words.npy' is stored twice"):
+        load_stream(tmp_path / "twice.npz")
+    np.savez(tmp_path / "ok.npz", words=words, config=config.to_json())      # as tespike writes it
+    assert np.array_equal(load_stream(tmp_path / "ok.npz")[0], words)
+
+
 def test_a_config_member_stored_as_bytes_is_read_as_utf8(tmp_path):
     """np.array(text.encode()) is a 0-d string array too (dtype S): it was read as "b'{...}'" and
     refused as "not valid JSON"."""
