@@ -27,7 +27,8 @@ MAX_CODE = 2.0
 def tone_map(light: np.ndarray, peak: float, mu: float = MU) -> np.ndarray:
     """Divide by the ground truth's peak, clip to [0, 1], mu-law (paper eq. 11); float64: the
     numpy twin of :func:`compress` for the pictures."""
-    h = np.clip(np.asarray(light, np.float64) / peak, 0.0, 1.0)
+    with np.errstate(over="ignore"):      # a tiny peak (subnormal): light / peak is inf, white as it should be
+        h = np.clip(np.asarray(light, np.float64) / peak, 0.0, 1.0)
     return np.log1p(mu * h) / math.log1p(mu)
 
 

@@ -134,3 +134,10 @@ def test_each_killed_leaves_the_previous_frames_whole(tmp_path):
     process.wait()
     assert process.returncode == -signal.SIGKILL, "the run ended before it could be killed mid-way"
     assert {p.name: p.read_bytes() for p in (tmp_path / "frames").iterdir()} == before
+
+
+def test_a_tiny_peak_maps_everything_to_white_without_a_warning(tmp_path):
+    """--peak 1e-320 (subnormal) made light / peak overflow: numpy's two-line RuntimeWarning."""
+    _files(tmp_path)
+    done = run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "w.png", "--peak", "1e-320")
+    assert done.returncode == 0 and done.stderr == "", done.stderr
