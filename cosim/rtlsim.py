@@ -316,10 +316,12 @@ def _progress_bar(total: int, progress: bool | None):
 
 
 def _run_with_vcd(sim, config, shape, vcd_path, gtkw_path) -> None:
-    """Run with a waveform; write VCD and GTKWave files atomically (nothing on failure)."""
+    """Run with a waveform; write VCD and GTKWave files atomically (nothing on failure). The VCD is
+    entered last so that it is committed first: one that fails there (a full disk, ``/dev/full``)
+    takes the save file with it (the stack commits in reverse order)."""
     with contextlib.ExitStack() as stack:
-        vcd_tmp = stack.enter_context(atomic_output(vcd_path))
         gtkw_tmp = stack.enter_context(atomic_output(gtkw_path)) if gtkw_path is not None else None
+        vcd_tmp = stack.enter_context(atomic_output(vcd_path))
         try:
             with sim.write_vcd(vcd_tmp):
                 sim.run()

@@ -225,6 +225,20 @@ def test_rtl_sim_names_the_vcd_when_its_disk_is_full(tmp_path):
         assert os.listdir(mount) == [] and os.listdir(tmp_path / "other") == []
 
 
+def test_rtl_sim_commits_no_save_file_for_a_vcd_it_could_not_write_nor_beside_a_device(tmp_path):
+    """The save file was committed before the VCD: --vcd /dev/full left W.gtkw (and /dev/full.gtkw
+    by default) beside a refusal; --vcd /dev/null made /dev/null.gtkw."""
+    (tmp_path / "c.json").write_text(json.dumps({"b1": 1, "b2": 1, "threshold": 3, "acc_bits": 3}))
+    np.save(tmp_path / "e.npy", np.full((TINY.clocks_per_readout * 4, 2, 2), 3, np.uint8))
+    args = ("rtl-sim", "--config", tmp_path / "c.json", "--stimulus", tmp_path / "e.npy", "--out", tmp_path / "w.npz")
+    result = run_tespike(*args, "--vcd", "/dev/full", "--gtkw", tmp_path / "W.gtkw")
+    assert_refused(result, "'/dev/full'", "No space left")
+    assert sorted(os.listdir(tmp_path)) == ["c.json", "e.npy"]
+    for device in ("/dev/full", "/dev/null"):
+        run_tespike(*args, "--vcd", device)
+        assert not os.path.exists(device + ".gtkw")
+
+
 # ------------------------------------------------------------------ found by benchmarks/fault_sweep.py
 def cut_in_half(source: Path, target: Path) -> Path:
     data = source.read_bytes()

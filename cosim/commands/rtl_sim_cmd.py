@@ -14,13 +14,24 @@ def add_arguments(parser):
     parser.add_argument("--out", required=True, help="S.npz to write: readout words and the full config")
     parser.add_argument("--vcd", help="also write the waveform W.vcd (amaranth backend; the run takes about 2x as long) "
                                       "and a GTKWave save file beside it")
-    parser.add_argument("--gtkw", help="GTKWave save file to write with --vcd (default: the VCD path with .gtkw)")
+    parser.add_argument("--gtkw", help="GTKWave save file to write with --vcd (default: the VCD path with .gtkw; "
+                                       "none where --vcd is a device or a pipe)")
     parser.add_argument("--backend", choices=BACKEND_NAMES, default=BACKEND_NAMES[0],
                         help="simulator: amaranth (Python, default), or verilator / icarus on the generated Verilog")
     parser.add_argument("--check", action="store_true",
                         help="also run the golden model and exit 1 naming the first word where they differ "
                              "(S.npz still holds the RTL's stream)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (same as --progress off)")
+
+
+def _regular_or_new(path: str) -> bool:
+    """Whether ``path`` is a regular file or not there yet (not a device or a pipe)."""
+    import os
+    import stat
+    try:
+        return stat.S_ISREG(os.stat(path).st_mode)
+    except OSError:
+        return True
 
 
 def run(args) -> int:
@@ -39,7 +50,8 @@ def run(args) -> int:
     if args.vcd is not None:
         if args.backend != "amaranth":
             raise InputError(f"--vcd is only written by the amaranth backend, not {args.backend!r}")
-        gtkw = gtkw if gtkw is not None else str(Path(args.vcd).with_suffix(".gtkw"))
+        if gtkw is None and _regular_or_new(args.vcd):   # (no /dev/null.gtkw beside a VCD sent to a device)
+            gtkw = str(Path(args.vcd).with_suffix(".gtkw"))
     elif gtkw is not None:
         raise InputError("--gtkw needs --vcd (a save file describes a waveform)")
     # every output checked, and kept apart from the inputs, before anything is written
@@ -67,7 +79,7 @@ def run(args) -> int:
     save_stream(args.out, checked_words(words, config, stimulus, args.backend), config)
     K, H, W = words.shape
     report(args, f"wrote {args.out}: {K} readouts of {H} x {W} {config.mode.upper()} words "
-                 f"({args.backend} RTL)" + (f", {args.vcd} and {gtkw}" if args.vcd else ""))
+                 f"({args.backend} RTL)" + (f", {args.vcd}" if args.vcd else "") + (f" and {gtkw}" if gtkw else ""))
     if args.check:
         return _compare_with_golden(words, config, stimulus, args.backend)
     return 0
