@@ -412,8 +412,8 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
         for log in (log_path, validation_path):
             trim_log(log, step)
     else:
-        for stale in (log_path, validation_path, best_path):
-            if stale.exists():
+        for stale in (checkpoint, log_path, validation_path, best_path, curves_path):
+            if stale.exists():          # a new run: nothing of an earlier one stays beside it
                 stale.unlink()
         if options.init is not None:
             warm_start(model, options.init, options.method)

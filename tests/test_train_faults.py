@@ -231,3 +231,26 @@ def test_the_step_memory_bound_grows_with_batch_and_crop_area():
     small, batch, crop = (step_memory(options(batch=b, crop=c)) for b, c in ((2, 16), (4, 16), (4, 32)))
     assert 0 < small < batch < crop
     assert abs((crop - batch) - 6 * (batch - small)) <= 8             # batch x crop area, plus what does not grow
+
+
+def test_a_new_run_over_an_earlier_runs_folder_is_refused_unless_forced(tmp_path, capsys):
+    """A new run started in an earlier run's folder removed its logs and best weights at once but
+    kept its checkpoint and curves: killed early, the folder mixed two runs and could not be
+    resumed. It is refused now (--resume or --force); --force removes every file of the earlier run."""
+    from tespike.cosim.cli import main
+    from tespike.recon.train import RUN_FILES
+    args = ["train", "--out", str(tmp_path / "w.pt"), "--crop", "32", "--batch", "1", "--pool", "2",
+            "--validate-every", "0", "--workers", "0", "-q"]
+    assert main([*args, "--steps", "2"]) == 0
+    run = tmp_path / "w.run"
+    before = {name: (run / name).read_bytes() for name in RUN_FILES if (run / name).exists()}
+    capsys.readouterr()
+    assert main([*args, "--steps", "3", "--seed", "7"]) == 2
+    err = capsys.readouterr().err
+    assert "holds an earlier run (checkpoint.pt" in err and "--resume" in err and "--force" in err, err
+    assert {name: (run / name).read_bytes() for name in before} == before          # untouched
+    assert main([*args, "--steps", "3", "--resume", "--force"]) == 2
+    (run / "best.pt").write_bytes(b"an earlier run's")       # every earlier file goes with --force
+    assert main([*args, "--steps", "1", "--seed", "7", "--force"]) == 0
+    assert not (run / "best.pt").exists()
+    assert log_steps(run / "log.csv") == [1] and load_weights(tmp_path / "w.pt")[2]["steps"] == 1

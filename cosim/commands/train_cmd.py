@@ -32,7 +32,7 @@ class _TrainerDefaults(argparse.HelpFormatter):
 def add_arguments(parser):
     parser.formatter_class = _TrainerDefaults
     add_config_argument(parser, required=False, default="te")
-    parser.add_argument("--out", required=True, help="weights file to write (.pt); its run folder is OUT.run/")
+    parser.add_argument("--out", required=True, help="weights file to write (.pt); its run folder is OUT with the suffix .run (w.pt: w.run/)")
 
     def trainer(flag, help, **kw):
         parser.add_argument(flag, default=argparse.SUPPRESS, help=help + " (default %(default)s)", **kw)
@@ -87,7 +87,9 @@ def add_arguments(parser):
                              "the trainer alone leaves torch's own setting)")
     parser.add_argument("--init", default=None, metavar="WEIGHTS",
                         help="start from this weights file's tensors of matching name and shape")
-    parser.add_argument("--resume", action="store_true", help="continue from OUT.run/checkpoint.pt")
+    parser.add_argument("--resume", action="store_true", help="continue the run of the run folder (w.run/checkpoint.pt)")
+    parser.add_argument("--force", action="store_true",
+                        help="start a new run where the run folder holds an earlier one (its files are removed first)")
 
 
 def _frame_files(folder: str) -> list:
@@ -130,6 +132,8 @@ def run(args) -> int:
         raise InputError(f"--init {args.init!r}: no such weights file")
     if args.init is not None and args.resume:
         raise InputError("--init starts a new run; --resume continues one: give one of them")
+    if args.force and args.resume:
+        raise InputError("--force starts a new run over an earlier one; --resume continues it: give one of them")
 
     from tespike.recon.train import RUN_FILES, TrainOptions, train
 
@@ -144,6 +148,11 @@ def run(args) -> int:
     run_folder = out.with_suffix(".run")
     check_output_dir(run_folder, "--out's run folder")
     check_distinct(inputs, {f"the run folder's {name}": run_folder / name for name in RUN_FILES})
+    earlier = [name for name in RUN_FILES if (run_folder / name).exists()]
+    if earlier and not args.resume and not args.force:   # a new run would mix with, or remove, the earlier
+        raise InputError(f"--out's run folder {str(run_folder)!r} holds an earlier run ({', '.join(earlier)}): "
+                         "continue it with --resume, start anew with --force (its files are removed), "
+                         "or give another --out")
 
     given = {flag: getattr(args, flag) for flag in TRAINER_FLAGS if hasattr(args, flag)}
     options = TrainOptions(config=args.config if preset else config.to_json(), ablation=args.ablation,
