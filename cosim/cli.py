@@ -220,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
         guard_imports()               # torch loads with the stops held (and, under ulimit -v, is tried in a child first)
         if whole_process:             # removes the run's temporaries should it be killed outright
             from tespike.golden.atomic import start_janitor
-            start_janitor()
+            start_janitor(report_faults=True)
     import warnings
     try:
         with warnings.catch_warnings(record=True) as caught:

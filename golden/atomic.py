@@ -45,10 +45,25 @@ NO_ROOM = (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)
 _FINISHED: list[str] = []
 
 
-def start_janitor() -> None:
+def start_janitor(report_faults: bool = False) -> None:
     """Start the process that removes this process's temporaries should it be killed outright
-    (:class:`_Janitor`; best effort, started anyway with the first temporary)."""
+    (:class:`_Janitor`; best effort, started anyway with the first temporary). ``report_faults``
+    (a command's whole process): a fatal signal, e.g. the bus error of reading a memory-mapped
+    input another program cut short, ends in the janitor's one line naming the file
+    (:func:`held_mapping`) instead of the shell's bare "Bus error"; the fault handler's own
+    dump goes to the janitor, never to the terminal."""
     _Janitor.start()
+    process = _Janitor._process
+    if report_faults and process is not None:
+        import faulthandler
+        faulthandler.enable(file=process.stdin, all_threads=False)
+
+
+def held_mapping(path: str | os.PathLike, size: int) -> None:
+    """``path`` (``size`` bytes) is read through a memory map: should a fatal signal end the run
+    once it is shorter (another program cut it short), the janitor names it."""
+    if _Janitor._process is not None and _Janitor._owner == os.getpid():
+        _Janitor._send(b"m", path, b" %d" % size)
 
 
 def process_group_holder():
@@ -89,17 +104,25 @@ def finished_outputs(since: int = 0) -> list[str]:
 #: it to clean up.
 _JANITOR_CODE = r"""
 import os, shutil, signal, sys
-held, groups = set(), set()
+held, groups, mapped, fault = set(), set(), {}, None
 for line in sys.stdin.buffer:
     line = line.strip()
-    if line[:1] == b"+":
-        held.add(bytes.fromhex(line[1:].decode()))
-    elif line[:1] == b"-":
-        held.discard(bytes.fromhex(line[1:].decode()))
-    elif line[:1] == b"g":
-        groups.add(int(line[1:]))
-    elif line[:1] == b"e":
-        groups.discard(int(line[1:]))
+    try:                                              # (the fault handler's dump shares the pipe)
+        if line.startswith(b"Fatal Python error: "):  # its first line (report_faults)
+            fault = fault or line[20:].decode(errors="replace").strip(": ")
+        elif line[:1] == b"m":
+            path, _, size = line[1:].partition(b" ")
+            mapped[bytes.fromhex(path.decode())] = int(size)
+        elif line[:1] == b"+":
+            held.add(bytes.fromhex(line[1:].decode()))
+        elif line[:1] == b"-":
+            held.discard(bytes.fromhex(line[1:].decode()))
+        elif line[:1] == b"g":
+            groups.add(int(line[1:]))
+        elif line[:1] == b"e":
+            groups.discard(int(line[1:]))
+    except ValueError:
+        pass
 for group in groups:
     try:
         os.killpg(group, signal.SIGKILL)
@@ -113,6 +136,19 @@ for path in held:
             os.unlink(path)
         except OSError:
             pass
+if fault:
+    def size(path):
+        try:
+            return os.path.getsize(path)
+        except OSError:
+            return -1
+    cut = [path for path, was in mapped.items() if size(path) < was]
+    if cut:
+        text = (f"tespike: error: input file {os.fsdecode(cut[0])!r} was cut short while it was read "
+                f"({fault}: it changed under the command; run again on a file left alone)")
+    else:
+        text = f"tespike: error: the process ended on a fatal signal ({fault})"
+    sys.stderr.write(text + "\n")
 """
 
 
@@ -133,7 +169,7 @@ class _Janitor:
             try:
                 cls._process = subprocess.Popen([sys.executable, "-I", "-S", "-c", _JANITOR_CODE],
                                                 stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                                                stderr=subprocess.DEVNULL, start_new_session=True)
+                                                start_new_session=True)   # (stderr: its one fault line)
             except OSError:
                 return
             atexit.register(cls._close)
@@ -148,8 +184,8 @@ class _Janitor:
         cls._send(b"-", path)
 
     @classmethod
-    def _send(cls, mark: bytes, path: str | Path) -> None:
-        cls._line(mark + os.fsencode(os.fspath(path)).hex().encode())
+    def _send(cls, mark: bytes, path: str | Path, tail: bytes = b"") -> None:
+        cls._line(mark + os.fsencode(os.fspath(path)).hex().encode() + tail)
 
     @classmethod
     def _line(cls, line: bytes) -> None:
@@ -166,6 +202,9 @@ class _Janitor:
         """At a normal exit: end the janitor (nothing is registered any more) and reap it."""
         process, cls._process = cls._process, None
         if process is not None and cls._owner == os.getpid():
+            import faulthandler
+            if faulthandler.is_enabled():            # (its file, the pipe, is about to close)
+                faulthandler.disable()
             with contextlib.suppress(OSError, ValueError, subprocess.TimeoutExpired):
                 process.stdin.close()
                 process.wait(5)

@@ -17,7 +17,7 @@ from typing import Iterator
 
 import numpy as np
 
-from .atomic import atomic_output
+from .atomic import atomic_output, held_mapping
 from .config import SensorConfig
 from .decode import check_words
 from .errors import InputError, TespikeError, one_line
@@ -55,6 +55,8 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
     if extra:
         raise InputError(f"{what} file {str(path)!r} holds {extra} bytes after its {array.dtype} "
                          f"{array.shape} array (a corrupt or concatenated file)")
+    if mmap_mode is not None:                          # cut short while mapped: named, not a bare bus error
+        held_mapping(path, header + array.nbytes)
     return array
 
 
@@ -247,6 +249,7 @@ def _stored_member(path: str | Path, name: str) -> np.ndarray | None:
         raise ValueError(f"member {name!r} is shorter than its header's shape {shape}")
     if count == 0:
         return np.zeros(shape, dtype)
+    held_mapping(path, start + header + count * dtype.itemsize)   # (cut short while mapped: named)
     return np.memmap(path, dtype=dtype, mode="r", offset=start + header, shape=shape,
                      order="F" if fortran else "C")
 

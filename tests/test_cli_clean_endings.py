@@ -543,3 +543,35 @@ def test_an_interrupted_commands_line_names_each_file_written_once(tmp_path):
                 Path(tmp).write_bytes(b"x")
     line = _after(since, KeyboardInterrupt())
     assert line == f" after writing {str(tmp_path / 'best.pt')!r}, {str(tmp_path / 'curves.png')!r} whole"
+
+
+@pytest.mark.parametrize("command", ["simulate", "reconstruct"])
+def test_an_input_cut_short_while_mapped_is_named_not_a_bare_bus_error(tmp_path, command):
+    """Inputs are read through memory maps; another program cutting one short (np.save onto the same
+    path) made the next read a bus error: the process died with no line of its own. The fault
+    handler's dump goes to the janitor, which names the file that shrank."""
+    scene = tmp_path / "I.npy"
+    np.save(scene, np.full((6, 64, 64), 0.3, np.float32))
+    target, loader = scene, "load_scene"
+    args = ["simulate", "--config", "te", "--scene", str(scene), "--out", str(tmp_path / "out.npz")]
+    if command == "reconstruct":
+        assert run_tespike("simulate", "--config", "te", "--scene", scene, "--out", tmp_path / "S.npz",
+                           "--seed", "1").returncode == 0
+        target, loader = tmp_path / "S.npz", "load_stream"
+        args = ["reconstruct", "--stream", str(target), "--method", "tfp", "--out", str(tmp_path / "R.npy")]
+    result = run_python(f"""
+import os, sys
+from tespike.golden import io
+read = io.{loader}
+def read_then_cut(path, **kw):
+    loaded = read(path, **kw)
+    os.truncate(path, 300)                   # (another program cuts the mapped file short)
+    return loaded
+io.{loader} = read_then_cut
+sys.argv = ["tespike", *{args!r}]
+from tespike.cosim.cli import main
+sys.exit(main())
+""")
+    assert result.returncode in (-signal.SIGBUS, 128 + signal.SIGBUS), result
+    assert_refused(result, f"input file {str(target)!r} was cut short while it was read", "Bus error")
+    assert sorted(os.listdir(tmp_path)) == sorted(["I.npy"] + (["S.npz"] if command == "reconstruct" else []))
