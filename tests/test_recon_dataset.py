@@ -117,7 +117,8 @@ def test_resume_rebuilds_a_complete_sequence_whose_chunk_is_damaged(tmp_path, ca
     capsys.readouterr()
     assert main([*args, "--out", str(tmp_path / "cut.zarr")]) == 0
     out = capsys.readouterr().out
-    assert f"sequence 'sun' was complete but chunk {str(light)!r} and 1 more fails its CRC-32C check" in out, out
+    assert f"sequence 'sun' was complete but chunk {str(light)!r} (fails its CRC-32C check) and 1 more is damaged" \
+        in out, out
     assert "(1 already complete, 1 rebuilt for a damaged chunk)" in out, out
     assert compare_stores(tmp_path / "ref.zarr", tmp_path / "cut.zarr") == []
     assert main([*args, "--out", str(tmp_path / "cut.zarr")]) == 0          # nothing left to rebuild
@@ -285,3 +286,71 @@ def test_an_option_of_a_source_not_given_is_refused(tmp_path, capsys, extra, wor
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and re.search(".*".join(words), err), err
     assert not (tmp_path / "d.zarr").exists()
+
+
+def _tamper(path, change):
+    import json
+    document = json.loads(path.read_text())
+    change(document, document.get("attributes", {}))
+    path.write_text(json.dumps(document))
+
+
+STORE_DAMAGE = {
+    "a deleted chunk file": (lambda s: (s / "sun/streams/te/c/0/0/0").unlink(), "holds 0 of the 1 chunk files"),
+    "seed not a number": (lambda s: _tamper(s / "zarr.json", lambda d, a: a.update(seed="abc")), "attribute seed"),
+    "configs missing": (lambda s: _tamper(s / "zarr.json", lambda d, a: a.pop("configs")), "configs is missing"),
+    "configs a list": (lambda s: _tamper(s / "zarr.json", lambda d, a: a.update(configs=[])), "attribute configs"),
+    "tile a number": (lambda s: _tamper(s / "zarr.json", lambda d, a: a.update(tile=5)), "attribute tile"),
+    "chunk_frames text": (lambda s: _tamper(s / "zarr.json", lambda d, a: a.update(chunk_frames="x")), "chunk_frames"),
+    "peak missing": (lambda s: _tamper(s / "sun/zarr.json", lambda d, a: a.pop("peak")), "peak is missing"),
+    "peak text": (lambda s: _tamper(s / "sun/zarr.json", lambda d, a: a.update(peak="x")), "attribute peak"),
+    "frames altered": (lambda s: _tamper(s / "sun/zarr.json", lambda d, a: a.update(frames=10)), "has shape"),
+    "height text": (lambda s: _tamper(s / "sun/zarr.json", lambda d, a: a.update(height="abc")), "attribute height"),
+    "stream config gone": (lambda s: _tamper(s / "sun/streams/te/zarr.json", lambda d, a: a.pop("config")),
+                           "another configuration"),
+    "stream shape altered": (lambda s: _tamper(s / "sun/streams/te/zarr.json", lambda d, a: d.update(shape=[8, 16, 16])),
+                             "has shape (8, 16, 16)"),
+    "sequence zarr.json gone": (lambda s: (s / "sun/zarr.json").unlink(), "zarr.json' is missing"),
+}
+
+
+@pytest.fixture(scope="module")
+def small_store(tmp_path_factory):
+    import contextlib
+    import io
+    root = tmp_path_factory.mktemp("store")
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(["dataset", "--scene", "sun", "--frames", "4", "--height", "16", "--width", "16",
+                     "--config", "te", "--config", "ml-msb", "--out", str(root / "D.zarr"), "-q"]) == 0
+    return root / "D.zarr"
+
+
+@pytest.mark.parametrize("damage", sorted(STORE_DAMAGE))
+def test_evaluate_store_refuses_a_store_whose_metadata_or_chunks_were_altered(tmp_path, capsys, small_store, damage):
+    """Each was a traceback (attributes read unchecked) or, worse, scores with exit 0: a deleted
+    chunk read as zeros, a stream of another shape or configuration, a sequence without its
+    zarr.json left out of the table's means."""
+    import shutil
+    store = tmp_path / "D.zarr"
+    shutil.copytree(small_store, store)
+    change, words = STORE_DAMAGE[damage]
+    change(store)
+    capsys.readouterr()
+    assert main(["evaluate", "--store", str(store), "--out", str(tmp_path / "E"), "--methods", "tfp", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and words in err, err
+    assert not (tmp_path / "E").exists()
+
+
+def test_resume_rebuilds_an_array_whose_chunk_file_was_deleted(tmp_path, capsys, small_store):
+    """The resume checked the CRC of the chunk files present only: a deleted one was never noticed
+    ("1 already complete") and read as zeros."""
+    import shutil
+    store = tmp_path / "D.zarr"
+    shutil.copytree(small_store, store)
+    (store / "sun/light/c/0/0/0").unlink()
+    capsys.readouterr()
+    assert main(["dataset", "--scene", "sun", "--frames", "4", "--height", "16", "--width", "16",
+                 "--config", "te", "--config", "ml-msb", "--out", str(store)]) == 0
+    assert "of its 1 chunk files missing) is damaged: rebuilding its array" in capsys.readouterr().out
+    assert compare_stores(small_store, store) == []

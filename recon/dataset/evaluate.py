@@ -155,7 +155,8 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
 
     store = DatasetStore.open(url)
     sequences = store.sequences()
-    tiled = [s for s in sequences if store.info(s)["height"] > tile[0] or store.info(s)["width"] > tile[1]]
+    infos = {s: store.check_sequence(s) for s in sequences}    # metadata consistent, no chunk file gone
+    tiled = [s for s in sequences if infos[s]["height"] > tile[0] or infos[s]["width"] > tile[1]]
     named = methods is not None
     # by default every method that has weights for each sensor of the store (and, where frames
     # must be tiled, works pixel by pixel: a learned method sees far beyond the tiles' halo)
@@ -179,7 +180,7 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     learned = learned_span(methods)                      # frames scored as the serial evaluation scores them
     tasks, keys, plan = [], [], {}
     for sequence in sequences:
-        info = store.info(sequence)
+        info = infos[sequence]
         K, H, W = info["frames"], info["height"], info["width"]
         peak = check_sequence_peak(sequence, float(info["peak"]))
         if min(H, W) < 2 * h + 1:

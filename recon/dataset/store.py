@@ -115,11 +115,19 @@ class DatasetStore:
     def __init__(self, url: str, group, attrs: dict):
         self.url = str(url)
         self.group = group
-        self.seed = int(attrs["seed"])
-        self.configs = {name: SensorConfig.from_dict(d) for name, d in attrs["configs"].items()}
-        self.tile = tuple(attrs["tile"])
-        self.chunk_frames = int(attrs["chunk_frames"])
-        #: sequence -> chunk files found damaged by :meth:`prepare_sequence`, whose arrays it made anew
+        what = f"dataset store {self.url!r}"
+        self.seed = _attribute(attrs, "seed", what, lambda v: type(v) is int and v >= 0, "an integer >= 0")
+        configs = _attribute(attrs, "configs", what, lambda v: isinstance(v, dict) and v, "an object of configurations")
+        try:
+            self.configs = {check_name(name, "sensor configuration"): SensorConfig.from_dict(d)
+                            for name, d in configs.items()}
+        except (InputError, TypeError, ValueError, AttributeError) as exc:
+            raise InputError(f"{what}: its configs are not valid ({one_line(exc, 160)})") from None
+        self.tile = tuple(_attribute(attrs, "tile", what, lambda v: isinstance(v, list) and len(v) == 2 and all(
+            type(n) is int and n >= 1 for n in v), "two integers >= 1"))
+        self.chunk_frames = _attribute(attrs, "chunk_frames", what, lambda v: type(v) is int and v >= 1,
+                                       "an integer >= 1")
+        #: sequence -> what :meth:`prepare_sequence` found damaged (chunk files), whose arrays it made anew
         self.rebuilt: dict[str, list[str]] = {}
 
     # -- opening --------------------------------------------------------------
@@ -201,7 +209,15 @@ class DatasetStore:
             key = path.split("/")[-1]
             with reading(self.url, f"{name}/{path}"):
                 complete = path in group and bool(group[path].attrs.get("complete", False))
-            damaged = damaged_chunks(self.url, f"{name}/{path}") if complete else []
+            damaged = [f"chunk {chunk!r} (fails its CRC-32C check)"
+                       for chunk in (damaged_chunks(self.url, f"{name}/{path}") if complete else [])]
+            if complete and not damaged:
+                with reading(self.url, f"{name}/{path}"):
+                    recorded = group[path].attrs.get("chunk_files")
+                missing = missing_chunks(self.url, f"{name}/{path}", recorded)
+                if missing:                 # (a deleted chunk file would read as zeros)
+                    damaged = [f"{str(Path(self.url, name, *path.split('/'), 'c'))!r} ({recorded - missing[0]} "
+                               f"of its {recorded} chunk files missing)"]
             if damaged:              # kept work is verified: a damaged chunk's array is made again
                 self.rebuilt.setdefault(name, []).extend(damaged)
                 complete = False
@@ -223,9 +239,21 @@ class DatasetStore:
 
     # -- reading --------------------------------------------------------------
     def sequences(self, *, complete: bool = True) -> list[str]:
-        """Sequence names, sorted; only complete ones unless ``complete=False``."""
+        """Sequence names, sorted; only complete ones unless ``complete=False``. A local store's
+        folder holding a sequence's arrays but no ``zarr.json`` is refused (Zarr skipped it with a
+        warning, and the table's means left it out)."""
+        import warnings
+        if Path(self.url).is_dir():
+            for folder in sorted(Path(self.url).iterdir()):
+                if folder.is_dir() and not (folder / "zarr.json").exists() and \
+                        ((folder / "light").exists() or (folder / "streams").exists()):
+                    raise InputError(f"dataset store file {str(folder / 'zarr.json')!r} is missing (the sequence "
+                                     f"{folder.name!r} is damaged); remove its folder and run tespike dataset "
+                                     "again to rebuild it")
         try:
-            names = sorted(self.group.group_keys())
+            with warnings.catch_warnings():           # (Zarr warns of each stray file or folder)
+                warnings.simplefilter("ignore")
+                names = sorted(self.group.group_keys())
         except _DAMAGE:                   # listing reads every sequence's zarr.json: name the bad one
             folders = sorted(p.name for p in Path(self.url).iterdir() if p.is_dir()) if Path(self.url).is_dir() else []
             for child in folders:
@@ -238,6 +266,35 @@ class DatasetStore:
                 if not complete or self.group[name].attrs.get("complete", False):
                     done.append(name)
         return done
+
+    def check_sequence(self, name: str) -> dict:
+        """The attributes of complete sequence ``name`` once its metadata is consistent: sizes and
+        peak of the kind a build writes, every array of the sequence's (frames, height, width)
+        shape, each stream made for the root's configuration of its name, and (a local store)
+        every chunk file a build wrote still there: Zarr reads a missing chunk as zeros. One line
+        naming the sequence otherwise (its folder must be rebuilt)."""
+        info = self.info(name)
+        what = f"sequence {name!r} of dataset store {self.url!r}"
+        for key in ("frames", "height", "width"):
+            _attribute(info, key, what, lambda v: type(v) is int and v >= 1, "an integer >= 1")
+        _attribute(info, "peak", what, lambda v: isinstance(v, (int, float)) and not isinstance(v, bool)
+                   and np.isfinite(v) and 0 < v < 1e30, "a finite number > 0")
+        shape = (info["frames"], info["height"], info["width"])
+        for part in ("light", *(f"streams/{c}" for c in self.configs)):
+            array = self.array(name, part)
+            if tuple(array.shape) != shape:
+                raise InputError(f"{what}: {part} has shape {tuple(array.shape)}, the sequence {shape}; "
+                                 "remove its folder and run tespike dataset again")
+            key = part.split("/")[-1]
+            if key in self.configs and array.attrs.get("config") != self.configs[key].to_json():
+                raise InputError(f"{what}: stream {key!r} was made for another configuration than the store's "
+                                 f"{key!r}; remove its folder and run tespike dataset again")
+            missing = missing_chunks(self.url, f"{name}/{part}", array.attrs.get("chunk_files"))
+            if missing:
+                raise InputError(f"{what}: {part} holds {missing[0]} of the {missing[1]} chunk files its build "
+                                 "wrote (Zarr would read the others as zeros); remove its folder and run "
+                                 "tespike dataset again")
+        return info
 
     def info(self, sequence: str) -> dict:
         """Attributes of one sequence (source, frames, height, width, peak, scale, complete)."""
@@ -263,6 +320,16 @@ class DatasetStore:
         """The Zarr array ``light`` or ``streams/<config>`` of one sequence (for tasks)."""
         with reading(self.url, f"{sequence}/{part}"):
             return self.group[f"{sequence}/{part}"]
+
+
+def _attribute(attrs: dict, key: str, what: str, ok, rule: str):
+    """``attrs[key]`` where ``ok`` accepts it, else one line: the store's metadata was altered."""
+    value = attrs.get(key)
+    if key not in attrs or not ok(value):
+        shown = "missing" if key not in attrs else f"{one_line(repr(value), 60)}"
+        raise InputError(f"{what}: attribute {key} is {shown}, not {rule} (its zarr.json was altered; "
+                         "rebuild it with tespike dataset)")
+    return value
 
 
 def open_array(url: str, path: str, mode: str = "r"):
@@ -347,11 +414,34 @@ def damaged_chunks(url: str, path: str) -> list[str]:
     return bad
 
 
+def chunk_file_count(url: str, path: str) -> int | None:
+    """Chunk files of the array at ``path`` of a local store (None for a store that is not a
+    folder). Zarr writes no chunk that holds only its fill value, so the count a build leaves is
+    recorded (``chunk_files``) rather than derived from the shape."""
+    folder = Path(url, *path.split("/"), "c")
+    if not Path(url).is_dir():
+        return None
+    if not folder.is_dir():
+        return 0
+    return sum(1 for chunk in folder.rglob("*") if chunk.is_file() and not chunk.name.endswith(".partial"))
+
+
+def missing_chunks(url: str, path: str, recorded) -> tuple[int, int] | None:
+    """(present, recorded) where the array at ``path`` holds fewer chunk files than its build
+    recorded; None where it holds them all, or nothing was recorded (older stores, remote ones)."""
+    if type(recorded) is not int:
+        return None
+    present = chunk_file_count(url, path)
+    return None if present is None or present >= recorded else (present, recorded)
+
+
 def mark_complete(url: str, path: str, **attrs) -> None:
-    """Write ``complete: true`` (and ``attrs``) on a group or array: the last write of a part."""
+    """Write ``complete: true`` (and ``attrs``) on a group or array: the last write of a part. An
+    array of a local store also records how many chunk files it holds (:func:`missing_chunks`)."""
     import zarr
     node = zarr.open(str(url), path=path, mode="r+")
-    node.attrs.update({**attrs, "complete": True})
+    count = chunk_file_count(url, path) if isinstance(node, zarr.Array) else None
+    node.attrs.update({**attrs, **({} if count is None else {"chunk_files": count}), "complete": True})
 
 
 def compare_stores(a: str, b: str) -> list[str]:
