@@ -9,6 +9,10 @@ from .common import add_array_arguments, add_config_argument
 HELP = "check the array Verilog with the cocotb testbench (golden model as scoreboard) in Icarus / Verilator / ..."
 
 
+#: Readout intervals of the default stimulus.
+DEFAULT_READOUTS = 3
+
+
 def add_arguments(parser):
     add_config_argument(parser)
     add_array_arguments(parser, lanes_use=" (its beats checked against the golden model's words in beat order)")
@@ -19,8 +23,10 @@ def add_arguments(parser):
                                           "(must have the SPEC section 6 ports)")
     parser.add_argument("--stimulus", help="E.npy (T, H, W) electrons per pixel clock "
                                            "(default: --readouts intervals of a mixed Poisson stimulus)")
-    parser.add_argument("--readouts", type=int, default=3, help="readout intervals of the default stimulus")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the default stimulus")
+    parser.add_argument("--readouts", type=int, default=None,
+                        help=f"readout intervals of the default stimulus (default {DEFAULT_READOUTS}; not with --stimulus)")
+    parser.add_argument("--seed", type=int, default=None,
+                        help="seed of the default stimulus (default 0; not with --stimulus)")
     parser.add_argument("--resets", help="also reset mid-run: 'sweep' (rst at every phase of an interval "
                                          "and of its beats, charge flowing throughout) or R.npy (one 0/1 per "
                                          "stimulus clock); each segment is checked from zero state")
@@ -39,17 +45,24 @@ def run(args) -> int:
 
     config = load_config(args.config)
     check_array_arguments(config, args.height, args.width, args.lanes)   # the tops tespike verilog writes
+    for flag, value in (("--readouts", args.readouts), ("--seed", args.seed)):
+        if value is not None and args.stimulus is not None:
+            raise InputError(f"{flag} shapes the default stimulus; --stimulus gives its own (it would be ignored)")
+    readouts = DEFAULT_READOUTS if args.readouts is None else args.readouts
+    seed = 0 if args.seed is None else args.seed
+    if readouts < 1:
+        raise InputError(f"--readouts {readouts}: must be >= 1")
+    if seed < 0:
+        raise InputError(f"--seed {seed}: must be >= 0")
     if args.stimulus is None:           # the default stimulus, int64 electrons per pixel clock
         from tespike.cosim.room import require_room
         L = config.clocks_per_readout
-        clocks = args.readouts * L
+        clocks = readouts * L
         if args.resets == "sweep":          # at most 2L + 3 segments cut up to 2L + 2 clocks in, held up
             clocks += (2 * L + 3) * (2 * L + 2) // 2 + 3 * (2 * L + 3) + L   # to 3 (reset_sweep)
         require_room(f"the stimulus of {clocks} clocks of {args.height} x {args.width} pixels",
                      memory=8 * clocks * args.height * args.width)
-    if args.readouts < 1:
-        raise InputError(f"--readouts {args.readouts}: must be >= 1")
-    settings = Settings(config, args.height, args.width, args.readouts, args.seed, args.stimulus, args.lanes,
+    settings = Settings(config, args.height, args.width, readouts, seed, args.stimulus, args.lanes,
                         args.resets)
     failed = 0
     for simulator in args.simulator:
