@@ -82,6 +82,9 @@ def test_simulate_refuses_bad_files_and_config(tmp_path):
                                "--out", tmp_path / "s.npz", "--seed", "-3"), "--seed")
     assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
                                "--out", tmp_path / "s.npz", "--no-noise", "--dark-current", "eq12"), "eq12")
+    for extra in (["--method", "per-clock"], ["--no-noise"]):      # (one process: --workers was ignored)
+        assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
+                                   "--out", tmp_path / "s.npz", "--workers", "2", *extra), "--workers 2", extra[0])
     for command in ("simulate", "stimulus"):    # (the seed was reported and changed nothing)
         assert_refused(run_tespike(command, "--config", "te", "--scene", tmp_path / "i.npy",
                                    "--out", tmp_path / "s.npz", "--no-noise", "--seed", "7"), "--seed", "--no-noise")

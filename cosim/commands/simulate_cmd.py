@@ -14,7 +14,8 @@ def add_arguments(parser):
                         help="'per-clock' draws electrons every pixel clock (slow; for checking)")
     parser.add_argument("--workers", type=int, default=None,
                         help=f"processes simulating the frame's stripes, 1..{MAX_WORKERS} (default: the "
-                             "cores available; the stream does not depend on it)")
+                             "cores available; the stream does not depend on it; the fast method with "
+                             "noise only)")
 
 
 def run(args) -> int:
@@ -26,6 +27,11 @@ def run(args) -> int:
     from tespike.golden.paths import check_outputs
 
     check_workers_argument(args.workers)                # before the scene is read and scanned
+    if args.workers not in (None, 1) and (args.method == "per-clock" or args.no_noise):
+        from tespike.golden.errors import InputError
+        mode = "--method per-clock" if args.method == "per-clock" else "--no-noise"
+        raise InputError(f"--workers {args.workers}: the fast simulator's stripes run in worker processes; "
+                         f"{mode} runs in one (it would be ignored)")
     check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config, "--noise": args.noise})
     config = load_config(args.config)
     sensor = light_front_end(args)
