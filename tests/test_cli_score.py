@@ -152,6 +152,7 @@ def test_refusals(tmp_path, rng):
     for spec in ("3:3", "0:5", "x", "1:2:3", "-1:2"):
         refused("--frames", extra=("--frames", spec))
     refused("metrics", extra=("--metrics", "psnr_mu,hdr_vdp3"))
+    refused("--json", extra=("--json", "--quiet"))          # (exit 0 and no output at all)
 
 
 def test_big_endian_and_fortran_files_score_like_native(tmp_path, capsys, rng):

@@ -66,6 +66,8 @@ def run(args) -> int:
     from tespike.golden.io import load_scene
     from tespike.recon.score import score
 
+    if args.json and args.quiet:      # (the JSON is the whole output: quiet would drop it)
+        raise InputError("--json prints the scores and --quiet prints nothing: give one of them")
     metrics = tuple(m.strip() for m in args.metrics.split(",") if m.strip())
     reference = load_scene(args.reference, memory_map=True, what="reference")
     estimate = load_estimate(args.estimate)
