@@ -124,6 +124,11 @@ def test_evaluate_table_refuses(tmp_path, capsys, empty_weights_dir):   # no wei
     refused(capsys, "evaluate", "--metrics", "vdp3", "--out", out, "--metrics 'vdp3'")
     refused(capsys, "evaluate", "--table", "--frames", 0, "--out", out, "--frames 0")
     refused(capsys, "evaluate", "--table", "--threads", 0, "--out", out, "--threads 0")
+    # options of a part the run lacks were dropped without a word (exit 0, the same results)
+    refused(capsys, "evaluate", "--vdp-frames", 2, "--out", out, "add fovvideovdp to --metrics")
+    for flag in ("--frames", "--height", "--width"):
+        refused(capsys, "evaluate", "--set", "none", "--scene", "i.npy", flag, 5, "--out", out,
+                f"{flag} sizes the built-in sequences of --set; with --set none")
     refused(capsys, "evaluate", "--table", "--store", tmp_path / "s.zarr", "--out", out, "--table does not apply")
     # every option --store does not take, the simulation's included, refused away from its default (one list)
     for flag, value in (("--seed", 3), ("--te-config", "ml"), ("--frames", 5), ("--set", "default"),

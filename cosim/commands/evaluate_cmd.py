@@ -212,6 +212,15 @@ def run(args) -> int:
         unknown = [m for m in metrics if m not in KEYS]
         if unknown or not metrics:
             raise InputError(f"--metrics {args.metrics!r}: choose from {', '.join(KEYS)}")
+    # options of a part the run does not have would be dropped without a word
+    if args.vdp_frames is not None and "fovvideovdp" not in metrics:
+        raise InputError("--vdp-frames sets FovVideoVDP's frames; add fovvideovdp to --metrics, or leave it out")
+    if args.set == "none":
+        given = [flag for flag, value in (("--frames", args.frames), ("--height", args.height),
+                                          ("--width", args.width)) if value is not None]
+        if given:
+            raise InputError(f"{given[0]} sizes the built-in sequences of --set; with --set none there are none "
+                             "(a --scene or --folder keeps its own size)")
     ml_count = args.ml_count_config or ("none" if args.table else "ml")
     check_results_dir(args.out, OUTPUT_FILES, args.force)
     # option, value, sensor key, (mode, ml_readout) it must have
