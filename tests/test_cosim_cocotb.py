@@ -136,6 +136,7 @@ def test_cocotb_command_takes_a_stimulus_file(tmp_path):
     (["--config", "te", "--height", 2, "--width", 2, "--simulator", "no-such-sim"], ["no-such-sim"]),
     (["--config", "te", "--height", 2, "--width", 2, "--readouts", 0], ["--readouts", "0"]),
     (["--config", "te", "--height", 2, "--width", 2, "--seed", -1], ["--seed -1"]),      # (a traceback)
+    (["--config", "te", "--height", 2, "--width", 2, "--work-dir", "/dev/null"], ["--work-dir", "not a directory"]),
     # the default stimulus's options with a stimulus file were dropped without a word
     (["--config", "te", "--height", 2, "--width", 2, "--stimulus", "e.npy", "--readouts", 7], ["--readouts", "ignored"]),
     (["--config", "te", "--height", 2, "--width", 2, "--stimulus", "e.npy", "--seed", 1], ["--seed", "ignored"]),

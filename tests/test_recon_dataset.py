@@ -354,3 +354,10 @@ def test_resume_rebuilds_an_array_whose_chunk_file_was_deleted(tmp_path, capsys,
                  "--config", "te", "--config", "ml-msb", "--out", str(store)]) == 0
     assert "of its 1 chunk files missing) is damaged: rebuilding its array" in capsys.readouterr().out
     assert compare_stores(small_store, store) == []
+
+
+def test_a_file_given_as_a_store_is_named_a_file(tmp_path, capsys):
+    """A file at the store's path was said not to exist."""
+    (tmp_path / "F.zarr").write_text("hi")
+    assert main(["evaluate", "--store", str(tmp_path / "F.zarr"), "--out", str(tmp_path / "E")]) == 2
+    assert "is a file, not a dataset store" in capsys.readouterr().err

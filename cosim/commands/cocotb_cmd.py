@@ -45,6 +45,9 @@ def run(args) -> int:
 
     config = load_config(args.config)
     check_array_arguments(config, args.height, args.width, args.lanes)   # the tops tespike verilog writes
+    if args.work_dir is not None:         # (a file there was "File exists", naming no option)
+        from tespike.golden.paths import check_output_dir
+        check_output_dir(args.work_dir, "--work-dir")
     for flag, value in (("--readouts", args.readouts), ("--seed", args.seed)):
         if value is not None and args.stimulus is not None:
             raise InputError(f"{flag} shapes the default stimulus; --stimulus gives its own (it would be ignored)")
