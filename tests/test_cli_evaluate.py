@@ -131,8 +131,10 @@ def test_evaluate_table_refuses(tmp_path, capsys, empty_weights_dir):   # no wei
                 f"{flag} sizes the built-in sequences of --set; with --set none")
     refused(capsys, "evaluate", "--table", "--store", tmp_path / "s.zarr", "--out", out, "--table does not apply")
     # every option --store does not take, the simulation's included, refused away from its default (one list)
+    # (typed at its default value too: --set heldout was accepted where --ml-count-config ml was not)
     for flag, value in (("--seed", 3), ("--te-config", "ml"), ("--frames", 5), ("--set", "default"),
-                        ("--ml-count-config", "none"), ("--scene", "i.npy")):
+                        ("--ml-count-config", "none"), ("--scene", "i.npy"), ("--set", "heldout"),
+                        ("--te-config", "te")):
         refused(capsys, "evaluate", flag, value, "--store", tmp_path / "s.zarr", "--out", out,
                 f"{flag} does not apply with --store")
     refused(capsys, "evaluate", "--methods", "tfp,bsf", "--set", "default", "--frames", 4, "--height", 24, "--width", 24,

@@ -13,12 +13,15 @@ def add_config_argument(parser, *, required: bool = True, default: str | None = 
 
 
 def options_given(parser, args, keep=()) -> list[tuple[str, str]]:
-    """(flag, dest) of every option of ``parser`` that ``args`` holds away from its default, those
-    whose dest is in ``keep`` aside: the options a mode that takes no others would drop. The
-    defaults are the parser's own, so they are typed once."""
+    """(flag, dest) of every option of ``parser`` that ``args`` holds away from its default, or
+    that its command line (``args.argv``) names even at its default value, those whose dest is in
+    ``keep`` aside: the options a mode that takes no others would drop. The defaults are the
+    parser's own, so they are typed once."""
+    typed = {token.split("=", 1)[0] for token in getattr(args, "argv", None) or () if token.startswith("-")}
     return [(action.option_strings[0], action.dest) for action in parser._actions   # (argparse lists
             if action.option_strings and action.dest not in keep                   # no other way)
-            and getattr(args, action.dest, action.default) != action.default]
+            and (getattr(args, action.dest, action.default) != action.default
+                 or typed & set(action.option_strings))]
 
 
 def add_array_arguments(parser, *, required: bool = True, what: str = "", lanes_use: str = "") -> None:
