@@ -226,7 +226,9 @@ def test_array_above_4096_pixels_lints_under_verilators_defaults(tmp_path):
 def test_an_interrupt_while_yosys_runs_leaves_no_process_and_no_open_pipe():
     """Amaranth's Yosys helper waits for Yosys with ``communicate``: an interrupt there (Ctrl-C,
     SIGTERM) kills and closes the Yosys process (it used to run on, its pipes left for Python
-    to warn of at exit)."""
+    to warn of at exit). Each process Yosys's helper starts waits 3 s first (one process, exec'd
+    into the command): on an idle machine the real run took under the 0.2 s the interrupt
+    waits, and the interrupt came after it."""
     import subprocess
     import sys
     body = ("import gc, os, signal, threading, time, warnings\n"
@@ -235,6 +237,12 @@ def test_an_interrupt_while_yosys_runs_leaves_no_process_and_no_open_pipe():
             "from tespike.golden.config import SensorConfig\n"
             "from tespike.rtl.verilog import array_verilog\n"
             "from amaranth._toolchain import yosys\n"
+            "import subprocess, sys\n"
+            "class SlowPopen(subprocess.Popen):\n"
+            "    def __init__(self, args, *rest, **kw):\n"
+            "        wait = 'import os, sys, time; time.sleep(3); os.execvp(sys.argv[1], sys.argv[1:])'\n"
+            "        super().__init__([sys.executable, '-c', wait, *args], *rest, **kw)\n"
+            "subprocess.Popen = SlowPopen\n"
             "started = []\n"
             "real = yosys.subprocess.Popen\n"
             "main = threading.get_ident()\n"
