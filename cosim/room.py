@@ -45,7 +45,7 @@ def require_disk(outputs: Mapping[str | os.PathLike, int], what: str) -> None:
     their file systems; files on the same file system add up. Devices and FIFOs take none."""
     needs: dict[int, list] = {}
     for path, size in outputs.items():
-        if size <= 0 or _is_stream(path):
+        if size <= 0 or is_stream(path):
             continue
         place = free_disk(path)
         if place is None:
@@ -59,7 +59,8 @@ def require_disk(outputs: Mapping[str | os.PathLike, int], what: str) -> None:
                              f"but only {size_text(free)} is free on its file system")
 
 
-def _is_stream(path) -> bool:
+def is_stream(path) -> bool:
+    """Whether ``path`` is a character device or a FIFO (written through, never a file of its own)."""
     import stat
     try:
         mode = os.stat(path).st_mode

@@ -24,16 +24,6 @@ def add_arguments(parser):
     parser.add_argument("--no-progress", action="store_true", help="no progress bar (same as --progress off)")
 
 
-def _regular_or_new(path: str) -> bool:
-    """Whether ``path`` is a regular file or not there yet (not a device or a pipe)."""
-    import os
-    import stat
-    try:
-        return stat.S_ISREG(os.stat(path).st_mode)
-    except OSError:
-        return True
-
-
 def run(args) -> int:
     from pathlib import Path
 
@@ -43,14 +33,14 @@ def run(args) -> int:
     from tespike.golden.errors import InputError
     from tespike.golden.io import load_stimulus, save_stream, word_dtype
     from tespike.cosim.vcd import VCD_BYTES_PER_PIXEL_CLOCK
-    from tespike.cosim.room import require_room
+    from tespike.cosim.room import is_stream, require_room
     from tespike.golden.paths import check_outputs
 
     gtkw = args.gtkw
     if args.vcd is not None:
         if args.backend != "amaranth":
             raise InputError(f"--vcd is only written by the amaranth backend, not {args.backend!r}")
-        if gtkw is None and _regular_or_new(args.vcd):   # (no /dev/null.gtkw beside a VCD sent to a device)
+        if gtkw is None and not is_stream(args.vcd):     # (no /dev/null.gtkw beside a VCD sent to a device)
             gtkw = str(Path(args.vcd).with_suffix(".gtkw"))
     elif gtkw is not None:
         raise InputError("--gtkw needs --vcd (a save file describes a waveform)")
