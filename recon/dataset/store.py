@@ -280,7 +280,7 @@ class DatasetStore:
         for key in ("frames", "height", "width"):
             _attribute(info, key, what, lambda v: type(v) is int and v >= 1, "an integer >= 1")
         _attribute(info, "peak", what, lambda v: isinstance(v, (int, float)) and not isinstance(v, bool)
-                   and np.isfinite(v) and 0 < v < 1e30, "a finite number > 0")
+                   and 0 < v < 1e30, "a number in (0, 1e30)")
         shape = (info["frames"], info["height"], info["width"])
         for part in ("light", *(f"streams/{c}" for c in self.configs)):
             array = self.array(name, part)
@@ -407,25 +407,27 @@ def damaged_chunks(url: str, path: str) -> list[str]:
     if not any(isinstance(codec, dict) and codec.get("name") == "crc32c" for codec in meta.get("codecs", ())):
         return []
     bad = []
-    for chunk in sorted((folder / "c").rglob("*")) if (folder / "c").is_dir() else ():
-        if not chunk.is_file() or chunk.name.endswith(".partial"):
-            continue
+    for chunk in _chunk_files(folder):
         data = chunk.read_bytes()
         if len(data) < 4 or google_crc32c.value(data[:-4]) != int.from_bytes(data[-4:], "little"):
             bad.append(str(chunk))
     return bad
 
 
+def _chunk_files(array_folder: Path) -> list[Path]:
+    """The chunk files of a local array folder (under ``c/``, sorted; a write's ``.partial`` aside)."""
+    chunks = array_folder / "c"
+    return [chunk for chunk in sorted(chunks.rglob("*")) if chunk.is_file() and not chunk.name.endswith(".partial")] \
+        if chunks.is_dir() else []
+
+
 def chunk_file_count(url: str, path: str) -> int | None:
     """Chunk files of the array at ``path`` of a local store (None for a store that is not a
     folder). Zarr writes no chunk that holds only its fill value, so the count a build leaves is
     recorded (``chunk_files``) rather than derived from the shape."""
-    folder = Path(url, *path.split("/"), "c")
     if not Path(url).is_dir():
         return None
-    if not folder.is_dir():
-        return 0
-    return sum(1 for chunk in folder.rglob("*") if chunk.is_file() and not chunk.name.endswith(".partial"))
+    return len(_chunk_files(Path(url, *path.split("/"))))
 
 
 def missing_chunks(url: str, path: str, recorded) -> tuple[int, int] | None:
