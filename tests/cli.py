@@ -12,9 +12,10 @@ def _checkout_env() -> dict:
     return dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
 
 
-def run_tespike(*args, timeout=600) -> subprocess.CompletedProcess:
+def run_tespike(*args, timeout=600, env=None) -> subprocess.CompletedProcess:
+    """``tespike args`` in a fresh interpreter of this checkout; ``env``: variables to set besides."""
     return subprocess.run([sys.executable, "-m", "tespike", *map(str, args)], capture_output=True,
-                          text=True, env=_checkout_env(), timeout=timeout)
+                          text=True, env={**_checkout_env(), **(env or {})}, timeout=timeout)
 
 
 def run_python(code: str, timeout=600) -> subprocess.CompletedProcess:

@@ -108,6 +108,20 @@ def test_a_missing_tool_is_named_with_its_package(monkeypatch):
         require_tools("z3")
 
 
+def test_tops_alone_need_no_smt_solver(tmp_path):
+    """``--only tops`` runs ABC: a PATH with yosys and yosys-abc alone (no z3, no yosys-smtbmc)
+    proves the timing blocks; the pixel's proofs on the same PATH name the missing tool."""
+    for tool in ("yosys", "yosys-abc"):
+        (tmp_path / tool).symlink_to(shutil.which(tool))
+    path = {"PATH": str(tmp_path)}
+    done = run_tespike("prove", "--config", "te", "--only", "tops", "--sizes", "none", "--config-sizes", "none",
+                       env=path, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "4 of 4 properties proved" in done.stdout
+    assert_refused(run_tespike("prove", "--config", "te", "--only", "pixel", env=path, timeout=300),
+                   "'yosys-smtbmc' is not on PATH")
+
+
 def test_command_refuses_bad_options_in_one_line():
     done = run_tespike("prove", "--solver", "cvc9", timeout=60)
     assert_refused(done, "cvc9")

@@ -141,7 +141,7 @@ def run(args) -> int:
     import time
     from pathlib import Path
 
-    from tespike.cosim.formal import require_tools
+    from tespike.cosim.formal import TOP_TOOLS, require_tools
     from tespike.golden.errors import InputError
 
     from .common import check_workers_argument
@@ -160,7 +160,10 @@ def run(args) -> int:
     check_workers_argument(args.workers)
     sizes = parse_sizes("--sizes", args.sizes)
     config_sizes = parse_sizes("--config-sizes", args.config_sizes)
-    require_tools(args.solver)
+    if args.only == "tops":                # ABC alone: no SMT solver, no yosys-smtbmc
+        require_tools(None, TOP_TOOLS)
+    else:
+        require_tools(args.solver)
     configs = targets(args.config, args.corners)
     start = time.perf_counter()
     tasks = list(_tasks(configs, args, sizes, config_sizes))

@@ -21,10 +21,10 @@ from tespike.golden.config import SensorConfig
 from .pixel import (STREAM_ARRAY, bounds_harness, corners, rule_harness, amaranth_stream_harness,
                     stream_lanes)
 from .rule_equivalence import Equivalence, prove_equivalence, stream_rule_equivalence
-from .smtbmc import SOLVERS, TOOLS, ProofToolError, ProofResult, require_tools
+from .smtbmc import SOLVERS, TOOLS, TOP_TOOLS, ProofToolError, ProofResult, require_tools
 from .smtbmc import prove as _prove_harness
 
-__all__ = ["SOLVERS", "TOOLS", "ProofToolError", "ProofResult", "corners", "properties", "prove",
+__all__ = ["SOLVERS", "TOOLS", "TOP_TOOLS", "ProofToolError", "ProofResult", "corners", "properties", "prove",
            "require_tools", "rule_harness", "bounds_harness", "amaranth_stream_harness",
            "stream_rule_equivalence", "STREAM_ARRAY", "stream_lanes"]
 

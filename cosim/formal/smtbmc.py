@@ -26,19 +26,21 @@ from tespike.golden.errors import TespikeError
 from .. import children
 
 SOLVERS = {"z3": "z3"}
-#: Tools the proof needs: executable -> Debian package.
+#: Tools the proofs need: executable -> Debian package; the tops' proofs (ABC) need TOP_TOOLS alone.
 TOOLS = {"yosys": "yosys", "yosys-smtbmc": "yosys", "yosys-abc": "yosys"}
+TOP_TOOLS = {"yosys": "yosys", "yosys-abc": "yosys"}
 
 
 class ProofToolError(TespikeError, RuntimeError):
     """A tool the proof needs is missing or failed (one line: which and how to install)."""
 
 
-def require_tools(solver: str) -> None:
-    """Refuse in one line when yosys, yosys-smtbmc or the solver is not on PATH."""
-    if solver not in SOLVERS:
+def require_tools(solver: str | None, tools: dict = TOOLS) -> None:
+    """Refuse in one line when one of ``tools`` or the SMT ``solver`` is not on PATH (``solver``
+    None: no solver, for the tops' proofs alone, which run ABC)."""
+    if solver is not None and solver not in SOLVERS:
         raise ProofToolError(f"--solver {solver!r}: must be one of {', '.join(SOLVERS)}")
-    for tool, package in {**TOOLS, solver: SOLVERS[solver]}.items():
+    for tool, package in {**tools, **({} if solver is None else {solver: SOLVERS[solver]})}.items():
         if shutil.which(tool) is None:
             raise ProofToolError(f"{tool!r} is not on PATH; the proof needs it "
                                  f"(Debian/Ubuntu: apt-get install {package})")
