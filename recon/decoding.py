@@ -4,8 +4,9 @@ Decoding uses exactly :mod:`tespike.golden.decode`: for each configuration (and
 estimator) a table over every code a word of ``config.word_bits`` bits can
 hold (at most 2^17) is filled once by calling :func:`tespike.golden.decode.decode_light`
 and :func:`tespike.golden.decode.decode_spikes` on the legal codes; decoding a stream
-is then one gather on the device. Codes the sensor cannot emit are marked
-illegal in the table and refused, as :func:`tespike.golden.decode.check_words` does.
+is then one gather on the device. Codes outside SPEC section 4's word set
+(:func:`tespike.golden.decode.legal_words`) are NaN in the table and refused, as
+:func:`tespike.golden.decode.check_words` refuses them.
 """
 
 from __future__ import annotations

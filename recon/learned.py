@@ -6,10 +6,11 @@ decoder (scene units, key moment in the middle, H and W multiples of
 the sensor's one-spike light, and returns (N, 1, H, W) light at the key moment;
 its sizes dataclass is a :class:`tespike.recon.learning.sizes.SizesMixin` with
 ``span`` and ``pyramid_factor``. The machinery they share (output head,
-alignment, deformable convolution, mu-law, weights file, tiled inference) is
-:mod:`tespike.recon.learning`; one trainer (:mod:`tespike.recon.train`) and one data engine
-(:mod:`tespike.recon.engine`) serve them all. Each module reports how far its output
-pixels reach (:func:`method_radius`, derived by :mod:`tespike.recon.reach`).
+alignment, deformable convolution, weights file, tiled inference) is
+:mod:`tespike.recon.learning`, the mu-law :mod:`tespike.recon.mulaw`; one trainer
+(:mod:`tespike.recon.train`) and one data engine (:mod:`tespike.recon.engine`) serve them
+all. Each module reports how far its output pixels reach (:func:`method_radius`, derived by
+:mod:`tespike.recon.reach`).
 
 Shipped weights live in :data:`WEIGHTS_DIR`, one file per method and sensor
 preset: ``<preset>.pt`` for the project's network (``net``), ``<method>-<preset>.pt``

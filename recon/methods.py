@@ -37,9 +37,9 @@ from .tfp import tfp
 
 def _tfp_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings,
                correction: tuple | None = None) -> torch.Tensor:
-    """TFP of a (K, P) block; ``correction`` (dark, 1 / gain, dark law atoms (Q, P)) of its P pixels:
-    the window's own light under the pixels' dark law (:func:`tespike.recon.darklaw.law_light`),
-    divided by the gain, floored at 0."""
+    """TFP of a (K, P) block; ``correction`` (dark, 1 / gain, dark law (atoms (Q, P), ceiling (P,))) of
+    its P pixels: the window's own light under the pixels' dark law
+    (:func:`tespike.recon.darklaw.law_light`), divided by the gain, floored at 0."""
     if correction is None:
         light = decode_light(words, config, estimator=settings.estimator, device=settings.device,
                              dtype=settings.torch_dtype)
@@ -53,8 +53,8 @@ def _tfp_block(words: torch.Tensor, config: SensorConfig, settings: ReconSetting
 
 def _tfi_block(words: torch.Tensor, config: SensorConfig, settings: ReconSettings,
                correction: tuple | None = None) -> torch.Tensor:
-    """TFI of a (K, P) block; ``correction`` (dark, 1 / gain, dark law atoms (Q, P) or None) of its
-    P pixels: TFI of the pixels' own charge, re-coded as a pixel without dark current codes it
+    """TFI of a (K, P) block; ``correction`` (dark, 1 / gain, dark law (atoms (Q, P), ceiling (P,)) or
+    None) of its P pixels: TFI of the pixels' own charge, re-coded as a pixel without dark current codes it
     (:func:`tespike.recon.calibration.dark_free_light`), so the intervals are those of the pixel's
     own light, not of its dark current; divided by the gain (TFI is linear in the light of fixed
     intervals). The own charge of a readout is its decoded spikes less its expected dark charge
@@ -124,8 +124,9 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = DEFAU
                 calibration=None, weights=None, **options) -> np.ndarray:
     """Stream words (K, H, W) -> reconstructed light, float32 (K, H, W), scene units.
 
-    ``method`` is a key of :data:`RECON_METHODS`. ``window`` (odd, readouts) and
-    ``device`` (a torch device) apply to every method; further ``options``
+    ``method`` is a key of :data:`RECON_METHODS`. ``window`` (odd, readouts) applies to TFP and
+    TFI (the learned methods see the span their sizes fix); ``device`` (a torch device) to every
+    method; further ``options``
     are fields of :class:`tespike.recon.settings.ReconSettings` the method uses
     (``estimator``, ``search`` for TFI, ``chunk_elements``, ``dtype``). Words are checked
     legal for ``config``; an unknown method or option is refused. ``out``: a

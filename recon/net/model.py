@@ -5,9 +5,11 @@ light) of ``sizes.span`` readouts around the key moment, (N, span, H, W),
 with H and W multiples of ``sizes.pyramid_factor`` (:mod:`tespike.recon.learning.infer`
 pads any frame). The HDR range is compressed by the mu-law
 ``log(1 + mu x) / log(1 + mu)`` before the first convolution (the network
-sees the stream, never the ground truth); the network predicts, in that
-compressed domain, a correction to the compressed temporal mean of the key
-sub-stream, and the output is expanded back to light, >= 0 and finite. The paper's
+sees the stream, never the ground truth); the output head
+(:mod:`tespike.recon.learning.head`, ``sizes.head``) predicts, in that compressed domain, a
+per-pixel softmax blend of training-free estimates (centred means and TFI) plus a
+correction (``"blend"``, the default; the legacy ``"mean"`` head corrects the temporal mean
+of the key sub-stream alone), and the output is expanded back to light, >= 0 and finite. The paper's
 eq. 7 divides the output by the quantum efficiency; here the output is in
 scene units already (the decoder has divided by it), so that division is
 folded into the output.
