@@ -217,16 +217,10 @@ def poisson_stimulus(config: SensorConfig, scene: np.ndarray, rng=None, *,
     ``sensor``: a :class:`tespike.golden.noise.Sensor` (non-idealities and their per-pixel
     maps), instead of ``dark_current``.
     """
+    from .noise import pixel_noise             # (golden.noise imports this module at its top)
     scene = check_scene(scene)
-    model = check_dark_current(dark_current)
-    pixels = None
-    if sensor is not None:                     # (golden.noise imports this module: no import back)
-        if model is not None:
-            raise InputError("give the dark current either alone or inside the sensor noise, not both")
-        pixels = sensor.pixels(scene.shape[1:])
-        model = pixels.dark_model
-    if not noise and model is not None:
-        raise InputError(f"dark current {model!r} is random; it cannot be combined with noise=False")
+    check_dark_current(dark_current)
+    pixels = pixel_noise(dark_current, sensor, scene.shape[1:], noise=noise)
     rng = as_generator(rng)
     K, H, W = scene.shape
     L = config.clocks_per_readout
@@ -234,13 +228,9 @@ def poisson_stimulus(config: SensorConfig, scene: np.ndarray, rng=None, *,
     out = np.empty((K * L, H, W), stimulus_dtype(config))
     fraction = np.zeros(H * W)
     for k in range(K):
-        expected = electrons_per_readout(scene[k].reshape(-1))
-        if pixels is not None:
-            expected = pixels.photo(expected)
+        expected = pixels.photo(electrons_per_readout(scene[k].reshape(-1)))
         if noise:
-            dark = (dark_electrons(model, expected.shape, rng) if pixels is None
-                    else pixels.dark(expected.size, rng))
-            e = clock_electrons(config, expected, dark, rng, budget)
+            e = clock_electrons(config, expected, pixels.dark(expected.size, rng), rng, budget)
         else:
             e, fraction = deterministic_clock_electrons(config, expected, fraction)
         out[k * L:(k + 1) * L] = e.T.reshape(L, H, W)

@@ -234,16 +234,24 @@ class PixelNoise:
                           self.dark_scale.reshape(-1, width)[rows].reshape(-1))
 
 
-def pixel_noise(dark_current: str | None, sensor: Sensor | None, shape: tuple[int, int]) -> PixelNoise:
+def pixel_noise(dark_current: str | None, sensor: Sensor | None, shape: tuple[int, int], *,
+                noise: bool = True) -> PixelNoise:
     """The :class:`PixelNoise` of an H x W frame from either the legacy ``dark_current``
-    keyword (a sensor of that dark current and no maps) or a :class:`Sensor`, not both."""
+    keyword (a sensor of that dark current and no maps) or a :class:`Sensor`, not both; with
+    ``noise`` False (electrons delivered deterministically) a random dark current is refused.
+    The one check of the light front end's options (the fast simulator and
+    :func:`tespike.golden.light.poisson_stimulus` alike)."""
     if sensor is not None and check_dark_current(dark_current) is not None:
         raise InputError("give the dark current either alone or inside the sensor noise, not both")
     if sensor is None:
         sensor = Sensor(SensorNoise(dark_current=dark_current))
     if not isinstance(sensor, Sensor):
         raise InputError(f"sensor must be a golden.noise.Sensor, not {type(sensor).__name__}")
-    return sensor.pixels(shape)
+    pixels = sensor.pixels(shape)
+    if not noise and pixels.dark_model is not None:
+        raise InputError(f"dark current {pixels.dark_model!r} is random; "
+                         "it cannot be combined with noise switched off")
+    return pixels
 
 
 @functools.lru_cache(maxsize=None)

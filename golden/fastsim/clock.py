@@ -60,14 +60,14 @@ def clock_chunks(sim, sel, expected, dark):
     for start in range(0, sel.size, step):
         part = sel[start:start + step]
         if sim.noise:
-            e = clock_electrons(sim, expected[part], dark[part])
+            e = path_electrons(sim, expected[part], dark[part])
         else:
             e, sim.fraction[part] = deterministic_clock_electrons(c, expected[part], sim.fraction[part])
             e = np.ascontiguousarray(e.T)
         yield part, e
 
 
-def clock_electrons(sim, expected, dark):
+def path_electrons(sim, expected, dark):
     """Random electrons ``(L, n)`` of one interval, the law of
     :func:`tespike.golden.light.clock_electrons` (Poisson per clock, dark electrons
     multinomial over the clocks, saturated at ``2^E - 1``; no draw where

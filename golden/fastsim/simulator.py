@@ -66,11 +66,9 @@ class SceneSimulator:
         self.shape = tuple(shape)
         # sensor non-idealities as per-pixel rates (golden.noise): a Sensor, or its
         # PixelNoise for these pixels (a stripe's share of a frame's maps)
-        self.pixels = pixels if pixels is not None else pixel_noise(dark_current, sensor, self.shape)
+        self.pixels = pixels if pixels is not None else pixel_noise(dark_current, sensor, self.shape,
+                                                                    noise=noise)
         self.dark_model = self.pixels.dark_model
-        if not noise and self.dark_model is not None:
-            raise InputError(f"dark current {self.dark_model!r} is random; "
-                             "it cannot be combined with noise switched off")
         self.noise = noise
         self.method = method
         self.rng = as_generator(rng)
