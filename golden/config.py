@@ -208,6 +208,12 @@ class SensorConfig:
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=False)
 
+    def first_difference(self, other: "SensorConfig") -> tuple[str, Any, Any] | None:
+        """``(key, this value, other's value)`` of the first key (SPEC order) where ``other``
+        differs, None where they are equal: what a refusal of a mismatched file names."""
+        return next(((key, getattr(self, key), getattr(other, key)) for key in KEYS
+                     if getattr(self, key) != getattr(other, key)), None)
+
     def save(self, path: str | Path) -> None:
         with atomic_output(path) as tmp:
             Path(tmp).write_text(self.to_json() + "\n")

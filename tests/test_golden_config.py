@@ -1,3 +1,4 @@
+import dataclasses
 import json
 
 import pytest
@@ -103,3 +104,11 @@ def test_bad_json_and_missing_file(tmp_path):
     (tmp_path / "list.json").write_text("[1]")
     with pytest.raises(ConfigError, match="JSON object"):
         load_config(tmp_path / "list.json")
+
+
+def test_first_difference_names_the_first_key_in_spec_order():
+    te = SensorConfig.preset("te")
+    assert te.first_difference(te) is None
+    other = dataclasses.replace(te, threshold=100, acc_bits=10)
+    assert te.first_difference(other) == ("threshold", 175, 100)
+    assert SensorConfig.preset("ml").first_difference(SensorConfig.preset("ml-msb")) == ("ml_readout", "count", "msb")

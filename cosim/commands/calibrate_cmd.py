@@ -30,11 +30,11 @@ def run(args) -> int:
     check_outputs({"--out": args.out}, {"--dark": args.dark, "--flat": args.flat})
     dark, config = load_stream(args.dark, memory_map=True)
     flat, flat_config = load_stream(args.flat, memory_map=True)
-    if flat_config != config:
-        mine, theirs = config.to_dict(), flat_config.to_dict()
-        key = next(k for k in mine if mine[k] != theirs[k])
+    difference = config.first_difference(flat_config)
+    if difference is not None:
+        key, mine, theirs = difference
         raise InputError(f"--dark and --flat were recorded with different configurations: "
-                         f"{key} = {mine[key]!r} in {args.dark}, {theirs[key]!r} in {args.flat}")
+                         f"{key} = {mine!r} in {args.dark}, {theirs!r} in {args.flat}")
     calibration = estimate(dark, flat, config, args.flat_light)
     save_calibration(args.out, calibration)
     report(args, f"wrote {args.out}: {calibration_summary(calibration)}")
