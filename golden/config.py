@@ -149,10 +149,17 @@ class SensorConfig:
 
     # -- construction -------------------------------------------------------
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "SensorConfig":
-        """Build from a mapping of SPEC keys; unknown keys are refused."""
+    def from_dict(cls, data: Mapping[str, Any], *, whole: bool = False) -> "SensorConfig":
+        """Build from a mapping of SPEC keys; unknown keys are refused. ``whole=True`` is for
+        the configuration a file records (a stream's, a calibration's, a weights file's: SPEC
+        section 6, "every key of section 2"): a missing key is refused, not given its default,
+        except those older files may lack (:data:`ADDED_KEYS`)."""
         if not isinstance(data, Mapping):
             raise ConfigError(f"configuration must be a JSON object, not {type(data).__name__}")
+        missing = [key for key in KEYS if key not in data and key not in ADDED_KEYS] if whole else []
+        if missing:
+            raise ConfigError(f"configuration lacks key{'s' * (len(missing) > 1)} "
+                              f"{', '.join(map(repr, missing))} (a recorded configuration holds every key)")
         unknown = sorted(set(data) - set(KEYS), key=str)
         if unknown:
             raise ConfigError(
@@ -167,17 +174,9 @@ class SensorConfig:
 
     @classmethod
     def from_json(cls, text: str, *, whole: bool = False) -> "SensorConfig":
-        """Parse JSON text; refuse duplicate keys, deep nesting and huge numbers in one line.
-        ``whole=True`` is for the configuration a file records (a stream's, a calibration's: SPEC
-        section 6, "every key of section 2"): a missing key is refused, not given its default,
-        except those older files may lack (:data:`ADDED_KEYS`)."""
-        data = parse_json(text, "configuration", keys="config key")
-        if whole and isinstance(data, Mapping):
-            missing = [key for key in KEYS if key not in data and key not in ADDED_KEYS]
-            if missing:
-                raise ConfigError(f"configuration lacks key{'s' * (len(missing) > 1)} "
-                                  f"{', '.join(map(repr, missing))} (a recorded configuration holds every key)")
-        return cls.from_dict(data)
+        """Parse JSON text; refuse duplicate keys, deep nesting and huge numbers in one line;
+        ``whole`` as :meth:`from_dict`'s."""
+        return cls.from_dict(parse_json(text, "configuration", keys="config key"), whole=whole)
 
     @classmethod
     def preset(cls, name: str) -> "SensorConfig":

@@ -141,6 +141,17 @@ def test_weights_for_another_configuration_are_refused(te_weights):
         weights_path(SensorConfig(b1=3))
 
 
+def test_a_weights_file_whose_configuration_lacks_a_key_is_refused(tmp_path):
+    """A recorded configuration holds every key (as a stream's does): one without its threshold
+    is refused, not read with the default threshold."""
+    import torch
+    payload = torch.load(weights_path(SensorConfig.preset("te")), map_location="cpu", weights_only=True)
+    del payload["config"]["threshold"]
+    torch.save(payload, tmp_path / "lacking.pt")
+    with pytest.raises(InputError, match="lacks key 'threshold'"):
+        load_weights(tmp_path / "lacking.pt")
+
+
 def test_not_a_weights_file_is_refused(tmp_path):
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"not a torch file")

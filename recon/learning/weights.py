@@ -104,7 +104,7 @@ def read_weights(path: str | Path, what: str = "weights") -> dict[str, Any]:
     if not isinstance(payload, dict) or any(key not in payload for key in KEYS):
         raise InputError(f"{what} {str(path)!r} is not a tespike weights file (no {', '.join(KEYS)})")
     try:
-        config = SensorConfig.from_dict(payload["config"])
+        config = SensorConfig.from_dict(payload["config"], whole=True)
     except (InputError, TypeError, ValueError) as exc:
         raise InputError(f"{what} {str(path)!r}: its sensor configuration is not valid ({exc})") from None
     return {**payload, "method": payload.get("method", "net"), "config": config, "meta": payload.get("meta", {})}
