@@ -113,15 +113,13 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 
 
 def _add_common_arguments(command: argparse.ArgumentParser) -> None:
-    """--quiet and --progress on every sub-command (unless it defines its own)."""
-    flags = command._option_string_actions
-    if "--quiet" not in flags:
-        names = ("--quiet",) if "-q" in flags else ("--quiet", "-q")
-        command.add_argument(*names, action="store_true",
+    """--quiet (unless the command defines its own, as demo does) and --progress on every
+    sub-command."""
+    if "--quiet" not in command._option_string_actions:
+        command.add_argument("--quiet", "-q", action="store_true",
                              help="print nothing on stdout on success (errors still go to stderr)")
-    if "--progress" not in flags:
-        command.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
-                             help="progress bars on stderr: auto (only when stderr is a terminal), on, off")
+    command.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
+                         help="progress bars on stderr: auto (only when stderr is a terminal), on, off")
 
 
 def _raise_terminated(signum, frame):

@@ -12,8 +12,6 @@ import sys
 def progress_wanted(args) -> bool:
     """Draw progress bars? ``--progress on``/``off``, else only when stderr is a terminal."""
     choice = getattr(args, "progress", "auto")
-    if choice is True:                  # a command's own --progress switch
-        return True
     if choice in ("on", "off"):
         return choice == "on"
     return sys.stderr.isatty()
