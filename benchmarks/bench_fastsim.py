@@ -11,7 +11,7 @@ Usage (from the worktree root):
 
 Part 1, per light level from 1e-4 to 10 x design light, paper TE, ML (count
 readout) and ML msb (eq. 10) configurations: ``simulate_scene`` (fast) against the naive loop (Poisson
-electrons drawn per pixel clock by ``tespike.golden.light.poisson_stimulus``, stepped
+electrons drawn per pixel clock by ``tespike.golden.stimulus.poisson_stimulus``, stepped
 by the cycle-exact ``tespike.golden.sensor.simulate``) on the same light: bias of the
 mean decoded value (spikes per readout, with its standard error), total
 variation distance (TVD) of the code histograms, and both throughputs
@@ -57,7 +57,7 @@ sys.path.insert(0, str(ROOT))
 from tespike.golden.config import SensorConfig  # noqa: E402
 from tespike.golden.decode import decode_spikes  # noqa: E402
 from tespike.golden.fastsim import SceneSimulator  # noqa: E402
-from tespike.golden.light import poisson_stimulus  # noqa: E402
+from tespike.golden.stimulus import poisson_stimulus  # noqa: E402
 from tespike.golden.sensor import simulate  # noqa: E402
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
 from tespike.recon.pictures import save_figure  # noqa: E402

@@ -7,7 +7,8 @@ Depends on numpy alone. The rooms:
   :func:`simulate` runs it on per-clock electrons), :mod:`.decode` (the one decoder),
   :mod:`.beats` (the streaming readout's lanes), :mod:`.dynamic_range`;
 - light to electrons: :mod:`.light` (the front end), :mod:`.noise` (a sensor's
-  non-idealities), :mod:`.fastsim` (light to words, exact in distribution: what
+  non-idealities), :mod:`.stimulus` (a scene's per-clock electrons, the naive loop's
+  input), :mod:`.fastsim` (light to words, exact in distribution: what
   ``tespike simulate`` runs, :func:`tespike.golden.fastsim.simulate_scene`), :mod:`.poisson`;
 - the hardware's switching: :mod:`.toggles` (the pixel's registers), :mod:`.activity`
   (every register of a generated top);

@@ -35,7 +35,7 @@ import numpy as np
 
 from .config import DESIGN_ELECTRONS, SensorConfig
 from .errors import InputError
-from .io import check_scene, unsigned_dtype
+from .io import unsigned_dtype
 
 #: Dark-current models of the paper's appendix A.2.5.
 DARK_CURRENT_MODELS = ("eq12", "eq13")
@@ -203,35 +203,3 @@ def deterministic_clock_electrons(config: SensorConfig, mean_per_readout: np.nda
     fraction_out = np.where(np.isfinite(fraction_out), fraction_out, 0.0)
     return e.astype(np.int64), fraction_out
 
-
-def poisson_stimulus(config: SensorConfig, scene: np.ndarray, rng=None, *,
-                     dark_current: str | None = None, noise: bool = True, sensor=None) -> np.ndarray:
-    """Scene light ``(K, H, W)`` -> per-clock electrons ``(K * L, H, W)``.
-
-    The stimulus for the cycle-exact model (:func:`tespike.golden.sensor.simulate`) and
-    the RTL. ``rng``: a numpy Generator or a seed. ``noise=False`` gives the
-    deterministic stimulus of :func:`deterministic_clock_electrons` (and refuses
-    dark current, which is random by nature). The dtype is the smallest unsigned
-    one that holds ``2^input_bits - 1``. Memory is ``K * L * H * W`` values: use
-    it for crops, not whole videos (:mod:`tespike.golden.fastsim` simulates those).
-    ``sensor``: a :class:`tespike.golden.noise.Sensor` (non-idealities and their per-pixel
-    maps), instead of ``dark_current``.
-    """
-    from .noise import pixel_noise             # (golden.noise imports this module at its top)
-    scene = check_scene(scene)
-    check_dark_current(dark_current)
-    pixels = pixel_noise(dark_current, sensor, scene.shape[1:], noise=noise)
-    rng = as_generator(rng)
-    K, H, W = scene.shape
-    L = config.clocks_per_readout
-    budget = log_budget(scene.size, L)
-    out = np.empty((K * L, H, W), stimulus_dtype(config))
-    fraction = np.zeros(H * W)
-    for k in range(K):
-        expected = pixels.photo(electrons_per_readout(scene[k].reshape(-1)))
-        if noise:
-            e = clock_electrons(config, expected, pixels.dark(expected.size, rng), rng, budget)
-        else:
-            e, fraction = deterministic_clock_electrons(config, expected, fraction)
-        out[k * L:(k + 1) * L] = e.T.reshape(L, H, W)
-    return out

@@ -240,7 +240,7 @@ def pixel_noise(dark_current: str | None, sensor: Sensor | None, shape: tuple[in
     keyword (a sensor of that dark current and no maps) or a :class:`Sensor`, not both; with
     ``noise`` False (electrons delivered deterministically) a random dark current is refused.
     The one check of the light front end's options (the fast simulator and
-    :func:`tespike.golden.light.poisson_stimulus` alike)."""
+    :func:`tespike.golden.stimulus.poisson_stimulus` alike)."""
     if sensor is not None and check_dark_current(dark_current) is not None:
         raise InputError("give the dark current either alone or inside the sensor noise, not both")
     if sensor is None:

@@ -22,6 +22,12 @@ from .errors import InputError
 MAX_WORKERS = 256
 
 
+def check_workers_argument(workers: int | None) -> None:
+    """Refuse a ``--workers`` outside 1..MAX_WORKERS with one line (None: the default)."""
+    if workers is not None and not 1 <= workers <= MAX_WORKERS:
+        raise InputError(f"--workers {workers}: must be in 1..{MAX_WORKERS}")
+
+
 def _read_int(path: str) -> int | None:
     try:
         text = Path(path).read_text().strip()

@@ -16,7 +16,7 @@ from tespike.golden.config import SensorConfig
 from tespike.golden.decode import check_words, decode_spikes
 from tespike.golden.errors import InputError
 from tespike.golden.fastsim import SceneSimulator, clock, head, simulate_scene, stripe_simulators
-from tespike.golden.light import poisson_stimulus
+from tespike.golden.stimulus import poisson_stimulus
 from tespike.golden.noise import Sensor, SensorNoise
 from tespike.golden.reference import msb_index
 from tespike.golden.sensor import PixelArray, simulate

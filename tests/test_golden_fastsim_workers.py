@@ -18,7 +18,7 @@ from tespike.golden.errors import InputError
 from tespike.golden.fastsim import (MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, SceneSimulator, scene_stimulus,
                             simulate_scene, stripe_simulators, stripe_slices)
 from tespike.golden.io import load_stream
-from tespike.golden.light import poisson_stimulus
+from tespike.golden.stimulus import poisson_stimulus
 from tespike.golden.sensor import simulate
 from tests.cli import assert_refused, run_tespike
 

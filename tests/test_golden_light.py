@@ -7,8 +7,8 @@ import pytest
 from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig
 from tespike.golden.errors import InputError
 from tespike.golden.light import (LIGHT_CAP, dark_electrons, deterministic_clock_electrons, log_budget,
-                          log_poisson_tail_above, log_poisson_tail_below, poisson_stimulus,
-                          stimulus_dtype)
+                                  log_poisson_tail_above, log_poisson_tail_below, stimulus_dtype)
+from tespike.golden.stimulus import poisson_stimulus
 from tespike.golden.io import check_stimulus
 from tests.configs import EDGE_CONFIGS
 

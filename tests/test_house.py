@@ -2,7 +2,8 @@
 
 - no import circle among the project's modules, at module level or inside functions;
 - no module imports another module's private (``_name``) functions or constants;
-- no command module imports :mod:`tespike.cosim.cli` back (shared pieces live below it);
+- no command module imports :mod:`tespike.cosim.cli` back (shared pieces live below it), and no
+  library module of cosim imports a command module (cli -> commands -> the rest);
 - the learned wing's shared package (:mod:`tespike.recon.learning`) reaches no method (:mod:`tespike.recon.net`,
   :mod:`tespike.recon.baselines`), directly or through another module (the registry, the trainer);
 - the floors: ``golden`` imports no other room, ``rtl`` only ``golden``'s configuration,
@@ -123,6 +124,15 @@ def test_command_modules_do_not_import_the_cli_back():
             if name.startswith("tespike.cosim.commands") and any(module == "tespike.cosim.cli" or (module == "tespike.cosim" and "cli" in names)
                                                          for module, names in _imports(name, path))]
     assert back == []
+
+
+def test_cosim_library_modules_do_not_import_the_commands():
+    graph = _graph()
+    up = [f"{name} -> {target}" for name in sorted(graph)
+          if _inside(name, "tespike.cosim") and not _inside(name, "tespike.cosim.commands")
+          and name != "tespike.cosim.cli"
+          for target in sorted(graph[name]) if _inside(target, "tespike.cosim.commands")]
+    assert up == []
 
 
 def _inside(name: str, package: str) -> bool:

@@ -1,7 +1,7 @@
 """Argument blocks several sub-commands share, so their names and help read the same everywhere."""
 
 from tespike.golden.config import PRESETS
-from tespike.golden.resources import MAX_WORKERS  # noqa: F401  (one limit for every command's --workers)
+from tespike.golden.resources import MAX_WORKERS, check_workers_argument  # noqa: F401  (one --workers rule)
 
 CONFIG_HELP = "JSON config file, or a preset: " + " / ".join(PRESETS)
 
@@ -126,13 +126,6 @@ def sensor_argument(args):
 
 #: Most torch CPU threads any command's ``--threads`` accepts (reconstruct, evaluate, train).
 MAX_THREADS = 256
-
-
-def check_workers_argument(workers: int | None) -> None:
-    """Refuse a ``--workers`` outside 1..MAX_WORKERS with one line."""
-    from tespike.golden.errors import InputError
-    if workers is not None and not 1 <= workers <= MAX_WORKERS:
-        raise InputError(f"--workers {workers}: must be in 1..{MAX_WORKERS}")
 
 
 def check_threads_argument(threads: int | None) -> None:

@@ -33,7 +33,7 @@ POLL_SECONDS = 0.1
 def check_cluster_options(workers: int | None, scheduler: str | None) -> None:
     """Refuse ``--workers`` outside the commands' one range (1..MAX_WORKERS) and ``--workers``
     together with ``--scheduler``."""
-    from tespike.cosim.commands.common import check_workers_argument
+    from tespike.golden.resources import check_workers_argument
     if workers is not None and type(workers) is not int:
         raise InputError(f"--workers {workers!r} must be an integer")
     check_workers_argument(workers)

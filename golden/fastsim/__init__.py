@@ -1,7 +1,7 @@
 """Fast light-to-stream simulator, distributed like the cycle-exact model (SPEC sections 3, 6).
 
 :func:`simulate_scene` gives readout words with the same distribution as
-:func:`tespike.golden.sensor.simulate` driven by :func:`tespike.golden.light.poisson_stimulus`
+:func:`tespike.golden.sensor.simulate` driven by :func:`tespike.golden.stimulus.poisson_stimulus`
 (accumulator starting at 0, residual carried across readouts), but draws
 random numbers per readout interval instead of per pixel clock wherever the
 dynamics allow. Each pixel-readout takes one path, chosen from its light and
