@@ -73,6 +73,9 @@ MIN_GAIN = 0.05
 #: Median gain above which :func:`estimate` refuses the flat's stated light (no sensor's
 #: non-uniformity comes near it: the flat was recorded at another light than the one stated).
 MAX_GAIN = 1 / MIN_GAIN
+#: Share of a flat's words at the sensor's top code (:func:`saturated_words`) from which
+#: :func:`estimate` refuses it: most of its pixels saw light beyond the sensor's range.
+MAX_SATURATED_SHARE = 0.5
 #: Readouts decoded at once (bounds memory to this many float64 frames).
 CHUNK_READOUTS = 32
 #: Readouts of each calibration stream (dark and flat) the project records: the evaluation's
@@ -123,6 +126,33 @@ def mean_decoded_light(words, config: SensorConfig) -> np.ndarray:
     return total * (config.spike_light / K)
 
 
+def flat_ceiling(config: SensorConfig) -> float:
+    """Light (scene units) below which a nominal pixel's mean decoded light conserves spikes: TE below
+    its overflow (2^b1 spikes a readout: 0.067 for the paper's camera), ML below its counter's top
+    (or one spike a clock, whichever comes first)."""
+    from tespike.golden.config import DESIGN_ELECTRONS
+    spikes = config.p_max if config.is_te else min(config.ml_max, config.clocks_per_readout)
+    return spikes * config.threshold / DESIGN_ELECTRONS
+
+
+def saturated_words(config: SensorConfig) -> np.ndarray:
+    """The words the sensor gives where every clock's input saturates (2^E - 1 electrons a clock:
+    any light far enough above its range), over two readouts from an empty accumulator (a carried
+    charge can change the count by one): a pixel reading only these words shows no light level."""
+    from tespike.golden.sensor import PixelArray
+    clocks = 2 * config.clocks_per_readout
+    words = PixelArray(config, (1, 1)).feed(np.full((clocks, 1, 1), config.input_max, np.int64))
+    return np.unique(words)
+
+
+def saturated_share(words, config: SensorConfig) -> float:
+    """Share of ``words`` (K, H, W) that are :func:`saturated_words`."""
+    top = saturated_words(config)
+    count = sum(int(np.count_nonzero(np.isin(np.asarray(words[s:s + CHUNK_READOUTS]), top)))
+                for s in range(0, words.shape[0], CHUNK_READOUTS))
+    return count / words.size
+
+
 def overflow_share(words, config: SensorConfig) -> float:
     """Share of TE overflow words in ``words`` (0 for ML)."""
     if not config.is_te:
@@ -165,6 +195,13 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
     if dark_words.shape[1:] != flat_words.shape[1:]:
         raise InputError(f"dark stream frames {dark_words.shape[1:]} and flat stream frames "
                          f"{flat_words.shape[1:]} differ: both must come from the same sensor")
+    saturated = saturated_share(flat_words, config)
+    if saturated >= MAX_SATURATED_SHARE:
+        top = ", ".join(map(str, saturated_words(config).tolist()))
+        raise InputError(f"the flat stream is saturated: {100 * saturated:.1f} % of its words are the sensor's "
+                         f"top code ({top}: what any light above its range gives), so its light cannot be "
+                         f"measured; record the flat at a lower light (below {flat_ceiling(config):.3g}, "
+                         "where the mean decoding conserves spikes)")
     dark = mean_decoded_light(dark_words, config)
     shown = mean_decoded_light(flat_words, config) - dark
     if float(np.median(shown)) > MAX_GAIN * float(flat_light):
@@ -174,7 +211,7 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
     if float(np.median(shown)) < MIN_GAIN * float(flat_light):
         raise InputError(f"flat light {flat_light:g}: the flat stream's pixels read {float(np.median(shown)):.4g} "
                          f"(median, less the dark), below {MIN_GAIN:g} times it: no brighter than the dark "
-                         "stream (were --dark and --flat swapped, or the flat recorded without light?)")
+                         "stream (were the dark and flat streams swapped, or the flat recorded without light?)")
     raw_gain = shown / float(flat_light)
     floored = int(np.count_nonzero(raw_gain < MIN_GAIN))
     return Calibration(dark, np.maximum(raw_gain, MIN_GAIN), config, int(dark_words.shape[0]),
@@ -247,6 +284,10 @@ def load_calibration(path: str | Path) -> Calibration:
                 or not np.isfinite(law).all() or (law < 0).any():
             raise InputError(f"calibration file {shown!r}: dark_law must be float32 (Q, H, W) of the maps' "
                              f"frame size, finite and >= 0, not {law.dtype} {law.shape}")
+        most = float(decode_spikes(legal_words(config), config).max())     # decoded spikes of one readout
+        if law.size and float(law.max()) > most * (1 + 1e-6):
+            raise InputError(f"calibration file {shown!r}: dark_law must lie in [0, {most:g}] (decoded dark "
+                             f"spikes of one readout; found up to {float(law.max()):g})")
         if law.shape[0] == 1 or (np.diff(law, axis=0) < 0).any():
             raise InputError(f"calibration file {shown!r}: dark_law must hold Q >= 2 quantiles of each pixel "
                              f"in ascending order (or none), not {law.shape[0]}"

@@ -78,6 +78,19 @@ def test_refusals_and_floor():
         reconstruct(dark[:, :2], config, "tfp", calibration=c)
 
 
+@pytest.mark.parametrize("config, light", [(SensorConfig(), 2.0), (SensorConfig.preset("ml"), 10.0),
+                                           (SensorConfig.preset("ml-msb"), 2.0)], ids=str)
+def test_a_flat_beyond_the_sensor_range_is_refused(config, light):
+    """A flat whose words are the sensor's top code (every clock's input saturated) showed half or a
+    fifth of its light: the gain came out 0.49 (TE) or 0.19 (ML count), rc 0, and every calibrated
+    image 2 to 5 times too bright."""
+    dark, flat = _streams(config, 4, flat_light=light)
+    with pytest.raises(InputError, match=r"flat stream is saturated: 100.0 % of its words are the sensor's "
+                                         r"top code \(\d+:.*below \d"):
+        estimate(dark, flat, config, light)
+    estimate(*_streams(config, 4), config, 0.03)               # a flat within the range: calibrated
+
+
 def test_calibrate_command_and_reconstruct_with_it(tmp_path):
     config = SensorConfig()
     dark, flat = _streams(config, 40)
@@ -130,6 +143,7 @@ def test_file_round_trip(tmp_path):
     ("gain", lambda c: c.gain.astype(np.complex128), "gain must be a float"),       # the imaginary part dropped
     ("dark_law", lambda c: c.dark_law[:1], "Q >= 2"),
     ("dark_law", lambda c: c.dark_law[::-1].copy(), "ascending"),
+    ("dark_law", lambda c: np.full(c.dark_law.shape, 3e38, np.float32), r"dark_law must lie in \[0, 240\]"),
     ("estimator", lambda c: np.array("bogus"), "estimator 'bogus' unknown"),
     ("dark_readouts", lambda c: np.array(0), "dark_readouts must be an integer >= 1"),
     ("flat_light", lambda c: np.array(np.nan), "flat_light must be a finite number > 0"),
