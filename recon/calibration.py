@@ -195,9 +195,14 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
     if dark_words.shape[1:] != flat_words.shape[1:]:
         raise InputError(f"dark stream frames {dark_words.shape[1:]} and flat stream frames "
                          f"{flat_words.shape[1:]} differ: both must come from the same sensor")
+    top = ", ".join(map(str, saturated_words(config).tolist()))
+    saturated = saturated_share(dark_words, config)
+    if saturated >= MAX_SATURATED_SHARE:
+        raise InputError(f"the dark stream is saturated: {100 * saturated:.1f} % of its words are the sensor's "
+                         f"top code ({top}): its dark current alone is beyond the sensor's range, and no "
+                         "calibration recovers light under it")
     saturated = saturated_share(flat_words, config)
     if saturated >= MAX_SATURATED_SHARE:
-        top = ", ".join(map(str, saturated_words(config).tolist()))
         raise InputError(f"the flat stream is saturated: {100 * saturated:.1f} % of its words are the sensor's "
                          f"top code ({top}: what any light above its range gives), so its light cannot be "
                          f"measured; record the flat at a lower light (below {flat_ceiling(config):.3g}, "

@@ -356,8 +356,11 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
                     key = sensor, (H, W)
                     if key not in calibrations:
                         bar.set_postfix_str(f"{name} {sensor} calibrate")
-                        calibrations[key] = calibrate_sensor(simulate, config, noise_sensors[base], (H, W),
-                                                             np.random.default_rng([seed, sensor_index, H, W]))
+                        try:
+                            calibrations[key] = calibrate_sensor(simulate, config, noise_sensors[base], (H, W),
+                                                                 np.random.default_rng([seed, sensor_index, H, W]))
+                        except InputError as exc:               # (a sensor no calibration can serve)
+                            raise InputError(f"calibrating noise sensor {base}: {exc}") from None
                     calibration = calibrations[key]
             else:
                 words = simulate(config, light, rng)

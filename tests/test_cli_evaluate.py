@@ -116,6 +116,13 @@ def test_evaluate_sensor_noise_and_calibrate(tmp_path, capsys):
     refused(capsys, "evaluate", "--sensor-noise", tmp_path / "eq12.json", "--out", out, "'te+eq12' is taken")
     refused(capsys, "evaluate", "--sensor-noise", tmp_path / "hot.json", "--store", tmp_path, "--out", out,
             "--sensor-noise does not apply with --store")
+    # a dark current beyond the sensor's range: no calibration; the refusal names the sensor (it named
+    # calibrate's --dark and --flat, flags this command does not have)
+    (tmp_path / "sat.json").write_text('{"dark_current": "eq12", "dark_level": 1e6}')
+    refused(capsys, "evaluate", "--sensor-noise", tmp_path / "sat.json", "--calibrate", "--set", "default",
+            "--frames", 4, "--height", 16, "--width", 16, "--methods", "tfp", "--ml-count-config", "none",
+            "--progress", "off", "--out", out, "calibrating noise sensor te+sat: the dark stream is saturated")
+    assert not out.exists()
 
 
 def test_evaluate_table_refuses(tmp_path, capsys, empty_weights_dir):   # no weights, whatever the checkout holds

@@ -89,6 +89,8 @@ def test_a_flat_beyond_the_sensor_range_is_refused(config, light):
                                          r"top code \(\d+:.*below \d"):
         estimate(dark, flat, config, light)
     estimate(*_streams(config, 4), config, 0.03)               # a flat within the range: calibrated
+    with pytest.raises(InputError, match="the dark stream is saturated: 100.0 %.*its dark current alone"):
+        estimate(flat, flat, config, light)
 
 
 def test_calibrate_command_and_reconstruct_with_it(tmp_path):
