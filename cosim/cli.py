@@ -119,7 +119,8 @@ def _add_common_arguments(command: argparse.ArgumentParser) -> None:
         command.add_argument("--quiet", "-q", action="store_true",
                              help="print nothing on stdout on success (errors still go to stderr)")
     command.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
-                         help="progress bars on stderr: auto (only when stderr is a terminal), on, off")
+                         help="progress bars on stderr: auto (only when stderr is a terminal; evaluate prints "
+                              "plain progress lines to a log file instead), on, off")
 
 
 def _raise_terminated(signum, frame):
