@@ -24,10 +24,10 @@ import os
 import re
 import shutil
 import sys
-import tempfile
 import types
 from pathlib import Path
 
+from tespike.golden.atomic import work_folder
 from tespike.golden.errors import InputError
 
 from .cocotb_bench import Settings
@@ -186,7 +186,7 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
         check_lanes(settings.config, settings.height, settings.width, settings.lanes)
     top = Top(settings.config, settings.height, settings.width, settings.lanes).module
     settings.inputs()                      # and a bad stimulus or reset vector, before building anything
-    with tempfile.TemporaryDirectory(prefix="tespike-cocotb-") as scratch:
+    with work_folder("tespike-cocotb-") as scratch:
         if verilog_path is None:
             verilog_path = Path(scratch) / "array.v"
             if settings.lanes is None:

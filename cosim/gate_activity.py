@@ -16,9 +16,9 @@ value per clock (zero-delay: no glitches), and filed under its block as
 from __future__ import annotations
 
 import json
-import tempfile
 from pathlib import Path
 
+from tespike.golden.atomic import work_folder
 from tespike.golden.activity import BLOCKS
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
@@ -110,7 +110,7 @@ def logic_check(config: SensorConfig, electrons, lanes: int) -> dict[str, dict[s
 
     top = Top(config, electrons.shape[1], electrons.shape[2], lanes)
     netlist, design = gate_netlist(top.verilog(), top.module)
-    with tempfile.TemporaryDirectory(prefix="tespike-gates-") as tmp:
+    with work_folder("tespike-gates-") as tmp:
         vcd = Path(tmp) / "gates.vcd"
         words = run_icarus_stream(config, electrons, lanes, verilog=netlist, vcd_path=vcd)
         if not np.array_equal(words, beats(simulate(config, electrons), lanes)):

@@ -19,11 +19,11 @@ arrays; use :mod:`tespike.cosim.verilator` for scale.
 from __future__ import annotations
 
 import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from tespike.golden.atomic import work_folder
 from tespike.golden.config import SensorConfig
 from tespike.golden.io import atomic_output
 
@@ -157,7 +157,7 @@ def _simulate(run: Run, verilog: str, what: str, work_dir, vcd_path=None) -> tup
     vvp = require_tool("vvp", "iverilog")
     testbench = _testbench(top.module, top.charge_bits, top.output_bits, top.outputs,
                            "streaming ports" if top.streaming else "ports", vcd_path is not None)
-    with tempfile.TemporaryDirectory(prefix="tespike-icarus-") as scratch:
+    with work_folder("tespike-icarus-") as scratch:
         work = Path(work_dir) if work_dir is not None else Path(scratch)
         if not work.is_dir():
             raise SimulatorRunError(f"work_dir {str(work)!r} is not an existing directory")

@@ -31,9 +31,10 @@ import os
 import re
 import shutil
 import subprocess
-import tempfile
 import time
 from pathlib import Path
+
+from tespike.golden.atomic import work_folder
 
 from . import children
 
@@ -114,7 +115,7 @@ def yosys_run(verilog_text: str, steps: list[str], failure: str, yosys: str = "y
     missing = yosys_missing(yosys)
     if missing:
         raise SynthesisError(missing)
-    with tempfile.TemporaryDirectory(prefix=prefix) as tmp:
+    with work_folder(prefix) as tmp:
         work = Path(tmp)
         (work / DESIGN_FILE).write_text(verilog_text)
         code, output, run = _run_measured([yosys, "-q", "-p", "; ".join([f"read_verilog {DESIGN_FILE}", *steps])],

@@ -28,11 +28,11 @@ import re
 import shutil
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from tespike.golden.atomic import work_folder
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.golden.io import atomic_output
@@ -335,24 +335,24 @@ def _keep_runtime(obj: Path, runtime: Path, cxx_opt: str = CXX_OPT) -> None:
     """
     if runtime.is_dir() or not all((obj / name).is_file() for name in _RUNTIME_OBJECTS):
         return
-    staging = Path(tempfile.mkdtemp(prefix=f".{runtime.name}-", dir=runtime.parent))
-    for name in _RUNTIME_OBJECTS:
-        shutil.copyfile(obj / name, staging / name)
-    pch_tmp = obj / "pch"
-    pch_tmp.mkdir()
-    (obj / "pch.mk").write_text(
-        "include Varray.mk\n"
-        "pch/verilated.h.gch:\n"
-        "\tln -sf $(VERILATOR_ROOT)/include/verilated.h pch/verilated.h\n"
-        "\t$(CXX) $(CXXFLAGS) $(CPPFLAGS) $(OPT_FAST) -x c++-header pch/verilated.h -o $@\n")
-    made = children.run(["make", "-f", "pch.mk", f"OPT_FAST={cxx_opt}", "pch/verilated.h.gch"],
-                        cwd=obj, capture_output=True, text=True)
-    if made.returncode == 0 and (pch_tmp / "verilated.h.gch").is_file():
-        shutil.move(str(pch_tmp), staging / "pch")
-    try:
-        os.rename(staging, runtime)
-    except OSError:                              # another process saved them first
-        shutil.rmtree(staging, ignore_errors=True)
+    with work_folder(f".{runtime.name}-", runtime.parent) as staging:   # (renamed into place whole)
+        for name in _RUNTIME_OBJECTS:
+            shutil.copyfile(obj / name, staging / name)
+        pch_tmp = obj / "pch"
+        pch_tmp.mkdir()
+        (obj / "pch.mk").write_text(
+            "include Varray.mk\n"
+            "pch/verilated.h.gch:\n"
+            "\tln -sf $(VERILATOR_ROOT)/include/verilated.h pch/verilated.h\n"
+            "\t$(CXX) $(CXXFLAGS) $(CPPFLAGS) $(OPT_FAST) -x c++-header pch/verilated.h -o $@\n")
+        made = children.run(["make", "-f", "pch.mk", f"OPT_FAST={cxx_opt}", "pch/verilated.h.gch"],
+                            cwd=obj, capture_output=True, text=True)
+        if made.returncode == 0 and (pch_tmp / "verilated.h.gch").is_file():
+            shutil.move(str(pch_tmp), staging / "pch")
+        try:
+            os.rename(staging, runtime)
+        except OSError:                          # another process saved them first (removed on leaving)
+            pass
 
 
 def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
@@ -378,8 +378,8 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
             return final / _EXECUTABLE
         if progress:
             print(f"tespike: building the Verilator model of {top} in {final} ...", file=sys.stderr)
-        work = Path(tempfile.mkdtemp(prefix=f".{key}.build-", dir=root))
-        try:
+        # a killed build leaves no hidden folder in the cache (the janitor removes it)
+        with work_folder(f".{key}.build-", root) as work:
             (work / "array.v").write_text(verilog)
             (work / "harness.cpp").write_text(harness)
             runtime = _runtime_dir(root, cxx_opt)
@@ -401,9 +401,6 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
             if final.exists():
                 shutil.rmtree(final)             # a stale entry without its "done" mark
             os.rename(work, final)
-        finally:
-            if work.exists():
-                shutil.rmtree(work, ignore_errors=True)
     return final / _EXECUTABLE
 
 
@@ -538,7 +535,7 @@ def _run(run: Run, verilog: str | None, cxx_opt: str, build_model, progress: boo
     if run.idle:
         return top.empty()
     executable = build_model(top.verilog() if verilog is None else verilog, top)
-    with tempfile.TemporaryDirectory(prefix="tespike-verilator-") as scratch:
+    with work_folder("tespike-verilator-") as scratch:
         stim_path, cap_path = Path(scratch) / "stimulus.bin", Path(scratch) / "captures.bin"
         write_stimulus_file(stim_path, run.stimulus, top.config.input_bits)
         resets_path = None

@@ -91,6 +91,38 @@ def release_process_group(group: int) -> None:
     _Janitor._line(b"e%d" % group)
 
 
+#: The work folders (:func:`work_folder`) open in this process: files written inside them are
+#: intermediates, never reported as outputs.
+_WORK_FOLDERS: set[Path] = set()
+
+
+@contextlib.contextmanager
+def work_folder(prefix: str, dir: str | os.PathLike | None = None) -> Iterator[Path]:
+    """A new folder for a run's intermediate files (the inputs and outputs of the tools it
+    drives): removed when the block ends, and by the janitor should this process be killed
+    outright (``tempfile.TemporaryDirectory`` left it behind); renamed away inside the block
+    (a finished build moved into its cache), nothing is removed. Files written in it with
+    :func:`atomic_output` are not reported among the run's outputs (:func:`finished_outputs`)."""
+    path = Path(tempfile.mkdtemp(prefix=prefix, dir=dir))
+    _Janitor.hold(path)
+    real = Path(os.path.realpath(path))
+    _WORK_FOLDERS.add(real)
+    try:
+        yield path
+    finally:
+        _WORK_FOLDERS.discard(real)
+        shutil.rmtree(path, ignore_errors=True)
+        _Janitor.release(path)
+
+
+def _finished(target: Path, shown: str) -> None:
+    """``shown`` (the user's name of ``target``) was moved into place whole: an output of the
+    run, unless written inside a work folder."""
+    real = Path(os.path.realpath(target))
+    if not any(real.is_relative_to(folder) for folder in _WORK_FOLDERS):
+        _FINISHED.append(shown)
+
+
 def finished_outputs(since: int = 0) -> list[str]:
     """The outputs moved into place whole since the ``since``-th (``len(finished_outputs())`` marks a start)."""
     return _FINISHED[since:]
@@ -293,13 +325,13 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
             yield tmp
             if through:
                 _write_through(tmp, target, shown)
-                _FINISHED.append(shown)
+                _finished(target, shown)
             else:
                 mode = (info.st_mode & 0o777) if info is not None else (0o666 & ~_umask())
                 os.chmod(tmp, mode)
                 with stops_held():
                     os.replace(tmp, target)
-                    _FINISHED.append(shown)
+                    _finished(target, shown)
         except OSError as exc:
             if exc.filename not in (None, tmp, str(target)):
                 raise                              # about another file: the caller names it
@@ -426,7 +458,7 @@ def atomic_folder(path: str | Path, what: str = "--out") -> Iterator[Path]:
                     os.rename(tmp, target)
                     os.rename(old, tmp)
                 del _FINISHED[mark:]
-                _FINISHED.append(shown)
+                _finished(target, shown)
         except InputError as exc:
             raise InputError(reworded(str(exc))) from None
         except OSError as exc:

@@ -72,12 +72,12 @@ def test_a_proof_worker_ends_with_the_command_killed_outright():
     """``tespike prove --workers N``'s pool: each worker asks to end with the command."""
     body = ("import multiprocessing, os, time\n"
             "from concurrent.futures import ProcessPoolExecutor\n"
-            "from tespike.cosim.children import end_with_parent\n"
+            "from tespike.cosim.commands.prove_cmd import proof_worker_start\n"
             "def task():\n"
             "    print(os.getpid(), flush=True)\n"
             "    time.sleep(30)\n"
             "pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context('fork'),\n"
-            "                           initializer=end_with_parent, initargs=(os.getpid(),))\n"
+            "                           initializer=proof_worker_start, initargs=(os.getpid(),))\n"
             "pool.submit(task).result()\n")
     assert not _kill_command_and_watch(body)
 

@@ -122,6 +122,36 @@ def test_tops_alone_need_no_smt_solver(tmp_path):
                    "'yosys-smtbmc' is not on PATH")
 
 
+def test_ctrl_c_ends_the_proof_pool_at_any_moment(tmp_path):
+    """The terminal's Ctrl-C reaches the workers too: one interrupted inside the pool's queue
+    lock left the command waiting on it forever (2 runs of 5 hung). Now the workers leave the
+    signal to the command, which ends them: one line, exit 130, no work folder left."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from tests.cli import _checkout_env
+    env = dict(_checkout_env(), TMPDIR=str(tmp_path))
+    for delay in (0.8, 1.5, 2.5):
+        process = subprocess.Popen([sys.executable, "-m", "tespike", "prove", "--corners", "--depth", "3",
+                                    "--workers", "2"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                   text=True, env=env, start_new_session=True)
+        time.sleep(delay)
+        os.killpg(process.pid, signal.SIGINT)               # as a terminal's Ctrl-C: the whole group
+        try:
+            _, stderr = process.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.communicate()
+            raise AssertionError(f"prove hung after Ctrl-C at {delay} s")
+        if process.returncode == 0:                         # (done before the signal: nothing to see)
+            continue
+        assert process.returncode == 130 and stderr.strip() == "tespike prove: interrupted", stderr
+    time.sleep(0.5)
+    assert [p.name for p in tmp_path.iterdir()] == []
+
+
 def test_command_refuses_bad_options_in_one_line():
     done = run_tespike("prove", "--solver", "cvc9", timeout=60)
     assert_refused(done, "cvc9")

@@ -124,17 +124,37 @@ def _results(tasks, workers: int, settings: tuple):
     import os
     from concurrent.futures import ProcessPoolExecutor
 
-    from tespike.cosim.children import end_with_parent
-
-    # a worker (and through it its tools) ends with the command, even one killed outright
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                               initializer=end_with_parent, initargs=(os.getpid(),))
+                               initializer=proof_worker_start, initargs=(os.getpid(),))
     try:
         futures = [pool.submit(run_task, task, *settings) for task in tasks]
         for future in futures:
             yield future.result()
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+    except BaseException:
+        # Ctrl-C, a signal or a failure: the workers go at once (a worker that the terminal's
+        # Ctrl-C had interrupted inside the pool's queue lock left shutdown waiting forever)
+        for child in multiprocessing.active_children():
+            child.kill()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+
+
+def proof_worker_start(parent: int) -> None:
+    """A proof worker: ends with the command, even one killed outright (and through it its
+    tools), and leaves the terminal's Ctrl-C and the signals sent to the whole process group
+    to the command, which ends it (a handler, not SIG_IGN: the tools it starts keep the
+    default action, which exec restores for handlers only)."""
+    import signal
+
+    from tespike.cosim.children import end_with_parent
+    end_with_parent(parent)
+    for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(number, _ignore_here)
+
+
+def _ignore_here(signum, frame) -> None:
+    """The worker's handler of the group's signals: nothing (the command ends the worker)."""
 
 
 def run(args) -> int:

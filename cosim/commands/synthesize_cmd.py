@@ -148,13 +148,13 @@ def energy_lines(config, stimulus, lanes, result: dict, text: str, icarus: bool)
     activity = top_activity(config, stimulus, lanes)
     found = None
     if icarus:
-        import tempfile
         from pathlib import Path
 
         from tespike.cosim.activity import edges_after_reset, vcd_activity
         from tespike.cosim.icarus import DUT_SCOPE, run_icarus, run_icarus_stream
+        from tespike.golden.atomic import work_folder
 
-        with tempfile.TemporaryDirectory(prefix="tespike-energy-") as tmp:
+        with work_folder("tespike-energy-") as tmp:
             vcd = Path(tmp) / "run.vcd"
             if lanes is None:
                 run_icarus(config, stimulus, verilog=text, vcd_path=vcd)

@@ -35,10 +35,11 @@ from __future__ import annotations
 
 import re
 import subprocess
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
+
+from tespike.golden.atomic import work_folder
 
 from .. import children
 from .smtbmc import ProofResult
@@ -114,7 +115,7 @@ def prove_harness(name: str, harness: Harness, *, timeout: float = 300.0) -> Pro
     def left() -> float:
         return timeout - (time.perf_counter() - start)
 
-    with tempfile.TemporaryDirectory(prefix="tespike-prove-") as tmp:
+    with work_folder("tespike-prove-") as tmp:
         work = Path(tmp)
         aig = _aiger(harness, work, "top")
         verdict, frame = "undecided", None

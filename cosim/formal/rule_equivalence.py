@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import re
 import shutil
-import tempfile
 import time
 from pathlib import Path
 
+from tespike.golden.atomic import work_folder
 from tespike.golden.config import SensorConfig
 
 from .smtbmc import ProofToolError, ProofResult, run_tool
@@ -83,7 +83,7 @@ def prove_equivalence(name: str, eq: Equivalence, trace_dir: Path) -> ProofResul
 
     start = time.perf_counter()
     config, registers = eq.config, eq.registers()
-    with tempfile.TemporaryDirectory(prefix="tespike-prove-") as tmp:
+    with work_folder("tespike-prove-") as tmp:
         work = Path(tmp)
         (work / "pixel.il").write_text(rtlil.convert(eq.pixel_factory(config, word_register=False),
                                                      name="pixel"))

@@ -16,11 +16,11 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from tespike.golden.atomic import work_folder
 from tespike.golden.errors import TespikeError
 
 from .. import children
@@ -102,7 +102,7 @@ def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Pr
     from amaranth.back import rtlil
 
     start = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="tespike-prove-") as tmp:
+    with work_folder("tespike-prove-") as tmp:
         work = Path(tmp)
         text = rtlil.convert(harness.m, ports=harness.inputs, name="top")
         text, messages = _yosys_checks(text)
