@@ -91,7 +91,13 @@ def test_crop_and_readouts_keep_the_full_stimulus_electrons(tmp_path):
     result = run_tespike("stimulus", "--config", "te", "--scene", tmp_path / "i.npy", "--seed", 9,
                          "--crop", "1,2,3,4", "--readouts", 2, "--out", tmp_path / "e.npy")
     assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().endswith("seed 9)")
     assert np.array_equal(np.load(tmp_path / "e.npy"), full[:2 * 240, 1:4, 2:6])
+    assert_refused(run_tespike("stimulus", "--config", "te", "--scene", tmp_path / "i.npy", "--crop", "0,0,0,1",
+                               "--out", tmp_path / "f.npy"), "height and width must be >= 1 (got 0 x 1)")
+    done = run_tespike("stimulus", "--config", "te", "--scene", tmp_path / "i.npy", "--no-noise",
+                       "--out", tmp_path / "g.npy")                  # (it printed "seed None")
+    assert done.returncode == 0 and done.stdout.strip().endswith("no noise)"), done
     for crop in ("1,2,3", "4,0,3,1", "0,0,0,1"):
         assert_refused(run_tespike("stimulus", "--config", "te", "--scene", tmp_path / "i.npy",
                                    "--crop", crop, "--out", tmp_path / "f.npy"), "--crop")

@@ -60,7 +60,9 @@ def run(args) -> int:
             y, x, h, w = (int(v) for v in args.crop.split(","))
         except ValueError:
             raise InputError(f"--crop {args.crop!r} must be four integers Y,X,H,W") from None
-        if min(y, x) < 0 or min(h, w) < 1 or y + h > H or x + w > W:
+        if min(h, w) < 1:
+            raise InputError(f"--crop {args.crop!r}: the crop's height and width must be >= 1 (got {h} x {w})")
+        if min(y, x) < 0 or y + h > H or x + w > W:
             raise InputError(f"--crop {args.crop!r}: rows {y}..{y + h - 1}, columns {x}..{x + w - 1} "
                              f"are not inside the {H} x {W} scene")
         rows, cols, H, W = slice(y, y + h), slice(x, x + w), h, w
@@ -92,5 +94,6 @@ def run(args) -> int:
         finally:
             del out
     report(args, f"wrote {args.out}: {K * L} x {H} x {W} {dtype} electrons per pixel clock "
-                 f"(K = {K} readouts of L = {L} clocks, seed {args.seed})")
+                 f"(K = {K} readouts of L = {L} clocks, "
+                 + ("no noise)" if args.no_noise else "fresh seed)" if args.seed is None else f"seed {args.seed})"))
     return 0
