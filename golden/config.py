@@ -127,14 +127,18 @@ class SensorConfig:
         b2 = need_int("b2", 1, 16, "in 1..16")
         ml_bits = need_int("ml_bits", 1, 16, "in 1..16")
         need_int("input_bits", 1, 32, "in 1..32")
+        derived = {key for key in ("alpha", "clocks_per_tick") if getattr(self, key) is None}
         fill("alpha", (1 << b2) - 1)
         alpha = need_int("alpha", 1, (1 << b2) - 1, f"in 1..2^b2 - 1 = {(1 << b2) - 1}")
         fill("clocks_per_tick", 1 << b1)
         clocks = need_int("clocks_per_tick", 1, None, ">= 1")
         if clocks * alpha > MAX_CLOCKS_PER_READOUT:
+            defaults = {"alpha": "2^b2 - 1", "clocks_per_tick": "2^b1"}
+            given = "; ".join(f"{key} is its default {defaults[key]}" for key in sorted(derived))
             raise ConfigError(
                 f"config key 'clocks_per_tick' = {clocks}: clocks_per_tick * alpha = "
-                f"{clocks * alpha} must be <= 2^24 = {MAX_CLOCKS_PER_READOUT}")
+                f"{clocks * alpha} must be <= 2^24 = {MAX_CLOCKS_PER_READOUT}"
+                + (f" ({given}: give smaller b1 / b2, or the keys themselves)" if given else ""))
         fill("threshold", _default_threshold(self.mode, b1, alpha, ml_bits))
         theta = need_int("threshold", 1, None, ">= 1")
         if self.acc_bits is None and theta.bit_length() + 1 > 62:     # (the derived width, named by its cause)

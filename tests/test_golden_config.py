@@ -112,3 +112,11 @@ def test_first_difference_names_the_first_key_in_spec_order():
     other = dataclasses.replace(te, threshold=100, acc_bits=10)
     assert te.first_difference(other) == ("threshold", 175, 100)
     assert SensorConfig.preset("ml").first_difference(SensorConfig.preset("ml-msb")) == ("ml_readout", "count", "msb")
+
+
+def test_a_clock_structure_too_long_from_defaults_says_they_are_defaults():
+    """b1 = b2 = 16 alone: the refusal named clocks_per_tick and alpha, keys never given."""
+    with pytest.raises(ConfigError, match=r"alpha is its default 2\^b2 - 1; clocks_per_tick is its default 2\^b1"):
+        SensorConfig(b1=16, b2=16)
+    with pytest.raises(ConfigError, match=r"must be <= 2\^24 = 16777216$"):
+        SensorConfig(b1=16, b2=16, alpha=300, clocks_per_tick=65536)
