@@ -189,6 +189,22 @@ def test_folder_errors(tmp_path):
         load_hdr_sequence(tmp_path)
 
 
+def test_an_entry_named_as_a_frame_that_is_not_one_is_refused(tmp_path):
+    """A dangling link, a folder or a FIFO named *.hdr was skipped: the sequence came out a frame
+    short and every command that read it exited 0."""
+    import os
+    write_hdr(tmp_path / "frame1.hdr", _frame(1.0))
+    for make, words in ((lambda p: p.symlink_to(tmp_path / "gone.hdr"), "does not exist"),
+                        (lambda p: p.mkdir(), "is a directory"),
+                        (lambda p: os.mkfifo(p), "is a FIFO")):
+        make(tmp_path / "frame2.hdr")
+        with pytest.raises(InputError, match=f"HDR frame file '.*frame2.hdr' {words}"):
+            load_hdr_sequence(tmp_path)
+        path = tmp_path / "frame2.hdr"
+        path.rmdir() if path.is_dir() and not path.is_symlink() else path.unlink()
+    assert load_hdr_sequence(tmp_path).shape[0] == 1
+
+
 def test_writers_are_atomic(tmp_path):
     with pytest.raises(InputError):
         write_hdr(tmp_path / "x.hdr", np.full((2, 2, 3), np.nan))

@@ -389,11 +389,16 @@ def _natural_key(name: str) -> list:
 
 
 def list_frames(folder: str | Path) -> list[Path]:
-    """The HDR frames of a folder, sorted by name (numbers compared as numbers: 2 < 10)."""
+    """The HDR frames of a folder, sorted by name (numbers compared as numbers: 2 < 10). Every
+    entry named as a frame must be one: a dangling link, a folder or a FIFO so named is refused
+    in one line (it was skipped, and the sequence came out a frame short, exit 0)."""
+    from tespike.golden.paths import check_input_file
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(f"HDR sequence folder {str(folder)!r} does not exist or is not a folder")
-    frames = [p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in FRAME_SUFFIXES]
+    frames = [p for p in folder.iterdir() if p.suffix.lower() in FRAME_SUFFIXES]
+    for path in frames:
+        check_input_file(path, "HDR frame")
     if not frames:
         raise InputError(f"HDR sequence folder {str(folder)!r} holds no frames "
                          f"(files ending in {', '.join(FRAME_SUFFIXES)})")
