@@ -159,8 +159,9 @@ def _save_checkpoint(path: Path, model, optimizer, scheduler, step, elapsed, gen
 def read_checkpoint(path: Path) -> tuple[dict, "TrainOptions"]:
     """(the checkpoint's payload, the options it was made with); a one-line refusal naming ``path``
     where it is missing, truncated or not a checkpoint of this trainer."""
-    if not path.is_file():
-        raise InputError(f"nothing to resume: no checkpoint at {str(path)!r}")
+    if not (path.exists() or path.is_symlink()):
+        raise InputError(f"nothing to resume: no checkpoint at {str(path)!r} (a run killed before its first "
+                         "checkpoint left none: start it anew with --force)")
     state = read_torch_file(path, "checkpoint", "training checkpoint")
     if not isinstance(state, dict) or any(key not in state for key in CHECKPOINT_KEYS):
         raise InputError(f"checkpoint {str(path)!r} is not a checkpoint of tespike train")

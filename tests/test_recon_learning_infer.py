@@ -152,6 +152,17 @@ def test_a_weights_file_whose_configuration_lacks_a_key_is_refused(tmp_path):
         load_weights(tmp_path / "lacking.pt")
 
 
+def test_a_weights_path_that_is_no_regular_file_is_refused_at_once(tmp_path):
+    """A FIFO given as --weights blocked reconstruct, evaluate and demo for good (opening it waits
+    for a writer); a folder was read as a file."""
+    import os
+    os.mkfifo(tmp_path / "w.pt")
+    with pytest.raises(InputError, match="'.*w.pt' is a FIFO, not a regular file"):
+        load_weights(tmp_path / "w.pt")
+    with pytest.raises(InputError, match="is a directory, not a regular file"):
+        load_weights(tmp_path)
+
+
 def test_not_a_weights_file_is_refused(tmp_path):
     bad = tmp_path / "bad.pt"
     bad.write_bytes(b"not a torch file")

@@ -221,7 +221,9 @@ def test_init_warm_starts_every_matching_tensor(tmp_path):
 
 def test_init_refusals(tmp_path):
     assert_refused(run_tespike("train", "--config", "te", "--init", tmp_path / "none.pt", "--out", tmp_path / "w.pt",
-                               "--steps", "1"), "no such weights file")
+                               "--steps", "1"), "none.pt' does not exist")
+    assert_refused(run_tespike("train", "--config", "te", "--init", tmp_path, "--out", tmp_path / "v.pt",
+                               "--steps", "1"), "is a directory")              # (it said "no such weights file")
     (tmp_path / "w.pt").write_bytes(b"x")
     assert_refused(run_tespike("train", "--config", "te", "--init", tmp_path / "w.pt", "--out", tmp_path / "w.pt",
                                "--steps", "1"), "--init")

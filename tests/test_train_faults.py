@@ -43,7 +43,7 @@ def test_full_disk_names_the_file_torch_could_not_write(tmp_path):
 
 def test_empty_or_truncated_files_are_named(tmp_path):
     (tmp_path / "empty.pt").write_bytes(b"")
-    with pytest.raises(InputError, match=r"--init '.*empty\.pt' is not a tespike weights file .*empty"):
+    with pytest.raises(InputError, match=r"--init file '.*empty\.pt' is empty \(0 bytes\)"):
         train(options(steps=1, init=str(tmp_path / "empty.pt")), tmp_path / "e.pt")
     assert not (tmp_path / "e.run").exists()                             # no empty run folder left
     train(options(steps=1), tmp_path / "w.pt")
@@ -51,7 +51,9 @@ def test_empty_or_truncated_files_are_named(tmp_path):
     data = checkpoint.read_bytes()
     for cut in (len(data) // 2, 10, 0):
         checkpoint.write_bytes(data[:cut])
-        with pytest.raises(InputError, match=r"checkpoint '.*w\.run/checkpoint\.pt' is not a training checkpoint"):
+        words = "file '.*w\\.run/checkpoint\\.pt' is empty" if cut == 0 else \
+            "'.*w\\.run/checkpoint\\.pt' is not a training checkpoint"
+        with pytest.raises(InputError, match=f"checkpoint {words}"):
             train(options(steps=2), tmp_path / "w.pt", resume=True)
 
 
@@ -254,3 +256,21 @@ def test_a_new_run_over_an_earlier_runs_folder_is_refused_unless_forced(tmp_path
     assert main([*args, "--steps", "1", "--seed", "7", "--force"]) == 0
     assert not (run / "best.pt").exists()
     assert log_steps(run / "log.csv") == [1] and load_weights(tmp_path / "w.pt")[2]["steps"] == 1
+
+
+def test_a_run_killed_before_its_first_checkpoint_does_not_block_the_next(tmp_path, capsys):
+    """Killed before its first checkpoint, a run left an empty log.csv alone: --resume had nothing
+    to resume and a new run called it an earlier run, each pointing at the other. A new run now
+    starts over such logs (saying so), and --resume's refusal names --force."""
+    from tespike.cosim.cli import main
+    args = ["train", "--out", str(tmp_path / "w.pt"), "--crop", "32", "--batch", "1", "--pool", "2",
+            "--validate-every", "0", "--workers", "0", "--steps", "1", "-q"]
+    run = tmp_path / "w.run"
+    run.mkdir()
+    (run / "log.csv").write_bytes(b"")
+    assert main([*args, "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "nothing to resume" in err and "start it anew with --force" in err, err
+    assert main(args) == 0
+    assert "holds only the logs of a run that saved no checkpoint (log.csv): starting anew" in capsys.readouterr().err
+    assert log_steps(run / "log.csv") == [1]

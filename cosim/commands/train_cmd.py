@@ -102,6 +102,7 @@ def _frame_files(folder: str) -> list:
 
 def run(args) -> int:
     import shlex
+    import sys
     from pathlib import Path
 
     from tespike.golden.config import PRESETS, load_config
@@ -128,14 +129,15 @@ def run(args) -> int:
     out = Path(args.out)
     preset = args.config in PRESETS
     config_input = {} if preset else {"--config": args.config}
-    if args.init is not None and not Path(args.init).is_file():
-        raise InputError(f"--init {args.init!r}: no such weights file")
+    if args.init is not None:
+        from tespike.golden.paths import check_input_file
+        check_input_file(args.init, "--init weights")       # (a folder was "no such weights file")
     if args.init is not None and args.resume:
         raise InputError("--init starts a new run; --resume continues one: give one of them")
     if args.force and args.resume:
         raise InputError("--force starts a new run over an earlier one; --resume continues it: give one of them")
 
-    from tespike.recon.train import RUN_FILES, TrainOptions, train
+    from tespike.recon.train import CHECKPOINT, RUN_FILES, TrainOptions, train
 
     # --out and the run folder's files are never one of the files the run reads (or its folders hold)
     # (every file of the folders, the held-out panorama too; the shipped panoramas beside them)
@@ -149,6 +151,12 @@ def run(args) -> int:
     check_output_dir(run_folder, "--out's run folder")
     check_distinct(inputs, {f"the run folder's {name}": run_folder / name for name in RUN_FILES})
     earlier = [name for name in RUN_FILES if (run_folder / name).exists()]
+    if earlier and not args.resume and not args.force and not any(
+            name in earlier for name in (CHECKPOINT, "best.pt")):
+        # a run killed before its first checkpoint: nothing to resume or keep but its first log rows
+        print(f"tespike train: {str(run_folder)!r} holds only the logs of a run that saved no checkpoint "
+              f"({', '.join(earlier)}): starting anew over them", file=sys.stderr)
+        earlier = []
     if earlier and not args.resume and not args.force:   # a new run would mix with, or remove, the earlier
         raise InputError(f"--out's run folder {str(run_folder)!r} holds an earlier run ({', '.join(earlier)}): "
                          "continue it with --resume, start anew with --force (its files are removed), "

@@ -71,7 +71,10 @@ def _check_crcs(path: str | Path, what: str, kind: str) -> None:
 def read_torch_file(path: str | Path, what: str, kind: str) -> Any:
     """``torch.load(path, weights_only=True)`` on the CPU; a one-line refusal naming ``what`` (a flag or a
     role), the file and the cause where it cannot be read or is no torch file of ``kind``. The
-    archive's CRCs are checked first: ``torch.load`` does not, and would load an altered byte."""
+    archive's CRCs are checked first: ``torch.load`` does not, and would load an altered byte. A
+    path that is no regular file (a FIFO blocked the command for good) is refused first."""
+    from tespike.golden.paths import check_input_file
+    check_input_file(path, what)
     _check_crcs(path, what, kind)
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
