@@ -137,7 +137,11 @@ def _install_signal_handlers() -> dict:
         return previous
     for name in CLEANUP_SIGNALS:
         number = getattr(signal, name, None)
-        if number is not None and signal.getsignal(number) in (signal.SIG_DFL, None):
+        if number is None:
+            continue
+        handler = signal.getsignal(number)
+        # (the entry point's own, tespike.entry, holds the signals while numpy loads)
+        if handler in (signal.SIG_DFL, None) or getattr(handler, "tespike_early", False):
             previous[number] = signal.signal(number, _raise_terminated)
     return previous
 

@@ -16,8 +16,41 @@ PROBE_SECONDS = 60
 _MEMORY_WORDS = ("memory", "Memory", "map segment", "pthread_create", "allocat")
 
 
+class _Stopped(BaseException):
+    """SIGTERM or SIGHUP before the command's own handling is in place."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _stop_early(signum, frame):
+    raise _Stopped(signum)
+
+
+#: Marks the handler the command's own (tespike.cosim.cli) replaces once it runs.
+_stop_early.tespike_early = True
+
+
+def _hold_early_signals() -> None:
+    """SIGTERM and SIGHUP while numpy loads end in one line too (the process ended silently, exit
+    143, when the signal came in its first 0.2 s); the command installs its own handlers later."""
+    import signal
+    for name in ("SIGTERM", "SIGHUP"):
+        number = getattr(signal, name, None)
+        if number is not None and signal.getsignal(number) in (signal.SIG_DFL, None):
+            signal.signal(number, _stop_early)
+
+
+def _stopped(exc: _Stopped) -> int:
+    import signal
+    print(f"tespike: terminated by {signal.Signals(exc.signum).name}", file=sys.stderr)
+    return 128 + exc.signum
+
+
 def main() -> int:
     """Run ``tespike`` with the process's arguments; the exit status."""
+    _hold_early_signals()
     try:
         refusal = _address_space_refusal()
         if refusal:
@@ -27,6 +60,8 @@ def main() -> int:
     except KeyboardInterrupt:          # while numpy loads, before the command's own handling
         print("tespike: interrupted", file=sys.stderr)
         return 130
+    except _Stopped as exc:
+        return _stopped(exc)
     except MemoryError:
         print(f"tespike: error: {_starved()}", file=sys.stderr)
         return 1
@@ -40,6 +75,8 @@ def main() -> int:
     except KeyboardInterrupt:          # while the arguments are read, outside the command's handling
         print("tespike: interrupted", file=sys.stderr)
         return 130
+    except _Stopped as exc:
+        return _stopped(exc)
 
 
 def _address_space_limit() -> int | None:

@@ -466,6 +466,32 @@ def test_ctrl_c_while_the_command_loads_is_one_line():
     assert done.returncode == 130 and done.stderr == "tespike: interrupted\n", done
 
 
+@pytest.mark.parametrize("signal_name", ["SIGTERM", "SIGHUP"])
+def test_a_signal_while_the_command_loads_is_one_line(signal_name):
+    """SIGTERM or SIGHUP in the first 0.2 s (numpy loading, before the command's handlers) ended
+    the process silently (exit 143). The entry point holds them from its first line; the command's
+    own handlers take over once it runs (the second run: its line names the command)."""
+    code = ("import sys, types, os, signal\n"
+            "cli = types.ModuleType('tespike.cosim.cli')\n"
+            "def stopped(name):\n"
+            f"    os.kill(os.getpid(), signal.{signal_name})\n"
+            "    raise AttributeError(name)\n"
+            "cli.__getattr__ = stopped\n"
+            "import tespike.cosim\n"
+            "sys.modules['tespike.cosim.cli'] = cli\n"
+            "import runpy\nrunpy.run_module('tespike', run_name='__main__')\n")
+    done = run_python(code)
+    number = getattr(signal, signal_name)
+    assert done.returncode == 128 + number and done.stderr == f"tespike: terminated by {signal_name}\n", done
+    code = ("import os, signal, sys\n"
+            "import tespike.cosim.commands.scene_cmd as scene\n"
+            f"scene.run = lambda args: os.kill(os.getpid(), signal.{signal_name})\n"
+            "sys.argv = ['tespike', 'scene', '--list']\n"
+            "from tespike.entry import main\nsys.exit(main())\n")
+    done = run_python(code)
+    assert done.returncode == 128 + number and done.stderr == f"tespike scene: terminated by {signal_name}\n", done
+
+
 def test_the_installed_script_goes_through_the_same_early_ctrl_c_handling():
     """The console script called ``tespike.cosim.cli:main``, which imports numpy before any handling:
     Ctrl-C in the installed ``tespike``'s first 0.2 s was a traceback. It now calls the light entry
