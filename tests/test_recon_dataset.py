@@ -361,3 +361,10 @@ def test_a_file_given_as_a_store_is_named_a_file(tmp_path, capsys):
     (tmp_path / "F.zarr").write_text("hi")
     assert main(["evaluate", "--store", str(tmp_path / "F.zarr"), "--out", str(tmp_path / "E")]) == 2
     assert "is a file, not a dataset store" in capsys.readouterr().err
+
+
+def test_a_link_to_nothing_given_as_a_store_is_named_so(tmp_path, capsys):
+    """A symlink loop (or a dangling link) at the store's path was called a file."""
+    (tmp_path / "L.zarr").symlink_to(tmp_path / "L.zarr")
+    assert main(["evaluate", "--store", str(tmp_path / "L.zarr"), "--out", str(tmp_path / "E")]) == 2
+    assert "is a link to nothing (a loop, or a target that is gone)" in capsys.readouterr().err

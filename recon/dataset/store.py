@@ -99,11 +99,15 @@ def _zarr_open_group(url: str, mode: str, missing_ok: bool = False):
         if missing_ok:
             return None
         import os
-        there = "://" not in url and os.path.isdir(url)      # a local folder without a store's zarr.json
-        a_file = "://" not in url and os.path.lexists(url) and not there
+        local = "://" not in url
+        there = local and os.path.isdir(url)                  # a local folder without a store's zarr.json
+        dangling = local and os.path.islink(url) and not os.path.exists(url)   # (a loop, or gone)
+        a_file = local and os.path.lexists(url) and not there and not dangling
         raise InputError(f"dataset store {url!r} " + ("is a folder but not a dataset store (it holds no zarr.json)"
                                                      if there else "is a file, not a dataset store (a folder)"
-                                                     if a_file else "does not exist")) from None
+                                                     if a_file else "is a link to nothing (a loop, or a "
+                                                     "target that is gone)" if dangling else "does not exist")
+                         ) from None
     except (ValueError, TypeError, KeyError) as exc:      # not a Zarr v3 group, bad JSON
         raise InputError(f"{url!r} is not a readable Zarr store: {one_line(exc, 200)}") from None
     except RecursionError:                                # JSON nested too deeply for the parser
