@@ -35,6 +35,7 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
         raise InputError(f"{what} file {str(path)!r} holds an archive, not one .npy array")
     if magic != b"\x93NUMPY":                          # (np.load would try it as a pickle and say so)
         raise InputError(f"{what} file {str(path)!r} is not a readable .npy array (no .npy header)")
+    _refuse_cut_short(path, what)
     try:
         array = np.load(path, allow_pickle=False, mmap_mode=mmap_mode)
     except (OSError, ValueError, EOFError, OverflowError) as exc:   # (Overflow: a header shape whose
@@ -58,6 +59,24 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
     if mmap_mode is not None:                          # cut short while mapped: named, not a bare bus error
         held_mapping(path, header + array.nbytes)
     return array
+
+
+def _refuse_cut_short(path, what: str) -> None:
+    """Refuse a .npy file shorter than its header says, in those words (numpy says "mmap length is
+    greater than file size" or "cannot reshape array of size ..."); a header numpy cannot read is
+    left to np.load's own refusal."""
+    try:
+        with open(path, "rb") as handle:
+            shape, _, dtype, header = _npy_header(handle)
+            size = os.fstat(handle.fileno()).st_size
+    except (OSError, ValueError, EOFError):
+        return
+    if dtype.hasobject or header is None:
+        return
+    expected = header + int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if size < expected:
+        raise InputError(f"{what} file {str(path)!r} is cut short: {size} of the {expected} bytes its header "
+                         f"promises ({dtype} {tuple(shape)})")
 
 
 def _magic(path, what: str) -> bytes:

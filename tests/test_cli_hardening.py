@@ -936,3 +936,16 @@ def test_scene_list_refuses_the_options_it_would_ignore(files):
     refused_without_change(files, ("scene", "--list", "--downscale", "2"), "--downscale given")
     listed = run_tespike("scene", "--list")
     assert listed.returncode == 0 and listed.stdout.startswith("default")
+
+
+@pytest.mark.parametrize("keep", [0.5, 0.99])
+def test_a_npy_input_cut_short_says_so(tmp_path, keep):
+    """A .npy file cut short was refused in numpy's words ("mmap length is greater than file
+    size", "cannot reshape array"); it says now how many of the bytes its header promises it holds."""
+    np.save(tmp_path / "i.npy", np.zeros((4, 8, 8), np.float32))
+    whole = (tmp_path / "i.npy").read_bytes()
+    (tmp_path / "i.npy").write_bytes(whole[:int(len(whole) * keep)])
+    for command, out in ((("simulate", "--config", "te", "--scene"), "o.npz"), (("view", "--input"), "o.png")):
+        done = run_tespike(*command, tmp_path / "i.npy", "--out", tmp_path / out)
+        assert_refused(done, f"'{tmp_path / 'i.npy'}' is cut short: {int(len(whole) * keep)} of the "
+                             f"{len(whole)} bytes its header promises (float32 (4, 8, 8))")
