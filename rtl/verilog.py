@@ -223,6 +223,21 @@ module {names['top']} (
   integer i;
   always @* for (i = 0; i < H*W; i = i + 1) words[i*WD +: WD] = word[i];
   assign frame = words;
+`ifndef SYNTHESIS
+`ifndef FORMAL
+`ifndef VERILATOR
+  // synopsys translate_off
+  // A SystemVerilog simulator (iverilog -g2012, cocotb's, a commercial one) sets the pixels'
+  // registers to their initial values before any process starts, so always @* would wait for a
+  // word to change and leave frame X until then (forever in the dark): copy once at time 0.
+  // Simulation only (Yosys defines SYNTHESIS, or FORMAL for the proofs; Verilator settles every
+  // combinational block at its start).
+  integer j;
+  initial for (j = 0; j < H*W; j = j + 1) words[j*WD +: WD] = word[j];
+  // synopsys translate_on
+`endif
+`endif
+`endif
 
   genvar {genvars};
   generate

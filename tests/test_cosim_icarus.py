@@ -9,6 +9,7 @@ planted faults, X detection, refusals.
 """
 
 import shutil
+import subprocess
 
 import numpy as np
 import pytest
@@ -126,3 +127,23 @@ def test_testbench_drives_only_the_spec_ports():
     text = icarus_testbench("te_pixel_array", 96, 30)
     assert "te_pixel_array dut(.clk(clk), .rst(rst), .charge(charge), .frame_valid(frame_valid), .frame(frame));" in text
     assert "reg [95:0] charge;" in text and "wire [29:0] frame;" in text
+
+
+@pytest.mark.parametrize("generation", ["-g2005", "-g2012"])
+def test_frame_is_defined_from_the_first_readout_in_verilog_and_systemverilog_mode(tmp_path, generation):
+    """In the dark no word ever changes: the parallel top's frame must still read the words (0),
+    not X. A SystemVerilog simulator sets the registers' initial values before any process starts,
+    so the frame's always @* loop alone left frame X for the whole run (iverilog -g2012)."""
+    from tespike.rtl.verilog import array_verilog
+    (tmp_path / "array.v").write_text(array_verilog(SensorConfig(), 1, 2))
+    (tmp_path / "tb.v").write_text(
+        "module tb; reg clk = 0, rst = 1; reg [31:0] charge = 0; wire valid; wire [9:0] frame;\n"
+        "  te_pixel_array dut(.clk(clk), .rst(rst), .charge(charge), .frame_valid(valid), .frame(frame));\n"
+        "  integer t; initial begin #1 clk = 1; #1 clk = 0; rst = 0;\n"
+        "    for (t = 0; t < 480; t = t + 1) begin #1 clk = 1; #1 if (valid) $display(\"frame=%b\", frame);\n"
+        "      clk = 0; end $finish; end\n"
+        "endmodule\n")
+    subprocess.run(["iverilog", generation, "-o", "t.vvp", "tb.v", "array.v"], cwd=tmp_path, check=True)
+    shown = subprocess.run(["vvp", "-n", "t.vvp"], cwd=tmp_path, capture_output=True, text=True, check=True).stdout
+    frames = [line for line in shown.splitlines() if line.startswith("frame=")]
+    assert frames == ["frame=0000000000"] * 2
