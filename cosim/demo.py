@@ -402,9 +402,12 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
             label=label)
         write_text(out / "report.md", report)
 
-    if not quiet:
-        from tespike.recon.report import table_markdown
-        print(table_markdown(evaluation), end="")
+    if quiet:                         # nothing on stdout; a verdict that fails the run on stderr
+        if difference is not None:
+            print(f"RTL: {verdict}", file=sys.stderr)
+        return 0 if difference is None else 1
+    from tespike.recon.report import table_markdown
+    print(table_markdown(evaluation), end="")
     print(f"RTL: {verdict}")
     print(f"wrote {given}/: report.md, verdict.txt, I.npy, S_*.npz, R_*.npy, E_crop.npy, "
           + ("W.vcd, W.gtkw, " if backend == "amaranth" else "")

@@ -71,6 +71,7 @@ def test_small_demo_closes_the_loop(tmp_path):
 def test_demo_with_every_sensor_and_the_hardware_cost(tmp_path, capsys):
     code, out, err = run_here(capsys, "demo", *SMALL, "--quiet", "--out", tmp_path / "d")
     assert code == 0, err
+    assert out == ""                                        # (--quiet printed the verdict and wrote-lines)
     report = (tmp_path / "d" / "report.md").read_text(encoding="utf-8")
     assert "| TFP_ML |" in report and "| TFP_ML-count |" in report and "| ml-msb |" in report
     assert "| te | " in report.split("## Hardware cost")[1]
@@ -89,12 +90,12 @@ def test_demo_reports_the_first_difference(tmp_path, capsys, monkeypatch):
         return wave
 
     monkeypatch.setattr(cosim.vcd, "waveform_stream", broken)
-    code, out, _ = run_here(capsys, "demo", *SMALL, "--sensors", "te", "--no-hw-cost", "--quiet",
-                            "--out", tmp_path / "d")
+    code, out, err = run_here(capsys, "demo", *SMALL, "--sensors", "te", "--no-hw-cost", "--quiet",
+                              "--out", tmp_path / "d")
     assert code == 1
     verdict = (tmp_path / "d" / "verdict.txt").read_text()
     assert verdict.startswith("DIFFERENT: 1 of 363 words differ; first at readout 1, crop pixel (2, 3)")
-    assert "RTL word" in verdict and "golden word" in verdict and verdict.strip() in out
+    assert "RTL word" in verdict and "golden word" in verdict and verdict.strip() in err and out == ""
 
 
 @pytest.mark.skipif(shutil.which("iverilog") is None, reason="Icarus Verilog not installed")
@@ -102,7 +103,7 @@ def test_demo_on_the_generated_verilog(tmp_path, capsys):
     code, out, err = run_here(capsys, "demo", *SMALL, "--sensors", "te", "--no-hw-cost", "--quiet",
                               "--backend", "icarus", "--out", tmp_path / "d")
     assert code == 0, err
-    assert "RTL: bit-identical: icarus RTL == golden model" in out
+    assert "bit-identical: icarus RTL == golden model" in (tmp_path / "d" / "verdict.txt").read_text()
     assert not (tmp_path / "d" / "W.vcd").exists()
     assert "--backend icarus" in (tmp_path / "d" / "report.md").read_text(encoding="utf-8")
 

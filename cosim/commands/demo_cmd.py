@@ -32,7 +32,9 @@ def add_arguments(parser):
                         help="a learned method's weights file ('tespike train --out W.pt') used instead of the "
                              "shipped ones for the sensor it was trained for (repeatable)")
     parser.add_argument("--no-hw-cost", action="store_true", help="skip the Yosys hardware cost table")
-    parser.add_argument("--quiet", action="store_true", help="no progress on stderr, no table on stdout")
+    parser.add_argument("--quiet", "-q", action="store_true",
+                        help="nothing on stdout on success (no table, no verdict line) and no progress on "
+                             "stderr; an RTL stream that differs is still said on stderr (exit 1)")
 
 
 def run(args) -> int:
