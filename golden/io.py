@@ -63,15 +63,18 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
 
 def _refuse_cut_short(path, what: str) -> None:
     """Refuse a .npy file shorter than its header says, in those words (numpy says "mmap length is
-    greater than file size" or "cannot reshape array of size ..."); a header numpy cannot read is
-    left to np.load's own refusal."""
+    greater than file size" or "cannot reshape array of size ..."), or one of Python objects (numpy:
+    "Array can't be memory-mapped" or "allow_pickle=False"); a header numpy cannot read is left to
+    np.load's own refusal."""
     try:
         with open(path, "rb") as handle:
             shape, _, dtype, header = _npy_header(handle)
             size = os.fstat(handle.fileno()).st_size
     except (OSError, ValueError, EOFError):
         return
-    if dtype.hasobject or header is None:
+    if dtype.hasobject:
+        raise InputError(f"{what} file {str(path)!r} holds Python objects (dtype {dtype}), not numbers")
+    if header is None:
         return
     expected = header + int(np.prod(shape, dtype=object)) * dtype.itemsize
     if size < expected:

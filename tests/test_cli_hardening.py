@@ -480,7 +480,8 @@ def test_reconstruct_refuses_stream_with_zero_height_like_the_others(files):
 # ------------------------------------------------------------------ what still works
 def test_pickles_never_loaded(files):
     np.save(files / "obj.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)
-    refused_without_change(files, golden_args(files, files / "o.npz", stimulus=files / "obj.npy"), "obj.npy")
+    refused_without_change(files, golden_args(files, files / "o.npz", stimulus=files / "obj.npy"),
+                           "obj.npy' holds Python objects (dtype object), not numbers")
     np.savez(files / "obj.npz", words=np.array([None], dtype=object), config=np.array(TINY.to_json()))
     refused_without_change(files, ("reconstruct", "--stream", files / "obj.npz", "--method", "tfp",
                                    "--out", files / "o.npy"), "obj.npz")
