@@ -471,7 +471,9 @@ def test_a_signal_while_the_command_loads_is_one_line(signal_name):
     """SIGTERM or SIGHUP in the first 0.2 s (numpy loading, before the command's handlers) ended
     the process silently (exit 143). The entry point holds them from its first line; the command's
     own handlers take over once it runs (the second run: its line names the command)."""
-    code = ("import sys, types, os, signal\n"
+    # (the signal's default action first, as in a terminal: under nohup SIGHUP is ignored, and stays so)
+    default = f"import signal\nsignal.signal(signal.{signal_name}, signal.SIG_DFL)\n"
+    code = (default + "import sys, types, os, signal\n"
             "cli = types.ModuleType('tespike.cosim.cli')\n"
             "def stopped(name):\n"
             f"    os.kill(os.getpid(), signal.{signal_name})\n"
@@ -483,7 +485,7 @@ def test_a_signal_while_the_command_loads_is_one_line(signal_name):
     done = run_python(code)
     number = getattr(signal, signal_name)
     assert done.returncode == 128 + number and done.stderr == f"tespike: terminated by {signal_name}\n", done
-    code = ("import os, signal, sys\n"
+    code = (default + "import os, signal, sys\n"
             "import tespike.cosim.commands.scene_cmd as scene\n"
             f"scene.run = lambda args: os.kill(os.getpid(), signal.{signal_name})\n"
             "sys.argv = ['tespike', 'scene', '--list']\n"
