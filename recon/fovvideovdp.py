@@ -28,6 +28,8 @@ from tespike.recon.metrics import as_frames, display_peak, frame_stacks
 
 #: Memory per pixel of one frame pyfvvdp judges (measured: about 220 bytes at 2048 x 2048).
 BYTES_PER_PIXEL = 256
+#: Smallest frame side pyfvvdp judges (at 2 and 3 it fails inside with an AttributeError).
+MIN_SIDE = 4
 #: pyfvvdp's display whose geometry is used (its photometry is replaced by the project's display).
 GEOMETRY_DISPLAY = "standard_hdr_linear"
 
@@ -58,8 +60,8 @@ def fovvideovdp(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY, p
     """
     estimate, reference, single, rshape = frame_stacks(estimate, reference, "FovVideoVDP")
     K, H, W = rshape
-    if K == 0 or H < 2 or W < 2:
-        raise InputError(f"FovVideoVDP needs frames of at least 2 x 2 pixels, got shape {rshape}")
+    if K == 0 or H < MIN_SIDE or W < MIN_SIDE:         # (pyfvvdp fails inside below 4: a traceback)
+        raise InputError(f"FovVideoVDP needs frames of at least {MIN_SIDE} x {MIN_SIDE} pixels, got shape {rshape}")
     peak = display_peak(reference, peak, K, H, W, device)
     require_memory(H * W * BYTES_PER_PIXEL, f"FovVideoVDP of {H} x {W} frames")
     metric = _metric(display, device)

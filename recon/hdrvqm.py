@@ -63,6 +63,9 @@ SIGMA_ON_F = 0.55
 D_THETA_ON_SIGMA = 1.5
 SIMILARITY_C = 0.2
 BLOCK = 64
+#: Smallest frame side scored (a block of one pixel deviates by 0: a 1 x 1 estimate at 1 % of its
+#: reference scored 0, "identical"; 4 x 4 is the size FovVideoVDP needs too).
+MIN_SIDE = 4
 FRAME_RATE = 25.0
 FIXATION_S = 0.6
 #: Frames of one short-term tube: ceil(25 frames/s x 0.6 s) = 15.
@@ -165,8 +168,9 @@ def hdr_vqm_scores(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY
     if not (isinstance(fixation_frames, int) and fixation_frames >= 1):
         raise InputError(f"fixation_frames = {fixation_frames!r}: must be an integer >= 1")
     K, H, W = rshape
-    if K == 0 or H == 0 or W == 0:
-        raise InputError(f"HDR-VQM needs at least one pixel, got frames of shape {rshape}")
+    if K == 0 or H < MIN_SIDE or W < MIN_SIDE:         # (a 1 x 1 frame's deviation is 0 whatever it shows)
+        raise InputError(f"HDR-VQM needs frames of at least {MIN_SIDE} x {MIN_SIDE} pixels (its errors are "
+                         f"deviations over blocks of pixels), got shape {rshape}")
     peak = display_peak(reference, peak, K, H, W, device)
     per_fft = max(1, FFT_PIXELS // (H * W))
     require_memory(H * W * (BYTES_PER_PIXEL + BYTES_PER_FFT_PIXEL * per_fft),

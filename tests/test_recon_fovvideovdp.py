@@ -71,3 +71,11 @@ def test_refusals():
         fovvideovdp(ref, ref - 0.5)
     with pytest.raises(InputError, match="non-finite"):
         fovvideovdp(ref * np.nan, ref)
+
+
+@pytest.mark.parametrize("shape", [(2, 2), (3, 32), (32, 3)])
+def test_frames_pyfvvdp_cannot_judge_are_refused_in_one_line(shape):
+    """Frames of 2 or 3 pixels on a side ended in pyfvvdp's AttributeError traceback."""
+    reference = np.ones((2, *shape), np.float32)
+    with pytest.raises(InputError, match=r"FovVideoVDP needs frames of at least 4 x 4 pixels"):
+        fovvideovdp(reference * 0.5, reference)

@@ -144,3 +144,11 @@ def test_refusals(rng):
         hdrvqm.hdr_vqm(ref, ref, peak=-1.0)
     with pytest.raises(InputError, match="black"):
         HdrDisplay(peak_nits=1.0, black_nits=2.0)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (2, 8), (8, 3)])
+def test_frames_too_small_for_a_deviation_are_refused(shape):
+    """A 1 x 1 estimate at 1 % of its reference scored 0 ("identical")."""
+    reference = np.ones((2, *shape), np.float32)
+    with pytest.raises(InputError, match=r"HDR-VQM needs frames of at least 4 x 4 pixels"):
+        hdrvqm.hdr_vqm(reference * 0.01, reference)
