@@ -368,3 +368,22 @@ def test_a_link_to_nothing_given_as_a_store_is_named_so(tmp_path, capsys):
     (tmp_path / "L.zarr").symlink_to(tmp_path / "L.zarr")
     assert main(["evaluate", "--store", str(tmp_path / "L.zarr"), "--out", str(tmp_path / "E")]) == 2
     assert "is a link to nothing (a loop, or a target that is gone)" in capsys.readouterr().err
+
+
+def test_a_zarr_format_2_store_is_refused_untouched(tmp_path, capsys):
+    """A Zarr-v2 group with the store's attributes made `dataset` fail with a traceback after it
+    had replaced a sequence's arrays with version-2 groups."""
+    import zarr
+    from tespike.golden.config import SensorConfig
+    store = tmp_path / "v2"
+    group = zarr.open_group(str(store), mode="w", zarr_format=2)
+    group.attrs.update({"format": "tespike-dataset", "version": 1, "seed": 0,
+                        "configs": {"te": SensorConfig.preset("te").to_dict()}, "tile": [256, 256],
+                        "chunk_frames": 16})
+    before = sorted(p.relative_to(store) for p in store.rglob("*"))
+    assert main(["dataset", "--scene", "sun", "--frames", "4", "--height", "16", "--width", "16",
+                 "--config", "te", "--out", str(store)]) == 2
+    assert "is a Zarr format 2 store; tespike dataset stores are Zarr format 3" in capsys.readouterr().err
+    assert sorted(p.relative_to(store) for p in store.rglob("*")) == before
+    assert main(["evaluate", "--store", str(store), "--out", str(tmp_path / "E")]) == 2
+    assert "Zarr format 2" in capsys.readouterr().err

@@ -89,6 +89,15 @@ def _compressors():
     return (BloscCodec(cname="zstd", clevel=3, shuffle="bitshuffle"), Crc32cCodec())
 
 
+def _check_zarr_format(group, url: str, what: str) -> None:
+    """Refuse a store of another Zarr format than this build writes (3): writing into a version-2
+    store failed mid-way with a traceback after replacing a sequence's arrays with version-2 groups."""
+    version = getattr(getattr(group, "metadata", None), "zarr_format", 3)
+    if version != 3:
+        raise InputError(f"{what} {url!r} is a Zarr format {version} store; tespike dataset stores are "
+                         "Zarr format 3 (it is left untouched)")
+
+
 def _zarr_open_group(url: str, mode: str, missing_ok: bool = False):
     """The store's root group, or one line saying why it cannot be read (``missing_ok``: None
     where there is no store yet)."""
@@ -141,6 +150,7 @@ class DatasetStore:
     def open(cls, url: str, mode: str = "r") -> "DatasetStore":
         """Open an existing store (``mode`` "r" or "r+"); refuse anything else."""
         group = _zarr_open_group(str(url), mode)
+        _check_zarr_format(group, str(url), "dataset store")
         attrs = group.attrs.asdict()
         if attrs.get("format") != FORMAT:
             raise InputError(f"{str(url)!r} is a Zarr store but not a tespike dataset store")
@@ -171,13 +181,21 @@ class DatasetStore:
             group = zarr.open_group(url, mode="w-")
             group.attrs.update(attrs)
             return cls(url, group, attrs)
+        _check_zarr_format(group, url, "--out")        # (before anything is written into it)
         old = group.attrs.asdict()
         if old.get("format") != FORMAT:
             raise InputError(f"--out {url!r} is a Zarr store but not a tespike dataset store")
         for key in ("version", "seed", "configs", "tile", "chunk_frames"):
             if json.dumps(old.get(key), sort_keys=True) != json.dumps(attrs[key], sort_keys=True):
-                raise InputError(f"dataset store {url!r} was made with {key} = {old.get(key)!r}, "
-                                 f"not {attrs[key]!r}: resume with the same settings or use a new --out")
+                was, now = old.get(key), attrs[key]
+                if key == "configs" and isinstance(was, dict):      # name the sensors, not two long dicts
+                    was, now = sorted(was), sorted(now)
+                    if was == now:
+                        raise InputError(f"dataset store {url!r} was made with other settings of the sensor "
+                                         f"configurations {', '.join(now)}: resume with the same ones or use "
+                                         "a new --out")
+                raise InputError(f"dataset store {url!r} was made with {key} = {was!r}, "
+                                 f"not {now!r}: resume with the same settings or use a new --out")
         return cls(url, group, old)
 
     # -- layout ---------------------------------------------------------------
