@@ -164,6 +164,9 @@ def check_methods(methods: Sequence[str]) -> tuple[str, ...]:
             raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
     if not methods:
         raise InputError("no reconstruction method to evaluate")
+    twice = next((method for i, method in enumerate(methods) if method in methods[:i]), None)
+    if twice is not None:           # (two rows of one method, their timings averaged into both)
+        raise InputError(f"reconstruction method {twice!r} is given twice: give each method once")
     return methods
 
 

@@ -187,6 +187,41 @@ def test_unreachable_scheduler_is_refused_in_one_line(tmp_path, monkeypatch):
     assert len(lines) == 1 and "cannot reach the Dask scheduler" in lines[0], result.stderr
 
 
+def test_an_address_that_answers_but_is_not_dask_and_an_empty_one_are_named(tmp_path, monkeypatch):
+    """A server that answers in another protocol (HTTP here) was reported as "out of memory" (Dask
+    read its reply as a frame length of exabytes); --scheduler '' ran on this process silently."""
+    import socket
+    import threading
+    monkeypatch.setenv("DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT", "5s")
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+
+    def answer():
+        while True:
+            try:
+                peer, _ = server.accept()
+            except OSError:
+                return
+            peer.recv(1000)
+            peer.sendall(b"HTTP/1.1 400 Bad Request\r\ncontent-length: 0\r\n\r\n")
+            peer.close()
+    threading.Thread(target=answer, daemon=True).start()
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    try:
+        result = run_tespike("dataset", "--scene", "sun", "--config", "te", "--out", tmp_path / "s.zarr",
+                             "--scheduler", address, timeout=120)
+    finally:
+        server.close()
+    assert result.returncode == 2 and result.stderr.strip().splitlines() == [
+        f"tespike dataset: error: {address!r} answers, but is not a Dask scheduler (its reply is not Dask's "
+        "protocol)"], result
+    result = run_tespike("dataset", "--scene", "sun", "--config", "te", "--out", tmp_path / "s.zarr",
+                         "--scheduler", "", timeout=120)
+    assert result.returncode == 2 and "--scheduler '': give the Dask scheduler's address" in result.stderr
+    assert not (tmp_path / "s.zarr").exists()
+
+
 def test_a_local_cluster_ends_at_once_with_a_command_killed_outright():
     """SIGKILL to the command: its local cluster (a session of its own) sees its pipe close with
     its command gone and ends its whole session at once, without a graceful close nobody awaits."""

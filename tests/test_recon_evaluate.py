@@ -164,6 +164,8 @@ def test_evaluate_refuses():
     light = make_scene("moderate", 4, 24, 24)
     with pytest.raises(InputError, match="unknown reconstruction method"):
         evaluate([("a", light)], simulate, methods=("magic",), progress=False)
+    with pytest.raises(InputError, match="'tfp' is given twice"):     # (two TFP rows, their timings averaged)
+        evaluate([("a", light)], simulate, methods=("tfp", "tfi", "tfp"), progress=False)
     with pytest.raises(InputError, match="unique"):
         evaluate([("a", light), ("a", light)], simulate, progress=False)
     with pytest.raises(InputError, match="no sequences"):

@@ -37,6 +37,9 @@ def check_cluster_options(workers: int | None, scheduler: str | None) -> None:
     if workers is not None and type(workers) is not int:
         raise InputError(f"--workers {workers!r} must be an integer")
     check_workers_argument(workers)
+    if scheduler is not None and not scheduler.strip():       # ("" ran on this process without a word)
+        raise InputError("--scheduler '': give the Dask scheduler's address (e.g. tcp://host:8786), "
+                         "or leave the option out")
     if workers is not None and scheduler:
         raise InputError("--workers and --scheduler exclude each other "
                          "(an existing cluster has its own workers)")
@@ -252,6 +255,9 @@ class Runner:
                 except (OSError, TimeoutError, ValueError) as exc:
                     first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
                     raise InputError(f"cannot reach the Dask scheduler {self.address!r}: {first}") from None
+                except MemoryError:  # a server that answers, but not Dask: its reply read as a frame length
+                    raise InputError(f"{self.address!r} answers, but is not a Dask scheduler (its reply is "
+                                     "not Dask's protocol)") from None
             else:
                 import logging
 
