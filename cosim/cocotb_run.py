@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import io
+import json
 import os
 import re
 import shutil
@@ -122,6 +123,11 @@ def _children_end_with_us():
         module.subprocess = real
 
 
+def check_simulator(simulator: str) -> None:
+    """Refuse, in one line, a simulator cocotb's runner does not know or cannot find."""
+    _runner(simulator)
+
+
 def _runner(simulator: str):
     import warnings
     with warnings.catch_warnings():      # "Python runners ... are an experimental feature"
@@ -130,6 +136,8 @@ def _runner(simulator: str):
     try:
         return get_runner(simulator)
     except (ValueError, SystemExit) as exc:
+        if "not found" in str(exc):     # a simulator cocotb knows, not installed here
+            raise InputError(f"simulator {simulator!r} is not installed ({exc})") from None
         raise InputError(f"simulator {simulator!r}: cocotb's runner does not know it ({exc})") from None
 
 
@@ -220,6 +228,9 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
         passed = tests >= 1 and failed == 0
         text = log.read_text(errors="replace") if log.is_file() else ""
         summary = re.search(r"RTL == golden model (\{.*\})", text)
+        if passed and summary and json.loads(summary.group(1)).get("golden_outputs") == 0:
+            raise InputError(f"{simulator}: nothing was compared: no stretch of the stimulus between resets "
+                             "holds a whole readout interval (no output words, RTL's or the golden model's)")
         message = (f"RTL == golden model {summary.group(1)}" if passed and summary else
                    "passed" if passed else _failure_line(log))
         if work_dir is None:

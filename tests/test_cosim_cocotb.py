@@ -134,6 +134,10 @@ def test_cocotb_command_takes_a_stimulus_file(tmp_path):
     (["--config", "te", "--height", 2, "--width", 2, "--verilog", "/nonexistent/a.v",
       "--simulator", "icarus"], ["/nonexistent/a.v", "does not exist"]),
     (["--config", "te", "--height", 2, "--width", 2, "--simulator", "no-such-sim"], ["no-such-sim"]),
+    # every name checked before the first run (icarus ran to a pass, then bogus was refused); a
+    # name given twice ran twice without a word
+    (["--config", "te", "--height", 2, "--width", 2, "--simulator", "icarus", "bogus"], ["'bogus'"]),
+    (["--config", "te", "--height", 2, "--width", 2, "--simulator", "icarus", "icarus"], ["icarus is given twice"]),
     (["--config", "te", "--height", 2, "--width", 2, "--readouts", 0], ["--readouts", "0"]),
     (["--config", "te", "--height", 2, "--width", 2, "--seed", -1], ["--seed -1"]),      # (a traceback)
     (["--config", "te", "--height", 2, "--width", 2, "--work-dir", "/dev/null"], ["--work-dir", "not a directory"]),
@@ -143,6 +147,16 @@ def test_cocotb_command_takes_a_stimulus_file(tmp_path):
 ])
 def test_cocotb_command_refuses_bad_input(argv, words, tmp_path):
     assert_refused(run_tespike("cocotb", *argv), *words)
+
+
+@needs("icarus")
+def test_a_run_that_compares_nothing_is_no_pass(tmp_path):
+    """A reset every readout interval leaves no whole interval to compare: it said "pass"."""
+    np.save(tmp_path / "e.npy", np.ones((240, 2, 2), np.uint16))
+    np.save(tmp_path / "r.npy", (np.arange(240) == 100).astype(np.uint8))
+    result = run_tespike("cocotb", "--config", "te", "--height", 2, "--width", 2, "--simulator", "icarus",
+                         "--stimulus", tmp_path / "e.npy", "--resets", tmp_path / "r.npy")
+    assert_refused(result, "icarus: nothing was compared")
 
 
 @needs("icarus")

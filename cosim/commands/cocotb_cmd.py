@@ -39,10 +39,15 @@ def run(args) -> int:
     from tespike.golden.errors import InputError
 
     from tespike.cosim.cocotb_bench import Settings
-    from tespike.cosim.cocotb_run import run_cocotb
+    from tespike.cosim.cocotb_run import check_simulator, run_cocotb
 
     from .common import check_array_arguments
 
+    twice = next((s for i, s in enumerate(args.simulator) if s in args.simulator[:i]), None)
+    if twice is not None:
+        raise InputError(f"--simulator {twice} is given twice: name each simulator once")
+    for simulator in args.simulator:      # every name checked before the first run (it ran, then refused)
+        check_simulator(simulator)
     config = load_config(args.config)
     check_array_arguments(config, args.height, args.width, args.lanes)   # the tops tespike verilog writes
     if args.work_dir is not None:         # (a file there was "File exists", naming no option)
