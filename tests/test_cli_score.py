@@ -124,6 +124,9 @@ def test_refusals(tmp_path, rng):
 
     np.save(tmp_path / "short.npy", reference[:, 1:])
     refused("shape", str(tmp_path / "short.npy"), estimate_path=tmp_path / "short.npy")
+    # the refusal named neither the flag nor the unknown name ("metrics ['psnr_mu', 'bogus']: ...")
+    refused("--metrics 'psnr_mu,bogus': 'bogus' is no metric (choose from psnr_mu", extra=("--metrics", "psnr_mu,bogus"))
+    refused("--metrics ',': names no metric", extra=("--metrics", ","))
     bad = reference.copy()
     bad[2, 3, 4] = np.nan
     np.save(tmp_path / "nan.npy", bad)
