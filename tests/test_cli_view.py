@@ -55,6 +55,9 @@ def test_refusals(tmp_path):
     assert_refused(run_tespike("view", "--input", tmp_path / "x.npy", "--out", tmp_path / "i.png"), "x.npy")
     assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.png",
                                "--peak", "-1"), "--peak")
+    np.save(tmp_path / "long.npy", np.ones((241, 2, 2), np.float32))     # (1700 frames: 50 s, a 69630-px PNG)
+    assert_refused(run_tespike("view", "--input", tmp_path / "long.npy", "--out", tmp_path / "i.png",
+                               "--frames", "all"), "selects 241 frames; a contact sheet shows at most 240", "--each")
     assert not list(tmp_path.glob("*.png")) and not list(tmp_path.glob(".*"))
 
 

@@ -21,6 +21,9 @@ HELP = "write tone-mapped PNGs (contact sheet or one per frame) of I.npy, S.npz,
 DEFAULT_SHEET_FRAMES = 12
 #: Frames per row of a contact sheet unless --columns says otherwise.
 DEFAULT_COLUMNS = 6
+#: Most frames on one contact sheet (a panel each: 1700 frames took 50 s and made a PNG 69630
+#: pixels tall; --each writes any number, one file a frame, in seconds).
+MAX_SHEET_FRAMES = 240
 
 
 def add_arguments(parser):
@@ -135,6 +138,9 @@ def run(args) -> int:
         check_outputs({"--out": args.out}, inputs)
     light, what = load_light(args.input, args.config, args.estimator)
     frames = pick_frames(args.frames, light.shape[0], args.each)
+    if not args.each and len(frames) > MAX_SHEET_FRAMES:
+        raise InputError(f"--frames {args.frames!r} selects {len(frames)} frames; a contact sheet shows at most "
+                         f"{MAX_SHEET_FRAMES} (select fewer, or write one PNG a frame with --each and a folder)")
     if args.each and out.is_dir():                  # (a frame file there may be an input, or a link to one)
         check_outputs({f"--out (frame {k})": out / f"frame_{k:04d}.png" for k in frames}, inputs)
         # the folder is replaced whole (atomic_folder): it may hold only frames this run writes again,
