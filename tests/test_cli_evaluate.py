@@ -116,6 +116,12 @@ def test_evaluate_sensor_noise_and_calibrate(tmp_path, capsys):
     refused(capsys, "evaluate", "--sensor-noise", tmp_path / "eq12.json", "--out", out, "'te+eq12' is taken")
     refused(capsys, "evaluate", "--sensor-noise", tmp_path / "hot.json", "--store", tmp_path, "--out", out,
             "--sensor-noise does not apply with --store")
+    # two scene files of one stem ("sequence labels must be unique, got ['I', 'I']" named neither)
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        np.save(tmp_path / folder / "I.npy", make_scene("lights", 4, 16, 16, seed=1))
+    refused(capsys, "evaluate", "--set", "none", "--scene", tmp_path / "a" / "I.npy", "--scene",
+            tmp_path / "b" / "I.npy", "--methods", "tfp", "--out", out, "/b/I.npy' and --scene")
     # a dark current beyond the sensor's range: no calibration; the refusal names the sensor (it named
     # calibrate's --dark and --flat, flags this command does not have)
     (tmp_path / "sat.json").write_text('{"dark_current": "eq12", "dark_level": 1e6}')

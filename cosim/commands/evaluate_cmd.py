@@ -260,10 +260,19 @@ def run(args) -> int:
         raise InputError(f"--weights: {unrun[0]} weights given, but {unrun[0]} is not among the methods "
                          "evaluated (add it to --methods; the file would be ignored)")
     sequences = [] if args.set == "none" else sequence_set(args.set, frames, height, width)
+    given = {name: "a sequence of --set" for name, _ in sequences}
+
+    def label(name: str, source: str) -> str:
+        """A sequence's label (its file's stem, its folder's name): one per sequence (the table's rows)."""
+        if name in given:
+            raise InputError(f"{source} and {given[name]} would both be labelled {name!r} in the tables: "
+                             "rename one")
+        given[name] = source
+        return name
     for path in args.scene:          # memory-mapped: read one slice at a time
-        sequences.append((Path(path).stem, load_scene(path, memory_map=True)))
+        sequences.append((label(Path(path).stem, f"--scene {str(path)!r}"), load_scene(path, memory_map=True)))
     for folder in args.folder:
-        sequences.append((Path(folder).name or str(folder),
+        sequences.append((label(Path(folder).name or str(folder), f"--folder {str(folder)!r}"),
                           load_hdr_sequence(folder, progress=progress_wanted(args))))
     if not sequences:
         raise InputError("nothing to evaluate: --set none and no --scene or --folder")
