@@ -145,9 +145,8 @@ def saturated_words(config: SensorConfig) -> np.ndarray:
     return np.unique(words)
 
 
-def saturated_share(words, config: SensorConfig) -> float:
-    """Share of ``words`` (K, H, W) that are :func:`saturated_words`."""
-    top = saturated_words(config)
+def saturated_share(words, top: np.ndarray) -> float:
+    """Share of ``words`` (K, H, W) that are among ``top`` (the configuration's :func:`saturated_words`)."""
     count = sum(int(np.count_nonzero(np.isin(np.asarray(words[s:s + CHUNK_READOUTS]), top)))
                 for s in range(0, words.shape[0], CHUNK_READOUTS))
     return count / words.size
@@ -195,13 +194,14 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
     if dark_words.shape[1:] != flat_words.shape[1:]:
         raise InputError(f"dark stream frames {dark_words.shape[1:]} and flat stream frames "
                          f"{flat_words.shape[1:]} differ: both must come from the same sensor")
-    top = ", ".join(map(str, saturated_words(config).tolist()))
-    saturated = saturated_share(dark_words, config)
+    top_words = saturated_words(config)              # (2 L clocks of the cycle-exact model: made once)
+    top = ", ".join(map(str, top_words.tolist()))
+    saturated = saturated_share(dark_words, top_words)
     if saturated >= MAX_SATURATED_SHARE:
         raise InputError(f"the dark stream is saturated: {100 * saturated:.1f} % of its words are the sensor's "
                          f"top code ({top}): its dark current alone is beyond the sensor's range, and no "
                          "calibration recovers light under it")
-    saturated = saturated_share(flat_words, config)
+    saturated = saturated_share(flat_words, top_words)
     if saturated >= MAX_SATURATED_SHARE:
         raise InputError(f"the flat stream is saturated: {100 * saturated:.1f} % of its words are the sensor's "
                          f"top code ({top}: what any light above its range gives), so its light cannot be "
