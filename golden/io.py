@@ -35,7 +35,7 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
         raise InputError(f"{what} file {str(path)!r} holds an archive, not one .npy array")
     if magic != b"\x93NUMPY":                          # (np.load would try it as a pickle and say so)
         raise InputError(f"{what} file {str(path)!r} is not a readable .npy array (no .npy header)")
-    _refuse_cut_short(path, what)
+    layout = _npy_layout(path, what)                  # (read once: before the load, and for the bytes after it)
     try:
         array = np.load(path, allow_pickle=False, mmap_mode=mmap_mode)
     except (OSError, ValueError, EOFError, OverflowError) as exc:   # (Overflow: a header shape whose
@@ -46,13 +46,10 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
         if hasattr(array, "close"):
             array.close()
         raise InputError(f"{what} file {str(path)!r} holds an archive, not one .npy array")
-    try:
-        with open(path, "rb") as handle:               # np.load ignores bytes after the array
-            header = _npy_header(handle)[3]
-            extra = os.fstat(handle.fileno()).st_size - header - array.nbytes
-    except (OSError, ValueError) as exc:
-        _refuse_starved(exc, what, path)
-        raise InputError(f"{what} file {str(path)!r} is not a readable .npy array: {one_line(exc)}") from None
+    if layout is None:                                 # (a header np.load read and we could not)
+        raise InputError(f"{what} file {str(path)!r} is not a readable .npy array")
+    header, size = layout
+    extra = size - header - array.nbytes               # np.load ignores bytes after the array
     if extra:
         raise InputError(f"{what} file {str(path)!r} holds {extra} bytes after its {array.dtype} "
                          f"{array.shape} array (a corrupt or concatenated file)")
@@ -61,25 +58,25 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
     return array
 
 
-def _refuse_cut_short(path, what: str) -> None:
-    """Refuse a .npy file shorter than its header says, in those words (numpy says "mmap length is
-    greater than file size" or "cannot reshape array of size ..."), or one of Python objects (numpy:
-    "Array can't be memory-mapped" or "allow_pickle=False"); a header numpy cannot read is left to
-    np.load's own refusal."""
+def _npy_layout(path, what: str) -> tuple[int, int] | None:
+    """(header bytes, file bytes) of a .npy file, read from its header; a file shorter than its header
+    says is refused in those words (numpy says "mmap length is greater than file size" or "cannot
+    reshape array of size ..."), and so is one of Python objects (numpy: "Array can't be
+    memory-mapped" or "allow_pickle=False"). None for a header numpy cannot read: np.load's own
+    refusal names what is wrong."""
     try:
         with open(path, "rb") as handle:
             shape, _, dtype, header = _npy_header(handle)
             size = os.fstat(handle.fileno()).st_size
     except (OSError, ValueError, EOFError):
-        return
+        return None
     if dtype.hasobject:
         raise InputError(f"{what} file {str(path)!r} holds Python objects (dtype {dtype}), not numbers")
-    if header is None:
-        return
     expected = header + int(np.prod(shape, dtype=object)) * dtype.itemsize
     if size < expected:
         raise InputError(f"{what} file {str(path)!r} is cut short: {size} of the {expected} bytes its header "
                          f"promises ({dtype} {tuple(shape)})")
+    return header, size
 
 
 def _magic(path, what: str) -> bytes:
