@@ -128,6 +128,19 @@ def sensor_argument(args):
 MAX_THREADS = 256
 
 
+def metrics_argument(text: str) -> list[str]:
+    """The metric names of a ``--metrics`` comma list (``score``, ``evaluate``), each one of
+    :data:`tespike.recon.score.KEYS`; one line naming the flag and the first unknown name otherwise."""
+    from tespike.golden.errors import InputError
+    from tespike.recon.score import KEYS
+    metrics = [m.strip() for m in text.split(",") if m.strip()]
+    unknown = [m for m in metrics if m not in KEYS]
+    if unknown or not metrics:
+        raise InputError(f"--metrics {text!r}: " + (f"{unknown[0]!r} is no metric" if unknown else "names no metric")
+                         + f" (choose from {', '.join(KEYS)})")
+    return metrics
+
+
 def check_threads_argument(threads: int | None) -> None:
     """Refuse a ``--threads`` outside 1..MAX_THREADS with one line (None: torch's choice)."""
     from tespike.golden.errors import InputError

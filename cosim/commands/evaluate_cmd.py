@@ -178,7 +178,7 @@ def run(args) -> int:
     from tespike.golden.io import load_scene
     from tespike.golden.paths import check_results_dir
 
-    from .common import check_threads_argument
+    from .common import check_threads_argument, metrics_argument
     from .results import publish_results
     from tespike.recon.evaluate import evaluate
     from tespike.recon.report import OUTPUT_FILES
@@ -208,10 +208,7 @@ def run(args) -> int:
         methods = _named_methods(args)
     metrics = list(KEYS) if args.table else []
     if args.metrics is not None:
-        metrics = [m.strip() for m in args.metrics.split(",") if m.strip()]
-        unknown = [m for m in metrics if m not in KEYS]
-        if unknown or not metrics:
-            raise InputError(f"--metrics {args.metrics!r}: choose from {', '.join(KEYS)}")
+        metrics = metrics_argument(args.metrics)
     # options of a part the run does not have would be dropped without a word
     if args.vdp_frames is not None and "fovvideovdp" not in metrics:
         raise InputError("--vdp-frames sets FovVideoVDP's frames; add fovvideovdp to --metrics, or leave it out")

@@ -64,16 +64,13 @@ def run(args) -> int:
 
     from tespike.golden.errors import InputError
     from tespike.golden.io import load_scene
-    from tespike.recon.score import KEYS, score
+    from tespike.recon.score import score
+
+    from .common import metrics_argument
 
     if args.json and args.quiet:      # (the JSON is the whole output: quiet would drop it)
         raise InputError("--json prints the scores and --quiet prints nothing: give one of them")
-    metrics = tuple(m.strip() for m in args.metrics.split(",") if m.strip())
-    unknown = [m for m in metrics if m not in KEYS]
-    if unknown or not metrics:        # (the library's refusal named neither the flag nor the odd one out)
-        raise InputError(f"--metrics {args.metrics!r}: " + (f"{unknown[0]!r} is no metric" if unknown
-                                                            else "names no metric")
-                         + f" (choose from {', '.join(KEYS)})")
+    metrics = tuple(metrics_argument(args.metrics))   # (the library's refusal named neither the flag nor the name)
     reference = load_scene(args.reference, memory_map=True, what="reference")
     estimate = load_estimate(args.estimate)
     if estimate.shape != reference.shape:
