@@ -54,9 +54,27 @@ class Terminated(BaseException):
 class Parser(argparse.ArgumentParser):
     """argparse with one-line errors: ``tespike CMD: error: argument --x: ... (see tespike CMD --help)``."""
 
+    def parse_known_args(self, args=None, namespace=None):
+        self._tokens = list(sys.argv[1:] if args is None else args)     # (for error's hint)
+        return super().parse_known_args(args, namespace)
+
     def error(self, message):
-        text = " ".join(message.split())
+        text = " ".join(message.split()) + self._dash_hint(message)
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {text} (see {self.prog} --help)\n")
+
+    def _dash_hint(self, message: str) -> str:
+        """argparse reads a value that starts with '-' (``--frames -1:``) as an option and
+        says the option lacks its value: name the value, and the form that passes it."""
+        import re
+        missing = re.match(r"argument ([^:]+): expected one argument", message)
+        if not missing:
+            return ""
+        spellings = missing.group(1).split("/")
+        tokens = getattr(self, "_tokens", [])
+        for option, value in zip(tokens, tokens[1:]):
+            if option in spellings and value.startswith("-"):
+                return f" ({value!r} was read as an option: give {option}={value})"
+        return ""
 
 
 def version() -> str:

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Mapping
 
 from tespike.golden.errors import InputError
+from tespike.golden.paths import written_through
 from tespike.golden.resources import require_memory, size_text
 
 
@@ -45,7 +46,7 @@ def require_disk(outputs: Mapping[str | os.PathLike, int], what: str) -> None:
     their file systems; files on the same file system add up. Devices and FIFOs take none."""
     needs: dict[int, list] = {}
     for path, size in outputs.items():
-        if size <= 0 or is_stream(path):
+        if size <= 0 or written_through(path):
             continue
         place = free_disk(path)
         if place is None:
@@ -57,16 +58,6 @@ def require_disk(outputs: Mapping[str | os.PathLike, int], what: str) -> None:
         if needed > free:
             raise InputError(f"cannot write {os.fspath(path)!r}: {what} needs about {size_text(needed)}, "
                              f"but only {size_text(free)} is free on its file system")
-
-
-def is_stream(path) -> bool:
-    """Whether ``path`` is a character device or a FIFO (written through, never a file of its own)."""
-    import stat
-    try:
-        mode = os.stat(path).st_mode
-    except OSError:
-        return False
-    return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
 
 
 def require_room(what: str, *, memory: int = 0, disk: Mapping[str | os.PathLike, int] | None = None) -> None:

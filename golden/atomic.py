@@ -17,7 +17,6 @@ import os
 import re
 import shutil
 import signal
-import stat
 import subprocess
 import sys
 import tempfile
@@ -26,7 +25,7 @@ from pathlib import Path
 from typing import Iterator
 
 from .errors import InputError
-from .paths import check_output_file
+from .paths import check_output_file, written_through
 
 
 #: Hidden temporaries are named ``.<name>.<pid>.<random>.part`` beside the output;
@@ -305,7 +304,7 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
         info = os.stat(target)
     except OSError:
         info = None
-    through = info is not None and (stat.S_ISCHR(info.st_mode) or stat.S_ISFIFO(info.st_mode))
+    through = written_through(target)
     if through:
         directory = Path(tempfile.gettempdir())
         prefix = f".tespike.{os.getpid()}."

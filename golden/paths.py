@@ -11,6 +11,8 @@ that names the path the user gave (never a hidden temporary):
   a block device, a socket, a missing or read-only directory is refused;
 - :func:`check_distinct`: no output may be the same file as an input (compared
   by resolved path and by inode, so hard links count) or as another output;
+- :func:`check_format`: a file an output names is named for what it holds (a stream
+  written as ``S.png`` would be shown as a picture by a file browser and ``view``);
 - :func:`check_outputs`: all of the above for one command, before any work.
 """
 
@@ -92,7 +94,7 @@ def check_output_file(path: str | os.PathLike, what: str | None = None) -> Path:
     except OSError as exc:
         raise InputError(f"cannot write {label}: {_reason(exc)}") from None
     if info is not None:
-        if stat.S_ISCHR(info.st_mode) or stat.S_ISFIFO(info.st_mode):
+        if written_through(target):
             if not os.access(target, os.W_OK):
                 raise InputError(f"cannot write {label}: permission denied")
             return target
@@ -154,14 +156,41 @@ def _refuse_control_characters(text: str, label: str) -> None:
                          "(name one without)")
 
 
-def check_outputs(outputs: Mapping[str, str | os.PathLike | None], inputs=None) -> None:
-    """Every output path of a command checked (:func:`check_output_file`) and kept apart
-    from the inputs (:func:`check_distinct`: a mapping, or (flag, path) pairs), before any
-    output is written."""
+def written_through(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is (or links to) a character device or a FIFO: an output written through
+    (``/dev/null``, a pipe), never replaced, and no file of its own."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
+
+
+def check_format(flag: str, path: str | os.PathLike, suffixes: tuple[str, ...]) -> None:
+    """Refuse an output file named with a suffix other than ``suffixes`` (the first is the
+    format's own, e.g. ``.npz``; any case): the file would hold one format under another's
+    name. A FIFO or character device (``/dev/null``, a pipe) takes any name."""
+    text = os.fspath(path)
+    if written_through(text):
+        return
+    if Path(text).suffix.lower() not in suffixes:
+        names = " or ".join(suffixes)
+        raise InputError(f"{flag} {text!r}: the file is written in the {suffixes[0]} format; "
+                         f"give a name ending in {names}")
+
+
+def check_outputs(outputs: Mapping[str, str | os.PathLike | None], inputs=None,
+                  formats: Mapping[str, tuple[str, ...]] | None = None) -> None:
+    """Every output path of a command checked (:func:`check_output_file`; its suffix
+    against ``formats[flag]``, :func:`check_format`) and kept apart from the inputs
+    (:func:`check_distinct`: a mapping, or (flag, path) pairs), before any output is written."""
     for flag, path in outputs.items():
         if path is not None:
             check_output_file(path, flag)
     check_distinct(inputs or {}, outputs)
+    for flag, suffixes in (formats or {}).items():      # (after: an input named as an output is the worse fault)
+        if outputs.get(flag) is not None:
+            check_format(flag, outputs[flag], suffixes)
 
 
 def check_output_dir(path: str | os.PathLike, what: str = "--out",

@@ -756,9 +756,10 @@ def test_commands_refuse_outputs_the_disk_cannot_hold(files, capsys, monkeypatch
             "rtl-sim": ("--config", files / "c.json", "--stimulus", files / "e.npy"),
             "scene": ("--name", "default", "--frames", 2, "--height", 12, "--width", 16)}[command]
     before = snapshot(files)
-    code, out, err = run_in_process(capsys, command, *args, "--out", files / "o.npy")
+    out_name = "o.npz" if command in ("simulate", "golden", "rtl-sim") else "o.npy"
+    code, out, err = run_in_process(capsys, command, *args, "--out", files / out_name)
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1, err
-    assert "but only 10 B is free on its file system" in err and "o.npy" in err
+    assert "but only 10 B is free on its file system" in err and out_name in err
     assert snapshot(files) == before
 
 
@@ -875,15 +876,20 @@ def test_scene_and_train_never_write_over_a_frame_they_read(tmp_path):
     (tmp_path / "link.npy").symlink_to(tmp_path / "video/001.hdr")
     (tmp_path / "run.run").mkdir()
     (tmp_path / "run.run/log.csv").write_text('{"mode": "te"}')
-    refused_without_change(tmp_path, ("scene", "--folder", tmp_path / "video", "--out", tmp_path / "video/000.hdr"),
+    (tmp_path / "frame.npy").symlink_to(tmp_path / "video/000.hdr")
+    (tmp_path / "frame.pt").symlink_to(tmp_path / "hdr/seq/000.hdr")
+    (tmp_path / "pano.pt").symlink_to(tmp_path / "pano/p.hdr")
+    refused_without_change(tmp_path, ("scene", "--folder", tmp_path / "video", "--out", tmp_path / "frame.npy"),
                            "a frame of --folder", "refusing to overwrite an input")
+    refused_without_change(tmp_path, ("scene", "--folder", tmp_path / "video", "--out", tmp_path / "video/000.hdr"),
+                           "--out", "ending in .npy")          # (named as a frame: not an array's name)
     refused_without_change(tmp_path, ("scene", "--folder", tmp_path / "video", "--out", tmp_path / "link.npy"),
                            "a frame of --folder", "001.hdr")
     budget = ("--steps", 1, "--crop", 32, "--batch", 1, "--workers", 0, "--pool", 1)
     refused_without_change(tmp_path, ("train", "--config", "te", "--hdr", tmp_path / "hdr/seq",
-                                      "--out", tmp_path / "hdr/seq/000.hdr", *budget), "a frame of --hdr")
+                                      "--out", tmp_path / "frame.pt", *budget), "a frame of --hdr")
     refused_without_change(tmp_path, ("train", "--config", "te", "--panoramas", tmp_path / "pano",
-                                      "--out", tmp_path / "pano/p.hdr", *budget), "a panorama of --panoramas")
+                                      "--out", tmp_path / "pano.pt", *budget), "a panorama of --panoramas")
     refused_without_change(tmp_path, ("train", "--config", tmp_path / "run.run/log.csv", "--out", tmp_path / "run.pt",
                                       *budget), "the run folder's log.csv", "--config")
 

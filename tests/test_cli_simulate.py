@@ -11,7 +11,7 @@ from tests.cli import assert_refused, run_tespike
 
 
 def _no_output(tmp_path):
-    return not list(tmp_path.glob("s.npz*")) and not list(tmp_path.glob(".s.npz*"))
+    return not list(tmp_path.glob("s.np[yz]*")) and not list(tmp_path.glob(".s.np[yz]*"))
 
 
 def test_simulate_writes_spec_stream_reproducibly(tmp_path):
@@ -85,9 +85,9 @@ def test_simulate_refuses_bad_files_and_config(tmp_path):
     for extra in (["--method", "per-clock"], ["--no-noise"]):      # (one process: --workers was ignored)
         assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
                                    "--out", tmp_path / "s.npz", "--workers", "2", *extra), "--workers 2", extra[0])
-    for command in ("simulate", "stimulus"):    # (the seed was reported and changed nothing)
+    for command, out in (("simulate", "s.npz"), ("stimulus", "s.npy")):   # (the seed was reported and changed nothing)
         assert_refused(run_tespike(command, "--config", "te", "--scene", tmp_path / "i.npy",
-                                   "--out", tmp_path / "s.npz", "--no-noise", "--seed", "7"), "--seed", "--no-noise")
+                                   "--out", tmp_path / out, "--no-noise", "--seed", "7"), "--seed", "--no-noise")
     assert _no_output(tmp_path)
 
 

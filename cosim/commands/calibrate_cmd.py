@@ -25,9 +25,10 @@ def run(args) -> int:
     from tespike.golden.errors import InputError
     from tespike.golden.io import load_stream
     from tespike.golden.paths import check_outputs
+    from .common import NPZ_FILE
     from tespike.recon.calibration import calibration_summary, estimate, save_calibration
 
-    check_outputs({"--out": args.out}, {"--dark": args.dark, "--flat": args.flat})
+    check_outputs({"--out": args.out}, {"--dark": args.dark, "--flat": args.flat}, {"--out": NPZ_FILE})
     dark, config = load_stream(args.dark, memory_map=True)
     flat, flat_config = load_stream(args.flat, memory_map=True)
     difference = config.first_difference(flat_config)

@@ -36,6 +36,13 @@ def add_array_arguments(parser, *, required: bool = True, what: str = "", lanes_
                              f"{lanes_use}; without it the parallel top")
 
 
+#: Suffixes of the files a command writes, by format (:func:`tespike.golden.paths.check_format`):
+#: a .npy array (scene, stimulus, reconstruction), a .npz archive (stream, calibration), torch weights.
+NPY_FILE = (".npy",)
+NPZ_FILE = (".npz",)
+TORCH_FILE = (".pt", ".pth")
+
+
 #: Largest parallel top a command writes, synthesises or tests: 65536 pixels. Its charge and frame
 #: ports are H * W * E and H * W * Wd bits wide (up to 2^21 bits at E = 32); larger arrays take
 #: minutes to convert and give ports beyond what the simulators here read well.
@@ -148,6 +155,16 @@ def check_threads_argument(threads: int | None) -> None:
         raise InputError(f"--threads {threads}: must be in 1..{MAX_THREADS}")
 
 
+def frame_number(text: str) -> int:
+    """A frame index as typed: decimal digits with an optional sign (Python's ``int`` also
+    reads ``1_0`` as 10 and other scripts' digits, which a frame list should refuse);
+    ValueError otherwise."""
+    import re
+    if not re.fullmatch(r"\s*[+-]?[0-9]+\s*", text):
+        raise ValueError(text)
+    return int(text)
+
+
 def frame_range(spec, count: int) -> range:
     """Frames selected by ``--frames a:b`` among ``count`` (a default 0, b default
     ``count``, b excluded): inside the files, never clipped to them (``score``, ``view``)."""
@@ -158,7 +175,7 @@ def frame_range(spec, count: int) -> range:
     try:
         if len(parts) != 2:
             raise ValueError
-        a, b = (int(x) if x.strip() else None for x in parts)
+        a, b = (frame_number(x) if x.strip() else None for x in parts)
     except ValueError:
         raise InputError(f"--frames {spec!r}: must be 'a:b' with integers a < b (b excluded)") from None
     a = 0 if a is None else a

@@ -90,7 +90,8 @@ def _run_store(args) -> int:
     methods = None if args.methods is None else _named_methods(args)
     DatasetStore.open(args.store)                       # a missing or foreign store refused before any line
     with Runner(args.workers, args.scheduler) as runner:
-        evaluation = evaluate_store(args.store, runner, methods=methods, window=args.window, device=args.device,
+        evaluation = evaluate_store(args.store, runner, methods=methods, device=args.device,
+                                    window=DEFAULT_WINDOW if args.window is None else args.window,
                                     starting=lambda: report(args, f"evaluate: {args.store} on {runner.where}"))
     return publish_results(args, evaluation, plot=False)
 
@@ -149,8 +150,9 @@ def add_arguments(parser):
     parser.add_argument("--repeats", type=int, default=None,
                         help=f"timed runs per method, the median reported (default {DEFAULTS[3]}; "
                              f"--table {TABLE_DEFAULTS[3]})")
-    parser.add_argument("--window", type=int, default=DEFAULT_WINDOW,
-                        help=f"readouts per window, odd (default {DEFAULT_WINDOW}, paper 6.4)")
+    parser.add_argument("--window", type=int, default=None,
+                        help=f"readouts per window, odd (default {DEFAULT_WINDOW}, paper 6.4); at most 2 K - 1 "
+                             "for the shortest sequence of K readouts")
     parser.add_argument("--te-config", default="te", help="TE sensor: JSON file or 'te' (paper b1 = b2 = 4)")
     parser.add_argument("--ml-config", default="ml-msb",
                         help="ML sensor of the table's ML column, msb readout: JSON file or 'ml-msb' "
@@ -273,6 +275,13 @@ def run(args) -> int:
                           load_hdr_sequence(folder, progress=progress_wanted(args))))
     if not sequences:
         raise InputError("nothing to evaluate: --set none and no --scene or --folder")
+    window = DEFAULT_WINDOW if args.window is None else args.window
+    if args.window is not None:      # as reconstruct: no frame's window can be that wide
+        shortest, light = min(sequences, key=lambda sequence: sequence[1].shape[0])
+        K = light.shape[0]
+        if window > 2 * K - 1:
+            raise InputError(f"--window {window}: wider than any window of the {K}-readout sequence "
+                             f"{shortest!r} ({2 * K - 1} readouts at most; a wider one changes nothing)")
     if threads is not None:
         import torch
         torch.set_num_threads(threads)
@@ -282,7 +291,7 @@ def run(args) -> int:
 
     progress = progress_wanted(args) or ("lines" if args.progress == "auto" and not args.quiet else False)
     evaluation = evaluate(sequences, simulate, methods=list(DEFAULT_METHODS) if methods is None else methods,
-                          sensors=tuple(configs), configs=configs, window=args.window, seed=args.seed,
+                          sensors=tuple(configs), configs=configs, window=window, seed=args.seed,
                           device=args.device, progress=progress, repeats=repeats, metrics=metrics,
                           vdp_frames=vdp_frames, missing="note" if args.table or methods is None else None,
                           noise_sensors=noise_sensors, weights=weights)

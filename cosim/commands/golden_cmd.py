@@ -9,7 +9,7 @@ when stderr is a terminal (``--progress on`` forces it).
 
 from tespike.golden.sensor import DEFAULT_CHUNK_ELEMENTS
 
-from .common import add_config_argument
+from .common import NPZ_FILE, add_config_argument
 
 HELP = "run the bit-exact golden model on a per-clock electron stimulus E.npy"
 
@@ -36,7 +36,8 @@ def run(args) -> int:
     from tespike.cosim.room import require_room
     from tespike.golden.sensor import PixelArray, iter_chunks
 
-    check_outputs({"--out": args.out}, {"--stimulus": args.stimulus, "--config": args.config})
+    check_outputs({"--out": args.out}, {"--stimulus": args.stimulus, "--config": args.config},
+                  {"--out": NPZ_FILE})
     config = load_config(args.config)
     chunk_elements = DEFAULT_CHUNK_ELEMENTS if args.chunk_elements is None else args.chunk_elements
     if chunk_elements < 1:

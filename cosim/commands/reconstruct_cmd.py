@@ -4,7 +4,7 @@ from tespike.golden.config import DESIGN_ELECTRONS
 from tespike.recon.learned import LEARNED, LEARNED_SUMMARIES
 from tespike.recon.settings import DEFAULT_WINDOW, TFI_SEARCH, TRAINING_FREE
 
-from .common import MAX_THREADS
+from .common import MAX_THREADS, NPY_FILE
 
 #: The keys of recon.methods.RECON_METHODS (named here without importing torch, so refusals are quick).
 METHOD_CHOICES = (*TRAINING_FREE, *LEARNED)
@@ -68,7 +68,8 @@ def run(args) -> int:
     if args.weights is not None and args.method not in LEARNED:
         raise InputError(f"--weights applies to the learned methods ({', '.join(LEARNED)}), not {args.method!r}")
     check_outputs({"--out": args.out},
-                  {"--stream": args.stream, "--calibration": args.calibration, "--weights": args.weights})
+                  {"--stream": args.stream, "--calibration": args.calibration, "--weights": args.weights},
+                  {"--out": NPY_FILE})
     words, config = load_stream(args.stream, memory_map=True)     # stays on disk
     K, H, W = words.shape
     if args.window is not None and window > 2 * K - 1:      # (every window is cut to the stream's ends)

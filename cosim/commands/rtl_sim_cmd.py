@@ -4,7 +4,7 @@ import sys
 
 from tespike.cosim.backends import NAMES as BACKEND_NAMES
 
-from .common import add_config_argument
+from .common import NPZ_FILE, add_config_argument
 
 HELP = "simulate the Amaranth RTL pixel array on a per-clock electron stimulus E.npy"
 
@@ -33,20 +33,22 @@ def run(args) -> int:
     from tespike.golden.errors import InputError
     from tespike.golden.io import load_stimulus, save_stream, word_dtype
     from tespike.cosim.vcd import VCD_BYTES_PER_PIXEL_CLOCK
-    from tespike.cosim.room import is_stream, require_room
+    from tespike.cosim.room import require_room
+    from tespike.golden.paths import written_through
     from tespike.golden.paths import check_outputs
 
     gtkw = args.gtkw
     if args.vcd is not None:
         if args.backend != "amaranth":
             raise InputError(f"--vcd is only written by the amaranth backend, not {args.backend!r}")
-        if gtkw is None and not is_stream(args.vcd):     # (no /dev/null.gtkw beside a VCD sent to a device)
+        if gtkw is None and not written_through(args.vcd):     # (no /dev/null.gtkw beside a VCD sent to a device)
             gtkw = str(Path(args.vcd).with_suffix(".gtkw"))
     elif gtkw is not None:
         raise InputError("--gtkw needs --vcd (a save file describes a waveform)")
     # every output checked, and kept apart from the inputs, before anything is written
     check_outputs({"--out": args.out, "--vcd": args.vcd, "--gtkw": gtkw},
-                  {"--stimulus": args.stimulus, "--config": args.config})
+                  {"--stimulus": args.stimulus, "--config": args.config},
+                  {"--out": NPZ_FILE, "--vcd": (".vcd",), "--gtkw": (".gtkw",)})
     config = load_config(args.config)
     stimulus = load_stimulus(args.stimulus, config)
     T, H, W = stimulus.shape

@@ -38,7 +38,7 @@ def run(args) -> int:
     from tespike.golden.errors import InputError
     from tespike.golden.io import atomic_output
 
-    from .common import options_given
+    from .common import NPY_FILE, options_given
     from tespike.golden.paths import check_distinct, check_outputs
     from tespike.cosim.room import require_room
     from tespike.recon.scenes import SCENES, load_hdr_sequence, make_scene
@@ -71,7 +71,7 @@ def run(args) -> int:
             setattr(args, key, default)
     if not (math.isfinite(args.peak) and args.peak > 0):
         raise InputError(f"--peak {args.peak!r}: must be a finite number > 0")
-    check_outputs({"--out": args.out})
+    check_outputs({"--out": args.out}, formats={"--out": NPY_FILE})
     if args.folder:
         crop = None
         if args.crop:

@@ -1,6 +1,6 @@
 """``tespike simulate``: scene light I.npy -> readout stream S.npz, with photon shot noise."""
 
-from .common import MAX_WORKERS, add_light_arguments, check_workers_argument, light_front_end
+from .common import MAX_WORKERS, NPZ_FILE, add_light_arguments, check_workers_argument, light_front_end
 
 HELP = "simulate the sensor on a light scene I.npy (photon shot noise; fast, exact in distribution)"
 
@@ -32,7 +32,8 @@ def run(args) -> int:
         mode = "--method per-clock" if args.method == "per-clock" else "--no-noise"
         raise InputError(f"--workers {args.workers}: the fast simulator's stripes run in worker processes; "
                          f"{mode} runs in one (it would be ignored)")
-    check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config, "--noise": args.noise})
+    check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config, "--noise": args.noise},
+                  {"--out": NPZ_FILE})
     config = load_config(args.config)
     sensor = light_front_end(args)
     scene = load_scene(args.scene, memory_map=True)     # read one readout at a time

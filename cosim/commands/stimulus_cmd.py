@@ -18,7 +18,7 @@ K * L * H * W values, so the command refuses sizes above ``--max-bytes``;
 it is written one readout interval at a time into a memory-mapped file.
 """
 
-from .common import add_light_arguments, light_front_end
+from .common import NPY_FILE, add_light_arguments, light_front_end
 
 HELP = "turn a light scene I.npy into the per-clock electron stimulus E.npy of golden / rtl-sim"
 
@@ -49,7 +49,8 @@ def run(args) -> int:
     from tespike.cosim.room import require_room, reserved_memmap
 
     from tespike.golden.paths import check_outputs
-    check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config, "--noise": args.noise})
+    check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config, "--noise": args.noise},
+                  {"--out": NPY_FILE})
     config = load_config(args.config)
     sensor = light_front_end(args)
     scene = load_scene(args.scene, memory_map=True)

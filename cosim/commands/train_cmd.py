@@ -7,7 +7,7 @@ defaults from there when it is printed (importing torch then only).
 
 import argparse
 
-from .common import MAX_THREADS, add_config_argument, check_threads_argument
+from .common import MAX_THREADS, TORCH_FILE, add_config_argument, check_threads_argument
 
 HELP = "train a learned reconstruction method for one sensor configuration (resumable, CPU or GPU)"
 
@@ -146,7 +146,7 @@ def run(args) -> int:
               *(("a panorama of --panoramas", panorama) for folder in args.panoramas
                 for panorama in _frame_files(folder)),
               *(("a shipped panorama", panorama) for panorama in shipped)]
-    check_outputs({"--out": args.out}, inputs)
+    check_outputs({"--out": args.out}, inputs, {"--out": TORCH_FILE})
     run_folder = out.with_suffix(".run")
     check_output_dir(run_folder, "--out's run folder")
     check_distinct(inputs, {f"the run folder's {name}": run_folder / name for name in RUN_FILES})

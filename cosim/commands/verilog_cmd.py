@@ -21,7 +21,7 @@ def run(args) -> int:
 
     from .common import check_array_arguments
 
-    check_outputs({"--out": args.out}, {"--config": args.config})
+    check_outputs({"--out": args.out}, {"--config": args.config}, {"--out": (".v", ".sv")})
     config = load_config(args.config)
     check_array_arguments(config, args.height, args.width, args.lanes)   # before the slow conversion
     pixels = args.height * args.width
