@@ -172,8 +172,9 @@ def build(verilog_path: Path, top: str, simulator: str, cache_root: Path | None 
             failed = root / f"{key}.failed.log"
             shutil.copyfile(log, failed)
             shutil.rmtree(final, ignore_errors=True)
+            line = first_error_line(failed.read_text(errors="replace"))   # about the cache's copy: the user's file
             raise SimulatorBuildError(f"cocotb {simulator} build of {top} failed: "
-                                      f"{first_error_line(failed.read_text(errors='replace'))} "
+                                      f"{line.replace(str(source), str(verilog_path))} "
                                       f"(full log: {failed})") from None
         (final / "done").write_text(key + "\n")
     return final

@@ -165,3 +165,14 @@ def test_cocotb_command_refuses_a_stimulus_of_another_size(tmp_path):
     result = run_tespike("cocotb", "--config", "te", "--height", 2, "--width", 2, "--simulator", "icarus",
                          "--stimulus", tmp_path / "e.npy")
     assert_refused(result, "3, 3", "2 x 2")
+
+
+@needs("icarus")
+def test_a_verilog_file_that_does_not_build_is_named_as_given(tmp_path):
+    """The compiler's error line named the cache's copy of the file (``<cache>/cocotb/<key>/array.v``)."""
+    text = spec_model_verilog(SensorConfig.preset("te"), 2, 2).replace("endmodule", "endmodule oops", 1)
+    (tmp_path / "mine.v").write_text(text)
+    result = run_tespike("cocotb", "--config", "te", "--height", 2, "--width", 2, "--simulator", "icarus",
+                         "--verilog", tmp_path / "mine.v", env={"TESPIKE_CACHE": str(tmp_path / "cache")})
+    assert_refused(result, str(tmp_path / "mine.v"), "build")
+    assert "array.v" not in result.stderr.split("(full log")[0]
