@@ -350,7 +350,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
             save_images(out / f"R_{method}_{sensor}.npy", images)
         peak = float(light.max())
         truth = light[:rtl_readouts, y:y + crop, x:x + crop]
-        scored = scored_frames(rtl_readouts, window)
+        scored = scored_frames(rtl_readouts, window, evaluation.span)    # (the golden rows' rule)
         rtl_rows, rtl_images, golden_images = [], {}, {}
         middle = (scored.start + scored.stop - 1) // 2
         for method in methods:

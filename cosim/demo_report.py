@@ -36,10 +36,12 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
 
     import torch
 
+    from tespike.recon.evaluate import scored_frames
     from tespike.recon.mulaw import MU
     from tespike.recon.report import table_markdown
     y, x, size = crop
     te = rtl_config
+    golden_scored = scored_frames(frames, evaluation.window, evaluation.span)
     lines = ["# tespike demo report", "",
              f"Scene: the shipped CC0 panorama (Greg Zaal, HDRI Haven; `recon/data/README.md`), panned: "
              f"{frames} readout intervals of {height} x {width} pixels, brightest pixel = design light "
@@ -91,7 +93,7 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
                      f"{row['ms_per_frame']:.3f} |")
     lines += ["", "## Quality per method and sensor (golden full frame)", "",
               f"PSNR-μ / SSIM-μ (μ = {MU:g}, after division by the ground truth's peak), frames "
-              f"{evaluation.window // 2}..{frames - 1 - evaluation.window // 2} scored; run time per frame "
+              f"{golden_scored.start}..{golden_scored.stop - 1} scored; run time per frame "
               f"is the median of {evaluation.repeats} runs with {evaluation.threads} torch thread(s) (single "
               "runs vary several-fold on a shared machine). Methods: every one of the registry "
               f"(`recon/methods.py`): {', '.join(methods)}.", "",
