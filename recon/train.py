@@ -148,11 +148,11 @@ CHECKPOINT_KEYS = ("model", "optimizer", "scheduler", "step", "elapsed", "genera
 
 
 def _save_checkpoint(path: Path, model, optimizer, scheduler, step, elapsed, generator, options,
-                     best) -> None:
+                     best, init=None) -> None:
     payload = {"model": model.state_dict(), "optimizer": optimizer.state_dict(),
                "scheduler": scheduler.state_dict(), "step": step, "elapsed": elapsed,
                "generator": json_state(generator), "options": dataclasses.asdict(options),
-               "torch_rng": torch.get_rng_state(), "best": best}
+               "torch_rng": torch.get_rng_state(), "best": best, "init": init}
     write_torch_file(path, payload)
 
 
@@ -288,19 +288,21 @@ def validate(model: torch.nn.Module, cases, config: SensorConfig, device: str) -
         model.train(was_training)
 
 
-def warm_start(model: torch.nn.Module, path: str, method: str) -> list[str]:
-    """Copy into ``model`` every tensor of weights file ``path`` whose name and shape match; return the names.
+def warm_start(model: torch.nn.Module, path: str, method: str) -> tuple[list[str], SensorConfig]:
+    """Copy into ``model`` every tensor of weights file ``path`` whose name and shape match;
+    return the names and the configuration the file was trained for.
 
     A network whose head changed keeps what it learned elsewhere (features,
-    alignment, refinement) and trains its new parts from their initial values.
+    alignment, refinement) and trains its new parts from their initial values; one
+    trained for another sensor is a start too (the run says so, and records it).
     """
-    source, _, _ = load_weights(path, "--init", method)
+    source, trained_for, _ = load_weights(path, "--init", method)
     saved, own = source.state_dict(), model.state_dict()
     copied = [name for name, value in saved.items() if name in own and own[name].shape == value.shape]
     if not copied:
         raise InputError(f"--init {path!r}: no tensor matches the model's names and shapes")
     model.load_state_dict({**own, **{name: saved[name] for name in copied}})
-    return copied
+    return copied, trained_for
 
 
 def step_memory(options: TrainOptions) -> int:
@@ -386,7 +388,7 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
     model = options.model().to(options.device).to(memory_format=torch.channels_last)
     optimizer = torch.optim.Adam(model.parameters(), lr=options.lr, betas=(0.9, 0.999))
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, functools.partial(lr_factor, options))
-    step, elapsed_before, best, best_weights = 0, 0.0, None, None
+    step, elapsed_before, best, best_weights, init = 0, 0.0, None, None, None
     if resume:
         state, saved = read_checkpoint(checkpoint)
         kept = {"steps": options.steps, "minutes": options.minutes, "device": options.device,
@@ -404,6 +406,7 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
             optimizer.load_state_dict(state["optimizer"])
             scheduler.load_state_dict(state["scheduler"])
             step, elapsed_before, best = int(state["step"]), float(state["elapsed"]), state.get("best")
+            init = state.get("init")        # (what the warm start copied; absent from older checkpoints)
             generator.bit_generator.state = state["generator"]
             torch.set_rng_state(state["torch_rng"])
         except (RuntimeError, KeyError, TypeError, ValueError) as exc:
@@ -417,7 +420,12 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
             if stale.exists():          # a new run: nothing of an earlier one stays beside it
                 stale.unlink()
         if options.init is not None:
-            warm_start(model, options.init, options.method)
+            copied, trained_for = warm_start(model, options.init, options.method)
+            init = {"tensors_copied": len(copied), "tensors": len(model.state_dict()),
+                    "trained_for": trained_for.to_dict()}
+            if trained_for != config:
+                print(f"train: --init {options.init!r} was trained for {trained_for}, this run is for {config}: "
+                      f"{len(copied)} of its tensors (matching name and shape) start it", file=sys.stderr)
     show = sys.stderr.isatty() if progress is None else progress
     cases = None
     if options.validate_every:
@@ -425,6 +433,8 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
         cases = validation_set(config)
     meta = {"options": dataclasses.asdict(options), "recipe": options.data_recipe().to_dict(),
             "parameters": parameter_count(model), "command": command}
+    if init is not None:
+        meta["init"] = init
     start, first_step = time.monotonic(), step
 
     def elapsed() -> float:
@@ -449,7 +459,8 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
 
     def save_checkpoint() -> None:
         run_folder_kept()
-        _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options, best)
+        _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options, best,
+                         init)
         plot_curves(log_path, validation_path, curves_path, f"{options.method} {options.config}")
 
     validated = None
@@ -521,7 +532,8 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
     except BaseException as exc:
         if not isinstance(exc, Exception) and step > first_step and work.is_dir():     # interrupted: keep the steps
             with contextlib.suppress(Exception):
-                _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options, best)
+                _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options,
+                                 best, init)
                 exc.add_note(f"at step {step}: checkpoint {str(checkpoint)!r} saved (continue with --resume)")
         raise
     finally:

@@ -203,7 +203,8 @@ def test_init_warm_starts_every_matching_tensor(tmp_path):
     save_weights(tmp_path / "old.pt", old, SensorConfig.preset("te"), {}, "net")
     new = TESpikeNet(NetSizes())
     head_before = new.head.conv.weight.clone()
-    copied = warm_start(new, str(tmp_path / "old.pt"), "net")
+    copied, trained_for = warm_start(new, str(tmp_path / "old.pt"), "net")
+    assert trained_for == SensorConfig.preset("te")
     assert "encoder.embed.weight" in copied or any(name.startswith("encoder.") for name in copied)
     assert not any(name.startswith("head.") for name in copied)
     assert torch.equal(new.head.conv.weight, head_before)
@@ -213,10 +214,26 @@ def test_init_warm_starts_every_matching_tensor(tmp_path):
         warm_start(new, str(tmp_path / "old.pt"), "bsf")
     out = train(options(init=str(tmp_path / "old.pt")), tmp_path / "w.pt")
     assert load_weights(out)[2]["options"]["init"] == str(tmp_path / "old.pt")
+    # the record says what the warm start gave: tensors copied, and the sensor it was trained for
+    init = load_weights(out)[2]["init"]
+    assert init["tensors_copied"] == len(copied) < init["tensors"] and init["trained_for"]["mode"] == "te"
     # --resume continues a warm-started run without --init (its start is in the checkpoint) and records it
     out = train(options(steps=6), tmp_path / "w.pt", resume=True)
     meta = load_weights(out)[2]
-    assert meta["steps"] == 6 and meta["options"]["init"] == str(tmp_path / "old.pt")
+    assert meta["steps"] == 6 and meta["options"]["init"] == str(tmp_path / "old.pt") and meta["init"] == init
+
+
+def test_a_warm_start_from_another_sensor_says_so(tmp_path, capsys):
+    """--init weights trained for the TE camera start an ML run: allowed (a start is a start), said on
+    stderr and recorded; the same sensor's weights start one without a word."""
+    te = train(options(), tmp_path / "te.pt")
+    capsys.readouterr()
+    out = train(options(config="ml", init=str(te)), tmp_path / "ml.pt")
+    err = capsys.readouterr().err
+    assert "was trained for" in err and "te.pt" in err and "of its tensors" in err
+    assert load_weights(out)[2]["init"]["trained_for"]["mode"] == "te"
+    train(options(init=str(te)), tmp_path / "te2.pt")
+    assert "was trained for" not in capsys.readouterr().err
 
 
 def test_init_refusals(tmp_path):
