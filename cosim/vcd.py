@@ -8,7 +8,7 @@ sees), takes pixel clock t = 0 as the first edge with reset low, and collects
 ``frame`` wherever ``frame_valid`` is high. It must equal the stream the
 testbench captured live (the tests check this).
 
-Pitfalls handled (see AMARANTH-NOTES.md): the timescale is 1 fs, so time stamps
+Pitfalls handled (measured on Amaranth's VCD writer and vcdvcd): the timescale is 1 fs, so time stamps
 are large and vcdvcd's slice form ``sig[a:b]`` (which walks every integer time)
 is never used; several changes can share one time stamp (values are looked up
 with a binary search on the change times, taking the last change before the

@@ -76,12 +76,6 @@ class PixelArray(wiring.Component):
     def pixels(self) -> int:
         return self.height * self.width
 
-    def charge_slice(self, row: int, col: int):
-        """The bits of ``charge`` that carry pixel (row, col)."""
-        e = self.config.input_bits
-        i = row * self.width + col
-        return self.charge[i * e:(i + 1) * e]
-
     def word_slice(self, row: int, col: int):
         """The bits of ``frame`` that carry the word of pixel (row, col)."""
         wd = self.config.word_bits

@@ -264,7 +264,7 @@ def amaranth_stream_harness(config: SensorConfig, height: int, width: int, lanes
     ``held``, ``beat``, ``sending``) are asserted equal to that copy and counter, which makes
     the property inductive. ``rst`` is held low: the base case starts from the reset state.
     """
-    from amaranth.hdl import Assert, Assume, Cat, Const, Fragment, Module, ResetSignal, Signal
+    from amaranth.hdl import Assert, Assume, Cat, Const, Fragment, Module, Mux, ResetSignal, Signal
 
     if stream_factory is None:
         from tespike.rtl.stream import StreamingPixelArray as stream_factory
@@ -319,8 +319,8 @@ def amaranth_stream_harness(config: SensorConfig, height: int, width: int, lanes
         Assert(seen | ~pending, "no words before the first interval's"),
         Assert(seen | ~primed | (position <= L - 1), "timing position inside the interval"),
     ]
-    m.d.sync += since.eq(Mux_(since < L + 1, since + 1, since))
-    m.d.sync += age.eq(Mux_(age < 2 * L + 1, age + 1, age))
+    m.d.sync += since.eq(Mux(since < L + 1, since + 1, since))
+    m.d.sync += age.eq(Mux(age < 2 * L + 1, age + 1, age))
     with m.If(array.frame_valid):
         m.d.sync += [snap.eq(Cat(array.frame, Const(0, pad)) if pad else array.frame),
                      expect.eq(0), pending.eq(1), age.eq(2), since.eq(1), seen.eq(1)]
@@ -349,8 +349,3 @@ def _find_fragment(fragment, *ports: str):
     if found is None:
         raise ProofToolError(f"no block with ports {', '.join(ports)} inside the design")
     return found
-
-
-def Mux_(sel, a, b):
-    from amaranth.hdl import Mux
-    return Mux(sel, a, b)
