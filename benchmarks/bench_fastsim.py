@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -54,6 +53,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.usage import children_cpu  # noqa: E402
 from tespike.golden.config import SensorConfig  # noqa: E402
 from tespike.golden.decode import decode_spikes  # noqa: E402
 from tespike.golden.fastsim import SceneSimulator  # noqa: E402
@@ -188,7 +188,7 @@ def whole_process(name, path, crops=6, repeats=3, workers=(None,), baseline=None
             for mode in MODES:
                 for t in workers:
                     for tree, root in trees.items():
-                        cpu0 = _child_cpu()
+                        cpu0 = children_cpu()
                         t0 = time.perf_counter()
                         run = subprocess.run([sys.executable, "-m", "tespike", "simulate", "--config", mode,
                                               "--scene", str(Path(path).resolve()), "--out",
@@ -199,7 +199,7 @@ def whole_process(name, path, crops=6, repeats=3, workers=(None,), baseline=None
                         wall = time.perf_counter() - t0
                         if run.returncode:
                             raise SystemExit(run.stderr)
-                        times[tree, mode, t].append((wall, _child_cpu() - cpu0))
+                        times[tree, mode, t].append((wall, children_cpu() - cpu0))
     naive = {mode: naive_rate(SensorConfig.preset(mode), scene, crops, repeats=repeats) for mode in MODES}
     if baseline is None:
         return _report(name, scene, {key[1:]: value for key, value in times.items()}, naive, repeats, workers)
@@ -247,12 +247,6 @@ def _report(name, scene, times, naive_rates, repeats, workers):
               f"{msb['fast'] / count['fast']:.3f}, CPU {msb['cpu'] / count['cpu']:.3f} (target: within 1.10)",
               flush=True)
     return results
-
-
-def _child_cpu():
-    """User + system CPU seconds of the finished child processes of this process."""
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
 
 
 def plot(tables, out):

@@ -48,14 +48,10 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from benchmarks.usage import children_cpu  # noqa: E402
 from tespike.golden.config import SensorConfig  # noqa: E402
 from tespike.golden.reference import step_reference  # noqa: E402
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
-
-
-def children_cpu() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
 
 
 def _build_and_peak(build, args, kwargs) -> tuple[Path, float]:

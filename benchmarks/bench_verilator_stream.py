@@ -38,12 +38,8 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from benchmarks.usage import children_cpu  # noqa: E402
 from tespike.golden.config import SensorConfig  # noqa: E402
-
-
-def children_cpu() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
 
 
 def _build_and_peak(config, verilog, height, width, lanes, build_dir):

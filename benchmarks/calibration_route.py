@@ -29,7 +29,8 @@ from tespike.golden.config import SensorConfig  # noqa: E402
 from tespike.golden.fastsim import simulate_scene  # noqa: E402
 from tespike.golden.noise import Sensor, SensorNoise, load_noise  # noqa: E402
 from tespike.recon.calibration import correct  # noqa: E402
-from tespike.recon.evaluate import calibrate_sensor, scored_frames  # noqa: E402
+from tespike.recon.evaluate import calibrate_sensor, learned_span, scored_frames  # noqa: E402
+from tespike.recon.settings import DEFAULT_WINDOW  # noqa: E402
 from tespike.recon.learned import LEARNED  # noqa: E402
 from tespike.recon.methods import available_methods, reconstruct  # noqa: E402
 from tespike.recon.metrics import psnr_mu  # noqa: E402
@@ -67,7 +68,7 @@ def main() -> int:
     sequences = sequence_set("heldout", args.frames, args.height, args.width)[:args.sequences]
     for index, (name, light) in enumerate(sequences):
         light = np.asarray(light, np.float32)
-        frames = scored_frames(light.shape[0], 9, 61)
+        frames = scored_frames(light.shape[0], DEFAULT_WINDOW, learned_span(methods))
         clean = simulate(config, light, np.random.default_rng([index, 0]))
         noisy = simulate(config, light, np.random.default_rng([index, 1]), sensor)
         calibration = calibrate_sensor(simulate, config, sensor, light.shape[1:], np.random.default_rng([index, 2]))

@@ -42,12 +42,13 @@ from tespike.golden.decode import decode_spikes  # noqa: E402
 from tespike.golden.fastsim import simulate_scene  # noqa: E402
 from tespike.golden.noise import Sensor, SensorNoise, load_noise  # noqa: E402
 from tespike.recon.evaluate import CALIBRATION_READOUTS, calibrate_sensor, scored_frames  # noqa: E402
+from tespike.recon.settings import DEFAULT_WINDOW  # noqa: E402
 from tespike.recon.methods import reconstruct  # noqa: E402
 from tespike.recon.metrics import psnr_mu  # noqa: E402
 from tespike.recon.scenes.heldout import sequence_set  # noqa: E402
 
 TRIMS = (0.05, 0.10, 0.20)
-WINDOW = 9
+WINDOW = DEFAULT_WINDOW
 
 
 def simulate(config, light, rng, noise_sensor=None):

@@ -46,6 +46,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))                       # measure this checkout's code
 
+from benchmarks.hw_cost import ml_camera  # noqa: E402
 from tespike.cosim.energy import SKY130_HD, block_cells, block_energy  # noqa: E402
 from tespike.cosim.gate_activity import logic_check  # noqa: E402
 from tespike.cosim.synthesis import synthesize_hierarchy  # noqa: E402
@@ -64,22 +65,18 @@ MAX_BEATS = 240
 IMX636_PJ = 166e-3 / (400 * 250 * 40e3) * 1e12
 
 
-def _ml(b: int, bits: int, readout: str = "count") -> SensorConfig:
-    return SensorConfig(mode="ml", b1=b, b2=b, ml_bits=bits, ml_readout=readout)
-
-
 #: (group, {label: config}): the hw_cost.py groups, without the b = 8 one (L = 65280 clocks
 #: per readout: too long to count edge by edge here).
 GROUPS = [
     ("paper setting (b1 = b2 = 4, 8-bit ML)", {
-        "TE b1=b2=4": SensorConfig(mode="te", b1=4, b2=4), "ML count 8 bit": _ml(4, 8),
-        "ML msb 8 bit": _ml(4, 8, "msb"), "ML msb 9 bit (TE's range)": _ml(4, 9, "msb")}),
+        "TE b1=b2=4": SensorConfig(mode="te", b1=4, b2=4), "ML count 8 bit": ml_camera(4, 8),
+        "ML msb 8 bit": ml_camera(4, 8, "msb"), "ML msb 9 bit (TE's range)": ml_camera(4, 9, "msb")}),
     ("low range (b1 = b2 = 2, 4-bit ML)", {
-        "TE b1=b2=2": SensorConfig(mode="te", b1=2, b2=2), "ML count 4 bit": _ml(2, 4),
-        "ML msb 5 bit": _ml(2, 5, "msb")}),
+        "TE b1=b2=2": SensorConfig(mode="te", b1=2, b2=2), "ML count 4 bit": ml_camera(2, 4),
+        "ML msb 5 bit": ml_camera(2, 5, "msb")}),
     ("higher range (b1 = b2 = 6, 12-bit ML)", {
-        "TE b1=b2=6": SensorConfig(mode="te", b1=6, b2=6), "ML count 12 bit": _ml(6, 12),
-        "ML msb 13 bit": _ml(6, 13, "msb")}),
+        "TE b1=b2=6": SensorConfig(mode="te", b1=6, b2=6), "ML count 12 bit": ml_camera(6, 12),
+        "ML msb 13 bit": ml_camera(6, 13, "msb")}),
 ]
 
 #: Light levels of the table (1 = 42000 electrons per readout), and of the plot: every half

@@ -47,7 +47,8 @@ from tespike.golden.config import SensorConfig  # noqa: E402
 #: Pixels per array used to amortise the timing block.
 ARRAY_PIXELS = 128 * 128
 
-def _ml(b: int, bits: int, readout: str = "count") -> SensorConfig:
+def ml_camera(b: int, bits: int, readout: str = "count") -> SensorConfig:
+    """The ML camera with TE's clocks at b1 = b2 = b and a B-bit counter read out by ``readout``."""
     return SensorConfig(mode="ml", b1=b, b2=b, ml_bits=bits, ml_readout=readout)
 
 
@@ -58,13 +59,13 @@ def _ml(b: int, bits: int, readout: str = "count") -> SensorConfig:
 #: (its range is 2^(B-1): one bit less than the count's), when that is a legal ml_bits (<= 16).
 GROUPS = [
     ("paper setting (TE b1=b2=4, ML 8 bit)", SensorConfig(mode="te", b1=4, b2=4),
-     [_ml(4, 8), _ml(4, 8, "msb"), _ml(4, 9, "msb")]),
+     [ml_camera(4, 8), ml_camera(4, 8, "msb"), ml_camera(4, 9, "msb")]),
     ("low range (TE b1=b2=2, ML 4 bit)", SensorConfig(mode="te", b1=2, b2=2),
-     [_ml(2, 4), _ml(2, 4, "msb"), _ml(2, 5, "msb")]),
+     [ml_camera(2, 4), ml_camera(2, 4, "msb"), ml_camera(2, 5, "msb")]),
     ("higher range (TE b1=b2=6, ML 12 bit)", SensorConfig(mode="te", b1=6, b2=6),
-     [_ml(6, 12), _ml(6, 12, "msb"), _ml(6, 13, "msb")]),
+     [ml_camera(6, 12), ml_camera(6, 12, "msb"), ml_camera(6, 13, "msb")]),
     ("highest range (TE b1=b2=8, ML 16 bit)", SensorConfig(mode="te", b1=8, b2=8),
-     [_ml(8, 16), _ml(8, 16, "msb")]),
+     [ml_camera(8, 16), ml_camera(8, 16, "msb")]),
 ]
 
 

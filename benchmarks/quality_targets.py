@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from tespike.golden.fastsim import simulate_scene  # noqa: E402
 from tespike.recon.mulaw import tone_map  # noqa: E402
 from tespike.recon.evaluate import evaluate, label, scored_frames  # noqa: E402
+from tespike.recon.settings import DEFAULT_WINDOW  # noqa: E402
 from tespike.recon.report import table_markdown, write_outputs  # noqa: E402
 from tespike.recon.scenes.heldout import sequence_set  # noqa: E402
 
@@ -42,7 +43,7 @@ def breakdown(evaluation, sequences) -> list[str]:
              "| band | pixels | " + " | ".join(label(m, d) for m in evaluation.methods
                                                for d in evaluation.sensors) + " |",
              "| --- | ---: | " + " | ".join("---:" for _ in evaluation.methods for _ in evaluation.sensors) + " |"]
-    truths = {name: tone_map(light[scored_frames(len(light), evaluation.window)], float(light.max()))
+    truths = {name: tone_map(light[scored_frames(len(light), evaluation.window, evaluation.span)], float(light.max()))
               for name, light in sequences}
     for low, high in BANDS:
         cells, count = [], 0
@@ -50,7 +51,7 @@ def breakdown(evaluation, sequences) -> list[str]:
             for sensor in evaluation.sensors:
                 squared, n = 0.0, 0
                 for name, light in sequences:
-                    frames = scored_frames(len(light), evaluation.window)
+                    frames = scored_frames(len(light), evaluation.window, evaluation.span)
                     truth = truths[name]
                     pred = tone_map(evaluation.images[name, sensor, method][frames], float(light.max()))
                     mask = (truth >= low) & (truth < high)
@@ -122,7 +123,7 @@ def main(argv=None) -> int:
     parser.add_argument("--frames", type=int, default=48)
     parser.add_argument("--height", type=int, default=128)
     parser.add_argument("--width", type=int, default=160)
-    parser.add_argument("--window", type=int, default=9)
+    parser.add_argument("--window", type=int, default=DEFAULT_WINDOW)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default="out/quality_targets")
     args = parser.parse_args(argv)
