@@ -11,7 +11,7 @@ Stages (each timed, each written, each with the individual command that redoes i
 3. RTL: the TE pixel array (Amaranth by default, pixels inlined, no build) on a
    crop of those electrons (``E_crop.npy``), with a VCD and a GTKWave save file
    opening on one readout interval; the stream is rebuilt from the VCD with
-   vcdvcd (:func:`tespike.cosim.vcd.waveform_stream`) and compared with the golden
+   vcdvcd (:func:`tespike.cosim.vcd.waveform_words`) and compared with the golden
    stream of the same pixels and readouts: "bit-identical", or the first
    differing readout, pixel and both words (``verdict.txt``, exit 1);
 4. reconstruction: every method of :data:`tespike.recon.methods.RECON_METHODS` with weights for the sensors on every
@@ -308,11 +308,11 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         rtl_info = {"backend": backend, "vcd": None}
         if backend == "amaranth":
             from tespike.cosim.rtlsim import rtl_run
-            from tespike.cosim.vcd import waveform_stream
+            from tespike.cosim.vcd import waveform_words
             run = rtl_run(te, crop_stimulus, vcd_path=out / "W.vcd", gtkw_path=out / "W.gtkw", flat=True,
                           progress=bars)
             read_started = time.perf_counter()
-            wave = waveform_stream(out / "W.vcd", te, (crop, crop))
+            wave = waveform_words(out / "W.vcd", te, (crop, crop))
             rtl_info.update(vcd="W.vcd", gtkw="W.gtkw", latency=run.latency, cycles=run.cycles,
                             sim_seconds=run.seconds, read_seconds=time.perf_counter() - read_started,
                             live_equals_vcd=bool(np.array_equal(run.words, wave.words)),

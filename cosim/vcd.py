@@ -1,6 +1,6 @@
 """Waveforms of the RTL co-simulation: read a VCD back, write a GTKWave save file.
 
-:func:`waveform_stream` rebuilds the readout stream from the VCD *alone*: it
+:func:`waveform_words` rebuilds the readout stream from the VCD *alone*: it
 finds the rising edges of the clock in the waveform, samples reset,
 ``frame_valid`` and ``frame`` at each edge (the last value written strictly
 before the edge's time stamp, which is what a register latching on that edge
@@ -42,7 +42,7 @@ ARRAY_SCOPE = f"{BENCH_SCOPE}.{benchbus.ARRAY_SCOPE}"
 
 @dataclasses.dataclass
 class Waveform:
-    """What :func:`waveform_stream` read: words and the pixel clock of each ``frame_valid``."""
+    """What :func:`waveform_words` read: words and the pixel clock of each ``frame_valid``."""
 
     words: np.ndarray       # (K, H, W) int64
     clocks: np.ndarray      # (K,) pixel clock t (edge index after reset) of each frame
@@ -107,7 +107,7 @@ def rising_edges(signal) -> np.ndarray:
     return np.asarray(edges, np.int64)
 
 
-def waveform_stream(vcd_path, config: SensorConfig, shape: tuple[int, int]) -> Waveform:
+def waveform_words(vcd_path, config: SensorConfig, shape: tuple[int, int]) -> Waveform:
     """Rebuild the readout stream of an ``rtl_words(..., vcd_path=...)`` run from its VCD."""
     H, W = shape
     names = {key: f"{BENCH_SCOPE}.tb_{key}" for key in ("clk", "rst", "frame_valid", "frame")}

@@ -165,7 +165,7 @@ def check_methods(methods: Sequence[str]) -> tuple[str, ...]:
     if not methods:
         raise InputError("no reconstruction method to evaluate")
     twice = next((method for i, method in enumerate(methods) if method in methods[:i]), None)
-    if twice is not None:           # (two rows of one method, their timings averaged into both)
+    if twice is not None:           # (two rows of one method, their run times averaged into both)
         raise InputError(f"reconstruction method {twice!r} is given twice: give each method once")
     return methods
 
@@ -211,7 +211,7 @@ class Evaluation:
     sensors: tuple[str, ...]
     window: int
     strips: dict[str, dict] = dataclasses.field(default_factory=dict)
-    #: timing: median of this many runs, with this many torch threads
+    #: run time: median of this many runs, with this many torch threads
     repeats: int = 1
     threads: int = 1
     #: with ``keep=True``: (sequence, sensor) -> words and (sequence, sensor, method) -> images

@@ -98,7 +98,7 @@ def table_rows(evaluation: Evaluation) -> list[list[str]]:
     return rows
 
 
-def timing_label(evaluation: Evaluation) -> str:
+def run_time_label(evaluation: Evaluation) -> str:
     """Run-time column title: median of how many runs, with how many torch threads."""
     return (f"ms / frame ↓ (median of {evaluation.repeats}, {evaluation.threads} "
             f"thread{'s' if evaluation.threads != 1 else ''})")
@@ -116,7 +116,7 @@ def table_markdown(evaluation: Evaluation) -> str:
     header, align = [], []
     for sensor in table_layout(evaluation)[0]:
         header += [f"{name(sensor)} reconstruction", *(HEADERS[k] for k in evaluation.metrics),
-                   timing_label(evaluation)]
+                   run_time_label(evaluation)]
         align += [":---"] + ["---:"] * (len(evaluation.metrics) + 1)
     if evaluation.complexity:
         header += complexity_header()

@@ -82,14 +82,14 @@ def assert_rtl_matches_golden(config: SensorConfig, stimulus: np.ndarray, name: 
     its path is part of the failure message.
     """
     from tespike.cosim.rtlsim import rtl_run
-    from tespike.cosim.vcd import waveform_stream
+    from tespike.cosim.vcd import waveform_words
 
     expected = golden_words(config, stimulus)
     vcd = vcd_path_for(name) if vcd_wanted() else None
     run = rtl_run(config, stimulus, vcd_path=vcd, gtkw_path=vcd and vcd.with_suffix(".gtkw"), **kwargs)
     if np.array_equal(run.words, expected):
         if vcd is not None:
-            wave = waveform_stream(vcd, config, stimulus.shape[1:])
+            wave = waveform_words(vcd, config, stimulus.shape[1:])
             assert np.array_equal(wave.words, run.words) and np.array_equal(wave.clocks, run.clocks), \
                 f"stream read back from {vcd} differs from the live stream"
             vcd.unlink()

@@ -82,14 +82,14 @@ def test_demo_reports_the_first_difference(tmp_path, capsys, monkeypatch):
     """A wrong word rebuilt from the waveform: exit 1, the verdict names readout, pixel and words."""
     import tespike.cosim.vcd
     from tespike import cosim
-    real = cosim.vcd.waveform_stream
+    real = cosim.vcd.waveform_words
 
     def broken(*args, **kwargs):
         wave = real(*args, **kwargs)
         wave.words[1, 2, 3] ^= 1
         return wave
 
-    monkeypatch.setattr(cosim.vcd, "waveform_stream", broken)
+    monkeypatch.setattr(cosim.vcd, "waveform_words", broken)
     code, out, err = run_here(capsys, "demo", *SMALL, "--sensors", "te", "--no-hw-cost", "--quiet",
                               "--out", tmp_path / "d")
     assert code == 1

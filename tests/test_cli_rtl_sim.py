@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tespike.cosim.cli import main
-from tespike.cosim.vcd import waveform_stream
+from tespike.cosim.vcd import waveform_words
 from tespike.golden.config import SensorConfig
 from tests.cli import assert_refused, run_tespike
 from tests.cosim_helpers import golden_words, threshold_stimulus
@@ -62,7 +62,7 @@ def test_rtl_sim_ml_msb_preset_with_vcd(tmp_path, rng):
         words = npz["words"]
         assert json.loads(str(npz["config"]))["ml_readout"] == "msb"
     assert np.array_equal(words, golden_words(config, stim)) and words.max() <= config.ml_bits
-    assert np.array_equal(waveform_stream(tmp_path / "w.vcd", config, (1, 2)).words, words)
+    assert np.array_equal(waveform_words(tmp_path / "w.vcd", config, (1, 2)).words, words)
 
 
 def test_rtl_sim_vcd_and_gtkw(tmp_path, rng):
@@ -72,7 +72,7 @@ def test_rtl_sim_vcd_and_gtkw(tmp_path, rng):
     assert result.returncode == 0, result.stderr
     with np.load(tmp_path / "s.npz") as npz:
         words = npz["words"]
-    assert np.array_equal(waveform_stream(tmp_path / "w.vcd", config, (1, 2)).words, words)
+    assert np.array_equal(waveform_words(tmp_path / "w.vcd", config, (1, 2)).words, words)
     assert "bench.top.array.px_0_0.acc" in (tmp_path / "w.gtkw").read_text()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.json", "e.npy", "s.npz", "w.gtkw", "w.vcd"]
 

@@ -6,7 +6,7 @@ import pytest
 from tespike.cosim.benchbus import CLOCK_PERIOD_FS
 from tespike.cosim.outside import RESET_CLOCKS
 from tespike.cosim.rtlsim import RTLProtocolError, rtl_run
-from tespike.cosim.vcd import rising_edges, waveform_stream, write_gtkw
+from tespike.cosim.vcd import rising_edges, waveform_words, write_gtkw
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tests.cosim_helpers import golden_words, threshold_stimulus
@@ -24,7 +24,7 @@ def test_vcd_round_trip_gives_the_live_stream(config, rng, tmp_path):
     vcd, gtkw = tmp_path / "w.vcd", tmp_path / "w.gtkw"
     run = rtl_run(config, stim, vcd_path=vcd, gtkw_path=gtkw)
     assert np.array_equal(run.words, golden_words(config, stim))
-    wave = waveform_stream(vcd, config, (2, 3))
+    wave = waveform_words(vcd, config, (2, 3))
     assert np.array_equal(wave.words, run.words)
     assert np.array_equal(wave.clocks, run.clocks)      # sampled at the same edges, not one late
     assert wave.edges >= stim.shape[0]
@@ -104,7 +104,7 @@ def test_reader_samples_the_last_value_before_each_edge(tmp_path):
     # edge 0: reset still high; then t = 0.. with (valid, frame) before each edge
     pairs = [(1, 9), (0, 3), (1, 6), (1, 5), (0, 0), (1, 12)]
     _hand_vcd(tmp_path / "h.vcd", pairs)
-    wave = waveform_stream(tmp_path / "h.vcd", config, (1, 2))
+    wave = waveform_words(tmp_path / "h.vcd", config, (1, 2))
     # edge 0 had reset high (sampled before the edge), so t = 0 is edge 1
     assert list(wave.clocks) == [1, 2, 4]
     assert wave.words.tolist() == [[[2, 1]], [[1, 1]], [[0, 3]]]        # 6, 5, 12 as two 2-bit words
@@ -121,16 +121,16 @@ def test_reader_refuses_a_foreign_vcd(tmp_path):
     with open(tmp_path / "f.vcd", "w") as handle, VCDWriter(handle, timescale="1 ns") as writer:
         writer.register_var("top", "clk", "wire", size=1, init=0)
     with pytest.raises(InputError, match="tb_"):
-        waveform_stream(tmp_path / "f.vcd", SensorConfig(), (1, 1))
+        waveform_words(tmp_path / "f.vcd", SensorConfig(), (1, 1))
     with pytest.raises(InputError, match="does not exist"):
-        waveform_stream(tmp_path / "missing.vcd", SensorConfig(), (1, 1))
+        waveform_words(tmp_path / "missing.vcd", SensorConfig(), (1, 1))
 
 
 def test_reader_refuses_a_wrong_shape(rng, tmp_path):
     config = SensorConfig(b1=2, b2=2, threshold=20)
     rtl_run(config, threshold_stimulus(config, rng, 1, 2, 2), vcd_path=tmp_path / "w.vcd")
     with pytest.raises(InputError, match="frame is 12 bits"):
-        waveform_stream(tmp_path / "w.vcd", config, (1, 2))
+        waveform_words(tmp_path / "w.vcd", config, (1, 2))
 
 
 def test_reset_is_held_before_clock_zero(rng, tmp_path):
@@ -150,7 +150,7 @@ def test_gtkw_of_the_flat_array_shows_pixel_00(rng, tmp_path):
     config = SensorConfig(b1=2, b2=2, threshold=20)
     stim = threshold_stimulus(config, rng, 2, 2, 2)
     run = rtl_run(config, stim, vcd_path=tmp_path / "w.vcd", gtkw_path=tmp_path / "w.gtkw", flat=True)
-    assert np.array_equal(waveform_stream(tmp_path / "w.vcd", config, (2, 2)).words, run.words)
+    assert np.array_equal(waveform_words(tmp_path / "w.vcd", config, (2, 2)).words, run.words)
     text = (tmp_path / "w.gtkw").read_text()
     for name in ("px_0_0_acc", "px_0_0_sfc", "px_0_0_ovf", "px_0_0_m[", "px_0_0_word"):
         assert f"bench.top.array.{name}" in text, name

@@ -17,7 +17,7 @@ TABLE_METHODS = ("tfi", "tfp", "spk2imgnet", "bsf", "mambaspike1", "mambaspike",
 #: evaluation takes minutes on 2 cores (each learned baseline adds about 40 CPU seconds per
 #: sequence and sensor at 24 x 96 x 128: --methods or --table name them).
 DEFAULT_METHODS = ("tfp", "tfi", "net")
-#: Defaults of the built-in sequences' size and of the timing: (frames, height, width, repeats);
+#: Defaults of the built-in sequences' size and of the run-time measurement: (frames, height, width, repeats);
 #: --table's are cut to its time budget (docs/evaluation.md).
 DEFAULTS = (24, 96, 128, 1)
 TABLE_DEFAULTS = (70, 64, 96, 1)      # 70 frames: 10 scored where the learned methods' 61 readouts fit
@@ -38,7 +38,7 @@ HELP = ("simulate sequences with the paper's TE and ML (msb readout) sensors and
 
 
 #: What ``--store`` takes besides itself: the store's streams are scored as they are, so every
-#: other option (picking, simulating or timing sequences, your own weights) is refused away from
+#: other option (picking or simulating sequences, the run-time repeats, your own weights) is refused away from
 #: its default (:func:`check_store_options`).
 STORE_OPTIONS = ("store", "workers", "scheduler", "methods", "window", "device", "out", "force")
 
