@@ -64,8 +64,8 @@ from tespike.recon.pictures import save_figure  # noqa: E402
 
 LEVELS = np.logspace(-4, 1, 16)
 
-#: The cameras timed: config preset -> label.
-MODES = {"te": "TE", "ml": "ML", "ml-msb": "ML-MSB"}
+#: The cameras timed: configuration preset -> label.
+CAMERAS = {"te": "TE", "ml": "ML", "ml-msb": "ML-MSB"}
 
 
 def _histogram(words, config):
@@ -182,15 +182,15 @@ def whole_process(name, path, crops=6, repeats=3, workers=(None,), baseline=None
     scene = np.load(path, mmap_mode="r")
     K, H, W = scene.shape
     trees = {"": ROOT} if baseline is None else {"": ROOT, "baseline": Path(baseline).resolve()}
-    times = {(tree, mode, t): [] for tree in trees for mode in MODES for t in workers}
+    times = {(tree, preset, t): [] for tree in trees for preset in CAMERAS for t in workers}
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(repeats):
-            for mode in MODES:
+            for preset in CAMERAS:
                 for t in workers:
                     for tree, root in trees.items():
                         cpu0 = children_cpu()
                         t0 = time.perf_counter()
-                        run = subprocess.run([sys.executable, "-m", "tespike", "simulate", "--config", mode,
+                        run = subprocess.run([sys.executable, "-m", "tespike", "simulate", "--config", preset,
                                               "--scene", str(Path(path).resolve()), "--out",
                                               str(Path(tmp) / "S.npz"), "--seed", "1",
                                               *(() if t is None else ("--workers", str(t)))],
@@ -199,16 +199,16 @@ def whole_process(name, path, crops=6, repeats=3, workers=(None,), baseline=None
                         wall = time.perf_counter() - t0
                         if run.returncode:
                             raise SystemExit(run.stderr)
-                        times[tree, mode, t].append((wall, children_cpu() - cpu0))
-    naive = {mode: naive_rate(SensorConfig.preset(mode), scene, crops, repeats=repeats) for mode in MODES}
+                        times[tree, preset, t].append((wall, children_cpu() - cpu0))
+    naive = {preset: naive_rate(SensorConfig.preset(preset), scene, crops, repeats=repeats) for preset in CAMERAS}
     if baseline is None:
         return _report(name, scene, {key[1:]: value for key, value in times.items()}, naive, repeats, workers)
-    for mode in MODES:
+    for preset in CAMERAS:
         for t in workers:
-            new, old = (min(wall for wall, _ in times[tree, mode, t]) for tree in trees)
-            cpu_new, cpu_old = (min(cpu for _, cpu in times[tree, mode, t]) for tree in trees)
+            new, old = (min(wall for wall, _ in times[tree, preset, t]) for tree in trees)
+            cpu_new, cpu_old = (min(cpu for _, cpu in times[tree, preset, t]) for tree in trees)
             tag = "" if t is None else f" --workers {t}"
-            print(f"{name} {MODES[mode]}{tag}: baseline {old:.2f} s (CPU {cpu_old:.2f} s), this tree "
+            print(f"{name} {CAMERAS[preset]}{tag}: baseline {old:.2f} s (CPU {cpu_old:.2f} s), this tree "
                   f"{new:.2f} s (CPU {cpu_new:.2f} s): wall {old / new:.2f}x, CPU {cpu_old / cpu_new:.2f}x "
                   f"(best of {repeats}, interleaved)", flush=True)
     print(f"{name}: the baseline ({baseline}) against the naive loop:", flush=True)
@@ -220,25 +220,25 @@ def whole_process(name, path, crops=6, repeats=3, workers=(None,), baseline=None
 
 
 def _report(name, scene, times, naive_rates, repeats, workers):
-    """Print each camera's whole-process ratio against the naive loop's rate ``naive_rates[mode]``."""
+    """Print each camera's whole-process ratio against the naive loop's rate ``naive_rates[preset]``."""
     K, H, W = scene.shape
     results = {}
-    for mode in MODES:
-        naive = naive_rates[mode]
+    for preset in CAMERAS:
+        naive = naive_rates[preset]
         for t in workers:
-            fast = min(wall for wall, _ in times[mode, t])
-            cpu = min(cpu for _, cpu in times[mode, t])
-            results[mode, t] = dict(fast=fast, cpu=cpu, rate=scene.size / fast, naive_rate=naive,
+            fast = min(wall for wall, _ in times[preset, t])
+            cpu = min(cpu for _, cpu in times[preset, t])
+            results[preset, t] = dict(fast=fast, cpu=cpu, rate=scene.size / fast, naive_rate=naive,
                                     ratio=scene.size / fast / naive)
             tag = "" if t is None else f" --workers {t}"
-            print(f"{name} {MODES[mode]}{tag}: tespike simulate on {K} x {H} x {W} (readouts x rows x cols): "
+            print(f"{name} {CAMERAS[preset]}{tag}: tespike simulate on {K} x {H} x {W} (readouts x rows x cols): "
                   f"{fast:.1f} s = {scene.size / fast:.3g} pixel-readouts/s (best of {repeats}; CPU {cpu:.1f} s); "
                   f"naive loop {naive:.3g} pixel-readouts/s (random 2 x 32 x 48 crops, best of {repeats}) -> "
                   f"{scene.size / naive:.0f} s scaled; speed ratio {scene.size / fast / naive:.1f}x", flush=True)
-        first = results[mode, workers[0]]
+        first = results[preset, workers[0]]
         for t in workers[1:]:
-            other = results[mode, t]
-            print(f"{name} {MODES[mode]}: --workers {workers[0]} / --workers {t} in this run: wall "
+            other = results[preset, t]
+            print(f"{name} {CAMERAS[preset]}: --workers {workers[0]} / --workers {t} in this run: wall "
                   f"{first['fast'] / other['fast']:.2f}x, CPU {first['cpu'] / other['cpu']:.2f}x", flush=True)
     for t in workers:
         msb, count = results["ml-msb", t], results["ml", t]
@@ -254,9 +254,9 @@ def plot(tables, out):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
-    for mode, rows in tables.items():
+    for preset, rows in tables.items():
         levels = [r["level"] for r in rows]
-        tag = MODES[mode]
+        tag = CAMERAS[preset]
         axes[0].errorbar(levels, [r["bias"] for r in rows], yerr=[2 * r["se"] for r in rows],
                          marker="o", capsize=3, label=f"{tag} fast - naive (2 se)")
         axes[1].plot(levels, [r["tvd"] for r in rows], "o-", label=f"{tag} fast vs naive")
@@ -314,10 +314,10 @@ def main(argv=None):
     png_path(args, "fastsim.png", "--out")
     if not args.skip_levels:
         tables = {}
-        for mode in MODES:
-            config = SensorConfig.preset(mode)
-            tables[mode] = error_table(config, args.pixels, args.readouts)
-            print_table(config, tables[mode], MODES[mode])
+        for preset in CAMERAS:
+            config = SensorConfig.preset(preset)
+            tables[preset] = error_table(config, args.pixels, args.readouts)
+            print_table(config, tables[preset], CAMERAS[preset])
         plot(tables, args.out)
     if not args.skip_whole:
         print(f"\nwhole process (load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")

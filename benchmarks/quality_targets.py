@@ -80,7 +80,7 @@ def midpoint_light(words: np.ndarray, config) -> np.ndarray:
 
 
 def flat_light_sweep(window: int, seed: int) -> list[str]:
-    """Constant light, no motion: bias and RMS tone-mapped error of every method and mode."""
+    """Constant light, no motion: bias and RMS tone-mapped error of every method and camera."""
     import torch
 
     from tespike.golden.config import SensorConfig
@@ -97,14 +97,14 @@ def flat_light_sweep(window: int, seed: int) -> list[str]:
         light = np.full((40, 32, 32), level, np.float32)
         truth = tone_map(light[half:-half], 1.0)
         cells = {}
-        for mode in ("ml-msb", "ml", "te"):
-            config = SensorConfig.preset(mode)
+        for preset in ("ml-msb", "ml", "te"):
+            config = SensorConfig.preset(preset)
             words = simulate_scene(config, light, seed=seed)
             for method in ("tfp", "tfi"):
-                cells[method, mode] = reconstruct(words, config, method, window=window)[half:-half]
-            if mode == "te":
+                cells[method, preset] = reconstruct(words, config, method, window=window)[half:-half]
+            if preset == "te":
                 flat = torch.from_numpy(midpoint_light(words, config).reshape(40, -1))
-                cells["mid", mode] = tfp(flat, half).numpy().reshape(light.shape)[half:-half]
+                cells["mid", preset] = tfp(flat, half).numpy().reshape(light.shape)[half:-half]
 
         def fmt(images):
             bias = images.mean() / level - 1
