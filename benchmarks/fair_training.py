@@ -45,6 +45,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+
+from tespike.recon.learned import WEIGHTS_DIR, weights_name  # noqa: E402
+
 #: The one recipe of every run (``tespike train`` flags).
 RECIPE = ("--loss", "mu-l1", "--halve-every", "20", "--threads", "1", "--workers", "1", "--pool", "32",
           "--refresh", "12", "--noise-fraction", "0.5", "--seed", "0")
@@ -53,26 +56,22 @@ FAIR = [("net", "te"), ("net", "ml-msb"), ("net", "ml"),
         ("mambaspike", "te"), ("mambaspike", "ml-msb"), ("mambaspike1", "ml-msb")]
 
 
-def weights_file(method: str, camera: str) -> str:
-    return f"{camera}.pt" if method == "net" else f"{method}-{camera}.pt"
-
-
 def jobs(groups: list[str], lr: float, continue_lr: float) -> list[tuple[str, list[str]]]:
     """(run name, ``tespike train`` arguments without --out/--minutes/--device) of each group."""
     out = []
     if "fair" in groups:
         out += [(f"fair-{m}-{c}", ["--config", c, "--method", m, "--lr", str(lr)]) for m, c in FAIR]
     if "continue" in groups:
-        shipped = ROOT / "recon" / "weights"
+        shipped = WEIGHTS_DIR
         out += [(f"continue-net-{c}", ["--config", c, "--method", "net", "--lr", str(continue_lr),
-                                       "--init", str(shipped / weights_file("net", c))])
+                                       "--init", str(shipped / weights_name("net", c))])
                 for c in ("te", "ml-msb", "ml")]
     if "continue-baselines" in groups:
-        shipped = ROOT / "recon" / "weights"
+        shipped = WEIGHTS_DIR
         # mambaspike (msb: 3 parsings) and mambaspike1 both start from the shipped one-branch file
         source = {("mambaspike1", "ml-msb"): ("mambaspike", "ml-msb")}
         out += [(f"continue-{m}-{c}", ["--config", c, "--method", m, "--lr", str(continue_lr),
-                                       "--init", str(shipped / weights_file(*source.get((m, c), (m, c))))])
+                                       "--init", str(shipped / weights_name(*source.get((m, c), (m, c))))])
                 for m, c in FAIR if m != "net"]
     if "ablation" in groups:
         out += [(f"ablation-{case}", ["--config", "te", "--ablation", str(case), "--lr", str(lr)])

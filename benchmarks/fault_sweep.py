@@ -231,6 +231,7 @@ def tespike(cwd: Path, *argv) -> None:
 def make_inputs(base: Path) -> None:
     """One small valid input of every kind under ``base/valid``."""
     from tespike.golden.config import load_config
+    from tespike.recon.learned import WEIGHTS_DIR, weights_name
     from tespike.recon.scenes.hdr_io import write_exr, write_hdr
 
     v = base / "valid"
@@ -249,7 +250,7 @@ def make_inputs(base: Path) -> None:
                 "--noise", "noise.json", "--sensor-seed", 3, "-q")
     tespike(v, "calibrate", "--dark", "dark.npz", "--flat", "flat.npz", "--flat-light", 0.03, "--out", "C.npz",
             "--quiet")
-    shutil.copy(ROOT / "recon" / "weights" / "te.pt", v / "W.pt")
+    shutil.copy(WEIGHTS_DIR / weights_name("net", "te"), v / "W.pt")
     tespike(v, "train", "--config", "te", "--steps", 2, "--batch", 1, "--crop", 32, "--workers", 0,
             "--pool", 4, "--validate-every", 1000, "--out", "T.pt", "-q")    # (a small pool: a resume fits TIMEOUT)
     rng = np.random.default_rng(0)
