@@ -26,7 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from tespike.golden.config import SensorConfig  # noqa: E402
-from tespike.golden.fastsim import simulate_scene  # noqa: E402
+from tespike.golden.fastsim import simulate_sequence as simulate  # noqa: E402
 from tespike.golden.noise import Sensor, SensorNoise, load_noise  # noqa: E402
 from tespike.recon.calibration import correct  # noqa: E402
 from tespike.recon.evaluate import calibrate_sensor, learned_span, scored_frames  # noqa: E402
@@ -35,10 +35,6 @@ from tespike.recon.learned import LEARNED  # noqa: E402
 from tespike.recon.methods import available_methods, reconstruct  # noqa: E402
 from tespike.recon.metrics import psnr_mu  # noqa: E402
 from tespike.recon.scenes.heldout import sequence_set  # noqa: E402
-
-
-def simulate(config, light, rng, noise_sensor=None):
-    return simulate_scene(config, light, seed=rng, sensor=noise_sensor)
 
 
 def main() -> int:

@@ -39,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
 from tespike.golden.decode import decode_spikes  # noqa: E402
-from tespike.golden.fastsim import simulate_scene  # noqa: E402
+from tespike.golden.fastsim import simulate_sequence as simulate  # noqa: E402
 from tespike.golden.noise import Sensor, SensorNoise, load_noise  # noqa: E402
 from tespike.recon.evaluate import CALIBRATION_READOUTS, calibrate_sensor, scored_frames  # noqa: E402
 from tespike.recon.settings import DEFAULT_WINDOW  # noqa: E402
@@ -49,10 +49,6 @@ from tespike.recon.scenes.heldout import sequence_set  # noqa: E402
 
 TRIMS = (0.05, 0.10, 0.20)
 WINDOW = DEFAULT_WINDOW
-
-
-def simulate(config, light, rng, noise_sensor=None):
-    return simulate_scene(config, light, seed=rng, sensor=noise_sensor)
 
 
 def dark_maps(dark_spikes: np.ndarray, calibration, sensor: Sensor, config: SensorConfig) -> dict:

@@ -24,7 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from benchmarks.plotfile import add_png_arguments, write_plot  # noqa: E402
-from tespike.golden.fastsim import simulate_scene  # noqa: E402
+from tespike.golden.fastsim import simulate_sequence as simulate  # noqa: E402
 from tespike.golden.noise import Sensor, SensorNoise, load_noise  # noqa: E402
 from tespike.recon.evaluate import CALIBRATED, METHOD_NAMES, default_noise_sensors, evaluate, paper_configs  # noqa: E402
 from tespike.recon.methods import available_methods  # noqa: E402
@@ -32,10 +32,6 @@ from tespike.recon.report import noise_markdown  # noqa: E402
 from tespike.recon.scenes.heldout import sequence_set  # noqa: E402
 
 NAME = "noise_tables.png"
-
-
-def simulate(config, light, rng, noise_sensor=None):
-    return simulate_scene(config, light, seed=rng, sensor=noise_sensor)
 
 
 def main() -> int:

@@ -176,7 +176,7 @@ def run(args) -> int:
     from tespike.cosim.console import progress_wanted
     from tespike.golden.config import load_config
     from tespike.golden.errors import ConfigError, InputError
-    from tespike.golden.fastsim import simulate_scene
+    from tespike.golden.fastsim import simulate_sequence
     from tespike.golden.io import load_scene
     from tespike.golden.paths import check_results_dir
 
@@ -286,11 +286,8 @@ def run(args) -> int:
         import torch
         torch.set_num_threads(threads)
 
-    def simulate(config, light, rng, noise_sensor=None):
-        return simulate_scene(config, light, seed=rng, sensor=noise_sensor)
-
     progress = progress_wanted(args) or ("lines" if args.progress == "auto" and not args.quiet else False)
-    evaluation = evaluate(sequences, simulate, methods=list(DEFAULT_METHODS) if methods is None else methods,
+    evaluation = evaluate(sequences, simulate_sequence, methods=list(DEFAULT_METHODS) if methods is None else methods,
                           sensors=tuple(configs), configs=configs, window=window, seed=args.seed,
                           device=args.device, progress=progress, repeats=repeats, metrics=metrics,
                           vdp_frames=vdp_frames, missing="note" if args.table or methods is None else None,

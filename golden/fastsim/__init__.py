@@ -36,12 +36,13 @@ stimulus of :func:`tespike.golden.light.deterministic_clock_electrons`.
 """
 
 from .codes import SIMULATION_PATHS
-from .scene import iter_scene_stimulus, scene_stimulus, simulate_scene, stripe_simulators
+from .scene import iter_scene_stimulus, scene_stimulus, simulate_scene, simulate_sequence, stripe_simulators
 from .simulator import CHECKS, SIMULATION_METHODS, SceneSimulator
 from .stripes import MAX_STRIPES, STRIPE_PIXELS, STRIPE_ROWS, spawn_generators, stripe_slices, worker_count
 from .window import MAX_BACKLOG, MIN_WINDOW, lindley_ends
 
 __all__ = ["CHECKS", "MAX_BACKLOG", "MAX_STRIPES", "MIN_WINDOW", "SIMULATION_METHODS", "SIMULATION_PATHS",
            "STRIPE_PIXELS", "STRIPE_ROWS", "SceneSimulator", "iter_scene_stimulus",
-           "lindley_ends", "scene_stimulus", "simulate_scene", "spawn_generators", "stripe_simulators",
+           "lindley_ends", "scene_stimulus", "simulate_scene", "simulate_sequence", "spawn_generators",
+           "stripe_simulators",
            "stripe_slices", "worker_count"]

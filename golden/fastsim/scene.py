@@ -79,6 +79,13 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     return words
 
 
+def simulate_sequence(config: SensorConfig, light: np.ndarray, rng, noise_sensor=None) -> np.ndarray:
+    """:func:`simulate_scene` in the form the evaluation harness calls its simulator,
+    ``simulate(config, light, rng[, noise_sensor])`` (:mod:`tespike.recon.evaluate` takes it as an
+    argument: the reconstruction side does not import the simulator)."""
+    return simulate_scene(config, light, seed=rng, sensor=noise_sensor)
+
+
 def iter_scene_stimulus(config: SensorConfig, scene: np.ndarray, *, seed=None,
                         dark_current: str | None = None, noise: bool = True, sensor=None):
     """Yield the per-clock electrons ``(L, H, W)`` of each readout interval of ``scene``.
