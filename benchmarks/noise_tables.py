@@ -26,7 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from benchmarks.plotfile import add_png_arguments, write_plot  # noqa: E402
 from tespike.golden.fastsim import simulate_sequence as simulate  # noqa: E402
 from tespike.golden.noise import Sensor, SensorNoise, load_noise  # noqa: E402
-from tespike.recon.evaluate import CALIBRATED, METHOD_NAMES, default_noise_sensors, evaluate, paper_configs  # noqa: E402
+from tespike.recon.evaluate import CALIBRATED, default_noise_sensors, evaluate, paper_configs  # noqa: E402
+from tespike.recon.names import METHOD_NAMES  # noqa: E402
 from tespike.recon.methods import available_methods  # noqa: E402
 from tespike.recon.report import noise_markdown  # noqa: E402
 from tespike.recon.scenes.heldout import sequence_set  # noqa: E402

@@ -27,7 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from tespike.golden.fastsim import simulate_scene  # noqa: E402
 from tespike.recon.mulaw import tone_map  # noqa: E402
-from tespike.recon.evaluate import evaluate, label, scored_frames  # noqa: E402
+from tespike.recon.evaluate import evaluate, scored_frames  # noqa: E402
+from tespike.recon.names import label  # noqa: E402
 from tespike.recon.settings import DEFAULT_WINDOW  # noqa: E402
 from tespike.recon.report import table_markdown, write_outputs  # noqa: E402
 from tespike.recon.scenes.heldout import sequence_set  # noqa: E402

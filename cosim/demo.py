@@ -335,7 +335,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         # 4. reconstruction: every method on every golden stream, and on the RTL's own stream
         started = progress.begin("reconstruction: every method on every stream (run time: median of "
                                  f"{repeats}) and on the RTL stream")
-        from tespike.recon.evaluate import evaluate, label, scored_frames
+        from tespike.recon.evaluate import evaluate, scored_frames
+        from tespike.recon.names import label
         from tespike.recon.report import write_outputs
         from tespike.recon.methods import available_methods, reconstruct
         from tespike.recon.settings import uses_window

@@ -7,6 +7,6 @@ weights), :mod:`.net` (the paper's network), :mod:`.baselines` (Spk2ImgNet, BSF,
 inference, weights); :mod:`.decoding` (streams decoded in torch), :mod:`.mulaw` (the
 mu-law that compresses HDR light), :mod:`.calibration` and :mod:`.darklaw` (a sensor's
 calibration). Training: :mod:`.engine` (clips simulated on the fly), :mod:`.train`.
-Judging: :mod:`.metrics`, :mod:`.score`, :mod:`.evaluate` and :mod:`.report` (Table 1),
+Judging: :mod:`.metrics`, :mod:`.score`, :mod:`.evaluate` (the harness), :mod:`.report` (Table 1) and :mod:`.names` (its names),
 :mod:`.dataset` (stores scored on Dask), :mod:`.scenes`, :mod:`.pictures`.
 """

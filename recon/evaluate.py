@@ -75,6 +75,7 @@ from tespike.golden.io import check_scene, word_dtype
 from tespike.golden.resources import require_memory
 
 from .calibration import CALIBRATION_READOUTS
+from .names import label
 from .settings import DEFAULT_WINDOW, check_window
 
 #: Sensors evaluated by default: the paper's Table 1 columns (ML = the msb camera
@@ -87,12 +88,6 @@ CALIBRATED = "+cal"
 #: The flat calibration stream's light, scene units (below the TE overflow level;
 #: benchmarks/calibration_error.py measured the error); each stream has CALIBRATION_READOUTS readouts.
 CALIBRATION_FLAT = 0.03
-#: Names in tables and plots: the paper's names for its two cameras.
-NAMES = {"ml-msb": "ML", "te": "TE", "ml": "ML-count", "te+eq12": "TE+dark12", "te+eq13": "TE+dark13"}
-#: Methods as the paper names them (``label``); other methods in capitals.
-METHOD_NAMES = {"tfp": "TFP", "tfi": "TFI", "spk2imgnet": "Spk2ImgNet", "bsf": "BSF", "mambaspike1": "MambaSpike1",
-                "mambaspike": "MambaSpike",
-                "net": "Net"}
 #: Metrics every evaluation computes; the others of recon.score.KEYS are asked for.
 BASIC_METRICS = ("psnr_mu", "ssim_mu")
 #: Memory of one sequence's work besides its words and images (reconstruction
@@ -110,16 +105,6 @@ def paper_configs() -> dict[str, SensorConfig]:
     TE camera of the noise sensors."""
     return {sensor: SensorConfig.preset(NOISE_SENSORS.get(sensor, (sensor,))[0])
             for sensor in (*SENSORS, *NOISE_SENSORS)}
-
-
-def name(sensor: str) -> str:
-    """Table name of a sensor: ``ML`` (msb, the paper's), ``TE``, ``ML-count``; else the key in capitals."""
-    return NAMES.get(sensor, sensor.upper())
-
-
-def label(method: str, sensor: str) -> str:
-    """Paper-style name, e.g. ``TFP_TE``, ``TFI_ML`` (msb camera), ``BSF_ML-count``, ``Net_TE``."""
-    return f"{METHOD_NAMES.get(method, method.upper())}_{name(sensor)}"
 
 
 def scored_frames(frames: int, window: int, span: int | None = None) -> slice:

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .evaluate import BASIC_METRICS, CALIBRATED, NOISE_SENSORS, Evaluation, Measurement, label, name
+from .evaluate import BASIC_METRICS, CALIBRATED, NOISE_SENSORS, Evaluation, Measurement
+from .names import label, name
 from .mulaw import MU, tone_map
 from .pictures import ERROR_RANGE, save_figure, write_text
 

@@ -9,7 +9,8 @@ import pytest
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.golden.fastsim import simulate_scene
-from tespike.recon.evaluate import Evaluation, Measurement, evaluate, label, paper_configs, scored_frames
+from tespike.recon.evaluate import Evaluation, Measurement, evaluate, paper_configs, scored_frames
+from tespike.recon.names import label
 from tespike.recon.report import results_csv, table_csv, table_markdown, write_outputs
 from tespike.recon.mulaw import tone_map
 from tespike.recon.metrics import psnr_mu, ssim_mu
