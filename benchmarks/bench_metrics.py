@@ -37,7 +37,7 @@ def main() -> None:
     import torch
 
     from tespike.recon.scenes import make_scene
-    from tespike.recon.score import KEYS, columns, score
+    from tespike.recon.score import METRIC_KEYS, columns, score
 
     torch.set_num_threads(args.threads)
     reference = make_scene("city", frames=args.frames, height=HEIGHT, width=WIDTH).astype(np.float64)
@@ -47,7 +47,7 @@ def main() -> None:
     print(f"{args.frames} frames of {HEIGHT} x {WIDTH}, torch threads {args.threads}, best of {args.repeats}")
     labels = {c.key: c.label for c in columns()}
     cpu_of = {}
-    for key in KEYS:
+    for key in METRIC_KEYS:
         cpu = wall = float("inf")
         for _ in range(args.repeats):
             t0, c0 = time.perf_counter(), time.process_time()

@@ -49,7 +49,7 @@ seed), estimate the per-pixel dark rate, dark law and gain that correct every me
 (recon.methods.reconstruct says where each method is corrected).
 
 Metrics: PSNR-mu and SSIM-mu always; ``metrics=`` adds any further column of
-:data:`tespike.recon.score.KEYS` (PU21-PSNR, HDR-VQM, FovVideoVDP, conventions in
+:data:`tespike.recon.score.METRIC_KEYS` (PU21-PSNR, HDR-VQM, FovVideoVDP, conventions in
 docs/metrics.md), computed by :func:`tespike.recon.score.score` on the scored frames;
 FovVideoVDP, which costs about half a second per frame at any frame size here
 (100 times PSNR-mu at 96 x 128), on the middle ``vdp_frames`` of them where
@@ -88,7 +88,7 @@ CALIBRATED = "+cal"
 #: The flat calibration stream's light, scene units (below the TE overflow level;
 #: benchmarks/calibration_error.py measured the error); each stream has CALIBRATION_READOUTS readouts.
 CALIBRATION_FLAT = 0.03
-#: Metrics every evaluation computes; the others of recon.score.KEYS are asked for.
+#: Metrics every evaluation computes; the others of recon.score.METRIC_KEYS are asked for.
 BASIC_METRICS = ("psnr_mu", "ssim_mu")
 #: Memory of one sequence's work besides its words and images (reconstruction
 #: blocks, metric bands, torch), for the up-front check of :func:`evaluate`.
@@ -202,7 +202,7 @@ class Evaluation:
     #: with ``keep=True``: (sequence, sensor) -> words and (sequence, sensor, method) -> images
     streams: dict[tuple[str, str], np.ndarray] = dataclasses.field(default_factory=dict)
     images: dict[tuple[str, str, str], np.ndarray] = dataclasses.field(default_factory=dict)
-    #: metric keys computed (recon.score.KEYS order) and the frames FovVideoVDP was limited to
+    #: metric keys computed (recon.score.METRIC_KEYS order) and the frames FovVideoVDP was limited to
     metrics: tuple[str, ...] = BASIC_METRICS
     vdp_frames: int | None = None
     #: (method, sensor) -> why it was not run (a learned method's missing weights)
@@ -248,7 +248,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     ``options`` maps a method to extra keywords of :func:`tespike.recon.methods.reconstruct`
     (e.g. ``{"tfi": {"search": "window"}}``); ``weights``: (method, sensor) -> the
     learned method's weights file there (:func:`tespike.recon.learned.weights_by_sensor`; else
-    the shipped ones); ``repeats``: runs timed per method (the median is reported). ``metrics``: keys of :data:`tespike.recon.score.KEYS` (PSNR-mu
+    the shipped ones); ``repeats``: runs timed per method (the median is reported). ``metrics``: keys of :data:`tespike.recon.score.METRIC_KEYS` (PSNR-mu
     and SSIM-mu are always computed); ``vdp_frames``: compute FovVideoVDP on the
     middle this many scored frames only (None: all). A sensor key of ``noise_sensors``
     (key -> :class:`tespike.golden.noise.Sensor`, over :func:`default_noise_sensors`: the
@@ -264,7 +264,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
 
     from .methods import RECON_METHODS, missing_weights, reconstruct
     from .metrics import psnr_mu, ssim_mu
-    from .score import KEYS, score
+    from .score import METRIC_KEYS, score
 
     check_window(window)
     if missing is None:
@@ -272,10 +272,10 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     if missing not in ("note", "refuse"):
         raise InputError(f"missing = {missing!r}: must be 'note' or 'refuse'")
     methods = check_methods(RECON_METHODS if methods is None else methods)
-    unknown = [key for key in metrics if key not in KEYS]
+    unknown = [key for key in metrics if key not in METRIC_KEYS]
     if unknown:
-        raise InputError(f"unknown metric {unknown[0]!r} (known: {', '.join(KEYS)})")
-    metrics = tuple(key for key in KEYS if key in (*BASIC_METRICS, *metrics))
+        raise InputError(f"unknown metric {unknown[0]!r} (known: {', '.join(METRIC_KEYS)})")
+    metrics = tuple(key for key in METRIC_KEYS if key in (*BASIC_METRICS, *metrics))
     further = [key for key in metrics if key not in BASIC_METRICS]
     if vdp_frames is not None and (type(vdp_frames) is not int or vdp_frames < 1):
         raise InputError(f"vdp_frames = {vdp_frames!r}: must be an integer >= 1")

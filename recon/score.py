@@ -32,11 +32,11 @@ class Column:
 
 
 #: The metrics' keys, in table order (importing this module does not import torch).
-KEYS = ("psnr_mu", "ssim_mu", "psnr_pu21", "hdr_vqm", "fovvideovdp")
+METRIC_KEYS = ("psnr_mu", "ssim_mu", "psnr_pu21", "hdr_vqm", "fovvideovdp")
 
 
 def columns(display: HdrDisplay = DEFAULT_DISPLAY) -> tuple[Column, ...]:
-    """The columns (in :data:`KEYS` order) with their labels for ``display``."""
+    """The columns (in :data:`METRIC_KEYS` order) with their labels for ``display``."""
     from tespike.recon.metrics import DEFAULT_NITS_PER_UNIT
     from tespike.recon.mulaw import MU
     shown = f"HDR display {display.peak_nits:g} cd/m^2"
@@ -71,10 +71,10 @@ def score(estimate, reference, *, metrics=None, display: HdrDisplay = DEFAULT_DI
     from tespike.recon.hdrvqm import hdr_vqm_scores
     from tespike.recon.metrics import psnr_mu, psnr_pu21, ssim_mu
 
-    keys = KEYS if metrics is None else tuple(metrics)
-    unknown = [k for k in keys if k not in KEYS]
+    keys = METRIC_KEYS if metrics is None else tuple(metrics)
+    unknown = [k for k in keys if k not in METRIC_KEYS]
     if unknown or not keys:
-        raise InputError(f"metrics {list(keys)!r}: choose from {', '.join(KEYS)}")
+        raise InputError(f"metrics {list(keys)!r}: choose from {', '.join(METRIC_KEYS)}")
     estimate, reference = np.asarray(estimate), np.asarray(reference)
     if reference.ndim != 3 or estimate.ndim != 3:
         raise InputError(f"estimate {estimate.shape} and reference {reference.shape} must be (K, H, W)")

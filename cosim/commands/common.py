@@ -137,14 +137,14 @@ MAX_THREADS = 256
 
 def metrics_argument(text: str) -> list[str]:
     """The metric names of a ``--metrics`` comma list (``score``, ``evaluate``), each one of
-    :data:`tespike.recon.score.KEYS`; one line naming the flag and the first unknown name otherwise."""
+    :data:`tespike.recon.score.METRIC_KEYS`; one line naming the flag and the first unknown name otherwise."""
     from tespike.golden.errors import InputError
-    from tespike.recon.score import KEYS
+    from tespike.recon.score import METRIC_KEYS
     metrics = [m.strip() for m in text.split(",") if m.strip()]
-    unknown = [m for m in metrics if m not in KEYS]
+    unknown = [m for m in metrics if m not in METRIC_KEYS]
     if unknown or not metrics:
         raise InputError(f"--metrics {text!r}: " + (f"{unknown[0]!r} is no metric" if unknown else "names no metric")
-                         + f" (choose from {', '.join(KEYS)})")
+                         + f" (choose from {', '.join(METRIC_KEYS)})")
     return metrics
 
 

@@ -193,7 +193,7 @@ def run(args) -> int:
         return _run_store(args)
     from tespike.golden.noise import Sensor, load_noise
     from tespike.recon.evaluate import CALIBRATED, NOISE_SENSORS, default_noise_sensors
-    from tespike.recon.score import KEYS
+    from tespike.recon.score import METRIC_KEYS
     defaults = TABLE_DEFAULTS if args.table else DEFAULTS
     frames, height, width, repeats = (default if value is None else value for value, default in
                                       zip((args.frames, args.height, args.width, args.repeats), defaults))
@@ -208,7 +208,7 @@ def run(args) -> int:
     methods = list(TABLE_METHODS) if args.table else None       # None: DEFAULT_METHODS, noted if missing
     if args.methods is not None:
         methods = _named_methods(args)
-    metrics = list(KEYS) if args.table else []
+    metrics = list(METRIC_KEYS) if args.table else []
     if args.metrics is not None:
         metrics = metrics_argument(args.metrics)
     # options of a part the run does not have would be dropped without a word

@@ -19,13 +19,13 @@ HELP = "score a reconstruction R.npy against its reference I.npy: PSNR-mu, SSIM-
 
 
 def add_arguments(parser):
-    from tespike.recon.score import KEYS
+    from tespike.recon.score import METRIC_KEYS
     parser.add_argument("--reference", required=True, help="I.npy: float (K, H, W) reference light, scene units")
     parser.add_argument("--estimate", required=True, help="R.npy: float (K, H, W) reconstructed light, same shape")
     parser.add_argument("--frames", help="frames to score: 'a:b' (b excluded, either end may be left out); "
                                          "default all")
-    parser.add_argument("--metrics", default=",".join(KEYS),
-                        help=f"comma list of metrics (default all: {','.join(KEYS)})")
+    parser.add_argument("--metrics", default=",".join(METRIC_KEYS),
+                        help=f"comma list of metrics (default all: {','.join(METRIC_KEYS)})")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
 
 

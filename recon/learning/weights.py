@@ -25,7 +25,7 @@ from tespike.golden.errors import InputError, one_line
 from tespike.golden.io import atomic_output
 
 #: Keys every weights file holds.
-KEYS = ("state_dict", "sizes", "config")
+PAYLOAD_KEYS = ("state_dict", "sizes", "config")
 
 
 def cpu_state(model: torch.nn.Module) -> dict[str, torch.Tensor]:
@@ -104,8 +104,8 @@ def _load_fault(path: str | Path, exc: BaseException) -> str:
 def read_weights(path: str | Path, what: str = "weights") -> dict[str, Any]:
     """The payload of weights file ``path`` (method, state dict, sizes, config as a SensorConfig, meta)."""
     payload = read_torch_file(path, what, "tespike weights file")
-    if not isinstance(payload, dict) or any(key not in payload for key in KEYS):
-        raise InputError(f"{what} {str(path)!r} is not a tespike weights file (no {', '.join(KEYS)})")
+    if not isinstance(payload, dict) or any(key not in payload for key in PAYLOAD_KEYS):
+        raise InputError(f"{what} {str(path)!r} is not a tespike weights file (no {', '.join(PAYLOAD_KEYS)})")
     try:
         config = SensorConfig.from_dict(payload["config"], whole=True)
     except (InputError, TypeError, ValueError) as exc:
