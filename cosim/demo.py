@@ -332,9 +332,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         if not quiet:
             print(f"      RTL verdict: {verdict}", file=sys.stderr, flush=True)
 
-        # 4. reconstruction: every method on every golden stream, and on the RTL's own stream
-        started = progress.begin("reconstruction: every method on every stream (run time: median of "
-                                 f"{repeats}) and on the RTL stream")
+        # 4. reconstruction: every method with weights for every sensor, on every golden stream and
+        # on the RTL's own stream
         from tespike.recon.evaluate import evaluate, scored_frames
         from tespike.recon.names import label
         from tespike.recon.report import write_outputs
@@ -342,6 +341,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         from tespike.recon.settings import uses_window
         from tespike.recon.metrics import psnr_mu, ssim_mu
         methods = available_methods(configs.values(), ready)     # learned ones only where there are weights
+        started = progress.begin(f"reconstruction: {', '.join(methods)} on every stream (run time: median of "
+                                 f"{repeats}) and on the RTL stream")
         by_config = {configs[name]: streams[name] for name in configs}
         evaluation = evaluate([(DEMO_SCENE, light)], lambda config, scene, rng: by_config[config],
                               methods=methods, sensors=tuple(configs), configs=configs, window=window, seed=seed,

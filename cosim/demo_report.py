@@ -37,11 +37,13 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
     import torch
 
     from tespike.recon.evaluate import scored_frames
+    from tespike.recon.methods import RECON_METHODS
     from tespike.recon.mulaw import MU
     from tespike.recon.report import table_markdown
     y, x, size = crop
     te = rtl_config
     golden_scored = scored_frames(frames, evaluation.window, evaluation.span)
+    left = [method for method in RECON_METHODS if method not in methods]
     lines = ["# tespike demo report", "",
              f"Scene: the shipped CC0 panorama (Greg Zaal, HDRI Haven; `recon/data/README.md`), panned: "
              f"{frames} readout intervals of {height} x {width} pixels, brightest pixel = design light "
@@ -95,8 +97,10 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
               f"PSNR-μ / SSIM-μ (μ = {MU:g}, after division by the ground truth's peak), frames "
               f"{golden_scored.start}..{golden_scored.stop - 1} scored; run time per frame "
               f"is the median of {evaluation.repeats} runs with {evaluation.threads} torch thread(s) (single "
-              "runs vary several-fold on a shared machine). Methods: every one of the registry "
-              f"(`recon/methods.py`): {', '.join(methods)}.", "",
+              "runs vary several-fold on a shared machine). Methods: those of the registry "
+              f"(`recon/methods.py`) with weights for every sensor here: {', '.join(methods)}"
+              + (f" (not {', '.join(left)}: no shipped weights for one of the sensors; `--weights` "
+                 "gives yours)" if left else "") + ".", "",
               table_markdown(evaluation).rstrip(), "",
               "Pictures: `strips/default.png` (ground truth, each method, |error| maps with colour bar, one "
               "pair of rows per sensor), `quality_vs_time.png` (quality against run time, with legend), "

@@ -59,6 +59,9 @@ def test_small_demo_closes_the_loop(tmp_path):
                     "## Hardware cost", "## Run time of every stage", "## Rerun each step"):
         assert section in report, section
     assert "tespike rtl-sim --config te --stimulus E_crop.npy" in report and "PSNR-μ" in report
+    # the methods run are named as what they are (it said "every one of the registry" without the baselines)
+    methods = report.split("Methods: ")[1].split("\n")[0]
+    assert "with weights for every sensor here: tfp, tfi" in methods and "(not " in methods and "bsf" in methods
     for method in ("tfp", "tfi"):
         for mode in ("ml", "te", "rtl"):
             assert np.load(out / f"R_{method}_{mode}.npy").dtype == np.float32

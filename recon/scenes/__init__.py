@@ -39,16 +39,16 @@ def _panorama(source: str) -> Callable:
     def make(rng, frames, height, width, *, motion="pan", sources=None):
         count = (0 if source == "default" else 2) if sources is None else sources
         return panorama_sequence(rng, frames, height, width, source=source, motion=motion, sources=count)
-    make.__doc__ = (f"a camera window ({', '.join(MOTIONS)}) over the "
-                    f"{'shipped' if source == 'default' else 'full-size'} {source!r} panorama")
+    make.__doc__ = (f"a camera window ({', '.join(MOTIONS)}) over the {source!r} panorama (shipped at "
+                    f"128 x 256{'' if source == 'default' else '; full size from $TESPIKE_HDRI_DIR'})")
     return make
 
 
 #: name -> (generator(rng, frames, height, width, **options), one-line description)
 SCENES: dict[str, tuple[Callable, str]] = {
     "default": (_panorama("default"), "pan over the shipped CC0 courtyard panorama (the demo scene)"),
-    **{name: (_panorama(name), f"camera over the full-size {name} panorama, two moving bright sources "
-                               "(needs the project's data folder)") for name in PANORAMAS},
+    **{name: (_panorama(name), f"camera over the CC0 {name} panorama, two moving bright sources (shipped "
+                               "at 128 x 256; full size from $TESPIKE_HDRI_DIR)") for name in PANORAMAS},
     "moderate": (procedural.moderate_scene, "textured background and highlights, peak 100..300 x median"),
     "lights": (procedural.light_sources_scene, "textured background, moving lights 1e2..1e5 x its median"),
     "sun": (procedural.sun_scene, "stiff: sun 1e6 x background, near-black and zero-light regions"),
