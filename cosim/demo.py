@@ -236,6 +236,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     from tespike.golden.io import save_images, save_stream
     from tespike.golden.sensor import PixelArray, simulate
     from tespike.recon.learned import weights_by_sensor
+    from tespike.recon.methods import available_methods, missing_weights
     from tespike.recon.pictures import write_text
     from tespike.recon.scenes import make_scene
 
@@ -251,6 +252,15 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     configs = {label: load_config(label) for label in sensors}
     chosen = weights_by_sensor(weights, configs)                        # (method, sensor) -> file
     ready = {(method, configs[sensor]): path for (method, sensor), path in chosen.items()}
+    runs = available_methods(configs.values(), ready)
+    unused = sorted({(method, str(path)) for (method, _), path in chosen.items() if method not in runs})
+    if unused:          # (the demo runs a learned method only with weights for every one of its sensors)
+        method, path = unused[0]
+        missing = [sensor for sensor, config in configs.items()
+                   if missing_weights(method, config, ready.get((method, config))) is not None]
+        raise InputError(f"--weights {path!r}: the demo runs {method} only with weights for every sensor, "
+                         f"and there are none for {', '.join(missing)} (give those too, or leave --sensors "
+                         "to the sensors it has; the file would be ignored)")
     te = configs[RTL_SENSOR]
     L = te.clocks_per_readout
     check_room(out, configs, frames=frames, height=height, width=width, crop=crop,

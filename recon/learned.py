@@ -140,25 +140,34 @@ def _load_cached(path: str, mtime: float, what: str):
         raise InputError(f"{what} {path!r} do not fit a {payload['method']} module "
                          f"({one_line(exc, 300)})") from None      # (torch's first line names no tensor)
     model.eval().to(memory_format=torch.channels_last)
-    return model, payload["config"], payload["meta"]
+    return model, payload["config"], payload["meta"], payload["method"]
 
 
 def load_weights(path: str | Path, what: str = "weights", method: str | None = None):
     """(module in eval mode, the sensor configuration it was trained for, how it was made) of any learned
     method's weights file; ``what`` names the file in a refusal (a flag, or "weights"); ``method``: the
     method the file must hold (refused in one line where it holds another's module)."""
+    *loaded, held = _cached(path, what)
+    if method is not None and held != method:   # (by the recorded name: mambaspike1 and mambaspike share a class)
+        wanted = method_classes(method)[0]
+        raise InputError(f"{what} {str(path)!r} holds {held} weights (a {type(loaded[0]).__name__}), not "
+                         f"{method}'s {wanted.__name__}")
+    return tuple(loaded)
+
+
+def weights_method(path: str | Path, what: str = "weights") -> str:
+    """The learned method a weights file holds, as recorded in it (read once, like :func:`load_weights`)."""
+    return _cached(path, what)[3]
+
+
+def _cached(path: str | Path, what: str):
+    """(module, config, meta, method) of weights file ``path``, read once while it is unchanged."""
     path = Path(path)
     try:
         mtime = path.stat().st_mtime
     except OSError as exc:
         raise InputError(f"cannot read {what} {str(path)!r}: {exc.strerror}") from None
-    loaded = _load_cached(str(path), mtime, what)
-    if method is not None:
-        wanted = method_classes(method)[0]
-        if type(loaded[0]) is not wanted:
-            raise InputError(f"{what} {str(path)!r} holds a {type(loaded[0]).__name__}, not {method}'s "
-                             f"{wanted.__name__}")
-    return loaded
+    return _load_cached(str(path), mtime, what)
 
 
 def weights_by_sensor(paths, configs) -> dict[tuple[str, str], Path]:
@@ -168,8 +177,8 @@ def weights_by_sensor(paths, configs) -> dict[tuple[str, str], Path]:
     cannot be read, one trained for none of the sensors, two for the same method and sensor."""
     chosen: dict[tuple[str, str], Path] = {}
     for path in map(Path, paths):
-        model, trained_for, _ = load_weights(path, "--weights")
-        method = next(name for name, (module, _) in learned_methods().items() if type(model) is module)
+        _, trained_for, _ = load_weights(path, "--weights")
+        method = weights_method(path, "--weights")
         sensors = [name for name, config in configs.items() if config == trained_for]
         if not sensors:
             raise InputError(f"--weights {str(path)!r} were trained for {trained_for}, none of the sensors "

@@ -91,7 +91,7 @@ def test_missing_weights_are_refused_naming_the_file_and_the_training(empty_weig
 
 def test_weights_of_another_method_or_sensor_are_refused(empty_weights_dir, rng):
     save_tiny(empty_weights_dir, "spk2imgnet", TE, file_name="bsf-te.pt")
-    with pytest.raises(InputError, match="holds a Spk2ImgNet, not bsf.s BSF"):
+    with pytest.raises(InputError, match=r"holds spk2imgnet weights \(a Spk2ImgNet\), not bsf.s BSF"):
         reconstruct(tiny_stream(rng), TE, "bsf")
     save_tiny(empty_weights_dir, "spk2imgnet", ML, file_name="spk2imgnet-te.pt")
     with pytest.raises(InputError, match="were trained for"):
@@ -141,7 +141,7 @@ def test_cli_reconstruct_with_weights_the_user_trained(empty_weights_dir, tmp_pa
     out.unlink()
     save_stream(tmp_path / "T.npz", tiny_stream(rng), TE)
     (tmp_path / "empty.pt").write_bytes(b"")
-    for args, word in [(("--stream", stream, "--method", "net", "--weights", path), "holds a BSF, not net's"),
+    for args, word in [(("--stream", stream, "--method", "net", "--weights", path), "holds bsf weights (a BSF), not net's"),
                        (("--stream", tmp_path / "T.npz", "--method", "bsf", "--weights", path), "were trained for"),
                        (("--stream", stream, "--method", "tfi", "--weights", path), "--weights applies"),
                        (("--stream", stream, "--method", "bsf", "--weights", tmp_path / "empty.pt"), "empty"),
@@ -172,3 +172,32 @@ def test_weights_by_sensor(tmp_path):
         weights_by_sensor([ml_file], {"te": TE})
     with pytest.raises(InputError, match="both bsf weights for the te sensor"):
         weights_by_sensor([te_file, te_file], {"te": TE})
+
+
+def test_mambaspike_and_mambaspike1_weights_are_told_apart_by_the_method_recorded(empty_weights_dir, rng, tmp_path):
+    """Both methods build the same module class: mambaspike1's file was taken as mambaspike's (rc 0)."""
+    from tespike.recon.learned import load_weights, weights_by_sensor, weights_method
+    one, _ = save_tiny(empty_weights_dir, "mambaspike1", TE, file_name="mambaspike-te.pt")
+    with pytest.raises(InputError, match="holds mambaspike1 weights .*not mambaspike's"):
+        reconstruct(tiny_stream(rng), TE, "mambaspike")
+    assert weights_method(one) == "mambaspike1" and load_weights(one, method="mambaspike1")[1] == TE
+    assert weights_by_sensor([one], {"te": TE}) == {("mambaspike1", "te"): one}
+
+
+def test_a_weights_file_whose_method_is_not_a_name_is_one_line(tmp_path, rng):
+    from tespike.recon.learned import load_weights
+    path, _ = save_tiny(tmp_path, "net", TE, file_name="w.pt")
+    payload = torch.load(path, weights_only=False)
+    for field, value, word in (("method", ["net"], "is not a method's name"), ("meta", [1], "not a mapping")):
+        torch.save({**payload, field: value}, tmp_path / "c.pt")
+        with pytest.raises(InputError, match=word):
+            load_weights(tmp_path / "c.pt")
+
+
+def test_demo_refuses_weights_it_would_not_run(tmp_path, capsys):
+    """The demo runs a learned method only with weights for every sensor: one file for one sensor was ignored."""
+    path, _ = save_tiny(tmp_path, "mambaspike1", TE, file_name="m1.pt")
+    code, _, err = run_here(capsys, "demo", "--sensors", "te,ml", "--weights", path, "--out", tmp_path / "d")
+    lines = err.strip().splitlines()
+    assert code != 0 and len(lines) == 1 and "mambaspike1" in lines[0] and "none for ml " in lines[0], err
+    assert not (tmp_path / "d").exists()

@@ -110,4 +110,10 @@ def read_weights(path: str | Path, what: str = "weights") -> dict[str, Any]:
         config = SensorConfig.from_dict(payload["config"], whole=True)
     except (InputError, TypeError, ValueError) as exc:
         raise InputError(f"{what} {str(path)!r}: its sensor configuration is not valid ({exc})") from None
-    return {**payload, "method": payload.get("method", "net"), "config": config, "meta": payload.get("meta", {})}
+    method = payload.get("method", "net")
+    if not isinstance(method, str):
+        raise InputError(f"{what} {str(path)!r}: its method {method!r} is not a method's name")
+    meta = payload.get("meta", {})
+    if not isinstance(meta, dict):
+        raise InputError(f"{what} {str(path)!r}: its record (meta) is a {type(meta).__name__}, not a mapping")
+    return {**payload, "method": method, "config": config, "meta": meta}
