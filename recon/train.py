@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from tespike.golden.atomic import NO_ROOM
+from tespike.golden.atomic import NO_ROOM, finished_outputs, stops_held
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError, one_line
 from tespike.golden.io import atomic_output, word_dtype
@@ -209,6 +209,18 @@ def appending(path: Path):
         raise
 
 
+def _random_states(generator: np.random.Generator) -> tuple:
+    """The training's random states (the batch generator's, torch's) at a step boundary."""
+    return generator.bit_generator.state, torch.get_rng_state()
+
+
+def _restore_random_states(generator: np.random.Generator, states: tuple) -> None:
+    """Back to the states of :func:`_random_states`: an interrupted step's checkpoint resumes exactly
+    (its batch, drawn again by the resumed run, is the one the uninterrupted run draws)."""
+    generator.bit_generator.state, torch_state = states
+    torch.set_rng_state(torch_state)
+
+
 def json_state(generator: np.random.Generator) -> dict:
     state = generator.bit_generator.state
     return {"bit_generator": state["bit_generator"], "state": {k: int(v) for k, v in state["state"].items()},
@@ -363,12 +375,14 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
     work = Path(work_dir) if work_dir is not None else out.with_suffix(".run")
     created = not work.exists()
     work.mkdir(parents=True, exist_ok=True)
+    start = len(finished_outputs())
     try:
         return _train(options, out, work, resume, progress, command)
     except BaseException:
-        if created and work.is_dir() and not (work / CHECKPOINT).exists():
-            shutil.rmtree(work, ignore_errors=True)        # nothing to resume: leave no empty folder
-        raise
+        made_weights = any(Path(written) == out for written in finished_outputs(start))
+        if created and work.is_dir() and not (work / CHECKPOINT).exists() and not made_weights:
+            shutil.rmtree(work, ignore_errors=True)        # nothing to resume or to explain: no empty folder
+        raise                                              # (weights written: their logs and curves stay)
 
 
 #: The run folder's checkpoint (``OUT.run/``), what ``--resume`` continues from.
@@ -497,6 +511,7 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
             if new_log:
                 log.writerow(["step", "epoch", "lr", "loss", "seconds"])
             model.train()
+            boundary = _random_states(generator)      # the random states where the last step ended
             while True:
                 if options.steps is not None and step >= options.steps:
                     break
@@ -512,11 +527,13 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
                     raise InputError(f"training diverged at step {step} (loss {value}); lower the learning rate")
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                optimizer.step()
-                scheduler.step()
-                step += 1
-                log.writerow([step, step // options.steps_per_epoch, f"{lr:.3g}", f"{value:.6g}",
-                              f"{elapsed():.1f}"])
+                with stops_held():                  # the step's updates whole, or none of them
+                    optimizer.step()
+                    scheduler.step()
+                    step += 1
+                    log.writerow([step, step // options.steps_per_epoch, f"{lr:.3g}", f"{value:.6g}",
+                                  f"{elapsed():.1f}"])
+                    boundary = _random_states(generator)
                 if bar is not None:
                     bar.update(1)
                     bar.set_postfix(loss=f"{value:.4g}", best=f"{best['mean']:.2f}" if best else "-")
@@ -532,6 +549,7 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
     except BaseException as exc:
         if not isinstance(exc, Exception) and step > first_step and work.is_dir():     # interrupted: keep the steps
             with contextlib.suppress(Exception):
+                _restore_random_states(generator, boundary)   # (a step cut short drew the next batch)
                 _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options,
                                  best, init)
                 exc.add_note(f"at step {step}: checkpoint {str(checkpoint)!r} saved (continue with --resume)")

@@ -112,6 +112,61 @@ def test_resume_continues_exactly(tmp_path):
     assert all(torch.equal(a[k], b[k]) for k in a)
 
 
+@pytest.mark.parametrize("where", ["forward", "backward"])
+def test_resume_after_an_interrupt_inside_a_step_continues_exactly(tmp_path, monkeypatch, where):
+    """Ctrl-C inside step 3 (its batch drawn, the model not yet updated) saved the batch generator
+    past that batch: the resumed run trained on other batches (weights off by 1e-4)."""
+    import tespike.recon.train as trainer
+    straight = train(options(steps=5), tmp_path / "a.pt")
+    calls = {"n": 0}
+    real_loss, real_backward = trainer.training_loss, torch.Tensor.backward
+
+    def interrupt_on_third():
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+
+    def loss(*args, **kwargs):
+        if where == "forward":
+            interrupt_on_third()
+        return real_loss(*args, **kwargs)
+
+    def backward(self, *args, **kwargs):
+        real_backward(self, *args, **kwargs)
+        if where == "backward":
+            interrupt_on_third()
+    monkeypatch.setattr(trainer, "training_loss", loss)
+    monkeypatch.setattr(torch.Tensor, "backward", backward)
+    with pytest.raises(KeyboardInterrupt) as info:
+        train(options(steps=5), tmp_path / "b.pt")
+    assert "at step 2" in "".join(getattr(info.value, "__notes__", []))
+    monkeypatch.undo()
+    resumed = train(options(steps=5), tmp_path / "b.pt", resume=True)
+    a, b = (load_weights(p)[0].state_dict() for p in (straight, resumed))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    with open(tmp_path / "b.run" / "log.csv") as handle:
+        assert [row["step"] for row in csv.DictReader(handle)] == ["1", "2", "3", "4", "5"]
+
+
+def test_a_failed_final_checkpoint_keeps_the_logs_of_the_weights_it_wrote(tmp_path, monkeypatch):
+    """A full disk at the last checkpoint (the weights already written) removed the whole run folder."""
+    import errno
+
+    import tespike.recon.train as trainer
+
+    def full(path, *args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+    monkeypatch.setattr(trainer, "_save_checkpoint", full)
+    with pytest.raises(OSError):
+        train(options(steps=2), tmp_path / "w.pt")
+    assert (tmp_path / "w.pt").is_file() and (tmp_path / "w.run" / "log.csv").is_file()
+    monkeypatch.undo()
+    with pytest.raises(KeyboardInterrupt):                # a run that made nothing leaves no folder
+        monkeypatch.setattr(trainer, "draw_batch", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
+        train(options(steps=2), tmp_path / "v.pt")
+    assert not (tmp_path / "v.run").exists()
+
+
 def test_resume_refuses_other_options(tmp_path):
     cache = tmp_path / "cache"
     train(options(steps=1), tmp_path / "c.pt")
