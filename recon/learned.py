@@ -127,6 +127,9 @@ def _load_cached(path: str, mtime: float, what: str):
         model = module(sizes_class.from_dict(payload["sizes"]))
     except InputError as exc:
         raise InputError(f"{what} {path!r}: {exc}") from None
+    except (MemoryError, RuntimeError) as exc:         # sizes no machine holds (torch's allocation failure)
+        raise InputError(f"{what} {path!r}: its sizes {payload['sizes']!r} make a module too large for this "
+                         f"machine's memory ({one_line(exc, 120)})") from None
     state = payload["state_dict"]
     if isinstance(state, dict):              # a diverged run's weights would make a light file of NaN
         bad = next((name for name, tensor in state.items() if isinstance(tensor, torch.Tensor)

@@ -86,8 +86,13 @@ def _learned_frames(name: str) -> Callable:
         from .learned import load_learned
         from .learning.infer import reconstruct_model
         model = load_learned(config, name, weights)
-        return reconstruct_model(model, words, config, device=settings.device, progress=progress, out=out,
-                                 calibration=calibration)
+        images = reconstruct_model(model, words, config, device=settings.device, progress=progress, out=out,
+                                   calibration=calibration)
+        if not all(np.isfinite(images[k:k + 64]).all() for k in range(0, images.shape[0], 64)):
+            source = "its shipped weights" if weights is None else f"weights {str(weights)!r}"
+            raise InputError(f"{name} with {source} gives light that is not finite (weights of a scale "
+                             "float32 overflows: not a trained network's)")
+        return images
     frames.__name__ = f"_{name}_frames"
     return frames
 

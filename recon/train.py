@@ -524,7 +524,10 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
                 loss = training_loss(model(inputs, inside, config.spike_light), truth, options.loss)
                 value = loss.detach().item()
                 if not math.isfinite(value):
-                    raise InputError(f"training diverged at step {step} (loss {value}); lower the learning rate")
+                    cause = ("" if step > first_step or options.init is None
+                             else f" (or the --init weights {options.init!r} are not a trained network's)")
+                    raise InputError(f"training diverged at step {step} (loss {value}); lower the learning rate"
+                                     + cause)
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 with stops_held():                  # the step's updates whole, or none of them

@@ -201,3 +201,20 @@ def test_demo_refuses_weights_it_would_not_run(tmp_path, capsys):
     lines = err.strip().splitlines()
     assert code != 0 and len(lines) == 1 and "mambaspike1" in lines[0] and "none for ml " in lines[0], err
     assert not (tmp_path / "d").exists()
+
+
+def test_weights_of_absurd_scale_or_size_are_refused_naming_the_file(tmp_path, rng):
+    """Finite weights times 1e30 passed the NaN check and wrote a light file of NaN (rc 0); sizes no
+    machine holds failed as a bare 'out of memory' naming no file."""
+    from tespike.recon.learned import load_weights
+    path, _ = save_tiny(tmp_path, "net", TE, file_name="w.pt")
+    payload = torch.load(path, weights_only=False)
+    scaled = {k: v * 1e30 if v.is_floating_point() else v for k, v in payload["state_dict"].items()}
+    torch.save({**payload, "state_dict": scaled}, tmp_path / "big.pt")
+    with pytest.raises(InputError, match="big.pt.* not finite"):
+        reconstruct(tiny_stream(rng, shape=(5, 16, 16)), TE, "net", weights=tmp_path / "big.pt")
+    sizes = dict(payload["sizes"])
+    key = next(k for k, v in sizes.items() if isinstance(v, int) and not isinstance(v, bool) and v > 4)
+    torch.save({**payload, "sizes": {**sizes, key: 10 ** 6}}, tmp_path / "huge.pt")
+    with pytest.raises(InputError, match="huge.pt"):
+        load_weights(tmp_path / "huge.pt")
