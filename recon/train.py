@@ -49,6 +49,9 @@ from .mulaw import MU, compress
 from .learning.weights import cpu_state, read_torch_file, read_weights, save_weights, write_torch_file
 
 LOSSES = ("l1", "mu-l1")
+#: Largest learning rate a run takes (Adam's step per weight is about the rate: 1e30 trained weights
+#: to 1e30 with a loss that never moved, and exit 0).
+MAX_LR = 1.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,8 +88,9 @@ class TrainOptions:
             raise InputError(f"loss = {self.loss!r}: must be one of {', '.join(LOSSES)}")
         if self.floor not in FLOORS:
             raise InputError(f"floor = {self.floor!r}: must be one of {', '.join(FLOORS)}")
-        if not (self.lr > 0 and math.isfinite(self.lr)):
-            raise InputError(f"learning rate {self.lr!r} must be a finite number > 0")
+        if not (0 < self.lr <= MAX_LR):
+            raise InputError(f"learning rate {self.lr!r} must be in (0, {MAX_LR:g}] (Adam moves every weight by "
+                             "about the learning rate each step: above 1 the weights only grow)")
         for key in ("halve_every", "steps_per_epoch", "batch", "crop", "pool", "refresh"):
             if type(getattr(self, key)) is not int or getattr(self, key) < 1:
                 raise InputError(f"{key} = {getattr(self, key)!r}: must be an integer >= 1")
