@@ -138,6 +138,8 @@ def test_tiled_scores_equal_whole_frame_scores(tmp_path):
         assert np.isnan(a.ms_per_frame) and a.frames_scored == 4
     with Runner() as run, pytest.raises(InputError, match="method 'net' is spatial: sequence '.*' has frames larger"):
         evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp", "net"], tile=(16, 16))
+    with Runner() as run, pytest.raises(InputError, match="--window 25: wider than any window of the 12-readout"):
+        evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp"], window=25)   # (it was the whole sequence)
     for sequence in ("lights", "decades"):
         for key, image in whole.strips[sequence].items():
             if isinstance(key, tuple):

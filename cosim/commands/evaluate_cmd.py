@@ -90,8 +90,7 @@ def _run_store(args) -> int:
     methods = None if args.methods is None else _named_methods(args)
     DatasetStore.open(args.store)                       # a missing or foreign store refused before any line
     with Runner(args.workers, args.scheduler) as runner:
-        evaluation = evaluate_store(args.store, runner, methods=methods, device=args.device,
-                                    window=DEFAULT_WINDOW if args.window is None else args.window,
+        evaluation = evaluate_store(args.store, runner, methods=methods, device=args.device, window=args.window,
                                     starting=lambda: report(args, f"evaluate: {args.store} on {runner.where}"))
     return publish_results(args, evaluation, plot=False)
 

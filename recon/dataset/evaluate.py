@@ -135,11 +135,12 @@ def _combine(parts: list[dict], height: int, width: int) -> tuple[np.ndarray, np
     return psnr, ssum / ((height - 2 * h) * (width - 2 * h))
 
 
-def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, window: int = DEFAULT_WINDOW,
+def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, window: int | None = None,
                    device: str = "cpu", tile: tuple[int, int] = EVAL_TILE,
                    options: dict[str, dict] | None = None, starting=None):
     """Score every complete sequence x sensor x method of the store -> :class:`tespike.recon.evaluate.Evaluation`.
 
+    ``window``: TFP's (None: the default, 9); given, at most 2 K - 1 of the shortest sequence's K.
     ``run`` runs ``dask.delayed`` tasks (:class:`tespike.cosim.dataset.cluster.Runner`);
     sensors are the store's configurations, in its order (they are the table's
     column groups); ``options`` as in :func:`tespike.recon.evaluate.evaluate`. ``starting()`` is called
@@ -173,9 +174,15 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
             reason = missing_weights(method, config)
             if reason is not None:
                 raise InputError(reason)
+    given, window = window is not None, DEFAULT_WINDOW if window is None else window
     ReconSettings(window=window, device=device)          # refuse a bad window or device here
     if not sequences:
         raise InputError(f"dataset store {store.url!r} holds no complete sequence")
+    shortest = min(sequences, key=lambda s: infos[s]["frames"])
+    if given and window > 2 * infos[shortest]["frames"] - 1:     # (as the serial evaluation and reconstruct)
+        K = infos[shortest]["frames"]
+        raise InputError(f"--window {window}: wider than any window of the {K}-readout sequence {shortest!r} "
+                         f"({2 * K - 1} readouts at most; a wider one changes nothing)")
     h = _halo()
     learned = learned_span(methods)                      # frames scored as the serial evaluation scores them
     tasks, keys, plan = [], [], {}
