@@ -60,10 +60,10 @@ def simulate(config: SensorConfig, scene: np.ndarray, seed: int) -> np.ndarray:
     if simulate_scene is not None:
         return simulate_scene(config, scene, seed=seed)
     from tqdm import tqdm
-    from tespike.golden.sensor import PixelArray
+    from tespike.golden.sensor import PixelArrayModel
     rng = np.random.default_rng(seed)
     L = config.clocks_per_readout
-    array = PixelArray(config, scene.shape[1:])
+    array = PixelArrayModel(config, scene.shape[1:])
     words = []
     for light in tqdm(scene, desc="per-clock simulation (golden.sensor)", unit="readout"):
         electrons = rng.poisson(np.broadcast_to(light * DESIGN_ELECTRONS / L, (L,) + light.shape))

@@ -5,7 +5,7 @@ Stages (each timed, each written, each with the individual command that redoes i
 1. scene: the shipped CC0 panorama, panned (``I.npy``);
 2. golden, full frame: TE from the per-clock electrons of
    :func:`tespike.golden.fastsim.iter_scene_stimulus` through the cycle-exact
-   :class:`tespike.golden.sensor.PixelArray` (so the RTL crop below gets literally the
+   :class:`tespike.golden.sensor.PixelArrayModel` (so the RTL crop below gets literally the
    electrons the golden model got), ML count and ML msb with the fast
    simulator :func:`tespike.golden.fastsim.simulate_scene` (same law); ``S_<sensor>.npz``;
 3. RTL: the TE pixel array (Amaranth by default, pixels inlined, no build) on a
@@ -234,7 +234,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     from tespike.golden.config import load_config
     from tespike.golden.fastsim import iter_scene_stimulus, simulate_scene
     from tespike.golden.io import save_images, save_stream
-    from tespike.golden.sensor import PixelArray, simulate
+    from tespike.golden.sensor import PixelArrayModel, simulate
     from tespike.recon.learned import weights_by_sensor
     from tespike.recon.methods import available_methods, missing_weights
     from tespike.recon.pictures import write_text
@@ -284,7 +284,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                                  "ML count and ML msb (fast simulator)")
         y, x = choose_crop(light, crop)
         streams = {}
-        array = PixelArray(te, (height, width))
+        array = PixelArrayModel(te, (height, width))
         words_te = np.empty((frames, height, width), np.int64)
         crop_stimulus = np.empty((rtl_readouts * L, crop, crop), np.uint16)
         electrons = iter_scene_stimulus(te, light, seed=seed)

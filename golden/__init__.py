@@ -20,8 +20,8 @@ from .config import DESIGN_ELECTRONS, SensorConfig, load_config
 from .decode import decode_light, decode_spikes
 from .errors import ConfigError, InputError, TespikeError
 from .io import load_stream, save_stream
-from .sensor import PixelArray, simulate
+from .sensor import PixelArrayModel, simulate
 
 __all__ = ["DESIGN_ELECTRONS", "SensorConfig", "load_config", "decode_light", "decode_spikes",
            "ConfigError", "InputError", "TespikeError", "load_stream", "save_stream",
-           "PixelArray", "simulate"]
+           "PixelArrayModel", "simulate"]

@@ -24,7 +24,7 @@ import numpy as np
 
 from .config import DESIGN_ELECTRONS, SensorConfig
 from .decode import decode_light
-from .sensor import PixelArray
+from .sensor import PixelArrayModel
 
 
 def formula_db(config: SensorConfig, n_s: float = 1, *, paper_alpha: bool = False) -> float:
@@ -66,7 +66,7 @@ def constant_light_words(config: SensorConfig, light: np.ndarray, readouts: int,
     L = config.clocks_per_readout
     lam = DESIGN_ELECTRONS * light / L
     rng = None if seed is None else np.random.default_rng(seed)
-    array = PixelArray(config, (1, light.size))
+    array = PixelArrayModel(config, (1, light.size))
     words = []
     for start in range(0, readouts, chunk_readouts):
         k = min(chunk_readouts, readouts - start)

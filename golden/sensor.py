@@ -1,6 +1,6 @@
 """Cycle-exact model of a TE or ML pixel array (SPEC sections 3 and 4), fast and run in chunks.
 
-:class:`PixelArray` gives the same words, clock for clock, as the literal
+:class:`PixelArrayModel` gives the same words, clock for clock, as the literal
 per-clock rule :func:`tespike.golden.reference.step_reference`. State (acc, sfc, ovf,
 m and the clock phase; with the ML msb readout, sfc keeps its remainder across
 readouts) is carried between calls, so a run split anywhere gives the
@@ -182,8 +182,9 @@ class _Engine:
         return C, acc.astype(np.int64)
 
 
-class PixelArray:
-    """An H x W array of TE or ML pixels that consumes per-clock electrons in chunks."""
+class PixelArrayModel:
+    """The cycle-exact model of an H x W array of TE or ML pixels, consuming per-clock electrons in
+    chunks (named apart from the hardware's :class:`tespike.rtl.array.PixelArray`, which it models)."""
 
     def __init__(self, config: SensorConfig, shape: tuple[int, int]):
         self.config = config
@@ -313,7 +314,7 @@ def simulate(config: SensorConfig, stimulus: np.ndarray,
     values are checked as it is fed.
     """
     check_stimulus(stimulus, config, scan_values=False)
-    array = PixelArray(config, stimulus.shape[1:])
+    array = PixelArrayModel(config, stimulus.shape[1:])
     words = np.empty((stimulus.shape[0] // config.clocks_per_readout,) + stimulus.shape[1:], np.int64)
     done = 0
     for chunk in (chunks if chunks is not None else iter_chunks(stimulus, config)):

@@ -10,7 +10,7 @@ The per-clock charge input register of the array is left out: it toggles with
 the light whatever the camera, and is the same for cameras with the same E.
 
 It is the literal SPEC section 3 rule over all pixels at once (one numpy
-operation per register per clock), not :class:`tespike.golden.sensor.PixelArray`'s
+operation per register per clock), not :class:`tespike.golden.sensor.PixelArrayModel`'s
 engine: that engine's whole-block shortcuts never form the per-clock
 accumulator values whose bit changes are counted here. The words it returns are
 checked against that engine's in the tests, the toggles against a VCD of the

@@ -139,9 +139,9 @@ def saturated_words(config: SensorConfig) -> np.ndarray:
     """The words the sensor gives where every clock's input saturates (2^E - 1 electrons a clock:
     any light far enough above its range), over two readouts from an empty accumulator (a carried
     charge can change the count by one): a pixel reading only these words shows no light level."""
-    from tespike.golden.sensor import PixelArray
+    from tespike.golden.sensor import PixelArrayModel
     clocks = 2 * config.clocks_per_readout
-    words = PixelArray(config, (1, 1)).feed(np.full((clocks, 1, 1), config.input_max, np.int64))
+    words = PixelArrayModel(config, (1, 1)).feed(np.full((clocks, 1, 1), config.input_max, np.int64))
     return np.unique(words)
 
 

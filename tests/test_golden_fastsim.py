@@ -19,7 +19,7 @@ from tespike.golden.fastsim import SceneSimulator, clock, head, simulate_scene, 
 from tespike.golden.stimulus import poisson_stimulus
 from tespike.golden.noise import Sensor, SensorNoise
 from tespike.golden.reference import msb_index
-from tespike.golden.sensor import PixelArray, simulate
+from tespike.golden.sensor import PixelArrayModel, simulate
 from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
 LEVELS = [1e-4, 1e-3, 1e-2, 0.05, 0.2, 0.5, 1.0, 2.0, 10.0]
@@ -602,7 +602,7 @@ def test_walk_equals_the_cycle_exact_model_word_for_word(config, phases, monkeyp
     sim.carried[:] = rng.integers(0, config.acc_max + 1, n)
     if config.is_msb:
         sim.sfc[:] = rng.integers(0, config.ml_max + 1, n)
-    array = PixelArray(config, (1, n))
+    array = PixelArrayModel(config, (1, n))
     array.state.acc[0], array.state.sfc[0] = sim.carried, sim.sfc
     exact = array.feed(e.reshape(L, 1, n))[0, 0]
     words = np.full(n, -1, np.int64)
@@ -632,7 +632,7 @@ def test_head_state_equals_the_cycle_exact_model(config):
         acc0 = rng.integers(0, config.acc_max + 1, n)
         sfc0 = rng.integers(0, config.ml_max + 1, n) if config.is_msb else np.zeros(n, np.int64)
         state = head.run_head(config, acc0, sfc0, e)
-        array = PixelArray(config, (1, n))
+        array = PixelArrayModel(config, (1, n))
         array.state.acc[0], array.state.sfc[0] = acc0, sfc0
         array.feed(e.reshape(h, 1, n))
         assert state.clock == array.state.clock == h
@@ -694,7 +694,7 @@ def test_walk_from_a_head_state_equals_the_cycle_exact_model(config):
         e = np.minimum(rng.poisson(lam[None, :], size=(L, n)), config.input_max).astype(np.int64)
         acc0 = rng.integers(0, config.acc_max + 1, n)
         sfc0 = rng.integers(0, config.ml_max + 1, n) if config.is_msb else np.zeros(n, np.int64)
-        array = PixelArray(config, (1, n))
+        array = PixelArrayModel(config, (1, n))
         array.state.acc[0], array.state.sfc[0] = acc0, sfc0
         array.feed(e[:h].reshape(h, 1, n))
         start = array.state.copy()

@@ -12,7 +12,7 @@ from tespike.golden.config import SensorConfig
 from tespike.golden.decode import check_words
 from tespike.golden.errors import InputError
 from tespike.golden.reference import PixelState, step_reference
-from tespike.golden.sensor import PixelArray, simulate
+from tespike.golden.sensor import PixelArrayModel, simulate
 from tests.configs import EDGE_CONFIGS, MSB_EDGE_CONFIGS
 
 MSB = SensorConfig.preset("ml-msb")
@@ -57,7 +57,7 @@ def assert_same_state(engine: PixelState, reference: PixelState):
 
 
 def run_engine(config, stim, bounds):
-    array = PixelArray(config, stim.shape[1:])
+    array = PixelArrayModel(config, stim.shape[1:])
     parts = [array.feed(stim[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
     return np.concatenate(parts), array.state
 
@@ -253,7 +253,7 @@ def test_working_dtype_follows_the_bound():
 
 
 def test_feed_refuses_bad_chunks():
-    array = PixelArray(SensorConfig(), (2, 2))
+    array = PixelArrayModel(SensorConfig(), (2, 2))
     with pytest.raises(InputError, match="65536"):
         array.feed(np.full((3, 2, 2), 65536, np.int64))
     with pytest.raises(InputError, match="float"):

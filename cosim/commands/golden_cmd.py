@@ -34,7 +34,7 @@ def run(args) -> int:
     from tespike.golden.io import load_stimulus, save_stream, word_dtype
     from tespike.golden.paths import check_outputs
     from tespike.cosim.room import require_room
-    from tespike.golden.sensor import PixelArray, iter_chunks
+    from tespike.golden.sensor import PixelArrayModel, iter_chunks
 
     check_outputs({"--out": args.out}, {"--stimulus": args.stimulus, "--config": args.config},
                   {"--out": NPZ_FILE})
@@ -53,7 +53,7 @@ def run(args) -> int:
     words = np.empty((T // L, H, W), word_dtype(config))
     chunks = iter_chunks(stimulus, config, chunk_elements)
     show = progress_wanted(args) and (args.progress == "on" or -(-T // clocks_per_chunk) > PROGRESS_MIN_CHUNKS)
-    array = PixelArray(config, (H, W))
+    array = PixelArrayModel(config, (H, W))
     done = 0
     from tqdm import tqdm
     with tqdm(total=T // L, unit="readout", desc="golden", disable=not show, leave=False) as shown:

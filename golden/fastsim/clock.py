@@ -6,7 +6,7 @@ pixel with ``method="per-clock"`` or ``noise=False``, and as the fallback of
 the window paths (:mod:`.window`) and the head (:mod:`.head`) where a drawn
 window did not settle the outcome. Where few pixels take it, the queue of
 crossings over all clocks in a few array passes (:func:`walk_clocks`), kept where no
-clock clipped; else the cycle-exact model :class:`tespike.golden.sensor.PixelArray`.
+clock clipped; else the cycle-exact model :class:`tespike.golden.sensor.PixelArrayModel`.
 Nothing here classifies: the path is what is left when the others decline.
 """
 
@@ -17,7 +17,7 @@ import numpy as np
 from ..light import deterministic_clock_electrons
 from ..poisson import PoissonSampler
 from ..reference import PixelState, overflow_word
-from ..sensor import PixelArray
+from ..sensor import PixelArrayModel
 from .distinct import distinct
 from .words import ml_words, overflow_clock_word
 
@@ -254,7 +254,7 @@ def walk(c, acc0, e, need=None):
 
 
 def run_clocks(sim, sel, e, words, start=None):
-    """The cycle-exact model (:class:`tespike.golden.sensor.PixelArray`, clock for clock
+    """The cycle-exact model (:class:`tespike.golden.sensor.PixelArrayModel`, clock for clock
     the literal rule of SPEC section 3) on electrons ``e`` (clocks, n) of pixels
     ``sel``, from the start of the interval or from ``start`` (a
     :class:`tespike.golden.reference.PixelState` of shape (1, n) part-way through it)."""
@@ -266,7 +266,7 @@ def run_clocks(sim, sel, e, words, start=None):
         sel, e = sel[left], e[:, left]
         if start is not None:
             start = state_columns(start, left)
-    array = PixelArray(sim.config, (1, sel.size))
+    array = PixelArrayModel(sim.config, (1, sel.size))
     if start is None:
         array.state.acc[0] = sim.carried[sel]
         array.state.sfc[0] = sim.sfc[sel]               # 0 except the msb remainder

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..reference import PixelState, overflow_word
-from ..sensor import PixelArray
+from ..sensor import PixelArrayModel
 from .clock import clock_draws, fallback, run_clocks, state_columns, walk
 from .window import full_plan, full_walk, groups, queue_plan, queue_walk, round_window
 from .codes import HEAD
@@ -153,7 +153,7 @@ def run_head(c, acc0, sfc0, e):
         state.sfc[0] = np.minimum(count, c.ml_max)
     rest = np.flatnonzero(~settled)
     if rest.size:
-        array = PixelArray(c, (1, rest.size))
+        array = PixelArrayModel(c, (1, rest.size))
         array.state.acc[0] = acc0[rest]
         array.state.sfc[0] = sfc0[rest]
         array.feed(np.ascontiguousarray(e[:, rest]).reshape(h, 1, rest.size))
