@@ -1013,13 +1013,13 @@ def test_event_path_under_a_mask_equals_the_gathered_path(config, monkeypatch):
     same generator state: the other pixels' means are 0, which draw nothing. The frame
     mixes event light (some surely overflowing) with lazy, bright and near-threshold
     pixels whose charge alone may pass an overflow's (2^b1 = 2 in the last config)."""
-    from tespike.golden.fastsim import simulator
+    from tespike.golden.fastsim import interval
     rng = np.random.default_rng(5)
     light = 10.0 ** rng.uniform(-3, 0.5, (6, 40, 50))
     light[:, :, :35] = rng.uniform(0.02, 0.3, (6, 40, 35))              # most of the frame: event light
 
     def run(share):
-        monkeypatch.setattr(simulator, "EVENT_MASK_SHARE", share)
+        monkeypatch.setattr(interval, "EVENT_MASK_SHARE", share)
         sim = SceneSimulator(config, light.shape[1:], rng=11)
         words = [sim.readout(frame) for frame in light]
         return np.array(words), sim.carried.copy(), None if sim.sfc is None else sim.sfc.copy(), sim.path_counts

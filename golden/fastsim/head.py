@@ -49,6 +49,13 @@ def classify_head(levels, idx, lam, mean, dark, acc, path, length):
     length[idx[head]] = size[head]
 
 
+def head_paths(sim, sel, length, expected, lam, words):
+    """The head path of pixels ``sel`` (flat indices), in groups of one head length each
+    (``length``: every pixel's, from the plan)."""
+    for h, group in groups(sel, length[sel]):
+        head_path(sim, group, h, expected, lam, words)
+
+
 def head_path(sim, sel, h, expected, lam, words):
     """The first ``h`` clocks per clock through the cycle-exact model, then
     the rest of the interval by the cheapest path the state reached allows:

@@ -17,10 +17,10 @@ from ..errors import InputError
 from ..light import as_generator, electrons_per_readout, log_budget
 from ..noise import PixelNoise, pixel_noise
 from .clock import clock_chunks, clock_path
-from .head import head_path
-from .interval import bright_path, event_path
+from .head import head_paths
+from .interval import bright_path, event_path, event_pixels
 from .lazy import LazyState, lazy_charge, lazy_path
-from .window import groups, window_path
+from .window import window_path
 from .codes import BRIGHT, CLOCK, EVENT, FULL, HEAD, LAZY, QUEUE, SIMULATION_PATHS
 from .plan import path_levels
 from .words import word_tables
@@ -32,14 +32,6 @@ CHECKS = 8
 #: Spawn key of the generator that draws lazy pixels' charge when :attr:`SceneSimulator.acc`
 #: is read (beyond any child index a caller spawns in practice).
 PEEK_KEY = 0x7065656B
-
-#: The event path runs on the whole frame under a mask (:func:`.interval.event_path`)
-#: where it holds at least 1 / EVENT_MASK_SHARE of the pixels (passes over the others
-#: then cost less than gathering and scattering its own). Words identical either way;
-#: 1.4 (a share of 0.71) against 2 took 3 % less CPU on the vestibule pan (TE, where the
-#: path holds about 60 % of a readout), the same on the St Fagans pan (75 %) and the
-#: drifting log-uniform scene (benchmarks/bench_fastsim_knob.py, interleaved readouts).
-EVENT_MASK_SHARE = 1.4
 
 #: How :class:`SceneSimulator` draws electrons: the fast paths, or per pixel clock everywhere.
 SIMULATION_METHODS = ("fast", "per-clock")
@@ -155,12 +147,7 @@ class SceneSimulator:
             if not count:
                 continue
             self.path_counts[name] += count
-            if code == EVENT and count == expected.size:
-                sel = slice(None)                          # the whole frame: no gather / scatter
-            elif code == EVENT and count * EVENT_MASK_SHARE >= expected.size:
-                sel = on_path                              # most of the frame: a mask (event_path)
-            else:
-                sel = np.flatnonzero(on_path)
+            sel = event_pixels(on_path, count) if code == EVENT else np.flatnonzero(on_path)
             if code == EVENT:
                 event_path(self, sel, expected, dark, words)
             elif code == BRIGHT:
@@ -168,8 +155,7 @@ class SceneSimulator:
             elif code in (QUEUE, FULL):
                 window_path(self, code, sel, plan, expected, dark, lam, words)
             elif code == HEAD:
-                for h, group in groups(sel, plan.length[sel]):
-                    head_path(self, group, h, expected, lam, words)
+                head_paths(self, sel, plan.length, expected, lam, words)
             elif code == CLOCK:
                 clock_path(self, sel, expected, dark, words)
         return words.reshape(self.shape)
