@@ -30,3 +30,8 @@ def report(args, message: str) -> None:
     """The one line a command prints on stdout on success (silenced by ``--quiet``)."""
     if not getattr(args, "quiet", False):
         print(message, flush=True)
+
+
+def counted(n: int, noun: str) -> str:
+    """``n`` and ``noun`` in the plural unless n is 1: "1 readout", "4 readouts" (nouns taking an -s)."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"

@@ -142,8 +142,9 @@ class SensorConfig:
         fill("threshold", _default_threshold(self.mode, b1, alpha, ml_bits))
         theta = need_int("threshold", 1, None, ">= 1")
         if self.acc_bits is None and theta.bit_length() + 1 > 62:     # (the derived width, named by its cause)
-            raise ConfigError(f"config key 'threshold' = {_short(theta)}: must be < 2^61 "
-                              f"(its accumulator would need acc_bits = {theta.bit_length() + 1}, at most 62)")
+            raise ConfigError(f"config key 'threshold' = {_short(theta)}: must be < 2^61 with the default "
+                              f"acc_bits (it would be {theta.bit_length() + 1}, at most 62); up to 2^62 - 1 "
+                              "with acc_bits = 62 given")
         fill("acc_bits", theta.bit_length() + 1)
         acc_bits = need_int("acc_bits", 1, 62, "in 1..62")
         if (1 << acc_bits) - 1 < theta:

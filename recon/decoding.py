@@ -52,7 +52,8 @@ def as_word_tensor(words, device: str | torch.device = "cpu") -> torch.Tensor:
     check_word_dtype(words.dtype)
     if words.dtype == np.uint64 and words.size and int(words.max()) > np.iinfo(np.int64).max:
         raise InputError(f"readout word {int(words.max())} does not fit in int64")
-    return torch.from_numpy(words.astype(np.int64, copy=False)).to(device)
+    words = words.astype(np.int64, copy=not words.flags.writeable)  # (torch takes no read-only array: a
+    return torch.from_numpy(words).to(device)                            # memory-mapped int64 stream is one)
 
 
 def _refuse(w: torch.Tensor, bad: torch.Tensor, config: SensorConfig):

@@ -54,3 +54,12 @@ def test_refusals(tmp_path, rng):
     assert not out.exists()
     assert_refused(run_tespike("reconstruct", "--stream", stream, "--method", "tfi",
                                "--out", tmp_path / "nodir" / "R.npy"), "does not exist")
+
+
+def test_a_memory_mapped_int64_stream_reconstructs_without_a_torch_warning(tmp_path):
+    """SPEC allows int64 words; a memory-mapped int64 stream is read-only, which torch warned about
+    on stderr after the success line (uint8 streams are copied anyway)."""
+    from tespike.golden.config import SensorConfig
+    np.savez(tmp_path / "s.npz", words=np.full((3, 2, 2), 5, np.int64), config=SensorConfig.preset("te").to_json())
+    result = run_tespike("reconstruct", "--stream", tmp_path / "s.npz", "--method", "tfp", "--out", tmp_path / "r.npy")
+    assert result.returncode == 0 and result.stderr == "", result.stderr

@@ -154,3 +154,9 @@ def test_simulate_msb_camera_from_json_then_reconstruct(tmp_path):
         assert result.returncode == 0, result.stderr
         images = np.load(tmp_path / f"r_{method}.npy")
         assert images.shape == scene.shape and np.isfinite(images).all()
+
+
+def test_the_success_line_counts_one_readout_as_one(tmp_path):
+    np.save(tmp_path / "i.npy", np.full((1, 2, 2), 0.3, np.float32))
+    result = run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy", "--out", tmp_path / "s.npz")
+    assert result.stdout.strip().endswith(": 1 readout of 2 x 2 TE words"), result.stdout

@@ -120,3 +120,11 @@ def test_a_clock_structure_too_long_from_defaults_says_they_are_defaults():
         SensorConfig(b1=16, b2=16)
     with pytest.raises(ConfigError, match=r"must be <= 2\^24 = 16777216$"):
         SensorConfig(b1=16, b2=16, alpha=300, clocks_per_tick=65536)
+
+
+def test_the_largest_threshold_is_named_with_the_acc_bits_that_allow_it():
+    """'must be < 2^61' read as the rule, yet 2^62 - 1 runs with acc_bits = 62 given."""
+    big = (1 << 62) - 1
+    with pytest.raises(ConfigError, match="with the default acc_bits .* up to 2\\^62 - 1 with acc_bits = 62"):
+        SensorConfig(threshold=big)
+    assert SensorConfig(threshold=big, acc_bits=62).threshold == big

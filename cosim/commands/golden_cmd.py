@@ -28,7 +28,7 @@ def add_arguments(parser):
 def run(args) -> int:
     import numpy as np
 
-    from tespike.cosim.console import progress_wanted, report
+    from tespike.cosim.console import counted, progress_wanted, report
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
     from tespike.golden.io import load_stimulus, save_stream, word_dtype
@@ -63,5 +63,5 @@ def run(args) -> int:
             done += len(part)
             shown.update(len(part))
     save_stream(args.out, words, config)
-    report(args, f"wrote {args.out}: {T // L} readouts of {H} x {W} {config.mode.upper()} words")
+    report(args, f"wrote {args.out}: {counted(T // L, 'readout')} of {H} x {W} {config.mode.upper()} words")
     return 0

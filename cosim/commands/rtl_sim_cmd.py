@@ -28,7 +28,7 @@ def run(args) -> int:
     from pathlib import Path
 
     from tespike.cosim.backends import backend, checked_words
-    from tespike.cosim.console import progress_wanted, report
+    from tespike.cosim.console import counted, progress_wanted, report
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
     from tespike.golden.io import load_stimulus, save_stream, word_dtype
@@ -70,7 +70,7 @@ def run(args) -> int:
         words = backend(args.backend)(config, stimulus)
     save_stream(args.out, checked_words(words, config, stimulus, args.backend), config)
     K, H, W = words.shape
-    report(args, f"wrote {args.out}: {K} readouts of {H} x {W} {config.mode.upper()} words "
+    report(args, f"wrote {args.out}: {counted(K, 'readout')} of {H} x {W} {config.mode.upper()} words "
                  f"({args.backend} RTL)" + (f", {args.vcd}" if args.vcd else "") + (f" and {gtkw}" if gtkw else ""))
     if args.check:
         return _compare_with_golden(words, config, stimulus, args.backend)

@@ -19,7 +19,7 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from tespike.cosim.console import bar, progress_wanted, report
+    from tespike.cosim.console import bar, counted, progress_wanted, report
     from tespike.golden.config import load_config
     from tespike.golden.fastsim import simulate_scene
     from tespike.golden.io import load_scene, save_stream, word_dtype
@@ -46,5 +46,5 @@ def run(args) -> int:
                            sensor=sensor)
     save_stream(args.out, words, config)
     K, H, W = words.shape
-    report(args, f"wrote {args.out}: {K} readouts of {H} x {W} {config.mode.upper()} words")
+    report(args, f"wrote {args.out}: {counted(K, 'readout')} of {H} x {W} {config.mode.upper()} words")
     return 0
