@@ -196,19 +196,17 @@ def check_demo_folder(out) -> None:
 
 
 def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, crop, rtl_readouts,
-               vcd: bool, weights=None) -> None:
+               vcd: bool, methods=()) -> None:
     """Refuse up front (one line) a demo whose arrays do not fit in memory or whose files do not
-    fit on the disk of ``out``: a lower bound of each, from the sizes the options give."""
+    fit on the disk of ``out``: a lower bound of each, from the sizes the options give (``methods``:
+    those the demo runs, each reconstructing every sensor's stream)."""
     from tespike.cosim.room import require_room as require
     from tespike.golden.io import word_dtype
     from tespike.golden.light import stimulus_dtype
-    from tespike.recon.methods import available_methods
-
     from .vcd import VCD_BYTES_PER_PIXEL_CLOCK
     te = configs[RTL_SENSOR]
     values = frames * height * width
     word_bytes = sum(word_dtype(config).itemsize for config in configs.values())
-    methods = available_methods(configs.values(), weights)
     images = 4 * len(methods) * len(configs) * values            # R_*.npy, float32, kept for the report
     crop_clocks = rtl_readouts * te.clocks_per_readout * crop * crop
     disk = (4 * values + word_bytes * values + images + stimulus_dtype(te).itemsize * crop_clocks
@@ -252,8 +250,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     configs = {label: load_config(label) for label in sensors}
     chosen = weights_by_sensor(weights, configs)                        # (method, sensor) -> file
     ready = {(method, configs[sensor]): path for (method, sensor), path in chosen.items()}
-    runs = available_methods(configs.values(), ready)
-    unused = sorted({(method, str(path)) for (method, _), path in chosen.items() if method not in runs})
+    methods = available_methods(configs.values(), ready)     # learned ones only where there are weights
+    unused = sorted({(method, str(path)) for (method, _), path in chosen.items() if method not in methods})
     if unused:          # (the demo runs a learned method only with weights for every one of its sensors)
         method, path = unused[0]
         missing = [sensor for sensor, config in configs.items()
@@ -264,7 +262,7 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     te = configs[RTL_SENSOR]
     L = te.clocks_per_readout
     check_room(out, configs, frames=frames, height=height, width=width, crop=crop,
-               rtl_readouts=rtl_readouts, vcd=backend == "amaranth", weights=ready)
+               rtl_readouts=rtl_readouts, vcd=backend == "amaranth", methods=methods)
     from tespike.golden.atomic import atomic_folder
     given = out
     with atomic_folder(given) as out:          # the folder is this run's whole, or the previous run's
@@ -347,10 +345,9 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         from tespike.recon.evaluate import evaluate, scored_frames
         from tespike.recon.names import label
         from tespike.recon.report import write_outputs
-        from tespike.recon.methods import available_methods, reconstruct
+        from tespike.recon.methods import reconstruct
         from tespike.recon.settings import uses_window
         from tespike.recon.metrics import psnr_mu, ssim_mu
-        methods = available_methods(configs.values(), ready)     # learned ones only where there are weights
         started = progress.begin(f"reconstruction: {', '.join(methods)} on every stream (run time: median of "
                                  f"{repeats}) and on the RTL stream")
         by_config = {configs[name]: streams[name] for name in configs}

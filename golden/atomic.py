@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Iterator
 
 from .errors import InputError
-from .paths import check_output_file, written_through
+from .paths import check_output_file, passes_through
 
 
 #: Hidden temporaries are named ``.<name>.<pid>.<random>.part`` beside the output;
@@ -304,7 +304,7 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
         info = os.stat(target)
     except OSError:
         info = None
-    through = written_through(target)
+    through = info is not None and passes_through(info.st_mode)
     if through:
         directory = Path(tempfile.gettempdir())
         prefix = f".tespike.{os.getpid()}."

@@ -94,7 +94,7 @@ def check_output_file(path: str | os.PathLike, what: str | None = None) -> Path:
     except OSError as exc:
         raise InputError(f"cannot write {label}: {_reason(exc)}") from None
     if info is not None:
-        if written_through(target):
+        if passes_through(info.st_mode):
             if not os.access(target, os.W_OK):
                 raise InputError(f"cannot write {label}: permission denied")
             return target
@@ -163,6 +163,11 @@ def written_through(path: str | os.PathLike) -> bool:
         mode = os.stat(path).st_mode
     except OSError:
         return False
+    return passes_through(mode)
+
+
+def passes_through(mode: int) -> bool:
+    """:func:`written_through` from an ``st_mode`` already read."""
     return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
 
 

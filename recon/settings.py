@@ -25,6 +25,15 @@ def check_window(window, what: str = "window") -> None:
         raise InputError(f"{what} {window!r}: must be an odd integer >= 1 (readouts centred on the key moment)")
 
 
+def check_window_reach(window: int, readouts: int, what: str) -> None:
+    """Refuse a window given wider than ``2 K - 1`` for ``what`` of K ``readouts`` ("this 9-readout
+    stream", "the 9-readout sequence 'a'"): every window is cut to the ends, so no frame's can be
+    that wide (the default window is not checked: a short sequence takes what it has)."""
+    if window > 2 * readouts - 1:
+        raise InputError(f"--window {window}: wider than any window of {what} "
+                         f"({2 * readouts - 1} readouts at most; a wider one changes nothing)")
+
+
 def check_device(device) -> None:
     """Refuse, in one line, a torch device that cannot hold a tensor on this machine (a misspelt
     name, cuda without a GPU, the data-less meta device), before any work is done on it."""

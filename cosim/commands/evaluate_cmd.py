@@ -185,7 +185,7 @@ def run(args) -> int:
     from tespike.recon.report import OUTPUT_FILES
     from tespike.recon.scenes import load_hdr_sequence
     from tespike.recon.scenes.heldout import sequence_set
-    from tespike.recon.settings import check_device
+    from tespike.recon.settings import check_device, check_window_reach
 
     check_device(args.device)                           # before any sequence is simulated
     if args.store or args.workers is not None or args.scheduler:
@@ -277,10 +277,7 @@ def run(args) -> int:
     window = DEFAULT_WINDOW if args.window is None else args.window
     if args.window is not None:      # as reconstruct: no frame's window can be that wide
         shortest, light = min(sequences, key=lambda sequence: sequence[1].shape[0])
-        K = light.shape[0]
-        if window > 2 * K - 1:
-            raise InputError(f"--window {window}: wider than any window of the {K}-readout sequence "
-                             f"{shortest!r} ({2 * K - 1} readouts at most; a wider one changes nothing)")
+        check_window_reach(window, light.shape[0], f"the {light.shape[0]}-readout sequence {shortest!r}")
     if threads is not None:
         import torch
         torch.set_num_threads(threads)

@@ -45,7 +45,7 @@ def run(args) -> int:
     from tespike.golden.errors import InputError
     from tespike.golden.io import atomic_output, load_stream
     from tespike.golden.paths import check_outputs
-    from tespike.recon.settings import DEFAULT_WINDOW, check_window, uses_window
+    from tespike.recon.settings import DEFAULT_WINDOW, check_window, check_window_reach, uses_window
 
     from .common import check_threads_argument
     from tespike.cosim.room import require_room, reserved_memmap
@@ -72,9 +72,8 @@ def run(args) -> int:
                   {"--out": NPY_FILE})
     words, config = load_stream(args.stream, memory_map=True)     # stays on disk
     K, H, W = words.shape
-    if args.window is not None and window > 2 * K - 1:      # (every window is cut to the stream's ends)
-        raise InputError(f"--window {window}: wider than any window of this {K}-readout stream "
-                         f"({2 * K - 1} readouts at most; a wider one changes nothing)")
+    if args.window is not None:
+        check_window_reach(window, K, f"this {K}-readout stream")
     calibration = None
     if args.calibration is not None:
         from tespike.recon.calibration import check_matches, load_calibration

@@ -152,7 +152,7 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     from tespike.recon.evaluate import (Evaluation, Measurement, check_methods, check_sequence_peak,
                                         learned_span, scored_frames)
     from tespike.recon.methods import RECON_METHODS, available_methods, missing_weights
-    from tespike.recon.settings import ReconSettings
+    from tespike.recon.settings import ReconSettings, check_window_reach
 
     store = DatasetStore.open(url)
     sequences = store.sequences()
@@ -178,11 +178,10 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     ReconSettings(window=window, device=device)          # refuse a bad window or device here
     if not sequences:
         raise InputError(f"dataset store {store.url!r} holds no complete sequence")
-    shortest = min(sequences, key=lambda s: infos[s]["frames"])
-    if given and window > 2 * infos[shortest]["frames"] - 1:     # (as the serial evaluation and reconstruct)
+    if given:                                            # (as the serial evaluation and reconstruct)
+        shortest = min(sequences, key=lambda s: infos[s]["frames"])
         K = infos[shortest]["frames"]
-        raise InputError(f"--window {window}: wider than any window of the {K}-readout sequence {shortest!r} "
-                         f"({2 * K - 1} readouts at most; a wider one changes nothing)")
+        check_window_reach(window, K, f"the {K}-readout sequence {shortest!r}")
     h = _halo()
     learned = learned_span(methods)                      # frames scored as the serial evaluation scores them
     tasks, keys, plan = [], [], {}
