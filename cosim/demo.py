@@ -216,6 +216,169 @@ def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, 
             disk={Path(out) / "report.md": disk})
 
 
+# ---------------------------------------------------------------- the stages
+def demo_methods(weights, configs: dict[str, SensorConfig]):
+    """-> (``chosen``: (method, sensor) -> weights file, the methods the demo runs): the learned ones
+    only where there are weights for every sensor; a given file the demo would leave unused is refused."""
+    from tespike.recon.learned import weights_by_sensor
+    from tespike.recon.methods import available_methods, missing_weights
+    chosen = weights_by_sensor(weights, configs)                        # (method, sensor) -> file
+    ready = {(method, configs[sensor]): path for (method, sensor), path in chosen.items()}
+    methods = available_methods(configs.values(), ready)
+    unused = sorted({(method, str(path)) for (method, _), path in chosen.items() if method not in methods})
+    if unused:
+        method, path = unused[0]
+        missing = [sensor for sensor, config in configs.items()
+                   if missing_weights(method, config, ready.get((method, config))) is not None]
+        raise InputError(f"--weights {path!r}: the demo runs {method} only with weights for every sensor, "
+                         f"and there are none for {', '.join(missing)} (give those too, or leave --sensors "
+                         "to the sensors it has; the file would be ignored)")
+    return chosen, methods
+
+
+@dataclasses.dataclass
+class RTLCrop:
+    """The pixels and readouts the RTL runs: rows ``y..y + size``, columns ``x..x + size``,
+    the first ``readouts`` readouts."""
+    y: int
+    x: int
+    size: int
+    readouts: int
+
+    def of(self, array: np.ndarray) -> np.ndarray:
+        """The crop of a ``(K, H, W)`` array (its readouts and pixels)."""
+        return array[:self.readouts, self.y:self.y + self.size, self.x:self.x + self.size]
+
+
+def golden_stage(out: Path, light, configs, crop: RTLCrop, seed: int, bars: bool):
+    """Stage 2: every sensor's stream of ``light`` (``S_<sensor>.npz``), TE through the per-clock
+    electrons of the cycle-exact model, and the crop's electrons (``E_crop.npy``) -> (streams,
+    crop electrons, the commands that redo it)."""
+    from tespike.golden.fastsim import iter_scene_stimulus, simulate_scene
+    from tespike.golden.io import save_stream
+    from tespike.golden.sensor import PixelArrayModel
+    te = configs[RTL_SENSOR]
+    frames, height, width = light.shape
+    L = te.clocks_per_readout
+    array = PixelArrayModel(te, (height, width))
+    words_te = np.empty((frames, height, width), np.int64)
+    crop_stimulus = np.empty((crop.readouts * L, crop.size, crop.size), np.uint16)
+    electrons = iter_scene_stimulus(te, light, seed=seed)
+    if bars:
+        from tqdm import tqdm
+        electrons = tqdm(electrons, total=frames, desc="golden te", unit="readout", leave=False)
+    for k, e in enumerate(electrons):
+        words_te[k] = array.feed(e)[0]
+        if k < crop.readouts:
+            crop_stimulus[k * L:(k + 1) * L] = e[:, crop.y:crop.y + crop.size, crop.x:crop.x + crop.size]
+    streams = {}
+    for label, config in configs.items():
+        streams[label] = words_te if label == RTL_SENSOR else simulate_scene(config, light, seed=seed)
+        save_stream(out / f"S_{label}.npz", streams[label], config)
+    _save_npy(out / "E_crop.npy", crop_stimulus)
+    commands = [f"tespike stimulus --config te --scene I.npy --seed {seed} --out E_te.npy   "
+                f"# {frames * L * height * width * 2 / 2**20:.0f} MiB",
+                "tespike golden --config te --stimulus E_te.npy --out S_te.npz",
+                f"tespike simulate --config te --scene I.npy --seed {seed} --method per-clock --out S_te.npz"
+                "   # the same words, without the file"]
+    commands += [f"tespike simulate --config {label} --scene I.npy --seed {seed} --out S_{label}.npz"
+                 for label in configs if label != RTL_SENSOR]
+    return streams, crop_stimulus, commands
+
+
+@dataclasses.dataclass
+class RTLResult:
+    """Stage 3's outcome: the RTL's words, the first difference from golden (None: bit-identical),
+    its verdict line, what the report says of the run, and the commands that redo it."""
+    words: np.ndarray
+    difference: object
+    verdict: str
+    info: dict
+    commands: list[str]
+
+
+def rtl_stage(out: Path, te: SensorConfig, crop_stimulus, golden_crop, crop: RTLCrop, backend: str,
+              seed: int, bars: bool) -> RTLResult:
+    """Stage 3: the TE array in ``backend`` on the crop's electrons (with a VCD read back under
+    Amaranth), ``S_rtl.npz`` and ``verdict.txt`` against the golden model's words."""
+    from tespike.golden.io import save_stream
+    from tespike.golden.sensor import simulate
+    from tespike.recon.pictures import write_text
+
+    from .backends import backend as run_backend, checked_words
+    from .compare import first_difference
+    from .demo_report import verdict_text
+    expected = simulate(te, crop_stimulus)
+    if not np.array_equal(expected, golden_crop):   # the generator and the engine disagree: a bug, not a verdict
+        raise RuntimeError("golden on the crop stimulus differs from the full frame's crop")
+    info = {"backend": backend, "vcd": None}
+    if backend == "amaranth":
+        from tespike.cosim.rtlsim import rtl_run
+        from tespike.cosim.vcd import waveform_words
+        run = rtl_run(te, crop_stimulus, vcd_path=out / "W.vcd", gtkw_path=out / "W.gtkw", flat=True,
+                      progress=bars)
+        read_started = time.perf_counter()
+        wave = waveform_words(out / "W.vcd", te, (crop.size, crop.size))
+        info.update(vcd="W.vcd", gtkw="W.gtkw", latency=run.latency, cycles=run.cycles,
+                    sim_seconds=run.seconds, read_seconds=time.perf_counter() - read_started,
+                    live_equals_vcd=bool(np.array_equal(run.words, wave.words)),
+                    vcd_bytes=(out / "W.vcd").stat().st_size)
+        words = wave.words
+    else:
+        words = checked_words(run_backend(backend)(te, crop_stimulus), te, crop_stimulus, backend)
+    save_stream(out / "S_rtl.npz", words, te)
+    difference = first_difference(words, expected)
+    verdict = verdict_text(difference, backend, crop.readouts, crop.size, (crop.y, crop.x))
+    write_text(out / "verdict.txt", verdict + "\n")
+    commands = [f"tespike stimulus --config te --scene I.npy --seed {seed} "
+                f"--crop {crop.y},{crop.x},{crop.size},{crop.size} --readouts {crop.readouts} --out E_crop.npy",
+                "tespike rtl-sim --config te --stimulus E_crop.npy --out S_rtl.npz --check"
+                + (" --vcd W.vcd" if backend == "amaranth" else f" --backend {backend}")]
+    return RTLResult(words, difference, verdict, info, commands)
+
+
+def rtl_reconstruction(out: Path, rtl_words, te: SensorConfig, light, crop: RTLCrop, evaluation, methods,
+                       chosen, window: int, repeats: int, scored: slice, middle: int):
+    """Stage 4's second half: every method on the RTL's own stream (``R_<method>_rtl.npy``), scored
+    on the crop's readouts ``scored`` beside the same method on the golden full frame's stream ->
+    (rows of the report, readout ``middle``'s RTL and golden images per method)."""
+    from tespike.golden.io import save_images
+    from tespike.recon.methods import reconstruct
+    from tespike.recon.metrics import psnr_mu, ssim_mu
+
+    from .walltime import median_seconds
+    peak = float(light.max())
+    truth = crop.of(light)
+    rows, rtl_images, golden_images = [], {}, {}
+    for method in methods:
+        seconds, images = median_seconds(
+            lambda: reconstruct(rtl_words, te, method, window=window, weights=chosen.get((method, RTL_SENSOR))),
+            repeats)
+        save_images(out / f"R_{method}_rtl.npy", images)
+        full = crop.of(evaluation.images[DEMO_SCENE, RTL_SENSOR, method])
+        rtl_images[method], golden_images[method] = images[middle], full[middle]
+        rows.append({
+            "method": method,
+            "rtl_psnr": float(np.mean(psnr_mu(images[scored], truth[scored], peak=peak))),
+            "rtl_ssim": float(np.mean(ssim_mu(images[scored], truth[scored], peak=peak))),
+            "golden_psnr": float(np.mean(psnr_mu(full[scored], truth[scored], peak=peak))),
+            "golden_ssim": float(np.mean(ssim_mu(full[scored], truth[scored], peak=peak))),
+            "max_diff": float(np.max(np.abs(images[scored] - full[scored]))),
+            "ms_per_frame": 1e3 * seconds / crop.readouts})
+    return rows, rtl_images, golden_images
+
+
+def reconstruction_commands(configs, methods, window: int, frames: int, height: int, width: int,
+                            seed: int) -> list[str]:
+    """The commands that redo stage 4."""
+    from tespike.recon.settings import uses_window
+    return ([f"tespike reconstruct --stream S_{sensor}.npz --method {method} "
+             + (f"--window {window} " if uses_window(method) else "")
+             + f"--out R_{method}_{sensor}.npy" for sensor in list(configs) + ["rtl"] for method in methods]
+            + [f"tespike evaluate --set default --frames {frames} --height {height} --width {width} "
+               f"--seed {seed} --out eval   # Table 1 layout, TE and ML count, other noise draws"])
+
+
 # ---------------------------------------------------------------- the demo
 def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed: int = 0,
              crop: int | None = None, rtl_readouts: int | None = None,
@@ -229,125 +392,52 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     progress bars within the stages (default: when not quiet and stderr is a terminal); ``weights``:
     learned methods' weights files to use instead of the shipped ones for the sensor each was trained for.
     """
+    from tespike.golden.atomic import atomic_folder
     from tespike.golden.config import load_config
-    from tespike.golden.fastsim import iter_scene_stimulus, simulate_scene
-    from tespike.golden.io import save_images, save_stream
-    from tespike.golden.sensor import PixelArrayModel, simulate
-    from tespike.recon.learned import weights_by_sensor
-    from tespike.recon.methods import available_methods, missing_weights
+    from tespike.golden.io import save_images
+    from tespike.recon.evaluate import evaluate, scored_frames
+    from tespike.recon.names import label
     from tespike.recon.pictures import write_text
+    from tespike.recon.report import write_outputs
     from tespike.recon.scenes import make_scene
 
-    from .backends import backend as run_backend, checked_words
-    from .compare import first_difference
     from .demo_plots import plot_frame, plot_rtl_crop
-    from .demo_report import report_markdown, verdict_text
-    from .walltime import median_seconds
+    from .demo_report import report_markdown
     sensors = tuple(sensors)
-    crop, rtl_readouts = check_options(out, frames=frames, height=height, width=width, seed=seed, crop=crop,
+    size, rtl_readouts = check_options(out, frames=frames, height=height, width=width, seed=seed, crop=crop,
                                        rtl_readouts=rtl_readouts, backend=backend, repeats=repeats,
                                        window=window, sensors=sensors)
-    configs = {label: load_config(label) for label in sensors}
-    chosen = weights_by_sensor(weights, configs)                        # (method, sensor) -> file
-    ready = {(method, configs[sensor]): path for (method, sensor), path in chosen.items()}
-    methods = available_methods(configs.values(), ready)     # learned ones only where there are weights
-    unused = sorted({(method, str(path)) for (method, _), path in chosen.items() if method not in methods})
-    if unused:          # (the demo runs a learned method only with weights for every one of its sensors)
-        method, path = unused[0]
-        missing = [sensor for sensor, config in configs.items()
-                   if missing_weights(method, config, ready.get((method, config))) is not None]
-        raise InputError(f"--weights {path!r}: the demo runs {method} only with weights for every sensor, "
-                         f"and there are none for {', '.join(missing)} (give those too, or leave --sensors "
-                         "to the sensors it has; the file would be ignored)")
+    configs = {name: load_config(name) for name in sensors}
+    chosen, methods = demo_methods(weights, configs)
     te = configs[RTL_SENSOR]
-    L = te.clocks_per_readout
-    check_room(out, configs, frames=frames, height=height, width=width, crop=crop,
+    check_room(out, configs, frames=frames, height=height, width=width, crop=size,
                rtl_readouts=rtl_readouts, vcd=backend == "amaranth", methods=methods)
-    from tespike.golden.atomic import atomic_folder
     given = out
     with atomic_folder(given) as out:          # the folder is this run's whole, or the previous run's
         progress = Progress(6, quiet)
         if bars is None:
             bars = not quiet and sys.stderr.isatty()
 
-        # 1. scene
         started = progress.begin(f"scene: pan over the shipped CC0 panorama, {frames} x {height} x {width}")
         light = make_scene(DEMO_SCENE, frames, height, width, seed=seed)
         _save_npy(out / "I.npy", light)
         progress.end("scene", started, [f"tespike scene --name {DEMO_SCENE} --frames {frames} --height {height} "
                                         f"--width {width} --seed {seed} --out I.npy"])
 
-        # 2. golden full frame; TE through the per-clock electrons the RTL crop will get
         started = progress.begin("golden model, full frame: TE (per-clock electrons, cycle-exact), "
                                  "ML count and ML msb (fast simulator)")
-        y, x = choose_crop(light, crop)
-        streams = {}
-        array = PixelArrayModel(te, (height, width))
-        words_te = np.empty((frames, height, width), np.int64)
-        crop_stimulus = np.empty((rtl_readouts * L, crop, crop), np.uint16)
-        electrons = iter_scene_stimulus(te, light, seed=seed)
-        if bars:
-            from tqdm import tqdm
-            electrons = tqdm(electrons, total=frames, desc="golden te", unit="readout", leave=False)
-        for k, e in enumerate(electrons):
-            words_te[k] = array.feed(e)[0]
-            if k < rtl_readouts:
-                crop_stimulus[k * L:(k + 1) * L] = e[:, y:y + crop, x:x + crop]
-        for label, config in configs.items():
-            streams[label] = words_te if label == RTL_SENSOR else simulate_scene(config, light, seed=seed)
-            save_stream(out / f"S_{label}.npz", streams[label], config)
-        _save_npy(out / "E_crop.npy", crop_stimulus)
-        commands = [f"tespike stimulus --config te --scene I.npy --seed {seed} --out E_te.npy   "
-                    f"# {frames * L * height * width * 2 / 2**20:.0f} MiB",
-                    "tespike golden --config te --stimulus E_te.npy --out S_te.npz",
-                    f"tespike simulate --config te --scene I.npy --seed {seed} --method per-clock --out S_te.npz"
-                    "   # the same words, without the file"]
-        commands += [f"tespike simulate --config {label} --scene I.npy --seed {seed} --out S_{label}.npz"
-                     for label in configs if label != RTL_SENSOR]
+        rtl_crop = RTLCrop(*choose_crop(light, size), size, rtl_readouts)
+        streams, crop_stimulus, commands = golden_stage(out, light, configs, rtl_crop, seed, bars)
         progress.end("golden, full frame", started, commands)
 
-        # 3. RTL on the crop
-        started = progress.begin(f"RTL ({backend}): TE array of {crop} x {crop} pixels, {rtl_readouts} readouts "
-                                 f"({rtl_readouts * L} clocks) at rows {y}.., columns {x}..")
-        expected = simulate(te, crop_stimulus)
-        consistent = bool(np.array_equal(expected, words_te[:rtl_readouts, y:y + crop, x:x + crop]))
-        if not consistent:           # the generator and the engine disagree: a bug, not a verdict
-            raise RuntimeError("golden on the crop stimulus differs from the full frame's crop")
-        rtl_info = {"backend": backend, "vcd": None}
-        if backend == "amaranth":
-            from tespike.cosim.rtlsim import rtl_run
-            from tespike.cosim.vcd import waveform_words
-            run = rtl_run(te, crop_stimulus, vcd_path=out / "W.vcd", gtkw_path=out / "W.gtkw", flat=True,
-                          progress=bars)
-            read_started = time.perf_counter()
-            wave = waveform_words(out / "W.vcd", te, (crop, crop))
-            rtl_info.update(vcd="W.vcd", gtkw="W.gtkw", latency=run.latency, cycles=run.cycles,
-                            sim_seconds=run.seconds, read_seconds=time.perf_counter() - read_started,
-                            live_equals_vcd=bool(np.array_equal(run.words, wave.words)),
-                            vcd_bytes=(out / "W.vcd").stat().st_size)
-            rtl_words = wave.words
-        else:
-            rtl_words = checked_words(run_backend(backend)(te, crop_stimulus), te, crop_stimulus, backend)
-        save_stream(out / "S_rtl.npz", rtl_words, te)
-        difference = first_difference(rtl_words, expected)
-        verdict = verdict_text(difference, backend, rtl_readouts, crop, (y, x))
-        write_text(out / "verdict.txt", verdict + "\n")
-        rerun = (f"tespike stimulus --config te --scene I.npy --seed {seed} --crop {y},{x},{crop},{crop} "
-                 f"--readouts {rtl_readouts} --out E_crop.npy")
-        rtl_cmd = ("tespike rtl-sim --config te --stimulus E_crop.npy --out S_rtl.npz --check"
-                   + (" --vcd W.vcd" if backend == "amaranth" else f" --backend {backend}"))
-        progress.end(f"RTL ({backend})", started, [rerun, rtl_cmd])
+        started = progress.begin(f"RTL ({backend}): TE array of {size} x {size} pixels, {rtl_readouts} readouts "
+                                 f"({rtl_readouts * te.clocks_per_readout} clocks) at rows {rtl_crop.y}.., "
+                                 f"columns {rtl_crop.x}..")
+        rtl = rtl_stage(out, te, crop_stimulus, rtl_crop.of(streams[RTL_SENSOR]), rtl_crop, backend, seed, bars)
+        progress.end(f"RTL ({backend})", started, rtl.commands)
         if not quiet:
-            print(f"      RTL verdict: {verdict}", file=sys.stderr, flush=True)
+            print(f"      RTL verdict: {rtl.verdict}", file=sys.stderr, flush=True)
 
-        # 4. reconstruction: every method with weights for every sensor, on every golden stream and
-        # on the RTL's own stream
-        from tespike.recon.evaluate import evaluate, scored_frames
-        from tespike.recon.names import label
-        from tespike.recon.report import write_outputs
-        from tespike.recon.methods import reconstruct
-        from tespike.recon.settings import uses_window
-        from tespike.recon.metrics import psnr_mu, ssim_mu
         started = progress.begin(f"reconstruction: {', '.join(methods)} on every stream (run time: median of "
                                  f"{repeats}) and on the RTL stream")
         by_config = {configs[name]: streams[name] for name in configs}
@@ -357,34 +447,13 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         paths = write_outputs(evaluation, out)
         for (_, sensor, method), images in evaluation.images.items():
             save_images(out / f"R_{method}_{sensor}.npy", images)
-        peak = float(light.max())
-        truth = light[:rtl_readouts, y:y + crop, x:x + crop]
         scored = scored_frames(rtl_readouts, window, evaluation.span)    # (the golden rows' rule)
-        rtl_rows, rtl_images, golden_images = [], {}, {}
-        middle = (scored.start + scored.stop - 1) // 2
-        for method in methods:
-            seconds, images = median_seconds(
-                lambda: reconstruct(rtl_words, te, method, window=window, weights=chosen.get((method, RTL_SENSOR))),
-                repeats)
-            save_images(out / f"R_{method}_rtl.npy", images)
-            full = evaluation.images[DEMO_SCENE, RTL_SENSOR, method][:rtl_readouts, y:y + crop, x:x + crop]
-            rtl_images[method], golden_images[method] = images[middle], full[middle]
-            rtl_rows.append({
-                "method": method,
-                "rtl_psnr": float(np.mean(psnr_mu(images[scored], truth[scored], peak=peak))),
-                "rtl_ssim": float(np.mean(ssim_mu(images[scored], truth[scored], peak=peak))),
-                "golden_psnr": float(np.mean(psnr_mu(full[scored], truth[scored], peak=peak))),
-                "golden_ssim": float(np.mean(ssim_mu(full[scored], truth[scored], peak=peak))),
-                "max_diff": float(np.max(np.abs(images[scored] - full[scored]))),
-                "ms_per_frame": 1e3 * seconds / rtl_readouts})
+        middle = (scored.start + scored.stop - 1) // 2                  # (the pictures' readout)
+        rtl_rows, rtl_images, golden_images = rtl_reconstruction(
+            out, rtl.words, te, light, rtl_crop, evaluation, methods, chosen, window, repeats, scored, middle)
         progress.end("reconstruction", started,
-                     [f"tespike reconstruct --stream S_{sensor}.npz --method {method} "
-                      + (f"--window {window} " if uses_window(method) else "")
-                      + f"--out R_{method}_{sensor}.npy" for sensor in list(configs) + ["rtl"] for method in methods]
-                     + [f"tespike evaluate --set default --frames {frames} --height {height} --width {width} "
-                        f"--seed {seed} --out eval   # Table 1 layout, TE and ML count, other noise draws"])
+                     reconstruction_commands(configs, methods, window, frames, height, width, seed))
 
-        # 5. dynamic range and hardware cost
         started = progress.begin("dynamic range (formula and measured)" + (" and hardware cost (Yosys)"
                                                                            if hw_cost else ""))
         ranges = dynamic_ranges(configs)
@@ -394,35 +463,35 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
                      ["python3 benchmarks/dynamic_range.py   # the full table, from a clone",
                       "python3 benchmarks/hw_cost.py          # the full cost table, from a clone"])
 
-        # 6. pictures and report
         started = progress.begin("pictures and report.md")
-        plot_frame(light, middle, (y, x, crop), out / "frame.png")
-        plot_rtl_crop(truth[middle], rtl_images, golden_images, peak, middle, out / "rtl_crop.png")
+        plot_frame(light, middle, (rtl_crop.y, rtl_crop.x, size), out / "frame.png")
+        plot_rtl_crop(rtl_crop.of(light)[middle], rtl_images, golden_images, float(light.max()), middle,
+                      out / "rtl_crop.png")
         progress.end("pictures and report", started, [
             "tespike view --input I.npy --out I.png",
             "tespike view --input S_te.npz --out S_te.png",
             "tespike view --input R_tfi_te.npy --out R_tfi_te.png --peak 1",
             "gtkwave W.gtkw" if backend == "amaranth" else "# no waveform: only the amaranth backend writes one"])
         report = report_markdown(
-            configs=configs, rtl_config=te, frames=frames, height=height, width=width, seed=seed, crop=(y, x, crop),
-            rtl_readouts=rtl_readouts, rtl_info=rtl_info, verdict=verdict, evaluation=evaluation,
-            rtl_rows=rtl_rows, scored=scored, ranges=ranges, hardware=hardware, stages=progress.stages,
-            total=time.perf_counter() - progress.start, window=window, methods=list(methods),
-            label=label)
+            configs=configs, rtl_config=te, frames=frames, height=height, width=width, seed=seed,
+            crop=(rtl_crop.y, rtl_crop.x, size), rtl_readouts=rtl_readouts, rtl_info=rtl.info,
+            verdict=rtl.verdict, evaluation=evaluation, rtl_rows=rtl_rows, scored=scored, ranges=ranges,
+            hardware=hardware, stages=progress.stages, total=time.perf_counter() - progress.start,
+            window=window, methods=list(methods), label=label)
         write_text(out / "report.md", report)
 
     if quiet:                         # nothing on stdout; a verdict that fails the run on stderr
-        if difference is not None:
-            print(f"RTL: {verdict}", file=sys.stderr)
-        return 0 if difference is None else 1
+        if rtl.difference is not None:
+            print(f"RTL: {rtl.verdict}", file=sys.stderr)
+        return 0 if rtl.difference is None else 1
     from tespike.recon.report import table_markdown
     print(table_markdown(evaluation), end="")
-    print(f"RTL: {verdict}")
+    print(f"RTL: {rtl.verdict}")
     print(f"wrote {given}/: report.md, verdict.txt, I.npy, S_*.npz, R_*.npy, E_crop.npy, "
           + ("W.vcd, W.gtkw, " if backend == "amaranth" else "")
           + f"frame.png, rtl_crop.png, {paths['plot'].name}, strips/{DEMO_SCENE}.png, table.md "
             f"({time.perf_counter() - progress.start:.0f} s)")
-    return 0 if difference is None else 1
+    return 0 if rtl.difference is None else 1
 
 
 def dynamic_ranges(configs: dict[str, SensorConfig], n_s: int = 16) -> list[dict]:
