@@ -397,17 +397,43 @@ RUN_FILES = (CHECKPOINT, "log.csv", "validation.csv", "best.pt", "curves.png")
 
 def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress: bool | None,
            command: str) -> Path:
-    checkpoint, log_path, validation_path, best_path, curves_path = (work / name for name in RUN_FILES)
-    if options.threads is not None:
-        torch.set_num_threads(options.threads)
-    config, sizes = options.sensor_config(), options.sizes()
-    torch.manual_seed(options.seed)
-    generator = np.random.default_rng(options.seed)
-    model = options.model().to(options.device).to(memory_format=torch.channels_last)
-    optimizer = torch.optim.Adam(model.parameters(), lr=options.lr, betas=(0.9, 0.999))
-    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, functools.partial(lr_factor, options))
-    step, elapsed_before, best, best_weights, init = 0, 0.0, None, None, None
+    run = TrainingRun(options, out, work, command)
     if resume:
+        run.resume()
+    else:
+        run.start_anew()
+    run.steps(sys.stderr.isatty() if progress is None else progress)
+    run.write_weights()                # the result first: a run folder lost now loses no weights
+    run.save_checkpoint()
+    return out
+
+
+class TrainingRun:
+    """One training in progress: the model, its optimiser and schedule, the batch generator, the step
+    reached, the best validation so far, and the files of its run folder ``work`` (:data:`RUN_FILES`)
+    and of its weights ``out``."""
+
+    def __init__(self, options: TrainOptions, out: Path, work: Path, command: str):
+        self.checkpoint, self.log_path, self.validation_path, self.best_path, self.curves_path = (
+            work / name for name in RUN_FILES)
+        self.options, self.out, self.work, self.command = options, out, work, command
+        if options.threads is not None:
+            torch.set_num_threads(options.threads)
+        self.config, self.sizes = options.sensor_config(), options.sizes()
+        torch.manual_seed(options.seed)
+        self.generator = np.random.default_rng(options.seed)
+        self.model = options.model().to(options.device).to(memory_format=torch.channels_last)
+        self.optimizer = torch.optim.Adam(self.model.parameters(), lr=options.lr, betas=(0.9, 0.999))
+        self.scheduler = torch.optim.lr_scheduler.LambdaLR(self.optimizer, functools.partial(lr_factor, options))
+        self.step, self.elapsed_before, self.best, self.best_weights, self.init = 0, 0.0, None, None, None
+        self.validated, self.pool, self.cases, self.meta = None, None, None, {}
+        self.started = time.monotonic()
+
+    # ---------------------------------------------------------------- the run's start
+    def resume(self) -> None:
+        """Continue from the run folder's checkpoint (made with the same options but the budgets);
+        the logs are cut back to its step."""
+        options, checkpoint = self.options, self.checkpoint
         state, saved = read_checkpoint(checkpoint)
         kept = {"steps": options.steps, "minutes": options.minutes, "device": options.device,
                 "threads": options.threads, "workers": options.workers,
@@ -418,153 +444,176 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
         if same(saved) != same(options):
             raise InputError(f"checkpoint {str(checkpoint)!r} was made with other options; "
                              "resume with the same sensor, method, size, loss, recipe and seed")
-        options = dataclasses.replace(options, init=saved.init)     # the record names the run's warm start
+        self.options = dataclasses.replace(options, init=saved.init)     # the record names the run's warm start
         try:
-            model.load_state_dict(state["model"])
-            optimizer.load_state_dict(state["optimizer"])
-            scheduler.load_state_dict(state["scheduler"])
-            step, elapsed_before, best = int(state["step"]), float(state["elapsed"]), state.get("best")
-            init = state.get("init")        # (what the warm start copied; absent from older checkpoints)
-            generator.bit_generator.state = state["generator"]
+            self.model.load_state_dict(state["model"])
+            self.optimizer.load_state_dict(state["optimizer"])
+            self.scheduler.load_state_dict(state["scheduler"])
+            self.step, self.elapsed_before, self.best = int(state["step"]), float(state["elapsed"]), state.get("best")
+            self.init = state.get("init")        # (what the warm start copied; absent from older checkpoints)
+            self.generator.bit_generator.state = state["generator"]
             torch.set_rng_state(state["torch_rng"])
         except (RuntimeError, KeyError, TypeError, ValueError) as exc:
             raise InputError(f"checkpoint {str(checkpoint)!r} does not fit this run ({one_line(exc, 300)})") from None
-        if best is not None:
-            best_weights = read_weights(best_path, "the run's best weights")
-        for log in (log_path, validation_path):
-            trim_log(log, step)
-    else:
-        for stale in (checkpoint, log_path, validation_path, best_path, curves_path):
-            if stale.exists():          # a new run: nothing of an earlier one stays beside it
+        if self.best is not None:
+            self.best_weights = read_weights(self.best_path, "the run's best weights")
+        for log in (self.log_path, self.validation_path):
+            trim_log(log, self.step)
+
+    def start_anew(self) -> None:
+        """A new run: no file of an earlier one stays in the run folder; ``--init`` copied in."""
+        options = self.options
+        for stale in (self.checkpoint, self.log_path, self.validation_path, self.best_path, self.curves_path):
+            if stale.exists():
                 stale.unlink()
         if options.init is not None:
-            copied, trained_for = warm_start(model, options.init, options.method)
-            init = {"tensors_copied": len(copied), "tensors": len(model.state_dict()),
-                    "trained_for": trained_for.to_dict()}
-            if trained_for != config:
-                print(f"train: --init {options.init!r} was trained for {trained_for}, this run is for {config}: "
-                      f"{len(copied)} of its tensors (matching name and shape) start it", file=sys.stderr)
-    show = sys.stderr.isatty() if progress is None else progress
-    cases = None
-    if options.validate_every:
-        from .engine.validation import validation_set
-        cases = validation_set(config)
-    meta = {"options": dataclasses.asdict(options), "recipe": options.data_recipe().to_dict(),
-            "parameters": parameter_count(model), "command": command}
-    if init is not None:
-        meta["init"] = init
-    start, first_step = time.monotonic(), step
+            copied, trained_for = warm_start(self.model, options.init, options.method)
+            self.init = {"tensors_copied": len(copied), "tensors": len(self.model.state_dict()),
+                         "trained_for": trained_for.to_dict()}
+            if trained_for != self.config:
+                print(f"train: --init {options.init!r} was trained for {trained_for}, this run is for "
+                      f"{self.config}: {len(copied)} of its tensors (matching name and shape) start it",
+                      file=sys.stderr)
 
-    def elapsed() -> float:
-        return elapsed_before + time.monotonic() - start
+    # ---------------------------------------------------------------- what it writes
+    def elapsed(self) -> float:
+        """Wall seconds of the run, its earlier sessions included."""
+        return self.elapsed_before + time.monotonic() - self.started
 
-    def write_weights() -> None:
+    def write_weights(self) -> None:
         """``out``: the best weights on validation so far, else the present ones."""
-        if best_weights is None:
-            save_weights(out, model, config, {**meta, "steps": step, "wall_seconds": round(elapsed(), 1),
-                                              "threads": torch.get_num_threads()}, options.method)
+        if self.best_weights is None:
+            save_weights(self.out, self.model, self.config,
+                         {**self.meta, "steps": self.step, "wall_seconds": round(self.elapsed(), 1),
+                          "threads": torch.get_num_threads()}, self.options.method)
             return
-        final = {**best_weights["meta"], "final_step": step, "final_wall_seconds": round(elapsed(), 1),
-                 "threads": torch.get_num_threads(), "waited_for_data_seconds": round(pool.source.waited, 1)}
-        save_weights(out, model, config, final, options.method, best_weights["state_dict"])
+        final = {**self.best_weights["meta"], "final_step": self.step,
+                 "final_wall_seconds": round(self.elapsed(), 1), "threads": torch.get_num_threads(),
+                 "waited_for_data_seconds": round(self.pool.source.waited, 1)}
+        save_weights(self.out, self.model, self.config, final, self.options.method,
+                     self.best_weights["state_dict"])
 
-    def run_folder_kept() -> None:
+    def run_folder_kept(self) -> None:
         """Before every write into the run folder: one removed meanwhile ends the run, its weights saved."""
-        if not work.is_dir():
-            write_weights()
-            raise RunFolderGone(f"run folder {str(work)!r} was removed during training (step {step}): its "
-                                f"checkpoint and logs are lost; wrote the weights to {str(out)!r}")
+        if not self.work.is_dir():
+            self.write_weights()
+            raise RunFolderGone(f"run folder {str(self.work)!r} was removed during training (step {self.step}): "
+                                f"its checkpoint and logs are lost; wrote the weights to {str(self.out)!r}")
 
-    def save_checkpoint() -> None:
-        run_folder_kept()
-        _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options, best,
-                         init)
-        plot_curves(log_path, validation_path, curves_path, f"{options.method} {options.config}")
+    def save_checkpoint(self) -> None:
+        """The checkpoint and the curves' PNG."""
+        self.run_folder_kept()
+        self._write_checkpoint()
+        plot_curves(self.log_path, self.validation_path, self.curves_path,
+                    f"{self.options.method} {self.options.config}")
 
-    validated = None
+    def _write_checkpoint(self) -> None:
+        _save_checkpoint(self.checkpoint, self.model, self.optimizer, self.scheduler, self.step, self.elapsed(),
+                         self.generator, self.options, self.best, self.init)
 
-    def keep_if_best() -> None:
-        nonlocal best, best_weights, validated
-        validated = step
-        scores = validate(model, cases, config, options.device)
-        run_folder_kept()
-        new_file = not validation_path.exists()
-        with appending(validation_path) as handle:
+    def keep_if_best(self) -> None:
+        """Score the model on the validation set, log it, and keep it if it is the best so far."""
+        self.validated = self.step
+        scores = validate(self.model, self.cases, self.config, self.options.device)
+        self.run_folder_kept()
+        new_file = not self.validation_path.exists()
+        with appending(self.validation_path) as handle:
             writer = csv.writer(handle)
             if new_file:
                 writer.writerow(["step", *scores, "seconds"])
-            writer.writerow([step, *(f"{v:.3f}" for v in scores.values()), f"{elapsed():.1f}"])
-        if best is None or scores["mean"] > best["mean"]:
-            best = {"step": step, **scores}
-            best_weights = {"state_dict": cpu_state(model), "meta": {**meta, "steps": step, "validation": scores,
-                                                                      "wall_seconds": round(elapsed(), 1)}}
-            save_weights(best_path, model, config, best_weights["meta"], options.method, best_weights["state_dict"])
+            writer.writerow([self.step, *(f"{v:.3f}" for v in scores.values()), f"{self.elapsed():.1f}"])
+        if self.best is None or scores["mean"] > self.best["mean"]:
+            self.best = {"step": self.step, **scores}
+            self.best_weights = {"state_dict": cpu_state(self.model),
+                                 "meta": {**self.meta, "steps": self.step, "validation": scores,
+                                          "wall_seconds": round(self.elapsed(), 1)}}
+            save_weights(self.best_path, self.model, self.config, self.best_weights["meta"], self.options.method,
+                         self.best_weights["state_dict"])
 
-    pool = ClipPool(options.data_recipe(), config, capacity=options.pool, refresh=options.refresh,
-                    step=step, workers=options.workers, progress=show)
-    bar = None
-    if show:
-        from tqdm import tqdm
-        bar = tqdm(total=options.steps, initial=step, desc=f"train {options.method} {options.config}",
-                   unit="step")
-    last_save = time.monotonic()
-    new_log = not log_path.exists()
-    try:
-        with appending(log_path) as handle:
-            log = csv.writer(handle)
-            if new_log:
-                log.writerow(["step", "epoch", "lr", "loss", "seconds"])
-            model.train()
-            boundary = _random_states(generator)      # the random states where the last step ended
-            while True:
-                if options.steps is not None and step >= options.steps:
-                    break
-                if options.minutes is not None and elapsed() >= 60 * options.minutes:
-                    break
-                pool.advance_to(step)
-                lr = optimizer.param_groups[0]["lr"]
-                inputs, truth, inside = draw_batch(pool, config, sizes.span, options.crop, options.batch, generator,
-                                                   options.device)
-                loss = training_loss(model(inputs, inside, config.spike_light), truth, options.loss)
-                value = loss.detach().item()
-                if not math.isfinite(value):
-                    cause = ("" if step > first_step or options.init is None
-                             else f" (or the --init weights {options.init!r} are not a trained network's)")
-                    raise InputError(f"training diverged at step {step} (loss {value}); lower the learning rate"
-                                     + cause)
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                with stops_held():                  # the step's updates whole, or none of them
-                    optimizer.step()
-                    scheduler.step()
-                    step += 1
-                    log.writerow([step, step // options.steps_per_epoch, f"{lr:.3g}", f"{value:.6g}",
-                                  f"{elapsed():.1f}"])
-                    boundary = _random_states(generator)
-                if bar is not None:
-                    bar.update(1)
-                    bar.set_postfix(loss=f"{value:.4g}", best=f"{best['mean']:.2f}" if best else "-")
-                if cases is not None and step % options.validate_every == 0:
-                    handle.flush()
-                    keep_if_best()
-                if time.monotonic() - last_save >= options.checkpoint_seconds:
-                    handle.flush()
-                    save_checkpoint()
-                    last_save = time.monotonic()
-        if cases is not None and validated != step:
-            keep_if_best()
-    except BaseException as exc:
-        if not isinstance(exc, Exception) and step > first_step and work.is_dir():     # interrupted: keep the steps
-            with contextlib.suppress(Exception):
-                _restore_random_states(generator, boundary)   # (a step cut short drew the next batch)
-                _save_checkpoint(checkpoint, model, optimizer, scheduler, step, elapsed(), generator, options,
-                                 best, init)
-                exc.add_note(f"at step {step}: checkpoint {str(checkpoint)!r} saved (continue with --resume)")
-        raise
-    finally:
-        pool.close()
-        if bar is not None:
-            bar.close()
-    write_weights()                    # the result first: a run folder lost now loses no weights
-    save_checkpoint()
-    return out
+    # ---------------------------------------------------------------- the steps
+    def steps(self, show: bool) -> None:
+        """Train until a budget is reached (``show``: a progress bar); an interrupt after a step
+        saves the checkpoint of the last step boundary first."""
+        options, config = self.options, self.config
+        if options.validate_every:
+            from .engine.validation import validation_set
+            self.cases = validation_set(config)
+        self.meta = {"options": dataclasses.asdict(options), "recipe": options.data_recipe().to_dict(),
+                     "parameters": parameter_count(self.model), "command": self.command}
+        if self.init is not None:
+            self.meta["init"] = self.init
+        self.started, first_step = time.monotonic(), self.step
+        self.pool = ClipPool(options.data_recipe(), config, capacity=options.pool, refresh=options.refresh,
+                             step=self.step, workers=options.workers, progress=show)
+        bar = None
+        if show:
+            from tqdm import tqdm
+            bar = tqdm(total=options.steps, initial=self.step, desc=f"train {options.method} {options.config}",
+                       unit="step")
+        last_save = time.monotonic()
+        new_log = not self.log_path.exists()
+        try:
+            with appending(self.log_path) as handle:
+                log = csv.writer(handle)
+                if new_log:
+                    log.writerow(["step", "epoch", "lr", "loss", "seconds"])
+                self.model.train()
+                boundary = _random_states(self.generator)      # the random states where the last step ended
+                while not self.budget_spent():
+                    value, lr = self.one_step(first_step)
+                    with stops_held():                  # the step's updates whole, or none of them
+                        self.optimizer.step()
+                        self.scheduler.step()
+                        self.step += 1
+                        log.writerow([self.step, self.step // options.steps_per_epoch, f"{lr:.3g}", f"{value:.6g}",
+                                      f"{self.elapsed():.1f}"])
+                        boundary = _random_states(self.generator)
+                    if bar is not None:
+                        bar.update(1)
+                        bar.set_postfix(loss=f"{value:.4g}", best=f"{self.best['mean']:.2f}" if self.best else "-")
+                    if self.cases is not None and self.step % options.validate_every == 0:
+                        handle.flush()
+                        self.keep_if_best()
+                    if time.monotonic() - last_save >= options.checkpoint_seconds:
+                        handle.flush()
+                        self.save_checkpoint()
+                        last_save = time.monotonic()
+            if self.cases is not None and self.validated != self.step:
+                self.keep_if_best()
+        except BaseException as exc:
+            if not isinstance(exc, Exception) and self.step > first_step and self.work.is_dir():   # interrupted
+                with contextlib.suppress(Exception):
+                    _restore_random_states(self.generator, boundary)   # (a step cut short drew the next batch)
+                    self._write_checkpoint()
+                    exc.add_note(f"at step {self.step}: checkpoint {str(self.checkpoint)!r} saved "
+                                 "(continue with --resume)")
+            raise
+        finally:
+            self.pool.close()
+            if bar is not None:
+                bar.close()
+
+    def budget_spent(self) -> bool:
+        """The step or wall-time budget reached (the first of the two that is set)."""
+        options = self.options
+        return ((options.steps is not None and self.step >= options.steps)
+                or (options.minutes is not None and self.elapsed() >= 60 * options.minutes))
+
+    def one_step(self, first_step: int) -> tuple[float, float]:
+        """A batch's loss and gradients (the updates are the caller's, held against stops) ->
+        (the loss, the learning rate it was taken at); a loss that is not finite ends the run."""
+        options, config = self.options, self.config
+        self.pool.advance_to(self.step)
+        lr = self.optimizer.param_groups[0]["lr"]
+        inputs, truth, inside = draw_batch(self.pool, config, self.sizes.span, options.crop, options.batch,
+                                           self.generator, options.device)
+        loss = training_loss(self.model(inputs, inside, config.spike_light), truth, options.loss)
+        value = loss.detach().item()
+        if not math.isfinite(value):
+            cause = ("" if self.step > first_step or options.init is None
+                     else f" (or the --init weights {options.init!r} are not a trained network's)")
+            raise InputError(f"training diverged at step {self.step} (loss {value}); lower the learning rate"
+                             + cause)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        return value, lr
