@@ -262,45 +262,11 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     import torch
     from tqdm import tqdm
 
-    from .methods import RECON_METHODS, missing_weights, reconstruct
-    from .metrics import psnr_mu, ssim_mu
-    from .score import METRIC_KEYS, score
+    from .methods import reconstruct
 
-    check_window(window)
-    if missing is None:
-        missing = "note" if methods is None else "refuse"
-    if missing not in ("note", "refuse"):
-        raise InputError(f"missing = {missing!r}: must be 'note' or 'refuse'")
-    methods = check_methods(RECON_METHODS if methods is None else methods)
-    unknown = [key for key in metrics if key not in METRIC_KEYS]
-    if unknown:
-        raise InputError(f"unknown metric {unknown[0]!r} (known: {', '.join(METRIC_KEYS)})")
-    metrics = tuple(key for key in METRIC_KEYS if key in (*BASIC_METRICS, *metrics))
+    methods, metrics, configs, noise_sensors, absent = _checked_arguments(
+        methods, sensors, configs, window, seed, repeats, metrics, vdp_frames, missing, noise_sensors, weights)
     further = [key for key in metrics if key not in BASIC_METRICS]
-    if vdp_frames is not None and (type(vdp_frames) is not int or vdp_frames < 1):
-        raise InputError(f"vdp_frames = {vdp_frames!r}: must be an integer >= 1")
-    configs = dict(paper_configs() if configs is None else configs)
-    noise_sensors = default_noise_sensors() | dict(noise_sensors or {})
-    for sensor in sensors:
-        if sensor.endswith(CALIBRATED) and noise_base(sensor, noise_sensors) is None:
-            raise InputError(f"sensor {sensor!r}: {sensor[:-len(CALIBRATED)]!r} is no noise sensor to calibrate")
-        if sensor.endswith(CALIBRATED) and sensor not in configs and sensor[:-len(CALIBRATED)] in configs:
-            configs[sensor] = configs[sensor[:-len(CALIBRATED)]]     # its noise sensor's configuration
-    for sensor in sensors:
-        if sensor not in configs:
-            raise InputError(f"no sensor configuration for sensor {sensor!r}")
-    absent = {}
-    for sensor in sensors:
-        for method in methods:
-            reason = missing_weights(method, configs[sensor], (weights or {}).get((method, sensor)))
-            if reason is not None and missing == "refuse":
-                raise InputError(reason)
-            if reason is not None:
-                absent[method, sensor] = reason
-    if type(seed) is not int or seed < 0:
-        raise InputError(f"seed = {seed!r} must be an integer >= 0")
-    if type(repeats) is not int or repeats < 1:
-        raise InputError(f"repeats = {repeats!r} must be an integer >= 1")
     sequences = list(sequences)
     if not sequences:
         raise InputError("no sequences to evaluate")
@@ -336,22 +302,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
             config = configs[sensor]
             bar.set_postfix_str(f"{name} {sensor} simulate")
             rng = np.random.default_rng([seed, index, sensor_index])
-            base = bases[sensor]
-            calibration = None
-            if base is not None:
-                words = simulate(config, light, rng, noise_sensor=noise_sensors[base])
-                if sensor.endswith(CALIBRATED):
-                    key = sensor, (H, W)
-                    if key not in calibrations:
-                        bar.set_postfix_str(f"{name} {sensor} calibrate")
-                        try:
-                            calibrations[key] = calibrate_sensor(simulate, config, noise_sensors[base], (H, W),
-                                                                 np.random.default_rng([seed, sensor_index, H, W]))
-                        except InputError as exc:               # (a sensor no calibration can serve)
-                            raise InputError(f"calibrating noise sensor {base}: {exc}") from None
-                    calibration = calibrations[key]
-            else:
-                words = simulate(config, light, rng)
+            words, calibration = _recorded(simulate, config, light, rng, sensor, bases[sensor], noise_sensors,
+                                           calibrations, np.random.default_rng([seed, sensor_index, H, W]), bar)
             if keep:
                 evaluation.streams[name, sensor] = words
             bar.update()
@@ -364,26 +316,10 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
                 if (sensor, method) not in warmed:      # one-time costs (tables, torch) are not timed
                     reconstruct(words[:window, :4, :4], config, method, window=window, device=device, **kwargs)
                     warmed.add((sensor, method))
-                times = []
-                for _ in range(repeats):
-                    start = time.perf_counter()
-                    images = reconstruct(words, config, method, window=window, device=device,
-                                         calibration=calibration, **kwargs)
-                    times.append(time.perf_counter() - start)
-                seconds = float(np.median(times))
-                pred, truth = images[frames], light[frames]
-                values, counted = {}, 0
-                for key in further:
-                    subset = metric_subset(pred.shape[0], vdp_frames if key == "fovvideovdp" else None)
-                    scores = score(pred[subset], np.asarray(truth[subset]), metrics=(key,), device=device)
-                    values[key] = scores.sequence.get(key, scores.mean[key])
-                    if key == "fovvideovdp":
-                        counted = subset.stop - subset.start
-                evaluation.results.append(Measurement(
-                    name, sensor, method,
-                    float(np.mean(psnr_mu(pred, truth, peak=peak))),
-                    float(np.mean(ssim_mu(pred, truth, peak=peak))),
-                    1e3 * seconds / light.shape[0], int(pred.shape[0]), frames_vdp=counted, **values))
+                images, seconds = _timed(reconstruct, words, config, method, window, device, calibration, kwargs,
+                                         repeats)
+                evaluation.results.append(_measurement(name, sensor, method, images, light, frames, peak, seconds,
+                                                       further, vdp_frames, device))
                 strip[sensor, method] = np.array(images[middle])     # a copy: the images can go
                 if keep:
                     evaluation.images[name, sensor, method] = images
@@ -391,6 +327,100 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
         evaluation.strips[name] = strip
     bar.close()
     return evaluation
+
+
+def _checked_arguments(methods, sensors, configs, window, seed, repeats, metrics, vdp_frames, missing,
+                       noise_sensors, weights):
+    """:func:`evaluate`'s arguments checked (one line for the first bad one) -> (methods, metrics in
+    their table order, configuration per sensor, noise sensors, (method, sensor) -> why a learned
+    method is left out there)."""
+    from .methods import RECON_METHODS, missing_weights
+    from .score import METRIC_KEYS
+
+    check_window(window)
+    if missing is None:
+        missing = "note" if methods is None else "refuse"
+    if missing not in ("note", "refuse"):
+        raise InputError(f"missing = {missing!r}: must be 'note' or 'refuse'")
+    methods = check_methods(RECON_METHODS if methods is None else methods)
+    unknown = [key for key in metrics if key not in METRIC_KEYS]
+    if unknown:
+        raise InputError(f"unknown metric {unknown[0]!r} (known: {', '.join(METRIC_KEYS)})")
+    metrics = tuple(key for key in METRIC_KEYS if key in (*BASIC_METRICS, *metrics))
+    if vdp_frames is not None and (type(vdp_frames) is not int or vdp_frames < 1):
+        raise InputError(f"vdp_frames = {vdp_frames!r}: must be an integer >= 1")
+    configs = dict(paper_configs() if configs is None else configs)
+    noise_sensors = default_noise_sensors() | dict(noise_sensors or {})
+    for sensor in sensors:
+        if sensor.endswith(CALIBRATED) and noise_base(sensor, noise_sensors) is None:
+            raise InputError(f"sensor {sensor!r}: {sensor[:-len(CALIBRATED)]!r} is no noise sensor to calibrate")
+        if sensor.endswith(CALIBRATED) and sensor not in configs and sensor[:-len(CALIBRATED)] in configs:
+            configs[sensor] = configs[sensor[:-len(CALIBRATED)]]     # its noise sensor's configuration
+    for sensor in sensors:
+        if sensor not in configs:
+            raise InputError(f"no sensor configuration for sensor {sensor!r}")
+    absent = {}
+    for sensor in sensors:
+        for method in methods:
+            reason = missing_weights(method, configs[sensor], (weights or {}).get((method, sensor)))
+            if reason is not None and missing == "refuse":
+                raise InputError(reason)
+            if reason is not None:
+                absent[method, sensor] = reason
+    if type(seed) is not int or seed < 0:
+        raise InputError(f"seed = {seed!r} must be an integer >= 0")
+    if type(repeats) is not int or repeats < 1:
+        raise InputError(f"repeats = {repeats!r} must be an integer >= 1")
+    return methods, metrics, configs, noise_sensors, absent
+
+
+def _recorded(simulate, config, light, rng, sensor, base, noise_sensors, calibrations, calibration_rng, bar):
+    """``sensor``'s stream of ``light`` -> (words, the calibration its reconstruction uses, or None):
+    a noise sensor (``base``: its key, else None) records with its non-idealities, and ``<key>+cal``
+    is calibrated once per frame size (``calibrations``, from dark and flat streams drawn with
+    ``calibration_rng``)."""
+    if base is None:
+        return simulate(config, light, rng), None
+    words = simulate(config, light, rng, noise_sensor=noise_sensors[base])
+    if not sensor.endswith(CALIBRATED):
+        return words, None
+    key = sensor, tuple(light.shape[1:])
+    if key not in calibrations:
+        bar.set_postfix_str(f"{sensor} calibrate")
+        try:
+            calibrations[key] = calibrate_sensor(simulate, config, noise_sensors[base], key[1], calibration_rng)
+        except InputError as exc:               # (a sensor no calibration can serve)
+            raise InputError(f"calibrating noise sensor {base}: {exc}") from None
+    return words, calibrations[key]
+
+
+def _timed(reconstruct, words, config, method, window, device, calibration, kwargs, repeats):
+    """-> (the reconstruction, the median of ``repeats`` run times in seconds)."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        images = reconstruct(words, config, method, window=window, device=device,
+                             calibration=calibration, **kwargs)
+        times.append(time.perf_counter() - start)
+    return images, float(np.median(times))
+
+
+def _measurement(name, sensor, method, images, light, frames, peak, seconds, further, vdp_frames,
+                 device) -> Measurement:
+    """One row of the table: ``images`` scored against ``light`` on the readouts ``frames``."""
+    from .metrics import psnr_mu, ssim_mu
+    from .score import score
+    pred, truth = images[frames], light[frames]
+    values, counted = {}, 0
+    for key in further:
+        subset = metric_subset(pred.shape[0], vdp_frames if key == "fovvideovdp" else None)
+        scores = score(pred[subset], np.asarray(truth[subset]), metrics=(key,), device=device)
+        values[key] = scores.sequence.get(key, scores.mean[key])
+        if key == "fovvideovdp":
+            counted = subset.stop - subset.start
+    return Measurement(name, sensor, method, float(np.mean(psnr_mu(pred, truth, peak=peak))),
+                       float(np.mean(ssim_mu(pred, truth, peak=peak))), 1e3 * seconds / light.shape[0],
+                       int(pred.shape[0]), frames_vdp=counted, **values)
 
 
 class ProgressLines:
