@@ -170,28 +170,20 @@ def add_arguments(parser):
 
 
 def run(args) -> int:
-    from pathlib import Path
-
     from tespike.cosim.console import progress_wanted
-    from tespike.golden.config import load_config
-    from tespike.golden.errors import ConfigError, InputError
+    from tespike.golden.errors import InputError
     from tespike.golden.fastsim import simulate_sequence
-    from tespike.golden.io import load_scene
     from tespike.golden.paths import check_results_dir
 
     from .common import check_threads_argument, metrics_argument
     from .results import publish_results
     from tespike.recon.evaluate import evaluate
     from tespike.recon.report import OUTPUT_FILES
-    from tespike.recon.scenes import load_hdr_sequence
-    from tespike.recon.scenes.heldout import sequence_set
     from tespike.recon.settings import check_device, check_window_reach
 
     check_device(args.device)                           # before any sequence is simulated
     if args.store or args.workers is not None or args.scheduler:
         return _run_store(args)
-    from tespike.golden.noise import Sensor, load_noise
-    from tespike.recon.evaluate import CALIBRATED, NOISE_SENSORS, default_noise_sensors
     from tespike.recon.score import METRIC_KEYS
     defaults = TABLE_DEFAULTS if args.table else DEFAULTS
     frames, height, width, repeats = (default if value is None else value for value, default in
@@ -221,6 +213,45 @@ def run(args) -> int:
                              "(a --scene or --folder keeps its own size)")
     ml_count = args.ml_count_config or ("none" if args.table else "ml")
     check_results_dir(args.out, OUTPUT_FILES, args.force)
+    configs, noise_sensors = _sensors(args, ml_count)
+    from tespike.recon.learned import weights_by_sensor
+    weights = weights_by_sensor(args.weights, configs)
+    unrun = sorted({method for method, _ in weights} - set(methods if methods is not None else DEFAULT_METHODS))
+    if unrun:
+        raise InputError(f"--weights: {unrun[0]} weights given, but {unrun[0]} is not among the methods "
+                         "evaluated (add it to --methods; the file would be ignored)")
+    sequences = _sequences(args, frames, height, width)
+    window = DEFAULT_WINDOW if args.window is None else args.window
+    if args.window is not None:      # as reconstruct: no frame's window can be that wide
+        shortest, light = min(sequences, key=lambda sequence: sequence[1].shape[0])
+        check_window_reach(window, light.shape[0], f"the {light.shape[0]}-readout sequence {shortest!r}")
+    if threads is not None:
+        import torch
+        torch.set_num_threads(threads)
+
+    progress = progress_wanted(args) or ("lines" if args.progress == "auto" and not args.quiet else False)
+    evaluation = evaluate(sequences, simulate_sequence, methods=list(DEFAULT_METHODS) if methods is None else methods,
+                          sensors=tuple(configs), configs=configs, window=window, seed=args.seed,
+                          device=args.device, progress=progress, repeats=repeats, metrics=metrics,
+                          vdp_frames=vdp_frames, missing="note" if args.table or methods is None else None,
+                          noise_sensors=noise_sensors, weights=weights)
+    if args.table:
+        from tespike.recon.complexity import measure
+        evaluation.complexity = measure(evaluation.methods, configs["te"])
+    return publish_results(args, evaluation)
+
+
+def _sensors(args, ml_count: str):
+    """The sensors evaluated -> (configuration per sensor key, noise sensor per key): the TE and ML msb
+    cameras (and the ML count camera unless ``ml_count`` is 'none'), each checked for its mode and
+    readout; with ``--noise`` / ``--sensor-noise`` the TE camera with each noise sensor, and with
+    ``--calibrate`` each again, calibrated."""
+    from pathlib import Path
+
+    from tespike.golden.config import load_config
+    from tespike.golden.errors import ConfigError, InputError
+    from tespike.golden.noise import Sensor, load_noise
+    from tespike.recon.evaluate import CALIBRATED, NOISE_SENSORS, default_noise_sensors
     # option, value, sensor key, (mode, ml_readout) it must have
     wanted = [("--ml-config", args.ml_config, "ml-msb", ("ml", "msb")),
               ("--te-config", args.te_config, "te", ("te", "count"))]
@@ -251,12 +282,19 @@ def run(args) -> int:
     configs.update({sensor: configs["te"] for sensor in noise_sensors})
     if args.calibrate:
         configs.update({sensor + CALIBRATED: configs["te"] for sensor in noise_sensors})
-    from tespike.recon.learned import weights_by_sensor
-    weights = weights_by_sensor(args.weights, configs)
-    unrun = sorted({method for method, _ in weights} - set(methods if methods is not None else DEFAULT_METHODS))
-    if unrun:
-        raise InputError(f"--weights: {unrun[0]} weights given, but {unrun[0]} is not among the methods "
-                         "evaluated (add it to --methods; the file would be ignored)")
+    return configs, noise_sensors
+
+
+def _sequences(args, frames: int, height: int, width: int) -> list:
+    """(label, light) of every sequence evaluated: ``--set``'s, each ``--scene`` (memory-mapped) and
+    ``--folder``; two sequences with one label are refused (they would share the tables' rows)."""
+    from pathlib import Path
+
+    from tespike.cosim.console import progress_wanted
+    from tespike.golden.errors import InputError
+    from tespike.golden.io import load_scene
+    from tespike.recon.scenes import load_hdr_sequence
+    from tespike.recon.scenes.heldout import sequence_set
     sequences = [] if args.set == "none" else sequence_set(args.set, frames, height, width)
     given = {name: "a sequence of --set" for name, _ in sequences}
 
@@ -274,21 +312,4 @@ def run(args) -> int:
                           load_hdr_sequence(folder, progress=progress_wanted(args))))
     if not sequences:
         raise InputError("nothing to evaluate: --set none and no --scene or --folder")
-    window = DEFAULT_WINDOW if args.window is None else args.window
-    if args.window is not None:      # as reconstruct: no frame's window can be that wide
-        shortest, light = min(sequences, key=lambda sequence: sequence[1].shape[0])
-        check_window_reach(window, light.shape[0], f"the {light.shape[0]}-readout sequence {shortest!r}")
-    if threads is not None:
-        import torch
-        torch.set_num_threads(threads)
-
-    progress = progress_wanted(args) or ("lines" if args.progress == "auto" and not args.quiet else False)
-    evaluation = evaluate(sequences, simulate_sequence, methods=list(DEFAULT_METHODS) if methods is None else methods,
-                          sensors=tuple(configs), configs=configs, window=window, seed=args.seed,
-                          device=args.device, progress=progress, repeats=repeats, metrics=metrics,
-                          vdp_frames=vdp_frames, missing="note" if args.table or methods is None else None,
-                          noise_sensors=noise_sensors, weights=weights)
-    if args.table:
-        from tespike.recon.complexity import measure
-        evaluation.complexity = measure(evaluation.methods, configs["te"])
-    return publish_results(args, evaluation)
+    return sequences
