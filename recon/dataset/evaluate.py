@@ -147,20 +147,37 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     once every sequence, method and weights file is checked, before any task runs (a refusal comes
     before the command says what it will do).
     """
-    from dask import delayed
-
-    from tespike.recon.evaluate import (Evaluation, Measurement, check_methods, check_sequence_peak,
-                                        learned_span, scored_frames)
-    from tespike.recon.methods import RECON_METHODS, available_methods, missing_weights
-    from tespike.recon.settings import ReconSettings, check_window_reach
+    from tespike.recon.evaluate import learned_span
 
     store = DatasetStore.open(url)
     sequences = store.sequences()
     infos = {s: store.check_sequence(s) for s in sequences}    # metadata consistent, no chunk file gone
+    methods, window = _store_methods(store, infos, methods, window, device, tile)
+    learned = learned_span(methods)                      # frames scored as the serial evaluation scores them
+    tasks, keys, plan = _score_tasks(store, infos, methods, window, device, tile, options, learned)
+    if starting is not None:
+        starting()
+    outputs: list = [None] * len(tasks)
+    for index, result in run(tasks):
+        outputs[index] = result
+    by_cell: dict[tuple, list] = {}
+    for key, result in zip(keys, outputs):
+        by_cell.setdefault(key[:3], []).append((key[3], result))
+    return _gathered(store, methods, window, learned, plan, by_cell)
+
+
+def _store_methods(store, infos, methods, window, device, tile) -> tuple[tuple[str, ...], int]:
+    """The methods and window of a store's evaluation, checked against its sequences (one line for
+    the first refusal) -> (methods, window). By default every method that has weights for each
+    sensor of the store and, where frames must be tiled, works pixel by pixel (a learned method sees
+    far beyond the tiles' halo)."""
+    from tespike.recon.evaluate import check_methods
+    from tespike.recon.methods import RECON_METHODS, available_methods, missing_weights
+    from tespike.recon.settings import ReconSettings, check_window_reach
+
+    sequences = list(infos)
     tiled = [s for s in sequences if infos[s]["height"] > tile[0] or infos[s]["width"] > tile[1]]
     named = methods is not None
-    # by default every method that has weights for each sensor of the store (and, where frames
-    # must be tiled, works pixel by pixel: a learned method sees far beyond the tiles' halo)
     methods = available_methods(store.configs.values()) if methods is None else tuple(methods)
     if tiled and not named:
         methods = tuple(m for m in methods if RECON_METHODS[m].block is not None)
@@ -182,11 +199,19 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
         shortest = min(sequences, key=lambda s: infos[s]["frames"])
         K = infos[shortest]["frames"]
         check_window_reach(window, K, f"the {K}-readout sequence {shortest!r}")
+    return methods, window
+
+
+def _score_tasks(store, infos, methods, window, device, tile, options, learned):
+    """One ``dask.delayed`` scoring task per sequence x sensor x method (per tile where a frame is
+    larger than ``tile``) -> (tasks, their (sequence, sensor, method, tile or None) keys, per sequence
+    (H, W, peak, the strip's readout, the scored readouts))."""
+    from dask import delayed
+
+    from tespike.recon.evaluate import check_sequence_peak, scored_frames
     h = _halo()
-    learned = learned_span(methods)                      # frames scored as the serial evaluation scores them
     tasks, keys, plan = [], [], {}
-    for sequence in sequences:
-        info = infos[sequence]
+    for sequence, info in infos.items():
         K, H, W = info["frames"], info["height"], info["width"]
         peak = check_sequence_peak(sequence, float(info["peak"]))
         if min(H, W) < 2 * h + 1:
@@ -210,18 +235,15 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
                         tasks.append(delayed(score_tile, pure=False)(*args, rows, cols,
                                                                      dask_key_name=f"{name}-{r}-{c}"))
                         keys.append((sequence, sensor, method, (rows, cols)))
-    if starting is not None:
-        starting()
-    outputs: list = [None] * len(tasks)
-    for index, result in run(tasks):
-        outputs[index] = result
-    by_cell: dict[tuple, list] = {}
-    for key, result in zip(keys, outputs):
-        by_cell.setdefault(key[:3], []).append((key[3], result))
+    return tasks, keys, plan
 
+
+def _gathered(store, methods, window, learned, plan, by_cell):
+    """The tasks' results (``by_cell``: (sequence, sensor, method) -> [(tile or None, result)]) as one
+    :class:`tespike.recon.evaluate.Evaluation`: a tiled frame's scores combined, its strip assembled."""
+    from tespike.recon.evaluate import Evaluation, Measurement
     evaluation = Evaluation([], methods, tuple(store.configs), window, span=learned)
-    for sequence in sequences:
-        H, W, peak, middle, span = plan[sequence]
+    for sequence, (H, W, peak, middle, span) in plan.items():
         with reading(store.url, f"{sequence}/light"):
             gt = np.asarray(store.array(sequence, "light")[middle])
         strip = {"gt": gt, "peak": peak, "frame": middle}
