@@ -18,7 +18,7 @@ net_TE above net on the msb camera).
 
 Complexity: parameters, FLOPs (torch.utils.flop_counter, counted at 192 x 256
 and scaled by 4 to 384 x 512: every layer's cost is proportional to the pixel
-count) and CPU latency at 384 x 512 (torch.utils.benchmark, per thread count)
+count) and CPU latency at 384 x 512 (tespike.recon.walltime, per thread count)
 for the CPU default and the paper size; and the plain-torch DCN against conv2d.
 
     python3 benchmarks/bench_net.py [--quality] [--complexity] [--weights-dir DIR] [--ablation-dir DIR]
@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import torch  # noqa: E402
 
-from tespike.cosim.walltime import median_seconds  # noqa: E402
+from tespike.recon.walltime import median_seconds  # noqa: E402
 from tespike.golden.config import SensorConfig  # noqa: E402
 from tespike.golden.fastsim import simulate_scene  # noqa: E402
 from tespike.recon.calibration import correct_input, input_correction  # noqa: E402

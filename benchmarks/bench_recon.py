@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tespike.cosim.walltime import median_seconds  # noqa: E402
+from tespike.recon.walltime import median_seconds  # noqa: E402
 from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig  # noqa: E402
 from tespike.golden.decode import decode_light  # noqa: E402
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402

@@ -346,7 +346,7 @@ def rtl_reconstruction(out: Path, rtl_words, te: SensorConfig, light, crop: RTLC
     from tespike.recon.methods import reconstruct
     from tespike.recon.metrics import psnr_mu, ssim_mu
 
-    from .walltime import median_seconds
+    from tespike.recon.walltime import median_seconds
     peak = float(light.max())
     truth = crop.of(light)
     rows, rtl_images, golden_images = [], {}, {}

@@ -85,7 +85,7 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
               "the RTL's readouts (TFI searches the whole stream for a spike interval, so it may differ "
               "near the ends); the learned methods are spatial (they see a neighbourhood of each pixel), so "
               "near the crop's borders it sees other pixels than on the full frame and may differ there. "
-              "Run time: median of repeats (`torch.utils.benchmark`). Pictures: `rtl_crop.png`.", "",
+              "Run time: median of repeats (`recon/walltime.py`). Pictures: `rtl_crop.png`.", "",
               "| method | RTL: PSNR-μ | SSIM-μ | golden full frame: PSNR-μ | SSIM-μ | max abs difference (light) "
               "| RTL stream ms / frame |",
               "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]

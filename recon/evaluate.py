@@ -395,14 +395,12 @@ def _recorded(simulate, config, light, rng, sensor, base, noise_sensors, calibra
 
 
 def _timed(reconstruct, words, config, method, window, device, calibration, kwargs, repeats):
-    """-> (the reconstruction, the median of ``repeats`` run times in seconds)."""
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        images = reconstruct(words, config, method, window=window, device=device,
-                             calibration=calibration, **kwargs)
-        times.append(time.perf_counter() - start)
-    return images, float(np.median(times))
+    """-> (the reconstruction, the median of ``repeats`` run times in seconds: :mod:`.walltime`, as
+    every report of the project times a reconstruction)."""
+    from .walltime import median_seconds
+    seconds, images = median_seconds(lambda: reconstruct(words, config, method, window=window, device=device,
+                                                         calibration=calibration, **kwargs), repeats)
+    return images, float(seconds)
 
 
 def _measurement(name, sensor, method, images, light, frames, peak, seconds, further, vdp_frames,
