@@ -303,7 +303,8 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
             bar.set_postfix_str(f"{name} {sensor} simulate")
             rng = np.random.default_rng([seed, index, sensor_index])
             words, calibration = _recorded(simulate, config, light, rng, sensor, bases[sensor], noise_sensors,
-                                           calibrations, np.random.default_rng([seed, sensor_index, H, W]), bar)
+                                           calibrations, np.random.default_rng([seed, sensor_index, H, W]), bar,
+                                           name)
             if keep:
                 evaluation.streams[name, sensor] = words
             bar.update()
@@ -374,11 +375,12 @@ def _checked_arguments(methods, sensors, configs, window, seed, repeats, metrics
     return methods, metrics, configs, noise_sensors, absent
 
 
-def _recorded(simulate, config, light, rng, sensor, base, noise_sensors, calibrations, calibration_rng, bar):
+def _recorded(simulate, config, light, rng, sensor, base, noise_sensors, calibrations, calibration_rng, bar,
+              name):
     """``sensor``'s stream of ``light`` -> (words, the calibration its reconstruction uses, or None):
     a noise sensor (``base``: its key, else None) records with its non-idealities, and ``<key>+cal``
     is calibrated once per frame size (``calibrations``, from dark and flat streams drawn with
-    ``calibration_rng``)."""
+    ``calibration_rng``); ``name``: the sequence's, for the progress ``bar``."""
     if base is None:
         return simulate(config, light, rng), None
     words = simulate(config, light, rng, noise_sensor=noise_sensors[base])
@@ -386,7 +388,7 @@ def _recorded(simulate, config, light, rng, sensor, base, noise_sensors, calibra
         return words, None
     key = sensor, tuple(light.shape[1:])
     if key not in calibrations:
-        bar.set_postfix_str(f"{sensor} calibrate")
+        bar.set_postfix_str(f"{name} {sensor} calibrate")
         try:
             calibrations[key] = calibrate_sensor(simulate, config, noise_sensors[base], key[1], calibration_rng)
         except InputError as exc:               # (a sensor no calibration can serve)
