@@ -27,8 +27,10 @@ The per-frame values are averaged per sequence, then the sequence means are
 averaged (paper section 6.4).
 
 Simulation is passed in as a function (``simulate(config, light, rng) ->
-words``) because :mod:`recon` does not import the simulator; the command
-line and the benchmarks pass :func:`tespike.golden.fastsim.simulate_scene`.
+words``), so that one harness scores any source of streams: the command
+line and the benchmarks pass :func:`tespike.golden.fastsim.simulate_sequence`
+(the fast simulator), the demo the streams its golden model and fast simulator
+recorded before (one per sensor, the TE one cycle-exact).
 
 Sensors are named by a key (a sensor, not the configuration's ``mode``; the
 keys are ``--config`` presets): ``"ml-msb"`` is the ML camera the

@@ -3,7 +3,8 @@ pixel rule against that pixel, and every generated Verilog top against a SPEC re
 
 HELP = ("prove the pixel equal to SPEC section 3's rule (yosys-smtbmc k-induction), the streaming "
         "Verilog top's pixel rule equivalent to it (Yosys sat), and every generated Verilog top "
-        "(timing block, parallel and streaming tops, read from the text `tespike verilog` writes) "
+        "(timing block, parallel and streaming tops of a few small arrays, read from the text "
+        "`tespike verilog` writes for them) "
         "equal to a SPEC reference with reset free on every clock (ABC scorr + pdr or dprove, else BMC); "
         "independent proofs run in --workers processes")
 
@@ -24,8 +25,10 @@ def add_arguments(parser):
     parser.add_argument("--depth", type=int, default=3,
                         help="k of the pixel's k-induction (base case and induction step; default 3)")
     parser.add_argument("--solver", default="z3", help="SMT solver for yosys-smtbmc (default z3)")
-    parser.add_argument("--sizes", default="1x1,2x3,3x4", metavar="HxW,...",
-                        help="array sizes of the tops at small clocks (b1 = b2 = 2, L = 12; default 1x1,2x3,3x4)")
+    from tespike.cosim.formal.tops import SIZES
+    default_sizes = ",".join(f"{rows}x{cols}" for rows, cols in SIZES)
+    parser.add_argument("--sizes", default=default_sizes, metavar="HxW,...",
+                        help=f"array sizes of the tops at small clocks (b1 = b2 = 2, L = 12; default {default_sizes})")
     parser.add_argument("--config-sizes", default="1x1", metavar="HxW,...",
                         help="array sizes of the tops at each configuration's own clocks and widths, beside "
                              "its timing block (default 1x1; 'none': the timing block only)")
@@ -58,6 +61,7 @@ def targets(specs, with_corners: bool):
 
 def parse_sizes(flag: str, text: str) -> list[tuple[int, int]]:
     """``"1x1,2x3"`` -> [(1, 1), (2, 3)]; ``"none"`` -> []; anything else is refused in one line."""
+    from tespike.cosim.formal.tops import MAX_PIXELS
     from tespike.golden.errors import InputError
 
     if text.strip() == "none":
@@ -66,8 +70,8 @@ def parse_sizes(flag: str, text: str) -> list[tuple[int, int]]:
     for part in text.split(","):
         rows, sep, cols = part.strip().partition("x")
         if not (sep and rows.isdigit() and cols.isdigit() and int(rows) >= 1 and int(cols) >= 1
-                and int(rows) * int(cols) <= 64):
-            raise InputError(f"{flag} {text!r}: each size must be HxW with H, W >= 1 and H x W <= 64 "
+                and int(rows) * int(cols) <= MAX_PIXELS):
+            raise InputError(f"{flag} {text!r}: each size must be HxW with H, W >= 1 and H x W <= {MAX_PIXELS} "
                              f"(e.g. 2x3), or 'none'")
         sizes.append((int(rows), int(cols)))
     return sizes

@@ -80,9 +80,9 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
 
 
 def simulate_sequence(config: SensorConfig, light: np.ndarray, rng, noise_sensor=None) -> np.ndarray:
-    """:func:`simulate_scene` in the form the evaluation harness calls its simulator,
-    ``simulate(config, light, rng[, noise_sensor])`` (:mod:`tespike.recon.evaluate` takes it as an
-    argument: the reconstruction side does not import the simulator)."""
+    """:func:`simulate_scene` in the form the evaluation harness calls its source of streams,
+    ``simulate(config, light, rng[, noise_sensor])`` (:func:`tespike.recon.evaluate.evaluate` takes
+    that source as an argument: the demo gives it streams recorded before)."""
     return simulate_scene(config, light, seed=rng, sensor=noise_sensor)
 
 
