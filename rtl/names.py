@@ -22,8 +22,9 @@ def module_names(config: SensorConfig) -> dict[str, str]:
 
 def stream_module_names(config: SensorConfig) -> dict[str, str]:
     """Module names of the streaming Verilog: ``top`` (``<mode>_pixel_array_stream``),
-    ``timing``, ``pixel`` (one site's pixel), ``rule`` (its combinational rule) and ``cell``
-    (one readout cell)."""
+    ``timing``, ``pixel`` (one site's pixel), ``rule`` (its combinational rule), ``cell``
+    (one readout cell), ``group`` and ``group_end`` (the sites whose words leave in one beat; the
+    end group, the last beat's, shifts in 0)."""
     names = module_names(config)
     mode = config.mode
     return {"top": names["top"] + "_stream", "timing": names["timing"], "pixel": f"{mode}_stream_pixel",

@@ -150,7 +150,7 @@ def add_arguments(parser):
                         help=f"timed runs per method, the median reported (default {DEFAULTS[3]}; "
                              f"--table {TABLE_DEFAULTS[3]})")
     parser.add_argument("--window", type=int, default=None,
-                        help=f"readouts per window, odd (default {DEFAULT_WINDOW}, paper 6.4); at most 2 K - 1 "
+                        help=f"readouts per window, odd (default {DEFAULT_WINDOW}, paper section 6.4); at most 2 K - 1 "
                              "for the shortest sequence of K readouts")
     parser.add_argument("--te-config", default="te", help="TE sensor: JSON file or 'te' (paper b1 = b2 = 4)")
     parser.add_argument("--ml-config", default="ml-msb",

@@ -21,7 +21,7 @@ def add_arguments(parser):
                           "are some (recon/weights/), or --weights")
     parser.add_argument("--out", required=True, help=f"R.npy to write: float32 (K, H, W) light, I = 1 is {DESIGN_ELECTRONS} e-")
     parser.add_argument("--window", type=int, default=None,
-                        help=f"tfp, and tfi with --search window: readouts per window, odd (default {DEFAULT_WINDOW}, paper 6.4); learned methods see the "
+                        help=f"tfp, and tfi with --search window: readouts per window, odd (default {DEFAULT_WINDOW}, paper section 6.4); learned methods see the "
                              "span of readouts their sizes fix")
     parser.add_argument("--weights", default=None, metavar="W.pt",
                         help="learned methods: this weights file ('tespike train --out W.pt') instead of the "
