@@ -78,7 +78,7 @@ from tespike.golden.resources import require_memory
 
 from .calibration import CALIBRATION_READOUTS
 from .names import label
-from .settings import DEFAULT_WINDOW, check_window
+from .settings import DEFAULT_WINDOW, check_known, check_window
 
 #: Sensors evaluated by default: the paper's Table 1 columns (ML = the msb camera
 #: of its eq. 10 on the left, TE on the right), then the full-count ML camera.
@@ -147,8 +147,7 @@ def check_methods(methods: Sequence[str]) -> tuple[str, ...]:
     from .methods import RECON_METHODS
     methods = tuple(methods)
     for method in methods:
-        if method not in RECON_METHODS:
-            raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
+        check_known(method, RECON_METHODS)
     if not methods:
         raise InputError("no reconstruction method to evaluate")
     twice = next((method for i, method in enumerate(methods) if method in methods[:i]), None)

@@ -29,6 +29,8 @@ from pathlib import Path
 from tespike.golden.config import PRESETS, SensorConfig
 from tespike.golden.errors import InputError, one_line
 
+from .settings import check_known
+
 #: The learned methods in the paper's row order, its learned baselines then the network: name -> what
 #: it is. ``mambaspike1`` is MambaSpike of one parsing branch, the paper's spade row on the msb camera
 #: (shipped for ml-msb only: on TE and the full count ``mambaspike`` has one branch already).
@@ -54,8 +56,7 @@ def learned_methods() -> dict[str, tuple[type, type]]:
 
 def method_classes(name: str) -> tuple[type, type]:
     methods = learned_methods()
-    if name not in methods:
-        raise InputError(f"unknown learned method {name!r} (known: {', '.join(methods)})")
+    check_known(name, methods, "learned method")
     return methods[name]
 
 
@@ -89,8 +90,7 @@ def weights_name(method: str, preset: str) -> str:
 
 def weights_path(config: SensorConfig, method: str = "net") -> Path:
     """The shipped weights of ``method`` for ``config``; a one-line refusal where there are none."""
-    if method not in LEARNED:
-        raise InputError(f"unknown learned method {method!r} (known: {', '.join(LEARNED)})")
+    check_known(method, LEARNED, "learned method")
     preset = preset_of(config)
     if preset is None:
         raise InputError(f"the stream's configuration {config} is none of the presets {', '.join(PRESETS)} "

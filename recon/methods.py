@@ -30,7 +30,7 @@ from tespike.golden.io import images_array
 
 from .decoding import as_word_tensor, decode_light, decode_spikes
 from .learned import LEARNED_SUMMARIES
-from .settings import DEFAULT_WINDOW, TRAINING_FREE, ReconSettings
+from .settings import DEFAULT_WINDOW, TRAINING_FREE, ReconSettings, check_known
 from .tfi import tfi
 from .tfp import tfp
 
@@ -154,8 +154,7 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = DEFAU
     tail less that charge instead (:func:`tespike.recon.learning.infer.law_input`). Each route was chosen by
     measurement (docs/reconstruction.md "Calibration").
     """
-    if method not in RECON_METHODS:
-        raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
+    check_known(method, RECON_METHODS)
     spec = RECON_METHODS[method]
     unknown = sorted(set(options) - set(spec.options))
     if unknown:
@@ -223,8 +222,7 @@ def missing_weights(method: str, config: SensorConfig, weights=None) -> str | No
     """Why ``method`` cannot reconstruct streams of ``config`` with the weights file ``weights``
     (None: the shipped ones): the one-line refusal of its weights (missing, another method's,
     another sensor's), or None where it can."""
-    if method not in RECON_METHODS:
-        raise InputError(f"unknown reconstruction method {method!r} (known: {', '.join(RECON_METHODS)})")
+    check_known(method, RECON_METHODS)
     if RECON_METHODS[method].frames is None:
         return None
     from .learned import load_learned

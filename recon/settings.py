@@ -51,6 +51,13 @@ def check_device(device) -> None:
 TRAINING_FREE = {"tfp": "mean decoded light over the window (spike-firing rate)",
                  "tfi": "decoded spikes over the spike interval around each readout"}
 
+def check_known(method: str, known, what: str = "reconstruction method") -> None:
+    """Refuse a method name not among ``known`` in one line (every place that takes a method's name:
+    the registry, the learned methods' loader, the evaluations, the command line)."""
+    if method not in known:
+        raise InputError(f"unknown {what} {method!r} (known: {', '.join(known)})")
+
+
 #: TFI search modes: the whole stream (default) or the window around the key moment.
 TFI_SEARCH = ("stream", "window")
 

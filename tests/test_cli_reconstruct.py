@@ -37,7 +37,7 @@ def test_refusals(tmp_path, rng):
     cases = [
         (("--stream", tmp_path / "missing.npz", "--method", "tfp"), ("does not exist",)),
         (("--stream", bad, "--method", "tfp"), ("not a readable",)),
-        (("--stream", stream, "--method", "cnn"), ("unknown method 'cnn'",)),
+        (("--stream", stream, "--method", "cnn"), ("unknown reconstruction method 'cnn'",)),
         (("--stream", stream, "--method", "tfp", "--window", "4"), ("--window 4", "odd integer")),
         (("--stream", stream, "--method", "tfp", "--device", "cuda:7"), ("device",)),
         (("--stream", stream, "--method", "tfp", "--search", "window"), ("--search",)),

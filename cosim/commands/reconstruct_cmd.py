@@ -45,14 +45,13 @@ def run(args) -> int:
     from tespike.golden.errors import InputError
     from tespike.golden.io import atomic_output, load_stream
     from tespike.golden.paths import check_outputs
-    from tespike.recon.settings import DEFAULT_WINDOW, check_window, check_window_reach, uses_window
+    from tespike.recon.settings import DEFAULT_WINDOW, check_known, check_window, check_window_reach, uses_window
 
     from .common import check_threads_argument
     from tespike.cosim.room import require_room, reserved_memmap
 
     # every check that needs no torch comes first, so a refusal is quick
-    if args.method not in METHOD_CHOICES:
-        raise InputError(f"unknown method {args.method!r} (offered: {', '.join(METHOD_CHOICES)})")
+    check_known(args.method, METHOD_CHOICES)
     if args.method in LEARNED and args.window is not None:
         from tespike.recon.learned import method_span
         raise InputError(f"--window applies to methods 'tfp' and 'tfi'; {args.method!r} sees the "
