@@ -1,7 +1,6 @@
 """Argument blocks several sub-commands share, so their names and help read the same everywhere."""
 
 from tespike.golden.config import PRESETS
-from tespike.golden.resources import MAX_WORKERS, check_workers_argument  # noqa: F401  (one --workers rule)
 
 CONFIG_HELP = "JSON config file, or a preset: " + " / ".join(PRESETS)
 
@@ -126,9 +125,15 @@ def sensor_argument(args):
     if args.no_noise and not noise.is_ideal:
         raise InputError(f"--noise {args.noise} describes random non-idealities; it cannot be combined with "
                          "--no-noise")
-    if args.sensor_seed is not None and args.sensor_seed < 0:
-        raise InputError(f"--sensor-seed {args.sensor_seed}: must be >= 0")
-    return Sensor(noise, 0 if args.sensor_seed is None else args.sensor_seed)
+    return Sensor(noise, sensor_seed_argument(args.sensor_seed))
+
+
+def sensor_seed_argument(value: int | None) -> int:
+    """``--sensor-seed`` (simulate, stimulus, evaluate): 0 when not given, refused below 0."""
+    from tespike.golden.errors import InputError
+    if value is not None and value < 0:
+        raise InputError(f"--sensor-seed {value}: must be >= 0")
+    return 0 if value is None else value
 
 
 #: Most torch CPU threads any command's ``--threads`` accepts (reconstruct, evaluate, train).

@@ -252,6 +252,8 @@ def _sensors(args, ml_count: str):
     from tespike.golden.errors import ConfigError, InputError
     from tespike.golden.noise import Sensor, load_noise
     from tespike.recon.evaluate import CALIBRATED, NOISE_SENSORS, default_noise_sensors
+
+    from .common import sensor_seed_argument
     # option, value, sensor key, (mode, ml_readout) it must have
     wanted = [("--ml-config", args.ml_config, "ml-msb", ("ml", "msb")),
               ("--te-config", args.te_config, "te", ("te", "count"))]
@@ -263,9 +265,7 @@ def _sensors(args, ml_count: str):
         if (config.mode, config.ml_readout) != (kind, readout):
             raise ConfigError(f"{option} {value!r} has mode {config.mode!r}, ml_readout {config.ml_readout!r}; "
                               f"expected mode {kind!r}" + (f", ml_readout {readout!r}" if kind == "ml" else ""))
-    sensor_seed = 0 if args.sensor_seed is None else args.sensor_seed
-    if sensor_seed < 0:
-        raise InputError(f"--sensor-seed {sensor_seed}: must be >= 0")
+    sensor_seed = sensor_seed_argument(args.sensor_seed)
     if args.sensor_seed is not None and not (args.noise or args.sensor_noise):
         raise InputError("--sensor-seed draws a noise sensor's per-pixel maps: give --noise or --sensor-noise "
                          "(without one it would be ignored)")

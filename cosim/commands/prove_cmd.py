@@ -168,7 +168,7 @@ def run(args) -> int:
     from tespike.cosim.formal import TOP_TOOLS, require_tools
     from tespike.golden.errors import InputError
 
-    from .common import check_workers_argument
+    from tespike.golden.resources import check_workers_argument
 
     if args.only is not None:           # the other part's options would be dropped without a word
         from .common import options_given

@@ -1,6 +1,8 @@
 """``tespike simulate``: scene light I.npy -> readout stream S.npz, with photon shot noise."""
 
-from .common import MAX_WORKERS, NPZ_FILE, add_light_arguments, check_workers_argument, light_front_end
+from tespike.golden.resources import MAX_WORKERS, check_workers_argument
+
+from .common import NPZ_FILE, add_light_arguments, light_front_end
 
 HELP = "simulate the sensor on a light scene I.npy (photon shot noise; fast, exact in distribution)"
 
