@@ -1,8 +1,10 @@
 """The dataset store, synthesis into it and evaluation over it, in this process (no cluster)."""
 
 import csv
+import shutil
 
 import numpy as np
+
 import pytest
 import zarr
 
@@ -117,9 +119,9 @@ def test_resume_rebuilds_a_complete_sequence_whose_chunk_is_damaged(tmp_path, ca
     capsys.readouterr()
     assert main([*args, "--out", str(tmp_path / "cut.zarr")]) == 0
     out = capsys.readouterr().out
-    assert f"sequence 'sun' was complete but chunk {str(light)!r} (fails its CRC-32C check) and 1 more is damaged" \
+    assert f"sequence 'sun' was complete, but chunk {str(light)!r} fails its CRC-32C check (and 1 more)" \
         in out, out
-    assert "(1 already complete, 1 rebuilt for a damaged chunk)" in out, out
+    assert "(1 already complete, 1 rebuilt where damaged)" in out, out
     assert compare_stores(tmp_path / "ref.zarr", tmp_path / "cut.zarr") == []
     assert main([*args, "--out", str(tmp_path / "cut.zarr")]) == 0          # nothing left to rebuild
     assert "(2 already complete)" in capsys.readouterr().out
@@ -313,6 +315,10 @@ STORE_DAMAGE = {
     "stream shape altered": (lambda s: _tamper(s / "sun/streams/te/zarr.json", lambda d, a: d.update(shape=[8, 16, 16])),
                              "has shape (8, 16, 16)"),
     "sequence zarr.json gone": (lambda s: (s / "sun/zarr.json").unlink(), "zarr.json' is missing"),
+    "a stream removed": (lambda s: shutil.rmtree(s / "sun/streams/te"), "its array streams/te is missing"),
+    "the light removed": (lambda s: shutil.rmtree(s / "sun/light"), "its array light is missing"),
+    "a stream never finished": (lambda s: _tamper(s / "sun/streams/te/zarr.json", lambda d, a: a.update(complete=False)),
+                                "its array streams/te was never finished"),
 }
 
 
@@ -354,7 +360,21 @@ def test_resume_rebuilds_an_array_whose_chunk_file_was_deleted(tmp_path, capsys,
     capsys.readouterr()
     assert main(["dataset", "--scene", "sun", "--frames", "4", "--height", "16", "--width", "16",
                  "--config", "te", "--config", "ml-msb", "--out", str(store)]) == 0
-    assert "of its 1 chunk files missing) is damaged: rebuilding its array" in capsys.readouterr().out
+    assert "of its 1 chunk files missing: rebuilding what is damaged" in capsys.readouterr().out
+    assert compare_stores(small_store, store) == []
+
+
+@pytest.mark.parametrize("part", ["streams/te", "light"])
+def test_resume_rebuilds_an_array_removed_from_a_complete_sequence(tmp_path, capsys, small_store, part):
+    """The resume called a sequence whose array was removed complete ("1 already complete"), left a new
+    empty array in its place, and evaluate --store scored its fill value with exit 0."""
+    store = tmp_path / "D.zarr"
+    shutil.copytree(small_store, store)
+    shutil.rmtree(store / "sun" / part)
+    capsys.readouterr()
+    assert main(["dataset", "--scene", "sun", "--frames", "4", "--height", "16", "--width", "16",
+                 "--config", "te", "--config", "ml-msb", "--out", str(store)]) == 0
+    assert f"its array {part} is missing or unfinished: rebuilding" in capsys.readouterr().out
     assert compare_stores(small_store, store) == []
 
 

@@ -110,7 +110,7 @@ def run(args) -> int:
         note_resumable(exc, args.out, kept)               # (also for a failure after the build)
         raise
     seconds = time.perf_counter() - start
-    rebuilt = f", {len(counts['rebuilt'])} rebuilt for a damaged chunk" if counts["rebuilt"] else ""
+    rebuilt = f", {len(counts['rebuilt'])} rebuilt where damaged" if counts["rebuilt"] else ""
     report(args, f"wrote {counts['done']} sequence(s) to {args.out} ({counts['skipped']} already complete{rebuilt}), "
                  f"{counts['pixel_readouts']} pixel-readouts in {seconds:.1f} s")
     return 0

@@ -286,9 +286,9 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
                 pixel_readouts += int(np.prod(source.shape)) * streams
             damaged = store.rebuilt.get(source.name)
             if damaged and notice is not None:
-                notice(f"sequence {source.name!r} was complete but {damaged[0]}"
-                       f"{f' and {len(damaged) - 1} more' if len(damaged) > 1 else ''} is damaged: "
-                       "rebuilding its array")
+                notice(f"sequence {source.name!r} was complete, but {damaged[0]}"
+                       f"{f' (and {len(damaged) - 1} more)' if len(damaged) > 1 else ''}: rebuilding "
+                       "what is damaged")
         if starting is not None:
             starting()
         for _, name in run(graphs):

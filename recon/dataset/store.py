@@ -233,15 +233,17 @@ class DatasetStore:
             key = path.split("/")[-1]
             with reading(self.url, f"{name}/{path}"):
                 complete = path in group and bool(group[path].attrs.get("complete", False))
-            damaged = [f"chunk {chunk!r} (fails its CRC-32C check)"
+            damaged = [f"chunk {chunk!r} fails its CRC-32C check"
                        for chunk in (damaged_chunks(self.url, f"{name}/{path}") if complete else [])]
             if complete and not damaged:
                 with reading(self.url, f"{name}/{path}"):
                     recorded = group[path].attrs.get("chunk_files")
                 missing = missing_chunks(self.url, f"{name}/{path}", recorded)
                 if missing:                 # (a deleted chunk file would read as zeros)
-                    damaged = [f"{str(Path(self.url, name, *path.split('/'), 'c'))!r} ({recorded - missing[0]} "
-                               f"of its {recorded} chunk files missing)"]
+                    damaged = [f"{str(Path(self.url, name, *path.split('/'), 'c'))!r} has {recorded - missing[0]} "
+                               f"of its {recorded} chunk files missing"]
+            if not complete and done["sequence"]:     # a complete sequence whose array was removed or reset
+                damaged = [f"its array {path} is missing or unfinished"]
             if damaged:              # kept work is verified: a damaged chunk's array is made again
                 self.rebuilt.setdefault(name, []).extend(damaged)
                 complete = False
@@ -305,7 +307,15 @@ class DatasetStore:
                    and 0 < v < 1e30, "a number in (0, 1e30)")
         shape = (info["frames"], info["height"], info["width"])
         for part in ("light", *(f"streams/{c}" for c in self.configs)):
+            with reading(self.url, f"{name}/{part}"):
+                present = part in self.group[name]
+            if not present:
+                raise InputError(f"{what}: its array {part} is missing; remove its folder and run tespike "
+                                 "dataset again")
             array = self.array(name, part)
+            if array.attrs.get("complete") is not True:
+                raise InputError(f"{what}: its array {part} was never finished (not marked complete); remove "
+                                 "its folder and run tespike dataset again")
             if tuple(array.shape) != shape:
                 raise InputError(f"{what}: {part} has shape {tuple(array.shape)}, the sequence {shape}; "
                                  "remove its folder and run tespike dataset again")
