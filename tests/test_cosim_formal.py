@@ -159,6 +159,9 @@ def test_command_refuses_bad_options_in_one_line():
     assert_refused(done, "--depth")
     done = run_tespike("prove", "--workers", "0", timeout=60)
     assert_refused(done, "--workers")
+    # two sensors of one name: the later replaced the earlier, which was never proved (exit 0)
+    done = run_tespike("prove", "--only", "pixel", "--config", "te", "--config", "other/te.json", timeout=60)
+    assert_refused(done, "a sensor named 'te' is already given")
     # the other part's options with --only were dropped without a word (exit 0)
     for only, option in (("pixel", ("--sizes", "2x2")), ("pixel", ("--config-sizes", "none")),
                          ("pixel", ("--top-timeout", "1")), ("tops", ("--depth", "5")), ("tops", ("--corners",))):
@@ -229,3 +232,18 @@ def test_command_fails_in_one_line_on_an_edited_stream_rule(tmp_path, monkeypatc
         and "in the equivalence check: " in failed[0], out
     assert (tmp_path / "traces" / "small-stream-pixel-rule.vcd").exists()
     assert "4 of 5 properties proved" in out[-1]
+
+
+def test_an_induction_step_failing_at_too_small_a_depth_is_inconclusive(tmp_path, capsys):
+    """``--depth 1`` printed 'stream: FAILED ...; counterexample' for a design proved at depth 2: an
+    induction step's failure may start from a state no run reaches, so it is 'NOT PROVED'."""
+    from tespike.cosim.cli import main
+
+    path = tmp_path / "small.json"
+    path.write_text(json.dumps(SMALL_TE.to_dict()))
+    code = main(["prove", "--config", str(path), "--depth", "1", "--only", "pixel", "--workers", "1",
+                 "--traces", str(tmp_path / "traces")])
+    out = capsys.readouterr().out.strip().splitlines()
+    assert code == 1 and not [line for line in out if "FAILED" in line], out
+    stuck = [line for line in out if "NOT PROVED" in line]
+    assert stuck and all("inconclusive" in line and "--depth" in line for line in stuck), out

@@ -47,10 +47,14 @@ def targets(specs, with_corners: bool):
 
     from tespike.cosim.formal import corners
     from tespike.golden.config import PRESETS, load_config
+    from tespike.golden.errors import InputError
 
     configs = {}
     for spec in specs or list(PRESETS):
         name = spec if spec in PRESETS else Path(spec).stem
+        if name in configs:             # (one would replace the other: a sensor left unproved, exit 0)
+            raise InputError(f"--config {spec!r}: a sensor named {name!r} is already given (names are the "
+                             "presets and the files' stems: rename the file)")
         config = load_config(spec)
         configs[name] = config
         if with_corners:
@@ -104,6 +108,10 @@ def run_task(task, depth: int, solver: str, traces, top_timeout: float) -> tuple
         method = "SAT (combinational)" if prop == "stream-pixel-rule" else f"k-induction depth {depth}"
         if result.proved:
             return True, f"{name} {prop}: proved, {method} ({result.seconds:.1f} s)"
+        if result.detail.startswith("induction step"):   # (from a state the base case may never reach)
+            where = f"; the induction step's trace {result.trace}" if result.trace else ""
+            return False, (f"{name} {prop}: NOT PROVED, {method}: the {result.detail} (inconclusive: that "
+                           f"state may be unreachable; try a larger --depth){where}")
         where = f"; counterexample {result.trace}" if result.trace else ""
         return False, f"{name} {prop}: FAILED, {method}, in the {result.detail}{where}"
     from tespike.cosim.formal.abc import prove_harness
