@@ -180,6 +180,32 @@ def build(verilog_path: Path, top: str, simulator: str, cache_root: Path | None 
     return final
 
 
+def check_ports(verilog_path: Path, top: Top) -> str | None:
+    """Refuse (one line) a Verilog file whose top lacks a port of SPEC section 6, or has one of
+    another direction or width: the testbench reaches signals by name, and an internal net of a
+    port's name would pass for it (a top whose ``frame_valid`` was renamed passed, exit 0). Read by
+    Yosys's parser (``write_json``); -> a note where Yosys is missing or cannot parse the file (the
+    simulator still checks the widths it sees), None where the ports were checked."""
+    from .synthesis import SynthesisError, yosys_missing, yosys_run
+    missing = yosys_missing()
+    if missing:
+        return f"ports not checked before the run ({missing})"
+    try:
+        with yosys_run(verilog_path.read_text(), [f"hierarchy -top {top.module}", "proc", "write_json ports.json"],
+                       f"yosys could not read {top.module}", prefix="tespike-ports-") as (work, _):
+            ports = json.loads((work / "ports.json").read_text())["modules"][top.module]["ports"]
+    except (SynthesisError, KeyError, ValueError) as exc:
+        return f"ports not checked before the run (Yosys could not read the file: {exc})"
+    for name, (direction, bits) in top.ports.items():
+        port = ports.get(name)
+        found = "no such port" if port is None else f"an {port['direction']} of {len(port['bits'])} bit(s)"
+        if port is None or port["direction"] != direction or len(port["bits"]) != bits:
+            raise InputError(f"Verilog file {str(verilog_path)!r}: module {top.module} port {name}: {found}; "
+                             f"SPEC section 6 wants an {direction} of {bits} bit(s) for {top.height} x "
+                             f"{top.width} pixels{f' and {top.lanes} lanes' if top.streaming else ''}")
+    return None
+
+
 def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: str | Path | None = None,
                work_dir: str | Path | None = None, cache_root: Path | None = None) -> CocotbResult:
     """Run :func:`tespike.cosim.cocotb_bench.spec_ports_equal_golden` on one simulator.
@@ -193,8 +219,10 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
     if settings.lanes is not None:
         from tespike.golden.beats import check_lanes
         check_lanes(settings.config, settings.height, settings.width, settings.lanes)
-    top = Top(settings.config, settings.height, settings.width, settings.lanes).module
+    design = Top(settings.config, settings.height, settings.width, settings.lanes)
+    top = design.module
     settings.inputs()                      # and a bad stimulus or reset vector, before building anything
+    given = verilog_path is not None
     with work_folder("tespike-cocotb-") as scratch:
         if verilog_path is None:
             verilog_path = Path(scratch) / "array.v"
@@ -208,7 +236,10 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
         verilog_path = Path(verilog_path)
         if not verilog_path.is_file():
             raise InputError(f"Verilog file {str(verilog_path)!r} does not exist")
+        note = check_ports(verilog_path, design) if given else None
         build_dir = build(verilog_path, top, simulator, cache_root)
+        if note is not None:            # (after the build: a file it refuses gets its one line alone)
+            print(f"cocotb: {verilog_path}: {note}", file=sys.stderr)
         # absolute: the simulator runs in test_dir and reads the results file's path from there
         test_dir = Path(work_dir).resolve() if work_dir is not None else Path(scratch) / "run"
         test_dir.mkdir(parents=True, exist_ok=True)

@@ -76,6 +76,16 @@ class Top:
         return self.word_values * self.config.word_bits
 
     @property
+    def ports(self) -> dict[str, tuple[str, int]]:
+        """SPEC section 6's ports of the top: name -> (direction, bits)."""
+        ports = {"clk": ("input", 1), "rst": ("input", 1), "charge": ("input", self.charge_bits),
+                 self.valid_port: ("output", 1)}
+        if self.streaming:
+            ports["out_first"] = ("output", 1)
+        ports[self.word_port] = ("output", self.output_bits)
+        return ports
+
+    @property
     def beats(self) -> int:
         """Captures per readout interval: B beats, or 1 frame."""
         return beat_count(self.height * self.width, self.lanes) if self.streaming else 1

@@ -176,3 +176,24 @@ def test_a_verilog_file_that_does_not_build_is_named_as_given(tmp_path):
                          "--verilog", tmp_path / "mine.v", env={"TESPIKE_CACHE": str(tmp_path / "cache")})
     assert_refused(result, str(tmp_path / "mine.v"), "build")
     assert "array.v" not in result.stderr.split("(full log")[0]
+
+
+@pytest.mark.parametrize("edit", ["frame_valid renamed", "charge an output"])
+def test_a_top_without_specs_ports_is_refused_before_the_run(tmp_path, edit):
+    """The testbench reaches ports by name: an internal net named frame_valid passed for the port
+    (the top's own frame_valid renamed and tied to 0: 'pass', exit 0)."""
+    from tespike.rtl.verilog import array_verilog
+    text = array_verilog(SensorConfig.preset("te"), 2, 3)
+    if edit == "frame_valid renamed":
+        text = text.replace("output wire frame_valid,", "output wire fv,", 1).replace(
+            "  assign frame = words;", "  wire frame_valid;\n  assign fv = 1'b0;\n  assign frame = words;", 1)
+        words = ("port frame_valid: no such port",)
+    else:
+        text = text.replace("input  wire [95:0] charge,", "output wire [95:0] charge,", 1)
+        words = ("port charge: an output of 96 bit(s)", "wants an input")
+    assert text != array_verilog(SensorConfig.preset("te"), 2, 3)
+    (tmp_path / "mine.v").write_text(text)
+    result = run_tespike("cocotb", "--config", "te", "--height", 2, "--width", 3, "--simulator", "icarus",
+                         "--readouts", 2, "--verilog", tmp_path / "mine.v",
+                         env={"TESPIKE_CACHE": str(tmp_path / "cache")})
+    assert_refused(result, str(tmp_path / "mine.v"), *words)
