@@ -89,6 +89,13 @@ def test_writer_rle_is_smaller_and_equal(tmp_path):
     (HEADER + b"-Y 1 +X 2\n" + bytes((1, 1, 1, 5, 0, 0, 0, 0)), ["old-style"]),
     (HEADER + b"-Z 1 +X 2\n", ["resolution"]),
     (HEADER + b"-Y 1 +X 8\n" + bytes((2, 2, 0, 9)) + bytes(20), ["width 9"]),
+    # a second image or text after the last scanline was dropped unread
+    (HEADER + b"-Y 1 +X 1\n" + bytes((128, 64, 32, 129)) + HEADER + b"-Y 1 +X 1\n" + bytes(4),
+     ["byte(s) after the last of its 1 scanlines", "concatenated"]),
+    (HEADER + b"-Y 1 +X 1\n" + bytes((128, 64, 32, 129)) + b"garbage\n", ["8 byte(s) after"]),
+    # an exposure that overflows was blamed on the pixel data
+    (b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\nEXPOSURE=1e-300\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)),
+     ["EXPOSURE=1e-300", "beyond float32's range"]),
 ])
 def test_reader_refuses_bad_files(tmp_path, content, words):
     path = tmp_path / "bad.hdr"

@@ -171,6 +171,9 @@ def read_hdr(path: str | Path) -> np.ndarray:
     for row in range(n1):
         line, pos = _decode_scanline(data, pos, n2, path, row)
         rows.append(line)
+    if pos != len(data):                    # (a second image, or text, would be dropped unread)
+        raise InputError(f"{path!r}: {len(data) - pos} byte(s) after the last of its {n1} scanlines "
+                         "(a corrupt or concatenated file)")
     pixels = np.frombuffer(b"".join(rows), np.uint8).reshape(n1, n2, 4)
     rgb = rgbe_to_float(pixels)
     # Standard orientation is "-Y H +X W": scanlines top to bottom, left to right.
@@ -186,7 +189,11 @@ def read_hdr(path: str | Path) -> np.ndarray:
         if sign2 == b"+":
             rgb = rgb[::-1]
     if exposure != 1.0:
-        rgb = (rgb.astype(np.float64) / exposure).astype(np.float32)
+        with np.errstate(over="ignore"):
+            rgb = (rgb.astype(np.float64) / exposure).astype(np.float32)
+        if not np.isfinite(rgb).all():      # (the pixels are finite: RGBE holds no infinity)
+            raise InputError(f"{path!r}: its EXPOSURE={exposure:g} (the header lines' product) divides "
+                             "its pixel values beyond float32's range")
     return np.ascontiguousarray(rgb)
 
 
