@@ -170,6 +170,25 @@ def test_not_a_weights_file_is_refused(tmp_path):
         load_weights(bad)
 
 
+class _Runs:
+    """A pickled object whose loading would run a shell command."""
+
+    def __reduce__(self):
+        import os
+        return (os.system, ("echo loaded",))
+
+
+def test_a_weights_file_holding_code_is_refused_without_torchs_unsafe_advice(tmp_path):
+    """torch's refusal advised loading with weights_only=False, which would run the file's code."""
+    path = tmp_path / "evil.pt"
+    torch.save({"x": _Runs()}, path)
+    with pytest.raises(InputError) as refused:
+        load_weights(path)
+    message = str(refused.value)
+    assert "not loaded, as loading could run code" in message and "posix.system" in message, message
+    assert "weights_only" not in message and "will likely succeed" not in message
+
+
 @pytest.mark.parametrize("keep", ["one byte", "half", "all but one byte"])
 def test_a_cut_short_weights_file_is_named_in_our_words(tmp_path, keep):
     """torch's own first line for a cut-short file speaks of weights_only defaults or of an

@@ -98,7 +98,13 @@ def _load_fault(path: str | Path, exc: BaseException) -> str:
             return "not a zip archive as torch writes: cut short, or another format"
     except OSError:
         pass
-    return f"another format: {one_line(str(exc).splitlines()[0] if str(exc) else exc, 300)}"
+    text = str(exc)
+    if text.startswith("Weights only load failed"):   # (torch's first line advises loading it unsafely)
+        lines = [line.strip() for line in text.splitlines()[1:] if line.strip()
+                 and not line.startswith(("Check the documentation", "Please file an issue"))]
+        what = one_line(lines[0], 200) if lines else "objects other than tensors"
+        return f"it holds Python objects a weights file does not ({what}); not loaded, as loading could run code"
+    return f"another format: {one_line(text.splitlines()[0] if text else exc, 300)}"
 
 
 def read_weights(path: str | Path, what: str = "weights") -> dict[str, Any]:
