@@ -162,6 +162,9 @@ def test_command_refuses_bad_options_in_one_line():
     # two sensors of one name: the later replaced the earlier, which was never proved (exit 0)
     done = run_tespike("prove", "--only", "pixel", "--config", "te", "--config", "other/te.json", timeout=60)
     assert_refused(done, "a sensor named 'te' is already given")
+    # a --traces that is a file was found only when a failure's trace was written, after the proofs
+    done = run_tespike("prove", "--only", "pixel", "--traces", __file__, timeout=60)
+    assert_refused(done, "--traces", "is not a directory")
     # the other part's options with --only were dropped without a word (exit 0)
     for only, option in (("pixel", ("--sizes", "2x2")), ("pixel", ("--config-sizes", "none")),
                          ("pixel", ("--top-timeout", "1")), ("tops", ("--depth", "5")), ("tops", ("--corners",))):

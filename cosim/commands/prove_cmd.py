@@ -190,6 +190,9 @@ def run(args) -> int:
     if not args.top_timeout > 0:
         raise InputError(f"--top-timeout {args.top_timeout} must be > 0")
     check_workers_argument(args.workers)
+    if args.only != "tops":             # (written only on a failure: a bad one was found after the proofs)
+        from tespike.golden.paths import check_output_dir
+        check_output_dir(args.traces, "--traces")
     sizes = parse_sizes("--sizes", args.sizes)
     config_sizes = parse_sizes("--config-sizes", args.config_sizes)
     if args.only == "tops":                # ABC alone: no SMT solver, no yosys-smtbmc
