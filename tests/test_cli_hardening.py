@@ -820,7 +820,9 @@ def test_generated_arrays_and_their_stimuli_are_bounded_up_front(files):
 
 def test_dataset_checks_its_options_before_printing_or_creating_the_store(files):
     for args, word in ((("--chunk-frames", 0), "--chunk-frames"), (("--frames", 10 ** 8), "limit"),
-                       (("--seed", -1), "--seed")):
+                       (("--seed", -1), "--seed"),
+                       # Zarr allocates a chunk whole: 'out of memory' after the start line, no option named
+                       (("--chunk-frames", 10 ** 11), "--chunk-frames 100000000000")):
         result = refused_without_change(files, ("dataset", "--config", "te", "--scene", "default",
                                                 "--out", files / "store", *args), word)
         assert result.stdout == ""

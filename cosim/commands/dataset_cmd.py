@@ -73,6 +73,12 @@ def run(args) -> int:
         raise InputError(f"--frames {args.frames} must be >= 1")
     if args.chunk_frames < 1:
         raise InputError(f"--chunk-frames {args.chunk_frames} must be an integer >= 1")
+    from tespike.golden.resources import require_memory
+    from tespike.recon.dataset.store import TILE
+    # a task holds one chunk of light (float32) and its words: Zarr allocates it whole, whatever
+    # the sequence's length (a typo of a few digits failed after the start line, naming no option)
+    require_memory(args.chunk_frames * TILE[0] * TILE[1] * 8,
+                   f"--chunk-frames {args.chunk_frames} (chunks of {args.chunk_frames} x {TILE[0]} x {TILE[1]})")
     if args.seed < 0:
         raise InputError(f"--seed {args.seed!r} must be an integer >= 0")
     if "://" not in args.out:          # a local store: its folder can be checked before any work
