@@ -409,3 +409,16 @@ def test_a_zarr_format_2_store_is_refused_untouched(tmp_path, capsys):
     assert sorted(p.relative_to(store) for p in store.rglob("*")) == before
     assert main(["evaluate", "--store", str(store), "--out", str(tmp_path / "E")]) == 2
     assert "Zarr format 2" in capsys.readouterr().err
+
+
+def test_an_illegal_stored_word_is_named_with_its_store_sequence_and_stream(tmp_path, capsys, small_store):
+    """The refusal named the word and its index only: which store, sequence and stream it was in, not."""
+    store = tmp_path / "D.zarr"
+    shutil.copytree(small_store, store)
+    zarr.open(str(store / "sun/streams/te"), mode="r+")[1, 5, 7] = 16      # no TE word of the preset
+    capsys.readouterr()
+    assert main(["evaluate", "--store", str(store), "--out", str(tmp_path / "E"), "--methods", "tfp",
+                 "-q"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and f"dataset store {str(store)!r}, sequence 'sun', stream 'te': readout " \
+        "word 16" in err, err

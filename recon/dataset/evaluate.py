@@ -62,6 +62,16 @@ def _one_thread():
         torch.set_num_threads(before)
 
 
+@contextlib.contextmanager
+def _about(url: str, sequence: str, sensor: str):
+    """A refusal of what a task read (an illegal word, a light that is not finite) names the store,
+    sequence and stream it came from: the task's own message knows only the array."""
+    try:
+        yield
+    except InputError as exc:
+        raise InputError(f"dataset store {url!r}, sequence {sequence!r}, stream {sensor!r}: {exc}") from None
+
+
 def score_whole(url: str, sequence: str, sensor: str, method: str, window: int, device: str,
                 peak: float, frames: tuple[int, int], middle: int, options: dict) -> dict:
     """Reconstruct and score whole frames (as :func:`tespike.recon.evaluate.evaluate`)."""
@@ -72,7 +82,7 @@ def score_whole(url: str, sequence: str, sensor: str, method: str, window: int, 
     with reading(url, f"{sequence}/streams/{sensor}"):
         config = SensorConfig.from_json(stream.attrs["config"])
         words = stream[...]
-    with _one_thread():
+    with _one_thread(), _about(url, sequence, sensor):
         images = reconstruct(words, config, method, window=window, device=device, **options)
         scored = slice(*frames)
         with reading(url, f"{sequence}/light"):
@@ -105,7 +115,7 @@ def score_tile(url: str, sequence: str, sensor: str, method: str, window: int, d
     centres = (slice(None), slice(y0 - R0 - h, y1 - R0 - h), slice(x0 - C0 - h, x1 - C0 - h))
     light = open_array(url, f"{sequence}/light")
     sse, ssum = [], []
-    with _one_thread():
+    with _one_thread(), _about(url, sequence, sensor):
         with reading(url, f"{sequence}/streams/{sensor}"):
             words = stream[:, R0:R1, C0:C1]
         images = reconstruct(words, config, method, window=window, device=device, **options)
