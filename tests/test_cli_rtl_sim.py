@@ -122,6 +122,9 @@ def test_rtl_sim_refuses_missing_files_and_directories(tmp_path, rng):
     assert_refused(run_tespike(*base, "--out", tmp_path / "s.npz", "--gtkw", tmp_path / "w.gtkw"), "--gtkw")
     assert_refused(run_tespike(*base, "--out", tmp_path / "s.npz", "--vcd", tmp_path / "w.vcd",
                                "--backend", "icarus"), "--vcd", "icarus")
+    # the two progress options disagreeing: --no-progress won without a word
+    assert_refused(run_tespike(*base, "--out", tmp_path / "s.npz", "--no-progress", "--progress", "on"),
+                   "--no-progress and --progress on")
     assert not _leftovers(tmp_path, "s.npz", "w.vcd", "w.gtkw")
 
 

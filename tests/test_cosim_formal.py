@@ -157,6 +157,8 @@ def test_command_refuses_bad_options_in_one_line():
     assert_refused(done, "cvc9")
     done = run_tespike("prove", "--depth", "0", timeout=60)
     assert_refused(done, "--depth")
+    done = run_tespike("prove", "--depth", "100000", timeout=60)       # ran for minutes, nothing printed
+    assert_refused(done, "--depth 100000", "1..32")
     done = run_tespike("prove", "--workers", "0", timeout=60)
     assert_refused(done, "--workers")
     # two sensors of one name: the later replaced the earlier, which was never proved (exit 0)

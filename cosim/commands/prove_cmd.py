@@ -9,6 +9,10 @@ HELP = ("prove the pixel equal to SPEC section 3's rule (yosys-smtbmc k-inductio
         "independent proofs run in --workers processes")
 
 PARTS = ("pixel", "tops")
+#: Largest k of the pixel's k-induction: each step unrolls k clocks of the harness, and the solver's
+#: time grows fast with k (100000 ran for minutes with nothing printed); the properties are 1- or
+#: 2-inductive (docs/rtl.md), the default 3.
+MAX_DEPTH = 32
 #: Options only the pixel's proofs use, and only the tops' (``--only`` refuses the other part's).
 PIXEL_OPTIONS = ("corners", "depth", "solver", "traces")
 TOP_OPTIONS = ("sizes", "config_sizes", "top_timeout")
@@ -23,7 +27,8 @@ def add_arguments(parser):
                         help="also prove the pixel at the extreme corners of SPEC section 2 for each "
                              "configuration's mode (min, max and saturating widths; see docs/rtl.md)")
     parser.add_argument("--depth", type=int, default=3,
-                        help="k of the pixel's k-induction (base case and induction step; default 3)")
+                        help=f"k of the pixel's k-induction (base case and induction step), 1..{MAX_DEPTH} "
+                             "(default 3)")
     parser.add_argument("--solver", default="z3", help="SMT solver for yosys-smtbmc (default z3)")
     from tespike.cosim.formal.tops import SIZES
     default_sizes = ",".join(f"{rows}x{cols}" for rows, cols in SIZES)
@@ -185,8 +190,8 @@ def run(args) -> int:
         if given:
             part = "the pixel's proofs" if args.only == "tops" else "the tops' proofs"
             raise InputError(f"{given[0]} belongs to {part}, which --only {args.only} leaves out")
-    if args.depth < 1:
-        raise InputError(f"--depth {args.depth} must be >= 1")
+    if not 1 <= args.depth <= MAX_DEPTH:
+        raise InputError(f"--depth {args.depth} must be in 1..{MAX_DEPTH}")
     if not args.top_timeout > 0:
         raise InputError(f"--top-timeout {args.top_timeout} must be > 0")
     check_workers_argument(args.workers)
