@@ -82,8 +82,9 @@ def check_resets(resets, clocks: int, path: str | None = None) -> np.ndarray | N
     return arr.astype(bool)
 
 
-def segments(resets: np.ndarray | None, clocks: int) -> list[Segment]:
-    """The segments of a run of ``clocks`` stimulus clocks (one, from 0 to the end, without resets)."""
+def segments(resets: np.ndarray | None) -> list[Segment]:
+    """The segments of a run whose reset vector is ``resets`` (one per stimulus clock; None or all low: one
+    segment, from 0 to the end)."""
     if resets is None or not resets.any():
         return [Segment(0, None)]
     step = np.diff(np.concatenate([[0], resets.astype(np.int8), [0]]))
@@ -115,7 +116,7 @@ def frame_segments(clocks, frames, config: SensorConfig, height: int, width: int
     """
     L = config.clocks_per_readout
     clocks = np.asarray(clocks, np.int64)
-    parts = segments(resets, stimulus_clocks)
+    parts = segments(resets)
     _refuse_during_reset(clocks, parts, what, "frame_valid")
     picks = [np.flatnonzero(seg.holds(clocks)) for seg in parts]
     first = next(((seg, p) for seg, p in zip(parts, picks) if len(p)), None)
@@ -163,7 +164,7 @@ def beat_segments(clocks, firsts, lane_rows, config: SensorConfig, height: int, 
     L, B = config.clocks_per_readout, beat_count(height * width, lanes)
     clocks = np.asarray(clocks, np.int64)
     firsts = np.asarray(firsts, bool)
-    parts = segments(resets, stimulus_clocks)
+    parts = segments(resets)
     _refuse_during_reset(clocks, parts, what, "out_valid")
     picks = [np.flatnonzero(seg.holds(clocks)) for seg in parts]
     offsets = set()
@@ -220,7 +221,7 @@ def golden_segments(config: SensorConfig, stimulus: np.ndarray, resets: np.ndarr
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
     out = []
-    for seg in segments(check_resets(resets, T), T):
+    for seg in segments(check_resets(resets, T)):
         K = seg.readouts(T, L)
         words = step_reference(config, stimulus[seg.start:seg.start + K * L])[0]
         out.append(words if lanes is None else beats(words, lanes).reshape(-1, lanes))

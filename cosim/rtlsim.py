@@ -160,7 +160,7 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
     ports = (bench.tb_frame_valid, bench.tb_frame)
     clock = _simulate(bench, bench.tb_charge, ports, run, record, limit=L, reset_charge=reset_charge,
                       progress=progress, waveform=None if vcd_path is None else
-                      lambda sim: _run_with_vcd(sim, config, (H, W), vcd_path, gtkw_path))
+                      lambda sim: _run_with_vcd(sim, config, vcd_path, gtkw_path))
     what = f"Amaranth simulation of the {H} x {W} array"
     if run.resets is not None:
         segment_words = run.top.result(run, edges, [], frame_rows(frames, H * W, config.word_bits), what)
@@ -315,7 +315,7 @@ def _progress_bar(total: int, progress: bool | None):
                 disable=None if progress is None else False, leave=False)
 
 
-def _run_with_vcd(sim, config, shape, vcd_path, gtkw_path) -> None:
+def _run_with_vcd(sim, config, vcd_path, gtkw_path) -> None:
     """Run with a waveform; write VCD and GTKWave files atomically (nothing on failure). The VCD is
     entered last so that it is committed first: one that fails there (a full disk, ``/dev/full``)
     takes the save file with it (the stack commits in reverse order)."""
@@ -330,4 +330,4 @@ def _run_with_vcd(sim, config, shape, vcd_path, gtkw_path) -> None:
                 exc.filename = vcd_tmp
             raise
         if gtkw_tmp is not None:
-            write_gtkw(gtkw_tmp, vcd_tmp, config, shape, dumpfile=dump_path(vcd_path, gtkw_path))
+            write_gtkw(gtkw_tmp, vcd_tmp, config, dumpfile=dump_path(vcd_path, gtkw_path))

@@ -159,5 +159,5 @@ def prepare(config: SensorConfig, stimulus: np.ndarray, lanes: int | None = None
         check_lanes(config, H, W, lanes)
     resets = check_resets(resets, T)
     L = config.clocks_per_readout
-    readouts = T // L if resets is None else segments(resets, T)[-1].readouts(T, L)
+    readouts = T // L if resets is None else segments(resets)[-1].readouts(T, L)
     return Run(Top(config, H, W, lanes), stimulus, resets, readouts)

@@ -218,7 +218,7 @@ def dump_path(vcd_path, gtkw_path) -> str:
     return os.path.relpath(Path(vcd_path).resolve(), Path(gtkw_path).resolve().parent)
 
 
-def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, shape, *, dumpfile=None,
+def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, *, dumpfile=None,
                readout: int = 0) -> list[str]:
     """Write a GTKWave save file for ``vcd_path`` showing the signals worth looking at.
 

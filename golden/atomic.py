@@ -413,7 +413,7 @@ def folder_holds_files(path: str | Path) -> bool:
 
 
 @contextlib.contextmanager
-def atomic_folder(path: str | Path, what: str = "--out") -> Iterator[Path]:
+def atomic_folder(path: str | Path) -> Iterator[Path]:
     """Yield a hidden temporary folder to fill; on success it becomes ``path`` whole, else it is removed.
 
     A results folder is one run's: the new folder is built beside the target

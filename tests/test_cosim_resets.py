@@ -56,9 +56,9 @@ def assert_segments_golden(config, stim, resets, got, lanes=None):
 
 def test_segments_split_at_each_reset_edge():
     resets = np.array([0, 0, 1, 1, 0, 0, 0, 1, 0, 0], bool)
-    assert segments(resets, 10) == [Segment(0, 2), Segment(4, 7), Segment(8, None)]
-    assert segments(None, 10) == [Segment(0, None)]
-    assert segments(np.array([0, 1], bool), 2) == [Segment(0, 1), Segment(2, None)]   # ends in reset
+    assert segments(resets) == [Segment(0, 2), Segment(4, 7), Segment(8, None)]
+    assert segments(None) == [Segment(0, None)]
+    assert segments(np.array([0, 1], bool)) == [Segment(0, 1), Segment(2, None)]   # ends in reset
     assert Segment(4, 7).readouts(10, 2) == 2 and Segment(8, None).readouts(10, 2) == 1
 
 
