@@ -308,6 +308,3 @@ def psnr_pu21(pred, gt, *, nits_per_unit: float = DEFAULT_NITS_PER_UNIT, device=
     with np.errstate(divide="ignore"):
         return 10 * np.log10(PU21_PEAK ** 2 / mse)
 
-
-#: name -> per-frame metric function (higher is better for all).
-METRICS = {"psnr_mu": psnr_mu, "ssim_mu": ssim_mu, "psnr_pu21": psnr_pu21}
