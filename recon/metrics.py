@@ -307,4 +307,3 @@ def psnr_pu21(pred, gt, *, nits_per_unit: float = DEFAULT_NITS_PER_UNIT, device=
                   normalised=False, device=device)
     with np.errstate(divide="ignore"):
         return 10 * np.log10(PU21_PEAK ** 2 / mse)
-
