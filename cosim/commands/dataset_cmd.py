@@ -1,5 +1,7 @@
 """``tespike dataset``: HDR frame folders and built-in scenes -> a dataset store of light and streams."""
 
+from .common import CONFIG_HELP
+
 HELP = ("simulate every sequence of a folder of HDR frame folders (and/or built-in scenes) with "
         "every sensor configuration into a Zarr dataset store, locally or on a Dask cluster")
 
@@ -22,8 +24,8 @@ def add_arguments(parser):
     parser.add_argument("--grayscale", default=None, help="luminance weights of HDR frames: rec709 "
                                                           "(default) or rec601")
     parser.add_argument("--config", metavar="C", action="append", default=[],
-                        help="sensor: te, ml, ml-msb or a JSON file (repeatable; streams are named "
-                             "after the preset or the file's stem)")
+                        help=f"sensor: {CONFIG_HELP} (repeatable; streams are named after the preset or "
+                             "the file's stem)")
     parser.add_argument("--out", required=True, metavar="STORE",
                         help="dataset store (Zarr folder) to make, or to resume if it exists")
     parser.add_argument("--seed", type=int, default=0, help="root seed of the shot noise (default 0)")
@@ -68,7 +70,7 @@ def run(args) -> int:
 
     check_cluster_options(args.workers, args.scheduler)
     if not args.config:
-        raise InputError("--config is required (te, ml, ml-msb or a JSON file; repeatable)")
+        raise InputError(f"--config is required ({CONFIG_HELP}; repeatable)")
     if args.frames is not None and args.frames < 1:
         raise InputError(f"--frames {args.frames} must be >= 1")
     if args.chunk_frames < 1:

@@ -1,6 +1,8 @@
 """``tespike prove``: the pixel against SPEC sections 3-4 (k-induction), the streaming Verilog top's
 pixel rule against that pixel, and every generated Verilog top against a SPEC reference (ABC)."""
 
+from .common import CONFIG_HELP
+
 HELP = ("prove the pixel equal to SPEC section 3's rule (yosys-smtbmc k-induction), the streaming "
         "Verilog top's pixel rule equivalent to it (Yosys sat), and every generated Verilog top "
         "(timing block, parallel and streaming tops of a few small arrays, read from the text "
@@ -20,7 +22,7 @@ TOP_OPTIONS = ("sizes", "config_sizes", "top_timeout")
 
 def add_arguments(parser):
     parser.add_argument("--config", metavar="C", action="append", default=[],
-                        help="sensor: te, ml, ml-msb or a JSON file (repeatable; default: all three presets)")
+                        help=f"sensor: {CONFIG_HELP} (repeatable; default: every preset)")
     parser.add_argument("--only", choices=PARTS, default=None,
                         help="prove only the pixel properties or only the generated tops (default: both)")
     parser.add_argument("--corners", action="store_true",
