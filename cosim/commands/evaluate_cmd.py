@@ -11,8 +11,10 @@ built-in held-out set in 15 minutes on 2 cores (:data:`TABLE_DEFAULTS`);
 ``--calibrate`` a calibrated row (``<sensor>+cal``) per method for each of them.
 """
 
-#: --table's methods in the paper's row order.
-TABLE_METHODS = ("tfi", "tfp", "spk2imgnet", "bsf", "mambaspike1", "mambaspike", "net")
+from tespike.recon.learned import LEARNED  # (torch-free: the learned methods in the paper's order)
+
+#: --table's methods in the paper's row order: the training-free ones, its learned baselines, the network.
+TABLE_METHODS = ("tfi", "tfp", *LEARNED)
 #: The default run's methods: the training-free ones and the paper's network, so the default
 #: evaluation takes minutes on 2 cores (each learned baseline adds about 40 CPU seconds per
 #: sequence and sensor at 24 x 96 x 128: --methods or --table name them).
