@@ -64,7 +64,7 @@ from tespike.golden.reference import step_reference
 
 from .compare import first_difference
 from .outside import RESET_CLOCKS, pack_rows, words_per_row
-from .tops import Run, Top, prepare
+from .tops import RunPlan, Top, prepare
 
 #: Pixel clock period in simulator steps (its time precision, whatever the Verilog's timescale):
 #: low for 2 steps (inputs change at the falling edge, sampled 1 step later), high for 2.
@@ -180,7 +180,7 @@ def _as_int(value, what: str) -> int:
     return int(value)
 
 
-async def _drive(dut, top: Top, run: Run) -> tuple[list, list, np.ndarray]:
+async def _drive(dut, top: Top, run: RunPlan) -> tuple[list, list, np.ndarray]:
     """Reset, then per clock ``rst``/``charge`` at the falling edge and the outputs sampled a step later.
 
     Either top: the valid flag, ``out_first`` (streaming top only) and the word port of

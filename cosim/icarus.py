@@ -29,7 +29,7 @@ from tespike.golden.io import atomic_output
 
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, first_error_line, hex_to_rows,
                       pack_rows, require_tool, rows_to_hex, run_process)
-from .tops import Run, prepare
+from .tops import RunPlan, prepare
 
 TESTBENCH_TOP = "tespike_tb"
 _STIMULUS = "stimulus.hex"
@@ -147,7 +147,7 @@ def _parse_captures(path: Path, what: str, word_port: str = "frame") -> tuple[np
     return np.asarray(clocks, np.int64), frames
 
 
-def _simulate(run: Run, verilog: str, what: str, work_dir, vcd_path=None) -> tuple[np.ndarray, list[str]]:
+def _simulate(run: RunPlan, verilog: str, what: str, work_dir, vcd_path=None) -> tuple[np.ndarray, list[str]]:
     """Compile ``verilog`` with the top's testbench, run it on the stimulus (and ``rst`` = the
     reset vector, :mod:`tespike.cosim.resets`); return the parsed captures. ``vcd_path``: the
     run's VCD of every signal is moved there."""
@@ -187,7 +187,7 @@ def _simulate(run: Run, verilog: str, what: str, work_dir, vcd_path=None) -> tup
         return captures
 
 
-def _run(run: Run, verilog: str | None, work_dir, vcd_path=None):
+def _run(run: RunPlan, verilog: str | None, work_dir, vcd_path=None):
     """Simulate ``run`` in Icarus (either top); its words, beats, or each segment's."""
     top = run.top
     if run.idle:

@@ -39,7 +39,7 @@ from tespike.golden.beats import check_lanes
 from .benchbus import ARRAY_SCOPE, CLOCK_PERIOD_S, frame_rows, iter_packed_charge, unpack_frames
 from .outside import RESET_CLOCKS
 from .stream_ports import check_beats
-from .tops import Run, prepare
+from .tops import RunPlan, prepare
 from .vcd import dump_path, write_gtkw
 
 
@@ -233,7 +233,7 @@ def rtl_stream_run(config: SensorConfig, stimulus: np.ndarray, lanes: int, *, fl
     return check_beats(clocks, firsts, rows, config, H, W, lanes, run.readouts, what)
 
 
-def _simulate(bench, charge, ports, run: Run, record, *, limit: int, reset_charge: int = 0,
+def _simulate(bench, charge, ports, run: RunPlan, record, *, limit: int, reset_charge: int = 0,
               progress: bool | None = False, waveform=None) -> tuple[int, float]:
     """The one testbench of both tops: reset, then per pixel clock one ``charge`` (and ``rst``).
 

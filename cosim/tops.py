@@ -114,7 +114,7 @@ class Top:
             return np.zeros((0, self.beats, self.lanes), np.int64)
         return np.zeros((0, self.height, self.width), np.int64)
 
-    def result(self, run: "Run", clocks, firsts, rows, what: str):
+    def result(self, run: "RunPlan", clocks, firsts, rows, what: str):
         """Captures -> words ``(K, H, W)`` / beats ``(K, B, N)``, held to SPEC section 6; with resets,
         each segment's words ``(n, H, W)`` / beats ``(n, N)`` (:mod:`tespike.cosim.resets`)."""
         H, W, T = self.height, self.width, run.stimulus.shape[0]
@@ -132,8 +132,9 @@ class Top:
 
 
 @dataclasses.dataclass(frozen=True)
-class Run:
-    """A checked run: its top, stimulus, reset vector (or None) and readouts after the last reset."""
+class RunPlan:
+    """A run's checked plan, made before anything runs: its top, stimulus, reset vector (or None)
+    and readouts after the last reset."""
 
     top: Top
     stimulus: np.ndarray
@@ -151,7 +152,7 @@ class Run:
         return self.readouts == 0 and self.resets is None
 
 
-def prepare(config: SensorConfig, stimulus: np.ndarray, lanes: int | None = None, resets=None) -> Run:
+def prepare(config: SensorConfig, stimulus: np.ndarray, lanes: int | None = None, resets=None) -> RunPlan:
     """The run prologue every harness shares: check the stimulus, the lane count and the resets."""
     check_stimulus(stimulus, config)
     T, H, W = stimulus.shape
@@ -160,4 +161,4 @@ def prepare(config: SensorConfig, stimulus: np.ndarray, lanes: int | None = None
     resets = check_resets(resets, T)
     L = config.clocks_per_readout
     readouts = T // L if resets is None else segments(resets)[-1].readouts(T, L)
-    return Run(Top(config, H, W, lanes), stimulus, resets, readouts)
+    return RunPlan(Top(config, H, W, lanes), stimulus, resets, readouts)

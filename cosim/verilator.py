@@ -40,7 +40,7 @@ from tespike.golden.io import atomic_output
 from . import children
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, cache_entry, content_hash,
                       default_cache_root, first_error_line, pack_rows, require_tool, words_per_row)
-from .tops import Run, Top, prepare
+from .tops import RunPlan, Top, prepare
 
 #: Verilator options of every build. ``-O3``: Verilator's own optimisation;
 #: ``--x-assign/--x-initial fast``: X is irrelevant after the synchronous reset.
@@ -526,7 +526,7 @@ def run_verilator_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int,
     return _run(prepare(config, stimulus, lanes, resets), verilog, cxx_opt, build_streaming, progress)
 
 
-def _run(run: Run, verilog: str | None, cxx_opt: str, build_model, progress: bool):
+def _run(run: RunPlan, verilog: str | None, cxx_opt: str, build_model, progress: bool):
     """Build ``verilog`` (default: the top's generated text) with ``build_model(text, top)`` and
     run it on ``run``, either top; its words, beats, or each segment's (nothing is built for an
     idle run)."""
