@@ -130,18 +130,15 @@ def check_options(out, *, frames, height, width, seed, crop, rtl_readouts, backe
                   sensors) -> tuple[int, int]:
     """Refuse a bad option in one line; return (crop, RTL readouts) with their defaults resolved."""
     from tespike.cosim.backends import NAMES
-    from tespike.recon.scenes import MAX_VOXELS
+    from tespike.recon.scenes import check_scene_request
 
-    for key, value, low in (("--frames", frames, 1), ("--height", height, 1), ("--width", width, 1),
-                            ("--crop", crop, 1), ("--rtl-readouts", rtl_readouts, 1),
+    check_scene_request(DEMO_SCENE, frames, height, width, flags=True)
+    for key, value, low in (("--crop", crop, 1), ("--rtl-readouts", rtl_readouts, 1),
                             ("--repeats", repeats, 1), ("--seed", seed, 0)):
         if value is not None and value < low:
             raise InputError(f"{key} {value}: must be >= {low}")
     if repeats > MAX_REPEATS:
         raise InputError(f"--repeats {repeats}: must be in 1..{MAX_REPEATS}")
-    if frames * height * width > MAX_VOXELS:
-        raise InputError(f"--frames {frames} --height {height} --width {width}: a scene of "
-                         f"{frames * height * width} values, above the limit of {MAX_VOXELS}")
     if crop is None:
         crop = min(DEFAULT_CROP, height, width)
         if crop < MIN_CROP:

@@ -97,18 +97,11 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
 
 def scene_sources(names: Sequence[str], frames: int, height: int, width: int) -> list[Source]:
     """Built-in scenes (public seed 0, peak 1), each named after its scene."""
-    from tespike.recon.scenes import MAX_VOXELS, SCENES
+    from tespike.recon.scenes import check_scene_request
 
     out = []
     for name in names:
-        if name not in SCENES:
-            raise InputError(f"unknown scene {name!r} (known: {', '.join(SCENES)})")
-        for key, value in (("frames", frames), ("height", height), ("width", width)):
-            if value < 1:
-                raise InputError(f"--{key} {value} must be >= 1")
-        if frames * height * width > MAX_VOXELS:
-            raise InputError(f"scene {name!r} of {frames} x {height} x {width} = {frames * height * width} "
-                             f"values exceeds the limit of {MAX_VOXELS}")
+        check_scene_request(name, frames, height, width, flags=True)
         out.append(Source(name, (frames, height, width), f"scene:{name} seed 0",
                           scene=(name, frames, height, width)))
     return out
