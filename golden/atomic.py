@@ -319,6 +319,7 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
     except OSError as exc:
         raise _write_error(shown, exc) from None
     _Janitor.hold(tmp)
+    deferred = False
     try:
         try:
             yield tmp
@@ -328,17 +329,66 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
             else:
                 mode = (info.st_mode & 0o777) if info is not None else (0o666 & ~_umask())
                 os.chmod(tmp, mode)
-                with stops_held():
-                    os.replace(tmp, target)
-                    _finished(target, shown)
+                group = next((g for g in reversed(_together) if target in g[0]), None)
+                if group is not None:              # renamed with the group's other outputs
+                    group[1].append((tmp, target, shown))
+                    deferred = True
+                else:
+                    with stops_held():
+                        os.replace(tmp, target)
+                        _finished(target, shown)
         except OSError as exc:
             if exc.filename not in (None, tmp, str(target)):
                 raise                              # about another file: the caller names it
             raise _write_error(shown, exc) from None
     finally:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        _Janitor.release(tmp)
+        if not deferred:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            _Janitor.release(tmp)
+
+
+#: The open groups of :func:`outputs_together`, innermost last: each (its targets, the finished
+#: temporaries (temporary, target, name shown) waiting for the group's end).
+_together: list[tuple[set, list]] = []
+
+
+@contextlib.contextmanager
+def outputs_together(*paths):
+    """The outputs ``paths`` (None entries ignored) that :func:`atomic_output` finishes inside the
+    block are renamed into place together when the block ends, in one :func:`stops_held` step; a
+    block that fails or is stopped renames none of them (other files, e.g. a tool's work files,
+    are renamed as usual). For a command whose outputs are one run's (``rtl-sim``'s stream,
+    waveform and save file): written one after the other, a stop between them left the new
+    waveform beside the previous run's stream. (A SIGKILL between two renames of the step can
+    still split them.)"""
+    from .paths import check_output_file
+    pending: list = []
+    group = ({check_output_file(path) for path in paths if path is not None}, pending)
+    _together.append(group)
+    try:
+        yield
+    except BaseException:
+        for tmp, _, _ in pending:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            _Janitor.release(tmp)
+        raise
+    finally:
+        _together.remove(group)
+    try:
+        with stops_held():
+            for tmp, target, shown in pending:
+                try:
+                    os.replace(tmp, target)
+                except OSError as exc:
+                    raise _write_error(shown, exc) from None
+                _finished(target, shown)
+    finally:
+        for tmp, _, _ in pending:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            _Janitor.release(tmp)
 
 
 #: Signals that stop a command, held while an output is committed (:func:`stops_held`) or a

@@ -228,3 +228,25 @@ def test_rtl_sim_icarus_backend_end_to_end(tmp_path, rng):
     assert result.returncode == 0, result.stderr
     with np.load(tmp_path / "s.npz") as npz:
         assert np.array_equal(npz["words"], golden_words(config, stim))
+
+
+def test_a_run_stopped_between_its_outputs_leaves_the_previous_set_whole(tmp_path, rng, monkeypatch, capsys):
+    """The VCD and save file were renamed into place when the simulation ended and the stream after:
+    a stop between left the new waveform beside the previous run's stream."""
+    from tespike.cosim.cli import main
+    from tespike.golden import io
+
+    _inputs(tmp_path, rng)
+    args = ["rtl-sim", "--config", str(tmp_path / "c.json"), "--stimulus", str(tmp_path / "e.npy"),
+            "--out", str(tmp_path / "s.npz"), "--vcd", str(tmp_path / "w.vcd"), "-q"]
+    assert main(args) == 0
+    before = {name: (tmp_path / name).read_bytes() for name in ("s.npz", "w.vcd", "w.gtkw")}
+    np.save(tmp_path / "e.npy", np.load(tmp_path / "e.npy")[:12])    # another run: another waveform
+
+    def stopped(*_, **__):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(io, "save_stream", stopped)
+    assert main(args) == 130
+    capsys.readouterr()
+    assert {name: (tmp_path / name).read_bytes() for name in before} == before
+    assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".part")]

@@ -59,18 +59,20 @@ def run(args) -> int:
         raise InputError("--no-progress and --progress on: give one of them")
     progress = False if args.no_progress else progress_wanted(args)
 
-    if args.backend == "amaranth":
-        from tespike.cosim.rtlsim import RTLProtocolError, rtl_words
-        try:
-            words = rtl_words(config, stimulus, vcd_path=args.vcd, gtkw_path=gtkw,
-                              progress=progress)
-        except RTLProtocolError as exc:
-            print(f"tespike rtl-sim: internal error: the RTL broke the output protocol: {exc}",
-                  file=sys.stderr)
-            return 1
-    else:
-        words = backend(args.backend)(config, stimulus)
-    save_stream(args.out, checked_words(words, config, stimulus, args.backend), config)
+    from tespike.golden.atomic import outputs_together
+    with outputs_together(args.out, args.vcd, gtkw):    # the stream, waveform and save file: this run's, or none
+        if args.backend == "amaranth":
+            from tespike.cosim.rtlsim import RTLProtocolError, rtl_words
+            try:
+                words = rtl_words(config, stimulus, vcd_path=args.vcd, gtkw_path=gtkw,
+                                  progress=progress)
+            except RTLProtocolError as exc:
+                print(f"tespike rtl-sim: internal error: the RTL broke the output protocol: {exc}",
+                      file=sys.stderr)
+                return 1
+        else:
+            words = backend(args.backend)(config, stimulus)
+        save_stream(args.out, checked_words(words, config, stimulus, args.backend), config)
     K, H, W = words.shape
     report(args, f"wrote {args.out}: {counted(K, 'readout')} of {H} x {W} {config.mode.upper()} words "
                  f"({args.backend} RTL)" + (f", {args.vcd}" if args.vcd else "") + (f" and {gtkw}" if gtkw else ""))
