@@ -336,3 +336,15 @@ def test_a_cluster_whose_reader_thread_cannot_start_leaves_no_process_and_no_pip
     (process,) = started
     assert process.returncode is not None
     assert process.stdin.closed and process.stdout.closed and process.stderr.closed
+
+
+def test_a_ctrl_c_while_the_cluster_shuts_down_is_not_lost():
+    """A Ctrl-C recorded after the last task (while the local cluster shut down) was dropped with the
+    handler: evaluate --store and dataset then replaced their results and exited 0."""
+    from tespike.cosim.dataset.cluster import Runner
+    runner = Runner(workers=2)              # not entered: no cluster to stop, the handler's record alone
+    runner._interrupts.pending = True
+    with pytest.raises(KeyboardInterrupt):
+        runner.__exit__(None, None, None)
+    runner._interrupts.pending = True       # leaving on an error already: that error is the run's
+    runner.__exit__(ValueError, ValueError("x"), None)

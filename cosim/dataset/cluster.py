@@ -215,6 +215,8 @@ class _Interrupts:
             raise KeyboardInterrupt
 
     def restore(self) -> None:
+        """The handler before :meth:`install` again (a Ctrl-C recorded meanwhile stays pending for
+        :meth:`check`)."""
         import signal
         if self.previous is not None:
             signal.signal(signal.SIGINT, self.previous)
@@ -280,6 +282,8 @@ class Runner:
         finally:
             self.client = self.cluster = None
             self._interrupts.restore()
+        if kind is None:                   # a Ctrl-C while the cluster shut down is the run's, not lost
+            self._interrupts.check()
 
     def _result(self, future):
         """A finished future's result, looking for a Ctrl-C meanwhile: gathering it from a worker that
