@@ -251,8 +251,8 @@ def _run_measured(command: list[str], cwd: Path) -> tuple[int, str, dict]:
     of that one child process, from ``os.wait4``)."""
     start = time.perf_counter()
     proc = children.popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    output = proc.stdout.read()
-    proc.stdout.close()
+    with proc.stdout:                  # (closed when a stop interrupts the read: no ResourceWarning line)
+        output = proc.stdout.read()
     _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
     return proc.returncode, output, {"seconds": time.perf_counter() - start,
