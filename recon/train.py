@@ -463,9 +463,15 @@ class TrainingRun:
     def start_anew(self) -> None:
         """A new run: no file of an earlier one stays in the run folder; ``--init`` copied in."""
         options = self.options
+        removed = []
         for stale in (self.checkpoint, self.log_path, self.validation_path, self.best_path, self.curves_path):
             if stale.exists():
                 stale.unlink()
+                removed.append(stale.name)
+        if {CHECKPOINT, "best.pt"} & set(removed):   # (--force; said at once: a run stopped before its
+            #                                            checkpoint leaves none of them)
+            print(f"train: a new run in {str(self.work)!r}: removed the earlier run's {', '.join(removed)}",
+                  file=sys.stderr)
         if options.init is not None:
             copied, trained_for = warm_start(self.model, options.init, options.method)
             self.init = {"tensors_copied": len(copied), "tensors": len(self.model.state_dict()),

@@ -253,7 +253,9 @@ def test_a_new_run_over_an_earlier_runs_folder_is_refused_unless_forced(tmp_path
     assert {name: (run / name).read_bytes() for name in before} == before          # untouched
     assert main([*args, "--steps", "3", "--resume", "--force"]) == 2
     (run / "best.pt").write_bytes(b"an earlier run's")       # every earlier file goes with --force
+    capsys.readouterr()
     assert main([*args, "--steps", "1", "--seed", "7", "--force"]) == 0
+    assert "removed the earlier run's checkpoint.pt, log.csv, best.pt, curves.png" in capsys.readouterr().err
     assert not (run / "best.pt").exists()
     assert log_steps(run / "log.csv") == [1] and load_weights(tmp_path / "w.pt")[2]["steps"] == 1
 
