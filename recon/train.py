@@ -468,8 +468,8 @@ class TrainingRun:
             if stale.exists():
                 stale.unlink()
                 removed.append(stale.name)
-        if {CHECKPOINT, "best.pt"} & set(removed):   # (--force; said at once: a run stopped before its
-            #                                            checkpoint leaves none of them)
+        # --force over an earlier run: said at once (a run stopped before its checkpoint leaves none of them)
+        if {CHECKPOINT, "best.pt"} & set(removed):
             print(f"train: a new run in {str(self.work)!r}: removed the earlier run's {', '.join(removed)}",
                   file=sys.stderr)
         if options.init is not None:
