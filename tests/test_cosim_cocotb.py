@@ -197,3 +197,25 @@ def test_a_top_without_specs_ports_is_refused_before_the_run(tmp_path, edit):
                          "--readouts", 2, "--verilog", tmp_path / "mine.v",
                          env={"TESPIKE_CACHE": str(tmp_path / "cache")})
     assert_refused(result, str(tmp_path / "mine.v"), *words)
+
+
+def test_the_work_folder_is_one_runs_whole(tmp_path):
+    """--work-dir mixed runs: the commands file was appended to, another simulator's files of an
+    earlier run stayed, and a stopped run left its partial log under the final name. The folder is
+    now replaced whole when the run ends; one holding files no run writes is refused."""
+    work = tmp_path / "cw"
+    work.mkdir()
+    (work / "verilator.log").write_text("an earlier run's\n")
+    (work / "icarus-commands.txt").write_text("an earlier run's\n")
+    env = {"TESPIKE_CACHE": str(tmp_path / "cache")}
+    result = run_tespike("cocotb", "--config", "te", "--height", 2, "--width", 2, "--readouts", 2,
+                         "--simulator", "icarus", "--work-dir", work, env=env)
+    assert result.returncode == 0, result.stderr
+    assert f"(log: {work / 'icarus.log'})" in result.stdout
+    assert sorted(p.name for p in work.iterdir()) == ["icarus-commands.txt", "icarus-results.xml", "icarus.log"]
+    assert "an earlier run's" not in (work / "icarus-commands.txt").read_text()
+    (work / "notes.txt").write_text("mine")
+    result = run_tespike("cocotb", "--config", "te", "--height", 2, "--width", 2, "--simulator", "icarus",
+                         "--work-dir", work, env=env)
+    assert_refused(result, "--work-dir", "'notes.txt'", "no cocotb run writes")
+    assert (work / "notes.txt").read_text() == "mine"

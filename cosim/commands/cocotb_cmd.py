@@ -30,11 +30,17 @@ def add_arguments(parser):
     parser.add_argument("--resets", help="also reset mid-run: 'sweep' (rst at every phase of an interval "
                                          "and of its beats, charge flowing throughout) or R.npy (one 0/1 per "
                                          "stimulus clock); each segment is checked from zero state")
-    parser.add_argument("--work-dir", help="keep each simulator's log and results here")
+    parser.add_argument("--work-dir", help="keep each simulator's log and results here (new, empty, or an "
+                                           "earlier run's, which the run replaces whole when it ends)")
 
 
 def run(args) -> int:
+    import contextlib
+    import dataclasses
+    from pathlib import Path
+
     from tespike.cosim.console import report
+    from tespike.golden.atomic import atomic_folder
     from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
 
@@ -51,8 +57,7 @@ def run(args) -> int:
     config = load_config(args.config)
     check_array_arguments(config, args.height, args.width, args.lanes)   # the tops tespike verilog writes
     if args.work_dir is not None:         # (a file there was "File exists", naming no option)
-        from tespike.golden.paths import check_output_dir
-        check_output_dir(args.work_dir, "--work-dir")
+        check_work_dir(args.work_dir)
     for flag, value in (("--readouts", args.readouts), ("--seed", args.seed)):
         if value is not None and args.stimulus is not None:
             raise InputError(f"{flag} shapes the default stimulus; --stimulus gives its own (it would be ignored)")
@@ -72,14 +77,46 @@ def run(args) -> int:
                      memory=8 * clocks * args.height * args.width)
     settings = Settings(config, args.height, args.width, readouts, seed, args.stimulus, args.lanes,
                         args.resets)
+    results = []
+    with contextlib.ExitStack() as stack:
+        # --work-dir is one run's logs and results, whole (a stop leaves the previous run's untouched)
+        folder = None if args.work_dir is None else stack.enter_context(atomic_folder(args.work_dir))
+        for simulator in args.simulator:
+            result = run_cocotb(settings, simulator, verilog_path=args.verilog, work_dir=folder)
+            if folder is not None:              # named where it will be once the folder is in place
+                result = dataclasses.replace(result, log=Path(args.work_dir) / Path(result.log).name)
+            results.append(result)
     failed = 0
-    for simulator in args.simulator:
-        result = run_cocotb(settings, simulator, verilog_path=args.verilog, work_dir=args.work_dir)
+    for result in results:
         verdict = "pass" if result.passed else "FAIL"
-        line = f"tespike cocotb: {simulator}: {verdict}: {result.message} (log: {result.log})"
+        line = f"tespike cocotb: {result.simulator}: {verdict}: {result.message} (log: {result.log})"
         if result.passed:
             report(args, line)
         else:
             print(line, flush=True)                 # a failure is printed, --quiet or not
         failed += not result.passed
     return 1 if failed else 0
+
+
+#: The files a cocotb run writes into ``--work-dir`` (per simulator): what the folder may hold
+#: when a run replaces it whole.
+WORK_FILES = ("*.log", "*-results.xml", "*-commands.txt")
+
+
+def check_work_dir(path) -> None:
+    """``--work-dir``: new, empty, or an earlier run's (replaced whole when the run ends); never a
+    folder holding anything else, which replacing it would delete."""
+    import fnmatch
+    import os
+
+    from tespike.golden.atomic import folder_holds_files
+    from tespike.golden.errors import InputError
+    from tespike.golden.paths import check_output_dir
+    check_output_dir(path, "--work-dir")
+    if not folder_holds_files(path):
+        return
+    foreign = [name for name in sorted(os.listdir(path))
+               if not any(fnmatch.fnmatchcase(name, pattern) for pattern in WORK_FILES)]
+    if foreign:
+        raise InputError(f"--work-dir {str(path)!r} holds {foreign[0]!r}, which no cocotb run writes: choose a "
+                         "new or empty folder (a run replaces its work folder whole)")
