@@ -362,21 +362,14 @@ def outputs_together(*paths):
     waveform and save file): written one after the other, a stop between them left the new
     waveform beside the previous run's stream. (A SIGKILL between two renames of the step can
     still split them.)"""
-    from .paths import check_output_file
     pending: list = []
     group = ({check_output_file(path) for path in paths if path is not None}, pending)
     _together.append(group)
     try:
-        yield
-    except BaseException:
-        for tmp, _, _ in pending:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            _Janitor.release(tmp)
-        raise
-    finally:
-        _together.remove(group)
-    try:
+        try:
+            yield
+        finally:
+            _together.remove(group)
         with stops_held():
             for tmp, target, shown in pending:
                 try:
@@ -384,7 +377,7 @@ def outputs_together(*paths):
                 except OSError as exc:
                     raise _write_error(shown, exc) from None
                 _finished(target, shown)
-    finally:
+    finally:                                   # (a renamed temporary is gone: its unlink does nothing)
         for tmp, _, _ in pending:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)

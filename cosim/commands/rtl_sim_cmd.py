@@ -55,7 +55,6 @@ def run(args) -> int:
     outputs = {args.out: size} | ({args.vcd: VCD_BYTES_PER_PIXEL_CLOCK * T * H * W} if args.vcd else {})
     require_room(f"the RTL run of {T} clocks of {H} x {W} pixels", memory=size, disk=outputs)
     if args.no_progress and args.progress == "on":      # (one of the two would be dropped without a word)
-        from tespike.golden.errors import InputError
         raise InputError("--no-progress and --progress on: give one of them")
     progress = False if args.no_progress else progress_wanted(args)
 
