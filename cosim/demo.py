@@ -168,28 +168,21 @@ def check_demo_folder(out) -> None:
     done (:func:`tespike.golden.atomic.atomic_folder`: killed or failing, the previous demo stays
     untouched); never a folder holding anything else, which replacing it would delete: a file no demo
     writes, at the top or among the strips (an evaluation's strips are named after its sequences)."""
-    import fnmatch
     import os
 
-    from tespike.golden.atomic import folder_holds_files
-    from tespike.golden.paths import check_output_dir
+    from tespike.golden.paths import check_output_dir, foreign_names
     from tespike.recon.report import OUTPUT_FILES as EVALUATION_FILES
     check_output_dir(out, "--out")
-    if not folder_holds_files(out):
-        return
-    names = OUTPUT_FILES + EVALUATION_FILES + PER_SENSOR_FILES
-    foreign = [name for name in sorted(os.listdir(out))
-               if not any(fnmatch.fnmatchcase(name, pattern.rstrip("/")) for pattern in names)]
+    foreign = foreign_names(out, OUTPUT_FILES + EVALUATION_FILES + PER_SENSOR_FILES)
     if foreign:
         raise InputError(f"--out {str(out)!r} holds {foreign[0]!r}, which no demo writes: choose a new or "
                          "empty folder (a demo replaces its folder whole)")
-    strips = os.path.join(out, "strips")
-    if os.path.isdir(strips):                    # an evaluation's strips are named after its sequences
-        foreign = sorted(set(os.listdir(strips)) - {f"{DEMO_SCENE}.png"})
-        if foreign:
-            raise InputError(f"--out {str(out)!r} holds 'strips/{foreign[0]}', which no demo writes (an "
-                             "evaluation's results?): choose a new or empty folder (a demo replaces its "
-                             "folder whole)")
+    # an evaluation's strips are named after its sequences; the demo's after its scene
+    foreign = foreign_names(os.path.join(out, "strips"), (f"{DEMO_SCENE}.png",))
+    if foreign:
+        raise InputError(f"--out {str(out)!r} holds 'strips/{foreign[0]}', which no demo writes (an "
+                         "evaluation's results?): choose a new or empty folder (a demo replaces its "
+                         "folder whole)")
 
 
 def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, crop, rtl_readouts,

@@ -233,6 +233,19 @@ def check_output_dir(path: str | os.PathLike, what: str = "--out",
     return folder
 
 
+def foreign_names(path: str | os.PathLike, patterns) -> list[str]:
+    """The names in folder ``path`` that match none of ``patterns`` (``fnmatch``, a trailing ``/``
+    ignored), sorted; none where the folder is absent or empty. What a command that replaces its
+    folder whole would delete besides an earlier run's files (the demo, ``cocotb --work-dir``)."""
+    import fnmatch
+    try:
+        present = sorted(os.listdir(path))
+    except (FileNotFoundError, NotADirectoryError):
+        return []
+    return [name for name in present
+            if not any(fnmatch.fnmatchcase(name, pattern.rstrip("/")) for pattern in patterns)]
+
+
 def check_results_dir(path: str | os.PathLike, names: tuple[str, ...], force: bool,
                       what: str = "--out") -> Path:
     """A folder a command fills whole (:func:`tespike.golden.atomic.atomic_folder`): new or empty;

@@ -106,17 +106,10 @@ WORK_FILES = ("*.log", "*-results.xml", "*-commands.txt")
 def check_work_dir(path) -> None:
     """``--work-dir``: new, empty, or an earlier run's (replaced whole when the run ends); never a
     folder holding anything else, which replacing it would delete."""
-    import fnmatch
-    import os
-
-    from tespike.golden.atomic import folder_holds_files
     from tespike.golden.errors import InputError
-    from tespike.golden.paths import check_output_dir
+    from tespike.golden.paths import check_output_dir, foreign_names
     check_output_dir(path, "--work-dir")
-    if not folder_holds_files(path):
-        return
-    foreign = [name for name in sorted(os.listdir(path))
-               if not any(fnmatch.fnmatchcase(name, pattern) for pattern in WORK_FILES)]
+    foreign = foreign_names(path, WORK_FILES)
     if foreign:
         raise InputError(f"--work-dir {str(path)!r} holds {foreign[0]!r}, which no cocotb run writes: choose a "
                          "new or empty folder (a run replaces its work folder whole)")
