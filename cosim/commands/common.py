@@ -109,6 +109,19 @@ def light_front_end(args):
     return sensor_argument(args)
 
 
+def config_name(spec: str, taken) -> str:
+    """A ``--config`` value's sensor name: the preset, or the JSON file's stem; refused where ``taken``
+    holds it already (``prove``, ``dataset``: a second sensor of one name replaced the first)."""
+    from pathlib import Path
+
+    from tespike.golden.errors import InputError
+    name = spec if spec in PRESETS else Path(spec).stem
+    if name in taken:
+        raise InputError(f"--config {spec!r}: a sensor named {name!r} is already given (names are the "
+                         "presets and the files' stems: rename the file)")
+    return name
+
+
 def sensor_argument(args):
     """The :class:`tespike.golden.noise.Sensor` of ``--noise`` / ``--sensor-seed`` (None without
     ``--noise``), refused in one line where it clashes with ``--dark-current`` or ``--no-noise``."""

@@ -1,6 +1,6 @@
 """``tespike dataset``: HDR frame folders and built-in scenes -> a dataset store of light and streams."""
 
-from .common import CONFIG_HELP
+from .common import CONFIG_HELP, config_name
 
 HELP = ("simulate every sequence of a folder of HDR frame folders (and/or built-in scenes) with "
         "every sensor configuration into a Zarr dataset store, locally or on a Dask cluster")
@@ -39,18 +39,14 @@ def add_arguments(parser):
 
 def sensor_configs(specs):
     """``--config`` values -> {stream name: SensorConfig}, names unique, configurations distinct."""
-    from pathlib import Path
-
-    from tespike.golden.config import PRESETS, load_config
+    from tespike.golden.config import load_config
     from tespike.golden.errors import InputError
     from tespike.recon.dataset.store import check_name
 
     configs = {}
     for spec in specs:
-        name = spec if spec in PRESETS else Path(spec).stem
+        name = config_name(spec, configs)
         check_name(name, f"sensor configuration {spec!r}:")
-        if name in configs:
-            raise InputError(f"--config {spec!r}: a sensor named {name!r} is already given")
         config = load_config(spec)
         same = [other for other, c in configs.items() if c == config]
         if same:

@@ -50,18 +50,14 @@ def add_arguments(parser):
 
 def targets(specs, with_corners: bool):
     """``--config`` values (and their corners) -> {name: SensorConfig}, in order."""
-    from pathlib import Path
-
     from tespike.cosim.formal import corners
     from tespike.golden.config import PRESETS, load_config
-    from tespike.golden.errors import InputError
+
+    from .common import config_name
 
     configs = {}
     for spec in specs or list(PRESETS):
-        name = spec if spec in PRESETS else Path(spec).stem
-        if name in configs:             # (one would replace the other: a sensor left unproved, exit 0)
-            raise InputError(f"--config {spec!r}: a sensor named {name!r} is already given (names are the "
-                             "presets and the files' stems: rename the file)")
+        name = config_name(spec, configs)
         config = load_config(spec)
         configs[name] = config
         if with_corners:
