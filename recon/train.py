@@ -469,7 +469,7 @@ class TrainingRun:
                 stale.unlink()
                 removed.append(stale.name)
         # --force over an earlier run: said at once (a run stopped before its checkpoint leaves none of them)
-        if {CHECKPOINT, "best.pt"} & set(removed):
+        if {self.checkpoint.name, self.best_path.name} & set(removed):
             print(f"train: a new run in {str(self.work)!r}: removed the earlier run's {', '.join(removed)}",
                   file=sys.stderr)
         if options.init is not None:

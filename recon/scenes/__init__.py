@@ -56,22 +56,21 @@ SCENES: dict[str, tuple[Callable, str]] = {
 }
 
 
-def check_scene_request(name: str | None, frames, height, width, flags: bool = False) -> None:
-    """Refuse a built-in scene's request in one line: an unknown ``name`` (None: the caller's own
-    scene), a size that is not an integer >= 1, or more than :data:`MAX_VOXELS` values.
-    ``flags``: name the sizes as the command line's ``--frames``, ``--height``, ``--width``."""
-    if name is not None and name not in SCENES:
+def check_scene_request(name: str, frames, height, width, flags: bool = False) -> None:
+    """Refuse a built-in scene's request in one line: an unknown ``name``, a size that is not an
+    integer >= 1, or more than :data:`MAX_VOXELS` values. ``flags``: name the sizes as the command
+    line's ``--frames``, ``--height``, ``--width``."""
+    if name not in SCENES:
         raise InputError(f"unknown scene {name!r} (known: {', '.join(SCENES)})")
     for key, value in (("frames", frames), ("height", height), ("width", width)):
         if type(value) is not int or value < 1:
             raise InputError(f"--{key} {value!r} must be an integer >= 1" if flags
                              else f"scene {key} = {value!r} must be an integer >= 1")
     if frames * height * width > MAX_VOXELS:
-        scene = f"scene{'' if name is None else f' {name!r}'}"
-        raise InputError(f"--frames {frames} --height {height} --width {width}: a {scene} of "
+        raise InputError(f"--frames {frames} --height {height} --width {width}: a scene {name!r} of "
                          f"{frames * height * width} values exceeds the limit of {MAX_VOXELS}" if flags
-                         else f"{scene} of {frames} x {height} x {width} = {frames * height * width} values "
-                              f"exceeds the limit of {MAX_VOXELS}")
+                         else f"scene {name!r} of {frames} x {height} x {width} = {frames * height * width} "
+                              f"values exceeds the limit of {MAX_VOXELS}")
 
 
 def make_scene(name: str, frames: int = 24, height: int = 96, width: int = 128, *, seed: int = 0,
