@@ -753,12 +753,13 @@ def test_sure_te_overflow_on_the_event_path_matches_per_clock(config):
     assert (word >> config.d) == 1 and 0 <= one.acc[0] < theta
 
 
-def test_sure_te_overflow_puts_the_overflow_electron_first():
+def test_sure_te_overflow_puts_the_overflow_electron_first(monkeypatch):
     """The arithmetic of the sure-overflow draw on given random numbers: the overflow
     electron (``2^b1 theta - acc`` after the sync) at light-time G is in clock
     ``floor(L G / expected)``, and the charge left is that of ``2^b1 theta`` plus the
     electrons drawn after it."""
     from tespike.golden.fastsim import interval
+    monkeypatch.setattr(interval, "poisson_draws", lambda rng, mean: rng.poisson(mean))
 
     class Given:                                   # a generator that returns chosen numbers
         def __init__(self):

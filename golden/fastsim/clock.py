@@ -16,6 +16,7 @@ import numpy as np
 
 from ..light import deterministic_clock_electrons
 from ..poisson import PoissonSampler
+from ..poisson_rejection import poisson_draws
 from ..reference import PixelState, overflow_word
 from ..sensor import PixelArrayModel
 from .distinct import distinct
@@ -99,9 +100,12 @@ def clock_draws(sim, lam, clocks):
     sampler per draw; same law to float64 precision, tables cut where the
     tail is below the per-clock budget); ``method="per-clock"``, the
     reference the shortcuts are tested against, and ``clock_stimulus``
-    keep numpy's ``Generator.poisson``, as do the calls :func:`tabled_call` declines."""
-    if sim.method == "per-clock" or not tabled_call(lam, clocks):
+    keep numpy's ``Generator.poisson``; the calls :func:`tabled_call` declines go to
+    :func:`tespike.golden.poisson_rejection.poisson_draws` (numpy's method as array passes)."""
+    if sim.method == "per-clock":
         return sim.rng.poisson(lam[None, :], size=(clocks, lam.size))
+    if not tabled_call(lam, clocks):
+        return poisson_draws(sim.rng, np.broadcast_to(lam[None, :], (clocks, lam.size)))
     if sim.sampler is None:
         sim.sampler = PoissonSampler(sim.budget)
     return sim.sampler.draw(sim.rng, lam, clocks=clocks)

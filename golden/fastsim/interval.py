@@ -29,6 +29,7 @@ import numpy as np
 
 from ..config import SensorConfig
 from ..light import log_poisson_tail_above, log_poisson_tail_below
+from ..poisson_rejection import poisson_draws
 from .clock import clock_path
 from .bisection import largest_below, smallest_below
 from .codes import BRIGHT, CLOCK, EVENT
@@ -137,7 +138,7 @@ def event_path(sim, sel, expected, dark, words):
         if isinstance(sel, slice):
             mean = mean.copy()                          # (a view of expected)
         mean[sure] = sure_mean - light_time            # the electrons after it
-    total = sim.rng.poisson(mean)
+    total = poisson_draws(sim.rng, mean)               # (vectorised PTRS: golden.poisson_rejection)
     if sim.dark_model:
         total += gather(dark, sel)
     if sure.size:

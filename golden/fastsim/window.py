@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import SensorConfig
+from ..poisson_rejection import poisson_draws
 from .clock import clock_draws, clock_path, fallback, tabled_call
 from .codes import FULL, QUEUE
 from .distinct import distinct, distinct_counts
@@ -166,7 +167,8 @@ def window_draw(sim, sel, w, lam, clocks=None, own=None):
 def window_draws(sim, lam, w, own=None):
     """Per-clock electrons of windows of ``own[j]`` clocks (default all ``w``) in one
     ``(w, n)`` block: column j's last ``own[j]`` rows iid Poisson(lam[j]), its padding rows
-    0. numpy's sampler gets a mean of 0 there (a 0 without a draw, about 7 ns an entry);
+    0. :func:`tespike.golden.poisson_rejection.poisson_draws` gets a mean of 0 there (a 0 without
+    a draw);
     the table sampler, where :func:`tabled_call` takes the call, draws the block whole and
     the padding is zeroed (draws thrown away are independent of those kept)."""
     if own is None or own.min() >= w:
@@ -176,7 +178,7 @@ def window_draws(sim, lam, w, own=None):
         window = clock_draws(sim, lam, w)
         window *= rows
         return window
-    return sim.rng.poisson(np.where(rows, lam[None, :], 0.0))
+    return poisson_draws(sim.rng, np.where(rows, lam[None, :], 0.0))
 
 
 def queue_path(sim, sel, w, b_max, lam, words, own=None):
