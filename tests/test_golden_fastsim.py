@@ -1074,3 +1074,46 @@ def test_queue_overflow_tick_matches_per_clock_near_tick_ends(config, per_clock,
         se = np.sqrt(ta.var() / ta.size + tb.var() / tb.size)
         tvd = 0.5 * np.abs(_histogram(wa, config) - _histogram(wb, config)).sum()
         assert abs(ta.mean() - tb.mean()) <= 4 * se and tvd < 0.05, (per_clock[i], ta.mean(), tb.mean(), tvd)
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB,
+                                    SensorConfig(b1=1, b2=4, threshold=100, acc_bits=8)], ids=str)
+def test_lazy_pixels_crossing_out_into_brighter_light_match_per_clock(config, monkeypatch):
+    """Lazy pixels whose light steps up past the path's level leave it at their next crossing
+    (:func:`tespike.golden.fastsim.lazy.cross_out`: the crossing's spike, then the event
+    path's arithmetic on the electrons after it, TE overflows at their clock): the words of
+    the step and of the readout after it, and the charge carried, have the per-clock law,
+    for steps to just above the lazy level, to a few thresholds and to overflowing light."""
+    from tespike.golden.fastsim import lazy
+    settled = []
+    cross_out = lazy.cross_out
+
+    def counted(sim, leave, *rest):
+        left, done = cross_out(sim, leave, *rest)
+        settled.append(done.size)
+        return left, done
+
+    monkeypatch.setattr(lazy, "cross_out", counted)
+    theta, L = config.threshold, config.clocks_per_readout
+    pixels = 8000
+    probe = SceneSimulator(config, (1, 1), total_pixel_readouts=4 * 3 * pixels)
+    lazy_mean, event_mean = probe.levels.mean_lazy, probe.levels.mean_event * L
+    steps = np.array([1.3 * lazy_mean, min(6 * theta, 0.9 * event_mean), 0.9 * event_mean]) / 42000
+    scene = np.zeros((4, 3, pixels))
+    scene[:2] = 0.6 * lazy_mean / 42000                           # lazy first
+    scene[2:] = steps[None, :, None]
+    fast = SceneSimulator(config, (3, pixels), rng=81, total_pixel_readouts=scene.size)
+    full = SceneSimulator(config, (3, pixels), rng=82, method="per-clock")
+    for k in range(4):
+        a, b = fast.readout(scene[k]), full.readout(scene[k])
+        if k < 2:
+            continue
+        for g in range(3):
+            tvd = 0.5 * np.abs(_histogram(a[g], config) - _histogram(b[g], config)).sum()
+            da, db = (decode_spikes(w[g], config).astype(float) for w in (a, b))
+            se = np.sqrt(da.var() / pixels + db.var() / pixels)
+            assert tvd < 0.04 and abs(da.mean() - db.mean()) <= 4 * se + 1e-12, (k, g, tvd)
+            ca, cb = (s.acc.reshape(3, pixels)[g].astype(float) for s in (fast, full))
+            se = np.sqrt(ca.var() / pixels + cb.var() / pixels)
+            assert abs(ca.mean() - cb.mean()) <= 4 * se + 1e-12, (k, g, ca.mean(), cb.mean())
+    assert sum(settled) > 2 * pixels                   # most of the lazy pixels crossed out

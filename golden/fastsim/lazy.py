@@ -8,7 +8,9 @@ the electrons are a unit-rate Poisson process, so the crossing ``n = theta - acc
 electrons after a sync comes ``Gamma(n)`` later, then ``Gamma(theta)`` from
 crossing to crossing; an interval only subtracts its mean from what remains.
 The charge between syncs is drawn only when a pixel leaves the path
-(:func:`sync`) or the simulator's ``acc`` is read (:func:`lazy_charge`).
+(:func:`sync`) or the simulator's ``acc`` is read (:func:`lazy_charge`); a pixel
+that leaves for event light at a crossing in the interval needs none
+(:func:`cross_out`: the electrons after the crossing are a fresh Poisson draw).
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ import numpy as np
 from ..config import SensorConfig
 from ..light import log_poisson_tail_above
 from .bisection import largest_below
-from .words import ml_words
+from ..poisson_rejection import poisson_draws
+from .words import NO_PIXELS, ml_words, overflow_clock_word
 
 #: Interval mean, in thresholds, up to which dim light takes the lazy path.
 LAZY_THRESHOLDS = 2.0
@@ -62,7 +65,9 @@ def lazy_path(sim, expected, dark, words):
     electron: a sync, whose next crossing is ``Gamma(theta)`` later (memoryless),
     maybe again within the interval (a further spike). TE overflow needs
     ``(2^b1 - 1) theta`` electrons after a crossing in one interval, surely not at
-    this light (bound). -> the pixels on this path (a flat mask)."""
+    this light (bound). Pixels that leave it are settled by :func:`cross_out` where
+    it can, else synced. -> the pixels this readout settled here (a flat mask: those
+    on the path and those that crossed out)."""
     c = sim.config
     theta = c.threshold
     state = sim.lazy
@@ -70,10 +75,12 @@ def lazy_path(sim, expected, dark, words):
     if sim.dark_model:
         eligible &= dark == 0
     changed = np.flatnonzero(eligible != state.mask)  # (one pass; few pixels change)
+    done = NO_PIXELS
     if changed.size:
         was = state.mask[changed]
         leave = changed[was]
         if leave.size:
+            leave, done = cross_out(sim, leave, expected, dark, words)
             sync(sim, leave)
         enter = changed[~was]
         if enter.size:
@@ -102,7 +109,49 @@ def lazy_path(sim, expected, dark, words):
             words[cross] = spikes
         else:
             ml_words(sim, cross, spikes, words)
+    if done.size:                                      # settled here too, lazy no more
+        eligible = eligible.copy()
+        eligible[done] = True
     return eligible
+
+
+def cross_out(sim, leave, expected, dark, words):
+    """Lazy pixels ``leave`` that leave the path for brighter light, where their next
+    crossing falls in this interval (``remaining <= expected``) and the interval is event
+    light (at most ``mean_event`` a clock, no dark electrons): the crossing at light-time
+    ``remaining`` is a spike and restarts the charge from 0; the electrons after it are
+    ``Poisson(expected - remaining)``, a Poisson process independent of the past, which the
+    event path's arithmetic turns into spikes, the charge left and, TE, the clock of an
+    overflow (the ``(2^b1 - 1) theta``-th of them, an order statistic of uniform
+    light-times after the crossing). No charge is drawn, as :func:`sync` would
+    (a Binomial, about 110 ns a pixel). -> (the pixels left to :func:`sync`, those settled)."""
+    c = sim.config
+    theta, L = c.threshold, c.clocks_per_readout
+    at = sim.lazy.remaining[leave]
+    mean = expected[leave]
+    out = (at <= mean) & (mean <= sim.levels.mean_event * L)
+    if sim.dark_model:
+        out &= dark[leave] == 0
+    if not out.any():
+        return leave, NO_PIXELS
+    settled = leave[out]
+    at, mean = at[out], mean[out]
+    after = poisson_draws(sim.rng, mean - at)           # electrons after the crossing electron
+    fired = after // theta
+    sim.carried[settled] = after - fired * theta
+    spikes = fired + 1
+    if not c.is_te:
+        ml_words(sim, settled, spikes, words)
+        return leave[~out], settled
+    over = np.flatnonzero(spikes >= c.p_max)
+    if over.size:
+        n = (c.p_max - 1) * theta                      # electrons after the crossing to spike 2^b1
+        t = after[over]
+        light_time = at[over] + (mean[over] - at[over]) * sim.rng.beta(n, t - n + 1)
+        clock = np.minimum((light_time / mean[over] * L).astype(np.int64), L - 1)
+        spikes[over] = overflow_clock_word(c, clock)
+    words[settled] = spikes
+    return leave[~out], settled
 
 
 def sync(sim, sel):
