@@ -76,8 +76,14 @@ def as_generator(rng) -> np.random.Generator:
 
 
 def electrons_per_readout(light: np.ndarray) -> np.ndarray:
-    """Light (1.0 = design light) -> expected photo-electrons per readout interval, float64."""
-    return np.minimum(np.asarray(light, np.float64), LIGHT_CAP) * DESIGN_ELECTRONS
+    """Light (1.0 = design light, any float dtype and strides) -> expected photo-electrons per
+    readout interval, a new C-contiguous float64 array of its shape (two passes, each value
+    converted once: a stripe's rows are a strided view of the frame)."""
+    light = np.asarray(light)
+    out = np.empty(light.shape)
+    np.minimum(light, LIGHT_CAP, out=out, dtype=np.float64)
+    out *= DESIGN_ELECTRONS
+    return out
 
 
 def dark_electrons(model: str | None, shape, rng: np.random.Generator, *,

@@ -172,3 +172,18 @@ def test_dark_current_spreads_over_clocks(rng):
 def test_light_cap_is_far_above_any_saturation():
     # a clock's mean at the cap dwarfs the largest input word and the longest L
     assert LIGHT_CAP * DESIGN_ELECTRONS / (1 << 24) > 1e100 * (1 << 32)
+
+
+def test_electrons_per_readout_of_a_strided_float32_view():
+    """A stripe's rows (a strided float32 view) convert as the float64 values would, capped,
+    into a new contiguous array of the view's shape; the input is left alone."""
+    from tespike.golden.light import LIGHT_CAP, electrons_per_readout
+    frame = np.random.default_rng(4).random((8, 6)).astype(np.float32) * 3
+    frame[0, 0] = np.float32(3e38)
+    rows = frame[1::2]
+    kept = frame.copy()
+    got = electrons_per_readout(rows)
+    want = np.minimum(rows.astype(np.float64), LIGHT_CAP) * 42000.0
+    assert got.dtype == np.float64 and got.flags.c_contiguous and np.array_equal(got, want)
+    assert np.array_equal(electrons_per_readout(np.array([1e300, 0.5])), [LIGHT_CAP * 42000.0, 21000.0])
+    assert np.array_equal(frame, kept)

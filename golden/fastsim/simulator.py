@@ -121,7 +121,7 @@ class SceneSimulator:
     def readout(self, light: np.ndarray) -> np.ndarray:
         """Light of one interval (H, W), checked >= 0 and finite -> words (H, W) int64."""
         L = self.config.clocks_per_readout
-        expected = self.pixels.photo(electrons_per_readout(np.asarray(light).reshape(-1)))
+        expected = self.pixels.photo(electrons_per_readout(light).reshape(-1))
         self.readouts += 1
         dark = self.pixels.dark(expected.size, self.rng) if self.dark_model else self.no_dark
         words = np.zeros(expected.shape, np.int64)
@@ -169,7 +169,7 @@ class SceneSimulator:
         if self.noise and self.method != "per-clock":
             raise InputError("clock_stimulus needs method='per-clock' (or noise switched off)")
         L = self.config.clocks_per_readout
-        expected = self.pixels.photo(electrons_per_readout(np.asarray(light).reshape(-1)))
+        expected = self.pixels.photo(electrons_per_readout(light).reshape(-1))
         dark = self.pixels.dark(expected.size, self.rng) if self.dark_model else self.no_dark
         out = np.empty((L, expected.size), stimulus_dtype(self.config))
         for part, e in clock_chunks(self, np.arange(expected.size), expected, dark):
