@@ -177,7 +177,7 @@ def test_light_cap_is_far_above_any_saturation():
 def test_electrons_per_readout_of_a_strided_float32_view():
     """A stripe's rows (a strided float32 view) convert as the float64 values would, capped,
     into a new contiguous array of the view's shape; the input is left alone."""
-    from tespike.golden.light import LIGHT_CAP, electrons_per_readout
+    from tespike.golden.light import electrons_per_readout
     frame = np.random.default_rng(4).random((8, 6)).astype(np.float32) * 3
     frame[0, 0] = np.float32(3e38)
     rows = frame[1::2]
