@@ -51,8 +51,31 @@ class Terminated(BaseException):
         self.signum = signum
 
 
+def strict_int(text: str) -> int:
+    """An ``int`` option's value: decimal digits with an optional sign. Python's ``int`` also
+    reads ``1_0`` (as 10), `` 7 `` and digits of other scripts; a command line takes none of
+    them as a number without a word."""
+    if not (text.isascii() and text.lstrip("+-").isdigit() and len(text) - len(text.lstrip("+-")) <= 1):
+        raise ValueError(text)
+    return int(text)
+
+
+def strict_float(text: str) -> float:
+    """A ``float`` option's value: Python's ``float`` without the digit separators (``1_0.5``) and
+    surrounding spaces it also reads."""
+    if "_" in text or text != text.strip() or not text.isascii():
+        raise ValueError(text)
+    return float(text)
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``tespike CMD: error: argument --x: ... (see tespike CMD --help)``."""
+    """argparse with one-line errors: ``tespike CMD: error: argument --x: ... (see tespike CMD --help)``,
+    and ``type=int`` / ``type=float`` options read strictly (:func:`strict_int`, :func:`strict_float`)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.register("type", int, strict_int)
+        self.register("type", float, strict_float)
 
     def parse_known_args(self, args=None, namespace=None):
         self._tokens = list(sys.argv[1:] if args is None else args)     # (for error's hint)
