@@ -422,3 +422,23 @@ def test_an_illegal_stored_word_is_named_with_its_store_sequence_and_stream(tmp_
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and f"dataset store {str(store)!r}, sequence 'sun', stream 'te': readout " \
         "word 16" in err, err
+
+
+def test_a_resume_refuses_frames_rewritten_since_and_rebuilds_an_unfinished_sequence_from_them(tmp_path, rng):
+    """Frames rewritten in place between two runs (the same names, sizes and shapes) are not
+    mixed into one store: a complete sequence made from the old bytes is refused in one line,
+    an unfinished one is made again from the new frames, bit for bit as a fresh build."""
+    root = hdr_folder(tmp_path / "hdr", rng)
+    build(tmp_path / "d.zarr", hdr_sources(root), tile=(8, 8))
+    frame = root / "beta" / "f002.exr"
+    write_exr(frame, (rng.random((18, 22, 3)) ** 6 * 1e3).astype(np.float32))     # rewritten in place
+    with pytest.raises(InputError, match="'beta' .* frames whose files have changed since") as caught:
+        build(tmp_path / "d.zarr", hdr_sources(root), tile=(8, 8))
+    assert "\n" not in str(caught.value) and not getattr(caught.value, "__notes__", None)   # no "resumes it"
+    group = zarr.open_group(str(tmp_path / "d.zarr"), mode="r+")
+    group["beta"].attrs.update(complete=False)                                     # as an interrupted run leaves it
+    build(tmp_path / "d.zarr", hdr_sources(root), tile=(8, 8))
+    build(tmp_path / "fresh.zarr", hdr_sources(root), tile=(8, 8))
+    assert compare_stores(tmp_path / "fresh.zarr", tmp_path / "d.zarr") == []
+    assert np.array_equal(DatasetStore.open(tmp_path / "d.zarr").light("beta").compute(),
+                          load_hdr_sequence(root / "beta"))

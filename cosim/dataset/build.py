@@ -56,12 +56,28 @@ class Source:
     frames: tuple[str, ...] = ()            # HDR frame files, in order
     weights: str = "rec709"                 # grayscale weights of HDR frames
     scene: tuple[str, int, int, int] | None = None     # built-in: (name, frames, height, width)
+    digest: str = ""                        # HDR frames: :func:`frames_digest` of their files
 
 
 def read_gray(path: str, weights: str) -> np.ndarray:
     """One HDR frame -> float32 grayscale (H, W), as :func:`tespike.recon.scenes.load_hdr_sequence` reads it."""
     from tespike.recon.scenes import read_image, to_gray
     return to_gray(read_image(path), weights, what=f"frame {path!r}").astype(np.float32)
+
+
+def frames_digest(paths: Sequence[Path]) -> str:
+    """A digest of a sequence's frame files, names and bytes in order (BLAKE2b, 128 bits): a
+    resumed store compares it with the one its sequence was made from, so frames rewritten in
+    place between two runs are not mixed into one dataset (names, sizes and shapes can all stay)."""
+    import hashlib
+    digest = hashlib.blake2b(digest_size=16)
+    for path in paths:
+        digest.update(Path(path).name.encode() + b"\0")
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                digest.update(block)
+        digest.update(b"\0")
+    return digest.hexdigest()
 
 
 def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int | None = None) -> list[Source]:
@@ -91,7 +107,8 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
         height, width = sequence_size(paths, f"sequence {sub.name!r}")   # every frame, before the plan
         read_gray(str(paths[0]), weights)                                  # (its channels: one frame decoded)
         sources.append(Source(sub.name, (len(paths), height, width), f"hdr:{sub.name} ({weights})",
-                              frames=tuple(str(p) for p in paths), weights=weights))
+                              frames=tuple(str(p) for p in paths), weights=weights,
+                              digest=frames_digest(paths)))
     return sources
 
 
@@ -204,7 +221,7 @@ def sequence_graph(store: DatasetStore, source: Source):
     number of streams it simulates."""
     from dask import delayed
 
-    done = store.prepare_sequence(source.name, source.shape, source.description)
+    done = store.prepare_sequence(source.name, source.shape, source.description, source.digest)
     if done["sequence"]:
         return None, 0
     url, name = store.url, source.name
@@ -266,7 +283,7 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
         raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     if not configs:
         raise InputError("no sensor configuration: give --config at least once")
-    graphs, skipped, pixel_readouts, done = [], 0, 0, 0
+    graphs, skipped, pixel_readouts, done, checked = [], 0, 0, 0, False
     try:
         store = DatasetStore.create_or_resume(url, seed=seed, configs=configs, tile=tile,
                                               chunk_frames=chunk_frames)
@@ -282,6 +299,7 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
                 notice(f"sequence {source.name!r} was complete, but {damaged[0]}"
                        f"{f' (and {len(damaged) - 1} more)' if len(damaged) > 1 else ''}: rebuilding "
                        "what is damaged")
+        checked = True
         if starting is not None:
             starting()
         for _, name in run(graphs):
@@ -292,7 +310,8 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
         full = isinstance(exc, OSError) and exc.filename is None and exc.errno in NO_ROOM
         if full:                       # Zarr's writes (here or on a worker) name no file
             exc = InputError(f"cannot write dataset store {os.fspath(url)!r}: {exc.strerror}")
-        note_resumable(exc, url, done + skipped)
+        if checked or not isinstance(exc, InputError):   # (a store refused as it stands: no rerun resumes it)
+            note_resumable(exc, url, done + skipped)
         if full:
             raise exc from None
         raise

@@ -202,21 +202,28 @@ class DatasetStore:
     def chunks(self, height: int, width: int) -> tuple[int, int, int]:
         return (self.chunk_frames, min(self.tile[0], height), min(self.tile[1], width))
 
-    def prepare_sequence(self, name: str, shape: tuple[int, int, int], source: str) -> dict[str, bool]:
+    def prepare_sequence(self, name: str, shape: tuple[int, int, int], source: str,
+                         digest: str = "") -> dict[str, bool]:
         """Make (or keep) the group and arrays of one sequence; return which parts are
         already complete: ``{"sequence": ..., "light": ..., <config>: ...}``.
 
-        A complete sequence must match ``shape`` and ``source``; unfinished arrays
-        are made anew (their chunks are rewritten by the next build anyway).
+        A complete sequence must match ``shape``, ``source`` and, for frames read from files,
+        their content ``digest``; an unfinished one that does not is made anew, and so are
+        unfinished arrays (their chunks are rewritten by the next build anyway).
         """
         check_name(name, "sequence")
         K, H, W = (int(n) for n in shape)
-        info = {"source": source, "frames": K, "height": H, "width": W}
+        info = {"source": source, "frames": K, "height": H, "width": W, **({"digest": digest} if digest else {})}
         if name in self.group:
             group = self.group[name]
             old = group.attrs.asdict()
-            mismatch = [k for k, v in info.items() if old.get(k) != v]
+            mismatch = [k for k, v in info.items() if old.get(k) != v
+                        and not (k == "digest" and "digest" not in old)]   # (stores made before digests)
             if mismatch:
+                if old.get("complete") and mismatch == ["digest"]:
+                    raise InputError(f"sequence {name!r} in {self.url!r} was made from frames whose files have "
+                                     "changed since (the same names, other bytes): use a new --out, or remove "
+                                     "the sequence from the store to build it again from these frames")
                 if old.get("complete"):
                     raise InputError(f"sequence {name!r} in {self.url!r} was made with "
                                      f"{mismatch[0]} = {old.get(mismatch[0])!r}, not {info[mismatch[0]]!r}")
