@@ -65,11 +65,13 @@ def check_word_dtype(dtype) -> None:
         raise InputError(f"readout words dtype {dtype} is not an integer type")
 
 
-def check_words(words: np.ndarray, config: SensorConfig) -> np.ndarray:
+def check_words(words: np.ndarray, config: SensorConfig, origin: tuple[int, ...] = ()) -> np.ndarray:
     """Refuse any word outside the configuration's word set (:func:`legal_words`).
 
     Checked in slices of about :data:`CHECK_CHUNK_WORDS` words along the first
-    axis, so the memory it needs is bounded whatever the stream's size.
+    axis, so the memory it needs is bounded whatever the stream's size. ``origin``:
+    where ``words`` starts in the array a refusal should name (a tile of a frame),
+    added to the index it gives.
     """
     words = np.asarray(words)
     check_word_dtype(words.dtype)
@@ -80,9 +82,11 @@ def check_words(words: np.ndarray, config: SensorConfig) -> np.ndarray:
         return words
     row = max(1, words[0].size)
     step = max(1, CHECK_CHUNK_WORDS // row)
+    shift = tuple(origin) + (0,) * (words.ndim - len(origin))
     for start in range(0, words.shape[0], step):
         _check_word_block(words[start:start + step], config,
-                          lambda index, start=start: (index[0] + start,) + index[1:])
+                          lambda index, start=start: tuple(i + o for i, o in zip((index[0] + start,) + index[1:],
+                                                                                 shift)))
     return words
 
 

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.decode import check_word_dtype
+from tespike.golden.decode import check_word_dtype, check_words
 from tespike.golden.errors import InputError
 from tespike.golden.io import images_array
 
@@ -171,6 +171,8 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = DEFAU
         check_word_dtype(words.dtype)
     if len(shape) != 3:
         raise InputError(f"stream words shape {shape} must be (K, H, W)")
+    if not isinstance(words, torch.Tensor):
+        check_words(words, config)          # here, so a refusal's index is (readout, row, column)
     K, H, W = shape
     if calibration is not None:
         from .calibration import check_matches

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.decode import decode_light, decode_spikes, legal_words
+from tespike.golden.decode import check_words, decode_light, decode_spikes, legal_words
 from tespike.golden.sensor import simulate
 from tespike.golden.errors import InputError
 
@@ -20,6 +20,19 @@ def test_te_decode_every_legal_word():
 def test_te_illegal_words_refused(word):
     with pytest.raises(InputError, match="not a legal TE word"):
         decode_spikes(np.array([word]), SensorConfig())
+
+
+def test_a_refusal_names_the_index_in_the_array_a_tile_came_from(monkeypatch):
+    """The index is the word's own (readout, row, column), across the slices the check runs in,
+    and, with ``origin``, where the tile lies in its frame."""
+    import tespike.golden.decode as decode
+    monkeypatch.setattr(decode, "CHECK_CHUNK_WORDS", 20)               # slices of one readout
+    words = np.zeros((4, 3, 5), np.uint8)
+    words[2, 1, 3] = 16
+    with pytest.raises(InputError, match=r"at index \(2, 1, 3\)"):
+        check_words(words, SensorConfig())
+    with pytest.raises(InputError, match=r"at index \(2, 9, 43\)"):
+        check_words(words, SensorConfig(), origin=(0, 8, 40))
 
 
 def test_ml_decode_and_refusal():

@@ -421,7 +421,7 @@ def test_an_illegal_stored_word_is_named_with_its_store_sequence_and_stream(tmp_
                  "-q"]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and f"dataset store {str(store)!r}, sequence 'sun', stream 'te': readout " \
-        "word 16" in err, err
+        "word 16 at index (1, 5, 7)" in err, err                         # (readout, row, column), not flattened
 
 
 def test_a_resume_refuses_frames_rewritten_since_and_rebuilds_an_unfinished_sequence_from_them(tmp_path, rng):
