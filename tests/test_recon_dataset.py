@@ -158,10 +158,20 @@ def test_store_scores_equal_the_serial_evaluation(tmp_path):
     serial = evaluate([("moderate", store.light("moderate").compute())],
                       lambda config, light, rng: streams[config.mode], methods=["tfp", "tfi"],
                       sensors=("te", "ml"), configs=CONFIGS, progress=False)
+    walked = []
+
+    def progress(total):                                 # (--progress: a bar of the finished tasks)
+        def wrap(items):
+            for item in items:
+                walked.append(total)
+                yield item
+        return wrap
+
     with Runner() as run:
-        stored = evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp", "tfi"])
+        stored = evaluate_store(str(tmp_path / "s.zarr"), run, methods=["tfp", "tfi"], progress=progress)
     assert [(r.sequence, r.sensor, r.method, r.psnr_mu, r.ssim_mu) for r in serial.results] == \
            [(r.sequence, r.sensor, r.method, r.psnr_mu, r.ssim_mu) for r in stored.results]
+    assert walked == [4] * 4                             # one sequence x two sensors x two methods
 
 
 def run_here(capsys, *args):

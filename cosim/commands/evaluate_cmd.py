@@ -73,7 +73,7 @@ def _named_methods(args) -> list[str]:
 def _run_store(args) -> int:
     """``--store``: score a dataset store's streams on a Dask cluster
     (:func:`tespike.recon.dataset.evaluate.evaluate_store`); every option it does not take refused first."""
-    from tespike.cosim.console import report
+    from tespike.cosim.console import bar, progress_wanted, report
     from tespike.cosim.dataset.cluster import Runner, check_cluster_options
     from tespike.golden.errors import InputError
     from tespike.golden.paths import check_results_dir
@@ -93,7 +93,9 @@ def _run_store(args) -> int:
     DatasetStore.open(args.store)                       # a missing or foreign store refused before any line
     with Runner(args.workers, args.scheduler) as runner:
         evaluation = evaluate_store(args.store, runner, methods=methods, device=args.device, window=args.window,
-                                    starting=lambda: report(args, f"evaluate: {args.store} on {runner.where}"))
+                                    starting=lambda: report(args, f"evaluate: {args.store} on {runner.where}"),
+                                    progress=(lambda total: bar("evaluate", "task", total))
+                                    if progress_wanted(args) else None)
     return publish_results(args, evaluation, plot=False)
 
 

@@ -149,7 +149,7 @@ def _combine(parts: list[dict], height: int, width: int) -> tuple[np.ndarray, np
 
 def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, window: int | None = None,
                    device: str = "cpu", tile: tuple[int, int] = EVAL_TILE,
-                   options: dict[str, dict] | None = None, starting=None):
+                   options: dict[str, dict] | None = None, starting=None, progress=None):
     """Score every complete sequence x sensor x method of the store -> :class:`tespike.recon.evaluate.Evaluation`.
 
     ``window``: TFP's (None: the default, 9); given, at most 2 K - 1 of the shortest sequence's K.
@@ -157,7 +157,9 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     sensors are the store's configurations, in its order (they are the table's
     column groups); ``options`` as in :func:`tespike.recon.evaluate.evaluate`. ``starting()`` is called
     once every sequence, method and weights file is checked, before any task runs (a refusal comes
-    before the command says what it will do).
+    before the command says what it will do). ``progress``: None, or ``progress(total)`` -> a function
+    that wraps the iterable of finished tasks and reports as it is walked (``tespike evaluate
+    --store`` passes a tqdm bar, :func:`tespike.cosim.console.bar`).
     """
     from tespike.recon.evaluate import learned_span
 
@@ -170,7 +172,7 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     if starting is not None:
         starting()
     outputs: list = [None] * len(tasks)
-    for index, result in run(tasks):
+    for index, result in (iter if progress is None else progress(len(tasks)))(run(tasks)):
         outputs[index] = result
     by_cell: dict[tuple, list] = {}
     for key, result in zip(keys, outputs):
