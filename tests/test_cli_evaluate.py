@@ -153,3 +153,14 @@ def test_evaluate_table_refuses(tmp_path, capsys, empty_weights_dir):   # no wei
     refused(capsys, "evaluate", "--methods", "tfp,bsf", "--set", "default", "--frames", 4, "--height", 24, "--width", 24,
             "--out", out, "bsf-ml-msb.pt' is missing")
     assert not out.exists()
+
+
+def test_table_frames_leave_ten_scored_frames_for_the_learned_methods():
+    """--table's 70 frames are the learned methods' span plus nine: ten frames scored. A change of
+    a network's span (its sizes) fails here rather than shrinking Table 1 without a word."""
+    from tespike.cosim.commands.evaluate_cmd import TABLE_DEFAULTS
+    from tespike.recon.evaluate import learned_span, scored_frames
+    from tespike.recon.learned import LEARNED
+    from tespike.recon.settings import DEFAULT_WINDOW
+    scored = scored_frames(TABLE_DEFAULTS[0], DEFAULT_WINDOW, learned_span(list(LEARNED)))
+    assert scored.stop - scored.start == 10, scored

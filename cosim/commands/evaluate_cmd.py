@@ -22,7 +22,7 @@ DEFAULT_METHODS = ("tfp", "tfi", "net")
 #: Defaults of the built-in sequences' size and of the run-time measurement: (frames, height, width, repeats);
 #: --table's are cut to its time budget (docs/evaluation.md).
 DEFAULTS = (24, 96, 128, 1)
-TABLE_DEFAULTS = (70, 64, 96, 1)      # 70 frames: 10 scored where the learned methods' 61 readouts fit
+TABLE_DEFAULTS = (70, 64, 96, 1)      # 70 frames: 10 scored where the learned methods' 61 readouts fit (tested)
 #: --table's torch threads: on a shared machine two threads spin against the load (a 64 x 96 frame of
 #: the network took 2.6 s with 2 threads against 0.04 s with 1 at load 10 on 2 cores).
 TABLE_THREADS = 1
