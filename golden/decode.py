@@ -11,7 +11,7 @@ import functools
 import numpy as np
 
 from .config import SensorConfig
-from .errors import InputError
+from .errors import IllegalWordError, InputError
 
 
 #: Words checked at once by :func:`check_words` (bounds its int64 temporaries).
@@ -98,7 +98,7 @@ def _check_word_block(words: np.ndarray, config: SensorConfig, where) -> None:
     bad[inside] = ~table[w[inside]]
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise InputError(f"readout word {int(words[index])} at index {where(index)} is not a legal "
+        raise IllegalWordError(f"readout word {int(words[index])} at index {where(index)} is not a legal "
                          f"{config.mode.upper()} word for this configuration ({config}; its words are "
                          f"{_word_ranges(legal_words(config))})")
 

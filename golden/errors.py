@@ -15,6 +15,11 @@ class InputError(TespikeError, ValueError):
     """A stimulus, scene, stream or other input file breaks SPEC section 6."""
 
 
+class IllegalWordError(InputError):
+    """A readout word outside its configuration's word set (SPEC section 5). A caller that decodes
+    a reshaped or cut array catches it to name the word's index in the array it was given."""
+
+
 #: A terminal's escape sequence (colour, bold) in a library's message: never part of a quoted cause.
 _ESCAPE = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")
 

@@ -19,7 +19,7 @@ import torch
 from tespike.golden.config import SensorConfig
 from tespike.golden.decode import check_word_dtype, decode_light as golden_decode_light, legal_words
 from tespike.golden.decode import decode_spikes as golden_decode_spikes
-from tespike.golden.errors import InputError
+from tespike.golden.errors import IllegalWordError, InputError
 
 
 @functools.lru_cache(maxsize=64)
@@ -58,7 +58,7 @@ def as_word_tensor(words, device: str | torch.device = "cpu") -> torch.Tensor:
 
 def _refuse(w: torch.Tensor, bad: torch.Tensor, config: SensorConfig):
     index = tuple(int(i) for i in torch.nonzero(bad)[0])
-    raise InputError(f"readout word {int(w[index])} at index {index} is not a legal "
+    raise IllegalWordError(f"readout word {int(w[index])} at index {index} is not a legal "
                      f"{config.mode.upper()} word for this configuration ({config})")
 
 

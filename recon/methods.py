@@ -25,7 +25,7 @@ import torch
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.decode import check_word_dtype, check_words
-from tespike.golden.errors import InputError
+from tespike.golden.errors import IllegalWordError, InputError
 from tespike.golden.io import images_array
 
 from .decoding import as_word_tensor, decode_light, decode_spikes
@@ -171,8 +171,6 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = DEFAU
         check_word_dtype(words.dtype)
     if len(shape) != 3:
         raise InputError(f"stream words shape {shape} must be (K, H, W)")
-    if not isinstance(words, torch.Tensor):
-        check_words(words, config)          # here, so a refusal's index is (readout, row, column)
     K, H, W = shape
     if calibration is not None:
         from .calibration import check_matches
@@ -180,6 +178,16 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = DEFAU
     out = images_array((K, H, W), out)
     if out.size == 0:
         return out
+    try:
+        return _dispatch(words, config, spec, settings, progress, out, weights, calibration)
+    except IllegalWordError:                # found in a flattened block: name (readout, row, column)
+        check_words(words.detach().cpu().numpy() if isinstance(words, torch.Tensor) else words, config)
+        raise
+
+
+def _dispatch(words, config, spec, settings, progress, out, weights, calibration) -> np.ndarray:
+    """:func:`reconstruct` after its checks: the method's route (learned, corrected at its input or
+    at its output, or raw)."""
     if spec.frames is not None:             # a learned method: corrected at its input
         return spec.frames(words, config, settings, progress, out, weights, calibration)
     if calibration is not None and (spec.corrected_input or (spec.law_input and calibration.dark_law is not None)):

@@ -432,6 +432,10 @@ def test_an_illegal_stored_word_is_named_with_its_store_sequence_and_stream(tmp_
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and f"dataset store {str(store)!r}, sequence 'sun', stream 'te': readout " \
         "word 16 at index (1, 5, 7)" in err, err                         # (readout, row, column), not flattened
+    zarr.open(str(store / "sun/streams/te"), mode="r+")[1, 5, 7] = 0
+    zarr.open(str(store / "sun/streams/te"), mode="r+")[2, 12, 13] = 16
+    with Runner() as run, pytest.raises(InputError, match=r"word 16 at index \(2, 12, 13\)"):
+        evaluate_store(str(store), run, methods=["tfp"], tile=(8, 8))   # a tile's word, named in its frame
 
 
 def test_a_resume_refuses_frames_rewritten_since_and_rebuilds_an_unfinished_sequence_from_them(tmp_path, rng):

@@ -151,3 +151,14 @@ def test_refusals():
     with pytest.raises(InputError, match="readout word 16 at index"):
         reconstruct(words + 16, TE, "tfi")
     assert reconstruct(np.zeros((0, 2, 2), np.uint8), TE, "tfp").shape == (0, 2, 2)
+
+
+@pytest.mark.parametrize("method", ["tfp", "tfi", "net"])
+@pytest.mark.parametrize("as_tensor", [False, True])
+def test_an_illegal_word_is_named_by_readout_row_and_column(method, as_tensor):
+    """The methods decode flattened blocks; the refusal names the word where the caller has it."""
+    words = np.zeros((3, 16, 16), np.uint8)
+    words[1, 5, 7] = 16                                                # no TE word of the preset
+    given = torch.from_numpy(words.astype(np.int64)) if as_tensor else words
+    with pytest.raises(InputError, match=r"readout word 16 at index \(1, 5, 7\)"):
+        reconstruct(given, SensorConfig(), method)

@@ -34,7 +34,7 @@ import numpy as np
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.decode import check_words
-from tespike.golden.errors import InputError
+from tespike.golden.errors import IllegalWordError, InputError
 
 from ..settings import DEFAULT_WINDOW
 from .store import DatasetStore, open_array, reading, tiles
@@ -119,8 +119,11 @@ def score_tile(url: str, sequence: str, sensor: str, method: str, window: int, d
     with _one_thread(), _about(url, sequence, sensor):
         with reading(url, f"{sequence}/streams/{sensor}"):
             words = stream[:, R0:R1, C0:C1]
-        check_words(words, config, origin=(0, R0, C0))   # (the frame's index, not the tile's)
-        images = reconstruct(words, config, method, window=window, device=device, **options)
+        try:
+            images = reconstruct(words, config, method, window=window, device=device, **options)
+        except IllegalWordError:
+            check_words(words, config, origin=(0, R0, C0))   # (the frame's index, not the tile's)
+            raise
         for start in range(frames[0], frames[1], METRIC_FRAMES):
             stop = min(frames[1], start + METRIC_FRAMES)
             pred = torch.as_tensor(images[start:stop], dtype=torch.float64)
