@@ -37,13 +37,21 @@ import numpy as np
 #: Smallest mean of the transformed rejection (Hoermann's method, and numpy's, holds from 10).
 PTRS_MIN = 10.0
 
-#: Draws of a call below which numpy's sampler takes them all: a call's fixed cost (about 40
-#: array operations, 30-50 us) is what numpy spends on 2000-6000 draws (measured crossover 4096 to
-#: 16384 on means 300-3000, ``benchmarks/bench_poisson.py`` case (c)).
+#: PTRS draws (means in [PTRS_MIN, PTRS_MAX]) of a call below which numpy's sampler takes the whole
+#: call: a call's fixed cost (about 40 array operations, 30-55 us) is won back by the 6-8 ns it
+#: saves a draw only past a few thousand draws (measured crossover 4096 to 16384 on means 300-3000,
+#: ``benchmarks/bench_poisson.py`` case (c)). Counted on those means alone, so that zeros (a masked
+#: path's other pixels) never change which sampler draws.
 PTRS_DRAWS = 8192
 
-#: Largest mean drawn here: float64 candidates stay exact integers far inside int64.
+#: Largest mean drawn here (float64 holds its candidates' integers exactly; a candidate past int64,
+#: possible where ``us`` is within about ``a / 2^63`` of 0, is rejected as numpy's conversion
+#: rejects it). Above it numpy's sampler, whose acceptance test rounds as this one does.
 PTRS_MAX = float(1 << 40)
+
+#: Candidates at or past this are rejected: numpy converts a candidate to int64 before its tests,
+#: and one past int64 comes out negative there (x86), so rejected.
+_CANDIDATE_LIMIT = 2.0 ** 63
 
 #: Draws per block of array passes (five float64 arrays of 1 MiB: fewer, larger passes
 #: measured faster here than blocks that stay in a core's cache).
@@ -85,16 +93,21 @@ def log_factorial(k: np.ndarray) -> np.ndarray:
 
 
 def poisson_draws(rng: np.random.Generator, lam: np.ndarray) -> np.ndarray:
-    """Independent Poisson(``lam[j]``) draws (int64, lam's shape) from ``rng``: PTRS for
-    means in [PTRS_MIN, PTRS_MAX], ``rng.poisson`` for the others (a mean of 0 draws
-    nothing) and for calls of fewer than PTRS_DRAWS draws. ``lam``: finite float64, at least 0 (the caller's light is checked)."""
+    """Independent Poisson(``lam[j]``) draws (an int64 array of lam's shape) from ``rng``: PTRS
+    for means in [PTRS_MIN, PTRS_MAX], ``rng.poisson`` for the others (a mean of 0 draws
+    nothing, so the draws of the other means do not depend on zeros among them), and for a call
+    with fewer than PTRS_DRAWS means in that range. A negative or NaN mean is refused as numpy
+    refuses it (``ValueError``)."""
     lam = np.asarray(lam, np.float64)
-    if lam.size < PTRS_DRAWS:
-        return rng.poisson(lam)
     flat = lam.reshape(-1)
-    out = np.zeros(flat.shape, np.int64)
     big = (flat >= PTRS_MIN) & (flat <= PTRS_MAX)
-    if big.all():
+    count = int(np.count_nonzero(big))
+    if count < PTRS_DRAWS:
+        return np.asarray(rng.poisson(lam), np.int64)
+    if not flat.min() >= 0:                             # (NaN fails too)
+        raise ValueError("lam < 0 or lam contains NaNs")
+    out = np.zeros(flat.shape, np.int64)
+    if count == flat.size:
         _ptrs(rng, flat, out)
         return out.reshape(lam.shape)
     at = np.flatnonzero(big)
@@ -171,7 +184,7 @@ def _round(rng, lam, out):
         if not left:
             return np.zeros(0, np.int64)
         at, k, us, v, b = (np.concatenate(parts) for parts in zip(*left))
-        tested = np.flatnonzero((k >= 0) & ((us >= 0.013) | (v <= us)))
+        tested = np.flatnonzero((k >= 0) & (k < _CANDIDATE_LIMIT) & ((us >= 0.013) | (v <= us)))
         k_t, us_t, b_t, mean = k[tested], us[tested], b[tested], lam[at[tested]]
         a = b_t * 0.02483
         a -= 0.059

@@ -1008,7 +1008,10 @@ def test_a_simulation_does_not_import_numpy_ma():
 @pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB,
                                     SensorConfig(b1=1, threshold=1400, acc_bits=12, clocks_per_tick=2)],
                          ids=str)
-def test_event_path_under_a_mask_equals_the_gathered_path(config, monkeypatch):
+# the larger frame: its masked call passes PTRS_DRAWS means with the zeros, the gathered one not
+@pytest.mark.parametrize("shape, event_columns", [((40, 50), 35), ((100, 100), 75)],
+                         ids=["small", "frame-past-PTRS_DRAWS"])
+def test_event_path_under_a_mask_equals_the_gathered_path(config, shape, event_columns, monkeypatch):
     """The event path run on the whole frame under a mask (where it holds most pixels)
     gives the gathered path's words, charges and msb remainders bit for bit, from the
     same generator state: the other pixels' means are 0, which draw nothing. The frame
@@ -1016,8 +1019,8 @@ def test_event_path_under_a_mask_equals_the_gathered_path(config, monkeypatch):
     pixels whose charge alone may pass an overflow's (2^b1 = 2 in the last config)."""
     from tespike.golden.fastsim import interval
     rng = np.random.default_rng(5)
-    light = 10.0 ** rng.uniform(-3, 0.5, (6, 40, 50))
-    light[:, :, :35] = rng.uniform(0.02, 0.3, (6, 40, 35))              # most of the frame: event light
+    light = 10.0 ** rng.uniform(-3, 0.5, (6, *shape))
+    light[:, :, :event_columns] = rng.uniform(0.02, 0.3, (6, shape[0], event_columns))   # most of it: event light
 
     def run(share):
         monkeypatch.setattr(interval, "EVENT_MASK_SHARE", share)

@@ -64,16 +64,18 @@ def test_mixed_means_keep_their_places_and_laws():
         assert abs(per[:, j].var() / mean - 1) < 0.05, j
 
 
-def test_a_seed_gives_one_result_and_zeros_draw_nothing():
-    """Same generator state, same draws; a mean of 0 among the others changes none of
-    theirs (the event path's mask relies on it)."""
-    lam = np.linspace(PTRS_MIN, 5000.0, 30_000)
+@pytest.mark.parametrize("size", [30_000, 5_000])        # PTRS draws, and numpy's (below PTRS_DRAWS)
+def test_a_seed_gives_one_result_and_zeros_draw_nothing(size):
+    """Same generator state, same draws; means of 0 among the others change none of theirs,
+    nor which sampler draws them, however many zeros there are (the event path's mask relies
+    on it: its masked frame holds zeros where the gathered pixels hold nothing)."""
+    lam = np.linspace(PTRS_MIN, 5000.0, size)
     a = poisson_draws(np.random.default_rng(9), lam)
     b = poisson_draws(np.random.default_rng(9), lam)
-    spread = np.zeros(2 * lam.size)
-    spread[::2] = lam
+    spread = np.zeros(4 * lam.size)
+    spread[::4] = lam
     c = poisson_draws(np.random.default_rng(9), spread)
-    assert np.array_equal(a, b) and np.array_equal(c[::2], a) and not c[1::2].any()
+    assert np.array_equal(a, b) and np.array_equal(c[::4], a) and not c.reshape(-1, 4)[:, 1:].any()
 
 
 def test_log_factorial_matches_lgamma_in_and_beyond_the_table():
@@ -85,17 +87,20 @@ def test_log_factorial_matches_lgamma_in_and_beyond_the_table():
 
 
 class _EdgeGenerator:
-    """A generator whose first uniforms are 0 (U = -0.5: us = 0, the candidate -inf)
-    and just below 1, then a real generator's."""
+    """A generator whose first uniforms U (then V) of each round are chosen, then a real
+    generator's: U = 0 (us = 0, the candidate -inf), U just below 1 (us = 2^-53, a candidate
+    as large as the mean allows), V = 0 (log V = -inf: any candidate tested is accepted)."""
 
-    def __init__(self):
+    def __init__(self, u, v):
         self.inner = np.random.default_rng(1)
+        self.chosen = (u, v)
         self.calls = 0
 
     def random(self, out):
         self.inner.random(out=out)
         if self.calls < 2:
-            out[:3] = (0.0, 1.0 - 2.0 ** -53, 0.5)
+            values = self.chosen[self.calls]
+            out[:len(values)] = values
         self.calls += 1
         return out
 
@@ -104,10 +109,17 @@ class _EdgeGenerator:
 
 
 def test_edge_uniforms_are_rejected_or_accepted_without_warnings():
+    top = 1.0 - 2.0 ** -53
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        draws = poisson_draws(_EdgeGenerator(), np.full(20000, 500.0))
-    assert draws.min() >= 0 and abs(draws.mean() - 500) < 5 * math.sqrt(500 / 20000)
+        draws = poisson_draws(_EdgeGenerator((0.0, top, 0.5), (0.0, top, 0.5)), np.full(20000, 500.0))
+        assert draws.min() >= 0 and abs(draws.mean() - 500) < 5 * math.sqrt(500 / 20000)
+        # a candidate past int64 (us = 2^-53 at the largest mean) with V = 0: rejected, as numpy's
+        # int64 conversion leaves it negative; at mean 500 it is within int64 and accepted, as by numpy
+        huge = poisson_draws(_EdgeGenerator((top, top), (0.0, 0.0)), np.full(20000, PTRS_MAX))
+        assert huge.min() >= 0 and huge.max() < 2 * PTRS_MAX
+        within = poisson_draws(_EdgeGenerator((top,), (0.0,)), np.full(20000, 500.0))
+    assert within[0] == _ptrs_attempt(500.0, top, 0.0) > 10 ** 15
 
 
 def test_rejected_draws_start_again_until_none_is_open(monkeypatch):
@@ -131,6 +143,8 @@ def _ptrs_attempt(lam, u, v):
     if us == 0.0:
         return None
     k = math.floor((2 * a / us + b) * U + lam + 0.43)
+    if k >= 2 ** 63:                       # (numpy's int64 conversion leaves it negative: rejected)
+        return None
     if us >= 0.07 and v <= vr:
         return k
     if k < 0 or (us < 0.013 and v > us):
@@ -173,6 +187,15 @@ def test_each_draw_is_numpys_ptrs_on_its_own_uniforms(monkeypatch):
 
 
 def test_a_small_call_is_numpys_own_draw():
-    """Below PTRS_DRAWS draws a call's fixed cost exceeds numpy's: its draws are numpy's."""
+    """Below PTRS_DRAWS means in PTRS's range a call's fixed cost exceeds what PTRS saves: its
+    draws are numpy's, an int64 array whatever lam's shape; bad means are refused alike."""
     lam = np.linspace(0.0, 900.0, poisson_rejection.PTRS_DRAWS - 1)
     assert np.array_equal(poisson_draws(np.random.default_rng(3), lam), np.random.default_rng(3).poisson(lam))
+    zero_d = poisson_draws(np.random.default_rng(3), np.float64(700.0))
+    assert isinstance(zero_d, np.ndarray) and zero_d.shape == () and zero_d.dtype == np.int64
+    for bad in (-1.0, np.nan):
+        for size in (10, 3 * poisson_rejection.PTRS_DRAWS):
+            lam = np.full(size, 500.0)
+            lam[size // 2] = bad
+            with pytest.raises(ValueError):
+                poisson_draws(np.random.default_rng(3), lam)

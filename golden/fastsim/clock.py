@@ -118,8 +118,9 @@ def tabled_call(lam, clocks, draws=None) -> bool:
     at least SMALL_DRAW draws, and at least TABLE_DRAWS per distinct integer mean (a
     table costs 0.15-0.7 ms to build and a call of the sampler a fixed 0.2 ms or so,
     numpy's sampler 45-65 ns a draw at these means: the window paths of a wide-range
-    scene make calls of a few hundred pixels with as many distinct means, which numpy
-    draws for less). Decided from the means alone (never from the cache or a draw):
+    scene make calls of a few hundred pixels with as many distinct means, which the
+    untabled route, :func:`tespike.golden.poisson_rejection.poisson_draws`, draws for less).
+    Decided from the means alone (never from the cache or a draw):
     both samplers have the Poisson law, so the choice changes a seed's stream only."""
     draws = lam.size * clocks if draws is None else draws
     if draws < SMALL_DRAW:

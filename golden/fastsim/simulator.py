@@ -46,7 +46,8 @@ class SceneSimulator:
     remainder (``sfc``, int64, flat; 0 otherwise) and, for ``noise=False``, the
     carried charge fraction. ``method="per-clock"`` sends every pixel down
     the per-clock path (the full path the shortcuts are tested against).
-    ``path_counts`` counts pixel-readouts per path.
+    ``path_counts`` counts pixel-readouts per path (``lazy``: those the lazy path settled,
+    pixels that crossed out of it into event light included).
     """
 
     def __init__(self, config: SensorConfig, shape: tuple[int, int], *, rng=None,
