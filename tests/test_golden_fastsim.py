@@ -1120,3 +1120,50 @@ def test_lazy_pixels_crossing_out_into_brighter_light_match_per_clock(config, mo
             se = np.sqrt(ca.var() / pixels + cb.var() / pixels)
             assert abs(ca.mean() - cb.mean()) <= 4 * se + 1e-12, (k, g, ca.mean(), cb.mean())
     assert sum(settled) > 2 * pixels                   # most of the lazy pixels crossed out
+
+
+@pytest.mark.parametrize("mode", ["te", "ml"])
+def test_cross_out_arithmetic_on_given_random_numbers(mode, monkeypatch):
+    """The arithmetic of a lazy pixel crossing out, on given random numbers: the crossing's spike,
+    then the electrons after it (``expected - remaining``, here its floor) in further spikes and
+    the charge left; TE, an overflow's clock from the ``(2^b1 - 1) theta``-th electron after the
+    crossing at light-time ``remaining + (expected - remaining) B``; a pixel whose crossing is
+    past the interval, or whose light is above event light, is left to the sync."""
+    from tespike.golden.fastsim import lazy
+
+    class Given:                                   # a generator that returns chosen numbers
+        def __init__(self):
+            self.calls = []
+
+        def beta(self, a, b):
+            self.calls.append((int(a), list(b)))
+            return np.full(np.shape(b), 0.5)
+
+    monkeypatch.setattr(lazy, "poisson_draws", lambda rng, mean: np.floor(mean).astype(np.int64))
+    config = SensorConfig.preset(mode)
+    theta, L, F = config.threshold, config.clocks_per_readout, config.clocks_per_tick
+    sim = SceneSimulator(config, (1, 6), rng=0)
+    top = sim.levels.mean_event * L
+    # a few spikes, many (overflowing), two, exactly 2^b1 (TE: overflowing), no crossing, too bright
+    remaining = np.array([0.57, 0.34, 0.97, 0.5, 2.3, 0.17]) * theta
+    expected = np.array([3 * theta + 0.5, 20 * theta + 0.75, 2.5 * theta, 0, 2.1 * theta, 1.5 * top])
+    expected[3] = remaining[3] + (config.p_max - 1) * theta + 0.25
+    assert expected[1] < top and remaining[4] > expected[4]
+    sim.lazy.mask[:] = True
+    sim.lazy.remaining[:] = remaining
+    sim.carried[:] = [0, 10, 20, 5, 30, 40]
+    sim.rng = Given()
+    words = np.zeros(6, np.int64)
+    left, settled = lazy.cross_out(sim, np.arange(6), expected, np.zeros(6, np.int64), words)
+    assert list(settled) == [0, 1, 2, 3] and list(left) == [4, 5]
+    after = np.floor(expected[:4] - remaining[:4]).astype(np.int64)
+    spikes = 1 + after // theta
+    assert np.array_equal(sim.carried, np.concatenate([after % theta, [30, 40]]))
+    if mode == "ml":
+        assert np.array_equal(words[:4], np.minimum(spikes, config.ml_max)) and sim.rng.calls == []
+        return
+    need = (config.p_max - 1) * theta
+    assert list(spikes >= config.p_max) == [False, True, False, True] and spikes[3] == config.p_max
+    assert sim.rng.calls == [(need, [after[1] - need + 1, 1])]
+    ticks = [int((remaining[i] + (expected[i] - remaining[i]) * 0.5) / expected[i] * L) // F + 1 for i in (1, 3)]
+    assert list(words) == [spikes[0], (1 << config.d) | ticks[0], spikes[2], (1 << config.d) | ticks[1], 0, 0]
