@@ -52,12 +52,9 @@ class Terminated(BaseException):
 
 
 def strict_int(text: str) -> int:
-    """An ``int`` option's value: decimal digits with an optional sign. Python's ``int`` also
-    reads ``1_0`` (as 10), `` 7 `` and digits of other scripts; a command line takes none of
-    them as a number without a word."""
-    if not (text.isascii() and text.lstrip("+-").isdigit() and len(text) - len(text.lstrip("+-")) <= 1):
-        raise ValueError(text)
-    return int(text)
+    """An ``int`` option's value, as :func:`tespike.cosim.commands.common.decimal` reads it."""
+    from tespike.cosim.commands.common import decimal
+    return decimal(text)
 
 
 def strict_float(text: str) -> float:

@@ -69,6 +69,18 @@ def test_a_frame_number_is_decimal_digits(files, spec):
                                "--out", files / "v.png"), "--frames", "integers")
 
 
+@pytest.mark.parametrize("value", ["1_0", "\u0664", "\u00b2"])          # 10, an Arabic-Indic 4, a superscript 2
+def test_crops_and_sizes_are_decimal_digits(files, value):
+    """``--crop`` and ``--sizes`` read their numbers themselves: as strictly as integer options
+    (a superscript passed ``str.isdigit`` and then failed ``int`` in a traceback)."""
+    assert_refused(run_tespike("stimulus", "--config", "te", "--scene", files / "i.npy", "--crop", f"0,0,{value},4",
+                               "--out", files / "o.npy"), "--crop", "integers")
+    assert_refused(run_tespike("scene", "--folder", files, "--crop", f"{value}x4", "--out", files / "o.npy"),
+                   "--crop", "HxW")
+    assert_refused(run_tespike("prove", "--sizes", f"{value}x1"), "--sizes", "HxW")
+    assert not (files / "o.npy").exists()
+
+
 def test_a_value_read_as_an_option_is_named_with_the_form_that_passes_it(files):
     result = run_tespike("score", "--estimate", files / "i.npy", "--reference", files / "i.npy", "--frames", "-1:")
     assert_refused(result, "--frames", "'-1:' was read as an option", "--frames=-1:")

@@ -173,12 +173,12 @@ def check_threads_argument(threads: int | None) -> None:
         raise InputError(f"--threads {threads}: must be in 1..{MAX_THREADS}")
 
 
-def frame_number(text: str) -> int:
-    """A frame index as typed: decimal digits with an optional sign (Python's ``int`` also
-    reads ``1_0`` as 10 and other scripts' digits, which a frame list should refuse);
-    ValueError otherwise."""
+def decimal(text: str) -> int:
+    """An integer as typed on a command line: ASCII digits with one optional sign; ValueError
+    otherwise. Python's ``int`` also reads ``1_0`` as 10, `` 7 `` as 7 and other scripts' digits,
+    which no option, frame list, crop or size takes as a number without a word."""
     import re
-    if not re.fullmatch(r"\s*[+-]?[0-9]+\s*", text):
+    if not re.fullmatch(r"[+-]?[0-9]+", text):
         raise ValueError(text)
     return int(text)
 
@@ -193,7 +193,7 @@ def frame_range(spec, count: int) -> range:
     try:
         if len(parts) != 2:
             raise ValueError
-        a, b = (frame_number(x) if x.strip() else None for x in parts)
+        a, b = (decimal(x.strip()) if x.strip() else None for x in parts)
     except ValueError:
         raise InputError(f"--frames {spec!r}: must be 'a:b' with integers a < b (b excluded)") from None
     a = 0 if a is None else a

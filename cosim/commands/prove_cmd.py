@@ -73,14 +73,19 @@ def parse_sizes(flag: str, text: str) -> list[tuple[int, int]]:
 
     if text.strip() == "none":
         return []
+    from .common import decimal
+
     sizes = []
     for part in text.split(","):
         rows, sep, cols = part.strip().partition("x")
-        if not (sep and rows.isdigit() and cols.isdigit() and int(rows) >= 1 and int(cols) >= 1
-                and int(rows) * int(cols) <= MAX_PIXELS):
+        try:
+            size = (decimal(rows), decimal(cols)) if sep else (0, 0)
+        except ValueError:
+            size = (0, 0)
+        if not (min(size) >= 1 and size[0] * size[1] <= MAX_PIXELS):
             raise InputError(f"{flag} {text!r}: each size must be HxW with H, W >= 1 and H x W <= {MAX_PIXELS} "
                              f"(e.g. 2x3), or 'none'")
-        sizes.append((int(rows), int(cols)))
+        sizes.append(size)
     return sizes
 
 

@@ -38,7 +38,7 @@ def run(args) -> int:
     from tespike.golden.errors import InputError
     from tespike.golden.io import atomic_output
 
-    from .common import NPY_FILE, options_given
+    from .common import NPY_FILE, decimal, options_given
     from tespike.golden.paths import check_distinct, check_outputs
     from tespike.cosim.room import require_room
     from tespike.recon.scenes import SCENES, load_hdr_sequence, make_scene
@@ -76,7 +76,7 @@ def run(args) -> int:
         crop = None
         if args.crop:
             try:
-                crop = tuple(int(n) for n in args.crop.lower().split("x"))
+                crop = tuple(decimal(n.strip()) for n in args.crop.lower().split("x"))
             except ValueError:
                 crop = ()
             if len(crop) != 2:

@@ -18,7 +18,7 @@ K * L * H * W values, so the command refuses sizes above ``--max-bytes``;
 it is written one readout interval at a time into a memory-mapped file.
 """
 
-from .common import NPY_FILE, add_light_arguments, light_front_end
+from .common import NPY_FILE, add_light_arguments, decimal, light_front_end
 
 HELP = "turn a light scene I.npy into the per-clock electron stimulus E.npy of golden / rtl-sim"
 
@@ -58,7 +58,7 @@ def run(args) -> int:
     rows, cols = slice(0, H), slice(0, W)
     if args.crop is not None:
         try:
-            y, x, h, w = (int(v) for v in args.crop.split(","))
+            y, x, h, w = (decimal(v.strip()) for v in args.crop.split(","))
         except ValueError:
             raise InputError(f"--crop {args.crop!r} must be four integers Y,X,H,W") from None
         if min(h, w) < 1:

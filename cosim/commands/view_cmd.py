@@ -96,9 +96,9 @@ def pick_frames(spec, count, each):
     if ":" in spec:                   # (as score reads it: no Python slice, which clipped 0:99 and took -1:)
         from .common import frame_range
         return list(frame_range(spec, count))
-    from .common import frame_number
+    from .common import decimal
     try:
-        frames = [frame_number(x) for x in spec.split(",")]
+        frames = [decimal(x.strip()) for x in spec.split(",")]
     except ValueError:
         raise InputError(f"--frames {spec!r}: must be 'all', 'a:b' or a comma list of integers") from None
     bad = [f for f in frames if not 0 <= f < count]
