@@ -456,3 +456,22 @@ def test_a_resume_refuses_frames_rewritten_since_and_rebuilds_an_unfinished_sequ
     assert compare_stores(tmp_path / "fresh.zarr", tmp_path / "d.zarr") == []
     assert np.array_equal(DatasetStore.open(tmp_path / "d.zarr").light("beta").compute(),
                           load_hdr_sequence(root / "beta"))
+
+
+def test_a_full_disk_while_a_resume_checks_its_sequences_says_a_rerun_resumes(tmp_path, monkeypatch):
+    """A refusal of the store as it stands has no "resumes it" note (a rerun would be refused
+    again); a full disk met while the sequences are checked has it, as anywhere else."""
+    import errno
+    sources = scene_sources(["sun", "moderate"], 4, 16, 16)
+    build(tmp_path / "d.zarr", sources[:1])
+    prepare = DatasetStore.prepare_sequence
+
+    def full(self, name, *rest):
+        if name == "moderate":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return prepare(self, name, *rest)
+
+    monkeypatch.setattr(DatasetStore, "prepare_sequence", full)
+    with pytest.raises(InputError, match="cannot write dataset store") as caught:
+        build(tmp_path / "d.zarr", sources)
+    assert any(note.endswith("the same command resumes it)") for note in caught.value.__notes__)

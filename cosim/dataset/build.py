@@ -307,10 +307,11 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
             if report is not None:
                 report(name)
     except BaseException as exc:       # a bad frame, Ctrl-C, a lost cluster: say what a rerun resumes
+        refused = isinstance(exc, InputError) and not checked   # (a store refused as it stands: no rerun resumes it)
         full = isinstance(exc, OSError) and exc.filename is None and exc.errno in NO_ROOM
         if full:                       # Zarr's writes (here or on a worker) name no file
             exc = InputError(f"cannot write dataset store {os.fspath(url)!r}: {exc.strerror}")
-        if checked or not isinstance(exc, InputError):   # (a store refused as it stands: no rerun resumes it)
+        if not refused:
             note_resumable(exc, url, done + skipped)
         if full:
             raise exc from None
