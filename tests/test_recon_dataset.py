@@ -475,3 +475,21 @@ def test_a_full_disk_while_a_resume_checks_its_sequences_says_a_rerun_resumes(tm
     with pytest.raises(InputError, match="cannot write dataset store") as caught:
         build(tmp_path / "d.zarr", sources)
     assert any(note.endswith("the same command resumes it)") for note in caught.value.__notes__)
+
+
+@pytest.mark.parametrize("damage", ["a deleted chunk file", "peak missing", "peak text", "stream config gone",
+                                    "stream shape altered", "a stream removed", "the light removed",
+                                    "a stream never finished"])
+def test_a_resume_repairs_what_evaluate_store_refuses_in_a_sequence(tmp_path, capsys, small_store, damage):
+    """evaluate --store refuses a damaged sequence and says to run tespike dataset again: that run
+    rebuilds it (it called an edited stream "already complete" and repaired nothing), bit for bit."""
+    store = tmp_path / "D.zarr"
+    shutil.copytree(small_store, store)
+    STORE_DAMAGE[damage][0](store)
+    capsys.readouterr()
+    assert main(["evaluate", "--store", str(store), "--out", str(tmp_path / "E"), "--methods", "tfp", "-q"]) == 2
+    assert "tespike dataset" in capsys.readouterr().err                 # (it says to run it again)
+    assert main(["dataset", "--scene", "sun", "--frames", "4", "--height", "16", "--width", "16",
+                 "--config", "te", "--config", "ml-msb", "--out", str(store), "-q"]) == 0
+    assert compare_stores(small_store, store) == []
+    assert main(["evaluate", "--store", str(store), "--out", str(tmp_path / "E"), "--methods", "tfp", "-q"]) == 0

@@ -228,6 +228,9 @@ class DatasetStore:
                     raise InputError(f"sequence {name!r} in {self.url!r} was made with "
                                      f"{mismatch[0]} = {old.get(mismatch[0])!r}, not {info[mismatch[0]]!r}")
                 del self.group[name]                        # an unfinished different sequence
+            elif old.get("complete") and not _is_peak(old.get("peak")):   # (check_sequence refuses it)
+                self.rebuilt.setdefault(name, []).append(f"its peak attribute is {old.get('peak')!r}")
+                del self.group[name]                        # the light's build writes it: made again
         if name not in self.group:
             group = self.group.create_group(name)
             group.attrs.update({**info, "complete": False})
@@ -242,6 +245,14 @@ class DatasetStore:
                 complete = path in group and bool(group[path].attrs.get("complete", False))
             damaged = [f"chunk {chunk!r} fails its CRC-32C check"
                        for chunk in (damaged_chunks(self.url, f"{name}/{path}") if complete else [])]
+            if complete and not damaged:      # what check_sequence refuses of an array, here rebuilt
+                with reading(self.url, f"{name}/{path}"):
+                    made_for = group[path].attrs.get("config")
+                    shape = tuple(group[path].shape)
+                if shape != (K, H, W):
+                    damaged = [f"its array {path} has shape {shape}, the sequence {(K, H, W)}"]
+                elif key in self.configs and made_for != self.configs[key].to_json():
+                    damaged = [f"its stream {key!r} was made for another configuration than the store's {key!r}"]
             if complete and not damaged:
                 with reading(self.url, f"{name}/{path}"):
                     recorded = group[path].attrs.get("chunk_files")
@@ -310,8 +321,7 @@ class DatasetStore:
         what = f"sequence {name!r} of dataset store {self.url!r}"
         for key in ("frames", "height", "width"):
             _attribute(info, key, what, lambda v: type(v) is int and v >= 1, "an integer >= 1")
-        _attribute(info, "peak", what, lambda v: isinstance(v, (int, float)) and not isinstance(v, bool)
-                   and 0 < v < 1e30, "a number in (0, 1e30)")
+        _attribute(info, "peak", what, _is_peak, "a number in (0, 1e30)")
         shape = (info["frames"], info["height"], info["width"])
         for part in ("light", *(f"streams/{c}" for c in self.configs)):
             with reading(self.url, f"{name}/{part}"):
@@ -361,6 +371,11 @@ class DatasetStore:
         """The Zarr array ``light`` or ``streams/<config>`` of one sequence (for tasks)."""
         with reading(self.url, f"{sequence}/{part}"):
             return self.group[f"{sequence}/{part}"]
+
+
+def _is_peak(value) -> bool:
+    """A sequence's ``peak`` attribute as a build writes it: a number in (0, 1e30)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and 0 < value < 1e30
 
 
 def _attribute(attrs: dict, key: str, what: str, ok, rule: str):
