@@ -56,6 +56,9 @@ NOISE_RANGES = {
     "comparator_offset": (0.0, 0.2),
 }
 
+#: A hot pixel's dark scale factor unless the noise description gives one (it needs hot_pixels > 0).
+HOT_FACTOR = 20.0
+
 #: The comparator offset's normal law is cut at this many standard deviations,
 #: so ``1 + delta`` stays at least 1 - 4 x 0.2 = 0.2 > 0.
 OFFSET_CUT = 4.0
@@ -72,7 +75,7 @@ class SensorNoise:
     dark_level: float = 1.0             # x the dark model's electrons
     dsnu: float = 0.0                   # relative std of the per-pixel dark scale
     hot_pixels: float = 0.0             # fraction of hot pixels
-    hot_factor: float = 20.0            # a hot pixel's dark scale factor
+    hot_factor: float = HOT_FACTOR      # a hot pixel's dark scale factor
     prnu: float = 0.0                   # relative std of the per-pixel photo gain
     comparator_offset: float = 0.0      # std of the threshold offset, / theta
 
@@ -142,7 +145,11 @@ def load_noise(path: str | Path) -> SensorNoise:
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{what} is not readable JSON: {exc}") from None
     values = parse_json(text, what, InputError)
-    return SensorNoise.from_dict(values, what)
+    noise = SensorNoise.from_dict(values, what)
+    if noise.hot_factor != HOT_FACTOR and not noise.hot_pixels:     # (to_json writes the default always)
+        raise InputError(f"{what}: hot_factor = {noise.hot_factor:g} scales the hot pixels' dark current; it "
+                         "needs hot_pixels > 0 (without them it would be ignored)")
+    return noise
 
 
 @dataclasses.dataclass(frozen=True)

@@ -112,6 +112,10 @@ def test_simulate_with_a_sensor_noise_file(tmp_path):
     assert_refused(run_tespike(*common, "--out", tmp_path / "s.npz", "--sensor-seed", "-1"), "--sensor-seed")
     assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
                                "--out", tmp_path / "s.npz", "--sensor-seed", "1"), "--noise")
+    (tmp_path / "mapless.json").write_text('{"dark_current": "eq12"}')          # no per-pixel map to draw
+    assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy", "--out",
+                               tmp_path / "s.npz", "--noise", tmp_path / "mapless.json", "--sensor-seed", "3"),
+                   "--sensor-seed", "would be ignored")
     (tmp_path / "bad.json").write_text('{"prnu": 3}')
     assert_refused(run_tespike("simulate", "--config", "te", "--scene", tmp_path / "i.npy",
                                "--out", tmp_path / "s.npz", "--noise", tmp_path / "bad.json"), "prnu")

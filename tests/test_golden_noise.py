@@ -84,3 +84,15 @@ def test_json_round_trip_and_refusals(tmp_path):
         load_noise(path)
     with pytest.raises(InputError, match="sensor seed"):
         Sensor(noise, seed=-1)
+
+
+def test_a_noise_file_setting_that_would_be_ignored_is_refused(tmp_path):
+    """hot_factor without hot pixels changes nothing: a file giving one is refused (a file
+    to_json wrote, which always holds the default, is not)."""
+    from tespike.golden.noise import load_noise
+    path = tmp_path / "n.json"
+    path.write_text('{"dark_current": "eq12", "hot_factor": 50}')
+    with pytest.raises(InputError, match="hot_factor = 50 .* needs hot_pixels > 0"):
+        load_noise(path)
+    path.write_text(SensorNoise(prnu=0.05).to_json())
+    assert load_noise(path) == SensorNoise(prnu=0.05)

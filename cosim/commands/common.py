@@ -135,6 +135,9 @@ def sensor_argument(args):
         raise InputError(f"--dark-current {args.dark_current} with --noise: give the dark current in "
                          f"{args.noise} ('dark_current')")
     noise = load_noise(args.noise)
+    if args.sensor_seed is not None and not noise.has_maps:
+        raise InputError(f"--sensor-seed {args.sensor_seed} draws the per-pixel maps of --noise {args.noise}, which "
+                         "has none (dsnu, hot_pixels, prnu and comparator_offset are 0): it would be ignored")
     if args.no_noise and not noise.is_ideal:
         raise InputError(f"--noise {args.noise} describes random non-idealities; it cannot be combined with "
                          "--no-noise")
