@@ -448,6 +448,8 @@ def test_corrupt_stream_files(files, kind):
     (("verilog", "--config", "te", "--height", "257", "--width", "256"), ["65536"]),
     (("evaluate", "--set", "none", "--methods", ""), ["--methods"]),
     (("evaluate", "--set", "none", "--methods", " , "), ["--methods"]),
+    (("evaluate", "--set", "none", "--methods", "tfp", "--metrics", "fovvideovdp", "--vdp-frames", "1000"),
+     ["--vdp-frames 1000", "scored frame"]),                       # (it was cut to the frames there are)
     (("golden", "--config", "te", "--stimulus"), ["--stimulus", "--help"]),
     (("golden", "--config", "te"), ["required", "--help"]),
     (("simulate", "--seed", "abc"), ["--seed", "--help"]),

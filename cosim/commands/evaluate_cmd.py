@@ -229,6 +229,14 @@ def run(args) -> int:
     if args.window is not None:      # as reconstruct: no frame's window can be that wide
         shortest, light = min(sequences, key=lambda sequence: sequence[1].shape[0])
         check_window_reach(window, light.shape[0], f"the {light.shape[0]}-readout sequence {shortest!r}")
+    if args.vdp_frames is not None:  # as --window: FovVideoVDP takes at most every scored frame
+        from tespike.recon.evaluate import learned_span, scored_frames
+        span = learned_span(list(DEFAULT_METHODS) if methods is None else methods)
+        name, count = min(((name, len(range(*scored_frames(light.shape[0], window, span).indices(light.shape[0]))))
+                           for name, light in sequences), key=lambda item: item[1])
+        if args.vdp_frames > count:
+            raise InputError(f"--vdp-frames {args.vdp_frames}: more than the {count} scored frame(s) of sequence "
+                             f"{name!r} (FovVideoVDP runs on the middle ones of them; more changes nothing)")
     if threads is not None:
         import torch
         torch.set_num_threads(threads)
