@@ -52,6 +52,9 @@ LOSSES = ("l1", "mu-l1")
 #: Largest learning rate a run takes (Adam's step per weight is about the rate: 1e30 trained weights
 #: to 1e30 with a loss that never moved, and exit 0).
 MAX_LR = 1.0
+#: Smallest learning rate a run takes: Adam's step, about the rate, rounds away below float32's
+#: spacing, 1.2e-10 at a weight of 1e-3 (``--lr 1e-40`` wrote the --init weights back unchanged, exit 0).
+MIN_LR = 1e-10
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,9 +91,10 @@ class TrainOptions:
             raise InputError(f"loss = {self.loss!r}: must be one of {', '.join(LOSSES)}")
         if self.floor not in FLOORS:
             raise InputError(f"floor = {self.floor!r}: must be one of {', '.join(FLOORS)}")
-        if not (0 < self.lr <= MAX_LR):
-            raise InputError(f"learning rate {self.lr!r} must be in (0, {MAX_LR:g}] (Adam moves every weight by "
-                             "about the learning rate each step: above 1 the weights only grow)")
+        if not (MIN_LR <= self.lr <= MAX_LR):
+            raise InputError(f"learning rate {self.lr!r} must be in [{MIN_LR:g}, {MAX_LR:g}] (Adam moves every weight "
+                             "by about the learning rate each step: above 1 the weights only grow, below 1e-10 the "
+                             "step rounds away on float32 weights)")
         for key in ("halve_every", "steps_per_epoch", "batch", "crop", "pool", "refresh"):
             if type(getattr(self, key)) is not int or getattr(self, key) < 1:
                 raise InputError(f"{key} = {getattr(self, key)!r}: must be an integer >= 1")

@@ -242,10 +242,11 @@ def test_method_and_crop_checked():
         options(crop=40)
     with pytest.raises(InputError, match="larger than the engine"):
         options(crop=64)
-    for lr in (0.0, -1e-3, float("nan"), float("inf"), 1e30, 1.5):    # (1e30 trained to a loss that never moved)
+    # (1e30 trained to a loss that never moved; 1e-40 wrote the initial weights back unchanged)
+    for lr in (0.0, -1e-3, float("nan"), float("inf"), 1e30, 1.5, 1e-40, 1e-320, 9e-11):
         with pytest.raises(InputError, match="learning rate"):
             options(lr=lr)
-    assert options(lr=1.0).lr == 1.0
+    assert options(lr=1.0).lr == 1.0 and options(lr=1e-10).lr == 1e-10
 
 
 def test_init_warm_starts_every_matching_tensor(tmp_path):
