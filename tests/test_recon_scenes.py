@@ -266,3 +266,14 @@ def test_scene_command_refusals_in_process(tmp_path, capsys, monkeypatch, args, 
     assert main(["scene", "--out", str(tmp_path / "no" / "I.npy")]) == 2
     assert "does not exist" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_peak_that_would_push_lit_pixels_out_of_float32_is_refused():
+    """The peak itself within float32's range is not enough: a scene of many decades scaled to a
+    tiny peak put its darker pixels at subnormal values or 0 (84 lit pixels of 'decades' at 1e-35)."""
+    from tespike.recon.scenes.color import normalise_sequence
+    frames = np.array([[[1.0, 1e-12, 0.0]]])
+    with pytest.raises(InputError, match=r"darkest lit value at 1e-47, below float32's normal range"):
+        normalise_sequence(frames, 1e-35)
+    out = normalise_sequence(frames, 1e-20)
+    assert out.dtype == np.float32 and out[0, 0, 1] > 0 and out[0, 0, 2] == 0
