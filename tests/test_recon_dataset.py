@@ -493,3 +493,10 @@ def test_a_resume_repairs_what_evaluate_store_refuses_in_a_sequence(tmp_path, ca
                  "--config", "te", "--config", "ml-msb", "--out", str(store), "-q"]) == 0
     assert compare_stores(small_store, store) == []
     assert main(["evaluate", "--store", str(store), "--out", str(tmp_path / "E"), "--methods", "tfp", "-q"]) == 0
+
+
+def test_a_sequence_named_as_zarrs_metadata_file_is_refused(tmp_path, capsys, rng):
+    """An HDR sub-folder named zarr.json collided with the store's own file ('File exists')."""
+    root = hdr_folder(tmp_path / "hdr", rng, sequences=(("zarr.json", 2, 12, 12),))
+    code, _, err = run_here(capsys, "dataset", "--hdr", root, "--config", "te", "--out", tmp_path / "o.zarr")
+    assert code == 2 and "'zarr.json' is reserved" in err and not (tmp_path / "o.zarr").exists()

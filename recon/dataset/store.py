@@ -55,11 +55,19 @@ CHUNK_FRAMES = 16
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
 
+#: Node names Zarr's stores use for their own files (a sequence of that name would collide).
+RESERVED_NAMES = ("zarr.json",)
+
+
 def check_name(name: str, what: str) -> str:
-    """Sequence and sensor names become Zarr node names: letters, digits, ``_ . + -``."""
+    """Sequence and sensor names become Zarr node names: letters, digits, ``_ . + -``, and not the
+    name of Zarr's own metadata file (a folder ``zarr.json`` would collide with the group's)."""
     if not isinstance(name, str) or not _NAME.match(name) or name.startswith("__"):
         raise InputError(f"{what} name {name!r} must start with a letter or digit and hold only "
                          "letters, digits and _ . + -")
+    if name.lower() in RESERVED_NAMES:
+        raise InputError(f"{what} name {name!r} is reserved: it is the name of Zarr's metadata files "
+                         "(rename it)")
     return name
 
 
