@@ -145,17 +145,19 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     for name, module in _available_commands(only).items():
         command = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(command)
-        _add_common_arguments(command)
+        _add_common_arguments(command, getattr(module, "PROGRESS", False))
         command.set_defaults(run=module.run, command_parser=command)
     return parser
 
 
-def _add_common_arguments(command: argparse.ArgumentParser) -> None:
-    """--quiet (unless the command defines its own, as demo does) and --progress on every
-    sub-command."""
+def _add_common_arguments(command: argparse.ArgumentParser, progress: bool) -> None:
+    """--quiet on every sub-command (unless it defines its own, as demo does), and --progress on
+    those that draw progress (a command's ``PROGRESS``: elsewhere the flag would do nothing)."""
     if "--quiet" not in command._option_string_actions:
         command.add_argument("--quiet", "-q", action="store_true",
                              help="print nothing on stdout on success (errors still go to stderr)")
+    if not progress:
+        return
     command.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
                          help="progress bars on stderr: auto (only when stderr is a terminal; evaluate prints "
                               "plain progress lines to a log file instead), on, off")

@@ -965,3 +965,17 @@ def test_a_npy_input_cut_short_says_so(tmp_path, keep):
         done = run_tespike(*command, tmp_path / "i.npy", "--out", tmp_path / out)
         assert_refused(done, f"'{tmp_path / 'i.npy'}' is cut short: {int(len(whole) * keep)} of the "
                              f"{len(whole)} bytes its header promises (float32 (4, 8, 8))")
+
+
+def test_progress_is_a_flag_of_the_commands_that_draw_progress_only():
+    """A command that draws no progress refused --progress as unknown; one that does takes it
+    (eight commands took it and ignored it, and scene --list took -q and printed its list)."""
+    from tespike.cosim.cli import _available_commands, build_parser
+    for name, module in _available_commands().items():
+        flags = build_parser(name)._subparsers._group_actions[0].choices[name]._option_string_actions
+        assert ("--progress" in flags) == bool(getattr(module, "PROGRESS", False)), name
+        if getattr(module, "PROGRESS", False):
+            assert "progress" in Path(module.__file__).read_text().replace("PROGRESS = True", ""), name
+    assert_refused(run_tespike("score", "--estimate", "x.npy", "--reference", "x.npy", "--progress", "on"),
+                   "unrecognized arguments: --progress")
+    assert_refused(run_tespike("scene", "--list", "-q"), "--list", "--quiet given")

@@ -4,6 +4,8 @@ from .common import CONFIG_HELP, config_name
 
 HELP = ("simulate every sequence of a folder of HDR frame folders (and/or built-in scenes) with "
         "every sensor configuration into a Zarr dataset store, locally or on a Dask cluster")
+#: It draws progress, so it takes --progress (cli adds the flag to such commands only).
+PROGRESS = True
 
 
 #: Rows and columns of the built-in scenes (--scene) unless --height / --width say otherwise.
@@ -58,7 +60,7 @@ def sensor_configs(specs):
 def run(args) -> int:
     import time
 
-    from tespike.cosim.console import report
+    from tespike.cosim.console import bar, progress_wanted, report
     from tespike.cosim.dataset.cluster import Runner, check_cluster_options
     from tespike.cosim.dataset.build import (build_dataset, discard_unfinished_store, hdr_sources,
                                              new_local_store, note_resumable, scene_sources)
@@ -108,7 +110,9 @@ def run(args) -> int:
                                    report=lambda name: report(args, f"dataset: {name} complete"),
                                    notice=lambda text: report(args, f"dataset: {text}"),
                                    starting=lambda: report(args, f"dataset: {len(sources)} sequence(s) x "
-                                                             f"{len(configs)} sensor(s) on {runner.where}"))
+                                                             f"{len(configs)} sensor(s) on {runner.where}"),
+                                   progress=(lambda total: bar("dataset", "sequence", total))
+                                   if progress_wanted(args) else None)
     except BaseException as exc:
         kept = discard_unfinished_store(args.out, made)   # the workers have stopped: nothing writes there now
         note_resumable(exc, args.out, kept)               # (also for a failure after the build)

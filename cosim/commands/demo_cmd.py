@@ -11,6 +11,8 @@ from tespike.cosim.backends import NAMES as BACKEND_NAMES
 
 HELP = ("circuit to image on the built-in HDR scene: golden model, RTL on a crop (VCD, bit-exact "
         "check), reconstruction, pictures and report.md")
+#: It draws progress, so it takes --progress (cli adds the flag to such commands only).
+PROGRESS = True
 
 
 def add_arguments(parser):

@@ -37,6 +37,8 @@ from .reconstruct_cmd import METHOD_CHOICES  # noqa: E402
 HELP = ("simulate sequences with the paper's TE and ML (msb readout) sensors and the full-count ML "
         "camera, reconstruct with every method, write Table 1 (Markdown, CSV), a quality-against-run-time "
         "plot and image strips")
+#: It draws progress, so it takes --progress (cli adds the flag to such commands only).
+PROGRESS = True
 
 
 #: What ``--store`` takes besides itself: the store's streams are scored as they are, so every

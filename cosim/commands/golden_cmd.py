@@ -12,6 +12,8 @@ from tespike.golden.sensor import DEFAULT_CHUNK_ELEMENTS
 from .common import NPZ_FILE, add_config_argument
 
 HELP = "run the bit-exact golden model on a per-clock electron stimulus E.npy"
+#: It draws progress, so it takes --progress (cli adds the flag to such commands only).
+PROGRESS = True
 
 #: Runs with more chunks than this show a progress bar on stderr.
 PROGRESS_MIN_CHUNKS = 4

@@ -10,6 +10,8 @@ from .common import MAX_THREADS, NPY_FILE
 METHOD_CHOICES = (*TRAINING_FREE, *LEARNED)
 
 HELP = f"reconstruct light images R.npy from a TE or ML stream S.npz ({', '.join(METHOD_CHOICES)})"
+#: It draws progress, so it takes --progress (cli adds the flag to such commands only).
+PROGRESS = True
 
 
 def add_arguments(parser):

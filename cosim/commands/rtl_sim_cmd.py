@@ -7,6 +7,8 @@ from tespike.cosim.backends import NAMES as BACKEND_NAMES
 from .common import NPZ_FILE, add_config_argument
 
 HELP = "simulate the Amaranth RTL pixel array on a per-clock electron stimulus E.npy"
+#: It draws progress, so it takes --progress (cli adds the flag to such commands only).
+PROGRESS = True
 
 def add_arguments(parser):
     add_config_argument(parser)

@@ -1,6 +1,8 @@
 """``tespike scene``: write a light sequence I.npy (built-in scene or a folder of HDR frames)."""
 
 HELP = "write a light sequence I.npy: a built-in scene by name, or a folder of .exr/.hdr frames"
+#: It draws progress, so it takes --progress (cli adds the flag to such commands only).
+PROGRESS = True
 
 #: Defaults of a built-in scene's options (refused beside --folder, so they default to None there).
 BUILT_IN = {"name": "default", "height": 96, "width": 128, "seed": 0}
@@ -46,7 +48,7 @@ def run(args) -> int:
     from tespike.recon.scenes.color import DEFAULT_WEIGHTS
 
     if args.list:
-        given = options_given(args.command_parser, args, keep=("list", "quiet", "progress"))
+        given = options_given(args.command_parser, args, keep=("list",))         # (the list is the output: no -q)
         if given:
             raise InputError(f"--list prints the built-in scenes and takes no other option ({given[0][0]} given)")
         for name, (_, summary) in SCENES.items():

@@ -5,6 +5,8 @@ from tespike.golden.resources import MAX_WORKERS, check_workers_argument
 from .common import NPZ_FILE, add_light_arguments, light_front_end
 
 HELP = "simulate the sensor on a light scene I.npy (photon shot noise; fast, exact in distribution)"
+#: It draws progress, so it takes --progress (cli adds the flag to such commands only).
+PROGRESS = True
 
 
 def add_arguments(parser):

@@ -21,6 +21,8 @@ it is written one readout interval at a time into a memory-mapped file.
 from .common import NPY_FILE, add_light_arguments, decimal, light_front_end
 
 HELP = "turn a light scene I.npy into the per-clock electron stimulus E.npy of golden / rtl-sim"
+#: It draws progress, so it takes --progress (cli adds the flag to such commands only).
+PROGRESS = True
 
 #: Largest E.npy written unless --max-bytes says otherwise (1 GiB).
 MAX_BYTES = 1 << 30

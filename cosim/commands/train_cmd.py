@@ -10,6 +10,8 @@ import argparse
 from .common import MAX_THREADS, TORCH_FILE, add_config_argument, check_threads_argument
 
 HELP = "train a learned reconstruction method for one sensor configuration (resumable, CPU or GPU)"
+#: It draws progress, so it takes --progress (cli adds the flag to such commands only).
+PROGRESS = True
 
 #: Flags whose default is the trainer's (their dest is the TrainOptions field).
 TRAINER_FLAGS = ("method", "size", "loss", "lr", "steps_per_epoch", "halve_every", "batch", "crop",

@@ -258,14 +258,16 @@ def sequence_graph(store: DatasetStore, source: Source):
 
 def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, SensorConfig], seed: int, run, *,
                chunk_frames: int = CHUNK_FRAMES, tile: tuple[int, int] = TILE, report=None, notice=None,
-               starting=None) -> dict:
+               starting=None, progress=None) -> dict:
     """Write every source into the store at ``url`` (made or resumed) with every configuration.
 
     ``run`` is a :class:`tespike.cosim.dataset.cluster.Runner`; ``report(name)`` is
     called as each sequence completes, ``notice(text)`` for each sequence a resumed
     store held complete but with a damaged chunk (its CRC-32C fails), which is rebuilt;
     ``starting()`` once the store is made or resumed and every sequence checked, before any is
-    simulated (so a refusal comes before the command says what it will do).
+    simulated (so a refusal comes before the command says what it will do). ``progress``: None, or
+    ``progress(total)`` -> a function that wraps the iterable of completed sequences and reports as
+    it is walked (``tespike dataset`` passes a tqdm bar).
     Returns counts: ``done`` (sequences written now, rebuilt ones included),
     ``skipped`` (already complete), ``pixel_readouts`` (simulated now, summed over
     the streams), ``rebuilt`` (names of the damaged sequences rebuilt).
@@ -302,7 +304,7 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
         checked = True
         if starting is not None:
             starting()
-        for _, name in run(graphs):
+        for _, name in (iter if progress is None else progress(len(graphs)))(run(graphs)):
             done += 1
             if report is not None:
                 report(name)
