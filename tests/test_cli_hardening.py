@@ -448,6 +448,8 @@ def test_corrupt_stream_files(files, kind):
     (("verilog", "--config", "te", "--height", "257", "--width", "256"), ["65536"]),
     (("evaluate", "--set", "none", "--methods", ""), ["--methods"]),
     (("evaluate", "--set", "none", "--methods", " , "), ["--methods"]),
+    (("scene", "--frames", "2", "--height", "8", "--width", "8", "--sources", str(10 ** 11)),
+     ["--sources", "memory"]),                                     # (it ran out of memory naming no option)
     (("evaluate", "--set", "none", "--methods", "tfp", "--metrics", "fovvideovdp", "--vdp-frames", "1000"),
      ["--vdp-frames 1000", "scored frame"]),                       # (it was cut to the frames there are)
     (("golden", "--config", "te", "--stimulus"), ["--stimulus", "--help"]),

@@ -93,7 +93,9 @@ def run(args) -> int:
         if args.sources is not None and args.sources < 0:
             raise InputError(f"--sources = {args.sources} must be >= 0")
         values = args.frames * args.height * args.width
-        require_room(f"the scene of {args.frames} x {args.height} x {args.width} values", memory=8 * values,
+        spots = 0 if args.sources is None else args.sources   # (a panorama's spots are drawn whole first)
+        require_room(f"the scene of {args.frames} x {args.height} x {args.width} values"
+                     + (f" with --sources {spots}" if spots else ""), memory=8 * values * (1 + spots),
                      disk={args.out: 4 * values})     # float32 light, and the generator's own copy
         light = make_scene(args.name, args.frames, args.height, args.width, seed=args.seed,
                            peak=args.peak, motion=args.motion, sources=args.sources)
