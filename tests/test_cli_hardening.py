@@ -23,6 +23,7 @@ import pytest
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
+from tespike.recon.scenes.hdr_io import write_hdr
 from tests.cli import ROOT, assert_refused, run_tespike
 
 TINY = SensorConfig(b1=1, b2=1, threshold=3, acc_bits=3)          # L = 2
@@ -551,8 +552,13 @@ def test_view_and_the_light_front_end_never_overwrite_an_input(files):
     os.symlink(files / "i.npy", files / "d" / "frame_0001.png")
     for args, words in ((("--input", files / "i.png", "--out", files / "i.png"), ("--input",)),
                         (("--input", files / "i.npy", "--out", files / "link.png"), ("--input",)),
-                        (("--input", files / "i.npy", "--out", files / "d", "--each"), ("frame 1", "--input"))):
+                        (("--input", files / "i.npy", "--out", files / "d", "--each"), ("frame 1", "--input")),
+                        (("--input", files / "i.npy", "--out", files / "i.npy"), ("--input",))):  # (was: "a .png")
         refused_without_change(files, ("view", *args), *words, "refusing to overwrite an input")
+    (files / "hdr").mkdir()
+    write_hdr(files / "hdr" / "f0.hdr", np.ones((4, 4, 3), np.float32))             # (was: "the .npy format")
+    refused_without_change(files, ("scene", "--folder", files / "hdr", "--out", files / "hdr" / "f0.hdr"),
+                           "a frame of --folder", "refusing to overwrite an input")
     (files / "n.npz").write_text('{"prnu": 0.01}')
     for command in ("simulate", "stimulus"):
         refused_without_change(files, (command, "--config", "te", "--scene", files / "i.npy", "--noise",

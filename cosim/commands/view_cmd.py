@@ -116,7 +116,7 @@ def run(args) -> int:
 
     from tespike.cosim.console import report
     from tespike.golden.errors import InputError
-    from tespike.golden.paths import check_outputs
+    from tespike.golden.paths import check_distinct, check_outputs
 
     inputs = {"--input": args.input, "--config": args.config}
     if args.peak is not None and not (math.isfinite(args.peak) and args.peak > 0):
@@ -128,6 +128,7 @@ def run(args) -> int:
     if args.columns is not None and args.columns < 1:
         raise InputError(f"--columns {args.columns}: must be >= 1")
     out = Path(args.out)
+    check_distinct(inputs, {"--out": args.out})     # (an input given as --out: the worse fault, named first)
     if args.each:
         if out.exists() and not out.is_dir():
             raise InputError(f"--out {str(out)!r} exists and is not a folder (--each writes a folder)")
