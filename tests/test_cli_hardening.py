@@ -899,7 +899,7 @@ def test_scene_and_train_never_write_over_a_frame_they_read(tmp_path):
     refused_without_change(tmp_path, ("scene", "--folder", tmp_path / "video", "--out", tmp_path / "frame.npy"),
                            "a frame of --folder", "refusing to overwrite an input")
     refused_without_change(tmp_path, ("scene", "--folder", tmp_path / "video", "--out", tmp_path / "video/000.hdr"),
-                           "--out", "ending in .npy")          # (named as a frame: not an array's name)
+                           "a frame of --folder", "refusing to overwrite an input")   # (before its format)
     refused_without_change(tmp_path, ("scene", "--folder", tmp_path / "video", "--out", tmp_path / "link.npy"),
                            "a frame of --folder", "001.hdr")
     budget = ("--steps", 1, "--crop", 32, "--batch", 1, "--workers", 0, "--pool", 1)

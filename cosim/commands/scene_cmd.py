@@ -73,11 +73,8 @@ def run(args) -> int:
             setattr(args, key, default)
     if not (math.isfinite(args.peak) and args.peak > 0):
         raise InputError(f"--peak {args.peak!r}: must be a finite number > 0")
-    if args.folder:                 # (a frame given as --out: the worse fault, named before the format)
-        check_distinct([("a frame of --folder", frame) for frame in list_frames(args.folder)], {"--out": args.out})
-    check_outputs({"--out": args.out}, formats={"--out": NPY_FILE})
+    crop = None
     if args.folder:
-        crop = None
         if args.crop:
             try:
                 crop = tuple(decimal(n.strip()) for n in args.crop.lower().split("x"))
@@ -87,6 +84,10 @@ def run(args) -> int:
                 raise InputError(f"--crop {args.crop!r} must be HxW, e.g. 384x512")
         if args.frames < 1:
             raise InputError(f"--frames {args.frames}: must be >= 1")
+        # a frame given as --out: the worse fault, named before the output's format
+        check_distinct([("a frame of --folder", frame) for frame in list_frames(args.folder)], {"--out": args.out})
+    check_outputs({"--out": args.out}, formats={"--out": NPY_FILE})
+    if args.folder:
         light = load_hdr_sequence(args.folder, weights=args.grayscale or DEFAULT_WEIGHTS, peak=args.peak,
                                   max_frames=args.frames, crop=crop, downscale=args.downscale,
                                   progress=progress_wanted(args))
