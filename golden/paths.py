@@ -180,8 +180,10 @@ def check_format(flag: str, path: str | os.PathLike, suffixes: tuple[str, ...]) 
         return
     if Path(text).suffix.lower() not in suffixes:
         names = " or ".join(suffixes)
+        stemless = Path(text).name.lower() in suffixes          # ".npz": a hidden file without a suffix
         raise InputError(f"{flag} {text!r}: the file is written in the {suffixes[0]} format; "
-                         f"give a name ending in {names}")
+                         + (f"give it a name before {names} (the name is all suffix)" if stemless
+                            else f"give a name ending in {names}"))
 
 
 def check_outputs(outputs: Mapping[str, str | os.PathLike | None], inputs=None,

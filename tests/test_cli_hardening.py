@@ -456,6 +456,7 @@ def test_corrupt_stream_files(files, kind):
     (("golden", "--config", "te", "--stimulus"), ["--stimulus", "--help"]),
     (("golden", "--config", "te"), ["required", "--help"]),
     (("simulate", "--seed", "abc"), ["--seed", "--help"]),
+    (("simulate", "--config", "te", "--scene", "i.npy", "--out", ".npz"), ["'.npz'", "name before .npz"]),
     (("simulate", "--seed", "1_0"), ["--seed", "invalid int value: '1_0'"]),     # int('1_0') is 10
     (("simulate", "--seed", " 7"), ["--seed", "invalid int value"]),
     (("prove", "--depth", "\u0661"), ["--depth", "invalid int value"]),            # an Arabic-Indic 1
