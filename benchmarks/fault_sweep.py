@@ -525,14 +525,13 @@ def interrupt_cases() -> list[Case]:
         Case("rtl-sim --vcd", "", ["rtl-sim", "--config", "te", "--stimulus", "E.npy", "--out", "S2.npz",
                                    "--vcd", "W.vcd", "--progress", "off"], out="S2.npz"),
         Case("calibrate", "", ["calibrate", "--dark", "dark.npz", "--flat", "flat.npz", "--flat-light", "0.03",
-                               "--out", "C.npz", "--progress", "off"], out="C.npz"),
+                               "--out", "C.npz"], out="C.npz"),
         Case("demo", "", ["demo", "--out", "demo", "--frames", "10", "--height", "32", "--width", "32",
                           "--crop", "11", "--repeats", "1", "--sensors", "te", "--no-hw-cost", "--quiet"],
              out="demo", out_kind="folder"),
     ] + [  # an empty build cache each run: the simulator built (make, the compilers), then run
         Case(f"cocotb {simulator}", "", ["cocotb", "--config", "te", "--height", "8", "--width", "8",
-                                         "--readouts", "40", "--simulator", simulator, "--work-dir", "cw",
-                                         "--progress", "off"],
+                                         "--readouts", "40", "--simulator", simulator, "--work-dir", "cw"],
              out="nothing", out_kind="none", env={"TESPIKE_CACHE": "{work}/cache"})
         for simulator in ("icarus", "verilator")
     ]
