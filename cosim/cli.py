@@ -51,28 +51,16 @@ class Terminated(BaseException):
         self.signum = signum
 
 
-def strict_int(text: str) -> int:
-    """An ``int`` option's value, as :func:`tespike.cosim.commands.common.decimal` reads it."""
-    from tespike.cosim.commands.common import decimal
-    return decimal(text)
-
-
-def strict_float(text: str) -> float:
-    """A ``float`` option's value: Python's ``float`` without the digit separators (``1_0.5``) and
-    surrounding spaces it also reads."""
-    if "_" in text or text != text.strip() or not text.isascii():
-        raise ValueError(text)
-    return float(text)
-
-
 class Parser(argparse.ArgumentParser):
     """argparse with one-line errors: ``tespike CMD: error: argument --x: ... (see tespike CMD --help)``,
-    and ``type=int`` / ``type=float`` options read strictly (:func:`strict_int`, :func:`strict_float`)."""
+    and ``type=int`` / ``type=float`` options read as typed (:func:`tespike.cosim.commands.common.decimal`,
+    :func:`tespike.cosim.commands.common.number`)."""
 
     def __init__(self, *args, **kwargs):
+        from tespike.cosim.commands.common import decimal, number
         super().__init__(*args, **kwargs)
-        self.register("type", int, strict_int)
-        self.register("type", float, strict_float)
+        self.register("type", int, decimal)
+        self.register("type", float, number)
 
     def parse_known_args(self, args=None, namespace=None):
         self._tokens = list(sys.argv[1:] if args is None else args)     # (for error's hint)

@@ -186,6 +186,14 @@ def decimal(text: str) -> int:
     return int(text)
 
 
+def number(text: str) -> float:
+    """A number as typed on a command line: what Python's ``float`` reads, less the digit
+    separators (``1_0.5``), surrounding spaces and other scripts' digits it also reads."""
+    if "_" in text or text != text.strip() or not text.isascii():
+        raise ValueError(text)
+    return float(text)
+
+
 def frame_range(spec, count: int) -> range:
     """Frames selected by ``--frames a:b`` among ``count`` (a default 0, b default
     ``count``, b excluded): inside the files, never clipped to them (``score``, ``view``)."""

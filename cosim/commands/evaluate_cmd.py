@@ -234,8 +234,8 @@ def run(args) -> int:
     if args.vdp_frames is not None:  # as --window: FovVideoVDP takes at most every scored frame
         from tespike.recon.evaluate import learned_span, scored_frames
         span = learned_span(list(DEFAULT_METHODS) if methods is None else methods)
-        name, count = min(((name, len(range(*scored_frames(light.shape[0], window, span).indices(light.shape[0]))))
-                           for name, light in sequences), key=lambda item: item[1])
+        scored = {name: scored_frames(light.shape[0], window, span) for name, light in sequences}
+        name, count = min(((name, s.stop - s.start) for name, s in scored.items()), key=lambda item: item[1])
         if args.vdp_frames > count:
             raise InputError(f"--vdp-frames {args.vdp_frames}: more than the {count} scored frame(s) of sequence "
                              f"{name!r} (FovVideoVDP runs on the middle ones of them; more changes nothing)")

@@ -255,12 +255,8 @@ class DatasetStore:
                        for chunk in (damaged_chunks(self.url, f"{name}/{path}") if complete else [])]
             if complete and not damaged:      # what check_sequence refuses of an array, here rebuilt
                 with reading(self.url, f"{name}/{path}"):
-                    made_for = group[path].attrs.get("config")
-                    shape = tuple(group[path].shape)
-                if shape != (K, H, W):
-                    damaged = [f"its array {path} has shape {shape}, the sequence {(K, H, W)}"]
-                elif key in self.configs and made_for != self.configs[key].to_json():
-                    damaged = [f"its stream {key!r} was made for another configuration than the store's {key!r}"]
+                    problem = self._array_problem(group[path], path, (K, H, W))
+                damaged = [] if problem is None else [problem]
             if complete and not damaged:
                 with reading(self.url, f"{name}/{path}"):
                     recorded = group[path].attrs.get("chunk_files")
@@ -341,19 +337,26 @@ class DatasetStore:
             if array.attrs.get("complete") is not True:
                 raise InputError(f"{what}: its array {part} was never finished (not marked complete); remove "
                                  "its folder and run tespike dataset again")
-            if tuple(array.shape) != shape:
-                raise InputError(f"{what}: {part} has shape {tuple(array.shape)}, the sequence {shape}; "
-                                 "remove its folder and run tespike dataset again")
-            key = part.split("/")[-1]
-            if key in self.configs and array.attrs.get("config") != self.configs[key].to_json():
-                raise InputError(f"{what}: stream {key!r} was made for another configuration than the store's "
-                                 f"{key!r}; remove its folder and run tespike dataset again")
+            problem = self._array_problem(array, part, shape)
+            if problem is not None:
+                raise InputError(f"{what}: {problem}; remove its folder and run tespike dataset again")
             missing = missing_chunks(self.url, f"{name}/{part}", array.attrs.get("chunk_files"))
             if missing:
                 raise InputError(f"{what}: {part} holds {missing[0]} of the {missing[1]} chunk files its build "
                                  "wrote (Zarr would read the others as zeros); remove its folder and run "
                                  "tespike dataset again")
         return info
+
+    def _array_problem(self, array, part: str, shape: tuple[int, int, int]) -> str | None:
+        """What makes a finished array ``part`` of a sequence of ``shape`` unusable (another shape, a
+        stream made for another configuration than the store's of its name), or None: read by
+        :meth:`check_sequence` (refused) and :meth:`prepare_sequence` (rebuilt)."""
+        if tuple(array.shape) != shape:
+            return f"{part} has shape {tuple(array.shape)}, the sequence {shape}"
+        key = part.split("/")[-1]
+        if key in self.configs and array.attrs.get("config") != self.configs[key].to_json():
+            return f"stream {key!r} was made for another configuration than the store's {key!r}"
+        return None
 
     def info(self, sequence: str) -> dict:
         """Attributes of one sequence (source, frames, height, width, peak, scale, complete)."""

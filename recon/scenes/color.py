@@ -81,9 +81,9 @@ def normalise_sequence(frames: np.ndarray, peak: float = 1.0, *, what: str = "se
     if top <= 0:
         raise InputError(f"{what}: every pixel is 0, so it cannot be normalised by its maximum")
     out = frames * (peak / top)
-    lit = out[out > 0]
-    if float(lit.min()) < float(f32.tiny):                # float32 would round it to a subnormal or 0
-        raise InputError(f"{what}: peak = {peak!r} puts its darkest lit value at {float(lit.min()):.3g}, below "
+    darkest = float(np.min(out, where=out > 0, initial=np.inf))    # (no copy of the lit values)
+    if darkest < float(f32.tiny):                         # float32 would round it to a subnormal or 0
+        raise InputError(f"{what}: peak = {peak!r} puts its darkest lit value at {darkest:.3g}, below "
                          f"float32's normal range (from {float(f32.tiny):.3g}: it would lose precision or become "
-                         f"zero); give a peak of at least {peak * float(f32.tiny) / float(lit.min()):.3g}")
+                         f"zero); give a peak of at least {peak * float(f32.tiny) / darkest:.3g}")
     return out.astype(np.float32)
