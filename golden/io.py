@@ -308,7 +308,10 @@ def _check_member_sizes(path: str | Path) -> None:
     read from its first bytes and the archive's directory before numpy allocates the shape (a
     400-byte archive declaring 9 TiB was reported as running out of memory), or fewer (numpy
     ignores bytes after the array, as a bare .npy's are refused: :func:`load_npy`); and an
-    archive holding one member name twice (numpy reads the last, unseen by most zip tools)."""
+    archive holding one member name twice (numpy reads the last, unseen by most zip tools); and bytes
+    after the archive's end record (zip readers find the record near the end and ignore what follows:
+    two files joined, or a copy that overran)."""
+    _check_archive_end(path)
     with zipfile.ZipFile(path) as archive:
         names = archive.namelist()
         twice = sorted({name for name in names if names.count(name) > 1})
@@ -327,6 +330,29 @@ def _check_member_sizes(path: str | Path) -> None:
             if size < info.file_size:
                 raise ValueError(f"member {info.filename!r} holds {info.file_size - size} bytes after its "
                                  f"{shape} array")
+
+
+#: A zip archive's end record: its signature, and its size without the comment that may follow it.
+_END_SIGNATURE, _END_SIZE = b"PK\x05\x06", 22
+
+
+def _check_archive_end(path: str | Path) -> None:
+    """Refuse (ValueError) an archive whose end-of-directory record, with the comment it declares, does
+    not end the file. The record is the one :mod:`zipfile` reads: the file's last 22 bytes where they
+    are one without a comment, else the last signature in the final 64 KiB; an archive without one is
+    left to :mod:`zipfile`, whose message says so."""
+    with open(path, "rb") as file:
+        size = file.seek(0, os.SEEK_END)
+        file.seek(max(0, size - (_END_SIZE + 0xFFFF)))
+        tail = file.read()
+    if tail[-_END_SIZE:][:4] == _END_SIGNATURE and tail[-2:] == b"\0\0":
+        return
+    at = tail.rfind(_END_SIGNATURE)
+    if at < 0 or at + _END_SIZE > len(tail):
+        return
+    extra = len(tail) - (at + _END_SIZE + int.from_bytes(tail[at + 20:at + 22], "little"))
+    if extra > 0:
+        raise ValueError(f"{extra} bytes follow the archive's end")
 
 
 def _refuse_starved(exc: BaseException, what: str, path) -> None:

@@ -138,6 +138,29 @@ def test_a_member_with_bytes_after_its_array_or_a_name_stored_twice_is_refused(t
     assert np.array_equal(load_stream(tmp_path / "ok.npz")[0], words)
 
 
+def test_bytes_after_an_archives_end_are_refused(tmp_path):
+    """zip readers find an archive's end record near the end and ignore what follows it (two files
+    joined, a copy that overran): the archive was read as if whole. A comment the record declares is
+    the archive's own."""
+    import zipfile
+
+    from tespike.golden.io import load_stream
+    words = np.zeros((2, 3, 4), np.uint8)
+    np.savez(tmp_path / "s.npz", words=words, config=SensorConfig().to_json())
+    whole = (tmp_path / "s.npz").read_bytes()
+    (tmp_path / "joined.npz").write_bytes(whole + whole[:100])
+    with pytest.raises(InputError, match=r"stream file '.*joined\.npz' is not a readable .npz archive: "
+                                         r"100 bytes follow the archive's end"):
+        load_stream(tmp_path / "joined.npz")
+    with zipfile.ZipFile(tmp_path / "s.npz", "a") as archive:
+        archive.comment = b"made by hand"
+    assert np.array_equal(load_stream(tmp_path / "s.npz")[0], words)
+    with open(tmp_path / "s.npz", "ab") as file:
+        file.write(b"\0")
+    with pytest.raises(InputError, match="1 bytes follow the archive's end"):
+        load_stream(tmp_path / "s.npz")
+
+
 def test_a_config_member_stored_as_bytes_is_read_as_utf8(tmp_path):
     """np.array(text.encode()) is a 0-d string array too (dtype S): it was read as "b'{...}'" and
     refused as "not valid JSON"."""
