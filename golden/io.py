@@ -311,7 +311,7 @@ def _check_member_sizes(path: str | Path) -> None:
     archive holding one member name twice (numpy reads the last, unseen by most zip tools); and bytes
     after the archive's end record (zip readers find the record near the end and ignore what follows:
     two files joined, or a copy that overran)."""
-    _check_archive_end(path)
+    check_archive_end(path)
     with zipfile.ZipFile(path) as archive:
         names = archive.namelist()
         twice = sorted({name for name in names if names.count(name) > 1})
@@ -336,7 +336,7 @@ def _check_member_sizes(path: str | Path) -> None:
 _END_SIGNATURE, _END_SIZE = b"PK\x05\x06", 22
 
 
-def _check_archive_end(path: str | Path) -> None:
+def check_archive_end(path: str | Path) -> None:
     """Refuse (ValueError) an archive whose end-of-directory record, with the comment it declares, does
     not end the file. The record is the one :mod:`zipfile` reads: the file's last 22 bytes where they
     are one without a comment, else the last signature in the final 64 KiB; an archive without one is

@@ -284,6 +284,18 @@ def test_a_weights_file_with_a_flipped_byte_is_refused_not_loaded(capsys, tmp_pa
     assert not (tmp_path / "r.npy").exists()
 
 
+def test_a_weights_file_with_bytes_after_its_end_is_refused(tmp_path):
+    """torch.load, as every zip reader, ignored bytes after the archive's end record."""
+    from tespike.golden.config import load_config
+    from tespike.recon.learned import weights_path
+    from tespike.recon.learning.weights import read_weights
+    joined = tmp_path / "w.pt"
+    joined.write_bytes(weights_path(load_config("te"), "net").read_bytes() + b"\n")
+    with pytest.raises(InputError, match=r"weights '.*w\.pt' is not a tespike weights file \(a damaged archive: "
+                                         r"1 bytes follow the archive's end\)"):
+        read_weights(joined)
+
+
 def test_a_truncated_exr_frame_is_one_line_with_the_librarys_cause(tmp_path):
     """OpenEXR prints its fault on the process's stderr beside the exception: two lines, the useful one first."""
     from tespike.recon.scenes.hdr_io import write_exr

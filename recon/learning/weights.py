@@ -22,7 +22,7 @@ import torch
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError, one_line
-from tespike.golden.io import atomic_output
+from tespike.golden.io import atomic_output, check_archive_end
 
 #: Keys every weights file holds.
 PAYLOAD_KEYS = ("state_dict", "sizes", "config")
@@ -60,6 +60,7 @@ def _check_crcs(path: str | Path, what: str, kind: str) -> None:
         return
     try:
         with archive:
+            check_archive_end(path)
             damaged = archive.testzip()
     except (OSError, zipfile.BadZipFile, ValueError, EOFError, NotImplementedError, zlib.error) as exc:
         raise InputError(f"{what} {str(path)!r} is not a {kind} (a damaged archive: {one_line(exc, 100)})") from None
