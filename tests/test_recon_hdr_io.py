@@ -116,6 +116,23 @@ def test_exr_round_trip(tmp_path, rng):
         read_exr(tmp_path / "junk.exr")
 
 
+@pytest.mark.parametrize("compression", ["NO_COMPRESSION", "ZIP_COMPRESSION", "PIZ_COMPRESSION", "DWAB_COMPRESSION"])
+def test_bytes_after_an_exr_files_last_chunk_are_refused(tmp_path, rng, compression):
+    """OpenEXR reads a file's chunks by their offsets and ignored what followed the last (two files
+    joined, a copy that overran), as the Radiance reader refuses: the chunks' ends are read from the
+    offset table, for every scan-line compression (1 to 256 lines a chunk)."""
+    import OpenEXR
+    rgb = rng.random((300, 7, 3)).astype(np.float32)
+    with OpenEXR.File({"compression": getattr(OpenEXR, compression), "type": OpenEXR.scanlineimage},
+                      {"RGB": rgb}) as handle:
+        handle.write(str(tmp_path / "f.exr"))
+    assert read_exr(tmp_path / "f.exr").shape == (300, 7, 3)
+    whole = (tmp_path / "f.exr").read_bytes()
+    (tmp_path / "joined.exr").write_bytes(whole + whole[:5])
+    with pytest.raises(InputError, match=r"EXR file '.*joined\.exr': 5 byte\(s\) after the last of its chunks"):
+        read_exr(tmp_path / "joined.exr")
+
+
 def test_gray_weights_and_clipping():
     pixel = np.array([[[1.0, 2.0, 4.0], [-0.03, 1.0, 0.0]]])     # a dip below 0 of 0.75 % of the peak: clipped
     assert np.allclose(to_gray(pixel), [[0.2126 + 1.4304 + 0.2888, 0.7152]])

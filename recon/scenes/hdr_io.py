@@ -302,10 +302,61 @@ def _exr_contents(path: str, header_only: bool = False) -> dict:
     return contents
 
 
+#: Scan lines per chunk of each OpenEXR compression (its id in the header), for the end check.
+_EXR_LINES = {0: 1, 1: 1, 2: 1, 3: 16, 4: 32, 5: 16, 6: 32, 7: 32, 8: 32, 9: 256}
+
+#: Version flags of an OpenEXR file that is not one part of scan lines (tiled, deep, multi-part).
+_EXR_NOT_SCANLINE = 0x200 | 0x800 | 0x1000
+
+
+def _exr_bytes_after(path: str) -> int:
+    """Bytes after the last chunk of a single-part scan-line OpenEXR file (the library reads its chunks
+    by their offsets and ignores what follows them: two files joined, a copy that overran); 0 where
+    the file is another kind (tiled, deep, multi-part, an unknown compression) or its offsets are not
+    all readable, which the library itself judges."""
+    import struct
+    with open(path, "rb") as file:
+        data = file.read()
+    if len(data) < 8 or data[:4] != b"\x76\x2f\x31\x01" or \
+            int.from_bytes(data[4:8], "little") & _EXR_NOT_SCANLINE:
+        return 0
+    pos, window, compression = 8, None, None
+    try:
+        while data[pos]:                                   # attributes until an empty name
+            name_end = data.index(b"\0", pos)
+            type_end = data.index(b"\0", name_end + 1)
+            size = int.from_bytes(data[type_end + 1:type_end + 5], "little", signed=True)
+            value = data[type_end + 5:type_end + 5 + size]
+            name = data[pos:name_end]
+            if name == b"dataWindow" and size == 16:
+                window = struct.unpack("<4i", value)
+            elif name == b"compression" and size == 1:
+                compression = value[0]
+            pos = type_end + 5 + size
+        pos += 1
+    except (ValueError, IndexError):
+        return 0
+    if window is None or compression not in _EXR_LINES:
+        return 0
+    chunks = -(-(window[3] - window[1] + 1) // _EXR_LINES[compression])
+    if chunks < 1 or pos + 8 * chunks > len(data):
+        return 0
+    end = 0
+    for offset in struct.unpack_from(f"<{chunks}Q", data, pos):
+        if not pos + 8 * chunks <= offset <= len(data) - 8:
+            return 0
+        end = max(end, offset + 8 + int.from_bytes(data[offset + 4:offset + 8], "little", signed=True))
+    return max(0, len(data) - end)
+
+
 def read_exr(path: str | Path) -> np.ndarray:
     """Read an OpenEXR file -> float32 (H, W, 3) RGB or (H, W) for a luminance-only 'Y' file."""
     path = str(path)
     channels = _exr_contents(path)
+    extra = _exr_bytes_after(path)
+    if extra:
+        raise InputError(f"EXR file {path!r}: {extra} byte(s) after the last of its chunks (two files joined, "
+                         "or a copy that overran?)")
     for name in ("RGB", "RGBA"):
         if name in channels:
             return channels[name][..., :3].astype(np.float32)
