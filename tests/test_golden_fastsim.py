@@ -1084,7 +1084,8 @@ def test_queue_overflow_tick_matches_per_clock_near_tick_ends(config, per_clock,
 def test_lazy_pixels_crossing_out_into_brighter_light_match_per_clock(config, monkeypatch):
     """Lazy pixels whose light steps up past the path's level leave it at their next crossing
     (:func:`tespike.golden.fastsim.lazy.cross_out`: the crossing's spike, then the event
-    path's arithmetic on the electrons after it, TE overflows at their clock): the words of
+    path's arithmetic on the electrons after it, TE overflows at their clock; or, where the
+    crossing lies past the interval, no spike and the charge drawn at its end): the words of
     the step and of the readout after it, and the charge carried, have the per-clock law,
     for steps to just above the lazy level, to a few thresholds and to overflowing light."""
     from tespike.golden.fastsim import lazy
@@ -1122,13 +1123,41 @@ def test_lazy_pixels_crossing_out_into_brighter_light_match_per_clock(config, mo
     assert sum(settled) > 2 * pixels                   # most of the lazy pixels crossed out
 
 
-@pytest.mark.parametrize("mode", ["te", "ml"])
+@pytest.mark.parametrize("config", [SensorConfig(b1=1, b2=4), SensorConfig(b1=1, b2=1)], ids=str)
+def test_lazy_pixels_whose_crossing_lies_past_a_brighter_interval_match_per_clock(config):
+    """Pixels that enter the lazy path in the dark (their crossing a whole ``Gamma(theta)`` away) and
+    leave it for light of about one threshold an interval: where the lazy level is below a threshold
+    (2^b1 = 2: its overflow bound) half of the crossings lie past the interval. Those pixels were
+    synced at the interval's start and their electrons drawn afresh: a spike in 76 % of the pixels
+    where the law gives 50 % (2^b1 = 2, the paper's threshold)."""
+    theta = config.threshold
+    pixels = 20000
+    probe = SceneSimulator(config, (1, 1), total_pixel_readouts=3 * pixels)
+    step = theta
+    assert probe.levels.mean_lazy < step <= probe.levels.mean_event * config.clocks_per_readout
+    scene = np.zeros((3, 1, pixels))
+    scene[1:] = step / 42000
+    fast = SceneSimulator(config, (1, pixels), rng=91, total_pixel_readouts=scene.size)
+    full = SceneSimulator(config, (1, pixels), rng=92, method="per-clock")
+    for k in range(3):
+        a, b = fast.readout(scene[k]), full.readout(scene[k])
+        da, db = (decode_spikes(w, config).astype(float) for w in (a, b))
+        ca, cb = (np.asarray(s.acc, float) for s in (fast, full))
+        for x, y in ((da, db), (ca, cb), (a > 0, b > 0)):
+            se = np.sqrt(x.var() / pixels + y.var() / pixels)
+            assert abs(x.mean() - y.mean()) <= 4.5 * se + 1e-12, (k, x.mean(), y.mean())
+        assert 0.5 * np.abs(_histogram(a, config) - _histogram(b, config)).sum() < 0.03
+    assert fast.path_counts["lazy"] > pixels
+
+
+@pytest.mark.parametrize("mode", ["te", "ml", "ml-msb"])
 def test_cross_out_arithmetic_on_given_random_numbers(mode, monkeypatch):
     """The arithmetic of a lazy pixel crossing out, on given random numbers: the crossing's spike,
     then the electrons after it (``expected - remaining``, here its floor) in further spikes and
     the charge left; TE, an overflow's clock from the ``(2^b1 - 1) theta``-th electron after the
     crossing at light-time ``remaining + (expected - remaining) B``; a pixel whose crossing is
-    past the interval, or whose light is above event light, is left to the sync."""
+    past the interval has no spike (msb: its counter's remainder read out) and its charge drawn at
+    the interval's end; one whose light is above event light is left to the sync."""
     from tespike.golden.fastsim import lazy
 
     class Given:                                   # a generator that returns chosen numbers
@@ -1138,6 +1167,10 @@ def test_cross_out_arithmetic_on_given_random_numbers(mode, monkeypatch):
         def beta(self, a, b):
             self.calls.append((int(a), list(b)))
             return np.full(np.shape(b), 0.5)
+
+        def binomial(self, n, p):
+            self.calls.append(("binomial", list(n), list(p)))
+            return np.full(np.shape(n), 7)
 
     monkeypatch.setattr(lazy, "poisson_draws", lambda rng, mean: np.floor(mean).astype(np.int64))
     config = SensorConfig.preset(mode)
@@ -1151,19 +1184,30 @@ def test_cross_out_arithmetic_on_given_random_numbers(mode, monkeypatch):
     assert expected[1] < top and remaining[4] > expected[4]
     sim.lazy.mask[:] = True
     sim.lazy.remaining[:] = remaining
+    sim.lazy.span[:] = 2.5 * theta
     sim.carried[:] = [0, 10, 20, 5, 30, 40]
+    sim.sfc[4] = 5 if config.is_msb else 0                # a remainder left in the msb counter
     sim.rng = Given()
     words = np.zeros(6, np.int64)
     left, settled = lazy.cross_out(sim, np.arange(6), expected, np.zeros(6, np.int64), words)
-    assert list(settled) == [0, 1, 2, 3] and list(left) == [4, 5]
+    assert list(settled) == [0, 1, 2, 3, 4] and list(left) == [5]
     after = np.floor(expected[:4] - remaining[:4]).astype(np.int64)
     spikes = 1 + after // theta
-    assert np.array_equal(sim.carried, np.concatenate([after % theta, [30, 40]]))
+    assert np.array_equal(sim.carried, np.concatenate([after % theta, [30 + 7, 40]]))
+    # the quiet pixel's charge: n - 1 electrons before its crossing, the share of its span passed at the end
+    quiet = ("binomial", [theta - 30 - 1], [pytest.approx((2.5 - (2.3 - 2.1)) / 2.5)])
+    assert sim.rng.calls[0] == quiet and not sim.lazy.mask[4] and sim.lazy.mask[5]
+    if config.is_msb:
+        count = np.minimum(np.append(spikes, 5), config.ml_max)
+        assert np.array_equal(words[:5], sim.tables.msb_word[count]) and words[4] > 0
+        assert np.array_equal(sim.sfc[:5], sim.tables.msb_rest[count]) and sim.rng.calls == [quiet]
+        return
     if mode == "ml":
-        assert np.array_equal(words[:4], np.minimum(spikes, config.ml_max)) and sim.rng.calls == []
+        assert np.array_equal(words[:5], np.append(np.minimum(spikes, config.ml_max), 0))
+        assert sim.rng.calls == [quiet]
         return
     need = (config.p_max - 1) * theta
     assert list(spikes >= config.p_max) == [False, True, False, True] and spikes[3] == config.p_max
-    assert sim.rng.calls == [(need, [after[1] - need + 1, 1])]
+    assert sim.rng.calls == [quiet, (need, [after[1] - need + 1, 1])]
     ticks = [int((remaining[i] + (expected[i] - remaining[i]) * 0.5) / expected[i] * L) // F + 1 for i in (1, 3)]
     assert list(words) == [spikes[0], (1 << config.d) | ticks[0], spikes[2], (1 << config.d) | ticks[1], 0, 0]

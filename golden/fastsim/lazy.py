@@ -116,33 +116,51 @@ def lazy_path(sim, expected, dark, words):
 
 
 def cross_out(sim, leave, expected, dark, words):
-    """Lazy pixels ``leave`` that leave the path for brighter light, where their next
-    crossing falls in this interval (``remaining <= expected``) and the interval is event
-    light (at most ``mean_event`` a clock, no dark electrons): the crossing at light-time
-    ``remaining`` is a spike and restarts the charge from 0; the electrons after it are
-    ``Poisson(expected - remaining)``, a Poisson process independent of the past, which the
-    event path's arithmetic turns into spikes, the charge left and, TE, the clock of an
-    overflow (the ``(2^b1 - 1) theta``-th of them, an order statistic of uniform
-    light-times after the crossing). No charge is drawn, as :func:`sync` would
-    (a Binomial, about 110 ns a pixel). -> (the pixels left to :func:`sync`, those settled)."""
+    """Lazy pixels ``leave`` that leave the path for brighter event light (at most ``mean_event``
+    a clock, no dark electrons), settled here by where their next crossing falls, which the
+    path already holds:
+
+    * in this interval (``remaining <= expected``): the crossing at light-time ``remaining``
+      is a spike and restarts the charge from 0; the electrons after it are
+      ``Poisson(expected - remaining)``, a Poisson process independent of the past, which the
+      event path's arithmetic turns into spikes, the charge left and, TE, the clock of an
+      overflow (the ``(2^b1 - 1) theta``-th of them, an order statistic of uniform
+      light-times after the crossing). No charge is drawn, as :func:`sync` would (a
+      Binomial, about 110 ns a pixel);
+    * past it (where the lazy level is below a threshold, e.g. 2^b1 = 2): no spike, and the
+      charge is drawn at the interval's end (:func:`sync` after ``expected`` has passed).
+      Drawn at its start, the crossing known to lie past the interval would be forgotten
+      and the interval's electrons drawn afresh (spikes where there are none).
+
+    -> (the pixels left to :func:`sync` at the interval's start, those settled)."""
     c = sim.config
     theta, L = c.threshold, c.clocks_per_readout
     at = sim.lazy.remaining[leave]
     mean = expected[leave]
-    out = (at <= mean) & (mean <= sim.levels.mean_event * L)
+    event = mean <= sim.levels.mean_event * L
     if sim.dark_model:
-        out &= dark[leave] == 0
-    if not out.any():
+        event &= dark[leave] == 0
+    if not event.any():
         return leave, NO_PIXELS
+    out = event & (at <= mean)
+    quiet = leave[event & ~out]
     settled = leave[out]
+    if quiet.size:                                      # no crossing in the interval
+        sim.lazy.remaining[quiet] -= expected[quiet]
+        sync(sim, quiet)
+        if c.is_msb:
+            ml_words(sim, quiet, 0, words)
+    if not settled.size:
+        return leave[~event], quiet
     at, mean = at[out], mean[out]
     after = poisson_draws(sim.rng, mean - at)           # electrons after the crossing electron
     fired = after // theta
     sim.carried[settled] = after - fired * theta
     spikes = fired + 1
+    done = np.concatenate([settled, quiet]) if quiet.size else settled
     if not c.is_te:
         ml_words(sim, settled, spikes, words)
-        return leave[~out], settled
+        return leave[~event], done
     over = np.flatnonzero(spikes >= c.p_max)
     if over.size:
         n = (c.p_max - 1) * theta                      # electrons after the crossing to spike 2^b1
@@ -151,7 +169,7 @@ def cross_out(sim, leave, expected, dark, words):
         clock = np.minimum((light_time / mean[over] * L).astype(np.int64), L - 1)
         spikes[over] = overflow_clock_word(c, clock)
     words[settled] = spikes
-    return leave[~out], settled
+    return leave[~event], done
 
 
 def sync(sim, sel):
