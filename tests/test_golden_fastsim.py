@@ -619,6 +619,28 @@ def test_walk_equals_the_cycle_exact_model_word_for_word(config, phases, monkeyp
     assert (words[~settled] == -1).all()                  # the others are left untouched
 
 
+def test_walk_goes_on_past_max_phases_where_the_model_would_cost_more(monkeypatch):
+    """At 61440 clocks a pixel at one threshold a clock alternates queue and firing tens of times: it
+    was left to the cycle-exact model after MAX_PHASES phases (at 7.9 million clocks, a minute a
+    pixel-readout against 6 s walked). The walk goes on while its phases cost less than the model's
+    steps would (``clock.walk_on``), and gives the model's words and charges; at 240 clocks it stops
+    at MAX_PHASES as before."""
+    config = SensorConfig(mode="te", clocks_per_tick=4096, threshold=100, acc_bits=8)
+    L, n = config.clocks_per_readout, 1
+    phases = []
+    walk_on = clock.walk_on
+    monkeypatch.setattr(clock, "walk_on", lambda phase, *rest: phases.append(phase) or walk_on(phase, *rest))
+    e = np.random.default_rng(0).poisson(99.0, (L, n)).astype(np.int64)
+    sim = SceneSimulator(config, (1, n), rng=0)
+    words = np.full(n, -1, np.int64)
+    settled = clock.walk_clocks(sim, np.arange(n), e, words)
+    array = PixelArrayModel(config, (1, n))
+    exact = array.feed(e.reshape(L, 1, n))[0, 0]
+    assert settled.all() and max(phases) > clock.MAX_PHASES
+    assert np.array_equal(words, exact) and np.array_equal(sim.carried, array.state.acc[0])
+    assert not clock.walk_on(clock.MAX_PHASES, 1, 240) and clock.walk_on(clock.MAX_PHASES - 1, 10 ** 6, 240)
+
+
 @pytest.mark.parametrize("config", EDGE_CONFIGS + MSB_EDGE_CONFIGS, ids=str)
 def test_head_state_equals_the_cycle_exact_model(config):
     """The head's first clocks (``tespike.golden.fastsim.head.run_head``: the walk, the

@@ -38,9 +38,28 @@ CLOCK_CHUNK_ELEMENTS = 1 << 21
 #: cycle-exact model's five per clock, whose Python cost dominates for few pixels.
 WALK_PIXELS = 512
 
-#: Phases (queue, firing, queue, ...) :func:`walk_clocks` walks before it leaves a
-#: pixel to the cycle-exact model.
+#: Phases (queue, firing, queue, ...) :func:`walk_clocks` walks before it may leave a
+#: pixel to the cycle-exact model (:func:`walk_on`).
 MAX_PHASES = 16
+
+#: The costs :func:`walk_on` weighs, measured here (one walk phase and the cycle-exact model on the
+#: same electrons, 1 to 64 pixels, L = 240 and 61440): a phase's fixed cost, its cost per
+#: (clock, pixel), and the model's per clock (its Python steps, few pixels).
+WALK_PHASE_SECONDS = 70e-6
+WALK_ELEMENT_SECONDS = 60e-9
+MODEL_CLOCK_SECONDS = 4e-6
+
+
+def walk_on(phase: int, pixels: int, clocks: int) -> bool:
+    """Whether :func:`walk` takes another phase (the ``phase``-th, from 0) for its ``pixels`` still
+    walking over ``clocks`` clocks: always within MAX_PHASES; past them while the phases so far and
+    this one cost less than the cycle-exact model, which walks every clock again from the start
+    (at 240 clocks never; at millions of clocks near one threshold a clock, where a pixel alternates
+    queue and firing many more times, a few pixels walk on for tens of phases instead of minutes of
+    the model's steps). Both are exact on the same electrons: only the time changes."""
+    if phase < MAX_PHASES:
+        return True
+    return (phase + 1) * (WALK_PHASE_SECONDS + pixels * clocks * WALK_ELEMENT_SECONDS) < clocks * MODEL_CLOCK_SECONDS
 
 
 def clock_path(sim, sel, expected, dark, words):
@@ -196,8 +215,8 @@ def walk(c, acc0, e, need=None):
       starts from it.
 
     Nothing is drawn or bounded: each phase is checked on the electrons themselves.
-    Pixels still walking after MAX_PHASES phases are left to the cycle-exact model on
-    the same electrons. -> (settled mask, spikes, end charge, TE: the 0-based clock of
+    Pixels still walking when :func:`walk_on` says the model is cheaper are left to the
+    cycle-exact model on the same electrons. -> (settled mask, spikes, end charge, TE: the 0-based clock of
     spike ``need`` (per pixel; default 2^b1) or ``clocks`` where it did not fire), the
     last three valid where settled."""
     theta, top = c.threshold, c.acc_max
@@ -210,9 +229,8 @@ def walk(c, acc0, e, need=None):
     settled = np.zeros(n, bool)
     need = np.full(n, c.p_max, np.int64) if need is None else np.asarray(need, np.int64)
     active = np.arange(n)
-    for phase in range(MAX_PHASES):
-        if not active.size:
-            break
+    phase = 0
+    while active.size and walk_on(phase, active.size, L):
         s0, a, before = done_clocks[active], charge[active], spikes[active]
         ea = e[:, active]
         later = clocks >= s0                            # the clocks still to walk
@@ -255,6 +273,7 @@ def walk(c, acc0, e, need=None):
         finished = active[~stops | (last == L - 1)]
         settled[finished] = True
         active = active[stops & (last < L - 1)]
+        phase += 1
     return settled, spikes, charge, at
 
 
