@@ -152,24 +152,39 @@ def _add_common_arguments(command: argparse.ArgumentParser, progress: bool) -> N
 
 
 def _raise_terminated(signum, frame):
+    from tespike.golden.atomic import note_stop
+    note_stop(signum)
     raise Terminated(signum)
 
 
+def _raise_interrupted(signum, frame):
+    from tespike.golden.atomic import note_stop
+    note_stop(signum)
+    raise KeyboardInterrupt
+
+
 def _install_signal_handlers() -> dict:
-    """SIGTERM / SIGHUP raise :class:`Terminated` (if nobody else handles them); returns
-    the previous handlers for :func:`_restore_signal_handlers`."""
+    """SIGTERM / SIGHUP raise :class:`Terminated`, Ctrl-C KeyboardInterrupt as Python's own handler
+    does (if nobody else handles them), each recorded (:func:`tespike.golden.atomic.note_stop`: one
+    that Python drops in a finalizer is raised again before an output is renamed into place and when
+    the command returns); returns the previous handlers for :func:`_restore_signal_handlers`."""
     import signal
     import threading
+    from tespike.golden.atomic import forget_stops
+    forget_stops()
     previous = {}
     if threading.current_thread() is not threading.main_thread():
         return previous
-    for name in CLEANUP_SIGNALS:
+    for name in ("SIGINT", *CLEANUP_SIGNALS):
         number = getattr(signal, name, None)
         if number is None:
             continue
         handler = signal.getsignal(number)
+        if number == signal.SIGINT:
+            if handler is signal.default_int_handler:
+                previous[number] = signal.signal(number, _raise_interrupted)
         # (the entry point's own, tespike.entry, holds the signals while numpy loads)
-        if handler in (signal.SIG_DFL, None) or getattr(handler, "tespike_early", False):
+        elif handler in (signal.SIG_DFL, None) or getattr(handler, "tespike_early", False):
             previous[number] = signal.signal(number, _raise_terminated)
     return previous
 
@@ -260,6 +275,8 @@ def main(argv: list[str] | None = None) -> int:
                                                     whole_process and _end_quietly()))
     finally:              # main() called in-process (tests) leaves the caller's handlers as they were
         _restore_signal_handlers(previous)
+        from tespike.golden.atomic import forget_stops
+        forget_stops()    # (and no stop recorded: the caller's own stops are not the command's)
         if whole_process:
             _end_quietly()
     if ok:            # only a run that succeeded shows its warnings; a refusal stays one line
@@ -295,12 +312,13 @@ def _run(args, prepare=lambda: None, ended=lambda: None) -> tuple[int, bool]:
     """Run a sub-command after ``prepare``; return (exit code, whether it ended normally). ``ended``
     runs once the command has returned (the caller's signal handlers back: a stop after it ends
     the process as the system does, never with a traceback from outside this function)."""
-    from tespike.golden.atomic import finished_outputs
+    from tespike.golden.atomic import finished_outputs, raise_lost_stop
     prefix = f"tespike {args.command}"
     start = len(finished_outputs())
     try:
         prepare()
         code = int(args.run(args) or 0)
+        raise_lost_stop()                 # (a stop Python dropped in a finalizer: the command did not end well)
         ended()
         return code, True
     except TespikeError as exc:

@@ -389,15 +389,54 @@ def outputs_together(*paths):
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
+#: Stops (signal numbers) the command's handlers turned into exceptions (:func:`note_stop`). Python
+#: prints and drops an exception raised inside a finalizer (a ``__del__``, a weakref callback), and
+#: the command would go on to rename its outputs into place and end as if never stopped.
+_stops_raised: list[int] = []
+
+
+def note_stop(signum: int) -> None:
+    """Record that a handler is raising the stop ``signum`` (the command's handlers call it)."""
+    _stops_raised.append(signum)
+
+
+def forget_stops() -> None:
+    """A command starts with no stop recorded (several may run in one process, e.g. tests)."""
+    _stops_raised.clear()
+
+
+def lost_stop() -> int | None:
+    """The signal number of a stop a handler raised that is not being handled now, so was dropped
+    on the way (in a finalizer), or None. A stop being handled (a checkpoint saved before it goes
+    on) is not lost."""
+    if not _stops_raised:
+        return None
+    handling = sys.exception()
+    if handling is not None and not isinstance(handling, Exception):
+        return None
+    return _stops_raised[-1]
+
+
+def raise_lost_stop() -> None:
+    """Raise a lost stop (:func:`lost_stop`) again through its handler, where one was recorded."""
+    number = lost_stop()
+    if number is not None and threading.current_thread() is threading.main_thread():
+        handler = signal.getsignal(number)
+        if callable(handler):
+            handler(number, None)
+
+
 @contextlib.contextmanager
 def stops_held():
     """Ctrl-C, SIGTERM and SIGHUP held while an output is renamed into place and recorded as
     written, then raised again through the handlers they would have met: a command stopped there
     reports the output as written (:func:`finished_outputs`), never a replaced file it does not
-    name. Only the main thread can change the handlers (elsewhere nothing is held)."""
+    name. A stop dropped earlier (:func:`lost_stop`) is raised first: nothing is renamed. Only the
+    main thread can change the handlers (elsewhere nothing is held)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    raise_lost_stop()
     held, previous = [], {}
     for number in STOP_SIGNALS:
         if signal.getsignal(number) not in (signal.SIG_IGN, None):

@@ -35,6 +35,50 @@ def tiny_scene(folder: Path, frames: int = 10) -> Path:
     return path
 
 
+# ------------------------------------------------------------------ a stop is never lost
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("when", ["before its output", "after its output"])
+def test_a_stop_python_drops_in_a_finalizer_still_ends_the_command(capsys, tmp_path, monkeypatch, stop, when):
+    """A stop whose exception is raised inside a finalizer (a ``__del__``, a weakref callback: Amaranth's
+    and torch's run all the time) is printed and dropped by Python: ``demo`` went on, replaced the
+    previous folder and exited 0. The command's handlers record each stop; one dropped is raised again
+    before an output is renamed into place (nothing written) and when the command returns (its exit
+    status and line say it was stopped)."""
+    import signal
+
+    from tespike.golden import io
+    number = getattr(signal, stop)
+
+    class Finalized:
+        def __del__(self):
+            signal.raise_signal(number)                # the handler raises here: Python drops it
+
+    save = io.save_stream
+
+    def saving(*args, **kwargs):
+        if when == "before its output":
+            Finalized()                                # made and finalized at once
+        save(*args, **kwargs)
+        if when == "after its output":
+            Finalized()
+    monkeypatch.setattr(io, "save_stream", saving)
+    dropped = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda unraisable: dropped.append(unraisable.exc_type.__name__))
+    scene = tiny_scene(tmp_path)
+    result = run_here(capsys, "simulate", "--config", "te", "--scene", scene, "--out", tmp_path / "s.npz",
+                      "--seed", 1, "--quiet")
+    assert dropped == ["KeyboardInterrupt" if stop == "SIGINT" else "Terminated"]   # (what Python drops)
+    line = result.stderr.strip().splitlines()[-1]
+    if stop == "SIGINT":
+        assert result.returncode == 130 and line.startswith("tespike simulate: interrupted"), result.stderr
+    else:
+        assert result.returncode == 128 + number and line.startswith("tespike simulate: terminated by SIGTERM")
+    assert (tmp_path / "s.npz").exists() == (when == "after its output")
+    monkeypatch.setattr(io, "save_stream", save)
+    assert run_here(capsys, "simulate", "--config", "te", "--scene", scene, "--out", tmp_path / "t.npz",
+                    "--seed", 1, "--quiet").returncode == 0            # (the next command starts afresh)
+
+
 # ------------------------------------------------------------------ a results folder is one run's
 def test_evaluate_refuses_a_previous_runs_folder_without_force_and_never_a_foreign_one(capsys, tmp_path):
     scene = tiny_scene(tmp_path)
@@ -293,6 +337,10 @@ def test_a_weights_file_with_bytes_after_its_end_is_refused(tmp_path):
     joined.write_bytes(weights_path(load_config("te"), "net").read_bytes() + b"\n")
     with pytest.raises(InputError, match=r"weights '.*w\.pt' is not a tespike weights file \(a damaged archive: "
                                          r"1 bytes follow the archive's end\)"):
+        read_weights(joined)
+    shipped = weights_path(load_config("te"), "net").read_bytes()
+    joined.write_bytes(shipped + shipped)                 # (torch read it as the second copy)
+    with pytest.raises(InputError, match=rf"{len(shipped)} bytes come before the archive"):
         read_weights(joined)
 
 
