@@ -332,27 +332,51 @@ def _check_member_sizes(path: str | Path) -> None:
                                  f"{shape} array")
 
 
-#: A zip archive's end record: its signature, and its size without the comment that may follow it.
+#: A zip archive's end record: its signature, and its size without the comment that may follow it;
+#: the zip64 end record's signature and size, and its locator's (just before the end record).
 _END_SIGNATURE, _END_SIZE = b"PK\x05\x06", 22
+_ZIP64_SIGNATURE, _ZIP64_RECORD = b"PK\x06\x06", 56
+_ZIP64_LOCATOR_SIGNATURE, _ZIP64_LOCATOR = b"PK\x06\x07", 20
 
 
 def check_archive_end(path: str | Path) -> None:
-    """Refuse (ValueError) an archive whose end-of-directory record, with the comment it declares, does
-    not end the file. The record is the one :mod:`zipfile` reads: the file's last 22 bytes where they
-    are one without a comment, else the last signature in the final 64 KiB; an archive without one is
-    left to :mod:`zipfile`, whose message says so."""
+    """Refuse (ValueError) an archive that is not the whole file: bytes after its end-of-directory
+    record (with the comment it declares), or before its first member (the directory's offset, plus
+    the zip64 records where they are, falls short of the record's place: a second archive joined to a
+    first is read as the second alone). The record is the one :mod:`zipfile` reads: the file's last 22
+    bytes where they are one without a comment, else the last signature in the final 64 KiB; an
+    archive without one is left to :mod:`zipfile`, whose message says so."""
     with open(path, "rb") as file:
         size = file.seek(0, os.SEEK_END)
-        file.seek(max(0, size - (_END_SIZE + 0xFFFF)))
+        start = max(0, size - (_END_SIZE + 0xFFFF))
+        file.seek(start)
         tail = file.read()
-    if tail[-_END_SIZE:][:4] == _END_SIGNATURE and tail[-2:] == b"\0\0":
-        return
-    at = tail.rfind(_END_SIGNATURE)
-    if at < 0 or at + _END_SIZE > len(tail):
-        return
-    extra = len(tail) - (at + _END_SIZE + int.from_bytes(tail[at + 20:at + 22], "little"))
-    if extra > 0:
-        raise ValueError(f"{extra} bytes follow the archive's end")
+        if tail[-_END_SIZE:][:4] == _END_SIGNATURE and tail[-2:] == b"\0\0":
+            at = len(tail) - _END_SIZE
+        else:
+            at = tail.rfind(_END_SIGNATURE)
+            if at < 0 or at + _END_SIZE > len(tail):
+                return
+            extra = len(tail) - (at + _END_SIZE + int.from_bytes(tail[at + 20:at + 22], "little"))
+            if extra > 0:
+                raise ValueError(f"{extra} bytes follow the archive's end")
+        record = start + at                                 # the end record's place in the file
+        directory_size, directory_at = (int.from_bytes(tail[at + k:at + k + 4], "little") for k in (12, 16))
+        if directory_at == 0xFFFFFFFF or directory_size == 0xFFFFFFFF:   # zip64: its record before the locator
+            record -= _ZIP64_LOCATOR + _ZIP64_RECORD
+            if record < 0:
+                return
+            file.seek(record)
+            zip64 = file.read(_ZIP64_RECORD)
+            if zip64[:4] != _ZIP64_SIGNATURE:
+                return
+            directory_size, directory_at = (int.from_bytes(zip64[k:k + 8], "little") for k in (40, 48))
+        elif tail[max(0, at - _ZIP64_LOCATOR):at][:4] == _ZIP64_LOCATOR_SIGNATURE and \
+                record >= _ZIP64_LOCATOR + _ZIP64_RECORD:          # zip64 records a writer always adds (torch)
+            record -= _ZIP64_LOCATOR + _ZIP64_RECORD
+    before = record - directory_size - directory_at
+    if before > 0:
+        raise ValueError(f"{before} bytes come before the archive (two archives joined?)")
 
 
 def _refuse_starved(exc: BaseException, what: str, path) -> None:

@@ -140,8 +140,8 @@ def test_a_member_with_bytes_after_its_array_or_a_name_stored_twice_is_refused(t
 
 def test_bytes_after_an_archives_end_are_refused(tmp_path):
     """zip readers find an archive's end record near the end and ignore what follows it (two files
-    joined, a copy that overran): the archive was read as if whole. A comment the record declares is
-    the archive's own."""
+    joined, a copy that overran), or read a second archive joined to a first as the second alone: the
+    archive was read as if whole. A comment the record declares is the archive's own."""
     import zipfile
 
     from tespike.golden.io import load_stream
@@ -152,6 +152,11 @@ def test_bytes_after_an_archives_end_are_refused(tmp_path):
     with pytest.raises(InputError, match=r"stream file '.*joined\.npz' is not a readable .npz archive: "
                                          r"100 bytes follow the archive's end"):
         load_stream(tmp_path / "joined.npz")
+    np.savez(tmp_path / "t.npz", words=words[:1], config=SensorConfig().to_json())
+    (tmp_path / "two.npz").write_bytes(whole + (tmp_path / "t.npz").read_bytes())
+    with pytest.raises(InputError, match=rf"'.*two\.npz' is not a readable .npz archive: {len(whole)} bytes come "
+                                         r"before the archive \(two archives joined\?\)"):
+        load_stream(tmp_path / "two.npz")                    # (zip readers read the second alone)
     with zipfile.ZipFile(tmp_path / "s.npz", "a") as archive:
         archive.comment = b"made by hand"
     assert np.array_equal(load_stream(tmp_path / "s.npz")[0], words)
