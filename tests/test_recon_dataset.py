@@ -329,7 +329,15 @@ STORE_DAMAGE = {
     "the light removed": (lambda s: shutil.rmtree(s / "sun/light"), "its array light is missing"),
     "a stream never finished": (lambda s: _tamper(s / "sun/streams/te/zarr.json", lambda d, a: a.update(complete=False)),
                                 "its array streams/te was never finished"),
+    # JSON, but not metadata Zarr reads (a flipped byte renames a key): Zarr's TypeError was a traceback
+    "a sequence's key renamed": (lambda s: _rename_key(s / "sun/zarr.json", "attributes"), "sun/zarr.json' is damaged"),
+    "an array's codec key renamed": (lambda s: _rename_key(s / "sun/light/zarr.json", "endian"),
+                                     "light/zarr.json' is damaged"),
 }
+
+
+def _rename_key(path, key):
+    path.write_text(path.read_text().replace(f'"{key}"', f'"{key[:-1]}x"', 1))
 
 
 @pytest.fixture(scope="module")
@@ -358,6 +366,26 @@ def test_evaluate_store_refuses_a_store_whose_metadata_or_chunks_were_altered(tm
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and words in err, err
     assert not (tmp_path / "E").exists()
+
+
+@pytest.mark.parametrize("damage", ["cut", "a key renamed"])
+def test_resume_rebuilds_a_sequence_whose_metadata_is_damaged(tmp_path, capsys, small_store, damage):
+    """A sequence's zarr.json cut short or with a key renamed: the resume died in Zarr's JSONDecodeError
+    or TypeError (a traceback); it now makes the sequence anew, as for a damaged chunk, and says so."""
+    import shutil
+    store = tmp_path / "D.zarr"
+    shutil.copytree(small_store, store)
+    meta = store / "sun" / "zarr.json"
+    if damage == "cut":
+        meta.write_bytes(meta.read_bytes()[:96])
+    else:
+        _rename_key(meta, "attributes")
+    capsys.readouterr()
+    assert main(["dataset", "--scene", "sun", "--frames", "4", "--height", "16", "--width", "16",
+                 "--config", "te", "--config", "ml-msb", "--out", str(store)]) == 0
+    out = capsys.readouterr().out
+    assert f"{str(meta)!r} is damaged" in out and "rebuilt where damaged" in out, out
+    assert compare_stores(small_store, store) == []
 
 
 def test_resume_rebuilds_an_array_whose_chunk_file_was_deleted(tmp_path, capsys, small_store):
@@ -500,3 +528,13 @@ def test_a_sequence_named_as_zarrs_metadata_file_is_refused(tmp_path, capsys, rn
     root = hdr_folder(tmp_path / "hdr", rng, sequences=(("zarr.json", 2, 12, 12),))
     code, _, err = run_here(capsys, "dataset", "--hdr", root, "--config", "te", "--out", tmp_path / "o.zarr")
     assert code == 2 and "'zarr.json' is reserved" in err and not (tmp_path / "o.zarr").exists()
+
+
+@pytest.mark.parametrize("inside", ["D.zarr", "seq/D.zarr"])
+def test_a_store_inside_an_hdr_folder_is_refused(tmp_path, capsys, rng, inside):
+    """``--out HD/D.zarr`` was built once; the next run read the store as a sequence folder without
+    frames, so the same command (the documented resume) was refused for ever."""
+    root = hdr_folder(tmp_path / "hdr", rng, sequences=(("seq", 2, 12, 12),))
+    code, _, err = run_here(capsys, "dataset", "--hdr", root, "--config", "te", "--out", root / inside)
+    assert code == 2 and len(err.splitlines()) == 1 and f"lies inside --hdr {str(root)!r}" in err, err
+    assert not (root / inside).exists()

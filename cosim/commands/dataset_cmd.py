@@ -84,6 +84,12 @@ def run(args) -> int:
     if "://" not in args.out:          # a local store: its folder can be checked before any work
         from tespike.golden.paths import check_output_dir
         check_output_dir(args.out, "--out")
+        import os
+        store = os.path.realpath(args.out)
+        for folder in args.hdr:        # the next run would read the store as one of its sequences
+            if os.path.commonpath([store, os.path.realpath(folder)]) == os.path.realpath(folder):
+                raise InputError(f"--out {args.out!r} lies inside --hdr {folder!r}, whose sub-folders are read "
+                                 "as sequences: a resume would read the store as one; put it elsewhere")
     # options of one kind of source, given without it, would be dropped: refused
     if args.grayscale is not None and not args.hdr:
         raise InputError("--grayscale weighs the colours of --hdr frames; built-in scenes are grey already "

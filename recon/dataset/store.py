@@ -38,6 +38,8 @@ import contextlib
 import hashlib
 import json
 import re
+import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -126,7 +128,8 @@ def _zarr_open_group(url: str, mode: str, missing_ok: bool = False):
                                                      "target that is gone)" if dangling else "does not exist")
                          ) from None
     except (ValueError, TypeError, KeyError) as exc:      # not a Zarr v3 group, bad JSON
-        raise InputError(f"{url!r} is not a readable Zarr store: {one_line(exc, 200)}") from None
+        where = f" (its {str(Path(url, 'zarr.json'))!r})" if "://" not in url else ""
+        raise InputError(f"{url!r} is not a readable Zarr store{where}: {one_line(exc, 200)}") from None
     except RecursionError:                                # JSON nested too deeply for the parser
         raise InputError(f"{url!r} is not a readable Zarr store: its zarr.json is nested too deeply "
                          "to read as JSON") from None
@@ -222,6 +225,7 @@ class DatasetStore:
         check_name(name, "sequence")
         K, H, W = (int(n) for n in shape)
         info = {"source": source, "frames": K, "height": H, "width": W, **({"digest": digest} if digest else {})}
+        self._rebuild_if_unreadable(name)
         if name in self.group:
             group = self.group[name]
             old = group.attrs.asdict()
@@ -286,6 +290,24 @@ class DatasetStore:
         return done
 
     # -- reading --------------------------------------------------------------
+    def _rebuild_if_unreadable(self, name: str) -> None:
+        """A sequence whose group metadata Zarr cannot read (its ``zarr.json`` cut short, not JSON, or
+        a key of it renamed by a flipped byte) is removed, to be made anew like a damaged chunk's
+        array; where the store is not a local folder, one line names the cause."""
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                if name in self.group:
+                    self.group[name].attrs.asdict()
+            return
+        except _DAMAGE as exc:
+            where = damaged_file(self.url, name)
+            if where is None:
+                raise InputError(f"sequence {name!r} of dataset store {self.url!r} cannot be read "
+                                 f"({one_line(exc, 160)})") from None
+        self.rebuilt.setdefault(name, []).append(f"{where!r} is damaged")
+        shutil.rmtree(Path(self.url, name))
+
     def sequences(self, *, complete: bool = True) -> list[str]:
         """Sequence names, sorted; only complete ones unless ``complete=False``. A local store's
         folder holding a sequence's arrays but no ``zarr.json`` is refused (Zarr skipped it with a
@@ -434,6 +456,7 @@ def damaged_file(url: str, path: str = "") -> str | None:
     root = Path(url)
     if not root.is_dir():
         return None
+    import zarr
     parts = [part for part in path.split("/") if part]
     for depth in range(len(parts) + 1):
         meta = root.joinpath(*parts[:depth], "zarr.json")
@@ -443,10 +466,14 @@ def damaged_file(url: str, path: str = "") -> str | None:
             continue
         except (OSError, ValueError, RecursionError):     # (nested too deeply for the parser)
             return str(meta)
+        try:                                              # JSON, but not metadata Zarr reads (a key renamed)
+            zarr.open(str(root), path="/".join(parts[:depth]), mode="r")
+        except FileNotFoundError:
+            continue
+        except _DAMAGE:
+            return str(meta)
     try:
         import itertools
-
-        import zarr
         array = zarr.open_array(str(root), path=path, mode="r")
         for index in itertools.product(*(range(n) for n in array.cdata_shape)):
             try:
