@@ -183,10 +183,13 @@ def read_checkpoint(path: Path) -> tuple[dict, "TrainOptions"]:
                          f"({one_line(exc, 300)})") from None
 
 
-def trim_log(path: Path, step: int) -> None:
+def trim_log(path: Path, step: int, every_step: bool = False) -> None:
     """Drop the rows of CSV log ``path`` after ``step`` (written by a run killed after its last
     checkpoint, which a resumed run writes again); a missing log is left missing, a log without
-    its header or with a row cut short is refused (the rows appended next would be unreadable)."""
+    its header, with a row cut short or a value that is not a number is refused (the rows appended
+    next would be unreadable, the curves drawn at the run's end would fail), and so is one whose
+    rows, ``every_step`` (a row a step, from wherever the log began), stop short of ``step`` or
+    skip one (cut at a row's end)."""
     if not path.is_file():
         return
     try:
@@ -196,9 +199,15 @@ def trim_log(path: Path, step: int) -> None:
         header_cut = len(rows) == 1 and not text.endswith("\n")
         if not rows or rows[0][:1] != ["step"] or header_cut or any(len(row) != len(rows[0]) for row in rows):
             raise ValueError("no header, or a row cut short")    # new rows would follow none, or a stub
+        for row in rows[1:]:
+            int(row[0]), [float(value) for value in row[1:]]     # (a flipped byte: not a number)
         kept = rows[:1] + [row for row in rows[1:] if int(row[0]) <= step]
     except (ValueError, IndexError, csv.Error, UnicodeDecodeError):
         raise InputError(f"run log {str(path)!r} is damaged: move it away to resume") from None
+    steps = [int(row[0]) for row in kept[1:]]
+    if every_step and steps and steps != list(range(steps[0], step + 1)):
+        raise InputError(f"run log {str(path)!r} is damaged (its rows {'stop at step ' + str(steps[-1]) if steps[-1] < step else 'skip steps'}, "
+                         f"the checkpoint is at step {step}): move it away to resume")
     if len(kept) < len(rows) or not text.endswith("\n"):      # a row cut at its end: the next would join it
         with atomic_output(path) as tmp, open(tmp, "w", newline="") as handle:
             csv.writer(handle).writerows(kept)
@@ -461,8 +470,8 @@ class TrainingRun:
             raise InputError(f"checkpoint {str(checkpoint)!r} does not fit this run ({one_line(exc, 300)})") from None
         if self.best is not None:
             self.best_weights = read_weights(self.best_path, "the run's best weights")
-        for log in (self.log_path, self.validation_path):
-            trim_log(log, self.step)
+        trim_log(self.log_path, self.step, every_step=True)
+        trim_log(self.validation_path, self.step)
 
     def start_anew(self) -> None:
         """A new run: no file of an earlier one stays in the run folder; ``--init`` copied in."""

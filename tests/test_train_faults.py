@@ -81,15 +81,20 @@ def test_resume_does_not_repeat_the_killed_runs_rows(tmp_path):
     assert log_steps(log) == [1, 2, 3, 4]
 
 
-@pytest.mark.parametrize("cut", ["everything", "the header", "half a row", "the final newline"])
+@pytest.mark.parametrize("cut", ["everything", "the header", "half a row", "the final newline", "a whole row",
+                                 "a number's byte"])
 def test_a_cut_run_log_is_refused_or_mended_never_appended_to(tmp_path, cut):
     """A run log emptied or cut: new rows followed no header or joined a stub; a row whole but for
-    its newline is kept and the log rewritten."""
+    its newline is kept and the log rewritten. A log cut at a row's end resumed without that step's
+    row; one whose number lost a byte ('4t601e-05') trained on and failed drawing the curves at the
+    end, with a traceback, weights and checkpoint rewritten."""
     train(options(steps=2), tmp_path / "w.pt")
     log = tmp_path / "w.run" / "log.csv"
     text = log.read_text()
+    last = text.rstrip("\n").rsplit("\n", 1)
     log.write_text({"everything": "", "the header": text[:4], "half a row": text[:-12],
-                    "the final newline": text.rstrip()}[cut])
+                    "the final newline": text.rstrip(), "a whole row": last[0] + "\n",
+                    "a number's byte": last[0] + "\n" + last[1].replace(".", "t", 1) + "\n"}[cut])
     if cut == "the final newline":
         train(options(steps=3), tmp_path / "w.pt", resume=True)
         assert log_steps(log) == [1, 2, 3]
