@@ -465,7 +465,14 @@ def test_corrupt_stream_files(files, kind):
     (("simulate", "--config", "ml", "--config=te", "--scene", "i.npy", "--out", "o.npz"),
      ["--config", "more than once"]),
     (("scene", "--frames", "3", "--frames", "4"), ["--frames", "more than once"]),
+    (("simulate", "--config", "te", "--conf", "ml", "--scene", "i.npy", "--out", "o.npz"),   # (an abbreviation
+     ["--config / --conf", "more than once"]),                                               # argparse takes)
+    (("simulate", "--config", "te", "--scene", "i.npy", "--out", "a.npz", "--ou=b.npz"), ["--out / --ou", "more than once"]),
     (("scene", "--folder", "hdr", "--seed", "5"), ["--seed", "built-in scenes only"]),
+    (("reconstruct", "--method", "tfp", "--search", "stream"), ["--search", "'tfi' only"]),   # (tfi's default, dropped)
+    (("evaluate", "--repeats", "101"), ["--repeats 101", "1..100"]),
+    (("view", "--frames", "0,0,1", "--each"), ["frame 0", "more than once"]),      # (wrote 2 files, said 3)
+    (("view", "--frames", "0,1", "--columns", "3"), ["--columns 3", "at most 2"]),       # (was cut to 2)
     (("scene", "--grayscale", "rec709"), ["--grayscale", "--folder only"]),
     (("train", "--seed", "-1"), ["seed = -1", "0..2^63 - 1"]),
     (("train", "--seed", str(10 ** 23)), ["seed", "0..2^63 - 1"]),
@@ -475,7 +482,8 @@ def test_argument_errors_are_one_line(files, args, words):
     extra = {"reconstruct": ("--stream", files / "s.npz", "--out", files / "o.npy"),
              "train": ("--out", files / "W.pt", "--steps", 1, "--validate-every", 0),
              "scene": ("--out", files / "o.npy"), "verilog": ("--out", files / "o.v"),
-             "evaluate": ("--scene", files / "i.npy", "--out", files / "ev")}.get(args[0], ())
+             "evaluate": ("--scene", files / "i.npy", "--out", files / "ev"),
+             "view": ("--input", files / "s.npz", "--out", files / "v.png")}.get(args[0], ())
     result = refused_without_change(files, (*args, *extra), *words)
     assert "usage:" not in result.stderr
 
