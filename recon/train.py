@@ -416,6 +416,9 @@ def _train(options: TrainOptions, out: Path, work: Path, resume: bool, progress:
     else:
         run.start_anew()
     run.steps(sys.stderr.isatty() if progress is None else progress)
+    if run.step == 0:                  # (--minutes 1e-300 wrote the untrained weights as a result)
+        raise InputError(f"--minutes {options.minutes:g} ran out before the first step: nothing trained, "
+                         "nothing written")
     run.write_weights()                # the result first: a run folder lost now loses no weights
     run.save_checkpoint()
     return out
@@ -455,8 +458,12 @@ class TrainingRun:
         def same(o: TrainOptions) -> TrainOptions:    # the recipe compared as resolved, not as typed
             return dataclasses.replace(o, **kept, checkpoint_seconds=0, recipe=o.data_recipe().to_dict())
         if same(saved) != same(options):
-            raise InputError(f"checkpoint {str(checkpoint)!r} was made with other options; "
-                             "resume with the same sensor, method, size, loss, recipe and seed")
+            was, now = dataclasses.asdict(same(saved)), dataclasses.asdict(same(options))
+            differ = [key for key in was if was[key] != now[key]]
+            shown = "; ".join(f"{key} {was[key]!r}, not {now[key]!r}" for key in differ[:2]
+                              if key != "recipe") or "its recipe differs"
+            raise InputError(f"checkpoint {str(checkpoint)!r} was made with other options ({shown}); resume with "
+                             "the options it was made with (every one but the budget, device, threads and workers)")
         self.options = dataclasses.replace(options, init=saved.init)     # the record names the run's warm start
         try:
             self.model.load_state_dict(state["model"])
@@ -476,6 +483,10 @@ class TrainingRun:
     def start_anew(self) -> None:
         """A new run: no file of an earlier one stays in the run folder; ``--init`` copied in."""
         options = self.options
+        if options.init is not None:    # (first: an --init refused removes nothing of an earlier run)
+            copied, trained_for = warm_start(self.model, options.init, options.method)
+            self.init = {"tensors_copied": len(copied), "tensors": len(self.model.state_dict()),
+                         "trained_for": trained_for.to_dict()}
         removed = []
         for stale in (self.checkpoint, self.log_path, self.validation_path, self.best_path, self.curves_path):
             if stale.exists():
@@ -485,14 +496,10 @@ class TrainingRun:
         if {self.checkpoint.name, self.best_path.name} & set(removed):
             print(f"train: a new run in {str(self.work)!r}: removed the earlier run's {', '.join(removed)}",
                   file=sys.stderr)
-        if options.init is not None:
-            copied, trained_for = warm_start(self.model, options.init, options.method)
-            self.init = {"tensors_copied": len(copied), "tensors": len(self.model.state_dict()),
-                         "trained_for": trained_for.to_dict()}
-            if trained_for != self.config:
-                print(f"train: --init {options.init!r} was trained for {trained_for}, this run is for "
-                      f"{self.config}: {len(copied)} of its tensors (matching name and shape) start it",
-                      file=sys.stderr)
+        if options.init is not None and trained_for != self.config:
+            print(f"train: --init {options.init!r} was trained for {trained_for}, this run is for "
+                  f"{self.config}: {len(copied)} of its tensors (matching name and shape) start it",
+                  file=sys.stderr)
 
     # ---------------------------------------------------------------- what it writes
     def elapsed(self) -> float:

@@ -170,7 +170,7 @@ def test_a_failed_final_checkpoint_keeps_the_logs_of_the_weights_it_wrote(tmp_pa
 def test_resume_refuses_other_options(tmp_path):
     cache = tmp_path / "cache"
     train(options(steps=1), tmp_path / "c.pt")
-    with pytest.raises(InputError, match="other options"):
+    with pytest.raises(InputError, match=r"other options \(loss 'l1', not 'mu-l1'\)"):   # (the option named)
         train(options(steps=2, loss="mu-l1"), tmp_path / "c.pt", resume=True)
 
 
@@ -201,9 +201,16 @@ def test_cli_refusals(tmp_path):
                                "--steps", "1"), "loss")
     assert_refused(run_tespike("train", "--config", "te", "--ablation", "0", "--out", tmp_path / "w.pt",
                                "--steps", "1"), "ablation case 0")
-    for low, high in (("0.3", "0.1"), ("0", "1"), ("1", "inf")):
+    # (1e-300 and 1e-40 trained on all-black float32 clips with exit 0; 1e300 "diverged")
+    for low, high in (("0.3", "0.1"), ("0", "1"), ("1", "inf"), ("1e-300", "1"), ("1e-40", "1e-40"), ("1", "1e300")):
         assert_refused(run_tespike("train", "--config", "te", "--peak", low, high, "--out", tmp_path / "w.pt",
-                                   "--steps", "1"), f"--peak {low} {high}")
+                                   "--steps", "1"), f"--peak {float(low):g} {float(high):g}", "1e-06 <= low")
+    # --noisy-input with no noisy clip; an --hdr folder without frames (was met after --force removed a run)
+    assert_refused(run_tespike("train", "--config", "te", "--noisy-input", "law", "--out", tmp_path / "w.pt",
+                               "--steps", "1"), "--noisy-input law", "--noise-fraction")
+    (tmp_path / "empty").mkdir()
+    assert_refused(run_tespike("train", "--config", "te", "--hdr", tmp_path / "empty", "--out", tmp_path / "w.pt",
+                               "--steps", "1"), "holds no frames")
     assert_refused(run_tespike("train", "--config", "te", "--panoramas", tmp_path / "none", "--out",
                                tmp_path / "w.pt", "--steps", "1"), "--panoramas")
     # a typo of a few zeros: refused before any process is started or any clip is made

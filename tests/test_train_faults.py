@@ -281,3 +281,34 @@ def test_a_run_killed_before_its_first_checkpoint_does_not_block_the_next(tmp_pa
     assert main(args) == 0
     assert "holds only the logs of a run that saved no checkpoint (log.csv): starting anew" in capsys.readouterr().err
     assert log_steps(run / "log.csv") == [1]
+
+
+def test_a_new_run_refused_for_its_init_removes_nothing_of_the_earlier(tmp_path):
+    """``train --force --init BAD``: the earlier run's checkpoint, log and curves were removed, then the
+    --init refused: two lines, and the earlier run could no longer be resumed."""
+    train(options(steps=2), tmp_path / "w.pt")
+    before = sorted(p.name for p in (tmp_path / "w.run").iterdir())
+    (tmp_path / "bad.pt").write_text("hello")
+    with pytest.raises(InputError, match=r"--init '.*bad\.pt' is not a tespike weights file"):
+        train(options(steps=1, init=str(tmp_path / "bad.pt")), tmp_path / "w.pt")
+    assert sorted(p.name for p in (tmp_path / "w.run").iterdir()) == before and "checkpoint.pt" in before
+
+
+def test_a_budget_that_allows_no_step_writes_nothing(tmp_path):
+    """``--minutes 1e-300`` ran 0 steps and wrote the untrained weights with the usual success line."""
+    with pytest.raises(InputError, match="--minutes 1e-300 ran out before the first step"):
+        train(options(steps=None, minutes=1e-300), tmp_path / "w.pt")
+    assert not (tmp_path / "w.pt").exists() and not (tmp_path / "w.run").exists()
+
+
+def test_weights_whose_archive_end_is_damaged_are_called_damaged(tmp_path):
+    """A byte of the end record flipped: torch's miniz text, cut mid-word, was quoted as 'another format'."""
+    from tespike.golden.config import load_config
+    from tespike.recon.learned import weights_path
+    from tespike.recon.learning.weights import read_weights
+    data = bytearray(weights_path(load_config("te"), "net").read_bytes())
+    data[-30] ^= 0xFF
+    (tmp_path / "w.pt").write_bytes(bytes(data))
+    with pytest.raises(InputError, match=r"\(a damaged archive: PytorchStreamReader failed reading zip archive: "
+                                         r"not a ZIP archive\)$"):
+        read_weights(tmp_path / "w.pt")

@@ -121,9 +121,17 @@ def run(args) -> int:
         check_peak_range(args.peak, "--peak {:g} {:g}".format(*args.peak))
     if args.noise_fraction is not None and not 0 <= args.noise_fraction <= 1:
         raise InputError(f"--noise-fraction {args.noise_fraction}: must lie in [0, 1]")
+    if args.noisy_input is not None and not args.noise_fraction:
+        raise InputError(f"--noisy-input {args.noisy_input} says what a noisy clip's method sees: give "
+                         "--noise-fraction P > 0 too (without it no clip is noisy)")
     for folder in args.hdr:
         if not Path(folder).is_dir():
             raise InputError(f"--hdr {folder!r}: not a folder of .exr/.hdr frames")
+        from tespike.recon.scenes.hdr_io import list_frames
+        try:                  # (before --force removes an earlier run: its clips come after the start)
+            list_frames(folder)
+        except InputError as exc:
+            raise InputError(f"--hdr {folder!r}: {exc}") from None
     panoramas = shipped = ()
     if args.panoramas:
         from tespike.recon.engine.clips import TRAIN_PANORAMAS as shipped, panorama_files

@@ -79,12 +79,20 @@ NOISE_DRAW = {"dark_current": ("eq12", "eq13"), "dark_level": (0.05, 6.0), "dsnu
               "comparator_offset": (0.0, 0.05)}
 
 
+#: The clips' peaks (x the design light) the engine takes: far below, the light of float32 clips
+#: loses its precision and then is 0 (all-black clips, trained on with exit 0); far above, the
+#: network's float32 activations overflow (a run "diverged", blaming the learning rate). A
+#: millionth of the design light is 0.04 electrons a readout, a million times saturates any sensor.
+PEAK_LIMITS = (1e-6, 1e6)
+
+
 def check_peak_range(peak, name: str) -> None:
     """A clips' peak range ``(low, high)`` (x the design light), refused in one line
-    naming ``name`` unless ``0 < low <= high`` and finite (the recipe and ``--peak``)."""
+    naming ``name`` unless ``low <= high``, both within :data:`PEAK_LIMITS` (the recipe and ``--peak``)."""
     low, high = peak
-    if not 0 < low <= high < math.inf:
-        raise InputError(f"{name}: need 0 < low <= high, finite")
+    if not PEAK_LIMITS[0] <= low <= high <= PEAK_LIMITS[1]:
+        raise InputError(f"{name}: need {PEAK_LIMITS[0]:g} <= low <= high <= {PEAK_LIMITS[1]:g} "
+                         "(x the design light)")
 
 
 @dataclasses.dataclass(frozen=True)
