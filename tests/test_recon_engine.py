@@ -391,3 +391,22 @@ def test_a_pool_whose_terminate_refuses_still_ends_its_workers(monkeypatch):
         for process in workers:
             if process.is_alive():
                 process.kill()
+
+
+def test_a_workers_stderr_stays_quiet_while_a_broken_pipe_is_handled():
+    """A SIGKILLed trainer's pipe closes before its workers get another parent: the pool's first line
+    of the BrokenPipeError traceback ("Process SpawnPoolWorker-1:") reached the user's terminal."""
+    import io
+    import os
+
+    from tespike.recon.engine.batches import _WhileParent
+    text = io.StringIO()
+    stderr = _WhileParent(text, os.getppid())
+    stderr.write("a clip's own fault\n")
+    try:
+        raise BrokenPipeError(32, "Broken pipe")
+    except BrokenPipeError:
+        stderr.write("Process SpawnPoolWorker-1:\n")
+    assert text.getvalue() == "a clip's own fault\n"
+    _WhileParent(text, -1).write("after the trainer is gone\n")
+    assert text.getvalue() == "a clip's own fault\n"

@@ -64,17 +64,24 @@ def _worker_init(parent: int) -> None:
 class _WhileParent:
     """A worker's stderr that writes only while the trainer that started it lives: a trainer killed
     outright breaks the pipe the worker sends its clip on, and the pool would print that
-    ``BrokenPipeError`` to the user's terminal after the kill (nobody is left to read it). A
-    clip's own error still reaches the trainer, which raises it."""
+    ``BrokenPipeError`` to the user's terminal after the kill (nobody is left to read it). Nor
+    while a broken pipe is being handled: the dying trainer's pipe closes before its children are
+    handed to another parent, so the pool's first line ("Process SpawnPoolWorker-1:") got through.
+    A clip's own error still reaches the trainer, which raises it."""
 
     def __init__(self, stream, parent: int):
         self._stream, self._parent = stream, parent
 
+    def _open(self) -> bool:
+        import sys
+        return os.getppid() == self._parent and not isinstance(sys.exception(), (BrokenPipeError, EOFError,
+                                                                                 ConnectionError))
+
     def write(self, text: str) -> int:
-        return self._stream.write(text) if os.getppid() == self._parent else len(text)
+        return self._stream.write(text) if self._open() else len(text)
 
     def flush(self) -> None:
-        if os.getppid() == self._parent:
+        if self._open():
             self._stream.flush()
 
     def __getattr__(self, name):

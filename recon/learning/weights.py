@@ -105,6 +105,8 @@ def _load_fault(path: str | Path, exc: BaseException) -> str:
                  and not line.startswith(("Check the documentation", "Please file an issue"))]
         what = one_line(lines[0], 200) if lines else "objects other than tensors"
         return f"it holds Python objects a weights file does not ({what}); not loaded, as loading could run code"
+    if text.startswith("PytorchStreamReader failed"):  # (miniz: an archive whose directory is damaged)
+        return f"a damaged archive: {one_line(text.split('. ')[0], 200)}"
     return f"another format: {one_line(text.splitlines()[0] if text else exc, 300)}"
 
 
