@@ -234,8 +234,9 @@ def run_cocotb(settings: Settings, simulator: str = "icarus", *, verilog_path: s
                 text = stream_array_verilog(settings.config, settings.height, settings.width, settings.lanes)
             verilog_path.write_text(text)
         verilog_path = Path(verilog_path)
-        if not verilog_path.is_file():
-            raise InputError(f"Verilog file {str(verilog_path)!r} does not exist")
+        if given:                       # (a folder, a FIFO or a link loop: named as what it is)
+            from tespike.golden.paths import check_input_file
+            check_input_file(verilog_path, "--verilog")
         note = check_ports(verilog_path, design) if given else None
         build_dir = build(verilog_path, top, simulator, cache_root)
         if note is not None:            # (after the build: a file it refuses gets its one line alone)

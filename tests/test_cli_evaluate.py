@@ -112,6 +112,8 @@ def test_evaluate_sensor_noise_and_calibrate(tmp_path, capsys):
     out = tmp_path / "refused"
     refused(capsys, "evaluate", "--calibrate", "--out", out, "--calibrate needs a noise sensor")
     refused(capsys, "evaluate", "--sensor-seed", -1, "--out", out, "--sensor-seed -1")
+    # the paper's dark currents have no per-pixel maps: seeds 0 and 5 gave the same table
+    refused(capsys, "evaluate", "--noise", "--sensor-seed", 5, "--out", out, "none has any")
     (tmp_path / "eq12.json").write_text("{}")
     refused(capsys, "evaluate", "--sensor-noise", tmp_path / "eq12.json", "--out", out, "'te+eq12' is taken")
     refused(capsys, "evaluate", "--sensor-noise", tmp_path / "hot.json", "--store", tmp_path, "--out", out,

@@ -55,6 +55,10 @@ def test_refusals(tmp_path):
     assert_refused(run_tespike("view", "--input", tmp_path / "x.npy", "--out", tmp_path / "i.png"), "x.npy")
     assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.png",
                                "--peak", "-1"), "--peak")
+    ml = SensorConfig(mode="ml")                       # (its estimators are one: the pictures were the same)
+    save_stream(tmp_path / "M.npz", simulate_scene(ml, np.load(tmp_path / "I.npy"), seed=0), ml)
+    assert_refused(run_tespike("view", "--input", tmp_path / "M.npz", "--out", tmp_path / "m.png",
+                               "--estimator", "midpoint"), "--estimator", "TE decoders", "M.npz")
     np.save(tmp_path / "long.npy", np.ones((241, 2, 2), np.float32))     # (1700 frames: 50 s, a 69630-px PNG)
     assert_refused(run_tespike("view", "--input", tmp_path / "long.npy", "--out", tmp_path / "i.png",
                                "--frames", "all"), "selects 241 frames; a contact sheet shows at most 240", "--each")

@@ -133,6 +133,11 @@ def test_cocotb_command_takes_a_stimulus_file(tmp_path):
     (["--config", "te", "--height", 0, "--width", 2], ["height", "0"]),
     (["--config", "te", "--height", 2, "--width", 2, "--verilog", "/nonexistent/a.v",
       "--simulator", "icarus"], ["/nonexistent/a.v", "does not exist"]),
+    # a folder or a device was said not to exist
+    (["--config", "te", "--height", 2, "--width", 2, "--verilog", "/dev/null", "--simulator", "icarus"],
+     ["--verilog file '/dev/null' is a character device"]),
+    (["--config", "te", "--height", 2, "--width", 2, "--verilog", "/", "--simulator", "icarus"],
+     ["--verilog file '/' is a directory"]),
     (["--config", "te", "--height", 2, "--width", 2, "--simulator", "no-such-sim"], ["no-such-sim"]),
     # every name checked before the first run (icarus ran to a pass, then bogus was refused); a
     # name given twice ran twice without a word

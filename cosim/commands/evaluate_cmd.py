@@ -197,6 +197,9 @@ def run(args) -> int:
     for flag, value in (("--frames", frames), ("--height", height), ("--width", width), ("--repeats", repeats)):
         if value < 1:
             raise InputError(f"{flag} {value}: must be an integer >= 1")
+    from tespike.cosim.demo import MAX_REPEATS
+    if repeats > MAX_REPEATS:                           # (each reconstructs every sequence again)
+        raise InputError(f"--repeats {repeats}: must be in 1..{MAX_REPEATS}")
     threads = TABLE_THREADS if args.table and args.threads is None else args.threads
     check_threads_argument(threads)
     vdp_frames = TABLE_VDP_FRAMES if args.table and args.vdp_frames is None else args.vdp_frames
@@ -291,6 +294,10 @@ def _sensors(args, ml_count: str):
         if key in noise_sensors or key in configs or key in NOISE_SENSORS or key.endswith(CALIBRATED):
             raise InputError(f"--sensor-noise {path}: the sensor name {key!r} is taken; rename the file")
         noise_sensors[key] = Sensor(load_noise(path), sensor_seed)
+    if args.sensor_seed is not None and not any(sensor.noise.has_maps for sensor in noise_sensors.values()):
+        raise InputError(f"--sensor-seed {args.sensor_seed} draws the per-pixel maps of a noise sensor, and none "
+                         "has any (--noise's dark currents and these --sensor-noise files hold no dsnu, hot_pixels, "
+                         "prnu or comparator_offset): it would be ignored")
     if args.calibrate and not noise_sensors:
         raise InputError("--calibrate needs a noise sensor: --noise or --sensor-noise N.json")
     configs.update({sensor: configs["te"] for sensor in noise_sensors})

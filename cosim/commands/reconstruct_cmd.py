@@ -29,7 +29,7 @@ def add_arguments(parser):
                         help="learned methods: this weights file ('tespike train --out W.pt') instead of the "
                              "shipped one; it must hold the method and be trained for the stream's configuration")
     parser.add_argument("--device", default="cpu", help="torch device (default cpu)")
-    parser.add_argument("--search", choices=TFI_SEARCH, default="stream",
+    parser.add_argument("--search", choices=TFI_SEARCH, default=None,
                         help="tfi only: look for the spike interval in the whole stream (default) or the window")
     parser.add_argument("--calibration", metavar="C.npz",
                         help="a calibration of the sensor that recorded the stream ('tespike calibrate'): "
@@ -58,14 +58,15 @@ def run(args) -> int:
         from tespike.recon.learned import method_span
         raise InputError(f"--window applies to methods 'tfp' and 'tfi'; {args.method!r} sees the "
                          f"{method_span(args.method)} readouts its sizes fix")
-    if args.method == "tfi" and args.window is not None and not uses_window("tfi", args.search):
+    if args.method != "tfi" and args.search is not None:    # (even at tfi's default: it would be dropped)
+        raise InputError(f"--search applies to method 'tfi' only, not {args.method!r}")
+    search = args.search or "stream"
+    if args.method == "tfi" and args.window is not None and not uses_window("tfi", search):
         raise InputError("--window applies to tfi with --search window only (tfi searches the whole stream "
                          "by default, whatever the window)")
     window = DEFAULT_WINDOW if args.window is None else args.window
     check_window(window, "--window")
     check_threads_argument(args.threads)
-    if args.method != "tfi" and args.search != "stream":
-        raise InputError(f"--search applies to method 'tfi' only, not {args.method!r}")
     if args.weights is not None and args.method not in LEARNED:
         raise InputError(f"--weights applies to the learned methods ({', '.join(LEARNED)}), not {args.method!r}")
     check_outputs({"--out": args.out},
@@ -88,7 +89,7 @@ def run(args) -> int:
 
     if args.threads is not None:
         torch.set_num_threads(args.threads)
-    options = {"search": args.search} if args.method == "tfi" else {}
+    options = {"search": search} if args.method == "tfi" else {}
     import numpy as np
     with atomic_output(args.out, "--out") as tmp:
         # R.npy is filled block by block through a memory map of the output file (its blocks

@@ -61,6 +61,9 @@ def load_light(path, config_spec=None, estimator=None):
             raise InputError(f"--config applies to a stimulus E.npy only (the stream {str(path)!r} "
                              "carries its own configuration)")
         words, config = load_stream(path)
+        if estimator is not None and not config.is_te:
+            raise InputError(f"--estimator chooses among TE decoders; the ML stream {str(path)!r} has one "
+                             "(leave --estimator out)")
         return decode_light(words, config, estimator or "ratio").astype(np.float64), f"stream ({config}), decoded"
     if estimator is not None:
         raise InputError(f"--estimator applies to a stream S.npz only ({str(path)!r} is not one)")
@@ -106,6 +109,9 @@ def pick_frames(spec, count, each):
         raise InputError(f"--frames {spec!r}: frame {bad[0]} outside 0..{count - 1}")
     if not frames:
         raise InputError(f"--frames {spec!r} selects no frame of 0..{count - 1}")
+    twice = sorted({f for f in frames if frames.count(f) > 1})
+    if twice:                         # (--each wrote one file for both and counted two)
+        raise InputError(f"--frames {spec!r}: frame {twice[0]} is listed more than once")
     return frames
 
 
@@ -179,6 +185,8 @@ def run(args) -> int:
                      f"mu {args.mu:g})")
         return 0
     K, H, W = mapped.shape
+    if args.columns is not None and args.columns > K:
+        raise InputError(f"--columns {args.columns}: the sheet shows {K} frame(s); give at most {K}")
     columns = min(args.columns or DEFAULT_COLUMNS, K)
     rows = -(-K // columns)
     size = 2.2 / max(H, W)
