@@ -215,6 +215,9 @@ def test_cli_refusals(tmp_path, capsys, rng):
     refused(capsys, "dataset", "--scene", "sun", "--out", out, "--config")
     refused(capsys, "dataset", "--config", "te", "--out", out, "nothing to build")
     refused(capsys, "dataset", "--scene", "sun", "--config", "te", "--config", "te", "--out", out, "already given")
+    (tmp_path / "ml-msb.json").write_text('{"mode": "te"}')     # (evaluate --store took it for the msb camera)
+    refused(capsys, "dataset", "--scene", "sun", "--config", "te", "--config", tmp_path / "ml-msb.json", "--out", out,
+            "named as the preset 'ml-msb' but holds another configuration")
     refused(capsys, "dataset", "--scene", "magic", "--config", "te", "--out", out, "magic")
     refused(capsys, "dataset", "--scene", "sun", "--config", "te", "--workers", 0, "--out", out, "--workers")
     refused(capsys, "dataset", "--scene", "sun", "--config", "te", "--workers", 2, "--scheduler",

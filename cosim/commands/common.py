@@ -116,6 +116,11 @@ def config_name(spec: str, taken) -> str:
 
     from tespike.golden.errors import InputError
     name = spec if spec in PRESETS else Path(spec).stem
+    if spec not in PRESETS and name in PRESETS:      # (evaluate --store reads a sensor's kind by its name)
+        from tespike.golden.config import SensorConfig, load_config
+        if load_config(spec) != SensorConfig.preset(name):
+            raise InputError(f"--config {spec!r} is named as the preset {name!r} but holds another "
+                             "configuration: rename the file")
     if name in taken:
         raise InputError(f"--config {spec!r}: a sensor named {name!r} is already given (names are the "
                          "presets and the files' stems: rename the file)")
