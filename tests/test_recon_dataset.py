@@ -332,11 +332,20 @@ STORE_DAMAGE = {
     "the light removed": (lambda s: shutil.rmtree(s / "sun/light"), "its array light is missing"),
     "a stream never finished": (lambda s: _tamper(s / "sun/streams/te/zarr.json", lambda d, a: a.update(complete=False)),
                                 "its array streams/te was never finished"),
+    # (Zarr's words showed both checksums as Python bytes)
+    "a chunk byte flipped": (lambda s: _flip_middle(s / "sun/light/c/0/0/0"),
+                             "c/0/0/0' is damaged (its CRC-32C does not match its bytes)"),
     # JSON, but not metadata Zarr reads (a flipped byte renames a key): Zarr's TypeError was a traceback
     "a sequence's key renamed": (lambda s: _rename_key(s / "sun/zarr.json", "attributes"), "sun/zarr.json' is damaged"),
     "an array's codec key renamed": (lambda s: _rename_key(s / "sun/light/zarr.json", "endian"),
                                      "light/zarr.json' is damaged"),
 }
+
+
+def _flip_middle(path):
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0x01
+    path.write_bytes(bytes(data))
 
 
 def _rename_key(path, key):
@@ -541,3 +550,31 @@ def test_a_store_inside_an_hdr_folder_is_refused(tmp_path, capsys, rng, inside):
     code, _, err = run_here(capsys, "dataset", "--hdr", root, "--config", "te", "--out", root / inside)
     assert code == 2 and len(err.splitlines()) == 1 and f"lies inside --hdr {str(root)!r}" in err, err
     assert not (root / inside).exists()
+
+
+def test_hdr_light_below_float32s_normal_range_is_refused(tmp_path, capsys):
+    """A sequence whose darkest lit pixel is below float32's normal range once its brightest is 1 was stored
+    with half its lit pixels 0 (exit 0), where scene --folder and evaluate --folder refuse it."""
+    (tmp_path / "hdr" / "deep").mkdir(parents=True)
+    for k in range(2):
+        rgb = np.full((12, 12, 3), 1e-12, np.float32)
+        rgb[0, 0] = 1e30                                   # (Radiance's exponent holds both)
+        write_hdr(tmp_path / "hdr" / "deep" / f"f{k}.hdr", rgb)
+    code, _, err = run_here(capsys, "dataset", "--hdr", tmp_path / "hdr", "--config", "te", "--out", tmp_path / "d.zarr")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "below float32's normal range" in err, err
+    assert "f0.hdr" in err or "f1.hdr" in err
+
+
+def test_resume_rebuilds_a_sequence_whose_size_attribute_is_damaged(tmp_path, capsys, small_store):
+    """A complete sequence whose width attribute was lost: the resume said it 'was made with width = None,
+    not 16', blaming the flags for damage; it is made again, as other damage is."""
+    import shutil
+    store = tmp_path / "D.zarr"
+    shutil.copytree(small_store, store)
+    _tamper(store / "sun/zarr.json", lambda d, a: a.pop("width"))
+    capsys.readouterr()
+    assert main(["dataset", "--scene", "sun", "--frames", "4", "--height", "16", "--width", "16",
+                 "--config", "te", "--config", "ml-msb", "--out", str(store)]) == 0
+    out = capsys.readouterr().out
+    assert "its attribute width is None" in out and "rebuilt where damaged" in out, out
+    assert compare_stores(small_store, store) == []

@@ -144,9 +144,16 @@ def write_hdr_light(url: str, source: Source, start: int, stop: int, top: float)
         raise InputError(f"HDR sequence {source.name!r}: every pixel is 0, so it cannot be "
                          "normalised by its maximum")
     scale = 1.0 / top
+    tiny = float(np.finfo(np.float32).tiny)
     out = np.empty((stop - start,) + source.shape[1:], np.float32)
     for k, path in enumerate(source.frames[start:stop]):
-        out[k] = read_gray(path, source.weights).astype(np.float64) * scale
+        light = read_gray(path, source.weights).astype(np.float64) * scale
+        darkest = float(np.min(light, where=light > 0, initial=np.inf))
+        if darkest < tiny:            # float32 would round it to a subnormal or 0 (scene --folder refuses it)
+            raise InputError(f"HDR frame {path!r}: its darkest lit value is {darkest:.3g} of the sequence's "
+                             f"brightest, below float32's normal range (from {tiny:.3g}), in which the store "
+                             "holds the light: it would lose precision or become zero")
+        out[k] = light
     open_array(url, f"{source.name}/light", "r+")[start:stop] = out
     return float(out.max())
 

@@ -231,7 +231,11 @@ class DatasetStore:
             old = group.attrs.asdict()
             mismatch = [k for k, v in info.items() if old.get(k) != v
                         and not (k == "digest" and "digest" not in old)]   # (stores made before digests)
-            if mismatch:
+            altered = [k for k in mismatch if type(old.get(k)) is not type(info[k])]   # (None: missing)
+            if mismatch and old.get("complete") and altered:    # damage, not another sequence: made again
+                self.rebuilt.setdefault(name, []).append(f"its attribute {altered[0]} is {old.get(altered[0])!r}")
+                del self.group[name]
+            elif mismatch:
                 if old.get("complete") and mismatch == ["digest"]:
                     raise InputError(f"sequence {name!r} in {self.url!r} was made from frames whose files have "
                                      "changed since (the same names, other bytes): use a new --out, or remove "
@@ -445,7 +449,9 @@ def reading(url: str, path: str = ""):
         where = damaged_file(str(url), path)
         if where is None:
             raise
-        raise InputError(f"dataset store file {where!r} is damaged ({one_line(exc, 160)}); remove its sequence's "
+        cause = ("its CRC-32C does not match its bytes" if "checksum do not match" in str(exc)   # (Zarr shows
+                 else one_line(exc, 160))                                                      # both as bytes)
+        raise InputError(f"dataset store file {where!r} is damaged ({cause}); remove its sequence's "
                          "folder and run tespike dataset again to rebuild it") from None
 
 
