@@ -52,6 +52,9 @@ def test_refusals(tmp_path):
         assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.png",
                                    f"--frames={spec}"), f"--frames {spec!r}", "0 <= a < b")
     assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.jpg"), ".png")
+    # a device takes any name (docs/cli.md): /dev/full was refused for its name, not its room
+    assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", "/dev/full"),
+                   "cannot write '/dev/full': No space left on device")
     assert_refused(run_tespike("view", "--input", tmp_path / "x.npy", "--out", tmp_path / "i.png"), "x.npy")
     assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "i.png",
                                "--peak", "-1"), "--peak")

@@ -208,6 +208,8 @@ def test_cli_refusals(tmp_path):
     # --noisy-input with no noisy clip; an --hdr folder without frames (was met after --force removed a run)
     assert_refused(run_tespike("train", "--config", "te", "--noisy-input", "law", "--out", tmp_path / "w.pt",
                                "--steps", "1"), "--noisy-input law", "--noise-fraction")
+    assert_refused(run_tespike("train", "--config", "te", "--out", "/dev/full", "--steps", "1"),   # (trained,
+                   "--out '/dev/full' is a device or FIFO")                                    # then failed)
     (tmp_path / "empty").mkdir()
     assert_refused(run_tespike("train", "--config", "te", "--hdr", tmp_path / "empty", "--out", tmp_path / "w.pt",
                                "--steps", "1"), "holds no frames")

@@ -157,6 +157,10 @@ def run(args) -> int:
                 for panorama in _frame_files(folder)),
               *(("a shipped panorama", panorama) for panorama in shipped)]
     check_outputs({"--out": args.out}, inputs, {"--out": TORCH_FILE})
+    from tespike.golden.paths import written_through
+    if written_through(args.out):      # (it trained to the end, then could not write)
+        raise InputError(f"--out {args.out!r} is a device or FIFO: a run writes a weights file and its run "
+                         "folder beside it (OUT.run); give a file name")
     run_folder = out.with_suffix(".run")
     check_output_dir(run_folder, "--out's run folder")
     check_distinct(inputs, {f"the run folder's {name}": run_folder / name for name in RUN_FILES})
