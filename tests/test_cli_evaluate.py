@@ -116,6 +116,11 @@ def test_evaluate_sensor_noise_and_calibrate(tmp_path, capsys):
     refused(capsys, "evaluate", "--noise", "--sensor-seed", 5, "--out", out, "none has any")
     (tmp_path / "eq12.json").write_text("{}")
     refused(capsys, "evaluate", "--sensor-noise", tmp_path / "eq12.json", "--out", out, "'te+eq12' is taken")
+    (tmp_path / "none.json").write_text("{}")             # (a column labelled '()', the TE camera's again)
+    refused(capsys, "evaluate", "--sensor-noise", tmp_path / "none.json", "--out", out, "no non-ideality")
+    (tmp_path / "again.json").write_text((tmp_path / "hot.json").read_text())
+    refused(capsys, "evaluate", "--sensor-noise", tmp_path / "hot.json", "--sensor-noise", tmp_path / "again.json",
+            "--out", out, "the same sensor noise as 'te+hot'")
     refused(capsys, "evaluate", "--sensor-noise", tmp_path / "hot.json", "--store", tmp_path, "--out", out,
             "--sensor-noise does not apply with --store")
     # two scene files of one stem ("sequence labels must be unique, got ['I', 'I']" named neither)

@@ -293,7 +293,14 @@ def _sensors(args, ml_count: str):
         key = f"te+{Path(path).stem}"
         if key in noise_sensors or key in configs or key in NOISE_SENSORS or key.endswith(CALIBRATED):
             raise InputError(f"--sensor-noise {path}: the sensor name {key!r} is taken; rename the file")
-        noise_sensors[key] = Sensor(load_noise(path), sensor_seed)
+        noise = load_noise(path)
+        if noise.is_ideal:                  # (a column labelled '()': the TE camera's again)
+            raise InputError(f"--sensor-noise {path}: describes no non-ideality (shot noise alone is the TE "
+                             "camera's own column)")
+        same = [other for other, sensor in noise_sensors.items() if sensor.noise == noise]
+        if same:                            # (two columns of one header)
+            raise InputError(f"--sensor-noise {path}: the same sensor noise as {same[0]!r}")
+        noise_sensors[key] = Sensor(noise, sensor_seed)
     if args.sensor_seed is not None and not any(sensor.noise.has_maps for sensor in noise_sensors.values()):
         raise InputError(f"--sensor-seed {args.sensor_seed} draws the per-pixel maps of a noise sensor, and none "
                          "has any (--noise's dark currents and these --sensor-noise files hold no dsnu, hot_pixels, "
