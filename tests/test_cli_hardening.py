@@ -470,6 +470,8 @@ def test_corrupt_stream_files(files, kind):
     (("simulate", "--config", "te", "--scene", "i.npy", "--out", "a.npz", "--ou=b.npz"), ["--out / --ou", "more than once"]),
     (("scene", "--folder", "hdr", "--seed", "5"), ["--seed", "built-in scenes only"]),
     (("reconstruct", "--method", "tfp", "--search", "stream"), ["--search", "'tfi' only"]),   # (tfi's default, dropped)
+    (("score", "--reference", "i.npy", "--estimate", "i.npy", "--metrics", "psnr_mu,psnr_mu"),   # (one column)
+     ["'psnr_mu' is named more than once"]),
     (("evaluate", "--repeats", "101"), ["--repeats 101", "1..100"]),
     (("view", "--frames", "0,0,1", "--each"), ["frame 0", "more than once"]),      # (wrote 2 files, said 3)
     (("view", "--frames", "0,1", "--columns", "3"), ["--columns 3", "at most 2"]),       # (was cut to 2)

@@ -164,6 +164,9 @@ def test_command_refuses_bad_options_in_one_line():
     # two sensors of one name: the later replaced the earlier, which was never proved (exit 0)
     done = run_tespike("prove", "--only", "pixel", "--config", "te", "--config", "other/te.json", timeout=60)
     assert_refused(done, "a sensor named 'te' is already given")
+    # a size named twice was proven once, without a word
+    done = run_tespike("prove", "--only", "tops", "--sizes", "1x1,1x1", timeout=60)
+    assert_refused(done, "--sizes '1x1,1x1'", "1x1 is named more than once")
     # a --traces that is a file was found only when a failure's trace was written, after the proofs
     done = run_tespike("prove", "--only", "pixel", "--traces", __file__, timeout=60)
     assert_refused(done, "--traces", "is not a directory")

@@ -116,14 +116,14 @@ def config_name(spec: str, taken) -> str:
 
     from tespike.golden.errors import InputError
     name = spec if spec in PRESETS else Path(spec).stem
+    if name in taken:
+        raise InputError(f"--config {spec!r}: a sensor named {name!r} is already given (names are the "
+                         "presets and the files' stems: rename the file)")
     if spec not in PRESETS and name in PRESETS:      # (evaluate --store reads a sensor's kind by its name)
         from tespike.golden.config import SensorConfig, load_config
         if load_config(spec) != SensorConfig.preset(name):
             raise InputError(f"--config {spec!r} is named as the preset {name!r} but holds another "
                              "configuration: rename the file")
-    if name in taken:
-        raise InputError(f"--config {spec!r}: a sensor named {name!r} is already given (names are the "
-                         "presets and the files' stems: rename the file)")
     return name
 
 
@@ -171,6 +171,9 @@ def metrics_argument(text: str) -> list[str]:
     if unknown or not metrics:
         raise InputError(f"--metrics {text!r}: " + (f"{unknown[0]!r} is no metric" if unknown else "names no metric")
                          + f" (choose from {', '.join(METRIC_KEYS)})")
+    twice = [m for m in metrics if metrics.count(m) > 1]
+    if twice:                           # (one column was made of both)
+        raise InputError(f"--metrics {text!r}: {twice[0]!r} is named more than once")
     return metrics
 
 

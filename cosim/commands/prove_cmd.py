@@ -85,6 +85,8 @@ def parse_sizes(flag: str, text: str) -> list[tuple[int, int]]:
         if not (min(size) >= 1 and size[0] * size[1] <= MAX_PIXELS):
             raise InputError(f"{flag} {text!r}: each size must be HxW with H, W >= 1 and H x W <= {MAX_PIXELS} "
                              f"(e.g. 2x3), or 'none'")
+        if size in sizes:               # (it was proven once, without a word)
+            raise InputError(f"{flag} {text!r}: {size[0]}x{size[1]} is named more than once")
         sizes.append(size)
     return sizes
 
