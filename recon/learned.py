@@ -83,6 +83,14 @@ def preset_of(config: SensorConfig) -> str | None:
     return None
 
 
+def differences(config: SensorConfig, other: SensorConfig) -> str:
+    """The keys in which ``config`` differs from ``other``, ``"ml_bits 4, not 8"`` (for messages where the two
+    print alike: a TE configuration's short name leaves out the ML keys)."""
+    import dataclasses
+    return ", ".join(f"{f.name} {getattr(config, f.name)!r}, not {getattr(other, f.name)!r}"
+                     for f in dataclasses.fields(config) if getattr(config, f.name) != getattr(other, f.name))
+
+
 def weights_name(method: str, preset: str) -> str:
     """File name of the shipped weights: ``<preset>.pt`` for the network, ``<method>-<preset>.pt`` else."""
     return f"{preset}.pt" if method == "net" else f"{method}-{preset}.pt"
@@ -93,7 +101,10 @@ def weights_path(config: SensorConfig, method: str = "net") -> Path:
     check_known(method, LEARNED, "learned method")
     preset = preset_of(config)
     if preset is None:
-        raise InputError(f"the stream's configuration {config} is none of the presets {', '.join(PRESETS)} "
+        near = next((name for name, keys in PRESETS.items() if str(SensorConfig(**keys)) == str(config)), None)
+        differs = f" (it differs from the {near} preset in {differences(config, SensorConfig(**PRESETS[near]))})" \
+            if near else ""
+        raise InputError(f"the stream's configuration {config}{differs} is none of the presets {', '.join(PRESETS)} "
                          f"that {method} weights are shipped for: train weights for it with "
                          f"'tespike train --method {method} --config C.json --out W.pt' and pass --weights W.pt")
     path = WEIGHTS_DIR / weights_name(method, preset)
@@ -112,7 +123,8 @@ def load_learned(config: SensorConfig, method: str, weights: str | Path | None =
     what = "weights" if weights is None else "--weights"
     model, trained_for, _ = load_weights(path, what, method)
     if trained_for != config:
-        raise InputError(f"{method} {what} {str(path)!r} were trained for {trained_for}, the stream is {config}")
+        alike = f" ({differences(config, trained_for)})" if str(trained_for) == str(config) else ""
+        raise InputError(f"{method} {what} {str(path)!r} were trained for {trained_for}, the stream is {config}{alike}")
     return model
 
 

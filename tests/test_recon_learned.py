@@ -87,6 +87,9 @@ def test_missing_weights_are_refused_naming_the_file_and_the_training(empty_weig
     odd = SensorConfig(threshold=200)
     with pytest.raises(InputError, match="none of the presets"):
         weights_path(odd, "bsf")
+    # a TE configuration whose short name is the preset's (ML keys left out): the message said what differs
+    with pytest.raises(InputError, match=r"\(it differs from the te preset in ml_bits 4, not 8\) is none of the presets"):
+        weights_path(SensorConfig(ml_bits=4), "bsf")
 
 
 def test_weights_of_another_method_or_sensor_are_refused(empty_weights_dir, rng):
