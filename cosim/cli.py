@@ -170,8 +170,6 @@ def _install_signal_handlers() -> dict:
     the command returns); returns the previous handlers for :func:`_restore_signal_handlers`."""
     import signal
     import threading
-    from tespike.golden.atomic import forget_stops
-    forget_stops()
     previous = {}
     if threading.current_thread() is not threading.main_thread():
         return previous
@@ -276,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:              # main() called in-process (tests) leaves the caller's handlers as they were
         _restore_signal_handlers(previous)
         from tespike.golden.atomic import forget_stops
-        forget_stops()    # (and no stop recorded: the caller's own stops are not the command's)
+        forget_stops()    # (the next command, in this process too, starts with no stop recorded)
         if whole_process:
             _end_quietly()
     if ok:            # only a run that succeeded shows its warnings; a refusal stays one line

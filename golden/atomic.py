@@ -401,29 +401,22 @@ def note_stop(signum: int) -> None:
 
 
 def forget_stops() -> None:
-    """A command starts with no stop recorded (several may run in one process, e.g. tests)."""
+    """Forget the stops recorded (at a command's end: the next, in this process too, starts with none)."""
     _stops_raised.clear()
 
 
-def lost_stop() -> int | None:
-    """The signal number of a stop a handler raised that is not being handled now, so was dropped
-    on the way (in a finalizer), or None. A stop being handled (a checkpoint saved before it goes
-    on) is not lost."""
-    if not _stops_raised:
-        return None
-    handling = sys.exception()
-    if handling is not None and not isinstance(handling, Exception):
-        return None
-    return _stops_raised[-1]
-
-
 def raise_lost_stop() -> None:
-    """Raise a lost stop (:func:`lost_stop`) again through its handler, where one was recorded."""
-    number = lost_stop()
-    if number is not None and threading.current_thread() is threading.main_thread():
-        handler = signal.getsignal(number)
-        if callable(handler):
-            handler(number, None)
+    """Raise again, through its handler, a stop a handler raised that is not being handled now, so was
+    dropped on the way (in a finalizer). A stop being handled (a checkpoint saved before it goes on)
+    is not lost."""
+    handling = sys.exception()
+    if not _stops_raised or (handling is not None and not isinstance(handling, Exception)) \
+            or threading.current_thread() is not threading.main_thread():
+        return
+    number = _stops_raised[-1]
+    handler = signal.getsignal(number)
+    if callable(handler):
+        handler(number, None)
 
 
 @contextlib.contextmanager
@@ -431,7 +424,7 @@ def stops_held():
     """Ctrl-C, SIGTERM and SIGHUP held while an output is renamed into place and recorded as
     written, then raised again through the handlers they would have met: a command stopped there
     reports the output as written (:func:`finished_outputs`), never a replaced file it does not
-    name. A stop dropped earlier (:func:`lost_stop`) is raised first: nothing is renamed. Only the
+    name. A stop dropped earlier (:func:`raise_lost_stop`) is raised first: nothing is renamed. Only the
     main thread can change the handlers (elsewhere nothing is held)."""
     if threading.current_thread() is not threading.main_thread():
         yield
