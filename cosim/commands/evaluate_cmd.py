@@ -283,9 +283,6 @@ def _sensors(args, ml_count: str):
             raise ConfigError(f"{option} {value!r} has mode {config.mode!r}, ml_readout {config.ml_readout!r}; "
                               f"expected mode {kind!r}" + (f", ml_readout {readout!r}" if kind == "ml" else ""))
     sensor_seed = sensor_seed_argument(args.sensor_seed)
-    if args.sensor_seed is not None and not (args.noise or args.sensor_noise):
-        raise InputError("--sensor-seed draws a noise sensor's per-pixel maps: give --noise or --sensor-noise "
-                         "(without one it would be ignored)")
     noise_sensors = {}          # sensor key -> golden.noise.Sensor
     if args.noise:              # the paper's Tables 6 to 9: its TE camera with dark current
         noise_sensors.update(default_noise_sensors(sensor_seed))
@@ -302,9 +299,10 @@ def _sensors(args, ml_count: str):
             raise InputError(f"--sensor-noise {path}: the same sensor noise as {same[0]!r}")
         noise_sensors[key] = Sensor(noise, sensor_seed)
     if args.sensor_seed is not None and not any(sensor.noise.has_maps for sensor in noise_sensors.values()):
-        raise InputError(f"--sensor-seed {args.sensor_seed} draws the per-pixel maps of a noise sensor, and none "
-                         "has any (--noise's dark currents and these --sensor-noise files hold no dsnu, hot_pixels, "
-                         "prnu or comparator_offset): it would be ignored")
+        raise InputError(f"--sensor-seed {args.sensor_seed} draws the per-pixel maps of a noise sensor, and " + (
+            "none has any (--noise's dark currents and these --sensor-noise files hold no dsnu, hot_pixels, prnu "
+            "or comparator_offset)" if noise_sensors else "none is given (--noise or --sensor-noise)")
+            + ": it would be ignored")
     if args.calibrate and not noise_sensors:
         raise InputError("--calibrate needs a noise sensor: --noise or --sensor-noise N.json")
     configs.update({sensor: configs["te"] for sensor in noise_sensors})

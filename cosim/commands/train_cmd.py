@@ -124,11 +124,9 @@ def run(args) -> int:
     if args.noisy_input is not None and not args.noise_fraction:
         raise InputError(f"--noisy-input {args.noisy_input} says what a noisy clip's method sees: give "
                          "--noise-fraction P > 0 too (without it no clip is noisy)")
-    for folder in args.hdr:
-        if not Path(folder).is_dir():
-            raise InputError(f"--hdr {folder!r}: not a folder of .exr/.hdr frames")
-        from tespike.recon.scenes.hdr_io import list_frames
-        try:                  # (before --force removes an earlier run: its clips come after the start)
+    from tespike.recon.scenes.hdr_io import list_frames
+    for folder in args.hdr:   # (before --force removes an earlier run: its clips come after the start)
+        try:
             list_frames(folder)
         except InputError as exc:
             raise InputError(f"--hdr {folder!r}: {exc}") from None
