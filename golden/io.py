@@ -341,9 +341,9 @@ _ZIP64_LOCATOR_SIGNATURE, _ZIP64_LOCATOR = b"PK\x06\x07", 20
 
 def check_archive_end(path: str | Path) -> None:
     """Refuse (ValueError) an archive that is not the whole file: bytes after its end-of-directory
-    record (with the comment it declares), or before its first member (the directory's offset, plus
-    the zip64 records where they are, falls short of the record's place: a second archive joined to a
-    first is read as the second alone). The record is the one :mod:`zipfile` reads: the file's last 22
+    record (with the comment it declares), or before its first member (the directory's size and offset,
+    from the zip64 record where there is one, fall short of the record's place: a second archive joined
+    to a first is read as the second alone). The record is the one :mod:`zipfile` reads: the file's last 22
     bytes where they are one without a comment, else the last signature in the final 64 KiB; an
     archive without one is left to :mod:`zipfile`, whose message says so."""
     with open(path, "rb") as file:
@@ -362,18 +362,14 @@ def check_archive_end(path: str | Path) -> None:
                 raise ValueError(f"{extra} bytes follow the archive's end")
         record = start + at                                 # the end record's place in the file
         directory_size, directory_at = (int.from_bytes(tail[at + k:at + k + 4], "little") for k in (12, 16))
-        if directory_at == 0xFFFFFFFF or directory_size == 0xFFFFFFFF:   # zip64: its record before the locator
-            record -= _ZIP64_LOCATOR + _ZIP64_RECORD
-            if record < 0:
-                return
-            file.seek(record)
-            zip64 = file.read(_ZIP64_RECORD)
-            if zip64[:4] != _ZIP64_SIGNATURE:
-                return
-            directory_size, directory_at = (int.from_bytes(zip64[k:k + 8], "little") for k in (40, 48))
-        elif tail[max(0, at - _ZIP64_LOCATOR):at][:4] == _ZIP64_LOCATOR_SIGNATURE and \
-                record >= _ZIP64_LOCATOR + _ZIP64_RECORD:          # zip64 records a writer always adds (torch)
-            record -= _ZIP64_LOCATOR + _ZIP64_RECORD
+        if record >= _ZIP64_RECORD + _ZIP64_LOCATOR:         # zip64 records just before it (torch always writes them)
+            file.seek(record - _ZIP64_RECORD - _ZIP64_LOCATOR)
+            zip64 = file.read(_ZIP64_RECORD + _ZIP64_LOCATOR)
+            if zip64[:4] == _ZIP64_SIGNATURE and zip64[_ZIP64_RECORD:][:4] == _ZIP64_LOCATOR_SIGNATURE:
+                record -= _ZIP64_RECORD + _ZIP64_LOCATOR
+                directory_size, directory_at = (int.from_bytes(zip64[k:k + 8], "little") for k in (40, 48))
+    if 0xFFFFFFFF in (directory_size, directory_at):        # zip64 values without their records: zipfile's to say
+        return
     before = record - directory_size - directory_at
     if before > 0:
         raise ValueError(f"{before} bytes come before the archive (two archives joined?)")
