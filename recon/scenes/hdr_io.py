@@ -313,18 +313,28 @@ def _exr_bytes_after(path: str) -> int:
     """Bytes after the last chunk of a single-part scan-line OpenEXR file (the library reads its chunks
     by their offsets and ignores what follows them: two files joined, a copy that overran); 0 where
     the file is another kind (tiled, deep, multi-part, an unknown compression) or its offsets are not
-    all readable, which the library itself judges."""
-    import struct
+    all readable, which the library itself judges. Mapped, not read: only the header, the offset table
+    and each chunk's 8-byte head are touched."""
+    import mmap
     with open(path, "rb") as file:
-        data = file.read()
-    if len(data) < 8 or data[:4] != b"\x76\x2f\x31\x01" or \
-            int.from_bytes(data[4:8], "little") & _EXR_NOT_SCANLINE:
+        if os.fstat(file.fileno()).st_size < 8:
+            return 0
+        with mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            return _exr_tail(data)
+
+
+def _exr_tail(data) -> int:
+    """:func:`_exr_bytes_after` on the file's bytes ``data`` (a memory map)."""
+    import struct
+    if data[:4] != b"\x76\x2f\x31\x01" or int.from_bytes(data[4:8], "little") & _EXR_NOT_SCANLINE:
         return 0
     pos, window, compression = 8, None, None
     try:
         while data[pos]:                                   # attributes until an empty name
-            name_end = data.index(b"\0", pos)
-            type_end = data.index(b"\0", name_end + 1)
+            name_end = data.find(b"\0", pos)
+            type_end = data.find(b"\0", name_end + 1)
+            if name_end < 0 or type_end < 0:
+                return 0
             size = int.from_bytes(data[type_end + 1:type_end + 5], "little", signed=True)
             value = data[type_end + 5:type_end + 5 + size]
             name = data[pos:name_end]
@@ -334,7 +344,7 @@ def _exr_bytes_after(path: str) -> int:
                 compression = value[0]
             pos = type_end + 5 + size
         pos += 1
-    except (ValueError, IndexError):
+    except (IndexError, struct.error):
         return 0
     if window is None or compression not in _EXR_LINES:
         return 0
