@@ -247,6 +247,8 @@ def main(argv: list[str] | None = None) -> int:
     if not argv:
         parser.print_help()
         return 0
+    if len(argv) > 1 and argv[0].startswith("--v") and "--version".startswith(argv[0]):
+        parser.error(f"--version takes nothing else (given: {' '.join(argv[1:])})")   # (argparse exits at it)
     args, unknown = parser.parse_known_args(argv)
     if unknown:       # named by the sub-command's parser: "tespike train: ... (see tespike train --help)"
         getattr(args, "command_parser", parser).error(f"unrecognized arguments: {' '.join(unknown)}")

@@ -889,6 +889,10 @@ def test_the_version_is_looked_up_only_when_asked(monkeypatch, capsys):
     with pytest.raises(SystemExit) as stop:
         cli.main(["--version"])
     assert stop.value.code == 0 and capsys.readouterr().out == "tespike 9.9\n"
+    for argv in (["--version", "extra"], ["--vers", "-q"]):      # nothing after it is dropped silently
+        with pytest.raises(SystemExit) as stop:
+            cli.main(argv)
+        assert stop.value.code == 2 and "--version takes nothing else" in capsys.readouterr().err
 
 
 def test_scene_and_train_never_write_over_a_frame_they_read(tmp_path):

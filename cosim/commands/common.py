@@ -2,7 +2,8 @@
 
 from tespike.golden.config import PRESETS
 
-CONFIG_HELP = "JSON config file, or a preset: " + " / ".join(PRESETS)
+CONFIG_HELP = ("JSON config file, or a preset: " + " / ".join(PRESETS)
+               + " (a preset's name is the preset: write ./te for a file named te)")
 
 
 def add_config_argument(parser, *, required: bool = True, default: str | None = None) -> None:

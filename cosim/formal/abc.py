@@ -137,7 +137,7 @@ def prove_harness(name: str, harness: Harness, *, timeout: float = 300.0) -> Pro
             else:
                 return ProofResult(name, False, time.perf_counter() - start, method=method,
                                    detail=f"undecided: neither an unbounded proof nor BMC {harness.steps} "
-                                          f"finished in {timeout:.0f} s")
+                                          f"finished in {timeout:.3g} s")
         if verdict == "proved":
             return ProofResult(name, True, time.perf_counter() - start, method=method)
         which = _name_failure(harness, work, frame)
