@@ -366,7 +366,7 @@ def reconstruction_commands(configs, methods, window: int, frames: int, height: 
              + (f"--window {window} " if uses_window(method) else "")
              + f"--out R_{method}_{sensor}.npy" for sensor in list(configs) + ["rtl"] for method in methods]
             + [f"tespike evaluate --set default --frames {frames} --height {height} --width {width} "
-               f"--seed {seed} --out eval   # Table 1 layout, TE and ML count, other noise draws"])
+               f"--seed {seed} --out eval   # Table 1 layout, TE, ML msb and ML count, other noise draws"])
 
 
 # ---------------------------------------------------------------- the demo
@@ -450,8 +450,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
         hardware = (hardware_cost({k: c for k, c in configs.items() if k in ("te", "ml")}) if hw_cost
                     else "not computed (--no-hw-cost)")
         progress.end("dynamic range and hardware cost", started,
-                     ["python3 benchmarks/dynamic_range.py   # the full table, from a clone",
-                      "python3 benchmarks/hw_cost.py          # the full cost table, from a clone"])
+                     ["python3 benchmarks/dynamic_range.py   # the full table, from the clone's root",
+                      "python3 benchmarks/hw_cost.py          # the full cost table, from the clone's root"])
 
         started = progress.begin("pictures and report.md")
         plot_frame(light, middle, (rtl_crop.y, rtl_crop.x, size), out / "frame.png")

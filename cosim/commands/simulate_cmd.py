@@ -11,7 +11,7 @@ PROGRESS = True
 
 def add_arguments(parser):
     add_light_arguments(parser, out_help="S.npz to write: readout words and the full config",
-                        seed_help="seed of the random generator (default: fresh entropy)",
+                        seed_help="seed of the random generator (default: fresh entropy, so each run differs; give one to repeat a run)",
                         no_noise_help="no shot noise: deliver the expected electrons deterministically")
     from tespike.golden.fastsim.simulator import SIMULATION_METHODS
     parser.add_argument("--method", choices=SIMULATION_METHODS, default="fast",
