@@ -63,7 +63,7 @@ def build_or_refuse(make, config, height, width):
     except TespikeError:
         raise
     except Exception as exc:            # the RTL's own refusal, whatever its type
-        raise ConfigError(f"the RTL cannot build a {height} x {width} array for config {config}: "
+        raise ConfigError(f"the RTL cannot build a {height} x {width} array for config {config.describe()}: "
                           f"{type(exc).__name__}: {exc}") from exc
 
 

@@ -212,11 +212,18 @@ class SensorConfig:
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=False)
 
-    def first_difference(self, other: "SensorConfig") -> tuple[str, Any, Any] | None:
-        """``(key, this value, other's value)`` of the first key (SPEC order) where ``other``
-        differs, None where they are equal: what a refusal of a mismatched file names."""
-        return next(((key, getattr(self, key), getattr(other, key)) for key in KEYS
-                     if getattr(self, key) != getattr(other, key)), None)
+    def key_differences(self, other: "SensorConfig") -> list[tuple[str, Any, Any]]:
+        """``(key, this value, other's value)`` of every key (SPEC order) where ``other`` differs;
+        empty where they are equal."""
+        return [(key, getattr(self, key), getattr(other, key)) for key in KEYS
+                if getattr(self, key) != getattr(other, key)]
+
+    def differences_text(self, other: "SensorConfig", mine: str, theirs: str) -> str | None:
+        """How ``other`` differs, as every refusal of a mismatched file or stream says it:
+        ``"threshold = 175 in the calibration, 100 in the stream"`` (``mine`` and ``theirs`` name
+        the two; each differing key, "; " between them); None where they are equal."""
+        return "; ".join(f"{key} = {a!r} in {mine}, {b!r} in {theirs}"
+                         for key, a, b in self.key_differences(other)) or None
 
     def save(self, path: str | Path) -> None:
         with atomic_output(path) as tmp:
@@ -274,12 +281,19 @@ class SensorConfig:
         """Light of one spike per readout interval, in scene units (1.0 = the design light)."""
         return self.threshold / DESIGN_ELECTRONS
 
-    def __str__(self) -> str:   # short, for test ids and logs
+    def _shown_keys(self) -> tuple[str, ...]:
         keys = ("b1", "b2", "alpha", "clocks_per_tick", "threshold", "acc_bits", "input_bits")
-        if not self.is_te:
-            keys += ("ml_bits",)
+        return keys if self.is_te else keys + ("ml_bits",)
+
+    def __str__(self) -> str:   # short, for test ids, logs and the dataset store's array names
         mode = self.mode + ("-msb" if self.is_msb else "")
-        return mode + "-" + "-".join(f"{k}{getattr(self, k)}" for k in keys)
+        return mode + "-" + "-".join(f"{k}{getattr(self, k)}" for k in self._shown_keys())
+
+    def describe(self) -> str:
+        """The configuration as messages show it to a user: ``te (b1=4, b2=4, alpha=15, ...)``
+        (``str`` glues key and value, ``b14``, which reads as b1 = 14)."""
+        mode = self.mode + ("-msb" if self.is_msb else "")
+        return f"{mode} (" + ", ".join(f"{k}={getattr(self, k)}" for k in self._shown_keys()) + ")"
 
 
 def load_config(spec: str | Path) -> SensorConfig:

@@ -98,9 +98,15 @@ def _check_word_block(words: np.ndarray, config: SensorConfig, where) -> None:
     bad[inside] = ~table[w[inside]]
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise IllegalWordError(f"readout word {int(words[index])} at index {where(index)} is not a legal "
-                         f"{config.mode.upper()} word for this configuration ({config}; its words are "
-                         f"{_word_ranges(legal_words(config))})")
+        raise illegal_word(int(words[index]), where(index), config)
+
+
+def illegal_word(word: int, index: tuple, config: SensorConfig) -> IllegalWordError:
+    """The refusal of a word that is no legal word of ``config`` (at ``index`` of its array): one wording
+    wherever words are checked (here, and the torch decoder)."""
+    return IllegalWordError(f"readout word {word} at index {index} is not a legal {config.mode.upper()} word "
+                            f"for this configuration ({config.describe()}; its words are "
+                            f"{_word_ranges(legal_words(config))})")
 
 
 def _te_fields(words: np.ndarray, config: SensorConfig) -> tuple[np.ndarray, np.ndarray]:

@@ -329,11 +329,9 @@ def check_matches(calibration: Calibration, config: SensorConfig, shape: tuple[i
                   what: str = "the stream", name: str = "the calibration") -> None:
     """Refuse, in one line naming both (``name``: the calibration, e.g. its file), a calibration made
     for another configuration or frame size than ``what``."""
-    difference = calibration.config.first_difference(config)
+    difference = calibration.config.differences_text(config, "the calibration", what)
     if difference is not None:
-        key, mine, theirs = difference
-        raise InputError(f"{name} is for another sensor configuration than {what}: "
-                         f"{key} = {mine!r} in the calibration, {theirs!r} in {what}")
+        raise InputError(f"{name} is for another sensor configuration than {what}: {difference}")
     if tuple(shape) != calibration.shape:
         raise InputError(f"{name} holds maps of {calibration.shape[0]} x {calibration.shape[1]} pixels, "
                          f"{what} frames of {shape[0]} x {shape[1]}")

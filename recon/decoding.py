@@ -17,9 +17,9 @@ import numpy as np
 import torch
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.decode import check_word_dtype, decode_light as golden_decode_light, legal_words
+from tespike.golden.decode import check_word_dtype, decode_light as golden_decode_light, illegal_word, legal_words
 from tespike.golden.decode import decode_spikes as golden_decode_spikes
-from tespike.golden.errors import IllegalWordError, InputError
+from tespike.golden.errors import InputError
 
 
 @functools.lru_cache(maxsize=64)
@@ -58,8 +58,7 @@ def as_word_tensor(words, device: str | torch.device = "cpu") -> torch.Tensor:
 
 def _refuse(w: torch.Tensor, bad: torch.Tensor, config: SensorConfig):
     index = tuple(int(i) for i in torch.nonzero(bad)[0])
-    raise IllegalWordError(f"readout word {int(w[index])} at index {index} is not a legal "
-                     f"{config.mode.upper()} word for this configuration ({config})")
+    raise illegal_word(int(w[index]), index, config)
 
 
 def _gather(table: np.ndarray, words, config: SensorConfig, device, dtype: torch.dtype) -> torch.Tensor:

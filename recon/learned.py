@@ -83,14 +83,6 @@ def preset_of(config: SensorConfig) -> str | None:
     return None
 
 
-def differences(config: SensorConfig, other: SensorConfig) -> str:
-    """The keys in which ``config`` differs from ``other``, ``"ml_bits 4, not 8"`` (for messages where the two
-    print alike: a TE configuration's short name leaves out the ML keys)."""
-    import dataclasses
-    return ", ".join(f"{f.name} {getattr(config, f.name)!r}, not {getattr(other, f.name)!r}"
-                     for f in dataclasses.fields(config) if getattr(config, f.name) != getattr(other, f.name))
-
-
 def weights_name(method: str, preset: str) -> str:
     """File name of the shipped weights: ``<preset>.pt`` for the network, ``<method>-<preset>.pt`` else."""
     return f"{preset}.pt" if method == "net" else f"{method}-{preset}.pt"
@@ -102,9 +94,10 @@ def weights_path(config: SensorConfig, method: str = "net") -> Path:
     preset = preset_of(config)
     if preset is None:
         near = next((name for name, keys in PRESETS.items() if str(SensorConfig(**keys)) == str(config)), None)
-        differs = f" (it differs from the {near} preset in {differences(config, SensorConfig(**PRESETS[near]))})" \
+        differs = f" ({config.differences_text(SensorConfig(**PRESETS[near]), 'the stream', f'the {near} preset')})" \
             if near else ""
-        raise InputError(f"the stream's configuration {config}{differs} is none of the presets {', '.join(PRESETS)} "
+        raise InputError(f"the stream's configuration {config.describe()}{differs} is none of the presets "
+                         f"{', '.join(PRESETS)} "
                          f"that {method} weights are shipped for: train weights for it with "
                          f"'tespike train --method {method} --config C.json --out W.pt' and pass --weights W.pt")
     path = WEIGHTS_DIR / weights_name(method, preset)
@@ -123,8 +116,8 @@ def load_learned(config: SensorConfig, method: str, weights: str | Path | None =
     what = "weights" if weights is None else "--weights"
     model, trained_for, _ = load_weights(path, what, method)
     if trained_for != config:
-        alike = f" ({differences(config, trained_for)})" if str(trained_for) == str(config) else ""
-        raise InputError(f"{method} {what} {str(path)!r} were trained for {trained_for}, the stream is {config}{alike}")
+        raise InputError(f"{method} {what} {str(path)!r} were trained for another configuration than the stream's: "
+                         f"{config.differences_text(trained_for, 'the stream', 'the weights')}")
     return model
 
 
@@ -196,7 +189,7 @@ def weights_by_sensor(paths, configs) -> dict[tuple[str, str], Path]:
         method = weights_method(path, "--weights")
         sensors = [name for name, config in configs.items() if config == trained_for]
         if not sensors:
-            raise InputError(f"--weights {str(path)!r} were trained for {trained_for}, none of the sensors "
+            raise InputError(f"--weights {str(path)!r} were trained for {trained_for.describe()}, none of the sensors "
                              f"evaluated ({', '.join(configs)})")
         for sensor in sensors:
             if (method, sensor) in chosen:

@@ -497,8 +497,8 @@ class TrainingRun:
             print(f"train: a new run in {str(self.work)!r}: removed the earlier run's {', '.join(removed)}",
                   file=sys.stderr)
         if options.init is not None and trained_for != self.config:
-            print(f"train: --init {options.init!r} was trained for {trained_for}, this run is for "
-                  f"{self.config}: {len(copied)} of its tensors (matching name and shape) start it",
+            print(f"train: --init {options.init!r} was trained for {trained_for.describe()}, this run is for "
+                  f"{self.config.describe()}: {len(copied)} of its tensors (matching name and shape) start it",
                   file=sys.stderr)
 
     # ---------------------------------------------------------------- what it writes

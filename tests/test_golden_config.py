@@ -106,12 +106,20 @@ def test_bad_json_and_missing_file(tmp_path):
         load_config(tmp_path / "list.json")
 
 
-def test_first_difference_names_the_first_key_in_spec_order():
+def test_differences_name_every_key_in_spec_order_in_one_wording():
     te = SensorConfig.preset("te")
-    assert te.first_difference(te) is None
+    assert te.key_differences(te) == [] and te.differences_text(te, "a", "b") is None
     other = dataclasses.replace(te, threshold=100, acc_bits=10)
-    assert te.first_difference(other) == ("threshold", 175, 100)
-    assert SensorConfig.preset("ml").first_difference(SensorConfig.preset("ml-msb")) == ("ml_readout", "count", "msb")
+    assert te.key_differences(other) == [("threshold", 175, 100), ("acc_bits", 9, 10)]
+    assert te.differences_text(other, "X", "Y") == "threshold = 175 in X, 100 in Y; acc_bits = 9 in X, 10 in Y"
+    assert SensorConfig.preset("ml").key_differences(SensorConfig.preset("ml-msb")) == [("ml_readout", "count", "msb")]
+
+
+def test_describe_shows_keys_and_values_apart():
+    """str() glues them (b14 for b1 = 4, the dataset store's names); messages use describe()."""
+    assert SensorConfig.preset("te").describe().startswith("te (b1=4, b2=4, alpha=15, clocks_per_tick=16")
+    assert SensorConfig.preset("ml-msb").describe().startswith("ml-msb (b1=4") and "ml_bits=8" in \
+        SensorConfig.preset("ml-msb").describe()
 
 
 def test_a_clock_structure_too_long_from_defaults_says_they_are_defaults():

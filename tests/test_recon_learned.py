@@ -88,7 +88,7 @@ def test_missing_weights_are_refused_naming_the_file_and_the_training(empty_weig
     with pytest.raises(InputError, match="none of the presets"):
         weights_path(odd, "bsf")
     # a TE configuration whose short name is the preset's (ML keys left out): the message said what differs
-    with pytest.raises(InputError, match=r"\(it differs from the te preset in ml_bits 4, not 8\) is none of the presets"):
+    with pytest.raises(InputError, match=r"\(ml_bits = 4 in the stream, 8 in the te preset\) is none of the presets"):
         weights_path(SensorConfig(ml_bits=4), "bsf")
 
 

@@ -31,11 +31,9 @@ def run(args) -> int:
     check_outputs({"--out": args.out}, {"--dark": args.dark, "--flat": args.flat}, {"--out": NPZ_FILE})
     dark, config = load_stream(args.dark, memory_map=True)
     flat, flat_config = load_stream(args.flat, memory_map=True)
-    difference = config.first_difference(flat_config)
+    difference = config.differences_text(flat_config, args.dark, args.flat)
     if difference is not None:
-        key, mine, theirs = difference
-        raise InputError(f"--dark and --flat were recorded with different configurations: "
-                         f"{key} = {mine!r} in {args.dark}, {theirs!r} in {args.flat}")
+        raise InputError(f"--dark and --flat were recorded with different configurations: {difference}")
     calibration = estimate(dark, flat, config, args.flat_light)
     save_calibration(args.out, calibration)
     report(args, f"wrote {args.out}: {calibration_summary(calibration)}")

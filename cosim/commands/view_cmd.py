@@ -64,7 +64,7 @@ def load_light(path, config_spec=None, estimator=None):
         if estimator is not None and not config.is_te:
             raise InputError(f"--estimator chooses among TE decoders; the ML stream {str(path)!r} has one "
                              "(leave --estimator out)")
-        return decode_light(words, config, estimator or "ratio").astype(np.float64), f"stream ({config}), decoded"
+        return decode_light(words, config, estimator or "ratio").astype(np.float64), f"stream ({config.describe()}), decoded"
     if estimator is not None:
         raise InputError(f"--estimator applies to a stream S.npz only ({str(path)!r} is not one)")
     header = load_npy(path, "--input", mmap_mode="r")
