@@ -29,7 +29,19 @@ def bar(desc: str, unit: str = "readout", total: int | None = None):
 def report(args, message: str) -> None:
     """The one line a command prints on stdout on success (silenced by ``--quiet``)."""
     if not getattr(args, "quiet", False):
-        print(message, flush=True)
+        print(printable(message, sys.stdout), flush=True)
+
+
+def printable(text: str, stream) -> str:
+    """``text`` as ``stream`` can encode it: a path the terminal's encoding lacks (``é`` under ASCII, a
+    non-UTF-8 byte under a strict UTF-8 locale) escaped, never a UnicodeEncodeError after the output
+    is written."""
+    encoding = getattr(stream, "encoding", None) or "utf-8"
+    try:
+        text.encode(encoding, errors=getattr(stream, "errors", None) or "strict")
+        return text
+    except (UnicodeEncodeError, LookupError):
+        return text.encode(encoding, errors="backslashreplace").decode(encoding, errors="replace")
 
 
 def counted(n: int, noun: str) -> str:

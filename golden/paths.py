@@ -107,10 +107,19 @@ def check_output_file(path: str | os.PathLike, what: str | None = None) -> Path:
     if not directory.is_dir():
         shown = os.path.dirname(text) or "."
         raise InputError(f"cannot write {label}: directory {shown!r} does not exist")
-    if not os.access(directory, os.W_OK | os.X_OK):
+    if not writable_directory(directory):
         shown = os.path.dirname(text) or "."
         raise InputError(f"cannot write {label}: directory {shown!r} is not writable")
     return target
+
+
+def writable_directory(path: str | os.PathLike) -> bool:
+    """Whether a command may write in directory ``path``: the process may (``os.access``) and its mode
+    lets someone (root may write anywhere, but a folder whose mode says no to all is read-only)."""
+    try:
+        return os.access(path, os.W_OK | os.X_OK) and bool(os.stat(path).st_mode & 0o222)
+    except OSError:
+        return False
 
 
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
@@ -215,10 +224,10 @@ def check_output_dir(path: str | os.PathLike, what: str = "--out",
         if not parent.is_dir():
             raise InputError(f"cannot write {what} {text!r}: directory "
                              f"{os.path.dirname(text.rstrip('/')) or '.'!r} does not exist")
-        if not os.access(parent, os.W_OK | os.X_OK):
+        if not writable_directory(parent):
             raise InputError(f"cannot create {what} {text!r}: its parent directory is not writable")
         return folder
-    if not os.access(folder, os.W_OK | os.X_OK):
+    if not writable_directory(folder):
         raise InputError(f"cannot write {what} {text!r}: directory is not writable")
     for name in files:
         inside = folder / name

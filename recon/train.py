@@ -105,6 +105,10 @@ class TrainOptions:
                 raise InputError(f"{key} = {getattr(self, key)!r}: must be an integer >= 0")
         if self.workers > MAX_WORKERS:
             raise InputError(f"workers = {self.workers}: must be in 0..{MAX_WORKERS} (data-engine processes)")
+        if self.warmup > self.lr / MIN_LR:
+            raise InputError(f"warmup = {self.warmup}: its first step's rate, lr / warmup = {self.lr / self.warmup:.3g}, "
+                             f"is below {MIN_LR:g}, where a step rounds away (at most lr / {MIN_LR:g} = "
+                             f"{int(self.lr / MIN_LR)} steps)")
         if self.steps is None and self.minutes is None:
             raise InputError("give a budget: steps or minutes")
         self.sizes()                    # an unknown method, size or ablation case is refused here
@@ -297,8 +301,9 @@ def lr_factor(options: TrainOptions, step: int) -> float:
     the learning rate whatever its gradient. (Measured: it did not remove the 1.5 to 2 dB
     validation dip of the shipped ML networks warm-started on noisy clips, which is the data's,
     not the optimiser's: docs/fair-training.md.)"""
-    ramp = min(1.0, (step + 1) / options.warmup) if options.warmup else 1.0
-    return ramp * 0.5 ** (step // (options.steps_per_epoch * options.halve_every))
+    ramp = min(1.0, (step + 1) / options.warmup) if options.warmup else 1.0   # (warmup <= lr / MIN_LR)
+    halved = 0.5 ** (step // (options.steps_per_epoch * options.halve_every))
+    return ramp * max(halved, MIN_LR / options.lr)      # halving stops at MIN_LR, below which a step rounds away
 
 
 def validate(model: torch.nn.Module, cases, config: SensorConfig, device: str) -> dict[str, float]:
@@ -496,10 +501,11 @@ class TrainingRun:
         if {self.checkpoint.name, self.best_path.name} & set(removed):
             print(f"train: a new run in {str(self.work)!r}: removed the earlier run's {', '.join(removed)}",
                   file=sys.stderr)
-        if options.init is not None and trained_for != self.config:
-            print(f"train: --init {options.init!r} was trained for {trained_for.describe()}, this run is for "
-                  f"{self.config.describe()}: {len(copied)} of its tensors (matching name and shape) start it",
-                  file=sys.stderr)
+        if options.init is not None and (trained_for != self.config or self.init["tensors_copied"] < self.init["tensors"]):
+            why = (f"was trained for {trained_for.describe()}, this run is for {self.config.describe()}"
+                   if trained_for != self.config else "holds another size or ablation of the method")
+            print(f"train: --init {options.init!r} {why}: {len(copied)} of this run's {self.init['tensors']} "
+                  "tensors (matching name and shape) start from it, the others afresh", file=sys.stderr)
 
     # ---------------------------------------------------------------- what it writes
     def elapsed(self) -> float:

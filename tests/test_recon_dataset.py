@@ -321,6 +321,9 @@ STORE_DAMAGE = {
     "chunk_frames text": (lambda s: _tamper(s / "zarr.json", lambda d, a: a.update(chunk_frames="x")), "chunk_frames"),
     "peak missing": (lambda s: _tamper(s / "sun/zarr.json", lambda d, a: a.pop("peak")), "peak is missing"),
     "peak text": (lambda s: _tamper(s / "sun/zarr.json", lambda d, a: a.update(peak="x")), "attribute peak"),
+    # (above the light's maximum every score rose: PSNR-mu 550 dB, exit 0)
+    "peak above the light's": (lambda s: _tamper(s / "sun/zarr.json", lambda d, a: a.update(peak=2.0)),
+                               "records peak 2, its light's maximum is 1"),
     "frames altered": (lambda s: _tamper(s / "sun/zarr.json", lambda d, a: a.update(frames=10)), "has shape"),
     "height text": (lambda s: _tamper(s / "sun/zarr.json", lambda d, a: a.update(height="abc")), "attribute height"),
     "stream config gone": (lambda s: _tamper(s / "sun/streams/te/zarr.json", lambda d, a: a.pop("config")),

@@ -182,6 +182,15 @@ def test_losses():
         TrainOptions(steps=1, loss="l2")
     with pytest.raises(InputError, match="budget"):
         TrainOptions()
+    with pytest.raises(InputError, match="warmup = 100000001: its first step's rate"):
+        TrainOptions(steps=1, lr=1e-2, warmup=10 ** 8 + 1)     # (1e11 trained at 1e-15: no weight moved)
+    TrainOptions(steps=1, lr=1e-2, warmup=10 ** 8)
+
+
+def test_the_halving_schedule_stops_at_the_smallest_rate():
+    from tespike.recon.train import MIN_LR, lr_factor
+    opts = TrainOptions(steps=1, lr=1e-10, steps_per_epoch=1, halve_every=1)
+    assert [lr_factor(opts, step) * opts.lr for step in range(3)] == [1e-10, MIN_LR, MIN_LR]
 
 
 def test_ablation_case_trains_the_switched_network(tmp_path):

@@ -137,7 +137,9 @@ def sensor_argument(args):
         if args.sensor_seed is not None:
             raise InputError("--sensor-seed needs --noise N.json (the maps it draws are the non-idealities')")
         return None
-    if args.dark_current != "none":
+    typed = any(len(name) > 3 and "--dark-current".startswith(name)   # (an abbreviation argparse takes too)
+                for name in (token.split("=", 1)[0] for token in getattr(args, "argv", None) or ()))
+    if args.dark_current != "none" or typed:   # (even 'none': the file's dark current would override it)
         raise InputError(f"--dark-current {args.dark_current} with --noise: give the dark current in "
                          f"{args.noise} ('dark_current')")
     noise = load_noise(args.noise)
@@ -221,3 +223,27 @@ def frame_range(spec, count: int) -> range:
     if not 0 <= a < b <= count:
         raise InputError(f"--frames {spec!r}: needs 0 <= a < b <= {count} (the files hold {count} frames)")
     return range(a, b)
+
+
+def check_inputs_outside(args, folder_option: str) -> None:
+    """Refuse any input of the command (every option's value naming an existing file or folder) that lies
+    inside the output folder of ``folder_option`` (``"out"``, ``"work_dir"``), which the run replaces
+    whole: a --weights, --scene or --verilog kept there was overwritten by the new folder's files."""
+    import os
+    from pathlib import Path
+
+    from tespike.golden.errors import InputError
+    folder = getattr(args, folder_option)
+    if folder is None or not os.path.isdir(folder):
+        return
+    root = Path(folder).resolve()
+    flag = "--" + folder_option.replace("_", "-")
+    for dest, value in vars(args).items():
+        if dest in (folder_option, "argv"):
+            continue
+        for item in value if isinstance(value, (list, tuple)) else (value,):
+            if not isinstance(item, (str, os.PathLike)) or not os.path.lexists(item):
+                continue
+            if Path(item).resolve().is_relative_to(root):
+                raise InputError(f"--{dest.replace('_', '-')} {os.fspath(item)!r} lies inside {flag} {folder!r}, "
+                                 "which this run replaces whole: refusing to overwrite an input (move it out)")

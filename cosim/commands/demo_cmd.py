@@ -42,6 +42,9 @@ def add_arguments(parser):
 def run(args) -> int:
     from tespike.cosim.console import progress_wanted
     from tespike.cosim.demo import run_demo
+
+    from .common import check_inputs_outside
+    check_inputs_outside(args, "out")        # (the folder is replaced whole: an input kept there would go)
     return run_demo(args.out, frames=args.frames, height=args.height, width=args.width, seed=args.seed,
                     crop=args.crop, rtl_readouts=args.rtl_readouts, backend=args.backend,
                     repeats=args.repeats, sensors=[s.strip() for s in args.sensors.split(",") if s.strip()],

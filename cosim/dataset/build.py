@@ -88,7 +88,7 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
     different sizes (before anything is planned); the first frame of each is decoded.
     """
     from tespike.recon.scenes import LUMA_WEIGHTS
-    from tespike.recon.scenes.hdr_io import list_frames, sequence_size
+    from tespike.recon.scenes.hdr_io import FRAME_SUFFIXES, list_frames, sequence_size
 
     folder = Path(folder)
     if weights not in LUMA_WEIGHTS:
@@ -98,9 +98,17 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
     subfolders = sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))
     if not subfolders:
         raise InputError(f"--hdr {str(folder)!r} holds no sub-folders (one folder of frames per sequence)")
+    loose = sorted(p.name for p in folder.iterdir() if p.suffix.lower() in FRAME_SUFFIXES)
+    if loose:                       # (read as no sequence: it was dropped without a word)
+        raise InputError(f"--hdr {str(folder)!r} holds the frame {loose[0]!r} beside its sequence folders: "
+                         "put every frame in a sequence's sub-folder")
     sources = []
     for sub in subfolders:
         check_name(sub.name, "sequence (HDR sub-folder)")
+        nested = sorted(p.name for p in sub.iterdir() if p.is_dir() and not p.name.startswith("."))
+        if nested:                  # (its frames were dropped without a word)
+            raise InputError(f"sequence folder {str(sub)!r} holds the folder {nested[0]!r}: a sequence is one "
+                             "folder of frames (sequences sit side by side in --hdr)")
         paths = list_frames(sub)
         if max_frames is not None:
             paths = paths[:max_frames]

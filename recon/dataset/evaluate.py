@@ -231,6 +231,10 @@ def _score_tasks(store, infos, methods, window, device, tile, options, learned):
     for sequence, info in infos.items():
         K, H, W = info["frames"], info["height"], info["width"]
         peak = check_sequence_peak(sequence, float(info["peak"]))
+        stored = store.light_peak(sequence)
+        if stored != peak:          # (a peak above the light's would lift every score: 550 dB)
+            raise InputError(f"dataset store {store.url!r}: sequence {sequence!r} records peak {peak:g}, its "
+                             f"light's maximum is {stored:g} (a damaged store: build it again with tespike dataset)")
         if min(H, W) < 2 * h + 1:
             raise InputError(f"sequence {sequence!r} is {H} x {W}: SSIM needs frames of at least "
                              f"{2 * h + 1} x {2 * h + 1} pixels")

@@ -396,6 +396,14 @@ class DatasetStore:
         import dask.array as da
         return da.from_zarr(self.group[f"{sequence}/light"])
 
+    def light_peak(self, sequence: str) -> float:
+        """The largest value of a sequence's stored light, read a few frames at a time (the peak its
+        attributes record must be it: it normalises every score)."""
+        with reading(self.url, f"{sequence}/light"):
+            light = self.group[f"{sequence}/light"]
+            step = max(1, (1 << 22) // max(1, light.shape[1] * light.shape[2]))
+            return max((float(np.max(light[k:k + step])) for k in range(0, light.shape[0], step)), default=0.0)
+
     def words(self, sequence: str, config: str):
         """The readout words of one sequence and sensor as a lazy dask array (K, H, W)."""
         import dask.array as da

@@ -291,6 +291,7 @@ def _exr_contents(path: str, header_only: bool = False) -> dict:
     with _library_output() as said:
         try:
             with OpenEXR.File(path, header_only=header_only) as handle:
+                parts = len(handle.parts)
                 contents = dict(handle.header()) if header_only else \
                     {name: np.asarray(ch.pixels) for name, ch in handle.channels().items()}
             failure = None
@@ -299,6 +300,8 @@ def _exr_contents(path: str, header_only: bool = False) -> dict:
             said_first = said()
     if failure is not None:
         raise InputError(f"cannot read EXR file {path!r}: {one_line(said_first.removeprefix(f'{path}: ') or failure)}")
+    if parts != 1:                          # (the channels read are the first part's: the others would be dropped)
+        raise InputError(f"EXR file {path!r} holds {parts} parts (images): give one image per frame file")
     return contents
 
 
@@ -452,8 +455,11 @@ def sequence_size(paths: list, what: str) -> tuple[int, int]:
     return first
 
 
-def _natural_key(name: str) -> list:
-    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", name)]
+def _natural_key(name: str) -> tuple:
+    """Numbers compared as numbers (ASCII digit runs: ``'²'`` is text), case aside, then the name
+    itself: a total order, so ``f1``, ``f01`` and ``F1`` come in one order whatever the folder's."""
+    parts = re.split(r"([0-9]+)", name)
+    return [int(part) if i % 2 else part.lower() for i, part in enumerate(parts)], name
 
 
 def list_frames(folder: str | Path) -> list[Path]:
