@@ -108,9 +108,15 @@ def dark_electrons(model: str | None, shape, rng: np.random.Generator, *,
         return np.zeros(shape, np.int64)
     x = rng.normal(*DARK_NORMAL[model], shape)
     per = np.maximum(x, 0.0) if model == "eq12" else eq13_dark_per_readout(x)
-    if scale is not None:
-        per = per * scale
+    if scale is not None:       # (a hot pixel's scale can take the count past int64: held at DARK_MAX)
+        per = np.minimum(per * scale, DARK_MAX)
     return np.rint(per).astype(np.int64)
+
+
+#: Most dark electrons one pixel-readout is given: 2^62, where every clock of any legal readout
+#: (at most 2^24 clocks of at most 2^32 - 1 electrons) is saturated all the same, and the int64 sums
+#: of a readout cannot wrap (legal noise settings reach 1e19: the count came out negative).
+DARK_MAX = float(1 << 62)
 
 
 def eq13_dark_per_readout(x: np.ndarray) -> np.ndarray:

@@ -56,6 +56,12 @@ NOISE_RANGES = {
     "comparator_offset": (0.0, 0.2),
 }
 
+#: Smallest non-zero value of each per-pixel map's option: below it the map cannot change a word (a
+#: relative spread of 1e-6 moves a pixel's mean by under one electron in a million; a hot-pixel share
+#: of 1e-9 draws none in the largest scene a command takes), so a smaller one would make --sensor-seed
+#: and a second noise file look like another sensor while changing nothing.
+MAP_SMALLEST = {"dsnu": 1e-6, "prnu": 1e-6, "comparator_offset": 1e-6, "hot_pixels": 1e-9}
+
 #: A hot pixel's dark scale factor unless the noise description gives one (it needs hot_pixels > 0).
 HOT_FACTOR = 20.0
 
@@ -89,7 +95,16 @@ class SensorNoise:
                 raise InputError(f"sensor noise {key} = {one_line(repr(value), 40)}: must be a finite number")
             if not low <= value <= high:
                 raise InputError(f"sensor noise {key} = {one_line(repr(value), 40)}: must be in [{low:g}, {high:g}]")
+            if 0 < value < MAP_SMALLEST.get(key, 0.0):
+                raise InputError(f"sensor noise {key} = {one_line(repr(value), 40)}: must be 0 or at least "
+                                 f"{MAP_SMALLEST[key]:g} (a smaller one changes no pixel)")
             object.__setattr__(self, key, float(value))
+        if self.dark_current is not None and self.dark_level == 0:
+            raise InputError(f"sensor noise: dark_level 0 makes dark_current {self.dark_current!r} draw nothing "
+                             "(leave the dark current out for none)")
+        if self.hot_pixels and self.hot_factor == 1.0:
+            raise InputError("sensor noise: hot_factor 1 makes the hot pixels like the others (give a factor > 1, "
+                             "or no hot_pixels)")
         if self.dark_current is None and (self.dsnu or self.hot_pixels or self.dark_level != 1.0):
             raise InputError("sensor noise: dark_level, dsnu and hot_pixels shape the dark current; "
                              "they need dark_current 'eq12' or 'eq13'")

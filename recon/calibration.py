@@ -76,6 +76,10 @@ MAX_GAIN = 1 / MIN_GAIN
 #: Share of a flat's words at the sensor's top code (:func:`saturated_words`) from which
 #: :func:`estimate` refuses it: most of its pixels saw light beyond the sensor's range.
 MAX_SATURATED_SHARE = 0.5
+#: Share of a TE flat's words that are overflow words from which :func:`estimate` refuses it: there the
+#: mean decoding no longer conserves spikes (a flat at 0.1 to 0.9, all overflow words, read gains 2 to
+#: 43 % low and every calibrated image up to 1.7 times too bright).
+MAX_OVERFLOW_SHARE = 0.5
 #: Readouts decoded at once (bounds memory to this many float64 frames).
 CHUNK_READOUTS = 32
 #: Readouts of each calibration stream (dark and flat) the project records: the evaluation's
@@ -131,7 +135,12 @@ def flat_ceiling(config: SensorConfig) -> float:
     its overflow (2^b1 spikes a readout: 0.067 for the paper's camera), ML below its counter's top
     (or one spike a clock, whichever comes first)."""
     from tespike.golden.config import DESIGN_ELECTRONS
-    spikes = config.p_max if config.is_te else min(config.ml_max, config.clocks_per_readout)
+    if config.is_te:
+        spikes = config.p_max
+    elif config.is_msb:             # (the msb word holds counts below 2^(ml_bits - 1) whole)
+        spikes = min(1 << (config.ml_bits - 1), config.clocks_per_readout)
+    else:
+        spikes = min(config.ml_max, config.clocks_per_readout)
     return spikes * config.threshold / DESIGN_ELECTRONS
 
 
@@ -202,11 +211,21 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
                          f"top code ({top}): its dark current alone is beyond the sensor's range, and no "
                          "calibration recovers light under it")
     saturated = saturated_share(flat_words, top_words)
+    if saturated >= MAX_SATURATED_SHARE and config.is_msb:
+        # (the msb word of the top code is also the ordinary reading of any count of 2^(ml_bits - 1) or
+        # more: a flat below the ceiling reads it most of the time and still conserves spikes)
+        reads = float(np.median(mean_decoded_light(flat_words, config)))
+        saturated = saturated if reads >= 0.97 * flat_ceiling(config) else 0.0
     if saturated >= MAX_SATURATED_SHARE:
         raise InputError(f"the flat stream is saturated: {100 * saturated:.1f} % of its words are the sensor's "
                          f"top code ({top}: what any light above its range gives), so its light cannot be "
                          f"measured; record the flat at a lower light (below {flat_ceiling(config):.3g}, "
                          "where the mean decoding conserves spikes)")
+    overflowing = overflow_share(flat_words, config)
+    if overflowing >= MAX_OVERFLOW_SHARE:
+        raise InputError(f"the flat stream is too bright for a TE calibration: {100 * overflowing:.1f} % of its "
+                         "words are overflow words, whose mean decoding does not conserve spikes; record the "
+                         f"flat at a lower light (below {flat_ceiling(config):.3g}, the overflow level)")
     dark = mean_decoded_light(dark_words, config)
     shown = mean_decoded_light(flat_words, config) - dark
     if float(np.median(shown)) > MAX_GAIN * float(flat_light):
@@ -216,12 +235,13 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
     if float(np.median(shown)) < MIN_GAIN * float(flat_light):
         raise InputError(f"flat light {flat_light:g}: the flat stream's pixels read {float(np.median(shown)):.4g} "
                          f"(median, less the dark), below {MIN_GAIN:g} times it: no brighter than the dark "
-                         "stream (were the dark and flat streams swapped, or the flat recorded without light?)")
+                         "stream for that light (is the flat light stated above the one it was recorded at? were the "
+                         "dark and flat streams swapped, or the flat recorded without light?)")
     raw_gain = shown / float(flat_light)
     floored = int(np.count_nonzero(raw_gain < MIN_GAIN))
     return Calibration(dark, np.maximum(raw_gain, MIN_GAIN), config, int(dark_words.shape[0]),
                        int(flat_words.shape[0]), float(flat_light), CALIBRATION_ESTIMATOR, floored,
-                       overflow_share(flat_words, config), *estimate_dark_law(dark_words, config))
+                       overflowing, *estimate_dark_law(dark_words, config))
 
 
 def save_calibration(path: str | Path, calibration: Calibration) -> None:
@@ -284,6 +304,9 @@ def load_calibration(path: str | Path) -> Calibration:
         raise InputError(f"calibration file {shown!r}: gain must lie in [{MIN_GAIN:g}, {high:.6g}] (the flat's "
                          f"light over {numbers['flat_light']:g}, floored at {MIN_GAIN:g}; found "
                          f"{float(gain.min()):g} to {float(gain.max()):g})")
+    if float(np.median(gain)) > MAX_GAIN:       # (as estimate refuses it: a flat read far above its stated light)
+        raise InputError(f"calibration file {shown!r}: its median gain {float(np.median(gain)):g} is above "
+                         f"{MAX_GAIN:g}, which 'tespike calibrate' never writes")
     if law is not None:
         if law.dtype != np.float32 or law.ndim != 3 or law.shape[1:] != dark.shape \
                 or not np.isfinite(law).all() or (law < 0).any():

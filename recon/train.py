@@ -504,8 +504,9 @@ class TrainingRun:
         if options.init is not None and (trained_for != self.config or self.init["tensors_copied"] < self.init["tensors"]):
             why = (f"was trained for {trained_for.describe()}, this run is for {self.config.describe()}"
                    if trained_for != self.config else "holds another size or ablation of the method")
+            rest = ", the others afresh" if len(copied) < self.init["tensors"] else ""
             print(f"train: --init {options.init!r} {why}: {len(copied)} of this run's {self.init['tensors']} "
-                  "tensors (matching name and shape) start from it, the others afresh", file=sys.stderr)
+                  f"tensors (matching name and shape) start from it{rest}", file=sys.stderr)
 
     # ---------------------------------------------------------------- what it writes
     def elapsed(self) -> float:

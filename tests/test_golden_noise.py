@@ -96,3 +96,23 @@ def test_a_noise_file_setting_that_would_be_ignored_is_refused(tmp_path):
         load_noise(path)
     path.write_text(SensorNoise(prnu=0.05).to_json())
     assert load_noise(path) == SensorNoise(prnu=0.05)
+
+
+def test_settings_that_would_change_nothing_are_refused():
+    """Each was accepted and changed no word (so --sensor-seed was ignored, and evaluate took two files
+    of one sensor for two sensors)."""
+    for keys, words in (({"dark_current": "eq12", "dsnu": 1e-300}, "dsnu = 1e-300: must be 0 or at least"),
+                        ({"prnu": 5e-324}, "prnu"), ({"comparator_offset": 1e-7}, "comparator_offset"),
+                        ({"dark_current": "eq12", "hot_pixels": 1e-12}, "hot_pixels"),
+                        ({"dark_current": "eq12", "dark_level": 0.0}, "dark_level 0"),
+                        ({"dark_current": "eq12", "hot_pixels": 0.1, "hot_factor": 1.0}, "hot_factor 1")):
+        with pytest.raises(InputError, match=words):
+            SensorNoise(**keys)
+    SensorNoise(dark_current="eq12", dsnu=1e-6, hot_pixels=1e-9, hot_factor=1.5)
+
+
+def test_dark_electrons_of_an_extreme_hot_pixel_do_not_wrap(rng):
+    """Legal settings (eq. 13 x 1e6, hot factor 1e6, DSNU 2) reached 1e19 electrons: the int64 cast came out
+    negative and the simulators stopped with a traceback."""
+    d = dark_electrons("eq13", (100000,), rng, scale=np.full(100000, 8e14))
+    assert d.min() >= 0 and d.max() == 1 << 62

@@ -296,3 +296,29 @@ def test_calibrated_tfi_error_does_not_grow_as_the_dark_level_falls(light_level)
         errors.append(np.abs(images.mean(axis=0) - light_level).mean())
         assert errors[-1] < 0.1 * dark, (level, errors[-1], dark)
     assert all(a <= b * (1 + 1e-6) for a, b in zip(errors, errors[1:])), errors
+
+
+def test_a_te_flat_of_overflow_words_is_refused_and_an_msb_flat_below_its_ceiling_is_taken():
+    """A TE flat at 0.1 to 0.9 (every word an overflow word) read gains 2 to 43 % low, exit 0; an msb
+    flat at 0.8 to 0.99, whose mean decoding is exact, was refused as saturated (its top word is also
+    the ordinary reading of 2^(ml_bits - 1) spikes or more)."""
+    te = SensorConfig()
+    dark, flat = _streams(te, 8, flat_light=0.3)
+    with pytest.raises(InputError, match="overflow words.*below 0.0667"):
+        estimate(dark, flat, te, 0.3)
+    msb = SensorConfig.preset("ml-msb")
+    dark, flat = _streams(msb, 64, flat_light=0.9, sensor=None)
+    c = estimate(dark, flat, msb, 0.9)
+    assert abs(float(np.median(c.gain)) - 1) < 0.02
+    dark, flat = _streams(msb, 16, flat_light=1.5, sensor=None)
+    with pytest.raises(InputError, match="saturated.*below 1"):
+        estimate(dark, flat, msb, 1.5)
+
+
+def test_a_calibration_file_with_a_gain_calibrate_never_writes_is_refused(tmp_path):
+    config = SensorConfig()
+    c = estimate(*_streams(config, 4), config, 0.03)
+    import dataclasses
+    save_calibration(tmp_path / "c.npz", dataclasses.replace(c, gain=c.gain * 1e3, flat_light=1e-6))
+    with pytest.raises(InputError, match="median gain .* above 20"):
+        load_calibration(tmp_path / "c.npz")

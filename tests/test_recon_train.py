@@ -308,10 +308,15 @@ def test_a_warm_start_from_another_sensor_says_so(tmp_path, capsys):
     capsys.readouterr()
     out = train(options(config="ml", init=str(te)), tmp_path / "ml.pt")
     err = capsys.readouterr().err
-    assert "was trained for" in err and "te.pt" in err and "of its tensors" in err
+    assert "was trained for" in err and "te.pt" in err and "of this run's" in err
     assert load_weights(out)[2]["init"]["trained_for"]["mode"] == "te"
     train(options(init=str(te)), tmp_path / "te2.pt")
     assert "was trained for" not in capsys.readouterr().err
+    ablated = train(options(ablation=4), tmp_path / "ab.pt")       # fewer tensors: a start of part of the run
+    capsys.readouterr()
+    train(options(init=str(ablated)), tmp_path / "whole.pt")
+    err = capsys.readouterr().err
+    assert "holds another size or ablation" in err and "the others afresh" in err, err
 
 
 def test_init_refusals(tmp_path):

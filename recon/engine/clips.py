@@ -258,13 +258,16 @@ def clip_light(recipe: EngineRecipe, index: int, *, domain: int = TRAIN_DOMAIN,
 
 def draw_sensor(rng: np.random.Generator):
     """A random noisy sensor over :data:`NOISE_DRAW` (a :class:`tespike.golden.noise.Sensor`, its own seed)."""
-    from tespike.golden.noise import Sensor, SensorNoise
+    from tespike.golden.noise import MAP_SMALLEST, Sensor, SensorNoise
     d = NOISE_DRAW
     low, high = d["dark_level"]
-    noise = SensorNoise(dark_current=d["dark_current"][int(rng.integers(len(d["dark_current"])))],
-                        dark_level=math.exp(rng.uniform(math.log(low), math.log(high))),
-                        **{key: float(rng.uniform(*d[key]))
-                           for key in ("dsnu", "hot_pixels", "hot_factor", "prnu", "comparator_offset")})
+    dark_current = d["dark_current"][int(rng.integers(len(d["dark_current"])))]       # (the draws' order kept)
+    dark_level = math.exp(rng.uniform(math.log(low), math.log(high)))
+    drawn = {key: float(rng.uniform(*d[key])) for key in ("dsnu", "hot_pixels", "hot_factor", "prnu", "comparator_offset")}
+    # a value below a map's smallest changes no pixel (and is refused): it is that map's 0 (each map
+    # draws from its own stream, so the others are unchanged)
+    drawn = {key: 0.0 if value < MAP_SMALLEST.get(key, 0.0) else value for key, value in drawn.items()}
+    noise = SensorNoise(dark_current=dark_current, dark_level=dark_level, **drawn)
     return Sensor(noise, int(rng.integers(1 << 62)))
 
 
