@@ -76,7 +76,8 @@ MAX_GAIN = 1 / MIN_GAIN
 #: Share of a flat's words at the sensor's top code (:func:`saturated_words`) from which
 #: :func:`estimate` refuses it: most of its pixels saw light beyond the sensor's range.
 MAX_SATURATED_SHARE = 0.5
-#: Share of a TE flat's words that are overflow words from which :func:`estimate` refuses it: there the
+#: Share of a TE flat's words that are overflow words from which :func:`estimate` refuses it, where its
+#: stated light is above the overflow level (:func:`flat_ceiling`): there the
 #: mean decoding no longer conserves spikes (a flat at 0.1 to 0.9, all overflow words, read gains 2 to
 #: 43 % low and every calibrated image up to 1.7 times too bright).
 MAX_OVERFLOW_SHARE = 0.5
@@ -222,10 +223,12 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
                          f"measured; record the flat at a lower light (below {flat_ceiling(config):.3g}, "
                          "where the mean decoding conserves spikes)")
     overflowing = overflow_share(flat_words, config)
-    if overflowing >= MAX_OVERFLOW_SHARE:
-        raise InputError(f"the flat stream is too bright for a TE calibration: {100 * overflowing:.1f} % of its "
-                         "words are overflow words, whose mean decoding does not conserve spikes; record the "
-                         f"flat at a lower light (below {flat_ceiling(config):.3g}, the overflow level)")
+    if overflowing >= MAX_OVERFLOW_SHARE and flat_light > flat_ceiling(config):
+        # (only a flat whose own light passes the overflow: under strong dark current a flat below it
+        # may overflow half the time from the dark charge, which the dark stream shares)
+        raise InputError(f"flat light {flat_light:g} is above the TE overflow level ({flat_ceiling(config):.3g}): "
+                         f"{100 * overflowing:.1f} % of the flat's words are overflow words, whose mean decoding "
+                         "does not conserve spikes; record the flat at a lower light")
     dark = mean_decoded_light(dark_words, config)
     shown = mean_decoded_light(flat_words, config) - dark
     if float(np.median(shown)) > MAX_GAIN * float(flat_light):

@@ -304,7 +304,7 @@ def test_a_te_flat_of_overflow_words_is_refused_and_an_msb_flat_below_its_ceilin
     the ordinary reading of 2^(ml_bits - 1) spikes or more)."""
     te = SensorConfig()
     dark, flat = _streams(te, 8, flat_light=0.3)
-    with pytest.raises(InputError, match="overflow words.*below 0.0667"):
+    with pytest.raises(InputError, match="flat light 0.3 is above the TE overflow level .0.0667.: 100.0 % of"):
         estimate(dark, flat, te, 0.3)
     msb = SensorConfig.preset("ml-msb")
     dark, flat = _streams(msb, 64, flat_light=0.9, sensor=None)
