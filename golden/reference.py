@@ -1,7 +1,7 @@
 """The pixel update rule of SPEC section 3, written literally: one step per pixel clock.
 
 This is the executable form of the specification, vectorised over pixels but
-looping over clocks. It is slow on purpose-free grounds (clarity over speed) and
+looping over clocks. It is slow on purpose (clarity over speed) and
 is what the fast cycle-exact engine (:mod:`tespike.golden.sensor`) and the RTL are
 checked against. Integer arithmetic in int64 cannot wrap: acc < 2^62 and
 e < 2^32, so q = acc + e < 2^63.

@@ -36,7 +36,7 @@ import torch
 
 from tespike.golden.errors import InputError
 
-from .mulaw import MU, compress  # noqa: F401  (MU: the paper's mu, read here by the metrics' callers)
+from .mulaw import MU, compress
 
 SSIM_SIGMA = 1.5
 SSIM_TRUNCATE = 3.5

@@ -35,6 +35,18 @@ class Column:
 METRIC_KEYS = ("psnr_mu", "ssim_mu", "psnr_pu21", "hdr_vqm", "fovvideovdp")
 
 
+def check_metrics(names: tuple, what: str) -> tuple:
+    """``names``, each one of :data:`METRIC_KEYS` and each once; else one line naming ``what`` (the
+    flag and its text, or the argument) and the first name at fault. The one check of metric names."""
+    unknown = [m for m in names if m not in METRIC_KEYS]
+    if unknown or not names:
+        raise InputError(f"{what}: " + (f"{unknown[0]!r} is no metric" if unknown else "names no metric")
+                         + f" (choose from {', '.join(METRIC_KEYS)})")
+    twice = [m for m in names if names.count(m) > 1]
+    if twice:                           # (one column was made of both)
+        raise InputError(f"{what}: {twice[0]!r} is named more than once")
+    return tuple(names)
+
 def columns(display: HdrDisplay = DEFAULT_DISPLAY) -> tuple[Column, ...]:
     """The columns (in :data:`METRIC_KEYS` order) with their labels for ``display``."""
     from tespike.recon.metrics import DEFAULT_NITS_PER_UNIT
@@ -71,10 +83,7 @@ def score(estimate, reference, *, metrics=None, display: HdrDisplay = DEFAULT_DI
     from tespike.recon.hdrvqm import hdr_vqm_scores
     from tespike.recon.metrics import psnr_mu, psnr_pu21, ssim_mu
 
-    keys = METRIC_KEYS if metrics is None else tuple(metrics)
-    unknown = [k for k in keys if k not in METRIC_KEYS]
-    if unknown or not keys:
-        raise InputError(f"metrics {list(keys)!r}: choose from {', '.join(METRIC_KEYS)}")
+    keys = METRIC_KEYS if metrics is None else check_metrics(tuple(metrics), f"metrics {list(metrics)!r}")
     estimate, reference = np.asarray(estimate), np.asarray(reference)
     if reference.ndim != 3 or estimate.ndim != 3:
         raise InputError(f"estimate {estimate.shape} and reference {reference.shape} must be (K, H, W)")

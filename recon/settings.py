@@ -1,8 +1,12 @@
-"""Sizes and switches of the training-free reconstruction, in one dataclass.
+"""The training-free reconstruction's settings and the rules every method shares.
 
-Nothing in :mod:`recon` keeps global state: every function takes its device and
-its sizes explicitly, and :class:`ReconSettings` gathers them for callers that
-want one object to pass around (the CLI, the benchmarks, the evaluation).
+Its sizes and switches in one dataclass (:class:`ReconSettings`); the window rule
+(:data:`DEFAULT_WINDOW`, :func:`check_window`, :func:`check_window_reach`, :func:`uses_window`),
+the device check, and the training-free methods' registry (:data:`TRAINING_FREE`,
+:func:`check_known`, :data:`TFI_SEARCH`). Nothing in :mod:`recon` keeps global state:
+every function takes its device and its sizes explicitly, and :class:`ReconSettings`
+gathers them for callers that want one object to pass around (the CLI, the benchmarks,
+the evaluation).
 """
 
 from __future__ import annotations

@@ -31,7 +31,7 @@ def test_dark_models_draw_and_integrate_the_same_parameters():
 
 
 def test_train_help_states_the_calibration_readouts(capsys):
-    """train_cmd types the readouts in its help (its parser imports no recon): it must be the constant."""
+    """train_cmd's help states the readouts from the constant (its parser reads recon.calibration, no torch)."""
     from tespike.cosim.cli import build_parser
     from tespike.recon.calibration import CALIBRATION_READOUTS
     from tespike.recon.engine.clips import sensor_calibration

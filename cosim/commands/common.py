@@ -167,17 +167,8 @@ MAX_THREADS = 256
 def metrics_argument(text: str) -> list[str]:
     """The metric names of a ``--metrics`` comma list (``score``, ``evaluate``), each one of
     :data:`tespike.recon.score.METRIC_KEYS`; one line naming the flag and the first unknown name otherwise."""
-    from tespike.golden.errors import InputError
-    from tespike.recon.score import METRIC_KEYS
-    metrics = [m.strip() for m in text.split(",") if m.strip()]
-    unknown = [m for m in metrics if m not in METRIC_KEYS]
-    if unknown or not metrics:
-        raise InputError(f"--metrics {text!r}: " + (f"{unknown[0]!r} is no metric" if unknown else "names no metric")
-                         + f" (choose from {', '.join(METRIC_KEYS)})")
-    twice = [m for m in metrics if metrics.count(m) > 1]
-    if twice:                           # (one column was made of both)
-        raise InputError(f"--metrics {text!r}: {twice[0]!r} is named more than once")
-    return metrics
+    from tespike.recon.score import check_metrics
+    return list(check_metrics(tuple(m.strip() for m in text.split(",") if m.strip()), f"--metrics {text!r}"))
 
 
 def check_threads_argument(threads: int | None) -> None:

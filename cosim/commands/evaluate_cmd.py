@@ -146,8 +146,8 @@ def add_arguments(parser):
                         help="add a calibrated row per method for every noise sensor (its own dark and flat "
                              "streams, recon.calibration)")
     parser.add_argument("--metrics", default=None,
-                        help="comma-separated further metrics: psnr_pu21, hdr_vqm, fovvideovdp "
-                             "(default: none; --table: all)")
+                        help="comma-separated further metrics: psnr_pu21, hdr_vqm, fovvideovdp (psnr_mu and "
+                             "ssim_mu, always scored, may be named too; default: none; --table: all)")
     parser.add_argument("--vdp-frames", type=int, default=None,
                         help="compute FovVideoVDP (about 0.5 s a frame) on the middle N scored frames of each "
                              f"sequence (default: every scored frame; --table {TABLE_VDP_FRAMES})")

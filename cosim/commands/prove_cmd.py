@@ -68,7 +68,7 @@ def targets(specs, with_corners: bool):
 
 def parse_sizes(flag: str, text: str) -> list[tuple[int, int]]:
     """``"1x1,2x3"`` -> [(1, 1), (2, 3)]; ``"none"`` -> []; anything else is refused in one line."""
-    from tespike.cosim.formal.tops import MAX_PIXELS
+    from tespike.cosim.formal.tops import MAX_PROOF_PIXELS
     from tespike.golden.errors import InputError
 
     if text.strip() == "none":
@@ -82,8 +82,8 @@ def parse_sizes(flag: str, text: str) -> list[tuple[int, int]]:
             size = (decimal(rows), decimal(cols)) if sep else (0, 0)
         except ValueError:
             size = (0, 0)
-        if not (min(size) >= 1 and size[0] * size[1] <= MAX_PIXELS):
-            raise InputError(f"{flag} {text!r}: each size must be HxW with H, W >= 1 and H x W <= {MAX_PIXELS} "
+        if not (min(size) >= 1 and size[0] * size[1] <= MAX_PROOF_PIXELS):
+            raise InputError(f"{flag} {text!r}: each size must be HxW with H, W >= 1 and H x W <= {MAX_PROOF_PIXELS} "
                              f"(e.g. 2x3), or 'none'")
         if size in sizes:               # (it was proven once, without a word)
             raise InputError(f"{flag} {text!r}: {size[0]}x{size[1]} is named more than once")

@@ -32,6 +32,9 @@ class _TrainerDefaults(argparse.HelpFormatter):
 
 
 def add_arguments(parser):
+    from tespike.recon.calibration import CALIBRATION_READOUTS          # (numpy and golden only: no torch)
+    from tespike.recon.engine.clips import NOISE_DRAW, EngineRecipe
+    low_peak, high_peak = EngineRecipe.__dataclass_fields__["peak"].default
     parser.formatter_class = _TrainerDefaults
     add_config_argument(parser, required=False, default="te")
     parser.add_argument("--out", required=True, help="weights file to write (.pt); its run folder is OUT with the suffix .run (w.pt: w.run/)")
@@ -64,18 +67,19 @@ def add_arguments(parser):
                              "panorama, is left out; repeatable)")
     parser.add_argument("--peak", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
                         help="the clips' brightest light, drawn log-uniformly in [LOW, HIGH] x the design "
-                             "light (default: the engine's 0.01 3)")
+                             f"light (default: the engine's {low_peak:g} {high_peak:g})")
     parser.add_argument("--noise-fraction", type=float, default=None, metavar="P",
-                        help="share of clips recorded by a random noisy sensor (dark current eq. 12/13 at 0.05..6 x, "
+                        help="share of clips recorded by a random noisy sensor (dark current eq. 12/13 at "
+                             f"{NOISE_DRAW['dark_level'][0]:g}..{NOISE_DRAW['dark_level'][1]:g} x, "
                              "DSNU, hot pixels, PRNU, comparator offset; recon.engine.clips.NOISE_DRAW), its "
                              "decoded light corrected by the sensor's exact calibration as inference corrects a "
                              "learned method's input, target the scene light (default 0: shot noise only)")
-    # 256: tespike.recon.calibration.CALIBRATION_READOUTS, typed here so the parser imports no recon
     parser.add_argument("--noisy-input", choices=("mean", "law"), default=None,
                         help="what a noisy clip's method sees: its light less the sensor's mean dark rate, over "
                              "its gain (mean, the default: every shipped file's training), or also less the dark "
                              "law's upper tail, as inference reads a stream whose calibration has a dark law "
-                             "(law: a 256-readout dark stream per noisy clip, and the input made in the trainer; "
+                             f"(law: a {CALIBRATION_READOUTS}-readout dark stream per noisy clip, and the input made in "
+                             "the trainer; "
                              "about 25 s a 128 x 128 clip on one CPU core, fast on a GPU)")
     trainer("--workers", "data-engine processes making clips ahead (0: in this process)", type=int)
     trainer("--pool", "clips a step draws from", type=int)

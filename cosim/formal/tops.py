@@ -226,7 +226,7 @@ SIZES = ((1, 1), (2, 3), (3, 4))
 #: site's registers and the reference's copy of them), and a top is the same module per site in a
 #: generate loop, so a few small arrays (every lane count, padded beats) prove the structure that
 #: larger ones repeat.
-MAX_PIXELS = 64
+MAX_PROOF_PIXELS = 64
 #: Lane counts tried on each size of :data:`SIZES` (one beat per pixel, padded last beats, a
 #: single beat); the others get 2 and 5. A lane count whose beats do not fit in L clocks is skipped.
 LANES = {(1, 1): (1, 2), (2, 3): (2, 5), (3, 4): (5, 12)}
