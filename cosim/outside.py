@@ -31,7 +31,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import TespikeError
+from tespike.golden.errors import InputError, TespikeError
 
 from . import children
 
@@ -173,11 +173,17 @@ def first_error_line(text: str) -> str:
 
 
 def default_cache_root() -> Path:
-    """``$TESPIKE_CACHE``, else ``$XDG_CACHE_HOME/tespike``, else ``~/.cache/tespike``."""
-    if os.environ.get("TESPIKE_CACHE"):
-        return Path(os.environ["TESPIKE_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "tespike"
+    """``$TESPIKE_CACHE``, else ``$XDG_CACHE_HOME/tespike``, else ``~/.cache/tespike``; refused in one line
+    naming the variable where it names something other than a folder (the build failed on 'X/verilator':
+    Not a directory, naming neither the variable nor the cache)."""
+    for variable, sub in (("TESPIKE_CACHE", ""), ("XDG_CACHE_HOME", "tespike")):
+        value = os.environ.get(variable)
+        if value:
+            if os.path.lexists(value) and not os.path.isdir(value):
+                raise InputError(f"${variable} {value!r} (where the build cache lives) is not a directory: "
+                                 "point it at a folder, or unset it")
+            return Path(value) / sub if sub else Path(value)
+    return Path.home() / ".cache" / "tespike"
 
 
 def content_hash(*parts: str | bytes) -> str:

@@ -217,6 +217,9 @@ def check_output_dir(path: str | os.PathLike, what: str = "--out",
     text = os.fspath(path)
     _refuse_control_characters(text, f"{what} {text!r}")
     folder = Path(text)
+    if os.path.islink(text) and not os.path.exists(text):
+        raise InputError(f"cannot write {what} {text!r}: it is a symbolic link to {os.readlink(text)!r}, "
+                         "which does not exist (make that folder, or name another)")
     if os.path.lexists(text) and not folder.is_dir():
         raise InputError(f"cannot write {what} {text!r}: it exists and is not a directory")
     if not folder.is_dir():

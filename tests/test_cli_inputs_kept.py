@@ -121,3 +121,21 @@ def test_the_success_line_escapes_a_path_the_terminal_cannot_encode(tmp_path, sc
                          env={"PYTHONIOENCODING": "ascii"})
     assert result.returncode == 0 and "\\xe9.npz" in result.stdout and result.stderr == "", result
     assert out.is_file()
+
+
+def test_a_dangling_link_as_an_output_folder_and_a_cache_variable_naming_a_file_are_said_as_such(tmp_path):
+    from tespike.cosim.outside import default_cache_root
+    from tespike.golden.paths import check_output_dir
+    (tmp_path / "link").symlink_to(tmp_path / "missing" / "x.zarr")
+    with pytest.raises(InputError, match="symbolic link to .*missing.*which does not exist"):
+        check_output_dir(tmp_path / "link", "--out")
+    (tmp_path / "file").write_text("")
+    os.environ["TESPIKE_CACHE"], before = str(tmp_path / "file"), os.environ.get("TESPIKE_CACHE")
+    try:
+        with pytest.raises(InputError, match=r"\$TESPIKE_CACHE .* is not a directory"):
+            default_cache_root()
+    finally:
+        if before is None:
+            del os.environ["TESPIKE_CACHE"]
+        else:
+            os.environ["TESPIKE_CACHE"] = before

@@ -13,6 +13,7 @@ import time
 import numpy as np
 import pytest
 
+from tespike.golden.errors import InputError
 from tespike.recon.dataset import compare_stores
 from tespike.recon.scenes.hdr_io import write_exr
 
@@ -348,3 +349,14 @@ def test_a_ctrl_c_while_the_cluster_shuts_down_is_not_lost():
         runner.__exit__(None, None, None)
     runner._interrupts.pending = True       # leaving on an error already: that error is the run's
     runner.__exit__(ValueError, ValueError("x"), None)
+
+
+def test_a_scheduler_address_of_no_reachable_form_is_refused_at_once():
+    """A port past 65535 waited 30 s and said "timed out"; inproc:// spoke of Python's unpacking."""
+    from tespike.cosim.dataset.cluster import check_scheduler_address
+    for good in ("tcp://127.0.0.1:8786", "127.0.0.1:8786", "tls://host:1", "host"):
+        check_scheduler_address(good)
+    for bad, words in (("tcp://127.0.0.1:99999", "port in 1..65535"), ("inproc://x", "inproc:// is not"),
+                       ("tcp://:80", "HOST:PORT"), ("http://h:1", "http:// is not")):
+        with pytest.raises(InputError, match=words):
+            check_scheduler_address(bad)

@@ -43,6 +43,30 @@ def check_cluster_options(workers: int | None, scheduler: str | None) -> None:
     if workers is not None and scheduler:
         raise InputError("--workers and --scheduler exclude each other "
                          "(an existing cluster has its own workers)")
+    if scheduler:
+        check_scheduler_address(scheduler)
+
+
+#: Address schemes of a Dask scheduler another process can reach (inproc:// lives in one process).
+SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+
+
+def check_scheduler_address(address: str) -> None:
+    """Refuse a ``--scheduler`` that names no reachable scheduler by its form alone: a scheme another
+    process cannot reach, no host, or a port outside 1..65535 (each waited 30 s and said "timed out",
+    or spoke of Python's unpacking)."""
+    from urllib.parse import urlsplit
+    text = address.strip()
+    parts = urlsplit(text if "://" in text else f"tcp://{text}")
+    if parts.scheme not in SCHEDULER_SCHEMES:
+        raise InputError(f"--scheduler {address!r}: a scheduler's address is {'/'.join(SCHEDULER_SCHEMES)}://HOST:PORT "
+                         f"({parts.scheme}:// is not one another process can reach)")
+    try:
+        port = parts.port
+    except ValueError:
+        port = -1
+    if not parts.hostname or port is not None and not 1 <= port <= 65535:
+        raise InputError(f"--scheduler {address!r}: give HOST:PORT with a port in 1..65535 (e.g. tcp://host:8786)")
 
 
 #: The local cluster's own process: started in a session of its own, so a terminal's Ctrl-C
