@@ -190,7 +190,7 @@ def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, 
     """Refuse up front (one line) a demo whose arrays do not fit in memory or whose files do not
     fit on the disk of ``out``: a lower bound of each, from the sizes the options give (``methods``:
     those the demo runs, each reconstructing every sensor's stream)."""
-    from tespike.cosim.room import require_room as require
+    from tespike.cosim.headroom import require_room as require
     from tespike.golden.io import word_dtype
     from tespike.golden.light import stimulus_dtype
     from .vcd import VCD_BYTES_PER_PIXEL_CLOCK

@@ -258,11 +258,13 @@ class PixelNoise:
 
 def pixel_noise(dark_current: str | None, sensor: Sensor | None, shape: tuple[int, int], *,
                 noise: bool = True) -> PixelNoise:
-    """The :class:`PixelNoise` of an H x W frame from either the legacy ``dark_current``
-    keyword (a sensor of that dark current and no maps) or a :class:`Sensor`, not both; with
-    ``noise`` False (electrons delivered deterministically) a random dark current is refused.
-    The one check of the light front end's options (the fast simulator and
-    :func:`tespike.golden.stimulus.poisson_stimulus` alike)."""
+    """The :class:`PixelNoise` of an H x W frame from either the ``dark_current`` keyword (the
+    shorthand of a sensor of that dark current and no maps, as ``--dark-current`` is of a noise
+    file holding only ``dark_current``) or a :class:`Sensor`, not both; with ``noise`` False
+    (electrons delivered deterministically) a random dark current is refused. The library's
+    check of the light front end's options (the fast simulator and
+    :func:`tespike.golden.stimulus.poisson_stimulus` alike); the command checks the same rules
+    first, before reading a scene, in its flags' words (``cosim.commands.common.light_front_end``)."""
     if sensor is not None and check_dark_current(dark_current) is not None:
         raise InputError("give the dark current either alone or inside the sensor noise, not both")
     if sensor is None:

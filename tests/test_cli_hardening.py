@@ -793,7 +793,7 @@ def test_memory_mapped_output_on_a_full_disk_is_one_line_and_leaves_nothing(file
     """The reservation fails (ENOSPC) before any write through the map (which would die of SIGBUS)."""
     import errno
 
-    from tespike.cosim import room
+    from tespike.cosim import headroom as room
 
     def full(fd, offset, length):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
@@ -821,7 +821,7 @@ def test_reconstruct_into_a_small_tmpfs(files, capsys, monkeypatch):
                              "--out", mount / "r.npy")
         assert_refused(result, str(mount / "r.npy"), "is free on its file system")
         assert sorted(os.listdir(mount)) == ["filler"]
-        from tespike.cosim import room          # past the estimate: the reservation refuses (no SIGBUS)
+        from tespike.cosim import headroom as room          # past the estimate: the reservation refuses (no SIGBUS)
         monkeypatch.setattr(room, "require_disk", lambda *args, **kwargs: None)
         code, out, err = run_in_process(capsys, "reconstruct", "--stream", files / "big.npz", "--method",
                                         "tfp", "--out", mount / "r.npy")

@@ -69,7 +69,7 @@ def run(args) -> int:
     if seed < 0:
         raise InputError(f"--seed {seed}: must be >= 0")
     if args.stimulus is None:           # the default stimulus, int64 electrons per pixel clock
-        from tespike.cosim.room import require_room
+        from tespike.cosim.headroom import require_room
         L = config.clocks_per_readout
         clocks = readouts * L
         if args.resets == "sweep":          # at most 2L + 3 segments cut up to 2L + 2 clocks in, held up

@@ -35,7 +35,7 @@ def run(args) -> int:
     from tespike.golden.errors import InputError
     from tespike.golden.io import load_stimulus, save_stream, word_dtype
     from tespike.golden.paths import check_outputs
-    from tespike.cosim.room import require_room
+    from tespike.cosim.headroom import require_room
     from tespike.golden.sensor import PixelArrayModel, iter_chunks
 
     check_outputs({"--out": args.out}, {"--stimulus": args.stimulus, "--config": args.config},

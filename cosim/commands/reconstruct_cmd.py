@@ -50,7 +50,7 @@ def run(args) -> int:
     from tespike.recon.settings import DEFAULT_WINDOW, check_known, check_window, check_window_reach, uses_window
 
     from .common import check_threads_argument
-    from tespike.cosim.room import require_room, reserved_memmap
+    from tespike.cosim.headroom import require_room, reserved_memmap
 
     # every check that needs no torch comes first, so a refusal is quick
     check_known(args.method, METHOD_CHOICES)

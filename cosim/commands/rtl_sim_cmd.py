@@ -35,7 +35,7 @@ def run(args) -> int:
     from tespike.golden.errors import InputError
     from tespike.golden.io import load_stimulus, save_stream, word_dtype
     from tespike.cosim.vcd import VCD_BYTES_PER_PIXEL_CLOCK
-    from tespike.cosim.room import require_room
+    from tespike.cosim.headroom import require_room
     from tespike.golden.paths import check_outputs, written_through
 
     gtkw = args.gtkw

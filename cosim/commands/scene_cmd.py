@@ -42,7 +42,7 @@ def run(args) -> int:
 
     from .common import NPY_FILE, decimal, options_given
     from tespike.golden.paths import check_distinct, check_outputs
-    from tespike.cosim.room import require_room
+    from tespike.cosim.headroom import require_room
     from tespike.recon.scenes import SCENES, load_hdr_sequence, make_scene
     from tespike.recon.scenes.hdr_io import list_frames
     from tespike.recon.scenes.color import DEFAULT_WEIGHTS

@@ -27,7 +27,7 @@ def run(args) -> int:
     from tespike.golden.config import load_config
     from tespike.golden.fastsim import simulate_scene
     from tespike.golden.io import load_scene, save_stream, word_dtype
-    from tespike.cosim.room import require_room
+    from tespike.cosim.headroom import require_room
     from tespike.golden.paths import check_outputs
 
     check_workers_argument(args.workers)                # before the scene is read and scanned

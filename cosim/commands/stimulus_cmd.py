@@ -48,7 +48,7 @@ def run(args) -> int:
     from tespike.golden.fastsim import iter_scene_stimulus
     from tespike.golden.io import atomic_output, load_scene
     from tespike.golden.light import stimulus_dtype
-    from tespike.cosim.room import require_room, reserved_memmap
+    from tespike.cosim.headroom import require_room, reserved_memmap
 
     from tespike.golden.paths import check_outputs
     check_outputs({"--out": args.out}, {"--scene": args.scene, "--config": args.config, "--noise": args.noise},
