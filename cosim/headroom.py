@@ -1,4 +1,4 @@
-"""Room a command needs, checked before any work: memory and disk, from an estimate.
+"""Headroom a command needs, checked before any work: memory and disk, from an estimate.
 
 A command whose output sizes follow from its arguments (frames x height x width,
 the stimulus's shape, ...) calls :func:`require_room` before it prints, creates a
