@@ -251,3 +251,18 @@ def test_running_out_of_file_handles_names_the_limit(tmp_path):
             io.load_npy(scene, "scene")
     finally:
         np.load = real
+
+
+def test_intact_weights_read_without_file_handles_are_not_called_damaged(monkeypatch):
+    """Under ulimit -n 6 the shipped te.pt was "not a tespike weights file (a damaged archive: [Errno 24] ...)"."""
+    import errno
+    import zipfile
+    from tespike.recon.learning import weights
+    from tespike.recon.learned import weights_path
+    from tespike.golden.config import SensorConfig
+
+    def starved(*args, **kwargs):
+        raise OSError(errno.EMFILE, "Too many open files")
+    monkeypatch.setattr(zipfile, "ZipFile", starved)
+    with pytest.raises(InputError, match=r"cannot read weights .*te.pt': too many open files \(this process may hold"):
+        weights.read_torch_file(weights_path(SensorConfig.preset("te")), "weights", "tespike weights file")

@@ -581,3 +581,13 @@ def test_resume_rebuilds_a_sequence_whose_size_attribute_is_damaged(tmp_path, ca
     out = capsys.readouterr().out
     assert "its attribute width is None" in out and "rebuilt where damaged" in out, out
     assert compare_stores(small_store, store) == []
+
+
+def test_results_inside_the_store_they_score_are_refused(tmp_path, capsys, small_store):
+    """evaluate --store D.zarr --out D.zarr/ev wrote its results among the sequences, exit 0."""
+    import shutil
+    store = tmp_path / "D.zarr"
+    shutil.copytree(small_store, store)
+    capsys.readouterr()
+    assert main(["evaluate", "--store", str(store), "--out", str(store / "ev"), "--methods", "tfp", "-q"]) == 2
+    assert "lies inside --store" in capsys.readouterr().err and not (store / "ev").exists()

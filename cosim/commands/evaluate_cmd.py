@@ -61,6 +61,10 @@ def check_store_options(args) -> None:
                              "evaluate without --store to use your own")
         raise InputError(f"{flag} does not apply with --store (the store holds the sequences and their "
                          "streams, and scores them as they are)")
+    from pathlib import Path
+    if "://" not in args.store and Path(args.out).resolve().is_relative_to(Path(args.store).resolve()):
+        raise InputError(f"--out {args.out!r} lies inside --store {args.store!r}: write the results outside "
+                         "the store (it holds only sequences)")
 
 
 def _named_methods(args) -> list[str]:
