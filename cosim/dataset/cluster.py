@@ -73,18 +73,19 @@ def check_scheduler_address(address: str) -> None:
 #: (sent to the whole foreground group) never reaches its workers (each printed its traceback:
 #: 63 lines for two); it prints the scheduler's address, then runs until its stdin closes,
 #: which happens however this command ends (a SIGKILL included), so no worker outlives it.
-#: A watcher thread reads stdin from the start: a cluster still starting when the command ends
-#: (a start that hangs: with few file handles Dask's scheduler spins for ever), one whose command
-#: is gone (killed outright: nobody waits for a graceful close), or one that does not close in
-#: 30 s, ends with its whole session at once.
+#: A watcher thread reads stdin from the start: only an orderly stop writes "close" before the
+#: pipe closes; a cluster still starting when the command ends (a start that hangs: with few file
+#: handles Dask's scheduler spins for ever), one whose command is gone (killed outright: its pipe
+#: closes before it is seen as gone, and a graceful close took 4.5 s), or one that does not close
+#: in 30 s, ends with its whole session at once.
 LOCAL_CLUSTER = """
 import logging, os, signal, sys, threading
 started, ended, closed = threading.Event(), threading.Event(), threading.Event()
 command = os.getppid()
 def watch():
-    sys.stdin.read()
+    orderly = sys.stdin.read() == "close"         # (only the command's own stop writes it: EOF alone is its death)
     ended.set()
-    if not started.is_set() or os.getppid() != command or not closed.wait(30):   # its own session's group
+    if not orderly or not started.is_set() or os.getppid() != command or not closed.wait(30):   # its own group
         os.killpg(0, signal.SIGKILL) if os.getpgrp() == os.getpid() else os.kill(os.getpid(), signal.SIGKILL)
 threading.Thread(target=watch, daemon=True).start()
 from distributed import LocalCluster
@@ -196,6 +197,9 @@ def _stop_local_cluster(process, at_once: bool = False) -> None:
     hangs, or ``at_once`` (a run that failed or was interrupted: nothing of theirs is wanted)."""
     import signal
     import subprocess
+    if not at_once:                                     # an orderly stop: the cluster closes itself
+        with contextlib.suppress(OSError, ValueError):
+            process.stdin.write("close")
     for pipe in (process.stdin, process.stdout):
         with contextlib.suppress(OSError):
             pipe.close()
