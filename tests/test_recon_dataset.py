@@ -591,3 +591,18 @@ def test_results_inside_the_store_they_score_are_refused(tmp_path, capsys, small
     capsys.readouterr()
     assert main(["evaluate", "--store", str(store), "--out", str(store / "ev"), "--methods", "tfp", "-q"]) == 2
     assert "lies inside --store" in capsys.readouterr().err and not (store / "ev").exists()
+
+
+def test_light_from_frames_replaced_during_the_run_is_never_marked_complete(tmp_path):
+    """A frame replaced while dataset --hdr ran gave a store with its light under the old frames' digest:
+    refused, and a resume with the old frames back called the mixed store complete."""
+    from tespike.cosim.dataset.build import finish_light
+    from tespike.recon.scenes.hdr_io import write_hdr
+    seq = tmp_path / "H" / "seq"
+    seq.mkdir(parents=True)
+    for i in range(2):
+        write_hdr(seq / f"f{i}.hdr", np.full((4, 4, 3), 1.0 + i, np.float32))
+    source, = hdr_sources(tmp_path / "H")
+    write_hdr(seq / "f1.hdr", np.full((4, 4, 3), 7.0, np.float32))       # replaced mid-run
+    with pytest.raises(InputError, match="frames of sequence 'seq' changed while this run read them"):
+        finish_light(str(tmp_path / "D.zarr"), "seq/light", [1.0], 2.0, source)

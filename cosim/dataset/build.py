@@ -210,8 +210,13 @@ def finish_array(url: str, path: str, *after, **attrs) -> bool:
     return True
 
 
-def finish_light(url: str, path: str, peaks: list, top: float | None = None) -> float:
-    """Mark the light complete with its peak (and the source maximum it was divided by)."""
+def finish_light(url: str, path: str, peaks: list, top: float | None = None, source: Source | None = None) -> float:
+    """Mark the light complete with its peak (and the source maximum it was divided by); HDR frames are
+    hashed again first, so that light read from frames replaced during the run is never marked
+    complete under the digest of the frames it was planned from (a resume then mixed two inputs)."""
+    if source is not None and source.frames and frames_digest(source.frames) != source.digest:
+        raise InputError(f"the frames of sequence {source.name!r} changed while this run read them "
+                         f"({str(Path(source.frames[0]).parent)!r}): run the command again once they stay as they are")
     peak = max(peaks)
     mark_complete(url, path, peak=peak, **({} if top is None else {"source_max": top}))
     return peak
@@ -255,7 +260,7 @@ def sequence_graph(store: DatasetStore, source: Source):
             peaks = [delayed(write_hdr_light, pure=False)(url, source, s, e, top,
                                                           dask_key_name=f"light-{name}-{s}")
                      for s, e in chunks]
-        light_done = delayed(finish_light, pure=False)(url, f"{name}/light", peaks, top,
+        light_done = delayed(finish_light, pure=False)(url, f"{name}/light", peaks, top, source,
                                                        dask_key_name=f"light-done-{name}")
     streams = []
     for sensor, config in store.configs.items():
