@@ -1,5 +1,7 @@
 """``tespike dataset``: HDR frame folders and built-in scenes -> a dataset store of light and streams."""
 
+import os
+
 from .common import CONFIG_HELP, config_name
 
 HELP = ("simulate every sequence of a folder of HDR frame folders (and/or built-in scenes) with "
@@ -84,7 +86,6 @@ def run(args) -> int:
     if "://" not in args.out:          # a local store: its folder can be checked before any work
         from tespike.golden.paths import check_output_dir
         check_output_dir(args.out, "--out")
-        import os
         store = os.path.realpath(args.out)
         for folder in args.hdr:        # the next run would read the store as one of its sequences
             if os.path.commonpath([store, os.path.realpath(folder)]) == os.path.realpath(folder):
@@ -119,9 +120,16 @@ def run(args) -> int:
                                                              f"{len(configs)} sensor(s) on {runner.where}"),
                                    progress=(lambda total: bar("dataset", "sequence", total))
                                    if progress_wanted(args) else None)
-    except BaseException as exc:
+    except Exception as exc:
         kept = discard_unfinished_store(args.out, made)   # the workers have stopped: nothing writes there now
+        if "://" not in args.out and not os.path.isdir(args.out):   # (Zarr's own words named no file, or a resume)
+            raise InputError(f"dataset store {args.out!r} was removed during the run: nothing is kept to "
+                             "resume") from None
         note_resumable(exc, args.out, kept)               # (also for a failure after the build)
+        raise
+    except BaseException as exc:                          # a stop: said by the command, with what is kept
+        kept = discard_unfinished_store(args.out, made)
+        note_resumable(exc, args.out, kept)
         raise
     seconds = time.perf_counter() - start
     rebuilt = f", {len(counts['rebuilt'])} rebuilt where damaged" if counts["rebuilt"] else ""
