@@ -117,6 +117,8 @@ def test_cocotb_command_runs_both_simulators(tmp_path):
     assert [line.split(":")[1].strip() for line in lines] == ["icarus", "verilator"], lines
     assert all(": pass: RTL == golden model" in line for line in lines)
     assert sorted(p.name for p in (tmp_path / "logs").glob("*.log")) == ["icarus.log", "verilator.log"]
+    for kept in (tmp_path / "logs").iterdir():          # (they named the staging folder, gone once in place)
+        assert ".part" not in kept.read_text(errors="replace"), kept
 
 
 @needs("icarus")

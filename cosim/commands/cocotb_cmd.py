@@ -87,6 +87,8 @@ def run(args) -> int:
             if folder is not None:              # named where it will be once the folder is in place
                 result = dataclasses.replace(result, log=Path(args.work_dir) / Path(result.log).name)
             results.append(result)
+        if folder is not None:
+            name_final_folder(Path(folder), Path(args.work_dir))
     failed = 0
     for result in results:
         verdict = "pass" if result.passed else "FAIL"
@@ -102,6 +104,17 @@ def run(args) -> int:
 #: The files a cocotb run writes into ``--work-dir`` (per simulator): what the folder may hold
 #: when a run replaces it whole.
 WORK_FILES = ("*.log", "*-results.xml", "*-commands.txt")
+
+
+def name_final_folder(staging, final) -> None:
+    """The tools' logs in the staging folder name it (``Results file: .../.wd.123.x.part/...``), which is
+    gone once the folder is in place: they name the work folder instead."""
+    old, new = str(staging.resolve()), str(final.resolve())
+    for path in staging.iterdir():
+        if path.is_file() and not path.is_symlink() and path.suffix in (".log", ".txt", ".xml"):
+            text = path.read_text(errors="surrogateescape")
+            if old in text:
+                path.write_text(text.replace(old, new), errors="surrogateescape")
 
 
 def check_work_dir(path) -> None:
