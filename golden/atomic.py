@@ -179,6 +179,15 @@ if fault:
                 f"({fault}: it changed under the command; run again on a file left alone)")
     else:
         text = f"tespike: error: the process ended on a fatal signal ({fault})"
+        try:                    # (the command's own limits, inherited: a library may die of one in C)
+            import resource
+            limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+            limit = 0 if limit == resource.RLIM_INFINITY else limit
+        except (ImportError, OSError, ValueError):
+            limit = 0
+        if limit > 0:
+            text += (f", under an address-space limit (ulimit -v) of {limit >> 20} MB: most likely out of "
+                     "memory (raise the limit, or take less: a smaller --batch or --crop)")
     sys.stderr.write(text + "\n")
 """
 

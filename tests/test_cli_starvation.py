@@ -266,3 +266,13 @@ def test_intact_weights_read_without_file_handles_are_not_called_damaged(monkeyp
     monkeypatch.setattr(zipfile, "ZipFile", starved)
     with pytest.raises(InputError, match=r"cannot read weights .*te.pt': too many open files \(this process may hold"):
         weights.read_torch_file(weights_path(SensorConfig.preset("te")), "weights", "tespike weights file")
+
+
+def test_a_fatal_signal_under_an_address_space_limit_names_the_limit():
+    """torch's backward died of a segmentation fault at ulimit -v of about 1 GB: the line named no memory."""
+    code = ("import ctypes, time; from tespike.golden.atomic import start_janitor; "
+            "start_janitor(report_faults=True); time.sleep(0.3); ctypes.string_at(0)")
+    done = run_limited(code, {resource.RLIMIT_AS: 3 << 30})
+    assert done.returncode == -signal.SIGSEGV
+    assert "fatal signal (Segmentation fault), under an address-space limit (ulimit -v) of 3072 MB: most " \
+           "likely out of memory" in done.stderr, done.stderr
