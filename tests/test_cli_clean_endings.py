@@ -382,6 +382,21 @@ def test_a_failed_dataset_build_leaves_no_store_or_says_what_it_resumes(capsys, 
     assert os.listdir(tmp_path / "empty.zarr") == []
 
 
+
+def test_a_dataset_store_removed_during_the_run_is_said_so(capsys, monkeypatch, tmp_path):
+    """It said the store "keeps 1 complete sequence(s); the same command resumes it", or gave Zarr's words."""
+    import shutil
+    import tespike.cosim.dataset.build as build
+
+    def removed_midway(url, *args, **kwargs):
+        shutil.rmtree(url)
+        raise RuntimeError(f"No array found in store file://{url} at path sun/light")
+    monkeypatch.setattr(build, "build_dataset", removed_midway)
+    out = tmp_path / "D.zarr"
+    assert_refused(run_here(capsys, "dataset", "--scene", "sun", "--frames", 2, "--height", 16, "--width", 16,
+                            "--config", "te", "--out", out), f"dataset store {str(out)!r} was removed during the run")
+
+
 # ------------------------------------------------------------------ a signal after the output is in place
 def test_a_signal_after_the_output_is_in_place_says_it_is_whole(capsys, monkeypatch, tmp_path):
     """Ctrl-C between the move into place and the end printed "interrupted" over a new, whole output."""

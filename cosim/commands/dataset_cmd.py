@@ -121,10 +121,10 @@ def run(args) -> int:
                                    progress=(lambda total: bar("dataset", "sequence", total))
                                    if progress_wanted(args) else None)
     except Exception as exc:
-        kept = discard_unfinished_store(args.out, made)   # the workers have stopped: nothing writes there now
         if "://" not in args.out and not os.path.isdir(args.out):   # (Zarr's own words named no file, or a resume)
             raise InputError(f"dataset store {args.out!r} was removed during the run: nothing is kept to "
                              "resume") from None
+        kept = discard_unfinished_store(args.out, made)   # the workers have stopped: nothing writes there now
         note_resumable(exc, args.out, kept)               # (also for a failure after the build)
         raise
     except BaseException as exc:                          # a stop: said by the command, with what is kept
