@@ -111,17 +111,19 @@ def run(args) -> int:
         raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     start = time.perf_counter()
     made = new_local_store(args.out)
+    made_or_resumed = []                                  # (set once the store is there: build_dataset's start)
     try:
         with Runner(args.workers, args.scheduler) as runner:
             counts = build_dataset(args.out, sources, configs, args.seed, runner, chunk_frames=args.chunk_frames,
                                    report=lambda name: report(args, f"dataset: {name} complete"),
                                    notice=lambda text: report(args, f"dataset: {text}"),
-                                   starting=lambda: report(args, f"dataset: {len(sources)} sequence(s) x "
-                                                             f"{len(configs)} sensor(s) on {runner.where}"),
+                                   starting=lambda: (made_or_resumed.append(True),
+                                                     report(args, f"dataset: {len(sources)} sequence(s) x "
+                                                                  f"{len(configs)} sensor(s) on {runner.where}")),
                                    progress=(lambda total: bar("dataset", "sequence", total))
                                    if progress_wanted(args) else None)
     except Exception as exc:
-        if "://" not in args.out and not os.path.isdir(args.out):   # (Zarr's own words named no file, or a resume)
+        if made_or_resumed and "://" not in args.out and not os.path.isdir(args.out):   # (Zarr's words, or a resume)
             raise InputError(f"dataset store {args.out!r} was removed during the run: nothing is kept to "
                              "resume") from None
         kept = discard_unfinished_store(args.out, made)   # the workers have stopped: nothing writes there now

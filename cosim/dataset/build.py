@@ -359,11 +359,6 @@ RESUMES = "the same command resumes it)"
 
 def note_resumable(exc: BaseException, url: str, complete: int) -> None:
     """Say on ``exc``, once, that store ``url`` keeps ``complete`` (> 0) complete sequences a rerun resumes."""
-    if "://" not in os.fspath(url) and not os.path.isdir(url):     # (removed during the run: nothing is kept)
-        removed = f"(store {os.fspath(url)!r} was removed during the run: nothing is kept to resume)"
-        if removed not in getattr(exc, "__notes__", ()):
-            exc.add_note(removed)
-        return
     if complete and not any(note.endswith(RESUMES) for note in getattr(exc, "__notes__", ())):
         exc.add_note(f"(store {os.fspath(url)!r} keeps {complete} complete sequence(s); {RESUMES}")
 
