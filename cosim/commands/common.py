@@ -221,13 +221,12 @@ def check_inputs_outside(args, folder_option: str) -> None:
     inside the output folder of ``folder_option`` (``"out"``, ``"work_dir"``), which the run replaces
     whole: a --weights, --scene or --verilog kept there was overwritten by the new folder's files."""
     import os
-    from pathlib import Path
 
     from tespike.golden.errors import InputError
     folder = getattr(args, folder_option)
     if folder is None or not os.path.isdir(folder):
         return
-    root = Path(folder).resolve()
+    root = os.path.realpath(folder)                     # (realpath: a link loop does not raise)
     flag = "--" + folder_option.replace("_", "-")
     for dest, value in vars(args).items():
         if dest in (folder_option, "argv"):
@@ -235,6 +234,6 @@ def check_inputs_outside(args, folder_option: str) -> None:
         for item in value if isinstance(value, (list, tuple)) else (value,):
             if not isinstance(item, (str, os.PathLike)) or not os.path.lexists(item):
                 continue
-            if Path(item).resolve().is_relative_to(root):
+            if os.path.commonpath([root, os.path.realpath(item)]) == root:
                 raise InputError(f"--{dest.replace('_', '-')} {os.fspath(item)!r} lies inside {flag} {folder!r}, "
                                  "which this run replaces whole: refusing to overwrite an input (move it out)")

@@ -61,8 +61,9 @@ def check_store_options(args) -> None:
                              "evaluate without --store to use your own")
         raise InputError(f"{flag} does not apply with --store (the store holds the sequences and their "
                          "streams, and scores them as they are)")
-    from pathlib import Path
-    if "://" not in args.store and Path(args.out).resolve().is_relative_to(Path(args.store).resolve()):
+    import os
+    store, out = os.path.realpath(args.store), os.path.realpath(args.out)   # (realpath: a link loop too)
+    if "://" not in args.store and os.path.commonpath([store, out]) == store:
         raise InputError(f"--out {args.out!r} lies inside --store {args.store!r}: write the results outside "
                          "the store (it holds only sequences)")
 
