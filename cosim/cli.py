@@ -292,19 +292,16 @@ def _repeated_option(parser, argv: list[str]) -> str | None:
     spellings as typed, e.g. ``--out``, or an abbreviation argparse takes for it, ``--ou``), or
     None; repeatable options (``append``) and switches may repeat."""
     import argparse
+
+    from .commands.common import option_typed
     single = {option: action.dest for action in parser._actions if type(action) is argparse._StoreAction
               for option in action.option_strings}
-    every = [option for action in parser._actions for option in action.option_strings]
     seen: dict[str, str] = {}
     for token in argv:
         if token == "--":
             break
         name = token.split("=", 1)[0]
-        dest = single.get(name)
-        if dest is None and name.startswith("--") and name not in every and parser.allow_abbrev:
-            # argparse takes an unambiguous prefix as the option (--conf for --config)
-            whole = [option for option in every if option.startswith(name)]
-            dest = single.get(whole[0]) if len(whole) == 1 else None
+        dest = single.get(option_typed(parser, token))   # (--conf for --config: argparse takes the prefix)
         if dest is None:
             continue
         if dest in seen:

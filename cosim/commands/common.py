@@ -12,12 +12,26 @@ def add_config_argument(parser, *, required: bool = True, default: str | None = 
                         help=CONFIG_HELP + (f" (default {default})" if default else ""))
 
 
+def option_typed(parser, token: str) -> str | None:
+    """The option of ``parser`` a command-line ``token`` names as argparse reads it: its spelling
+    (``--out`` or ``--out=x``), or an unambiguous prefix argparse takes for it (``--conf`` for
+    ``--config``); None for anything else (a value, an unknown or ambiguous name)."""
+    name = token.split("=", 1)[0]
+    every = [option for action in parser._actions for option in action.option_strings]
+    if name in every:
+        return name
+    if name.startswith("--") and parser.allow_abbrev:
+        whole = [option for option in every if option.startswith(name)]
+        return whole[0] if len(whole) == 1 else None
+    return None
+
+
 def options_given(parser, args, keep=()) -> list[tuple[str, str]]:
     """(flag, dest) of every option of ``parser`` that ``args`` holds away from its default, or
-    that its command line (``args.argv``) names even at its default value, those whose dest is in
-    ``keep`` aside: the options a mode that takes no others would drop. The defaults are the
-    parser's own, so they are typed once."""
-    typed = {token.split("=", 1)[0] for token in getattr(args, "argv", None) or () if token.startswith("-")}
+    that its command line (``args.argv``) names even at its default value (an abbreviation too),
+    those whose dest is in ``keep`` aside: the options a mode that takes no others would drop. The
+    defaults are the parser's own, so they are typed once."""
+    typed = {option_typed(parser, token) for token in getattr(args, "argv", None) or () if token.startswith("-")}
     return [(action.option_strings[0], action.dest) for action in parser._actions   # (argparse lists
             if action.option_strings and action.dest not in keep                   # no other way)
             and (getattr(args, action.dest, action.default) != action.default
@@ -137,8 +151,8 @@ def sensor_argument(args):
         if args.sensor_seed is not None:
             raise InputError("--sensor-seed needs --noise N.json (the maps it draws are the non-idealities')")
         return None
-    typed = any(len(name) > 3 and "--dark-current".startswith(name)   # (an abbreviation argparse takes too)
-                for name in (token.split("=", 1)[0] for token in getattr(args, "argv", None) or ()))
+    parser = getattr(args, "command_parser", None)
+    typed = parser is not None and "dark_current" in {dest for _, dest in options_given(parser, args)}
     if args.dark_current != "none" or typed:   # (even 'none': the file's dark current would override it)
         raise InputError(f"--dark-current {args.dark_current} with --noise: give the dark current in "
                          f"{args.noise} ('dark_current')")
