@@ -122,6 +122,14 @@ def writable_directory(path: str | os.PathLike) -> bool:
         return False
 
 
+def lies_inside(path: str | os.PathLike, folder: str | os.PathLike) -> bool:
+    """Whether ``path`` is ``folder`` or lies anywhere below it, links followed (``realpath``: a link
+    loop does not raise): an input a run that replaces the folder would lose, or an output a
+    reader of the folder would take for one of its own."""
+    root = os.path.realpath(folder)
+    return os.path.commonpath([root, os.path.realpath(path)]) == root
+
+
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
     """True if two paths name one file: equal once resolved, or one inode (hard links)."""
     ra, rb = resolve_output(a), resolve_output(b)

@@ -237,10 +237,10 @@ def check_inputs_outside(args, folder_option: str) -> None:
     import os
 
     from tespike.golden.errors import InputError
+    from tespike.golden.paths import lies_inside
     folder = getattr(args, folder_option)
     if folder is None or not os.path.isdir(folder):
         return
-    root = os.path.realpath(folder)                     # (realpath: a link loop does not raise)
     flag = "--" + folder_option.replace("_", "-")
     for dest, value in vars(args).items():
         if dest in (folder_option, "argv"):
@@ -248,6 +248,6 @@ def check_inputs_outside(args, folder_option: str) -> None:
         for item in value if isinstance(value, (list, tuple)) else (value,):
             if not isinstance(item, (str, os.PathLike)) or not os.path.lexists(item):
                 continue
-            if os.path.commonpath([root, os.path.realpath(item)]) == root:
+            if lies_inside(item, folder):
                 raise InputError(f"--{dest.replace('_', '-')} {os.fspath(item)!r} lies inside {flag} {folder!r}, "
                                  "which this run replaces whole: refusing to overwrite an input (move it out)")

@@ -84,11 +84,10 @@ def run(args) -> int:
     if args.seed < 0:
         raise InputError(f"--seed {args.seed!r} must be an integer >= 0")
     if "://" not in args.out:          # a local store: its folder can be checked before any work
-        from tespike.golden.paths import check_output_dir
+        from tespike.golden.paths import check_output_dir, lies_inside
         check_output_dir(args.out, "--out")
-        store = os.path.realpath(args.out)
         for folder in args.hdr:        # the next run would read the store as one of its sequences
-            if os.path.commonpath([store, os.path.realpath(folder)]) == os.path.realpath(folder):
+            if lies_inside(args.out, folder):
                 raise InputError(f"--out {args.out!r} lies inside --hdr {folder!r}, whose sub-folders are read "
                                  "as sequences: a resume would read the store as one; put it elsewhere")
     # options of one kind of source, given without it, would be dropped: refused
@@ -122,16 +121,12 @@ def run(args) -> int:
                                                                   f"{len(configs)} sensor(s) on {runner.where}")),
                                    progress=(lambda total: bar("dataset", "sequence", total))
                                    if progress_wanted(args) else None)
-    except Exception as exc:
-        if made_or_resumed and "://" not in args.out and not os.path.isdir(args.out):   # (Zarr's words, or a resume)
+    except BaseException as exc:
+        if isinstance(exc, Exception) and made_or_resumed and "://" not in args.out and not os.path.isdir(args.out):
             raise InputError(f"dataset store {args.out!r} was removed during the run: nothing is kept to "
-                             "resume") from None
+                             "resume") from None          # (it said what a resume keeps, or gave Zarr's words)
         kept = discard_unfinished_store(args.out, made)   # the workers have stopped: nothing writes there now
         note_resumable(exc, args.out, kept)               # (also for a failure after the build)
-        raise
-    except BaseException as exc:                          # a stop: said by the command, with what is kept
-        kept = discard_unfinished_store(args.out, made)
-        note_resumable(exc, args.out, kept)
         raise
     seconds = time.perf_counter() - start
     rebuilt = f", {len(counts['rebuilt'])} rebuilt where damaged" if counts["rebuilt"] else ""

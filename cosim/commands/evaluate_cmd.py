@@ -61,9 +61,8 @@ def check_store_options(args) -> None:
                              "evaluate without --store to use your own")
         raise InputError(f"{flag} does not apply with --store (the store holds the sequences and their "
                          "streams, and scores them as they are)")
-    import os
-    store, out = os.path.realpath(args.store), os.path.realpath(args.out)   # (realpath: a link loop too)
-    if "://" not in args.store and os.path.commonpath([store, out]) == store:
+    from tespike.golden.paths import lies_inside
+    if "://" not in args.store and lies_inside(args.out, args.store):
         raise InputError(f"--out {args.out!r} lies inside --store {args.store!r}: write the results outside "
                          "the store (it holds only sequences)")
 
