@@ -39,7 +39,7 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
     try:
         array = np.load(path, allow_pickle=False, mmap_mode=mmap_mode)
     except (OSError, ValueError, EOFError, OverflowError) as exc:   # (Overflow: a header shape whose
-        _refuse_starved(exc, what, path)                            # product is negative, memory-mapped)
+        refuse_starved(exc, what, path)                            # product is negative, memory-mapped)
         raise InputError(f"{what} file {str(path)!r} is not a readable .npy array: "
                          f"{one_line(exc)}") from None
     if not isinstance(array, np.ndarray):
@@ -85,7 +85,7 @@ def _magic(path, what: str) -> bytes:
         with open(path, "rb") as handle:
             return handle.read(6)
     except OSError as exc:
-        _refuse_starved(exc, what, path)
+        refuse_starved(exc, what, path)
         raise InputError(f"cannot read {what} file {str(path)!r}: {one_line(exc)}") from None
 
 
@@ -299,7 +299,7 @@ def open_npz(path: str | Path, what: str, holding: str = "") -> Iterator[np.lib.
     except InputError:
         raise
     except NPZ_ERRORS as exc:
-        _refuse_starved(exc, what, path)
+        refuse_starved(exc, what, path)
         raise InputError(f"{what} file {shown!r} is not a readable .npz archive: {one_line(exc)}") from None
 
 
@@ -375,7 +375,7 @@ def check_archive_end(path: str | Path) -> None:
         raise ValueError(f"{before} bytes come before the archive (two archives joined?)")
 
 
-def _refuse_starved(exc: BaseException, what: str, path) -> None:
+def refuse_starved(exc: BaseException, what: str, path) -> None:
     """A read that failed for want of file handles or memory, not for the file: one line saying so
     (instead of calling the file unreadable)."""
     if not isinstance(exc, OSError):

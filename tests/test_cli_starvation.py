@@ -264,7 +264,7 @@ def test_intact_weights_read_without_file_handles_are_not_called_damaged(monkeyp
     def starved(*args, **kwargs):
         raise OSError(errno.EMFILE, "Too many open files")
     monkeypatch.setattr(zipfile, "ZipFile", starved)
-    with pytest.raises(InputError, match=r"cannot read weights .*te.pt': too many open files \(this process may hold"):
+    with pytest.raises(InputError, match=r"cannot read weights file .*te.pt.: too many open files \(this process may hold"):
         weights.read_torch_file(weights_path(SensorConfig.preset("te")), "weights", "tespike weights file")
 
 

@@ -22,7 +22,7 @@ import torch
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError, one_line
-from tespike.golden.io import atomic_output, check_archive_end
+from tespike.golden.io import atomic_output, check_archive_end, refuse_starved
 
 #: Keys every weights file holds.
 PAYLOAD_KEYS = ("state_dict", "sizes", "config")
@@ -54,34 +54,21 @@ def write_torch_file(path: str | Path, payload: Any) -> None:
 def _check_crcs(path: str | Path, what: str, kind: str) -> None:
     """Refuse a torch zip archive a member of which fails its CRC (a flipped or lost byte); an
     archive zipfile cannot open at all is left to ``torch.load``, which names its own fault."""
-    from tespike.golden.resources import file_handles_fault
     try:
         archive = zipfile.ZipFile(path)
-    except OSError as exc:
-        _refuse_starved(exc, path, what)
-        return
-    except (zipfile.BadZipFile, ValueError, EOFError):
+    except (OSError, zipfile.BadZipFile, ValueError, EOFError) as exc:
+        refuse_starved(exc, what, path)                 # (an intact file read without handles is not damaged)
         return
     try:
         with archive:
             check_archive_end(path)
             damaged = archive.testzip()
     except (OSError, zipfile.BadZipFile, ValueError, EOFError, NotImplementedError, zlib.error) as exc:
-        if isinstance(exc, OSError) and file_handles_fault(exc):
-            _refuse_starved(exc, path, what)
+        refuse_starved(exc, what, path)
         raise InputError(f"{what} {str(path)!r} is not a {kind} (a damaged archive: {one_line(exc, 100)})") from None
     if damaged is not None:
         raise InputError(f"{what} {str(path)!r} is not a {kind} (a damaged archive: member {damaged!r} "
                          "fails its CRC check)")
-
-
-def _refuse_starved(exc: OSError, path, what: str) -> None:
-    """A read that failed for want of file handles says so (an intact file was called "a damaged
-    archive" under ulimit -n); any other OSError is left to the caller."""
-    from tespike.golden.resources import file_handles_fault
-    fault = file_handles_fault(exc)
-    if fault:
-        raise InputError(f"cannot read {what} {str(path)!r}: {fault}") from None
 
 
 def read_torch_file(path: str | Path, what: str, kind: str) -> Any:
@@ -95,7 +82,7 @@ def read_torch_file(path: str | Path, what: str, kind: str) -> Any:
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
     except OSError as exc:
-        _refuse_starved(exc, path, what)
+        refuse_starved(exc, what, path)
         raise InputError(f"cannot read {what} {str(path)!r}: {exc.strerror or exc}") from None
     except (RuntimeError, EOFError, ValueError, pickle.UnpicklingError, zipfile.BadZipFile) as exc:
         raise InputError(f"{what} {str(path)!r} is not a {kind} ({_load_fault(path, exc)})") from None
