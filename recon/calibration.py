@@ -211,12 +211,12 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
         raise InputError(f"the dark stream is saturated: {100 * saturated:.1f} % of its words are the sensor's "
                          f"top code ({top}): its dark current alone is beyond the sensor's range, and no "
                          "calibration recovers light under it")
+    flat_read = mean_decoded_light(flat_words, config)
     saturated = saturated_share(flat_words, top_words)
     if saturated >= MAX_SATURATED_SHARE and config.is_msb:
         # (the msb word of the top code is also the ordinary reading of any count of 2^(ml_bits - 1) or
         # more: a flat below the ceiling reads it most of the time and still conserves spikes)
-        reads = float(np.median(mean_decoded_light(flat_words, config)))
-        saturated = saturated if reads >= 0.97 * flat_ceiling(config) else 0.0
+        saturated = saturated if float(np.median(flat_read)) >= 0.97 * flat_ceiling(config) else 0.0
     if saturated >= MAX_SATURATED_SHARE:
         raise InputError(f"the flat stream is saturated: {100 * saturated:.1f} % of its words are the sensor's "
                          f"top code ({top}: what any light above its range gives), so its light cannot be "
@@ -230,7 +230,7 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
                          f"{100 * overflowing:.1f} % of the flat's words are overflow words, whose mean decoding "
                          "does not conserve spikes; record the flat at a lower light")
     dark = mean_decoded_light(dark_words, config)
-    shown = mean_decoded_light(flat_words, config) - dark
+    shown = flat_read - dark
     if float(np.median(shown)) > MAX_GAIN * float(flat_light):
         raise InputError(f"flat light {flat_light:g}: the flat stream's pixels read {float(np.median(shown)):.4g} "
                          f"(median, less the dark), above {MAX_GAIN:g} times it: state the light the flat "
