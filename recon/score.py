@@ -47,6 +47,7 @@ def check_metrics(names: tuple, what: str) -> tuple:
         raise InputError(f"{what}: {twice[0]!r} is named more than once")
     return tuple(names)
 
+
 def columns(display: HdrDisplay = DEFAULT_DISPLAY) -> tuple[Column, ...]:
     """The columns (in :data:`METRIC_KEYS` order) with their labels for ``display``."""
     from tespike.recon.metrics import DEFAULT_NITS_PER_UNIT

@@ -501,10 +501,11 @@ class TrainingRun:
         if {self.checkpoint.name, self.best_path.name} & set(removed):
             print(f"train: a new run in {str(self.work)!r}: removed the earlier run's {', '.join(removed)}",
                   file=sys.stderr)
-        if options.init is not None and (trained_for != self.config or self.init["tensors_copied"] < self.init["tensors"]):
+        partial = options.init is not None and len(copied) < self.init["tensors"]
+        if options.init is not None and (trained_for != self.config or partial):
             why = (f"was trained for {trained_for.describe()}, this run is for {self.config.describe()}"
                    if trained_for != self.config else "holds another size or ablation of the method")
-            rest = ", the others afresh" if len(copied) < self.init["tensors"] else ""
+            rest = ", the others afresh" if partial else ""
             print(f"train: --init {options.init!r} {why}: {len(copied)} of this run's {self.init['tensors']} "
                   f"tensors (matching name and shape) start from it{rest}", file=sys.stderr)
 
