@@ -182,7 +182,7 @@ def default_cache_root() -> Path:
             if os.path.lexists(value) and not os.path.isdir(value):
                 raise InputError(f"${variable} {value!r} (where the build cache lives) is not a directory: "
                                  "point it at a folder, or unset it")
-            return Path(value) / sub if sub else Path(value)
+            return Path(value, sub)
     return Path.home() / ".cache" / "tespike"
 
 

@@ -95,10 +95,11 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
         raise InputError(f"unknown grayscale weights {weights!r} (known: {', '.join(LUMA_WEIGHTS)})")
     if not folder.is_dir():
         raise InputError(f"--hdr {str(folder)!r} does not exist or is not a folder")
-    subfolders = sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))
+    entries = list(folder.iterdir())
+    subfolders = sorted(p for p in entries if p.is_dir() and not p.name.startswith("."))
     if not subfolders:
         raise InputError(f"--hdr {str(folder)!r} holds no sub-folders (one folder of frames per sequence)")
-    loose = sorted(p.name for p in folder.iterdir() if p.suffix.lower() in FRAME_SUFFIXES)
+    loose = sorted(p.name for p in entries if p.suffix.lower() in FRAME_SUFFIXES)
     if loose:                       # (read as no sequence: it was dropped without a word)
         raise InputError(f"--hdr {str(folder)!r} holds the frame {loose[0]!r} beside its sequence folders: "
                          "put every frame in a sequence's sub-folder")
