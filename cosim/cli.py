@@ -13,6 +13,7 @@ import argparse
 import importlib
 import sys
 
+from tespike.cosim.console import StandardOutputError, closed_pipe, drop_standard_output, name_standard_output
 from tespike.golden.errors import TespikeError, one_line
 from tespike.golden.resources import address_space_text
 
@@ -243,21 +244,19 @@ def _before(since: int, exc: BaseException) -> str:
 def main(argv: list[str] | None = None) -> int:
     whole_process = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(argv[0] if argv and argv[0] in COMMANDS else None)
-    if not argv:
-        parser.print_help()
-        return 0
-    if len(argv) > 1 and argv[0].startswith("--v") and "--version".startswith(argv[0]):
-        parser.error(f"--version takes nothing else (given: {' '.join(argv[1:])})")   # (argparse exits at it)
-    args, unknown = parser.parse_known_args(argv)
-    if unknown:       # named by the sub-command's parser: "tespike train: ... (see tespike train --help)"
-        getattr(args, "command_parser", parser).error(f"unrecognized arguments: {' '.join(unknown)}")
-    repeated = _repeated_option(getattr(args, "command_parser", parser), argv)
-    if repeated:      # argparse keeps the last value and drops the others without a word
-        getattr(args, "command_parser", parser).error(f"{repeated} is given more than once: give it once")
-    if args.command is None:          # only top-level options, e.g. "tespike -q"
-        parser.print_help()
-        return 0
+    if whole_process:
+        name_standard_output()
+    try:
+        args = _parse(argv)
+    except SystemExit as exc:         # help, --version, usage errors: what argparse printed, written out
+        if whole_process:
+            _write_out_standard_output("tespike")
+        raise exc
+    except StandardOutputError:       # (--version's line)
+        _write_out_standard_output("tespike")
+        raise
+    if args is None:
+        return _write_out_standard_output("tespike") if whole_process else 0
     args.argv = argv                  # the command line as given (a run records how it was made)
     previous = _install_signal_handlers()
 
@@ -285,6 +284,40 @@ def main(argv: list[str] | None = None) -> int:
     elif whole_process:   # ... also at interpreter exit (e.g. a coroutine the interruption left)
         warnings.simplefilter("ignore")
     return code
+
+
+def _parse(argv: list[str]):
+    """The command line's arguments, or None where there is no command (the help is printed)."""
+    parser = build_parser(argv[0] if argv and argv[0] in COMMANDS else None)
+    if not argv:
+        parser.print_help()
+        return None
+    if len(argv) > 1 and argv[0].startswith("--v") and "--version".startswith(argv[0]):
+        parser.error(f"--version takes nothing else (given: {' '.join(argv[1:])})")   # (argparse exits at it)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:       # named by the sub-command's parser: "tespike train: ... (see tespike train --help)"
+        getattr(args, "command_parser", parser).error(f"unrecognized arguments: {' '.join(unknown)}")
+    repeated = _repeated_option(getattr(args, "command_parser", parser), argv)
+    if repeated:      # argparse keeps the last value and drops the others without a word
+        getattr(args, "command_parser", parser).error(f"{repeated} is given more than once: give it once")
+    if args.command is None:          # only top-level options, e.g. "tespike -q"
+        parser.print_help()
+        return None
+    return args
+
+
+def _write_out_standard_output(prefix: str) -> int:
+    """Flush standard output outside a command (help, usage): 0, or the status of its one line
+    when it failed (a full disk under ``> help.txt``), never Python's "Exception ignored" at exit."""
+    try:
+        sys.stdout.flush()
+        return 0
+    except StandardOutputError as exc:
+        drop_standard_output()
+        if closed_pipe(exc):
+            return 128 + 13                         # as a tool killed by SIGPIPE
+        print(f"{prefix}: error: standard output: {one_line(exc.strerror or exc, 300)}", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT) from None
 
 
 def _repeated_option(parser, argv: list[str]) -> str | None:
@@ -320,6 +353,7 @@ def _run(args, prepare=lambda: None, ended=lambda: None) -> tuple[int, bool]:
     try:
         prepare()
         code = int(args.run(args) or 0)
+        sys.stdout.flush()                # (a full disk under "> log" is the command's fault, said below)
         raise_lost_stop()                 # (a stop Python dropped in a finalizer: the command did not end well)
         ended()
         return code, True
@@ -327,7 +361,12 @@ def _run(args, prepare=lambda: None, ended=lambda: None) -> tuple[int, bool]:
         print(f"{prefix}: error: {one_line(exc, 300)}{_notes(exc)}{_before(start, exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
     except OSError as exc:
-        where = f" {exc.filename!r}:" if exc.filename else ""
+        if isinstance(exc, StandardOutputError):
+            drop_standard_output()
+            if closed_pipe(exc):
+                return 128 + 13, False      # the reader went away (| head): quiet, as a shell tool
+        where = " standard output:" if isinstance(exc, StandardOutputError) else \
+            f" {exc.filename!r}:" if exc.filename else ""
         cause = one_line(exc.strerror or exc, 300)
         if "No usable temporary directory" in cause:       # tempfile's words hide the cause
             from tespike.golden.paths import temporary_directory_fault

@@ -6,6 +6,8 @@ the command modules), so the dependency runs one way: cli -> commands -> console
 
 from __future__ import annotations
 
+import errno
+import os
 import sys
 
 
@@ -47,3 +49,69 @@ def printable(text: str, stream) -> str:
 def counted(n: int, noun: str) -> str:
     """``n`` and ``noun`` in the plural unless n is 1: "1 readout", "4 readouts" (nouns taking an -s)."""
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+class StandardOutputError(OSError):
+    """A write to standard output failed (a full disk under ``> log``, a closed pipe): the
+    command's line names standard output, which such an error alone does not."""
+
+
+class _NamedStandardOutput:
+    """``sys.stdout`` whose failed writes raise :class:`StandardOutputError`; all else is the stream's."""
+
+    def __init__(self, stream):
+        self._stream = stream
+        #: The first failure, kept: argparse's help drops the error its write raised.
+        self.failure: StandardOutputError | None = None
+
+    def _failed(self, exc: OSError) -> StandardOutputError:
+        failure = StandardOutputError(exc.errno, exc.strerror)
+        self.failure = self.failure or failure
+        return failure
+
+    def write(self, text):
+        try:
+            return self._stream.write(text)
+        except OSError as exc:
+            raise self._failed(exc) from None
+
+    def flush(self):
+        if self.failure is not None:               # (what was lost is not written later)
+            raise self.failure
+        try:
+            self._stream.flush()
+        except OSError as exc:
+            raise self._failed(exc) from None
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+def name_standard_output() -> None:
+    """Make this process's ``sys.stdout`` say so when a write to it fails (the ``tespike`` process
+    only: a library caller's stdout is its own)."""
+    if sys.stdout is not None and not isinstance(sys.stdout, _NamedStandardOutput):
+        sys.stdout = _NamedStandardOutput(sys.stdout)
+
+
+def drop_standard_output() -> None:
+    """After standard output failed: what is still buffered goes to the null device, so that the
+    interpreter's exit does not print Python's two-line "Exception ignored" about it."""
+    if isinstance(sys.stdout, _NamedStandardOutput):   # (its failure is said: not raised again at exit)
+        sys.stdout = sys.stdout._stream
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+    except OSError:
+        return
+    try:
+        os.dup2(null, sys.__stdout__.fileno() if sys.__stdout__ is not None else 1)
+    except (OSError, ValueError):
+        pass
+    finally:
+        os.close(null)
+
+
+def closed_pipe(exc: OSError) -> bool:
+    """Whether standard output failed because its reader went away (``tespike ... | head -1``):
+    ended quietly, as a shell tool killed by SIGPIPE ends."""
+    return isinstance(exc, StandardOutputError) and exc.errno == errno.EPIPE

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from tespike.golden.errors import InputError
-from tests.cli import ROOT, assert_refused, run_python, run_tespike
+from tests.cli import ROOT, _checkout_env, assert_refused, run_python, run_tespike
 from tests.test_cli_hardening import TINY, small_tmpfs, snapshot
 
 EVALUATE = ("evaluate", "--set", "none", "--methods", "tfp", "--repeats", "1", "--ml-count-config", "none")
@@ -680,3 +680,34 @@ sys.exit(main())
     assert result.returncode in (-signal.SIGBUS, 128 + signal.SIGBUS), result
     assert_refused(result, f"input file {str(target)!r} was cut short while it was read", "Bus error")
     assert sorted(os.listdir(tmp_path)) == sorted(["I.npy"] + (["S.npz"] if command == "reconstruct" else []))
+
+
+@pytest.mark.parametrize("buffered", [True, False])
+@pytest.mark.parametrize("args", [("scene", "--list"), ("--help",), ("--version",), ()])
+def test_a_full_standard_output_is_one_line_naming_it(tmp_path, buffered, args):
+    """``tespike ... > log`` on a full disk: Python's exit-time "Exception ignored" (exit 120), or
+    a line naming no file, or (argparse drops its write errors) exit 0 with the help lost."""
+    env = {**_checkout_env(), "PYTHONUNBUFFERED": "" if buffered else "1"}
+    with open("/dev/full", "w") as full:
+        result = subprocess.run([sys.executable, "-m", "tespike", *args], stdout=full, stderr=subprocess.PIPE,
+                                text=True, env=env, timeout=120, cwd=tmp_path)
+    assert_refused(result, "standard output", "No space left")
+
+
+def test_a_full_standard_output_after_the_output_is_written_says_it_is_whole(tmp_path):
+    out = tmp_path / "I.npy"
+    with open("/dev/full", "w") as full:
+        result = subprocess.run([sys.executable, "-m", "tespike", "scene", "--frames", "2", "--height", "8",
+                                 "--width", "8", "--out", out], stdout=full, stderr=subprocess.PIPE, text=True,
+                                env=_checkout_env(), timeout=120)
+    assert_refused(result, "standard output", f"after writing {str(out)!r} whole")
+    assert np.load(out).shape == (2, 8, 8)
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly():
+    """``tespike scene --list | head -0``: no message (as a shell tool killed by SIGPIPE)."""
+    reader = subprocess.Popen([sys.executable, "-m", "tespike", "scene", "--list"], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, env=_checkout_env())
+    reader.stdout.close()                          # the reader is gone before the list is written
+    _, err = reader.communicate(timeout=120)
+    assert reader.returncode == 141 and err == b"", (reader.returncode, err)
