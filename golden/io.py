@@ -161,6 +161,9 @@ def check_scene(scene: np.ndarray, *, scan_values: bool = True, what: str = "sce
         raise InputError(f"{what} dtype {scene.dtype} is not a float type (light per readout interval "
                          "must be a float array, SPEC section 6; an integer array is refused "
                          "like a float stimulus is)")
+    if scene.dtype.itemsize > 8:                       # (1e4000 is finite there and inf in float64)
+        raise InputError(f"{what} dtype {scene.dtype} is wider than float64, in which light is simulated "
+                         "and scored: convert the file to float64 (values past its range would change)")
     if scene.ndim != 3:
         raise InputError(f"{what} shape {scene.shape} must be (K, H, W)")
     if scene.shape[1] < 1 or scene.shape[2] < 1:

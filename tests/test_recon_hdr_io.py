@@ -58,6 +58,9 @@ def test_reader_flat_scanlines_orientation_and_exposure(tmp_path):
     assert np.array_equal(read_hdr(tmp_path / "flat.hdr"), expected)
     assert np.array_equal(read_hdr(tmp_path / "up.hdr"), expected[::-1])
     assert np.allclose(read_hdr(tmp_path / "exp.hdr"), expected / 8, rtol=1e-7)
+    # COLORCORR: a per-channel multiplier already applied, divided out as EXPOSURE is
+    (tmp_path / "corr.hdr").write_bytes(b"#?RADIANCE\nEXPOSURE=2\nCOLORCORR=1 0.5 4\n\n-Y 2 +X 3\n" + data)
+    assert np.allclose(read_hdr(tmp_path / "corr.hdr"), expected / (2 * np.array([1, 0.5, 4])), rtol=1e-7)
 
 
 @pytest.mark.parametrize("rle", [True, False])
@@ -95,7 +98,17 @@ def test_writer_rle_is_smaller_and_equal(tmp_path):
     (HEADER + b"-Y 1 +X 1\n" + bytes((128, 64, 32, 129)) + b"garbage\n", ["8 byte(s) after"]),
     # an exposure that overflows was blamed on the pixel data
     (b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\nEXPOSURE=1e-300\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)),
-     ["EXPOSURE=1e-300", "beyond float32's range"]),
+     ["exposure 1e-300", "beyond float32's range"]),
+    # ... and one that underflows turned a lit frame black without a word
+    (b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\nEXPOSURE=1e60\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)),
+     ["exposure 1e+60", "below float32's smallest normal"]),
+    (b"#?RADIANCE\nCOLORCORR=1 1e60 1\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)),
+     ["exposure 1 1e+60 1", "below float32's smallest normal"]),
+    # header numbers as C's atof reads them (Python's float took 1_0 as 10, and inf)
+    (b"#?RADIANCE\nEXPOSURE=1_0\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)), ["EXPOSURE=1_0", "1 number"]),
+    (b"#?RADIANCE\nEXPOSURE=inf\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)), ["EXPOSURE=inf"]),
+    (b"#?RADIANCE\nEXPOSURE=0\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)), ["EXPOSURE=0", "> 0"]),
+    (b"#?RADIANCE\nCOLORCORR=1 2\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)), ["COLORCORR=1 2", "3 number"]),
 ])
 def test_reader_refuses_bad_files(tmp_path, content, words):
     path = tmp_path / "bad.hdr"

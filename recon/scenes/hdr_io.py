@@ -12,8 +12,10 @@ a shared exponent E), flat or in "new" run-length encoding. A pixel decodes
 as ``mantissa * 2^(E - 136)`` (E = 0 means black) -- the rule of Bruce
 Walter's ``rgbe.c`` that OpenCV, imageio and most dataset pipelines use
 (Radiance's own ``colr_color`` adds 0.5 to the mantissa; the difference is
-below the format's 1/256 quantisation). ``EXPOSURE=`` values are multipliers
-already applied to the pixels, so the reader divides them out.
+below the format's 1/256 quantisation). ``EXPOSURE=`` values and ``COLORCORR=``
+triples (per channel) are multipliers already applied to the pixels, so the
+reader divides them out, refusing a product that would take lit pixels past
+float32's range or below its smallest normal number.
 """
 
 from __future__ import annotations
@@ -75,12 +77,31 @@ def float_to_rgbe(rgb: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- .hdr reader
-def _parse_header(data: bytes, path: str) -> tuple[int, float, tuple]:
-    """Return (offset of pixel data, exposure, (rows, cols, row-axis info))."""
+#: A header number as Radiance writes it (C's atof: no ``1_0``, ``inf`` or ``nan``, which Python's float takes).
+_HEADER_NUMBER = re.compile(rb"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+
+
+def _header_numbers(line: bytes, count: int, path: str) -> np.ndarray:
+    """The ``count`` numbers of an EXPOSURE= or COLORCORR= header line, each finite and > 0 (the
+    multipliers already applied to the pixels, which the reader divides out)."""
+    key, _, text = line.partition(b"=")
+    words = text.split()
+    if len(words) != count or not all(_HEADER_NUMBER.fullmatch(word) for word in words):
+        raise InputError(f"{path!r}: bad header line {line.decode('latin-1')!r} "
+                         f"({key.decode('latin-1')}= takes {count} number(s))")
+    values = np.array([float(word) for word in words])
+    if not (np.isfinite(values).all() and (values > 0).all()):
+        raise InputError(f"{path!r}: {line.decode('latin-1')} must hold finite numbers > 0")
+    return values
+
+
+def _parse_header(data: bytes, path: str) -> tuple[int, np.ndarray, tuple]:
+    """Return (offset of pixel data, exposure per channel: the product of the EXPOSURE= and
+    COLORCORR= lines, (rows, cols, row-axis info))."""
     if not data.startswith(b"#?"):
         raise InputError(f"{path!r} is not a Radiance HDR file (it must start with '#?')")
     pos = 0
-    exposure = 1.0
+    exposure = np.ones(1)
     fmt = None
     while True:
         end = data.find(b"\n", pos)
@@ -93,13 +114,9 @@ def _parse_header(data: bytes, path: str) -> tuple[int, float, tuple]:
         if line.startswith(b"FORMAT="):
             fmt = line[7:].strip().decode("latin-1")
         elif line.startswith(b"EXPOSURE="):
-            try:
-                value = float(line[9:])
-            except ValueError:
-                raise InputError(f"{path!r}: bad header line {line.decode('latin-1')!r}") from None
-            if not (np.isfinite(value) and value > 0):
-                raise InputError(f"{path!r}: EXPOSURE={value} must be a finite number > 0")
-            exposure *= value
+            exposure = exposure * _header_numbers(line, 1, path)
+        elif line.startswith(b"COLORCORR="):       # (a per-channel EXPOSURE, Radiance's header)
+            exposure = exposure * _header_numbers(line, 3, path)
     if fmt is not None and fmt != "32-bit_rle_rgbe":
         raise InputError(f"{path!r}: FORMAT={fmt} is not supported (only 32-bit_rle_rgbe)")
     end = data.find(b"\n", pos)
@@ -188,12 +205,17 @@ def read_hdr(path: str | Path) -> np.ndarray:
             rgb = rgb[:, ::-1]
         if sign2 == b"+":
             rgb = rgb[::-1]
-    if exposure != 1.0:
-        with np.errstate(over="ignore"):
+    if (exposure != 1.0).any():
+        lit = rgb >= np.finfo(np.float32).tiny     # (RGBE holds subnormals too: those stay as they are)
+        with np.errstate(over="ignore", under="ignore"):
             rgb = (rgb.astype(np.float64) / exposure).astype(np.float32)
+        factor = " ".join(f"{value:g}" for value in exposure)
         if not np.isfinite(rgb).all():      # (the pixels are finite: RGBE holds no infinity)
-            raise InputError(f"{path!r}: its EXPOSURE={exposure:g} (the header lines' product) divides "
-                             "its pixel values beyond float32's range")
+            raise InputError(f"{path!r}: its exposure {factor} (the EXPOSURE= and COLORCORR= lines' product) "
+                             "divides its pixel values beyond float32's range")
+        if (rgb[lit] < np.finfo(np.float32).tiny).any():   # (lit pixels made 0 or subnormal: lost)
+            raise InputError(f"{path!r}: its exposure {factor} (the EXPOSURE= and COLORCORR= lines' product) "
+                             "divides lit pixel values below float32's smallest normal number")
     return np.ascontiguousarray(rgb)
 
 
