@@ -288,7 +288,8 @@ def main(argv=None):
     parser.add_argument("--whole-shape", type=int, nargs=3, default=(64, 384, 512))
     parser.add_argument("--scene", action="append", default=[],
                         help="I.npy to time the whole process on as well (repeatable), e.g. from "
-                             "'python3 -m tespike scene --name city --frames 64 --height 384 --width 512'")
+                             "'TESPIKE_HDRI_DIR=../shared/data/hdri python3 -m tespike scene --name city --frames 64 "
+                             "--height 384 --width 512' (the full-size panorama: the shipped copy is 128 x 256)")
     parser.add_argument("--crops", type=int, default=6, help="random crops the naive loop is timed on")
     parser.add_argument("--repeats", type=int, default=3,
                         help="whole-process runs per camera (interleaved) and naive-loop runs per crop; "

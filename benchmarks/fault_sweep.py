@@ -639,7 +639,7 @@ def parts_left(work: Path) -> list[str]:
 
 def make_long_inputs(valid: Path) -> None:
     """A scene large enough that ``simulate --workers 2`` takes a few seconds."""
-    tespike(valid, "scene", "--name", "default", "--frames", 24, "--height", 192, "--width", 256,
+    tespike(valid, "scene", "--name", "default", "--frames", 36, "--height", 128, "--width", 256,
             "--out", "big.npy", "-q")
 
 

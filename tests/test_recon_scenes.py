@@ -138,7 +138,7 @@ def test_decades_scene_spans_twelve_decades_in_one_frame():
     assert positive.max() / positive.min() > 1e11 and (frame == 0).any()
 
 
-def test_make_scene_refuses():
+def test_make_scene_refuses(monkeypatch):
     with pytest.raises(InputError, match="unknown scene"):
         make_scene("nope")
     with pytest.raises(InputError, match="frames"):
@@ -151,6 +151,13 @@ def test_make_scene_refuses():
         scene_rng("sun", -1)
     with pytest.raises(InputError, match="exceeds"):
         make_scene("moderate", 10_000, 1000, 1000)
+    # a window larger than the panorama was filled with copies of its edge rows and repeated columns
+    monkeypatch.delenv("TESPIKE_HDRI_DIR", raising=False)       # (the shipped 128 x 256 copies)
+    assert make_scene("city", 1, 128, 256).shape == (1, 128, 256)
+    for height, width in ((129, 64), (64, 257), (400, 1200)):
+        with pytest.raises(InputError, match=rf"{height} x {width} window is larger than the panorama 'city' "
+                                             r"\(128 x 256\).*TESPIKE_HDRI_DIR"):
+            make_scene("city", 1, height, width)
 
 
 @pytest.mark.parametrize("motion", ["pan", "tilt", "rotate", "zoom", "mixed"])

@@ -247,10 +247,14 @@ def test_peak_sets_the_clips_brightness(tmp_path, monkeypatch):
     assert seen[1].data_recipe().peak == EngineRecipe().peak
     from tespike.recon.scenes import write_hdr
     (tmp_path / "panos").mkdir()
-    write_hdr(tmp_path / "panos" / "hall.hdr", np.full((32, 64, 3), 0.5, np.float32))
+    write_hdr(tmp_path / "panos" / "hall.hdr", np.full((128, 256, 3), 0.5, np.float32))
     assert main(["train", "--out", str(tmp_path / "w.pt"), "--steps", "1", "--panoramas", str(tmp_path / "panos"),
                  "-q"]) == 0
     assert seen[2].data_recipe().panoramas == EngineRecipe().panoramas + (str(tmp_path / "panos" / "hall.hdr"),)
+    # a panorama smaller than the engine's window: its clips would repeat its edge rows (it trained)
+    write_hdr(tmp_path / "panos" / "small.hdr", np.full((8, 8, 3), 0.5, np.float32))
+    with pytest.raises(InputError, match=r"small.hdr' is 8 x 8, smaller than the engine's 128 x 128 window"):
+        EngineRecipe(panoramas=(str(tmp_path / "panos" / "small.hdr"),))
 
 
 def test_method_and_crop_checked():

@@ -135,6 +135,13 @@ class EngineRecipe:
         for key in ("height", "width"):
             if type(getattr(self, key)) is not int or getattr(self, key) < 8:
                 raise InputError(f"engine recipe {key} = {getattr(self, key)!r}: must be an integer >= 8")
+        from ..scenes.hdr_io import frame_size
+        for source in self.panoramas:               # (a file: its header's size; a shipped one is 128 x 256)
+            if source not in TRAIN_PANORAMAS:
+                h, w = frame_size(source)
+                if h < self.height or w < self.width:   # (its windows would repeat its edge rows)
+                    raise InputError(f"panorama {source!r} is {h} x {w}, smaller than the engine's "
+                                     f"{self.height} x {self.width} window")
         for key in ("long", "short"):
             lo, hi = getattr(self, key)
             if not (type(lo) is int and type(hi) is int and 1 <= lo <= hi):

@@ -173,12 +173,28 @@ def render_path(panorama: np.ndarray, path: CameraPath, frames: int, height: int
     return out
 
 
+def check_window(panorama_shape: tuple[int, int], height: int, width: int, source) -> None:
+    """Refuse a ``height`` x ``width`` camera window larger than its panorama: its rows past the
+    panorama's would be copies of the edge rows (the latitude is clamped) and its columns would
+    show the panorama again beside itself (the longitude wraps round)."""
+    rows, columns = panorama_shape
+    if height > rows or width > columns:
+        shipped = str(source) == "default" or (str(source) in PANORAMAS and hdri_dir() is None)
+        more = ("; the full-size panoramas, 512 x 1024, are used with TESPIKE_HDRI_DIR set to their "
+                "folder" if shipped and str(source) != "default" else "")
+        raise InputError(f"a {height} x {width} window is larger than the panorama {str(source)!r} "
+                         f"({rows} x {columns}): its rows would repeat the edge rows and its columns the "
+                         f"panorama; ask for at most {rows} x {columns}{more}")
+
+
 def panorama_sequence(rng: np.random.Generator, frames: int, height: int, width: int, *,
                       source: str | Path = "default", motion: str = "pan", sources: int = 0,
                       source_gain: tuple[float, float] = (1e2, 1e4)) -> np.ndarray:
     """A moving window over a panorama with ``sources`` moving bright spots added,
-    each ``source_gain`` (log-uniform range) x the sequence's median. Float64, unnormalised."""
+    each ``source_gain`` (log-uniform range) x the sequence's median. Float64, unnormalised;
+    a window larger than the panorama is refused (:func:`check_window`)."""
     panorama = load_panorama(source)
+    check_window(panorama.shape, height, width, source)
     path = random_path(rng, motion, panorama.shape, height, width, frames)
     scene = render_path(panorama, path, frames, height, width)
     if sources:
