@@ -29,7 +29,18 @@ def tone_map(light: np.ndarray, peak: float, mu: float = MU) -> np.ndarray:
     numpy twin of :func:`compress` for the pictures."""
     with np.errstate(over="ignore"):      # a tiny peak (subnormal): light / peak is inf, white as it should be
         h = np.clip(np.asarray(light, np.float64) / peak, 0.0, 1.0)
-    return np.log1p(mu * h) / math.log1p(mu)
+    # log1p(mu h) / log1p(mu) written as h g(mu h) / g(mu), g(x) = log1p(x) / x: the same to a few ulps,
+    # and the linear limit where mu h underflows (a subnormal mu drew a two-level picture)
+    return h * _log1p_ratio(mu * h) / float(_log1p_ratio(np.float64(mu)))
+
+
+def _log1p_ratio(x: np.ndarray) -> np.ndarray:
+    """``log1p(x) / x`` for ``x >= 0``, 1 at 0 (its limit)."""
+    x = np.asarray(x, np.float64)
+    out = np.ones_like(x)
+    positive = x > 0
+    out[positive] = np.log1p(x[positive]) / x[positive]
+    return out
 
 
 def compress(light: "torch.Tensor", mu: float) -> "torch.Tensor":

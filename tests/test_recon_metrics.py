@@ -135,6 +135,9 @@ def test_one_mu_law_for_metrics_pictures_and_learned_methods():
     h = torch.linspace(0, 1, 101, dtype=torch.float64)
     assert torch.equal(metrics.mu_law(h), compress(h, mulaw.MU))
     assert np.allclose(mulaw.tone_map(h.numpy(), 1.0), metrics.mu_law(h).numpy(), rtol=0, atol=1e-15)
+    # a tiny mu tends to the identity, a subnormal one too (it drew black below half the peak, white above)
+    for mu in (1e-300, 5e-324):
+        assert np.allclose(mulaw.tone_map(h.numpy(), 1.0, mu), h.numpy(), rtol=0, atol=1e-15)
     # the in-place twin the baselines use on their large firing-rate stacks
     from tespike.recon.mulaw import compress_
     light = torch.cat((torch.tensor([-0.5, 0.0]), torch.logspace(-6, 1, 50)))
