@@ -62,6 +62,13 @@ NOISE_RANGES = {
 #: and a second noise file look like another sensor while changing nothing.
 MAP_SMALLEST = {"dsnu": 1e-6, "prnu": 1e-6, "comparator_offset": 1e-6, "hot_pixels": 1e-9}
 
+#: Smallest ``dark_level`` under a dark model, and smallest ``hot_factor - 1`` with hot pixels, for the
+#: same reason: a dark pixel's electrons are rounded per readout, and 1e-12 x the models' 400-535 e- x
+#: the largest hot factor (1e6) is under 0.001, so no pixel gets one; a hot factor within 1e-6 of 1
+#: changes a hot pixel's dark scale as little as the maps' smallest spreads do.
+DARK_LEVEL_SMALLEST = 1e-12
+HOT_FACTOR_SMALLEST_EXCESS = 1e-6
+
 #: A hot pixel's dark scale factor unless the noise description gives one (it needs hot_pixels > 0).
 HOT_FACTOR = 20.0
 
@@ -99,12 +106,13 @@ class SensorNoise:
                 raise InputError(f"sensor noise {key} = {one_line(repr(value), 40)}: must be 0 or at least "
                                  f"{MAP_SMALLEST[key]:g} (a smaller one changes no pixel)")
             object.__setattr__(self, key, float(value))
-        if self.dark_current is not None and self.dark_level == 0:
-            raise InputError(f"sensor noise: dark_level 0 makes dark_current {self.dark_current!r} draw nothing "
-                             "(leave the dark current out for none)")
-        if self.hot_pixels and self.hot_factor == 1.0:
-            raise InputError("sensor noise: hot_factor 1 makes the hot pixels like the others (give a factor > 1, "
-                             "or no hot_pixels)")
+        if self.dark_current is not None and self.dark_level < DARK_LEVEL_SMALLEST:
+            raise InputError(f"sensor noise: dark_level {self.dark_level:g} makes dark_current {self.dark_current!r} "
+                             f"draw nothing (give at least {DARK_LEVEL_SMALLEST:g}, or leave the dark current out "
+                             "for none)")
+        if self.hot_pixels and self.hot_factor < 1.0 + HOT_FACTOR_SMALLEST_EXCESS:
+            raise InputError(f"sensor noise: hot_factor {self.hot_factor!r} makes the hot pixels like the others "
+                             f"(give a factor of at least 1 + {HOT_FACTOR_SMALLEST_EXCESS:g}, or no hot_pixels)")
         if self.dark_current is None and (self.dsnu or self.hot_pixels or self.dark_level != 1.0):
             raise InputError("sensor noise: dark_level, dsnu and hot_pixels shape the dark current; "
                              "they need dark_current 'eq12' or 'eq13'")

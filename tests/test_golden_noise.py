@@ -105,10 +105,15 @@ def test_settings_that_would_change_nothing_are_refused():
                         ({"prnu": 5e-324}, "prnu"), ({"comparator_offset": 1e-7}, "comparator_offset"),
                         ({"dark_current": "eq12", "hot_pixels": 1e-12}, "hot_pixels"),
                         ({"dark_current": "eq12", "dark_level": 0.0}, "dark_level 0"),
-                        ({"dark_current": "eq12", "hot_pixels": 0.1, "hot_factor": 1.0}, "hot_factor 1")):
+                        ({"dark_current": "eq12", "hot_pixels": 0.1, "hot_factor": 1.0}, "hot_factor 1.0"),
+                        # ... and just past the refused values: as inert (words identical to eq12 alone)
+                        ({"dark_current": "eq12", "dark_level": 1e-300}, "dark_level 1e-300"),
+                        ({"dark_current": "eq13", "dark_level": 9e-13}, "dark_level 9e-13"),
+                        ({"dark_current": "eq12", "hot_pixels": 0.5, "hot_factor": 1 + 1e-13}, "hot_factor 1.0000")):
         with pytest.raises(InputError, match=words):
             SensorNoise(**keys)
     SensorNoise(dark_current="eq12", dsnu=1e-6, hot_pixels=1e-9, hot_factor=1.5)
+    SensorNoise(dark_current="eq12", dark_level=1e-12, hot_pixels=0.1, hot_factor=1 + 1e-6)
 
 
 def test_dark_electrons_of_an_extreme_hot_pixel_do_not_wrap(rng):
