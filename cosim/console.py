@@ -87,10 +87,28 @@ class _NamedStandardOutput:
         return getattr(self._stream, name)
 
 
+class _ClosedStandardOutput:
+    """What ``print`` writes to when the process started with stdout closed (``sys.stdout`` is
+    None, where ``print`` drops what it is given): each write fails, named."""
+
+    encoding = "utf-8"
+
+    def write(self, text):
+        raise StandardOutputError(errno.EBADF, "closed (the command started without one)")
+
+    def flush(self):
+        pass
+
+    def isatty(self):
+        return False
+
+
 def name_standard_output() -> None:
-    """Make this process's ``sys.stdout`` say so when a write to it fails (the ``tespike`` process
-    only: a library caller's stdout is its own)."""
-    if sys.stdout is not None and not isinstance(sys.stdout, _NamedStandardOutput):
+    """Make this process's ``sys.stdout`` say so when a write to it fails, or when it was closed
+    at the start (the ``tespike`` process only: a library caller's stdout is its own)."""
+    if sys.stdout is None:
+        sys.stdout = _NamedStandardOutput(_ClosedStandardOutput())
+    elif not isinstance(sys.stdout, _NamedStandardOutput):
         sys.stdout = _NamedStandardOutput(sys.stdout)
 
 

@@ -48,8 +48,28 @@ def _stopped(exc: _Stopped) -> int:
     return 128 + exc.signum
 
 
+def _fill_closed_descriptors() -> None:
+    """Give a closed standard descriptor (``tespike ... >&- 2>&-``) the null device, so that no pipe
+    or file the command opens takes its number (the cleanup process's pipe became stdout and stderr,
+    and the command ended with exit 1 and no line); a closed stdout stays ``None`` in ``sys``, for the
+    command to refuse writing to it (:func:`tespike.cosim.console.name_standard_output`), and a closed
+    stderr swallows the command's lines (they cannot be shown; the exit status still tells)."""
+    import os
+    for number in (0, 1, 2):
+        try:
+            os.fstat(number)
+        except OSError:
+            null = os.open(os.devnull, os.O_RDWR)
+            if null != number:
+                os.dup2(null, number)
+                os.close(null)
+    if sys.stderr is None:
+        sys.stderr = open(os.devnull, "w")
+
+
 def main() -> int:
     """Run ``tespike`` with the process's arguments; the exit status."""
+    _fill_closed_descriptors()
     _hold_early_signals()
     try:
         refusal = _address_space_refusal()

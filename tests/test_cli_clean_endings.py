@@ -711,3 +711,32 @@ def test_a_reader_that_goes_away_ends_the_command_quietly():
     reader.stdout.close()                          # the reader is gone before the list is written
     _, err = reader.communicate(timeout=120)
     assert reader.returncode == 141 and err == b"", (reader.returncode, err)
+
+
+def _started_with_closed(fds, *args, cwd):
+    """``tespike args`` started with the descriptors ``fds`` closed (``>&-``, ``2>&-``)."""
+    def close():
+        for fd in fds:
+            os.close(fd)
+    return subprocess.run([sys.executable, "-m", "tespike", *map(str, args)], stdin=subprocess.DEVNULL,
+                          stdout=subprocess.DEVNULL if 1 not in fds else None, stderr=subprocess.PIPE,
+                          text=True, env=_checkout_env(), timeout=300, cwd=cwd, preexec_fn=close)
+
+
+def test_a_command_started_without_stdout_refuses_to_print_or_runs_quietly(tmp_path):
+    """``score >&-`` exited 0 with its table lost; ``simulate >&- 2>&-`` exited 1 having written
+    nothing (the cleanup process's pipe took descriptors 1 and 2)."""
+    scene = tiny_scene(tmp_path, frames=4)
+    assert run_tespike("simulate", "--config", "te", "--scene", scene, "--out", tmp_path / "S.npz",
+                       "--seed", 1, "-q").returncode == 0
+    assert run_tespike("reconstruct", "--stream", tmp_path / "S.npz", "--method", "tfp",
+                       "--out", tmp_path / "R.npy", "-q").returncode == 0
+    result = _started_with_closed([1], "score", "--reference", scene, "--estimate", tmp_path / "R.npy",
+                                  cwd=tmp_path)
+    assert_refused(result, "standard output", "closed")
+    for fds in ([1], [1, 2]):
+        out = tmp_path / f"S{len(fds)}.npz"
+        result = _started_with_closed(fds, "simulate", "--config", "te", "--scene", scene, "--out", out,
+                                      "--seed", 1, "-q", cwd=tmp_path)
+        assert result.returncode == 0 and out.is_file(), result.stderr
+        assert np.array_equal(np.load(out)["words"], np.load(tmp_path / "S.npz")["words"])
