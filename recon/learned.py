@@ -142,6 +142,12 @@ def _load_cached(path: str, mtime: float, what: str):
         if bad is not None:
             raise InputError(f"{what} {path!r}: tensor {bad!r} holds a value that is not finite "
                              "(a training that diverged?)")
+        own = model.state_dict()             # load_state_dict converts another dtype without a word
+        odd = next((name for name, tensor in state.items() if isinstance(tensor, torch.Tensor)
+                    and name in own and tensor.dtype != own[name].dtype), None)
+        if odd is not None:
+            raise InputError(f"{what} {path!r}: tensor {odd!r} is {state[odd].dtype}, not the module's "
+                             f"{own[odd].dtype} (converting it would change its values)")
     try:
         model.load_state_dict(state)
     except (RuntimeError, TypeError, AttributeError) as exc:

@@ -207,6 +207,8 @@ def test_a_cut_short_weights_file_is_named_in_our_words(tmp_path, keep):
     ("sizes none", "network sizes must be a mapping of size keys, not NoneType"),     # a traceback before
     ("nan tensor", "tensor 'encoder.embed.weight' holds a value that is not finite"),   # an R.npy of NaN, rc 0
     ("short tensor", "size mismatch for encoder.embed.weight"),                         # torch's first line alone
+    ("int64 tensor", "tensor 'encoder.embed.weight' is torch.int64, not the module's torch.float32"),  # cast, rc 0
+    ("float64 tensor", "tensor 'encoder.embed.weight' is torch.float64"),
 ])
 def test_weights_that_cannot_give_light_are_refused_naming_why(tmp_path, fault, words):
     import torch
@@ -216,6 +218,8 @@ def test_weights_that_cannot_give_light_are_refused_naming_why(tmp_path, fault, 
         payload = {**payload, "sizes": None}
     elif fault == "nan tensor":
         state["encoder.embed.weight"] = state["encoder.embed.weight"] * float("nan")
+    elif fault.endswith("64 tensor"):
+        state["encoder.embed.weight"] = state["encoder.embed.weight"].to(getattr(torch, fault.split()[0]))
     else:
         state["encoder.embed.weight"] = state["encoder.embed.weight"][:1]
     torch.save({**payload, "state_dict": state} if fault != "sizes none" else payload, tmp_path / "w.pt")
