@@ -164,10 +164,17 @@ def check_distinct(inputs, outputs: Mapping[str, str | os.PathLike | None]) -> N
                                  "two outputs cannot share a file")
 
 
+#: Characters that reorder or break the line they are printed in: the bidirectional controls (a
+#: right-to-left override makes ``S.npz`` read as another name) and the line and paragraph separators.
+_LINE_BREAKERS = frozenset("\u061c\u200e\u200f\u2028\u2029\u202a\u202b\u202c\u202d\u202e"
+                           "\u2066\u2067\u2068\u2069")
+
+
 def _refuse_control_characters(text: str, label: str) -> None:
     """Refuse an output path holding a control character: the command's success line names its
-    outputs, and a newline there would split it (the refusal quotes it with repr, on one line)."""
-    control = next((c for c in text if ord(c) < 32 or ord(c) == 127), None)
+    outputs, and a newline there would split it, a right-to-left override reverse it (the refusal
+    quotes it with repr, on one line)."""
+    control = next((c for c in text if ord(c) < 32 or 127 <= ord(c) < 160 or c in _LINE_BREAKERS), None)
     if control is not None:
         raise InputError(f"cannot write {label}: the path holds the control character {control!r} "
                          "(name one without)")

@@ -958,6 +958,9 @@ def test_output_path_with_a_control_character_is_refused(files):
     result = refused_without_change(files, golden_args(files, files / "a\nb.npz"), "control character", "'\\n'")
     assert len(result.stderr.strip().splitlines()) == 1
     refused_without_change(files, ("demo", "--out", files / "d\tx"), "control character", "'\\t'")
+    # a right-to-left override printed the success line reversed from it on; a C1 control is one too
+    refused_without_change(files, golden_args(files, files / "\u202eb.npz"), "control character", "'\\u202e'")
+    refused_without_change(files, golden_args(files, files / "\x85b.npz"), "control character", "'\\x85'")
 
 
 def test_a_read_only_output_file_is_refused_even_for_root(files):
