@@ -115,7 +115,7 @@ def test_evaluate_sensor_noise_and_calibrate(tmp_path, capsys):
     # the paper's dark currents have no per-pixel maps: seeds 0 and 5 gave the same table
     refused(capsys, "evaluate", "--noise", "--sensor-seed", 5, "--out", out, "none has any")
     (tmp_path / "eq12.json").write_text("{}")
-    refused(capsys, "evaluate", "--sensor-noise", tmp_path / "eq12.json", "--out", out, "'te+eq12' is taken")
+    refused(capsys, "evaluate", "--sensor-noise", tmp_path / "eq12.json", "--out", out, "'te+eq12' is reserved for --noise's built-in sensors")
     (tmp_path / "none.json").write_text("{}")             # (a column labelled '()', the TE camera's again)
     refused(capsys, "evaluate", "--sensor-noise", tmp_path / "none.json", "--out", out, "no non-ideality")
     (tmp_path / "again.json").write_text((tmp_path / "hot.json").read_text())

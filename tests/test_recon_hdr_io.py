@@ -125,8 +125,12 @@ def test_exr_round_trip(tmp_path, rng):
     assert np.array_equal(read_exr(tmp_path / "c.exr"), rgb)
     assert np.array_equal(read_exr(tmp_path / "y.exr"), rgb[..., 0])
     (tmp_path / "junk.exr").write_bytes(b"not an exr at all")
-    with pytest.raises(InputError, match="junk.exr"):
+    with pytest.raises(InputError, match="junk.exr' is not an OpenEXR file"):
         read_exr(tmp_path / "junk.exr")
+    # a Radiance file named .Exr: the library's "Unable to open ... for read" sounded like permissions
+    write_hdr(tmp_path / "f4.Exr", rgb)
+    with pytest.raises(InputError, match=r"f4.Exr' is not an OpenEXR file.*a Radiance .hdr file"):
+        hdr_io.read_image(tmp_path / "f4.Exr")
 
 
 @pytest.mark.parametrize("compression", ["NO_COMPRESSION", "ZIP_COMPRESSION", "PIZ_COMPRESSION", "DWAB_COMPRESSION"])

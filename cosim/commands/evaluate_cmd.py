@@ -294,8 +294,13 @@ def _sensors(args, ml_count: str):
         noise_sensors.update(default_noise_sensors(sensor_seed))
     for path in args.sensor_noise:
         key = f"te+{Path(path).stem}"
-        if key in noise_sensors or key in configs or key in NOISE_SENSORS or key.endswith(CALIBRATED):
-            raise InputError(f"--sensor-noise {path}: the sensor name {key!r} is taken; rename the file")
+        if key in noise_sensors or key in configs:
+            raise InputError(f"--sensor-noise {path}: the sensor name {key!r} is taken by another sensor of "
+                             "this run; rename the file")
+        if key in NOISE_SENSORS or key.endswith(CALIBRATED):
+            raise InputError(f"--sensor-noise {path}: the sensor name {key!r} is reserved for "
+                             + ("--noise's built-in sensors" if key in NOISE_SENSORS else
+                                f"the calibrated rows ('{CALIBRATED}' ends their names)") + "; rename the file")
         noise = load_noise(path)
         if noise.is_ideal:                  # (a column labelled '()': the TE camera's again)
             raise InputError(f"--sensor-noise {path}: describes no non-ideality (shot noise alone is the TE "

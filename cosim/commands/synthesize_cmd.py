@@ -61,7 +61,7 @@ def _design(args):
         if args.top is not None and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", args.top):
             # (a Verilog identifier: the name goes into Yosys's script, where ';' would start a command)
             raise InputError(f"--top {args.top!r}: not a Verilog module name (letters, digits, _ and $, "
-                             "not starting with a digit)")
+                             "starting with a letter or _)")
         return path.read_text(errors="replace"), args.top, None, f"{args.verilog}"
     if args.top is not None:
         raise InputError("--top names a module of --verilog; a generated top is named by its configuration")

@@ -310,6 +310,14 @@ def _exr_contents(path: str, header_only: bool = False) -> dict:
 
     if not Path(path).is_file():
         raise InputError(f"cannot read EXR file {path!r}: no such file")
+    try:
+        with open(path, "rb") as handle:
+            magic = handle.read(4)
+    except OSError as exc:
+        raise InputError(f"cannot read EXR file {path!r}: {exc.strerror}") from None
+    if magic != EXR_MAGIC:                  # (the library said "Unable to open ... for read", as if unreadable)
+        other = " (a Radiance .hdr file, by its first bytes)" if magic.startswith(b"#?") else ""
+        raise InputError(f"{path!r} is not an OpenEXR file: it does not start with EXR's magic number{other}")
     with _library_output() as said:
         try:
             with OpenEXR.File(path, header_only=header_only) as handle:
@@ -326,6 +334,9 @@ def _exr_contents(path: str, header_only: bool = False) -> dict:
         raise InputError(f"EXR file {path!r} holds {parts} parts (images): give one image per frame file")
     return contents
 
+
+#: The first four bytes of every OpenEXR file.
+EXR_MAGIC = bytes((0x76, 0x2F, 0x31, 0x01))
 
 #: Scan lines per chunk of each OpenEXR compression (its id in the header), for the end check.
 _EXR_LINES = {0: 1, 1: 1, 2: 1, 3: 16, 4: 32, 5: 16, 6: 32, 7: 32, 8: 32, 9: 256}
