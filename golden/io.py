@@ -403,6 +403,10 @@ def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarr
         if "words" not in npz.files or "config" not in npz.files:
             raise InputError(f"stream file {shown!r} must hold 'words' and 'config' "
                              f"(it holds {', '.join(npz.files) or 'nothing'})")
+        extra = [name for name in npz.files if name not in ("words", "config")]
+        if extra:                                      # (it would be ignored: SPEC's stream holds the two)
+            raise InputError(f"stream file {shown!r} holds {', '.join(map(repr, extra))} beside 'words' and "
+                             "'config': a stream holds those two only (SPEC section 6)")
         config_text = npz["config"]
         words = _stored_member(path, "words.npy") if memory_map else None
         if words is None:

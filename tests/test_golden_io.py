@@ -178,3 +178,12 @@ def test_a_config_member_stored_as_bytes_is_read_as_utf8(tmp_path):
     np.savez(tmp_path / "bad.npz", words=words, config=np.array(b"\xff\xfe"))
     with pytest.raises(InputError, match="bad.npz.*'config' holds bytes that are not UTF-8"):
         load_stream(tmp_path / "bad.npz")
+
+
+def test_a_stream_with_a_member_beside_words_and_config_is_refused(tmp_path):
+    """The extra member was ignored without a word (a stream holds the two, SPEC section 6)."""
+    from tespike.golden.io import load_stream
+    words = np.zeros((2, 3, 4), np.uint8)
+    np.savez(tmp_path / "s.npz", words=words, config=np.array(SensorConfig().to_json()), other=np.zeros(3))
+    with pytest.raises(InputError, match=r"s.npz' holds 'other' beside 'words' and 'config'"):
+        load_stream(tmp_path / "s.npz")
