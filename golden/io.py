@@ -161,18 +161,14 @@ def check_scene(scene: np.ndarray, *, scan_values: bool = True, what: str = "sce
         raise InputError(f"{what} dtype {scene.dtype} is not a float type (light per readout interval "
                          "must be a float array, SPEC section 6; an integer array is refused "
                          "like a float stimulus is)")
-    if scene.dtype.itemsize > 8:                       # (1e4000 is finite there and inf in float64)
-        raise InputError(f"{what} dtype {scene.dtype} is wider than float64, in which light is simulated "
-                         "and scored: convert the file to float64 (values past its range would change)")
     if scene.ndim != 3:
         raise InputError(f"{what} shape {scene.shape} must be (K, H, W)")
     if scene.shape[1] < 1 or scene.shape[2] < 1:
         raise InputError(f"{what} shape {scene.shape}: H and W must be at least 1")
     if not scan_values:
         return scene
-    scene = scene.astype(np.float64, copy=False)
-    scan_light(scene, what)
-    return scene
+    scan_light(scene, what)                            # (in its own dtype: a long double's own values)
+    return scene.astype(np.float64, copy=False)
 
 
 def scan_light(light: np.ndarray, what: str = "scene") -> None:
@@ -183,13 +179,16 @@ def scan_light(light: np.ndarray, what: str = "scene") -> None:
     if not light.size:
         return
     low, high = light.min(), light.max()
-    if low >= 0 and high < np.inf:
+    if low >= 0 and high <= np.finfo(np.float64).max:   # (a long double's 1e4000 is finite, inf in float64)
         return
     finite = np.isfinite(light)
     if not finite.all():
         bad = np.float64(light[~finite][0])
         raise InputError(f"{what} holds a non-finite light value ({bad}); light must be finite")
-    raise InputError(f"{what} holds a negative light value ({float(low)}); light must be >= 0")
+    if low < 0:
+        raise InputError(f"{what} holds a negative light value ({str(low)}); light must be >= 0")
+    raise InputError(f"{what} holds a light value ({str(high)}) beyond float64's range, in which light is "
+                     "simulated and scored")
 
 
 def load_scene(path: str | Path, *, memory_map: bool = False, what: str | None = None) -> np.ndarray:

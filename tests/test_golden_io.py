@@ -187,3 +187,24 @@ def test_a_stream_with_a_member_beside_words_and_config_is_refused(tmp_path):
     np.savez(tmp_path / "s.npz", words=words, config=np.array(SensorConfig().to_json()), other=np.zeros(3))
     with pytest.raises(InputError, match=r"s.npz' holds 'other' beside 'words' and 'config'"):
         load_stream(tmp_path / "s.npz")
+
+
+def test_a_long_double_scene_is_checked_in_its_own_values(tmp_path):
+    """1e4000 is finite in a long double and inf in float64: the memory-mapped scan passed it and the
+    simulator ran on inf; -1e-4000 was refused as "negative light value (-0.0)"."""
+    from tespike.golden.io import load_scene
+    light = np.full((2, 3, 4), 0.5, np.longdouble)
+    np.save(tmp_path / "fine.npy", light)
+    for memory_map in (True, False):
+        assert np.array_equal(np.asarray(load_scene(tmp_path / "fine.npy", memory_map=memory_map), np.float64),
+                              np.full((2, 3, 4), 0.5))
+    big, tiny = light.copy(), light.copy()
+    big[1, 2, 3] = np.longdouble("1e4000")
+    tiny[0, 1, 1] = -np.longdouble("1e-4000")
+    np.save(tmp_path / "big.npy", big)
+    np.save(tmp_path / "tiny.npy", tiny)
+    for memory_map in (True, False):
+        with pytest.raises(InputError, match=r"big.npy' holds a light value \(1e\+4000\) beyond float64's range"):
+            load_scene(tmp_path / "big.npy", memory_map=memory_map)
+        with pytest.raises(InputError, match=r"tiny.npy' holds a negative light value \(-1e-4000\)"):
+            load_scene(tmp_path / "tiny.npy", memory_map=memory_map)
