@@ -47,3 +47,15 @@ def test_dark_readouts_after_bright_ones_keep_their_precision():
     light = torch.cat([torch.full((5000, 1), 2.0, dtype=torch.float64),
                        torch.full((20, 1), 1e-5, dtype=torch.float64)])
     assert tfp(light, 4)[-1, 0].item() == pytest.approx(1e-5, rel=1e-12)
+
+
+def test_a_wide_window_on_float32_light_keeps_a_dim_present_after_a_bright_past():
+    """Windows past SHIFTED_SUM_MAX_WINDOW use a cumulative sum: in float32, after 1e5 bright readouts,
+    a pixel at 4.2e-4 read 2.2e-4 (-37 %); the same words without the bright past read right."""
+    dim = torch.zeros(200, 1)
+    dim[50::10] = 1.0 / 240
+    light = torch.cat([torch.ones(100_000, 1), dim])
+    for radius in (17, 20):                   # (33 readouts: shifted sums; 41: the cumulative sum)
+        wide = tfp(light, radius)
+        assert wide.dtype == torch.float32
+        assert torch.allclose(wide[-150:-100], tfp(dim, radius)[50:100], rtol=1e-6, atol=0), radius
