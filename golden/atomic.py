@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Iterator
 
 from .errors import InputError
-from .paths import check_output_file, passes_through
+from .paths import check_folder_path, check_output_file, passes_through
 
 
 #: Hidden temporaries are named ``.<name>.<pid>.<random>.part`` beside the output;
@@ -509,6 +509,7 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     Errors naming a file inside the temporary are re-worded to name it under ``path``.
     """
     shown = os.fspath(path)
+    check_folder_path(shown, "folder")              # ('' or nosuch/..: the folder holding the inputs)
     target = Path(os.path.realpath(shown))
     stem = target.name[:_PART_NAME]
     _remove_stale_parts(target.parent, stem, folders=True)

@@ -224,6 +224,19 @@ def check_outputs(outputs: Mapping[str, str | os.PathLike | None], inputs=None,
             check_format(flag, outputs[flag], suffixes)
 
 
+def check_folder_path(text: str, what: str = "--out") -> None:
+    """Refuse an output folder's path that names no folder of its own: ``''`` (the current folder),
+    or one that reaches an existing folder through a missing one (``nosuch/..``, ``file/..``: absent
+    as written, the current folder once resolved). A run replaces its output folder whole: either
+    would have replaced the folder holding its inputs."""
+    if not text:
+        raise InputError(f"cannot write {what} '': an empty path (name the output folder)")
+    if not os.path.lexists(text) and os.path.lexists(os.path.realpath(text)):
+        raise InputError(f"cannot write {what} {text!r}: it reaches the existing folder "
+                         f"{os.path.realpath(text)!r} through a folder that does not exist: name that folder "
+                         "itself (a run replaces its output folder whole)")
+
+
 def check_output_dir(path: str | os.PathLike, what: str = "--out",
                      files: tuple[str, ...] = ()) -> Path:
     """An output folder: existing directory or creatable (parent exists); ``files``
@@ -231,6 +244,7 @@ def check_output_dir(path: str | os.PathLike, what: str = "--out",
     name ending in ``/`` must be a directory or absent."""
     text = os.fspath(path)
     _refuse_control_characters(text, f"{what} {text!r}")
+    check_folder_path(text, what)
     folder = Path(text)
     if os.path.islink(text) and not os.path.exists(text):
         raise InputError(f"cannot write {what} {text!r}: it is a symbolic link to {os.readlink(text)!r}, "

@@ -740,3 +740,18 @@ def test_a_command_started_without_stdout_refuses_to_print_or_runs_quietly(tmp_p
                                       "--seed", 1, "-q", cwd=tmp_path)
         assert result.returncode == 0 and out.is_file(), result.stderr
         assert np.array_equal(np.load(out)["words"], np.load(tmp_path / "S.npz")["words"])
+
+
+@pytest.mark.parametrize("given", ["", "nosuch/.."])
+def test_an_output_folder_naming_no_folder_of_its_own_is_refused_and_nothing_is_removed(tmp_path, given):
+    """``--out ''`` and ``--out nosuch/..`` were absent to the checks and the current folder to the
+    writer, which replaced it whole: the run's inputs went with it (exit 0)."""
+    (tmp_path / "keep.txt").write_text("mine")
+    scene = tiny_scene(tmp_path, frames=2)
+    for args in (("view", "--input", scene, "--each", "--out", given),
+                 ("evaluate", "--scene", scene, "--methods", "tfp", "--out", given),
+                 ("demo", "--out", given)):
+        result = subprocess.run([sys.executable, "-m", "tespike", *map(str, args)], capture_output=True, text=True,
+                                env=_checkout_env(), timeout=300, cwd=tmp_path)
+        assert_refused(result, f"--out {given!r}")
+        assert (tmp_path / "keep.txt").read_text() == "mine" and scene.is_file()
