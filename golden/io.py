@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import tokenize
 import zipfile
 import zlib
 from pathlib import Path
@@ -22,6 +23,10 @@ from .config import SensorConfig
 from .decode import check_words
 from .errors import InputError, TespikeError, one_line
 from .paths import check_input_file
+
+#: What numpy raises for a .npy header whose text is damaged (its dict cut or a byte flipped: it
+#: parses the text as Python, and its fallback's tokenizer raises TokenError, not a ValueError).
+HEADER_ERRORS = (SyntaxError, tokenize.TokenError)
 
 __all__ = ["atomic_output", "check_scene", "check_stimulus", "load_npy", "load_scene", "load_stimulus",
            "load_stream", "open_npz", "save_images", "save_stream", "scan_light", "unsigned_dtype", "word_dtype"]
@@ -38,10 +43,10 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
     layout = _npy_layout(path, what)                  # (read once: before the load, and for the bytes after it)
     try:
         array = np.load(path, allow_pickle=False, mmap_mode=mmap_mode)
-    except (OSError, ValueError, EOFError, OverflowError) as exc:   # (Overflow: a header shape whose
-        refuse_starved(exc, what, path)                            # product is negative, memory-mapped)
-        raise InputError(f"{what} file {str(path)!r} is not a readable .npy array: "
-                         f"{one_line(exc)}") from None
+    except (OSError, ValueError, EOFError, OverflowError, *HEADER_ERRORS) as exc:   # (Overflow: a header
+        refuse_starved(exc, what, path)                            # shape whose product is negative, mapped)
+        cause = "its header is damaged" if isinstance(exc, HEADER_ERRORS) else one_line(exc)
+        raise InputError(f"{what} file {str(path)!r} is not a readable .npy array: {cause}") from None
     if not isinstance(array, np.ndarray):
         if hasattr(array, "close"):
             array.close()
@@ -68,7 +73,7 @@ def _npy_layout(path, what: str) -> tuple[int, int] | None:
         with open(path, "rb") as handle:
             shape, _, dtype, header = _npy_header(handle)
             size = os.fstat(handle.fileno()).st_size
-    except (OSError, ValueError, EOFError):
+    except (OSError, ValueError, EOFError, *HEADER_ERRORS):
         return None
     if dtype.hasobject:
         raise InputError(f"{what} file {str(path)!r} holds Python objects (dtype {dtype}), not numbers")
@@ -277,7 +282,7 @@ def _stored_member(path: str | Path, name: str) -> np.ndarray | None:
 
 #: What reading a truncated or corrupt .npz archive raises (numpy, zipfile, zlib).
 NPZ_ERRORS = (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error, NotImplementedError,
-              RuntimeError)
+              RuntimeError, *HEADER_ERRORS)
 
 
 @contextlib.contextmanager
@@ -302,7 +307,8 @@ def open_npz(path: str | Path, what: str, holding: str = "") -> Iterator[np.lib.
         raise
     except NPZ_ERRORS as exc:
         refuse_starved(exc, what, path)
-        raise InputError(f"{what} file {shown!r} is not a readable .npz archive: {one_line(exc)}") from None
+        cause = "a member's .npy header is damaged" if isinstance(exc, HEADER_ERRORS) else one_line(exc)
+        raise InputError(f"{what} file {shown!r} is not a readable .npz archive: {cause}") from None
 
 
 def _check_member_sizes(path: str | Path) -> None:

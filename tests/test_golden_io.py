@@ -208,3 +208,23 @@ def test_a_long_double_scene_is_checked_in_its_own_values(tmp_path):
             load_scene(tmp_path / "big.npy", memory_map=memory_map)
         with pytest.raises(InputError, match=r"tiny.npy' holds a negative light value \(-1e-4000\)"):
             load_scene(tmp_path / "tiny.npy", memory_map=memory_map)
+
+
+def test_a_damaged_npy_header_is_one_line_in_a_file_and_in_an_archive(tmp_path):
+    """A flipped byte in a .npy header's dict made numpy's fallback parser raise tokenize.TokenError,
+    not a ValueError: a 56-line traceback from every loader (a stream's words member too)."""
+    from tespike.golden.io import load_scene, load_stream
+    np.save(tmp_path / "I.npy", np.full((2, 3, 4), 0.5))
+    data = bytearray((tmp_path / "I.npy").read_bytes())
+    data[10] ^= 0x5A                                   # the header dict's "{" -> "!"
+    (tmp_path / "I.npy").write_bytes(bytes(data))
+    with pytest.raises(InputError, match=r"I.npy' is not a readable .npy array: its header is damaged"):
+        load_scene(tmp_path / "I.npy")
+    np.savez(tmp_path / "S.npz", words=np.zeros((2, 3, 4), np.uint8), config=np.array(SensorConfig().to_json()))
+    data = bytearray((tmp_path / "S.npz").read_bytes())
+    data[data.find(b"\x93NUMPY") + 10] ^= 0x5A
+    (tmp_path / "S.npz").write_bytes(bytes(data))
+    for memory_map in (True, False):
+        with pytest.raises(InputError, match=r"S.npz' is not a readable .npz archive: (a member's .npy header "
+                                             r"is damaged|Bad CRC-32 for file 'words.npy')"):
+            load_stream(tmp_path / "S.npz", memory_map=memory_map)
