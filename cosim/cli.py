@@ -313,11 +313,20 @@ def _write_out_standard_output(prefix: str) -> int:
         sys.stdout.flush()
         return 0
     except StandardOutputError as exc:
-        drop_standard_output()
-        if closed_pipe(exc):
-            return 128 + 13                         # as a tool killed by SIGPIPE
-        print(f"{prefix}: error: standard output: {one_line(exc.strerror or exc, 300)}", file=sys.stderr)
-        raise SystemExit(EXIT_BAD_INPUT) from None
+        code = _standard_output_failed(prefix, exc)
+        if code == EXIT_BAD_INPUT:
+            raise SystemExit(code) from None
+        return code
+
+
+def _standard_output_failed(prefix: str, exc: StandardOutputError, after: str = "") -> int:
+    """The exit status of a command whose standard output failed, its one line printed: quiet where
+    the reader went away (``| head``), as a tool killed by SIGPIPE; what is still buffered is dropped."""
+    drop_standard_output()
+    if closed_pipe(exc):
+        return 128 + 13
+    print(f"{prefix}: error: standard output: {one_line(exc.strerror or exc, 300)}{after}", file=sys.stderr)
+    return EXIT_BAD_INPUT
 
 
 def _repeated_option(parser, argv: list[str]) -> str | None:
@@ -360,13 +369,10 @@ def _run(args, prepare=lambda: None, ended=lambda: None) -> tuple[int, bool]:
     except TespikeError as exc:
         print(f"{prefix}: error: {one_line(exc, 300)}{_notes(exc)}{_before(start, exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
+    except StandardOutputError as exc:
+        return _standard_output_failed(prefix, exc, f"{_notes(exc)}{_before(start, exc)}"), False
     except OSError as exc:
-        if isinstance(exc, StandardOutputError):
-            drop_standard_output()
-            if closed_pipe(exc):
-                return 128 + 13, False      # the reader went away (| head): quiet, as a shell tool
-        where = " standard output:" if isinstance(exc, StandardOutputError) else \
-            f" {exc.filename!r}:" if exc.filename else ""
+        where = f" {exc.filename!r}:" if exc.filename else ""
         cause = one_line(exc.strerror or exc, 300)
         if "No usable temporary directory" in cause:       # tempfile's words hide the cause
             from tespike.golden.paths import temporary_directory_fault

@@ -122,8 +122,7 @@ def run(args) -> int:
 
     from tespike.cosim.console import report
     from tespike.golden.errors import InputError
-    from tespike.golden.paths import (check_distinct, check_folder_path, check_output_dir, check_outputs,
-                                      written_through)
+    from tespike.golden.paths import check_distinct, check_output_dir, check_outputs, written_through
 
     inputs = {"--input": args.input, "--config": args.config}
     if args.peak is not None and not (math.isfinite(args.peak) and args.peak > 0):
@@ -137,10 +136,9 @@ def run(args) -> int:
     out = Path(args.out)
     check_distinct(inputs, {"--out": args.out})     # (an input given as --out: the worse fault, named first)
     if args.each:
-        check_folder_path(args.out, "--out")        # (as typed: Path('') is '.', the folder of the inputs)
         if out.exists() and not out.is_dir():
             raise InputError(f"--out {str(out)!r} exists and is not a folder (--each writes a folder)")
-        check_output_dir(out, "--out")              # (a missing parent, a read-only folder or parent)
+        check_output_dir(args.out, "--out")         # (as typed: Path('') is '.', the folder of the inputs)
     elif out.suffix.lower() != ".png" and not written_through(args.out):   # (a device or FIFO takes any name)
         raise InputError(f"--out {str(out)!r}: a contact sheet is a .png file (or give --each and a folder)")
     elif not (out.parent if str(out.parent) else Path(".")).is_dir():
