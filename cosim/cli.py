@@ -297,6 +297,9 @@ def _parse(argv: list[str]):
     args, unknown = parser.parse_known_args(argv)
     if unknown:       # named by the sub-command's parser: "tespike train: ... (see tespike train --help)"
         getattr(args, "command_parser", parser).error(f"unrecognized arguments: {' '.join(unknown)}")
+    empty = _empty_text(getattr(args, "command_parser", parser), args)
+    if empty:         # '' reads as "not given" where a command tests the value's truth
+        getattr(args, "command_parser", parser).error(f"{empty} is given as '': give a value or leave it out")
     repeated = _repeated_option(getattr(args, "command_parser", parser), argv)
     if repeated:      # argparse keeps the last value and drops the others without a word
         getattr(args, "command_parser", parser).error(f"{repeated} is given more than once: give it once")
@@ -327,6 +330,21 @@ def _standard_output_failed(prefix: str, exc: StandardOutputError, after: str = 
         return 128 + 13
     print(f"{prefix}: error: standard output: {one_line(exc.strerror or exc, 300)}{after}", file=sys.stderr)
     return EXIT_BAD_INPUT
+
+
+def _empty_text(parser, args) -> str | None:
+    """The first text argument of ``parser`` given as ``''`` (its name: ``--folder``, or a
+    positional's metavar), or None: no text option means nothing when empty (a path, a name, a
+    list), and a command testing its truth would take it as not given."""
+    import argparse
+    for action in parser._actions:
+        if action.type is not None or not isinstance(action, (argparse._StoreAction, argparse._AppendAction)):
+            continue
+        value = getattr(args, action.dest, None)
+        values = value if isinstance(value, list) else [value]
+        if any(isinstance(v, str) and v == "" for v in values):
+            return "/".join(action.option_strings) or action.metavar or action.dest
+    return None
 
 
 def _repeated_option(parser, argv: list[str]) -> str | None:

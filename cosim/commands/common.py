@@ -178,11 +178,27 @@ def sensor_seed_argument(value: int | None) -> int:
 MAX_THREADS = 256
 
 
+def comma_items(text: str, flag: str) -> list[str]:
+    """The items of a comma list option (``--methods tfp,net``), stripped; one line naming the
+    flag where an item is empty (``tfp,,net``, a trailing comma) or named twice: neither is
+    dropped or run twice without a word."""
+    from tespike.golden.errors import InputError
+    items = [item.strip() for item in text.split(",")]
+    if not any(items):
+        return []
+    if not all(items):
+        raise InputError(f"{flag} {text!r}: an item is empty (a comma too many): give names separated by one comma")
+    twice = next((item for i, item in enumerate(items) if item in items[:i]), None)
+    if twice is not None:
+        raise InputError(f"{flag} {text!r}: {twice!r} is named more than once")
+    return items
+
+
 def metrics_argument(text: str) -> list[str]:
     """The metric names of a ``--metrics`` comma list (``score``, ``evaluate``), each one of
     :data:`tespike.recon.score.METRIC_KEYS`; one line naming the flag and the first unknown name otherwise."""
     from tespike.recon.score import check_metrics
-    return list(check_metrics(tuple(m.strip() for m in text.split(",") if m.strip()), f"--metrics {text!r}"))
+    return list(check_metrics(tuple(comma_items(text, "--metrics")), f"--metrics {text!r}"))
 
 
 def check_threads_argument(threads: int | None) -> None:

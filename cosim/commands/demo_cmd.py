@@ -43,10 +43,10 @@ def run(args) -> int:
     from tespike.cosim.console import progress_wanted
     from tespike.cosim.demo import run_demo
 
-    from .common import check_inputs_outside
+    from .common import check_inputs_outside, comma_items
     check_inputs_outside(args, "out")        # (the folder is replaced whole: an input kept there would go)
     return run_demo(args.out, frames=args.frames, height=args.height, width=args.width, seed=args.seed,
                     crop=args.crop, rtl_readouts=args.rtl_readouts, backend=args.backend,
-                    repeats=args.repeats, sensors=[s.strip() for s in args.sensors.split(",") if s.strip()],
+                    repeats=args.repeats, sensors=comma_items(args.sensors, "--sensors"),
                     hw_cost=not args.no_hw_cost, quiet=args.quiet,
                     bars=not args.quiet and progress_wanted(args), weights=args.weights)

@@ -70,7 +70,8 @@ def check_store_options(args) -> None:
 def _named_methods(args) -> list[str]:
     """``--methods`` as a list (refused when it names none)."""
     from tespike.golden.errors import InputError
-    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    from .common import comma_items
+    methods = comma_items(args.methods, "--methods")
     if not methods:
         raise InputError(f"--methods {args.methods!r} names no method (give e.g. tfp,tfi)")
     return methods
