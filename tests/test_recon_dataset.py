@@ -342,6 +342,16 @@ STORE_DAMAGE = {
     "a sequence's key renamed": (lambda s: _rename_key(s / "sun/zarr.json", "attributes"), "sun/zarr.json' is damaged"),
     "an array's codec key renamed": (lambda s: _rename_key(s / "sun/light/zarr.json", "endian"),
                                      "light/zarr.json' is damaged"),
+    # a node_type Zarr does not know was its ValueError traceback; a sequence's read as an array was
+    # "holds no complete sequence"; the root's "holds no zarr.json"
+    "a sequence's node_type unknown": (lambda s: _tamper(s / "sun/zarr.json", lambda d, a: d.update(node_type="x")),
+                                       "sun/zarr.json' is damaged (its node_type is 'x')"),
+    "a sequence's node_type array": (lambda s: _tamper(s / "sun/zarr.json", lambda d, a: d.update(node_type="array")),
+                                     "sun/zarr.json' is damaged (its node_type is 'array')"),
+    "an array's node_type unknown": (lambda s: _tamper(s / "sun/light/zarr.json", lambda d, a: d.update(node_type="x")),
+                                     "light/zarr.json' is damaged"),
+    "the root's node_type unknown": (lambda s: _tamper(s / "zarr.json", lambda d, a: d.update(node_type="x")),
+                                     "its node_type is 'x', not 'group'"),
 }
 
 
@@ -383,7 +393,7 @@ def test_evaluate_store_refuses_a_store_whose_metadata_or_chunks_were_altered(tm
     assert not (tmp_path / "E").exists()
 
 
-@pytest.mark.parametrize("damage", ["cut", "a key renamed"])
+@pytest.mark.parametrize("damage", ["cut", "a key renamed", "node_type unknown", "node_type array"])
 def test_resume_rebuilds_a_sequence_whose_metadata_is_damaged(tmp_path, capsys, small_store, damage):
     """A sequence's zarr.json cut short or with a key renamed: the resume died in Zarr's JSONDecodeError
     or TypeError (a traceback); it now makes the sequence anew, as for a damaged chunk, and says so."""
@@ -393,6 +403,8 @@ def test_resume_rebuilds_a_sequence_whose_metadata_is_damaged(tmp_path, capsys, 
     meta = store / "sun" / "zarr.json"
     if damage == "cut":
         meta.write_bytes(meta.read_bytes()[:96])
+    elif damage.startswith("node_type"):
+        _tamper(meta, lambda d, a: d.update(node_type=damage.split()[1]))
     else:
         _rename_key(meta, "attributes")
     capsys.readouterr()

@@ -122,6 +122,9 @@ def _zarr_open_group(url: str, mode: str, missing_ok: bool = False):
         there = local and os.path.isdir(url)                  # a local folder without a store's zarr.json
         dangling = local and os.path.islink(url) and not os.path.exists(url)   # (a loop, or gone)
         a_file = local and os.path.lexists(url) and not there and not dangling
+        if there and os.path.isfile(os.path.join(url, "zarr.json")):   # (Zarr read it as no group at all)
+            raise InputError(f"{url!r} is not a readable Zarr store (its {os.path.join(url, 'zarr.json')!r}): "
+                             f"its node_type is {_node_type(Path(url, 'zarr.json'))}, not 'group'") from None
         raise InputError(f"dataset store {url!r} " + ("is a folder but not a dataset store (it holds no zarr.json)"
                                                      if there else "is a file, not a dataset store (a folder)"
                                                      if a_file else "is a link to nothing (a loop, or a "
@@ -301,8 +304,12 @@ class DatasetStore:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                if name in self.group:
-                    self.group[name].attrs.asdict()
+                if name in self.group or Path(self.url, name, "zarr.json").is_file():   # (not "in" if unreadable)
+                    import zarr
+                    node = self.group[name]
+                    node.attrs.asdict()
+                    if not isinstance(node, zarr.Group):      # (its node_type altered: creating a group failed)
+                        raise ValueError(f"{name!r} is an array, not a sequence's group")
             return
         except _DAMAGE as exc:
             where = damaged_file(self.url, name)
@@ -319,11 +326,15 @@ class DatasetStore:
         import warnings
         if Path(self.url).is_dir():
             for folder in sorted(Path(self.url).iterdir()):
-                if folder.is_dir() and not (folder / "zarr.json").exists() and \
-                        ((folder / "light").exists() or (folder / "streams").exists()):
+                sequence_like = folder.is_dir() and ((folder / "light").exists() or (folder / "streams").exists())
+                if sequence_like and not (folder / "zarr.json").exists():
                     raise InputError(f"dataset store file {str(folder / 'zarr.json')!r} is missing (the sequence "
                                      f"{folder.name!r} is damaged); remove its folder and run tespike dataset "
                                      "again to rebuild it")
+                if sequence_like and (folder / "zarr.json").is_file() and _node_type(folder / "zarr.json") != "'group'":
+                    raise InputError(f"dataset store file {str(folder / 'zarr.json')!r} is damaged (its node_type is "
+                                     f"{_node_type(folder / 'zarr.json')}); remove its sequence's folder and run "
+                                     "tespike dataset again to rebuild it")
         try:
             with warnings.catch_warnings():           # (Zarr warns of each stray file or folder)
                 warnings.simplefilter("ignore")
@@ -475,11 +486,14 @@ def damaged_file(url: str, path: str = "") -> str | None:
     for depth in range(len(parts) + 1):
         meta = root.joinpath(*parts[:depth], "zarr.json")
         try:
-            json.loads(meta.read_bytes())
+            document = json.loads(meta.read_bytes())
         except FileNotFoundError:
             continue
         except (OSError, ValueError, RecursionError):     # (nested too deeply for the parser)
             return str(meta)
+        kind = document.get("node_type") if isinstance(document, dict) else None
+        if kind not in ("group", "array") or (kind == "array" and depth < len(parts)):
+            return str(meta)                              # (Zarr takes it as no node at all: not found)
         try:                                              # JSON, but not metadata Zarr reads (a key renamed)
             zarr.open(str(root), path="/".join(parts[:depth]), mode="r")
         except FileNotFoundError:
@@ -497,6 +511,17 @@ def damaged_file(url: str, path: str = "") -> str | None:
     except _DAMAGE:
         return None
     return None
+
+
+def _node_type(meta: Path) -> str:
+    """The ``node_type`` of a ``zarr.json``, shown (``'array'``), or why there is none to show."""
+    try:
+        document = json.loads(meta.read_bytes())
+    except (OSError, ValueError, RecursionError):
+        return "unreadable (not JSON)"
+    if not isinstance(document, dict) or "node_type" not in document:
+        return "missing"
+    return one_line(repr(document["node_type"]), 40)
 
 
 def damaged_chunks(url: str, path: str) -> list[str]:
