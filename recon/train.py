@@ -187,10 +187,20 @@ def read_checkpoint(path: Path) -> tuple[dict, "TrainOptions"]:
                          f"({one_line(exc, 300)})") from None
 
 
+#: The header of a run's ``log.csv`` (a row a step).
+LOG_HEADER = ["step", "epoch", "lr", "loss", "seconds"]
+
+
+def _is_validation_header(row: list[str]) -> bool:
+    """A ``validation.csv`` header: step, the validation cases' PSNR-mu (their labels), mean, seconds."""
+    return len(row) >= 3 and row[0] == "step" and row[-2:] == ["mean", "seconds"] and all(row)
+
+
 def trim_log(path: Path, step: int, every_step: bool = False) -> None:
     """Drop the rows of CSV log ``path`` after ``step`` (written by a run killed after its last
-    checkpoint, which a resumed run writes again); a missing log is left missing, a log without
-    its header, with a row cut short or a value that is not a number is refused (the rows appended
+    checkpoint, which a resumed run writes again); a missing log is left missing, a log whose
+    header is not the run's (``every_step``: :data:`LOG_HEADER`, else a validation header), with a
+    row cut short or a value that is not a number is refused (the rows appended
     next would be unreadable, the curves drawn at the run's end would fail), and so is one whose
     rows, ``every_step`` (a row a step, from wherever the log began), stop short of ``step`` or
     skip one (cut at a row's end)."""
@@ -201,7 +211,8 @@ def trim_log(path: Path, step: int, every_step: bool = False) -> None:
             text = handle.read()
         rows = list(csv.reader(text.splitlines()))
         header_cut = len(rows) == 1 and not text.endswith("\n")
-        if not rows or rows[0][:1] != ["step"] or header_cut or any(len(row) != len(rows[0]) for row in rows):
+        header_ok = bool(rows) and (rows[0] == LOG_HEADER if every_step else _is_validation_header(rows[0]))
+        if not header_ok or header_cut or any(len(row) != len(rows[0]) for row in rows):
             raise ValueError("no header, or a row cut short")    # new rows would follow none, or a stub
         for row in rows[1:]:
             int(row[0]), [float(value) for value in row[1:]]     # (a flipped byte: not a number)
@@ -590,7 +601,7 @@ class TrainingRun:
             with appending(self.log_path) as handle:
                 log = csv.writer(handle)
                 if new_log:
-                    log.writerow(["step", "epoch", "lr", "loss", "seconds"])
+                    log.writerow(LOG_HEADER)
                 self.model.train()
                 boundary = _random_states(self.generator)      # the random states where the last step ended
                 while not self.budget_spent():

@@ -82,7 +82,7 @@ def test_resume_does_not_repeat_the_killed_runs_rows(tmp_path):
 
 
 @pytest.mark.parametrize("cut", ["everything", "the header", "half a row", "the final newline", "a whole row",
-                                 "a number's byte"])
+                                 "a number's byte", "a header's byte"])
 def test_a_cut_run_log_is_refused_or_mended_never_appended_to(tmp_path, cut):
     """A run log emptied or cut: new rows followed no header or joined a stub; a row whole but for
     its newline is kept and the log rewritten. A log cut at a row's end resumed without that step's
@@ -94,13 +94,25 @@ def test_a_cut_run_log_is_refused_or_mended_never_appended_to(tmp_path, cut):
     last = text.rstrip("\n").rsplit("\n", 1)
     log.write_text({"everything": "", "the header": text[:4], "half a row": text[:-12],
                     "the final newline": text.rstrip(), "a whole row": last[0] + "\n",
-                    "a number's byte": last[0] + "\n" + last[1].replace(".", "t", 1) + "\n"}[cut])
+                    "a number's byte": last[0] + "\n" + last[1].replace(".", "t", 1) + "\n",
+                    "a header's byte": text.replace("epoch", "epxch", 1)}[cut])     # (it was resumed under it)
     if cut == "the final newline":
         train(options(steps=3), tmp_path / "w.pt", resume=True)
         assert log_steps(log) == [1, 2, 3]
         return
     with pytest.raises(InputError, match=r"run log '.*log\.csv' is damaged"):
         train(options(steps=3), tmp_path / "w.pt", resume=True)
+
+
+def test_a_validation_log_resumes_and_one_with_its_header_altered_is_refused(tmp_path):
+    """Only the header's first cell was checked: a header that lost a byte was resumed under."""
+    train(options(steps=1, validate_every=1), tmp_path / "w.pt")
+    validation = tmp_path / "w.run" / "validation.csv"
+    train(options(steps=2, validate_every=1), tmp_path / "w.pt", resume=True)
+    assert log_steps(validation) == [1, 2]
+    validation.write_text(validation.read_text().replace("mean", "meax", 1))
+    with pytest.raises(InputError, match=r"run log '.*validation\.csv' is damaged"):
+        train(options(steps=3, validate_every=1), tmp_path / "w.pt", resume=True)
 
 
 def test_a_run_folder_removed_during_training_keeps_the_weights(tmp_path, monkeypatch):
