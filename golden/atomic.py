@@ -289,10 +289,26 @@ def _write_error(path: str, exc: OSError) -> InputError:
     """An OSError of writing, as one line naming the user's path (never the temporary)."""
     from .resources import file_handles_fault
     if exc.errno is None and "requested" in str(exc):          # numpy's short write: a full disk
-        reason = f"short write ({exc}); is the disk full?"
+        reason = _file_size_limit(path) or f"short write ({exc}); is the disk full?"
     else:
         reason = file_handles_fault(exc) or exc.strerror or str(exc) or type(exc).__name__
     return InputError(f"cannot write {path!r}: {reason}")
+
+
+def _file_size_limit(path: str) -> str | None:
+    """Why a short write stopped where the disk still has room: the process's file size limit
+    (``ulimit -f``; Python ignores its SIGXFSZ, so the write is cut at the limit), else None."""
+    try:
+        import resource
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        if limit == resource.RLIM_INFINITY:
+            return None
+        folder = os.statvfs(os.path.dirname(os.path.abspath(path)))
+    except (ImportError, OSError, ValueError):
+        return None
+    if folder.f_bavail * folder.f_frsize <= limit:              # (room for less than the limit: maybe full)
+        return None
+    return f"File too large (over this process's file size limit, ulimit -f: {limit} bytes)"
 
 
 @contextlib.contextmanager

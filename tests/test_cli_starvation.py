@@ -276,3 +276,12 @@ def test_a_fatal_signal_under_an_address_space_limit_names_the_limit():
     assert done.returncode == -signal.SIGSEGV
     assert "fatal signal (Segmentation fault), under an address-space limit (ulimit -v) of 3072 MB: most " \
            "likely out of memory" in done.stderr, done.stderr
+
+
+def test_a_write_cut_at_the_file_size_limit_names_the_limit(tmp_path):
+    """numpy's write past ``ulimit -f`` is short, not EFBIG: it was called a full disk."""
+    out = tmp_path / "I.npy"
+    done = run_limited(ENTRY.format(args=["scene", "--frames", "24", "--out", str(out)]),
+                       {resource.RLIMIT_FSIZE: 100 << 10})
+    assert_refused(done, f"cannot write {str(out)!r}: File too large", "ulimit -f: 102400 bytes")
+    assert os.listdir(tmp_path) == []
