@@ -45,6 +45,10 @@ def test_evaluate_refuses(tmp_path, capsys):
     refused(capsys, "evaluate", "--ml-count-config", "ml-msb", "--out", out, "--ml-count-config")
     refused(capsys, "evaluate", "--set", "none", "--scene", tmp_path / "no.npy", "--out", out, "no.npy")
     refused(capsys, "evaluate", "--sensor-seed", 3, "--out", out, "--sensor-seed")     # no noise sensor: ignored
+    np.save(tmp_path / "a.npy", np.full((4, 8, 8), 0.3, np.float32))
+    (tmp_path / "b.npy").symlink_to(tmp_path / "a.npy")                                  # (scored twice, in the means)
+    refused(capsys, "evaluate", "--set", "none", "--scene", tmp_path / "a.npy", "--scene", tmp_path / "b.npy",
+            "--out", out, "is the same file as --scene")
     assert not out.exists()
 
 

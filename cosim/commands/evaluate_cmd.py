@@ -325,7 +325,9 @@ def _sensors(args, ml_count: str):
 
 def _sequences(args, frames: int, height: int, width: int) -> list:
     """(label, light) of every sequence evaluated: ``--set``'s, each ``--scene`` (memory-mapped) and
-    ``--folder``; two sequences with one label are refused (they would share the tables' rows)."""
+    ``--folder``; two sequences with one label are refused (they would share the tables' rows), and
+    so is one file or folder given twice."""
+    import os
     from pathlib import Path
 
     from tespike.cosim.console import progress_wanted
@@ -343,9 +345,25 @@ def _sequences(args, frames: int, height: int, width: int) -> list:
                              "rename one")
         given[name] = source
         return name
+    files: dict[tuple[int, int], str] = {}
+
+    def once(path, source: str) -> None:
+        """Refuse a file or folder given twice under two names (a link, ``./``): scored twice, it
+        would count twice in the tables' means."""
+        try:
+            stat = os.stat(path)
+        except OSError:
+            return                      # (the loader names what is wrong with it)
+        key = (stat.st_dev, stat.st_ino)
+        if key in files:
+            raise InputError(f"{source} is the same {'folder' if Path(path).is_dir() else 'file'} as {files[key]}: "
+                             "it would be scored twice; give it once")
+        files[key] = source
     for path in args.scene:          # memory-mapped: read one slice at a time
+        once(path, f"--scene {str(path)!r}")
         sequences.append((label(Path(path).stem, f"--scene {str(path)!r}"), load_scene(path, memory_map=True)))
     for folder in args.folder:
+        once(folder, f"--folder {str(folder)!r}")
         sequences.append((label(Path(folder).name or str(folder), f"--folder {str(folder)!r}"),
                           load_hdr_sequence(folder, progress=progress_wanted(args))))
     if not sequences:
