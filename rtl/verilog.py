@@ -94,6 +94,22 @@ def _yosys_ended_on_interrupt():
         helper.subprocess = real
 
 
+@contextlib.contextmanager
+def _yosys_memory_named():
+    """Amaranth's Yosys (a WebAssembly build run by wasmtime) reserves about 4 GiB of address space
+    as it starts; under a smaller ``ulimit -v`` it fails with its own traceback inside Amaranth's
+    YosysError. That failure is a :class:`MemoryError` naming the reservation."""
+    try:
+        yield
+    except Exception as exc:
+        text = str(exc)
+        if type(exc).__name__ != "YosysError" or "Cannot allocate memory" not in text:
+            raise
+        size = re.search(r"reserve (0x[0-9a-fA-F]+|\d+) bytes", text)
+        need = f" of {int(size.group(1), 0) / 2 ** 30:.1f} GiB" if size else ""
+        raise MemoryError(f"Amaranth's Yosys (WebAssembly) could not reserve its address space{need}") from None
+
+
 def convert_modules(*named_components) -> list[str]:
     """Verilog text of each (component, module name), one module each, in the given order.
 
@@ -107,7 +123,7 @@ def convert_modules(*named_components) -> list[str]:
     if run_rtlil is None:    # pragma: no cover - other Amaranth versions
         return [_waive(verilog.convert(c, name=n, emit_src=False, strip_internal_attrs=True))
                 for c, n in named_components]
-    with _yosys_ended_on_interrupt():
+    with _yosys_ended_on_interrupt(), _yosys_memory_named():
         text = run_rtlil("\n".join(rtlil.convert(c, name=n, emit_src=False) for c, n in named_components),
                          strip_internal_attrs=True)
     header, *modules = re.split(r"(?m)^(?=module )", text)

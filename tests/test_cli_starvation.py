@@ -285,3 +285,14 @@ def test_a_write_cut_at_the_file_size_limit_names_the_limit(tmp_path):
                        {resource.RLIMIT_FSIZE: 100 << 10})
     assert_refused(done, f"cannot write {str(out)!r}: File too large", "ulimit -f: 102400 bytes")
     assert os.listdir(tmp_path) == []
+
+
+def test_yosys_without_its_address_space_is_out_of_memory_in_one_line(tmp_path):
+    """Amaranth's Yosys (WebAssembly) reserves about 4 GiB as it starts: under a smaller ``ulimit -v``
+    every command that writes Verilog died with two tracebacks, Yosys's inside Amaranth's."""
+    out = tmp_path / "a.v"
+    done = run_limited(ENTRY.format(args=["verilog", "--config", "te", "--height", "2", "--width", "2",
+                                          "--out", str(out)]), {resource.RLIMIT_AS: 3 << 30})
+    assert_refused(done, "out of memory within the address-space limit (ulimit -v)",
+                   "Yosys (WebAssembly) could not reserve its address space")
+    assert done.returncode == 1 and not out.exists()
