@@ -161,6 +161,9 @@ def test_command_refuses_bad_options_in_one_line():
     assert_refused(done, "--depth 100000", "1..32")
     done = run_tespike("prove", "--workers", "0", timeout=60)
     assert_refused(done, "--workers")
+    # BMC gets 10 s whatever is left: 0.001 s ran for minutes and said "undecided ... in 0.001 s"
+    done = run_tespike("prove", "--only", "tops", "--top-timeout", "0.001", timeout=60)
+    assert_refused(done, "--top-timeout 0.001", "at least 10 seconds")
     # two sensors of one name: the later replaced the earlier, which was never proved (exit 0)
     done = run_tespike("prove", "--only", "pixel", "--config", "te", "--config", "other/te.json", timeout=60)
     assert_refused(done, "a sensor named 'te' is already given")

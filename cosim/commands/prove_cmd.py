@@ -40,7 +40,7 @@ def add_arguments(parser):
                         help="array sizes of the tops at each configuration's own clocks and widths, beside "
                              "its timing block (default 1x1; 'none': the timing block only)")
     parser.add_argument("--top-timeout", type=float, default=300.0, metavar="S",
-                        help="seconds each top property may take (default 300)")
+                        help="seconds each top property may take (default 300; at least 10)")
     parser.add_argument("--workers", type=int, default=2,
                         help="proofs run at once, each in its own process (default 2; 1: one after another)")
     parser.add_argument("--traces", metavar="DIR", default="tespike-prove-traces",
@@ -197,8 +197,10 @@ def run(args) -> int:
             raise InputError(f"{given[0]} belongs to {part}, which --only {args.only} leaves out")
     if not 1 <= args.depth <= MAX_DEPTH:
         raise InputError(f"--depth {args.depth} must be in 1..{MAX_DEPTH}")
-    if not args.top_timeout > 0:
-        raise InputError(f"--top-timeout {args.top_timeout} must be > 0")
+    from tespike.cosim.formal.abc import MIN_BMC_SECONDS
+    if not args.top_timeout >= MIN_BMC_SECONDS:        # (BMC gets that much whatever is left: "undecided
+        raise InputError(f"--top-timeout {args.top_timeout:g} must be at least {MIN_BMC_SECONDS:g} seconds "   # in 0.001 s"
+                         "(the bounded check of a top property gets that much in any case)")
     check_workers_argument(args.workers)
     if args.only != "tops":             # (written only on a failure: a bad one was found after the proofs)
         from tespike.golden.paths import check_output_dir

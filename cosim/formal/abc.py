@@ -54,6 +54,10 @@ TO_AIGER = ("prep -flatten -top proof_top; memory_map; opt -fast; "
 #: Seconds ``scorr; pdr`` gets (every top at small clocks took under 5 s, the ML tops at the
 #: presets' own clocks under 1 s; the TE streaming tops at their own clocks did not finish in 120 s).
 PDR_SECONDS = 20.0
+
+#: Seconds BMC always gets, however little of a harness's time is left (below it ABC barely
+#: starts): the least time a top property may be given.
+MIN_BMC_SECONDS = 10.0
 #: Seconds ``scorr; dprove`` gets before the bounded check takes over (the TE 1 x 1 streaming
 #: tops at the presets' own clocks took 12-41 s in it on 2 loaded cores).
 DPROVE_SECONDS = 150.0
@@ -128,7 +132,7 @@ def prove_harness(name: str, harness: Harness, *, timeout: float = 300.0) -> Pro
                 break
         if verdict == "undecided":
             method = f"BMC {harness.steps}"
-            log, finished = _abc(aig, f"bmc3 -F {harness.steps}", max(10.0, left()))
+            log, finished = _abc(aig, f"bmc3 -F {harness.steps}", max(MIN_BMC_SECONDS, left()))
             found = _FAILED.search(log)
             if found:
                 verdict, frame = "failed", int(found.group(2))
