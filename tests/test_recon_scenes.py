@@ -168,6 +168,29 @@ def test_default_panorama_motions(motion):
     assert not np.array_equal(light, with_sources)
 
 
+@pytest.mark.parametrize("motion", ["tilt", "rotate", "zoom", "mixed"])
+def test_long_camera_paths_stay_within_the_panoramas_rows(motion):
+    """A tilt, a turn of a wide window or a zoom-out over many frames ran past the panorama's rows:
+    the clamped edge row was shown stretched (in 6-20 % of the data engine's clips). Every sample
+    of every frame (the zoom-out's sub-samples too) now lies within the rows, and the camera moves."""
+    import math
+
+    from tespike.recon.scenes.panorama import random_path
+    from tespike.recon.scenes.warp import window_coords
+    rows = load_panorama("default").shape[0]
+    frames, height, width = 200, 96, 128
+    for seed in range(12):
+        path = random_path(np.random.default_rng(seed), motion, (rows, 256), height, width, frames)
+        for k in range(frames):
+            cy, cx, angle, zoom = path.at(k)
+            steps = max(1, math.ceil(1.0 / zoom - 1e-9))
+            for offset in {(-0.5 + 0.5 / steps, -0.5 + 0.5 / steps), (0.5 - 0.5 / steps, 0.5 - 0.5 / steps),
+                           (-0.5 + 0.5 / steps, 0.5 - 0.5 / steps), (0.5 - 0.5 / steps, -0.5 + 0.5 / steps)}:
+                ys, _ = window_coords(height, width, cy, cx, angle, zoom, offset=offset)
+                assert -1e-6 <= ys.min() and ys.max() <= rows - 1 + 1e-6, (seed, k, ys.min(), ys.max())
+        assert path.at(0) != path.at(frames - 1)
+
+
 def test_shipped_panorama():
     pano = load_panorama("default")
     assert pano.shape == (128, 256) and np.isfinite(pano).all() and pano.min() > 0

@@ -160,7 +160,40 @@ def random_path(rng: np.random.Generator, motion: str, pano_shape: tuple[int, in
     cy = rng.uniform(low, high) if high > low else 0.5 * (pano_h - 1) - 0.5 * travel
     if kw.get("vy", 0.0) < 0:
         cy += travel
-    return CameraPath(cy=cy, **kw)
+    path = CameraPath(cy=cy, **kw)
+    return path if _rows_fit(path, frames, height, width, pano_h) else _slowed(path, frames, height, width, pano_h)
+
+
+def _row_reach(path: CameraPath, frames: int, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """(centre row, half the rows spanned) of the window at each frame of ``path``: the rotated,
+    zoomed window's extent in the panorama's rows (its sub-samples' half pixel where it zooms out)."""
+    k = np.arange(max(1, frames))
+    angle, zoom = path.angle + path.spin * k, path.zoom * path.zoom_rate ** k
+    pad = np.where(zoom < 1.0, 0.5, 0.0)
+    half = (np.abs(np.cos(angle)) * ((height - 1) / 2 + pad) + np.abs(np.sin(angle)) * ((width - 1) / 2 + pad)) / zoom
+    return path.cy + path.vy * k, half
+
+
+def _rows_fit(path: CameraPath, frames: int, height: int, width: int, pano_h: int) -> bool:
+    """Whether every frame's window lies within the panorama's rows (none reaches a clamped row)."""
+    centre, half = _row_reach(path, frames, height, width)
+    return bool(np.all(centre - half >= -1e-9) and np.all(centre + half <= pano_h - 1 + 1e-9))
+
+
+def _slowed(path: CameraPath, frames: int, height: int, width: int, pano_h: int) -> CameraPath:
+    """``path`` with its tilt, spin and zoom halved until some centre row keeps every frame's window
+    within the panorama's rows (a long tilt or zoom-out, or a turning wide window, ran past them and
+    showed the clamped edge rows stretched): the slowest that fits, centred in the rows it may use;
+    at worst the still window, which fits (:func:`check_window`)."""
+    for halvings in range(1, 41):
+        f = 0.5 ** halvings
+        slower = dataclasses.replace(path, cy=0.0, vy=path.vy * f, spin=path.spin * f,
+                                     zoom_rate=path.zoom_rate ** f)
+        centre, half = _row_reach(slower, frames, height, width)
+        low, high = float(np.max(half - centre)), float(np.min(pano_h - 1 - half - centre))
+        if low <= high:
+            return dataclasses.replace(slower, cy=0.5 * (low + high))
+    return dataclasses.replace(path, cy=0.5 * (pano_h - 1), vy=0.0, spin=0.0, zoom_rate=1.0)
 
 
 def render_path(panorama: np.ndarray, path: CameraPath, frames: int, height: int,
