@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import errno
 import os
+import stat
 import sys
 
 
@@ -29,9 +30,31 @@ def bar(desc: str, unit: str = "readout", total: int | None = None):
 
 
 def report(args, message: str) -> None:
-    """The one line a command prints on stdout on success (silenced by ``--quiet``)."""
+    """The one line a command prints on stdout on success (silenced by ``--quiet``); on stderr where
+    an output of the command is standard output itself (``--out /dev/stdout``: the line would follow
+    the file's bytes into the pipe)."""
     if not getattr(args, "quiet", False):
-        print(printable(message, sys.stdout), flush=True)
+        stream = sys.stderr if _writes_standard_output(args) else sys.stdout
+        print(printable(message, stream), file=stream, flush=True)
+
+
+def _writes_standard_output(args) -> bool:
+    """Whether a path among the command's arguments is the file standard output writes to."""
+    try:
+        out = os.fstat(sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        return False
+    if stat.S_ISCHR(out.st_mode):       # (a terminal, /dev/null: the line mixes with nothing)
+        return False
+    for value in vars(args).values():
+        if isinstance(value, str) and value:
+            try:
+                info = os.stat(value)
+            except (OSError, ValueError):
+                continue
+            if (info.st_dev, info.st_ino) == (out.st_dev, out.st_ino):
+                return True
+    return False
 
 
 def printable(text: str, stream) -> str:

@@ -86,6 +86,10 @@ def check_output_file(path: str | os.PathLike, what: str | None = None) -> Path:
     if text.endswith(os.sep) and not os.path.isdir(text):     # (a directory's name, not a file's)
         raise InputError(f"cannot write {label}: a path ending in {os.sep!r} names a directory "
                          "(name a file)")
+    if written_through(text):           # (a pipe behind /dev/stdout: realpath names no file, the kernel opens it)
+        if not os.access(text, os.W_OK):
+            raise InputError(f"cannot write {label}: permission denied")
+        return Path(text)
     target = resolve_output(text)
     try:
         info = os.stat(target)

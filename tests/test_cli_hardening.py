@@ -153,6 +153,18 @@ def test_fifo_output_is_written_through_or_refused_without_reader(files):
     assert stat.S_ISFIFO(os.stat(fifo).st_mode)
 
 
+def test_standard_output_as_the_output_carries_the_file_alone(files):
+    """``--out /dev/stdout`` into a pipe was refused ("directory '/dev' is not writable": realpath
+    names no file for a pipe); the file now goes down the pipe, and the success line to stderr (it
+    would have followed the file's bytes)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-m", "tespike", *map(str, golden_args(files, "/dev/stdout"))],
+                          capture_output=True, env=env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == (files / "s.npz").read_bytes()
+    assert done.stderr.decode().startswith("wrote /dev/stdout")
+
+
 def test_outputs_get_the_mode_of_the_umask(files):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     for mask, mode in ((0o022, 0o644), (0o077, 0o600), (0o002, 0o664)):
