@@ -415,6 +415,23 @@ def test_resume_rebuilds_a_sequence_whose_metadata_is_damaged(tmp_path, capsys, 
     assert compare_stores(small_store, store) == []
 
 
+def test_a_store_removed_while_it_is_read_is_named_gone(tmp_path, small_store):
+    """A store (or a sequence's array) removed during ``evaluate --store`` was Zarr's "No array found
+    in store file://... at path ..." or a KeyError traceback."""
+    import shutil
+
+    from tespike.recon.dataset.store import DatasetStore
+    store = tmp_path / "D.zarr"
+    shutil.copytree(small_store, store)
+    opened = DatasetStore.open(str(store))
+    shutil.rmtree(store / "sun" / "streams" / "te")
+    with pytest.raises(InputError, match=r"'sun/streams/te' is gone \(removed while the run read it"):
+        opened.words("sun", "te")
+    shutil.rmtree(store)
+    with pytest.raises(InputError, match=r"dataset store '.*D\.zarr' is gone: it was removed or moved"):
+        opened.light("sun")
+
+
 def test_resume_rebuilds_an_array_whose_chunk_file_was_deleted(tmp_path, capsys, small_store):
     """The resume checked the CRC of the chunk files present only: a deleted one was never noticed
     ("1 already complete") and read as zeros."""

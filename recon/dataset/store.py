@@ -405,7 +405,8 @@ class DatasetStore:
     def light(self, sequence: str):
         """The ground-truth light of one sequence as a lazy dask array (K, H, W) float32."""
         import dask.array as da
-        return da.from_zarr(self.group[f"{sequence}/light"])
+        with reading(self.url, f"{sequence}/light"):
+            return da.from_zarr(self.group[f"{sequence}/light"])
 
     def light_peak(self, sequence: str) -> float:
         """The largest value of a sequence's stored light, read a few frames at a time (the peak its
@@ -421,7 +422,8 @@ class DatasetStore:
         if config not in self.configs:
             raise InputError(f"dataset store {self.url!r} has no sensor {config!r} "
                              f"(it has {', '.join(self.configs)})")
-        return da.from_zarr(self.group[f"{sequence}/streams/{config}"])
+        with reading(self.url, f"{sequence}/streams/{config}"):
+            return da.from_zarr(self.group[f"{sequence}/streams/{config}"])
 
     def array(self, sequence: str, part: str):
         """The Zarr array ``light`` or ``streams/<config>`` of one sequence (for tasks)."""
@@ -464,14 +466,36 @@ def reading(url: str, path: str = ""):
         yield
     except InputError:
         raise
+    except FileNotFoundError:           # (Zarr's "No array found ... at path": a node gone mid-run)
+        gone = _gone(str(url), path)
+        if gone is None:
+            raise
+        raise InputError(gone) from None
     except _DAMAGE as exc:
         where = damaged_file(str(url), path)
         if where is None:
-            raise
+            gone = _gone(str(url), path)
+            if gone is None:
+                raise
+            raise InputError(gone) from None
         cause = ("its CRC-32C does not match its bytes" if "checksum do not match" in str(exc)   # (Zarr shows
                  else one_line(exc, 160))                                                      # both as bytes)
         raise InputError(f"dataset store file {where!r} is damaged ({cause}); remove its sequence's "
                          "folder and run tespike dataset again to rebuild it") from None
+
+
+def _gone(url: str, path: str) -> str | None:
+    """Why node ``path`` of a local store cannot be found where a run opened it before: the store,
+    or that part of it, was removed or moved during the run (the line says so); None elsewhere."""
+    if "://" in url:
+        return None
+    if not Path(url).is_dir():
+        return f"dataset store {url!r} is gone: it was removed or moved while the run read it"
+    node = Path(url, *[part for part in path.split("/") if part])
+    if path and not (node / "zarr.json").is_file():
+        return (f"dataset store {url!r}: {path!r} is gone (removed while the run read it, or never "
+                "built); run tespike dataset again to rebuild it")
+    return None
 
 
 def damaged_file(url: str, path: str = "") -> str | None:
