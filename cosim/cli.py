@@ -299,7 +299,7 @@ def _parse(argv: list[str]):
         getattr(args, "command_parser", parser).error(f"unrecognized arguments: {' '.join(unknown)}")
     empty = _empty_text(getattr(args, "command_parser", parser), args)
     if empty:         # '' reads as "not given" where a command tests the value's truth
-        getattr(args, "command_parser", parser).error(f"{empty} is given as '': give a value or leave it out")
+        getattr(args, "command_parser", parser).error(f"{empty} '': an empty value (give one)")
     repeated = _repeated_option(getattr(args, "command_parser", parser), argv)
     if repeated:      # argparse keeps the last value and drops the others without a word
         getattr(args, "command_parser", parser).error(f"{repeated} is given more than once: give it once")
@@ -343,7 +343,7 @@ def _empty_text(parser, args) -> str | None:
         value = getattr(args, action.dest, None)
         values = value if isinstance(value, list) else [value]
         if any(isinstance(v, str) and v == "" for v in values):
-            return "/".join(action.option_strings) or action.metavar or action.dest
+            return action.option_strings[-1] if action.option_strings else action.metavar or action.dest
     return None
 
 

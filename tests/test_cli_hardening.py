@@ -491,11 +491,11 @@ def test_corrupt_stream_files(files, kind):
     (("train", "--seed", "-1"), ["seed = -1", "0..2^63 - 1"]),
     (("train", "--seed", str(10 ** 23)), ["seed", "0..2^63 - 1"]),
     (("train", "--device", "bogus"), ["device = 'bogus'", "not a usable torch device"]),
-    (("scene", "--folder", ""), ["--folder is given as ''"]),           # (read as not given: a built-in scene)
-    (("scene", "--crop", ""), ["--crop is given as ''"]),
-    (("evaluate", "--store", ""), ["--store is given as ''"]),          # (read as no store)
-    (("evaluate", "--set", "none", "--ml-count-config", ""), ["--ml-count-config is given as ''"]),
-    (("rtl-sim", "--config", "te", "--stimulus", "e.npy", "--out", "w.npy", "--vcd", ""), ["--vcd is given as ''"]),
+    (("scene", "--folder", ""), ["--folder '': an empty value"]),           # (read as not given: a built-in scene)
+    (("scene", "--crop", ""), ["--crop '': an empty value"]),
+    (("evaluate", "--store", ""), ["--store '': an empty value"]),          # (read as no store)
+    (("evaluate", "--set", "none", "--ml-count-config", ""), ["--ml-count-config '': an empty value"]),
+    (("rtl-sim", "--config", "te", "--stimulus", "e.npy", "--out", "w.npy", "--vcd", ""), ["--vcd '': an empty value"]),
     (("evaluate", "--set", "none", "--methods", "tfp,,tfi"), ["--methods 'tfp,,tfi'", "empty"]),   # (dropped)
     (("evaluate", "--set", "none", "--methods", "tfp,"), ["--methods 'tfp,'", "empty"]),
     (("evaluate", "--set", "none", "--methods", "tfp,tfp"), ["'tfp' is named more than once"]),

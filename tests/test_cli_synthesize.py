@@ -76,9 +76,11 @@ def test_synthesize_refuses_a_file_of_two_tops_unless_one_is_named(tmp_path):
     assert_refused(run_tespike("synthesize", "--verilog", tmp_path / "two.v"), "2 top modules (m1, m2)", "name one")
     named = run_tespike("synthesize", "--verilog", tmp_path / "two.v", "--top", "m2")
     assert named.returncode == 0 and "total m2: 1 cells" in named.stdout, named.stderr
-    for top in ("", "m1; shell touch x", "1m"):       # (an empty one was read as none given)
+    for top in ("m1; shell touch x", "1m"):
         assert_refused(run_tespike("synthesize", "--verilog", tmp_path / "two.v", "--top", top),
                        f"--top {top!r}", "not a Verilog module name")
+    assert_refused(run_tespike("synthesize", "--verilog", tmp_path / "two.v", "--top", ""),   # (read as none
+                   "--top '': an empty value")                                                # given)
 
 
 @pytest.mark.parametrize("args, words", [
