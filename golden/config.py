@@ -281,6 +281,18 @@ class SensorConfig:
         """Light of one spike per readout interval, in scene units (1.0 = the design light)."""
         return self.threshold / DESIGN_ELECTRONS
 
+    @property
+    def top_light(self) -> float:
+        """The most light a readout word can tell, in scene units: a pixel fires at most once a
+        clock (less where one clock's input, 2^E - 1, is below the threshold), and an ML count at
+        most 2^ml_bits - 1 times; brighter light reads as this. At least 1 with the SPEC's default
+        thresholds at L = 240; below 1 where a configuration cannot read its design light (e.g.
+        ``ml_bits`` 9 or more, or TE ``clocks_per_tick`` 1, at L = 240)."""
+        electrons = self.clocks_per_readout * min(self.threshold, self.input_max)
+        if not self.is_te and not self.is_msb:
+            electrons = min(electrons, self.ml_max * self.threshold)
+        return electrons / DESIGN_ELECTRONS
+
     def _shown_keys(self) -> tuple[str, ...]:
         keys = ("b1", "b2", "alpha", "clocks_per_tick", "threshold", "acc_bits", "input_bits")
         return keys if self.is_te else keys + ("ml_bits",)

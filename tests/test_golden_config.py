@@ -136,3 +136,15 @@ def test_the_largest_threshold_is_named_with_the_acc_bits_that_allow_it():
     with pytest.raises(ConfigError, match="with the default acc_bits .* up to 2\\^62 - 1 with acc_bits = 62"):
         SensorConfig(threshold=big)
     assert SensorConfig(threshold=big, acc_bits=62).threshold == big
+
+
+def test_top_light_is_what_a_pixel_firing_every_clock_reads():
+    """The most light a word can tell: 1.0 for the TE preset (its top code is the design light), the
+    ML presets' 240 spikes of 328 e-; below 1 for legal configurations that saturate early."""
+    from tespike.golden.config import SensorConfig
+    assert SensorConfig.preset("te").top_light == 1.0
+    assert SensorConfig.preset("ml").top_light == SensorConfig.preset("ml-msb").top_light == 240 * 328 / 42000
+    assert SensorConfig.from_dict({"mode": "ml", "ml_bits": 12}).top_light == 240 * 20 / 42000
+    assert SensorConfig.from_dict({"mode": "te", "clocks_per_tick": 1}).top_light == 15 * 175 / 42000
+    assert SensorConfig.from_dict({"mode": "te", "input_bits": 4}).top_light == 240 * 15 / 42000
+    assert SensorConfig.from_dict({"mode": "ml", "ml_bits": 3, "threshold": 5000}).top_light == 7 * 5000 / 42000
