@@ -181,11 +181,11 @@ def _rows_fit(path: CameraPath, frames: int, height: int, width: int, pano_h: in
 
 
 def _slowed(path: CameraPath, frames: int, height: int, width: int, pano_h: int) -> CameraPath:
-    """``path`` with its tilt, spin and zoom halved until some centre row keeps every frame's window
-    within the panorama's rows (a long tilt or zoom-out, or a turning wide window, ran past them and
-    showed the clamped edge rows stretched): the slowest that fits, centred in the rows it may use;
-    at worst the still window, which fits (:func:`check_window`)."""
-    for halvings in range(1, 41):
+    """``path`` re-centred, else with its tilt, spin and zoom halved until some centre row keeps
+    every frame's window within the panorama's rows (a long tilt or zoom-out, or a turning wide
+    window, ran past them and showed the clamped edge rows stretched): the least slowing that fits,
+    centred in the rows it may use; at worst the still window, which fits (:func:`check_window`)."""
+    for halvings in range(41):
         f = 0.5 ** halvings
         slower = dataclasses.replace(path, cy=0.0, vy=path.vy * f, spin=path.spin * f,
                                      zoom_rate=path.zoom_rate ** f)
