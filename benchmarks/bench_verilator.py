@@ -14,7 +14,7 @@ what the generated array's one-instance-per-pixel structure costs in
 Verilator. The baseline
 measured in the same run is the literal golden model
 (``tespike.golden.reference.step_reference``) on the same stimulus; the table prints
-each simulator's speed as a ratio to it. Writes ``out/bench/bench_verilator.png`` (``--docs``: ``benchmarks/bench_verilator.png``).
+each simulator's speed as a ratio to it. Writes ``out/bench/bench_verilator.png`` (``--docs``: ``docs/figures/bench_verilator.png``).
 
 Run from the repository root:
 ``python3 benchmarks/bench_verilator.py [--sizes 32 64] [--loop-sizes 32 64] [--icarus-sizes 4 8]

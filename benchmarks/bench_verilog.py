@@ -4,7 +4,7 @@ Each size runs the command as a user would (a fresh ``python3 -m tespike verilog
 process: interpreter start, imports, Amaranth elaboration, Yosys conversion,
 atomic write), ``--repeats`` times; the median is reported, and the ratio of
 128 x 128 to 8 x 8 (the brief's bound: about 16x at most). Writes
-``out/bench/bench_verilog.png`` (``--docs``: ``benchmarks/bench_verilog.png``).
+``out/bench/bench_verilog.png`` (``--docs``: ``docs/figures/bench_verilog.png``).
 
 Run from the repository root: ``python3 benchmarks/bench_verilog.py [--config te] [--repeats 3]``.
 """

@@ -2,7 +2,7 @@
 
 Prints two tables and draws a PNG of decoded vs true light over 1e-6..1e3
 (out/bench/dynamic-range.png); ``--docs`` writes the tables into
-docs/dynamic-range.md (between the marker comments) and the PNG beside it:
+docs/dynamic-range.md (between the marker comments) and the PNG into docs/figures/:
 
 1. dynamic range: SPEC/paper formula and the measurement of golden.dynamic_range
    (constant light through the cycle-exact engine, noise-free and Poisson);
@@ -25,6 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))    # measure this checkout's golden/
 
+from benchmarks.plotfile import DOCS_FIGURES
 from tespike.golden.config import SensorConfig
 from tespike.golden.decode import ESTIMATORS, decode_light
 from tespike.golden.dynamic_range import constant_light_words, estimator_error, formula_db, light_grid, measure
@@ -33,7 +34,7 @@ from tespike.recon.pictures import save_figure
 
 ROOT = Path(__file__).resolve().parent.parent
 DOC = ROOT / "docs" / "dynamic-range.md"
-PNG = ROOT / "docs" / "dynamic-range.png"
+PNG = DOCS_FIGURES / "dynamic-range.png"
 TOLERANCES = (0.05, 0.20)
 
 

@@ -27,7 +27,7 @@ sensor's budget (166 mW over 4 x 10^9 pixel-readouts a second: 41 pJ) for refere
 
 Run from the repository root:
 ``python3 benchmarks/energy.py [--readouts 3] [--out out/bench/energy.png | --docs]``
-(``--docs`` writes docs/energy.png). About a minute on one core.
+(``--docs`` writes docs/figures/energy.png). About a minute on one core.
 
 Last, the energy model's one assumption about logic (gates toggle at their block's
 register activity) is checked at gate level on a 2 x 3 top for the paper's cameras
@@ -47,6 +47,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))                       # measure this checkout's code
 
 from benchmarks.hw_cost import ml_camera  # noqa: E402
+from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
 from tespike.cosim.energy import SKY130_HD, block_cells, block_energy  # noqa: E402
 from tespike.cosim.gate_activity import logic_check  # noqa: E402
 from tespike.cosim.synthesis import synthesize_hierarchy  # noqa: E402
@@ -176,15 +177,12 @@ def plot(path: Path, lights: dict, results: dict) -> None:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--readouts", type=int, default=3, help="readout intervals counted (default 3)")
-    parser.add_argument("--out", default=str(ROOT / "out" / "bench" / "energy.png"))
-    parser.add_argument("--docs", action="store_true", help="write docs/energy.png")
+    add_png_arguments(parser, "energy.png", "--out")
     args = parser.parse_args(argv)
     if args.readouts < 1:
         print(f"energy.py: --readouts {args.readouts}: must be >= 1", file=sys.stderr)
         return 2
-    if args.docs:
-        args.out = str(ROOT / "docs" / "energy.png")
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    png_path(args, "energy.png", "--out")
     start = time.perf_counter()
     results, lights = {}, {}
     for group, cameras in GROUPS:

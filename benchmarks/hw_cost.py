@@ -233,7 +233,7 @@ def report(rows: list[tuple[str, dict, list[dict]]], yosys_version: str) -> str:
            f"count of the RTL in the tests) over {ACTIVITY_READOUTS} readouts of {ACTIVITY_PIXELS} "
            "pixels under constant Poisson light I (1 = 42000 electrons per readout). It leaves out the "
            "logic between registers, glitches, the clock tree and leakage. `benchmarks/toggles.py` "
-           "plots it against light (docs/toggles.png, docs/rtl.md).",
+           "plots it against light (docs/figures/toggles.png, docs/rtl.md).",
            "- Thresholds and accumulator widths are the SPEC defaults of each configuration "
            "(they differ between TE and ML and between groups, see the config column); they change "
            "only the full-pixel column.", "",

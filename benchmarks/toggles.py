@@ -10,7 +10,7 @@ and writes a PNG (log axes; a zero count is not drawn on a log axis).
 
 Run from the repository root:
 ``python3 benchmarks/toggles.py [--readouts 16] [--pixels 8] [--out out/bench/toggles.png | --docs]``
-(``--docs`` writes docs/toggles.png). About 10 s on one core.
+(``--docs`` writes docs/figures/toggles.png). About 10 s on one core.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))                       # measure this checkout's golden/
 
+from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
 from tespike.golden.config import SensorConfig  # noqa: E402
 from tespike.golden.toggles import constant_light_toggles  # noqa: E402
 from tespike.recon.pictures import save_figure  # noqa: E402
@@ -74,12 +75,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--readouts", type=int, default=16, help="readout intervals per pixel (default 16)")
     parser.add_argument("--pixels", type=int, default=8, help="pixels per light level (default 8)")
-    parser.add_argument("--out", default=str(ROOT / "out" / "bench" / "toggles.png"))
-    parser.add_argument("--docs", action="store_true", help="write docs/toggles.png")
+    add_png_arguments(parser, "toggles.png", "--out")
     args = parser.parse_args(argv)
-    if args.docs:
-        args.out = str(ROOT / "docs" / "toggles.png")
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    png_path(args, "toggles.png", "--out")
     light = np.logspace(-4, 2, 25)
     light = np.unique(np.concatenate([light, TABLE_LIGHT]))
     curves = {}

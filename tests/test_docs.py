@@ -212,3 +212,19 @@ def test_benchmark_examples_use_flags_that_exist():
         wrong += [f"{page.relative_to(ROOT)}:{n}: {script} has no {flag}"
                   for flag in re.findall(r"(?<![\w-])(--?[a-zA-Z][\w-]*)", args) if flag not in known[script]]
     assert uses and not wrong, "\n".join(wrong)
+
+
+def test_the_docs_figures_have_one_home_and_every_link_resolves():
+    """Figures lived in three places (docs/, docs/net/ and benchmarks/); they live in docs/figures/
+    (training curves in its net/), where ``--docs`` of every benchmark writes, and each link to one
+    (or to any other file) from a page resolves."""
+    import subprocess
+    tracked = subprocess.run(["git", "ls-files", "*.png"], cwd=ROOT, capture_output=True, text=True).stdout.split()
+    if tracked:                         # (a checkout without git lists none)
+        assert all(name.startswith("docs/figures/") for name in tracked), tracked
+    broken = []
+    for page in PAGES:
+        for target in re.findall(r"\]\(([^)#\s:]+)(?:#[^)]*)?\)", page.read_text()):
+            if not (page.parent / target).exists():
+                broken.append(f"{page.relative_to(ROOT)}: {target}")
+    assert not broken, broken
