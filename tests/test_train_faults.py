@@ -20,7 +20,7 @@ import pytest
 from tespike.golden.errors import InputError
 from tespike.recon.learned import load_weights
 from tespike.recon.train import RunFolderGone, train
-from tests.cli import ROOT, assert_refused
+from tests.cli import ROOT, assert_refused, run_tespike
 from tests.test_cli_hardening import small_tmpfs
 from tests.test_recon_train import options
 
@@ -102,6 +102,15 @@ def test_a_cut_run_log_is_refused_or_mended_never_appended_to(tmp_path, cut):
         return
     with pytest.raises(InputError, match=r"run log '.*log\.csv' is damaged"):
         train(options(steps=3), tmp_path / "w.pt", resume=True)
+
+
+def test_a_bad_option_is_named_before_the_earlier_run_in_the_run_folder(tmp_path):
+    """The run folder's earlier run was said first, and a bad --method or --pool only after --force."""
+    train(options(steps=1), tmp_path / "w.pt")
+    for option, words in ((("--method", "bogus"), "unknown learned method 'bogus'"), (("--pool", "0"), "pool = 0")):
+        done = run_tespike("train", "--config", "te", "--out", tmp_path / "w.pt", "--steps", "1",
+                           "--validate-every", "0", *option, timeout=120)
+        assert_refused(done, words)
 
 
 def test_a_validation_log_resumes_and_one_with_its_header_altered_is_refused(tmp_path):

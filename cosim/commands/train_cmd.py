@@ -163,6 +163,15 @@ def run(args) -> int:
     if written_through(args.out):      # (it trained to the end, then could not write)
         raise InputError(f"--out {args.out!r} is a device or FIFO: a run writes a weights file and its run "
                          "folder beside it (OUT.run); give a file name")
+    # every option checked (TrainOptions) before the run folder is: a bad one is the first thing said
+    given = {flag: getattr(args, flag) for flag in TRAINER_FLAGS if hasattr(args, flag)}
+    options = TrainOptions(config=args.config if preset else config.to_json(), ablation=args.ablation,
+                           steps=args.steps, minutes=args.minutes, threads=args.threads,
+                           recipe={"folders": tuple(args.hdr), **({"peak": tuple(args.peak)} if args.peak else {}),
+                                   **({"panoramas": panoramas} if panoramas else {}),
+                                   **({"noise_fraction": args.noise_fraction} if args.noise_fraction else {}),
+                                   **({"noisy_input": args.noisy_input} if args.noisy_input else {})},
+                           init=args.init, **given)
     run_folder = out.with_suffix(".run")
     check_output_dir(run_folder, "--out's run folder")
     check_distinct(inputs, {f"the run folder's {name}": run_folder / name for name in RUN_FILES})
@@ -178,14 +187,6 @@ def run(args) -> int:
                          "continue it with --resume, start anew with --force (its files are removed), "
                          "or give another --out")
 
-    given = {flag: getattr(args, flag) for flag in TRAINER_FLAGS if hasattr(args, flag)}
-    options = TrainOptions(config=args.config if preset else config.to_json(), ablation=args.ablation,
-                           steps=args.steps, minutes=args.minutes, threads=args.threads,
-                           recipe={"folders": tuple(args.hdr), **({"peak": tuple(args.peak)} if args.peak else {}),
-                                   **({"panoramas": panoramas} if panoramas else {}),
-                                   **({"noise_fraction": args.noise_fraction} if args.noise_fraction else {}),
-                                   **({"noisy_input": args.noisy_input} if args.noisy_input else {})},
-                           init=args.init, **given)
     command = "tespike " + " ".join(shlex.quote(a) for a in args.argv)   # (main's argv: in-process too)
     try:
         train(options, out, resume=args.resume, progress=progress_wanted(args), command=command)
