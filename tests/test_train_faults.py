@@ -71,6 +71,17 @@ def test_a_text_or_foreign_file_as_weights_is_named(tmp_path, text):
         train(options(steps=1, init=str(tmp_path / "w.txt")), tmp_path / "e.pt")
 
 
+def test_a_stream_given_as_weights_names_what_the_archive_holds(tmp_path):
+    """A zip archive of another kind (a stream S.npz) was named by torch's internal assert text."""
+    import numpy as np
+
+    from tespike.recon.learning.weights import read_weights
+    np.savez(tmp_path / "S.npz", words=np.zeros((2, 2, 2), np.uint8), config=np.array("{}"))
+    with pytest.raises(InputError, match=r"is not a tespike weights file \(a zip archive, but not torch's: it "
+                                         r"holds words\.npy, config\.npy\)$"):
+        read_weights(tmp_path / "S.npz")
+
+
 def test_resume_does_not_repeat_the_killed_runs_rows(tmp_path):
     """Rows a killed run logged after its last checkpoint are written again by the resumed run: once."""
     train(options(steps=2), tmp_path / "w.pt")

@@ -110,6 +110,14 @@ def _load_fault(path: str | Path, exc: BaseException) -> str:
         return f"it holds Python objects a weights file does not ({what}); not loaded, as loading could run code"
     if text.startswith("PytorchStreamReader failed"):  # (miniz: an archive whose directory is damaged)
         return f"a damaged archive: {one_line(text.split('. ')[0], 200)}"
+    if "not in a subdirectory" in text:                 # (a zip archive of another kind: an S.npz, a C.npz)
+        try:
+            with zipfile.ZipFile(path) as archive:
+                names = archive.namelist()
+            return (f"a zip archive, but not torch's: it holds {one_line(', '.join(names[:4]), 160)}"
+                    f"{', ...' if len(names) > 4 else ''}")
+        except (OSError, zipfile.BadZipFile):
+            pass
     return f"another format: {one_line(text.splitlines()[0] if text else exc, 300)}"
 
 
