@@ -21,7 +21,6 @@ import re
 
 import numpy as np
 
-from tespike.golden.activity import Activity
 from tespike.golden.toggles import pixel_register_names
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
@@ -195,12 +194,6 @@ def vcd_activity(vcd_path, config: SensorConfig, verilog_text: str, top: str, st
     for port, ref in outputs.items():
         counts[("output", port)] = bit_changes(settled_values(vcd[ref].tv), (1 << ports[port]) - 1)
     return counts
-
-
-def model_counts(activity: Activity) -> dict[tuple[str, str], int]:
-    """:class:`tespike.golden.activity.Activity` as :func:`vcd_activity` reports: totals per
-    (block, name), registers of zero width left out."""
-    return {key: int(value.sum()) for key, value in activity.toggles.items() if activity.bits[key] > 0}
 
 
 def register_bits(verilog_text: str, top: str, config: SensorConfig, streaming: bool) -> dict[tuple[str, str], int]:

@@ -2,7 +2,7 @@
 
 :func:`run_icarus` (the parallel top, ``tespike.rtl.verilog.array_verilog``) and
 :func:`run_icarus_stream` (the streaming top, ``--lanes N``) write the top's
-Verilog and one Verilog-2005 testbench (:func:`_testbench`, its output ports
+Verilog and one Verilog-2005 testbench (:func:`verilog_testbench`, its output ports
 taken from :class:`tespike.cosim.tops.Top`) that drives only the SPEC section 6 ports:
 it reads the stimulus rows with ``$readmemh`` (and the reset vector with
 ``$readmemb``), holds ``rst`` for :data:`~tespike.cosim.outside.RESET_CLOCKS` clocks,
@@ -64,7 +64,7 @@ _OUTPUTS = {
 }
 
 
-def _testbench(top: str, charge_bits: int, output_bits: int, outputs: str, what: str, dump: bool = False) -> str:
+def verilog_testbench(top: str, charge_bits: int, output_bits: int, outputs: str, what: str, dump: bool = False) -> str:
     """The one Verilog-2005 testbench; ``outputs`` picks the top's output ports (:data:`_OUTPUTS`);
     ``dump``: every signal of the top and below goes to :data:`DUMP` (a VCD)."""
     declare, connect, capture = _OUTPUTS[outputs]
@@ -122,11 +122,6 @@ endmodule
 """
 
 
-def icarus_testbench(top: str, charge_bits: int, frame_bits: int) -> str:
-    """Verilog-2005 testbench of the SPEC section 6 ports; CLOCKS, READOUTS, FLUSH are parameters."""
-    return _testbench(top, charge_bits, frame_bits, "frame", "ports")
-
-
 def _parse_captures(path: Path, what: str, word_port: str = "frame") -> tuple[np.ndarray, list[str]]:
     try:
         lines = path.read_text().splitlines()
@@ -155,14 +150,14 @@ def _simulate(run: RunPlan, verilog: str, what: str, work_dir, vcd_path=None) ->
     T = stimulus.shape[0]
     iverilog = require_tool("iverilog", "iverilog")
     vvp = require_tool("vvp", "iverilog")
-    testbench = _testbench(top.module, top.charge_bits, top.output_bits, top.outputs,
-                           "streaming ports" if top.streaming else "ports", vcd_path is not None)
+    bench = verilog_testbench(top.module, top.charge_bits, top.output_bits, top.outputs,
+                              "streaming ports" if top.streaming else "ports", vcd_path is not None)
     with work_folder("tespike-icarus-") as scratch:
         work = Path(work_dir) if work_dir is not None else Path(scratch)
         if not work.is_dir():
             raise SimulatorRunError(f"work_dir {str(work)!r} is not an existing directory")
         (work / "array.v").write_text(verilog)
-        (work / "tb.v").write_text(testbench)
+        (work / "tb.v").write_text(bench)
         E = top.config.input_bits
         with atomic_output(work / _STIMULUS) as tmp:
             rows = rows_to_hex(pack_rows(stimulus.reshape(T, -1), E), top.charge_bits)

@@ -141,11 +141,6 @@ def combine_statistics(n: torch.Tensor, mean: torch.Tensor, m2: torch.Tensor) ->
     return total, grand, m2.sum(dim=0) + (n * (mean - grand) ** 2).sum(dim=0)
 
 
-def tube_deviations(errors: torch.Tensor, block: int = BLOCK) -> torch.Tensor:
-    """Sample standard deviation of each (frames x block x block) tube of (F, H, W) errors -> (tubes,)."""
-    return _deviation(*combine_statistics(*block_statistics(errors, block)))
-
-
 def _deviation(n, mean, m2):
     return (m2 / (n - 1).clamp(min=1)).sqrt()
 

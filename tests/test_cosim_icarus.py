@@ -17,7 +17,7 @@ import pytest
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.golden.sensor import simulate
-from tespike.cosim.icarus import run_icarus, icarus_testbench
+from tespike.cosim.icarus import run_icarus, verilog_testbench
 from tespike.cosim.outside import SimulatorBuildError, SimulatorMissingError, SimulatorRunError
 from tests.configs import EDGE_CONFIGS, MSB_CONFIGS
 from tests.outside_helpers import KINDS, SHAPE, generated_verilog, make_stimulus, reference_words
@@ -124,7 +124,7 @@ def test_no_whole_readout_gives_no_words():
 
 
 def test_testbench_drives_only_the_spec_ports():
-    text = icarus_testbench("te_pixel_array", 96, 30)
+    text = verilog_testbench("te_pixel_array", 96, 30, "frame", "ports")
     assert "te_pixel_array dut(.clk(clk), .rst(rst), .charge(charge), .frame_valid(frame_valid), .frame(frame));" in text
     assert "reg [95:0] charge;" in text and "wire [29:0] frame;" in text
 
