@@ -102,16 +102,19 @@ def work_folder(prefix: str, dir: str | os.PathLike | None = None) -> Iterator[P
     outright (``tempfile.TemporaryDirectory`` left it behind); renamed away inside the block
     (a finished build moved into its cache), nothing is removed. Files written in it with
     :func:`atomic_output` are not reported among the run's outputs (:func:`finished_outputs`)."""
-    path = Path(tempfile.mkdtemp(prefix=prefix, dir=dir))
-    _Janitor.hold(path)
-    real = Path(os.path.realpath(path))
-    _WORK_FOLDERS.add(real)
+    path = real = None
     try:
+        with stops_held():              # (made and held as one step: a stop in between left it behind)
+            path = Path(tempfile.mkdtemp(prefix=prefix, dir=dir))
+            _Janitor.hold(path)
+        real = Path(os.path.realpath(path))
+        _WORK_FOLDERS.add(real)
         yield path
     finally:
         _WORK_FOLDERS.discard(real)
-        shutil.rmtree(path, ignore_errors=True)
-        _Janitor.release(path)
+        if path is not None:
+            shutil.rmtree(path, ignore_errors=True)
+            _Janitor.release(path)
 
 
 def _finished(target: Path, shown: str) -> None:
@@ -338,14 +341,15 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
         stem = target.name[:_PART_NAME]
         _remove_stale_parts(directory, stem)
         prefix = f".{stem}.{os.getpid()}."
+    tmp, deferred = None, False
     try:
-        fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=".part", dir=directory)
-        os.close(fd)
-    except OSError as exc:
-        raise _write_error(shown, exc) from None
-    _Janitor.hold(tmp)
-    deferred = False
-    try:
+        try:
+            with stops_held():          # (made and held as one step: a stop in between left it behind)
+                fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=".part", dir=directory)
+                os.close(fd)
+                _Janitor.hold(tmp)
+        except OSError as exc:
+            raise _write_error(shown, exc) from None
         try:
             yield tmp
             if through:
@@ -367,7 +371,7 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
                 raise                              # about another file: the caller names it
             raise _write_error(shown, exc) from None
     finally:
-        if not deferred:
+        if tmp is not None and not deferred:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
             _Janitor.release(tmp)
@@ -529,19 +533,21 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     target = Path(os.path.realpath(shown))
     stem = target.name[:_PART_NAME]
     _remove_stale_parts(target.parent, stem, folders=True)
-    try:
-        tmp = Path(tempfile.mkdtemp(prefix=f".{stem}.{os.getpid()}.", suffix=".part", dir=target.parent))
-        os.chmod(tmp, 0o777 & ~_umask())
-    except OSError as exc:
-        raise _write_error(shown, exc) from None
-    _Janitor.hold(tmp)
-    inside = str(tmp)
+    tmp, inside = None, None
     mark = len(_FINISHED)          # files written inside the temporary are not outputs yet
 
     def reworded(text: str) -> str:
-        return text.replace(inside, shown.rstrip("/") or shown)
+        return text.replace(inside, shown.rstrip("/") or shown) if inside else text
 
     try:
+        try:
+            with stops_held():          # (made and held as one step: a stop in between left it behind)
+                tmp = Path(tempfile.mkdtemp(prefix=f".{stem}.{os.getpid()}.", suffix=".part", dir=target.parent))
+                _Janitor.hold(tmp)
+            inside = str(tmp)
+            os.chmod(tmp, 0o777 & ~_umask())
+        except OSError as exc:
+            raise _write_error(shown, exc) from None
         try:
             yield tmp
             with stops_held():                    # (the two renames below are one step to a stop)
@@ -567,5 +573,6 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     finally:
         if _FINISHED[mark:] != [shown]:
             del _FINISHED[mark:]
-        shutil.rmtree(tmp, ignore_errors=True)
-        _Janitor.release(tmp)
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+            _Janitor.release(tmp)

@@ -41,3 +41,37 @@ def test_a_work_folder_of_a_run_killed_outright_is_removed(tmp_path):
     while os.path.exists(folder) and time.monotonic() < end:
         time.sleep(0.02)
     assert not os.path.exists(folder)
+
+
+def test_a_stop_as_a_temporary_is_made_leaves_none_behind(tmp_path, monkeypatch):
+    """Ctrl-C (or SIGTERM) right after the temporary was made, before the block that removes it
+    began: the temporary stayed (CI caught an rtl-sim SIGTERM leaving '.w.vcd.<pid>.<x>.part')."""
+    import tempfile
+
+    import pytest
+
+    from tespike.golden.atomic import atomic_folder
+    real_file, real_folder = tempfile.mkstemp, tempfile.mkdtemp
+
+    def then_stopped(real):
+        def made(*args, **kwargs):
+            made_path = real(*args, **kwargs)
+            signal.raise_signal(signal.SIGINT)          # (Python's handler: KeyboardInterrupt at once)
+            return made_path
+        return made
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        monkeypatch.setattr(tempfile, "mkstemp", then_stopped(real_file))
+        with pytest.raises(KeyboardInterrupt):
+            with atomic_output(tmp_path / "out.npy"):
+                pass
+        monkeypatch.setattr(tempfile, "mkdtemp", then_stopped(real_folder))
+        with pytest.raises(KeyboardInterrupt):
+            with atomic_folder(tmp_path / "results"):
+                pass
+        with pytest.raises(KeyboardInterrupt):
+            with work_folder("tespike-test-", dir=tmp_path):
+                pass
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert os.listdir(tmp_path) == []
