@@ -28,6 +28,15 @@ from .paths import check_input_file
 #: parses the text as Python, and its fallback's tokenizer raises TokenError, not a ValueError).
 HEADER_ERRORS = (SyntaxError, tokenize.TokenError)
 
+
+def header_damaged(exc: BaseException) -> bool:
+    """Whether numpy's refusal of a .npy (or an .npz member) is its header's text being damaged: a
+    parse error (:data:`HEADER_ERRORS`), ``ast.literal_eval``'s ValueError, whose words show an AST
+    node's repr (``malformed node or string on line 1: <ast.Name object at 0x...>``), not a cause,
+    or numpy's "Cannot parse header", which quotes the damaged bytes."""
+    return isinstance(exc, HEADER_ERRORS) or (isinstance(exc, ValueError) and any(
+        words in str(exc) for words in ("malformed node or string", "Cannot parse header")))
+
 __all__ = ["atomic_output", "check_scene", "check_stimulus", "load_npy", "load_scene", "load_stimulus",
            "load_stream", "open_npz", "save_images", "save_stream", "scan_light", "unsigned_dtype", "word_dtype"]
 
@@ -45,7 +54,7 @@ def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.nd
         array = np.load(path, allow_pickle=False, mmap_mode=mmap_mode)
     except (OSError, ValueError, EOFError, OverflowError, *HEADER_ERRORS) as exc:   # (Overflow: a header
         refuse_starved(exc, what, path)                            # shape whose product is negative, mapped)
-        cause = "its header is damaged" if isinstance(exc, HEADER_ERRORS) else one_line(exc)
+        cause = "its header is damaged" if header_damaged(exc) else one_line(exc)
         raise InputError(f"{what} file {str(path)!r} is not a readable .npy array: {cause}") from None
     if not isinstance(array, np.ndarray):
         if hasattr(array, "close"):
@@ -307,7 +316,7 @@ def open_npz(path: str | Path, what: str, holding: str = "") -> Iterator[np.lib.
         raise
     except NPZ_ERRORS as exc:
         refuse_starved(exc, what, path)
-        cause = "a member's .npy header is damaged" if isinstance(exc, HEADER_ERRORS) else one_line(exc)
+        cause = "a member's .npy header is damaged" if header_damaged(exc) else one_line(exc)
         raise InputError(f"{what} file {shown!r} is not a readable .npz archive: {cause}") from None
 
 

@@ -220,6 +220,14 @@ def test_a_damaged_npy_header_is_one_line_in_a_file_and_in_an_archive(tmp_path):
     (tmp_path / "I.npy").write_bytes(bytes(data))
     with pytest.raises(InputError, match=r"I.npy' is not a readable .npy array: its header is damaged"):
         load_scene(tmp_path / "I.npy")
+    np.save(tmp_path / "J.npy", np.full((2, 3, 4), 0.5))         # a byte of the dict's text: a name,
+    data = bytearray((tmp_path / "J.npy").read_bytes())          # not a literal ("malformed node or string
+    for flip in (0x01, 0xFF):                                     # ... <ast.Name object at 0x...>"), or
+        data[data.find(b"alse") - 1] ^= flip                      # not text ("Cannot parse header: ...")
+        (tmp_path / "J.npy").write_bytes(bytes(data))
+        with pytest.raises(InputError, match=r"J.npy' is not a readable .npy array: its header is damaged$"):
+            load_scene(tmp_path / "J.npy")
+        data[data.find(b"alse") - 1] ^= flip
     np.savez(tmp_path / "S.npz", words=np.zeros((2, 3, 4), np.uint8), config=np.array(SensorConfig().to_json()))
     data = bytearray((tmp_path / "S.npz").read_bytes())
     data[data.find(b"\x93NUMPY") + 10] ^= 0x5A
