@@ -113,8 +113,26 @@ def work_folder(prefix: str, dir: str | os.PathLike | None = None) -> Iterator[P
     finally:
         _WORK_FOLDERS.discard(real)
         if path is not None:
-            shutil.rmtree(path, ignore_errors=True)
-            _Janitor.release(path)
+            _remove_held(path)
+
+
+def _remove_held(folder: Path) -> None:
+    """Remove a temporary folder the janitor holds, and release it; where it cannot be removed
+    whole (out of file handles: ``rmtree`` opens each folder it walks), the janitor keeps it and
+    removes it once this process ends."""
+    shutil.rmtree(folder, ignore_errors=True)
+    if not os.path.lexists(folder):
+        _Janitor.release(folder)
+
+
+def _names_inside(filename, folder: Path, target: Path) -> bool:
+    """Whether an error's ``filename`` is the results folder being built (``folder``), a file in it,
+    or its target: a file the run writes, not one it reads."""
+    try:
+        name = Path(os.path.abspath(os.fspath(filename)))
+    except (TypeError, ValueError):
+        return True
+    return any(name == place or name.is_relative_to(place) for place in (Path(folder), target))
 
 
 def _finished(target: Path, shown: str) -> None:
@@ -568,11 +586,13 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
         except InputError as exc:
             raise InputError(reworded(str(exc))) from None
         except OSError as exc:
+            if exc.filename and not _names_inside(exc.filename, tmp, target):
+                raise                              # a file the run read (a font out of handles): not written
             name = reworded(os.fspath(exc.filename)) if exc.filename else shown
-            raise InputError(f"cannot write {name!r}: {exc.strerror or exc}") from None
+            from .resources import file_handles_fault
+            raise InputError(f"cannot write {name!r}: {file_handles_fault(exc) or exc.strerror or exc}") from None
     finally:
         if _FINISHED[mark:] != [shown]:
             del _FINISHED[mark:]
         if tmp is not None:
-            shutil.rmtree(tmp, ignore_errors=True)
-            _Janitor.release(tmp)
+            _remove_held(tmp)

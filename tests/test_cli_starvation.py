@@ -296,3 +296,28 @@ def test_yosys_without_its_address_space_is_out_of_memory_in_one_line(tmp_path):
     assert_refused(done, "out of memory within the address-space limit (ulimit -v)",
                    "Yosys (WebAssembly) could not reserve its address space")
     assert done.returncode == 1 and not out.exists()
+
+
+def test_evaluate_out_of_file_handles_leaves_no_temporary_and_names_no_read_file_as_written(tmp_path):
+    """Out of file handles, ``evaluate`` left its hidden results folder ``.E.<pid>.<x>.part`` for good
+    (``rmtree`` itself needs handles, and the janitor had been told it was gone), and called a
+    matplotlib font it was reading a file it "cannot write"."""
+    import time
+    scene = tmp_path / "I.npy"
+    np.save(scene, np.full((12, 32, 32), 0.3, np.float32))
+    outcomes = set()
+    for handles in range(8, 16):
+        out = tmp_path / f"E{handles}"
+        done = run_limited(ENTRY.format(args=["evaluate", "--set", "none", "--scene", str(scene), "--methods", "tfp",
+                                              "--out", str(out), "--progress", "off"]),
+                           {resource.RLIMIT_NOFILE: handles}, timeout=300)
+        if done.returncode:
+            assert_refused(done, "too many open files", "ulimit -n")
+            assert "cannot write" not in done.stderr or str(out) in done.stderr, done.stderr
+            assert not out.exists()
+        outcomes.add(done.returncode == 0)
+        deadline = time.monotonic() + 10                     # (the janitor's removal, where it had to)
+        while [p for p in os.listdir(tmp_path) if p.startswith(".")] and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert [p for p in os.listdir(tmp_path) if p.startswith(".")] == [], handles
+    assert False in outcomes, "no limit tried ran out of handles: lower the range"
