@@ -116,13 +116,17 @@ def work_folder(prefix: str, dir: str | os.PathLike | None = None) -> Iterator[P
             _remove_held(path)
 
 
-def _remove_held(folder: Path) -> None:
-    """Remove a temporary folder the janitor holds, and release it; where it cannot be removed
-    whole (out of file handles: ``rmtree`` opens each folder it walks), the janitor keeps it and
-    removes it once this process ends."""
-    shutil.rmtree(folder, ignore_errors=True)
-    if not os.path.lexists(folder):
-        _Janitor.release(folder)
+def _remove_held(path: str | Path) -> None:
+    """Remove a temporary (file or folder) the janitor holds, and release it; where it cannot be
+    removed whole (out of file handles: ``rmtree`` opens each folder it walks), the janitor keeps it
+    and removes it once this process ends. A temporary already renamed into place is only released."""
+    if os.path.isdir(path) and not os.path.islink(path):
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+    if not os.path.lexists(path):
+        _Janitor.release(path)
 
 
 def _names_inside(filename, folder: Path, target: Path) -> bool:
@@ -390,9 +394,7 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
             raise _write_error(shown, exc) from None
     finally:
         if tmp is not None and not deferred:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            _Janitor.release(tmp)
+            _remove_held(tmp)
 
 
 #: The open groups of :func:`outputs_together`, innermost last: each (its targets, the finished
@@ -426,9 +428,7 @@ def outputs_together(*paths):
                 _finished(target, shown)
     finally:                                   # (a renamed temporary is gone: its unlink does nothing)
         for tmp, _, _ in pending:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            _Janitor.release(tmp)
+            _remove_held(tmp)
 
 
 #: Signals that stop a command, held while an output is committed (:func:`stops_held`) or a
@@ -588,9 +588,7 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
         except OSError as exc:
             if exc.filename and not _names_inside(exc.filename, tmp, target):
                 raise                              # a file the run read (a font out of handles): not written
-            name = reworded(os.fspath(exc.filename)) if exc.filename else shown
-            from .resources import file_handles_fault
-            raise InputError(f"cannot write {name!r}: {file_handles_fault(exc) or exc.strerror or exc}") from None
+            raise _write_error(reworded(os.fspath(exc.filename)) if exc.filename else shown, exc) from None
     finally:
         if _FINISHED[mark:] != [shown]:
             del _FINISHED[mark:]

@@ -86,22 +86,18 @@ def check_output_file(path: str | os.PathLike, what: str | None = None) -> Path:
     if text.endswith(os.sep) and not os.path.isdir(text):     # (a directory's name, not a file's)
         raise InputError(f"cannot write {label}: a path ending in {os.sep!r} names a directory "
                          "(name a file)")
-    if written_through(text):           # (a pipe behind /dev/stdout: realpath names no file, the kernel opens it)
+    target = resolve_output(text)
+    if written_through(text):           # a device or FIFO, links followed as the kernel follows them
         if not os.access(text, os.W_OK):
             raise InputError(f"cannot write {label}: permission denied")
-        return Path(text)
-    target = resolve_output(text)
-    try:
+        return target if os.path.exists(target) else Path(text)   # (a pipe behind /dev/stdout: realpath
+    try:                                                            # names no file, the kernel opens it)
         info = os.stat(target)
     except FileNotFoundError:
         info = None
     except OSError as exc:
         raise InputError(f"cannot write {label}: {_reason(exc)}") from None
     if info is not None:
-        if passes_through(info.st_mode):
-            if not os.access(target, os.W_OK):
-                raise InputError(f"cannot write {label}: permission denied")
-            return target
         if not stat.S_ISREG(info.st_mode):
             raise InputError(f"cannot write {label}: it is {kind(info.st_mode)}"
                              + (" (name a file inside it)" if stat.S_ISDIR(info.st_mode) else ""))

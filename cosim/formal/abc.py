@@ -58,6 +58,7 @@ PDR_SECONDS = 20.0
 #: Seconds BMC always gets, however little of a harness's time is left (below it ABC barely
 #: starts): the least time a top property may be given.
 MIN_BMC_SECONDS = 10.0
+
 #: Seconds ``scorr; dprove`` gets before the bounded check takes over (the TE 1 x 1 streaming
 #: tops at the presets' own clocks took 12-41 s in it on 2 loaded cores).
 DPROVE_SECONDS = 150.0

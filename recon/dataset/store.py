@@ -331,10 +331,11 @@ class DatasetStore:
                     raise InputError(f"dataset store file {str(folder / 'zarr.json')!r} is missing (the sequence "
                                      f"{folder.name!r} is damaged); remove its folder and run tespike dataset "
                                      "again to rebuild it")
-                if sequence_like and (folder / "zarr.json").is_file() and _node_type(folder / "zarr.json") != "'group'":
+                kind = _node_type(folder / "zarr.json") if sequence_like and (folder / "zarr.json").is_file() else None
+                if kind not in (None, "'group'"):
                     raise InputError(f"dataset store file {str(folder / 'zarr.json')!r} is damaged (its node_type is "
-                                     f"{_node_type(folder / 'zarr.json')}); remove its sequence's folder and run "
-                                     "tespike dataset again to rebuild it")
+                                     f"{kind}); remove its sequence's folder and run tespike dataset again to "
+                                     "rebuild it")
         try:
             with warnings.catch_warnings():           # (Zarr warns of each stray file or folder)
                 warnings.simplefilter("ignore")
@@ -466,14 +467,9 @@ def reading(url: str, path: str = ""):
         yield
     except InputError:
         raise
-    except FileNotFoundError:           # (Zarr's "No array found ... at path": a node gone mid-run)
-        gone = _gone(str(url), path)
-        if gone is None:
-            raise
-        raise InputError(gone) from None
-    except _DAMAGE as exc:
-        where = damaged_file(str(url), path)
-        if where is None:
+    except (FileNotFoundError, *_DAMAGE) as exc:   # (FileNotFoundError: Zarr's "No array found ... at path")
+        where = None if isinstance(exc, FileNotFoundError) else damaged_file(str(url), path)
+        if where is None:                          # no damaged file: maybe a node gone mid-run
             gone = _gone(str(url), path)
             if gone is None:
                 raise
