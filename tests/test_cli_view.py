@@ -80,6 +80,10 @@ def test_an_option_that_would_be_ignored_is_refused(tmp_path):
     assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "f", "--each",
                                "--columns", "3"), "--columns")
     assert not list(tmp_path.glob("*.png")) and not (tmp_path / "f").exists()
+    # --each names a folder: one named like a contact sheet was made as a folder called v.png
+    assert_refused(run_tespike("view", "--input", tmp_path / "I.npy", "--out", tmp_path / "v.png", "--each"),
+                   "v.png", "--each writes a folder")
+    assert not (tmp_path / "v.png").exists()
     result = run_tespike(*view, "--input", tmp_path / "S.npz", "--estimator", "midpoint", "--columns", "2")
     assert result.returncode == 0, result.stderr
 

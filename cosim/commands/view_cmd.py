@@ -138,6 +138,9 @@ def run(args) -> int:
     if args.each:
         if out.exists() and not out.is_dir():
             raise InputError(f"--out {str(out)!r} exists and is not a folder (--each writes a folder)")
+        if out.suffix.lower() == ".png" and not out.is_dir():   # (a folder named so, made on purpose, is taken)
+            raise InputError(f"--out {str(out)!r}: --each writes a folder of frame_NNNN.png files, not a .png "
+                             "file (give a folder, or leave out --each for a contact sheet)")
         check_output_dir(args.out, "--out")         # (as typed: Path('') is '.', the folder of the inputs)
     elif out.suffix.lower() != ".png" and not written_through(args.out):   # (a device or FIFO takes any name)
         raise InputError(f"--out {str(out)!r}: a contact sheet is a .png file (or give --each and a folder)")
