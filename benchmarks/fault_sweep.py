@@ -211,13 +211,18 @@ def parts_beside(path: Path) -> list[str]:
     return sorted(p.name for p in folder.iterdir() if p.name.endswith(".part")) if folder.is_dir() else []
 
 
+#: Output kinds a case finds made by a previous run (:func:`precreate`).
+PRECREATED = ("file", "folder", "frames")
+
+
 def precreate(path: Path, kind: str) -> None:
-    """A previous run's output at ``path``: a file, or a folder with one file."""
+    """A previous run's output at ``path``: a file, or a folder with one file (a results folder's
+    table, or ``frames``: a folder of view --each, which refuses any file but its frames)."""
     if kind == "file":
         path.write_bytes(b"previous run")
-    elif kind == "folder":
+    elif kind in ("folder", "frames"):
         path.mkdir()
-        (path / "table.md").write_text("previous run")      # a name a results folder holds
+        (path / ("table.md" if kind == "folder" else "frame_0000.png")).write_text("previous run")
 
 
 # ------------------------------------------------------------------ inputs
@@ -333,7 +338,7 @@ class Case:
     argv: list[str]
     member: str | None = None    # for a folder input: the file inside it to corrupt
     out: str | None = "out"      # output path name; None: the command writes nothing
-    out_kind: str = "file"       # file / folder / none (do not pre-create)
+    out_kind: str = "file"       # file / folder / frames (view --each's) / none (do not pre-create)
     modes: tuple[str, ...] = MODES
     extra: dict = field(default_factory=dict)
     env: dict = field(default_factory=dict)     # environment of the command, ``{work}`` its folder
@@ -391,14 +396,14 @@ def truncation_cases(valid: Path) -> list[Case]:
         Case("view stream", "S.npz", ["view", "--input", "{in}", "--out", "{out}"], out="v.png"),
         Case("view stimulus", "E.npy", ["view", "--input", "{in}", "--config", "te", "--out", "{out}"], out="v.png"),
         Case("view each", "R.npy", ["view", "--input", "{in}", "--each", "--out", "{out}"], out="vdir",
-             out_kind="folder"),
+             out_kind="frames"),
         Case("scene hdr", "frames/hdr", ["scene", "--folder", "{in}", "--out", "{out}"], member="f1.hdr",
              out="I2.npy"),
         Case("scene exr", "frames/exr", ["scene", "--folder", "{in}", "--out", "{out}"], member="f1.exr",
              out="I2.npy"),
         Case("evaluate scene", "I.npy", EVAL + ["--scene", "{in}", "--out", "{out}", "--force"], out="ev",
              out_kind="folder"),
-        Case("evaluate folder", "frames/hdr", EVAL + ["--folder", "{in}", "--frames", "3", "--out", "{out}",
+        Case("evaluate folder", "frames/hdr", EVAL + ["--folder", "{in}", "--out", "{out}",
                                                       "--force"], member="f1.hdr", out="ev", out_kind="folder"),
         Case("evaluate weights", "T.pt", evaluate_argv("tfp,net", "--set", "none", "--scene", "I.npy", "--weights", "{in}",
                                                     "--out", "{out}", "--force"), out="ev", out_kind="folder"),
@@ -450,7 +455,7 @@ def run_truncation(case: Case, mode: str, base: Path) -> tuple[bool, str]:
     last_byte = target.read_bytes()[-1:]
     corrupt(target, mode)
     out = work / case.out if case.out else None
-    if out is not None and case.out_kind in ("file", "folder"):
+    if out is not None and case.out_kind in PRECREATED:
         if out.exists():
             shutil.rmtree(out) if out.is_dir() else out.unlink()
         precreate(out, case.out_kind)
@@ -493,7 +498,7 @@ def judge(case, mode, outcome, work, target, given, out, before, run_before, bla
         return False, f"{len(lines)} lines on stderr: {first[:100]} ... {lines[-1][:100] if lines else ''}"
     if not names(first, given):
         return False, f"does not name {given!r} as given: {first[:200]}"
-    if out is not None and case.out_kind in ("file", "folder") and state(out) != before:
+    if out is not None and case.out_kind in PRECREATED and state(out) != before:
         return False, f"output {case.out} changed: {first[:160]}"
     if out is not None and case.out_kind == "none" and os.path.lexists(out) and "resumes it" not in first:
         return False, f"output {case.out} left behind: {first[:160]}"     # a store kept to resume says so
@@ -541,7 +546,7 @@ def run_interrupt(case: Case, at: float, signum: int, base: Path) -> tuple[bool,
     work = Path(tempfile.mkdtemp(dir=base, prefix="int."))
     copy_inputs(base / "valid", work)
     out = work / case.out
-    if case.out_kind in ("file", "folder"):
+    if case.out_kind in PRECREATED:
         if out.exists():
             shutil.rmtree(out) if out.is_dir() else out.unlink()
         precreate(out, case.out_kind)
@@ -570,7 +575,7 @@ def run_interrupt(case: Case, at: float, signum: int, base: Path) -> tuple[bool,
         if len(lines) != 1:
             return False, (f"exit {outcome.code}, {len(lines)} lines on stderr: {first[:100]} ... "
                            f"{lines[-1][:100] if lines else ''}")
-        if case.out_kind in ("file", "folder") and state(out) != before and "whole" not in first:
+        if case.out_kind in PRECREATED and state(out) != before and "whole" not in first:
             return False, f"output {case.out} changed: {first[:140]}"
         if case.out_kind == "none" and os.path.lexists(out) and not case.name.startswith(("train", "dataset")):
             return False, f"output {case.out} left: {first[:140]}"
@@ -787,7 +792,7 @@ def run_starved(case: Case, kind: str, limits: dict[int, int], free: int | None,
             if mount is None:
                 return True, "skipped: cannot mount a tmpfs here"
             out = work / case.out
-            if case.out_kind in ("file", "folder"):
+            if case.out_kind in PRECREATED:
                 precreate(out, case.out_kind)
             before = state(out)
             env = {}
@@ -826,7 +831,7 @@ def judge_starved(case: Case, kind: str, outcome: Outcome, work: Path, out: Path
         return False, f"does not say the cause ({kind}): {first[:160]}"
     if kind in ("disk", "fsize") and "'" not in first:
         return False, f"names no file: {first[:160]}"
-    if case.out_kind in ("file", "folder") and state(out) != before and "whole" not in first:
+    if case.out_kind in PRECREATED and state(out) != before and "whole" not in first:
         return False, f"output {case.out} changed: {first[:140]}"
     if case.out_kind == "none" and os.path.lexists(out) and "whole" not in first and "resumes" not in first:
         return False, f"output {case.out} written by a failed run: {first[:140]}"     # (a resumable store says so)

@@ -42,9 +42,32 @@ def test_an_input_inside_the_cocotb_work_folder_is_refused(tmp_path):
     args = SimpleNamespace(work_dir=str(work), verilog=str(work / "icarus.log"), stimulus=None,
                            argv=[str(work / "icarus.log")])
     with pytest.raises(InputError, match="--verilog .* lies inside --work-dir"):
-        check_inputs_outside(args, "work_dir")
+        check_inputs_outside(args, "work_dir", ("verilog", "stimulus"))
     args.verilog = str(tmp_path / "elsewhere.v")
-    check_inputs_outside(args, "work_dir")              # outside (or missing): nothing to refuse
+    check_inputs_outside(args, "work_dir", ("verilog", "stimulus"))   # outside (or missing): nothing to refuse
+
+
+def test_a_word_that_names_the_results_folder_is_no_input(tmp_path, scene, monkeypatch):
+    """The check read every option's value as a path: with a folder of the same name in the working
+    folder, the command's own name (``demo --out demo`` run twice, the README's first command), ``--set
+    default`` or a preset (``--te-config te``) "lay inside --out" and the second run was refused."""
+    from tespike.cosim.cli import build_parser
+    from tespike.cosim.commands.common import check_inputs_outside
+    from tespike.cosim.commands.evaluate_cmd import INPUT_OPTIONS
+    monkeypatch.chdir(tmp_path)
+    for word in ("evaluate", "default", "te", "tfp"):
+        os.mkdir(word)
+        args = build_parser("evaluate").parse_args(["evaluate", "--set", "default", "--te-config", "te",
+                                                    "--methods", "tfp", "--out", word])
+        check_inputs_outside(args, "out", INPUT_OPTIONS)
+    demo = build_parser("demo").parse_args(["demo", "--out", "demo"])
+    os.mkdir("demo")
+    check_inputs_outside(demo, "out", ("weights",))
+    args = ("evaluate", "--set", "none", "--scene", scene, "--methods", "tfp", "--ml-count-config", "none",
+            "--out", "evaluate", "--force", "-q")
+    assert run_tespike(*args).returncode == 0
+    result = run_tespike(*args)                          # a second run into its own folder
+    assert result.returncode == 0, result.stderr
 
 
 def test_frames_whose_names_compare_alike_come_in_one_order(tmp_path):

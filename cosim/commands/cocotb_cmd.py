@@ -58,7 +58,7 @@ def run(args) -> int:
     check_array_arguments(config, args.height, args.width, args.lanes)   # the tops tespike verilog writes
     if args.work_dir is not None:         # (a file there was "File exists", naming no option)
         check_work_dir(args.work_dir)
-        check_inputs_outside(args, "work_dir")
+        check_inputs_outside(args, "work_dir", ("config", "verilog", "stimulus"))
     for flag, value in (("--readouts", args.readouts), ("--seed", args.seed)):
         if value is not None and args.stimulus is not None:
             raise InputError(f"{flag} shapes the default stimulus; --stimulus gives its own (it would be ignored)")

@@ -246,24 +246,27 @@ def frame_range(spec, count: int) -> range:
     return range(a, b)
 
 
-def check_inputs_outside(args, folder_option: str) -> None:
-    """Refuse any input of the command (every option's value naming an existing file or folder) that lies
-    inside the output folder of ``folder_option`` (``"out"``, ``"work_dir"``), which the run replaces
-    whole: a --weights, --scene or --verilog kept there was overwritten by the new folder's files."""
+def check_inputs_outside(args, folder_option: str, inputs: tuple[str, ...]) -> None:
+    """Refuse any input file or folder of the command (the options ``inputs``, by their argparse
+    names; a configuration preset or ``none`` is no file) that lies inside the output folder of
+    ``folder_option`` (``"out"``, ``"work_dir"``), which the run replaces whole: a --weights,
+    --scene or --verilog kept there was overwritten by the new folder's files. Only the options
+    that name files are read: a word such as the command's name or ``--set default`` was taken
+    for a path when a folder of that name existed (``demo --out demo`` refused its second run)."""
     import os
 
+    from tespike.golden.config import PRESETS
     from tespike.golden.errors import InputError
     from tespike.golden.paths import lies_inside
     folder = getattr(args, folder_option)
     if folder is None or not os.path.isdir(folder):
         return
     flag = "--" + folder_option.replace("_", "-")
-    for dest, value in vars(args).items():
-        if dest in (folder_option, "argv"):
-            continue
+    for dest in inputs:
+        value = getattr(args, dest)
         for item in value if isinstance(value, (list, tuple)) else (value,):
-            if not isinstance(item, (str, os.PathLike)) or not os.path.lexists(item):
+            if item is None or (dest.endswith("config") and str(item) in (*PRESETS, "none")):
                 continue
-            if lies_inside(item, folder):
+            if os.path.lexists(item) and lies_inside(item, folder):
                 raise InputError(f"--{dest.replace('_', '-')} {os.fspath(item)!r} lies inside {flag} {folder!r}, "
                                  "which this run replaces whole: refusing to overwrite an input (move it out)")

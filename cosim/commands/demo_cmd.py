@@ -44,7 +44,7 @@ def run(args) -> int:
     from tespike.cosim.demo import run_demo
 
     from .common import check_inputs_outside, comma_items
-    check_inputs_outside(args, "out")        # (the folder is replaced whole: an input kept there would go)
+    check_inputs_outside(args, "out", ("weights",))   # (the folder is replaced whole: an input kept there would go)
     return run_demo(args.out, frames=args.frames, height=args.height, width=args.width, seed=args.seed,
                     crop=args.crop, rtl_readouts=args.rtl_readouts, backend=args.backend,
                     repeats=args.repeats, sensors=comma_items(args.sensors, "--sensors"),

@@ -34,6 +34,9 @@ from tespike.recon.settings import DEFAULT_WINDOW  # noqa: E402  (after the cons
 from .common import MAX_THREADS, check_inputs_outside, options_given  # noqa: E402
 from .reconstruct_cmd import METHOD_CHOICES  # noqa: E402
 
+#: The options that name input files or folders (none may lie inside --out, replaced whole).
+INPUT_OPTIONS = ("scene", "folder", "weights", "sensor_noise", "te_config", "ml_config", "ml_count_config", "store")
+
 HELP = ("simulate sequences with the paper's TE and ML (msb readout) sensors and the full-count ML "
         "camera, reconstruct with every method, write Table 1 (Markdown, CSV), a quality-against-run-time "
         "plot and image strips")
@@ -96,7 +99,7 @@ def _run_store(args) -> int:
     check_store_options(args)
     check_cluster_options(args.workers, args.scheduler)
     check_results_dir(args.out, OUTPUT_FILES, args.force)
-    check_inputs_outside(args, "out")
+    check_inputs_outside(args, "out", INPUT_OPTIONS)
     methods = None if args.methods is None else _named_methods(args)
     DatasetStore.open(args.store)                       # a missing or foreign store refused before any line
     with Runner(args.workers, args.scheduler) as runner:
@@ -228,7 +231,7 @@ def run(args) -> int:
                              "(a --scene or --folder keeps its own size)")
     ml_count = args.ml_count_config or ("none" if args.table else "ml")
     check_results_dir(args.out, OUTPUT_FILES, args.force)
-    check_inputs_outside(args, "out")
+    check_inputs_outside(args, "out", INPUT_OPTIONS)
     configs, noise_sensors = _sensors(args, ml_count)
     from tespike.recon.learned import weights_by_sensor
     weights = weights_by_sensor(args.weights, configs)
