@@ -71,6 +71,7 @@ def main() -> int:
     """Run ``tespike`` with the process's arguments; the exit status."""
     _fill_closed_descriptors()
     _hold_early_signals()
+    _one_blas_thread_under_limit()
     try:
         refusal = _address_space_refusal()
         if refusal:
@@ -108,6 +109,17 @@ def _address_space_limit() -> int | None:
     return None if soft == resource.RLIM_INFINITY else soft
 
 
+def _one_blas_thread_under_limit() -> None:
+    """Under an address-space limit, numpy's OpenBLAS starts one thread unless the user chose a
+    count (``OPENBLAS_NUM_THREADS``): each thread reserves tens of MB at import, and near the limit
+    a failed reservation hung the start, crashed it (SIGSEGV) or left a C extension returning no
+    exception (``SystemError``), where one thread starts in about 40 MB less. tespike's numpy work
+    is elementwise (no BLAS call that threads would speed up)."""
+    import os
+    if _address_space_limit() is not None:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
 def _starved() -> str:
     limit = _address_space_limit()
     where = f" within the address-space limit (ulimit -v) of {limit >> 20} MB" if limit is not None else ""
@@ -131,6 +143,10 @@ def _address_space_refusal() -> str | None:
         return None
     except subprocess.TimeoutExpired:  # OpenBLAS short of threads' room can hang its start
         return _starved()
-    if done.returncode == 0 or not any(word in done.stderr for word in _MEMORY_WORDS):
+    if done.returncode == 0:
         return None
-    return _starved()
+    # a start killed by a signal (a failed reservation met as SIGSEGV or SIGABRT) or one whose C
+    # extension returned no exception (SystemError) is one short of memory, as a MemoryError is
+    if done.returncode < 0 or any(word in done.stderr for word in _MEMORY_WORDS + ("SystemError",)):
+        return _starved()
+    return None

@@ -18,24 +18,27 @@ from tests.test_cli_clean_endings import run_here
 from tests.test_cli_hardening import small_tmpfs
 
 
-def run_limited(code: str, limits: dict, timeout: float = 120) -> subprocess.CompletedProcess:
+def run_limited(code: str, limits: dict, timeout: float = 120, env: dict | None = None) -> subprocess.CompletedProcess:
     """``python -c code`` (this checkout's tespike) under the resource ``limits``, SIGXFSZ ignored
-    as a starved shell's command would have it (a write past RLIMIT_FSIZE then fails with EFBIG)."""
+    as a starved shell's command would have it (a write past RLIMIT_FSIZE then fails with EFBIG);
+    ``env``: variables to set besides."""
     def starve():
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         for which, value in limits.items():
             resource.setrlimit(which, (value, value))
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), **(env or {}))
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env,
                           preexec_fn=starve, timeout=timeout)
 
 
-def start_address_space() -> int:
-    """Bytes of address space a process that has imported the command takes here (numpy's
-    OpenBLAS reserves about 40 MB per core, so it depends on the machine)."""
+def start_address_space(blas_threads: int | None = 1) -> int:
+    """Bytes of address space a process that has imported the command takes here, with numpy's
+    OpenBLAS on ``blas_threads`` threads (None: its default, one a core, each reserving about
+    40 MB): the command starts one under an address-space limit (``tespike.entry``)."""
     code = ("import tespike.cosim.cli\n"
             "print([l for l in open('/proc/self/status') if l.startswith('VmPeak')][0].split()[1])")
-    done = run_limited(code, {})
+    env = {} if blas_threads is None else {"OPENBLAS_NUM_THREADS": str(blas_threads)}
+    done = run_limited(code, {}, env=env)
     assert done.returncode == 0, done.stderr
     return int(done.stdout) * 1024
 
@@ -55,6 +58,38 @@ def test_an_address_space_too_small_to_start_is_one_line():
         assert done.returncode == 1 and done.stdout == ""
     done = run_limited(ENTRY.format(args=["scene", "--list"]), {resource.RLIMIT_AS: need + (64 << 20)})
     assert done.returncode == 0 and "default" in done.stdout, done.stderr      # room to start: it starts
+
+
+def test_under_a_limit_the_command_starts_in_the_room_one_blas_thread_needs():
+    """Numpy's OpenBLAS reserved about 40 MB a core at import: near that start's size a failed
+    reservation hung the start, killed it with SIGSEGV, or left CPython's SystemError traceback
+    ("error return without exception set"). Under a limit the command starts one BLAS thread."""
+    one, default = start_address_space(1), start_address_space(None)
+    from tespike.entry import START_MARGIN
+    limit = one + START_MARGIN + (24 << 20)
+    if limit >= default:
+        pytest.skip("one BLAS thread takes no less room here (one core)")
+    done = run_limited(ENTRY.format(args=["scene", "--list"]), {resource.RLIMIT_AS: limit})
+    assert done.returncode == 0 and "default" in done.stdout, done.stderr
+    done = run_limited(ENTRY.format(args=["scene", "--list"]), {resource.RLIMIT_AS: limit},
+                       env={"OPENBLAS_NUM_THREADS": str(os.cpu_count())})   # the user's own count is kept
+    assert_refused(done, "cannot start")
+
+
+def test_a_trial_start_that_crashes_is_out_of_memory(monkeypatch):
+    """The trial start in a child was read as short of memory only where its stderr said so: one killed
+    by SIGSEGV, or ending in CPython's SystemError (a C extension's failed allocation), let the command
+    start and meet the same end itself, in a traceback or silently."""
+    import tespike.entry as entry
+    monkeypatch.setattr(entry, "_address_space_limit", lambda: 200 << 20)
+    for code, stderr, starved in ((-11, "", True), (1, "SystemError: error return without exception set", True),
+                                  (1, "MemoryError", True), (0, "", False),
+                                  (1, "ModuleNotFoundError: No module named 'tespike'", False)):
+        done = subprocess.CompletedProcess([], code, "", stderr)
+        monkeypatch.setattr(subprocess, "run", lambda *args, done=done, **kwargs: done)
+        refusal = entry._address_space_refusal()
+        assert (refusal is not None) == starved, (code, stderr)
+        assert refusal is None or refusal.endswith("cannot start within the address-space limit (ulimit -v) of 200 MB")
 
 
 def test_torch_without_room_is_out_of_memory_in_one_line(tmp_path):
