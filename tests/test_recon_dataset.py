@@ -635,3 +635,26 @@ def test_light_from_frames_replaced_during_the_run_is_never_marked_complete(tmp_
     write_hdr(seq / "f1.hdr", np.full((4, 4, 3), 7.0, np.float32))       # replaced mid-run
     with pytest.raises(InputError, match="frames of sequence 'seq' changed while this run read them"):
         finish_light(str(tmp_path / "D.zarr"), "seq/light", [1.0], 2.0, source)
+
+
+def test_a_thread_that_cannot_start_is_no_damaged_store(tmp_path, capsys, small_store, monkeypatch):
+    """Zarr reads through a thread pool: with no room for a thread (``ulimit -v``, too many processes)
+    its RuntimeError was taken for a damaged file, so ``evaluate --store`` told the user to rebuild a
+    sound store, and a resumed ``dataset`` removed a sound sequence to make it anew."""
+    import shutil
+    store = tmp_path / "D.zarr"
+    shutil.copytree(small_store, store)
+
+    def no_thread(*args, **kwargs):
+        raise RuntimeError("can't start new thread")
+    monkeypatch.setattr(zarr, "open_array", no_thread)
+    monkeypatch.setattr(zarr, "open", no_thread)
+    monkeypatch.setattr(zarr.Group, "__getitem__", no_thread)
+    capsys.readouterr()
+    assert main(["evaluate", "--store", str(store), "--out", str(tmp_path / "E"), "--methods", "tfp", "-q"]) == 1
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "cannot start a thread" in err and "damaged" not in err, err
+    with pytest.raises(RuntimeError, match="can't start new thread"):
+        DatasetStore.open(str(store))._rebuild_if_unreadable("sun")
+    monkeypatch.undo()
+    assert compare_stores(small_store, store) == []

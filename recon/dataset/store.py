@@ -312,6 +312,8 @@ class DatasetStore:
                         raise ValueError(f"{name!r} is an array, not a sequence's group")
             return
         except _DAMAGE as exc:
+            if _starved(exc):
+                raise                     # (a sound sequence is not removed for want of a thread)
             where = damaged_file(self.url, name)
             if where is None:
                 raise InputError(f"sequence {name!r} of dataset store {self.url!r} cannot be read "
@@ -468,6 +470,8 @@ def reading(url: str, path: str = ""):
     except InputError:
         raise
     except (FileNotFoundError, *_DAMAGE) as exc:   # (FileNotFoundError: Zarr's "No array found ... at path")
+        if _starved(exc):
+            raise                                  # the command's line says what ran out, not the file
         where = None if isinstance(exc, FileNotFoundError) else damaged_file(str(url), path)
         if where is None:                          # no damaged file: maybe a node gone mid-run
             gone = _gone(str(url), path)
@@ -478,6 +482,16 @@ def reading(url: str, path: str = ""):
                  else one_line(exc, 160))                                                      # both as bytes)
         raise InputError(f"dataset store file {where!r} is damaged ({cause}); remove its sequence's "
                          "folder and run tespike dataset again to rebuild it") from None
+
+
+def _starved(exc: BaseException) -> bool:
+    """Whether ``exc``, met while Zarr reads, is the process running out (a thread that cannot start:
+    Zarr reads through a thread pool; an allocation that failed in a codec), not a damaged file:
+    the file read again would read the same way, and a line calling it damaged sends the user to
+    rebuild a sound store."""
+    text = str(exc)
+    return isinstance(exc, RuntimeError) and (text == "can't start new thread" or "alloc" in text.lower()
+                                              or "memory" in text.lower())
 
 
 def _gone(url: str, path: str) -> str | None:
@@ -518,7 +532,9 @@ def damaged_file(url: str, path: str = "") -> str | None:
             zarr.open(str(root), path="/".join(parts[:depth]), mode="r")
         except FileNotFoundError:
             continue
-        except _DAMAGE:
+        except _DAMAGE as exc:
+            if _starved(exc):
+                raise
             return str(meta)
     try:
         import itertools
@@ -526,9 +542,13 @@ def damaged_file(url: str, path: str = "") -> str | None:
         for index in itertools.product(*(range(n) for n in array.cdata_shape)):
             try:
                 array.blocks[index]
-            except _DAMAGE:
+            except _DAMAGE as exc:
+                if _starved(exc):
+                    raise
                 return str(root.joinpath(*parts, array.metadata.encode_chunk_key(index)))
-    except _DAMAGE:
+    except _DAMAGE as exc:
+        if _starved(exc):
+            raise
         return None
     return None
 
