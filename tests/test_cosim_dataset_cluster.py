@@ -384,3 +384,17 @@ def test_a_scheduler_address_of_no_reachable_form_is_refused_at_once():
                        ("tcp://:80", "HOST:PORT"), ("http://h:1", "http:// is not")):
         with pytest.raises(InputError, match=words):
             check_scheduler_address(bad)
+
+
+def test_dasks_warnings_in_this_process_are_quieted():
+    """"Couldn't gather 1 keys, rescheduling" (a worker died out of memory) reached stderr before the
+    command's one line: only ``distributed`` was set to ERROR, and Dask's logging configuration gives
+    ``distributed.client`` a WARNING level of its own, which the parent's does not override."""
+    import importlib
+    import logging
+
+    from tespike.cosim.dataset.cluster import _quiet_distributed_logs
+    importlib.import_module("distributed.client")       # (its import configures Dask's loggers)
+    _quiet_distributed_logs()
+    for name in ("distributed", "distributed.client", "distributed.worker", "distributed.scheduler"):
+        assert logging.getLogger(name).getEffectiveLevel() >= logging.ERROR, name

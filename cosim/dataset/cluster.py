@@ -251,6 +251,19 @@ class _Interrupts:
             self.previous = None
 
 
+def _quiet_distributed_logs() -> None:
+    """Dask's warnings in this process (a key it could not gather from a worker that died, and
+    reschedules) broke the command's one line: ``distributed`` and every logger of it that Dask's
+    logging configuration gives a level of its own (``distributed.client`` is set to WARNING, which
+    the parent's level does not override) print errors only."""
+    import logging
+    loggers = logging.root.manager.loggerDict
+    for name in ["distributed", *(n for n in loggers if n.startswith("distributed."))]:
+        logger = logging.getLogger(name)
+        if name == "distributed" or logger.level != logging.NOTSET:
+            logger.setLevel(max(logger.level, logging.ERROR))
+
+
 class Runner:
     """Context manager: ``with Runner(workers, scheduler) as run: for i, r in run(tasks): ...``."""
 
@@ -289,11 +302,9 @@ class Runner:
                     raise InputError(f"{self.address!r} answers, but is not a Dask scheduler (its reply is "
                                      "not Dask's protocol)") from None
             else:
-                import logging
-
                 from distributed import Client
                 self.cluster, address = _start_local_cluster(self.workers, self._interrupts.check)
-                logging.getLogger("distributed").setLevel(logging.ERROR)     # its warnings break the one line
+                _quiet_distributed_logs()
                 self.client = Client(address)
             self._interrupts.check()          # a Ctrl-C during the start ends the run here
         except BaseException as exc:
