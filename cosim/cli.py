@@ -194,15 +194,26 @@ def _restore_signal_handlers(previous: dict) -> None:
         signal.signal(number, handler if handler is not None else signal.SIG_DFL)
 
 
-def _end_quietly() -> None:
-    """Once the command has ended (its line printed), Ctrl-C or SIGTERM during the interpreter's
-    exit (torch's and Dask's exit handlers can take a second) ends the process as the system
-    does, not with a KeyboardInterrupt traceback from an exit handler."""
+def _end_quietly(code: int) -> None:
+    """Once the command has ended (its line printed, its outputs whole), Ctrl-C, SIGTERM or SIGHUP
+    during the interpreter's exit (torch's and Dask's exit handlers take up to a second) ends the
+    process at once with the command's own exit status ``code``: not a KeyboardInterrupt traceback
+    from an exit handler, nor a death by the signal with no line (exit -2, what a run stopped
+    part-way looks like, where this one had ended and said so)."""
+    import os
     import signal
+
+    def leave(signum, frame):
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError, AttributeError):
+                pass
+        os._exit(code)
     for name in ("SIGINT", *CLEANUP_SIGNALS):
         number = getattr(signal, name, None)
         if number is not None and signal.getsignal(number) is not signal.SIG_IGN:    # nohup's stays
-            signal.signal(number, signal.SIG_DFL)
+            signal.signal(number, leave)
 
 
 #: What a RuntimeError (torch's allocator) or an ImportError (a shared library that could not be
@@ -270,14 +281,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            code, ok = _run(args, prepare, lambda: (_restore_signal_handlers(previous),
-                                                    whole_process and _end_quietly()))
+            code, ok = 1, False
+            code, ok = _run(args, prepare, lambda code: (_restore_signal_handlers(previous),
+                                                         whole_process and _end_quietly(code)))
     finally:              # main() called in-process (tests) leaves the caller's handlers as they were
         _restore_signal_handlers(previous)
         from tespike.golden.atomic import forget_stops
         forget_stops()    # (the next command, in this process too, starts with no stop recorded)
         if whole_process:
-            _end_quietly()
+            _end_quietly(code)
     if ok:            # only a run that succeeded shows its warnings; a refusal stays one line
         for warning in caught:
             warnings.showwarning(warning.message, warning.category, warning.filename, warning.lineno)
@@ -370,7 +382,7 @@ def _repeated_option(parser, argv: list[str]) -> str | None:
     return None
 
 
-def _run(args, prepare=lambda: None, ended=lambda: None) -> tuple[int, bool]:
+def _run(args, prepare=lambda: None, ended=lambda code: None) -> tuple[int, bool]:
     """Run a sub-command after ``prepare``; return (exit code, whether it ended normally). ``ended``
     runs once the command has returned (the caller's signal handlers back: a stop after it ends
     the process as the system does, never with a traceback from outside this function)."""
@@ -382,7 +394,7 @@ def _run(args, prepare=lambda: None, ended=lambda: None) -> tuple[int, bool]:
         code = int(args.run(args) or 0)
         sys.stdout.flush()                # (a full disk under "> log" is the command's fault, said below)
         raise_lost_stop()                 # (a stop Python dropped in a finalizer: the command did not end well)
-        ended()
+        ended(code)
         return code, True
     except TespikeError as exc:
         print(f"{prefix}: error: {one_line(exc, 300)}{_notes(exc)}{_before(start, exc)}", file=sys.stderr)

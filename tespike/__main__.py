@@ -1,5 +1,5 @@
 """``python3 -m tespike``: the ``tespike`` command, through the same entry as the installed script."""
 
-from tespike.entry import main
+from tespike.entry import run
 
-raise SystemExit(main())
+run()

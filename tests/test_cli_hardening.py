@@ -506,7 +506,8 @@ def test_argument_errors_are_one_line(files, args, words):
              "train": ("--out", files / "W.pt", "--steps", 1, "--validate-every", 0),
              "scene": ("--out", files / "o.npy"), "verilog": ("--out", files / "o.v"),
              "evaluate": ("--scene", files / "i.npy", "--out", files / "ev"),
-             "view": ("--input", files / "s.npz", "--out", files / "v.png")}.get(args[0], ())
+             "view": ("--input", files / "s.npz", "--out", files / ("frames" if "--each" in args else "v.png"))
+             }.get(args[0], ())
     result = refused_without_change(files, (*args, *extra), *words)
     assert "usage:" not in result.stderr
 
