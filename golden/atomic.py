@@ -214,6 +214,8 @@ if fault:
             text += (f", under an address-space limit (ulimit -v) of {limit >> 20} MB: most likely out of "
                      "memory (raise the limit, or take less: a smaller --batch or --crop)")
     sys.stderr.write(text + "\n")
+    sys.stderr.flush()
+os._exit(0)                     # (its interpreter's teardown took 3 ms the command waited for)
 """
 
 
