@@ -22,15 +22,11 @@ import os
 import sys
 
 from tespike.golden.atomic import stops_held
+from tespike.entry import short_of_room
 from tespike.golden.resources import address_space_limit, mapped_bytes
 
 #: Libraries whose room is checked (under a limit) and whose load runs with the stops held.
 GUARDED = ("torch",)
-#: What a child's failed import prints when the address space, not the library, was at fault
-#: (CPython's SystemError there is an allocation that failed in C: torch's import under ulimit -v
-#: 617 MB printed "error return without exception set", and the import here then aborted).
-_NO_ROOM_WORDS = ("alloc", "memory", "Memory", "map segment", "pthread_create", "can't start new thread",
-                  "SystemError")
 #: Seconds the trial import may take (torch: about 2 on an idle machine).
 PROBE_SECONDS = 120
 #: Address space kept free beyond the library's own mappings (its first tensors, threads).
@@ -62,9 +58,9 @@ def _refusal(name: str, limit: int) -> str | None:
     except subprocess.TimeoutExpired:     # a start short of room can hang (OpenBLAS's threads)
         return f"{name} did not load within {PROBE_SECONDS} s under the address-space limit"
     left = max(0, limit - mapped_bytes())
+    if short_of_room(done):               # (torch's import under ulimit -v 617 MB printed CPython's SystemError)
+        return f"{name} cannot be loaded: it does not fit in {left >> 20} MB of address space"
     if done.returncode != 0:
-        if done.returncode < 0 or any(word in done.stderr for word in _NO_ROOM_WORDS):
-            return f"{name} cannot be loaded: it does not fit in {left >> 20} MB of address space"
         return None                       # another failure: the import itself will tell
     try:
         needed = int(done.stdout.split()[-1]) + MARGIN

@@ -12,8 +12,10 @@ import sys
 START_MARGIN = 16 << 20
 #: Seconds the trial start may take (a few tenths normally).
 PROBE_SECONDS = 60
-#: What a failed start under an address-space limit prints when memory was what it lacked.
-_MEMORY_WORDS = ("memory", "Memory", "map segment", "pthread_create", "allocat")
+#: What a failed start or import prints when the address space, not the code, was at fault (CPython's
+#: SystemError there is an allocation that failed in C: "error return without exception set").
+NO_ROOM_WORDS = ("alloc", "memory", "Memory", "map segment", "pthread_create", "can't start new thread",
+                 "SystemError")
 
 
 class _Stopped(BaseException):
@@ -87,7 +89,7 @@ def main() -> int:
         print(f"tespike: error: {_starved()}", file=sys.stderr)
         return 1
     except ImportError as exc:         # a library that could not be mapped into the address space
-        if _address_space_limit() is None or not any(word in str(exc) for word in _MEMORY_WORDS):
+        if _address_space_limit() is None or not any(word in str(exc) for word in NO_ROOM_WORDS):
             raise
         print(f"tespike: error: {_starved()}", file=sys.stderr)
         return 1
@@ -181,10 +183,11 @@ def _address_space_refusal() -> str | None:
         return None
     except subprocess.TimeoutExpired:  # OpenBLAS short of threads' room can hang its start
         return _starved()
-    if done.returncode == 0:
-        return None
-    # a start killed by a signal (a failed reservation met as SIGSEGV or SIGABRT) or one whose C
-    # extension returned no exception (SystemError) is one short of memory, as a MemoryError is
-    if done.returncode < 0 or any(word in done.stderr for word in _MEMORY_WORDS + ("SystemError",)):
-        return _starved()
-    return None
+    return _starved() if short_of_room(done) else None
+
+
+def short_of_room(done) -> bool:
+    """Whether a trial start or import in a child (a ``subprocess.CompletedProcess``) failed for
+    want of address space: killed by a signal (a failed reservation met as SIGSEGV or SIGABRT), or
+    saying so (:data:`NO_ROOM_WORDS`); another failure is left for the real start to tell."""
+    return done.returncode != 0 and (done.returncode < 0 or any(word in done.stderr for word in NO_ROOM_WORDS))
