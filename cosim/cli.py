@@ -200,20 +200,13 @@ def _end_quietly(code: int) -> None:
     process at once with the command's own exit status ``code``: not a KeyboardInterrupt traceback
     from an exit handler, nor a death by the signal with no line (exit -2, what a run stopped
     part-way looks like, where this one had ended and said so)."""
-    import os
     import signal
 
-    def leave(signum, frame):
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError, AttributeError):
-                pass
-        os._exit(code)
+    from tespike.entry import end_process
     for name in ("SIGINT", *CLEANUP_SIGNALS):
         number = getattr(signal, name, None)
         if number is not None and signal.getsignal(number) is not signal.SIG_IGN:    # nohup's stays
-            signal.signal(number, leave)
+            signal.signal(number, lambda signum, frame: end_process(code))
 
 
 #: What a RuntimeError (torch's allocator) or an ImportError (a shared library that could not be
@@ -278,10 +271,10 @@ def main(argv: list[str] | None = None) -> int:
             from tespike.golden.atomic import start_janitor
             start_janitor(report_faults=True)
     import warnings
+    code, ok = 1, False   # (what the finally below ends with, should _run itself be stopped)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            code, ok = 1, False
             code, ok = _run(args, prepare, lambda code: (_restore_signal_handlers(previous),
                                                          whole_process and _end_quietly(code)))
     finally:              # main() called in-process (tests) leaves the caller's handlers as they were

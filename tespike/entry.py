@@ -125,17 +125,24 @@ def _leave(code: int) -> None:
     system's by then), after the command had ended and said so. Every file the commands write is
     closed before they return (``with`` blocks, atomic outputs renamed into place)."""
     import atexit
-    import os
     import threading
     shutdown = getattr(threading, "_shutdown", None)
     if shutdown is not None:
         shutdown()
     atexit._run_exitfuncs()
+    end_process(code)
+
+
+def end_process(code: int) -> None:
+    """Flush the standard streams and end the process at once with ``code`` (120 where a flush of
+    a run that succeeded fails, as Python's exit reports it); also what a stop during the exit
+    handlers does once the command has ended (``tespike.cosim.cli``)."""
+    import os
     for stream in (sys.stdout, sys.stderr):
         try:
             if stream is not None:
                 stream.flush()
-        except (OSError, ValueError):  # (what Python's exit reports as exit status 120)
+        except (OSError, ValueError):
             code = code or 120
     os._exit(code)
 
