@@ -489,9 +489,8 @@ def _starved(exc: BaseException) -> bool:
     Zarr reads through a thread pool; an allocation that failed in a codec), not a damaged file:
     the file read again would read the same way, and a line calling it damaged sends the user to
     rebuild a sound store."""
-    text = str(exc)
-    return isinstance(exc, RuntimeError) and (text == "can't start new thread" or "alloc" in text.lower()
-                                              or "memory" in text.lower())
+    from tespike.entry import NO_ROOM_WORDS
+    return isinstance(exc, RuntimeError) and any(word in str(exc) for word in NO_ROOM_WORDS)
 
 
 def _gone(url: str, path: str) -> str | None:
