@@ -87,8 +87,9 @@ def test_light_steps_between_readouts_match(config):
         assert tvd < 0.05, (k, tvd)
 
 
-def test_each_path_is_exercised():
+def test_each_path_is_exercised(monkeypatch):
     config = SensorConfig()
+    monkeypatch.setattr(head, "HEAD_CLOCK_DRAWS", 0)         # a single head takes its path
     sim = SceneSimulator(config, (1, 7), rng=0)
     # the last pixel: light 1.5 from an empty accumulator (a head charges it
     # for the full path), then dim light on the full accumulator (a head drains it)
@@ -99,6 +100,18 @@ def test_each_path_is_exercised():
     sim.readout(np.array([[0.0, 0.01, 10.0, 0.6, 1.0, 1.5, 0.01]]))     # full after a full accumulator
     assert sim.path_counts == {"lazy": 2, "event": 2, "bright": 3, "queue": 2, "full": 1, "head": 2,
                                "clock": 2, "fallback": 0}
+
+
+def test_a_readout_with_few_heads_sends_them_per_clock():
+    """Heads whose per-clock draws are at most HEAD_CLOCK_DRAWS join the per-clock path (a
+    head call's fixed cost exceeds their clocks'); a readout with more keeps the head path."""
+    config = SensorConfig()
+    L = config.clocks_per_readout
+    few = head.HEAD_CLOCK_DRAWS // L                  # heads (light 1.5 on an empty accumulator)
+    for pixels, path in ((few, "clock"), (few + 1, "head")):
+        sim = SceneSimulator(config, (1, pixels), rng=0)
+        sim.readout(np.full((1, pixels), 1.5))
+        assert sim.path_counts[path] == pixels, (pixels, sim.path_counts)
 
 
 @pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(mode="ml"), MSB,

@@ -18,13 +18,23 @@ from .window import full_plan, full_walk, groups, queue_plan, queue_walk, round_
 from .codes import HEAD
 from .words import ml_words, overflow_clock_word
 
+#: Per-clock draws (head pixels x clocks per readout) at or below which a readout's heads
+#: go per clock instead (:mod:`.clock`, with the pixels already there): a head call costs
+#: about 0.3 ms whatever its pixels (a walk of its clocks, then each rest path's own calls),
+#: the per-clock path 4-11 us more a pixel at 240 clocks in a call it mostly makes anyway.
+#: 8192 is 34 pixels at 240 clocks (a dim interior pan, TE: 5 % less CPU a stripe, about 10
+#: heads a readout) and none at 61440; docs/simulator.md, sixteenth round.
+HEAD_CLOCK_DRAWS = 8192
+
 
 def classify_head(levels, idx, lam, mean, dark, acc, path, length):
     """Head path for pixels ``idx`` a few clocks away from a cheap path: a carried
     backlog (``acc >= theta``) under light that surely drains it, then the
     event path; or light above one threshold per clock with too little
     charge yet for the full path's bound, which a few clocks supply.
-    ``length`` gets the head's length (a multiple of MIN_WINDOW)."""
+    ``length`` gets the head's length (a multiple of MIN_WINDOW). So few heads
+    that their per-clock draws are at most HEAD_CLOCK_DRAWS stay per clock (a count
+    of the light and the charges, as every path choice is; both paths are exact)."""
     c = levels.config
     theta, L = c.threshold, c.clocks_per_readout
     ok = dark == 0
@@ -45,6 +55,8 @@ def classify_head(levels, idx, lam, mean, dark, acc, path, length):
         charge[charge] = top_ok & (a_full <= c.acc_max)
     size = round_window(clocks)
     head = (drain | charge) & (size <= L // 2)
+    if np.count_nonzero(head) * L <= HEAD_CLOCK_DRAWS:
+        return
     path[idx[head]] = HEAD
     length[idx[head]] = size[head]
 
