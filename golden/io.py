@@ -38,7 +38,8 @@ def header_damaged(exc: BaseException) -> bool:
         words in str(exc) for words in ("malformed node or string", "Cannot parse header")))
 
 __all__ = ["atomic_output", "check_scene", "check_stimulus", "load_npy", "load_scene", "load_stimulus",
-           "load_stream", "open_npz", "save_images", "save_stream", "scan_light", "unsigned_dtype", "word_dtype"]
+           "load_stream", "open_npz", "save_images", "save_stream", "scan_light", "scene_name", "unsigned_dtype",
+           "word_dtype"]
 
 
 def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.ndarray:
@@ -205,27 +206,38 @@ def scan_light(light: np.ndarray, what: str = "scene") -> None:
                      "simulated and scored")
 
 
-def load_scene(path: str | Path, *, memory_map: bool = False, what: str | None = None) -> np.ndarray:
+def load_scene(path: str | Path, *, memory_map: bool = False, what: str | None = None,
+               scan_values: bool = True) -> np.ndarray:
     """Read and check ``I.npy`` (light per readout interval, 1.0 = design light).
 
     ``memory_map=True`` leaves the file on disk (read-only memory map, in the
     file's own dtype) and checks the values one slice of readouts at a time,
     so memory stays bounded by the slice; the caller converts what it reads.
+    ``scan_values=False`` (with ``memory_map``) leaves the values to a caller that checks
+    each readout as it reads it (:func:`tespike.golden.fastsim.simulate_scene`, named by
+    :func:`scene_name`); the dtype, shape and file are checked all the same.
     ``what`` names the file in refusals (default "scene": ``tespike score`` says "reference").
     """
     name = "scene" if what is None else what
     scene = load_npy(path, name, mmap_mode="r")
-    name = f"{name} file {str(path)!r}"                             # values refused naming the file
+    name = scene_name(path, what)                                   # values refused naming the file
     scene = check_scene(scene, scan_values=False, what=name)
     if scene.shape[0] == 0:
         raise InputError(f"scene file {str(path)!r} has K = 0 readout intervals (nothing to simulate)"
                          if what is None else f"{name} has K = 0 frames")
     if not memory_map:
         return check_scene(np.array(scene), what=name)
+    if not scan_values:
+        return scene
     step = max(1, (1 << 22) // max(1, scene[0].size))
     for start in range(0, scene.shape[0], step):
         scan_light(np.asarray(scene[start:start + step]), name)
     return scene
+
+
+def scene_name(path: str | Path, what: str | None = None) -> str:
+    """How :func:`load_scene` names the light file ``path`` in a refusal of its values."""
+    return f"{'scene' if what is None else what} file {str(path)!r}"
 
 
 def unsigned_dtype(bits: int) -> np.dtype:

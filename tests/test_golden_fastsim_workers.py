@@ -8,6 +8,7 @@ striped (they are the electrons of ``tespike stimulus``).
 """
 
 import os
+import re
 
 import numpy as np
 import pytest
@@ -158,12 +159,19 @@ def test_bad_worker_counts_are_refused(workers):
             simulate_scene(SensorConfig(), np.zeros((1, 2, 2)), seed=0, method=method, workers=workers)
 
 
-def test_bad_light_refused_before_workers_start():
-    scene = np.full((3, 64, 2048), 0.2)
-    scene[2, 40, 7] = np.nan                                              # in the second stripe
-    for workers in (1, 2):
-        with pytest.raises(InputError, match="non-finite"):
-            simulate_scene(SensorConfig(), scene, seed=0, workers=workers)
+def test_bad_light_is_refused_as_a_scan_of_the_whole_scene_refuses_it():
+    """Each process checks its own stripes' light as it simulates them; the refusal names
+    the first bad readout in order, whichever process met bad light first (row 41 lies in
+    the second stripe, a forked worker's with two workers; row 40 in the first)."""
+    cases = [([((2, 41, 7), np.nan), ((1, 40, 3), -1.0)], "negative light value (-1.0)"),
+             ([((1, 41, 7), np.nan), ((2, 40, 3), -1.0)], "non-finite light value (nan)")]
+    for bad, first in cases:
+        scene = np.full((3, 64, 2048), 0.2)
+        for where, value in bad:
+            scene[where] = value
+        for workers in (1, 2):
+            with pytest.raises(InputError, match=re.escape(f"scene 'I.npy' holds a {first}")):
+                simulate_scene(SensorConfig(), scene, seed=0, workers=workers, what="scene 'I.npy'")
 
 
 def test_a_failed_worker_is_an_error(monkeypatch):

@@ -26,7 +26,7 @@ def run(args) -> int:
     from tespike.cosim.console import bar, counted, progress_wanted, report
     from tespike.golden.config import load_config
     from tespike.golden.fastsim import simulate_scene
-    from tespike.golden.io import load_scene, save_stream, word_dtype
+    from tespike.golden.io import load_scene, save_stream, scene_name, word_dtype
     from tespike.cosim.headroom import require_room
     from tespike.golden.paths import check_outputs
 
@@ -40,14 +40,15 @@ def run(args) -> int:
                   {"--out": NPZ_FILE})
     config = load_config(args.config)
     sensor = light_front_end(args)
-    scene = load_scene(args.scene, memory_map=True)     # read one readout at a time
+    # read one readout at a time, its values checked as each is simulated (simulate_scene)
+    scene = load_scene(args.scene, memory_map=True, scan_values=False)
     K, H, W = scene.shape
     size = K * H * W * word_dtype(config).itemsize          # the words, in memory and in S.npz
     require_room(f"the stream of {K} readouts of {H} x {W} words", memory=size, disk={args.out: size})
     words = simulate_scene(config, scene, seed=args.seed, dark_current=args.dark_current,
                            noise=not args.no_noise, method=args.method,
                            progress=bar("simulate") if progress_wanted(args) else None, workers=args.workers,
-                           sensor=sensor)
+                           sensor=sensor, what=scene_name(args.scene))
     save_stream(args.out, words, config)
     K, H, W = words.shape
     report(args, f"wrote {args.out}: {counted(K, 'readout')} of {H} x {W} {config.mode.upper()} words")

@@ -44,7 +44,7 @@ def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None
 def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
                    dark_current: str | None = None, noise: bool = True,
                    progress=None, method: str = "fast",
-                   workers: int | None = 1, sensor=None) -> np.ndarray:
+                   workers: int | None = 1, sensor=None, what: str = "scene") -> np.ndarray:
     """Scene light ``(K, H, W)`` -> readout words ``(K, H, W)`` (smallest word dtype).
 
     ``seed``: int, numpy Generator or ``None`` (fresh entropy). ``method="per-clock"``
@@ -60,7 +60,9 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     ``method="per-clock"`` and ``noise=False`` run one :class:`SceneSimulator` in
     this process (the per-clock electrons of :func:`iter_scene_stimulus`).
     ``sensor``: a :class:`tespike.golden.noise.Sensor` (non-idealities with their per-pixel
-    maps from its sensor seed), instead of ``dark_current``.
+    maps from its sensor seed), instead of ``dark_current``. The light is checked one
+    readout at a time as it is simulated (a negative or non-finite value refused in one
+    line, ``what`` naming the scene): a caller need not scan it first.
     """
     scene = check_scene(scene, scan_values=False)       # values: one readout at a time
     K, H, W = scene.shape
@@ -69,13 +71,14 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     if noise and method == "fast":
         rows, sims = stripe_simulators(config, (H, W), seed=seed, dark_current=dark_current,
                                        total_pixel_readouts=scene.size, sensor=sensor)
-        return run_stripes(rows, sims, scene, word_dtype(config), workers=workers, progress=progress)
+        return run_stripes(rows, sims, scene, word_dtype(config), workers=workers, progress=progress,
+                           what=what)
     worker_count(workers, 1)                            # (refuses a bad count; one process here)
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
                          method=method, total_pixel_readouts=scene.size, sensor=sensor)
     words = np.empty((K, H, W), word_dtype(config))
     for k in (progress or iter)(range(K)):
-        words[k] = sim.readout(check_scene(np.asarray(scene[k:k + 1]))[0])
+        words[k] = sim.readout(check_scene(np.asarray(scene[k:k + 1]), what=what)[0])
     return words
 
 

@@ -62,14 +62,24 @@ def worker_count(workers, limit: int) -> int:
     return min(int(workers), limit)
 
 
-def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
+#: Exit status of a worker that met light :func:`tespike.golden.io.scan_light` refuses.
+BAD_LIGHT_STATUS = 3
+
+
+def run_stripes(rows, sims, scene, dtype, *, workers, progress, what: str = "scene") -> np.ndarray:
     """Words ``(K, H, W)`` of ``scene`` from one simulator per stripe (``sims[i]``
     reads out rows ``rows[i]``), each walked through the readouts in order; with
     several workers, ``workers - 1`` forked processes take stripes ``j, j + workers,
     ...`` and write their words into a shared anonymous memory map (processes, not
     threads: the simulator's Python work holds the GIL for a large share of its time).
     A worker stops at its next readout once this process is gone (killed outright: it
-    had no chance to end them)."""
+    had no chance to end them).
+
+    Each process checks the light of its stripes, readout by readout, just before it
+    simulates them (values in cache; a scan of the whole scene before the workers
+    start was 5-10 ms of one core). Bad light anywhere stops every worker, and the
+    refusal is that of a scan of the whole scene in readout order (the same line
+    whichever worker met it first); ``what`` names the scene in it."""
     import mmap
     K, H, W = scene.shape
     workers = worker_count(workers, len(rows)) if hasattr(os, "fork") else worker_count(workers, 1)
@@ -77,8 +87,6 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
     if workers == 1:
         words = np.empty((K, H, W), dtype)
     else:
-        for k in range(K):                              # refuse bad light before any worker starts
-            scan_light(np.asarray(scene[k:k + 1]))
         words = np.frombuffer(mmap.mmap(-1, max(1, K * H * W * dtype.itemsize)), dtype,
                               count=K * H * W).reshape(K, H, W)
 
@@ -88,12 +96,13 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
             if parent is not None and os.getppid() != parent:
                 os._exit(1)                              # a worker whose command was killed outright
             light = np.asarray(scene[k])
-            if workers == 1:
-                scan_light(light)
             for i in mine:
-                words[k, rows[i]] = sims[i].readout(light[rows[i]])
+                part = light[rows[i]]
+                scan_light(part, what)
+                words[k, rows[i]] = sims[i].readout(part)
 
     children, parent = {}, os.getpid()
+    bad_light = None
     try:
         for j in range(1, workers):
             try:
@@ -105,6 +114,8 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
                 try:
                     run(range(j, len(rows), workers), range(K), parent)
                     status = 0
+                except InputError:                       # bad light: this process tells it
+                    status = BAD_LIGHT_STATUS
                 except Exception:                        # (an interrupt: exit 1 quietly)
                     import traceback
                     traceback.print_exc()
@@ -113,13 +124,24 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress) -> np.ndarray:
             children[pid] = j
         readouts = (progress or iter)(range(K))         # (after the fork: a bar may start a thread)
         taken = set(children.values())
-        run([i for i in range(len(rows)) if i % workers not in taken], readouts)
+        try:
+            run([i for i in range(len(rows)) if i % workers not in taken], readouts)
+        except InputError as exc:
+            bad_light = exc
+            raise
     except BaseException:
         for pid in children:
             os.kill(pid, 9)
-        raise
+        if bad_light is None:
+            raise
     finally:
-        failed = [j for pid, j in children.items() if os.waitpid(pid, 0)[1] != 0]
+        status = {j: os.waitpid(pid, 0)[1] for pid, j in children.items()}
+    if bad_light is not None or any(os.WIFEXITED(s) and os.WEXITSTATUS(s) == BAD_LIGHT_STATUS
+                                    for s in status.values()):
+        for k in range(K):                              # the refusal of the first bad readout
+            scan_light(np.asarray(scene[k:k + 1]), what)
+        raise bad_light or RuntimeError("a simulation worker refused light a scan of the scene passes")
+    failed = [j for j, s in status.items() if s != 0]
     if failed:
         raise RuntimeError(f"simulation worker(s) {failed} failed (their stripes have no words)")
     return words
