@@ -39,7 +39,7 @@ def header_damaged(exc: BaseException) -> bool:
 
 __all__ = ["atomic_output", "check_scene", "check_stimulus", "load_npy", "load_scene", "load_stimulus",
            "load_stream", "open_npz", "save_images", "save_stream", "scan_light", "scene_name", "unsigned_dtype",
-           "word_dtype"]
+           "word_dtype", "write_npz"]
 
 
 def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.ndarray:
@@ -257,8 +257,27 @@ def save_stream(path: str | Path, words: np.ndarray, config: SensorConfig) -> No
         raise InputError(f"stream words shape {words.shape} must be (K, H, W)")
     with atomic_output(path) as tmp:
         with open(tmp, "wb") as handle:
-            np.savez(handle, words=words.astype(word_dtype(config), copy=False),
-                     config=np.array(config.to_json()))
+            write_npz(handle, words=words.astype(word_dtype(config), copy=False),
+                      config=np.array(config.to_json()))
+
+
+def write_npz(handle, **arrays: np.ndarray) -> None:
+    """``np.savez(handle, **arrays)``, the same archive (uncompressed, Zip64 members as numpy
+    writes them, read by ``np.load``), each array written from its own memory: ``np.savez``
+    copies an array into a bytes object first (its ``write_array`` does for any file that is
+    not a plain file, as an archive member is), 3-5 ms of a 12.6 MB stream's 10."""
+    with zipfile.ZipFile(handle, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as archive:
+        for name, array in arrays.items():
+            array = np.asarray(array)
+            if not array.flags.c_contiguous:
+                array = array.copy(order="C")
+            header = np.lib.format.header_data_from_array_1_0(array)
+            with archive.open(f"{name}.npy", mode="w", force_zip64=True) as member:
+                try:
+                    np.lib.format.write_array_header_1_0(member, header)
+                except ValueError:                          # (a header past 64 KiB: format 2.0)
+                    np.lib.format.write_array_header_2_0(member, header)
+                member.write(memoryview(array.reshape(-1)).cast("B") if array.size else b"")
 
 
 def _npy_header(member) -> tuple[tuple[int, ...], bool, np.dtype, int | None]:

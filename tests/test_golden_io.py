@@ -5,7 +5,8 @@ import pytest
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
-from tespike.golden.io import check_scene, check_stimulus, load_scene, load_stimulus, scan_light
+from tespike.golden.io import (check_scene, check_stimulus, load_scene, load_stimulus, load_stream, save_stream,
+                               scan_light)
 
 
 def test_load_stimulus_is_memory_mapped(tmp_path):
@@ -236,3 +237,32 @@ def test_a_damaged_npy_header_is_one_line_in_a_file_and_in_an_archive(tmp_path):
         with pytest.raises(InputError, match=r"S.npz' is not a readable .npz archive: (a member's .npy header "
                                              r"is damaged|Bad CRC-32 for file 'words.npy')"):
             load_stream(tmp_path / "S.npz", memory_map=memory_map)
+
+
+def test_write_npz_is_the_archive_np_savez_writes(tmp_path):
+    """The stream's writer (each array from its own memory) gives np.savez's archive: the same
+    members, dtypes, shapes and values, stored uncompressed with Zip64 extras, as np.load and
+    load_stream's memory map of a stored member read it."""
+    import zipfile
+    from tespike.golden.io import write_npz
+    arrays = dict(words=np.arange(60, dtype=np.uint8).reshape(3, 4, 5), config=np.array('{"x": "\u00e9"}'),
+                  big_endian=np.arange(7, dtype=">u2"), empty=np.zeros((0, 3)), scalar=np.float64(3.5),
+                  strided=np.arange(10)[::2], fortran=np.asfortranarray(np.arange(6.0).reshape(2, 3)))
+    with open(tmp_path / "ours.npz", "wb") as handle:
+        write_npz(handle, **arrays)
+    np.savez(tmp_path / "numpy.npz", **arrays)
+    ours, theirs = np.load(tmp_path / "ours.npz"), np.load(tmp_path / "numpy.npz")
+    assert ours.files == theirs.files == list(arrays)
+    for name in arrays:
+        assert ours[name].dtype == theirs[name].dtype and ours[name].shape == theirs[name].shape
+        np.testing.assert_array_equal(ours[name], theirs[name])
+    with zipfile.ZipFile(tmp_path / "ours.npz") as archive, zipfile.ZipFile(tmp_path / "numpy.npz") as other:
+        assert archive.testzip() is None
+        assert [(i.filename, i.compress_type, i.flag_bits) for i in archive.infolist()] == \
+            [(i.filename, i.compress_type, i.flag_bits) for i in other.infolist()]
+    config = SensorConfig()
+    words = np.arange(2 * 3 * 4, dtype=np.uint8).reshape(2, 3, 4) % 16
+    save_stream(tmp_path / "S.npz", words, config)
+    loaded, loaded_config = load_stream(tmp_path / "S.npz")
+    np.testing.assert_array_equal(loaded, words)
+    assert loaded_config == config
