@@ -27,8 +27,9 @@ from .words import ml_words, overflow_clock_word
 HEAD_CLOCK_DRAWS = 8192
 
 
-def classify_head(levels, idx, lam, mean, dark, acc, path, length):
-    """Head path for pixels ``idx`` a few clocks away from a cheap path: a carried
+def classify_head(levels, at, idx, lam, mean, dark, acc, path, length):
+    """Head path for pixels ``idx`` (flat indices; their codes at ``at`` in ``path``) a
+    few clocks away from a cheap path: a carried
     backlog (``acc >= theta``) under light that surely drains it, then the
     event path; or light above one threshold per clock with too little
     charge yet for the full path's bound, which a few clocks supply.
@@ -57,7 +58,7 @@ def classify_head(levels, idx, lam, mean, dark, acc, path, length):
     head = (drain | charge) & (size <= L // 2)
     if np.count_nonzero(head) * L <= HEAD_CLOCK_DRAWS:
         return
-    path[idx[head]] = HEAD
+    path[at[head]] = HEAD
     length[idx[head]] = size[head]
 
 

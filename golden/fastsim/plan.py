@@ -23,17 +23,22 @@ from .head import classify_head
 from .interval import classify_interval, interval_levels, overflow_level, saturation_levels
 from .lazy import lazy_level
 from .window import classify_window, queue_level
-from .codes import CLOCK, LAZY
+from .codes import CLOCK
 
 
 class Plan(NamedTuple):
-    """One readout's classification: ``path`` (n,) int8 codes into SIMULATION_PATHS;
-    ``length`` (n,) the window (queue, full) or head length in clocks, rounded
-    (:func:`tespike.golden.fastsim.window.round_window`; 0 elsewhere); ``b_max`` (n,) the
-    queue's backlog bound entering its window (0 elsewhere)."""
+    """One readout's classification: ``path`` int8 codes into SIMULATION_PATHS, of the whole
+    frame (n,) where ``pixels`` is None, else of the pixels ``pixels`` (flat indices,
+    ascending; every other pixel lazy: a readout whose pixels are mostly lazy is planned
+    and dispatched on the others alone, no pass over the frame); ``length`` (n,) the window
+    (queue, full) or head length in clocks, rounded
+    (:func:`tespike.golden.fastsim.window.round_window`); ``b_max`` (n,) the queue's backlog
+    bound entering its window. ``length`` and ``b_max`` are the simulator's own arrays, valid
+    at this readout's queue, full and head pixels only (the paths that read them)."""
     path: np.ndarray
     length: np.ndarray
     b_max: np.ndarray
+    pixels: np.ndarray | None = None
 
 
 class PathLevels:
@@ -50,36 +55,34 @@ class PathLevels:
         self.mean_lazy = lazy_level(config, budget, self.mean_event)
         self.rho_queue = queue_level(config, budget)
 
-    def classify(self, lazy_mask, n_lazy, lam, mean, dark, acc) -> Plan:
+    def classify(self, lazy_mask, n_lazy, lam, mean, dark, acc, length, b_max) -> Plan:
         """Paths of one readout: ``lazy_mask`` the lazy pixels' mask (``n_lazy`` of
         them, decided by the lazy path itself), ``lam`` photo-electrons per clock,
         ``mean`` with dark electrons, ``dark`` the interval's dark electrons,
-        ``acc`` the carried charge (all flat, n)."""
+        ``acc`` the carried charge (all flat, n); ``length`` and ``b_max`` (n,) the
+        simulator's arrays the window and head lengths and backlog bounds go into
+        (written at those pixels only: nothing else reads them)."""
         n = lam.size
         # the other pixels' paths: on them alone where they are few (gathers),
         # else on the whole frame (whole-array passes are cheaper than gathers)
-        few = 2 * n_lazy > n
-        idx = np.flatnonzero(~lazy_mask) if few else slice(None)
-        code = classify_interval(self, lam[idx], mean[idx], acc[idx])
-        if few:
-            path = np.full(n, LAZY, np.int8)
-            path[idx] = code
+        pixels = None
+        if 2 * n_lazy > n:
+            pixels = np.flatnonzero(~lazy_mask)
+            path = classify_interval(self, lam[pixels], mean[pixels], acc[pixels])
+            at = np.flatnonzero(path == CLOCK)          # (positions in path)
+            rest = pixels[at]
         else:
-            path = code
+            path = classify_interval(self, lam, mean, acc)
             if n_lazy:                                  # LAZY is code 0: a product, no masked store
                 path *= ~lazy_mask
-        length = b_max = _NONE
-        rest = np.flatnonzero(path == CLOCK)
+            at = rest = np.flatnonzero(path == CLOCK)
         if rest.size:
-            length, b_max = np.zeros(n), np.zeros(n)
-            classify_window(self, rest, lam[rest], mean[rest], dark[rest], acc[rest], path, length, b_max)
-            rest = rest[path[rest] == CLOCK]
+            classify_window(self, at, rest, lam[rest], mean[rest], dark[rest], acc[rest], path, length, b_max)
+            keep = path[at] == CLOCK
+            at, rest = at[keep], rest[keep]
             if rest.size:
-                classify_head(self, rest, lam[rest], mean[rest], dark[rest], acc[rest], path, length)
-        return Plan(path, length, b_max)
-
-
-_NONE = np.zeros(0)
+                classify_head(self, at, rest, lam[rest], mean[rest], dark[rest], acc[rest], path, length)
+        return Plan(path, length, b_max, pixels)
 
 
 @functools.lru_cache(maxsize=16)

@@ -72,6 +72,8 @@ class SceneSimulator:
         self.sfc = np.zeros(n, np.int64)                   # msb: remainder left in the counter
         self.fraction = np.zeros(n)
         self.no_dark = np.zeros(n, np.int64)               # read only
+        self.plan_length = np.zeros(n)                     # a readout's window and head lengths
+        self.plan_b_max = np.zeros(n)                      # ... and queue backlog bounds (Plan)
         # at most CHECKS bounded events per pixel-readout, each below the budget
         self.budget = log_budget(total_pixel_readouts or n, config.clocks_per_readout) - np.log(CHECKS)
         self.path_counts = dict.fromkeys(SIMULATION_PATHS + ("fallback",), 0)
@@ -138,7 +140,8 @@ class SceneSimulator:
             return words.reshape(self.shape)
         lam = expected / L                                 # photo-electrons per clock
         mean = lam + dark / L if self.dark_model else lam  # with dark electrons
-        plan = self.levels.classify(on_lazy, n_lazy, lam, mean, dark, self.carried)
+        plan = self.levels.classify(on_lazy, n_lazy, lam, mean, dark, self.carried, self.plan_length,
+                                    self.plan_b_max)
         self.path_counts["lazy"] += n_lazy                 # (done by lazy_path)
         for code, name in enumerate(SIMULATION_PATHS):
             if code == LAZY:
@@ -148,7 +151,10 @@ class SceneSimulator:
             if not count:
                 continue
             self.path_counts[name] += count
-            sel = event_pixels(on_path, count) if code == EVENT else np.flatnonzero(on_path)
+            if plan.pixels is not None:                    # planned on the non-lazy pixels alone
+                sel = plan.pixels[on_path]
+            else:
+                sel = event_pixels(on_path, count) if code == EVENT else np.flatnonzero(on_path)
             if code == EVENT:
                 event_path(self, sel, expected, dark, words)
             elif code == BRIGHT:

@@ -48,10 +48,10 @@ def queue_level(config: SensorConfig, budget: float) -> float:
     return 1.0 - (np.log(config.clocks_per_readout) - budget) / (2.0 * h)
 
 
-def classify_window(levels, idx, lam, mean, dark, acc, path, length, b_max):
-    """Queue or full path for pixels ``idx`` near one threshold per clock, where
-    allowed; their window lengths (rounded) and queue backlog bounds are written
-    into ``length`` and ``b_max``."""
+def classify_window(levels, at, idx, lam, mean, dark, acc, path, length, b_max):
+    """Queue or full path for pixels ``idx`` (flat indices; their codes at ``at`` in
+    ``path``) near one threshold per clock, where allowed; their window lengths
+    (rounded) and queue backlog bounds are written into ``length`` and ``b_max``."""
     theta = levels.config.threshold
     ok = (dark == 0) & (mean <= levels.mean_unclipped)
     rho = lam / theta
@@ -60,7 +60,7 @@ def classify_window(levels, idx, lam, mean, dark, acc, path, length, b_max):
     if queue.any():
         sel = idx[queue]
         keep, bound, window = queue_plan(levels, rho[queue])
-        path[sel[keep]] = QUEUE
+        path[at[queue][keep]] = QUEUE
         length[sel[keep]] = round_window(window[keep])
         b_max[sel[keep]] = bound[keep]
     # full: above the threshold per clock, a spike in every clock surely
@@ -68,7 +68,7 @@ def classify_window(levels, idx, lam, mean, dark, acc, path, length, b_max):
     if full.any():
         sel = idx[full]
         keep, window = full_plan(levels, lam[full], acc[full])
-        path[sel[keep]] = FULL
+        path[at[full][keep]] = FULL
         length[sel[keep]] = round_window(window[keep])
 
 
