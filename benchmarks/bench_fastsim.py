@@ -57,6 +57,7 @@ from benchmarks.usage import children_cpu  # noqa: E402
 from tespike.golden.config import SensorConfig  # noqa: E402
 from tespike.golden.decode import decode_spikes  # noqa: E402
 from tespike.golden.fastsim import SceneSimulator  # noqa: E402
+from tespike.golden.resources import keep_freed_memory  # noqa: E402
 from tespike.golden.stimulus import poisson_stimulus  # noqa: E402
 from tespike.golden.sensor import simulate  # noqa: E402
 from benchmarks.plotfile import add_png_arguments, png_path  # noqa: E402
@@ -152,7 +153,8 @@ def naive_rate(config, scene, crops=6, crop=(2, 32, 48), seed=0, repeats=3):
     all bright and would misstate the cost of a scene that mixes both. Each crop
     is timed ``repeats`` times and its fastest run counts, as the fast process's
     does: on a shared machine a slower run measures the other processes, and
-    a loaded naive loop alone would flatter the ratio."""
+    a loaded naive loop alone would flatter the ratio. ``main`` gives this process the
+    allocator settings the simulator's process runs with (``keep_freed_memory``) first."""
     rng = np.random.default_rng(seed)
     K, H, W = scene.shape
     k, h, w = min(crop[0], K), min(crop[1], H), min(crop[2], W)
@@ -313,6 +315,11 @@ def main(argv=None):
                              "with this one's (before/after in one run)")
     args = parser.parse_args(argv)
     png_path(args, "fastsim.png", "--out")
+    # The naive loop runs with the allocator settings `tespike simulate` gives its own process:
+    # without them each call's per-clock arrays (6 MB a crop) were fresh mappings faulted in again,
+    # and its rate hung on what this process had allocated before (the courtyard pan's naive loop:
+    # 1.8e5 pixel-readouts/s measured first in a process, 3.2e5 after other scenes or with them).
+    keep_freed_memory()
     if not args.skip_levels:
         tables = {}
         for preset in CAMERAS:
