@@ -55,19 +55,18 @@ class PathLevels:
         self.mean_lazy = lazy_level(config, budget, self.mean_event)
         self.rho_queue = queue_level(config, budget)
 
-    def classify(self, lazy_mask, n_lazy, lam, mean, dark, acc, length, b_max) -> Plan:
+    def classify(self, pixels, lazy_mask, n_lazy, lam, mean, dark, acc, length, b_max) -> Plan:
         """Paths of one readout: ``lazy_mask`` the lazy pixels' mask (``n_lazy`` of
-        them, decided by the lazy path itself), ``lam`` photo-electrons per clock,
-        ``mean`` with dark electrons, ``dark`` the interval's dark electrons,
-        ``acc`` the carried charge (all flat, n); ``length`` and ``b_max`` (n,) the
-        simulator's arrays the window and head lengths and backlog bounds go into
-        (written at those pixels only: nothing else reads them)."""
-        n = lam.size
+        them, decided by the lazy path itself), ``pixels`` the others' flat indices where
+        they are fewer (the caller's choice: ``2 n_lazy > n``; else None), ``lam``
+        photo-electrons per clock, ``mean`` with dark electrons (both read at ``pixels``
+        only where given), ``dark`` the interval's dark electrons, ``acc`` the carried
+        charge (all flat, n); ``length`` and ``b_max`` (n,) the simulator's arrays the
+        window and head lengths and backlog bounds go into (written at those pixels only:
+        nothing else reads them)."""
         # the other pixels' paths: on them alone where they are few (gathers),
         # else on the whole frame (whole-array passes are cheaper than gathers)
-        pixels = None
-        if 2 * n_lazy > n:
-            pixels = np.flatnonzero(~lazy_mask)
+        if pixels is not None:
             path = classify_interval(self, lam[pixels], mean[pixels], acc[pixels])
             at = np.flatnonzero(path == CLOCK)          # (positions in path)
             rest = pixels[at]

@@ -74,6 +74,8 @@ class SceneSimulator:
         self.no_dark = np.zeros(n, np.int64)               # read only
         self.plan_length = np.zeros(n)                     # a readout's window and head lengths
         self.plan_b_max = np.zeros(n)                      # ... and queue backlog bounds (Plan)
+        self.plan_lam = np.zeros(n)                        # a mostly lazy readout's rates per clock,
+        self.plan_mean = np.zeros(n)                       # at its other pixels only (readout)
         # at most CHECKS bounded events per pixel-readout, each below the budget
         self.budget = log_budget(total_pixel_readouts or n, config.clocks_per_readout) - np.log(CHECKS)
         self.path_counts = dict.fromkeys(SIMULATION_PATHS + ("fallback",), 0)
@@ -138,9 +140,20 @@ class SceneSimulator:
         if n_lazy == expected.size:                        # a dark frame: nothing else to do
             self.path_counts["lazy"] += n_lazy
             return words.reshape(self.shape)
-        lam = expected / L                                 # photo-electrons per clock
-        mean = lam + dark / L if self.dark_model else lam  # with dark electrons
-        plan = self.levels.classify(on_lazy, n_lazy, lam, mean, dark, self.carried, self.plan_length,
+        # photo-electrons per clock (lam) and with dark electrons (mean); where most pixels are
+        # lazy, of the others alone (the paths read them there only): no pass over the frame
+        pixels = np.flatnonzero(~on_lazy) if 2 * n_lazy > expected.size else None
+        if pixels is None:
+            lam = expected / L
+            mean = lam + dark / L if self.dark_model else lam
+        else:
+            lam = self.plan_lam
+            lam[pixels] = expected[pixels] / L
+            mean = lam
+            if self.dark_model:
+                mean = self.plan_mean
+                mean[pixels] = lam[pixels] + dark[pixels] / L
+        plan = self.levels.classify(pixels, on_lazy, n_lazy, lam, mean, dark, self.carried, self.plan_length,
                                     self.plan_b_max)
         self.path_counts["lazy"] += n_lazy                 # (done by lazy_path)
         for code, name in enumerate(SIMULATION_PATHS):
