@@ -124,16 +124,13 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress, what: str = "sce
             children[pid] = j
         readouts = (progress or iter)(range(K))         # (after the fork: a bar may start a thread)
         taken = set(children.values())
-        try:
-            run([i for i in range(len(rows)) if i % workers not in taken], readouts)
-        except InputError as exc:
-            bad_light = exc
-            raise
-    except BaseException:
+        run([i for i in range(len(rows)) if i % workers not in taken], readouts)
+    except BaseException as exc:
         for pid in children:
             os.kill(pid, 9)
-        if bad_light is None:
+        if not isinstance(exc, InputError):
             raise
+        bad_light = exc                                  # (refused below, as the ordered scan does)
     finally:
         status = {j: os.waitpid(pid, 0)[1] for pid, j in children.items()}
     if bad_light is not None or any(os.WIFEXITED(s) and os.WEXITSTATUS(s) == BAD_LIGHT_STATUS
