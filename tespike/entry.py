@@ -73,7 +73,7 @@ def main() -> int:
     """Run ``tespike`` with the process's arguments; the exit status."""
     _fill_closed_descriptors()
     _hold_early_signals()
-    _one_blas_thread_under_limit()
+    _one_blas_thread()
     try:
         refusal = _address_space_refusal()
         if refusal:
@@ -156,15 +156,17 @@ def _address_space_limit() -> int | None:
     return None if soft == resource.RLIM_INFINITY else soft
 
 
-def _one_blas_thread_under_limit() -> None:
-    """Under an address-space limit, numpy's OpenBLAS starts one thread unless the user chose a
-    count (``OPENBLAS_NUM_THREADS``): each thread reserves tens of MB at import, and near the limit
-    a failed reservation hung the start, crashed it (SIGSEGV) or left a C extension returning no
-    exception (``SystemError``), where one thread starts in about 40 MB less. tespike's numpy work
-    is elementwise (no BLAS call that threads would speed up)."""
+def _one_blas_thread() -> None:
+    """Numpy's OpenBLAS starts on one thread unless the user chose a count (``OPENBLAS_NUM_THREADS``).
+    tespike's numpy work is elementwise (no BLAS call that threads would speed up; torch has its
+    own), and the threads OpenBLAS starts at import spin on the other cores until the first fork
+    or for about 0.1 s: a quarter of the other core's time through a 0.25 s ``tespike simulate``,
+    whose janitor and stripe worker then waited for a core (9 % of its wall time on a dim pan,
+    ``benchmarks/bench_startup.py``). Under an address-space limit each thread also reserved tens
+    of MB at import, and near the limit a failed reservation hung the start, crashed it (SIGSEGV)
+    or left a C extension returning no exception (``SystemError``)."""
     import os
-    if _address_space_limit() is not None:
-        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def _starved() -> str:

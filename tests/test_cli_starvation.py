@@ -76,6 +76,25 @@ def test_under_a_limit_the_command_starts_in_the_room_one_blas_thread_needs():
     assert_refused(done, "cannot start")
 
 
+def test_a_command_runs_numpy_s_blas_on_one_thread_unless_the_user_chose_a_count():
+    """OpenBLAS's threads spin on the other cores after numpy's import: 9 % of a dim pan's
+    ``simulate`` wall time (``benchmarks/bench_startup.py``). A command starts it on one
+    thread, with or without a limit; a count the user set is kept."""
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("OpenBLAS starts no thread of its own on one core")
+    code = (ENTRY.format(args=["scene", "--list"]).replace("sys.exit(main())", "main()")
+            + "; print(open('/proc/self/status').read().split('Threads:')[1].split()[0])")
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    threads = []
+    for count in (None, 2):
+        env_here = dict(env, PYTHONPATH=str(ROOT)) | ({} if count is None else {"OPENBLAS_NUM_THREADS": str(count)})
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                              env=env_here, timeout=120)
+        assert done.returncode == 0, done.stderr
+        threads.append(int(done.stdout.split()[-1]))
+    assert threads == [1, 2]
+
+
 def test_a_trial_start_that_crashes_is_out_of_memory(monkeypatch):
     """The trial start in a child was read as short of memory only where its stderr said so: one killed
     by SIGSEGV, or ending in CPython's SystemError (a C extension's failed allocation), let the command
