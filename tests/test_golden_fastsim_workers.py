@@ -188,6 +188,48 @@ def test_a_failed_worker_is_an_error(monkeypatch):
     assert simulate_scene(SensorConfig(), np.full((2, 64, 2048), 0.1), seed=0, workers=1).shape == (2, 64, 2048)
 
 
+def test_a_worker_killed_without_a_word_is_an_error(monkeypatch):
+    """A worker tells its status on a pipe before it exits (its teardown is reaped beside the
+    command's own work); one that dies without telling (killed) is read from waitpid."""
+    import signal
+    parent, readout = os.getpid(), SceneSimulator.readout
+
+    def killed_in_workers(self, light):
+        if os.getpid() != parent:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return readout(self, light)
+
+    monkeypatch.setattr(SceneSimulator, "readout", killed_in_workers)
+    with pytest.raises(RuntimeError, match=r"worker\(s\) \[1\] failed"):
+        simulate_scene(SensorConfig(), np.full((2, 64, 2048), 0.1), seed=0, workers=2)
+
+
+def _children() -> set[int]:
+    """This process's child processes, zombies included (from /proc)."""
+    found = set()
+    for name in os.listdir("/proc"):
+        try:
+            with open(f"/proc/{name}/stat") as stat:
+                fields = stat.read().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if name.isdigit() and int(fields[1]) == os.getpid():
+            found.add(int(name))
+    return found
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc")
+def test_workers_are_reaped():
+    import threading
+    before = _children()
+    for workers in (2, 4):
+        simulate_scene(SensorConfig(), np.full((2, 256, 1024), 0.1), seed=0, workers=workers)
+    for thread in threading.enumerate():
+        if thread.name.startswith("tespike-reap"):
+            thread.join(10)
+    assert _children() == before
+
+
 def test_cli_workers_give_the_same_file(tmp_path):
     np.save(tmp_path / "i.npy", _log_uniform((2, 64, 2048), 3))            # 2 stripes
     for workers in (1, 2):

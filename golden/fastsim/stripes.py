@@ -101,15 +101,19 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress, what: str = "sce
                 scan_light(part, what)
                 words[k, rows[i]] = sims[i].readout(part)
 
-    children, parent = {}, os.getpid()
+    children, parent = {}, os.getpid()                  # pid -> (its first stripe, its "done" pipe)
     bad_light = None
     try:
         for j in range(1, workers):
+            done, told = os.pipe()
             try:
                 pid = os.fork()
             except OSError:                              # no more processes: this one does the rest
+                os.close(done)
+                os.close(told)
                 break
             if pid == 0:                                 # worker: its stripes, then leave at once
+                os.close(done)
                 status = 1
                 try:
                     run(range(j, len(rows), workers), range(K), parent)
@@ -120,10 +124,12 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress, what: str = "sce
                     import traceback
                     traceback.print_exc()
                 finally:
+                    _tell(told, status)
                     os._exit(status)
-            children[pid] = j
+            os.close(told)
+            children[pid] = (j, done)
         readouts = (progress or iter)(range(K))         # (after the fork: a bar may start a thread)
-        taken = set(children.values())
+        taken = {j for j, _ in children.values()}
         run([i for i in range(len(rows)) if i % workers not in taken], readouts)
     except BaseException as exc:
         for pid in children:
@@ -132,13 +138,52 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress, what: str = "sce
             raise
         bad_light = exc                                  # (refused below, as the ordered scan does)
     finally:
-        status = {j: os.waitpid(pid, 0)[1] for pid, j in children.items()}
-    if bad_light is not None or any(os.WIFEXITED(s) and os.WEXITSTATUS(s) == BAD_LIGHT_STATUS
-                                    for s in status.values()):
+        ended = []
+        status = {j: _worker_status(pid, done, ended) for pid, (j, done) in children.items()}
+        if ended:
+            _reap_beside(ended)
+    if bad_light is not None or BAD_LIGHT_STATUS in status.values():
         for k in range(K):                              # the refusal of the first bad readout
             scan_light(np.asarray(scene[k:k + 1]), what)
         raise bad_light or RuntimeError("a simulation worker refused light a scan of the scene passes")
-    failed = [j for j, s in status.items() if s != 0]
+    failed = [j for j, code in status.items() if code != 0]
     if failed:
         raise RuntimeError(f"simulation worker(s) {failed} failed (their stripes have no words)")
     return words
+
+
+def _tell(told: int, status: int) -> None:
+    """A worker's exit status, written on its "done" pipe just before it exits."""
+    try:
+        os.write(told, bytes([status]))
+    except OSError:                                      # (its command is gone: nobody to tell)
+        pass
+
+
+def _worker_status(pid: int, done: int, ended: list) -> int:
+    """A worker's exit status: the byte it wrote on its "done" pipe just before exiting (``pid``
+    appended to ``ended``, to be reaped beside this process's own work: a worker's exit, the
+    teardown of its address space, took 3-4 ms the command waited for), else, where it ended
+    without one (killed), what ``waitpid`` tells (the negative signal number)."""
+    try:
+        told = os.read(done, 1)
+    finally:
+        os.close(done)
+    if told:
+        ended.append(pid)
+        return told[0]
+    return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
+
+
+def _reap_beside(pids: list) -> None:
+    """Reap workers that have said they are done, on a thread of this process (not a daemon:
+    the interpreter's exit, and ``tespike``'s, joins it, so no worker outlives the command)."""
+    import threading
+
+    def reap():
+        for pid in pids:
+            try:
+                os.waitpid(pid, 0)
+            except ChildProcessError:
+                pass
+    threading.Thread(target=reap, name="tespike-reap-stripe-workers").start()
