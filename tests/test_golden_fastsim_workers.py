@@ -224,8 +224,9 @@ def test_workers_are_reaped():
     before = _children()
     for workers in (2, 4):
         simulate_scene(SensorConfig(), np.full((2, 256, 1024), 0.1), seed=0, workers=workers)
+    from tespike.golden.fastsim.stripes import REAPER_NAME
     for thread in threading.enumerate():
-        if thread.name.startswith("tespike-reap"):
+        if thread.name == REAPER_NAME:
             thread.join(10)
     assert _children() == before
 

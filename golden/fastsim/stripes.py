@@ -73,7 +73,8 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress, what: str = "sce
     ...`` and write their words into a shared anonymous memory map (processes, not
     threads: the simulator's Python work holds the GIL for a large share of its time).
     A worker stops at its next readout once this process is gone (killed outright: it
-    had no chance to end them).
+    had no chance to end them). A worker tells its exit status on a pipe just before it
+    exits, and is reaped on a thread (:func:`_reap_beside`) while this process goes on.
 
     Each process checks the light of its stripes, readout by readout, just before it
     simulates them (values in cache; a scan of the whole scene before the workers
@@ -101,6 +102,8 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress, what: str = "sce
                 scan_light(part, what)
                 words[k, rows[i]] = sims[i].readout(part)
 
+    if workers > 1:
+        _join_reapers()
     children, parent = {}, os.getpid()                  # pid -> (its first stripe, its "done" pipe)
     bad_light = None
     try:
@@ -175,6 +178,10 @@ def _worker_status(pid: int, done: int, ended: list) -> int:
     return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
 
 
+#: Name of the thread that reaps workers once they have said they are done (:func:`_reap_beside`).
+REAPER_NAME = "tespike-reap-stripe-workers"
+
+
 def _reap_beside(pids: list) -> None:
     """Reap workers that have said they are done, on a thread of this process (not a daemon:
     the interpreter's exit, and ``tespike``'s, joins it, so no worker outlives the command)."""
@@ -186,4 +193,13 @@ def _reap_beside(pids: list) -> None:
                 os.waitpid(pid, 0)
             except ChildProcessError:
                 pass
-    threading.Thread(target=reap, name="tespike-reap-stripe-workers").start()
+    threading.Thread(target=reap, name=REAPER_NAME).start()
+
+
+def _join_reapers() -> None:
+    """Wait for the reapers of earlier runs (their workers exit within milliseconds), so that
+    no thread of this module is running when this process forks again (a fork copies one thread)."""
+    import threading
+    for thread in threading.enumerate():
+        if thread.name == REAPER_NAME:
+            thread.join()
