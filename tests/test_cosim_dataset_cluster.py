@@ -363,6 +363,54 @@ def test_a_cluster_whose_reader_thread_cannot_start_leaves_no_process_and_no_pip
     assert process.stdin.closed and process.stdout.closed and process.stderr.closed
 
 
+def _fake_distributed(tmp_path, loop_dies: bool):
+    """A ``distributed`` package whose LocalCluster never starts: its "IO loop" thread dies at once
+    (``loop_dies``, as Dask's did starved of memory) or runs on, and the start waits for ever."""
+    package = tmp_path / "fake" / "distributed"
+    package.mkdir(parents=True)
+    (package / "__init__.py").write_text(
+        "import threading, time\n"
+        "class LocalCluster:\n"
+        "    def __init__(self, **options):\n"
+        f"        threading.Thread(target=time.sleep, args=({0.2 if loop_dies else 3600},), name='IO loop',\n"
+        "                         daemon=True).start()\n"
+        "        threading.Event().wait()\n")
+    return dict(os.environ, PYTHONPATH=str(tmp_path / "fake"))
+
+
+def test_a_cluster_whose_event_loop_thread_dies_while_it_starts_ends_in_one_line(tmp_path):
+    """Starved of memory, Dask's event loop thread died while the cluster started and the start
+    waited for it for ever, saying nothing: the command said "did not start in 120 s" (the fault
+    sweep's 120 s ran out first). The cluster's process now ends at once with one line."""
+    from tespike.cosim.dataset.cluster import LOCAL_CLUSTER
+    process = subprocess.Popen([sys.executable, "-c", LOCAL_CLUSTER, "2"], stdin=subprocess.PIPE,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               env=_fake_distributed(tmp_path, loop_dies=True), start_new_session=True)
+    try:
+        process.wait(30)
+    finally:
+        process.kill()
+        out, err = process.communicate()
+    assert process.returncode == -signal.SIGKILL and out == ""
+    assert err.strip() == "RuntimeError: the cluster's event loop thread ended before the cluster started"
+
+
+def test_a_cluster_that_never_starts_is_given_up_in_one_line(tmp_path, monkeypatch):
+    from tespike.cosim.dataset import cluster
+    monkeypatch.setattr(cluster, "START_SECONDS", 2)
+    real_popen = subprocess.Popen
+    started = []
+
+    def popen(*args, **kwargs):
+        started.append(real_popen(*args, **dict(kwargs, env=_fake_distributed(tmp_path, loop_dies=False))))
+        return started[-1]
+    monkeypatch.setattr(subprocess, "Popen", popen)
+    with pytest.raises(InputError, match=r"^a local Dask cluster of 2 worker processes did not start in 2 s$"):
+        cluster._start_local_cluster(2, lambda: None)
+    (process,) = started
+    assert process.returncode is not None                  # its session ended, nothing left running
+
+
 def test_a_ctrl_c_while_the_cluster_shuts_down_is_not_lost():
     """A Ctrl-C recorded after the last task (while the local cluster shut down) was dropped with the
     handler: evaluate --store and dataset then replaced their results and exited 0."""

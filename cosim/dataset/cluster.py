@@ -77,7 +77,10 @@ def check_scheduler_address(address: str) -> None:
 #: pipe closes; a cluster still starting when the command ends (a start that hangs: with few file
 #: handles Dask's scheduler spins for ever), one whose command is gone (killed outright: its pipe
 #: closes before it is seen as gone, and a graceful close took 4.5 s), or one that does not close
-#: in 30 s, ends with its whole session at once.
+#: in 30 s, ends with its whole session at once. A guard thread ends it too, with one line, if
+#: the event loop thread Dask starts first ("IO loop") dies before the cluster has started: starved
+#: of memory, that thread died and the start waited for it for ever, silently (the command said
+#: "did not start in 120 s").
 LOCAL_CLUSTER = """
 import logging, os, signal, sys, threading
 started, ended, closed = threading.Event(), threading.Event(), threading.Event()
@@ -88,6 +91,19 @@ def watch():
     if not orderly or not started.is_set() or os.getppid() != command or not closed.wait(30):   # its own group
         os.killpg(0, signal.SIGKILL) if os.getpgrp() == os.getpid() else os.kill(os.getpid(), signal.SIGKILL)
 threading.Thread(target=watch, daemon=True).start()
+loops, start_thread = [], threading.Thread.start
+def start_noting_loops(thread):                   # the start waits for its event loop thread: if that thread
+    start_thread(thread)                          # dies (out of memory), it waits for ever, saying nothing
+    if thread.name == "IO loop":
+        loops.append(thread)
+threading.Thread.start = start_noting_loops
+def guard():
+    while not started.wait(0.05):
+        if loops and not any(loop.is_alive() for loop in loops):
+            sys.stderr.write("RuntimeError: the cluster's event loop thread ended before the cluster started\\n")
+            sys.stderr.flush()
+            os.killpg(0, signal.SIGKILL) if os.getpgrp() == os.getpid() else os.kill(os.getpid(), signal.SIGKILL)
+threading.Thread(target=guard, daemon=True).start()
 from distributed import LocalCluster
 cluster = LocalCluster(n_workers=int(sys.argv[1]), threads_per_worker=1, processes=True, host="127.0.0.1",
                        dashboard_address="127.0.0.1:0", worker_dashboard_address="127.0.0.1:0",
@@ -98,8 +114,10 @@ ended.wait()
 cluster.close(timeout=10)
 closed.set()
 """
-#: Seconds a local cluster is given to start, and to stop before its processes are killed.
-START_SECONDS = 120
+#: Seconds a local cluster is given to start (an idle 2-core machine starts 2 workers in about
+#: 1 s, one with three busy processes in about 4: a start that takes 60 s has hung, as Dask's did
+#: starved of memory), and to stop before its processes are killed.
+START_SECONDS = 60
 STOP_SECONDS = 30
 #: Seconds a local cluster may run tasks with no worker left before the run is given up (its
 #: nannies restart a dead worker within a few seconds; starved of memory, the nannies die too).
@@ -179,8 +197,10 @@ def _start_local_cluster(workers: int, interrupted):
         while not select.select([process.stdout], [], [], POLL_SECONDS)[0]:
             interrupted()
             if time.monotonic() > end:
+                from tespike.golden.resources import address_space_text
+                limit = address_space_text()
                 raise InputError(f"a local Dask cluster of {workers} worker processes did not start "
-                                 f"in {START_SECONDS} s")
+                                 f"in {START_SECONDS} s" + (f" (most likely out of memory{limit})" if limit else ""))
         address = process.stdout.readline().strip()
     except BaseException:
         _stop_local_cluster(process, at_once=True)
