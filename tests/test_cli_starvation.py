@@ -21,12 +21,14 @@ from tests.test_cli_hardening import small_tmpfs
 def run_limited(code: str, limits: dict, timeout: float = 120, env: dict | None = None) -> subprocess.CompletedProcess:
     """``python -c code`` (this checkout's tespike) under the resource ``limits``, SIGXFSZ ignored
     as a starved shell's command would have it (a write past RLIMIT_FSIZE then fails with EFBIG);
-    ``env``: variables to set besides."""
+    ``env``: variables to set besides (None: to unset; a command run in this process, as
+    ``run_here`` runs them, set ``OPENBLAS_NUM_THREADS`` here)."""
     def starve():
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         for which, value in limits.items():
             resource.setrlimit(which, (value, value))
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), **(env or {}))
+    env = {name: value for name, value in env.items() if value is not None}
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, env=env,
                           preexec_fn=starve, timeout=timeout)
 
@@ -37,8 +39,7 @@ def start_address_space(blas_threads: int | None = 1) -> int:
     40 MB): the command starts one under an address-space limit (``tespike.entry``)."""
     code = ("import tespike.cosim.cli\n"
             "print([l for l in open('/proc/self/status') if l.startswith('VmPeak')][0].split()[1])")
-    env = {} if blas_threads is None else {"OPENBLAS_NUM_THREADS": str(blas_threads)}
-    done = run_limited(code, {}, env=env)
+    done = run_limited(code, {}, env={"OPENBLAS_NUM_THREADS": None if blas_threads is None else str(blas_threads)})
     assert done.returncode == 0, done.stderr
     return int(done.stdout) * 1024
 
@@ -84,12 +85,9 @@ def test_a_command_runs_numpy_s_blas_on_one_thread_unless_the_user_chose_a_count
         pytest.skip("OpenBLAS starts no thread of its own on one core")
     code = (ENTRY.format(args=["scene", "--list"]).replace("sys.exit(main())", "main()")
             + "; print(open('/proc/self/status').read().split('Threads:')[1].split()[0])")
-    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     threads = []
     for count in (None, 2):
-        env_here = dict(env, PYTHONPATH=str(ROOT)) | ({} if count is None else {"OPENBLAS_NUM_THREADS": str(count)})
-        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
-                              env=env_here, timeout=120)
+        done = run_limited(code, {}, env={"OPENBLAS_NUM_THREADS": None if count is None else str(count)})
         assert done.returncode == 0, done.stderr
         threads.append(int(done.stdout.split()[-1]))
     assert threads == [1, 2]
