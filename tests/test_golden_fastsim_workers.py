@@ -220,14 +220,11 @@ def _children() -> set[int]:
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc")
 def test_workers_are_reaped():
-    import threading
+    from tespike.golden.fastsim.stripes import _join_reapers
     before = _children()
     for workers in (2, 4):
         simulate_scene(SensorConfig(), np.full((2, 256, 1024), 0.1), seed=0, workers=workers)
-    from tespike.golden.fastsim.stripes import REAPER_NAME
-    for thread in threading.enumerate():
-        if thread.name == REAPER_NAME:
-            thread.join(10)
+    _join_reapers()
     assert _children() == before
 
 

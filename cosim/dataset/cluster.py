@@ -85,11 +85,13 @@ LOCAL_CLUSTER = """
 import logging, os, signal, sys, threading
 started, ended, closed = threading.Event(), threading.Event(), threading.Event()
 command = os.getppid()
+def end_at_once():                                # its own group (its workers) where it leads one
+    os.killpg(0, signal.SIGKILL) if os.getpgrp() == os.getpid() else os.kill(os.getpid(), signal.SIGKILL)
 def watch():
     orderly = sys.stdin.read() == "close"         # (only the command's own stop writes it: EOF alone is its death)
     ended.set()
-    if not orderly or not started.is_set() or os.getppid() != command or not closed.wait(30):   # its own group
-        os.killpg(0, signal.SIGKILL) if os.getpgrp() == os.getpid() else os.kill(os.getpid(), signal.SIGKILL)
+    if not orderly or not started.is_set() or os.getppid() != command or not closed.wait(30):
+        end_at_once()
 threading.Thread(target=watch, daemon=True).start()
 loops, start_thread = [], threading.Thread.start
 def start_noting_loops(thread):                   # the start waits for its event loop thread: if that thread
@@ -102,7 +104,7 @@ def guard():
         if loops and not any(loop.is_alive() for loop in loops):
             sys.stderr.write("RuntimeError: the cluster's event loop thread ended before the cluster started\\n")
             sys.stderr.flush()
-            os.killpg(0, signal.SIGKILL) if os.getpgrp() == os.getpid() else os.kill(os.getpid(), signal.SIGKILL)
+            end_at_once()
 threading.Thread(target=guard, daemon=True).start()
 from distributed import LocalCluster
 cluster = LocalCluster(n_workers=int(sys.argv[1]), threads_per_worker=1, processes=True, host="127.0.0.1",
