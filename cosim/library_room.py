@@ -23,7 +23,8 @@ import sys
 
 from tespike.golden.atomic import stops_held
 from tespike.entry import short_of_room
-from tespike.golden.resources import address_space_limit, mapped_bytes
+from tespike.golden import resources   # (its functions looked up at each call: a test that patches one
+                                       # while this module is first imported must not leave it bound here)
 
 #: Libraries whose room is checked (under a limit) and whose load runs with the stops held.
 GUARDED = ("torch",)
@@ -57,7 +58,7 @@ def _refusal(name: str, limit: int) -> str | None:
         return None                       # no process to try it in: the import itself will tell
     except subprocess.TimeoutExpired:     # a start short of room can hang (OpenBLAS's threads)
         return f"{name} did not load within {PROBE_SECONDS} s under the address-space limit"
-    left = max(0, limit - mapped_bytes())
+    left = max(0, limit - resources.mapped_bytes())
     if short_of_room(done):               # (torch's import under ulimit -v 617 MB printed CPython's SystemError)
         return f"{name} cannot be loaded: it does not fit in {left >> 20} MB of address space"
     if done.returncode != 0:
@@ -105,7 +106,7 @@ class _Guard:
         if fullname not in GUARDED or fullname in self.checked:
             return None
         self.checked.add(fullname)       # (removing itself here would skip the next finder of the loop)
-        limit = address_space_limit()
+        limit = resources.address_space_limit()
         refusal = None if limit is None else _refusal(fullname, limit)
         if refusal:
             raise MemoryError(refusal)

@@ -495,7 +495,7 @@ def test_a_stop_while_a_guarded_library_loads_comes_once_it_has_loaded(tmp_path,
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setattr(sys, "meta_path", [f for f in sys.meta_path if not isinstance(f, library_room._Guard)])
     monkeypatch.setattr(library_room, "GUARDED", ("stopped_library",))
-    monkeypatch.setattr(library_room, "address_space_limit", lambda: None)    # (no room check here)
+    monkeypatch.setattr(library_room.resources, "address_space_limit", lambda: None)    # (no room check here)
     monkeypatch.delitem(sys.modules, "stopped_library", raising=False)
     library_room.guard_imports()
     seen = []
@@ -637,6 +637,25 @@ def test_an_import_that_fails_in_c_under_an_address_space_limit_is_out_of_memory
     monkeypatch.setattr(resources, "address_space_limit", lambda: None)
     with pytest.raises(SystemError):
         cli._run(args)
+
+
+def test_the_import_guard_reads_the_address_space_limit_at_each_check(tmp_path, monkeypatch):
+    """The guard took ``address_space_limit`` by name when it was first imported: a command run in a
+    test process while a test had that function patched (900 MB) left the guard reading 900 MB for
+    every later command, and ``train`` was refused for want of room ("38 MB is left"), a failure that
+    hung on the order the test files ran in. The guard now reads the limit at each check."""
+    from tespike.cosim import library_room
+    from tespike.golden import resources
+
+    (tmp_path / "roomy_library.py").write_text("LOADED = True\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "roomy_library", raising=False)
+    monkeypatch.setattr(library_room, "GUARDED", ("roomy_library",))
+    monkeypatch.setattr(resources, "address_space_limit", lambda: 0)     # no room at all
+    with pytest.raises(MemoryError, match="roomy_library"):
+        library_room._Guard().find_spec("roomy_library", None)
+    monkeypatch.setattr(resources, "address_space_limit", lambda: None)  # unlimited: no check
+    assert library_room._Guard().find_spec("roomy_library", None) is not None
 
 
 def test_a_trial_import_that_fails_in_c_refuses_the_library(tmp_path, monkeypatch):
