@@ -643,7 +643,7 @@ def test_the_import_guard_reads_the_address_space_limit_at_each_check(tmp_path, 
     """The guard took ``address_space_limit`` by name when it was first imported: a command run in a
     test process while a test had that function patched (900 MB) left the guard reading 900 MB for
     every later command, and ``train`` was refused for want of room ("38 MB is left"), a failure that
-    hung on the order the test files ran in. The guard now reads the limit at each check."""
+    depended on the order the test files ran in. The guard now reads the limit at each check."""
     from tespike.cosim import library_room
     from tespike.golden import resources
 
