@@ -12,16 +12,9 @@ import time
 
 import pytest
 
+from tests.processes import alive
+
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
-
-
-def _running(pid: int) -> bool:
-    """Whether ``pid`` is a live process (a zombie waiting to be reaped has ended)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except (FileNotFoundError, ProcessLookupError, IndexError):
-        return False
 
 
 def _kill_command_and_watch(body: str, seconds: float = 10.0) -> bool:
@@ -32,15 +25,15 @@ def _kill_command_and_watch(body: str, seconds: float = 10.0) -> bool:
     child = None
     try:
         child = int(proc.stdout.readline())
-        assert _running(child)
+        assert alive(child)
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(10)
         deadline = time.monotonic() + seconds
-        while _running(child) and time.monotonic() < deadline:
+        while alive(child) and time.monotonic() < deadline:
             time.sleep(0.05)
-        return _running(child)
+        return alive(child)
     finally:
-        if child is not None and _running(child):
+        if child is not None and alive(child):
             os.kill(child, signal.SIGKILL)
         if proc.poll() is None:
             proc.kill()
@@ -149,12 +142,12 @@ def test_what_a_tool_started_ends_with_an_interrupted_command(tmp_path):
         assert done.stdout == "interrupted\n", (done.stdout, done.stderr)
         grandchild = int(said.read_text().split()[0])
         deadline = time.monotonic() + 10
-        while _running(grandchild) and time.monotonic() < deadline:
+        while alive(grandchild) and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert not _running(grandchild)
+        assert not alive(grandchild)
     finally:
         for pid in said.read_text().split():
-            if _running(int(pid)):
+            if alive(int(pid)):
                 os.kill(int(pid), signal.SIGKILL)
 
 

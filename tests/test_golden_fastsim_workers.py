@@ -22,6 +22,7 @@ from tespike.golden.io import load_stream
 from tespike.golden.stimulus import poisson_stimulus
 from tespike.golden.sensor import simulate
 from tests.cli import assert_refused, run_tespike
+from tests.processes import children
 
 SMALL = SensorConfig(b1=2, b2=2, threshold=100)                            # L = 12, one threshold/clock at I = 0.029
 SMALL_MSB = SensorConfig(mode="ml", ml_readout="msb", ml_bits=3, b1=2, b2=2, threshold=5)   # saturates, L = 12
@@ -204,28 +205,14 @@ def test_a_worker_killed_without_a_word_is_an_error(monkeypatch):
         simulate_scene(SensorConfig(), np.full((2, 64, 2048), 0.1), seed=0, workers=2)
 
 
-def _children() -> set[int]:
-    """This process's child processes, zombies included (from /proc)."""
-    found = set()
-    for name in os.listdir("/proc"):
-        try:
-            with open(f"/proc/{name}/stat") as stat:
-                fields = stat.read().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            continue
-        if name.isdigit() and int(fields[1]) == os.getpid():
-            found.add(int(name))
-    return found
-
-
 @pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc")
 def test_workers_are_reaped():
     from tespike.golden.fastsim.stripes import _join_reapers
-    before = _children()
+    before = set(children(os.getpid()))
     for workers in (2, 4):
         simulate_scene(SensorConfig(), np.full((2, 256, 1024), 0.1), seed=0, workers=workers)
     _join_reapers()
-    assert _children() == before
+    assert set(children(os.getpid())) == before
 
 
 def test_cli_workers_give_the_same_file(tmp_path):

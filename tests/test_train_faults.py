@@ -23,6 +23,7 @@ from tespike.recon.train import RunFolderGone, train
 from tests.cli import ROOT, assert_refused, run_tespike
 from tests.test_cli_hardening import small_tmpfs
 from tests.test_recon_train import options
+from tests.processes import alive, children
 
 
 def log_steps(path) -> list[int]:
@@ -164,28 +165,6 @@ def start_training(folder) -> subprocess.Popen:
 def interruptible() -> None:
     """In the child: Ctrl-C as a terminal gives it (a test run from a background job inherits it ignored)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
-def children(pid: int) -> list[int]:
-    found = []
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as handle:
-                    fields = handle.read().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            if int(fields[1]) == pid:
-                found.append(int(entry))
-    return found
-
-
-def alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as handle:
-            return handle.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
 
 
 def wait_for_worker(process, timeout=180) -> list[int]:
