@@ -40,7 +40,8 @@ def check_window_reach(window: int, readouts: int, what: str) -> None:
 
 def check_device(device) -> None:
     """Refuse, in one line, a torch device that cannot hold a tensor on this machine (a misspelt
-    name, cuda without a GPU, the data-less meta device), before any work is done on it."""
+    name, cuda without a GPU, the data-less meta device, a CPU index other than 0, which torch
+    accepts and ignores), before any work is done on it."""
     import torch
     if str(device).startswith("meta"):
         raise InputError(f"device = {device!r}: the meta device holds no data")
@@ -48,6 +49,10 @@ def check_device(device) -> None:
         torch.empty(0, device=device)
     except (RuntimeError, TypeError, AssertionError) as exc:
         raise InputError(f"device = {device!r}: not a usable torch device ({one_line(exc)})") from None
+    named = torch.device(device)
+    if named.type == "cpu" and named.index not in (None, 0):
+        raise InputError(f"device = {device!r}: there is one CPU device ('cpu' or 'cpu:0'); torch would "
+                         f"ignore the index")
 
 
 #: The training-free methods: name -> what it computes (their code: :data:`tespike.recon.methods.RECON_METHODS`;

@@ -491,6 +491,8 @@ def test_corrupt_stream_files(files, kind):
     (("train", "--seed", "-1"), ["seed = -1", "0..2^63 - 1"]),
     (("train", "--seed", str(10 ** 23)), ["seed", "0..2^63 - 1"]),
     (("train", "--device", "bogus"), ["device = 'bogus'", "not a usable torch device"]),
+    (("train", "--device", "cpu:1"), ["device = 'cpu:1'", "one CPU device"]),       # (torch ignores the index)
+    (("reconstruct", "--method", "tfp", "--device", "cpu:7"), ["device = 'cpu:7'", "one CPU device"]),
     (("scene", "--folder", ""), ["--folder '': an empty value"]),           # (read as not given: a built-in scene)
     (("scene", "--crop", ""), ["--crop '': an empty value"]),
     (("evaluate", "--store", ""), ["--store '': an empty value"]),          # (read as no store)

@@ -19,6 +19,7 @@ def test_defaults_and_radius():
     ("window", 0, "odd integer"), ("window", 8, "odd integer"), ("window", 9.0, "odd integer"),
     ("window", True, "odd integer"), ("chunk_elements", 0, ">= 1"), ("estimator", "mid", "ratio"),
     ("search", "both", "stream"), ("device", "cuda:3", "not a usable"), ("device", "meta", "no data"),
+    ("device", "cpu:1", "one CPU device"),
     ("dtype", "float16", "float32"),
 ])
 def test_refusals_name_field_and_value(field, value, words):
