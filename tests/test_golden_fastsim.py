@@ -238,6 +238,25 @@ def test_refuses_bad_input():
         simulate_scene(SensorConfig(), np.zeros((1, 1, 1)), noise=False, dark_current="eq12")
 
 
+@pytest.mark.parametrize("method", ["fast", "per-clock"])
+@pytest.mark.parametrize("light,words", [
+    (np.full((2, 3), -1e-300), "negative"), (np.full((2, 3), np.nan), "non-finite"),
+    (np.full((2, 3), np.inf), "non-finite"), (np.ones((3, 2)), "shape \\(2, 3\\)"),
+    (np.ones((2, 3), np.int64), "float array"), (np.ones(6), "shape \\(2, 3\\)"),
+])
+def test_a_simulators_readout_checks_its_light(method, light, words):
+    """The library's one-readout entry refuses bad light in one line (negative light had given
+    words of darkness, NaN numpy's 'lam value too large'), changes no state, and names it."""
+    sim = SceneSimulator(SensorConfig(), (2, 3), rng=1, method=method)
+    with pytest.raises(InputError, match=words) as info:
+        sim.readout(light, "frame 7")
+    assert str(info.value).startswith("frame 7") and sim.readouts == 0
+    if method == "per-clock":
+        with pytest.raises(InputError, match=words):
+            sim.clock_stimulus(light)
+    assert sim.readout(np.full((2, 3), 0.5, np.float32)).shape == (2, 3)
+
+
 def test_dark_current_matches_cycle_exact_model():
     config = SensorConfig()
     levels = [0.0, 0.005, 0.1]

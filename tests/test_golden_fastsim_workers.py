@@ -178,10 +178,10 @@ def test_bad_light_is_refused_as_a_scan_of_the_whole_scene_refuses_it():
 def test_a_failed_worker_is_an_error(monkeypatch):
     parent, readout = os.getpid(), SceneSimulator.readout
 
-    def broken_in_workers(self, light):
+    def broken_in_workers(self, light, what="light"):
         if os.getpid() != parent:
             raise ValueError("broken on purpose")
-        return readout(self, light)
+        return readout(self, light, what)
 
     monkeypatch.setattr(SceneSimulator, "readout", broken_in_workers)
     with pytest.raises(RuntimeError, match=r"worker\(s\) \[1\] failed"):
@@ -195,10 +195,10 @@ def test_a_worker_killed_without_a_word_is_an_error(monkeypatch):
     import signal
     parent, readout = os.getpid(), SceneSimulator.readout
 
-    def killed_in_workers(self, light):
+    def killed_in_workers(self, light, what="light"):
         if os.getpid() != parent:
             os.kill(os.getpid(), signal.SIGKILL)
-        return readout(self, light)
+        return readout(self, light, what)
 
     monkeypatch.setattr(SceneSimulator, "readout", killed_in_workers)
     with pytest.raises(RuntimeError, match=r"worker\(s\) \[1\] failed"):

@@ -78,7 +78,7 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
                          method=method, total_pixel_readouts=scene.size, sensor=sensor)
     words = np.empty((K, H, W), word_dtype(config))
     for k in (progress or iter)(range(K)):
-        words[k] = sim.readout(check_scene(np.asarray(scene[k:k + 1]), what=what)[0])
+        words[k] = sim.readout(scene[k], what)              # (which checks it)
     return words
 
 
@@ -105,7 +105,7 @@ def iter_scene_stimulus(config: SensorConfig, scene: np.ndarray, *, seed=None,
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
                          method="per-clock", total_pixel_readouts=scene.size, sensor=sensor)
     for k in range(K):
-        yield sim.clock_stimulus(check_scene(np.asarray(scene[k:k + 1]))[0])
+        yield sim.clock_stimulus(scene[k], "scene")
 
 
 def scene_stimulus(config: SensorConfig, scene: np.ndarray, **options) -> np.ndarray:

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..config import SensorConfig
 from ..errors import InputError
+from ..io import scan_light
 from ..light import as_generator, electrons_per_readout, log_budget
 from ..noise import PixelNoise, pixel_noise
 from .clock import clock_chunks, clock_path
@@ -123,8 +124,11 @@ class SceneSimulator:
         return np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=key + (self.readouts,),
                                                             pool_size=pool_size))
 
-    def readout(self, light: np.ndarray) -> np.ndarray:
-        """Light of one interval (H, W), checked >= 0 and finite -> words (H, W) int64."""
+    def readout(self, light: np.ndarray, what: str = "light") -> np.ndarray:
+        """Light of one interval (H, W) -> words (H, W) int64. The light is checked here (a
+        float array of this shape, every value finite and >= 0; ``what`` names it in a
+        refusal), so that a caller need not scan it first."""
+        light = self._checked(light, what)
         L = self.config.clocks_per_readout
         expected = self.pixels.photo(electrons_per_readout(light).reshape(-1))
         self.readouts += 1
@@ -180,7 +184,7 @@ class SceneSimulator:
                 clock_path(self, sel, expected, dark, words)
         return words.reshape(self.shape)
 
-    def clock_stimulus(self, light: np.ndarray) -> np.ndarray:
+    def clock_stimulus(self, light: np.ndarray, what: str = "light") -> np.ndarray:
         """Per-clock electrons ``(L, H, W)`` of one interval, drawn exactly as
         :meth:`readout` draws them with ``method="per-clock"`` (same random numbers
         in the same order), without running the pixels: the cycle-exact model on
@@ -188,6 +192,7 @@ class SceneSimulator:
         from ..light import stimulus_dtype
         if self.noise and self.method != "per-clock":
             raise InputError("clock_stimulus needs method='per-clock' (or noise switched off)")
+        light = self._checked(light, what)
         L = self.config.clocks_per_readout
         expected = self.pixels.photo(electrons_per_readout(light).reshape(-1))
         dark = self.pixels.dark(expected.size, self.rng) if self.dark_model else self.no_dark
@@ -195,6 +200,16 @@ class SceneSimulator:
         for part, e in clock_chunks(self, np.arange(expected.size), expected, dark):
             out[:, part] = e
         return out.reshape((L,) + self.shape)
+
+    def _checked(self, light, what: str) -> np.ndarray:
+        """``light`` as an array, refused in one line unless it is one interval's float light
+        of this simulator's shape with every value finite and >= 0 (SPEC section 6)."""
+        light = np.asarray(light)
+        if light.dtype.kind != "f" or light.shape != self.shape:
+            raise InputError(f"{what}: a readout interval's light must be a float array of shape "
+                             f"{self.shape} (got {light.dtype} of shape {light.shape})")
+        scan_light(light, what)
+        return light
 
 
 def check_method(method) -> None:

@@ -98,9 +98,7 @@ def run_stripes(rows, sims, scene, dtype, *, workers, progress, what: str = "sce
                 os._exit(1)                              # a worker whose command was killed outright
             light = np.asarray(scene[k])
             for i in mine:
-                part = light[rows[i]]
-                scan_light(part, what)
-                words[k, rows[i]] = sims[i].readout(part)
+                words[k, rows[i]] = sims[i].readout(light[rows[i]], what)     # (which checks it)
 
     if workers > 1:
         _join_reapers()
