@@ -37,9 +37,9 @@ def header_damaged(exc: BaseException) -> bool:
     return isinstance(exc, HEADER_ERRORS) or (isinstance(exc, ValueError) and any(
         words in str(exc) for words in ("malformed node or string", "Cannot parse header")))
 
-__all__ = ["atomic_output", "check_scene", "check_stimulus", "load_npy", "load_scene", "load_stimulus",
-           "load_stream", "open_npz", "save_images", "save_stream", "scan_light", "scene_name", "unsigned_dtype",
-           "word_dtype", "write_npz"]
+__all__ = ["atomic_output", "check_frame_shape", "check_scene", "check_stimulus", "load_npy", "load_scene",
+           "load_stimulus", "load_stream", "open_npz", "save_images", "save_stream", "scan_light", "scene_name",
+           "unsigned_dtype", "word_dtype", "write_npz"]
 
 
 def load_npy(path: str | Path, what: str, mmap_mode: str | None = None) -> np.ndarray:
@@ -161,6 +161,20 @@ def load_stimulus(path: str | Path, config: SensorConfig) -> np.ndarray:
     for start in range(0, stimulus.shape[0], step):
         check_stimulus(stimulus[start:start + step], config, whole_readouts=False, what=what)
     return stimulus
+
+
+def check_frame_shape(shape, what: str = "frame shape") -> tuple[int, int]:
+    """``shape`` as ``(H, W)``: two integers, each at least 1 (a pixel array's, SPEC section 6),
+    refused in one line otherwise (numpy had refused a negative one in its own words, and taken
+    three numbers or an empty frame)."""
+    try:
+        height, width = shape
+    except (TypeError, ValueError):
+        raise InputError(f"{what} {shape!r}: must be (H, W), two integers") from None
+    for size in (height, width):
+        if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1:
+            raise InputError(f"{what} {shape!r}: H and W must be integers of at least 1")
+    return int(height), int(width)
 
 
 def check_scene(scene: np.ndarray, *, scan_values: bool = True, what: str = "scene") -> np.ndarray:

@@ -30,7 +30,8 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from .config import SensorConfig
-from .io import check_stimulus
+from .errors import InputError
+from .io import check_frame_shape, check_stimulus
 from .reference import PixelState, msb_index, readout_word
 
 #: Pixel clocks x pixels processed at once by :func:`simulate` (bounds memory).
@@ -188,7 +189,7 @@ class PixelArrayModel:
 
     def __init__(self, config: SensorConfig, shape: tuple[int, int]):
         self.config = config
-        self.shape = tuple(shape)
+        self.shape = check_frame_shape(shape, "pixel array shape")
         self.state = PixelState.zeros(self.shape)
         self._engine = _Engine(config)
 
@@ -196,7 +197,7 @@ class PixelArrayModel:
         """Consume (T, H, W) electrons of any T; return the words (k, H, W) of the readouts completed."""
         check_stimulus(electrons, self.config, whole_readouts=False)
         if electrons.shape[1:] != self.shape:
-            raise ValueError(f"chunk shape {electrons.shape[1:]} != array shape {self.shape}")
+            raise InputError(f"stimulus chunk shape {electrons.shape[1:]} != pixel array shape {self.shape}")
         config, state = self.config, self.state
         T = electrons.shape[0]
         H, W = self.shape

@@ -257,6 +257,18 @@ def test_a_simulators_readout_checks_its_light(method, light, words):
     assert sim.readout(np.full((2, 3), 0.5, np.float32)).shape == (2, 3)
 
 
+@pytest.mark.parametrize("count", [0, -5, 2.5, True, "10"])
+def test_a_simulators_pixel_readout_count_must_be_positive(count):
+    """The count the error budget is spread over (a negative one had been taken as one)."""
+    with pytest.raises(InputError, match="total_pixel_readouts"):
+        SceneSimulator(SensorConfig(), (2, 3), rng=1, total_pixel_readouts=count)
+
+
+def test_an_empty_scene_gives_no_words_on_every_method():
+    for options in ({}, {"method": "per-clock"}, {"noise": False}):
+        assert simulate_scene(SensorConfig(), np.zeros((0, 2, 3)), seed=1, **options).shape == (0, 2, 3)
+
+
 def test_dark_current_matches_cycle_exact_model():
     config = SensorConfig()
     levels = [0.0, 0.005, 0.1]

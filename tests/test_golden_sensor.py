@@ -258,9 +258,21 @@ def test_feed_refuses_bad_chunks():
         array.feed(np.full((3, 2, 2), 65536, np.int64))
     with pytest.raises(InputError, match="float"):
         array.feed(np.zeros((3, 2, 2)))
-    with pytest.raises(ValueError, match="shape"):
+    with pytest.raises(InputError, match="chunk shape \\(2, 3\\) != pixel array shape \\(2, 2\\)"):
         array.feed(np.zeros((3, 2, 3), np.int64))
     assert array.state.clock == 0
+
+
+@pytest.mark.parametrize("shape", [(0, 2), (2, -1), (1, 2, 3), (2,), 4, (2.0, 2), (True, 2), None])
+def test_a_pixel_array_of_no_pixels_or_no_frame_shape_is_refused(shape):
+    """One line naming the shape (numpy had refused a negative size in its own words, and an
+    array had been made of three numbers or of no pixels); the fast simulator shares the rule."""
+    from tespike.golden.fastsim import SceneSimulator
+    with pytest.raises(InputError, match="pixel array shape") as info:
+        PixelArrayModel(SensorConfig(), shape)
+    assert repr(shape) in str(info.value)
+    with pytest.raises(InputError, match="simulator shape"):
+        SceneSimulator(SensorConfig(), shape, rng=1)
 
 
 # -- extreme cases (docs/golden-model.md) ---------------------------------------------

@@ -70,12 +70,12 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     keep_freed_memory()                                 # (speed only: see golden.resources)
     if noise and method == "fast":
         rows, sims = stripe_simulators(config, (H, W), seed=seed, dark_current=dark_current,
-                                       total_pixel_readouts=scene.size, sensor=sensor)
+                                       total_pixel_readouts=scene.size or None, sensor=sensor)
         return run_stripes(rows, sims, scene, word_dtype(config), workers=workers, progress=progress,
                            what=what)
     worker_count(workers, 1)                            # (refuses a bad count; one process here)
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
-                         method=method, total_pixel_readouts=scene.size, sensor=sensor)
+                         method=method, total_pixel_readouts=scene.size or None, sensor=sensor)
     words = np.empty((K, H, W), word_dtype(config))
     for k in (progress or iter)(range(K)):
         words[k] = sim.readout(scene[k], what)              # (which checks it)
@@ -103,7 +103,7 @@ def iter_scene_stimulus(config: SensorConfig, scene: np.ndarray, *, seed=None,
     scene = check_scene(scene, scan_values=False)
     K, H, W = scene.shape
     sim = SceneSimulator(config, (H, W), rng=seed, dark_current=dark_current, noise=noise,
-                         method="per-clock", total_pixel_readouts=scene.size, sensor=sensor)
+                         method="per-clock", total_pixel_readouts=scene.size or None, sensor=sensor)
     for k in range(K):
         yield sim.clock_stimulus(scene[k], "scene")
 

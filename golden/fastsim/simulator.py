@@ -14,7 +14,7 @@ import numpy as np
 
 from ..config import SensorConfig
 from ..errors import InputError
-from ..io import scan_light
+from ..io import check_frame_shape, scan_light
 from ..light import as_generator, electrons_per_readout, log_budget
 from ..noise import PixelNoise, pixel_noise
 from .clock import clock_chunks, clock_path
@@ -56,8 +56,12 @@ class SceneSimulator:
                  method: str = "fast", total_pixel_readouts: int | None = None,
                  sensor=None, pixels: PixelNoise | None = None):
         check_method(method)
+        if total_pixel_readouts is not None and (isinstance(total_pixel_readouts, bool) or not isinstance(
+                total_pixel_readouts, (int, np.integer)) or total_pixel_readouts < 1):
+            raise InputError(f"total_pixel_readouts {total_pixel_readouts!r}: must be a positive integer "
+                             "(the pixel-readouts of the whole scene, which the error budget counts)")
         self.config = config
-        self.shape = tuple(shape)
+        self.shape = check_frame_shape(shape, "simulator shape")
         # sensor non-idealities as per-pixel rates (golden.noise): a Sensor, or its
         # PixelNoise for these pixels (a stripe's share of a frame's maps)
         self.pixels = pixels if pixels is not None else pixel_noise(dark_current, sensor, self.shape,
