@@ -178,6 +178,12 @@ def check_peak(peak) -> None:
         raise InputError(f"peak = {peak!r}: must be a finite number > 0")
 
 
+def check_mu(mu) -> None:
+    """Refuse a mu-law constant (paper eq. 11) unless a finite number > 0 (``log1p(mu)`` divides)."""
+    if isinstance(mu, bool) or not (isinstance(mu, (int, float)) and math.isfinite(mu) and mu > 0):
+        raise InputError(f"mu = {mu!r}: the mu-law constant must be a finite number > 0")
+
+
 def display_peak(reference, peak, K: int, H: int, W: int, device) -> float:
     """The reference light a display metric (HDR-VQM, FovVideoVDP) shows at the display's peak:
     ``peak`` when given, else the reference's maximum over all its K frames (refused if all zero)."""
@@ -273,6 +279,7 @@ def _ssim_stat(mu: float):
 
 def psnr_mu(pred, gt, *, mu: float = MU, peak=None, device="cpu") -> np.ndarray:
     """PSNR-mu per frame (dB): normalise by the GT peak, clip, mu-law, PSNR with range 1."""
+    check_mu(mu)
     mse = _banded(pred, gt, lambda p, g: (mu_law(p, mu) - mu_law(g, mu)) ** 2, peak=peak, device=device)
     with np.errstate(divide="ignore"):
         return 10 * np.log10(1.0 / mse)
@@ -280,6 +287,7 @@ def psnr_mu(pred, gt, *, mu: float = MU, peak=None, device="cpu") -> np.ndarray:
 
 def ssim_mu(pred, gt, *, mu: float = MU, peak=None, device="cpu") -> np.ndarray:
     """SSIM-mu per frame: normalise by the GT peak, clip, mu-law, Gaussian SSIM with range 1."""
+    check_mu(mu)
     win = _gaussian_kernel(SSIM_SIGMA, SSIM_TRUNCATE, "cpu").numel()
     shape = _shape(gt)
     if len(shape) in (2, 3) and (shape[-2] < win or shape[-1] < win):

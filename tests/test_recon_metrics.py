@@ -113,6 +113,10 @@ def test_refusals(rng):
         metrics.ssim_mu(pred, gt, peak=0.5 * float(gt.max()))
     with pytest.raises(InputError, match=r"\(K, H, W\)"):
         metrics.psnr_mu(pred[0, 0], gt[0, 0])
+    for mu in (-1.0, 0, float("nan"), float("inf"), True):            # (-1 had been 'math domain error')
+        for metric in (metrics.psnr_mu, metrics.ssim_mu):
+            with pytest.raises(InputError, match="mu = .*the mu-law constant"):
+                metric(pred, gt, mu=mu)
 
 
 def test_twelve_decades_and_huge_light(rng):
