@@ -1,6 +1,8 @@
-"""Processes as /proc shows them: a process's children, and whether one still runs."""
+"""Processes as /proc shows them (a process's children and descendants, whether one still runs), and
+how a child gets Ctrl-C as a terminal gives it."""
 
 import os
+import signal
 
 
 def children(pid: int) -> list[int]:
@@ -16,6 +18,24 @@ def children(pid: int) -> list[int]:
             if int(fields[1]) == pid:
                 found.append(int(entry))
     return found
+
+
+def descendants(pid: int) -> set[int]:
+    """Every process below ``pid`` (children, their children, ...)."""
+    found, todo = set(), [pid]
+    while todo:
+        for child in children(todo.pop()):
+            if child not in found:
+                found.add(child)
+                todo.append(child)
+    return found
+
+
+def interruptible() -> None:
+    """In a child (``preexec_fn``): Ctrl-C as a terminal gives it. A test run from a shell's background
+    job (``nohup pytest &``) inherits SIGINT ignored, and tespike rightly leaves an ignored signal
+    ignored, so a test that sends it Ctrl-C starts it with the default disposition."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def alive(pid: int) -> bool:

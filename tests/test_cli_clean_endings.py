@@ -16,6 +16,7 @@ import pytest
 
 from tespike.golden.errors import InputError
 from tests.cli import ROOT, _checkout_env, assert_refused, run_python, run_tespike
+from tests.processes import alive, descendants, interruptible
 from tests.test_cli_hardening import TINY, small_tmpfs, snapshot
 
 EVALUATE = ("evaluate", "--set", "none", "--methods", "tfp", "--repeats", "1", "--ml-count-config", "none")
@@ -65,8 +66,12 @@ def test_a_stop_python_drops_in_a_finalizer_still_ends_the_command(capsys, tmp_p
     dropped = []
     monkeypatch.setattr(sys, "unraisablehook", lambda unraisable: dropped.append(unraisable.exc_type.__name__))
     scene = tiny_scene(tmp_path)
-    result = run_here(capsys, "simulate", "--config", "te", "--scene", scene, "--out", tmp_path / "s.npz",
-                      "--seed", 1, "--quiet")
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)   # (as a terminal gives it: a test
+    try:                                                                  # run in a background job has it ignored)
+        result = run_here(capsys, "simulate", "--config", "te", "--scene", scene, "--out", tmp_path / "s.npz",
+                          "--seed", 1, "--quiet")
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert dropped == ["KeyboardInterrupt" if stop == "SIGINT" else "Terminated"]   # (what Python drops)
     line = result.stderr.strip().splitlines()[-1]
     if stop == "SIGINT":
@@ -209,34 +214,12 @@ def test_a_store_json_nested_too_deeply_is_one_line(capsys, tmp_path, store, whe
         assert_refused(result, repr(str(copy)), "nested too deeply")
 
 
-def descendants(pid: int) -> set[int]:
-    """Every process below ``pid`` (children, their children, ...)."""
-    listing = subprocess.run(["ps", "-eo", "pid=,ppid="], capture_output=True, text=True).stdout
-    children: dict[int, list[int]] = {}
-    for line in listing.splitlines():
-        child, parent = map(int, line.split())
-        children.setdefault(parent, []).append(child)
-    found, todo = set(), [pid]
-    while todo:
-        for child in children.get(todo.pop(), []):
-            found.add(child)
-            todo.append(child)
-    return found
-
-
-def alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
-
-
 def test_ctrl_c_during_a_store_evaluation_on_workers_is_one_line_and_leaves_no_process(tmp_path, store):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     process = subprocess.Popen([sys.executable, "-m", "tespike", "evaluate", "--store", str(store), "--workers", "2",
                                 "--methods", "tfp,tfi", "--out", str(tmp_path / "ev")], env=env, text=True,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
+                               preexec_fn=interruptible)
     first = process.stdout.readline()                  # printed once the cluster is up
     assert "local cluster of 2 worker processes" in first, first
     end = time.monotonic() + 60

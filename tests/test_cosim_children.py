@@ -75,6 +75,20 @@ def test_a_proof_worker_ends_with_the_command_killed_outright():
     assert not _kill_command_and_watch(body)
 
 
+def test_a_proof_worker_leaves_a_signal_the_command_ignores_ignored():
+    """The worker hands the group's signals to the command with a handler of its own (exec gives its
+    tools the default action); one the command runs with ignored (``nohup``) stays ignored, so a
+    Ctrl-C to the group no longer killed the solvers of a run the user had shielded."""
+    body = ("import os, signal\n"
+            "signal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+            "signal.signal(signal.SIGTERM, signal.SIG_DFL)\n"
+            "from tespike.cosim.commands.prove_cmd import proof_worker_start\n"
+            "proof_worker_start(os.getppid())\n"
+            "print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN, callable(signal.getsignal(signal.SIGTERM)))\n")
+    done = subprocess.run([sys.executable, "-c", body], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.split() == ["True", "True"], done
+
+
 def test_a_child_whose_parent_is_already_gone_leaves():
     """The request comes after the fork: a child whose parent went in between leaves at once."""
     body = ("import os, sys\n"

@@ -423,6 +423,24 @@ def test_a_ctrl_c_while_the_cluster_shuts_down_is_not_lost():
     runner.__exit__(ValueError, ValueError("x"), None)
 
 
+def test_an_ignored_ctrl_c_stays_ignored_while_the_cluster_runs():
+    """A ``nohup`` or background job's SIGINT is ignored; the cluster's handler had replaced it, so a
+    Ctrl-C to the group stopped a run the user had shielded (tespike leaves an ignored signal ignored)."""
+    import signal
+
+    from tespike.cosim.dataset.cluster import _Interrupts
+    for start, recorded in ((signal.SIG_IGN, False), (signal.default_int_handler, True)):
+        previous = signal.signal(signal.SIGINT, start)
+        try:
+            interrupts = _Interrupts()
+            interrupts.install()
+            assert (signal.getsignal(signal.SIGINT) == interrupts._record) == recorded
+            interrupts.restore()
+            assert signal.getsignal(signal.SIGINT) is start
+        finally:
+            signal.signal(signal.SIGINT, previous)
+
+
 def test_a_scheduler_address_of_no_reachable_form_is_refused_at_once():
     """A port past 65535 waited 30 s and said "timed out"; inproc:// spoke of Python's unpacking."""
     from tespike.cosim.dataset.cluster import check_scheduler_address

@@ -132,11 +132,12 @@ def test_ctrl_c_ends_the_proof_pool_at_any_moment(tmp_path):
     import sys
     import time
     from tests.cli import _checkout_env
+    from tests.processes import interruptible
     env = dict(_checkout_env(), TMPDIR=str(tmp_path))
     for delay in (0.8, 1.5, 2.5):
         process = subprocess.Popen([sys.executable, "-m", "tespike", "prove", "--corners", "--depth", "3",
                                     "--workers", "2"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                   text=True, env=env, start_new_session=True)
+                                   text=True, env=env, start_new_session=True, preexec_fn=interruptible)
         time.sleep(delay)
         os.killpg(process.pid, signal.SIGINT)               # as a terminal's Ctrl-C: the whole group
         try:

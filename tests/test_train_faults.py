@@ -23,7 +23,7 @@ from tespike.recon.train import RunFolderGone, train
 from tests.cli import ROOT, assert_refused, run_tespike
 from tests.test_cli_hardening import small_tmpfs
 from tests.test_recon_train import options
-from tests.processes import alive, children
+from tests.processes import alive, children, interruptible
 
 
 def log_steps(path) -> list[int]:
@@ -160,11 +160,6 @@ def start_training(folder) -> subprocess.Popen:
                              "--minutes", "10", "--workers", "1", "--pool", "2", "--refresh", "1", "--crop", "32",
                              "--batch", "1", "--validate-every", "0"], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True, preexec_fn=interruptible)
-
-
-def interruptible() -> None:
-    """In the child: Ctrl-C as a terminal gives it (a test run from a background job inherits it ignored)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def wait_for_worker(process, timeout=180) -> list[int]:

@@ -166,13 +166,15 @@ def proof_worker_start(parent: int) -> None:
     """A proof worker: ends with the command, even one killed outright (and through it its
     tools), and leaves the terminal's Ctrl-C and the signals sent to the whole process group
     to the command, which ends it (a handler, not SIG_IGN: the tools it starts keep the
-    default action, which exec restores for handlers only)."""
+    default action, which exec restores for handlers only). A signal the command runs with
+    ignored (``nohup``, a background job's Ctrl-C) stays ignored, in the tools too."""
     import signal
 
     from tespike.cosim.children import end_with_parent
     end_with_parent(parent)
     for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(number, _ignore_here)
+        if signal.getsignal(number) is not signal.SIG_IGN:
+            signal.signal(number, _ignore_here)
 
 
 def _ignore_here(signum, frame) -> None:

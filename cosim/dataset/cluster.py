@@ -254,9 +254,12 @@ class _Interrupts:
         self.pending = True
 
     def install(self) -> None:
+        """Record Ctrl-C from now on (in the main thread; an ignored Ctrl-C, a ``nohup`` or background
+        job's, stays ignored, as everywhere in tespike)."""
         import signal
         import threading
-        if threading.current_thread() is threading.main_thread() and self.previous is None:
+        if threading.current_thread() is threading.main_thread() and self.previous is None \
+                and signal.getsignal(signal.SIGINT) not in (signal.SIG_IGN, None):
             self.previous = signal.signal(signal.SIGINT, self._record)
 
     def check(self) -> None:
