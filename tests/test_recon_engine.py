@@ -308,6 +308,72 @@ def test_a_killed_trainer_leaves_no_worker_and_no_notice(tmp_path):
     assert not left, f"processes of the killed trainer still running: {left}"
 
 
+def test_a_trainer_killed_before_its_worker_has_its_start_up_data_leaves_no_traceback():
+    """The instant a CI run met by chance, made certain: the trainer is killed right after starting
+    its clip worker, before handing it its start-up data. The worker's start-up fails in Python's
+    own code ("EOFError: Ran out of input"), and its traceback went to the user's terminal."""
+    import signal
+    import subprocess
+    import sys
+    script = ("import os, signal\n"
+              "from multiprocessing import util\n"
+              "spawn = util.spawnv_passfds\n"
+              "def spawn_then_die(path, args, passfds):\n"
+              "    spawn(path, args, passfds)\n"
+              "    if any('spawn_main' in str(arg) for arg in args):   # (the worker, not the resource tracker)\n"
+              "        os.kill(os.getpid(), signal.SIGKILL)\n"
+              "util.spawnv_passfds = spawn_then_die\n"
+              "from tespike.golden.config import SensorConfig\n"
+              "from tespike.recon.engine.batches import ClipSource\n"
+              "from tespike.recon.engine.clips import EngineRecipe\n"
+              f"ClipSource(EngineRecipe(**{SMALL.__dict__!r}), SensorConfig(), workers=1)\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
+                          start_new_session=True)
+    assert done.returncode == -signal.SIGKILL and done.stderr == "", done.stderr
+
+
+def test_what_workers_write_on_stderr_is_relayed_while_the_trainer_lives_only():
+    """The workers' stderr is a pipe the trainer relays: a trainer killed outright in the instant
+    between starting a worker and handing it its start-up data had left that worker's start-up
+    traceback ("EOFError: Ran out of input") on the terminal. Here a child started inside the relay
+    writes while the trainer lives (relayed, in order with the trainer's own line) and another
+    after the trainer was killed (nowhere)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from tests.processes import alive
+    child = "import sys, time; time.sleep({}); sys.stderr.write({!r}); sys.stderr.flush()"
+    script = ("import os, subprocess, sys, time\n"
+              "from tespike.recon.engine.batches import _children_stderr_relayed\n"
+              "with _children_stderr_relayed():\n"
+              f"    early = subprocess.Popen([sys.executable, '-c', {child.format(0, 'relayed|')!r}])\n"
+              f"    late = subprocess.Popen([sys.executable, '-c', {child.format(3, 'after the kill|')!r}],\n"
+              "                            stdout=subprocess.DEVNULL)\n"
+              "    early.wait()\n"
+              "    sys.stderr.write('own|')\n"
+              "sys.stderr.write('restored|'); sys.stderr.flush()\n"
+              "time.sleep(0.3)\n"
+              "print(late.pid, flush=True)\n"
+              "time.sleep(60)\n")
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        late = int(proc.stdout.readline())
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(30)
+        deadline = time.monotonic() + 30
+        while alive(late) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not alive(late)
+        err = proc.stderr.read()                    # EOF once every process holding it has ended
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert err == "relayed|own|restored|", err
+
+
 def test_ctrl_c_while_the_workers_start_ends_the_start_and_leaves_no_worker():
     """Ctrl-C is held, not ignored, while the clip workers start (they must not answer it
     themselves): one that comes then is answered once the start is over (it was lost, and a

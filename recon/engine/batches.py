@@ -134,6 +134,84 @@ def _ctrl_c_held():
         signal.raise_signal(signal.SIGINT)
 
 
+#: What ends the trainer's own writes through the relay (:func:`_children_stderr_relayed`); one
+#: write of it is atomic on a pipe, and the relay takes it out.
+_RELAY_MARK = b"\0tespike: relayed up to here\0"
+
+
+@contextlib.contextmanager
+def _children_stderr_relayed():
+    """Processes started inside get, as their stderr, a pipe this process relays to its own stderr for
+    as long as it lives. A trainer killed outright (``kill -9``) in the instant between starting a
+    worker and handing it its start-up data left the worker's start-up traceback ("EOFError: Ran out
+    of input", before any code of tespike runs there) on the user's terminal; with the trainer gone
+    the pipe has no reader, and such a write goes nowhere. This process's own writes inside go
+    through the relay too, and are out before the block ends (in order with what follows). Only the
+    main thread changes file descriptor 2 (elsewhere nothing changes)."""
+    import sys
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    with contextlib.suppress(OSError, ValueError):
+        sys.stderr.flush()
+    opened = []
+    try:                                   # (no stderr, or no file handle to spare: no relay)
+        opened += os.pipe()
+        opened += (os.dup(2), os.dup(2))
+    except OSError:
+        for fd in opened:
+            os.close(fd)
+        yield
+        return
+    read, write, terminal, restore = opened       # (terminal: the relay's, closed by it; restore: this thread's)
+    marked = threading.Event()
+
+    def relay() -> None:
+        held = b""                         # (a part of the mark, until the read that completes it)
+        try:
+            while chunk := os.read(read, 1 << 16):
+                data = held + chunk
+                while (at := data.find(_RELAY_MARK)) >= 0:
+                    _write_all(terminal, data[:at])
+                    data = data[at + len(_RELAY_MARK):]
+                    marked.set()
+                keep = next((k for k in range(min(len(data), len(_RELAY_MARK) - 1), 0, -1)
+                             if data.endswith(_RELAY_MARK[:k])), 0)
+                held = data[len(data) - keep:]
+                _write_all(terminal, data[:len(data) - keep])
+            _write_all(terminal, held)
+        except OSError:                    # (the terminal gone: the workers' lines go nowhere)
+            pass
+        finally:
+            os.close(read)
+            os.close(terminal)
+    try:
+        threading.Thread(target=relay, name="tespike-worker-stderr", daemon=True).start()
+    except RuntimeError:                   # (no thread to spare: the workers keep this stderr)
+        for fd in opened:
+            os.close(fd)
+        yield
+        return
+    os.dup2(write, 2)
+    os.close(write)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError, ValueError):
+            sys.stderr.flush()
+        with contextlib.suppress(OSError):
+            os.write(2, _RELAY_MARK)
+            marked.wait(5)                 # (the relay has written everything before the mark)
+        os.dup2(restore, 2)                # (the relay's write ends now live in the workers alone)
+        os.close(restore)
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
 def _end_workers_started(before: set) -> None:
     """The worker processes a pool started before its own start failed (one of its three handler
     threads could not start: out of memory): ended by :func:`_kill_workers`, so that none, still
@@ -177,7 +255,7 @@ class ClipSource:
             _quiet_resource_tracker()
             before = set(multiprocessing.active_children())
             try:
-                with _ctrl_c_held():        # the workers inherit it from their first instruction on
+                with _ctrl_c_held(), _children_stderr_relayed():   # the workers inherit both
                     self.pool = multiprocessing.get_context("spawn").Pool(workers, initializer=_worker_init,
                                                                           initargs=(os.getpid(),))
             except BaseException:
