@@ -271,14 +271,33 @@ def test_worker_processes_make_the_same_clips():
         remote.close()
 
 
-def test_a_killed_trainer_leaves_no_worker_and_no_notice(tmp_path):
-    """A trainer killed outright (SIGKILL: nothing of it runs) leaves neither its clip worker
-    (which watches its parent) nor a line on stderr (the resource tracker still removes the
-    pool's semaphores, without its UserWarning)."""
+def _killed_after_its_first_line(script: str, after_kill=None) -> tuple[int, str, str]:
+    """(pid, first line on stdout, stderr) of a Python ``script`` run in a session of its own and
+    killed outright (SIGKILL) once it has printed that line; ``after_kill(line)`` runs before its
+    stderr is read to the end (once every process holding it has ended)."""
     import os
     import signal
     import subprocess
     import sys
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        line = proc.stdout.readline().strip()
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(30)
+        if after_kill is not None:
+            after_kill(line)
+        return proc.pid, line, proc.stderr.read()
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def test_a_killed_trainer_leaves_no_worker_and_no_notice(tmp_path):
+    """A trainer killed outright (SIGKILL: nothing of it runs) leaves neither its clip worker
+    (which watches its parent) nor a line on stderr (the resource tracker still removes the
+    pool's semaphores, without its UserWarning)."""
+    import subprocess
     import time
     script = ("import os, sys, time\n"
               "from tespike.golden.config import SensorConfig\n"
@@ -288,20 +307,12 @@ def test_a_killed_trainer_leaves_no_worker_and_no_notice(tmp_path):
               "pool.advance_to(1)\n"
               "print(os.getpid(), flush=True)\n"
               "time.sleep(60)\n")
-    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
-    try:
-        assert proc.stdout.readline().strip() == str(proc.pid)
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(30)
-        err = proc.stderr.read()                    # EOF once every process holding stderr has ended
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
+    pid, line, err = _killed_after_its_first_line(script)
+    assert line == str(pid)
     assert err == "", err
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline:
-        left = subprocess.run(["ps", "-o", "pid=", "-s", str(proc.pid)], capture_output=True, text=True).stdout.split()
+        left = subprocess.run(["ps", "-o", "pid=", "-s", str(pid)], capture_output=True, text=True).stdout.split()
         if not left:
             break
         time.sleep(0.2)
@@ -338,10 +349,6 @@ def test_what_workers_write_on_stderr_is_relayed_while_the_trainer_lives_only():
     traceback ("EOFError: Ran out of input") on the terminal. Here a child started inside the relay
     writes while the trainer lives (relayed, in order with the trainer's own line) and another
     after the trainer was killed (nowhere)."""
-    import os
-    import signal
-    import subprocess
-    import sys
     import time
     from tests.processes import alive
     child = "import sys, time; time.sleep({}); sys.stderr.write({!r}); sys.stderr.flush()"
@@ -357,20 +364,13 @@ def test_what_workers_write_on_stderr_is_relayed_while_the_trainer_lives_only():
               "time.sleep(0.3)\n"
               "print(late.pid, flush=True)\n"
               "time.sleep(60)\n")
-    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
-    try:
-        late = int(proc.stdout.readline())
-        os.kill(proc.pid, signal.SIGKILL)
-        proc.wait(30)
+
+    def late_has_written(line: str) -> None:
         deadline = time.monotonic() + 30
-        while alive(late) and time.monotonic() < deadline:
+        while alive(int(line)) and time.monotonic() < deadline:
             time.sleep(0.1)
-        assert not alive(late)
-        err = proc.stderr.read()                    # EOF once every process holding it has ended
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
+        assert not alive(int(line))
+    _, _, err = _killed_after_its_first_line(script, late_has_written)
     assert err == "relayed|own|restored|", err
 
 
