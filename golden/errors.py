@@ -2,6 +2,8 @@
 
 import re
 
+import numpy as np
+
 
 class TespikeError(Exception):
     """Base of every refusal the project makes on purpose (bad config, bad input)."""
@@ -18,6 +20,12 @@ class InputError(TespikeError, ValueError):
 class IllegalWordError(InputError):
     """A readout word outside its configuration's word set (SPEC section 5). A caller that decodes
     a reshaped or cut array catches it to name the word's index in the array it was given."""
+
+
+def is_count(value, least: int = 0) -> bool:
+    """Whether ``value`` is an integer (Python's or numpy's, never a bool) of at least ``least``: the
+    test behind the refusals of counts, sizes and seeds."""
+    return not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= least
 
 
 #: A terminal's escape sequence (colour, bold) in a library's message: never part of a quoted cause.

@@ -21,7 +21,7 @@ import numpy as np
 from .atomic import atomic_output, held_mapping
 from .config import SensorConfig
 from .decode import check_words
-from .errors import InputError, TespikeError, one_line
+from .errors import InputError, TespikeError, is_count, one_line
 from .paths import check_input_file
 
 #: What numpy raises for a .npy header whose text is damaged (its dict cut or a byte flipped: it
@@ -171,9 +171,8 @@ def check_frame_shape(shape, what: str = "frame shape") -> tuple[int, int]:
         height, width = shape
     except (TypeError, ValueError):
         raise InputError(f"{what} {shape!r}: must be (H, W), two integers") from None
-    for size in (height, width):
-        if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 1:
-            raise InputError(f"{what} {shape!r}: H and W must be integers of at least 1")
+    if not (is_count(height, 1) and is_count(width, 1)):
+        raise InputError(f"{what} {shape!r}: H and W must be integers of at least 1")
     return int(height), int(width)
 
 

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import parse_json
-from .errors import InputError, one_line
+from .errors import InputError, is_count, one_line
 from .light import DARK_NORMAL, check_dark_current, dark_electrons, eq13_dark_per_readout
 
 #: Bounds of each option (inclusive): name -> (lowest, highest).
@@ -196,7 +196,7 @@ class Sensor:
     seed: int = 0
 
     def __post_init__(self):
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+        if not is_count(self.seed):
             raise InputError(f"sensor seed {self.seed!r}: must be an integer >= 0")
 
     def maps(self, shape: tuple[int, int]) -> SensorMaps:

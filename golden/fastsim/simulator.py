@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import SensorConfig
-from ..errors import InputError
+from ..errors import InputError, is_count
 from ..io import check_frame_shape, scan_light
 from ..light import as_generator, electrons_per_readout, log_budget
 from ..noise import PixelNoise, pixel_noise
@@ -56,8 +56,7 @@ class SceneSimulator:
                  method: str = "fast", total_pixel_readouts: int | None = None,
                  sensor=None, pixels: PixelNoise | None = None):
         check_method(method)
-        if total_pixel_readouts is not None and (isinstance(total_pixel_readouts, bool) or not isinstance(
-                total_pixel_readouts, (int, np.integer)) or total_pixel_readouts < 1):
+        if total_pixel_readouts is not None and not is_count(total_pixel_readouts, 1):
             raise InputError(f"total_pixel_readouts {total_pixel_readouts!r}: must be a positive integer "
                              "(the pixel-readouts of the whole scene, which the error budget counts)")
         self.config = config

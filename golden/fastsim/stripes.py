@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, is_count
 from ..io import scan_light
 
 #: Stripes of a noisy fast simulation (:func:`stripe_slices`): a power of two,
@@ -57,7 +57,7 @@ def worker_count(workers, limit: int) -> int:
     if workers is None:
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
         return max(1, min(cores, limit))
-    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+    if not is_count(workers, 1):
         raise InputError(f"workers {workers!r}: must be a positive integer")
     return min(int(workers), limit)
 
