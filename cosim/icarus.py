@@ -207,6 +207,7 @@ def run_icarus(config: SensorConfig, stimulus: np.ndarray, *, work_dir: str | Pa
     segment's words ``(n, H, W)``. ``vcd_path``: write a VCD of every signal of the top there
     (scope :data:`DUT_SCOPE`; :mod:`tespike.cosim.activity` counts its toggles).
     """
+    config = SensorConfig.required(config, "run_icarus")
     return _run(prepare(config, stimulus, None, resets), verilog, work_dir, vcd_path)
 
 
@@ -221,4 +222,5 @@ def run_icarus_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,
     ``resets``: as :func:`run_icarus`; the result is then each segment's beats ``(n, N)``
     (:func:`tespike.cosim.resets.beat_segments`). ``vcd_path``: as :func:`run_icarus`.
     """
+    config = SensorConfig.required(config, "run_icarus_stream")
     return _run(prepare(config, stimulus, lanes, resets), verilog, work_dir, vcd_path)

@@ -128,6 +128,7 @@ def rtl_words(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw
     ``resets`` (T booleans): ``rst`` of every stimulus clock (:mod:`tespike.cosim.resets`);
     the result is then a list of each segment's words ``(n, H, W)``.
     """
+    config = SensorConfig.required(config, "rtl_words")
     return rtl_run(config, stimulus, vcd_path=vcd_path, gtkw_path=gtkw_path,
                    progress=progress, flat=flat, resets=resets).words
 
@@ -142,6 +143,7 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
     With ``resets``, ``words`` is the list of each segment's words, checked by
     :func:`tespike.cosim.resets.frame_segments` (``latency`` is then None).
     """
+    config = SensorConfig.required(config, "rtl_run")
     run = prepare(config, stimulus, None, resets)
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
@@ -201,6 +203,7 @@ def rtl_stream_run(config: SensorConfig, stimulus: np.ndarray, lanes: int, *, fl
                    resets=None):
     """:func:`rtl_stream_beats` and the largest latency of a last beat (clocks after its interval);
     with ``resets``, the list of each segment's beats only."""
+    config = SensorConfig.required(config, "rtl_stream_run")
     from amaranth.hdl import ClockDomain, Elaboratable, Module
 
     run = prepare(config, stimulus, lanes, resets)

@@ -498,6 +498,7 @@ def run_verilator(config: SensorConfig, stimulus: np.ndarray, *, build_dir: str 
     ``rst`` of every stimulus clock (:mod:`tespike.cosim.resets`); the result is then a
     list of each segment's words ``(n, H, W)``.
     """
+    config = SensorConfig.required(config, "run_verilator")
     def build_parallel(text: str, top) -> Path:
         pixel = top.module.replace("_array", "")
         if shared and re.search(rf"^module {pixel}\(", text, re.M):
@@ -519,6 +520,7 @@ def run_verilator_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int,
     ``resets`` (T booleans): ``rst`` of every stimulus clock (:mod:`tespike.cosim.resets`); the
     result is then a list of each segment's beats ``(n, N)``.
     """
+    config = SensorConfig.required(config, "run_verilator_stream")
     def build_streaming(text: str, top) -> Path:
         return build_stream(config, text, top.height, top.width, lanes, build_dir=build_dir,
                             progress=progress, cxx_opt=cxx_opt)

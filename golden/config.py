@@ -198,12 +198,21 @@ class SensorConfig:
         return SensorConfig.from_dict(self.to_dict())
 
     @staticmethod
+    def required(config, what: str = "configuration") -> "SensorConfig":
+        """``config`` itself, or a :class:`ConfigError` naming ``what`` when it is no SensorConfig
+        (a preset's name or a dict where the library's entry points take the object: numpy's
+        ``AttributeError`` on its first field read would name neither). Instances are validated
+        when made and frozen, so the type is all there is to check."""
+        if not isinstance(config, SensorConfig):
+            raise ConfigError(f"{what}: configuration must be a SensorConfig (SensorConfig.preset(name) or "
+                              f"load_config(path)), not {type(config).__name__}")
+        return config
+
+    @staticmethod
     def checked(config, what: str = "configuration") -> "SensorConfig":
         """``config`` re-validated (:meth:`check`), or a :class:`ConfigError` naming ``what`` when it is no
         SensorConfig (a block or writer that builds from it: the RTL, the Verilog writers)."""
-        if not isinstance(config, SensorConfig):
-            raise ConfigError(f"{what}: configuration must be a SensorConfig, not {type(config).__name__}")
-        return config.check()
+        return SensorConfig.required(config, what).check()
 
     # -- serialisation ------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

@@ -177,6 +177,7 @@ def decode_spikes(words: np.ndarray, config: SensorConfig, estimator: str = "rat
     ``estimator`` names the decoding rule; ``"ratio"`` is the paper's and the
     default. Other named rules are in :data:`ESTIMATORS`.
     """
+    config = SensorConfig.required(config, "decode_spikes")
     try:
         rule = ESTIMATORS[estimator]
     except KeyError:
@@ -191,4 +192,5 @@ def spikes_to_light(spikes: np.ndarray, config: SensorConfig) -> np.ndarray:
 
 def decode_light(words: np.ndarray, config: SensorConfig, estimator: str = "ratio") -> np.ndarray:
     """Readout words -> light per readout interval, in the units of ``I.npy``."""
+    config = SensorConfig.required(config, "decode_light")
     return spikes_to_light(decode_spikes(words, config, estimator), config)

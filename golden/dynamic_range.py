@@ -35,6 +35,7 @@ def formula_db(config: SensorConfig, n_s: float = 1, *, paper_alpha: bool = Fals
     whatever alpha is configured; by default the configured alpha is used
     (the two agree for the default alpha = 2^b2 - 1).
     """
+    config = SensorConfig.required(config, "formula_db")
     if n_s <= 0:
         raise ValueError(f"N_s = {n_s}: must be > 0")
     if config.is_te:
@@ -62,6 +63,7 @@ def constant_light_words(config: SensorConfig, light: np.ndarray, readouts: int,
     Otherwise independent Poisson(lam) electrons per clock (SPEC section 6).
     Either way a clock carries at most 2^E - 1 electrons (the input saturates).
     """
+    config = SensorConfig.required(config, "constant_light_words")
     light = np.asarray(light, np.float64)
     L = config.clocks_per_readout
     lam = DESIGN_ELECTRONS * light / L
@@ -102,6 +104,7 @@ def measure(config: SensorConfig, n_s: int = 16, *, seed: int | None = None, est
     :func:`constant_light_words` with ``n_s * (windows + 1)`` readouts) to
     score one simulation under several estimators or tolerances.
     """
+    config = SensorConfig.required(config, "measure")
     light = light_grid() if light is None else np.asarray(light, np.float64)
     if words is None:
         words = constant_light_words(config, light, n_s * (windows + 1), seed=seed)
@@ -134,6 +137,7 @@ def estimator_error(config: SensorConfig, estimator: str, light: np.ndarray, rea
     (decoded - true) / true over ``readouts`` x ``replicas`` readouts, after a
     warm-up of 4 readouts.
     """
+    config = SensorConfig.required(config, "estimator_error")
     light = np.asarray(light, np.float64)
     grid = np.repeat(light, replicas)
     words = constant_light_words(config, grid, readouts + 4, seed=seed)[4:]

@@ -265,6 +265,7 @@ def word_dtype(config: SensorConfig) -> np.dtype:
 
 def save_stream(path: str | Path, words: np.ndarray, config: SensorConfig) -> None:
     """Write ``S.npz``: ``words`` (K, H, W) and ``config``, the full configuration as JSON."""
+    config = SensorConfig.required(config, "save_stream")
     words = np.asarray(words)
     if words.ndim != 3:
         raise InputError(f"stream words shape {words.shape} must be (K, H, W)")

@@ -188,6 +188,7 @@ class PixelArrayModel:
     chunks (named apart from the hardware's :class:`tespike.rtl.array.PixelArray`, which it models)."""
 
     def __init__(self, config: SensorConfig, shape: tuple[int, int]):
+        config = SensorConfig.required(config, "PixelArrayModel")
         self.config = config
         self.shape = check_frame_shape(shape, "pixel array shape")
         self.state = PixelState.zeros(self.shape)
@@ -314,6 +315,7 @@ def simulate(config: SensorConfig, stimulus: np.ndarray,
     split), so it may be a memory-mapped file larger than memory; each chunk's
     values are checked as it is fed.
     """
+    config = SensorConfig.required(config, "simulate")
     check_stimulus(stimulus, config, scan_values=False)
     array = PixelArrayModel(config, stimulus.shape[1:])
     words = np.empty((stimulus.shape[0] // config.clocks_per_readout,) + stimulus.shape[1:], np.int64)

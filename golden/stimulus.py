@@ -31,6 +31,7 @@ def poisson_stimulus(config: SensorConfig, scene: np.ndarray, rng=None, *,
     ``sensor``: a :class:`tespike.golden.noise.Sensor` (non-idealities and their per-pixel
     maps), instead of ``dark_current``.
     """
+    config = SensorConfig.required(config, "poisson_stimulus")
     scene = check_scene(scene)
     check_dark_current(dark_current)
     pixels = pixel_noise(dark_current, sensor, scene.shape[1:], noise=noise)

@@ -86,10 +86,12 @@ def decode_light(words, config: SensorConfig, *, estimator: str = "ratio",
 
     With ``dtype=torch.float32`` each value is golden's float64 value rounded once.
     """
+    config = SensorConfig.required(config, "decode_light")
     return _gather(code_tables(config, estimator)[0], words, config, device, dtype)
 
 
 def decode_spikes(words, config: SensorConfig, *, estimator: str = "ratio",
                   device: str | torch.device = "cpu", dtype: torch.dtype = torch.float64) -> torch.Tensor:
     """Words -> spikes per readout interval, equal to :func:`tespike.golden.decode.decode_spikes`."""
+    config = SensorConfig.required(config, "decode_spikes")
     return _gather(code_tables(config, estimator)[1], words, config, device, dtype)

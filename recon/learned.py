@@ -112,6 +112,7 @@ def load_learned(config: SensorConfig, method: str, weights: str | Path | None =
     """The ``method`` module for streams of ``config``, in eval mode: from the file ``weights``, or the
     shipped one (None); refused in one line where the file is missing or unreadable, holds another
     method or was trained for another configuration."""
+    config = SensorConfig.required(config, "load_learned")
     path = weights_path(config, method) if weights is None else Path(weights)
     what = "weights" if weights is None else "--weights"
     model, trained_for, _ = load_weights(path, what, method)

@@ -154,6 +154,7 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = DEFAU
     tail less that charge instead (:func:`tespike.recon.learning.infer.law_input`). Each route was chosen by
     measurement (docs/reconstruction.md "Calibration").
     """
+    config = SensorConfig.required(config, "reconstruct")
     check_known(method, RECON_METHODS)
     spec = RECON_METHODS[method]
     unknown = sorted(set(options) - set(spec.options))

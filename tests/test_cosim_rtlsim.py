@@ -154,6 +154,17 @@ def test_bad_stimulus_is_refused_before_simulating(stimulus, words):
         rtl_words(SensorConfig(), stimulus)
 
 
+@pytest.mark.parametrize("name", ["rtl_words", "rtl_run", "rtl_stream_run", "run_icarus", "run_icarus_stream",
+                                  "run_verilator", "run_verilator_stream"])
+def test_what_is_no_configuration_is_refused_naming_the_entry_point(name):
+    """Before any tool runs (a preset's name was an AttributeError on its first field)."""
+    from tespike.cosim import icarus, rtlsim, verilator
+    function = next(getattr(m, name) for m in (rtlsim, icarus, verilator) if hasattr(m, name))
+    lanes = (1,) if name.endswith("stream_run") or name.endswith("_stream") else ()
+    with pytest.raises(ConfigError, match=f"^{name}: configuration must be a SensorConfig .*not str$"):
+        function("te", np.zeros((240, 1, 1), np.int16), *lanes)
+
+
 def test_a_config_the_rtl_refuses_is_a_config_error(monkeypatch):
     import tespike.rtl.array
     from tespike import rtl

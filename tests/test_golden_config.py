@@ -148,3 +148,48 @@ def test_top_light_is_what_a_pixel_firing_every_clock_reads():
     assert SensorConfig.from_dict({"mode": "te", "clocks_per_tick": 1}).top_light == 15 * 175 / 42000
     assert SensorConfig.from_dict({"mode": "te", "input_bits": 4}).top_light == 240 * 15 / 42000
     assert SensorConfig.from_dict({"mode": "ml", "ml_bits": 3, "threshold": 5000}).top_light == 7 * 5000 / 42000
+
+
+def _golden_entry_points():
+    """Each public golden entry point that takes a configuration, called with ``config``."""
+    import numpy as np
+
+    from tespike.golden import dynamic_range as dr
+    from tespike.golden.decode import decode_light, decode_spikes
+    from tespike.golden.fastsim import SceneSimulator, scene_stimulus, simulate_scene
+    from tespike.golden.fastsim.scene import stripe_simulators
+    from tespike.golden.io import save_stream
+    from tespike.golden.sensor import PixelArrayModel, simulate
+    from tespike.golden.stimulus import poisson_stimulus
+    words, light = np.zeros((1, 2, 2), np.uint8), np.full((1, 2, 2), 0.1)
+    return {
+        "decode_spikes": lambda config: decode_spikes(words, config),
+        "decode_light": lambda config: decode_light(words, config),
+        "simulate": lambda config: simulate(config, np.zeros((240, 2, 2), np.int64)),
+        "PixelArrayModel": lambda config: PixelArrayModel(config, (2, 2)),
+        "save_stream": lambda config: save_stream("never-written.npz", words, config),
+        "simulate_scene": lambda config: simulate_scene(config, light),
+        "stripe_simulators": lambda config: stripe_simulators(config, (2, 2)),
+        "scene_stimulus": lambda config: scene_stimulus(config, light),
+        "SceneSimulator": lambda config: SceneSimulator(config, (2, 2)),
+        "poisson_stimulus": lambda config: poisson_stimulus(config, light, 0),
+        "formula_db": lambda config: dr.formula_db(config),
+        "constant_light_words": lambda config: dr.constant_light_words(config, np.ones(1), 1),
+        "measure": lambda config: dr.measure(config),
+        "estimator_error": lambda config: dr.estimator_error(config, "ratio", np.ones(1)),
+    }
+
+
+@pytest.mark.parametrize("name", list(_golden_entry_points()))
+@pytest.mark.parametrize("not_config", ["te", {"mode": "te"}, None])
+def test_library_entry_points_refuse_what_is_no_configuration(name, not_config, tmp_path, monkeypatch):
+    """A preset's name or a dict where the object belongs is refused in one line naming the entry
+    point (it was numpy's or Python's AttributeError on the first field read), and nothing is written."""
+    monkeypatch.chdir(tmp_path)
+    call = _golden_entry_points()[name]
+    with pytest.raises(ConfigError, match=rf"^{name}: configuration must be a SensorConfig "
+                                          rf"\(SensorConfig.preset\(name\) or load_config\(path\)\), "
+                                          rf"not {type(not_config).__name__}$"):
+        call(not_config)
+    assert not list(tmp_path.iterdir())
+    call(SensorConfig())                                # the same call with a configuration runs

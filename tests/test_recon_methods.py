@@ -6,8 +6,10 @@ import torch
 
 from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig
 from tespike.golden.decode import decode_light
-from tespike.golden.errors import InputError
+from tespike.golden.errors import ConfigError, InputError
 from tespike.golden.sensor import simulate
+from tespike.recon.decoding import decode_light as recon_decode_light
+from tespike.recon.learned import load_learned
 from tespike.recon.methods import RECON_METHODS, reconstruct
 
 #: The training-free methods, which work pixel by pixel along time on any configuration
@@ -151,6 +153,19 @@ def test_refusals():
     with pytest.raises(InputError, match="readout word 16 at index"):
         reconstruct(words + 16, TE, "tfi")
     assert reconstruct(np.zeros((0, 2, 2), np.uint8), TE, "tfp").shape == (0, 2, 2)
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda config: reconstruct(np.zeros((3, 2, 2), np.uint8), config, "tfp"), "reconstruct"),
+    (lambda config: recon_decode_light(np.zeros((3, 2, 2), np.uint8), config), "decode_light"),
+    (lambda config: load_learned(config, "net"), "load_learned"),
+])
+@pytest.mark.parametrize("not_config", ["te", {"mode": "te"}])
+def test_what_is_no_configuration_is_refused_naming_the_entry_point(call, name, not_config):
+    """(A preset's name was numpy's AttributeError; a dict, 'unhashable type')."""
+    with pytest.raises(ConfigError, match=f"^{name}: configuration must be a SensorConfig .*"
+                                          f"not {type(not_config).__name__}$"):
+        call(not_config)
 
 
 @pytest.mark.parametrize("method", ["tfp", "tfi", "net"])

@@ -32,6 +32,7 @@ def stripe_simulators(config: SensorConfig, shape: tuple[int, int], *, seed=None
     2^-64 bound for the whole stream is unchanged. ``sensor``'s maps are drawn for
     the whole frame; each stripe gets its rows of them.
     """
+    config = SensorConfig.required(config, "stripe_simulators")
     H, W = shape
     rows = stripe_slices(H, W)
     rngs = [seed] if len(rows) == 1 else spawn_generators(seed, len(rows))
@@ -64,6 +65,7 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     readout at a time as it is simulated (a negative or non-finite value refused in one
     line, ``what`` naming the scene): a caller need not scan it first.
     """
+    config = SensorConfig.required(config, "simulate_scene")
     scene = check_scene(scene, scan_values=False)       # values: one readout at a time
     K, H, W = scene.shape
     check_method(method)
@@ -111,6 +113,7 @@ def iter_scene_stimulus(config: SensorConfig, scene: np.ndarray, *, seed=None,
 def scene_stimulus(config: SensorConfig, scene: np.ndarray, **options) -> np.ndarray:
     """:func:`iter_scene_stimulus` as one ``(K L, H, W)`` array (for crops: it holds
     ``K L H W`` values)."""
+    config = SensorConfig.required(config, "scene_stimulus")
     from ..light import stimulus_dtype
     scene = check_scene(scene, scan_values=False)
     K, H, W = scene.shape

@@ -55,6 +55,7 @@ class SceneSimulator:
                  dark_current: str | None = None, noise: bool = True,
                  method: str = "fast", total_pixel_readouts: int | None = None,
                  sensor=None, pixels: PixelNoise | None = None):
+        config = SensorConfig.required(config, "SceneSimulator")
         check_method(method)
         if total_pixel_readouts is not None and not is_count(total_pixel_readouts, 1):
             raise InputError(f"total_pixel_readouts {total_pixel_readouts!r}: must be a positive integer "
