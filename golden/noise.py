@@ -44,6 +44,7 @@ import numpy as np
 
 from .config import parse_json
 from .errors import InputError, is_count, one_line
+from .io import check_frame_shape
 from .light import DARK_NORMAL, check_dark_current, dark_electrons, eq13_dark_per_readout
 
 #: Bounds of each option (inclusive): name -> (lowest, highest).
@@ -201,7 +202,7 @@ class Sensor:
 
     def maps(self, shape: tuple[int, int]) -> SensorMaps:
         """The per-pixel maps of an H x W frame, a function of the sensor seed and the shape."""
-        H, W = shape
+        H, W = check_frame_shape(shape, "sensor frame shape")
         children = np.random.SeedSequence(int(self.seed)).spawn(len(MAP_STREAMS))
         rng = {name: np.random.default_rng(child) for name, child in zip(MAP_STREAMS, children)}
         n = self.noise
@@ -218,6 +219,7 @@ class Sensor:
 
     def pixels(self, shape: tuple[int, int]) -> "PixelNoise":
         """The noise of every pixel of an H x W frame (flat, raster order)."""
+        shape = check_frame_shape(shape, "sensor frame shape")
         if not self.noise.has_maps:
             return PixelNoise(self.noise, None, None)
         maps = self.maps(shape)

@@ -43,6 +43,18 @@ def test_sensor_seed_fixes_the_maps_and_each_option_has_its_own():
     assert np.array_equal(Sensor(b, 7).maps((30, 30)).gain, m1.gain)     # hot pixels leave PRNU alone
 
 
+@pytest.mark.parametrize("shape", [(-2, 3), (0, 2), (1, 2, 3), (2.0, 3), "ab"])
+def test_a_frame_shape_that_is_no_frame_is_refused(shape):
+    """Sensor.maps / pixels and pixel_noise (numpy had refused a negative size in its words,
+    and a frame without maps took any shape)."""
+    from tespike.golden.noise import pixel_noise
+    with_maps = Sensor(SensorNoise(prnu=0.01))
+    for call in (lambda: with_maps.maps(shape), lambda: with_maps.pixels(shape),
+                 lambda: Sensor().pixels(shape), lambda: pixel_noise(None, None, shape)):
+        with pytest.raises(InputError, match=r"^sensor frame shape .*: (must be \(H, W\)|H and W must be)"):
+            call()
+
+
 def test_scaled_dark_draws_and_unscaled_ones():
     assert np.array_equal(dark_electrons("eq12", (1000,), np.random.default_rng(5)),
                           dark_electrons("eq12", (1000,), np.random.default_rng(5), scale=None))
