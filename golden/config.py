@@ -200,9 +200,9 @@ class SensorConfig:
     @staticmethod
     def required(config, what: str = "configuration") -> "SensorConfig":
         """``config`` itself, or a :class:`ConfigError` naming ``what`` when it is no SensorConfig
-        (a preset's name or a dict where the library's entry points take the object: numpy's
-        ``AttributeError`` on its first field read would name neither). Instances are validated
-        when made and frozen, so the type is all there is to check."""
+        (a preset's name or a dict where the library's entry points take the object: the
+        ``AttributeError`` of its first field read named neither). Instances are validated when
+        made and frozen, so the type is all there is to check."""
         if not isinstance(config, SensorConfig):
             raise ConfigError(f"{what}: configuration must be a SensorConfig (SensorConfig.preset(name) or "
                               f"load_config(path)), not {type(config).__name__}")
