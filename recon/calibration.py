@@ -354,7 +354,11 @@ def _checked_numbers(shown: str, values: dict, pixels: int) -> dict:
 def check_matches(calibration: Calibration, config: SensorConfig, shape: tuple[int, int],
                   what: str = "the stream", name: str = "the calibration") -> None:
     """Refuse, in one line naming both (``name``: the calibration, e.g. its file), a calibration made
-    for another configuration or frame size than ``what``."""
+    for another configuration or frame size than ``what``, or what is no :class:`Calibration` (a path
+    given where :func:`load_calibration`'s result belongs)."""
+    if not isinstance(calibration, Calibration):
+        raise InputError(f"{name} must be a Calibration (tespike.recon.calibration.load_calibration(path)), "
+                         f"not {type(calibration).__name__}")
     difference = calibration.config.differences_text(config, "the calibration", what)
     if difference is not None:
         raise InputError(f"{name} is for another sensor configuration than {what}: {difference}")

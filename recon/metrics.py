@@ -55,6 +55,8 @@ def as_frames(x, name: str, device) -> torch.Tensor:
     """A (K, H, W) or (H, W) array or tensor as a float64 tensor on ``device``; ``name`` in refusals."""
     if not isinstance(x, torch.Tensor):
         x = np.asarray(x)
+        if x.dtype.kind not in "iuf":      # (objects, strings, bools, complex: torch's TypeError or no error)
+            raise InputError(f"{name} dtype {x.dtype} is not a real number type")
         if x.dtype.kind == "f" and x.dtype.itemsize > 8:   # long double: torch has no such type
             x = x.astype(np.float64)
         elif not x.dtype.isnative:         # torch takes native byte order only (big-endian .npy files)
@@ -157,9 +159,16 @@ def _shape(x) -> tuple[int, ...]:
     return tuple(x.shape) if isinstance(x, torch.Tensor) else np.shape(x)
 
 
+def _arrays(*xs):
+    """Each of ``xs`` as it is where it is a numpy array (memory maps kept) or a tensor, else as a
+    numpy array (nested lists of numbers, as a library caller may pass them)."""
+    return tuple(x if isinstance(x, (np.ndarray, torch.Tensor)) else np.asarray(x) for x in xs)
+
+
 def frame_stacks(estimate, reference, metric: str):
     """(estimate, reference, single, (K, H, W)): (H, W) frames lifted to one-frame stacks, the
     shapes checked equal and three-dimensional; ``single`` says a lone frame was given."""
+    estimate, reference = _arrays(estimate, reference)
     eshape, rshape = _shape(estimate), _shape(reference)
     single = len(rshape) == 2
     if single:
@@ -222,6 +231,7 @@ def _banded(pred, gt, stat, *, halo: int = 0, peak=None, normalised: bool = True
     and passed to ``stat``, which returns the per-pixel values of the band's
     valid region (its input carries ``halo`` extra rows on each side).
     """
+    pred, gt = _arrays(pred, gt)
     pshape, gshape = _shape(pred), _shape(gt)
     single = len(pshape) == 2
     if len(pshape) == 2:

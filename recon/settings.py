@@ -43,13 +43,16 @@ def check_device(device) -> None:
     name, cuda without a GPU, the data-less meta device, a CPU index other than 0, which torch
     accepts and ignores), before any work is done on it."""
     import torch
+    if isinstance(device, bool) or not isinstance(device, (str, int, torch.device)):
+        raise InputError(f"device = {device!r}: must be a torch device name such as 'cpu' or 'cuda:0' "
+                         f"(or a torch.device)")
     if str(device).startswith("meta"):
         raise InputError(f"device = {device!r}: the meta device holds no data")
     try:
-        torch.empty(0, device=device)
+        named = torch.device(device)        # (None, a list, ...: torch's TypeError)
+        torch.empty(0, device=named)
     except (RuntimeError, TypeError, AssertionError) as exc:
         raise InputError(f"device = {device!r}: not a usable torch device ({one_line(exc)})") from None
-    named = torch.device(device)
     if named.type == "cpu" and named.index not in (None, 0):
         raise InputError(f"device = {device!r}: there is one CPU device ('cpu' or 'cpu:0'); torch would "
                          f"ignore the index")

@@ -155,6 +155,22 @@ def test_refusals():
     assert reconstruct(np.zeros((0, 2, 2), np.uint8), TE, "tfp").shape == (0, 2, 2)
 
 
+@pytest.mark.parametrize("options, refusal", [
+    ({"device": None}, r"^device = None: must be a torch device name such as 'cpu' or 'cuda:0' \(or a torch.device\)$"),
+    ({"device": True}, r"^device = True: must be a torch device name"),
+    ({"device": ["cpu"]}, r"^device = \['cpu'\]: must be a torch device name"),
+    ({"calibration": "C.npz"}, r"^the calibration must be a Calibration \(tespike.recon.calibration.load_calibration"
+                               r"\(path\)\), not str$"),
+    ({"weights": 123}, r"^weights must be a file name or path, not int$"),
+])
+def test_library_arguments_of_the_wrong_kind_are_refused_in_one_line(options, refusal):
+    """(device None was torch's TypeError, a calibration's path an AttributeError, weights of a
+    number os.fspath's TypeError.)"""
+    method = "net" if "weights" in options else "tfp"
+    with pytest.raises(InputError, match=refusal):
+        reconstruct(np.zeros((3, 2, 2), np.uint8), TE, method, **options)
+
+
 @pytest.mark.parametrize("call, name", [
     (lambda config: reconstruct(np.zeros((3, 2, 2), np.uint8), config, "tfp"), "reconstruct"),
     (lambda config: recon_decode_light(np.zeros((3, 2, 2), np.uint8), config), "decode_light"),

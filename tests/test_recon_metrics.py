@@ -119,6 +119,19 @@ def test_refusals(rng):
                 metric(pred, gt, mu=mu)
 
 
+def test_nested_lists_are_frames_and_what_is_no_number_is_refused():
+    """As a library caller may pass them: lists were 'list indices must be integers' (a TypeError);
+    an object array torch's TypeError; a bool array is refused as before, now before torch sees it."""
+    frame = [[0.5, 1.0, 2.0, 4.0]] * 12
+    assert metrics.psnr_mu(frame, frame) == metrics.psnr_mu(np.array(frame), np.array(frame))
+    assert metrics.psnr_pu21(frame, frame) == metrics.psnr_pu21(np.array(frame), np.array(frame))
+    square = np.linspace(0.1, 2.0, 144).reshape(12, 12)
+    assert metrics.ssim_mu(square.tolist(), square.tolist()) == pytest.approx(1.0)
+    for bad, dtype in (([[None, 1.0]], "object"), ([[True, False]], "bool"), ([[1j, 2.0]], "complex128")):
+        with pytest.raises(InputError, match=f"^prediction dtype {dtype} is not a real number type$"):
+            metrics.psnr_mu(bad, [[1.0, 2.0]])
+
+
 def test_twelve_decades_and_huge_light(rng):
     gt = 10 ** rng.uniform(-12, 0, size=(2, 16, 16))
     pred = gt * 1.01
