@@ -46,6 +46,7 @@ import dataclasses
 import numpy as np
 
 from .config import SensorConfig
+from .errors import InputError
 from .toggles import flips, pixel_register_bits, pixel_register_names, register_step
 
 #: The blocks of a generated top, in report order.
@@ -132,7 +133,7 @@ def top_activity(config: SensorConfig, electrons: np.ndarray, lanes: int | None 
     beats = -(-P // lanes) if streaming else 1
     U = (T + (beats + 1 if streaming else 1)) if edges is None else int(edges)
     if U < 0 or not 0 <= start <= U:
-        raise ValueError(f"edges = {U}, start = {start}: need 0 <= start <= edges")
+        raise InputError(f"edges = {U}, start = {start}: need 0 <= start <= edges")
     # the charge edge u processes: streaming, charge_sample before edge u (row u - 1);
     # parallel, the port at edge u (row u)
     charge = np.zeros((U + 1, P), np.int64)

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Iterator
 
 from .errors import InputError
-from .paths import check_folder_path, check_output_file, passes_through
+from .paths import check_folder_path, check_output_file, passes_through, path_text
 
 
 #: Hidden temporaries are named ``.<name>.<pid>.<random>.part`` beside the output;
@@ -350,8 +350,8 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
     the target; one left by a killed run is removed by the next run at that path.
     Any OSError while writing becomes an :class:`InputError` naming ``path``.
     """
-    shown = os.fspath(path)
     target = check_output_file(path, what)
+    shown = os.fspath(path)
     try:
         info = os.stat(target)
     except OSError:
@@ -548,7 +548,7 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     A symlink ``path`` keeps pointing where it did (its target folder is replaced).
     Errors naming a file inside the temporary are re-worded to name it under ``path``.
     """
-    shown = os.fspath(path)
+    shown = path_text(path, "folder")
     check_folder_path(shown, "folder")              # ('' or nosuch/..: the folder holding the inputs)
     target = Path(os.path.realpath(shown))
     stem = target.name[:_PART_NAME]

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from .config import SensorConfig
-from .errors import ConfigError
+from .errors import ConfigError, InputError
 
 
 #: Most lanes accepted: 262144 (2^18, the largest streaming array's pixel count). N above H W
@@ -58,9 +58,9 @@ def beats(words: np.ndarray, lanes: int) -> np.ndarray:
     """Words ``(K, H, W)`` -> beats ``(K, B, N)``: beat j, lane i holds pixel j N + i in raster order, or 0."""
     words = np.asarray(words)
     if words.ndim != 3:
-        raise ValueError(f"beats wants words (K, H, W), got shape {words.shape}")
+        raise InputError(f"beats wants words (K, H, W), got shape {words.shape}")
     if type(lanes) is not int or lanes < 1:
-        raise ValueError(f"lanes = {lanes!r}: must be an integer >= 1")
+        raise InputError(f"lanes = {lanes!r}: must be an integer >= 1")
     K, H, W = words.shape
     B = beat_count(H * W, lanes)
     out = np.zeros((K, B * lanes), words.dtype)

@@ -264,11 +264,15 @@ def word_dtype(config: SensorConfig) -> np.dtype:
 
 
 def save_stream(path: str | Path, words: np.ndarray, config: SensorConfig) -> None:
-    """Write ``S.npz``: ``words`` (K, H, W) and ``config``, the full configuration as JSON."""
+    """Write ``S.npz``: ``words`` (K, H, W) and ``config``, the full configuration as JSON. The words
+    must be integers, each a legal word of ``config`` (:func:`tespike.golden.decode.check_words`), so
+    that the cast to the smallest word dtype changes none (a float, negative or too large word had
+    been truncated or wrapped into the file)."""
     config = SensorConfig.required(config, "save_stream")
     words = np.asarray(words)
     if words.ndim != 3:
         raise InputError(f"stream words shape {words.shape} must be (K, H, W)")
+    check_words(words, config)
     with atomic_output(path) as tmp:
         with open(tmp, "wb") as handle:
             write_npz(handle, words=words.astype(word_dtype(config), copy=False),

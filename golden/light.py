@@ -34,7 +34,7 @@ import math
 import numpy as np
 
 from .config import DESIGN_ELECTRONS, SensorConfig
-from .errors import InputError
+from .errors import InputError, is_count
 from .io import unsigned_dtype
 
 #: Dark-current models of the paper's appendix A.2.5.
@@ -68,11 +68,22 @@ def check_dark_current(dark_current: str | None) -> str | None:
     return dark_current
 
 
+def check_seed(seed, what: str = "seed"):
+    """``seed`` itself where it is one the library takes: ``None`` (fresh entropy), an integer >= 0
+    (never a bool), a numpy SeedSequence, BitGenerator or Generator; refused in one line naming
+    ``what`` otherwise (numpy's TypeError or ValueError named no argument, and took True as 1)."""
+    if seed is None or is_count(seed) or isinstance(
+            seed, (np.random.SeedSequence, np.random.BitGenerator, np.random.Generator)):
+        return seed
+    raise InputError(f"{what} {seed!r}: must be an integer >= 0, a numpy Generator, SeedSequence or "
+                     f"BitGenerator, or None (fresh entropy)")
+
+
 def as_generator(rng) -> np.random.Generator:
-    """A numpy Generator from a Generator, a seed (int) or ``None`` (fresh entropy)."""
+    """A numpy Generator from a Generator, a seed (:func:`check_seed`) or ``None`` (fresh entropy)."""
     if isinstance(rng, np.random.Generator):
         return rng
-    return np.random.default_rng(rng)
+    return np.random.default_rng(check_seed(rng))
 
 
 def electrons_per_readout(light: np.ndarray) -> np.ndarray:

@@ -266,6 +266,14 @@ class PixelNoise:
                           self.dark_scale.reshape(-1, width)[rows].reshape(-1))
 
 
+def check_noise_switch(noise) -> bool:
+    """``noise`` where it is True or False (a string such as ``"no"`` had been taken as True)."""
+    if not isinstance(noise, (bool, np.bool_)):
+        raise InputError(f"noise {noise!r}: must be True or False (False: electrons delivered "
+                         "deterministically)")
+    return bool(noise)
+
+
 def pixel_noise(dark_current: str | None, sensor: Sensor | None, shape: tuple[int, int], *,
                 noise: bool = True) -> PixelNoise:
     """The :class:`PixelNoise` of an H x W frame from either the ``dark_current`` keyword (the
@@ -275,6 +283,7 @@ def pixel_noise(dark_current: str | None, sensor: Sensor | None, shape: tuple[in
     check of the light front end's options (the fast simulator and
     :func:`tespike.golden.stimulus.poisson_stimulus` alike); the command checks the same rules
     first, before reading a scene, in its flags' words (``cosim.commands.common.light_front_end``)."""
+    noise = check_noise_switch(noise)
     if sensor is not None and check_dark_current(dark_current) is not None:
         raise InputError("give the dark current either alone or inside the sensor noise, not both")
     if sensor is None:

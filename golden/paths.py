@@ -42,13 +42,23 @@ def _reason(exc: OSError) -> str:
     return exc.strerror or str(exc) or type(exc).__name__
 
 
+def path_text(path, what: str = "path") -> str:
+    """``path`` as text where it is a str or an os.PathLike of one, refused in one line naming
+    ``what`` otherwise (a number had been os.fspath's TypeError naming no argument)."""
+    if isinstance(path, (str, os.PathLike)):
+        text = os.fspath(path)
+        if isinstance(text, str):
+            return text
+    raise InputError(f"{what}: a file name must be a str or a path, not {type(path).__name__}")
+
+
 def check_input_file(path: str | os.PathLike, what: str = "input") -> Path:
     """Refuse an input that is missing, unreadable, empty or not a regular file; return it.
 
     ``what`` names the input in the message (``"stimulus"``, ``"--config"``...).
     A FIFO is refused rather than opened: opening one with no writer blocks.
     """
-    text = os.fspath(path)
+    text = path_text(path, what)
     if not text:
         raise InputError(f"{what}: empty path")
     try:
@@ -78,7 +88,7 @@ def check_output_file(path: str | os.PathLike, what: str | None = None) -> Path:
     regular file (replaced atomically), an existing character device or FIFO
     (written through by :func:`tespike.golden.io.atomic_output`, never replaced).
     """
-    text = os.fspath(path)
+    text = path_text(path, what or "output")
     label = f"{what} {text!r}" if what else repr(text)
     if not text:
         raise InputError(f"{what or 'output'}: empty path")
@@ -242,7 +252,7 @@ def check_output_dir(path: str | os.PathLike, what: str = "--out",
     """An output folder: existing directory or creatable (parent exists); ``files``
     (relative names written inside it) are checked like single outputs, and a
     name ending in ``/`` must be a directory or absent."""
-    text = os.fspath(path)
+    text = path_text(path, what)
     _refuse_control_characters(text, f"{what} {text!r}")
     check_folder_path(text, what)
     folder = Path(text)

@@ -325,5 +325,5 @@ def simulate(config: SensorConfig, stimulus: np.ndarray,
         words[done:done + len(part)] = part
         done += len(part)
     if done != len(words) or array.state.clock != stimulus.shape[0]:
-        raise ValueError(f"chunks covered {array.state.clock} of {stimulus.shape[0]} pixel clocks")
+        raise InputError(f"chunks covered {array.state.clock} of {stimulus.shape[0]} pixel clocks")
     return words

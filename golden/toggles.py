@@ -29,6 +29,7 @@ import dataclasses
 import numpy as np
 
 from .config import SensorConfig
+from .errors import InputError
 from .reference import msb_remainder, readout_word
 
 
@@ -112,7 +113,7 @@ def count_toggles(config: SensorConfig, electrons: np.ndarray) -> Toggles:
     T, n = e.shape
     L, F = config.clocks_per_readout, config.clocks_per_tick
     if T % L:
-        raise ValueError(f"{T} clocks is not a whole number of readout intervals (L = {L})")
+        raise InputError(f"{T} clocks is not a whole number of readout intervals (L = {L})")
     names = pixel_register_names(config)
     state = {name: np.zeros(n, np.int64) for name in names}
     counts = {name: np.zeros(n, np.int64) for name in names}

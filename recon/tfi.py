@@ -46,6 +46,8 @@ from __future__ import annotations
 
 import torch
 
+from tespike.golden.errors import InputError
+
 from .settings import TFI_SEARCH
 
 
@@ -84,7 +86,7 @@ def tfi(light: torch.Tensor, nonzero: torch.Tensor, spike_light: float, radius: 
     42000); ``radius``: window radius (used only when ``search == "window"``).
     """
     if search not in TFI_SEARCH:
-        raise ValueError(f"search = {search!r}: must be one of {', '.join(TFI_SEARCH)}")
+        raise InputError(f"search = {search!r}: must be one of {', '.join(TFI_SEARCH)}")
     K = light.shape[0]
     if not light.dtype.is_floating_point:
         light = light.to(torch.float64)

@@ -125,3 +125,21 @@ def test_a_refused_word_is_named_as_stored():
     for value in (2 ** 64 - 1, 2 ** 63 + 17):
         with pytest.raises(InputError, match=f"readout word {value} at index \\(0, 0, 1\\)"):
             check_words(np.array([[[0, value]]], np.uint64), SensorConfig())
+
+
+@pytest.mark.parametrize("config", [SensorConfig(), SensorConfig(b1=2, b2=4, alpha=9), SensorConfig(b1=1, b2=1, alpha=1),
+                                    SensorConfig.preset("ml"), SensorConfig.preset("ml-msb"),
+                                    SensorConfig(mode="ml", ml_readout="msb", ml_bits=3)])
+def test_every_illegal_word_is_refused_where_the_block_is_otherwise_legal(config):
+    """check_words' quick test (the block's smallest and largest word, then each hole between them)
+    decides nothing it should not: each word of the word width that is not legal, placed once among
+    legal words spanning the whole set, is refused at its index; all-legal blocks pass."""
+    from tespike.golden.decode import check_words, legal_words
+    legal = legal_words(config)
+    block = np.resize(legal, 3 * 7 * 11).reshape(3, 7, 11).astype(np.uint16)
+    check_words(block, config)
+    for bad in sorted(set(range(1 << (config.word_bits + 1))) - set(legal.tolist())):
+        words = block.copy()
+        words[2, 5, 3] = bad
+        with pytest.raises(InputError, match=f"readout word {bad} at index \\(2, 5, 3\\)"):
+            check_words(words, config)

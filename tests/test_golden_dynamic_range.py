@@ -5,6 +5,7 @@ import pytest
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.dynamic_range import constant_light_words, formula_db, light_grid, measure
+from tespike.golden.errors import InputError
 from tespike.golden.reference import step_reference
 
 
@@ -17,7 +18,7 @@ def test_formula_paper_settings():
     small = SensorConfig(alpha=5)
     assert formula_db(small, 1) == pytest.approx(20 * math.log10(16 * 5))
     assert formula_db(small, 1, paper_alpha=True) == pytest.approx(20 * math.log10(16 * 15))
-    with pytest.raises(ValueError):
+    with pytest.raises(InputError):
         formula_db(te, 0)
 
 
@@ -59,8 +60,30 @@ def test_measured_range_ml_noise_free():
 
 
 def test_measure_refuses_words_of_the_wrong_shape():
-    with pytest.raises(ValueError, match="shape"):
+    with pytest.raises(InputError, match="shape"):
         measure(SensorConfig(), 4, windows=2, light=np.array([0.1, 1.0]), words=np.zeros((5, 2), np.int64))
+
+
+@pytest.mark.parametrize("call, refusal", [
+    (lambda: measure(SensorConfig(), 0), r"^n_s = 0: must be an integer >= 1$"),
+    (lambda: measure(SensorConfig(), 2.5), r"^n_s = 2.5: must be an integer >= 1$"),
+    (lambda: measure(SensorConfig(), 4, windows=-1), r"^windows = -1: must be an integer >= 1$"),
+    (lambda: measure(SensorConfig(), 4, tolerance=float("nan")), r"^tolerance = nan: must be a finite number > 0$"),
+    (lambda: measure(SensorConfig(), 4, fraction=1.5), r"^fraction = 1.5: must be a number in \(0, 1\]"),
+    (lambda: measure(SensorConfig(), 4, light=np.array([0.0, 1.0])), r"^light: every value must be finite and > 0"),
+    (lambda: formula_db(SensorConfig(), float("nan")), r"^N_s = nan: must be a finite number > 0$"),
+    (lambda: formula_db(SensorConfig(), 0), r"^N_s = 0: must be a finite number > 0$"),
+    (lambda: constant_light_words(SensorConfig(), np.array([np.nan]), 2), r"^light: every value must be finite and >= 0"),
+    (lambda: constant_light_words(SensorConfig(), np.array([-1.0]), 2), r"^light: every value must be finite and >= 0"),
+    (lambda: constant_light_words(SensorConfig(), np.ones((2, 2)), 2), r"^light shape \(2, 2\): must be one light per pixel"),
+    (lambda: constant_light_words(SensorConfig(), np.ones(2), 0), r"^readouts = 0: must be an integer >= 1$"),
+    (lambda: constant_light_words(SensorConfig(), np.ones(2), 2, seed="x"), r"^seed 'x': must be an integer >= 0"),
+])
+def test_bad_arguments_are_refused_naming_them(call, refusal):
+    """(n_s = 0 had been numpy's 'need at least one array to concatenate', N_s = NaN a NaN range,
+    a NaN light 'stimulus value -9223372036854775808 is negative'.)"""
+    with pytest.raises(InputError, match=refusal):
+        call()
 
 
 def test_measured_range_msb_noise_free():

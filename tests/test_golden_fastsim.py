@@ -7,6 +7,7 @@ total variation distance 0.05. Shortcuts that are deterministic are compared
 word for word and accumulator for accumulator with the per-clock path.
 """
 
+import re
 import warnings
 
 import numpy as np
@@ -236,6 +237,36 @@ def test_refuses_bad_input():
         simulate_scene(SensorConfig(), np.zeros((1, 1, 1)), method="magic")
     with pytest.raises(InputError, match="noise"):
         simulate_scene(SensorConfig(), np.zeros((1, 1, 1)), noise=False, dark_current="eq12")
+
+
+@pytest.mark.parametrize("seed", ["abc", -1, 1.5, True, [1, 2]])
+def test_a_seed_numpy_would_refuse_in_its_own_words_or_take_as_another_is_refused(seed):
+    """Every entry that takes a seed (numpy's SeedSequence TypeError or ValueError named no argument,
+    and True was taken as 1); integers >= 0, numpy generators, bit generators and seed sequences go."""
+    light = np.full((1, 2, 2), 0.1)
+    for call in (lambda: simulate_scene(SensorConfig(), light, seed=seed),
+                 lambda: simulate_scene(SensorConfig(), np.full((1, 64, 2048), 0.1), seed=seed, workers=1),
+                 lambda: SceneSimulator(SensorConfig(), (2, 2), rng=seed),
+                 lambda: poisson_stimulus(SensorConfig(), light, seed)):
+        with pytest.raises(InputError, match=f"^seed {re.escape(repr(seed))}: must be an integer >= 0, a numpy "
+                                             "Generator, SeedSequence or BitGenerator, or None"):
+            call()
+    for good in (0, np.int64(7), np.random.SeedSequence(3), np.random.SFC64(3), np.random.default_rng(3)):
+        assert simulate_scene(SensorConfig(), light, seed=good).shape == (1, 2, 2)
+
+
+@pytest.mark.parametrize("options, refusal", [
+    ({"noise": "no"}, r"^noise 'no': must be True or False"),
+    ({"noise": 0}, r"^noise 0: must be True or False"),
+    ({"progress": 3}, r"^progress 3: must be None or a function that wraps the readouts' iterable"),
+])
+def test_a_switch_or_progress_of_the_wrong_kind_is_refused(options, refusal):
+    """('no' had been taken as True, a progress of 3 'int object is not callable' after the work began.)"""
+    with pytest.raises(InputError, match=refusal):
+        simulate_scene(SensorConfig(), np.full((2, 2, 2), 0.1), **options)
+    if "noise" in options:
+        with pytest.raises(InputError, match=refusal):
+            SceneSimulator(SensorConfig(), (2, 2), noise=options["noise"])
 
 
 @pytest.mark.parametrize("method", ["fast", "per-clock"])

@@ -266,3 +266,26 @@ def test_write_npz_is_the_archive_np_savez_writes(tmp_path):
     loaded, loaded_config = load_stream(tmp_path / "S.npz")
     np.testing.assert_array_equal(loaded, words)
     assert loaded_config == config
+
+
+@pytest.mark.parametrize("words, refusal", [
+    (np.full((1, 2, 2), 3.0), "dtype float64 is not an integer type"),
+    (np.full((1, 2, 2), -1), "readout word -1 at index \\(0, 0, 0\\)"),
+    (np.full((1, 2, 2), 16), "readout word 16 at index \\(0, 0, 0\\)"),
+    (np.full((1, 2, 2), 288), "readout word 288 at index \\(0, 0, 0\\)"),
+])
+def test_save_stream_writes_no_word_its_cast_would_change(words, refusal, tmp_path):
+    """A float word had been truncated, -1 and 288 wrapped into uint8 (255, 32), and 16 (no TE word)
+    written, each silently; nothing is left behind."""
+    with pytest.raises(InputError, match=refusal):
+        save_stream(tmp_path / "S.npz", words, SensorConfig())
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("call", [lambda path: save_stream(path, np.zeros((1, 1, 1), np.uint8), SensorConfig()),
+                                  load_stream, load_scene, lambda path: load_stimulus(path, SensorConfig())])
+def test_a_path_that_is_no_file_name_is_refused_in_one_line(call):
+    """(A number had been os.fspath's TypeError.)"""
+    for path in (5, 2.5, None, b"S.npz"):
+        with pytest.raises(InputError, match=f"a file name must be a str or a path, not {type(path).__name__}$"):
+            call(path)

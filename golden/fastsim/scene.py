@@ -12,8 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import SensorConfig
+from ..errors import InputError
 from ..io import check_scene, word_dtype
-from ..noise import pixel_noise
+from ..noise import check_noise_switch, pixel_noise
 from ..resources import keep_freed_memory
 from .simulator import SceneSimulator, check_method
 from .stripes import run_stripes, spawn_generators, stripe_slices, worker_count
@@ -69,6 +70,10 @@ def simulate_scene(config: SensorConfig, scene: np.ndarray, *, seed=None,
     scene = check_scene(scene, scan_values=False)       # values: one readout at a time
     K, H, W = scene.shape
     check_method(method)
+    noise = check_noise_switch(noise)
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress {progress!r}: must be None or a function that wraps the readouts' "
+                         "iterable (e.g. tqdm)")
     keep_freed_memory()                                 # (speed only: see golden.resources)
     if noise and method == "fast":
         rows, sims = stripe_simulators(config, (H, W), seed=seed, dark_current=dark_current,

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import InputError, is_count
 from ..io import scan_light
+from ..light import check_seed
 
 #: Stripes of a noisy fast simulation (:func:`stripe_slices`): a power of two,
 #: at most MAX_STRIPES, each of at least STRIPE_PIXELS pixels (a stripe's
@@ -42,6 +43,7 @@ def spawn_generators(seed, n: int) -> list[np.random.Generator]:
     kind), else an SFC64 generator on each child of ``SeedSequence(seed).spawn``: numpy's
     Poisson and Gamma draws, most of a striped frame's time, are 5-16 % cheaper on SFC64
     than on PCG64 (docs/simulator.md). The parent generator's own stream is not advanced."""
+    check_seed(seed)
     if isinstance(seed, np.random.BitGenerator):
         seed = np.random.Generator(seed)
     if isinstance(seed, np.random.Generator):
