@@ -195,6 +195,7 @@ def estimate_dark_law(words, config: SensorConfig, atoms: int | None = None) -> 
 def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) -> Calibration:
     """Dark stream (K_d, H, W) and flat stream (K_f, H, W) of one sensor, the flat's light
     (scene units) -> :class:`Calibration`."""
+    config = SensorConfig.required(config, "estimate")
     if not (isinstance(flat_light, (int, float)) and not isinstance(flat_light, bool)
             and np.isfinite(flat_light) and flat_light > 0):
         raise InputError(f"flat light {flat_light!r}: must be a finite number > 0 (1 = design light)")
@@ -250,7 +251,7 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
 def save_calibration(path: str | Path, calibration: Calibration) -> None:
     """Write ``C.npz`` (atomically: a temporary file beside it, then renamed)."""
     from tespike.golden.io import atomic_output
-    c = calibration
+    c = _required(calibration)
     with atomic_output(path) as tmp:
         with open(tmp, "wb") as handle:
             np.savez(handle, dark=c.dark, gain=c.gain, config=np.array(c.config.to_json()),
@@ -351,14 +352,21 @@ def _checked_numbers(shown: str, values: dict, pixels: int) -> dict:
     return out
 
 
+def _required(calibration, name: str = "the calibration") -> Calibration:
+    """``calibration`` where it is a :class:`Calibration`, else one line naming ``name`` (a path given
+    where :func:`load_calibration`'s result belongs had been an AttributeError)."""
+    if not isinstance(calibration, Calibration):
+        raise InputError(f"{name} must be a Calibration (tespike.recon.calibration.load_calibration(path)), "
+                         f"not {type(calibration).__name__}")
+    return calibration
+
+
 def check_matches(calibration: Calibration, config: SensorConfig, shape: tuple[int, int],
                   what: str = "the stream", name: str = "the calibration") -> None:
     """Refuse, in one line naming both (``name``: the calibration, e.g. its file), a calibration made
     for another configuration or frame size than ``what``, or what is no :class:`Calibration` (a path
     given where :func:`load_calibration`'s result belongs)."""
-    if not isinstance(calibration, Calibration):
-        raise InputError(f"{name} must be a Calibration (tespike.recon.calibration.load_calibration(path)), "
-                         f"not {type(calibration).__name__}")
+    _required(calibration, name)
     difference = calibration.config.differences_text(config, "the calibration", what)
     if difference is not None:
         raise InputError(f"{name} is for another sensor configuration than {what}: {difference}")
@@ -370,8 +378,12 @@ def check_matches(calibration: Calibration, config: SensorConfig, shape: tuple[i
 def correct(images: np.ndarray, calibration: Calibration) -> np.ndarray:
     """Reconstructed light (K, H, W) -> ``max(0, (x - dark) / gain)`` per pixel, in place
     where ``images`` is a writable float array (a memory-mapped R.npy stays on disk)."""
+    calibration = _required(calibration)
     out = images if isinstance(images, np.ndarray) and images.flags.writeable and \
         images.dtype.kind == "f" else np.array(images, np.float32)
+    if out.ndim != 3 or out.shape[1:] != calibration.shape:
+        raise InputError(f"images of shape {out.shape}: the calibration corrects (K, {calibration.shape[0]}, "
+                         f"{calibration.shape[1]}) frames")
     dark, inverse = calibration.dark.astype(out.dtype), (1.0 / calibration.gain).astype(out.dtype)
     for k in range(out.shape[0]):           # one frame at a time: bounded memory
         frame = out[k]

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from tespike.golden.config import DESIGN_ELECTRONS, SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import ConfigError, InputError
 from tespike.golden.fastsim import simulate_scene
 from tespike.golden.io import save_stream
 from tespike.golden.noise import Sensor, SensorNoise
@@ -42,6 +42,25 @@ def test_correct_inverts_the_pixel_response():
     assert np.allclose(correct(seen.copy(), c), light, atol=1e-6)
     below = np.full((1, 2, 2), 0.005, np.float32)         # below the dark rate: no light, not negative
     assert np.array_equal(correct(below, c), np.zeros((1, 2, 2), np.float32))
+
+
+def test_arguments_of_the_wrong_kind_are_refused_in_one_line(tmp_path):
+    """(A configuration's name in estimate and a path where the Calibration belongs were AttributeErrors,
+    frames of another size numpy's broadcast error.)"""
+    te = SensorConfig()
+    words = np.zeros((2, 3, 3), np.uint8)
+    calibration = Calibration(np.zeros((3, 3)), np.ones((3, 3)), te, 1, 1, 0.1)
+    with pytest.raises(ConfigError, match="^estimate: configuration must be a SensorConfig"):
+        estimate(words, words, "te", 0.1)
+    for call in (lambda: save_calibration(tmp_path / "C.npz", "C.npz"),
+                 lambda: correct(np.zeros((1, 3, 3), np.float32), "C.npz")):
+        with pytest.raises(InputError, match=r"^the calibration must be a Calibration \(tespike.recon.calibration"
+                                             r".load_calibration\(path\)\), not str$"):
+            call()
+    for images in (np.zeros((1, 3, 4), np.float32), np.zeros((3, 3), np.float32)):
+        with pytest.raises(InputError, match=r"^images of shape .*: the calibration corrects \(K, 3, 3\) frames$"):
+            correct(images, calibration)
+    assert not list(tmp_path.iterdir())
 
 
 def test_calibration_wins_back_the_dark_and_the_gain():

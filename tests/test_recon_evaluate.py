@@ -238,6 +238,8 @@ def test_further_metrics_are_the_scores_of_the_scored_frames():
     assert result.psnr_pu21 == pytest.approx(every.mean["psnr_pu21"])
     assert result.hdr_vqm == pytest.approx(every.sequence["hdr_vqm"])
     assert result.fovvideovdp == pytest.approx(score(pred[2:4], truth[2:4], metrics=("fovvideovdp",)).mean["fovvideovdp"])
+    # one name as a string is that metric (its letters had each been refused as a metric)
+    assert score(pred, truth, metrics="psnr_pu21").mean == score(pred, truth, metrics=("psnr_pu21",)).mean
     assert result.frames_vdp == 2 and result.frames_scored == 6
     text = table_markdown(evaluation)
     assert "HDR-VQM ↓" in text and "FovVideoVDP (JOD) ↑" in text and "middle 2 scored frames" in text
