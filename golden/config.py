@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -319,6 +320,12 @@ class SensorConfig:
 
 def load_config(spec: str | Path) -> SensorConfig:
     """``"te"`` / ``"ml"`` / ``"ml-msb"`` name presets; anything else is a JSON file path."""
+    if isinstance(spec, SensorConfig):
+        return spec
+    if not isinstance(spec, (str, os.PathLike)):
+        hint = " (a dict of keys: SensorConfig.from_dict)" if isinstance(spec, dict) else ""
+        raise ConfigError(f"configuration {spec!r}: must be a preset's name or a JSON file's path, "
+                          f"not {type(spec).__name__}{hint}")
     if str(spec) in PRESETS:
         return SensorConfig.preset(str(spec))
     path = Path(spec)

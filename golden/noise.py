@@ -197,6 +197,9 @@ class Sensor:
     seed: int = 0
 
     def __post_init__(self):
+        if not isinstance(self.noise, SensorNoise):
+            raise InputError(f"sensor noise {self.noise!r}: must be a SensorNoise (e.g. "
+                             f"SensorNoise(dark_current='eq12') or load_noise(path)), not {type(self.noise).__name__}")
         if not is_count(self.seed):
             raise InputError(f"sensor seed {self.seed!r}: must be an integer >= 0")
 

@@ -193,3 +193,15 @@ def test_library_entry_points_refuse_what_is_no_configuration(name, not_config, 
         call(not_config)
     assert not list(tmp_path.iterdir())
     call(SensorConfig())                                # the same call with a configuration runs
+
+
+def test_load_config_takes_a_name_a_path_or_a_configuration_and_refuses_the_rest(tmp_path):
+    """(A number or a dict had been os.fspath's TypeError.)"""
+    path = tmp_path / "C.json"
+    path.write_text('{"mode": "ml"}')
+    assert load_config(path) == load_config(str(path)) == SensorConfig(mode="ml")
+    assert load_config(SensorConfig(b1=3)) == SensorConfig(b1=3)
+    with pytest.raises(ConfigError, match=r"^configuration 3: must be a preset's name or a JSON file's path, not int$"):
+        load_config(3)
+    with pytest.raises(ConfigError, match=r"not dict \(a dict of keys: SensorConfig.from_dict\)$"):
+        load_config({"mode": "te"})

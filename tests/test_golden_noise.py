@@ -55,6 +55,13 @@ def test_a_frame_shape_that_is_no_frame_is_refused(shape):
             call()
 
 
+def test_a_sensor_of_no_sensor_noise_is_refused():
+    """(Sensor('eq12') had been taken, and failed later on the string's missing fields.)"""
+    for noise in ("eq12", {"dark_current": "eq12"}, None):
+        with pytest.raises(InputError, match=f"^sensor noise .*: must be a SensorNoise .*not {type(noise).__name__}$"):
+            Sensor(noise, 0)
+
+
 def test_scaled_dark_draws_and_unscaled_ones():
     assert np.array_equal(dark_electrons("eq12", (1000,), np.random.default_rng(5)),
                           dark_electrons("eq12", (1000,), np.random.default_rng(5), scale=None))
