@@ -15,7 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from .config import SensorConfig
-from .errors import ConfigError, InputError
+from .decode import check_word_dtype
+from .errors import ConfigError, InputError, is_count
 
 
 #: Most lanes accepted: 262144 (2^18, the largest streaming array's pixel count). N above H W
@@ -26,6 +27,9 @@ MAX_LANES = 1 << 18
 
 def beat_count(pixels: int, lanes: int) -> int:
     """B = ceil(pixels / lanes): beats per readout interval."""
+    if not (is_count(pixels) and is_count(lanes, 1)):
+        raise InputError(f"beat count of {pixels!r} pixels on {lanes!r} lanes: the pixels must be an integer "
+                         ">= 0, the lanes an integer >= 1")
     return -(-pixels // lanes)
 
 
@@ -59,6 +63,7 @@ def beats(words: np.ndarray, lanes: int) -> np.ndarray:
     words = np.asarray(words)
     if words.ndim != 3:
         raise InputError(f"beats wants words (K, H, W), got shape {words.shape}")
+    check_word_dtype(words.dtype)
     if type(lanes) is not int or lanes < 1:
         raise InputError(f"lanes = {lanes!r}: must be an integer >= 1")
     K, H, W = words.shape
@@ -70,6 +75,12 @@ def beats(words: np.ndarray, lanes: int) -> np.ndarray:
 
 def unbeat(beats_: np.ndarray, height: int, width: int) -> np.ndarray:
     """Inverse of :func:`beats`: ``(K, B, N)`` -> words ``(K, H, W)`` (the padding lanes are dropped)."""
+    beats_ = np.asarray(beats_)
+    if not (is_count(height, 1) and is_count(width, 1)):
+        raise InputError(f"unbeat: height {height!r} and width {width!r} must be integers >= 1")
+    if beats_.ndim != 3 or beats_.shape[1] * beats_.shape[2] < height * width:
+        raise InputError(f"unbeat: beats of shape {beats_.shape} cannot hold {height} x {width} pixels "
+                         "(they must be (K, B, N) with B N >= H W)")
     K = beats_.shape[0]
     return beats_.reshape(K, -1)[:, :height * width].reshape(K, height, width)
 

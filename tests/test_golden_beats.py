@@ -71,3 +71,20 @@ def test_lane_count_above_the_limit_is_refused_in_one_line():
     with pytest.raises(ConfigError, match=f"at most {MAX_LANES} lanes") as info:
         check_lanes(SensorConfig(), 2, 3, MAX_LANES + 1)
     assert "\n" not in str(info.value)
+
+
+def test_the_lane_helpers_refuse_what_they_cannot_pack_in_one_line():
+    """(A float word had been packed as a float, unbeat of too few beats was numpy's reshape error,
+    0 lanes a ZeroDivisionError.)"""
+    from tespike.golden.errors import InputError
+    words = np.zeros((2, 2, 3), np.uint8)
+    with pytest.raises(InputError, match="^readout words dtype float64 is not an integer type$"):
+        beats(words.astype(float), 2)
+    with pytest.raises(InputError, match=r"^unbeat: beats of shape \(2, 3, 2\) cannot hold 5 x 5 pixels"):
+        unbeat(np.zeros((2, 3, 2), np.uint8), 5, 5)
+    with pytest.raises(InputError, match="^unbeat: height 'x' and width 3 must be integers >= 1$"):
+        unbeat(np.zeros((2, 3, 2), np.uint8), "x", 3)
+    for pixels, lanes in ((4, 0), (-1, 2), (4, 1.5)):
+        with pytest.raises(InputError, match=f"^beat count of {pixels} pixels on {lanes} lanes"):
+            beat_count(pixels, lanes)
+    assert np.array_equal(unbeat(beats(words + 3, 4), 2, 3), words + 3)
