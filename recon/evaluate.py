@@ -265,12 +265,11 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
 
     from .methods import reconstruct
 
+    methods, sensors, metrics = (None if methods is None else _names(methods)), _names(sensors), _names(metrics)
     methods, metrics, configs, noise_sensors, absent = _checked_arguments(
         methods, sensors, configs, window, seed, repeats, metrics, vdp_frames, missing, noise_sensors, weights)
     further = [key for key in metrics if key not in BASIC_METRICS]
-    sequences = list(sequences)
-    if not sequences:
-        raise InputError("no sequences to evaluate")
+    sequences = _checked_sequences(sequences)
     labels = [name for name, _ in sequences]
     if len(set(labels)) != len(labels):
         raise InputError(f"sequence labels must be unique, got {labels}")
@@ -329,6 +328,29 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
         evaluation.strips[name] = strip
     bar.close()
     return evaluation
+
+
+def _names(value) -> tuple:
+    """A sequence of names as a tuple; one name given as a string is that name (its letters had been
+    taken as names: methods='tfp' was 'unknown reconstruction method 't'')."""
+    return (value,) if isinstance(value, str) else tuple(value)
+
+
+def _checked_sequences(sequences) -> list[tuple[str, np.ndarray]]:
+    """``sequences`` as a list of (label, light) pairs, refused in one line where one is not such a
+    pair (a light array given alone had been 'too many values to unpack') or none is given; the
+    light's own checks come when it is simulated."""
+    if isinstance(sequences, np.ndarray):
+        raise InputError("sequences: give (label, light) pairs, e.g. [('scene', light)], not a light array")
+    sequences = list(sequences)
+    for item in sequences:
+        if not (isinstance(item, tuple) and len(item) == 2 and isinstance(item[0], str)
+                and isinstance(item[1], np.ndarray) and item[1].ndim == 3):
+            raise InputError(f"sequences: each must be a (label, light (K, H, W)) pair, got "
+                             f"{type(item).__name__} {str(item)[:60]!r}")
+    if not sequences:
+        raise InputError("no sequences to evaluate")
+    return sequences
 
 
 def _checked_arguments(methods, sensors, configs, window, seed, repeats, metrics, vdp_frames, missing,

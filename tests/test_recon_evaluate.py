@@ -177,6 +177,20 @@ def test_evaluate_refuses():
         evaluate([("n", -light)], simulate, progress=False)
     with pytest.raises(InputError, match="no sensor configuration"):
         evaluate([("a", light)], simulate, configs={"te": SensorConfig()}, progress=False)
+    # a light array where pairs belong ('too many values to unpack'), a pair of another kind
+    with pytest.raises(InputError, match=r"^sequences: give \(label, light\) pairs, e.g. \[\('scene', light\)\]"):
+        evaluate(light, simulate, methods=("tfp",), progress=False)
+    for item in (["a", light], ("a", light, 1), (3, light), ("a", light[0])):
+        with pytest.raises(InputError, match=r"^sequences: each must be a \(label, light \(K, H, W\)\) pair"):
+            evaluate([item], simulate, methods=("tfp",), progress=False)
+
+
+def test_one_name_given_as_a_string_is_that_name():
+    """methods='tfp' had been 'unknown reconstruction method 't'', sensors='te' 'no sensor configuration
+    for sensor 't'', metrics='psnr_pu21' 'unknown metric 'p''."""
+    light = make_scene("moderate", 4, 24, 24)
+    one = evaluate([("a", light)], simulate, methods="tfp", sensors="te", metrics="psnr_pu21", progress=False)
+    assert (one.methods, one.sensors, one.metrics) == (("tfp",), ("te",), ("psnr_mu", "ssim_mu", "psnr_pu21"))
 
 
 def test_method_options_reach_the_method(small_run):
