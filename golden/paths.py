@@ -49,7 +49,7 @@ def path_text(path, what: str = "path") -> str:
         text = os.fspath(path)
         if isinstance(text, str):
             return text
-    raise InputError(f"{what}: a file name must be a str or a path, not {type(path).__name__}")
+    raise InputError(f"{what}: a path must be a str or an os.PathLike, not {type(path).__name__}")
 
 
 def check_input_file(path: str | os.PathLike, what: str = "input") -> Path:

@@ -287,5 +287,5 @@ def test_save_stream_writes_no_word_its_cast_would_change(words, refusal, tmp_pa
 def test_a_path_that_is_no_file_name_is_refused_in_one_line(call):
     """(A number had been os.fspath's TypeError.)"""
     for path in (5, 2.5, None, b"S.npz"):
-        with pytest.raises(InputError, match=f"a file name must be a str or a path, not {type(path).__name__}$"):
+        with pytest.raises(InputError, match=f"a path must be a str or an os.PathLike, not {type(path).__name__}$"):
             call(path)

@@ -291,3 +291,11 @@ def test_folder_crop_and_downscale(tmp_path):
     assert load_hdr_sequence(tmp_path, crop=(6, 8), downscale=2).shape == (1, 3, 4)
     with pytest.raises(InputError, match="downscale"):
         load_hdr_sequence(tmp_path, downscale=0)
+
+
+def test_a_path_that_is_no_path_is_refused_in_one_line():
+    """(load_panorama and load_hdr_sequence of a number had been os.fspath's TypeError.)"""
+    from tespike.recon.scenes.panorama import load_panorama
+    for call, what in ((load_panorama, "panorama"), (load_hdr_sequence, "HDR sequence folder")):
+        with pytest.raises(InputError, match=f"^{what}: a path must be a str or an os.PathLike, not int$"):
+            call(3)

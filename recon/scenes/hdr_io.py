@@ -499,8 +499,8 @@ def list_frames(folder: str | Path) -> list[Path]:
     """The HDR frames of a folder, sorted by name (numbers compared as numbers: 2 < 10). Every
     entry named as a frame must be one: a dangling link, a folder or a FIFO so named is refused
     in one line (it was skipped, and the sequence came out a frame short, exit 0)."""
-    from tespike.golden.paths import check_input_file
-    folder = Path(folder)
+    from tespike.golden.paths import check_input_file, path_text
+    folder = Path(path_text(folder, "HDR sequence folder"))
     if not folder.is_dir():
         raise InputError(f"HDR sequence folder {str(folder)!r} does not exist or is not a folder")
     frames = [p for p in folder.iterdir() if p.suffix.lower() in FRAME_SUFFIXES]

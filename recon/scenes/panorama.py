@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from tespike.golden.errors import InputError
+from tespike.golden.paths import path_text
 
 from .color import DEFAULT_WEIGHTS, to_gray
 from .procedural import moving_spots
@@ -65,6 +66,7 @@ def load_panorama(source: str | Path = "default", weights: str = DEFAULT_WEIGHTS
     A full-size or user file is read once per process and returned read-only
     (:func:`file_luminance`): the data engine moves cameras over the same panoramas clip
     after clip. A shipped copy is small and returned as a new array each call."""
+    path_text(source, "panorama")            # (a number had been os.fspath's TypeError)
     if str(source) == "default" or (str(source) in PANORAMAS and hdri_dir() is None):
         with np.load(shipped_panorama_file(str(source)), allow_pickle=False) as npz:
             return npz["luminance"].astype(np.float64)
