@@ -26,6 +26,7 @@ import numpy as np
 from tespike.golden.atomic import work_folder
 from tespike.golden.config import SensorConfig
 from tespike.golden.io import atomic_output
+from tespike.golden.paths import path_text
 
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, first_error_line, hex_to_rows,
                       pack_rows, require_tool, rows_to_hex, run_process)
@@ -153,7 +154,7 @@ def _simulate(run: RunPlan, verilog: str, what: str, work_dir, vcd_path=None) ->
     bench = verilog_testbench(top.module, top.charge_bits, top.output_bits, top.outputs,
                               "streaming ports" if top.streaming else "ports", vcd_path is not None)
     with work_folder("tespike-icarus-") as scratch:
-        work = Path(work_dir) if work_dir is not None else Path(scratch)
+        work = Path(path_text(work_dir, "work_dir")) if work_dir is not None else Path(scratch)
         if not work.is_dir():
             raise SimulatorRunError(f"work_dir {str(work)!r} is not an existing directory")
         (work / "array.v").write_text(verilog)

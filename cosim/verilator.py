@@ -36,6 +36,7 @@ from tespike.golden.atomic import work_folder
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.golden.io import atomic_output
+from tespike.golden.paths import path_text
 
 from . import children
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, cache_entry, content_hash,
@@ -371,7 +372,7 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
     if harness is None:
         harness = harness_cpp(top, charge_bits, frame_bits)
     flags = build_flags(top, inline, cxx_opt, tuple(extra_flags))
-    root = Path(build_dir) if build_dir is not None else default_cache_root() / "verilator"
+    root = Path(path_text(build_dir, "build_dir")) if build_dir is not None else default_cache_root() / "verilator"
     key = content_hash(verilog, harness, " ".join(flags), verilator_version())
     with cache_entry(root, key) as (final, done):
         if done:

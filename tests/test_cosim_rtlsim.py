@@ -165,6 +165,15 @@ def test_what_is_no_configuration_is_refused_naming_the_entry_point(name):
         function("te", np.zeros((240, 1, 1), np.int16), *lanes)
 
 
+@pytest.mark.parametrize("name, option", [("run_icarus", "work_dir"), ("run_verilator", "build_dir")])
+def test_a_work_folder_that_is_no_path_is_refused_before_any_tool_runs(name, option):
+    """(A number had been os.fspath's TypeError.)"""
+    from tespike.cosim import icarus, verilator
+    function = getattr(icarus if name == "run_icarus" else verilator, name)
+    with pytest.raises(InputError, match=f"^{option}: a path must be a str or an os.PathLike, not int$"):
+        function(SensorConfig(), np.zeros((240, 1, 1), np.int16), **{option: 3})
+
+
 def test_a_config_the_rtl_refuses_is_a_config_error(monkeypatch):
     import tespike.rtl.array
     from tespike import rtl
