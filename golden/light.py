@@ -70,13 +70,16 @@ def check_dark_current(dark_current: str | None) -> str | None:
 
 def check_seed(seed, what: str = "seed"):
     """``seed`` itself where it is one the library takes: ``None`` (fresh entropy), an integer >= 0
-    (never a bool), a numpy SeedSequence, BitGenerator or Generator; refused in one line naming
-    ``what`` otherwise (numpy's TypeError or ValueError named no argument, and took True as 1)."""
+    (never a bool) or a list or tuple of them (numpy's entropy), a numpy SeedSequence, BitGenerator
+    or Generator; refused in one line naming ``what`` otherwise (numpy's TypeError or ValueError
+    named no argument, and took True as 1)."""
     if seed is None or is_count(seed) or isinstance(
             seed, (np.random.SeedSequence, np.random.BitGenerator, np.random.Generator)):
         return seed
-    raise InputError(f"{what} {seed!r}: must be an integer >= 0, a numpy Generator, SeedSequence or "
-                     f"BitGenerator, or None (fresh entropy)")
+    if isinstance(seed, (list, tuple)) and seed and all(is_count(part) for part in seed):
+        return seed
+    raise InputError(f"{what} {seed!r}: must be an integer >= 0 (or a list of them), a numpy Generator, "
+                     f"SeedSequence or BitGenerator, or None (fresh entropy)")
 
 
 def as_generator(rng) -> np.random.Generator:

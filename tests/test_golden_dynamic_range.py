@@ -77,7 +77,7 @@ def test_measure_refuses_words_of_the_wrong_shape():
     (lambda: constant_light_words(SensorConfig(), np.array([-1.0]), 2), r"^light: every value must be finite and >= 0"),
     (lambda: constant_light_words(SensorConfig(), np.ones((2, 2)), 2), r"^light shape \(2, 2\): must be one light per pixel"),
     (lambda: constant_light_words(SensorConfig(), np.ones(2), 0), r"^readouts = 0: must be an integer >= 1$"),
-    (lambda: constant_light_words(SensorConfig(), np.ones(2), 2, seed="x"), r"^seed 'x': must be an integer >= 0"),
+    (lambda: constant_light_words(SensorConfig(), np.ones(2), 2, seed="x"), r"^seed 'x': must be an integer >= 0 \(or a list of them\)"),
 ])
 def test_bad_arguments_are_refused_naming_them(call, refusal):
     """(n_s = 0 had been numpy's 'need at least one array to concatenate', N_s = NaN a NaN range,

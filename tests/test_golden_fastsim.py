@@ -239,7 +239,7 @@ def test_refuses_bad_input():
         simulate_scene(SensorConfig(), np.zeros((1, 1, 1)), noise=False, dark_current="eq12")
 
 
-@pytest.mark.parametrize("seed", ["abc", -1, 1.5, True, [1, 2]])
+@pytest.mark.parametrize("seed", ["abc", -1, 1.5, True, [1, -2], ["a"], []])
 def test_a_seed_numpy_would_refuse_in_its_own_words_or_take_as_another_is_refused(seed):
     """Every entry that takes a seed (numpy's SeedSequence TypeError or ValueError named no argument,
     and True was taken as 1); integers >= 0, numpy generators, bit generators and seed sequences go."""
@@ -248,10 +248,10 @@ def test_a_seed_numpy_would_refuse_in_its_own_words_or_take_as_another_is_refuse
                  lambda: simulate_scene(SensorConfig(), np.full((1, 64, 2048), 0.1), seed=seed, workers=1),
                  lambda: SceneSimulator(SensorConfig(), (2, 2), rng=seed),
                  lambda: poisson_stimulus(SensorConfig(), light, seed)):
-        with pytest.raises(InputError, match=f"^seed {re.escape(repr(seed))}: must be an integer >= 0, a numpy "
-                                             "Generator, SeedSequence or BitGenerator, or None"):
+        with pytest.raises(InputError, match=f"^seed {re.escape(repr(seed))}: must be an integer >= 0 \\(or a list "
+                                             "of them\\), a numpy Generator, SeedSequence or BitGenerator, or None"):
             call()
-    for good in (0, np.int64(7), np.random.SeedSequence(3), np.random.SFC64(3), np.random.default_rng(3)):
+    for good in (0, np.int64(7), [3, 1], np.random.SeedSequence(3), np.random.SFC64(3), np.random.default_rng(3)):
         assert simulate_scene(SensorConfig(), light, seed=good).shape == (1, 2, 2)
 
 
