@@ -658,3 +658,14 @@ def test_a_thread_that_cannot_start_is_no_damaged_store(tmp_path, capsys, small_
         DatasetStore.open(str(store))._rebuild_if_unreadable("sun")
     monkeypatch.undo()
     assert compare_stores(small_store, store) == []
+
+
+@pytest.mark.parametrize("mode", ["w", "w-", "a", "x", None])
+def test_open_refuses_a_mode_that_would_write_and_leaves_the_folder_alone(tmp_path, mode):
+    """Zarr's 'w' clears the folder it is given: DatasetStore.open(folder, 'w') had emptied it (a
+    library call on /tmp emptied /tmp)."""
+    from tespike.recon.dataset import DatasetStore
+    (tmp_path / "keep.txt").write_text("mine")
+    with pytest.raises(InputError, match=f"^dataset store mode {mode!r}: must be 'r' or 'r\\+'"):
+        DatasetStore.open(tmp_path, mode)
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"] and (tmp_path / "keep.txt").read_text() == "mine"

@@ -162,7 +162,11 @@ class DatasetStore:
     # -- opening --------------------------------------------------------------
     @classmethod
     def open(cls, url: str, mode: str = "r") -> "DatasetStore":
-        """Open an existing store (``mode`` "r" or "r+"); refuse anything else."""
+        """Open an existing store (``mode`` "r" or "r+"); refuse anything else, before Zarr sees it
+        (Zarr's "w" clears the folder it is given: ``open('/tmp', 'w')`` had emptied /tmp)."""
+        if mode not in ("r", "r+"):
+            raise InputError(f"dataset store mode {mode!r}: must be 'r' or 'r+' (an existing store; "
+                             "DatasetStore.create_or_resume makes one)")
         group = _zarr_open_group(str(url), mode)
         _check_zarr_format(group, str(url), "dataset store")
         attrs = group.attrs.asdict()
