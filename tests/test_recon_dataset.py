@@ -669,3 +669,7 @@ def test_open_refuses_a_mode_that_would_write_and_leaves_the_folder_alone(tmp_pa
     with pytest.raises(InputError, match=f"^dataset store mode {mode!r}: must be 'r' or 'r\\+'"):
         DatasetStore.open(tmp_path, mode)
     assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"] and (tmp_path / "keep.txt").read_text() == "mine"
+    from tespike.recon.dataset.store import open_array
+    with pytest.raises(InputError, match=f"^dataset store array mode {mode!r}: must be 'r' or 'r\\+'$"):
+        open_array(tmp_path, "a", mode)
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"]

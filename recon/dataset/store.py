@@ -454,8 +454,11 @@ def _attribute(attrs: dict, key: str, what: str, ok, rule: str):
 
 
 def open_array(url: str, path: str, mode: str = "r"):
-    """One Zarr array of a store, opened in a task (workers open by URL, not by object)."""
+    """One Zarr array of a store, opened in a task (workers open by URL, not by object); ``mode`` "r"
+    or "r+" (Zarr's "w" would clear the array, as :meth:`DatasetStore.open` refuses it)."""
     import zarr
+    if mode not in ("r", "r+"):
+        raise InputError(f"dataset store array mode {mode!r}: must be 'r' or 'r+'")
     with reading(url, path):
         return zarr.open_array(str(url), path=path, mode=mode)
 
