@@ -78,7 +78,7 @@ from tespike.golden.resources import require_memory
 
 from .calibration import CALIBRATION_READOUTS
 from .names import label
-from .settings import DEFAULT_WINDOW, check_known, check_window
+from .settings import DEFAULT_WINDOW, check_known, check_window, names
 
 #: Sensors evaluated by default: the paper's Table 1 columns (ML = the msb camera
 #: of its eq. 10 on the left, TE on the right), then the full-count ML camera.
@@ -265,7 +265,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
 
     from .methods import reconstruct
 
-    methods, sensors, metrics = (None if methods is None else _names(methods)), _names(sensors), _names(metrics)
+    methods, sensors, metrics = (None if methods is None else names(methods)), names(sensors), names(metrics)
     methods, metrics, configs, noise_sensors, absent = _checked_arguments(
         methods, sensors, configs, window, seed, repeats, metrics, vdp_frames, missing, noise_sensors, weights)
     further = [key for key in metrics if key not in BASIC_METRICS]
@@ -328,12 +328,6 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
         evaluation.strips[name] = strip
     bar.close()
     return evaluation
-
-
-def _names(value) -> tuple:
-    """A sequence of names as a tuple; one name given as a string is that name (its letters had been
-    taken as names: methods='tfp' was 'unknown reconstruction method 't'')."""
-    return (value,) if isinstance(value, str) else tuple(value)
 
 
 def _checked_sequences(sequences) -> list[tuple[str, np.ndarray]]:

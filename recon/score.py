@@ -20,6 +20,7 @@ import numpy as np
 
 from tespike.golden.errors import InputError
 from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay
+from tespike.recon.settings import names
 
 
 @dataclass(frozen=True)
@@ -84,9 +85,8 @@ def score(estimate, reference, *, metrics=None, display: HdrDisplay = DEFAULT_DI
     from tespike.recon.hdrvqm import hdr_vqm_scores
     from tespike.recon.metrics import psnr_mu, psnr_pu21, ssim_mu
 
-    if isinstance(metrics, str):             # one name (its letters had been taken as names)
-        metrics = (metrics,)
-    keys = METRIC_KEYS if metrics is None else check_metrics(tuple(metrics), f"metrics {list(metrics)!r}")
+    metrics = None if metrics is None else names(metrics)
+    keys = METRIC_KEYS if metrics is None else check_metrics(metrics, f"metrics {list(metrics)!r}")
     estimate, reference = np.asarray(estimate), np.asarray(reference)
     if reference.ndim != 3 or estimate.ndim != 3:
         raise InputError(f"estimate {estimate.shape} and reference {reference.shape} must be (K, H, W)")

@@ -70,6 +70,13 @@ def check_known(method: str, known, what: str = "reconstruction method") -> None
         raise InputError(f"unknown {what} {method!r} (known: {', '.join(known)})")
 
 
+def names(value) -> tuple:
+    """A sequence of names (methods, sensors, metrics) as a tuple; one name given as a string is
+    that name (its letters had been taken as names: methods='tfp' was 'unknown reconstruction
+    method 't'')."""
+    return (value,) if isinstance(value, str) else tuple(value)
+
+
 #: TFI search modes: the whole stream (default) or the window around the key moment.
 TFI_SEARCH = ("stream", "window")
 
