@@ -24,7 +24,7 @@ import numpy as np
 
 from .config import DESIGN_ELECTRONS, SensorConfig
 from .decode import decode_light
-from .errors import InputError, is_count
+from .errors import InputError, is_count, is_positive_number
 from .light import check_seed
 from .sensor import PixelArrayModel
 
@@ -51,8 +51,7 @@ def formula_db(config: SensorConfig, n_s: float = 1, *, paper_alpha: bool = Fals
 
 def _check_positive(value, name: str) -> None:
     """Refuse ``value`` unless a finite number > 0 (never a bool), naming it."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(value) or value <= 0:
+    if not is_positive_number(value):
         raise InputError(f"{name} = {value!r}: must be a finite number > 0")
 
 

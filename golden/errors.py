@@ -1,5 +1,6 @@
 """Errors that name what was wrong; the command line prints them as one line."""
 
+import math
 import re
 
 import numpy as np
@@ -26,6 +27,13 @@ def is_count(value, least: int = 0) -> bool:
     """Whether ``value`` is an integer (Python's or numpy's, never a bool) of at least ``least``: the
     test behind the refusals of counts, sizes and seeds."""
     return not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= least
+
+
+def is_positive_number(value) -> bool:
+    """Whether ``value`` is a finite real number > 0 (Python's or numpy's, never a bool): the test
+    behind the refusals of lights, peaks, constants and durations."""
+    return (not isinstance(value, (bool, np.bool_)) and isinstance(value, (int, float, np.integer, np.floating))
+            and math.isfinite(value) and value > 0)
 
 
 #: A terminal's escape sequence (colour, bold) in a library's message: never part of a quoted cause.

@@ -59,7 +59,7 @@ import numpy as np
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.decode import decode_light, decode_spikes, legal_words
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_positive_number
 
 #: How every calibration file's maps were estimated (its "estimator" member; not a decoding rule of
 #: tespike.golden.decode.ESTIMATORS).
@@ -196,8 +196,7 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
     """Dark stream (K_d, H, W) and flat stream (K_f, H, W) of one sensor, the flat's light
     (scene units) -> :class:`Calibration`."""
     config = SensorConfig.required(config, "estimate")
-    if not (isinstance(flat_light, (int, float)) and not isinstance(flat_light, bool)
-            and np.isfinite(flat_light) and flat_light > 0):
+    if not is_positive_number(flat_light):
         raise InputError(f"flat light {flat_light!r}: must be a finite number > 0 (1 = design light)")
     for what, words in (("dark", dark_words), ("flat", flat_words)):
         if words.ndim != 3 or min(words.shape) < 1:

@@ -16,7 +16,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_positive_number
 
 if TYPE_CHECKING:                   # torch only for the annotations: importing this module stays light
     import torch
@@ -37,7 +37,7 @@ class HdrDisplay:
     def __post_init__(self):
         for name in ("peak_nits", "black_nits"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            if not is_positive_number(value):
                 raise InputError(f"display {name} = {value!r}: must be a finite number > 0")
         if self.black_nits >= self.peak_nits:
             raise InputError(f"display black {self.black_nits} cd/m^2 is not below its peak {self.peak_nits}")

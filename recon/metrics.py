@@ -34,7 +34,7 @@ import math
 import numpy as np
 import torch
 
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_positive_number
 
 from .mulaw import MU, compress
 
@@ -183,13 +183,13 @@ def frame_stacks(estimate, reference, metric: str):
 
 def check_peak(peak) -> None:
     """Refuse a given ``peak`` (the light a metric takes as the top of its range) unless a finite number > 0."""
-    if not (isinstance(peak, (int, float)) and math.isfinite(peak) and peak > 0):
+    if not is_positive_number(peak):
         raise InputError(f"peak = {peak!r}: must be a finite number > 0")
 
 
 def check_mu(mu) -> None:
     """Refuse a mu-law constant (paper eq. 11) unless a finite number > 0 (``log1p(mu)`` divides)."""
-    if isinstance(mu, bool) or not (isinstance(mu, (int, float)) and math.isfinite(mu) and mu > 0):
+    if not is_positive_number(mu):
         raise InputError(f"mu = {mu!r}: the mu-law constant must be a finite number > 0")
 
 

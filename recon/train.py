@@ -35,7 +35,7 @@ import torch
 
 from tespike.golden.atomic import NO_ROOM, finished_outputs, stops_held
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError, one_line
+from tespike.golden.errors import InputError, is_positive_number, one_line
 from tespike.golden.io import atomic_output, word_dtype
 from tespike.golden.resources import MAX_WORKERS, require_memory
 
@@ -121,7 +121,7 @@ class TrainOptions:
                              f"{self.sizes().pyramid_factor}")
         if self.steps is not None and (type(self.steps) is not int or self.steps < 1):
             raise InputError(f"steps = {self.steps!r}: must be an integer >= 1")
-        if self.minutes is not None and not (self.minutes > 0 and math.isfinite(self.minutes)):
+        if self.minutes is not None and not is_positive_number(self.minutes):
             raise InputError(f"minutes = {self.minutes!r}: must be a finite number > 0")
 
     def sensor_config(self) -> SensorConfig:

@@ -205,3 +205,25 @@ def test_load_config_takes_a_name_a_path_or_a_configuration_and_refuses_the_rest
         load_config(3)
     with pytest.raises(ConfigError, match=r"not dict \(a dict of keys: SensorConfig.from_dict\)$"):
         load_config({"mode": "te"})
+
+
+def test_the_two_tests_behind_the_refusals_of_numbers():
+    """golden.errors.is_count (counts, sizes, seeds) and is_positive_number (lights, peaks, constants,
+    durations): Python's and numpy's numbers pass, bools, strings, NaN and infinities do not."""
+    import numpy as np
+
+    from tespike.golden.errors import is_count, is_positive_number
+    assert all(is_count(v, 1) for v in (1, np.int64(3), np.uint8(2)))
+    assert not any(is_count(v, 1) for v in (0, True, 1.0, "1", np.float64(2), None))
+    assert all(is_positive_number(v) for v in (1, 0.5, np.float32(2.5), np.int16(3), 1e300))
+    assert not any(is_positive_number(v) for v in (0, -1.0, True, np.bool_(True), float("nan"), float("inf"),
+                                                   "1", None, np.array([1.0])))
+
+
+def test_a_metrics_peak_of_true_is_refused():
+    """(is_positive_number: a peak of True had been taken as 1.)"""
+    import numpy as np
+
+    from tespike.recon.metrics import psnr_mu
+    with pytest.raises(ValueError, match=r"^peak = True: must be a finite number > 0$"):
+        psnr_mu(np.ones((1, 4, 4)), np.ones((1, 4, 4)), peak=True)

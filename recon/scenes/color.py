@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_positive_number
 
 #: Linear-light luminance weights (R, G, B) by name.
 LUMA_WEIGHTS = {
@@ -64,7 +64,7 @@ def normalise_sequence(frames: np.ndarray, peak: float = 1.0, *, what: str = "se
     normalised and is refused. Returns float32.
     """
     frames = np.asarray(frames, dtype=np.float64)
-    if not (np.isfinite(peak) and peak > 0):
+    if not is_positive_number(peak):
         raise InputError(f"{what}: peak = {peak!r} must be a finite number > 0")
     f32 = np.finfo(np.float32)
     if not float(f32.tiny) <= peak <= float(f32.max):     # the sequence is stored as float32

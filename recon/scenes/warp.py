@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_positive_number
 
 
 def sample_bilinear(image: np.ndarray, ys: np.ndarray, xs: np.ndarray, *, wrap_x: bool = True) -> np.ndarray:
@@ -59,7 +59,7 @@ def window_coords(height: int, width: int, cy: float, cx: float, angle: float = 
     ``angle`` turns the window (radians), ``zoom`` > 0 (2 = twice
     magnified), ``offset`` a sub-sample position inside the output pixel.
     """
-    if not (zoom > 0 and math.isfinite(zoom)):
+    if not is_positive_number(zoom):
         raise InputError(f"zoom = {zoom!r} must be a finite number > 0")
     v = np.arange(height, dtype=np.float64)[:, None] - (height - 1) / 2.0 + offset[0]
     u = np.arange(width, dtype=np.float64)[None, :] - (width - 1) / 2.0 + offset[1]
