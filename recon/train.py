@@ -35,8 +35,9 @@ import torch
 
 from tespike.golden.atomic import NO_ROOM, finished_outputs, stops_held
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError, is_positive_number, one_line
+from tespike.golden.errors import InputError, is_count, is_positive_number, one_line
 from tespike.golden.io import atomic_output, word_dtype
+from tespike.golden.paths import path_text
 from tespike.golden.resources import MAX_WORKERS, require_memory
 
 from .engine.batches import ClipPool, draw_batch
@@ -91,7 +92,19 @@ class TrainOptions:
             raise InputError(f"loss = {self.loss!r}: must be one of {', '.join(LOSSES)}")
         if self.floor not in FLOORS:
             raise InputError(f"floor = {self.floor!r}: must be one of {', '.join(FLOORS)}")
-        if not (MIN_LR <= self.lr <= MAX_LR):
+        if not isinstance(self.config, str):
+            raise InputError(f"config = {self.config!r}: must be a preset's name or a configuration's JSON text "
+                             f"(SensorConfig.to_json()), not {type(self.config).__name__}")
+        if not isinstance(self.recipe, dict):
+            raise InputError(f"recipe = {self.recipe!r}: must be a dict of the data engine's settings")
+        if self.init is not None:
+            path_text(self.init, "init")
+        if self.threads is not None and not is_count(self.threads, 1):
+            raise InputError(f"threads = {self.threads!r}: must be an integer >= 1 (torch CPU threads) or None")
+        if not (is_positive_number(self.checkpoint_seconds) or type(self.checkpoint_seconds) in (int, float)
+                and self.checkpoint_seconds == 0):        # (0: a checkpoint after every step)
+            raise InputError(f"checkpoint_seconds = {self.checkpoint_seconds!r}: must be a finite number >= 0")
+        if not (is_positive_number(self.lr) and MIN_LR <= self.lr <= MAX_LR):
             raise InputError(f"learning rate {self.lr!r} must be in [{MIN_LR:g}, {MAX_LR:g}] (Adam moves every weight "
                              "by about the learning rate each step: above 1 the weights only grow, below 1e-10 the "
                              "step rounds away on float32 weights)")

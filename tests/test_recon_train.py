@@ -391,3 +391,18 @@ def test_a_checkpoint_written_before_the_options_rename_is_read(tmp_path):
     write_torch_file(path, {**dict.fromkeys(CHECKPOINT_KEYS, 0), "options": "te"})
     with pytest.raises(InputError, match="checkpoint.*holds options this trainer cannot take"):
         read_checkpoint(path)
+
+
+@pytest.mark.parametrize("option, refusal", [
+    ({"lr": "x"}, r"^learning rate 'x' must be in"), ({"lr": True}, r"^learning rate True must be in"),
+    ({"checkpoint_seconds": -1}, r"^checkpoint_seconds = -1: must be a finite number >= 0$"),
+    ({"threads": 0}, r"^threads = 0: must be an integer >= 1"), ({"threads": "2"}, r"^threads = '2': must be"),
+    ({"config": 3}, r"^config = 3: must be a preset's name or a configuration's JSON text"),
+    ({"recipe": 3}, r"^recipe = 3: must be a dict"), ({"init": 3}, r"^init: a path must be a str or an os.PathLike"),
+])
+def test_options_of_the_wrong_kind_are_refused_when_made(option, refusal):
+    """As a library caller makes them (the command checks its flags first): each had been a TypeError
+    there or later in the run ('lr': a comparison; 'config': json; 'recipe': a mapping), or taken
+    (True as the rate 1, a checkpoint every -1 s, threads 0 until torch refused them)."""
+    with pytest.raises(InputError, match=refusal):
+        TrainOptions(steps=1, **option)
