@@ -46,7 +46,8 @@ import dataclasses
 import numpy as np
 
 from .config import SensorConfig
-from .errors import InputError
+from .errors import InputError, is_count
+from .io import check_stimulus
 from .toggles import flips, pixel_register_bits, pixel_register_names, register_step
 
 #: The blocks of a generated top, in report order.
@@ -125,9 +126,13 @@ def top_activity(config: SensorConfig, electrons: np.ndarray, lanes: int | None 
     reset state is its power-up state); otherwise straight from power-up. ``start``: count
     only the edges u >= start (a window in steady state for per-readout figures).
     """
-    c = config.check()
-    e = np.asarray(electrons, np.int64)
+    c = SensorConfig.checked(config, "top_activity")
+    e = np.asarray(electrons)
+    check_stimulus(e, c, whole_readouts=False, what="electrons")   # integers (T, H, W) in 0..2^E - 1
+    e = e.astype(np.int64, copy=False)
     T, H, W = e.shape
+    if lanes is not None and not is_count(lanes, 1):
+        raise InputError(f"lanes = {lanes!r}: must be an integer >= 1 (the streaming top) or None (the parallel top)")
     P = H * W
     streaming = lanes is not None
     beats = -(-P // lanes) if streaming else 1

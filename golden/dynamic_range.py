@@ -24,8 +24,8 @@ import numpy as np
 
 from .config import DESIGN_ELECTRONS, SensorConfig
 from .decode import decode_light
-from .errors import InputError, is_count, is_positive_number
-from .light import check_seed
+from .errors import InputError, check_counts, is_positive_number
+from .light import check_seed, checked_light_levels
 from .sensor import PixelArrayModel
 
 
@@ -55,26 +55,6 @@ def _check_positive(value, name: str) -> None:
         raise InputError(f"{name} = {value!r}: must be a finite number > 0")
 
 
-def _check_counts(**counts) -> None:
-    """Refuse any of ``counts`` (name -> value) that is not an integer >= 1, naming it."""
-    for name, value in counts.items():
-        if not is_count(value, 1):
-            raise InputError(f"{name} = {value!r}: must be an integer >= 1")
-
-
-def _checked_light(light, what: str = "light", positive: bool = False) -> np.ndarray:
-    """``light`` as a 1-D float64 array of finite values >= 0 (> 0 with ``positive``: a relative
-    error divides by it), refused in one line otherwise (a negative or NaN light had been refused
-    as a stimulus value it became)."""
-    light = np.asarray(light, np.float64)
-    if light.ndim != 1 or not light.size:
-        raise InputError(f"{what} shape {light.shape}: must be one light per pixel, (n,) with n >= 1")
-    if not (np.isfinite(light).all() and (light > 0 if positive else light >= 0).all()):
-        bound = "> 0" if positive else ">= 0"
-        raise InputError(f"{what}: every value must be finite and {bound} (1 = design light)")
-    return light
-
-
 def light_grid(low: float = 1e-6, high: float = 1e3, per_decade: int = 20) -> np.ndarray:
     """Log-spaced light levels (1.0 = design light, 42000 electrons per readout)."""
     decades = math.log10(high / low)
@@ -91,8 +71,8 @@ def constant_light_words(config: SensorConfig, light: np.ndarray, readouts: int,
     Either way a clock carries at most 2^E - 1 electrons (the input saturates).
     """
     config = SensorConfig.required(config, "constant_light_words")
-    light = _checked_light(light)
-    _check_counts(readouts=readouts, chunk_readouts=chunk_readouts)
+    light = checked_light_levels(light)
+    check_counts(readouts=readouts, chunk_readouts=chunk_readouts)
     check_seed(seed)
     L = config.clocks_per_readout
     lam = DESIGN_ELECTRONS * light / L
@@ -134,12 +114,12 @@ def measure(config: SensorConfig, n_s: int = 16, *, seed: int | None = None, est
     score one simulation under several estimators or tolerances.
     """
     config = SensorConfig.required(config, "measure")
-    _check_counts(n_s=n_s, windows=windows)
+    check_counts(n_s=n_s, windows=windows)
     _check_positive(tolerance, "tolerance")
     if not (isinstance(fraction, (int, float, np.floating)) and not isinstance(fraction, bool)
             and 0 < fraction <= 1):
         raise InputError(f"fraction = {fraction!r}: must be a number in (0, 1] (of the windows within tolerance)")
-    light = light_grid() if light is None else _checked_light(light, positive=True)
+    light = light_grid() if light is None else checked_light_levels(light, positive=True)
     if words is None:
         words = constant_light_words(config, light, n_s * (windows + 1), seed=seed)
     words = np.asarray(words)
@@ -174,8 +154,8 @@ def estimator_error(config: SensorConfig, estimator: str, light: np.ndarray, rea
     warm-up of 4 readouts.
     """
     config = SensorConfig.required(config, "estimator_error")
-    light = _checked_light(light, positive=True)
-    _check_counts(readouts=readouts, replicas=replicas)
+    light = checked_light_levels(light, positive=True)
+    check_counts(readouts=readouts, replicas=replicas)
     grid = np.repeat(light, replicas)
     words = constant_light_words(config, grid, readouts + 4, seed=seed)[4:]
     error = (decode_light(words, config, estimator) - grid) / grid

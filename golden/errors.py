@@ -29,6 +29,13 @@ def is_count(value, least: int = 0) -> bool:
     return not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= least
 
 
+def check_counts(**counts) -> None:
+    """Refuse any of ``counts`` (name -> value) that is not an integer >= 1 (:func:`is_count`), naming it."""
+    for name, value in counts.items():
+        if not is_count(value, 1):
+            raise InputError(f"{name} = {value!r}: must be an integer >= 1")
+
+
 def is_positive_number(value) -> bool:
     """Whether ``value`` is a finite real number > 0 (Python's or numpy's, never a bool): the test
     behind the refusals of lights, peaks, constants and durations."""

@@ -82,6 +82,19 @@ def check_seed(seed, what: str = "seed"):
                      f"SeedSequence or BitGenerator, or None (fresh entropy)")
 
 
+def checked_light_levels(light, what: str = "light", positive: bool = False) -> np.ndarray:
+    """``light`` (one level a pixel, 1 = design light) as a 1-D float64 array of finite values >= 0
+    (> 0 with ``positive``: a relative error divides by it), refused in one line otherwise (a negative
+    or NaN light had been refused as the stimulus value it became, or taken)."""
+    light = np.asarray(light, np.float64)
+    if light.ndim != 1 or not light.size:
+        raise InputError(f"{what} shape {light.shape}: must be one light per pixel, (n,) with n >= 1")
+    if not (np.isfinite(light).all() and (light > 0 if positive else light >= 0).all()):
+        bound = "> 0" if positive else ">= 0"
+        raise InputError(f"{what}: every value must be finite and {bound} (1 = design light)")
+    return light
+
+
 def as_generator(rng) -> np.random.Generator:
     """A numpy Generator from a Generator, a seed (:func:`check_seed`) or ``None`` (fresh entropy)."""
     if isinstance(rng, np.random.Generator):

@@ -29,7 +29,9 @@ import dataclasses
 import numpy as np
 
 from .config import SensorConfig
-from .errors import InputError
+from .errors import InputError, check_counts
+from .io import check_stimulus
+from .light import check_seed, checked_light_levels
 from .reference import msb_remainder, readout_word
 
 
@@ -109,7 +111,12 @@ def register_step(config: SensorConfig, state: dict, charge, ccc: int, last: boo
 def count_toggles(config: SensorConfig, electrons: np.ndarray) -> Toggles:
     """Toggles of n pixels fed ``electrons`` (T, n) integers from the zero start, T a
     multiple of L (whole readout intervals)."""
-    e = np.asarray(electrons, np.int64)
+    config = SensorConfig.required(config, "count_toggles")
+    e = np.asarray(electrons)
+    if e.ndim != 2:
+        raise InputError(f"electrons shape {e.shape}: must be (T, n), T clocks of n pixels")
+    check_stimulus(e[:, None, :], config, whole_readouts=False, what="electrons")   # integers in 0..2^E - 1
+    e = e.astype(np.int64, copy=False)
     T, n = e.shape
     L, F = config.clocks_per_readout, config.clocks_per_tick
     if T % L:
@@ -138,8 +145,10 @@ def constant_light_toggles(config: SensorConfig, light: np.ndarray, readouts: in
     stimulus, saturated at 2^E - 1, over ``readouts`` intervals from the zero start."""
     from .config import DESIGN_ELECTRONS
 
-    light = np.asarray(light, np.float64)
+    config = SensorConfig.required(config, "constant_light_toggles")
+    light = checked_light_levels(light)
+    check_counts(readouts=readouts)
     lam = DESIGN_ELECTRONS * light / config.clocks_per_readout
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed))
     electrons = rng.poisson(np.broadcast_to(lam, (readouts * config.clocks_per_readout, light.size)))
     return count_toggles(config, np.minimum(electrons, config.input_max))

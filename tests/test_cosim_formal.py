@@ -259,3 +259,11 @@ def test_an_induction_step_failing_at_too_small_a_depth_is_inconclusive(tmp_path
     assert code == 1 and not [line for line in out if "FAILED" in line], out
     stuck = [line for line in out if "NOT PROVED" in line]
     assert stuck and all("inconclusive" in line and "--depth" in line for line in stuck), out
+
+
+def test_properties_refuse_what_is_no_configuration():
+    """(A preset's name had been an AttributeError on its first field read.)"""
+    from tespike.cosim.formal import properties
+    from tespike.golden.errors import ConfigError
+    with pytest.raises(ConfigError, match="^properties: configuration must be a SensorConfig"):
+        properties("te")

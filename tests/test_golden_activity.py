@@ -141,3 +141,25 @@ def test_no_light_parallel_toggles_only_the_timing_and_frame_valid():
     # last edge clears the third strobe)
     assert activity.toggles[("timing", "frame_valid_reg")][0] == 2 * 3 == activity.toggles[("output", "frame_valid")][0]
     assert activity.readouts == 3 and activity.edges == 3 * L + 1
+
+
+def test_the_switching_counts_refuse_what_they_cannot_run_on_in_one_line():
+    """(A preset's name had been an AttributeError or 'too many values to unpack', float electrons
+    were truncated, negative ones counted, a NaN light drawn from, 0 lanes a ZeroDivisionError.)"""
+    from tespike.golden.errors import ConfigError
+    from tespike.golden.toggles import constant_light_toggles, count_toggles
+    te, clocks = SensorConfig(), np.zeros((240, 2, 2), np.int64)
+    for call, name in ((lambda: count_toggles("te", clocks[:, 0]), "count_toggles"),
+                       (lambda: constant_light_toggles("te", np.ones(2), 1), "constant_light_toggles"),
+                       (lambda: top_activity("te", clocks), "top_activity")):
+        with pytest.raises(ConfigError, match=f"^{name}: configuration must be a SensorConfig"):
+            call()
+    for call, refusal in ((lambda: count_toggles(te, clocks[:, 0] + 0.5), "^electrons dtype float64 is not an integer"),
+                          (lambda: count_toggles(te, clocks[:, 0] - 1), "^electrons value -1 is negative"),
+                          (lambda: count_toggles(te, clocks), r"^electrons shape \(240, 2, 2\): must be \(T, n\)"),
+                          (lambda: constant_light_toggles(te, np.array([np.nan]), 1), "^light: every value must be finite"),
+                          (lambda: constant_light_toggles(te, np.ones(2), 0), "^readouts = 0: must be an integer >= 1$"),
+                          (lambda: top_activity(te, clocks.astype(float)), "^electrons dtype float64 is not an integer"),
+                          (lambda: top_activity(te, clocks, 0), "^lanes = 0: must be an integer >= 1")):
+        with pytest.raises(InputError, match=refusal):
+            call()

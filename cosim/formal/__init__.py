@@ -39,6 +39,7 @@ def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Pr
 
 def properties(config: SensorConfig, pixel_factory=None) -> dict[str, Callable[[], object]]:
     """The properties of one configuration, name -> harness builder."""
+    config = SensorConfig.required(config, "properties")
     if pixel_factory is None:
         from tespike.rtl.pixel import pixel_class
         pixel_factory = pixel_class(config)
