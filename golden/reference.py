@@ -14,6 +14,7 @@ import dataclasses
 import numpy as np
 
 from .config import SensorConfig
+from .io import check_stimulus
 
 
 @dataclasses.dataclass
@@ -71,6 +72,8 @@ def step_reference(config: SensorConfig, stimulus: np.ndarray,
     shape (k, H, W), and the state after the last clock. Any T is accepted, so a
     run split anywhere gives the same stream.
     """
+    config = SensorConfig.required(config, "step_reference")
+    check_stimulus(stimulus, config, whole_readouts=False)   # integers (T, H, W) in 0..2^E - 1
     T, H, W = stimulus.shape
     state = PixelState.zeros((H, W)) if state is None else state.copy()
     theta, acc_max = config.threshold, config.acc_max

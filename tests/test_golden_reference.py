@@ -1,6 +1,7 @@
 """The literal update rule against hand-worked cases of SPEC sections 3 and 4."""
 
 import numpy as np
+import pytest
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.reference import step_reference
@@ -72,3 +73,16 @@ def test_ml_msb_with_one_bit_is_the_count():
     for stim in ([1, 0, 0, 0] * 3, [1] * 12, [0] * 12):
         msb = SensorConfig(mode="ml", ml_readout="msb", ml_bits=1, b1=2, b2=1, threshold=1)
         assert run(msb, stim) == run(SensorConfig(mode="ml", ml_bits=1, b1=2, b2=1, threshold=1), stim)
+
+
+def test_the_oracle_refuses_what_the_rule_does_not_define():
+    """SPEC section 3's rule takes E-bit integer electrons: a float stimulus had been truncated, a
+    negative one stepped, a preset's name an AttributeError."""
+    from tespike.golden.errors import ConfigError, InputError
+    with pytest.raises(ConfigError, match="^step_reference: configuration must be a SensorConfig"):
+        step_reference("te", np.zeros((2, 1, 1), np.int64))
+    for stimulus, refusal in ((np.full((2, 1, 1), 0.5), "^stimulus dtype float64 is not an integer type"),
+                              (np.full((2, 1, 1), -1), "^stimulus value -1 is negative"),
+                              (np.full((2, 1, 1), 1 << 16), "^stimulus value 65536")):
+        with pytest.raises(InputError, match=refusal):
+            step_reference(SensorConfig(), stimulus)
