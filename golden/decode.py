@@ -107,7 +107,7 @@ def _holes(config: SensorConfig) -> np.ndarray:
 def _all_legal(words: np.ndarray, config: SensorConfig) -> bool:
     """Whether every word of the block is legal, from its smallest and largest (two reductions, a
     fraction of a millisecond for a 384 x 512 x 64 uint8 stream, where the table lookup took 60 ms)
-    and a comparison a hole between them; False also where it cannot tell cheaply."""
+    and a comparison per hole between them; False also where it cannot tell cheaply."""
     legal = legal_words(config)
     low, high = words.min(), words.max()
     if low < legal[0] or high > legal[-1]:
