@@ -218,6 +218,7 @@ def golden_segments(config: SensorConfig, stimulus: np.ndarray, resets: np.ndarr
     from tespike.golden.reference import step_reference
     from tespike.golden.beats import beats
 
+    config = SensorConfig.required(config, "golden_segments")
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
     out = []
@@ -254,6 +255,7 @@ def reset_sweep(config: SensorConfig, rng: np.random.Generator, *, beats: int = 
     up to L - 1 clocks more so that the vector's length is a multiple of L (as a
     stimulus's must be).
     """
+    config = SensorConfig.required(config, "reset_sweep")
     L = config.clocks_per_readout
     vector = []
     for offset in rng.permutation(max(2 * L + 2, L + beats + 3)):

@@ -27,6 +27,7 @@ import numpy as np
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
+from tespike.golden.paths import check_input_file
 
 from . import benchbus
 from .benchbus import BENCH_SCOPE
@@ -231,6 +232,8 @@ def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, *, dumpfile=None,
     """
     from vcd.gtkw import GTKWSave
 
+    config = SensorConfig.required(config, "write_gtkw")
+    check_input_file(vcd_path, "waveform")           # (a missing one had been a FileNotFoundError traceback)
     sizes = _var_sizes(vcd_path)
     start, marker, zoom = gtkw_view(vcd_path, config, readout)
 

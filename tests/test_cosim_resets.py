@@ -267,3 +267,18 @@ def test_cocotb_command_resets_mid_run(tmp_path):
     np.save(tmp_path / "r.npy", np.zeros(5, bool))
     assert_refused(run_tespike(*common, "--resets", tmp_path / "r.npy"), "reset vector", "(24,)")
     assert_refused(run_tespike(*common, "--resets", tmp_path / "none.npy"), "none.npy")
+
+
+def test_the_reset_helpers_and_the_save_file_writer_refuse_in_one_line(tmp_path):
+    """(A preset's name had been an AttributeError; a missing waveform a FileNotFoundError traceback,
+    and nothing is written.)"""
+    from tespike.cosim.vcd import write_gtkw
+    from tespike.golden.errors import ConfigError
+    for call, name in ((lambda: golden_segments("te", np.zeros((240, 1, 1), np.int64), None), "golden_segments"),
+                       (lambda: reset_sweep("te", np.random.default_rng(1)), "reset_sweep"),
+                       (lambda: write_gtkw(tmp_path / "W.gtkw", tmp_path / "W.vcd", "te"), "write_gtkw")):
+        with pytest.raises(ConfigError, match=f"^{name}: configuration must be a SensorConfig"):
+            call()
+    with pytest.raises(InputError, match="^waveform file .*W.vcd' does not exist$"):
+        write_gtkw(tmp_path / "W.gtkw", tmp_path / "W.vcd", SensorConfig())
+    assert not list(tmp_path.iterdir())
