@@ -294,8 +294,10 @@ def test_folder_crop_and_downscale(tmp_path):
 
 
 def test_a_path_that_is_no_path_is_refused_in_one_line():
-    """(load_panorama and load_hdr_sequence of a number had been os.fspath's TypeError.)"""
+    """(load_panorama, load_hdr_sequence and the dataset's hdr_sources of a number had been os.fspath's
+    TypeError.)"""
     from tespike.recon.scenes.panorama import load_panorama
-    for call, what in ((load_panorama, "panorama"), (load_hdr_sequence, "HDR sequence folder")):
+    from tespike.cosim.dataset.build import hdr_sources
+    for call, what in ((load_panorama, "panorama"), (load_hdr_sequence, "HDR sequence folder"), (hdr_sources, "--hdr")):
         with pytest.raises(InputError, match=f"^{what}: a path must be a str or an os.PathLike, not int$"):
             call(3)

@@ -42,6 +42,7 @@ import numpy as np
 from tespike.golden.atomic import NO_ROOM
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
+from tespike.golden.paths import path_text
 from tespike.recon.dataset.store import (CHUNK_FRAMES, TILE, DatasetStore, check_name, mark_complete,
                                  open_array, tile_seed, tiles)
 
@@ -90,7 +91,7 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
     from tespike.recon.scenes import LUMA_WEIGHTS
     from tespike.recon.scenes.hdr_io import FRAME_SUFFIXES, list_frames, sequence_size
 
-    folder = Path(folder)
+    folder = Path(path_text(folder, "--hdr"))
     if weights not in LUMA_WEIGHTS:
         raise InputError(f"unknown grayscale weights {weights!r} (known: {', '.join(LUMA_WEIGHTS)})")
     if not folder.is_dir():
