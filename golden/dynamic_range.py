@@ -116,8 +116,7 @@ def measure(config: SensorConfig, n_s: int = 16, *, seed: int | None = None, est
     config = SensorConfig.required(config, "measure")
     check_counts(n_s=n_s, windows=windows)
     _check_positive(tolerance, "tolerance")
-    if not (isinstance(fraction, (int, float, np.floating)) and not isinstance(fraction, bool)
-            and 0 < fraction <= 1):
+    if not (is_positive_number(fraction) and fraction <= 1):
         raise InputError(f"fraction = {fraction!r}: must be a number in (0, 1] (of the windows within tolerance)")
     light = light_grid() if light is None else checked_light_levels(light, positive=True)
     if words is None:

@@ -24,11 +24,11 @@ Importing this module does not import torch (command lines check names quickly).
 from __future__ import annotations
 
 import functools
-import os
 from pathlib import Path
 
 from tespike.golden.config import PRESETS, SensorConfig
 from tespike.golden.errors import InputError, one_line
+from tespike.golden.paths import path_text
 
 from .settings import check_known
 
@@ -114,9 +114,7 @@ def load_learned(config: SensorConfig, method: str, weights: str | Path | None =
     shipped one (None); refused in one line where the file is missing or unreadable, holds another
     method or was trained for another configuration."""
     config = SensorConfig.required(config, "load_learned")
-    if weights is not None and not isinstance(weights, (str, os.PathLike)):
-        raise InputError(f"weights must be a file name or path, not {type(weights).__name__}")
-    path = weights_path(config, method) if weights is None else Path(weights)
+    path = weights_path(config, method) if weights is None else Path(path_text(weights, "weights"))
     what = "weights" if weights is None else "--weights"
     model, trained_for, _ = load_weights(path, what, method)
     if trained_for != config:

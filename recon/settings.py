@@ -49,7 +49,7 @@ def check_device(device) -> None:
     if str(device).startswith("meta"):
         raise InputError(f"device = {device!r}: the meta device holds no data")
     try:
-        named = torch.device(device)        # (None, a list, ...: torch's TypeError)
+        named = torch.device(device)
         torch.empty(0, device=named)
     except (RuntimeError, TypeError, AssertionError) as exc:
         raise InputError(f"device = {device!r}: not a usable torch device ({one_line(exc)})") from None

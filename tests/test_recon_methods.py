@@ -161,7 +161,7 @@ def test_refusals():
     ({"device": ["cpu"]}, r"^device = \['cpu'\]: must be a torch device name"),
     ({"calibration": "C.npz"}, r"^the calibration must be a Calibration \(tespike.recon.calibration.load_calibration"
                                r"\(path\)\), not str$"),
-    ({"weights": 123}, r"^weights must be a file name or path, not int$"),
+    ({"weights": 123}, r"^weights: a path must be a str or an os.PathLike, not int$"),
 ])
 def test_library_arguments_of_the_wrong_kind_are_refused_in_one_line(options, refusal):
     """(device None was torch's TypeError, a calibration's path an AttributeError, weights of a
