@@ -99,7 +99,8 @@ def _holes(config: SensorConfig) -> np.ndarray:
     """The illegal words between the configuration's smallest and largest legal word (TE: 2^b1 ..
     2^d, the count past the counter and the overflow word of m = 0; none for ML)."""
     legal = legal_words(config)
-    holes = np.setdiff1d(np.arange(legal[0], legal[-1] + 1), legal)
+    # From the lookup table, not np.setdiff1d: that imports numpy.ma (7 ms of every simulate).
+    holes = np.flatnonzero(~_legal_table(config)[legal[0]:legal[-1] + 1]) + legal[0]
     holes.setflags(write=False)
     return holes
 
