@@ -75,6 +75,23 @@ def test_the_extended_validation_cases_add_noisy_sensors_inside_the_engine_range
     assert all(np.array_equal(a.words, b.words) for a, b in zip(base, extended))
 
 
+@pytest.mark.parametrize("args, kwargs, words", [
+    (("te",), {}, "validation_set: configuration must be a SensorConfig"),
+    ((SensorConfig(), -3), {}, "validation_set frame (height, width) (-3, 128)"),
+    ((SensorConfig(), 8, 2.5), {}, "validation_set frame (height, width) (8, 2.5)"),
+    ((SensorConfig(), 8, 0), {}, "validation_set frame (height, width) (8, 0)"),
+    ((SensorConfig(),), {"extended": "yes"}, "validation_set extended 'yes'"),
+], ids=["preset-name", "negative-height", "float-width", "empty-width", "extended-string"])
+def test_validation_set_refuses_what_it_cannot_take_in_one_line(args, kwargs, words):
+    """A preset's name, a frame of no pixels or a fractional size was numpy's traceback or a warning
+    about an empty mean, from deep inside the cases' light; now one line naming the argument."""
+    from tespike.golden.errors import ConfigError
+    from tespike.recon.engine.validation import validation_set
+    with pytest.raises((InputError, ConfigError)) as refused:
+        validation_set(*args, **kwargs)
+    assert str(refused.value).startswith(words) and "\n" not in str(refused.value)
+
+
 def test_validation_makes_each_noisy_case_law_input_once(monkeypatch):
     """A run scores every checkpoint on the same noisy streams: each case's law input is made at its
     first use on a device and served again (the images equal those made afresh); inputs of another

@@ -36,7 +36,9 @@ from typing import Callable
 import numpy as np
 
 from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError
 from tespike.golden.fastsim import simulate_scene
+from tespike.golden.io import check_frame_shape
 
 from .clips import HELDOUT_PANORAMA, VALIDATION_DOMAIN, sensor_calibration
 from .deadleaves import DeadLeavesParams, dead_leaves
@@ -151,6 +153,10 @@ def validation_set(config: SensorConfig, height: int = 96, width: int = 128, *,
                    extended: bool = False) -> list[ValidationCase]:
     """Every case of :data:`CASES` (and, ``extended``, of :data:`EXTENDED_CASES`) with its stream for
     ``config`` (validation seeds)."""
+    config = SensorConfig.required(config, "validation_set")
+    height, width = check_frame_shape((height, width), "validation_set frame (height, width)")
+    if not isinstance(extended, bool):
+        raise InputError(f"validation_set extended {extended!r}: must be True or False")
     out = []
     for index, case in enumerate(CASES + (EXTENDED_CASES if extended else ())):
         light = case_light(case, index, height, width)
