@@ -673,3 +673,17 @@ def test_open_refuses_a_mode_that_would_write_and_leaves_the_folder_alone(tmp_pa
     with pytest.raises(InputError, match=f"^dataset store array mode {mode!r}: must be 'r' or 'r\\+'$"):
         open_array(tmp_path, "a", mode)
     assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"]
+
+
+def test_a_store_that_is_no_path_or_a_seed_that_is_no_count_is_refused_in_one_line(tmp_path):
+    """``DatasetStore.open(3)`` said the store "does not exist", and ``create_or_resume`` took a seed of
+    2.5 as 2 (``int()``), a store whose streams no one asked for."""
+    from tespike.recon.dataset import DatasetStore
+    with pytest.raises(InputError, match="^dataset store: a path must be a str or an os.PathLike, not int$"):
+        DatasetStore.open(3)
+    with pytest.raises(InputError, match="^dataset store: a path must be a str or an os.PathLike, not list$"):
+        DatasetStore.create_or_resume([str(tmp_path)], seed=1, configs={"te": SensorConfig()})
+    for seed in (2.5, -1, True, "1"):
+        with pytest.raises(InputError, match=f"^dataset store seed {seed!r}: must be an integer >= 0$"):
+            DatasetStore.create_or_resume(tmp_path / "s.zarr", seed=seed, configs={"te": SensorConfig()})
+    assert not (tmp_path / "s.zarr").exists()

@@ -45,8 +45,9 @@ from pathlib import Path
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError, one_line
+from tespike.golden.errors import InputError, is_count, one_line
 from tespike.golden.io import word_dtype
+from tespike.golden.paths import path_text
 
 FORMAT = "tespike-dataset"
 VERSION = 1
@@ -164,10 +165,11 @@ class DatasetStore:
     def open(cls, url: str, mode: str = "r") -> "DatasetStore":
         """Open an existing store (``mode`` "r" or "r+"); refuse anything else, before Zarr sees it
         (Zarr's "w" clears the folder it is given: ``open('/tmp', 'w')`` had emptied /tmp)."""
+        url = path_text(url, "dataset store")               # (a number had been "does not exist")
         if mode not in ("r", "r+"):
             raise InputError(f"dataset store mode {mode!r}: must be 'r' or 'r+' (an existing store; "
                              "DatasetStore.create_or_resume makes one)")
-        group = _zarr_open_group(str(url), mode)
+        group = _zarr_open_group(url, mode)
         _check_zarr_format(group, str(url), "dataset store")
         attrs = group.attrs.asdict()
         if attrs.get("format") != FORMAT:
@@ -184,7 +186,9 @@ class DatasetStore:
         tile and chunking (anything else is refused: the streams would not match)."""
         import zarr
 
-        url = str(url)
+        url = path_text(url, "dataset store")
+        if not is_count(seed):                              # (int() had truncated 2.5 silently)
+            raise InputError(f"dataset store seed {seed!r}: must be an integer >= 0")
         for name in configs:
             check_name(name, "sensor configuration")
         attrs = {"format": FORMAT, "version": VERSION, "seed": int(seed),
