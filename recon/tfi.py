@@ -49,6 +49,7 @@ import torch
 from tespike.golden.errors import InputError
 
 from .settings import TFI_SEARCH
+from .tfp import check_radius
 
 
 def _index_dtype(K: int) -> torch.dtype:
@@ -87,6 +88,7 @@ def tfi(light: torch.Tensor, nonzero: torch.Tensor, spike_light: float, radius: 
     """
     if search not in TFI_SEARCH:
         raise InputError(f"search = {search!r}: must be one of {', '.join(TFI_SEARCH)}")
+    check_radius(radius)
     K = light.shape[0]
     if not light.dtype.is_floating_point:
         light = light.to(torch.float64)

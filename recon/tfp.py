@@ -15,12 +15,15 @@ from __future__ import annotations
 
 import torch
 
+from tespike.golden.errors import InputError, is_count
+
 #: Widest window summed as shifted slices; wider windows use a cumulative sum.
 SHIFTED_SUM_MAX_WINDOW = 33
 
 
 def tfp(light: torch.Tensor, radius: int) -> torch.Tensor:
     """Windowed mean of decoded light ``(K, ...)`` along dim 0 -> same shape and float dtype."""
+    check_radius(radius)
     K = light.shape[0]
     if not light.dtype.is_floating_point:
         light = light.to(torch.float64)
@@ -42,3 +45,11 @@ def tfp(light: torch.Tensor, radius: int) -> torch.Tensor:
     wide = light.to(torch.float64)
     csum = torch.cat([torch.zeros_like(wide[:1]), wide.cumsum(0)])
     return ((csum[hi] - csum[lo]) / count.to(torch.float64)).to(light.dtype)
+
+
+def check_radius(radius) -> int:
+    """``radius``, an integer >= 0 (a window ``[k - r, k + r]``), refused in one line otherwise: a
+    negative one had given TFP the light negated (a window of -1 readouts) and TFI a shifted search."""
+    if not is_count(radius):
+        raise InputError(f"window radius {radius!r}: must be an integer >= 0")
+    return int(radius)

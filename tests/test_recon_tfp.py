@@ -59,3 +59,15 @@ def test_a_wide_window_on_float32_light_keeps_a_dim_present_after_a_bright_past(
         wide = tfp(light, radius)
         assert wide.dtype == torch.float32
         assert torch.allclose(wide[-150:-100], tfp(dim, radius)[50:100], rtol=1e-6, atol=0), radius
+
+
+@pytest.mark.parametrize("radius", [-1, 2.5, True, "3"])
+def test_a_radius_that_is_no_count_is_refused_in_one_line(radius):
+    """A radius of -1 had given TFP the light negated (a window of -1 readouts counted) and TFI
+    a search shifted past the readout itself."""
+    from tespike.golden.errors import InputError
+    from tespike.recon.tfi import tfi
+    light = torch.rand(5, 2, 3)
+    for run in (lambda: tfp(light, radius), lambda: tfi(light, light > 0.5, 0.1, radius, search="window")):
+        with pytest.raises(InputError, match=f"^window radius {radius!r}: must be an integer >= 0$"):
+            run()
