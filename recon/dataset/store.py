@@ -170,12 +170,12 @@ class DatasetStore:
             raise InputError(f"dataset store mode {mode!r}: must be 'r' or 'r+' (an existing store; "
                              "DatasetStore.create_or_resume makes one)")
         group = _zarr_open_group(url, mode)
-        _check_zarr_format(group, str(url), "dataset store")
+        _check_zarr_format(group, url, "dataset store")
         attrs = group.attrs.asdict()
         if attrs.get("format") != FORMAT:
-            raise InputError(f"{str(url)!r} is a Zarr store but not a tespike dataset store")
+            raise InputError(f"{url!r} is a Zarr store but not a tespike dataset store")
         if attrs.get("version") != VERSION:
-            raise InputError(f"dataset store {str(url)!r} has version {attrs.get('version')!r}; "
+            raise InputError(f"dataset store {url!r} has version {attrs.get('version')!r}; "
                              f"this tespike reads version {VERSION}")
         return cls(url, group, attrs)
 
