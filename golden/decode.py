@@ -18,13 +18,17 @@ from .errors import IllegalWordError, InputError
 CHECK_CHUNK_WORDS = 1 << 22
 
 
-@functools.lru_cache(maxsize=64)
 def legal_words(config: SensorConfig) -> np.ndarray:
     """Every word of the configuration's word set (SPEC section 4), ascending int64 (read-only):
     TE counts 0..2^b1 - 1 and overflow words ``(1 << d) | m`` for m = 1..alpha; ML counts
     0..2^ml_bits - 1; msb words 0..ml_bits. The set is SPEC's contract, not what one pixel can
     reach: with one spike a pixel clock at most, counts above L and overflows before 2^b1 clocks
     never come from the sensor (docs/spec.md), yet decode as section 5 says."""
+    return _legal_words(SensorConfig.required(config, "legal_words"))
+
+
+@functools.lru_cache(maxsize=64)
+def _legal_words(config: SensorConfig) -> np.ndarray:
     if config.is_te:
         counts = np.arange(config.p_max, dtype=np.int64)
         overflow = (1 << config.d) | np.arange(1, config.alpha + 1, dtype=np.int64)
@@ -73,6 +77,7 @@ def check_words(words: np.ndarray, config: SensorConfig, origin: tuple[int, ...]
     where ``words`` starts in the array a refusal should name (a tile of a frame),
     added to the index it gives.
     """
+    config = SensorConfig.required(config, "check_words")
     words = np.asarray(words)
     check_word_dtype(words.dtype)
     if not words.size:
@@ -208,16 +213,25 @@ def decode_spikes(words: np.ndarray, config: SensorConfig, estimator: str = "rat
     default. Other named rules are in :data:`ESTIMATORS`.
     """
     config = SensorConfig.required(config, "decode_spikes")
-    try:
-        rule = ESTIMATORS[estimator]
-    except KeyError:
-        raise InputError(f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATORS)})") from None
-    return rule(check_words(words, config), config)
+    return ESTIMATORS[check_estimator(estimator)](check_words(words, config), config)
+
+
+def check_estimator(estimator) -> str:
+    """``estimator``, a name of :data:`ESTIMATORS`, refused in one line otherwise (a list had been
+    a dictionary's "unhashable type" traceback)."""
+    if not (isinstance(estimator, str) and estimator in ESTIMATORS):
+        raise InputError(f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATORS)})")
+    return estimator
 
 
 def spikes_to_light(spikes: np.ndarray, config: SensorConfig) -> np.ndarray:
     """Spikes per readout -> light in scene units (1.0 = 42000 electrons per readout)."""
-    return np.asarray(spikes, np.float64) * config.spike_light
+    config = SensorConfig.required(config, "spikes_to_light")
+    try:
+        spikes = np.asarray(spikes, np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"spikes: must be numbers, not {type(spikes).__name__}") from None
+    return spikes * config.spike_light
 
 
 def decode_light(words: np.ndarray, config: SensorConfig, estimator: str = "ratio") -> np.ndarray:

@@ -17,9 +17,11 @@ import numpy as np
 import torch
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.decode import check_word_dtype, decode_light as golden_decode_light, illegal_word, legal_words
-from tespike.golden.decode import decode_spikes as golden_decode_spikes
+from tespike.golden.decode import check_estimator, check_word_dtype, illegal_word, legal_words
+from tespike.golden.decode import decode_light as golden_decode_light, decode_spikes as golden_decode_spikes
 from tespike.golden.errors import InputError
+
+from .settings import check_device
 
 
 @functools.lru_cache(maxsize=64)
@@ -61,8 +63,19 @@ def _refuse(w: torch.Tensor, bad: torch.Tensor, config: SensorConfig):
     raise illegal_word(int(w[index]), index, config)
 
 
+def check_light_dtype(dtype) -> torch.dtype:
+    """``dtype``, a real torch floating type, refused in one line otherwise: an integer one had cut the
+    decoded light to whole numbers (0.0625 -> 0), bool made every value True, and a numpy dtype or a
+    name was torch's own TypeError."""
+    if not (isinstance(dtype, torch.dtype) and dtype.is_floating_point):
+        raise InputError(f"dtype = {dtype!r}: must be a torch floating type (torch.float64, torch.float32, ...)")
+    return dtype
+
+
 def _gather(table: np.ndarray, words, config: SensorConfig, device, dtype: torch.dtype) -> torch.Tensor:
     """table[words] on ``device``; any illegal word (NaN in the table) or one out of range is refused."""
+    check_light_dtype(dtype)
+    check_device(device)
     signed = (words.dtype.is_signed if isinstance(words, torch.Tensor)
               else np.asarray(words).dtype.kind == "i")
     w = as_word_tensor(words, device)
@@ -87,11 +100,11 @@ def decode_light(words, config: SensorConfig, *, estimator: str = "ratio",
     With ``dtype=torch.float32`` each value is golden's float64 value rounded once.
     """
     config = SensorConfig.required(config, "decode_light")
-    return _gather(code_tables(config, estimator)[0], words, config, device, dtype)
+    return _gather(code_tables(config, check_estimator(estimator))[0], words, config, device, dtype)
 
 
 def decode_spikes(words, config: SensorConfig, *, estimator: str = "ratio",
                   device: str | torch.device = "cpu", dtype: torch.dtype = torch.float64) -> torch.Tensor:
     """Words -> spikes per readout interval, equal to :func:`tespike.golden.decode.decode_spikes`."""
     config = SensorConfig.required(config, "decode_spikes")
-    return _gather(code_tables(config, estimator)[1], words, config, device, dtype)
+    return _gather(code_tables(config, check_estimator(estimator))[1], words, config, device, dtype)

@@ -100,3 +100,39 @@ def test_msb_table_is_the_msb_worth():
     assert decoding.decode_spikes(np.arange(9), config).tolist() == [0, 1, 2, 4, 8, 16, 32, 64, 128]
     with pytest.raises(InputError, match="readout word 9 at index"):
         decoding.decode_light(np.array([3, 9]), config)
+
+
+@pytest.mark.parametrize("dtype", [torch.int64, torch.uint8, torch.bool, torch.complex64, np.float32, "float32"],
+                         ids=str)
+def test_a_dtype_that_is_no_real_torch_float_is_refused_in_one_line(dtype):
+    """An integer dtype had cut the decoded light to whole numbers (0.0625 -> 0), uint8 wrapped the
+    spikes, bool made every value True; a numpy dtype or a name was torch's TypeError."""
+    words = np.array([1, 15, 17, 31])
+    for decode in (decoding.decode_light, decoding.decode_spikes):
+        with pytest.raises(InputError, match=r"^dtype = .*: must be a torch floating type"):
+            decode(words, SensorConfig(), dtype=dtype)
+
+
+def test_a_device_or_estimator_it_cannot_use_is_refused_in_one_line():
+    """A misspelt device was torch's RuntimeError; an estimator given as a list, the "unhashable type"
+    of a dictionary, in torch and in golden alike."""
+    words = np.array([1, 15, 17, 31])
+    with pytest.raises(InputError, match="^device = 'gpu9': not a usable torch device"):
+        decoding.decode_light(words, SensorConfig(), device="gpu9")
+    for decode in (decoding.decode_light, decoding.decode_spikes, gd.decode_light, gd.decode_spikes):
+        with pytest.raises(InputError, match=r"^unknown estimator \['ratio'\] \(known: ratio, midpoint, residual\)$"):
+            decode(words, SensorConfig(), estimator=["ratio"])
+
+
+def test_golden_word_helpers_refuse_a_preset_name_in_one_line():
+    """legal_words, check_words and spikes_to_light read fields of the configuration: a preset's name
+    was an AttributeError, a list an "unhashable type"."""
+    from tespike.golden.errors import ConfigError
+    for call, what in ((lambda c: gd.legal_words(c), "legal_words"),
+                       (lambda c: gd.check_words(np.zeros(3, np.uint8), c), "check_words"),
+                       (lambda c: gd.spikes_to_light(np.ones(3), c), "spikes_to_light")):
+        for config in ("te", ["te"]):
+            with pytest.raises(ConfigError, match=f"^{what}: configuration must be a SensorConfig"):
+                call(config)
+    with pytest.raises(InputError, match="^spikes: must be numbers, not str$"):
+        gd.spikes_to_light("abc", SensorConfig())
