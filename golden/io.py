@@ -150,6 +150,7 @@ def load_stimulus(path: str | Path, config: SensorConfig) -> np.ndarray:
     The range check streams through the file in slices of about 2^24 values,
     so it too needs memory bounded by the slice, not by the file.
     """
+    config = SensorConfig.required(config, "load_stimulus")
     stimulus = load_npy(path, "stimulus", mmap_mode="r")
     if stimulus.ndim == 3 and stimulus.shape[0] == 0:
         raise InputError(f"stimulus file {str(path)!r} has T = 0 pixel clocks (no readout to make)")

@@ -289,3 +289,12 @@ def test_a_path_that_is_no_file_name_is_refused_in_one_line(call):
     for path in (5, 2.5, None, b"S.npz"):
         with pytest.raises(InputError, match=f"a path must be a str or an os.PathLike, not {type(path).__name__}$"):
             call(path)
+
+
+def test_load_stimulus_refuses_a_preset_name_in_one_line(tmp_path):
+    """A preset's name where the configuration belongs was an AttributeError of its first field."""
+    from tespike.golden.errors import ConfigError
+    path = tmp_path / "E.npy"
+    np.save(path, np.zeros((240, 1, 1), np.uint16))
+    with pytest.raises(ConfigError, match="^load_stimulus: configuration must be a SensorConfig"):
+        load_stimulus(path, "te")
