@@ -307,3 +307,45 @@ def test_a_peak_that_would_push_lit_pixels_out_of_float32_is_refused():
         normalise_sequence(frames, 1e-35)
     out = normalise_sequence(frames, 1e-20)
     assert out.dtype == np.float32 and out[0, 0, 1] > 0 and out[0, 0, 2] == 0
+
+
+@pytest.mark.parametrize("args, options, words", [
+    ((["default"],), {}, r"^unknown scene \['default'\] \(known: default, "),
+    (("default", 1, 8, 8), {"sources": -1}, r"^scene 'default' sources = -1: must be an integer >= 0$"),
+    (("default", 1, 8, 8), {"sources": 2.5}, r"^scene 'default' sources = 2.5: must be an integer >= 0$"),
+    (("default", 1, 8, 8), {"sources": True}, r"^scene 'default' sources = True: must be an integer >= 0$"),
+    (("default", 1, 8, 8), {"sources": 10 ** 12}, r"^scene 'default' of 1 x 8 x 8 values with 1000000000000 "
+                                                  r"sources needs about .* of memory, but only"),
+    (("default", 1, 8, 8), {"speed": 3}, r"^scene 'default' takes no options \['speed'\] \(its options: motion, "
+                                         r"sources\)$"),
+    (("moderate", 1, 8, 8), {"heldout": "False"}, r"^heldout = 'False': must be True or False$"),
+], ids=["name-list", "negative-sources", "float-sources", "bool-sources", "sources-past-memory",
+        "unknown-option", "heldout-string"])
+def test_make_scene_refuses_what_its_generators_cannot_take_in_one_line(args, options, words):
+    """Bad sources were numpy's tracebacks (or a MemoryError of terabytes), an unknown option a
+    TypeError of an inner function, and ``heldout="False"`` silently gave the held-out scene: the
+    training and evaluation split leaked."""
+    with pytest.raises(InputError, match=words):
+        make_scene(*args, **options)
+
+
+def test_hdr_sequence_and_panorama_options_are_checked_in_one_line(tmp_path):
+    """``max_frames`` of 1.5 or "2" and a crop of 4 or (4, 4, 4) were Python's slice and unpacking
+    tracebacks, ``max_frames=True`` loaded one frame, and grayscale weights given for a shipped
+    panorama were ignored (it is stored as rec709 luminance)."""
+    from tespike.recon.scenes import load_hdr_sequence, load_panorama, write_hdr
+    for i in range(2):
+        write_hdr(tmp_path / f"f{i}.hdr", np.full((8, 12, 3), 0.5 + i))
+    for frames in (1.5, "2", True, 0):
+        with pytest.raises(InputError, match=f"^max_frames = {frames!r} must be an integer >= 1$"):
+            load_hdr_sequence(tmp_path, max_frames=frames)
+    for crop in (4, (4, 4, 4), (4.5, 4), (0, 4)):
+        with pytest.raises(InputError, match=r"^crop \(H, W\) "):
+            load_hdr_sequence(tmp_path, crop=crop)
+    with pytest.raises(InputError, match=r"^unknown grayscale weights \['rec709'\]"):
+        load_hdr_sequence(tmp_path, weights=["rec709"])
+    assert load_hdr_sequence(tmp_path, crop=(4, 6), max_frames=1).shape == (1, 4, 6)
+    with pytest.raises(InputError, match="^unknown grayscale weights 'foo'"):
+        load_panorama("default", weights="foo")
+    with pytest.raises(InputError, match="^panorama 'default': the shipped copy is stored as rec709 luminance"):
+        load_panorama("default", weights="rec601")

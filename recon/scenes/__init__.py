@@ -16,7 +16,8 @@ from typing import Callable
 
 import numpy as np
 
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_count
+from tespike.golden.resources import require_memory
 
 from . import procedural
 from .color import DEFAULT_WEIGHTS, LUMA_WEIGHTS, normalise_sequence, to_gray
@@ -60,7 +61,7 @@ def check_scene_request(name: str, frames, height, width, flags: bool = False) -
     """Refuse a built-in scene's request in one line: an unknown ``name``, a size that is not an
     integer >= 1, or more than :data:`MAX_VOXELS` values. ``flags``: name the sizes as the command
     line's ``--frames``, ``--height``, ``--width``."""
-    if name not in SCENES:
+    if not isinstance(name, str) or name not in SCENES:
         raise InputError(f"unknown scene {name!r} (known: {', '.join(SCENES)})")
     for key, value in (("frames", frames), ("height", height), ("width", width)):
         if type(value) is not int or value < 1:
@@ -73,15 +74,31 @@ def check_scene_request(name: str, frames, height, width, flags: bool = False) -
                               f"values exceeds the limit of {MAX_VOXELS}")
 
 
+#: What a panorama scene's generator takes beside its sizes (:func:`make_scene`'s ``options``).
+PANORAMA_OPTIONS = ("motion", "sources")
+
+
 def make_scene(name: str, frames: int = 24, height: int = 96, width: int = 128, *, seed: int = 0,
                peak: float = 1.0, heldout: bool = False, **options) -> np.ndarray:
     """Built-in scene ``name`` -> float32 light (K, H, W), brightest pixel = ``peak``.
 
-    ``options`` go to the generator (``motion=`` and ``sources=`` for panoramas).
+    ``options`` go to the generator (``motion=`` and ``sources=`` for panoramas; ``None`` is the
+    default). ``heldout``: the held-out domain's scene of the same name and seed (never trained on).
     """
     check_scene_request(name, frames, height, width)
+    if not isinstance(heldout, bool):                  # ("False" had given the held-out scene)
+        raise InputError(f"heldout = {heldout!r}: must be True or False")
     if name in ("default",) + PANORAMAS:
         options = {k: v for k, v in options.items() if v is not None}
+        unknown = sorted(set(options) - set(PANORAMA_OPTIONS))
+        if unknown:
+            raise InputError(f"scene {name!r} takes no options {unknown} (its options: {', '.join(PANORAMA_OPTIONS)})")
+        sources = options.get("sources", 0)
+        if not is_count(sources):
+            raise InputError(f"scene {name!r} sources = {sources!r}: must be an integer >= 0")
+        # each moving source is drawn whole (K x H x W float64) before the sum
+        require_memory(8 * frames * height * width * (1 + sources),
+                       f"scene {name!r} of {frames} x {height} x {width} values with {sources} sources")
     elif any(v is not None for v in options.values()):
         raise InputError(f"scene {name!r} takes no options {sorted(k for k, v in options.items() if v is not None)}")
     else:

@@ -26,6 +26,13 @@ DEFAULT_WEIGHTS = "rec709"
 NEGATIVE_SHARE = 0.01
 
 
+def check_weights(weights) -> str:
+    """``weights``, a name of :data:`LUMA_WEIGHTS`, refused in one line otherwise."""
+    if not (isinstance(weights, str) and weights in LUMA_WEIGHTS):
+        raise InputError(f"unknown grayscale weights {weights!r} (known: {', '.join(LUMA_WEIGHTS)})")
+    return weights
+
+
 def to_gray(image: np.ndarray, weights: str = DEFAULT_WEIGHTS, *, what: str = "image") -> np.ndarray:
     """Linear RGB ``(..., H, W, 3)`` or gray ``(..., H, W)`` -> float64 luminance ``(..., H, W)``.
 
@@ -34,8 +41,7 @@ def to_gray(image: np.ndarray, weights: str = DEFAULT_WEIGHTS, *, what: str = "i
     image's peak; deeper ones, and non-finite values, are refused (that is not
     light). A trailing axis of 3 is read as RGB, one of 1 as gray.
     """
-    if weights not in LUMA_WEIGHTS:
-        raise InputError(f"unknown grayscale weights {weights!r} (known: {', '.join(LUMA_WEIGHTS)})")
+    check_weights(weights)
     image = np.asarray(image)
     if image.dtype.kind not in "fiu":
         raise InputError(f"{what}: dtype {image.dtype} is not numeric")

@@ -29,11 +29,11 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from tespike.golden.errors import InputError, one_line
-from tespike.golden.io import atomic_output
+from tespike.golden.errors import InputError, is_count, one_line
+from tespike.golden.io import atomic_output, check_frame_shape
 from tespike.golden.paths import check_input_file
 
-from .color import DEFAULT_WEIGHTS, normalise_sequence, to_gray
+from .color import DEFAULT_WEIGHTS, check_weights, normalise_sequence, to_gray
 
 #: File name endings read as frames (case-insensitive).
 FRAME_SUFFIXES = (".exr", ".hdr", ".pic", ".rgbe")
@@ -559,10 +559,13 @@ def load_hdr_sequence(folder: str | Path, *, weights: str = DEFAULT_WEIGHTS, pea
     """
     from tqdm import tqdm
 
+    if max_frames is not None and not is_count(max_frames, 1):
+        raise InputError(f"max_frames = {max_frames!r} must be an integer >= 1")
+    if crop is not None:
+        crop = check_frame_shape(crop, "crop (H, W)")
+    check_weights(weights)
     paths = list_frames(folder)
     if max_frames is not None:
-        if max_frames < 1:
-            raise InputError(f"max_frames = {max_frames} must be at least 1")
         paths = paths[:max_frames]
     if type(downscale) is not int or downscale < 1:
         raise InputError(f"downscale = {downscale!r} must be an integer >= 1")

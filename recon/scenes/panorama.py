@@ -34,7 +34,7 @@ import numpy as np
 from tespike.golden.errors import InputError
 from tespike.golden.paths import path_text
 
-from .color import DEFAULT_WEIGHTS, to_gray
+from .color import DEFAULT_WEIGHTS, check_weights, to_gray
 from .procedural import moving_spots
 from .warp import render_window
 
@@ -67,7 +67,12 @@ def load_panorama(source: str | Path = "default", weights: str = DEFAULT_WEIGHTS
     (:func:`file_luminance`): the data engine moves cameras over the same panoramas clip
     after clip. A shipped copy is small and returned as a new array each call."""
     path_text(source, "panorama")            # (a number had been os.fspath's TypeError)
+    check_weights(weights)
     if str(source) == "default" or (str(source) in PANORAMAS and hdri_dir() is None):
+        if weights != DEFAULT_WEIGHTS:          # (they had been ignored)
+            raise InputError(f"panorama {str(source)!r}: the shipped copy is stored as {DEFAULT_WEIGHTS} "
+                             f"luminance; grayscale weights {weights!r} need the full-size file "
+                             "(TESPIKE_HDRI_DIR, docs/scenes.md)")
         with np.load(shipped_panorama_file(str(source)), allow_pickle=False) as npz:
             return npz["luminance"].astype(np.float64)
     if str(source) in PANORAMAS:
