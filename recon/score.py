@@ -20,7 +20,7 @@ import numpy as np
 
 from tespike.golden.errors import InputError
 from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay
-from tespike.recon.settings import names
+from tespike.recon.settings import check_device, names
 
 
 @dataclass(frozen=True)
@@ -49,8 +49,18 @@ def check_metrics(names: tuple, what: str) -> tuple:
     return tuple(names)
 
 
+def check_display(display) -> HdrDisplay:
+    """``display``, an :class:`tespike.recon.display.HdrDisplay`, refused in one line otherwise (a name
+    had been an AttributeError of its first field)."""
+    if not isinstance(display, HdrDisplay):
+        raise InputError(f"display = {display!r}: must be an HdrDisplay (tespike.recon.display), "
+                         f"not {type(display).__name__}")
+    return display
+
+
 def columns(display: HdrDisplay = DEFAULT_DISPLAY) -> tuple[Column, ...]:
     """The columns (in :data:`METRIC_KEYS` order) with their labels for ``display``."""
+    check_display(display)
     from tespike.recon.metrics import DEFAULT_NITS_PER_UNIT
     from tespike.recon.mulaw import MU
     shown = f"HDR display {display.peak_nits:g} cd/m^2"
@@ -85,14 +95,26 @@ def score(estimate, reference, *, metrics=None, display: HdrDisplay = DEFAULT_DI
     from tespike.recon.hdrvqm import hdr_vqm_scores
     from tespike.recon.metrics import psnr_mu, psnr_pu21, ssim_mu
 
-    metrics = None if metrics is None else names(metrics)
+    metrics = None if metrics is None else names(metrics, "metrics")
     keys = METRIC_KEYS if metrics is None else check_metrics(metrics, f"metrics {list(metrics)!r}")
+    check_display(display)
+    check_device(device)
     estimate, reference = np.asarray(estimate), np.asarray(reference)
     if reference.ndim != 3 or estimate.ndim != 3:
         raise InputError(f"estimate {estimate.shape} and reference {reference.shape} must be (K, H, W)")
     if estimate.shape != reference.shape:
         raise InputError(f"estimate shape {estimate.shape} != reference shape {reference.shape}")
-    if reference.size and not float(np.max(reference)) > 0:
+    if not reference.size:                   # (the means had been NaN, with numpy's empty-slice warning)
+        raise InputError(f"estimate and reference {reference.shape} hold no pixel to score")
+    for array, what in ((reference, "reference"), (estimate, "estimate")):
+        if array.dtype.kind not in "fiu":
+            raise InputError(f"the {what}: dtype {array.dtype} is not real numbers")
+    if not np.isfinite(reference).all():
+        raise InputError("the reference holds non-finite values (NaN or infinity): it is no light")
+    if float(np.min(reference)) < 0:
+        raise InputError(f"the reference holds negative light (down to {float(np.min(reference)):.6g}): it "
+                         "is no light")
+    if not float(np.max(reference)) > 0:
         raise InputError("the reference is all zero: no metric can normalise by its peak")
     per_frame, sequence = {}, {}
     for key in keys:

@@ -70,11 +70,20 @@ def check_known(method: str, known, what: str = "reconstruction method") -> None
         raise InputError(f"unknown {what} {method!r} (known: {', '.join(known)})")
 
 
-def names(value) -> tuple:
+def names(value, what: str = "names") -> tuple:
     """A sequence of names (methods, sensors, metrics) as a tuple; one name given as a string is
     that name (its letters had been taken as names: methods='tfp' was 'unknown reconstruction
-    method 't'')."""
-    return (value,) if isinstance(value, str) else tuple(value)
+    method 't''). Anything else (a number, a name that is no string) is refused in one line naming
+    ``what`` (``metrics=3`` had been Python's "not iterable")."""
+    if isinstance(value, str):
+        return (value,)
+    try:
+        out = tuple(value)
+    except TypeError:
+        out = None
+    if out is None or not all(isinstance(name, str) for name in out):
+        raise InputError(f"{what} {value!r}: must be a name or a sequence of names (strings)")
+    return out
 
 
 #: TFI search modes: the whole stream (default) or the window around the key moment.

@@ -177,3 +177,24 @@ def test_long_double_files_score_like_float64(tmp_path, capsys, rng):
                                           names=("Rl.npy", "Il.npy")))[0]
     for key in native["per_frame"]:
         assert np.allclose(long["per_frame"][key], native["per_frame"][key], rtol=1e-12), key
+
+
+@pytest.mark.parametrize("reference, options, words", [
+    (None, {"display": "sim2"}, r"^display = 'sim2': must be an HdrDisplay"),
+    (None, {"device": "gpu9"}, r"^device = 'gpu9': not a usable torch device"),
+    (None, {"metrics": 3}, r"^metrics 3: must be a name or a sequence of names \(strings\)$"),
+    (np.ones((0, 4, 4)), {}, r"^estimate and reference \(0, 4, 4\) hold no pixel to score$"),
+    (np.full((1, 4, 4), np.nan), {}, r"^the reference holds non-finite values \(NaN or infinity\): it is no light$"),
+    (-np.ones((1, 4, 4)), {}, r"^the reference holds negative light \(down to -1\): it is no light$"),
+    (np.zeros((1, 4, 4)), {}, r"^the reference is all zero"),
+], ids=["display-name", "device", "metrics-number", "no-frames", "nan-reference", "negative-reference",
+        "zero-reference"])
+def test_the_library_score_refuses_what_it_cannot_score_in_one_line(reference, options, words):
+    """The library's ``score`` took a display's name (an AttributeError), a device torch cannot use
+    (its RuntimeError), ``metrics=3`` (not iterable), zero frames (NaN means and a warning), and said
+    "all zero" of a NaN or negative reference."""
+    from tespike.golden.errors import InputError
+    from tespike.recon.score import score
+    reference = np.full((1, 4, 4), 0.5) if reference is None else reference
+    with pytest.raises(InputError, match=words):
+        score(np.ones_like(reference), reference, **{"metrics": ["psnr_mu"], **options})
