@@ -198,7 +198,11 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
     config = SensorConfig.required(config, "estimate")
     if not is_positive_number(flat_light):
         raise InputError(f"flat light {flat_light!r}: must be a finite number > 0 (1 = design light)")
+    dark_words, flat_words = (words if isinstance(words, np.ndarray) else np.asarray(words)
+                              for words in (dark_words, flat_words))   # (a list: an AttributeError)
     for what, words in (("dark", dark_words), ("flat", flat_words)):
+        if words.dtype.kind not in "iu":
+            raise InputError(f"{what} stream: readout words dtype {words.dtype} is not an integer type")
         if words.ndim != 3 or min(words.shape) < 1:
             raise InputError(f"{what} stream shape {words.shape} must be (K, H, W) with K, H, W >= 1")
     if dark_words.shape[1:] != flat_words.shape[1:]:

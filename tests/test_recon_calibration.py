@@ -341,3 +341,11 @@ def test_a_calibration_file_with_a_gain_calibrate_never_writes_is_refused(tmp_pa
     save_calibration(tmp_path / "c.npz", dataclasses.replace(c, gain=c.gain * 1e3, flat_light=1e-6))
     with pytest.raises(InputError, match="median gain .* above 20"):
         load_calibration(tmp_path / "c.npz")
+
+
+@pytest.mark.parametrize("dark", [None, "dark.npz", np.zeros((4, 2, 2))], ids=["none", "path-text", "float"])
+def test_estimate_refuses_a_dark_stream_that_is_no_word_array_in_one_line(dark):
+    """``estimate(None, ...)`` or a list was an AttributeError of ``.ndim``; a float array went on."""
+    from tespike.recon.calibration import estimate
+    with pytest.raises(InputError, match="^dark stream: readout words dtype .* is not an integer type$"):
+        estimate(dark, np.zeros((4, 2, 2), np.uint8), SensorConfig(), 0.03)
