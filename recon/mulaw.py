@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tespike.golden.errors import InputError, is_positive_number
+
 if TYPE_CHECKING:
     import torch
 
@@ -27,6 +29,12 @@ MAX_CODE = 2.0
 def tone_map(light: np.ndarray, peak: float, mu: float = MU) -> np.ndarray:
     """Divide by the ground truth's peak, clip to [0, 1], mu-law (paper eq. 11); float64: the
     numpy twin of :func:`compress` for the pictures."""
+    check_mu(mu)
+    if not is_positive_number(peak):        # (0, a negative or NaN peak had drawn a flat picture)
+        raise InputError(f"tone map peak {peak!r}: must be a finite number > 0")
+    light = np.asarray(light)
+    if light.dtype.kind not in "fiub":     # (a complex light had lost its imaginary part with a warning)
+        raise InputError(f"tone map light: dtype {light.dtype} is not real numbers")
     with np.errstate(over="ignore"):      # a tiny peak (subnormal): light / peak is inf, white as it should be
         h = np.clip(np.asarray(light, np.float64) / peak, 0.0, 1.0)
     # log1p(mu h) / log1p(mu) written as h g(mu h) / g(mu), g(x) = log1p(x) / x: the same to a few ulps,
@@ -43,8 +51,24 @@ def _log1p_ratio(x: np.ndarray) -> np.ndarray:
     return out
 
 
+def check_mu(mu) -> float:
+    """``mu``, a finite number > 0, refused in one line otherwise (0 had made every code NaN, -1 was
+    math's "domain error")."""
+    if not is_positive_number(mu):
+        raise InputError(f"mu-law mu {mu!r}: must be a finite number > 0 (the paper's is {MU:g})")
+    return float(mu)
+
+
+def _check_tensor(light) -> None:
+    if not (hasattr(light, "clamp") and hasattr(light, "log1p")):
+        raise InputError(f"mu-law light: must be a torch tensor, not {type(light).__name__} "
+                         "(tone_map takes numpy arrays)")
+
+
 def compress(light: "torch.Tensor", mu: float) -> "torch.Tensor":
     """mu-law: light >= 0 (scene units) -> [0, ~1] (1 at the design light)."""
+    check_mu(mu)
+    _check_tensor(light)
     return (mu * light.clamp(min=0)).log1p() / math.log1p(mu)
 
 
@@ -52,9 +76,13 @@ def compress_(light: "torch.Tensor", mu: float) -> "torch.Tensor":
     """:func:`compress` in place (returns ``light``, overwritten): for large inputs that
     need no gradient, e.g. the baselines' firing-rate stacks, which would otherwise be
     held twice."""
+    check_mu(mu)
+    _check_tensor(light)
     return light.clamp_(min=0).mul_(mu).log1p_().div_(math.log1p(mu))
 
 
 def expand(code: "torch.Tensor", mu: float) -> "torch.Tensor":
     """Inverse of :func:`compress` on [0, MAX_CODE]; codes outside are clamped to it."""
+    check_mu(mu)
+    _check_tensor(code)
     return (code.clamp(0.0, MAX_CODE) * math.log1p(mu)).expm1() / mu

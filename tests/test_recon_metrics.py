@@ -160,3 +160,23 @@ def test_one_mu_law_for_metrics_pictures_and_learned_methods():
     light = torch.cat((torch.tensor([-0.5, 0.0]), torch.logspace(-6, 1, 50)))
     work = light.clone()
     assert compress_(work, 5000.0) is work and torch.equal(work, compress(light, 5000.0))
+
+
+def test_the_mu_law_refuses_a_mu_peak_or_light_it_cannot_map_in_one_line():
+    """mu = 0 had made every code NaN and mu = -1 was math's "domain error"; tone_map drew a flat
+    picture for a peak of 0, -1 or NaN and dropped a complex light's imaginary part with a warning;
+    a numpy array in the torch functions was an AttributeError of ``clamp``."""
+    from tespike.golden.errors import InputError
+    from tespike.recon.mulaw import compress, compress_, expand, tone_map
+    for mu in (0, -1, float("nan"), "5000", True):
+        for call in (lambda: compress(torch.ones(2), mu), lambda: compress_(torch.ones(2), mu),
+                     lambda: expand(torch.ones(2), mu), lambda: tone_map(np.ones(2), 1.0, mu)):
+            with pytest.raises(InputError, match=f"^mu-law mu {mu!r}: must be a finite number > 0"):
+                call()
+    for peak in (0, -1.0, float("nan"), None):
+        with pytest.raises(InputError, match=f"^tone map peak {peak!r}: must be a finite number > 0$"):
+            tone_map(np.ones(2), peak)
+    with pytest.raises(InputError, match="^tone map light: dtype complex128 is not real numbers$"):
+        tone_map(np.array([1j]), 1.0)
+    with pytest.raises(InputError, match="^mu-law light: must be a torch tensor, not ndarray"):
+        compress(np.ones(2), 5000.0)
