@@ -300,12 +300,17 @@ def pixel_noise(dark_current: str | None, sensor: Sensor | None, shape: tuple[in
     return pixels
 
 
-@functools.lru_cache(maxsize=None)
 def model_mean(model: str | None) -> float:
     """Mean dark electrons per readout of a dark model before rounding: eq. 12's normal mean;
     for eq. 13 the mean of :func:`~tespike.golden.light.eq13_dark_per_readout` over its normal
     interval draw (midpoint rule on 2 x 10^6 points over 12 standard deviations)."""
-    model = check_dark_current(model)
+    if not (model is None or isinstance(model, str)):  # (a list: the cache's "unhashable type")
+        raise InputError(f"dark current model {model!r}: must be a name (none, eq12, eq13) or None")
+    return _model_mean(check_dark_current(model))
+
+
+@functools.lru_cache(maxsize=None)
+def _model_mean(model: str | None) -> float:
     if model is None:
         return 0.0
     mean, sd = DARK_NORMAL[model]

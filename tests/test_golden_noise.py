@@ -140,3 +140,11 @@ def test_dark_electrons_of_an_extreme_hot_pixel_do_not_wrap(rng):
     negative and the simulators stopped with a traceback."""
     d = dark_electrons("eq13", (100000,), rng, scale=np.full(100000, 8e14))
     assert d.min() >= 0 and d.max() == 1 << 62
+
+
+def test_model_mean_refuses_a_model_that_is_no_name_in_one_line():
+    """A list was the cache's "unhashable type" traceback."""
+    from tespike.golden.noise import model_mean
+    with pytest.raises(InputError, match=r"^dark current model \['eq12'\]: must be a name \(none, eq12, eq13\) or None$"):
+        model_mean(["eq12"])
+    assert model_mean("none") == model_mean(None) == 0.0
