@@ -24,6 +24,8 @@ Importing this module does not import torch (command lines check names quickly).
 from __future__ import annotations
 
 import functools
+import os
+from collections.abc import Mapping
 from pathlib import Path
 
 from tespike.golden.config import PRESETS, SensorConfig
@@ -92,6 +94,7 @@ def weights_name(method: str, preset: str) -> str:
 def weights_path(config: SensorConfig, method: str = "net") -> Path:
     """The shipped weights of ``method`` for ``config``; a one-line refusal where there are none."""
     check_known(method, LEARNED, "learned method")
+    config = SensorConfig.required(config, "weights_path")
     preset = preset_of(config)
     if preset is None:
         near = next((name for name, keys in PRESETS.items() if str(SensorConfig(**keys)) == str(config)), None)
@@ -178,7 +181,7 @@ def weights_method(path: str | Path, what: str = "weights") -> str:
 
 def _cached(path: str | Path, what: str):
     """(module, config, meta, method) of weights file ``path``, read once while it is unchanged."""
-    path = Path(path)
+    path = Path(path_text(path, what))
     try:
         mtime = path.stat().st_mtime
     except OSError as exc:
@@ -191,8 +194,14 @@ def weights_by_sensor(paths, configs) -> dict[tuple[str, str], Path]:
     (``--weights``, repeatable) and ``configs`` (sensor name -> configuration): each file serves its
     method on every sensor of the configuration it was trained for. Refused in one line: a file that
     cannot be read, one trained for none of the sensors, two for the same method and sensor."""
+    if isinstance(paths, (str, os.PathLike)):            # (one file: its letters had been taken as files)
+        paths = [paths]
+    if not isinstance(configs, Mapping):
+        raise InputError(f"configs: must map sensor names to configurations, not {type(configs).__name__}")
+    for name, config in configs.items():
+        SensorConfig.required(config, f"sensor {name!r}")
     chosen: dict[tuple[str, str], Path] = {}
-    for path in map(Path, paths):
+    for path in (Path(path_text(p, "--weights")) for p in paths):
         _, trained_for, _ = load_weights(path, "--weights")
         method = weights_method(path, "--weights")
         sensors = [name for name, config in configs.items() if config == trained_for]

@@ -66,7 +66,7 @@ TRAINING_FREE = {"tfp": "mean decoded light over the window (spike-firing rate)"
 def check_known(method: str, known, what: str = "reconstruction method") -> None:
     """Refuse a method name not among ``known`` in one line (every place that takes a method's name:
     the registry, the learned methods' loader, the evaluations, the command line)."""
-    if method not in known:
+    if not isinstance(method, str) or method not in known:       # (a list: "unhashable type")
         raise InputError(f"unknown {what} {method!r} (known: {', '.join(known)})")
 
 

@@ -193,3 +193,23 @@ def test_an_illegal_word_is_named_by_readout_row_and_column(method, as_tensor):
     given = torch.from_numpy(words.astype(np.int64)) if as_tensor else words
     with pytest.raises(InputError, match=r"readout word 16 at index \(1, 5, 7\)"):
         reconstruct(given, SensorConfig(), method)
+
+
+def test_the_learned_methods_registry_refuses_what_is_no_name_path_or_configuration_in_one_line():
+    """``weights_path('te')`` was an AttributeError of ``describe``, ``load_weights(None)`` pathlib's
+    TypeError, ``weights_by_sensor(paths, [config])`` an AttributeError of ``items`` (and one path given
+    as a string was taken letter by letter), ``method_classes(['net'])`` an "unhashable type"."""
+    from tespike.golden.errors import ConfigError, InputError
+    from tespike.recon.learned import load_weights, method_classes, weights_by_sensor, weights_path
+    with pytest.raises(ConfigError, match="^weights_path: configuration must be a SensorConfig"):
+        weights_path("te")
+    with pytest.raises(InputError, match="^weights: a path must be a str or an os.PathLike, not NoneType$"):
+        load_weights(None)
+    with pytest.raises(InputError, match="^configs: must map sensor names to configurations, not list$"):
+        weights_by_sensor([], [SensorConfig()])
+    with pytest.raises(ConfigError, match="^sensor 'te': configuration must be a SensorConfig"):
+        weights_by_sensor([], {"te": "te"})
+    with pytest.raises(InputError, match="^cannot read --weights 'absent.pt': No such file or directory$"):
+        weights_by_sensor("absent.pt", {"te": SensorConfig()})
+    with pytest.raises(InputError, match=r"^unknown learned method \['net'\] \(known: net, "):
+        method_classes(["net"])
