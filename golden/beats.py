@@ -16,7 +16,7 @@ import numpy as np
 
 from .config import SensorConfig
 from .decode import check_word_dtype
-from .errors import ConfigError, InputError, is_count
+from .errors import ConfigError, InputError, is_count, is_positive_number
 
 
 #: Most lanes accepted: 262144 (2^18, the largest streaming array's pixel count). N above H W
@@ -35,7 +35,17 @@ def beat_count(pixels: int, lanes: int) -> int:
 
 def min_lanes(config: SensorConfig, height: int, width: int) -> int:
     """The smallest N whose B = ceil(H W / N) beats fit in one readout interval of L clocks."""
+    config = SensorConfig.required(config, "min_lanes")
+    height, width = check_array_size(height, width)
     return beat_count(height * width, config.clocks_per_readout)
+
+
+def check_array_size(height, width) -> tuple[int, int]:
+    """An array's rows and columns, each an integer >= 1, refused in one line otherwise (two negative
+    sizes had passed as a positive pixel count, and 0 rows needed 0 lanes)."""
+    if not (is_count(height, 1) and is_count(width, 1)):
+        raise ConfigError(f"array of {height!r} x {width!r} pixels: the rows and columns must be integers >= 1")
+    return int(height), int(width)
 
 
 def check_lanes(config: SensorConfig, height: int, width: int, lanes) -> int:
@@ -44,6 +54,8 @@ def check_lanes(config: SensorConfig, height: int, width: int, lanes) -> int:
     The message names the smallest N that works (one line, :class:`ConfigError`). N above
     H W is legal (SPEC section 6): one beat, its lanes past the last pixel carrying 0.
     """
+    config = SensorConfig.required(config, "check_lanes")
+    height, width = check_array_size(height, width)
     pixels, L = height * width, config.clocks_per_readout
     if type(lanes) is not int or lanes < 1:
         raise ConfigError(f"lanes = {lanes!r}: must be an integer >= 1")
@@ -78,9 +90,10 @@ def unbeat(beats_: np.ndarray, height: int, width: int) -> np.ndarray:
     beats_ = np.asarray(beats_)
     if not (is_count(height, 1) and is_count(width, 1)):
         raise InputError(f"unbeat: height {height!r} and width {width!r} must be integers >= 1")
-    if beats_.ndim != 3 or beats_.shape[1] * beats_.shape[2] < height * width:
-        raise InputError(f"unbeat: beats of shape {beats_.shape} cannot hold {height} x {width} pixels "
-                         "(they must be (K, B, N) with B N >= H W)")
+    if beats_.ndim != 3 or beats_.shape[2] < 1 or beats_.shape[1] != beat_count(height * width, beats_.shape[2]):
+        raise InputError(f"unbeat: beats of shape {beats_.shape} are not those of {height} x {width} pixels "
+                         "(they must be (K, B, N) with B = ceil(H W / N): more beats would be dropped, "
+                         "fewer cannot hold the pixels)")
     K = beats_.shape[0]
     return beats_.reshape(K, -1)[:, :height * width].reshape(K, height, width)
 
@@ -93,6 +106,9 @@ def output_bandwidth(config: SensorConfig, height: int, width: int, pixel_clock_
     ``pins`` (N Wd output bits at that N) and ``port_bits_per_s`` (N Wd f, what those pins carry
     when every clock holds a beat; at least ``bits_per_s``).
     """
+    config = SensorConfig.required(config, "output_bandwidth")
+    if not is_positive_number(pixel_clock_hz):           # (a negative clock had given negative bits/s)
+        raise InputError(f"pixel clock {pixel_clock_hz!r} Hz: must be a finite number > 0")
     L, wd = config.clocks_per_readout, config.word_bits
     lanes = min_lanes(config, height, width)
     return {"readout_hz": pixel_clock_hz / L, "word_bits": wd,

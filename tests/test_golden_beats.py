@@ -80,11 +80,34 @@ def test_the_lane_helpers_refuse_what_they_cannot_pack_in_one_line():
     words = np.zeros((2, 2, 3), np.uint8)
     with pytest.raises(InputError, match="^readout words dtype float64 is not an integer type$"):
         beats(words.astype(float), 2)
-    with pytest.raises(InputError, match=r"^unbeat: beats of shape \(2, 3, 2\) cannot hold 5 x 5 pixels"):
-        unbeat(np.zeros((2, 3, 2), np.uint8), 5, 5)
+    for shape in ((2, 3, 2), (1, 3, 2)):          # too few beats for 5 x 5; more than 1 x 1 needs (dropped)
+        size = 5 if shape[0] == 2 else 1
+        with pytest.raises(InputError, match=rf"^unbeat: beats of shape \({shape[0]}, 3, 2\) are not those of "
+                                             rf"{size} x {size} pixels"):
+            unbeat(np.zeros(shape, np.uint8), size, size)
     with pytest.raises(InputError, match="^unbeat: height 'x' and width 3 must be integers >= 1$"):
         unbeat(np.zeros((2, 3, 2), np.uint8), "x", 3)
     for pixels, lanes in ((4, 0), (-1, 2), (4, 1.5)):
         with pytest.raises(InputError, match=f"^beat count of {pixels} pixels on {lanes} lanes"):
             beat_count(pixels, lanes)
     assert np.array_equal(unbeat(beats(words + 3, 4), 2, 3), words + 3)
+
+
+def test_the_bandwidth_and_lane_counts_refuse_sizes_and_clocks_that_are_none_in_one_line():
+    """Two negative sizes passed as a positive pixel count, 0 rows needed 0 lanes, a negative or NaN
+    pixel clock gave negative or NaN bits a second, and a preset's name an AttributeError."""
+    from tespike.golden.beats import check_lanes, min_lanes, output_bandwidth
+    from tespike.golden.errors import ConfigError, InputError
+    te = SensorConfig()
+    for height, width in ((-2, -3), (0, 3), (2.5, 2)):
+        for call in (lambda: check_lanes(te, height, width, 2), lambda: min_lanes(te, height, width),
+                     lambda: output_bandwidth(te, height, width, 1e6)):
+            with pytest.raises(ConfigError, match=rf"^array of {height!r} x {width!r} pixels: the rows and columns"):
+                call()
+    for clock in (-1e6, 0, float("nan"), "1e6"):
+        with pytest.raises(InputError, match=f"^pixel clock {clock!r} Hz: must be a finite number > 0$"):
+            output_bandwidth(te, 2, 3, clock)
+    for call, what in ((lambda: check_lanes("te", 2, 3, 2), "check_lanes"), (lambda: min_lanes("te", 2, 3), "min_lanes"),
+                       (lambda: output_bandwidth("te", 2, 3, 1e6), "output_bandwidth")):
+        with pytest.raises(ConfigError, match=f"^{what}: configuration must be a SensorConfig"):
+            call()
