@@ -24,7 +24,7 @@ import numpy as np
 
 from .config import DESIGN_ELECTRONS, SensorConfig
 from .decode import decode_light
-from .errors import InputError, check_counts, is_positive_number
+from .errors import InputError, check_counts, is_count, is_positive_number
 from .light import check_seed, checked_light_levels
 from .sensor import PixelArrayModel
 
@@ -56,7 +56,16 @@ def _check_positive(value, name: str) -> None:
 
 
 def light_grid(low: float = 1e-6, high: float = 1e3, per_decade: int = 20) -> np.ndarray:
-    """Log-spaced light levels (1.0 = design light, 42000 electrons per readout)."""
+    """Log-spaced light levels (1.0 = design light, 42000 electrons per readout), ``per_decade`` a
+    decade from ``low`` to ``high``; refused in one line where they are no such range (0 had been a
+    ZeroDivisionError, a low above the high numpy's "negative samples", 2.5 a decade taken as 2)."""
+    for name, value in (("low", low), ("high", high)):
+        if not is_positive_number(value):
+            raise InputError(f"light grid {name} {value!r}: must be a finite number > 0")
+    if not low < high:
+        raise InputError(f"light grid low {low!r} must be below its high {high!r}")
+    if not is_count(per_decade, 1):
+        raise InputError(f"light grid per_decade {per_decade!r}: must be an integer >= 1")
     decades = math.log10(high / low)
     return np.logspace(math.log10(low), math.log10(high), int(round(decades * per_decade)) + 1)
 

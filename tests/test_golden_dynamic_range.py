@@ -1,4 +1,5 @@
 import math
+import re
 
 import numpy as np
 import pytest
@@ -108,3 +109,21 @@ def test_measured_range_msb_noise_free():
     # at 5 % the msb windows fail where the count's pass
     strict = measure(msb, 8, windows=4, light=light, words=constant_light_words(msb, light, 40))
     assert strict.db < measure(count, 8, windows=4, light=light).db
+
+
+@pytest.mark.parametrize("args, words", [
+    ((0, 1), "light grid low 0: must be a finite number > 0"),
+    ((-1, 10), "light grid low -1: must be a finite number > 0"),
+    ((1, float("inf")), "light grid high inf: must be a finite number > 0"),
+    (("a", 100), "light grid low 'a': must be a finite number > 0"),
+    ((10, 1), "light grid low 10 must be below its high 1"),
+    ((1, 10, 2.5), "light grid per_decade 2.5: must be an integer >= 1"),
+    ((1, 10, 0), "light grid per_decade 0: must be an integer >= 1"),
+], ids=["zero-low", "negative-low", "infinite-high", "text-low", "reversed", "fractional-decade", "no-decade"])
+def test_light_grid_refuses_what_is_no_range_in_one_line(args, words):
+    """0 was a ZeroDivisionError, -1 math's domain error, a reversed range numpy's "negative samples",
+    and 2.5 points a decade were taken as 2 silently."""
+    from tespike.golden.dynamic_range import light_grid
+    from tespike.golden.errors import InputError
+    with pytest.raises(InputError, match="^" + re.escape(words) + "$"):
+        light_grid(*args)
