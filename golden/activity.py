@@ -100,6 +100,9 @@ def timing_states(config: SensorConfig, edges: int, *, sampled_input: bool = Tru
     ``sampled_input=False`` (the parallel top's ``<mode>_array_timing``): it shows clock u
     (reset: clock 0) and ``frame_valid`` is its register ``frame_valid_reg``, ``last`` one edge
     later (low after reset)."""
+    config = SensorConfig.required(config, "timing_states")
+    if not is_count(edges):                              # (2.5 had made four states)
+        raise InputError(f"edges = {edges!r}: must be an integer >= 0")
     F, L, alpha = config.clocks_per_tick, config.clocks_per_readout, config.alpha
     clock = np.arange(edges + 1, dtype=np.int64) - (1 if sampled_input else 0)
     divider = clock % F
@@ -136,6 +139,12 @@ def top_activity(config: SensorConfig, electrons: np.ndarray, lanes: int | None 
     P = H * W
     streaming = lanes is not None
     beats = -(-P // lanes) if streaming else 1
+    if edges is not None and not is_count(edges):        # (2.5 had run 2 edges, '5' five)
+        raise InputError(f"edges = {edges!r}: must be an integer >= 0 or None (the whole run)")
+    if not is_count(start):
+        raise InputError(f"start = {start!r}: must be an integer >= 0")
+    if not isinstance(reset, bool):                      # ('no' had meant a reset)
+        raise InputError(f"reset = {reset!r}: must be True or False")
     U = (T + (beats + 1 if streaming else 1)) if edges is None else int(edges)
     if U < 0 or not 0 <= start <= U:
         raise InputError(f"edges = {U}, start = {start}: need 0 <= start <= edges")

@@ -1,6 +1,7 @@
 """tespike.golden.activity: every register and output port of both generated tops, per block,
 equals a count of an Icarus VCD of the very Verilog ``tespike verilog`` writes."""
 
+import re
 import shutil
 
 import numpy as np
@@ -163,3 +164,25 @@ def test_the_switching_counts_refuse_what_they_cannot_run_on_in_one_line():
                           (lambda: top_activity(te, clocks, 0), "^lanes = 0: must be an integer >= 1")):
         with pytest.raises(InputError, match=refusal):
             call()
+
+
+@pytest.mark.parametrize("options, words", [
+    ({"edges": 2.5}, "edges = 2.5: must be an integer >= 0 or None (the whole run)"),
+    ({"edges": "5"}, "edges = '5': must be an integer >= 0 or None (the whole run)"),
+    ({"start": 2.5}, "start = 2.5: must be an integer >= 0"),
+    ({"start": None}, "start = None: must be an integer >= 0"),
+    ({"reset": "no"}, "reset = 'no': must be True or False"),
+], ids=["fractional-edges", "text-edges", "fractional-start", "no-start", "text-reset"])
+def test_top_activity_refuses_a_run_it_cannot_count_in_one_line(options, words):
+    """``edges=2.5`` counted 2 edges and ``'5'`` five, ``start=2.5`` was a slice's TypeError, and
+    ``reset='no'`` ran a reset."""
+    from tespike.golden.activity import top_activity
+    with pytest.raises(InputError, match="^" + re.escape(words) + "$"):
+        top_activity(SensorConfig(), np.zeros((4, 1, 2), np.uint16), **options)
+
+
+def test_timing_states_refuses_edges_that_are_no_count():
+    """2.5 edges had made four states silently."""
+    from tespike.golden.activity import timing_states
+    with pytest.raises(InputError, match=r"^edges = 2.5: must be an integer >= 0$"):
+        timing_states(SensorConfig(), 2.5)
