@@ -25,7 +25,7 @@ import numpy as np
 from .config import DESIGN_ELECTRONS, SensorConfig
 from .decode import decode_light
 from .errors import InputError, check_counts, is_count, is_positive_number
-from .light import check_seed, checked_light_levels
+from .light import check_seed, checked_light_levels, saturated_poisson
 from .sensor import PixelArrayModel
 
 
@@ -94,7 +94,7 @@ def constant_light_words(config: SensorConfig, light: np.ndarray, readouts: int,
         if rng is None:
             electrons = np.floor((t + 1) * lam) - np.floor(t * lam)
         else:
-            electrons = rng.poisson(np.broadcast_to(lam, (k * L, light.size)))
+            electrons = saturated_poisson(rng, lam, (k * L, light.size), config.input_max)
         electrons = np.minimum(electrons, config.input_max).astype(np.int64)
         words.append(array.feed(electrons[:, None, :])[:, 0, :])
     return np.concatenate(words)

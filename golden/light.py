@@ -113,6 +113,24 @@ def electrons_per_readout(light: np.ndarray) -> np.ndarray:
     return out
 
 
+#: Largest mean ``Generator.poisson`` accepts (numpy's POISSON_LAM_MAX).
+POISSON_LAM_MAX = float(np.iinfo(np.int64).max - np.sqrt(np.iinfo(np.int64).max) * 10)
+
+
+def saturated_poisson(rng: np.random.Generator, lam: np.ndarray, shape, top: int) -> np.ndarray:
+    """``min(Poisson(lam), top)`` draws of ``shape`` (int64; ``lam`` broadcast to it) for any finite
+    mean >= 0: one past numpy's limit (``lam value too large``) is ``top`` without a draw (it is
+    surely saturated), and its place draws ``Poisson(0)``, which takes no random number, so every other
+    value is the draw ``rng.poisson`` gives."""
+    lam = np.asarray(lam, np.float64)
+    past = lam > POISSON_LAM_MAX
+    if not past.any():
+        return np.minimum(rng.poisson(np.broadcast_to(lam, shape)), top)
+    out = np.minimum(rng.poisson(np.broadcast_to(np.where(past, 0.0, lam), shape)), top)
+    out[np.broadcast_to(past, shape)] = top
+    return out
+
+
 def dark_electrons(model: str | None, shape, rng: np.random.Generator, *,
                    scale: np.ndarray | None = None) -> np.ndarray:
     """Dark electrons per pixel and readout interval (int64), one draw each.

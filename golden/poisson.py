@@ -57,7 +57,7 @@ import time
 import numpy as np
 
 from .errors import InputError
-from .light import log_poisson_tail_above, log_poisson_tail_below
+from .light import POISSON_LAM_MAX, log_poisson_tail_above, log_poisson_tail_below
 
 #: CDF scale: table entries are integers out of 2^53.
 ONE = 1 << 53
@@ -76,7 +76,7 @@ LOCAL_BYTES = 1 << 20
 SUPPORT_BLOCK = 256
 
 #: Largest mean ``Generator.poisson`` accepts (numpy's POISSON_LAM_MAX).
-LAM_MAX = float(np.iinfo(np.int64).max - np.sqrt(np.iinfo(np.int64).max) * 10)
+LAM_MAX = POISSON_LAM_MAX
 
 #: Bit generators whose ``random_raw`` yields 64 random bits (MT19937 gives 32).
 _RAW64 = ("PCG64", "PCG64DXSM", "Philox", "SFC64")

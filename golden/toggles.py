@@ -31,7 +31,7 @@ import numpy as np
 from .config import SensorConfig
 from .errors import InputError, check_counts
 from .io import check_stimulus
-from .light import check_seed, checked_light_levels
+from .light import check_seed, checked_light_levels, saturated_poisson
 from .reference import msb_remainder, readout_word
 
 
@@ -150,5 +150,5 @@ def constant_light_toggles(config: SensorConfig, light: np.ndarray, readouts: in
     check_counts(readouts=readouts)
     lam = DESIGN_ELECTRONS * light / config.clocks_per_readout
     rng = np.random.default_rng(check_seed(seed))
-    electrons = rng.poisson(np.broadcast_to(lam, (readouts * config.clocks_per_readout, light.size)))
-    return count_toggles(config, np.minimum(electrons, config.input_max))
+    electrons = saturated_poisson(rng, lam, (readouts * config.clocks_per_readout, light.size), config.input_max)
+    return count_toggles(config, electrons)

@@ -127,3 +127,16 @@ def test_light_grid_refuses_what_is_no_range_in_one_line(args, words):
     from tespike.golden.errors import InputError
     with pytest.raises(InputError, match="^" + re.escape(words) + "$"):
         light_grid(*args)
+
+
+def test_light_past_numpys_poisson_limit_is_saturated_and_leaves_the_other_pixels_draws_alone():
+    """1e30 x the design light was numpy's "lam value too large" in constant_light_words and
+    constant_light_toggles; it is surely saturated, and draws no random number, so a pixel beside it
+    gets the words it gets alone."""
+    from tespike.golden.toggles import constant_light_toggles
+    config = SensorConfig()
+    for run in (lambda light: constant_light_words(config, light, 3, seed=1),
+                lambda light: constant_light_toggles(config, light, 3, seed=1).words):
+        both, alone, saturated = run(np.array([1e30, 0.5])), run(np.array([0.5])), run(np.array([1e3]))
+        assert np.array_equal(both[:, 1], alone[:, 0])
+        assert np.array_equal(both[:, 0], saturated[:, 0])
