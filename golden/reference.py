@@ -14,7 +14,8 @@ import dataclasses
 import numpy as np
 
 from .config import SensorConfig
-from .io import check_stimulus
+from .errors import InputError
+from .io import check_frame_shape, check_stimulus
 
 
 @dataclasses.dataclass
@@ -29,6 +30,8 @@ class PixelState:
 
     @classmethod
     def zeros(cls, shape: tuple[int, int]) -> "PixelState":
+        """The power-up state of an H x W array (clock 0, everything cleared)."""
+        shape = check_frame_shape(shape, "pixel state shape")
         return cls(0, np.zeros(shape, np.int64), np.zeros(shape, np.int64),
                    np.zeros(shape, bool), np.zeros(shape, np.int64))
 
@@ -75,6 +78,9 @@ def step_reference(config: SensorConfig, stimulus: np.ndarray,
     config = SensorConfig.required(config, "step_reference")
     check_stimulus(stimulus, config, whole_readouts=False)   # integers (T, H, W) in 0..2^E - 1
     T, H, W = stimulus.shape
+    if state is not None and not (isinstance(state, PixelState) and state.acc.shape == (H, W)):
+        raise InputError(f"state: must be a PixelState of the stimulus's {H} x {W} pixels, not "
+                         + (f"one of {state.acc.shape}" if isinstance(state, PixelState) else type(state).__name__))
     state = PixelState.zeros((H, W)) if state is None else state.copy()
     theta, acc_max = config.threshold, config.acc_max
     F, L = config.clocks_per_tick, config.clocks_per_readout

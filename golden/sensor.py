@@ -320,6 +320,11 @@ def simulate(config: SensorConfig, stimulus: np.ndarray,
     array = PixelArrayModel(config, stimulus.shape[1:])
     words = np.empty((stimulus.shape[0] // config.clocks_per_readout,) + stimulus.shape[1:], np.int64)
     done = 0
+    if chunks is not None:
+        try:
+            chunks = iter(chunks)
+        except TypeError:                                # (an int had been "not iterable")
+            raise InputError(f"chunks {chunks!r}: must be an iterable of (t, H, W) stimulus arrays") from None
     for chunk in (chunks if chunks is not None else iter_chunks(stimulus, config)):
         part = array.feed(np.asarray(chunk))
         words[done:done + len(part)] = part

@@ -86,3 +86,23 @@ def test_the_oracle_refuses_what_the_rule_does_not_define():
                               (np.full((2, 1, 1), 1 << 16), "^stimulus value 65536")):
         with pytest.raises(InputError, match=refusal):
             step_reference(SensorConfig(), stimulus)
+
+
+def test_the_reference_refuses_a_state_chunks_or_shape_it_cannot_step_in_one_line():
+    """A state of other pixels was numpy's broadcast error and a name an AttributeError,
+    ``PixelState.zeros((2, -1))`` numpy's "negative dimensions", and ``simulate(..., chunks=5)``
+    Python's "not iterable"."""
+    from tespike.golden.errors import InputError
+    from tespike.golden.reference import PixelState, step_reference
+    from tespike.golden.sensor import simulate
+    config = SensorConfig()
+    stimulus = np.zeros((config.clocks_per_readout, 2, 2), np.uint16)
+    with pytest.raises(InputError, match=r"^state: must be a PixelState of the stimulus's 2 x 2 pixels, not one of \(3, 3\)$"):
+        step_reference(config, stimulus, PixelState.zeros((3, 3)))
+    with pytest.raises(InputError, match=r"^state: must be a PixelState of the stimulus's 2 x 2 pixels, not dict$"):
+        step_reference(config, stimulus, {})
+    for shape in ((2, -1), (2, 2.5), 3):
+        with pytest.raises(InputError, match="^pixel state shape "):
+            PixelState.zeros(shape)
+    with pytest.raises(InputError, match=r"^chunks 5: must be an iterable of \(t, H, W\) stimulus arrays$"):
+        simulate(config, stimulus, chunks=5)
