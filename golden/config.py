@@ -50,6 +50,8 @@ def parse_json(text: str | bytes, what: str, error: type = ConfigError, keys: st
     """A user's JSON text -> its value; ``what`` names it in the one line that refuses it: not JSON,
     a key given twice (named as ``keys`` KEY, by default "``what``: key" KEY), nesting too deep for
     the parser (a RecursionError) or an integer too long to convert (Python's digit limit)."""
+    if not isinstance(text, (str, bytes, bytearray)):    # (json's TypeError named no input)
+        raise error(f"{what}: JSON must be text, not {type(text).__name__}")
     try:
         return json.loads(text, object_pairs_hook=unique_keys(keys or f"{what}: key"))
     except json.JSONDecodeError as exc:
@@ -188,7 +190,7 @@ class SensorConfig:
     def preset(cls, name: str) -> "SensorConfig":
         """A named preset: ``"te"`` (paper: b1 = b2 = 4), ``"ml"`` (8-bit count) or
         ``"ml-msb"`` (8-bit counter, most-significant-bit readout: the paper's eq. 10)."""
-        if name not in PRESETS:
+        if not isinstance(name, str) or name not in PRESETS:
             raise ConfigError(f"unknown preset {name!r}: must be one of "
                               + ", ".join(f'"{p}"' for p in PRESETS))
         return cls(**PRESETS[name])
@@ -225,6 +227,7 @@ class SensorConfig:
     def key_differences(self, other: "SensorConfig") -> list[tuple[str, Any, Any]]:
         """``(key, this value, other's value)`` of every key (SPEC order) where ``other`` differs;
         empty where they are equal."""
+        other = SensorConfig.required(other, "key_differences")
         return [(key, getattr(self, key), getattr(other, key)) for key in KEYS
                 if getattr(self, key) != getattr(other, key)]
 

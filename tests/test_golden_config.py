@@ -227,3 +227,15 @@ def test_a_metrics_peak_of_true_is_refused():
     from tespike.recon.metrics import psnr_mu
     with pytest.raises(ValueError, match=r"^peak = True: must be a finite number > 0$"):
         psnr_mu(np.ones((1, 4, 4)), np.ones((1, 4, 4)), peak=True)
+
+
+def test_a_configuration_method_refuses_what_is_no_text_name_or_configuration_in_one_line():
+    """``from_json(3)`` was json's TypeError naming no input, ``preset(['te'])`` an "unhashable type",
+    and ``key_differences('ml')`` an AttributeError of the first key."""
+    with pytest.raises(ConfigError, match="^configuration: JSON must be text, not int$"):
+        SensorConfig.from_json(3)
+    with pytest.raises(ConfigError, match=r"^unknown preset \['te'\]: must be one of"):
+        SensorConfig.preset(["te"])
+    for call in (lambda: SensorConfig().key_differences("ml"), lambda: SensorConfig().differences_text("ml", "a", "b")):
+        with pytest.raises(ConfigError, match="^key_differences: configuration must be a SensorConfig"):
+            call()
