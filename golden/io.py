@@ -205,6 +205,9 @@ def scan_light(light: np.ndarray, what: str = "scene") -> None:
     dtype (nothing converted: two reductions, no temporary; a NaN anywhere makes
     the minimum NaN). The values are those float64 would hold, so the message
     is the one :func:`check_scene` gives after converting."""
+    light = np.asarray(light)                            # (a list had been an AttributeError)
+    if light.dtype.kind not in "fiu":
+        raise InputError(f"{what}: dtype {light.dtype} is not real numbers")
     if not light.size:
         return
     low, high = light.min(), light.max()
@@ -233,6 +236,9 @@ def load_scene(path: str | Path, *, memory_map: bool = False, what: str | None =
     ``what`` names the file in refusals (default "scene": ``tespike score`` says "reference").
     """
     name = "scene" if what is None else what
+    for flag, value in (("memory_map", memory_map), ("scan_values", scan_values)):
+        if not isinstance(value, bool):                  # ('no' had been a memory map)
+            raise InputError(f"load_scene {flag} = {value!r}: must be True or False")
     scene = load_npy(path, name, mmap_mode="r")
     name = scene_name(path, what)                                   # values refused naming the file
     scene = check_scene(scene, scan_values=False, what=name)
@@ -508,6 +514,8 @@ def config_member(value: np.ndarray, what: str) -> SensorConfig:
 
 def images_array(shape: tuple[int, int, int], out: np.ndarray | None = None) -> np.ndarray:
     """The float32 (K, H, W) array of an ``R.npy`` a reconstruction fills: ``out`` checked, or a new one."""
+    if not (isinstance(shape, tuple) and len(shape) == 3 and all(is_count(n) for n in shape)):
+        raise InputError(f"images shape {shape!r}: must be (K, H, W), three integers >= 0")
     if out is None:
         return np.empty(shape, np.float32)
     if out.shape != tuple(shape) or out.dtype != np.float32:
@@ -516,10 +524,17 @@ def images_array(shape: tuple[int, int, int], out: np.ndarray | None = None) -> 
 
 
 def save_images(path: str | Path, images: np.ndarray) -> None:
-    """Write ``R.npy``: float32 (K, H, W) reconstructed light, atomically."""
-    images = np.asarray(images, dtype=np.float32)
+    """Write ``R.npy``: float32 (K, H, W) reconstructed light, atomically; light that is no finite,
+    real number >= 0 within float32's range is refused (NaN, negative and complex light had been
+    written, and 1e39 as infinity)."""
+    images = np.asarray(images)
     if images.ndim != 3:
         raise InputError(f"image array shape {images.shape} must be (K, H, W)")
+    scan_light(images, "reconstructed images")
+    if images.size and float(images.max()) > float(np.finfo(np.float32).max):
+        raise InputError(f"reconstructed images hold light ({float(images.max()):.6g}) beyond the range of "
+                         "R.npy's float32")
+    images = images.astype(np.float32, copy=False)
     with atomic_output(path) as tmp:
         with open(tmp, "wb") as handle:
             np.save(handle, images)

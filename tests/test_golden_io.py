@@ -1,5 +1,7 @@
 """tespike.golden.io: the stimulus reader is memory-mapped and checks every slice."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -298,3 +300,32 @@ def test_load_stimulus_refuses_a_preset_name_in_one_line(tmp_path):
     np.save(path, np.zeros((240, 1, 1), np.uint16))
     with pytest.raises(ConfigError, match="^load_stimulus: configuration must be a SensorConfig"):
         load_stimulus(path, "te")
+
+
+@pytest.mark.parametrize("images, words", [
+    (np.full((1, 2, 2), np.nan), "reconstructed images holds a non-finite light value (nan); light must be finite"),
+    (-np.ones((1, 2, 2)), "reconstructed images holds a negative light value (-1.0); light must be >= 0"),
+    (np.full((1, 2, 2), 1 + 5j), "reconstructed images: dtype complex128 is not real numbers"),
+    (np.full((1, 2, 2), 1e39), "reconstructed images hold light (1e+39) beyond the range of R.npy's float32"),
+], ids=["nan", "negative", "complex", "past-float32"])
+def test_save_images_refuses_light_that_is_none_and_writes_nothing(tmp_path, images, words):
+    """NaN, negative and complex light had been written (the imaginary part dropped with a warning),
+    and 1e39 as infinity."""
+    from tespike.golden.io import save_images
+    with pytest.raises(InputError, match="^" + re.escape(words) + "$"):
+        save_images(tmp_path / "R.npy", images)
+    assert not list(tmp_path.iterdir())
+
+
+def test_the_images_shape_scan_and_scene_flags_are_checked_in_one_line(tmp_path):
+    """``images_array((1, -2, 2))`` was numpy's "negative dimensions", ``scan_light`` of a list an
+    AttributeError, and ``load_scene(p, memory_map='no')`` a memory map."""
+    from tespike.golden.io import images_array, scan_light
+    with pytest.raises(InputError, match=r"^images shape \(1, -2, 2\): must be \(K, H, W\), three integers >= 0$"):
+        images_array((1, -2, 2))
+    with pytest.raises(InputError, match=r"^scene holds a negative light value \(-1.0\)"):
+        scan_light([1.0, -1.0])
+    path = tmp_path / "I.npy"
+    np.save(path, np.ones((1, 2, 2), np.float32))
+    with pytest.raises(InputError, match="^load_scene memory_map = 'no': must be True or False$"):
+        load_scene(path, memory_map="no")
