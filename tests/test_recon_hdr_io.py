@@ -301,3 +301,26 @@ def test_a_path_that_is_no_path_is_refused_in_one_line():
     for call, what in ((load_panorama, "panorama"), (load_hdr_sequence, "HDR sequence folder"), (hdr_sources, "--hdr")):
         with pytest.raises(InputError, match=f"^{what}: a path must be a str or an os.PathLike, not int$"):
             call(3)
+
+
+def test_the_hdr_writers_and_readers_refuse_what_is_no_light_or_path_in_one_line(tmp_path):
+    """write_exr wrote NaN, negative light and 1e300 (as infinity), and an empty frame was OpenEXR's
+    RuntimeError naming the temporary; write_hdr dropped a complex image's imaginary part; read_hdr(None)
+    said it could not read 'None'; sequence_size([]) and rgbe_to_float of (2, 3) were IndexErrors."""
+    from tespike.recon.scenes.hdr_io import read_exr, read_hdr, rgbe_to_float, sequence_size, write_exr, write_hdr
+    for image in (np.full((2, 2, 3), np.nan), -np.ones((2, 2, 3)), np.full((2, 2, 3), 1e300)):
+        with pytest.raises(InputError, match="^write_exr needs finite, non-negative values within float32's range$"):
+            write_exr(tmp_path / "e.exr", image)
+    with pytest.raises(InputError, match=r"^write_exr needs an \(H, W, 3\) or \(H, W\) image of at least 1 x 1"):
+        write_exr(tmp_path / "e.exr", np.ones((0, 2, 3)))
+    for write, name in ((write_hdr, "write_hdr"), (write_exr, "write_exr")):
+        with pytest.raises(InputError, match=f"^{name}: image dtype complex128 is not real numbers$"):
+            write(tmp_path / "c.hdr", np.full((2, 2, 3), 1 + 5j))
+    assert not list(tmp_path.iterdir())
+    for read, name in ((read_hdr, "HDR file"), (read_exr, "EXR file")):
+        with pytest.raises(InputError, match=f"^{name}: a path must be a str or an os.PathLike, not NoneType$"):
+            read(None)
+    with pytest.raises(InputError, match="^the sequence has no frames$"):
+        sequence_size([], "the sequence")
+    with pytest.raises(InputError, match=r"^RGBE pixels must be uint8 \(\.\.\., 4\), not uint8 \(2, 3\)$"):
+        rgbe_to_float(np.ones((2, 3), np.uint8))

@@ -31,7 +31,7 @@ import numpy as np
 
 from tespike.golden.errors import InputError, is_count, one_line
 from tespike.golden.io import atomic_output, check_frame_shape
-from tespike.golden.paths import check_input_file
+from tespike.golden.paths import check_input_file, path_text
 
 from .color import DEFAULT_WEIGHTS, check_weights, normalise_sequence, to_gray
 
@@ -44,7 +44,9 @@ _RESOLUTION = re.compile(rb"^([+-])([XY]) (\d+) ([+-])([XY]) (\d+)$")
 # ---------------------------------------------------------------- RGBE codec
 def rgbe_to_float(rgbe: np.ndarray) -> np.ndarray:
     """uint8 ``(..., 4)`` RGBE pixels -> float32 ``(..., 3)`` linear RGB."""
-    rgbe = np.asarray(rgbe, dtype=np.uint8)
+    rgbe = np.asarray(rgbe)
+    if rgbe.dtype != np.uint8 or rgbe.shape[-1:] != (4,):    # (another shape had been an IndexError)
+        raise InputError(f"RGBE pixels must be uint8 (..., 4), not {rgbe.dtype} {rgbe.shape}")
     exponent = rgbe[..., 3].astype(np.int32)
     scale = np.where(exponent > 0, np.ldexp(1.0, exponent - 136), 0.0)
     return (rgbe[..., :3].astype(np.float64) * scale[..., None]).astype(np.float32)
@@ -176,7 +178,7 @@ def _decode_scanline(data: bytes, pos: int, width: int, path: str, row: int) -> 
 
 def read_hdr(path: str | Path) -> np.ndarray:
     """Read a Radiance RGBE file -> float32 (H, W, 3) linear RGB, top row first."""
-    path = str(path)
+    path = path_text(path, "HDR file")                # (None had been "cannot read HDR file 'None'")
     try:
         data = Path(path).read_bytes()
     except OSError as exc:
@@ -251,13 +253,22 @@ def _rle_encode(plane: np.ndarray) -> bytes:
     return bytes(out)
 
 
+def _image_to_write(image, what: str) -> np.ndarray:
+    """``image`` as float64 for a writer named ``what``: real numbers only (a complex image had lost
+    its imaginary part with a warning, text was numpy's conversion error)."""
+    image = np.asarray(image)
+    if image.dtype.kind not in "fiu":
+        raise InputError(f"{what}: image dtype {image.dtype} is not real numbers")
+    return image.astype(np.float64, copy=False)
+
+
 def write_hdr(path: str | Path, image: np.ndarray, *, rle: bool = True) -> None:
     """Write float (H, W, 3) RGB or (H, W) gray as a Radiance RGBE file, atomically.
 
     ``rle`` selects new-style run-length encoding (used whenever the width
     allows it, 8..32767) or flat scanlines.
     """
-    image = np.asarray(image, dtype=np.float64)
+    image = _image_to_write(image, "write_hdr")
     if image.ndim == 2:
         image = np.repeat(image[..., None], 3, axis=-1)
     if image.ndim != 3 or image.shape[-1] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
@@ -397,7 +408,7 @@ def _exr_tail(data) -> int:
 
 def read_exr(path: str | Path) -> np.ndarray:
     """Read an OpenEXR file -> float32 (H, W, 3) RGB or (H, W) for a luminance-only 'Y' file."""
-    path = str(path)
+    path = path_text(path, "EXR file")
     channels = _exr_contents(path)
     extra = _exr_bytes_after(path)
     if extra:
@@ -414,10 +425,18 @@ def read_exr(path: str | Path) -> np.ndarray:
 
 
 def write_exr(path: str | Path, image: np.ndarray) -> None:
-    """Write float32 (H, W, 3) RGB or (H, W) as 'Y' to an OpenEXR file, atomically (tests, examples)."""
+    """Write float32 (H, W, 3) RGB or (H, W) as 'Y' to an OpenEXR file, atomically (tests, examples);
+    light that is no finite number >= 0 within float32's range is refused, as :func:`write_hdr` refuses
+    what RGBE cannot hold (NaN, negative light and 1e300, written as infinity, had been written)."""
     import OpenEXR
 
-    image = np.ascontiguousarray(np.asarray(image, dtype=np.float32))
+    image = _image_to_write(image, "write_exr")
+    if image.size and (not np.isfinite(image).all() or image.min() < 0
+                       or image.max() > float(np.finfo(np.float32).max)):
+        raise InputError("write_exr needs finite, non-negative values within float32's range")
+    if image.ndim not in (2, 3) or min(image.shape[:2], default=0) < 1:
+        raise InputError(f"write_exr needs an (H, W, 3) or (H, W) image of at least 1 x 1, not shape {image.shape}")
+    image = np.ascontiguousarray(image, dtype=np.float32)
     if image.ndim == 3 and image.shape[-1] == 3:
         channels = {"RGB": image}
     elif image.ndim == 2:
@@ -478,6 +497,8 @@ def frame_size(path: str | Path) -> tuple[int, int]:
 def sequence_size(paths: list, what: str) -> tuple[int, int]:
     """(H, W) of every frame of a sequence (``what`` names it), from the frames' headers alone:
     a frame of another size is refused naming both, before any frame is decoded."""
+    if not paths:                                     # (an IndexError)
+        raise InputError(f"{what} has no frames")
     first = frame_size(paths[0])
     for path in paths[1:]:
         size = frame_size(path)
