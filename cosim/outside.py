@@ -31,7 +31,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError, TespikeError
+from tespike.golden.errors import InputError, TespikeError, is_count
 
 from . import children
 
@@ -61,20 +61,32 @@ class SimulatorRunError(OutsideSimulatorError):
 # -- the SPEC ports ----------------------------------------------------------------
 def words_per_row(pixels: int, bits: int) -> int:
     """32-bit words holding one flat port of ``pixels * bits`` bits."""
+    _check_bits(bits, "words_per_row")
+    if not is_count(pixels):                           # (-1 had needed 0 words)
+        raise InputError(f"words_per_row: pixels {pixels!r} must be an integer >= 0")
     return (pixels * bits + 31) // 32
+
+
+def _check_bits(bits, what: str) -> None:
+    if not (is_count(bits, 1) and bits <= 32):
+        raise InputError(f"{what} handles 1..32 bits per value, not {bits!r}")
 
 
 def pack_rows(values: np.ndarray, bits: int) -> np.ndarray:
     """(T, N) unsigned values of ``bits`` bits -> (T, words_per_row) uint32, pixel i at bits [i*bits +: bits].
 
-    Values must already be checked to fit ``bits`` (the caller has run
-    ``check_stimulus``); bits above ``N * bits`` in the last word are zero.
+    Values are integers of ``0 .. 2^bits - 1`` (refused in one line otherwise: -1 and 64 had been
+    wrapped into the field, a float truncated); bits above ``N * bits`` in the last word are zero.
     """
     values = np.asarray(values)
     if values.ndim != 2:
-        raise ValueError(f"pack_rows wants (T, N), got shape {values.shape}")
-    if not 1 <= bits <= 32:
-        raise ValueError(f"pack_rows handles 1..32 bits per value, not {bits}")
+        raise InputError(f"pack_rows wants (T, N), got shape {values.shape}")
+    _check_bits(bits, "pack_rows")
+    if values.dtype.kind not in "iu":
+        raise InputError(f"pack_rows packs integers, not {values.dtype} values")
+    if values.size and (int(values.min()) < 0 or int(values.max()) >= 1 << bits):
+        bad = int(values.min()) if int(values.min()) < 0 else int(values.max())
+        raise InputError(f"pack_rows: value {bad} does not fit {bits} bits (0..{(1 << bits) - 1})")
     T, N = values.shape
     nw = words_per_row(N, bits)
     out = np.empty((T, nw), np.uint32)
@@ -91,11 +103,13 @@ def pack_rows(values: np.ndarray, bits: int) -> np.ndarray:
 
 def unpack_rows(words: np.ndarray, pixels: int, bits: int) -> np.ndarray:
     """Inverse of :func:`pack_rows`: (K, words_per_row) uint32 -> (K, pixels) int64."""
+    _check_bits(bits, "unpack_rows")
+    words = np.asarray(words)
+    if words.dtype.kind not in "iu":
+        raise InputError(f"unpack_rows reads integer words, not {words.dtype}")
     words = np.ascontiguousarray(words, dtype="<u4")
     if words.ndim != 2 or words.shape[1] != words_per_row(pixels, bits):
-        raise ValueError(f"unpack_rows wants (K, {words_per_row(pixels, bits)}) words, got {words.shape}")
-    if not 1 <= bits <= 32:
-        raise ValueError(f"unpack_rows handles 1..32 bits per value, not {bits}")
+        raise InputError(f"unpack_rows wants (K, {words_per_row(pixels, bits)}) words, got {words.shape}")
     K = words.shape[0]
     bitplanes = np.unpackbits(words.view(np.uint8).reshape(K, 4 * words.shape[1]), axis=1,
                               bitorder="little")
@@ -118,10 +132,21 @@ def hex_to_rows(lines: Sequence[str], bits: int) -> np.ndarray:
     """Hex strings (as ``$fwrite("%h")`` prints a ``bits``-wide vector) -> (K, nw) uint32 rows."""
     nw = (bits + 31) // 32
     rows = np.zeros((len(lines), nw), np.uint32)
+    _check_bits_wide(bits)
     for i, line in enumerate(lines):
-        raw = bytes.fromhex(line.rjust(nw * 8, "0"))
+        try:
+            raw = bytes.fromhex(line.rjust(nw * 8, "0"))
+            if len(raw) != 4 * nw:
+                raise ValueError
+        except (TypeError, ValueError):
+            raise InputError(f"line {i + 1} {str(line)[:40]!r} is no {bits}-bit hex value") from None
         rows[i] = np.frombuffer(raw, ">u4")[::-1]
     return rows
+
+
+def _check_bits_wide(bits) -> None:
+    if not is_count(bits, 1):
+        raise InputError(f"hex_to_rows: bits {bits!r} must be an integer >= 1")
 
 
 def check_captures(clocks: np.ndarray, config: SensorConfig, readouts: int, what: str) -> int:
@@ -132,6 +157,7 @@ def check_captures(clocks: np.ndarray, config: SensorConfig, readouts: int, what
     clocks past the stimulus). There must be exactly ``readouts`` of them, one
     per readout interval, all with the same latency in 0..L. Returns that latency.
     """
+    config = SensorConfig.required(config, "check_captures")
     L = config.clocks_per_readout
     clocks = np.asarray(clocks, np.int64)
     if len(clocks) != readouts:

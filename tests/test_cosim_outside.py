@@ -109,3 +109,24 @@ def test_every_harness_names_spec_sections_tops():
         config = SensorConfig(mode=mode)
         assert Top(config, 2, 2).module == top
         assert Top(config, 2, 2, lanes=1).module == top + "_stream"
+
+
+def test_the_row_packers_refuse_values_bits_and_hex_they_cannot_hold_in_one_line():
+    """pack_rows wrapped -1 and 64 into a 5-bit field ([[64, -1]] came back [[0, 31]]) and truncated
+    floats; bad bits, counts and hex were plain ValueErrors or wrong sizes."""
+    from tespike.golden.errors import InputError
+    with pytest.raises(InputError, match=r"^pack_rows: value -1 does not fit 5 bits \(0\.\.31\)$"):
+        pack_rows(np.array([[64, -1]]), 5)
+    with pytest.raises(InputError, match=r"^pack_rows: value 64 does not fit 5 bits \(0\.\.31\)$"):
+        pack_rows(np.array([[64, 1]]), 5)
+    with pytest.raises(InputError, match="^pack_rows packs integers, not float64 values$"):
+        pack_rows(np.array([[1.5, 2.0]]), 5)
+    for bits in (0, 33, 2.5):
+        with pytest.raises(InputError, match=f"^pack_rows handles 1..32 bits per value, not {bits!r}$"):
+            pack_rows(np.zeros((1, 2), np.int64), bits)
+        with pytest.raises(InputError, match=f"^unpack_rows handles 1..32 bits per value, not {bits!r}$"):
+            unpack_rows(np.zeros((1, 1), np.uint32), 2, bits)
+    with pytest.raises(InputError, match="^words_per_row: pixels -1 must be an integer >= 0$"):
+        words_per_row(-1, 5)
+    with pytest.raises(InputError, match="^line 1 'zz' is no 5-bit hex value$"):
+        hex_to_rows(["zz"], 5)

@@ -57,7 +57,7 @@ def _captures(config, H, W, N, K, delay=0, first_on=None):
         for j in range(B):
             clocks.append((k + 1) * L + 1 + j + (delay if j == B - 1 else 0))
             firsts.append(j == 0 if first_on is None else j == first_on)
-    rows = pack_rows(np.arange(K * B * N).reshape(K * B, N) % 16, config.word_bits)
+    rows = pack_rows(np.arange(K * B * N).reshape(K * B, N) % (1 << config.word_bits), config.word_bits)
     return clocks, firsts, rows
 
 
