@@ -40,7 +40,7 @@ from .benchbus import ARRAY_SCOPE, CLOCK_PERIOD_S, frame_rows, iter_packed_charg
 from .outside import RESET_CLOCKS
 from .stream_ports import check_beats
 from .tops import RunPlan, prepare
-from .vcd import dump_path, write_gtkw
+from .vcd import dump_path, write_gtkw_to
 
 
 class RTLProtocolError(RuntimeError):
@@ -333,4 +333,5 @@ def _run_with_vcd(sim, config, vcd_path, gtkw_path) -> None:
                 exc.filename = vcd_tmp
             raise
         if gtkw_tmp is not None:
-            write_gtkw(gtkw_tmp, vcd_tmp, config, dumpfile=dump_path(vcd_path, gtkw_path))
+            with open(gtkw_tmp, "w") as handle:
+                write_gtkw_to(handle, vcd_tmp, config, dumpfile=dump_path(vcd_path, gtkw_path))

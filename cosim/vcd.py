@@ -26,7 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.atomic import atomic_output
+from tespike.golden.errors import InputError, is_count
+from tespike.golden.io import check_frame_shape
 from tespike.golden.paths import check_input_file
 
 from . import benchbus
@@ -72,10 +74,19 @@ def vcd_reader():
 
 def _load(path, names):
     VCDVCD = vcd_reader()
-    try:
-        return VCDVCD(str(path), signals=list(names), store_tvs=True)
-    except FileNotFoundError:
-        raise InputError(f"waveform file {str(path)!r} does not exist") from None
+    return VCDVCD(str(waveform_file(path)), signals=list(names), store_tvs=True)
+
+
+def waveform_file(path) -> Path:
+    """``path``, a readable regular file, refused in one line otherwise (a folder had been an
+    IsADirectoryError, None a FileNotFoundError of 'None')."""
+    return check_input_file(path, "waveform")
+
+
+def _check_readout(readout) -> int:
+    if not is_count(readout):                           # (-1 or 2.5 had drawn a view of nothing)
+        raise InputError(f"readout {readout!r}: must be an integer >= 0")
+    return readout
 
 
 def _signal(vcd, path, name):
@@ -110,7 +121,8 @@ def rising_edges(signal) -> np.ndarray:
 
 def waveform_words(vcd_path, config: SensorConfig, shape: tuple[int, int]) -> Waveform:
     """Rebuild the readout stream of an ``rtl_words(..., vcd_path=...)`` run from its VCD."""
-    H, W = shape
+    config = SensorConfig.required(config, "waveform_words")
+    H, W = check_frame_shape(shape, "waveform shape")
     names = {key: f"{BENCH_SCOPE}.tb_{key}" for key in ("clk", "rst", "frame_valid", "frame")}
     vcd = _load(vcd_path, names.values())
     sig = {key: _signal(vcd, vcd_path, name) for key, name in names.items()}
@@ -147,7 +159,7 @@ PIXEL_SIGNALS = ("charge", "acc", "spike", "sfc", "ovf", "m", "count", "last", "
 def _var_sizes(vcd_path) -> dict[str, int]:
     """Every variable of the VCD header: full name -> width (vcdvcd drops ``[n:0]``)."""
     VCDVCD = vcd_reader()
-    header = VCDVCD(str(vcd_path), only_sigs=True)
+    header = VCDVCD(str(waveform_file(vcd_path)), only_sigs=True)
     return {ref: int(header.data[code].size) for ref, code in header.references_to_ids.items()}
 
 
@@ -198,6 +210,8 @@ def gtkw_view(vcd_path, config: SensorConfig, readout: int = 0) -> tuple[int, in
     the interval's last clock, t = readout * L + L - 1.
     """
     import math
+    config = SensorConfig.required(config, "gtkw_view")
+    _check_readout(readout)
     names = [f"{BENCH_SCOPE}.tb_clk", f"{BENCH_SCOPE}.tb_rst"]
     vcd = _load(vcd_path, names)
     edges = rising_edges(_signal(vcd, vcd_path, names[0]))
@@ -229,11 +243,22 @@ def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, *, dumpfile=None,
     ``readout`` (:func:`gtkw_view`: one interval wide, marker on its last clock).
     Returns the trace names written. ``dumpfile`` is the VCD path recorded in
     the save file (default: :func:`dump_path`, ``vcd_path`` relative to the save file).
+    Written atomically (:func:`tespike.golden.atomic.atomic_output`: a folder, a missing
+    folder or a full disk is one line, and no half-written file is left).
     """
+    dumpfile = dumpfile if dumpfile is not None else dump_path(vcd_path, gtkw_path)
+    with atomic_output(gtkw_path, "GTKWave save file") as tmp, open(tmp, "w") as handle:
+        return write_gtkw_to(handle, vcd_path, config, dumpfile=dumpfile, readout=readout)
+
+
+def write_gtkw_to(handle, vcd_path, config: SensorConfig, *, dumpfile, readout: int = 0) -> list[str]:
+    """:func:`write_gtkw` into an open text ``handle`` (a caller that holds its own temporary:
+    :func:`tespike.cosim.rtlsim.rtl_run` commits the save file with its waveform)."""
     from vcd.gtkw import GTKWSave
 
     config = SensorConfig.required(config, "write_gtkw")
-    check_input_file(vcd_path, "waveform")           # (a missing one had been a FileNotFoundError traceback)
+    waveform_file(vcd_path)                          # (a missing one had been a FileNotFoundError traceback)
+    _check_readout(readout)
     sizes = _var_sizes(vcd_path)
     start, marker, zoom = gtkw_view(vcd_path, config, readout)
 
@@ -257,22 +282,21 @@ def write_gtkw(gtkw_path, vcd_path, config: SensorConfig, *, dumpfile=None,
     groups["output"] = [f"{BENCH_SCOPE}.tb_{k}" for k in ("frame_valid", "frame")]
 
     written = []
-    with open(gtkw_path, "w") as handle:
-        save = GTKWSave(handle)
-        save.dumpfile(str(dumpfile if dumpfile is not None else dump_path(vcd_path, gtkw_path)), abspath=False)
-        save.size(*GTKW_WINDOW)
-        save.timestart(start)
-        save.treeopen(ARRAY_SCOPE)
-        save.zoom_markers(zoom, marker)
-        for group, traces in groups.items():
-            with save.group(group, closed=False):
-                for name in traces:
-                    if name not in sizes:
-                        continue
-                    size = sizes[name]
-                    full = name + (f"[{size - 1}:0]" if size > 1 else "")
-                    save.trace(full, datafmt="dec" if size > 1 else "hex")
-                    written.append(full)
+    save = GTKWSave(handle)
+    save.dumpfile(str(dumpfile), abspath=False)
+    save.size(*GTKW_WINDOW)
+    save.timestart(start)
+    save.treeopen(ARRAY_SCOPE)
+    save.zoom_markers(zoom, marker)
+    for group, traces in groups.items():
+        with save.group(group, closed=False):
+            for name in traces:
+                if name not in sizes:
+                    continue
+                size = sizes[name]
+                full = name + (f"[{size - 1}:0]" if size > 1 else "")
+                save.trace(full, datafmt="dec" if size > 1 else "hex")
+                written.append(full)
     return written
 
 
@@ -284,6 +308,8 @@ def bit_toggles(vcd_path, suffixes: tuple[str, ...]) -> dict[str, int]:
     The golden model's :func:`tespike.golden.toggles.count_toggles` is checked against this.
     """
     VCDVCD = vcd_reader()
+    if isinstance(suffixes, str) or not all(isinstance(s, str) for s in suffixes):
+        raise InputError(f"suffixes {suffixes!r}: must be a sequence of signal names (strings)")
     sizes = _var_sizes(vcd_path)
     names = [name for name in sizes if any(name.endswith("." + s) for s in suffixes)]
     if not names:

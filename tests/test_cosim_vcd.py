@@ -171,3 +171,33 @@ def test_reading_a_waveform_leaves_sigpipe_as_it_was():
                             "print(signal.getsignal(signal.SIGPIPE) == signal.SIG_DFL)"],
                            capture_output=True, text=True, timeout=60)
     assert plain.stdout.strip() == "True"                       # (the premise: vcdvcd alone changes it)
+
+
+def test_the_waveform_readers_and_writer_refuse_what_they_cannot_use_in_one_line(tmp_path):
+    """A folder was an IsADirectoryError and None a FileNotFoundError of 'None'; a preset's name, a
+    shape that is none and a readout of -1 or 'x' were tracebacks or a view of nothing; write_gtkw into
+    a folder was an IsADirectoryError and could leave a half-written file (it is atomic now)."""
+    from tespike.cosim.vcd import bit_toggles, gtkw_view
+    config = SensorConfig()
+    vcd = tmp_path / "w.vcd"
+    rtl_run(config, np.zeros((config.clocks_per_readout, 1, 2), np.uint16), vcd_path=vcd)
+    for call in (lambda p: bit_toggles(p, ("acc",)), lambda p: waveform_words(p, config, (1, 2)),
+                 lambda p: gtkw_view(p, config)):
+        with pytest.raises(InputError, match=f"^waveform file '{tmp_path}' is a directory, not a regular file$"):
+            call(tmp_path)
+        with pytest.raises(InputError, match="^waveform: a path must be a str or an os.PathLike, not NoneType$"):
+            call(None)
+    with pytest.raises(InputError, match="^suffixes 'acc': must be a sequence of signal names"):
+        bit_toggles(vcd, "acc")
+    for shape in (3, (-1, -2), (0.5, 4)):
+        with pytest.raises(InputError, match="^waveform shape "):
+            waveform_words(vcd, config, shape)
+    for readout in (-1, 2.5, "x"):
+        with pytest.raises(InputError, match=f"^readout {readout!r}: must be an integer >= 0$"):
+            gtkw_view(vcd, config, readout)
+        with pytest.raises(InputError, match=f"^readout {readout!r}: must be an integer >= 0$"):
+            write_gtkw(tmp_path / "w.gtkw", vcd, config, readout=readout)
+    with pytest.raises(InputError, match=f"^cannot write GTKWave save file '{tmp_path}': it is a directory"):
+        write_gtkw(tmp_path, vcd, config)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["w.vcd"]
+    assert write_gtkw(tmp_path / "w.gtkw", vcd, config)
