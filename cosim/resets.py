@@ -41,7 +41,7 @@ import dataclasses
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_count
 from tespike.golden.beats import beat_count
 
 from .outside import SimulatorRunError, unpack_rows
@@ -256,6 +256,12 @@ def reset_sweep(config: SensorConfig, rng: np.random.Generator, *, beats: int = 
     stimulus's must be).
     """
     config = SensorConfig.required(config, "reset_sweep")
+    if not isinstance(rng, np.random.Generator):          # (a seed had been an AttributeError)
+        raise InputError(f"reset_sweep rng: must be a numpy Generator (numpy.random.default_rng(seed)), "
+                         f"not {type(rng).__name__}")
+    for name, value, least in (("beats", beats, 1), ("tail_readouts", tail_readouts, 0)):
+        if not is_count(value, least):                   # (-1 tail readouts: a vector of no whole interval)
+            raise InputError(f"reset_sweep {name} = {value!r}: must be an integer >= {least}")
     L = config.clocks_per_readout
     vector = []
     for offset in rng.permutation(max(2 * L + 2, L + beats + 3)):

@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import ConfigError
+from tespike.golden.errors import ConfigError, InputError, is_count
 from tespike.golden.io import atomic_output
 from tespike.golden.beats import check_lanes
 
@@ -148,7 +148,11 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
     T, H, W = stimulus.shape
     L = config.clocks_per_readout
     if gtkw_path is not None and vcd_path is None:
-        raise ValueError("a GTKWave save file (gtkw_path) needs a waveform (vcd_path)")
+        raise InputError("a GTKWave save file (gtkw_path) needs a waveform (vcd_path)")
+    check_run_flags(progress, flat)
+    bus = H * W * config.input_bits
+    if not (is_count(reset_charge) and reset_charge < 1 << bus):     # (2.5 had been Amaranth's TypeError)
+        raise InputError(f"reset_charge {reset_charge!r}: must be an integer in 0 .. 2^{bus} - 1 (the charge bus)")
     bench = _bench(build_array(config, H, W, flat=flat))
     frames: list[int] = []
     edges: list[int] = []
@@ -174,6 +178,15 @@ def rtl_run(config: SensorConfig, stimulus: np.ndarray, *, vcd_path=None, gtkw_p
     words = unpack_frames(frames, H * W, config.word_bits).reshape(K, H, W)
     latency = edges[0] - (L - 1) if edges else None
     return RtlRun(words, np.asarray(edges, np.int64), latency, *clock)
+
+
+def check_run_flags(progress, flat) -> None:
+    """``progress`` None, True or False and ``flat`` True or False, refused in one line otherwise
+    ('no' had shown a bar, and built the flat array)."""
+    if not (progress is None or isinstance(progress, bool)):
+        raise InputError(f"progress = {progress!r}: must be None (a bar on a terminal), True or False")
+    if not isinstance(flat, bool):
+        raise InputError(f"flat = {flat!r}: must be True or False")
 
 
 def build_stream_array(config: SensorConfig, height: int, width: int, lanes: int, *, flat: bool = False):

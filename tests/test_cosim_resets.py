@@ -282,3 +282,26 @@ def test_the_reset_helpers_and_the_save_file_writer_refuse_in_one_line(tmp_path)
     with pytest.raises(InputError, match="^waveform file .*W.vcd' does not exist$"):
         write_gtkw(tmp_path / "W.gtkw", tmp_path / "W.vcd", SensorConfig())
     assert not list(tmp_path.iterdir())
+
+
+def test_reset_sweep_and_rtl_run_refuse_arguments_that_are_none_in_one_line():
+    """``reset_sweep(config, 0)`` was an AttributeError of ``permutation`` and ``tail_readouts=-1`` a
+    vector of no whole interval; rtl_run's ``reset_charge=2.5`` was Amaranth's TypeError, ``progress='no'``
+    showed a bar and a save file without a waveform was a plain ValueError."""
+    from tespike.cosim.rtlsim import rtl_run
+    config = SensorConfig()
+    for rng in (0, None):
+        with pytest.raises(InputError, match="^reset_sweep rng: must be a numpy Generator"):
+            reset_sweep(config, rng)
+    for options in ({"tail_readouts": -1}, {"tail_readouts": 2.5}, {"beats": 0}):
+        (name, value), = options.items()
+        with pytest.raises(InputError, match=f"^reset_sweep {name} = {value!r}: must be an integer >= "):
+            reset_sweep(config, np.random.default_rng(0), **options)
+    stimulus = np.zeros((config.clocks_per_readout, 1, 2), np.uint16)
+    for charge in (2.5, "x", -1, 1 << 32):
+        with pytest.raises(InputError, match=rf"^reset_charge {charge!r}: must be an integer in 0 \.\. 2\^32 - 1"):
+            rtl_run(config, stimulus, reset_charge=charge)
+    with pytest.raises(InputError, match="^progress = 'no': must be None"):
+        rtl_run(config, stimulus, progress="no")
+    with pytest.raises(InputError, match=r"^a GTKWave save file \(gtkw_path\) needs a waveform \(vcd_path\)$"):
+        rtl_run(config, stimulus, gtkw_path="w.gtkw")
