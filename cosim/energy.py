@@ -38,6 +38,8 @@ import dataclasses
 import numpy as np
 
 from tespike.golden.activity import BLOCKS, Activity
+from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError, is_count, is_positive_number
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,6 +54,19 @@ class EnergyModel:
     node_inputs: float
     flop_internal_inputs: float
     clock_inputs: float
+
+    def __post_init__(self):
+        """Refuse a model that is no physical one in one line (a negative supply had given
+        negative joules, a text one a TypeError at the first figure)."""
+        if not isinstance(self.name, str):
+            raise InputError(f"energy model name {self.name!r}: must be text")
+        for key in ("vdd", "c_input"):
+            if not is_positive_number(getattr(self, key)):
+                raise InputError(f"energy model {key} = {getattr(self, key)!r}: must be a finite number > 0")
+        for key in ("node_inputs", "flop_internal_inputs", "clock_inputs"):
+            value = getattr(self, key)
+            if not (value == 0 or is_positive_number(value)):
+                raise InputError(f"energy model {key} = {value!r}: must be a finite number >= 0")
 
     @property
     def gate_toggle(self) -> float:
@@ -77,6 +92,13 @@ SKY130_HD = EnergyModel(name="CV^2, sky130_fd_sc_hd, 1.8 V", vdd=1.8, c_input=2.
 PARTS = ("data", "logic", "clock")
 
 
+def check_model(model) -> "EnergyModel":
+    if not isinstance(model, EnergyModel):
+        raise InputError(f"energy model {model!r}: must be an EnergyModel (e.g. SKY130_HD), "
+                         f"not {type(model).__name__}")
+    return model
+
+
 def block_energy(toggles, register_bits: int, flops: int, gates: int, clocks: int,
                  model: EnergyModel = SKY130_HD) -> dict[str, np.ndarray]:
     """Energy (J, float64) of one block over ``clocks`` clocks: ``data`` (its register bit
@@ -84,7 +106,14 @@ def block_energy(toggles, register_bits: int, flops: int, gates: int, clocks: in
     register bits), ``clock`` (its synthesised flip-flops, every clock). ``toggles`` may be an
     array (one entry per instance or per case; counts, or their means); the other counts are
     per instance."""
-    toggles = np.asarray(toggles, np.float64)
+    check_model(model)
+    for name, value in (("register_bits", register_bits), ("flops", flops), ("gates", gates), ("clocks", clocks)):
+        if not is_count(value):                          # (-4 bits or 2.5 flops had been figures)
+            raise InputError(f"block_energy {name} = {value!r}: must be an integer >= 0")
+    toggles = np.asarray(toggles)
+    if toggles.dtype.kind not in "fiu" or (toggles.size and not (np.isfinite(toggles).all() and toggles.min() >= 0)):
+        raise InputError("block_energy toggles: must be finite counts >= 0")
+    toggles = toggles.astype(np.float64, copy=False)
     data = toggles * model.flop_toggle
     logic = gates * toggles / register_bits * model.gate_toggle if register_bits else 0.0 * toggles
     clock = np.full_like(toggles, float(flops) * clocks * model.clock_per_flop)
@@ -100,6 +129,10 @@ def block_cells(modules: dict, top: str, config, streaming: bool) -> dict[str, d
     from .activity import module_blocks
     from .synthesis import instance_counts
 
+    config = SensorConfig.required(config, "block_cells")
+    if not isinstance(modules, dict) or top not in modules:
+        raise InputError(f"block_cells: the synthesised modules hold no top {top!r} "
+                         "(synthesize_hierarchy's modules of that top)")
     blocks = module_blocks(config, streaming)
     out = {block: {"flops": 0, "gates": 0} for block in BLOCKS}
     for name, times in instance_counts(modules, top).items():
@@ -117,6 +150,14 @@ def run_energy(activity: Activity, cells: dict[str, dict[str, int]],
                model: EnergyModel = SKY130_HD) -> dict[str, dict[str, float]]:
     """Energy (J) of each block over the run's counted edges: ``data``, ``logic``, ``clock`` and
     ``total``; the output block is its port bit toggles at one logic node each."""
+    check_model(model)
+    if not isinstance(activity, Activity):
+        raise InputError(f"run_energy activity: must be an Activity (tespike.golden.activity.top_activity), "
+                         f"not {type(activity).__name__}")
+    missing = [block for block in BLOCKS if block != "output" and not (
+        isinstance(cells, dict) and isinstance(cells.get(block), dict) and {"flops", "gates"} <= set(cells[block]))]
+    if missing:                                          # (a KeyError of the first block)
+        raise InputError(f"run_energy cells: no flops and gates of block {missing[0]!r} (block_cells' result)")
     totals = activity.per_block()
     bits = activity.register_bits()
     out = {}

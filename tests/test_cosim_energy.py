@@ -86,3 +86,29 @@ def test_gate_level_check_runs_the_synthesised_netlist():
     assert high["pixel"]["measured"] > low["pixel"]["measured"] and high["pixel"]["gates"] > 0
     assert low["timing"]["measured"] == high["timing"]["measured"] > 0       # the timing ignores the light
     assert 0.2 < high["pixel"]["ratio"] < 5
+
+
+def test_the_energy_figures_refuse_counts_and_models_that_are_none_in_one_line():
+    """block_energy(-5, 4, 1, 1, -1) gave negative joules, NaN toggles and 2.5 flops went through, a
+    model's name was an AttributeError, a negative supply made a model, and run_energy of cells
+    without a block was a KeyError."""
+    from tespike.golden.errors import InputError
+    for args, words in (((5, 4, 1, 1, -1), "block_energy clocks = -1"), ((5, -4, 1, 1, 1), "block_energy register_bits = -4"),
+                        ((5, 4, 2.5, 1, 1), "block_energy flops = 2.5")):
+        with pytest.raises(InputError, match=f"^{words}: must be an integer >= 0$"):
+            block_energy(*args)
+    for toggles in (-5, float("nan"), "x"):
+        with pytest.raises(InputError, match="^block_energy toggles: must be finite counts >= 0$"):
+            block_energy(toggles, 4, 1, 1, 1)
+    with pytest.raises(InputError, match="^energy model 'sky130': must be an EnergyModel"):
+        block_energy(5, 4, 1, 1, 1, model="sky130")
+    for vdd in (-1.8, float("nan"), "1.8"):
+        with pytest.raises(InputError, match=f"^energy model vdd = {vdd!r}: must be a finite number > 0$"):
+            EnergyModel("x", vdd, 2e-15, 3, 4, 4)
+    with pytest.raises(InputError, match="^run_energy activity: must be an Activity"):
+        run_energy(None, {})
+    activity = top_activity(SensorConfig(), np.zeros((SensorConfig().clocks_per_readout, 1, 2), np.uint16))
+    with pytest.raises(InputError, match="^run_energy cells: no flops and gates of block "):
+        run_energy(activity, {}, SKY130_HD)
+    with pytest.raises(InputError, match="^block_cells: the synthesised modules hold no top 'top'"):
+        block_cells({}, "top", SensorConfig(), False)
