@@ -35,6 +35,7 @@ import time
 from pathlib import Path
 
 from tespike.golden.atomic import work_folder
+from tespike.golden.errors import InputError
 
 from . import children
 
@@ -47,7 +48,8 @@ DESIGN_FILE = "design.v"
 
 
 class SynthesisError(RuntimeError):
-    """Yosys is missing, failed, or reported what cannot be read as a cost."""
+    """Yosys is missing, failed, or reported what cannot be read as a cost (a tool's failure, not a
+    refusal of the caller's input: the command line says it in one line with its own exit status)."""
 
 
 def parse_stat(json_text: str) -> dict:
@@ -112,6 +114,9 @@ def yosys_run(verilog_text: str, steps: list[str], failure: str, yosys: str = "y
     switching netlists, the register map) starts it. Yields (the folder, the run's wall and CPU
     seconds and peak resident MB) while the folder lives; a missing Yosys or a failed run
     raises :class:`SynthesisError` saying ``failure`` and Yosys's first error line."""
+    if not (isinstance(verilog_text, str) and verilog_text.strip()):   # (None had been pathlib's TypeError)
+        raise InputError(f"Verilog text: must be a non-empty string of Verilog source, not "
+                         f"{'an empty one' if isinstance(verilog_text, str) else type(verilog_text).__name__}")
     missing = yosys_missing(yosys)
     if missing:
         raise SynthesisError(missing)
@@ -124,6 +129,16 @@ def yosys_run(verilog_text: str, steps: list[str], failure: str, yosys: str = "y
             errors = [line for line in output.splitlines() if "ERROR" in line] or output.strip().splitlines()[-1:]
             raise SynthesisError(f"{failure}: {errors[0].strip() if errors else f'exit code {code}'}")
         yield work, run
+
+
+def check_synthesis_request(top, gate_sets) -> None:
+    """A module name Yosys can read (or None where the caller lets the design say) and gate sets of
+    :data:`ABC_GATE_SETS`, refused in one line before Yosys starts."""
+    if top is not None and not (isinstance(top, str) and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", top)):
+        raise InputError(f"top module {top!r}: must be a Verilog module name")
+    if isinstance(gate_sets, str) or not gate_sets or not all(isinstance(g, str) and g in ABC_GATE_SETS
+                                                                for g in gate_sets):
+        raise InputError(f"gate sets {gate_sets!r}: must be a sequence of {', '.join(ABC_GATE_SETS)}")
 
 
 def mapping_steps(gate_sets: tuple[str, ...]) -> list[str]:
@@ -140,6 +155,9 @@ def synthesize_module(verilog_text: str, top: str, yosys: str = "yosys",
                gate_sets: tuple[str, ...] = ABC_GATE_SETS) -> dict:
     """Synthesize module ``top``; return cells, flops, ``transistors`` (smallest estimate
     over ``gate_sets``) and ``transistors_max`` (largest). Raises :class:`SynthesisError`."""
+    if top is None:
+        raise InputError("top module None: must be a Verilog module name")
+    check_synthesis_request(top, gate_sets)
     with yosys_run(verilog_text, [f"synth -top {top}", *mapping_steps(gate_sets)],
                    f"yosys failed on {top}", yosys) as (work, _):
         try:
@@ -269,6 +287,7 @@ def synthesize_hierarchy(verilog_text: str, top: str | None = None, yosys: str =
     flow of :func:`synthesize_module`) and ``run`` (wall and CPU seconds and peak memory of Yosys).
     ``top=None``: the module no other instantiates. Raises :class:`SynthesisError`.
     """
+    check_synthesis_request(top, gate_sets)
     if top is None:
         top = design_top(verilog_text, yosys)
     steps = [f"synth -top {top}", "setattr -mod -unset top", *mapping_steps(gate_sets)]

@@ -157,3 +157,19 @@ def test_quiet_synthesize_prints_nothing_and_still_refuses(tmp_path):
     assert loud.returncode == 0 and "flops" in loud.stdout, loud.stderr
     refused = run_tespike("synthesize", "--config", "te", "--height", 0, "--width", 2, "--quiet")
     assert_refused(refused, "--height 0", ">= 1")
+
+
+def test_the_synthesis_library_refuses_text_top_and_gate_sets_it_cannot_run_in_one_line():
+    """``synthesize_hierarchy(None)`` was pathlib's TypeError from the folder Yosys runs in; a top with
+    a space or an unknown gate set reached Yosys, which failed on its script."""
+    from tespike.cosim.synthesis import synthesize_hierarchy, synthesize_module
+    from tespike.golden.errors import InputError
+    for text, kind in ((None, "NoneType"), ("", "an empty one"), (b"module a; endmodule", "bytes")):
+        with pytest.raises(InputError, match=f"^Verilog text: must be a non-empty string of Verilog source, not {kind}$"):
+            synthesize_hierarchy(text)
+    for top in ("my top", 3, None):
+        with pytest.raises(InputError, match=f"^top module {re.escape(repr(top))}: must be a Verilog module name$"):
+            synthesize_module("module a; endmodule", top)
+    for sets in (("cmos9",), "cmos2", ()):
+        with pytest.raises(InputError, match="^gate sets .*: must be a sequence of cmos2, cmos3, cmos4, gates$"):
+            synthesize_hierarchy("module a; endmodule", gate_sets=sets)
