@@ -6,6 +6,8 @@ import dataclasses
 
 import numpy as np
 
+from tespike.golden.errors import InputError
+
 
 @dataclasses.dataclass(frozen=True)
 class Difference:
@@ -30,8 +32,15 @@ class Difference:
 
 
 def first_difference(rtl, golden) -> Difference | None:
-    """``None`` if the (K, H, W) word arrays are equal, else the first difference."""
+    """``None`` if the (K, H, W) word arrays are equal, else the first difference; arrays that are
+    not two integer (K, H, W) arrays of one shape are refused in one line (numpy's broadcast or
+    unpacking error before)."""
     rtl, golden = np.asarray(rtl), np.asarray(golden)
+    for array, what in ((rtl, "RTL"), (golden, "golden")):
+        if array.ndim != 3 or array.dtype.kind not in "iu":
+            raise InputError(f"{what} words: must be an integer (K, H, W) array, not {array.dtype} {array.shape}")
+    if rtl.shape != golden.shape:
+        raise InputError(f"RTL words {rtl.shape} and golden words {golden.shape} differ in shape")
     differ = rtl != golden
     count = int(np.count_nonzero(differ))
     if count == 0:

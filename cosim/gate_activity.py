@@ -104,10 +104,15 @@ def logic_check(config: SensorConfig, electrons, lanes: int) -> dict[str, dict[s
     from tespike.golden.beats import beats
     from tespike.golden.sensor import simulate
 
+    from tespike.golden.io import check_stimulus
+
     from .activity import edges_after_reset
     from .icarus import DUT_SCOPE, run_icarus_stream
     from .tops import Top
 
+    config = SensorConfig.required(config, "logic_check")
+    electrons = np.asarray(electrons)
+    check_stimulus(electrons, config, what="electrons")  # (a list had been an AttributeError of .shape)
     top = Top(config, electrons.shape[1], electrons.shape[2], lanes)
     netlist, design = gate_netlist(top.verilog(), top.module)
     with work_folder("tespike-gates-") as tmp:

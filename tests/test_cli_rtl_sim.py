@@ -250,3 +250,15 @@ def test_a_run_stopped_between_its_outputs_leaves_the_previous_set_whole(tmp_pat
     capsys.readouterr()
     assert {name: (tmp_path / name).read_bytes() for name in before} == before
     assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".part")]
+
+
+def test_first_difference_refuses_words_it_cannot_compare_in_one_line():
+    """Arrays of two shapes were numpy's broadcast error, a list or None an unpacking error."""
+    from tespike.cosim.compare import first_difference
+    from tespike.golden.errors import InputError
+    with pytest.raises(InputError, match=r"^RTL words \(1, 2, 2\) and golden words \(1, 2, 3\) differ in shape$"):
+        first_difference(np.zeros((1, 2, 2), np.int64), np.zeros((1, 2, 3), np.int64))
+    for rtl in (None, [1, 2], np.zeros((1, 2, 2))):
+        with pytest.raises(InputError, match="^RTL words: must be an integer"):
+            first_difference(rtl, np.zeros((1, 2, 2), np.int64))
+    assert first_difference(np.zeros((1, 2, 2), np.int64), np.zeros((1, 2, 2), np.uint8)) is None
