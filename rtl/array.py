@@ -46,7 +46,7 @@ from amaranth.lib.wiring import In, Out
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import ConfigError
 
-from .pixel import ml_pixel_logic, pixel_class, te_pixel_logic
+from .pixel import check_flag, ml_pixel_logic, pixel_class, te_pixel_logic
 from .timing import ReadoutTiming
 
 
@@ -64,7 +64,7 @@ class PixelArray(wiring.Component):
     def __init__(self, config: SensorConfig, height: int, width: int, *, flat: bool = False):
         self.config = SensorConfig.checked(config, "PixelArray")
         self.height, self.width = check_array_size(height, width)
-        self.flat = bool(flat)
+        self.flat = check_flag(flat, "PixelArray flat")
         n = height * width
         super().__init__({
             "charge": In(n * self.config.input_bits),

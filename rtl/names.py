@@ -15,7 +15,7 @@ def module_names(config: SensorConfig) -> dict[str, str]:
     """Verilog module names, prefixed by the mode: ``top``, ``pixel``, ``timing`` (the sampled-input
     timing block of the pixel and the streaming top) and ``array_timing`` (the parallel top's,
     ``ReadoutTiming(sampled_input=False)``)."""
-    mode = config.mode
+    mode = SensorConfig.required(config, "module_names").mode
     return {"top": f"{mode}_pixel_array", "pixel": f"{mode}_pixel", "timing": f"{mode}_readout_timing",
             "array_timing": f"{mode}_array_timing"}
 
@@ -25,6 +25,7 @@ def stream_module_names(config: SensorConfig) -> dict[str, str]:
     ``timing``, ``pixel`` (one site's pixel), ``rule`` (its combinational rule), ``cell``
     (one readout cell), ``group`` and ``group_end`` (the sites whose words leave in one beat; the
     end group, the last beat's, shifts in 0)."""
+    config = SensorConfig.required(config, "stream_module_names")
     names = module_names(config)
     mode = config.mode
     return {"top": names["top"] + "_stream", "timing": names["timing"], "pixel": f"{mode}_stream_pixel",

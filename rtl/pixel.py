@@ -59,6 +59,13 @@ def check_pixel_config(config: SensorConfig, mode: str, what: str) -> SensorConf
     return config
 
 
+def check_flag(value, what: str) -> bool:
+    """``value``, True or False, refused in one line otherwise ('False' had been True)."""
+    if not isinstance(value, bool):
+        raise ConfigError(f"{what} = {value!r}: must be True or False")
+    return value
+
+
 def _value(m: Module, expr, width: int, name: str, named: bool):
     """``expr`` as a named comb signal of ``width`` bits, or as the bare expression."""
     if not named:
@@ -190,7 +197,7 @@ class TEPixel(wiring.Component):
 
     def __init__(self, config: SensorConfig, *, word_register: bool = True):
         self.config = check_pixel_config(config, "te", "TEPixel")
-        self.word_register = bool(word_register)
+        self.word_register = check_flag(word_register, "TEPixel word_register")
         super().__init__({
             "charge": In(self.config.input_bits),
             "ccc": In(self.config.b2),
@@ -216,7 +223,7 @@ class MLPixel(wiring.Component):
 
     def __init__(self, config: SensorConfig, *, word_register: bool = True):
         self.config = check_pixel_config(config, "ml", "MLPixel")
-        self.word_register = bool(word_register)
+        self.word_register = check_flag(word_register, "MLPixel word_register")
         super().__init__({
             "charge": In(self.config.input_bits),
             "last": In(1),
@@ -233,4 +240,5 @@ class MLPixel(wiring.Component):
 
 def pixel_class(config: SensorConfig):
     """:class:`TEPixel` or :class:`MLPixel`, whichever the config's mode needs."""
+    config = SensorConfig.required(config, "pixel_class")
     return TEPixel if config.is_te else MLPixel

@@ -39,12 +39,17 @@ from amaranth.lib.wiring import In, Out
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.beats import beat_count, check_lanes
+from tespike.golden.errors import ConfigError, is_count
 
 from .array import PixelArray, check_array_size
+from .pixel import check_flag
 
 
 def beat_layout(config: SensorConfig, lanes: int) -> data.StructLayout:
     """The payload of one beat: ``words`` (lanes * Wd bits) and ``first``."""
+    config = SensorConfig.required(config, "beat_layout")
+    if not is_count(lanes, 1):                           # (-1 or 2.5 had been Amaranth's TypeError, 0 taken)
+        raise ConfigError(f"lanes = {lanes!r}: must be an integer >= 1")
     return data.StructLayout({"words": lanes * config.word_bits, "first": 1})
 
 
@@ -55,7 +60,7 @@ class StreamingPixelArray(wiring.Component):
         self.config = SensorConfig.checked(config, "StreamingPixelArray")
         self.height, self.width = check_array_size(height, width)
         self.lanes = check_lanes(self.config, height, width, lanes)
-        self.flat = bool(flat)
+        self.flat = check_flag(flat, "StreamingPixelArray flat")
         super().__init__({
             "charge": In(height * width * self.config.input_bits),
             "out": Out(stream.Signature(beat_layout(self.config, lanes), always_ready=True)),

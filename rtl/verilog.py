@@ -39,6 +39,7 @@ import re
 import types
 
 from tespike.golden.config import SensorConfig
+from tespike.golden.errors import ConfigError
 
 from .array import check_array_size
 from .names import module_names
@@ -138,20 +139,29 @@ def checked_config(config) -> SensorConfig:
     return SensorConfig.checked(config, "Verilog")
 
 
+def checked_name(name) -> str | None:
+    """A module name given for a generated module: None (the mode's own) or a Verilog identifier,
+    refused in one line otherwise ('my pixel' had been Yosys's parser error, 3 a TypeError)."""
+    if name is not None and not (isinstance(name, str) and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_$]*", name)):
+        raise ConfigError(f"module name {name!r}: must be a Verilog identifier (letters, digits, _ and $)")
+    return name
+
+
 def pixel_verilog(config: SensorConfig, name: str | None = None, *, word_register: bool = True) -> str:
     """Verilog of one TE or ML pixel as its own top module (ports clk, rst, charge, [ccc,] last, word).
 
     ``word_register=False``: the pixel without its readout word register (cost studies only).
     """
     config = checked_config(config)
-    pixel = pixel_class(config)(config, word_register=word_register)
-    return convert_modules((pixel, name or module_names(config)["pixel"]))[0]
+    name = checked_name(name) or module_names(config)["pixel"]
+    return convert_modules((pixel_class(config)(config, word_register=word_register), name))[0]
 
 
 def timing_verilog(config: SensorConfig, name: str | None = None) -> str:
     """Verilog of the shared readout timing block (ports clk, rst, [ccc,] last, frame_valid)."""
     config = checked_config(config)
-    return convert_modules((ReadoutTiming(config), name or module_names(config)["timing"]))[0]
+    name = checked_name(name) or module_names(config)["timing"]
+    return convert_modules((ReadoutTiming(config), name))[0]
 
 
 #: Longest generate loop written out: Verilator 5.006 refuses to unroll a generate loop of

@@ -55,6 +55,7 @@ import json
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.beats import beat_count, check_lanes
+from tespike.golden.errors import ConfigError
 
 from .array import check_array_size
 from .timing import ReadoutTiming
@@ -507,7 +508,7 @@ def stream_array_verilog(config: SensorConfig, height: int, width: int, lanes: i
     """
     config = checked_config(config)
     if view not in VIEWS:
-        raise ValueError(f"view = {view!r}: one of {', '.join(VIEWS)}")
+        raise ConfigError(f"view = {view!r}: one of {', '.join(VIEWS)}")
     make = stream_top_verilog if view == "instances" else stream_loop_verilog
     top = make(config, height, width, lanes)   # refuses before any conversion
     timing, = convert_modules((ReadoutTiming(config), stream_module_names(config)["timing"]))

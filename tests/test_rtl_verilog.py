@@ -264,3 +264,37 @@ def test_an_interrupt_while_yosys_runs_leaves_no_process_and_no_open_pipe():
     done = subprocess.run([sys.executable, "-c", body], capture_output=True, text=True, timeout=120)
     assert done.stdout == "interrupted\nchildren 0 restored True\n", (done.stdout, done.stderr)
     assert "ResourceWarning" not in done.stderr, done.stderr
+
+
+def test_the_rtl_builders_refuse_flags_names_lanes_and_configurations_that_are_none_in_one_line():
+    """``TEPixel(config, word_register='False')`` built a word register and ``flat='yes'`` a flat
+    array; a module name with a space was Yosys's parser error; ``beat_layout(config, -1)`` was
+    Amaranth's TypeError and 0 lanes were taken; a preset's name an AttributeError; an unknown view a
+    plain ValueError."""
+    from tespike.golden.config import SensorConfig
+    from tespike.golden.errors import ConfigError
+    from tespike.rtl.array import PixelArray
+    from tespike.rtl.names import module_names, stream_module_names
+    from tespike.rtl.pixel import MLPixel, TEPixel, pixel_class
+    from tespike.rtl.stream import beat_layout
+    from tespike.rtl.verilog import pixel_verilog, timing_verilog
+    from tespike.rtl.verilog_stream import stream_array_verilog
+    te, ml = SensorConfig(), SensorConfig(mode="ml")
+    for make, what in ((lambda: TEPixel(te, word_register="False"), "TEPixel word_register = 'False'"),
+                       (lambda: MLPixel(ml, word_register=1), "MLPixel word_register = 1"),
+                       (lambda: PixelArray(te, 2, 2, flat="yes"), "PixelArray flat = 'yes'")):
+        with pytest.raises(ConfigError, match=f"^{what}: must be True or False$"):
+            make()
+    for write in (pixel_verilog, timing_verilog):
+        for name in ("my pixel", 3, "1pixel"):
+            with pytest.raises(ConfigError, match=f"^module name {name!r}: must be a Verilog identifier"):
+                write(te, name)
+    for lanes in (-1, 2.5, 0):
+        with pytest.raises(ConfigError, match=f"^lanes = {lanes!r}: must be an integer >= 1$"):
+            beat_layout(te, lanes)
+    for call, what in ((pixel_class, "pixel_class"), (module_names, "module_names"),
+                       (stream_module_names, "stream_module_names"), (lambda c: beat_layout(c, 2), "beat_layout")):
+        with pytest.raises(ConfigError, match=f"^{what}: configuration must be a SensorConfig"):
+            call("te")
+    with pytest.raises(ConfigError, match="^view = 'nope': one of instances, loop$"):
+        stream_array_verilog(te, 2, 2, 2, view="nope")
