@@ -122,8 +122,22 @@ class Calibration:
         return atoms, self.dark_tail * atoms.to(torch.float64).mean(0)
 
 
+def word_stream(words, what: str = "words"):
+    """``words`` as a (K, H, W) integer array of at least one readout (a memory map stays one), refused
+    in one line otherwise (a list had been an AttributeError, no readout a ZeroDivisionError)."""
+    if not (hasattr(words, "ndim") and hasattr(words, "dtype")):
+        words = np.asarray(words)
+    if words.dtype.kind not in "iu":
+        raise InputError(f"{what}: readout words dtype {words.dtype} is not an integer type")
+    if words.ndim != 3 or min(words.shape) < 1:
+        raise InputError(f"{what} shape {tuple(words.shape)} must be (K, H, W) with K, H, W >= 1")
+    return words
+
+
 def mean_decoded_light(words, config: SensorConfig) -> np.ndarray:
     """Per-pixel mean decoded light (scene units) over the readouts of ``words`` (K, H, W)."""
+    config = SensorConfig.required(config, "mean_decoded_light")
+    words = word_stream(words)
     K = words.shape[0]
     total = np.zeros(words.shape[1:])
     for start in range(0, K, CHUNK_READOUTS):
@@ -136,6 +150,7 @@ def flat_ceiling(config: SensorConfig) -> float:
     its overflow (2^b1 spikes a readout: 0.067 for the paper's camera), ML below its counter's top
     (or one spike a clock, whichever comes first)."""
     from tespike.golden.config import DESIGN_ELECTRONS
+    config = SensorConfig.required(config, "flat_ceiling")
     if config.is_te:
         spikes = config.p_max
     elif config.is_msb:             # (the msb word holds counts below 2^(ml_bits - 1) whole)
@@ -150,6 +165,7 @@ def saturated_words(config: SensorConfig) -> np.ndarray:
     any light far enough above its range), over two readouts from an empty accumulator (a carried
     charge can change the count by one): a pixel reading only these words shows no light level."""
     from tespike.golden.sensor import PixelArrayModel
+    config = SensorConfig.required(config, "saturated_words")
     clocks = 2 * config.clocks_per_readout
     words = PixelArrayModel(config, (1, 1)).feed(np.full((clocks, 1, 1), config.input_max, np.int64))
     return np.unique(words)
@@ -157,6 +173,7 @@ def saturated_words(config: SensorConfig) -> np.ndarray:
 
 def saturated_share(words, top: np.ndarray) -> float:
     """Share of ``words`` (K, H, W) that are among ``top`` (the configuration's :func:`saturated_words`)."""
+    words = word_stream(words)
     count = sum(int(np.count_nonzero(np.isin(np.asarray(words[s:s + CHUNK_READOUTS]), top)))
                 for s in range(0, words.shape[0], CHUNK_READOUTS))
     return count / words.size
@@ -164,6 +181,8 @@ def saturated_share(words, top: np.ndarray) -> float:
 
 def overflow_share(words, config: SensorConfig) -> float:
     """Share of TE overflow words in ``words`` (0 for ML)."""
+    config = SensorConfig.required(config, "overflow_share")
+    words = word_stream(words)
     if not config.is_te:
         return 0.0
     flag = 1 << config.d                    # the overflow flag bit above the TE payload (golden's rule)
@@ -177,8 +196,10 @@ def estimate_dark_law(words, config: SensorConfig, atoms: int | None = None) -> 
     its decoded spikes per readout (:func:`tespike.recon.darklaw.law_atoms`), rows at a time, and the
     reach of its tail: the largest dark readout over its pixel's mean atom, over the frame (0 where
     no pixel saw dark charge)."""
-    from .darklaw import LAW_ATOMS, law_atoms
-    atoms = LAW_ATOMS if atoms is None else atoms
+    from .darklaw import LAW_ATOMS, check_atoms, law_atoms
+    config = SensorConfig.required(config, "estimate_dark_law")
+    words = word_stream(words, "dark stream")
+    atoms = LAW_ATOMS if atoms is None else check_atoms(atoms)
     K, H, W = words.shape
     out = np.empty((atoms, H, W), np.float32)
     reach = 0.0
@@ -198,13 +219,7 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
     config = SensorConfig.required(config, "estimate")
     if not is_positive_number(flat_light):
         raise InputError(f"flat light {flat_light!r}: must be a finite number > 0 (1 = design light)")
-    dark_words, flat_words = (words if isinstance(words, np.ndarray) else np.asarray(words)
-                              for words in (dark_words, flat_words))   # (a list: an AttributeError)
-    for what, words in (("dark", dark_words), ("flat", flat_words)):
-        if words.dtype.kind not in "iu":
-            raise InputError(f"{what} stream: readout words dtype {words.dtype} is not an integer type")
-        if words.ndim != 3 or min(words.shape) < 1:
-            raise InputError(f"{what} stream shape {words.shape} must be (K, H, W) with K, H, W >= 1")
+    dark_words, flat_words = word_stream(dark_words, "dark stream"), word_stream(flat_words, "flat stream")
     if dark_words.shape[1:] != flat_words.shape[1:]:
         raise InputError(f"dark stream frames {dark_words.shape[1:]} and flat stream frames "
                          f"{flat_words.shape[1:]} differ: both must come from the same sensor")
@@ -403,6 +418,7 @@ def input_correction(calibration: Calibration | None, device: str = "cpu", dtype
     yet shaped (docs/reconstruction.md)."""
     if calibration is None:
         return None
+    _required(calibration, "input_correction's calibration")
     import torch
     dtype = torch.float32 if dtype is None else dtype
     return (torch.as_tensor(calibration.dark, dtype=dtype, device=device),
@@ -433,7 +449,11 @@ def dark_free_light(spikes, dark, spike_light: float):
     the high-water mark at the last firing readout, within one spike of the net charge unless the
     net charge ends below its peak. With ``dark`` 0 the light is each readout's own (to rounding)."""
     import torch
+    if not is_positive_number(spike_light):             # (0 had given zeros, NaN NaNs)
+        raise InputError(f"spike light {spike_light!r}: must be a finite number > 0")
     spikes = torch.as_tensor(spikes, dtype=torch.float64)
+    if spikes.dim() < 1:                                 # (an IndexError)
+        raise InputError("spikes: must be readouts (K, ...), not one number")
     dark_spikes = torch.as_tensor(dark, dtype=torch.float64, device=spikes.device) / spike_light
     from .tfi import running_max
     high = running_max(torch.cumsum(spikes - dark_spikes, 0)).clamp_(min=0)
@@ -446,7 +466,7 @@ def dark_free_light(spikes, dark, spike_light: float):
 
 def calibration_summary(calibration: Calibration) -> str:
     """One line: maps, readouts, mean dark (electrons per readout), gain spread, floored pixels."""
-    c = calibration
+    c = _required(calibration, "calibration_summary's calibration")
     from tespike.golden.config import DESIGN_ELECTRONS
     return (f"{c.shape[0]} x {c.shape[1]} pixels from {c.dark_readouts} dark and {c.flat_readouts} flat "
             f"readouts (flat light {c.flat_light:g}): dark {DESIGN_ELECTRONS * c.dark.mean():.0f} e-/readout "

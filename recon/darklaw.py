@@ -53,6 +53,8 @@ import math
 import numpy as np
 import torch
 
+from tespike.golden.errors import InputError, is_count
+
 #: Atoms of each pixel's dark law (quantile levels (i + 0.5) / Q of its dark readouts); measured
 #: with eq. 13 on the held-out scenes: 16 atoms 0.6 dB below 64, 128 and 256 within 0.1 dB of it.
 LAW_ATOMS = 64
@@ -66,9 +68,20 @@ EM_STEPS = 3
 BLOCK_ELEMENTS = 1 << 22
 
 
+def check_atoms(atoms) -> int:
+    """A dark law's number of quantiles, an integer >= 1 (2.5 had given 3 atoms, 0 and -2 an empty law)."""
+    if not is_count(atoms, 1):
+        raise InputError(f"dark law atoms {atoms!r}: must be an integer >= 1")
+    return atoms
+
+
 def law_atoms(dark_spikes: np.ndarray, atoms: int = LAW_ATOMS) -> np.ndarray:
     """Decoded dark spikes per readout (K, ...) -> the (atoms, ...) float32 quantiles at levels
     (i + 0.5) / atoms, each an observed value (the inverted empirical distribution function)."""
+    check_atoms(atoms)
+    dark_spikes = np.asarray(dark_spikes)
+    if dark_spikes.ndim < 1 or not dark_spikes.shape[0]:
+        raise InputError(f"dark spikes shape {dark_spikes.shape}: need at least one readout (K, ...)")
     K = dark_spikes.shape[0]
     ordered = np.sort(np.asarray(dark_spikes, np.float64), axis=0)
     index = np.ceil((np.arange(atoms) + 0.5) / atoms * K).astype(np.int64) - 1

@@ -349,3 +349,35 @@ def test_estimate_refuses_a_dark_stream_that_is_no_word_array_in_one_line(dark):
     from tespike.recon.calibration import estimate
     with pytest.raises(InputError, match="^dark stream: readout words dtype .* is not an integer type$"):
         estimate(dark, np.zeros((4, 2, 2), np.uint8), SensorConfig(), 0.03)
+
+
+def test_the_calibration_helpers_refuse_words_configurations_and_counts_that_are_none_in_one_line():
+    """Empty words were ZeroDivisionErrors, float words an overflow share, a preset's name or a file's
+    name AttributeErrors, 0 or 2.5 atoms an empty law or a TypeError, and a spike light of 0 zeros."""
+    from tespike.recon.calibration import (calibration_summary, dark_free_light, estimate_dark_law, flat_ceiling,
+                                           input_correction, mean_decoded_light, overflow_share, saturated_share,
+                                           saturated_words)
+    from tespike.recon.darklaw import law_atoms
+    config, words = SensorConfig(), np.zeros((4, 2, 2), np.uint8)
+    for atoms in (0, 2.5, -2):
+        with pytest.raises(InputError, match=f"^dark law atoms {atoms!r}: must be an integer >= 1$"):
+            estimate_dark_law(words, config, atoms)
+        with pytest.raises(InputError, match=f"^dark law atoms {atoms!r}: must be an integer >= 1$"):
+            law_atoms(np.ones((3, 2)), atoms)
+    empty = np.zeros((0, 2, 2), np.uint8)
+    for call in (lambda: mean_decoded_light(empty, config), lambda: saturated_share(empty, np.array([1])),
+                 lambda: overflow_share(empty, config)):
+        with pytest.raises(InputError, match=r"^words shape \(0, 2, 2\) must be \(K, H, W\) with K, H, W >= 1$"):
+            call()
+    with pytest.raises(InputError, match="^words: readout words dtype float64 is not an integer type$"):
+        overflow_share(np.zeros((2, 2, 2)), config)
+    for call, what in ((flat_ceiling, "flat_ceiling"), (saturated_words, "saturated_words"),
+                       (lambda c: overflow_share(words, c), "overflow_share")):
+        with pytest.raises(ConfigError, match=f"^{what}: configuration must be a SensorConfig"):
+            call("te")
+    for call, what in ((calibration_summary, "calibration_summary"), (input_correction, "input_correction")):
+        with pytest.raises(InputError, match=f"^{what}'s calibration must be a Calibration"):
+            call("C.npz")
+    for light in (0.0, float("nan")):
+        with pytest.raises(InputError, match=f"^spike light {light!r}: must be a finite number > 0$"):
+            dark_free_light(np.ones((3, 2)), 0.0, light)
