@@ -70,6 +70,7 @@ def last_beat_latency(clocks, config: SensorConfig, beats_per_interval: int) -> 
 
     ``clocks`` are the sample clocks of the run's K * B beats, in order.
     """
+    config = SensorConfig.required(config, "last_beat_latency")
     clocks = np.asarray(clocks, np.int64)
     if len(clocks) == 0:
         return 0
@@ -80,4 +81,4 @@ def last_beat_latency(clocks, config: SensorConfig, beats_per_interval: int) -> 
 
 def flush_clocks(config: SensorConfig) -> int:
     """Clocks of zero charge a harness runs after the stimulus: 2L + 1 (the latency bound, and one)."""
-    return 2 * config.clocks_per_readout + 1
+    return 2 * SensorConfig.required(config, "flush_clocks").clocks_per_readout + 1

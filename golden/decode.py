@@ -69,6 +69,20 @@ def check_word_dtype(dtype) -> None:
         raise InputError(f"readout words dtype {dtype} is not an integer type")
 
 
+def word_stream(words, what: str = "words"):
+    """``words`` as a (K, H, W) integer array of at least one readout (a memory map stays one, its values
+    unread), refused in one line otherwise (a list had been an AttributeError, a 2-D array an unpacking
+    error, no readout a ZeroDivisionError): the one check of the stream a reconstruction or a
+    calibration reads before it decodes (which checks the values, :func:`check_words`)."""
+    if not (hasattr(words, "ndim") and hasattr(words, "dtype")):
+        words = np.asarray(words)
+    if words.dtype.kind not in "iu":
+        raise InputError(f"{what}: readout words dtype {words.dtype} is not an integer type")
+    if words.ndim != 3 or min(words.shape) < 1:
+        raise InputError(f"{what} shape {tuple(words.shape)} must be (K, H, W) with K, H, W >= 1")
+    return words
+
+
 def check_words(words: np.ndarray, config: SensorConfig, origin: tuple[int, ...] = ()) -> np.ndarray:
     """Refuse any word outside the configuration's word set (:func:`legal_words`).
 

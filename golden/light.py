@@ -151,6 +151,8 @@ def dark_electrons(model: str | None, shape, rng: np.random.Generator, *,
     model = check_dark_current(model)
     if model is None:
         return np.zeros(shape, np.int64)
+    if not isinstance(rng, np.random.Generator):         # (None or a seed had been an AttributeError)
+        raise InputError(f"dark_electrons rng: must be a numpy Generator, not {type(rng).__name__}")
     x = rng.normal(*DARK_NORMAL[model], shape)
     per = np.maximum(x, 0.0) if model == "eq12" else eq13_dark_per_readout(x)
     if scale is not None:       # (a hot pixel's scale can take the count past int64: held at DARK_MAX)

@@ -58,7 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.decode import decode_light, decode_spikes, legal_words
+from tespike.golden.decode import decode_light, decode_spikes, legal_words, word_stream
 from tespike.golden.errors import InputError, is_positive_number
 
 #: How every calibration file's maps were estimated (its "estimator" member; not a decoding rule of
@@ -120,18 +120,6 @@ class Calibration:
         atoms = torch.as_tensor(np.asarray(self.dark_law, np.float32), device=device)
         atoms = atoms.reshape(self.dark_law.shape[0], -1)
         return atoms, self.dark_tail * atoms.to(torch.float64).mean(0)
-
-
-def word_stream(words, what: str = "words"):
-    """``words`` as a (K, H, W) integer array of at least one readout (a memory map stays one), refused
-    in one line otherwise (a list had been an AttributeError, no readout a ZeroDivisionError)."""
-    if not (hasattr(words, "ndim") and hasattr(words, "dtype")):
-        words = np.asarray(words)
-    if words.dtype.kind not in "iu":
-        raise InputError(f"{what}: readout words dtype {words.dtype} is not an integer type")
-    if words.ndim != 3 or min(words.shape) < 1:
-        raise InputError(f"{what} shape {tuple(words.shape)} must be (K, H, W) with K, H, W >= 1")
-    return words
 
 
 def mean_decoded_light(words, config: SensorConfig) -> np.ndarray:
@@ -269,7 +257,7 @@ def estimate(dark_words, flat_words, config: SensorConfig, flat_light: float) ->
 def save_calibration(path: str | Path, calibration: Calibration) -> None:
     """Write ``C.npz`` (atomically: a temporary file beside it, then renamed)."""
     from tespike.golden.io import atomic_output
-    c = _required(calibration)
+    c = check_calibration(calibration)
     with atomic_output(path) as tmp:
         with open(tmp, "wb") as handle:
             np.savez(handle, dark=c.dark, gain=c.gain, config=np.array(c.config.to_json()),
@@ -370,7 +358,7 @@ def _checked_numbers(shown: str, values: dict, pixels: int) -> dict:
     return out
 
 
-def _required(calibration, name: str = "the calibration") -> Calibration:
+def check_calibration(calibration, name: str = "the calibration") -> Calibration:
     """``calibration`` where it is a :class:`Calibration`, else one line naming ``name`` (a path given
     where :func:`load_calibration`'s result belongs had been an AttributeError)."""
     if not isinstance(calibration, Calibration):
@@ -384,7 +372,7 @@ def check_matches(calibration: Calibration, config: SensorConfig, shape: tuple[i
     """Refuse, in one line naming both (``name``: the calibration, e.g. its file), a calibration made
     for another configuration or frame size than ``what``, or what is no :class:`Calibration` (a path
     given where :func:`load_calibration`'s result belongs)."""
-    _required(calibration, name)
+    check_calibration(calibration, name)
     difference = calibration.config.differences_text(config, "the calibration", what)
     if difference is not None:
         raise InputError(f"{name} is for another sensor configuration than {what}: {difference}")
@@ -396,7 +384,7 @@ def check_matches(calibration: Calibration, config: SensorConfig, shape: tuple[i
 def correct(images: np.ndarray, calibration: Calibration) -> np.ndarray:
     """Reconstructed light (K, H, W) -> ``max(0, (x - dark) / gain)`` per pixel, in place
     where ``images`` is a writable float array (a memory-mapped R.npy stays on disk)."""
-    calibration = _required(calibration)
+    calibration = check_calibration(calibration)
     out = images if isinstance(images, np.ndarray) and images.flags.writeable and \
         images.dtype.kind == "f" else np.array(images, np.float32)
     if out.ndim != 3 or out.shape[1:] != calibration.shape:
@@ -418,7 +406,7 @@ def input_correction(calibration: Calibration | None, device: str = "cpu", dtype
     yet shaped (docs/reconstruction.md)."""
     if calibration is None:
         return None
-    _required(calibration, "input_correction's calibration")
+    check_calibration(calibration, "input_correction's calibration")
     import torch
     dtype = torch.float32 if dtype is None else dtype
     return (torch.as_tensor(calibration.dark, dtype=dtype, device=device),
@@ -466,7 +454,7 @@ def dark_free_light(spikes, dark, spike_light: float):
 
 def calibration_summary(calibration: Calibration) -> str:
     """One line: maps, readouts, mean dark (electrons per readout), gain spread, floored pixels."""
-    c = _required(calibration, "calibration_summary's calibration")
+    c = check_calibration(calibration, "calibration_summary's calibration")
     from tespike.golden.config import DESIGN_ELECTRONS
     return (f"{c.shape[0]} x {c.shape[1]} pixels from {c.dark_readouts} dark and {c.flat_readouts} flat "
             f"readouts (flat light {c.flat_light:g}): dark {DESIGN_ELECTRONS * c.dark.mean():.0f} e-/readout "

@@ -12,7 +12,6 @@ the scale taken from the reference alone instead of from each sequence.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -51,9 +50,13 @@ class HdrDisplay:
 
     def luminance(self, light: "torch.Tensor", reference_peak: float) -> "torch.Tensor":
         """Emitted luminance (cd/m^2) of scene light when ``reference_peak`` is shown at the peak."""
-        if not (math.isfinite(reference_peak) and reference_peak > 0):
-            raise InputError(f"reference peak {reference_peak!r}: the reference must hold some light "
-                             "(an all-zero reference cannot be shown on a display)")
+        if not (hasattr(light, "clamp") and hasattr(light, "dtype")):   # (a numpy array: no clamp)
+            raise InputError(f"display luminance: the light must be a torch tensor, not {type(light).__name__}")
+        number = reference_peak if isinstance(reference_peak, (str, bytes)) or not hasattr(
+            reference_peak, "__float__") else float(reference_peak)      # (a tensor's or numpy's scalar too)
+        if not is_positive_number(number):                                # ('1' had been math's TypeError)
+            raise InputError(f"reference peak {reference_peak!r}: must be a finite number > 0, the reference's "
+                             "brightest light (an all-zero reference cannot be shown on a display)")
         return (light * (self.peak_nits / reference_peak)).clamp(self.black_nits, self.peak_nits)
 
 

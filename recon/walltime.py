@@ -15,6 +15,8 @@ from __future__ import annotations
 import statistics
 import time
 
+from tespike.golden.errors import InputError, is_count
+
 
 def median_seconds(function, repeats: int, *, warm_up: bool = False) -> tuple[float, object]:
     """Median wall time of ``repeats`` calls of ``function()`` and the result of one call.
@@ -23,6 +25,11 @@ def median_seconds(function, repeats: int, *, warm_up: bool = False) -> tuple[fl
     returned is always a call's own (the last, or the warm-up's when ``repeats`` is 0).
     """
     import torch
+
+    if not callable(function):
+        raise InputError(f"median_seconds: {function!r} is not a function to time")
+    if not is_count(repeats):                            # (2.5 had been a TypeError, 0 a NaN median)
+        raise InputError(f"median_seconds repeats {repeats!r}: must be an integer >= 0")
 
     def synchronise() -> None:
         if torch.cuda.is_available() and torch.cuda.is_initialized():

@@ -148,3 +148,10 @@ def test_model_mean_refuses_a_model_that_is_no_name_in_one_line():
     with pytest.raises(InputError, match=r"^dark current model \['eq12'\]: must be a name \(none, eq12, eq13\) or None$"):
         model_mean(["eq12"])
     assert model_mean("none") == model_mean(None) == 0.0
+
+
+def test_dark_electrons_refuses_an_rng_that_is_no_generator_in_one_line():
+    """None or a seed had been an AttributeError of ``normal``."""
+    for rng in (None, 3):
+        with pytest.raises(InputError, match="^dark_electrons rng: must be a numpy Generator"):
+            dark_electrons("eq12", (2,), rng)

@@ -255,3 +255,32 @@ def test_cli_reconstruct_net(tmp_path):
     assert not (tmp_path / "O.npy").exists()
     assert_refused(run_tespike("reconstruct", "--stream", tmp_path / "S.npz", "--method", "net", "--window", "5",
                                "--out", tmp_path / "W.npy"), "--window")
+
+
+def test_inference_refuses_a_key_stream_model_or_calibration_it_cannot_use_in_one_line():
+    """A key past the stream had repeated its last readout (or was head.py's ValueError), 2.5 an
+    IndexError; a list of words an AttributeError, 2-D words an unpacking error, a model's name an
+    AttributeError; law_input without a Calibration an AttributeError of ``law_tensors``; a pyramid
+    factor of 0 a ZeroDivisionError; key_span of a fractional span gave floats."""
+    from tespike.recon.learning.span import key_span
+    config = SensorConfig()
+    model = load_weights(weights_path(config))[0]
+    words = np.zeros((12, 8, 8), np.uint8)
+    for key in (100, 12, -1, 2.5, "3"):
+        with pytest.raises(InputError, match=rf"^key readout {key!r}: must be an integer in 0 \.\. 11"):
+            frame(model, words, config, key)
+    for bad in ([[1]], np.zeros((8, 8), np.uint8), np.zeros((0, 8, 8), np.uint8)):
+        with pytest.raises(InputError, match=r"^words shape .* must be \(K, H, W\) with K, H, W >= 1$"):
+            frame(model, bad, config, 0)
+    with pytest.raises(InputError, match="^words: readout words dtype float64 is not an integer type$"):
+        frame(model, words.astype(float), config, 0)
+    with pytest.raises(InputError, match="^model: must be a learned method's module"):
+        frame("net", words, config, 0)
+    for calibration in (None, "C.npz"):
+        with pytest.raises(InputError, match="^law_input's calibration must be a Calibration"):
+            infer.law_input(words, config, calibration)
+    with pytest.raises(InputError, match="^mirrored_index: length 5 and factor 0 must be integers >= 1$"):
+        mirrored_index(5, 0)
+    with pytest.raises(InputError, match="^readouts 5 and span 2.5: must be integers >= 1$"):
+        key_span(5, 2, 2.5)
+    assert frame(model, words, config, 11).shape == (8, 8)

@@ -83,6 +83,10 @@ def seed_key(sequence: str, config: SensorConfig) -> list[int]:
 
 def tile_seed(seed: int, sequence: str, config: SensorConfig, row: int, col: int) -> np.random.SeedSequence:
     """The random stream of tile (row, col) (tile indices, not pixels) of one stream."""
+    config = SensorConfig.required(config, "tile_seed")
+    for name, value in (("seed", seed), ("row", row), ("col", col)):
+        if not is_count(value):                          # (2.5 had been taken as 2, -1 numpy's error)
+            raise InputError(f"tile_seed {name} {value!r}: must be an integer >= 0")
     return np.random.SeedSequence([int(seed), *seed_key(sequence, config), int(row), int(col)])
 
 

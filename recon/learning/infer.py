@@ -34,13 +34,14 @@ import numpy as np
 import torch
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.decode import word_stream
+from tespike.golden.errors import InputError, is_count
 from tespike.golden.io import images_array
 
 from ..calibration import correct_input, input_correction
 from ..decoding import decode_light
 from ..reach import derive_radius
-from ..settings import DEFAULT_WINDOW
+from ..settings import DEFAULT_WINDOW, check_window
 from .span import key_span, span_inside
 
 
@@ -98,12 +99,23 @@ def tiles(height: int, width: int, model: torch.nn.Module,
     return [(y, x, min(ty, hp - y), min(tx, wp - x)) for y in range(0, hp, ty) for x in range(0, wp, tx)]
 
 
+def check_model(model) -> torch.nn.Module:
+    """``model``, a learned method's module (a torch module with its ``sizes``), refused in one line
+    otherwise (a name or a weights path had been an AttributeError: ``load_learned`` makes one)."""
+    if not (isinstance(model, torch.nn.Module) and hasattr(model, "sizes")):
+        raise InputError(f"model: must be a learned method's module (tespike.recon.learned.load_learned), "
+                         f"not {type(model).__name__}")
+    return model
+
+
 def mirrored_index(length: int, factor: int) -> np.ndarray:
     """The rows (or columns) of the frame the network sees: the frame mirrored (``np.pad``
     "reflect") by :data:`MIRROR_BORDER` before its first row and by that or more after its
     last, to a multiple of the pyramid factor (a frame of one row repeats it); the frame
     itself starts at :data:`MIRROR_BORDER`.
     """
+    if not (is_count(length, 1) and is_count(factor, 1)):     # (a factor of 0 was a ZeroDivisionError)
+        raise InputError(f"mirrored_index: length {length!r} and factor {factor!r} must be integers >= 1")
     total = -(-(length + 2 * MIRROR_BORDER) // factor) * factor
     return np.pad(np.arange(length), (MIRROR_BORDER, total - length - MIRROR_BORDER), mode="reflect")
 
@@ -157,6 +169,9 @@ def frame(model: torch.nn.Module, words: np.ndarray, config: SensorConfig, key: 
     (:class:`LawInputs`), read instead of decoding ``words`` (``correction`` then None); the image
     is floored at 0.
     """
+    check_model(model)
+    config = SensorConfig.required(config, "frame")
+    words = word_stream(words)
     sizes = model.sizes
     K, H, W = words.shape
     times = key_span(K, key, sizes.span)
@@ -226,7 +241,14 @@ def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int 
     ``readouts``: ``(start, stop)``, only those readouts (their windows read the stream around them,
     so the values are the whole stream's to float rounding); the float64 work runs in blocks of pixels,
     on ``device`` (the result stays there)."""
+    from ..calibration import check_calibration
     from ..darklaw import BLOCK_ELEMENTS, tail_free_light
+    config = SensorConfig.required(config, "law_input")
+    calibration = check_calibration(calibration, "law_input's calibration")
+    if calibration.dark_law is None:
+        raise InputError("law_input's calibration holds no dark law (a calibration made from a dark stream has one)")
+    check_window(window, "law_input window")
+    words = word_stream(words)
     K, H, W = words.shape
     start, stop = (0, K) if readouts is None else readouts
     radius = window // 2
