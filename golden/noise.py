@@ -186,6 +186,8 @@ class SensorMaps:
 
     def mean_dark_electrons(self, noise: SensorNoise) -> np.ndarray:
         """Expected dark electrons per readout of every pixel (before rounding)."""
+        if not isinstance(noise, SensorNoise):           # (a model's name had been an AttributeError)
+            raise InputError(f"mean_dark_electrons: noise must be a SensorNoise, not {type(noise).__name__}")
         return self.dark_scale * noise.dark_level * model_mean(noise.dark_current)
 
 
@@ -256,6 +258,10 @@ class PixelNoise:
 
     def dark(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """Dark electrons of one readout interval of the ``n`` pixels (int64)."""
+        if not is_count(n):                              # (-1 had been numpy's error, 2.5 a TypeError)
+            raise InputError(f"dark electrons of {n!r} pixels: must be an integer >= 0")
+        if self.dark_scale is not None and n != self.dark_scale.size:
+            raise InputError(f"dark electrons of {n} pixels: these maps hold {self.dark_scale.size}")
         scale = self.dark_scale
         if self.noise.dark_level != 1.0:
             scale = (np.ones(n) if scale is None else scale) * self.noise.dark_level
@@ -263,8 +269,12 @@ class PixelNoise:
 
     def rows(self, rows: slice, width: int) -> "PixelNoise":
         """The pixels of rows ``rows`` (a slice, any step) of a frame ``width`` pixels wide."""
+        if not isinstance(rows, slice):
+            raise InputError(f"rows {rows!r}: must be a slice of the frame's rows")
         if self.gain is None:
             return self
+        if not (is_count(width, 1) and self.gain.size % width == 0):   # (a reshape error)
+            raise InputError(f"width {width!r}: must be an integer >= 1 dividing the {self.gain.size} pixels")
         return PixelNoise(self.noise, self.gain.reshape(-1, width)[rows].reshape(-1),
                           self.dark_scale.reshape(-1, width)[rows].reshape(-1))
 

@@ -155,3 +155,21 @@ def test_dark_electrons_refuses_an_rng_that_is_no_generator_in_one_line():
     for rng in (None, 3):
         with pytest.raises(InputError, match="^dark_electrons rng: must be a numpy Generator"):
             dark_electrons("eq12", (2,), rng)
+
+
+def test_pixel_noise_refuses_counts_rows_and_noise_that_are_none_in_one_line():
+    """``dark(-1, rng)`` was numpy's error and 2.5 a TypeError, ``rows(slice, 4)`` of 6 pixels a reshape
+    error, ``mean_dark_electrons('eq12')`` an AttributeError."""
+    from tespike.golden.noise import PixelNoise, SensorMaps, SensorNoise
+    rng, maps = np.random.default_rng(0), PixelNoise(SensorNoise(), np.ones(6), np.ones(6))
+    for n in (-1, 2.5):
+        with pytest.raises(InputError, match=f"^dark electrons of {n!r} pixels: must be an integer >= 0$"):
+            PixelNoise(SensorNoise(), None, None).dark(n, rng)
+    with pytest.raises(InputError, match="^dark electrons of 5 pixels: these maps hold 6$"):
+        maps.dark(5, rng)
+    with pytest.raises(InputError, match="^width 4: must be an integer >= 1 dividing the 6 pixels$"):
+        maps.rows(slice(0, 1), 4)
+    with pytest.raises(InputError, match="^rows 3: must be a slice of the frame's rows$"):
+        maps.rows(3, 2)
+    with pytest.raises(InputError, match="^mean_dark_electrons: noise must be a SensorNoise, not str$"):
+        SensorMaps(np.ones(2), np.ones(2)).mean_dark_electrons("eq12")
