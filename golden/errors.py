@@ -29,6 +29,14 @@ def is_count(value, least: int = 0) -> bool:
     return not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= least
 
 
+def check_flag(value, what: str, error: type = None) -> bool:
+    """``value`` where it is True or False (never a string: ``"False"`` had been taken as True), else
+    one line naming ``what`` (as ``error``, :class:`InputError` by default)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise (error or InputError)(f"{what} = {value!r}: must be True or False")
+    return bool(value)
+
+
 def check_counts(**counts) -> None:
     """Refuse any of ``counts`` (name -> value) that is not an integer >= 1 (:func:`is_count`), naming it."""
     for name, value in counts.items():

@@ -72,7 +72,7 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, check_flag
 from tespike.golden.io import check_scene, word_dtype
 from tespike.golden.resources import require_memory
 
@@ -268,6 +268,7 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     methods, sensors, metrics = (None if methods is None else names(methods)), names(sensors), names(metrics)
     methods, metrics, configs, noise_sensors, absent = _checked_arguments(
         methods, sensors, configs, window, seed, repeats, metrics, vdp_frames, missing, noise_sensors, weights)
+    _checked_run_options(methods, sensors, options, weights, progress, keep)
     further = [key for key in metrics if key not in BASIC_METRICS]
     sequences = _checked_sequences(sequences)
     labels = [name for name, _ in sequences]
@@ -367,7 +368,18 @@ def _checked_arguments(methods, sensors, configs, window, seed, repeats, metrics
     metrics = tuple(key for key in METRIC_KEYS if key in (*BASIC_METRICS, *metrics))
     if vdp_frames is not None and (type(vdp_frames) is not int or vdp_frames < 1):
         raise InputError(f"vdp_frames = {vdp_frames!r}: must be an integer >= 1")
+    if not sensors:                                       # (max() of an empty sequence)
+        raise InputError("sensors: name at least one sensor")
+    twice = sorted({sensor for sensor in sensors if list(sensors).count(sensor) > 1})
+    if twice:                                             # (its sequences had been counted twice)
+        raise InputError(f"sensor {twice[0]!r} is named more than once")
+    if configs is not None and not isinstance(configs, dict):
+        raise InputError(f"configs: must map sensor names to configurations, not {type(configs).__name__}")
     configs = dict(paper_configs() if configs is None else configs)
+    for name, config in configs.items():
+        SensorConfig.required(config, f"sensor {name!r}")
+    if noise_sensors is not None and not isinstance(noise_sensors, dict):
+        raise InputError(f"noise_sensors: must map names to noise sensors, not {type(noise_sensors).__name__}")
     noise_sensors = default_noise_sensors() | dict(noise_sensors or {})
     for sensor in sensors:
         if sensor.endswith(CALIBRATED) and noise_base(sensor, noise_sensors) is None:
@@ -390,6 +402,32 @@ def _checked_arguments(methods, sensors, configs, window, seed, repeats, metrics
     if type(repeats) is not int or repeats < 1:
         raise InputError(f"repeats = {repeats!r} must be an integer >= 1")
     return methods, metrics, configs, noise_sensors, absent
+
+
+def _checked_run_options(methods, sensors, options, weights, progress, keep) -> None:
+    """:func:`evaluate`'s switches and per-method maps checked: ``progress`` True, False (None) or "lines" and
+    ``keep`` a bool (the text "False" had been true), every ``options`` key a method of the run whose
+    value is a dict of :func:`reconstruct` keywords other than the window (given once, to the run), and
+    every ``weights`` key a (method, sensor) pair of the run (a typo had been dropped without a word)."""
+    if not (progress is None or isinstance(progress, bool) or progress == "lines"):
+        raise InputError(f"progress = {progress!r}: must be True, False (or None) or 'lines'")
+    check_flag(keep, "keep")
+    for name, given in (("options", options), ("weights", weights)):
+        if given is not None and not isinstance(given, dict):
+            raise InputError(f"{name}: must be a dict, not {type(given).__name__}")
+    for method, kwargs in (options or {}).items():
+        if method not in methods:
+            raise InputError(f"options for {method!r}: no method of this evaluation "
+                             f"({', '.join(methods)}) has that name")
+        if not isinstance(kwargs, dict):
+            raise InputError(f"options for {method!r}: must be a dict of reconstruct() keywords, "
+                             f"not {type(kwargs).__name__}")
+        if "window" in kwargs:
+            raise InputError(f"options for {method!r}: the window is the evaluation's own argument "
+                             "(window=), the same for every method")
+    for key in (weights or {}):
+        if not (isinstance(key, tuple) and len(key) == 2 and key[0] in methods and key[1] in sensors):
+            raise InputError(f"weights key {key!r}: must be a (method, sensor) pair of this evaluation")
 
 
 def _recorded(simulate, config, light, rng, sensor, base, noise_sensors, calibrations, calibration_rng, bar,

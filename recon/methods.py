@@ -25,7 +25,7 @@ import torch
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.decode import check_word_dtype, check_words
-from tespike.golden.errors import IllegalWordError, InputError
+from tespike.golden.errors import IllegalWordError, InputError, check_flag
 from tespike.golden.io import images_array
 
 from .decoding import as_word_tensor, decode_light, decode_spikes
@@ -155,6 +155,7 @@ def reconstruct(words, config: SensorConfig, method: str, *, window: int = DEFAU
     measurement (docs/reconstruction.md "Calibration").
     """
     config = SensorConfig.required(config, "reconstruct")
+    check_flag(progress, "progress")                     # ('no' had shown a bar)
     check_known(method, RECON_METHODS)
     spec = RECON_METHODS[method]
     unknown = sorted(set(options) - set(spec.options))

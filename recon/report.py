@@ -15,6 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from tespike.golden.errors import InputError, check_flag
+from tespike.golden.paths import path_text
+
 from .evaluate import BASIC_METRICS, CALIBRATED, NOISE_SENSORS, Evaluation, Measurement
 from .names import label, name
 from .mulaw import MU, tone_map
@@ -348,7 +351,10 @@ def write_outputs(evaluation: Evaluation, out: str | Path, *, plot: bool = True)
     -> the paths written (key ``plot`` for the plot, ``strip:<sequence>`` for the strips).
     ``plot=False`` leaves the quality-against-run-time plot out (an evaluation over a dataset
     store, whose scores come from many workers, has no comparable run times)."""
-    out = Path(out)
+    check_flag(plot, "plot")                             # ('no' had written the plot)
+    if not isinstance(evaluation, Evaluation):
+        raise InputError(f"write_outputs: the evaluation must be an Evaluation, not {type(evaluation).__name__}")
+    out = Path(path_text(out, "results folder"))
     out.mkdir(parents=True, exist_ok=True)
     (out / "strips").mkdir(exist_ok=True)
     paths = {"table.md": out / "table.md", "table.csv": out / "table.csv", "results.csv": out / "results.csv"}

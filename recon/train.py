@@ -35,7 +35,7 @@ import torch
 
 from tespike.golden.atomic import NO_ROOM, finished_outputs, stops_held
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError, is_count, is_positive_number, one_line
+from tespike.golden.errors import InputError, check_flag, is_count, is_positive_number, one_line
 from tespike.golden.io import atomic_output, word_dtype
 from tespike.golden.paths import path_text
 from tespike.golden.resources import MAX_WORKERS, require_memory
@@ -165,6 +165,8 @@ def training_loss(pred: torch.Tensor, truth: torch.Tensor, loss: str, mu: float 
     ``mu-l1``: the same after the mu-law tone map of the metrics."""
     if loss == "l1":
         return (pred - truth).abs().mean()
+    if loss != "mu-l1":                                  # ('l2' or None had been mu-l1, silently)
+        raise InputError(f"loss = {loss!r}: must be one of {', '.join(LOSSES)}")
     return (compress(pred, mu) - compress(truth, mu)).abs().mean()
 
 
@@ -407,6 +409,10 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
     after a step, the run saves its checkpoint first and says so in a note on
     the exception; one that made nothing removes the run folder it created.
     """
+    if not isinstance(options, TrainOptions):
+        raise InputError(f"train: the options must be TrainOptions, not {type(options).__name__}")
+    check_flag(resume, "resume")                         # ('no' had resumed)
+    out = path_text(out, "weights file")
     check_device(options.device)       # (here, not in the options: a checkpoint's saved device may be absent)
     recipe = options.data_recipe()     # the clip pool's words and light, before anything is built
     clip_bytes = max(recipe.long[1], recipe.short[1]) * recipe.height * recipe.width * (

@@ -48,7 +48,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import ConfigError
+from tespike.golden.errors import ConfigError, check_flag as check_errors_flag
 
 
 def check_pixel_config(config: SensorConfig, mode: str, what: str) -> SensorConfig:
@@ -60,10 +60,9 @@ def check_pixel_config(config: SensorConfig, mode: str, what: str) -> SensorConf
 
 
 def check_flag(value, what: str) -> bool:
-    """``value``, True or False, refused in one line otherwise ('False' had been True)."""
-    if not isinstance(value, bool):
-        raise ConfigError(f"{what} = {value!r}: must be True or False")
-    return value
+    """``value``, True or False, refused in one line (a :class:`ConfigError`) otherwise ('False' had
+    been True)."""
+    return check_errors_flag(value, what, ConfigError)
 
 
 def _value(m: Module, expr, width: int, name: str, named: bool):

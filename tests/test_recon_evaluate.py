@@ -362,3 +362,29 @@ def test_weights_given_replace_the_shipped_ones(empty_weights_dir, tmp_path):
     words = evaluation.streams["a", "te"]
     assert np.array_equal(evaluation.images["a", "te", "bsf"],
                           reconstruct(words, SensorConfig(), "bsf", weights=tmp_path / "mine.pt"))
+
+
+def test_evaluate_refuses_switches_sensors_options_and_weights_it_would_misread_in_one_line():
+    """``progress='False'`` showed a bar and ``keep='no'`` kept the streams; a sensor named twice
+    counted its sequences twice; options and weights for a method or sensor not in the run were
+    dropped without a word, a window among a method's options was Python's "multiple values"; no
+    sensor was ``max()`` of an empty sequence and a preset's name as a configuration an
+    AttributeError."""
+    from tespike.golden.errors import ConfigError
+    light = np.full((9, 12, 12), 0.5, np.float32)
+    sequences = [("a", light)]
+    cases = [({"progress": "False"}, r"^progress = 'False': must be True, False \(or None\) or 'lines'$"),
+             ({"keep": "no"}, r"^keep = 'no': must be True or False$"),
+             ({"sensors": ["te", "te"]}, r"^sensor 'te' is named more than once$"),
+             ({"sensors": []}, r"^sensors: name at least one sensor$"),
+             ({"options": {"tfq": {}}}, r"^options for 'tfq': no method of this evaluation \(tfp\) has that name$"),
+             ({"options": {"tfp": 3}}, r"^options for 'tfp': must be a dict of reconstruct\(\) keywords, not int$"),
+             ({"options": {"tfp": {"window": 3}}}, r"^options for 'tfp': the window is the evaluation's own argument"),
+             ({"options": "x"}, r"^options: must be a dict, not str$"),
+             ({"weights": {"tfp": "x"}}, r"^weights key 'tfp': must be a \(method, sensor\) pair of this evaluation$")]
+    for options, words in cases:
+        with pytest.raises(InputError, match=words):
+            evaluate(sequences, lambda c, l, r: np.zeros(l.shape, np.uint8), **{"methods": ["tfp"], "sensors": ["te"],
+                                                                                "progress": False, **options})
+    with pytest.raises(ConfigError, match="^sensor 'te': configuration must be a SensorConfig"):
+        evaluate(sequences, lambda c, l, r: None, methods=["tfp"], sensors=["te"], configs={"te": "te"}, progress=False)

@@ -213,3 +213,17 @@ def test_the_learned_methods_registry_refuses_what_is_no_name_path_or_configurat
         weights_by_sensor("absent.pt", {"te": SensorConfig()})
     with pytest.raises(InputError, match=r"^unknown learned method \['net'\] \(known: net, "):
         method_classes(["net"])
+
+
+def test_reconstruct_and_write_outputs_refuse_switches_that_are_no_bool_in_one_line(tmp_path):
+    """``reconstruct(..., progress='no')`` showed a bar and ``write_outputs(..., plot='no')`` wrote the
+    plot; a results folder given as a number was a TypeError and an evaluation that is none an
+    AttributeError."""
+    from tespike.recon.report import write_outputs
+    with pytest.raises(InputError, match="^progress = 'no': must be True or False$"):
+        reconstruct(np.zeros((3, 2, 2), np.uint8), SensorConfig(), "tfp", progress="no")
+    with pytest.raises(InputError, match="^plot = 'no': must be True or False$"):
+        write_outputs(None, tmp_path, plot="no")
+    with pytest.raises(InputError, match="^write_outputs: the evaluation must be an Evaluation, not NoneType$"):
+        write_outputs(None, tmp_path)
+    assert not list(tmp_path.iterdir())

@@ -423,3 +423,17 @@ def test_options_of_the_wrong_kind_are_refused_when_made(option, refusal):
     (True as the rate 1, a checkpoint every -1 s, threads 0 until torch refused them)."""
     with pytest.raises(InputError, match=refusal):
         TrainOptions(steps=1, **option)
+
+
+def test_the_loss_the_resume_switch_and_the_options_are_checked_in_one_line(tmp_path):
+    """``training_loss(p, t, 'l2')`` (or None) had computed mu-l1 silently; ``train(..., resume='no')``
+    resumed, ``train({}, out)`` was an AttributeError of ``device``."""
+    t = torch.ones(2)
+    for loss in ("l2", None):
+        with pytest.raises(InputError, match=f"^loss = {loss!r}: must be one of l1, mu-l1$"):
+            training_loss(t, t * 0, loss)
+    with pytest.raises(InputError, match="^resume = 'no': must be True or False$"):
+        train(TrainOptions(steps=1), tmp_path / "w.pt", resume="no")
+    with pytest.raises(InputError, match="^train: the options must be TrainOptions, not dict$"):
+        train({}, tmp_path / "w.pt")
+    assert not list(tmp_path.iterdir())
