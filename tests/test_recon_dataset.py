@@ -687,3 +687,28 @@ def test_a_store_that_is_no_path_or_a_seed_that_is_no_count_is_refused_in_one_li
         with pytest.raises(InputError, match=f"^dataset store seed {seed!r}: must be an integer >= 0$"):
             DatasetStore.create_or_resume(tmp_path / "s.zarr", seed=seed, configs={"te": SensorConfig()})
     assert not (tmp_path / "s.zarr").exists()
+
+
+def test_store_sizes_and_sequence_attributes_are_checked_before_anything_is_written(tmp_path):
+    """A tile of (2.5, 4) was stored as (2, 4), chunk_frames 2.5 as 2; a tile of (0, 4) or no
+    configuration wrote the store and then called it altered; a sequence's shape of (2.5, 4, 4) made
+    K = 2, a source of 5 was stored; ``tiles(5, 5, (0, 4))`` was a ZeroDivisionError."""
+    from tespike.recon.dataset import DatasetStore
+    from tespike.recon.dataset.store import tiles
+    url = tmp_path / "s.zarr"
+    for options, words in (({"tile": (2.5, 4)}, r"^dataset store tile \(rows, cols\) \(2.5, 4\)"),
+                           ({"tile": (0, 4)}, r"^dataset store tile \(rows, cols\) \(0, 4\)"),
+                           ({"chunk_frames": 2.5}, r"^dataset store chunk_frames 2.5: must be an integer >= 1$"),
+                           ({"chunk_frames": True}, r"^dataset store chunk_frames True: must be an integer >= 1$"),
+                           ({"configs": {}}, r"^dataset store configs: must map one or more sensor names")):
+        with pytest.raises(InputError, match=words):
+            DatasetStore.create_or_resume(url, **{"seed": 0, "configs": {"te": SensorConfig()}, **options})
+        assert not url.exists()
+    store = DatasetStore.create_or_resume(url, seed=0, configs={"te": SensorConfig()})
+    for shape, source, words in (((2.5, 4, 4), "x", r"shape \(2.5, 4, 4\): must be \(K, H, W\), integers >= 1$"),
+                                 ((True, 4, 4), "x", r"shape \(True, 4, 4\): must be"),
+                                 ((2, 4, 4), 5, "source 5: must be text$")):
+        with pytest.raises(InputError, match="^sequence 'a' " + words):
+            store.prepare_sequence("a", shape, source)
+    with pytest.raises(InputError, match=r"^tile \(rows, cols\) \(0, 4\): H and W must be integers of at least 1$"):
+        tiles(5, 5, (0, 4))

@@ -46,7 +46,7 @@ import numpy as np
 
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError, is_count, one_line
-from tespike.golden.io import word_dtype
+from tespike.golden.io import check_frame_shape, word_dtype
 from tespike.golden.paths import path_text
 
 FORMAT = "tespike-dataset"
@@ -92,7 +92,8 @@ def tile_seed(seed: int, sequence: str, config: SensorConfig, row: int, col: int
 
 def tiles(height: int, width: int, tile: tuple[int, int] = TILE) -> list[tuple[int, int, slice, slice]]:
     """(row, col, rows, cols) of every tile of an H x W frame, row-major; edge tiles are smaller."""
-    th, tw = tile
+    height, width = check_frame_shape((height, width), "frame (height, width)")
+    th, tw = check_frame_shape(tile, "tile (rows, cols)")      # (0 had been a ZeroDivisionError)
     return [(r, c, slice(r * th, min(height, (r + 1) * th)), slice(c * tw, min(width, (c + 1) * tw)))
             for r in range(-(-height // th)) for c in range(-(-width // tw))]
 
@@ -193,8 +194,14 @@ class DatasetStore:
         url = path_text(url, "dataset store")
         if not is_count(seed):                              # (int() had truncated 2.5 silently)
             raise InputError(f"dataset store seed {seed!r}: must be an integer >= 0")
-        for name in configs:
+        if not isinstance(configs, dict) or not configs:
+            raise InputError("dataset store configs: must map one or more sensor names to configurations")
+        for name, config in configs.items():
             check_name(name, "sensor configuration")
+            SensorConfig.required(config, f"sensor {name!r}")
+        tile = check_frame_shape(tile, "dataset store tile (rows, cols)")   # (2.5 had been stored as 2)
+        if not is_count(chunk_frames, 1):
+            raise InputError(f"dataset store chunk_frames {chunk_frames!r}: must be an integer >= 1")
         attrs = {"format": FORMAT, "version": VERSION, "seed": int(seed),
                  "configs": {name: c.to_dict() for name, c in configs.items()},
                  "tile": [int(t) for t in tile], "chunk_frames": int(chunk_frames)}
@@ -238,6 +245,11 @@ class DatasetStore:
         unfinished arrays (their chunks are rewritten by the next build anyway).
         """
         check_name(name, "sequence")
+        if not (isinstance(shape, (tuple, list)) and len(shape) == 3 and all(is_count(n, 1) for n in shape)):
+            raise InputError(f"sequence {name!r} shape {shape!r}: must be (K, H, W), integers >= 1")
+        for what, text in (("source", source), ("digest", digest)):
+            if not isinstance(text, str):                # (5 or None had been stored)
+                raise InputError(f"sequence {name!r} {what} {text!r}: must be text")
         K, H, W = (int(n) for n in shape)
         info = {"source": source, "frames": K, "height": H, "width": W, **({"digest": digest} if digest else {})}
         self._rebuild_if_unreadable(name)
