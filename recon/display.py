@@ -60,5 +60,14 @@ class HdrDisplay:
         return (light * (self.peak_nits / reference_peak)).clamp(self.black_nits, self.peak_nits)
 
 
+def check_display(display) -> HdrDisplay:
+    """``display``, an :class:`HdrDisplay`, refused in one line otherwise (a name had been an
+    AttributeError of its first field): every metric that shows light on a display checks it."""
+    if not isinstance(display, HdrDisplay):
+        raise InputError(f"display = {display!r}: must be an HdrDisplay (tespike.recon.display), "
+                         f"not {type(display).__name__}")
+    return display
+
+
 #: The one display every perceptual metric of the project uses unless told otherwise.
 DEFAULT_DISPLAY = HdrDisplay()

@@ -23,7 +23,8 @@ import torch
 
 from tespike.golden.errors import InputError
 from tespike.golden.resources import require_memory
-from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay
+from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay, check_display
+from tespike.recon.settings import check_device
 from tespike.recon.metrics import as_frames, display_peak, frame_stacks
 
 #: Memory per pixel of one frame pyfvvdp judges (measured: about 220 bytes at 2048 x 2048).
@@ -58,6 +59,8 @@ def fovvideovdp(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY, p
     ``peak``: the reference light shown at the display's peak (default: the
     reference's maximum over all the frames given).
     """
+    check_display(display)
+    check_device(device)
     estimate, reference, single, rshape = frame_stacks(estimate, reference, "FovVideoVDP")
     K, H, W = rshape
     if K == 0 or H < MIN_SIDE or W < MIN_SIDE:         # (pyfvvdp fails inside below 4: a traceback)

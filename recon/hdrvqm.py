@@ -52,7 +52,8 @@ import torch
 
 from tespike.golden.errors import InputError
 from tespike.golden.resources import require_memory
-from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay
+from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay, check_display
+from tespike.recon.settings import check_device
 from tespike.recon.metrics import as_frames, display_peak, frame_stacks, pu21_encode
 
 N_SCALES = 5
@@ -159,6 +160,8 @@ def hdr_vqm_scores(estimate, reference, *, display: HdrDisplay = DEFAULT_DISPLAY
     ``peak``: the reference light shown at the display's peak (default: the
     reference's maximum over all the frames given).
     """
+    check_display(display)
+    check_device(device)
     estimate, reference, single, rshape = frame_stacks(estimate, reference, "HDR-VQM")
     if not (isinstance(fixation_frames, int) and fixation_frames >= 1):
         raise InputError(f"fixation_frames = {fixation_frames!r}: must be an integer >= 1")

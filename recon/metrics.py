@@ -37,6 +37,7 @@ import torch
 from tespike.golden.errors import InputError, is_positive_number
 
 from .mulaw import MU, compress
+from .settings import check_device
 
 SSIM_SIGMA = 1.5
 SSIM_TRUNCATE = 3.5
@@ -63,7 +64,7 @@ def as_frames(x, name: str, device) -> torch.Tensor:
             x = x.astype(x.dtype.newbyteorder("="))
         elif not x.flags.writeable:        # a read-only memory map: copy the (small) band
             x = x.copy()
-    t = torch.as_tensor(x)
+    t = torch.as_tensor(x).detach()                     # (one that requires grad: numpy() had refused it)
     if t.dtype.is_complex or t.dtype == torch.bool:
         raise InputError(f"{name} dtype {t.dtype} is not a real number type")
     t = t.to(device=device, dtype=torch.float64)
@@ -162,7 +163,16 @@ def _shape(x) -> tuple[int, ...]:
 def _arrays(*xs):
     """Each of ``xs`` as it is where it is a numpy array (memory maps kept) or a tensor, else as a
     numpy array (nested lists of numbers, as a library caller may pass them)."""
-    return tuple(x if isinstance(x, (np.ndarray, torch.Tensor)) else np.asarray(x) for x in xs)
+    out = []
+    for x in xs:
+        if not isinstance(x, (np.ndarray, torch.Tensor)):
+            try:
+                x = np.asarray(x)
+            except ValueError:                           # (a ragged list: numpy's "inhomogeneous shape")
+                raise InputError("light given as a list must be numbers arranged as (K, H, W) or (H, W) "
+                                 "frames, every row the same length") from None
+        out.append(x)
+    return tuple(out)
 
 
 def frame_stacks(estimate, reference, metric: str):
@@ -231,8 +241,12 @@ def _banded(pred, gt, stat, *, halo: int = 0, peak=None, normalised: bool = True
     and passed to ``stat``, which returns the per-pixel values of the band's
     valid region (its input carries ``halo`` extra rows on each side).
     """
+    check_device(device)
     pred, gt = _arrays(pred, gt)
     pshape, gshape = _shape(pred), _shape(gt)
+    if len(pshape) != len(gshape):                      # (a stack beside one frame had been paired)
+        raise InputError(f"prediction shape {pshape} and ground truth shape {gshape}: both (K, H, W) "
+                         "or both (H, W)")
     single = len(pshape) == 2
     if len(pshape) == 2:
         pred = pred[None]
@@ -244,6 +258,8 @@ def _banded(pred, gt, stat, *, halo: int = 0, peak=None, normalised: bool = True
             raise InputError(f"{name} shape {shape if not single else shape[1:]} must be (K, H, W) or (H, W)")
     if pshape != gshape:
         raise InputError(f"prediction shape {pshape} != ground truth shape {gshape}")
+    if 0 in gshape:                                      # (range()'s "arg 3 must not be zero")
+        raise InputError(f"frames of shape {gshape} hold no pixel to score")
     K, H, W = gshape
     if normalised:
         if peak is None:
@@ -319,7 +335,7 @@ def psnr_pu21(pred, gt, *, nits_per_unit: float = DEFAULT_NITS_PER_UNIT, device=
     Negative predicted light is clamped with everything below PU21's 0.005
     cd/m^2 (it is darker than the encoding resolves).
     """
-    if not (isinstance(nits_per_unit, (int, float)) and math.isfinite(nits_per_unit) and nits_per_unit > 0):
+    if not is_positive_number(nits_per_unit):          # (True had been taken, numpy's float32 refused)
         raise InputError(f"nits_per_unit = {nits_per_unit!r}: must be a finite number > 0")
     mse = _banded(pred, gt, lambda p, g: (pu21_encode(p * nits_per_unit) - pu21_encode(g * nits_per_unit)) ** 2,
                   normalised=False, device=device)

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tespike.golden.errors import InputError
-from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay
+from tespike.recon.display import DEFAULT_DISPLAY, HdrDisplay, check_display
 from tespike.recon.settings import check_device, names
 
 
@@ -47,15 +47,6 @@ def check_metrics(names: tuple, what: str) -> tuple:
     if twice:                           # (one column was made of both)
         raise InputError(f"{what}: {twice[0]!r} is named more than once")
     return tuple(names)
-
-
-def check_display(display) -> HdrDisplay:
-    """``display``, an :class:`tespike.recon.display.HdrDisplay`, refused in one line otherwise (a name
-    had been an AttributeError of its first field)."""
-    if not isinstance(display, HdrDisplay):
-        raise InputError(f"display = {display!r}: must be an HdrDisplay (tespike.recon.display), "
-                         f"not {type(display).__name__}")
-    return display
 
 
 def columns(display: HdrDisplay = DEFAULT_DISPLAY) -> tuple[Column, ...]:

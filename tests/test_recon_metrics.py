@@ -180,3 +180,31 @@ def test_the_mu_law_refuses_a_mu_peak_or_light_it_cannot_map_in_one_line():
         tone_map(np.array([1j]), 1.0)
     with pytest.raises(InputError, match="^mu-law light: must be a torch tensor, not ndarray"):
         compress(np.ones(2), 5000.0)
+
+
+def test_the_metrics_refuse_devices_displays_and_frames_they_cannot_score_in_one_line():
+    """A device torch cannot use was its AssertionError or RuntimeError, a display's name an
+    AttributeError, a ragged list numpy's "inhomogeneous shape", a tensor that requires grad
+    numpy()'s RuntimeError, frames of no pixel range()'s "arg 3 must not be zero", a stack beside
+    one frame was paired silently, and ``nits_per_unit=True`` taken while numpy's float32 was refused."""
+    from tespike.recon.fovvideovdp import fovvideovdp
+    from tespike.recon.hdrvqm import hdr_vqm
+    a = np.random.default_rng(0).random((2, 16, 16)) + 0.1
+    for device, words in (("cuda:7", "not a usable torch device"), ("xyz", "not a usable torch device"),
+                          ("meta", "the meta device holds no data")):
+        for metric in (metrics.psnr_mu, metrics.ssim_mu, metrics.psnr_pu21, hdr_vqm, fovvideovdp):
+            with pytest.raises(InputError, match=f"^device = '{device}': {words}"):
+                metric(a, a, device=device)
+    for metric in (hdr_vqm, fovvideovdp):
+        with pytest.raises(InputError, match="^display = 'sim2': must be an HdrDisplay"):
+            metric(a, a, display="sim2")
+    with pytest.raises(InputError, match=r"^light given as a list must be numbers arranged as \(K, H, W\)"):
+        metrics.psnr_mu([[1, 2], [3]], [[1, 2], [3]])
+    assert metrics.psnr_mu(torch.ones((2, 2), requires_grad=True), torch.ones((2, 2))) == math.inf
+    with pytest.raises(InputError, match=r"^frames of shape \(2, 0, 3\) hold no pixel to score$"):
+        metrics.psnr_pu21(np.ones((2, 0, 3)), np.ones((2, 0, 3)))
+    with pytest.raises(InputError, match=r"^prediction shape \(1, 2, 2\) and ground truth shape \(2, 2\): both"):
+        metrics.psnr_mu(np.ones((1, 2, 2)), np.ones((2, 2)))
+    with pytest.raises(InputError, match="^nits_per_unit = True: must be a finite number > 0$"):
+        metrics.psnr_pu21(a, a, nits_per_unit=True)
+    assert np.isfinite(metrics.psnr_pu21(a * 0.9, a, nits_per_unit=np.float32(4000))).all()
