@@ -1312,3 +1312,18 @@ def test_cross_out_arithmetic_on_given_random_numbers(mode, monkeypatch):
     assert sim.rng.calls == [quiet, (need, [after[1] - need + 1, 1])]
     ticks = [int((remaining[i] + (expected[i] - remaining[i]) * 0.5) / expected[i] * L) // F + 1 for i in (1, 3)]
     assert list(words) == [spikes[0], (1 << config.d) | ticks[0], spikes[2], (1 << config.d) | ticks[1], 0, 0]
+
+
+def test_setting_the_charge_refuses_what_no_pixel_can_hold_in_one_line():
+    """``sim.acc = 2.7`` had been truncated to 2, -5 simulated at the next readout, and booleans
+    taken as 1 and 0."""
+    config = SensorConfig()
+    sim = SceneSimulator(config, (1, 2), rng=0)
+    for values in (2.7, [True, False], [1, 2, 3]):
+        with pytest.raises(InputError, match=r"^acc: must be integers, one a pixel \(2, or \(1, 2\)\) or one for all"):
+            sim.acc = values
+    for values in (-5, config.acc_max + 1):
+        with pytest.raises(InputError, match=f"^acc: charges must lie in 0 .. {config.acc_max} "):
+            sim.acc = values
+    sim.acc = [3, 4]
+    assert sim.acc.tolist() == [3, 4]

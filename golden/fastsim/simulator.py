@@ -114,8 +114,17 @@ class SceneSimulator:
     @acc.setter
     def acc(self, values) -> None:
         """Set every pixel's carried charge (lazy pixels leave their path: their
-        charge is now known, and what follows depends on it alone)."""
-        self.carried[:] = values
+        charge is now known, and what follows depends on it alone): integers in
+        0 .. acc_max, one a pixel or one for all, refused in one line otherwise (2.7 had been
+        truncated to 2, -5 simulated, booleans taken as 1 and 0)."""
+        values = np.asarray(values)
+        if values.dtype.kind not in "iu" or values.shape not in ((), self.carried.shape, self.shape):
+            raise InputError(f"acc: must be integers, one a pixel ({self.carried.size}, or {self.shape}) or one "
+                             f"for all, not {values.dtype} {values.shape}")
+        if values.size and (int(values.min()) < 0 or int(values.max()) > self.config.acc_max):
+            raise InputError(f"acc: charges must lie in 0 .. {self.config.acc_max} (acc_max), got "
+                             f"{int(values.min())} .. {int(values.max())}")
+        self.carried[:] = values.reshape(-1) if values.ndim else values
         self.lazy.mask[:] = False
 
     def _peek_generator(self) -> np.random.Generator:
