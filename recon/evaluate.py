@@ -412,9 +412,20 @@ def _checked_run_options(methods, sensors, options, weights, progress, keep) -> 
     if not (progress is None or isinstance(progress, bool) or progress == "lines"):
         raise InputError(f"progress = {progress!r}: must be True, False (or None) or 'lines'")
     check_flag(keep, "keep")
-    for name, given in (("options", options), ("weights", weights)):
-        if given is not None and not isinstance(given, dict):
-            raise InputError(f"{name}: must be a dict, not {type(given).__name__}")
+    check_method_options(methods, options)
+    if weights is not None and not isinstance(weights, dict):
+        raise InputError(f"weights: must be a dict, not {type(weights).__name__}")
+    for key in (weights or {}):
+        if not (isinstance(key, tuple) and len(key) == 2 and key[0] in methods and key[1] in sensors):
+            raise InputError(f"weights key {key!r}: must be a (method, sensor) pair of this evaluation")
+
+
+def check_method_options(methods, options) -> None:
+    """Every key of ``options`` a method of the run (``methods``) whose value is a dict of
+    :func:`reconstruct` keywords other than the window (given once, to the run); a typo had been
+    dropped without a word. :func:`evaluate` and the store's evaluation check them alike."""
+    if options is not None and not isinstance(options, dict):
+        raise InputError(f"options: must be a dict, not {type(options).__name__}")
     for method, kwargs in (options or {}).items():
         if method not in methods:
             raise InputError(f"options for {method!r}: no method of this evaluation "
@@ -425,9 +436,6 @@ def _checked_run_options(methods, sensors, options, weights, progress, keep) -> 
         if "window" in kwargs:
             raise InputError(f"options for {method!r}: the window is the evaluation's own argument "
                              "(window=), the same for every method")
-    for key in (weights or {}):
-        if not (isinstance(key, tuple) and len(key) == 2 and key[0] in methods and key[1] in sensors):
-            raise InputError(f"weights key {key!r}: must be a (method, sensor) pair of this evaluation")
 
 
 def _recorded(simulate, config, light, rng, sensor, base, noise_sensors, calibrations, calibration_rng, bar,

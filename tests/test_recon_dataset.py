@@ -712,3 +712,23 @@ def test_store_sizes_and_sequence_attributes_are_checked_before_anything_is_writ
             store.prepare_sequence("a", shape, source)
     with pytest.raises(InputError, match=r"^tile \(rows, cols\) \(0, 4\): H and W must be integers of at least 1$"):
         tiles(5, 5, (0, 4))
+
+
+def test_the_store_builders_and_evaluation_refuse_names_counts_and_runners_that_are_none(tmp_path, small_store):
+    """``hdr_sources(folder, max_frames=-1)`` had dropped the last frame and True kept one; a scene's
+    name given as text was read letter by letter ("unknown scene 'd'"), and so were evaluate_store's
+    methods ("unknown method 't'"); a tile of 0 was a ZeroDivisionError, a run of None a TypeError after
+    the planning, and options for a method not run were dropped without a word."""
+    for frames in (-1, True, 2.5):
+        with pytest.raises(InputError, match=f"^max_frames = {frames!r}: must be an integer >= 1$"):
+            hdr_sources(tmp_path, max_frames=frames)
+    with pytest.raises(InputError, match=r"^unknown grayscale weights \['rec709'\]"):
+        hdr_sources(tmp_path, weights=["rec709"])
+    assert [s.name for s in scene_sources("default", 2, 8, 8)] == ["default"]
+    run = Runner(workers=1)
+    with pytest.raises(InputError, match=r"^tile \(rows, cols\) \(0, 4\): H and W must be integers of at least 1$"):
+        evaluate_store(small_store, run, tile=(0, 4))
+    with pytest.raises(InputError, match="^run: must run the evaluation's tasks"):
+        evaluate_store(small_store, None)
+    with pytest.raises(InputError, match=r"^options for 'tfi': no method of this evaluation \(tfp\) has that name$"):
+        evaluate_store(small_store, run, methods="tfp", options={"tfi": {"search": "window"}})

@@ -41,7 +41,7 @@ import numpy as np
 
 from tespike.golden.atomic import NO_ROOM
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_count
 from tespike.golden.paths import path_text
 from tespike.recon.dataset.store import (CHUNK_FRAMES, TILE, DatasetStore, check_name, mark_complete,
                                  open_array, tile_seed, tiles)
@@ -88,12 +88,13 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
     refused, as is a folder without sub-folders, and a sequence whose frames' headers give
     different sizes (before anything is planned); the first frame of each is decoded.
     """
-    from tespike.recon.scenes import LUMA_WEIGHTS
+    from tespike.recon.scenes.color import check_weights
     from tespike.recon.scenes.hdr_io import FRAME_SUFFIXES, list_frames, sequence_size
 
     folder = Path(path_text(folder, "--hdr"))
-    if weights not in LUMA_WEIGHTS:
-        raise InputError(f"unknown grayscale weights {weights!r} (known: {', '.join(LUMA_WEIGHTS)})")
+    check_weights(weights)
+    if max_frames is not None and not is_count(max_frames, 1):   # (-1 had dropped the last frame, True kept one)
+        raise InputError(f"max_frames = {max_frames!r}: must be an integer >= 1")
     if not folder.is_dir():
         raise InputError(f"--hdr {str(folder)!r} does not exist or is not a folder")
     entries = list(folder.iterdir())
@@ -125,7 +126,9 @@ def hdr_sources(folder: str | Path, *, weights: str = "rec709", max_frames: int 
 def scene_sources(names: Sequence[str], frames: int, height: int, width: int) -> list[Source]:
     """Built-in scenes (public seed 0, peak 1), each named after its scene."""
     from tespike.recon.scenes import check_scene_request
+    from tespike.recon.settings import names as name_list
 
+    names = name_list(names, "scene names")              # (one name given as text: its letters had been names)
     out = []
     for name in names:
         check_scene_request(name, frames, height, width, flags=True)

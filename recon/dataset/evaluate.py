@@ -35,6 +35,7 @@ import numpy as np
 from tespike.golden.config import SensorConfig
 from tespike.golden.decode import check_words
 from tespike.golden.errors import IllegalWordError, InputError
+from tespike.golden.io import check_frame_shape
 
 from ..settings import DEFAULT_WINDOW
 from .store import DatasetStore, open_array, reading, tiles
@@ -164,12 +165,18 @@ def evaluate_store(url: str, run, *, methods: Sequence[str] | None = None, windo
     that wraps the iterable of finished tasks and reports as it is walked (``tespike evaluate
     --store`` passes a tqdm bar, :func:`tespike.cosim.console.bar`).
     """
-    from tespike.recon.evaluate import learned_span
+    from tespike.recon.evaluate import check_method_options, learned_span
+    from tespike.recon.settings import names
 
+    if not callable(run):                               # (None had been a TypeError after the planning)
+        raise InputError(f"run: must run the evaluation's tasks (a Runner), not {type(run).__name__}")
+    tile = check_frame_shape(tile, "tile (rows, cols)")  # (0 had been a ZeroDivisionError)
+    methods = None if methods is None else names(methods, "methods")   # ('tfp' had been the methods t, f, p)
     store = DatasetStore.open(url)
     sequences = store.sequences()
     infos = {s: store.check_sequence(s) for s in sequences}    # metadata consistent, no chunk file gone
     methods, window = _store_methods(store, infos, methods, window, device, tile)
+    check_method_options(methods, options)
     learned = learned_span(methods)                      # frames scored as the serial evaluation scores them
     tasks, keys, plan = _score_tasks(store, infos, methods, window, device, tile, options, learned)
     if starting is not None:
