@@ -267,3 +267,35 @@ def test_properties_refuse_what_is_no_configuration():
     from tespike.golden.errors import ConfigError
     with pytest.raises(ConfigError, match="^properties: configuration must be a SensorConfig"):
         properties("te")
+
+
+def test_the_proof_builders_refuse_what_would_prove_nothing_in_one_line(tmp_path):
+    """prove(..., depth=0) had reported a proved property as failing, with a counterexample of
+    nothing; bounds and depths of 0, -5 or 2.5 were taken (0 as the default); a preset's name was an
+    AttributeError of ``check``, 0 lanes a ZeroDivisionError, a pixel factory of None "not callable"."""
+    from tespike.cosim.formal import prove, rule_harness, stream_lanes
+    from tespike.cosim.formal.reference import reference_verilog
+    from tespike.cosim.formal.tops import bmc_bound, small_clocks, timing_harness, verilog_parallel_harness
+    from tespike.golden.errors import ConfigError, InputError
+    small = small_clocks(SensorConfig())
+    harness = rule_harness(small, None, False)
+    for depth in (0, -1, 2.5, True):
+        with pytest.raises(InputError, match=f"^depth {depth!r}: must be an integer >= 1"):
+            prove("rule", harness, depth=depth, solver="z3", trace_dir=tmp_path)
+    with pytest.raises(InputError, match="^solver 'cvc9': must be one of z3$"):
+        prove("rule", harness, depth=3, solver="cvc9", trace_dir=tmp_path)
+    for bound in (0, -5, 2.5):
+        with pytest.raises(InputError, match=f"^bound {bound!r}: must be an integer >= 1 clocks"):
+            verilog_parallel_harness(small, 1, 1, bound=bound)
+        with pytest.raises(InputError, match=f"^depth {bound!r}: must be an integer >= 1 clocks"):
+            timing_harness(small, depth=bound)
+    with pytest.raises(InputError, match="^bmc_bound: lanes 0 must be an integer >= 1"):
+        bmc_bound(small, 1, 1, 0)
+    with pytest.raises(InputError, match="^reference_verilog parallel_delay -1: must be an integer >= 0$"):
+        reference_verilog(small, 1, 1, parallel_delay=-1)
+    for call, what in ((lambda c: verilog_parallel_harness(c, 1, 1), "verilog_parallel_harness"),
+                       (timing_harness, "timing_harness"), (lambda c: bmc_bound(c, 1, 1, None), "bmc_bound"),
+                       (small_clocks, "small_clocks"), (stream_lanes, "stream_lanes"),
+                       (lambda c: rule_harness(c, None, False), "pixel harness")):
+        with pytest.raises(ConfigError, match=f"^{what}: configuration must be a SensorConfig"):
+            call("te")

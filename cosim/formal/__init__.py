@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Callable
 
 from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError, is_count
+from tespike.golden.paths import path_text
 
 from .pixel import (STREAM_ARRAY, bounds_harness, corners, rule_harness, amaranth_stream_harness,
                     stream_lanes)
@@ -31,7 +33,15 @@ __all__ = ["SOLVERS", "TOOLS", "TOP_TOOLS", "ProofToolError", "ProofResult", "co
 
 def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> ProofResult:
     """Prove one pixel property: a harness by k-induction (base case and induction step, both
-    ``depth`` long); a ``stream-pixel-rule`` equivalence by one SAT call."""
+    ``depth`` long); a ``stream-pixel-rule`` equivalence by one SAT call. A depth that is no count
+    >= 1, a solver not in :data:`SOLVERS` or a ``trace_dir`` that is no path is refused in one line
+    (depth 0 had reported a proved property as failing, with a counterexample of nothing)."""
+    if not is_count(depth, 1):
+        raise InputError(f"depth {depth!r}: must be an integer >= 1 (clocks of the base case and the "
+                         "induction step)")
+    if not (isinstance(solver, str) and solver in SOLVERS):
+        raise InputError(f"solver {solver!r}: must be one of {', '.join(SOLVERS)}")
+    trace_dir = Path(path_text(trace_dir, "trace_dir"))
     if isinstance(harness, Equivalence):
         return prove_equivalence(name, harness, trace_dir)
     return _prove_harness(name, harness, depth=depth, solver=solver, trace_dir=trace_dir)

@@ -66,6 +66,10 @@ class _Harness:
     def __init__(self, config: SensorConfig, pixel_factory, word_register: bool):
         from amaranth.hdl import Fragment, Module
 
+        config = SensorConfig.checked(config, "pixel harness")
+        if pixel_factory is None:                        # (None had been "not callable")
+            from tespike.rtl.pixel import pixel_class
+            pixel_factory = pixel_class(config)
         self.config = config
         self.m = Module()
         self.pixel = pixel_factory(config, word_register=word_register)
@@ -250,7 +254,7 @@ STREAM_ARRAY = (1, 3)
 
 def stream_lanes(config: SensorConfig) -> int:
     """Two lanes (two beats, the second padded) where an interval has room, else three."""
-    return 2 if config.clocks_per_readout >= 2 else 3
+    return 2 if SensorConfig.required(config, "stream_lanes").clocks_per_readout >= 2 else 3
 
 
 # -- the streaming readout ---------------------------------------------------------------------

@@ -24,7 +24,9 @@ spelled out beat by beat (no run-time index). A reset clears both.
 
 from __future__ import annotations
 
+from tespike.golden.beats import check_array_size
 from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError, is_count
 
 #: Edges between the edge that samples an interval's last charge and the first clock its
 #: words show on the parallel top (0: ``frame_valid`` in the very next clock, sampled one
@@ -33,6 +35,18 @@ PARALLEL_DELAY = 0
 #: The same for beat 0 of the streaming top (1: beat j is sampled 2 + j clocks after the
 #: interval's last clock, docs/rtl.md "Streaming readout").
 STREAM_DELAY = 1
+
+
+def checked_request(config, what: str, height=None, width=None, lanes=None) -> SensorConfig:
+    """The configuration re-validated, and the array's sizes and lane count (where given) integers
+    >= 1, refused in one line naming ``what`` (a preset's name had been an AttributeError of
+    ``check``, 0 lanes a ZeroDivisionError): every harness builder's first step."""
+    config = SensorConfig.checked(config, what)
+    if height is not None or width is not None:
+        check_array_size(height, width)
+    if lanes is not None and not is_count(lanes, 1):
+        raise InputError(f"{what}: lanes {lanes!r} must be an integer >= 1 (or None: the parallel top)")
+    return config
 
 
 def _bits(value: int) -> int:
@@ -108,7 +122,10 @@ def reference_verilog(config: SensorConfig, height: int, width: int, lanes: int 
     """Module ``spec_reference`` (ports ``clk``, ``rst``, ``charge``; ``done``/``words``; the
     parallel ``frame_valid``/``frame``; with ``lanes``, ``out_valid``/``out_first``/``out_words``
     and ``beat_words`` (the words beat ``beat_index`` must carry, for the contract monitor)."""
-    c = config.check()
+    c = checked_request(config, "reference_verilog", height, width, lanes)
+    for name, value in (("parallel_delay", parallel_delay), ("stream_delay", stream_delay)):
+        if not is_count(value):                          # (-1 had been taken)
+            raise InputError(f"reference_verilog {name} {value!r}: must be an integer >= 0")
     P, E, wd = height * width, c.input_bits, c.word_bits
     F, alpha = c.clocks_per_tick, c.alpha
     pixels = [_pixel(c, p) for p in range(P)]

@@ -40,9 +40,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError, check_flag, is_count
 from tespike.rtl.names import module_names, stream_module_names
 
-from .reference import PARALLEL_DELAY, STREAM_DELAY, reference_verilog
+from .reference import PARALLEL_DELAY, STREAM_DELAY, checked_request, reference_verilog
+
+
+def _check_clocks(value, name: str) -> None:
+    """A proof's clocks given (None: the default): an integer >= 1 (0 had fallen back to the default
+    without a word, -5 and 2.5 been taken)."""
+    if value is not None and not is_count(value, 1):
+        raise InputError(f"{name} {value!r}: must be an integer >= 1 clocks (or None: the default)")
 
 
 def design_text(config: SensorConfig, height: int, width: int, lanes: int | None) -> str:
@@ -57,6 +65,9 @@ def design_text(config: SensorConfig, height: int, width: int, lanes: int | None
 def bmc_bound(config: SensorConfig, height: int, width: int, lanes: int | None, intervals: int = 3) -> int:
     """Clocks of the bounded proofs: ``intervals`` readout intervals after the first edge,
     then the latency and the last interval's beats, and one more clock."""
+    config = checked_request(config, "bmc_bound", height, width, lanes)
+    if not is_count(intervals, 1):
+        raise InputError(f"bmc_bound intervals {intervals!r}: must be an integer >= 1")
     L = config.clocks_per_readout
     drain = PARALLEL_DELAY if lanes is None else STREAM_DELAY + -(-height * width // lanes)
     return intervals * L + drain + 2
@@ -110,7 +121,8 @@ def _assemble(parts: list[str], body_head: str, asserts: _Asserts, body_tail: st
 def verilog_parallel_harness(config: SensorConfig, height: int, width: int, design: str | None = None,
                      bound: int | None = None) -> Harness:
     """``parallel-equiv``: the parallel top against the SPEC reference (see the module docstring)."""
-    c = config.check()
+    c = checked_request(config, "verilog_parallel_harness", height, width)
+    _check_clocks(bound, "bound")
     P, E, wd = height * width, c.input_bits, c.word_bits
     design = design_text(c, height, width, None) if design is None else design
     head = (_proof_top(P * E) + f"  wire dut_valid;\n  wire [{P * wd - 1}:0] dut_frame;\n"
@@ -129,7 +141,8 @@ def verilog_stream_harness(config: SensorConfig, height: int, width: int, lanes:
                    bound: int | None = None) -> Harness:
     """``stream-equiv``: the streaming top against the SPEC reference and the streaming contract
     (see the module docstring)."""
-    c = config.check()
+    c = checked_request(config, "verilog_stream_harness", height, width, lanes)
+    _check_clocks(bound, "bound")
     P, E, wd, n = height * width, c.input_bits, c.word_bits, lanes
     L = c.clocks_per_readout
     B = -(-P // n)
@@ -183,7 +196,9 @@ def timing_harness(config: SensorConfig, design: str | None = None, depth: int |
     counters show the clock the input register holds; else the parallel top's
     (``array-timing``), whose counters show the clock on the port (clock 0 after a reset) and
     whose ``frame_valid`` is ``last`` one edge later, never in the clock after a reset."""
-    c = config.check()
+    c = checked_request(config, "timing_harness")
+    _check_clocks(depth, "depth")
+    check_flag(sampled_input, "sampled_input")
     F, alpha, L = c.clocks_per_tick, c.alpha, c.clocks_per_readout
     if design is None:
         design = design_text(c, 1, 1, 1 if sampled_input else None)
@@ -236,7 +251,7 @@ def small_clocks(config: SensorConfig) -> SensorConfig:
     """``config`` with the smallest clocks that still have every phase (b1 = b2 = 2: F = 4,
     alpha = 3, L = 12) and small widths (theta 3, A 3, E 2, ml_bits 3), so that three readout
     intervals of a 3 x 4 array are a few seconds of proof."""
-    values = dict(config.to_dict(), b1=2, b2=2, alpha=3, clocks_per_tick=4, threshold=3, acc_bits=3,
+    values = dict(SensorConfig.required(config, "small_clocks").to_dict(), b1=2, b2=2, alpha=3, clocks_per_tick=4, threshold=3, acc_bits=3,
                   input_bits=2, ml_bits=3)
     return SensorConfig(**values).check()
 
