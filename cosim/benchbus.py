@@ -12,6 +12,8 @@ from typing import Iterator
 
 import numpy as np
 
+from tespike.golden.errors import InputError, is_count
+
 from .outside import pack_rows, unpack_rows, words_per_row
 
 #: Clock period given to the simulator (1 MHz); only the waveform's time axis sees it.
@@ -48,6 +50,13 @@ def iter_packed_charge(stimulus: np.ndarray, input_bits: int) -> Iterator[int]:
 def frame_rows(frames: list[int], n_values: int, bits: int) -> np.ndarray:
     """Port values as integers -> ``(K, words_per_row)`` uint32 rows, as the outside harnesses capture them."""
     nbytes = 4 * words_per_row(n_values, bits)
+    if not is_count(n_values, 1):                       # (0 had been an OverflowError)
+        raise InputError(f"frame_rows: {n_values!r} values a frame: must be an integer >= 1")
+    frames = list(frames)
+    bad = next((f for f in frames if not (is_count(f) and f < 1 << (n_values * bits))), None)
+    if bad is not None:                                  # (numpy's 5, 5.0, -1 or 2^40: AttributeError, OverflowError)
+        raise InputError(f"frame_rows: port value {bad!r} is no integer of 0 .. 2^{n_values * bits} - 1")
+    frames = [int(f) for f in frames]
     raw = b"".join(f.to_bytes(nbytes, "little") for f in frames)
     return np.frombuffer(raw, "<u4").reshape(len(frames), nbytes // 4)
 

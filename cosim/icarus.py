@@ -30,7 +30,7 @@ from tespike.golden.paths import path_text
 
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, first_error_line, hex_to_rows,
                       pack_rows, require_tool, rows_to_hex, run_process)
-from .tops import RunPlan, prepare
+from .tops import RunPlan, check_stream_lanes, prepare
 
 TESTBENCH_TOP = "tespike_tb"
 _STIMULUS = "stimulus.hex"
@@ -224,4 +224,5 @@ def run_icarus_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int, *,
     (:func:`tespike.cosim.resets.beat_segments`). ``vcd_path``: as :func:`run_icarus`.
     """
     config = SensorConfig.required(config, "run_icarus_stream")
+    check_stream_lanes(lanes, "run_icarus_stream")
     return _run(prepare(config, stimulus, lanes, resets), verilog, work_dir, vcd_path)

@@ -21,6 +21,7 @@ import dataclasses
 import numpy as np
 
 from tespike.golden.config import SensorConfig
+from tespike.golden.errors import InputError, is_count
 from tespike.golden.io import check_stimulus
 from tespike.golden.beats import beat_count, check_lanes
 
@@ -152,8 +153,17 @@ class RunPlan:
         return self.readouts == 0 and self.resets is None
 
 
+def check_stream_lanes(lanes, what: str) -> int:
+    """The lane count of a run of the streaming top, an integer >= 1 (None had run the parallel top
+    and returned its words where beats were asked for)."""
+    if not is_count(lanes, 1):
+        raise InputError(f"{what}: lanes {lanes!r} must be an integer >= 1 (the streaming top's lanes)")
+    return lanes
+
+
 def prepare(config: SensorConfig, stimulus: np.ndarray, lanes: int | None = None, resets=None) -> RunPlan:
     """The run prologue every harness shares: check the stimulus, the lane count and the resets."""
+    config = SensorConfig.required(config, "prepare")
     check_stimulus(stimulus, config)
     T, H, W = stimulus.shape
     if lanes is not None:

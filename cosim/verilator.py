@@ -41,7 +41,7 @@ from tespike.golden.paths import path_text
 from . import children
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, cache_entry, content_hash,
                       default_cache_root, first_error_line, pack_rows, require_tool, words_per_row)
-from .tops import RunPlan, Top, prepare
+from .tops import RunPlan, Top, check_stream_lanes, prepare
 
 #: Verilator options of every build. ``-O3``: Verilator's own optimisation;
 #: ``--x-assign/--x-initial fast``: X is irrelevant after the synchronous reset.
@@ -522,6 +522,8 @@ def run_verilator_stream(config: SensorConfig, stimulus: np.ndarray, lanes: int,
     result is then a list of each segment's beats ``(n, N)``.
     """
     config = SensorConfig.required(config, "run_verilator_stream")
+    check_stream_lanes(lanes, "run_verilator_stream")
+
     def build_streaming(text: str, top) -> Path:
         return build_stream(config, text, top.height, top.width, lanes, build_dir=build_dir,
                             progress=progress, cxx_opt=cxx_opt)

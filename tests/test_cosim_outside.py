@@ -1,5 +1,7 @@
 """Port bit packing, hex rows, the capture check and the cache helpers of cosim/outside.py."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -130,3 +132,26 @@ def test_the_row_packers_refuse_values_bits_and_hex_they_cannot_hold_in_one_line
         words_per_row(-1, 5)
     with pytest.raises(InputError, match="^line 1 'zz' is no 5-bit hex value$"):
         hex_to_rows(["zz"], 5)
+
+
+def test_the_outside_runs_refuse_lanes_frames_and_configurations_that_are_none_in_one_line():
+    """``run_icarus_stream(config, stimulus, None)`` had run the parallel top and returned its words
+    where beats were asked for; frame integers that are numpy's, floats, -1 or past the bus were
+    AttributeErrors or OverflowErrors; ``prepare('te', ...)`` an AttributeError."""
+    from tespike.cosim.benchbus import unpack_frames
+    from tespike.cosim.icarus import run_icarus_stream
+    from tespike.cosim.tops import prepare
+    from tespike.cosim.verilator import run_verilator_stream
+    from tespike.golden.errors import ConfigError, InputError
+    config = SensorConfig(b1=1, b2=1, alpha=1, clocks_per_tick=1, threshold=1, acc_bits=1, input_bits=1)
+    stimulus = np.ones((1, 1, 2), np.uint8)
+    for run, what in ((run_icarus_stream, "run_icarus_stream"), (run_verilator_stream, "run_verilator_stream")):
+        for lanes in (None, 0, 1.5):
+            with pytest.raises(InputError, match=f"^{what}: lanes {lanes!r} must be an integer >= 1"):
+                run(config, stimulus, lanes)
+    for frame in (-1, 1 << 40, "5", 5.0):
+        with pytest.raises(InputError, match=rf"^frame_rows: port value {re.escape(repr(frame))} is no integer of 0 \.\. 2\^8 - 1$"):
+            unpack_frames([frame], 2, 4)
+    assert unpack_frames([np.int64(5), 255], 2, 4).tolist() == [[5, 0], [15, 15]]
+    with pytest.raises(ConfigError, match="^prepare: configuration must be a SensorConfig"):
+        prepare("te", stimulus)
