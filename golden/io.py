@@ -518,6 +518,10 @@ def images_array(shape: tuple[int, int, int], out: np.ndarray | None = None) -> 
         raise InputError(f"images shape {shape!r}: must be (K, H, W), three integers >= 0")
     if out is None:
         return np.empty(shape, np.float32)
+    if not isinstance(out, np.ndarray):                  # (a list had been an AttributeError)
+        raise InputError(f"out must be a float32 {tuple(shape)} numpy array, not {type(out).__name__}")
+    if not out.flags.writeable:                          # (numpy's "assignment destination is read-only")
+        raise InputError("out is read-only: give an array the reconstruction can fill")
     if out.shape != tuple(shape) or out.dtype != np.float32:
         raise InputError(f"out must be float32 {tuple(shape)}, not {out.dtype} {out.shape}")
     return out

@@ -14,7 +14,7 @@ import errno
 import resource
 from pathlib import Path
 
-from .errors import InputError
+from .errors import InputError, is_count, is_positive_number
 
 #: Most worker processes any command starts (``simulate``, ``prove``, ``dataset`` and ``evaluate
 #: --store``'s local cluster, ``train``'s data engine): each costs a Python process, and a typo
@@ -23,9 +23,10 @@ MAX_WORKERS = 256
 
 
 def check_workers_argument(workers: int | None) -> None:
-    """Refuse a ``--workers`` outside 1..MAX_WORKERS with one line (None: the default)."""
-    if workers is not None and not 1 <= workers <= MAX_WORKERS:
-        raise InputError(f"--workers {workers}: must be in 1..{MAX_WORKERS}")
+    """Refuse a ``--workers`` outside 1..MAX_WORKERS with one line (None: the default); 2.5 and True
+    had been taken, '4' was a TypeError."""
+    if workers is not None and not (is_count(workers, 1) and workers <= MAX_WORKERS):
+        raise InputError(f"--workers {workers!r}: must be in 1..{MAX_WORKERS}")
 
 
 def _read_int(path: str) -> int | None:
@@ -109,6 +110,8 @@ def size_text(n: int) -> str:
 def require_memory(needed: int, what: str) -> None:
     """Refuse ``what`` (e.g. "evaluating sequence 'x' (24 x 4000 x 6000)") if it needs
     more memory than is available, in one line naming both sizes."""
+    if not (needed == 0 or is_positive_number(needed)):  # ('5', -5 or NaN had been a TypeError or taken)
+        raise InputError(f"require_memory: {needed!r} bytes must be a finite number >= 0")
     free = available_memory()
     if free is not None and needed > free:
         raise InputError(f"{what} needs about {size_text(needed)} of memory, "

@@ -249,5 +249,10 @@ def available_methods(configs, weights=None) -> tuple[str, ...]:
     """The methods of :data:`RECON_METHODS` that can reconstruct streams of every config given
     (TFP and TFI always; a learned method where its weights for each one are shipped, or given:
     ``weights`` maps (method, config) to a weights file)."""
+    configs = list(configs) if not isinstance(configs, SensorConfig) else [configs]   # (one config: a TypeError)
+    for config in configs:
+        SensorConfig.required(config, "available_methods")
+    if weights is not None and not isinstance(weights, dict):
+        raise InputError(f"available_methods weights: must map (method, config) to a file, not {type(weights).__name__}")
     weights = weights or {}
     return tuple(m for m in RECON_METHODS if all(missing_weights(m, c, weights.get((m, c))) is None for c in configs))

@@ -121,7 +121,7 @@ class ReconSettings:
         if self.chunk_elements is not None and (type(self.chunk_elements) is not int
                                                 or self.chunk_elements < 1):
             raise InputError(f"chunk_elements = {self.chunk_elements!r}: must be an integer >= 1")
-        if self.estimator not in ESTIMATORS:
+        if not isinstance(self.estimator, str) or self.estimator not in ESTIMATORS:   # (a list: unhashable)
             raise InputError(f"estimator = {self.estimator!r}: must be one of {', '.join(ESTIMATORS)}")
         if self.search not in TFI_SEARCH:
             raise InputError(f"search = {self.search!r}: must be one of {', '.join(TFI_SEARCH)}")

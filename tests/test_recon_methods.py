@@ -227,3 +227,29 @@ def test_reconstruct_and_write_outputs_refuse_switches_that_are_no_bool_in_one_l
     with pytest.raises(InputError, match="^write_outputs: the evaluation must be an Evaluation, not NoneType$"):
         write_outputs(None, tmp_path)
     assert not list(tmp_path.iterdir())
+
+
+def test_reconstruct_settings_and_registry_refuse_outputs_estimators_and_configurations_that_are_none():
+    """``out=[0] * 20`` was an AttributeError of ``shape``, a read-only out numpy's "assignment
+    destination is read-only", ``ReconSettings(estimator=['ratio'])`` an "unhashable type",
+    ``available_methods(config)`` a TypeError (one configuration is now one), a preset's name an
+    AttributeError; --workers of 2.5 or True had been taken."""
+    from tespike.golden.resources import check_workers_argument, require_memory
+    from tespike.recon.methods import available_methods
+    from tespike.recon.settings import ReconSettings
+    words, config = np.zeros((4, 3, 3), np.uint8), SensorConfig()
+    with pytest.raises(InputError, match=r"^out must be a float32 \(4, 3, 3\) numpy array, not list$"):
+        reconstruct(words, config, "tfp", out=[0] * 20)
+    with pytest.raises(InputError, match="^out is read-only: give an array the reconstruction can fill$"):
+        reconstruct(words, config, "tfp", out=np.broadcast_to(np.zeros((4, 3, 3), np.float32), (4, 3, 3)))
+    with pytest.raises(InputError, match=r"^estimator = \['ratio'\]: must be one of ratio, midpoint, residual$"):
+        ReconSettings(estimator=["ratio"])
+    assert available_methods(config) == available_methods([config])
+    with pytest.raises(ConfigError, match="^available_methods: configuration must be a SensorConfig"):
+        available_methods(["te"])
+    for workers in (2.5, True, "4", 0):
+        with pytest.raises(InputError, match=f"^--workers {workers!r}: must be in 1..256$"):
+            check_workers_argument(workers)
+    for needed in ("5", -5, float("nan")):
+        with pytest.raises(InputError, match=f"^require_memory: {needed!r} bytes must be a finite number >= 0$"):
+            require_memory(needed, "x")
