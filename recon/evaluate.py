@@ -271,6 +271,13 @@ def evaluate(sequences: Iterable[tuple[str, np.ndarray]], simulate: Simulate, *,
     _checked_run_options(methods, sensors, options, weights, progress, keep)
     further = [key for key in metrics if key not in BASIC_METRICS]
     sequences = _checked_sequences(sequences)
+    if not callable(simulate):                           # (None had been a TypeError at the first sequence)
+        raise InputError(f"simulate: must be a function simulate(config, light, rng) -> words, not "
+                         f"{type(simulate).__name__}")
+    if "ssim_mu" in metrics:                             # (refused only after the simulation and reconstruction)
+        from .metrics import check_ssim_frames
+        for _, light in sequences:
+            check_ssim_frames(light.shape)
     labels = [name for name, _ in sequences]
     if len(set(labels)) != len(labels):
         raise InputError(f"sequence labels must be unique, got {labels}")
@@ -337,7 +344,11 @@ def _checked_sequences(sequences) -> list[tuple[str, np.ndarray]]:
     light's own checks come when it is simulated."""
     if isinstance(sequences, np.ndarray):
         raise InputError("sequences: give (label, light) pairs, e.g. [('scene', light)], not a light array")
-    sequences = list(sequences)
+    try:
+        sequences = list(sequences)
+    except TypeError:                                     # (None: "not iterable")
+        raise InputError(f"sequences: give (label, light) pairs, e.g. [('scene', light)], not "
+                         f"{type(sequences).__name__}") from None
     for item in sequences:
         if not (isinstance(item, tuple) and len(item) == 2 and isinstance(item[0], str)
                 and isinstance(item[1], np.ndarray) and item[1].ndim == 3):
@@ -438,6 +449,16 @@ def check_method_options(methods, options) -> None:
                              "(window=), the same for every method")
 
 
+def _simulated(words, light) -> np.ndarray:
+    """The words a ``simulate`` function returned, refused in one line where they are no integer array
+    of the light's shape (a 2-D one had been an IndexError deep in a method, a list a TypeError)."""
+    if not (isinstance(words, np.ndarray) and words.dtype.kind in "iu" and words.shape == light.shape):
+        raise InputError(f"simulate returned {type(words).__name__} "
+                         f"{getattr(words, 'dtype', '')} {getattr(words, 'shape', '')}: it must return the "
+                         f"integer readout words of the light's shape {light.shape}")
+    return words
+
+
 def _recorded(simulate, config, light, rng, sensor, base, noise_sensors, calibrations, calibration_rng, bar,
               name):
     """``sensor``'s stream of ``light`` -> (words, the calibration its reconstruction uses, or None):
@@ -445,8 +466,8 @@ def _recorded(simulate, config, light, rng, sensor, base, noise_sensors, calibra
     is calibrated once per frame size (``calibrations``, from dark and flat streams drawn with
     ``calibration_rng``); ``name``: the sequence's, for the progress ``bar``."""
     if base is None:
-        return simulate(config, light, rng), None
-    words = simulate(config, light, rng, noise_sensor=noise_sensors[base])
+        return _simulated(simulate(config, light, rng), light), None
+    words = _simulated(simulate(config, light, rng, noise_sensor=noise_sensors[base]), light)
     if not sensor.endswith(CALIBRATED):
         return words, None
     key = sensor, tuple(light.shape[1:])

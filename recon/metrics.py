@@ -297,6 +297,18 @@ def _banded(pred, gt, stat, *, halo: int = 0, peak=None, normalised: bool = True
     return _out(sums / count if count else sums * math.nan, single)
 
 
+def ssim_window() -> int:
+    """Side of SSIM's Gaussian window in pixels (11: sigma 1.5 truncated at 3.5 sigma)."""
+    return _gaussian_kernel(SSIM_SIGMA, SSIM_TRUNCATE, "cpu").numel()
+
+
+def check_ssim_frames(shape) -> None:
+    """Refuse frames (shape (..., H, W)) smaller than SSIM's window, in one line."""
+    win = ssim_window()
+    if len(shape) in (2, 3) and (shape[-2] < win or shape[-1] < win):
+        raise InputError(f"SSIM needs frames of at least {win} x {win} pixels, got {shape[-2]} x {shape[-1]}")
+
+
 def _ssim_stat(mu: float):
     def stat(p, g):
         return ssim_map(mu_law(p, mu), mu_law(g, mu))
@@ -314,10 +326,9 @@ def psnr_mu(pred, gt, *, mu: float = MU, peak=None, device="cpu") -> np.ndarray:
 def ssim_mu(pred, gt, *, mu: float = MU, peak=None, device="cpu") -> np.ndarray:
     """SSIM-mu per frame: normalise by the GT peak, clip, mu-law, Gaussian SSIM with range 1."""
     check_mu(mu)
-    win = _gaussian_kernel(SSIM_SIGMA, SSIM_TRUNCATE, "cpu").numel()
+    win = ssim_window()
     shape = _shape(gt)
-    if len(shape) in (2, 3) and (shape[-2] < win or shape[-1] < win):
-        raise InputError(f"SSIM needs frames of at least {win} x {win} pixels, got {shape[-2]} x {shape[-1]}")
+    check_ssim_frames(shape)
     return _banded(pred, gt, _ssim_stat(mu), halo=win // 2, peak=peak, device=device)
 
 

@@ -172,7 +172,7 @@ def test_evaluate_refuses():
     with pytest.raises(InputError, match="no sequences"):
         evaluate([], simulate, progress=False)
     with pytest.raises(InputError, match="all zero"):
-        evaluate([("z", np.zeros((3, 4, 4)))], simulate, progress=False)
+        evaluate([("z", np.zeros((3, 12, 12)))], simulate, progress=False)
     with pytest.raises(InputError, match="negative"):
         evaluate([("n", -light)], simulate, progress=False)
     with pytest.raises(InputError, match="no sensor configuration"):
@@ -388,3 +388,23 @@ def test_evaluate_refuses_switches_sensors_options_and_weights_it_would_misread_
                                                                                 "progress": False, **options})
     with pytest.raises(ConfigError, match="^sensor 'te': configuration must be a SensorConfig"):
         evaluate(sequences, lambda c, l, r: None, methods=["tfp"], sensors=["te"], configs={"te": "te"}, progress=False)
+
+
+def test_evaluate_refuses_sequences_a_simulator_and_frames_it_cannot_score_before_any_work():
+    """``sequences=None`` and ``simulate=None`` were TypeErrors, a simulator returning a 2-D array an
+    IndexError deep in a method, and frames smaller than SSIM's window were refused only after every
+    stream had been simulated and reconstructed."""
+    light = np.full((9, 12, 12), 0.5, np.float32)
+    arguments = {"methods": ["tfp"], "sensors": ["te"], "progress": False}
+    with pytest.raises(InputError, match=r"^sequences: give \(label, light\) pairs, e\.g\. .*, not NoneType$"):
+        evaluate(None, lambda c, l, r: None, **arguments)
+    with pytest.raises(InputError, match=r"^simulate: must be a function simulate\(config, light, rng\) -> words"):
+        evaluate([("a", light)], None, **arguments)
+    for returned in (np.zeros((2, 2)), [1]):
+        with pytest.raises(InputError, match=r"^simulate returned .*: it must return the integer readout words of "
+                                             r"the light's shape \(9, 12, 12\)$"):
+            evaluate([("a", light)], lambda c, l, r, returned=returned: returned, **arguments)
+    called = []
+    with pytest.raises(InputError, match="^SSIM needs frames of at least 11 x 11 pixels, got 8 x 8$"):
+        evaluate([("a", np.full((9, 8, 8), 0.5, np.float32))], lambda c, l, r: called.append(1), **arguments)
+    assert not called
