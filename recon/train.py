@@ -97,6 +97,9 @@ class TrainOptions:
                              f"(SensorConfig.to_json()), not {type(self.config).__name__}")
         if not isinstance(self.recipe, dict):
             raise InputError(f"recipe = {self.recipe!r}: must be a dict of the data engine's settings")
+        if self.recipe.get("seed", self.seed) != self.seed:   # (it had been replaced by the run's seed silently)
+            raise InputError(f"recipe seed {self.recipe['seed']!r}: the data engine's seed is the run's own "
+                             f"(TrainOptions.seed = {self.seed!r}), not a recipe key")
         if self.init is not None:
             path_text(self.init, "init")
         if self.threads is not None and not is_count(self.threads, 1):
@@ -142,6 +145,9 @@ class TrainOptions:
         from tespike.golden.config import PRESETS
         if self.config in PRESETS:
             return SensorConfig.preset(self.config)
+        if not self.config.lstrip().startswith("{"):     # ('tee' had been "not valid JSON")
+            raise InputError(f"config = {self.config!r}: neither a preset ({', '.join(PRESETS)}) nor a "
+                             "configuration's JSON text")
         return SensorConfig.from_json(self.config)
 
     def sizes(self):

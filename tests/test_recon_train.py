@@ -437,3 +437,41 @@ def test_the_loss_the_resume_switch_and_the_options_are_checked_in_one_line(tmp_
     with pytest.raises(InputError, match="^train: the options must be TrainOptions, not dict$"):
         train({}, tmp_path / "w.pt")
     assert not list(tmp_path.iterdir())
+
+
+def test_the_data_engine_refuses_recipes_clips_and_dead_leaves_it_would_misdraw_in_one_line():
+    """A weight of '0.6' had been converted and an infinity taken (NaN probabilities at the first
+    clip), a seed of -1 or 2.5 failed in the first clip, one panorama's name was read letter by letter,
+    a missing folder was found at its first clip; a recipe's seed was replaced by the run's silently and
+    a preset's misspelt name was "not valid JSON"; a clip index of -1 was numpy's error; dead leaves
+    with a flicker period of 0 were NaN light and a size exponent of 1 a ZeroDivisionError."""
+    from tespike.recon.engine.clips import make_clip
+    from tespike.recon.engine.deadleaves import DeadLeavesParams, dead_leaves
+    cases = [({"weights": (("deadleaves", "0.6"),)}, "engine recipe weights"),
+             ({"weights": (("deadleaves", float("inf")),)}, "engine recipe weights"),
+             ({"weights": (("deadleaves", 0.5), ("deadleaves", 0.5))}, "engine recipe weights: a family is named twice"),
+             ({"seed": -1}, "engine recipe seed = -1"), ({"seed": 2.5}, "engine recipe seed = 2.5"),
+             ({"panoramas": "city"}, "engine recipe panoramas 'city'"),
+             ({"long": (48,)}, r"engine recipe long = \(48,\)"), ({"short_fraction": "0.3"}, "engine recipe short_fraction"),
+             ({"peak": ("a", "b")}, r"engine recipe peak = \('a', 'b'\)"),
+             ({"folders": ("/nonexistent-folder",)}, "engine recipe: folder '/nonexistent-folder' does not exist")]
+    for fields, words in cases:
+        with pytest.raises(InputError, match="^" + words):
+            EngineRecipe(**fields)
+    with pytest.raises(InputError, match="^engine recipe: must be a dict of its fields, not NoneType$"):
+        EngineRecipe.from_dict(None)
+    with pytest.raises(InputError, match="^recipe seed 5: the data engine's seed is the run's own"):
+        TrainOptions(steps=1, recipe={"seed": 5})
+    with pytest.raises(InputError, match=r"^config = 'tee': neither a preset \(te, ml, ml-msb\) nor"):
+        TrainOptions(steps=1, config="tee")
+    recipe = EngineRecipe(height=8, width=8)
+    for index in (-1, 2.5, "0", True):
+        with pytest.raises(InputError, match=f"^clip index {index!r}: must be an integer >= 0$"):
+            make_clip(recipe, SensorConfig(), index)
+    for fields, words in (({"flicker_period": (0.0, 0.0)}, "flicker_period"), ({"size_exponent": (1.0, 1.0)}, "size_exponent"),
+                          ({"radius": (0.0, 0.5)}, "radius"), ({"soft_fraction": float("nan")}, "soft_fraction"),
+                          ({"sources": (-1, 2)}, "sources")):
+        with pytest.raises(InputError, match=f"^dead leaves {words} = "):
+            DeadLeavesParams(**fields)
+    with pytest.raises(InputError, match=r"^dead leaves of 0 x 8 x 8: frames, height and width must be integers >= 1$"):
+        dead_leaves(np.random.default_rng(0), 0, 8, 8)

@@ -48,12 +48,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from pathlib import Path
 
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_count, is_positive_number
 from tespike.golden.fastsim import simulate_scene
 
 from ..calibration import CALIBRATION_READOUTS
@@ -90,7 +91,7 @@ def check_peak_range(peak, name: str) -> None:
     """A clips' peak range ``(low, high)`` (x the design light), refused in one line
     naming ``name`` unless ``low <= high``, both within :data:`PEAK_LIMITS` (the recipe and ``--peak``)."""
     low, high = peak
-    if not PEAK_LIMITS[0] <= low <= high <= PEAK_LIMITS[1]:
+    if not (is_positive_number(low) and is_positive_number(high) and PEAK_LIMITS[0] <= low <= high <= PEAK_LIMITS[1]):
         raise InputError(f"{name}: need {PEAK_LIMITS[0]:g} <= low <= high <= {PEAK_LIMITS[1]:g} "
                          "(x the design light)")
 
@@ -114,10 +115,14 @@ class EngineRecipe:
     noisy_input: str = "mean"                # what a noisy clip's method sees: NOISY_INPUTS
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "weights", tuple((str(n), float(w)) for n, w in self.weights))
+        self._check_kinds()
+        object.__setattr__(self, "weights", tuple((n, float(w)) for n, w in self.weights))
         object.__setattr__(self, "panoramas", tuple(p if p in TRAIN_PANORAMAS or p == HELDOUT_PANORAMA
                                                     else str(Path(p).resolve()) for p in self.panoramas))
         object.__setattr__(self, "folders", tuple(str(Path(f).resolve()) for f in self.folders))
+        for folder in self.folders:                      # (a missing one had failed at the first folder clip)
+            if not Path(folder).is_dir():
+                raise InputError(f"engine recipe: folder {folder!r} does not exist or is not a folder")
         for name, weight in self.weights:
             if name not in FAMILIES or name == "folder":
                 raise InputError(f"engine family {name!r} unknown (known: deadleaves, panorama; "
@@ -156,21 +161,53 @@ class EngineRecipe:
         if sum(w for _, w in self.weights) <= 0 and not self.folders:
             raise InputError("engine recipe: every family weight is 0 and no folder is given")
 
+    def _check_kinds(self) -> None:
+        """Each field of the kind it must hold, refused in one line before any is used: a weight given as
+        text had been converted ('0.6') or an infinity taken (NaN probabilities at the first clip), a seed
+        of -1 or 2.5 failed in the first clip, a panorama list given as one name read letter by letter."""
+        def pair(value) -> bool:
+            return isinstance(value, (tuple, list)) and len(value) == 2
+
+        def number(value) -> bool:
+            return value == 0 or is_positive_number(value)
+
+        if not (isinstance(self.weights, (tuple, list)) and all(
+                pair(w) and isinstance(w[0], str) and number(w[1]) for w in self.weights)):
+            raise InputError(f"engine recipe weights {self.weights!r}: must be (family, weight) pairs, each "
+                             "weight a finite number >= 0")
+        names = [w[0] for w in self.weights]
+        if len(set(names)) != len(names):
+            raise InputError(f"engine recipe weights: a family is named twice ({', '.join(names)})")
+        for key in ("panoramas", "folders"):
+            value = getattr(self, key)
+            if not (isinstance(value, (tuple, list)) and all(isinstance(v, (str, os.PathLike)) for v in value)):
+                raise InputError(f"engine recipe {key} {value!r}: must be a sequence of names or paths")
+        for key in ("long", "short", "peak"):
+            if not pair(getattr(self, key)):
+                raise InputError(f"engine recipe {key} = {getattr(self, key)!r}: must be a (low, high) pair")
+        for key in ("short_fraction", "folder_weight", "noise_fraction"):
+            if not number(getattr(self, key)):
+                raise InputError(f"engine recipe {key} = {getattr(self, key)!r}: must be a number in [0, 1]")
+        if not is_count(self.seed):
+            raise InputError(f"engine recipe seed = {self.seed!r}: must be an integer >= 0")
+
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> "EngineRecipe":
+        if not isinstance(data, dict):                   # (None had been a TypeError)
+            raise InputError(f"engine recipe: must be a dict of its fields, not {type(data).__name__}")
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - known)
         if unknown:
             raise InputError(f"unknown engine recipe key {unknown[0]!r}")
         fields = dict(data)
         for key in ("long", "short", "peak"):
-            if key in fields:
+            if key in fields and isinstance(fields[key], list):
                 fields[key] = tuple(fields[key])
-        if "weights" in fields:
-            fields["weights"] = tuple(tuple(w) for w in fields["weights"])
+        if "weights" in fields and isinstance(fields["weights"], list):
+            fields["weights"] = tuple(tuple(w) if isinstance(w, list) else w for w in fields["weights"])
         return cls(**fields)
 
     def family_table(self) -> tuple[tuple[str, ...], np.ndarray]:
@@ -202,6 +239,16 @@ class Clip:
 
 
 def clip_rng(recipe: EngineRecipe, index: int, domain: int = TRAIN_DOMAIN) -> np.random.Generator:
+    """The generator of clip ``index`` of ``recipe`` in ``domain`` (training or validation), refused in
+    one line for a recipe that is none, an index that is no count (-1 had been numpy's "expected
+    non-negative integer", 2.5 a TypeError, '0' and True taken) or a domain that is neither."""
+    if not isinstance(recipe, EngineRecipe):
+        raise InputError(f"recipe: must be an EngineRecipe, not {type(recipe).__name__}")
+    if not is_count(index):
+        raise InputError(f"clip index {index!r}: must be an integer >= 0")
+    if domain not in (TRAIN_DOMAIN, VALIDATION_DOMAIN) or isinstance(domain, bool):
+        raise InputError(f"clip domain {domain!r}: must be TRAIN_DOMAIN ({TRAIN_DOMAIN}) or VALIDATION_DOMAIN "
+                         f"({VALIDATION_DOMAIN})")
     return np.random.default_rng(np.random.SeedSequence([domain, recipe.seed, index]))
 
 

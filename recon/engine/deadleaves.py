@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_count, is_positive_number
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,11 +50,43 @@ class DeadLeavesParams:
     flicker_period: tuple[float, float] = (3.0, 40.0)  # readouts
 
     def __post_init__(self) -> None:
-        lo, hi = self.objects
-        if not (type(lo) is int and type(hi) is int and 0 <= lo <= hi):
-            raise InputError(f"dead leaves objects = {self.objects!r}: need integers 0 <= low <= high")
-        if not 0 < self.decades[0] <= self.decades[1]:
-            raise InputError(f"dead leaves decades = {self.decades!r}: need 0 < low <= high")
+        """Every range a (low, high) pair of the numbers its draw can use, refused in one line (a flicker
+        period of 0 had made NaN light, a size exponent of 1 or a radius of 0 a ZeroDivisionError when
+        drawn, a negative source gain math's domain error, a negative count or radius been taken)."""
+        def pair(key, least, positive=False, whole=False, most=math.inf):
+            value = getattr(self, key)
+            ok = isinstance(value, tuple) and len(value) == 2 and all(
+                (is_count(v) if whole else (v == 0 or is_positive_number(v))) for v in value)
+            if not ok or not (least <= value[0] <= value[1] <= most) or (positive and value[0] <= 0):
+                bound = f"{'0 <' if positive else f'{least:g} <='} low <= high" + (f" <= {most:g}" if most < math.inf else "")
+                raise InputError(f"dead leaves {key} = {value!r}: need {'integers' if whole else 'numbers'} {bound}")
+
+        def share(key, most=1.0):
+            value = getattr(self, key)
+            if not ((value == 0 or is_positive_number(value)) and value <= most):
+                raise InputError(f"dead leaves {key} = {value!r}: must be a number in [0, {most:g}]")
+
+        pair("objects", 0, whole=True)
+        pair("sources", 0, whole=True)
+        pair("size_exponent", 0, positive=True)
+        if self.size_exponent[0] <= 1:                   # (p(r) ~ r^-alpha inverted with 1 / (1 - alpha))
+            raise InputError(f"dead leaves size_exponent = {self.size_exponent!r}: need 1 < low <= high")
+        if not (isinstance(self.radius, tuple) and len(self.radius) == 2
+                and is_positive_number(self.radius[0]) and is_positive_number(self.radius[1])
+                and self.radius[1] <= 1):
+            raise InputError(f"dead leaves radius = {self.radius!r}: need the smallest > 0 pixels and the "
+                             "largest a fraction in (0, 1] of the frame side")
+        pair("decades", 0, positive=True)
+        pair("texture", 0)
+        pair("softness", 0, positive=True)
+        pair("object_speed", 0)
+        pair("camera_speed", 0)
+        pair("source_gain", 0, positive=True)
+        pair("flicker_period", 0, positive=True)
+        share("soft_fraction")
+        share("flicker_fraction")
+        for key in ("spin", "camera_spin", "camera_zoom"):
+            share(key, math.inf)
 
 
 def _uniform(rng, pair):
@@ -96,6 +128,13 @@ def _camera(rng, p: DeadLeavesParams, frames: int):
 def dead_leaves(rng: np.random.Generator, frames: int, height: int, width: int,
                 params: DeadLeavesParams = DeadLeavesParams()) -> np.ndarray:
     """A dead-leaves HDR video (K, H, W), float64, > 0, unnormalised."""
+    if not isinstance(rng, np.random.Generator):         # (a seed had been an AttributeError)
+        raise InputError(f"dead_leaves rng: must be a numpy Generator, not {type(rng).__name__}")
+    if not (is_count(frames, 1) and is_count(height, 1) and is_count(width, 1)):
+        raise InputError(f"dead leaves of {frames!r} x {height!r} x {width!r}: frames, height and width must be "
+                         "integers >= 1")
+    if not isinstance(params, DeadLeavesParams):
+        raise InputError(f"dead_leaves params: must be DeadLeavesParams, not {type(params).__name__}")
     p = params
     side = float(min(height, width))
     cam_dy, cam_dx, cam_angle, cam_zoom = _camera(rng, p, frames)
