@@ -26,7 +26,8 @@ import numpy as np
 from tespike.golden.atomic import work_folder
 from tespike.golden.config import SensorConfig
 from tespike.golden.io import atomic_output
-from tespike.golden.paths import path_text
+from tespike.golden.errors import InputError
+from tespike.golden.paths import check_output_file, path_text
 
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, first_error_line, hex_to_rows,
                       pack_rows, require_tool, rows_to_hex, run_process)
@@ -184,7 +185,16 @@ def _simulate(run: RunPlan, verilog: str, what: str, work_dir, vcd_path=None) ->
 
 
 def _run(run: RunPlan, verilog: str | None, work_dir, vcd_path=None):
-    """Simulate ``run`` in Icarus (either top); its words, beats, or each segment's."""
+    """Simulate ``run`` in Icarus (either top); its words, beats, or each segment's. The arguments
+    are checked before anything runs: Verilog text that is none (a TypeError), a work folder that does
+    not exist, a waveform path that cannot be written (found only after the simulation, as
+    shutil's error or a file moved into a folder)."""
+    if verilog is not None and not isinstance(verilog, str):
+        raise InputError(f"verilog: must be the Verilog text to simulate, not {type(verilog).__name__}")
+    if work_dir is not None and not Path(path_text(work_dir, "work_dir")).is_dir():
+        raise InputError(f"work_dir {str(work_dir)!r} is not an existing directory")
+    if vcd_path is not None:
+        check_output_file(vcd_path, "vcd_path")
     top = run.top
     if run.idle:
         return top.empty()

@@ -536,6 +536,8 @@ def _run(run: RunPlan, verilog: str | None, cxx_opt: str, build_model, progress:
     run it on ``run``, either top; its words, beats, or each segment's (nothing is built for an
     idle run)."""
     check_cxx_opt(cxx_opt)
+    if verilog is not None and not isinstance(verilog, str):   # (a TypeError in the build)
+        raise InputError(f"verilog: must be the Verilog text to simulate, not {type(verilog).__name__}")
     top = run.top
     if run.idle:
         return top.empty()

@@ -97,7 +97,7 @@ def test_work_dir_keeps_the_files(tmp_path, rng):
     run_icarus(PAPER_ML, stim, work_dir=tmp_path, verilog=spec_model_verilog(PAPER_ML, *SHAPE))
     assert {"array.v", "tb.v", "stimulus.hex", "captures.txt", "sim.vvp"} <= {p.name for p in tmp_path.iterdir()}
     assert len((tmp_path / "stimulus.hex").read_text().split()) == PAPER_ML.clocks_per_readout
-    with pytest.raises(SimulatorRunError, match="not an existing directory"):
+    with pytest.raises(InputError, match="not an existing directory"):        # (a bad argument, before any run)
         run_icarus(PAPER_ML, stim, work_dir=tmp_path / "nope", verilog="")
 
 

@@ -155,3 +155,22 @@ def test_the_outside_runs_refuse_lanes_frames_and_configurations_that_are_none_i
     assert unpack_frames([np.int64(5), 255], 2, 4).tolist() == [[5, 0], [15, 15]]
     with pytest.raises(ConfigError, match="^prepare: configuration must be a SensorConfig"):
         prepare("te", stimulus)
+
+
+def test_an_icarus_run_refuses_its_outputs_and_sources_before_it_simulates(tmp_path):
+    """A waveform path that was a folder or in a missing folder was shutil's error after the whole
+    simulation (or the file moved into the folder), Verilog text given as a number a TypeError, and a
+    missing work folder a simulator error."""
+    from tespike.cosim.icarus import run_icarus
+    from tespike.golden.errors import InputError
+    config = SensorConfig(b1=1, b2=1, alpha=1, clocks_per_tick=1, threshold=1, acc_bits=1, input_bits=1)
+    stimulus = np.ones((1, 1, 2), np.uint8)
+    with pytest.raises(InputError, match=f"^cannot write vcd_path '{tmp_path}': it is a directory"):
+        run_icarus(config, stimulus, vcd_path=tmp_path)
+    with pytest.raises(InputError, match="^cannot write vcd_path .*: directory .* does not exist$"):
+        run_icarus(config, stimulus, vcd_path=tmp_path / "missing" / "w.vcd")
+    with pytest.raises(InputError, match="^verilog: must be the Verilog text to simulate, not int$"):
+        run_icarus(config, stimulus, verilog=5)
+    with pytest.raises(InputError, match="^work_dir .* is not an existing directory$"):
+        run_icarus(config, stimulus, work_dir=tmp_path / "missing")
+    assert not list(tmp_path.iterdir())
