@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_count
 from tespike.recon.evaluate import SENSORS  # the golden full frame's: presets, the paper's msb ML camera, TE, ML count
 from tespike.recon.settings import DEFAULT_WINDOW, check_window
 
@@ -135,8 +135,8 @@ def check_options(out, *, frames, height, width, seed, crop, rtl_readouts, backe
     check_scene_request(DEMO_SCENE, frames, height, width, flags=True)
     for key, value, low in (("--crop", crop, 1), ("--rtl-readouts", rtl_readouts, 1),
                             ("--repeats", repeats, 1), ("--seed", seed, 0)):
-        if value is not None and value < low:
-            raise InputError(f"{key} {value}: must be >= {low}")
+        if (value is not None or key in ("--repeats", "--seed")) and not is_count(value, low):
+            raise InputError(f"{key} {value!r}: must be an integer >= {low}")   # (11.5 had failed inside)
     if repeats > MAX_REPEATS:
         raise InputError(f"--repeats {repeats}: must be in 1..{MAX_REPEATS}")
     if crop is None:

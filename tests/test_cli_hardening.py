@@ -1029,3 +1029,26 @@ def test_progress_is_a_flag_of_the_commands_that_draw_progress_only():
     assert_refused(run_tespike("score", "--estimate", "x.npy", "--reference", "x.npy", "--progress", "on"),
                    "unrecognized arguments: --progress")
     assert_refused(run_tespike("scene", "--list", "-q"), "--list", "--quiet given")
+
+
+def test_the_demo_and_dataset_library_refuse_sizes_runners_and_sources_that_are_none(tmp_path):
+    """run_demo's crop of 11.5 passed the checks and failed inside the RTL crop, a seed of 1.5 or True
+    and repeats of 2.5 passed; build_dataset with a run of None made the store and then failed with a
+    TypeError, and a text where the sources belong was an AttributeError."""
+    from tespike.cosim.dataset.build import build_dataset, scene_sources
+    from tespike.cosim.demo import check_options
+    from tespike.golden.config import SensorConfig
+    from tespike.golden.errors import InputError
+    common = dict(frames=24, height=64, width=64, seed=0, crop=None, rtl_readouts=None, backend="amaranth",
+                  repeats=3, window=9, sensors=("te",))
+    for key, value, low in (("crop", 11.5, 1), ("rtl_readouts", 1.5, 1), ("repeats", 2.5, 1), ("repeats", True, 1),
+                            ("seed", 1.5, 0), ("seed", None, 0), ("crop", "20", 1)):
+        flag = "--" + key.replace("_", "-")
+        with pytest.raises(InputError, match=f"^{flag} {value!r}: must be an integer >= {low}$"):
+            check_options(tmp_path / "d", **{**common, key: value})
+    url = tmp_path / "s.zarr"
+    with pytest.raises(InputError, match="^run: must run the build's tasks"):
+        build_dataset(url, scene_sources(["sun"], 2, 8, 8), {"te": SensorConfig()}, 0, None)
+    with pytest.raises(InputError, match=r"^sources: must be a sequence of Source"):
+        build_dataset(url, "abc", {"te": SensorConfig()}, 0, lambda tasks: tasks)
+    assert not url.exists()

@@ -299,6 +299,14 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
     """
     if type(seed) is not int or seed < 0:
         raise InputError(f"--seed {seed!r} must be an integer >= 0")
+    if not callable(run):                                # (None had been a TypeError after the store was made)
+        raise InputError(f"run: must run the build's tasks (a Runner), not {type(run).__name__}")
+    if isinstance(sources, (str, bytes)) or not all(isinstance(s, Source) for s in sources):
+        raise InputError("sources: must be a sequence of Source (hdr_sources, scene_sources)")
+    if not isinstance(configs, dict):
+        raise InputError(f"configs: must map sensor names to configurations, not {type(configs).__name__}")
+    for name, config in configs.items():
+        SensorConfig.required(config, f"sensor {name!r}")
     if type(chunk_frames) is not int or chunk_frames < 1:
         raise InputError(f"--chunk-frames {chunk_frames!r} must be an integer >= 1")
     names = [s.name for s in sources]
