@@ -48,6 +48,8 @@ def path_text(path, what: str = "path") -> str:
     if isinstance(path, (str, os.PathLike)):
         text = os.fspath(path)
         if isinstance(text, str):
+            if "\x00" in text:                          # (the system's "embedded null byte" ValueError)
+                raise InputError(f"{what}: the path {text!r} holds a NUL character, which no file name can")
             return text
     raise InputError(f"{what}: a path must be a str or an os.PathLike, not {type(path).__name__}")
 

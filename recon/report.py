@@ -113,10 +113,19 @@ def _markdown(header: list[str], align: list[str], rows: list[list[str]]) -> lis
             + ["| " + " | ".join(row) + " |" for row in rows])
 
 
+def check_evaluation(evaluation, what: str) -> Evaluation:
+    """``evaluation``, an :class:`tespike.recon.evaluate.Evaluation`, refused in one line naming ``what``
+    otherwise (a dict or a path had been an AttributeError deep in the table)."""
+    if not isinstance(evaluation, Evaluation):
+        raise InputError(f"{what}: the evaluation must be an Evaluation, not {type(evaluation).__name__}")
+    return evaluation
+
+
 def table_markdown(evaluation: Evaluation) -> str:
     """The paper's Table 1 layout in Markdown (the metrics and ms per frame per sensor):
     ML (msb) and TE columns, the full-count ML camera's rows beneath; then the noise
     table, the metrics' notes and the methods without weights, where there are any."""
+    check_evaluation(evaluation, "table_markdown")
     header, align = [], []
     for sensor in table_layout(evaluation)[0]:
         header += [f"{name(sensor)} reconstruction", *(HEADERS[k] for k in evaluation.metrics),
@@ -220,6 +229,7 @@ def table_csv(evaluation: Evaluation) -> str:
     """Table 1 as CSV, one row per method: method, then per sensor (key as in
     :data:`tespike.recon.evaluate.SENSORS`: ``ml-msb``, ``te``, ``ml``, and the noise sensors) name, every
     metric, ms_per_frame; then, with the complexity measured, its columns."""
+    check_evaluation(evaluation, "table_csv")
     summary = evaluation.summary()
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
@@ -244,6 +254,7 @@ def table_csv(evaluation: Evaluation) -> str:
 
 def results_csv(evaluation: Evaluation) -> str:
     """Every sequence x sensor x method, one row each (full precision)."""
+    check_evaluation(evaluation, "results_csv")
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     fields = [f.name for f in dataclasses.fields(Measurement)]
@@ -294,6 +305,10 @@ def plot_quality_vs_time(evaluation: Evaluation, path: str | Path) -> None:
 def plot_strip(evaluation: Evaluation, sequence: str, path: str | Path) -> None:
     """PNG strip of one frame: ground truth and every method (mu-law, GT-peak normalised),
     with the error maps |T(method) - T(GT)| beneath, one pair of rows per sensor."""
+    check_evaluation(evaluation, "plot_strip")
+    if sequence not in evaluation.strips:                # (a KeyError)
+        raise InputError(f"plot_strip: no sequence {sequence!r} in this evaluation "
+                         f"(its sequences: {', '.join(evaluation.strips) or 'none'})")
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -352,9 +367,10 @@ def write_outputs(evaluation: Evaluation, out: str | Path, *, plot: bool = True)
     ``plot=False`` leaves the quality-against-run-time plot out (an evaluation over a dataset
     store, whose scores come from many workers, has no comparable run times)."""
     check_flag(plot, "plot")                             # ('no' had written the plot)
-    if not isinstance(evaluation, Evaluation):
-        raise InputError(f"write_outputs: the evaluation must be an Evaluation, not {type(evaluation).__name__}")
+    check_evaluation(evaluation, "write_outputs")
     out = Path(path_text(out, "results folder"))
+    if out.exists() and not out.is_dir():                # (mkdir's FileExistsError)
+        raise InputError(f"results folder {str(out)!r} is a file, not a folder")
     out.mkdir(parents=True, exist_ok=True)
     (out / "strips").mkdir(exist_ok=True)
     paths = {"table.md": out / "table.md", "table.csv": out / "table.csv", "results.csv": out / "results.csv"}

@@ -408,3 +408,25 @@ def test_evaluate_refuses_sequences_a_simulator_and_frames_it_cannot_score_befor
     with pytest.raises(InputError, match="^SSIM needs frames of at least 11 x 11 pixels, got 8 x 8$"):
         evaluate([("a", np.full((9, 8, 8), 0.5, np.float32))], lambda c, l, r: called.append(1), **arguments)
     assert not called
+
+
+def test_the_report_helpers_refuse_an_evaluation_sequence_or_folder_they_cannot_use(tmp_path):
+    """``table_markdown({})`` and friends were AttributeErrors deep in the table, ``plot_strip`` of an
+    unknown sequence a KeyError, a results folder that is a file mkdir's FileExistsError, and a path
+    holding a NUL character the system's "embedded null byte" ValueError."""
+    from tespike.golden.paths import check_input_file
+    from tespike.recon.report import plot_strip, results_csv, table_csv, table_markdown, write_outputs
+    for helper in (table_markdown, table_csv, results_csv):
+        with pytest.raises(InputError, match=f"^{helper.__name__}: the evaluation must be an Evaluation, not dict$"):
+            helper({})
+    light = np.full((9, 12, 12), 0.5, np.float32)
+    evaluation = evaluate([("a", light)], lambda c, l, r: simulate_scene(c, l, seed=r), methods=["tfp"],
+                          sensors=["te"], progress=False, repeats=1)
+    with pytest.raises(InputError, match=r"^plot_strip: no sequence 'zz' in this evaluation \(its sequences: a\)$"):
+        plot_strip(evaluation, "zz", tmp_path / "s.png")
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(InputError, match="^results folder .* is a file, not a folder$"):
+        write_outputs(evaluation, tmp_path / "file")
+    with pytest.raises(InputError, match="holds a NUL character, which no file name can$"):
+        check_input_file("a\x00b")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
