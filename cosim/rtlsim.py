@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import ConfigError, InputError, is_count
+from tespike.golden.errors import ConfigError, InputError, check_flag, is_count
 from tespike.golden.io import atomic_output
 from tespike.golden.beats import check_lanes
 
@@ -185,8 +185,7 @@ def check_run_flags(progress, flat) -> None:
     ('no' had shown a bar, and built the flat array)."""
     if not (progress is None or isinstance(progress, bool)):
         raise InputError(f"progress = {progress!r}: must be None (a bar on a terminal), True or False")
-    if not isinstance(flat, bool):
-        raise InputError(f"flat = {flat!r}: must be True or False")
+    check_flag(flat, "flat")
 
 
 def build_stream_array(config: SensorConfig, height: int, width: int, lanes: int, *, flat: bool = False):

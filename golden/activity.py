@@ -46,7 +46,7 @@ import dataclasses
 import numpy as np
 
 from .config import SensorConfig
-from .errors import InputError, is_count
+from .errors import InputError, check_flag, is_count
 from .io import check_stimulus
 from .toggles import flips, pixel_register_bits, pixel_register_names, register_step
 
@@ -143,8 +143,7 @@ def top_activity(config: SensorConfig, electrons: np.ndarray, lanes: int | None 
         raise InputError(f"edges = {edges!r}: must be an integer >= 0 or None (the whole run)")
     if not is_count(start):
         raise InputError(f"start = {start!r}: must be an integer >= 0")
-    if not isinstance(reset, bool):                      # ('no' had meant a reset)
-        raise InputError(f"reset = {reset!r}: must be True or False")
+    check_flag(reset, "reset")                           # ('no' had meant a reset)
     U = (T + (beats + 1 if streaming else 1)) if edges is None else int(edges)
     if U < 0 or not 0 <= start <= U:
         raise InputError(f"edges = {U}, start = {start}: need 0 <= start <= edges")

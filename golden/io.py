@@ -21,7 +21,7 @@ import numpy as np
 from .atomic import atomic_output, held_mapping
 from .config import SensorConfig
 from .decode import check_words
-from .errors import InputError, TespikeError, is_count, one_line
+from .errors import InputError, TespikeError, check_flag, is_count, one_line
 from .paths import check_input_file
 
 #: What numpy raises for a .npy header whose text is damaged (its dict cut or a byte flipped: it
@@ -236,9 +236,8 @@ def load_scene(path: str | Path, *, memory_map: bool = False, what: str | None =
     ``what`` names the file in refusals (default "scene": ``tespike score`` says "reference").
     """
     name = "scene" if what is None else what
-    for flag, value in (("memory_map", memory_map), ("scan_values", scan_values)):
-        if not isinstance(value, bool):                  # ('no' had been a memory map)
-            raise InputError(f"load_scene {flag} = {value!r}: must be True or False")
+    check_flag(memory_map, "load_scene memory_map")     # ('no' had been a memory map)
+    check_flag(scan_values, "load_scene scan_values")
     scene = load_npy(path, name, mmap_mode="r")
     name = scene_name(path, what)                                   # values refused naming the file
     scene = check_scene(scene, scan_values=False, what=name)

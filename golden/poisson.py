@@ -75,9 +75,6 @@ LOCAL_BYTES = 1 << 20
 #: Means whose table ranges (:func:`support`) are found together, in aligned blocks.
 SUPPORT_BLOCK = 256
 
-#: Largest mean ``Generator.poisson`` accepts (numpy's POISSON_LAM_MAX).
-LAM_MAX = POISSON_LAM_MAX
-
 #: Bit generators whose ``random_raw`` yields 64 random bits (MT19937 gives 32).
 _RAW64 = ("PCG64", "PCG64DXSM", "Philox", "SFC64")
 
@@ -337,8 +334,8 @@ class PoissonSampler:
         """Independent Poisson draws (int64): ``(clocks, n)`` with column j of mean
         ``lam[j]`` when ``clocks`` is given (lam 1-D), else one per element of lam."""
         lam = np.asarray(lam, np.float64)
-        if lam.size and not (lam.min() >= 0 and lam.max() <= LAM_MAX):   # NaN fails both
-            raise InputError(f"Poisson means must be finite, >= 0 and <= {LAM_MAX:.6g} "
+        if lam.size and not (lam.min() >= 0 and lam.max() <= POISSON_LAM_MAX):   # NaN fails both
+            raise InputError(f"Poisson means must be finite, >= 0 and <= {POISSON_LAM_MAX:.6g} "
                              f"(numpy's limit); got {lam.min()!r}..{lam.max()!r}")
         if clocks is None:
             return self._draw(rng, lam.reshape(-1), 1).reshape(lam.shape)

@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from tespike.golden.errors import InputError, is_count
+from tespike.golden.errors import InputError, check_flag, is_count
 from tespike.golden.resources import require_memory
 
 from . import procedural
@@ -86,8 +86,7 @@ def make_scene(name: str, frames: int = 24, height: int = 96, width: int = 128, 
     default). ``heldout``: the held-out domain's scene of the same name and seed (never trained on).
     """
     check_scene_request(name, frames, height, width)
-    if not isinstance(heldout, bool):                  # ("False" had given the held-out scene)
-        raise InputError(f"heldout = {heldout!r}: must be True or False")
+    check_flag(heldout, "heldout")                     # ("False" had given the held-out scene)
     if name in ("default",) + PANORAMAS:
         options = {k: v for k, v in options.items() if v is not None}
         unknown = sorted(set(options) - set(PANORAMA_OPTIONS))
