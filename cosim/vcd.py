@@ -130,6 +130,10 @@ def waveform_words(vcd_path, config: SensorConfig, shape: tuple[int, int]) -> Wa
     if width != H * W * config.word_bits:
         raise InputError(f"waveform {str(vcd_path)!r}: frame is {width} bits, not H * W * word_bits = "
                          f"{H} * {W} * {config.word_bits}")
+    grid = pixel_grid(_var_sizes(vcd_path))
+    if grid is not None and grid != (H, W):
+        raise InputError(f"waveform {str(vcd_path)!r} is of a {grid[0]} x {grid[1]} pixel array, "
+                         f"not the {H} x {W} asked for")
     edge_times = rising_edges(sig["clk"])
     rst = _sampler(sig["rst"], edge_times)
     low = [i for i, v in enumerate(rst) if v == "0"]
@@ -183,6 +187,22 @@ def first_pixel_scope(sizes, scope=ARRAY_SCOPE) -> str | None:
         if digits and all(int(d) == 0 for d in digits):
             return f"{scope}.{child}"
     return None
+
+
+#: A pixel site's name in the array: its scope ``px_R_C`` (hierarchy kept) or its signals ``px_R_C_*`` (flat).
+_PIXEL_NAME = re.compile(r"px_(\d+)_(\d+)(?:_|$)")
+
+
+def pixel_grid(sizes, scope=ARRAY_SCOPE) -> tuple[int, int] | None:
+    """(rows, columns) of the pixel array whose sites the waveform names under ``scope``, from
+    the largest site indices; None where it names none. The frame's width alone is ``H * W *
+    word_bits``, which a 2 x 1 run shares with a 1 x 2 one."""
+    prefix = scope + "."
+    sites = [_PIXEL_NAME.match(name[len(prefix):].split(".")[0]) for name in sizes if name.startswith(prefix)]
+    sites = [(int(site[1]), int(site[2])) for site in sites if site]
+    if not sites:
+        return None
+    return max(r for r, _ in sites) + 1, max(c for _, c in sites) + 1
 
 
 def timing_scope(sizes, scope=ARRAY_SCOPE) -> str | None:

@@ -133,6 +133,16 @@ def test_reader_refuses_a_wrong_shape(rng, tmp_path):
         waveform_words(tmp_path / "w.vcd", config, (1, 2))
 
 
+@pytest.mark.parametrize("flat", [False, True], ids=["hierarchy", "flat"])
+def test_reader_refuses_the_transposed_shape_of_the_same_width(flat, rng, tmp_path):
+    # a 2 x 1 frame is as wide as a 1 x 2 one: the pixel sites the waveform names tell them apart
+    config = SensorConfig(b1=2, b2=2, threshold=20)
+    run = rtl_run(config, threshold_stimulus(config, rng, 1, 2, 1), vcd_path=tmp_path / "w.vcd", flat=flat)
+    assert np.array_equal(waveform_words(tmp_path / "w.vcd", config, (2, 1)).words, run.words)
+    with pytest.raises(InputError, match=r"of a 2 x 1 pixel array, not the 1 x 2 asked for"):
+        waveform_words(tmp_path / "w.vcd", config, (1, 2))
+
+
 def test_reset_is_held_before_clock_zero(rng, tmp_path):
     from tespike.cosim.vcd import vcd_reader
     VCDVCD = vcd_reader()
