@@ -69,6 +69,8 @@ _OUTPUTS = {
 def verilog_testbench(top: str, charge_bits: int, output_bits: int, outputs: str, what: str, dump: bool = False) -> str:
     """The one Verilog-2005 testbench; ``outputs`` picks the top's output ports (:data:`_OUTPUTS`);
     ``dump``: every signal of the top and below goes to :data:`DUMP` (a VCD)."""
+    if not isinstance(outputs, str) or outputs not in _OUTPUTS:
+        raise InputError(f"outputs {outputs!r}: must be one of {', '.join(_OUTPUTS)}")
     declare, connect, capture = _OUTPUTS[outputs]
     dumping = f'    $dumpfile("{DUMP}");\n    $dumpvars(0, dut);\n' if dump else ""
     return f"""// tespike Icarus testbench for {top}: SPEC section 6 {what} only (generated).

@@ -34,7 +34,7 @@ import numpy as np
 
 from tespike.golden.atomic import work_folder
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import InputError, is_count
 from tespike.golden.io import atomic_output
 from tespike.golden.paths import path_text
 
@@ -109,7 +109,9 @@ def shared_pixel_view(verilog: str, pixel_module: str) -> str:
 
 
 def c_type(bits: int) -> str:
-    """The smallest unsigned C++ integer type of ``bits`` bits."""
+    """The smallest unsigned C++ integer type of ``bits`` bits (1 to 64: a wider port is a ``VlWide``)."""
+    if not is_count(bits, 1) or bits > 64:
+        raise InputError(f"bits {bits!r}: a C++ integer holds 1 to 64")
     return "uint8_t" if bits <= 8 else "uint16_t" if bits <= 16 else "uint32_t" if bits <= 32 else "uint64_t"
 
 
@@ -145,6 +147,8 @@ def harness_cpp(top: str, charge_bits: int, output_bits: int, outputs: str = "fr
     (0 or 1) per stimulus clock, ``rst`` of that clock (:mod:`tespike.cosim.resets`);
     EXPECTED counts the records after the last reset edge.
     """
+    if not isinstance(outputs, str) or outputs not in HARNESS_OUTPUTS:
+        raise InputError(f"outputs {outputs!r}: must be one of {', '.join(HARNESS_OUTPUTS)}")
     valid, word_port, has_first = HARNESS_OUTPUTS[outputs]
     in_words = (charge_bits + 31) // 32
     out_words = (output_bits + 31) // 32

@@ -283,6 +283,13 @@ def test_the_proof_builders_refuse_what_would_prove_nothing_in_one_line(tmp_path
             prove("rule", None, depth=depth, solver="z3", trace_dir=tmp_path)
     with pytest.raises(InputError, match="^solver 'cvc9': must be one of z3$"):
         prove("rule", None, depth=3, solver="cvc9", trace_dir=tmp_path)
+    with pytest.raises(ProofToolError, match=r"^--solver \['z3'\]: must be one of z3$"):    # (a TypeError)
+        require_tools(["z3"])
+    from tespike.cosim.formal.abc import MIN_BMC_SECONDS, prove_harness
+    for timeout in ("5", 1.0, float("nan"), -300):      # (text failed at a subtraction; 1 s was overrun)
+        with pytest.raises(InputError, match=f"^timeout {timeout!r}: must be a number of seconds of at least "
+                                             f"{MIN_BMC_SECONDS:g}$"):
+            prove_harness("timing", None, timeout=timeout)
     for bound in (0, -5, 2.5):
         with pytest.raises(InputError, match=f"^bound {bound!r}: must be an integer >= 1 clocks"):
             verilog_parallel_harness(small, 1, 1, bound=bound)

@@ -147,3 +147,9 @@ def test_frame_is_defined_from_the_first_readout_in_verilog_and_systemverilog_mo
     shown = subprocess.run(["vvp", "-n", "t.vvp"], cwd=tmp_path, capture_output=True, text=True, check=True).stdout
     frames = [line for line in shown.splitlines() if line.startswith("frame=")]
     assert frames == ["frame=0000000000"] * 2
+
+
+def test_the_testbench_writer_refuses_an_unknown_kind_of_outputs():
+    """It had been a KeyError."""
+    with pytest.raises(InputError, match="^outputs 'fram': must be one of frame, beats$"):
+        verilog_testbench("array", 4, 4, "fram", "ports")

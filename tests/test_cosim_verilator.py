@@ -217,3 +217,13 @@ def test_shared_view_is_built_and_gives_the_same_words(tmp_path, rng):
     assert len(texts) == 1 and "public_flat_rd" in texts[0]
     plain = run_verilator(config, stim, verilog=verilog, shared=False)
     assert np.array_equal(shared, plain) and np.array_equal(shared, reference_words(config, stim))
+
+
+def test_the_harness_writer_refuses_what_it_cannot_write_in_one_line():
+    """An unknown kind of outputs had been a KeyError; 100 bits had been typed uint64_t."""
+    with pytest.raises(InputError, match="^outputs 'beat': must be one of frame, beats$"):
+        harness_cpp("array", 4, 4, "beat")
+    assert (cv.c_type(1), cv.c_type(9), cv.c_type(33), cv.c_type(64)) == ("uint8_t", "uint16_t", "uint64_t", "uint64_t")
+    for bits in (0, 65, 100, 2.5):
+        with pytest.raises(InputError, match=f"^bits {bits!r}: a C\\+\\+ integer holds 1 to 64$"):
+            cv.c_type(bits)

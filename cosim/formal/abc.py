@@ -40,6 +40,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from tespike.golden.atomic import work_folder
+from tespike.golden.errors import InputError, is_positive_number
 
 from .. import children
 from .smtbmc import ProofResult
@@ -114,7 +115,10 @@ def _bmc_passed(log: str, bound: int) -> bool:
 
 def prove_harness(name: str, harness: Harness, *, timeout: float = 300.0) -> ProofResult:
     """Prove one harness: the :data:`UNBOUNDED` attempts in order, else BMC to the harness's bound,
-    all within ``timeout`` seconds."""
+    all within ``timeout`` seconds (a number of at least :data:`MIN_BMC_SECONDS`: BMC gets that much
+    whatever is left, so less would be overrun, and text had failed at the first subtraction)."""
+    if not (is_positive_number(timeout) and timeout >= MIN_BMC_SECONDS):
+        raise InputError(f"timeout {timeout!r}: must be a number of seconds of at least {MIN_BMC_SECONDS:g}")
     start = time.perf_counter()
 
     def left() -> float:

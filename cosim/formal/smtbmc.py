@@ -38,7 +38,7 @@ class ProofToolError(TespikeError, RuntimeError):
 def require_tools(solver: str | None, tools: dict = TOOLS) -> None:
     """Refuse in one line when one of ``tools`` or the SMT ``solver`` is not on PATH (``solver``
     None: no solver, for the tops' proofs alone, which run ABC)."""
-    if solver is not None and solver not in SOLVERS:
+    if solver is not None and (not isinstance(solver, str) or solver not in SOLVERS):
         raise ProofToolError(f"--solver {solver!r}: must be one of {', '.join(SOLVERS)}")
     for tool, package in {**tools, **({} if solver is None else {solver: SOLVERS[solver]})}.items():
         if shutil.which(tool) is None:
