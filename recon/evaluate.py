@@ -72,7 +72,7 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError, check_flag
+from tespike.golden.errors import InputError, check_flag, is_count
 from tespike.golden.io import check_scene, word_dtype
 from tespike.golden.resources import require_memory
 
@@ -113,6 +113,9 @@ def scored_frames(frames: int, window: int, span: int | None = None) -> slice:
     """Frames whose whole window of readouts lies inside the sequence (all if too short);
     with ``span`` (the readouts a learned method sees), frames whose span lies inside it
     too, where the sequence is longer than the span (else the window's frames)."""
+    if not is_count(frames) or not is_count(window, 1) or not (span is None or is_count(span, 1)):
+        raise InputError(f"scored_frames({frames!r}, {window!r}, {span!r}): frames must be an integer >= 0, "
+                         "the window and span integers >= 1")       # (-3 frames had given slice(0, -3))
     reach = window if span is None or frames <= 2 * (span // 2) else max(window, span)
     half = reach // 2
     return slice(half, frames - half) if frames > 2 * half else slice(0, frames)
@@ -217,6 +220,15 @@ class Evaluation:
     span: int | None = None
     #: sensor key -> the golden.noise.Sensor it simulates, for the noise and calibrated sensors
     noise_sensors: dict = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self):
+        # names, each a string: one string had been read letter by letter ("tfp" as t, f, p)
+        for field in ("methods", "sensors", "metrics"):
+            value = getattr(self, field)
+            names = () if isinstance(value, str) else tuple(value) if isinstance(value, (tuple, list)) else None
+            if not names or not all(isinstance(name, str) for name in names):
+                raise InputError(f"Evaluation {field} {value!r}: must be a tuple of names")
+            setattr(self, field, names)
 
     def summary(self) -> dict[tuple[str, str], dict[str, float]]:
         """(method, sensor) -> mean over sequences of the per-sequence means."""
@@ -529,6 +541,9 @@ class ProgressLines:
 
 def metric_subset(scored: int, count: int | None) -> slice:
     """The middle ``count`` of ``scored`` frames (all when None or more), indices into the scored frames."""
+    if not is_count(scored) or not (count is None or is_count(count, 1)):     # (2.5 had given a float slice)
+        raise InputError(f"metric_subset({scored!r}, {count!r}): frames must be an integer >= 0, "
+                         "the subset None or an integer >= 1")
     if count is None or count >= scored:
         return slice(0, scored)
     start = (scored - count) // 2

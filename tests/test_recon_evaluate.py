@@ -9,7 +9,7 @@ import pytest
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.golden.fastsim import simulate_scene
-from tespike.recon.evaluate import Evaluation, Measurement, evaluate, paper_configs, scored_frames
+from tespike.recon.evaluate import Evaluation, Measurement, evaluate, metric_subset, paper_configs, scored_frames
 from tespike.recon.names import label
 from tespike.recon.report import results_csv, table_csv, table_markdown, write_outputs
 from tespike.recon.mulaw import tone_map
@@ -29,6 +29,13 @@ def test_scored_frames_skip_incomplete_windows():
     assert scored_frames(9, 9) == slice(4, 5)
     assert scored_frames(8, 9) == slice(0, 8)
     assert scored_frames(5, 1) == slice(0, 5)
+    for bad in ((-3, 9), (24, 0), (24, 9, 0), (24.0, 9), (24, 9, 2.5), (True, 9)):   # (-3 had given slice(0, -3))
+        with pytest.raises(InputError, match=r"^scored_frames\(.*\): frames must be an integer >= 0"):
+            scored_frames(*bad)
+    assert metric_subset(10, 4) == slice(3, 7) and metric_subset(10, None) == slice(0, 10)
+    for bad in ((10, 2.5), (10, 0), (-1, 3)):
+        with pytest.raises(InputError, match=r"^metric_subset\(.*\): frames must be an integer >= 0"):
+            metric_subset(*bad)
 
 
 def test_tone_map_divides_by_the_peak_and_clips():
@@ -59,6 +66,15 @@ def test_summary_is_mean_of_sequence_means():
     assert summary["tfp", "ml-msb"] == {"psnr_mu": 25.0, "ssim_mu": 0.6, "ms_per_frame": 2.0, "sequences": 2}
     assert summary["tfp", "te"]["psnr_mu"] == 30.0
     assert summary["tfi", "te"]["sequences"] == 1
+
+
+def test_an_evaluation_made_by_hand_takes_tuples_of_names():
+    # one name had been read letter by letter: summary() looked for methods "t", "f" and "p"
+    assert _hand_made(["ml-msb", "te"]).sensors == ("ml-msb", "te")
+    for field, value in (("methods", "tfp"), ("sensors", "te"), ("methods", None), ("sensors", ()),
+                         ("methods", ("tfp", 3)), ("metrics", "psnr_mu")):
+        with pytest.raises(InputError, match=f"^Evaluation {field} .*: must be a tuple of names$"):
+            Evaluation([], **{"methods": ("tfp",), "sensors": ("te",), "window": 9, field: value})
 
 
 def test_table_markdown_has_the_paper_layout():
