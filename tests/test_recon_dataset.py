@@ -427,9 +427,14 @@ def test_a_store_removed_while_it_is_read_is_named_gone(tmp_path, small_store):
     shutil.rmtree(store / "sun" / "streams" / "te")
     with pytest.raises(InputError, match=r"'sun/streams/te' is gone \(removed while the run read it"):
         opened.words("sun", "te")
+    from tespike.recon.dataset.store import mark_complete
+    with pytest.raises(InputError, match=r"'sun/streams/te' is gone \(removed while the run read it"):
+        mark_complete(str(store), "sun/streams/te")      # (the last write of a part: Zarr's traceback)
     shutil.rmtree(store)
     with pytest.raises(InputError, match=r"dataset store '.*D\.zarr' is gone: it was removed or moved"):
         opened.light("sun")
+    with pytest.raises(InputError, match=r"^dataset store '.*D\.zarr' does not exist$"):
+        compare_stores(str(small_store), str(store))
 
 
 def test_resume_rebuilds_an_array_whose_chunk_file_was_deleted(tmp_path, capsys, small_store):

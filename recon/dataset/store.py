@@ -640,7 +640,8 @@ def mark_complete(url: str, path: str, **attrs) -> None:
     """Write ``complete: true`` (and ``attrs``) on a group or array: the last write of a part. An
     array of a local store also records how many chunk files it holds (:func:`missing_chunks`)."""
     import zarr
-    node = zarr.open(str(url), path=path, mode="r+")
+    with reading(url, path):                        # (a node gone or damaged: one line naming it)
+        node = zarr.open(str(url), path=path, mode="r+")
     count = chunk_file_count(url, path) if isinstance(node, zarr.Array) else None
     node.attrs.update({**attrs, **({} if count is None else {"chunk_files": count}), "complete": True})
 
@@ -648,9 +649,7 @@ def mark_complete(url: str, path: str, **attrs) -> None:
 def compare_stores(a: str, b: str) -> list[str]:
     """Differences between two stores (attributes, sequence names, every array bit for bit);
     an empty list when they are identical. For tests and for checking a rerun."""
-    import zarr
-
-    left, right = zarr.open_group(str(a), mode="r"), zarr.open_group(str(b), mode="r")
+    left, right = _zarr_open_group(str(a), "r"), _zarr_open_group(str(b), "r")   # (one line where either is none)
     out: list[str] = []
 
     def walk(x, y, where: str) -> None:
