@@ -95,9 +95,14 @@ def choose_crop(light: np.ndarray, size: int) -> tuple[int, int]:
     """Top-left corner of the ``size`` x ``size`` crop holding the brightest pixel of the
     sequence's mean frame (centred on it, kept inside the frame): dark and bright pixels
     side by side, the part of the scene an HDR sensor is about."""
+    light = np.asarray(light)
+    if light.ndim != 3 or not light.size:
+        raise InputError(f"choose_crop: the light must be a non-empty (K, H, W) sequence, not of shape {light.shape}")
+    H, W = light.shape[1:]
+    if not is_count(size, 1) or size > min(H, W):      # (a crop past the frame had a negative corner)
+        raise InputError(f"choose_crop: crop {size!r} must be an integer from 1 to the frame's {min(H, W)}")
     mean = light.mean(axis=0)
     r, c = np.unravel_index(int(np.argmax(mean)), mean.shape)
-    H, W = mean.shape
     return (int(min(max(0, r - size // 2), H - size)), int(min(max(0, c - size // 2), W - size)))
 
 
@@ -106,6 +111,9 @@ def hardware_cost(configs: dict[str, SensorConfig], yosys: str = "yosys") -> lis
     """Per sensor: Yosys cells, flip-flops and transistor estimates (:func:`tespike.cosim.synthesis.synthesize_module`)
     of one pixel and of the shared timing block. A string says why there is no table (Yosys
     missing, failing, or reporting no usable estimate): the report says so instead of crashing."""
+    if not isinstance(configs, dict) or not all(isinstance(c, SensorConfig) for c in configs.values()):
+        raise InputError("hardware_cost: the sensors must be a dict of name -> SensorConfig, "
+                         f"not {type(configs).__name__} {configs!r}"[:200])
     from tespike.rtl.names import module_names
     from tespike.rtl.verilog import pixel_verilog, timing_verilog
 

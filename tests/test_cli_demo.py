@@ -166,3 +166,19 @@ def test_an_interrupted_demo_leaves_the_previous_demo_whole(tmp_path, capsys, mo
     code, _, err = run_here(capsys, *args)
     assert code == 2 and "'notes.txt'" in err and "new or empty folder" in err
     assert sorted(os.listdir(tmp_path)) == ["d"]
+
+
+def test_the_crop_and_hardware_helpers_refuse_what_they_cannot_use_in_one_line(rng):
+    """A crop larger than the frame had a negative corner; a list of sensor names an AttributeError."""
+    from tespike.cosim.demo import choose_crop, hardware_cost
+    light = rng.random((3, 8, 10))
+    light[:, 7, 9] = 5.0                                   # the brightest pixel, in a corner: the crop stays inside
+    assert choose_crop(light, 4) == (4, 6) and choose_crop(light, 8) == (0, 2)
+    for size in (9, 0, 2.5):
+        with pytest.raises(InputError, match=f"^choose_crop: crop {size!r} must be an integer from 1 to the frame's 8$"):
+            choose_crop(light, size)
+    with pytest.raises(InputError, match=r"^choose_crop: the light must be a non-empty \(K, H, W\) sequence"):
+        choose_crop(light[0], 2)
+    for configs in (["te"], {"te": "te"}):
+        with pytest.raises(InputError, match="^hardware_cost: the sensors must be a dict of name -> SensorConfig"):
+            hardware_cost(configs)
