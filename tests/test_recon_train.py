@@ -80,7 +80,7 @@ def test_the_extended_validation_cases_add_noisy_sensors_inside_the_engine_range
     ((SensorConfig(), -3), {}, "validation_set frame (height, width) (-3, 128)"),
     ((SensorConfig(), 8, 2.5), {}, "validation_set frame (height, width) (8, 2.5)"),
     ((SensorConfig(), 8, 0), {}, "validation_set frame (height, width) (8, 0)"),
-    ((SensorConfig(),), {"extended": "yes"}, "validation_set extended 'yes'"),
+    ((SensorConfig(),), {"extended": "yes"}, "validation_set extended = 'yes': must be True or False"),
 ], ids=["preset-name", "negative-height", "float-width", "empty-width", "extended-string"])
 def test_validation_set_refuses_what_it_cannot_take_in_one_line(args, kwargs, words):
     """A preset's name, a frame of no pixels or a fractional size was numpy's traceback or a warning

@@ -36,7 +36,7 @@ from typing import Callable
 import numpy as np
 
 from tespike.golden.config import SensorConfig
-from tespike.golden.errors import InputError
+from tespike.golden.errors import check_flag
 from tespike.golden.fastsim import simulate_scene
 from tespike.golden.io import check_frame_shape
 
@@ -155,8 +155,7 @@ def validation_set(config: SensorConfig, height: int = 96, width: int = 128, *,
     ``config`` (validation seeds)."""
     config = SensorConfig.required(config, "validation_set")
     height, width = check_frame_shape((height, width), "validation_set frame (height, width)")
-    if not isinstance(extended, bool):
-        raise InputError(f"validation_set extended {extended!r}: must be True or False")
+    extended = check_flag(extended, "validation_set extended")
     out = []
     for index, case in enumerate(CASES + (EXTENDED_CASES if extended else ())):
         light = case_light(case, index, height, width)
