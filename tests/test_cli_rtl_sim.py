@@ -120,6 +120,9 @@ def test_rtl_sim_refuses_missing_files_and_directories(tmp_path, rng):
     assert_refused(run_tespike(*base, "--out", tmp_path / "s.npz", "--vcd", tmp_path / "nodir" / "w.vcd"),
                    "--vcd", "nodir")
     assert_refused(run_tespike(*base, "--out", tmp_path / "s.npz", "--gtkw", tmp_path / "w.gtkw"), "--gtkw")
+    for nameless in (".", "/"):                          # (the save file's name made from it: a ValueError traceback)
+        assert_refused(run_tespike(*base, "--out", tmp_path / "s.npz", "--vcd", nameless),
+                       f"cannot write --vcd '{nameless}': it is a directory")
     assert_refused(run_tespike(*base, "--out", tmp_path / "s.npz", "--vcd", tmp_path / "w.vcd",
                                "--backend", "icarus"), "--vcd", "icarus")
     # the two progress options disagreeing: --no-progress won without a word

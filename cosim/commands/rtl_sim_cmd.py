@@ -42,7 +42,8 @@ def run(args) -> int:
     if args.vcd is not None:
         if args.backend != "amaranth":
             raise InputError(f"--vcd is only written by the amaranth backend, not {args.backend!r}")
-        if gtkw is None and not written_through(args.vcd):     # (no /dev/null.gtkw beside a VCD sent to a device)
+        if gtkw is None and not written_through(args.vcd) and Path(args.vcd).name:
+            # (no /dev/null.gtkw beside a VCD sent to a device; a nameless '.' or '/' is refused below)
             gtkw = str(Path(args.vcd).with_suffix(".gtkw"))
     elif gtkw is not None:
         raise InputError("--gtkw needs --vcd (a save file describes a waveform)")
