@@ -153,7 +153,7 @@ def test_ctrl_c_ends_the_proof_pool_at_any_moment(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == []
 
 
-def test_command_refuses_bad_options_in_one_line():
+def test_command_refuses_bad_options_in_one_line(tmp_path):
     done = run_tespike("prove", "--solver", "cvc9", timeout=60)
     assert_refused(done, "cvc9")
     done = run_tespike("prove", "--depth", "0", timeout=60)
@@ -174,6 +174,19 @@ def test_command_refuses_bad_options_in_one_line():
     # a --traces that is a file was found only when a failure's trace was written, after the proofs
     done = run_tespike("prove", "--only", "pixel", "--traces", __file__, timeout=60)
     assert_refused(done, "--traces", "is not a directory")
+    # a trace a failure would write: a folder in its place was found after the proofs, and a link
+    # from its place to the --config file had the counterexample written over the configuration
+    (tmp_path / "tr" / "te-stream.vcd").mkdir(parents=True)
+    assert_refused(run_tespike("prove", "--only", "pixel", "--traces", tmp_path / "tr", timeout=60),
+                   "cannot write --traces", "te-stream.vcd", "it is a directory")
+    config = tmp_path / "mine.json"
+    config.write_text(SensorConfig().to_json())
+    (tmp_path / "links").mkdir()
+    (tmp_path / "links" / "mine-stream.vcd").symlink_to(config)
+    assert_refused(run_tespike("prove", "--only", "pixel", "--config", config, "--depth", "1",
+                               "--traces", tmp_path / "links", timeout=60),
+                   "a counterexample of --traces", "mine-stream.vcd", "is the same file as --config")
+    assert config.read_text() == SensorConfig().to_json()
     # the other part's options with --only were dropped without a word (exit 0)
     for only, option in (("pixel", ("--sizes", "2x2")), ("pixel", ("--config-sizes", "none")),
                          ("pixel", ("--top-timeout", "1")), ("tops", ("--depth", "5")), ("tops", ("--corners",))):

@@ -107,13 +107,19 @@ def _tasks(configs, args, sizes, config_sizes):
                     yield ("top", label, c, prop, at)
 
 
+def trace_name(name: str, prop: str) -> str:
+    """A pixel property's name in the proof, and its counterexample's file name in ``--traces``
+    (``NAME.vcd``)."""
+    return f"{name.replace(':', '-')}-{prop}"
+
+
 def run_task(task, depth: int, solver: str, traces, top_timeout: float) -> tuple[bool, str]:
     """Prove one task of :func:`_tasks`: ``(proved, the line that reports it)``."""
     from tespike.cosim.formal import properties, prove
 
     if task[0] == "pixel":
         _, name, config, prop = task
-        result = prove(f"{name.replace(':', '-')}-{prop}", properties(config)[prop](), depth=depth,
+        result = prove(trace_name(name, prop), properties(config)[prop](), depth=depth,
                        solver=solver, trace_dir=traces)
         method = "SAT (combinational)" if prop == "stream-pixel-rule" else f"k-induction depth {depth}"
         if result.proved:
@@ -204,8 +210,8 @@ def run(args) -> int:
         raise InputError(f"--top-timeout {args.top_timeout:g} must be at least {MIN_BMC_SECONDS:g} seconds "   # in 0.001 s"
                          "(the bounded check of a top property gets that much in any case)")
     check_workers_argument(args.workers)
+    from tespike.golden.paths import check_output_dir
     if args.only != "tops":             # (written only on a failure: a bad one was found after the proofs)
-        from tespike.golden.paths import check_output_dir
         check_output_dir(args.traces, "--traces")
     sizes = parse_sizes("--sizes", args.sizes)
     config_sizes = parse_sizes("--config-sizes", args.config_sizes)
@@ -216,6 +222,14 @@ def run(args) -> int:
     configs = targets(args.config, args.corners)
     start = time.perf_counter()
     tasks = list(_tasks(configs, args, sizes, config_sizes))
+    if args.only != "tops":             # every trace a failure may write, checked before any proof runs:
+        from tespike.golden.config import PRESETS      # never a folder, never a --config file (a link)
+        from tespike.golden.paths import check_distinct
+        traces = [f"{trace_name(task[1], task[3])}.vcd" for task in tasks if task[0] == "pixel"]
+        check_output_dir(args.traces, "--traces", tuple(traces))
+        for name in traces:
+            check_distinct([("--config", spec) for spec in args.config if spec not in PRESETS],
+                           {"a counterexample of --traces": Path(args.traces) / name})
     count = failed = 0
     for proved, line in _results(tasks, args.workers, (args.depth, args.solver, Path(args.traces),
                                                         args.top_timeout)):

@@ -20,7 +20,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from tespike.golden.atomic import work_folder
+from tespike.golden.atomic import atomic_output, work_folder
 from tespike.golden.errors import TespikeError
 
 from .. import children
@@ -128,7 +128,8 @@ def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Pr
             if vcd.exists():
                 trace_dir.mkdir(parents=True, exist_ok=True)
                 trace = trace_dir / f"{name}.vcd"
-                shutil.copyfile(vcd, trace)
+                with atomic_output(trace, "counterexample trace") as part:   # (whole, or the earlier one)
+                    shutil.copyfile(vcd, part)
             return ProofResult(name, False, time.perf_counter() - start,
                           f"{step}: {_failed_assertion(done.stdout, messages)}", trace)
     return ProofResult(name, True, time.perf_counter() - start)
