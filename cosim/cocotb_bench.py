@@ -37,7 +37,8 @@ cocotb Makefile flow (docs/outside-simulators.md):
     reset in the middle of the run (:mod:`tespike.cosim.resets`): ``sweep`` asserts
     ``rst`` at every phase of an interval and of its beats
     (:func:`tespike.cosim.resets.reset_sweep` from the seed; the default stimulus then
-    covers the sweep and ``TESPIKE_READOUTS`` intervals after it), or an ``.npy``
+    covers the sweep and ``TESPIKE_READOUTS`` intervals after it; a stimulus file must be at
+    least that long, and runs without a reset past the sweep), or an ``.npy``
     file of one 0/1 per stimulus clock; each segment between resets is checked
     against the golden model from zero state (:func:`tespike.cosim.resets.golden_segments`);
 ``TESPIKE_LANES``
@@ -136,11 +137,18 @@ class Settings:
                 stim = default_stimulus(self.config, np.random.default_rng(self.seed),
                                         len(resets) // self.config.clocks_per_readout, self.height, self.width)
                 return stim, resets
+            stim = self.stimulus()                  # the sweep, then no reset to the stimulus's end
+            if stim.shape[0] < len(resets):
+                raise InputError(f"--resets sweep resets the array at every phase over {len(resets)} pixel "
+                                 f"clocks (with {self.readouts} intervals after): stimulus "
+                                 f"{self.stimulus_path!r} has {stim.shape[0]}; give one of at least "
+                                 f"{len(resets)} clocks, or a --resets file")
+            return stim, np.concatenate([resets, np.zeros(stim.shape[0] - len(resets), bool)])
         else:
             from tespike.golden.io import load_npy
             resets = load_npy(self.resets, "--resets")          # (one line naming the file for any fault)
         stim = self.stimulus()
-        return stim, check_resets(resets, stim.shape[0], None if self.resets == "sweep" else self.resets)
+        return stim, check_resets(resets, stim.shape[0], self.resets)
 
     def stimulus(self) -> np.ndarray:
         if self.stimulus_path is None:

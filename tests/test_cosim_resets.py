@@ -86,6 +86,26 @@ def test_a_reset_vector_file_is_read_as_every_npy_input_and_named(tmp_path):
             settings.inputs()
 
 
+def test_a_sweep_over_a_stimulus_file_runs_to_its_end_without_resets(tmp_path):
+    """A stimulus file beside --resets sweep was refused as a 'reset vector' of another length, a
+    vector the user never gave, with the length of a sweep they could not choose."""
+    from tespike.cosim.cocotb_bench import Settings
+    from tespike.cosim.resets import reset_sweep
+    config = SensorConfig(mode="ml", ml_readout="msb", b1=2, b2=2)         # L = 12
+    L = config.clocks_per_readout
+    sweep = reset_sweep(config, np.random.default_rng(1), tail_readouts=2)   # (Settings' own: seed + 1)
+    np.save(tmp_path / "short.npy", np.ones((len(sweep) - L, 1, 1), np.int64))
+    np.save(tmp_path / "long.npy", np.ones((len(sweep) + 2 * L, 1, 1), np.int64))
+    settings = Settings(config, 1, 1, 2, 0, str(tmp_path / "long.npy"), None, "sweep")
+    stimulus, resets = settings.inputs()
+    assert len(stimulus) == len(resets) == len(sweep) + 2 * L
+    assert np.array_equal(resets[:len(sweep)], sweep) and not resets[len(sweep):].any()
+    short = Settings(config, 1, 1, 2, 0, str(tmp_path / "short.npy"), None, "sweep")
+    with pytest.raises(InputError, match=f"^--resets sweep resets the array at every phase over {len(sweep)} pixel "
+                                         f"clocks .*: stimulus '.*short.npy' has {len(sweep) - L}; give one of"):
+        short.inputs()
+
+
 def _frames(clocks, n=1):
     return np.zeros((len(clocks), n), np.uint32)
 
