@@ -177,6 +177,15 @@ def test_long_double_files_score_like_float64(tmp_path, capsys, rng):
                                           names=("Rl.npy", "Il.npy")))[0]
     for key in native["per_frame"]:
         assert np.allclose(long["per_frame"][key], native["per_frame"][key], rtol=1e-12), key
+    # a long double beyond float64's range is finite: named as such, not as the inf it becomes
+    huge = estimate.astype(np.longdouble)
+    huge[0, 0, 0] = np.longdouble("1e4000")
+    if np.isfinite(huge[0, 0, 0]):                      # (where the long double is wider than float64)
+        np.save(tmp_path / "Rh.npy", huge)
+        assert main(["score", "--reference", str(tmp_path / "Il.npy"), "--estimate", str(tmp_path / "Rh.npy")]) == 2
+        assert capsys.readouterr().err.strip() == (f"tespike score: error: estimate file {str(tmp_path / 'Rh.npy')!r} "
+                                                   "holds a value (1e+4000) beyond float64's range, in which light "
+                                                   "is scored")
 
 
 @pytest.mark.parametrize("reference, options, words", [

@@ -85,10 +85,15 @@ def run(args) -> int:
     per_frame_peak = bool({"psnr_mu", "ssim_mu"} & set(metrics))
     step = max(1, CHECK_VALUES // max(1, ref[0].size))
     for k in range(0, len(frames), step):
-        e = np.asarray(est[k:k + step], dtype=np.float64)
+        raw = np.asarray(est[k:k + step])
+        e = raw.astype(np.float64, copy=False)
         if not np.isfinite(e).all():
+            value = raw[~np.isfinite(e)][0]             # (in its own dtype: a long double's 1e4000 is finite)
+            if np.isfinite(value):
+                raise InputError(f"estimate file {str(args.estimate)!r} holds a value ({str(value)}) beyond "
+                                 "float64's range, in which light is scored")
             raise InputError(f"estimate file {str(args.estimate)!r} holds a non-finite value "
-                             f"({e[~np.isfinite(e)][0]}); light must be finite")
+                             f"({value}); light must be finite")
         negative += int((e < 0).sum())
         lowest = min(lowest, float(e.min()))
         frame_peaks = np.max(ref[k:k + step], axis=(1, 2))
