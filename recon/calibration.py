@@ -288,6 +288,14 @@ def load_calibration(path: str | Path) -> Calibration:
                              f"(or {FORMAT_MEAN_ONLY!r})")
         if version == FORMAT and "dark_law" not in npz.files:
             raise InputError(f"calibration file {shown!r} lacks dark_law (write it with 'tespike calibrate')")
+        law_keys = ("dark_law", "dark_tail")
+        extra = [k for k in npz.files if k not in keys and (version != FORMAT or k not in law_keys)]
+        if extra and extra[0] in law_keys:      # (dropped without a word: the law of a format-1 file)
+            raise InputError(f"calibration file {shown!r} has format {version!r} and holds {extra[0]!r}, which "
+                             f"only format {FORMAT!r} has")
+        if extra:
+            raise InputError(f"calibration file {shown!r} holds {extra[0]!r} beside the members 'tespike calibrate' "
+                             "writes")
         law = np.asarray(npz["dark_law"]) if version == FORMAT else None
         stored = np.asarray(npz["dark_tail"]) if version == FORMAT and "dark_tail" in npz.files else None
         tail = float(stored) if stored is not None and stored.ndim == 0 and stored.dtype.kind in "iuf" \
@@ -350,8 +358,10 @@ def _checked_numbers(shown: str, values: dict, pixels: int) -> dict:
         if good:
             out[name] = kind(value)
             good = ok(out[name])
-        if not good:
-            raise InputError(f"calibration file {shown!r}: {name} must be {rule}, not {value!r}")
+        if not good:                            # (the value itself, not numpy's array(...) of it)
+            held = repr(value.item()) if value.ndim == 0 and value.dtype.kind != "O" else \
+                f"a {value.dtype} array of shape {value.shape}"
+            raise InputError(f"calibration file {shown!r}: {name} must be {rule}, not {held}")
     if str(values["estimator"]) != CALIBRATION_ESTIMATOR:
         raise InputError(f"calibration file {shown!r}: estimator {str(values['estimator'])!r} unknown "
                          f"(tespike calibrate writes {CALIBRATION_ESTIMATOR!r})")

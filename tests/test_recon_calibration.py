@@ -168,7 +168,12 @@ def test_file_round_trip(tmp_path):
     ("estimator", lambda c: np.array("bogus"), "estimator 'bogus' unknown"),
     ("dark_readouts", lambda c: np.array(0), "dark_readouts must be an integer >= 1"),
     ("flat_light", lambda c: np.array(np.nan), "flat_light must be a finite number > 0"),
-    ("flat_light", lambda c: np.array(-1.0), "flat_light must be a finite number > 0"),
+    ("flat_light", lambda c: np.array(-1.0), "flat_light must be a finite number > 0, not -1.0$"),  # not array(-1.)
+    ("flat_light", lambda c: np.array("0.03"), "flat_light must be a finite number > 0, not '0.03'$"),
+    ("flat_light", lambda c: np.zeros(3), r"flat_light must be a finite number > 0, not a float64 array of shape \(3,\)$"),
+    ("extra", lambda c: np.zeros(2), "holds 'extra' beside the members 'tespike calibrate' writes$"),    # dropped
+    ("format", lambda c: np.array("tespike-calibration-1"),                 # its law dropped without a word
+     "has format 'tespike-calibration-1' and holds 'dark_law', which only format 'tespike-calibration-2' has$"),
 ])
 def test_a_calibration_tespike_calibrate_could_not_write_is_refused(tmp_path, member, value, words):
     """Finite but absurd maps and numbers made R.npy files of inf or NaN (rc 0), or a traceback."""
