@@ -53,6 +53,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.arguments import existing_file  # noqa: E402
 from benchmarks.usage import children_cpu  # noqa: E402
 from tespike.golden.config import SensorConfig  # noqa: E402
 from tespike.golden.decode import decode_spikes  # noqa: E402
@@ -288,7 +289,7 @@ def main(argv=None):
     parser.add_argument("--skip-whole", action="store_true")
     parser.add_argument("--skip-levels", action="store_true", help="only the whole-process part")
     parser.add_argument("--whole-shape", type=int, nargs=3, default=(64, 384, 512))
-    parser.add_argument("--scene", action="append", default=[],
+    parser.add_argument("--scene", action="append", default=[], type=existing_file,
                         help="I.npy to time the whole process on as well (repeatable), e.g. from "
                              "'TESPIKE_HDRI_DIR=../shared/data/hdri python3 -m tespike scene --name city --frames 64 "
                              "--height 384 --width 512' (the full-size panorama: the shipped copy is 128 x 256)")
@@ -303,7 +304,7 @@ def main(argv=None):
     parser.add_argument("--workers", type=int, nargs="+", default=[None],
                         help="whole process: tespike simulate --workers values to time, interleaved "
                              "(e.g. 1 2; default: the command's default)")
-    parser.add_argument("--interior", action="append", default=[], metavar="PANORAMA",
+    parser.add_argument("--interior", action="append", default=[], metavar="PANORAMA", type=existing_file,
                         help="whole process: a dim pan over this .hdr/.exr panorama as well (repeatable; "
                              "e.g. /work/shared/data/hdri-polyhaven/vestibule_1k.hdr)")
     parser.add_argument("--dim-median", type=float, default=0.015,

@@ -30,6 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from benchmarks.arguments import existing_file  # noqa: E402
 from tespike.golden.config import SensorConfig, load_config  # noqa: E402
 from tespike.golden.fastsim.scene import stripe_simulators  # noqa: E402
 from tespike.golden.resources import keep_freed_memory  # noqa: E402
@@ -37,7 +38,7 @@ from tespike.golden.resources import keep_freed_memory  # noqa: E402
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scene", required=True, help="I.npy (K, H, W) light")
+    parser.add_argument("--scene", required=True, type=existing_file, help="I.npy (K, H, W) light")
     parser.add_argument("--constant", required=True,
                         help="MODULE.NAME under tespike.golden.fastsim, e.g. window.MERGE_DRAWS")
     parser.add_argument("--values", nargs="+", required=True, help="Python literals; the first is the reference")

@@ -33,6 +33,9 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from benchmarks.arguments import existing_file  # noqa: E402
 PACKAGES = ("golden", "rtl", "recon", "cosim", "tespike")
 
 
@@ -58,7 +61,7 @@ def _time(tree: Path, scene: Path, out: Path, blas_threads: int | None) -> float
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=15, help="runs of each kind (interleaved)")
-    parser.add_argument("--scene", type=Path, help="I.npy to simulate (default: 1 x 32 x 32 at 0.1)")
+    parser.add_argument("--scene", type=existing_file, help="I.npy to simulate (default: 1 x 32 x 32 at 0.1)")
     args = parser.parse_args()
     cores = os.cpu_count() or 1
     with tempfile.TemporaryDirectory() as tmp:
