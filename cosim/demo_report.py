@@ -138,7 +138,9 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
     lines += ["", "## Run time of every stage", "", "| stage | seconds |", "| --- | ---: |"]
     lines += [f"| {stage.name} | {stage.seconds:.1f} |" for stage in stages]
     lines += [f"| total | {total:.1f} |", "", "## Rerun each step with the individual commands", "",
-              "From this folder (`cd` into it), in order:", "", "```sh"]
+              "In a new, empty folder, in order (each step makes the files the next reads; run here they "
+              "would leave files no demo writes, and the next `tespike demo` into this folder would refuse it):",
+              "", "```sh", "mkdir ../demo-rerun && cd ../demo-rerun"]
     for stage in stages:
         lines.append(f"# {stage.name}")
         lines += stage.commands
