@@ -487,8 +487,8 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     print(f"RTL: {rtl.verdict}")
     print(f"wrote {given}/: report.md, verdict.txt, I.npy, S_*.npz, R_*.npy, E_crop.npy, "
           + ("W.vcd, W.gtkw, " if backend == "amaranth" else "")
-          + f"frame.png, rtl_crop.png, {paths['plot'].name}, strips/{DEMO_SCENE}.png, table.md "
-            f"({time.perf_counter() - progress.start:.0f} s)")
+          + f"frame.png, rtl_crop.png, {paths['plot'].name}, strips/{DEMO_SCENE}.png, table.md, "
+            f"table.csv, results.csv ({time.perf_counter() - progress.start:.0f} s)")
     return 0 if rtl.difference is None else 1
 
 

@@ -85,6 +85,8 @@ def report_markdown(*, configs, rtl_config, frames, height, width, seed, crop, r
               "the RTL's readouts (TFI searches the whole stream for a spike interval, so it may differ "
               "near the ends); the learned methods are spatial (they see a neighbourhood of each pixel), so "
               "near the crop's borders it sees other pixels than on the full frame and may differ there. "
+              "A learned method's light is floored at zero, so a dim pixel its output drives below zero is "
+              "black in either panel (the network's head, docs/fair-training.md). "
               "Run time: median of repeats (`recon/walltime.py`). Pictures: `rtl_crop.png`.", "",
               "| method | RTL: PSNR-μ | SSIM-μ | golden full frame: PSNR-μ | SSIM-μ | max abs difference (light) "
               "| RTL stream ms / frame |",
