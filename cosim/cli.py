@@ -13,7 +13,8 @@ import argparse
 import importlib
 import sys
 
-from tespike.cosim.console import StandardOutputError, closed_pipe, drop_standard_output, name_standard_output
+from tespike.cosim.console import (StandardOutputError, closed_at_start, closed_pipe, drop_standard_output,
+                                   name_standard_output)
 from tespike.golden.errors import TespikeError, one_line
 from tespike.golden.resources import address_space_text
 
@@ -261,6 +262,11 @@ def main(argv: list[str] | None = None) -> int:
         raise
     if args is None:
         return _write_out_standard_output("tespike") if whole_process else 0
+    if whole_process and closed_at_start() and not getattr(args, "quiet", False):
+        # refused before the run, not after its work was done (it had written its files, then failed to say so)
+        print(f"tespike {args.command}: error: standard output: closed (the command started without one): "
+              "give --quiet, or an open standard output", file=sys.stderr)
+        return EXIT_BAD_INPUT
     args.argv = argv                  # the command line as given (a run records how it was made)
     previous = _install_signal_handlers()
 

@@ -126,6 +126,13 @@ class _ClosedStandardOutput:
         return False
 
 
+def closed_at_start() -> bool:
+    """Whether this process started with its standard output closed (``tespike ... >&-``), as
+    :func:`name_standard_output` found it."""
+    stream = sys.stdout
+    return isinstance(stream, _NamedStandardOutput) and isinstance(stream._stream, _ClosedStandardOutput)
+
+
 def name_standard_output() -> None:
     """Make this process's ``sys.stdout`` say so when a write to it fails, or when it was closed
     at the start (the ``tespike`` process only: a library caller's stdout is its own)."""

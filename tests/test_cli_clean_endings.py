@@ -752,6 +752,11 @@ def test_a_command_started_without_stdout_refuses_to_print_or_runs_quietly(tmp_p
     result = _started_with_closed([1], "score", "--reference", scene, "--estimate", tmp_path / "R.npy",
                                   cwd=tmp_path)
     assert_refused(result, "standard output", "closed")
+    # refused before the run: it had written S.npz whole, then failed to say so (exit 2 after the work)
+    result = _started_with_closed([1], "simulate", "--config", "te", "--scene", scene, "--out", tmp_path / "S0.npz",
+                                  "--seed", 1, cwd=tmp_path)
+    assert_refused(result, "standard output: closed", "give --quiet")
+    assert not (tmp_path / "S0.npz").exists()
     for fds in ([1], [1, 2]):
         out = tmp_path / f"S{len(fds)}.npz"
         result = _started_with_closed(fds, "simulate", "--config", "te", "--scene", scene, "--out", out,
