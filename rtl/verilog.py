@@ -99,12 +99,25 @@ def _yosys_ended_on_interrupt():
 def _yosys_memory_named():
     """Amaranth's Yosys (a WebAssembly build run by wasmtime) reserves about 4 GiB of address space
     as it starts; under a smaller ``ulimit -v`` it fails with its own traceback inside Amaranth's
-    YosysError. That failure is a :class:`MemoryError` naming the reservation."""
+    YosysError. That failure is a :class:`MemoryError` naming the reservation; one of the system's
+    (wasmtime's "File too large (os error 27)" under ``ulimit -f``, a full disk) is that
+    :class:`OSError`, in one line."""
     try:
         yield
     except Exception as exc:
         text = str(exc)
-        if type(exc).__name__ != "YosysError" or "Cannot allocate memory" not in text:
+        if type(exc).__name__ != "YosysError":
+            raise
+        system = re.search(r"WasmtimeError: (.+?) \(os error (\d+)\)", text)
+        if system and "Cannot allocate memory" not in text:
+            import errno
+            import resource
+            limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+            where = (f" (over this process's file size limit, ulimit -f: {limit} bytes)"
+                     if int(system.group(2)) == errno.EFBIG and limit != resource.RLIM_INFINITY else "")
+            raise OSError(int(system.group(2)), f"Amaranth's Yosys (WebAssembly) could not write its work: "
+                                                f"{system.group(1)}{where}") from None
+        if "Cannot allocate memory" not in text:
             raise
         size = re.search(r"reserve (0x[0-9a-fA-F]+|\d+) bytes", text)
         need = f" of {int(size.group(1), 0) / 2 ** 30:.1f} GiB" if size else ""
