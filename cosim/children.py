@@ -57,6 +57,24 @@ def _preexec(parent: int):
     return (lambda: end_with_parent(parent)) if _PRCTL is not None else None
 
 
+def ended(returncode: int) -> str:
+    """How an outside tool that printed nothing ended, for the line of its failure: its exit status,
+    or the signal that killed it (SIGXFSZ: the file size limit a write went past; a tool gets the
+    system's default action for it, where Python ignores it)."""
+    if returncode >= 0:
+        return f"exit status {returncode}"
+    try:
+        name = signal.Signals(-returncode).name
+    except ValueError:
+        return f"killed by signal {-returncode}"
+    if name == "SIGXFSZ":
+        import resource
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        shown = "" if limit == resource.RLIM_INFINITY else f": {limit} bytes"
+        return f"killed by SIGXFSZ (a file past this process's file size limit, ulimit -f{shown})"
+    return f"killed by {name}"
+
+
 def run(argv, **kwargs) -> subprocess.CompletedProcess:
     """``subprocess.run`` of a child that ends with this process."""
     return subprocess.run(argv, preexec_fn=_preexec(os.getpid()), **kwargs)

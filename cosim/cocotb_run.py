@@ -159,15 +159,22 @@ def build(verilog_path: Path, top: str, simulator: str, cache_root: Path | None 
             return final
         if final.exists():
             shutil.rmtree(final)
-        final.mkdir(parents=True)
         log = final / "build.log"
         source = final / "array.v"
-        source.write_text(text)
         try:
+            final.mkdir(parents=True)
+            source.write_text(text)
             with _outside_pytest(), _quiet(final / "commands.txt"), _children_end_with_us():
                 _runner(simulator).build(verilog_sources=[source], hdl_toplevel=top, build_dir=final,
                                          build_args=BUILD_ARGS.get(simulator, []), always=True,
                                          log_file=log)
+            (final / "done").write_text(key + "\n")
+        except OSError as exc:                  # (a full disk under the cache named no file)
+            shutil.rmtree(final, ignore_errors=True)
+            if exc.filename is not None and not str(exc.filename).startswith(str(final)):
+                raise
+            raise InputError(f"cannot write the {simulator} build {str(final)!r} (the build cache: $TESPIKE_CACHE, "
+                             f"else ~/.cache/tespike): {exc.strerror or exc}") from None
         except SystemExit:
             failed = root / f"{key}.failed.log"
             shutil.copyfile(log, failed)
@@ -176,7 +183,6 @@ def build(verilog_path: Path, top: str, simulator: str, cache_root: Path | None 
             raise SimulatorBuildError(f"cocotb {simulator} build of {top} failed: "
                                       f"{line.replace(str(source), str(verilog_path))} "
                                       f"(full log: {failed})") from None
-        (final / "done").write_text(key + "\n")
     return final
 
 

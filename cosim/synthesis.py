@@ -127,7 +127,7 @@ def yosys_run(verilog_text: str, steps: list[str], failure: str, yosys: str = "y
                                           work)
         if code != 0:
             errors = [line for line in output.splitlines() if "ERROR" in line] or output.strip().splitlines()[-1:]
-            raise SynthesisError(f"{failure}: {errors[0].strip() if errors else f'exit code {code}'}")
+            raise SynthesisError(f"{failure}: {errors[0].strip() if errors else children.ended(code)}")
         yield work, run
 
 

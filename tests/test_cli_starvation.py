@@ -339,6 +339,18 @@ def test_a_write_cut_at_the_file_size_limit_names_the_limit(tmp_path):
     assert os.listdir(tmp_path) == []
 
 
+def test_yosys_past_the_file_size_limit_names_the_limit_in_one_line(tmp_path):
+    """Amaranth's Yosys writes its work as it runs: past ``ulimit -f`` every command that writes Verilog
+    (verilog, synthesize, cocotb, rtl-sim on Icarus) died with wasmtime's "File too large (os error 27)"
+    inside two tracebacks."""
+    out = tmp_path / "a.v"
+    done = run_limited(ENTRY.format(args=["verilog", "--config", "te", "--height", "4", "--width", "4",
+                                          "--out", str(out)]), {resource.RLIMIT_FSIZE: 300 << 10})
+    assert_refused(done, "Amaranth's Yosys (WebAssembly) could not write its work: File too large",
+                   "ulimit -f: 307200 bytes")
+    assert not out.exists()
+
+
 def test_yosys_without_its_address_space_is_out_of_memory_in_one_line(tmp_path):
     """Amaranth's Yosys (WebAssembly) reserves about 4 GiB as it starts: under a smaller ``ulimit -v``
     every command that writes Verilog died with two tracebacks, Yosys's inside Amaranth's."""
@@ -373,3 +385,33 @@ def test_evaluate_out_of_file_handles_leaves_no_temporary_and_names_no_read_file
             time.sleep(0.1)
         assert [p for p in os.listdir(tmp_path) if p.startswith(".")] == [], handles
     assert False in outcomes, "no limit tried ran out of handles: lower the range"
+
+
+def test_a_tool_killed_at_the_file_size_limit_is_named_so(tmp_path):
+    """Yosys past ``ulimit -f`` (killed by SIGXFSZ, printing nothing) was "yosys failed: []"."""
+    from tespike.cosim.children import ended
+    assert ended(3) == "exit status 3" and ended(-signal.SIGKILL) == "killed by SIGKILL"
+    done = run_limited(ENTRY.format(args=["prove", "--config", "te", "--only", "pixel", "--depth", "1",
+                                          "--traces", str(tmp_path / "tr")]), {resource.RLIMIT_FSIZE: 300 << 10})
+    assert_refused(done, "yosys failed: killed by SIGXFSZ", "ulimit -f: 307200 bytes")
+
+
+def test_a_full_disk_under_the_traces_or_the_build_cache_names_it(tmp_path):
+    """A counterexample trace on a full disk named the solver's temporary (``shutil.copyfile`` names its
+    source) and left an empty --traces folder; a cocotb build into a full cache named no file."""
+    from tests.cli import run_tespike
+    with small_tmpfs(tmp_path / "small", "2m") as mount:
+        filler = mount / "filler"
+        filler.write_bytes(b"\0" * (os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize - 4096))
+        done = run_tespike("prove", "--config", "te", "--only", "pixel", "--depth", "1", "--traces", mount / "tr")
+        assert_refused(done, f"cannot write {str(mount / 'tr' / 'te-stream.vcd')!r}: No space left on device")
+        assert os.listdir(mount) == ["filler"]
+        filler.unlink()
+        pytest.importorskip("cocotb")
+        if __import__("shutil").which("iverilog") is None:
+            pytest.skip("Icarus Verilog is not installed")
+        filler.write_bytes(b"\0" * (os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize - 200_000))
+        done = run_tespike("cocotb", "--config", "te", "--height", "4", "--width", "4", "--simulator", "icarus", "-q",
+                           env={"TESPIKE_CACHE": str(mount / "cache")})
+        assert_refused(done, "cannot write the icarus build", str(mount / "cache" / "cocotb"), "No space left on device")
+        assert [name for name in os.listdir(mount / "cache" / "cocotb") if not name.endswith(".lock")] == []

@@ -79,7 +79,7 @@ def _aiger(harness: Harness, work: Path, name: str) -> Path:
                          f"write_aiger -zinit {name}.aig"], cwd=work, capture_output=True, text=True)
     if done.returncode != 0:
         lines = [line for line in (done.stderr + done.stdout).splitlines() if "ERROR" in line]
-        raise AbcError(f"yosys failed on the harness: {(lines or ['no message'])[0].strip()}")
+        raise AbcError(f"yosys failed on the harness: {lines[0].strip() if lines else children.ended(done.returncode)}")
     return work / f"{name}.aig"
 
 

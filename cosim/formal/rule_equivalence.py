@@ -5,14 +5,14 @@ combinationally by Yosys ``miter`` + ``sat`` (:func:`prove_equivalence`)."""
 from __future__ import annotations
 
 import re
-import shutil
 import time
 from pathlib import Path
 
 from tespike.golden.atomic import work_folder
 from tespike.golden.config import SensorConfig
 
-from .smtbmc import ProofToolError, ProofResult, run_tool
+from .. import children
+from .smtbmc import ProofToolError, ProofResult, keep_trace, run_tool
 
 # -- the streaming Verilog top's pixel rule ---------------------------------------------------
 class Equivalence:
@@ -108,12 +108,8 @@ def prove_equivalence(name: str, eq: Equivalence, trace_dir: Path) -> ProofResul
             return ProofResult(name, True, time.perf_counter() - start)
         if "SAT proof finished - model found: FAIL!" not in log:
             errors = [line for line in log.splitlines() if "ERROR" in line] or log.strip().splitlines()[-1:]
-            raise ProofToolError(f"{name}: yosys failed: {errors[0] if errors else 'no output'}")
-        trace = None
-        if (work / "trace.vcd").exists():
-            trace_dir.mkdir(parents=True, exist_ok=True)
-            trace = trace_dir / f"{name}.vcd"
-            shutil.copyfile(work / "trace.vcd", trace)
+            raise ProofToolError(f"{name}: yosys failed: {errors[0] if errors else children.ended(done.returncode)}")
+        trace = keep_trace(work / "trace.vcd", trace_dir, name) if (work / "trace.vcd").exists() else None
         return ProofResult(name, False, time.perf_counter() - start,
                       f"equivalence check: {_counterexample(log)}", trace)
 

@@ -13,6 +13,7 @@ predates; :func:`_yosys_checks` rewrites each combinational check into the ``$as
 
 from __future__ import annotations
 
+import contextlib
 import re
 import shutil
 import subprocess
@@ -96,6 +97,25 @@ def _failed_assertion(log: str, messages: dict[str, str]) -> str:
     return "no failed assertion named in the log"
 
 
+def keep_trace(vcd: Path, trace_dir: Path, name: str) -> Path:
+    """A solver's counterexample ``vcd`` kept as ``trace_dir/NAME.vcd``: whole, or the earlier file
+    untouched, and a write that fails (a full disk) names the trace, not the solver's temporary
+    (``shutil.copyfile`` named its source); a ``trace_dir`` made here and left empty goes."""
+    made = not trace_dir.exists()
+    trace_dir.mkdir(parents=True, exist_ok=True)
+    trace = trace_dir / f"{name}.vcd"
+    try:
+        with atomic_output(trace, "counterexample trace") as part, open(vcd, "rb") as source, \
+                open(part, "wb") as target:
+            shutil.copyfileobj(source, target)
+    except BaseException:
+        if made:
+            with contextlib.suppress(OSError):
+                trace_dir.rmdir()
+        raise
+    return trace
+
+
 def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> ProofResult:
     """Prove one harness by k-induction with yosys-smtbmc (base case and induction step, both
     ``depth`` long); :func:`tespike.cosim.formal.prove` sends an equivalence elsewhere first."""
@@ -114,7 +134,8 @@ def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Pr
                   "dffunmap; write_smt2 -wires top.smt2")
         done = run_tool(["yosys", "-q", "-p", script], work)
         if done.returncode != 0:
-            raise ProofToolError(f"{name}: yosys failed: {(done.stderr or done.stdout).strip().splitlines()[-1:]}")
+            said = (done.stderr or done.stdout).strip().splitlines()[-1:]      # (nothing said: how it ended)
+            raise ProofToolError(f"{name}: yosys failed: {said[0] if said else children.ended(done.returncode)}")
         for step, extra in (("base case", []), ("induction step", ["-i"])):
             vcd = work / "trace.vcd"
             done = run_tool(["yosys-smtbmc", "-s", solver, *extra, "-t", str(depth),
@@ -122,14 +143,10 @@ def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Pr
             if "Status: PASSED" in done.stdout:
                 continue
             if "Status: FAILED" not in done.stdout:
+                said = (done.stdout.strip().splitlines() or done.stderr.strip().splitlines())[-1:]
                 raise ProofToolError(f"{name}: yosys-smtbmc ({solver}) gave no verdict: "
-                                     f"{done.stdout.strip().splitlines()[-1:] or done.stderr.strip()}")
-            trace = None
-            if vcd.exists():
-                trace_dir.mkdir(parents=True, exist_ok=True)
-                trace = trace_dir / f"{name}.vcd"
-                with atomic_output(trace, "counterexample trace") as part:   # (whole, or the earlier one)
-                    shutil.copyfile(vcd, part)
+                                     f"{said[0] if said else children.ended(done.returncode)}")
+            trace = keep_trace(vcd, trace_dir, name) if vcd.exists() else None
             return ProofResult(name, False, time.perf_counter() - start,
                           f"{step}: {_failed_assertion(done.stdout, messages)}", trace)
     return ProofResult(name, True, time.perf_counter() - start)
