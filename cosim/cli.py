@@ -274,8 +274,9 @@ def main(argv: list[str] | None = None) -> int:
         from .library_room import guard_imports
         guard_imports()               # torch loads with the stops held (and, under ulimit -v, is tried in a child first)
         if whole_process:             # removes the run's temporaries should it be killed outright
-            from tespike.golden.atomic import start_janitor
+            from tespike.golden.atomic import run_temporaries, start_janitor
             start_janitor(report_faults=True)
+            run_temporaries()         # (the tools' and libraries' temporaries too: all in one held folder)
     import warnings
     code, ok = 1, False   # (what the finally below ends with, should _run itself be stopped)
     try:

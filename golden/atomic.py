@@ -116,6 +116,25 @@ def work_folder(prefix: str, dir: str | os.PathLike | None = None) -> Iterator[P
             _remove_held(path)
 
 
+def run_temporaries(prefix: str = "tespike-run-") -> Path | None:
+    """Give this process, and every process it starts, a temporary folder of its own: made in the
+    temporary directory (``$TMPDIR``, else ``/tmp``), held by the janitor and made ``tempfile``'s
+    folder and ``$TMPDIR`` for the rest of the process. What the outside tools write there (Yosys's
+    ABC folders, Icarus's and the compiler's temporaries, Dask's scratch space, torch's) goes with it
+    when the process ends, killed outright or interrupted too (they had been left in ``$TMPDIR``).
+    None, nothing changed, where the folder cannot be made (the temporaries then fail as before,
+    naming the directory)."""
+    try:
+        with stops_held():              # (made and held as one step)
+            path = Path(tempfile.mkdtemp(prefix=prefix))
+            _Janitor.hold(path)
+    except OSError:
+        return None
+    tempfile.tempdir = str(path)
+    os.environ["TMPDIR"] = str(path)
+    return path
+
+
 def _remove_held(path: str | Path) -> None:
     """Remove a temporary (file or folder) the janitor holds, and release it; where it cannot be
     removed whole (out of file handles: ``rmtree`` opens each folder it walks), the janitor keeps it

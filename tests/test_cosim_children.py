@@ -175,3 +175,33 @@ def test_run_group_returns_what_run_returns():
     done = children.run_group([sys.executable, "-c", "import sys; print(sys.stdin.read())"], input="in",
                               capture_output=True, text=True)
     assert done.stdout == "in\n"
+
+
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL], ids=["INT", "TERM", "KILL"])
+def test_the_tools_temporaries_go_with_a_stopped_command(tmp_path, stop):
+    """Yosys's ABC writes ``yosys-abc-XXXX/`` in $TMPDIR (Icarus, the compiler, Dask and torch their own):
+    a command stopped while they ran left them there. Each command's tools now write in a folder of
+    its own that its janitor holds."""
+    import glob
+    import shutil
+    if shutil.which("yosys") is None:
+        pytest.skip("Yosys is not installed")
+    from tests.cli import _checkout_env
+    temporary = tmp_path / "t"
+    temporary.mkdir()
+    process = subprocess.Popen([sys.executable, "-m", "tespike", "synthesize", "--config", "te", "--height", "8",
+                                "--width", "8", "-q"], env=dict(_checkout_env(), TMPDIR=str(temporary)),
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while process.poll() is None and not (glob.glob(str(temporary / "yosys-abc-*"))
+                                          or glob.glob(str(temporary / "*" / "yosys-abc-*"))):
+        assert time.monotonic() < deadline, "no ABC folder within 2 minutes"
+        time.sleep(0.005)
+    assert process.poll() is None, "the command ended before its ABC folder was seen"
+    os.killpg(process.pid, stop)
+    process.communicate(timeout=60)
+    for _ in range(100):                                  # (the janitor removes them as the command ends)
+        if not os.listdir(temporary):
+            break
+        time.sleep(0.05)
+    assert os.listdir(temporary) == []
