@@ -249,6 +249,15 @@ def trim_log(path: Path, step: int, every_step: bool = False) -> None:
             csv.writer(handle).writerows(kept)
 
 
+def last_logged_step(path: Path) -> int | None:
+    """The step of a CSV log's last row (:func:`trim_log` has checked it), None where it has none."""
+    if not path.is_file():
+        return None
+    with open(path, newline="") as handle:
+        rows = list(csv.reader(handle))
+    return int(rows[-1][0]) if len(rows) > 1 else None
+
+
 @contextlib.contextmanager
 def appending(path: Path):
     """A CSV log appended to ``path`` (not replaced: it grows with the run): a write that runs out of
@@ -520,6 +529,8 @@ class TrainingRun:
             self.best_weights = read_weights(self.best_path, "the run's best weights")
         trim_log(self.log_path, self.step, every_step=True)
         trim_log(self.validation_path, self.step)
+        if last_logged_step(self.validation_path) == self.step:   # (validated again, a second row of it)
+            self.validated = self.step
 
     def start_anew(self) -> None:
         """A new run: no file of an earlier one stays in the run folder; ``--init`` copied in."""
@@ -582,23 +593,27 @@ class TrainingRun:
                          self.generator, self.options, self.best, self.init)
 
     def keep_if_best(self) -> None:
-        """Score the model on the validation set, log it, and keep it if it is the best so far."""
-        self.validated = self.step
+        """Score the model on the validation set, log it, and keep it if it is the best so far. The
+        log's row, the best and its file ``best.pt`` change as one, a stop held until all three are
+        done: a Ctrl-C between them had left a checkpoint recording a best whose file was never
+        written, which ``--resume`` refused."""
         scores = validate(self.model, self.cases, self.config, self.options.device)
         self.run_folder_kept()
-        new_file = not self.validation_path.exists()
-        with appending(self.validation_path) as handle:
-            writer = csv.writer(handle)
-            if new_file:
-                writer.writerow(["step", *scores, "seconds"])
-            writer.writerow([self.step, *(f"{v:.3f}" for v in scores.values()), f"{self.elapsed():.1f}"])
-        if self.best is None or scores["mean"] > self.best["mean"]:
-            self.best = {"step": self.step, **scores}
-            self.best_weights = {"state_dict": cpu_state(self.model),
-                                 "meta": {**self.meta, "steps": self.step, "validation": scores,
-                                          "wall_seconds": round(self.elapsed(), 1)}}
-            save_weights(self.best_path, self.model, self.config, self.best_weights["meta"], self.options.method,
-                         self.best_weights["state_dict"])
+        with stops_held():
+            new_file = not self.validation_path.exists()
+            with appending(self.validation_path) as handle:
+                writer = csv.writer(handle)
+                if new_file:
+                    writer.writerow(["step", *scores, "seconds"])
+                writer.writerow([self.step, *(f"{v:.3f}" for v in scores.values()), f"{self.elapsed():.1f}"])
+            if self.best is None or scores["mean"] > self.best["mean"]:
+                best_weights = {"state_dict": cpu_state(self.model),
+                                "meta": {**self.meta, "steps": self.step, "validation": scores,
+                                         "wall_seconds": round(self.elapsed(), 1)}}
+                save_weights(self.best_path, self.model, self.config, best_weights["meta"], self.options.method,
+                             best_weights["state_dict"])
+                self.best, self.best_weights = {"step": self.step, **scores}, best_weights
+            self.validated = self.step
 
     # ---------------------------------------------------------------- the steps
     def steps(self, show: bool) -> None:

@@ -136,6 +136,35 @@ def test_a_validation_log_resumes_and_one_with_its_header_altered_is_refused(tmp
         train(options(steps=3, validate_every=1), tmp_path / "w.pt", resume=True)
 
 
+def test_resuming_a_finished_run_validates_its_last_step_once(tmp_path):
+    """A run resumed at its last, validated step validated it again: a second row of that step."""
+    train(options(steps=1, validate_every=1), tmp_path / "w.pt")
+    validation = tmp_path / "w.run" / "validation.csv"
+    train(options(steps=1, validate_every=1), tmp_path / "w.pt", resume=True)
+    assert log_steps(validation) == [1]
+
+
+def test_a_stop_while_the_best_is_kept_leaves_a_run_that_resumes(tmp_path, monkeypatch):
+    """Ctrl-C after the validation row, before best.pt was written: the checkpoint recorded a best
+    whose file did not exist, and --resume refused ("the run's best weights file ... does not exist")."""
+    import signal
+
+    import tespike.recon.train as trainer
+    real = trainer.cpu_state
+
+    def stopped_while_keeping(*args, **kwargs):         # the Ctrl-C comes as the best is taken
+        signal.raise_signal(signal.SIGINT)
+        return real(*args, **kwargs)
+    monkeypatch.setattr(trainer, "cpu_state", stopped_while_keeping)
+    with pytest.raises(KeyboardInterrupt):
+        train(options(steps=3, validate_every=1), tmp_path / "w.pt")
+    monkeypatch.undo()
+    assert (tmp_path / "w.run" / "best.pt").is_file()     # (the row, the best and its file: all three)
+    assert log_steps(tmp_path / "w.run" / "validation.csv") == [1]
+    train(options(steps=3, validate_every=1), tmp_path / "w.pt", resume=True)
+    assert log_steps(tmp_path / "w.run" / "validation.csv") == [1, 2, 3]
+
+
 def test_a_run_folder_removed_during_training_keeps_the_weights(tmp_path, monkeypatch):
     import tespike.recon.train as trainer
     draw, calls = trainer.draw_batch, []
