@@ -222,6 +222,22 @@ def test_a_killed_trainer_leaves_no_worker(tmp_path):
         os.killpg(process.pid, signal.SIGKILL) if process.poll() is None else None
 
 
+def test_a_hangup_of_the_group_is_one_line(tmp_path):
+    """A closed terminal's SIGHUP reaches the whole group: the resource tracker died of it, and the one
+    started in its place printed a KeyError traceback for each of the pool's semaphores (25 lines)."""
+    process = start_training(tmp_path)
+    try:
+        kids = wait_for_worker(process)
+        time.sleep(1.0)                                        # (the worker at its clips)
+        os.killpg(process.pid, signal.SIGHUP)
+        _, stderr = process.communicate(timeout=120)
+    finally:
+        os.killpg(process.pid, signal.SIGKILL) if process.poll() is None else None
+    assert process.returncode == 129
+    assert_refused(subprocess.CompletedProcess([], 129, "", stderr), "terminated by SIGHUP")
+    assert gone(kids)
+
+
 def test_ctrl_c_is_one_line_and_leaves_no_empty_run_folder(tmp_path):
     process = start_training(tmp_path)
     try:

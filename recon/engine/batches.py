@@ -121,7 +121,17 @@ def _ctrl_c_held():
         yield
         return
     from multiprocessing import resource_tracker
-    resource_tracker.ensure_running()    # (its start, inside, would unblock SIGINT: it blocks and unblocks)
+    # (its start, inside, would unblock SIGINT: it blocks and unblocks). The tracker ignores SIGINT and
+    # SIGTERM itself, not SIGHUP: a closed terminal's SIGHUP ended it, and the tracker started again in
+    # its place printed a KeyError traceback for each semaphore the first had held. Blocked here, SIGHUP
+    # stays blocked in the tracker (it ends when the trainer and its workers are gone) and comes to
+    # this process once the mask is restored.
+    hangup = {signal.SIGHUP} if hasattr(signal, "SIGHUP") else set()
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, hangup)
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     held = []
     previous = signal.signal(signal.SIGINT, lambda number, frame: held.append(number))
     mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
