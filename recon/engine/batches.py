@@ -50,9 +50,10 @@ def _worker_init(parent: int) -> None:
     """A worker runs at lower priority and ends when the trainer is gone, however it ended (even
     killed, with no chance to end its workers), without a word once it is gone."""
     import sys
-    signal.signal(signal.SIGINT, signal.SIG_IGN)      # (the trainer answers Ctrl-C: _ctrl_c_held)
+    for number in _HELD_AT_START:                       # (the trainer answers Ctrl-C and a hang-up: _ctrl_c_held)
+        signal.signal(number, signal.SIG_IGN)
     if hasattr(signal, "pthread_sigmask"):
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, set(_HELD_AT_START))
     try:
         os.nice(5)              # the trainer keeps priority on a shared machine
     except OSError:
@@ -107,6 +108,12 @@ def _quiet_resource_tracker() -> None:
         sys.warnoptions.append(_TRACKER_NOTICE)
 
 
+#: What a terminal sends the whole process group, which the trainer answers for its workers (ending
+#: them): Ctrl-C and, the terminal closed, SIGHUP. A worker that died of SIGHUP was started again by
+#: the pool while the trainer ended it, and the trainer could wait for that start for minutes.
+_HELD_AT_START = tuple(getattr(signal, name) for name in ("SIGINT", "SIGHUP") if hasattr(signal, name))
+
+
 @contextlib.contextmanager
 def _ctrl_c_held():
     """Ctrl-C held while the workers start, then answered: it reaches a terminal's whole process
@@ -133,15 +140,16 @@ def _ctrl_c_held():
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     held = []
-    previous = signal.signal(signal.SIGINT, lambda number, frame: held.append(number))
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    previous = {number: signal.signal(number, lambda number, frame: held.append(number)) for number in _HELD_AT_START}
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, set(_HELD_AT_START))
     try:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)     # (one held here is noted now)
-        signal.signal(signal.SIGINT, previous)
-    if held:
-        signal.raise_signal(signal.SIGINT)
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    for number in dict.fromkeys(held):
+        signal.raise_signal(number)
 
 
 #: What ends the trainer's own writes through the relay (:func:`_children_stderr_relayed`); one
