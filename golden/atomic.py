@@ -123,13 +123,24 @@ def run_temporaries(prefix: str = "tespike-run-") -> Path | None:
     ABC folders, Icarus's and the compiler's temporaries, Dask's scratch space, torch's) goes with it
     when the process ends, killed outright or interrupted too (they had been left in ``$TMPDIR``).
     None, nothing changed, where the folder cannot be made (the temporaries then fail as before,
-    naming the directory)."""
+    naming the directory), or where no janitor runs (out of file handles, ``ulimit -n``): the folder
+    would outlive a kill. This process removes it itself at its exit (:mod:`atexit`, before the
+    janitor ends); the janitor, once this process is gone however it ended."""
+    _Janitor.start()
+    if _Janitor._process is None or _Janitor._owner != os.getpid():
+        return None
     try:
         with stops_held():              # (made and held as one step)
             path = Path(tempfile.mkdtemp(prefix=prefix))
             _Janitor.hold(path)
     except OSError:
         return None
+    owner = os.getpid()
+
+    def remove() -> None:               # (a forked child that runs the exit handlers leaves it alone)
+        if os.getpid() == owner:
+            _remove_held(path)
+    atexit.register(remove)
     tempfile.tempdir = str(path)
     os.environ["TMPDIR"] = str(path)
     return path

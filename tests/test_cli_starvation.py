@@ -415,3 +415,18 @@ def test_a_full_disk_under_the_traces_or_the_build_cache_names_it(tmp_path):
                            env={"TESPIKE_CACHE": str(mount / "cache")})
         assert_refused(done, "cannot write the icarus build", str(mount / "cache" / "cocotb"), "No space left on device")
         assert [name for name in os.listdir(mount / "cache" / "cocotb") if not name.endswith(".lock")] == []
+
+
+@pytest.mark.parametrize("handles", [7, 64])
+def test_the_runs_temporary_folder_goes_with_it_even_without_a_janitor(tmp_path, handles):
+    """Out of file handles the janitor cannot start: the run's own temporary folder, which only the
+    janitor removed, stayed in $TMPDIR after every run, successful ones included."""
+    scene = tmp_path / "I.npy"
+    np.save(scene, np.full((2, 4, 4), 0.1, np.float32))
+    temporary = tmp_path / "t"
+    temporary.mkdir()
+    done = run_limited(ENTRY.format(args=["simulate", "--config", "te", "--scene", str(scene), "--seed", "1",
+                                          "--out", str(tmp_path / "S.npz"), "-q"]),
+                       {resource.RLIMIT_NOFILE: handles}, env={"TMPDIR": str(temporary)})
+    assert done.returncode == 0, done.stderr
+    assert os.listdir(temporary) == []
