@@ -567,7 +567,7 @@ def folder_holds_files(path: str | Path) -> bool:
 
 
 @contextlib.contextmanager
-def atomic_folder(path: str | Path) -> Iterator[Path]:
+def atomic_folder(path: str | Path, replace: bool = True) -> Iterator[Path]:
     """Yield a hidden temporary folder to fill; on success it becomes ``path`` whole, else it is removed.
 
     A results folder is one run's: the new folder is built beside the target
@@ -577,6 +577,9 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     or the new one whole; a temporary a killed run left is removed by the next run.
     A symlink ``path`` keeps pointing where it did (its target folder is replaced).
     Errors naming a file inside the temporary are re-worded to name it under ``path``.
+    ``replace=False`` (a run that found ``path`` new or empty, not told to replace it): a ``path``
+    that holds files when the new folder is ready, another run's finished meanwhile, is refused and
+    kept (the later of two runs into one new folder had replaced the other's results).
     """
     shown = path_text(path, "folder")
     check_folder_path(shown, "folder")              # ('' or nosuch/..: the folder holding the inputs)
@@ -601,6 +604,9 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
         try:
             yield tmp
             with stops_held():                    # (the two renames below are one step to a stop)
+                if not replace and os.path.lexists(target) and folder_holds_files(target):
+                    raise InputError(f"folder {shown!r} was filled by another run while this one ran; it is kept: "
+                                     "replace it with --force, or choose another folder")
                 if not os.path.lexists(target):
                     os.rename(tmp, target)
                 elif not folder_holds_files(target) and target.is_dir():

@@ -1,6 +1,8 @@
 """``tespike evaluate`` as a user runs it."""
 
 import csv
+import os
+import shutil
 
 import numpy as np
 
@@ -50,6 +52,29 @@ def test_evaluate_refuses(tmp_path, capsys):
     refused(capsys, "evaluate", "--set", "none", "--scene", tmp_path / "a.npy", "--scene", tmp_path / "b.npy",
             "--out", out, "is the same file as --scene")
     assert not out.exists()
+
+
+def test_a_run_into_a_new_folder_keeps_another_runs_results_written_meanwhile(tmp_path, capsys, monkeypatch):
+    """Two evaluations into one new --out, neither with --force: both passed the check at their start,
+    and the later one replaced the other's finished results without a word."""
+    import tespike.recon.report as report
+    np.save(tmp_path / "a.npy", np.full((4, 16, 16), 0.3, np.float32))
+    out, real = tmp_path / "ev", report.write_outputs
+
+    def another_run_finishes_meanwhile(evaluation, folder, **kwargs):
+        out.mkdir()
+        (out / "table.md").write_text("the other run's")
+        return real(evaluation, folder, **kwargs)
+    monkeypatch.setattr(report, "write_outputs", another_run_finishes_meanwhile)
+    args = ("evaluate", "--set", "none", "--scene", tmp_path / "a.npy", "--methods", "tfp", "--repeats", 1, "--progress",
+            "off", "--out", out)
+    refused(capsys, *args, "was filled by another run while this one ran")
+    assert (out / "table.md").read_text() == "the other run's" and os.listdir(out) == ["table.md"]
+    assert not [name for name in os.listdir(tmp_path) if name.endswith(".part")]
+    shutil.rmtree(out)                                   # with --force, the run replaces it
+    code, _, err = run_here(capsys, *args, "--force")
+    assert code == 0, err
+    assert (out / "table.md").read_text() != "the other run's"
 
 
 def test_evaluate_without_the_count_camera(tmp_path, capsys):

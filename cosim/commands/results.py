@@ -13,7 +13,7 @@ def publish_results(args, evaluation, *, plot: bool = True) -> int:
     from tespike.recon.report import OUTPUT_FILES, table_markdown, write_outputs
 
     check_results_dir(args.out, OUTPUT_FILES, args.force)
-    with atomic_folder(args.out) as folder:
+    with atomic_folder(args.out, replace=args.force) as folder:   # (another run's, finished meanwhile: kept)
         written = write_outputs(evaluation, folder, plot=plot)
         files = [path.relative_to(folder) for key, path in written.items() if not key.startswith("strip:")]
     if args.quiet:
