@@ -194,10 +194,20 @@ def check_demo_folder(out) -> None:
 
 
 def check_room(out, configs: dict[str, SensorConfig], *, frames, height, width, crop, rtl_readouts,
-               vcd: bool, methods=()) -> None:
+               vcd: bool, methods=(), verilog: str | None = None) -> None:
     """Refuse up front (one line) a demo whose arrays do not fit in memory or whose files do not
     fit on the disk of ``out``: a lower bound of each, from the sizes the options give (``methods``:
-    those the demo runs, each reconstructing every sensor's stream)."""
+    those the demo runs, each reconstructing every sensor's stream); with ``verilog`` (what writes
+    Verilog and how to leave it out: the hardware cost, or the RTL on the generated Verilog), an
+    address-space limit below what Amaranth's Yosys reserves (the demo had done all its other work,
+    a minute or more, before that failed)."""
+    if verilog:
+        from tespike.golden.resources import address_space_limit, mapped_bytes
+        from tespike.rtl.verilog import YOSYS_ADDRESS_SPACE
+        limit = address_space_limit()
+        if limit is not None and limit - mapped_bytes() < YOSYS_ADDRESS_SPACE:
+            raise MemoryError(f"Amaranth's Yosys (WebAssembly) reserves {YOSYS_ADDRESS_SPACE / 2 ** 30:.1f} GiB "
+                              f"of address space for {verilog}")
     from tespike.cosim.headroom import require_room as require
     from tespike.golden.io import word_dtype
     from tespike.golden.light import stimulus_dtype
@@ -409,7 +419,9 @@ def run_demo(out, *, frames: int = 32, height: int = 96, width: int = 128, seed:
     chosen, methods = demo_methods(weights, configs)
     te = configs[RTL_SENSOR]
     check_room(out, configs, frames=frames, height=height, width=width, crop=size,
-               rtl_readouts=rtl_readouts, vcd=backend == "amaranth", methods=methods)
+               rtl_readouts=rtl_readouts, vcd=backend == "amaranth", methods=methods,
+               verilog=("the hardware cost (--no-hw-cost leaves it out)" if hw_cost else
+                        f"the {backend} backend's Verilog" if backend != "amaranth" else None))
     given = out
     with atomic_folder(given) as out:          # the folder is this run's whole, or the previous run's
         progress = Progress(6, quiet)

@@ -95,6 +95,12 @@ def _yosys_ended_on_interrupt():
         helper.subprocess = real
 
 
+#: Address space Amaranth's Yosys (its WebAssembly build, run by wasmtime) reserves as it starts,
+#: in bytes ("reserve 0x104000000 bytes" in its failure under ``ulimit -v``; 4.1 GiB): a caller
+#: that will write Verilog can refuse a smaller limit before its other work.
+YOSYS_ADDRESS_SPACE = 0x104000000
+
+
 @contextlib.contextmanager
 def _yosys_memory_named():
     """Amaranth's Yosys (a WebAssembly build run by wasmtime) reserves about 4 GiB of address space

@@ -351,6 +351,18 @@ def test_yosys_past_the_file_size_limit_names_the_limit_in_one_line(tmp_path):
     assert not out.exists()
 
 
+def test_a_demo_that_yosys_cannot_run_in_is_refused_before_its_work(tmp_path):
+    """Between about 1.5 and 4.2 GB of address space the demo ran its scene, golden model, RTL and
+    every reconstruction (a minute or more), then failed on Yosys's reservation for the hardware cost."""
+    done = run_limited(ENTRY.format(args=["demo", "--frames", "10", "--height", "32", "--width", "32", "--crop", "11",
+                                          "--repeats", "1", "--out", str(tmp_path / "d"), "-q"]),
+                       {resource.RLIMIT_AS: 2200 << 20})
+    assert_refused(done, "out of memory within the address-space limit (ulimit -v) of 2200 MB",
+                   "Amaranth's Yosys (WebAssembly) reserves 4.1 GiB of address space for the hardware cost "
+                   "(--no-hw-cost leaves it out)")
+    assert os.listdir(tmp_path) == []
+
+
 def test_yosys_without_its_address_space_is_out_of_memory_in_one_line(tmp_path):
     """Amaranth's Yosys (WebAssembly) reserves about 4 GiB as it starts: under a smaller ``ulimit -v``
     every command that writes Verilog died with two tracebacks, Yosys's inside Amaranth's."""
