@@ -18,6 +18,7 @@ that names the path the user gave (never a hidden temporary):
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 from pathlib import Path
@@ -259,6 +260,12 @@ def check_output_dir(path: str | os.PathLike, what: str = "--out",
     check_folder_path(text, what)
     folder = Path(text)
     if os.path.islink(text) and not os.path.exists(text):
+        try:
+            os.stat(text)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:             # (its target exists: a loop of links, not a missing folder)
+                raise InputError(f"cannot write {what} {text!r}: it is a loop of symbolic links "
+                                 f"({exc.strerror})") from None
         raise InputError(f"cannot write {what} {text!r}: it is a symbolic link to {os.readlink(text)!r}, "
                          "which does not exist (make that folder, or name another)")
     if os.path.lexists(text) and not folder.is_dir():

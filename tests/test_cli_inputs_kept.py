@@ -152,6 +152,10 @@ def test_a_dangling_link_as_an_output_folder_and_a_cache_variable_naming_a_file_
     (tmp_path / "link").symlink_to(tmp_path / "missing" / "x.zarr")
     with pytest.raises(InputError, match="symbolic link to .*missing.*which does not exist"):
         check_output_dir(tmp_path / "link", "--out")
+    (tmp_path / "loop1").symlink_to(tmp_path / "loop2")           # (said to be a link to nothing: loop2 exists)
+    (tmp_path / "loop2").symlink_to(tmp_path / "loop1")
+    with pytest.raises(InputError, match=r"'.*loop1': it is a loop of symbolic links \(Too many levels"):
+        check_output_dir(tmp_path / "loop1", "--out")
     (tmp_path / "file").write_text("")
     os.environ["TESPIKE_CACHE"], before = str(tmp_path / "file"), os.environ.get("TESPIKE_CACHE")
     try:
