@@ -222,30 +222,31 @@ def test_a_killed_trainer_leaves_no_worker(tmp_path):
         os.killpg(process.pid, signal.SIGKILL) if process.poll() is None else None
 
 
-def test_a_hangup_of_the_group_is_one_line(tmp_path):
-    """A closed terminal's SIGHUP reaches the whole group: the resource tracker died of it, and the one
-    started in its place printed a KeyError traceback for each of the pool's semaphores (25 lines)."""
-    process = start_training(tmp_path)
+def signal_the_group(folder, number: int, settle: float = 0.0) -> tuple[subprocess.Popen, str, list[int]]:
+    """A training run signalled ``number`` as a terminal signals it, to the whole group, ``settle``
+    seconds after its data worker runs -> (the ended process, its stderr, its children then)."""
+    process = start_training(folder)
     try:
         kids = wait_for_worker(process)
-        time.sleep(1.0)                                        # (the worker at its clips)
-        os.killpg(process.pid, signal.SIGHUP)
+        time.sleep(settle)
+        os.killpg(process.pid, number)
         _, stderr = process.communicate(timeout=120)
     finally:
         os.killpg(process.pid, signal.SIGKILL) if process.poll() is None else None
+    return process, stderr, kids
+
+
+def test_a_hangup_of_the_group_is_one_line(tmp_path):
+    """A closed terminal's SIGHUP reaches the whole group: the resource tracker died of it, and the one
+    started in its place printed a KeyError traceback for each of the pool's semaphores (25 lines)."""
+    process, stderr, kids = signal_the_group(tmp_path, signal.SIGHUP, settle=1.0)   # (the worker at its clips)
     assert process.returncode == 129
     assert_refused(subprocess.CompletedProcess([], 129, "", stderr), "terminated by SIGHUP")
     assert gone(kids)
 
 
 def test_ctrl_c_is_one_line_and_leaves_no_empty_run_folder(tmp_path):
-    process = start_training(tmp_path)
-    try:
-        kids = wait_for_worker(process)
-        os.killpg(process.pid, signal.SIGINT)                 # the whole group, as a terminal does
-        _, stderr = process.communicate(timeout=120)
-    finally:
-        os.killpg(process.pid, signal.SIGKILL) if process.poll() is None else None
+    process, stderr, kids = signal_the_group(tmp_path, signal.SIGINT)
     assert process.returncode == 130
     assert_refused(subprocess.CompletedProcess([], 130, "", stderr), "interrupted")
     assert gone(kids)
