@@ -32,10 +32,12 @@ def descendants(pid: int) -> set[int]:
 
 
 def interruptible() -> None:
-    """In a child (``preexec_fn``): Ctrl-C as a terminal gives it. A test run from a shell's background
-    job (``nohup pytest &``) inherits SIGINT ignored, and tespike rightly leaves an ignored signal
-    ignored, so a test that sends it Ctrl-C starts it with the default disposition."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    """In a child (``preexec_fn``): Ctrl-C and a hang-up as a terminal gives them. A test run from a
+    shell's background job (``nohup pytest &``) inherits SIGINT and SIGHUP ignored, and tespike rightly
+    leaves an ignored signal ignored, so a test that sends either starts it with the default disposition
+    (the SIGHUP test of training ran on for its 10 minutes under CI's nohup)."""
+    for number in (signal.SIGINT, signal.SIGHUP):
+        signal.signal(number, signal.SIG_DFL)
 
 
 def alive(pid: int) -> bool:
