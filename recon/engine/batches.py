@@ -109,8 +109,8 @@ def _quiet_resource_tracker() -> None:
 
 
 #: What a terminal sends the whole process group, which the trainer answers for its workers (ending
-#: them): Ctrl-C and, the terminal closed, SIGHUP. A worker that died of SIGHUP was started again by
-#: the pool while the trainer ended it, and the trainer could wait for that start for minutes.
+#: them): Ctrl-C and, the terminal closed, SIGHUP (a worker that died of it first was one the pool
+#: started again while the trainer was ending it).
 _HELD_AT_START = tuple(getattr(signal, name) for name in ("SIGINT", "SIGHUP") if hasattr(signal, name))
 
 
