@@ -68,10 +68,8 @@ def ended(returncode: int) -> str:
     except ValueError:
         return f"killed by signal {-returncode}"
     if name == "SIGXFSZ":
-        import resource
-        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
-        shown = "" if limit == resource.RLIM_INFINITY else f": {limit} bytes"
-        return f"killed by SIGXFSZ (a file past this process's file size limit, ulimit -f{shown})"
+        from tespike.golden.resources import file_size_text
+        return f"killed by SIGXFSZ{file_size_text()}"
     return f"killed by {name}"
 
 

@@ -10,6 +10,7 @@ input is one line on stderr and a non-zero exit, never a traceback.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 
@@ -407,8 +408,10 @@ def _run(args, prepare=lambda: None, ended=lambda code: None) -> tuple[int, bool
         if "No usable temporary directory" in cause:       # tempfile's words hide the cause
             from tespike.golden.paths import temporary_directory_fault
             cause = temporary_directory_fault() or cause
-        from tespike.golden.resources import file_handles_fault
+        from tespike.golden.resources import file_handles_fault, file_size_text
         cause = file_handles_fault(exc) or cause
+        if exc.errno == errno.EFBIG:                       # (the system's words name no limit)
+            cause += file_size_text()
         print(f"{prefix}: error:{where} {cause}{_notes(exc)}{_before(start, exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT, False
     except MemoryError as exc:        # numpy's says what it could not allocate; library_room's, what is left

@@ -344,11 +344,13 @@ def _remove_stale_parts(directory: Path, stem: str, folders: bool = False) -> No
 
 def _write_error(path: str, exc: OSError) -> InputError:
     """An OSError of writing, as one line naming the user's path (never the temporary)."""
-    from .resources import file_handles_fault
+    from .resources import file_handles_fault, file_size_text
     if exc.errno is None and "requested" in str(exc):          # numpy's short write: a full disk
         reason = _file_size_limit(path) or f"short write ({exc}); is the disk full?"
     else:
         reason = file_handles_fault(exc) or exc.strerror or str(exc) or type(exc).__name__
+        if exc.errno == errno.EFBIG:                    # (the system's words name no limit)
+            reason += file_size_text()
     return InputError(f"cannot write {path!r}: {reason}")
 
 
@@ -365,7 +367,8 @@ def _file_size_limit(path: str) -> str | None:
         return None
     if folder.f_bavail * folder.f_frsize <= limit:              # (room for less than the limit: maybe full)
         return None
-    return f"File too large (over this process's file size limit, ulimit -f: {limit} bytes)"
+    from .resources import file_size_text
+    return f"File too large{file_size_text()}"
 
 
 @contextlib.contextmanager
@@ -604,7 +607,7 @@ def atomic_folder(path: str | Path, replace: bool = True) -> Iterator[Path]:
         try:
             yield tmp
             with stops_held():                    # (the two renames below are one step to a stop)
-                if not replace and os.path.lexists(target) and folder_holds_files(target):
+                if not replace and folder_holds_files(target):
                     raise InputError(f"folder {shown!r} was filled by another run while this one ran; it is kept: "
                                      "replace it with --force, or choose another folder")
                 if not os.path.lexists(target):

@@ -87,6 +87,14 @@ def address_space_text() -> str:
     return "" if limit is None else f" within the address-space limit (ulimit -v) of {limit >> 20} MB"
 
 
+def file_size_text() -> str:
+    """The file size limit this process runs under, for the line of a write it stopped (EFBIG, a short
+    write, or a tool killed by SIGXFSZ): ' (over this process's file size limit, ulimit -f: N bytes)',
+    or '' where there is none."""
+    limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    return "" if limit == resource.RLIM_INFINITY else f" (over this process's file size limit, ulimit -f: {limit} bytes)"
+
+
 def file_handles_fault(exc: OSError) -> str | None:
     """The cause of an OSError that ran out of file handles, with the limit that was reached (the
     system's words, "Too many open files", name neither); None for any other error."""

@@ -102,32 +102,27 @@ YOSYS_ADDRESS_SPACE = 0x104000000
 
 
 @contextlib.contextmanager
-def _yosys_memory_named():
-    """Amaranth's Yosys (a WebAssembly build run by wasmtime) reserves about 4 GiB of address space
-    as it starts; under a smaller ``ulimit -v`` it fails with its own traceback inside Amaranth's
-    YosysError. That failure is a :class:`MemoryError` naming the reservation; one of the system's
-    (wasmtime's "File too large (os error 27)" under ``ulimit -f``, a full disk) is that
-    :class:`OSError`, in one line."""
+def _yosys_faults_named():
+    """Amaranth's Yosys (a WebAssembly build run by wasmtime) fails with its own traceback inside
+    Amaranth's YosysError where the system refuses it: under a ``ulimit -v`` below the 4 GiB it
+    reserves as it starts, a :class:`MemoryError` naming the reservation; otherwise (wasmtime's
+    "File too large (os error 27)" under ``ulimit -f``, a full disk) that :class:`OSError`, whose
+    limit the command's line names."""
     try:
         yield
     except Exception as exc:
         text = str(exc)
         if type(exc).__name__ != "YosysError":
             raise
+        if "Cannot allocate memory" in text:
+            size = re.search(r"reserve (0x[0-9a-fA-F]+|\d+) bytes", text)
+            need = f" of {int(size.group(1), 0) / 2 ** 30:.1f} GiB" if size else ""
+            raise MemoryError(f"Amaranth's Yosys (WebAssembly) could not reserve its address space{need}") from None
         system = re.search(r"WasmtimeError: (.+?) \(os error (\d+)\)", text)
-        if system and "Cannot allocate memory" not in text:
-            import errno
-            import resource
-            limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
-            where = (f" (over this process's file size limit, ulimit -f: {limit} bytes)"
-                     if int(system.group(2)) == errno.EFBIG and limit != resource.RLIM_INFINITY else "")
-            raise OSError(int(system.group(2)), f"Amaranth's Yosys (WebAssembly) could not write its work: "
-                                                f"{system.group(1)}{where}") from None
-        if "Cannot allocate memory" not in text:
+        if system is None:
             raise
-        size = re.search(r"reserve (0x[0-9a-fA-F]+|\d+) bytes", text)
-        need = f" of {int(size.group(1), 0) / 2 ** 30:.1f} GiB" if size else ""
-        raise MemoryError(f"Amaranth's Yosys (WebAssembly) could not reserve its address space{need}") from None
+        raise OSError(int(system.group(2)), f"Amaranth's Yosys (WebAssembly) could not write its work: "
+                                            f"{system.group(1)}") from None
 
 
 def convert_modules(*named_components) -> list[str]:
@@ -143,7 +138,7 @@ def convert_modules(*named_components) -> list[str]:
     if run_rtlil is None:    # pragma: no cover - other Amaranth versions
         return [_waive(verilog.convert(c, name=n, emit_src=False, strip_internal_attrs=True))
                 for c, n in named_components]
-    with _yosys_ended_on_interrupt(), _yosys_memory_named():
+    with _yosys_ended_on_interrupt(), _yosys_faults_named():
         text = run_rtlil("\n".join(rtlil.convert(c, name=n, emit_src=False) for c, n in named_components),
                          strip_internal_attrs=True)
     header, *modules = re.split(r"(?m)^(?=module )", text)
