@@ -36,6 +36,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.arguments import existing_file  # noqa: E402
+
 PACKAGES = ("golden", "rtl", "recon", "cosim", "tespike")
 
 

@@ -227,9 +227,9 @@ def run(args) -> int:
         from tespike.golden.paths import check_distinct
         traces = [f"{trace_name(task[1], task[3])}.vcd" for task in tasks if task[0] == "pixel"]
         check_output_dir(args.traces, "--traces", tuple(traces))
-        for name in traces:
-            check_distinct([("--config", spec) for spec in args.config if spec not in PRESETS],
-                           {"a counterexample of --traces": Path(args.traces) / name})
+        config_files = [("--config", spec) for spec in args.config if spec not in PRESETS]
+        for name in traces:             # (one at a time: each is named "a counterexample of --traces")
+            check_distinct(config_files, {"a counterexample of --traces": Path(args.traces) / name})
     count = failed = 0
     for proved, line in _results(tasks, args.workers, (args.depth, args.solver, Path(args.traces),
                                                         args.top_timeout)):
