@@ -32,11 +32,11 @@ def descendants(pid: int) -> set[int]:
 
 
 def interruptible() -> None:
-    """In a child (``preexec_fn``): Ctrl-C and a hang-up as a terminal gives them. A test run from a
-    shell's background job (``nohup pytest &``) inherits SIGINT and SIGHUP ignored, and tespike rightly
-    leaves an ignored signal ignored, so a test that sends either starts it with the default disposition
+    """In a child (``preexec_fn``): Ctrl-C, SIGTERM and a hang-up as a shell gives them. A test run from
+    a shell's background job (``nohup pytest &``) inherits SIGINT and SIGHUP ignored, and tespike rightly
+    leaves an ignored signal ignored, so a test that sends one starts it with the default disposition
     (the SIGHUP test of training ran on for its 10 minutes under CI's nohup)."""
-    for number in (signal.SIGINT, signal.SIGHUP):
+    for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(number, signal.SIG_DFL)
 
 

@@ -25,6 +25,7 @@ from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.recon.scenes.hdr_io import write_hdr
 from tests.cli import ROOT, assert_refused, run_tespike
+from tests.processes import interruptible
 
 TINY = SensorConfig(b1=1, b2=1, threshold=3, acc_bits=3)          # L = 2
 TINY_JSON = json.dumps({"b1": 1, "b2": 1, "threshold": 3, "acc_bits": 3})
@@ -189,13 +190,6 @@ def test_read_only_output_and_directory_named_not_the_temporary(files):
 
 
 # ------------------------------------------------------------------ signals and stale temporaries
-def _default_signal_dispositions():
-    """In the child: SIGTERM / SIGHUP as a shell would give them (a test runner started under
-    ``nohup`` passes SIGHUP on ignored, and tespike rightly leaves an ignored signal ignored)."""
-    for signum in (signal.SIGTERM, signal.SIGHUP):
-        signal.signal(signum, signal.SIG_DFL)
-
-
 def long_rtl_run(folder, session=False):
     """An rtl-sim run with a VCD, long enough to be interrupted while writing (``session``: in a
     session and process group of its own)."""
@@ -204,7 +198,7 @@ def long_rtl_run(folder, session=False):
     return subprocess.Popen([sys.executable, "-m", "tespike", "rtl-sim", "--config", str(folder / "c.json"),
                              "--stimulus", str(folder / "long.npy"), "--out", str(folder / "w.npz"),
                              "--vcd", str(folder / "w.vcd")], env=env, stderr=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True, preexec_fn=_default_signal_dispositions,
+                            stdout=subprocess.PIPE, text=True, preexec_fn=interruptible,
                             start_new_session=session)
 
 
