@@ -58,6 +58,10 @@ _ESCAPE = re.compile(r"\x1b\[[0-9;]*[A-Za-z]")
 def one_line(exc: BaseException | str, limit: int = 200) -> str:
     """An exception's message (or a message) as one short line, for refusals that quote a cause:
     terminal escape sequences dropped, whitespace collapsed, the exception's type name when it says
-    nothing, cut with ``...`` past ``limit`` characters."""
+    nothing; past ``limit`` characters its middle is cut (``...``), so that both what it names, at
+    its start, and the cause, at its end, stay (a quoted 400-digit value had cut the cause off)."""
     text = " ".join(_ESCAPE.sub("", str(exc)).split()) or type(exc).__name__
-    return text if len(text) <= limit else text[:limit] + "..."
+    if len(text) <= limit:
+        return text
+    tail = max(1, limit // 3)
+    return text[:limit - tail] + "..." + text[-tail:]

@@ -109,6 +109,11 @@ def test_writer_rle_is_smaller_and_equal(tmp_path):
     (b"#?RADIANCE\nEXPOSURE=inf\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)), ["EXPOSURE=inf"]),
     (b"#?RADIANCE\nEXPOSURE=0\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)), ["EXPOSURE=0", "> 0"]),
     (b"#?RADIANCE\nCOLORCORR=1 2\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)), ["COLORCORR=1 2", "3 number"]),
+    # a size of 5,000 digits was int()'s ValueError traceback (past its 4,300 digits)
+    (HEADER + b"-Y " + b"9" * 5000 + b" +X 8\n" + bytes(256), ["resolution line", "too large", "9 digits"]),
+    # a 400-digit exposure was quoted whole, and the cut line lost the cause
+    (b"#?RADIANCE\nEXPOSURE=1" + b"0" * 400 + b"\n\n-Y 1 +X 1\n" + bytes((128, 64, 32, 129)),
+     ["EXPOSURE=1000", "must hold finite numbers > 0"]),
 ])
 def test_reader_refuses_bad_files(tmp_path, content, words):
     path = tmp_path / "bad.hdr"
@@ -116,6 +121,7 @@ def test_reader_refuses_bad_files(tmp_path, content, words):
     with pytest.raises(InputError) as info:
         read_hdr(path)
     assert str(path) in str(info.value) and all(w in str(info.value) for w in words)
+    assert len(str(info.value)) < 200 + len(str(path))       # (a header line is quoted short)
 
 
 def test_exr_round_trip(tmp_path, rng):

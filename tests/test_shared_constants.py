@@ -14,9 +14,12 @@ from tespike.golden.noise import model_mean
 def test_one_line_collapses_names_empty_messages_and_cuts():
     assert one_line(ValueError("a\n  b\tc")) == "a b c"
     assert one_line(KeyError()) == "KeyError"
-    assert one_line(OSError("x" * 250)) == "x" * 200 + "..."
-    assert one_line("y" * 120, 100) == "y" * 100 + "..."
+    assert one_line(OSError("x" * 250)) == "x" * 134 + "..." + "x" * 66
+    assert one_line("y" * 120, 100) == "y" * 67 + "..." + "y" * 33
     assert one_line("z" * 100, 100) == "z" * 100
+    # the middle is cut: what a message names (its start) and the cause (its end) both stay
+    cut = one_line("'f.hdr': EXPOSURE=1" + "0" * 400 + " must hold finite numbers > 0", 100)
+    assert cut.startswith("'f.hdr': EXPOSURE=1") and cut.endswith("must hold finite numbers > 0")
 
 
 def test_dark_models_draw_and_integrate_the_same_parameters():

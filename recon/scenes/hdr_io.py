@@ -40,6 +40,20 @@ FRAME_SUFFIXES = (".exr", ".hdr", ".pic", ".rgbe")
 
 _RESOLUTION = re.compile(rb"^([+-])([XY]) (\d+) ([+-])([XY]) (\d+)$")
 
+#: Digits of a side in the resolution line (a billion pixels a side is past any frame read here).
+_SIZE_DIGITS = 9
+
+#: Characters of a header line quoted in a refusal (a line may be a 400-digit number).
+_QUOTED = 40
+
+
+def _quoted(line: bytes) -> str:
+    """A header line as a refusal quotes it: ``repr`` of its text, its middle cut past _QUOTED characters."""
+    text = line.decode("latin-1")
+    if len(text) > _QUOTED:
+        text = text[:_QUOTED - 12] + "..." + text[-9:]
+    return repr(text)
+
 
 # ---------------------------------------------------------------- RGBE codec
 def rgbe_to_float(rgbe: np.ndarray) -> np.ndarray:
@@ -89,11 +103,11 @@ def _header_numbers(line: bytes, count: int, path: str) -> np.ndarray:
     key, _, text = line.partition(b"=")
     words = text.split()
     if len(words) != count or not all(_HEADER_NUMBER.fullmatch(word) for word in words):
-        raise InputError(f"{path!r}: bad header line {line.decode('latin-1')!r} "
+        raise InputError(f"{path!r}: bad header line {_quoted(line)} "
                          f"({key.decode('latin-1')}= takes {count} number(s))")
     values = np.array([float(word) for word in words])
     if not (np.isfinite(values).all() and (values > 0).all()):
-        raise InputError(f"{path!r}: {line.decode('latin-1')} must hold finite numbers > 0")
+        raise InputError(f"{path!r}: header line {_quoted(line)} must hold finite numbers > 0")
     return values
 
 
@@ -126,9 +140,12 @@ def _parse_header(data: bytes, path: str) -> tuple[int, np.ndarray, tuple]:
         raise InputError(f"{path!r}: missing resolution line")
     match = _RESOLUTION.match(data[pos:end].strip())
     if not match or match.group(2) == match.group(5):
-        raise InputError(f"{path!r}: bad resolution line {data[pos:end][:40]!r} "
+        raise InputError(f"{path!r}: bad resolution line {_quoted(data[pos:end])} "
                          "(expected e.g. '-Y 512 +X 768')")
     sign1, axis1, n1, sign2, axis2, n2 = match.groups()
+    if max(len(n1), len(n2)) > _SIZE_DIGITS:          # (int() of 4,300 digits or more raises)
+        raise InputError(f"{path!r}: image size in the resolution line {_quoted(data[pos:end])} is too "
+                         f"large (at most {_SIZE_DIGITS} digits a side)")
     return end + 1, exposure, (sign1, axis1, int(n1), sign2, int(n2))
 
 
