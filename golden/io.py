@@ -314,10 +314,13 @@ def _npy_header(member) -> tuple[tuple[int, ...], bool, np.dtype, int | None]:
     return shape, fortran, dtype, member.tell() if hasattr(member, "tell") else None
 
 
-def _stored_member(path: str | Path, name: str) -> np.ndarray | None:
-    """A read-only memory map of an uncompressed (``np.savez``) ``.npy`` member, after its
-    CRC is verified by streaming through it; ``None`` if the member is compressed."""
+def _stored_member(path: str | Path, key: str) -> np.ndarray | None:
+    """A read-only memory map of the uncompressed (``np.savez``) array ``np.load`` calls ``key``
+    (stored as ``key.npy``, or as ``key`` itself), after its CRC is verified by streaming through it;
+    ``None`` if the member is compressed."""
     with zipfile.ZipFile(path) as archive:
+        names = archive.namelist()
+        name = f"{key}.npy" if f"{key}.npy" in names else key
         info = archive.getinfo(name)
         if info.compress_type != zipfile.ZIP_STORED or info.flag_bits & 0x1:
             return None
@@ -375,6 +378,11 @@ def open_npz(path: str | Path, what: str, holding: str = "") -> Iterator[np.lib.
         raise InputError(f"{what} file {shown!r} is not a readable .npz archive: {cause}") from None
 
 
+def _npz_key(name: str) -> str:
+    """The key ``np.load`` gives an archive member: its name without a final ``.npy``."""
+    return name[:-4] if name.endswith(".npy") else name
+
+
 def _check_member_sizes(path: str | Path) -> None:
     """Refuse (ValueError) an .npy member whose header's shape needs more bytes than the member holds,
     read from its first bytes and the archive's directory before numpy allocates the shape (a
@@ -386,12 +394,19 @@ def _check_member_sizes(path: str | Path) -> None:
     check_archive_end(path)
     with zipfile.ZipFile(path) as archive:
         names = archive.namelist()
-        twice = sorted({name for name in names if names.count(name) > 1})
+        keys = [_npz_key(name) for name in names]     # the names np.load gives (".npy" dropped)
+        twice = sorted({key for key in keys if keys.count(key) > 1})
         if twice:
-            raise ValueError(f"member {twice[0]!r} is stored twice")
+            stored = sorted({name for name, key in zip(names, keys) if key == twice[0]})
+            raise ValueError(f"member {twice[0]!r} is stored twice"
+                             + (f" (as {' and '.join(map(repr, stored))})" if len(stored) > 1 else ""))
         for info in archive.infolist():
-            if not info.filename.endswith(".npy") or info.flag_bits & 0x1:
+            if info.flag_bits & 0x1:
                 continue
+            if not info.filename.endswith(".npy"):   # np.load reads any member that starts as .npy does
+                with archive.open(info) as member:
+                    if member.read(len(np.lib.format.MAGIC_PREFIX)) != np.lib.format.MAGIC_PREFIX:
+                        continue
             with archive.open(info) as member:
                 shape, _, dtype, header = _npy_header(member)
             if header is None or dtype.hasobject:
@@ -477,7 +492,7 @@ def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarr
             raise InputError(f"stream file {shown!r} holds {', '.join(map(repr, extra))} beside 'words' and "
                              "'config': a stream holds those two only (SPEC section 6)")
         config_text = npz["config"]
-        words = _stored_member(path, "words.npy") if memory_map else None
+        words = _stored_member(path, "words") if memory_map else None
         if words is None:
             words = npz["words"]
     config = config_member(config_text, f"stream file {shown!r}")
