@@ -80,7 +80,9 @@ class StandardOutputError(OSError):
 
 
 class _NamedStandardOutput:
-    """``sys.stdout`` whose failed writes raise :class:`StandardOutputError`; all else is the stream's."""
+    """``sys.stdout`` whose failed writes raise :class:`StandardOutputError`, and which writes text its
+    encoding lacks escaped (:func:`printable`: evaluate's table holds a "μ", and under an ASCII locale
+    its print had ended a finished run in a UnicodeEncodeError traceback); all else is the stream's."""
 
     def __init__(self, stream):
         self._stream = stream
@@ -94,7 +96,10 @@ class _NamedStandardOutput:
 
     def write(self, text):
         try:
-            return self._stream.write(text)
+            try:
+                return self._stream.write(text)
+            except UnicodeEncodeError:                  # (raised before any of it is written)
+                return self._stream.write(printable(text, self._stream))
         except OSError as exc:
             raise self._failed(exc) from None
 

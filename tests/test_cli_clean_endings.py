@@ -778,3 +778,15 @@ def test_an_output_folder_naming_no_folder_of_its_own_is_refused_and_nothing_is_
                                 env=_checkout_env(), timeout=300, cwd=tmp_path)
         assert_refused(result, f"--out {given!r}")
         assert (tmp_path / "keep.txt").read_text() == "mine" and scene.is_file()
+
+
+def test_evaluate_under_an_ascii_locale_prints_its_table_escaped(tmp_path):
+    """Its table holds "PSNR-μ": under an ASCII standard output the print ended a finished run in a
+    UnicodeEncodeError traceback, exit 1. The command's stdout writes what it cannot encode escaped."""
+    np.save(tmp_path / "I.npy", np.full((4, 16, 16), 0.3, np.float32))
+    done = run_tespike("evaluate", "--set", "none", "--scene", tmp_path / "I.npy", "--methods", "tfp",
+                       "--ml-count-config", "none", "--progress", "off", "--out", tmp_path / "ev",
+                       env={"PYTHONIOENCODING": "ascii"})
+    assert done.returncode == 0 and not done.stderr, done.stderr
+    assert "PSNR-\\u03bc" in done.stdout and "| TFP_TE |" in done.stdout
+    assert (tmp_path / "ev" / "table.md").read_text(encoding="utf-8").count("PSNR-μ") == 2
