@@ -241,6 +241,8 @@ def instance_counts(modules: dict, top: str) -> dict[str, int]:
 
 def top_module(modules: dict) -> str:
     """The one module no other module instantiates (the design's top), or ValueError."""
+    if not modules:                                  # (naming a top could not help: there is none)
+        raise ValueError("the design defines no module")
     used = {sub for stat in modules.values() for sub in stat["instances"]}
     roots = sorted(set(modules) - used)
     if len(roots) != 1:

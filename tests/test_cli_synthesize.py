@@ -74,6 +74,10 @@ def test_synthesize_refuses_a_file_of_two_tops_unless_one_is_named(tmp_path):
     (tmp_path / "two.v").write_text("module m1(input a, output b); assign b = a; endmodule\n"
                                     "module m2(input a, output b); assign b = ~a; endmodule\n")
     assert_refused(run_tespike("synthesize", "--verilog", tmp_path / "two.v"), "2 top modules (m1, m2)", "name one")
+    (tmp_path / "none.v").write_text("// no module here\n")      # "name one" could not help: there is none
+    none = run_tespike("synthesize", "--verilog", tmp_path / "none.v")
+    assert_refused(none, "defines no module")
+    assert "name one" not in none.stderr
     named = run_tespike("synthesize", "--verilog", tmp_path / "two.v", "--top", "m2")
     assert named.returncode == 0 and "total m2: 1 cells" in named.stdout, named.stderr
     for top in ("m1; shell touch x", "1m"):
