@@ -440,7 +440,10 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
                                                           f"crop {options.crop} (and its clip pool)")
     out = Path(out)
     work = Path(work_dir) if work_dir is not None else out.with_suffix(".run")
-    created = not work.exists()
+    created = not (work.exists() or work.is_symlink())
+    if resume and created:             # (no run ever started: --force would not help)
+        raise InputError(f"nothing to resume: no run folder {str(work)!r} (no run of these weights started: "
+                         "leave out --resume)")
     work.mkdir(parents=True, exist_ok=True)
     start = len(finished_outputs())
     try:

@@ -325,6 +325,9 @@ def test_a_run_killed_before_its_first_checkpoint_does_not_block_the_next(tmp_pa
     args = ["train", "--out", str(tmp_path / "w.pt"), "--crop", "32", "--batch", "1", "--pool", "2",
             "--validate-every", "0", "--workers", "0", "--steps", "1", "-q"]
     run = tmp_path / "w.run"
+    assert main([*args, "--resume"]) == 2                       # no run at all: --force would not help
+    err = capsys.readouterr().err
+    assert f"no run folder {str(run)!r}" in err and "leave out --resume" in err and "--force" not in err, err
     run.mkdir()
     (run / "log.csv").write_bytes(b"")
     assert main([*args, "--resume"]) == 2
