@@ -282,7 +282,8 @@ def test_scene_command_refuses(tmp_path):
 
 @pytest.mark.parametrize("args, word", [
     (("--frames", "-2"), "frames"),
-    (("--name", "sun", "--motion", "pan"), "takes no options"),
+    (("--name", "sun", "--motion", "pan"), "--motion applies to the panorama scenes only"),
+    (("--name", "moderate", "--sources", "3"), "--sources applies to the panorama scenes only"),
     (("--sources", "-1"), "sources"),
     (("--folder", "."), "no frames"),
     (("--folder", ".", "--crop", "3y4"), "HxW"),

@@ -92,6 +92,12 @@ def run(args) -> int:
                                   max_frames=args.frames, crop=crop, downscale=args.downscale,
                                   progress=progress_wanted(args))
     else:
+        from tespike.recon.scenes import PANORAMAS, SCENES
+        if args.name in SCENES and args.name not in ("default",) + PANORAMAS:   # (the library's refusal names its keyword, not the flag)
+            for flag, key in (("--motion", "motion"), ("--sources", "sources")):
+                if getattr(args, key) is not None:
+                    raise InputError(f"{flag} applies to the panorama scenes only (default, "
+                                     f"{', '.join(PANORAMAS)}): scene {args.name!r} takes neither")
         if args.sources is not None and args.sources < 0:
             raise InputError(f"--sources = {args.sources} must be >= 0")
         values = args.frames * args.height * args.width
