@@ -1,6 +1,7 @@
 """The dataset store, synthesis into it and evaluation over it, in this process (no cluster)."""
 
 import csv
+import os
 import shutil
 
 import numpy as np
@@ -200,6 +201,34 @@ def test_cli_dataset_and_evaluate_store(tmp_path, capsys):
     assert rows[0]["te_name"] == "TFP_TE" and rows[0]["te_ms_per_frame"] == ""
     assert (tmp_path / "ev" / "strips" / "sun.png").is_file()
     assert not list((tmp_path / "ev").rglob("*.part"))
+
+
+def test_a_store_another_run_writes_is_refused_and_left_alone(tmp_path, capsys):
+    """Two runs writing one new store with other seeds had both ended with exit 0 on a store whose
+    chunks mixed their streams, or one removed the store the other was writing: a run holds its store
+    (flock on its folder) and a second is refused in one line, before it writes or removes anything."""
+    import fcntl
+    store = tmp_path / "s.zarr"
+    args = ("dataset", "--scene", "lights", "--frames", 4, "--height", 16, "--width", 20, "--config", "te",
+            "--out", store)
+    code, out, err = run_here(capsys, *args, "--seed", 1)
+    assert code == 0, err
+    before = {p.relative_to(store): p.read_bytes() for p in store.rglob("*") if p.is_file()}
+    held = os.open(store, os.O_RDONLY | os.O_DIRECTORY)       # another run writing it
+    try:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        refused(capsys, *args, "--seed", 2, "is being written by another tespike dataset run")
+        assert {p.relative_to(store): p.read_bytes() for p in store.rglob("*") if p.is_file()} == before
+        (tmp_path / "new.zarr").mkdir()                       # an empty folder another run made and holds
+        os.close(held)
+        held = os.open(tmp_path / "new.zarr", os.O_RDONLY | os.O_DIRECTORY)
+        fcntl.flock(held, fcntl.LOCK_EX)
+        refused(capsys, *args[:-1], tmp_path / "new.zarr", "is being written by another tespike dataset run")
+        assert (tmp_path / "new.zarr").is_dir()                  # (not removed as a store this run made)
+    finally:
+        os.close(held)
+    code, out, err = run_here(capsys, *args[:-1], tmp_path / "new.zarr")
+    assert code == 0, err
 
 
 def refused(capsys, *args_and_word):

@@ -65,7 +65,7 @@ def run(args) -> int:
     from tespike.cosim.console import bar, progress_wanted, report
     from tespike.cosim.dataset.cluster import Runner, check_cluster_options
     from tespike.cosim.dataset.build import (build_dataset, discard_unfinished_store, hdr_sources,
-                                             new_local_store, note_resumable, scene_sources)
+                                             note_resumable, scene_sources, writing_local_store)
     from tespike.golden.errors import InputError
 
     check_cluster_options(args.workers, args.scheduler)
@@ -109,25 +109,26 @@ def run(args) -> int:
     if not sources:
         raise InputError("nothing to build: give --hdr DIR and/or --scene NAME")
     start = time.perf_counter()
-    made = new_local_store(args.out)
     made_or_resumed = []                                  # (set once the store is there: build_dataset's start)
-    try:
-        with Runner(args.workers, args.scheduler) as runner:
-            counts = build_dataset(args.out, sources, configs, args.seed, runner, chunk_frames=args.chunk_frames,
-                                   report=lambda name: report(args, f"dataset: {name} complete"),
-                                   notice=lambda text: report(args, f"dataset: {text}"),
-                                   starting=lambda: (made_or_resumed.append(True),
-                                                     report(args, f"dataset: {len(sources)} sequence(s) x "
-                                                                  f"{len(configs)} sensor(s) on {runner.where}")),
-                                   progress=(lambda total: bar("dataset", "sequence", total))
-                                   if progress_wanted(args) else None)
-    except BaseException as exc:
-        if isinstance(exc, Exception) and made_or_resumed and "://" not in args.out and not os.path.isdir(args.out):
-            raise InputError(f"dataset store {args.out!r} was removed during the run: nothing is kept to "
-                             "resume") from None          # (it said what a resume keeps, or gave Zarr's words)
-        kept = discard_unfinished_store(args.out, made)   # the workers have stopped: nothing writes there now
-        note_resumable(exc, args.out, kept)               # (also for a failure after the build)
-        raise
+    with writing_local_store(args.out) as made:           # (a second run writing it: refused here)
+        try:
+            with Runner(args.workers, args.scheduler) as runner:
+                counts = build_dataset(args.out, sources, configs, args.seed, runner,
+                                       chunk_frames=args.chunk_frames,
+                                       report=lambda name: report(args, f"dataset: {name} complete"),
+                                       notice=lambda text: report(args, f"dataset: {text}"),
+                                       starting=lambda: (made_or_resumed.append(True),
+                                                         report(args, f"dataset: {len(sources)} sequence(s) x "
+                                                                      f"{len(configs)} sensor(s) on {runner.where}")),
+                                       progress=(lambda total: bar("dataset", "sequence", total))
+                                       if progress_wanted(args) else None)
+        except BaseException as exc:
+            if isinstance(exc, Exception) and made_or_resumed and "://" not in args.out and not os.path.isdir(args.out):
+                raise InputError(f"dataset store {args.out!r} was removed during the run: nothing is kept to "
+                                 "resume") from None      # (it said what a resume keeps, or gave Zarr's words)
+            kept = discard_unfinished_store(args.out, made)   # the workers have stopped: nothing writes there now
+            note_resumable(exc, args.out, kept)           # (also for a failure after the build)
+            raise
     seconds = time.perf_counter() - start
     rebuilt = f", {len(counts['rebuilt'])} rebuilt where damaged" if counts["rebuilt"] else ""
     report(args, f"wrote {counts['done']} sequence(s) to {args.out} ({counts['skipped']} already complete{rebuilt}), "

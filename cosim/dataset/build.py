@@ -355,15 +355,39 @@ def build_dataset(url: str, sources: Sequence[Source], configs: dict[str, Sensor
             "store": os.fspath(url), "rebuilt": sorted(store.rebuilt)}
 
 
-def new_local_store(url: str) -> str | None:
-    """``"new"`` where the local store ``url`` does not exist, ``"empty"`` where it is an empty
-    folder (a store this run would make), else None (a store to resume, or a remote one)."""
+@contextlib.contextmanager
+def writing_local_store(url: str):
+    """Hold the local store ``url`` for this run alone -> ``"new"`` where this run made its folder,
+    ``"empty"`` where it is an empty folder (a store this run would make), else None (a store to
+    resume, or a remote one, which is not held). The folder is made here (``mkdir``, atomic) and held
+    with an exclusive ``flock`` until the ``with`` ends: a second ``tespike dataset`` writing the same
+    store is refused in one line. Unheld, two runs with other seeds had both ended with exit 0 on a
+    store whose chunks mixed their streams, or one run had removed the store the other was writing."""
+    import fcntl
     url = os.fspath(url)
     if "://" in url:
-        return None
+        yield None
+        return
+    made = None
     if not os.path.lexists(url):
-        return "new"
-    return "empty" if os.path.isdir(url) and not os.path.islink(url) and not os.listdir(url) else None
+        with contextlib.suppress(FileExistsError):      # (another run made it just now: held, or refused, below)
+            os.mkdir(url)
+            made = "new"
+    if not os.path.isdir(url) or os.path.islink(url):  # (the store's own checks refuse it)
+        yield None
+        return
+    held = os.open(url, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        try:
+            fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InputError(f"dataset store {url!r} is being written by another tespike dataset run: wait "
+                             "for it to end, or write another store") from None
+        if made is None and not os.listdir(url):
+            made = "empty"
+        yield made
+    finally:
+        os.close(held)
 
 
 #: The end of the note a failed build's error carries when its store keeps complete sequences.
@@ -378,7 +402,7 @@ def note_resumable(exc: BaseException, url: str, complete: int) -> None:
 
 def discard_unfinished_store(url: str, made: str | None) -> int:
     """After a failed or interrupted build (its workers stopped): remove the store this run made
-    (``made`` from :func:`new_local_store`; an "empty" folder given is emptied, not removed) if it
+    (``made`` from :func:`writing_local_store`; an "empty" folder given is emptied, not removed) if it
     holds no complete sequence, so that a run that made nothing leaves nothing -> the complete
     sequences of a store kept (0 where it was removed or emptied, or not this run's)."""
     import shutil
