@@ -387,12 +387,13 @@ def _run(args, prepare=lambda: None, ended=lambda code: None) -> tuple[int, bool
     """Run a sub-command after ``prepare``; return (exit code, whether it ended normally). ``ended``
     runs once the command has returned (the caller's signal handlers back: a stop after it ends
     the process as the system does, never with a traceback from outside this function)."""
-    from tespike.golden.atomic import finished_outputs, raise_lost_stop
+    from tespike.golden.atomic import finished_outputs, raise_lost_stop, watching_inputs
     prefix = f"tespike {args.command}"
     start = len(finished_outputs())
     try:
         prepare()
-        code = int(args.run(args) or 0)
+        with watching_inputs():           # (an input written over while read: its outputs are not written)
+            code = int(args.run(args) or 0)
         sys.stdout.flush()                # (a full disk under "> log" is the command's fault, said below)
         raise_lost_stop()                 # (a stop Python dropped in a finalizer: the command did not end well)
         ended(code)

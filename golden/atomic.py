@@ -58,11 +58,84 @@ def start_janitor(report_faults: bool = False) -> None:
         faulthandler.enable(file=process.stdin, all_threads=False)
 
 
-def held_mapping(path: str | os.PathLike, size: int) -> None:
+def held_mapping(path: str | os.PathLike, size: int, opened: int | None = None) -> None:
     """``path`` (``size`` bytes) is read through a memory map: should a fatal signal end the run
-    once it is shorter (another program cut it short), the janitor names it."""
+    once it is shorter (another program cut it short), the janitor names it; and while a command
+    watches its inputs (:func:`watching_inputs`), its outputs are not written should the file be
+    written over in place meanwhile (:func:`check_inputs_unchanged`). ``opened``: a descriptor of the
+    file, open since before its bytes were first read (e.g. for a CRC), that this takes over."""
     if _Janitor._process is not None and _Janitor._owner == os.getpid():
         _Janitor._send(b"m", path, b" %d" % size)
+    key = os.fspath(path)
+    if _watched is None or key in _watched:
+        return                         # (an ``opened`` not taken is the caller's to close)
+    try:
+        fd = os.open(key, os.O_RDONLY) if opened is None else opened
+    except OSError:                    # (no descriptor to spare: unwatched, as a library caller's)
+        return
+    try:
+        _watched[key] = (fd, _signature(os.fstat(fd)))
+    except OSError:
+        os.close(fd)
+
+
+#: While a command runs (:func:`watching_inputs`): each file it reads through a memory map -> a
+#: descriptor of it and its (size, modification time) when first read; None outside a command.
+_watched: dict[str, tuple[int, tuple]] | None = None
+
+
+def watch_descriptor(path: str | os.PathLike) -> int | None:
+    """A descriptor of ``path`` to hand to :func:`held_mapping` once the file is mapped, opened now,
+    before its bytes are first read; None where nothing is watched (or no descriptor is to spare)."""
+    if _watched is None or os.fspath(path) in _watched:
+        return None
+    try:
+        return os.open(path, os.O_RDONLY)
+    except OSError:
+        return None
+
+
+def taken_descriptors() -> set[int]:
+    """The descriptors the watch holds (a caller closes an ``opened`` it did not take)."""
+    return {fd for fd, _ in (_watched or {}).values()}
+
+
+def _signature(info: os.stat_result) -> tuple:
+    """What a write changes (not the change time: a link removed, the file replaced at its path,
+    changes that too)."""
+    return info.st_size, info.st_mtime_ns
+
+
+@contextlib.contextmanager
+def watching_inputs() -> Iterator[None]:
+    """Watch, for the ``with`` (a command's run), the files read through memory maps
+    (:func:`held_mapping`); the outputs it moves into place check them first
+    (:func:`check_inputs_unchanged`). A library caller's reads are never watched."""
+    global _watched
+    outer, _watched = _watched, {}
+    try:
+        yield
+    finally:
+        for fd, _ in _watched.values():
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        _watched = outer
+
+
+def check_inputs_unchanged() -> None:
+    """Refuse (:class:`InputError`) to finish an output once a watched input was written over in
+    place while the command read it (``dd conv=notrunc``, an editor saving in place): the output
+    would mix the old bytes with the new ones (a reconstruction had blended two streams, exit 0).
+    The file read is the one opened (a descriptor held): one replaced by a new file at its path, or
+    removed, left what was read whole, and is no fault."""
+    for path, (fd, seen) in (_watched or {}).items():
+        try:
+            now = _signature(os.fstat(fd))
+        except OSError:
+            continue
+        if now != seen:
+            raise InputError(f"input file {path!r} was written over while the command read it: no output "
+                             "written (run again on a file left alone)")
 
 
 def process_group_holder():
@@ -409,6 +482,7 @@ def atomic_output(path: str | Path, what: str | None = None) -> Iterator[str]:
             raise _write_error(shown, exc) from None
         try:
             yield tmp
+            check_inputs_unchanged()
             if through:
                 _write_through(tmp, target, shown)
                 _finished(target, shown)
@@ -606,6 +680,7 @@ def atomic_folder(path: str | Path, replace: bool = True) -> Iterator[Path]:
             raise _write_error(shown, exc) from None
         try:
             yield tmp
+            check_inputs_unchanged()
             with stops_held():                    # (the two renames below are one step to a stop)
                 if not replace and folder_holds_files(target):
                     raise InputError(f"folder {shown!r} was filled by another run while this one ran; it is kept: "

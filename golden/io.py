@@ -18,7 +18,7 @@ from typing import Iterator
 
 import numpy as np
 
-from .atomic import atomic_output, held_mapping
+from .atomic import atomic_output, held_mapping, taken_descriptors, watch_descriptor
 from .config import SensorConfig
 from .decode import check_words
 from .errors import InputError, TespikeError, check_flag, is_count, one_line
@@ -318,6 +318,15 @@ def _stored_member(path: str | Path, key: str) -> np.ndarray | None:
     """A read-only memory map of the uncompressed (``np.savez``) array ``np.load`` calls ``key``
     (stored as ``key.npy``, or as ``key`` itself), after its CRC is verified by streaming through it;
     ``None`` if the member is compressed."""
+    opened = watch_descriptor(path)                     # (watched from before the CRC's read)
+    try:
+        return _mapped_member(path, key, opened)
+    finally:
+        if opened is not None and opened not in taken_descriptors():
+            os.close(opened)
+
+
+def _mapped_member(path: str | Path, key: str, opened: int | None) -> np.ndarray | None:
     with zipfile.ZipFile(path) as archive:
         names = archive.namelist()
         name = f"{key}.npy" if f"{key}.npy" in names else key
@@ -342,7 +351,7 @@ def _stored_member(path: str | Path, key: str) -> np.ndarray | None:
         raise ValueError(f"member {name!r} is shorter than its header's shape {shape}")
     if count == 0:
         return np.zeros(shape, dtype)
-    held_mapping(path, start + header + count * dtype.itemsize)   # (cut short while mapped: named)
+    held_mapping(path, start + header + count * dtype.itemsize, opened)   # (cut short while mapped: named)
     return np.memmap(path, dtype=dtype, mode="r", offset=start + header, shape=shape,
                      order="F" if fortran else "C")
 

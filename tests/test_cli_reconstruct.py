@@ -63,3 +63,31 @@ def test_a_memory_mapped_int64_stream_reconstructs_without_a_torch_warning(tmp_p
     np.savez(tmp_path / "s.npz", words=np.full((3, 2, 2), 5, np.int64), config=SensorConfig.preset("te").to_json())
     result = run_tespike("reconstruct", "--stream", tmp_path / "s.npz", "--method", "tfp", "--out", tmp_path / "r.npy")
     assert result.returncode == 0 and result.stderr == "", result.stderr
+
+
+def test_a_stream_written_over_during_the_run_writes_no_reconstruction(tmp_path, rng, monkeypatch, capsys):
+    """``dd conv=notrunc`` of another stream onto S.npz while ``reconstruct`` read it gave a
+    reconstruction blending the two, exit 0: refused in one line, and no R.npy."""
+    import os
+
+    import tespike.recon.methods as methods
+    from tespike.cosim.cli import main
+    stream, _, _ = make_stream(tmp_path, rng)
+    other = tmp_path / "other.npz"
+    save_stream(other, np.zeros((11, 3, 4), np.uint8), SensorConfig())
+    real = methods.reconstruct
+
+    def written_over_meanwhile(*args, **kwargs):
+        images = real(*args, **kwargs)
+        data = other.read_bytes()
+        with open(stream, "r+b") as handle:                  # in place, as dd conv=notrunc writes
+            handle.write(data[:os.path.getsize(stream)])
+        info = os.stat(stream)
+        os.utime(stream, ns=(info.st_atime_ns, info.st_mtime_ns + 1_000_000))   # (a coarse clock's tick)
+        return images
+    monkeypatch.setattr(methods, "reconstruct", written_over_meanwhile)
+    out = tmp_path / "R.npy"
+    assert main(["reconstruct", "--stream", str(stream), "--method", "tfp", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{str(stream)!r} was written over while the command read it" in err[0], err
+    assert not out.exists() and not list(tmp_path.glob(".*.part"))

@@ -348,3 +348,45 @@ def test_the_images_shape_scan_and_scene_flags_are_checked_in_one_line(tmp_path)
     np.save(path, np.ones((1, 2, 2), np.float32))
     with pytest.raises(InputError, match="^load_scene memory_map = 'no': must be True or False$"):
         load_scene(path, memory_map="no")
+
+
+def test_an_input_written_over_while_a_command_reads_it_stops_its_output(tmp_path):
+    """A stream memory-mapped by ``reconstruct`` and written over in place meanwhile (``dd
+    conv=notrunc``) gave a reconstruction blending the two streams, exit 0. While a command watches
+    its inputs, an output is not moved into place once an input it maps was written over; a file
+    replaced at the path, or removed, left what was read whole; a library caller is never watched."""
+    import os
+
+    from tespike.golden.atomic import watching_inputs
+    from tespike.golden.io import load_npy, load_stream, save_images, save_stream
+    config = SensorConfig()
+    save_stream(tmp_path / "S.npz", np.ones((2, 3, 4), np.uint8), config)
+    np.save(tmp_path / "I.npy", np.ones((2, 3, 4), np.float32))
+    out = tmp_path / "R.npy"
+
+    def write_over(path):
+        with open(path, "r+b") as handle:                    # in place: the same file, new bytes
+            handle.seek(-1, os.SEEK_END)
+            byte = handle.read(1)
+            handle.seek(-1, os.SEEK_END)
+            handle.write(byte)
+        info = os.stat(path)
+        os.utime(path, ns=(info.st_atime_ns, info.st_mtime_ns + 1_000_000))   # (a coarse clock's tick)
+    for name, read in (("S.npz", lambda p: load_stream(p, memory_map=True)),
+                       ("I.npy", lambda p: load_npy(p, "scene", mmap_mode="r"))):
+        with watching_inputs():
+            read(tmp_path / name)
+            save_images(out, np.zeros((1, 2, 2)))            # unchanged: written
+            write_over(tmp_path / name)
+            with pytest.raises(InputError, match=rf"input file '.*{name}' was written over while the command "
+                                                 "read it"):
+                save_images(out, np.ones((1, 2, 2)))
+        assert np.load(out).max() == 0 and not list(tmp_path.glob(".*.part"))
+    with watching_inputs():                                  # replaced by a new file: what was read is whole
+        load_stream(tmp_path / "S.npz", memory_map=True)
+        save_stream(tmp_path / "S.npz", np.zeros((2, 3, 4), np.uint8), config)
+        save_images(out, np.ones((1, 2, 2)))
+    load_stream(tmp_path / "S.npz", memory_map=True)          # no command: not watched
+    write_over(tmp_path / "S.npz")
+    save_images(out, np.full((1, 2, 2), 2.0))
+    assert np.load(out).max() == 2
