@@ -459,6 +459,32 @@ def test_a_pool_whose_terminate_refuses_still_ends_its_workers(monkeypatch):
                 process.kill()
 
 
+def test_a_result_thread_starved_of_memory_ends_the_wait_in_its_fault_without_a_traceback(monkeypatch, capfd):
+    """Under ``ulimit -v`` the pool's result-handler thread died of a MemoryError while a clip's bytes
+    came in: Python printed its 13-line traceback before the command's line, and a trainer waiting
+    for that clip would have waited for ever. The wait now raises the thread's fault, and the thread
+    prints nothing."""
+    import threading
+    from multiprocessing import connection
+
+    from tespike.recon.engine.batches import ClipSource
+    real = connection._ForkingPickler.loads
+
+    def starved(*args, **kwargs):
+        if "_handle_results" in threading.current_thread().name:
+            raise MemoryError
+        return real(*args, **kwargs)
+    monkeypatch.setattr(connection._ForkingPickler, "loads", starved)
+    source = ClipSource(SMALL, SensorConfig(), workers=1)
+    try:
+        with pytest.raises(MemoryError):
+            next(source)
+    finally:
+        monkeypatch.undo()
+        source.close()
+    assert "Traceback" not in capfd.readouterr().err
+
+
 def test_a_workers_stderr_stays_quiet_while_a_broken_pipe_is_handled():
     """A SIGKILLed trainer's pipe closes before its workers get another parent: the pool's first line
     of the BrokenPipeError traceback ("Process SpawnPoolWorker-1:") reached the user's terminal."""

@@ -25,6 +25,7 @@ import os
 import signal
 import threading
 import time
+import weakref
 
 import numpy as np
 import torch
@@ -261,6 +262,26 @@ def _kill_workers(handlers, processes) -> None:
             thread.join(5)
 
 
+#: The result-handler threads of the clip sources' pools, and why one ended, by thread
+#: (:func:`_note_pool_thread_failure`).
+_RESULT_HANDLERS: "weakref.WeakSet[threading.Thread]" = weakref.WeakSet()
+_POOL_THREAD_FAILURES: "weakref.WeakKeyDictionary[threading.Thread, BaseException]" = weakref.WeakKeyDictionary()
+
+#: Seconds a clip is waited for between checks that the pool can still deliver it.
+RESULT_POLL_SECONDS = 1.0
+
+
+def _note_pool_thread_failure(args, previous=threading.excepthook) -> None:
+    """``threading.excepthook``: a clip source's pool result-handler thread that dies (starved of
+    memory while a clip's bytes came in, ``ulimit -v``) is noted for the trainer, whose wait then
+    raises it (:meth:`ClipSource._wait`) and ends in the command's one line; Python had printed the
+    thread's 13-line traceback first. Any other thread's exception is the previous hook's."""
+    if args.thread is not None and args.thread in _RESULT_HANDLERS:
+        _POOL_THREAD_FAILURES[args.thread] = args.exc_value
+        return
+    previous(args)
+
+
 class ClipSource:
     """Clips ``start, start + 1, ...`` in order, made ahead on worker processes."""
 
@@ -282,6 +303,11 @@ class ClipSource:
                 else:
                     _end_workers_started(before)
                 raise
+            handler = getattr(self.pool, "_result_handler", None)
+            if handler is not None:
+                _RESULT_HANDLERS.add(handler)
+                if threading.excepthook is not _note_pool_thread_failure:
+                    threading.excepthook = _note_pool_thread_failure
         self.pending: collections.deque = collections.deque()
         self.submitted = start
         self.waited = 0.0
@@ -298,11 +324,24 @@ class ClipSource:
         else:
             self._fill()
             start = time.monotonic()
-            clip = self.pending.popleft().get()
+            clip = self._wait(self.pending.popleft())
             self.waited += time.monotonic() - start
             self._fill()
         self.next_index += 1
         return clip
+
+    def _wait(self, result):
+        """A clip's result, or the fault of the pool's result-handler thread once it has died (it
+        would never come: the wait had no end)."""
+        handler = getattr(self.pool, "_result_handler", None)
+        while True:
+            try:
+                return result.get(RESULT_POLL_SECONDS)
+            except multiprocessing.TimeoutError:
+                if handler is not None and not handler.is_alive() and not result.ready():
+                    fault = _POOL_THREAD_FAILURES.pop(handler, None)
+                    raise fault if fault is not None else RuntimeError(
+                        "the data workers' result thread ended: no clip can come") from None
 
     def close(self) -> None:
         """End the workers. Where a pool thread died (starved of memory while a clip came in),
