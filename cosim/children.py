@@ -73,6 +73,41 @@ def ended(returncode: int) -> str:
     return f"killed by {name}"
 
 
+#: Free bytes below which an outside tool's failure in its work folder is put down to a full disk.
+FULL_BELOW = 1 << 20
+
+
+def room_note(folder) -> str:
+    """``" (...)"`` saying that the file system of ``folder`` (a tool's work folder, in ``$TMPDIR``) is
+    full, where it has less than FULL_BELOW bytes free; else "". A tool that cannot write its files
+    seldom says so: yosys-smtbmc had ended in "gave no verdict: ## 0:00:00 Solver: z3"."""
+    try:
+        info = os.statvfs(folder)
+    except OSError:
+        return ""
+    free = info.f_bavail * info.f_frsize
+    if free >= FULL_BELOW:
+        return ""
+    return f" (the file system of its work folder {os.fspath(folder)!r} is full: {free // 1024} KiB free)"
+
+
+def write_work_file(path, data: str | bytes) -> None:
+    """Write a tool's input file into its work folder (``Path.write_text`` or ``write_bytes``); a failed
+    write names the file: on a full disk or past ``ulimit -f`` Python's write raises an OSError that
+    names none, and the command's line had been a bare "No space left on device"."""
+    from pathlib import Path
+    path = Path(path)
+    try:
+        if isinstance(data, bytes):
+            path.write_bytes(data)
+        else:
+            path.write_text(data)
+    except OSError as exc:
+        if exc.filename is None and exc.errno is not None:
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
+        raise
+
+
 def run(argv, **kwargs) -> subprocess.CompletedProcess:
     """``subprocess.run`` of a child that ends with this process."""
     return subprocess.run(argv, preexec_fn=_preexec(os.getpid()), **kwargs)

@@ -29,6 +29,7 @@ from tespike.golden.io import atomic_output
 from tespike.golden.errors import InputError
 from tespike.golden.paths import check_output_file, path_text
 
+from . import children
 from .outside import (RESET_CLOCKS, SimulatorBuildError, SimulatorRunError, first_error_line, hex_to_rows,
                       pack_rows, require_tool, rows_to_hex, run_process)
 from .tops import RunPlan, check_stream_lanes, prepare
@@ -160,14 +161,14 @@ def _simulate(run: RunPlan, verilog: str, what: str, work_dir, vcd_path=None) ->
         work = Path(path_text(work_dir, "work_dir")) if work_dir is not None else Path(scratch)
         if not work.is_dir():
             raise SimulatorRunError(f"work_dir {str(work)!r} is not an existing directory")
-        (work / "array.v").write_text(verilog)
-        (work / "tb.v").write_text(bench)
+        children.write_work_file(work / "array.v", verilog)
+        children.write_work_file(work / "tb.v", bench)
         E = top.config.input_bits
         with atomic_output(work / _STIMULUS) as tmp:
             rows = rows_to_hex(pack_rows(stimulus.reshape(T, -1), E), top.charge_bits)
             Path(tmp).write_text("\n".join(rows) + "\n")
         rst = np.zeros(T, np.uint8) if run.resets is None else run.resets.astype(np.uint8)
-        (work / _RESETS).write_text("\n".join("01"[v] for v in rst) + "\n")
+        children.write_work_file(work / _RESETS, "\n".join("01"[v] for v in rst) + "\n")
         (work / _CAPTURES).unlink(missing_ok=True)
         compiled = run_process([iverilog, "-g2005", "-o", "sim.vvp", "-s", TESTBENCH_TOP,
                                 f"-P{TESTBENCH_TOP}.CLOCKS={T}", f"-P{TESTBENCH_TOP}.READOUTS={run.expected}",

@@ -122,12 +122,13 @@ def yosys_run(verilog_text: str, steps: list[str], failure: str, yosys: str = "y
         raise SynthesisError(missing)
     with work_folder(prefix) as tmp:
         work = Path(tmp)
-        (work / DESIGN_FILE).write_text(verilog_text)
+        children.write_work_file(work / DESIGN_FILE, verilog_text)
         code, output, run = _run_measured([yosys, "-q", "-p", "; ".join([f"read_verilog {DESIGN_FILE}", *steps])],
                                           work)
         if code != 0:
             errors = [line for line in output.splitlines() if "ERROR" in line] or output.strip().splitlines()[-1:]
-            raise SynthesisError(f"{failure}: {errors[0].strip() if errors else children.ended(code)}")
+            raise SynthesisError(f"{failure}: {errors[0].strip() if errors else children.ended(code)}"
+                                  f"{children.room_note(work)}")
         yield work, run
 
 

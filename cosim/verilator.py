@@ -385,8 +385,8 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
             print(f"tespike: building the Verilator model of {top} in {final} ...", file=sys.stderr)
         # a killed build leaves no hidden folder in the cache (the janitor removes it)
         with work_folder(f".{key}.build-", root) as work:
-            (work / "array.v").write_text(verilog)
-            (work / "harness.cpp").write_text(harness)
+            children.write_work_file(work / "array.v", verilog)
+            children.write_work_file(work / "harness.cpp", harness)
             runtime = _runtime_dir(root, cxx_opt)
             reuse = _reuse_runtime(runtime, work / "obj")
             argv = [exe, *flags, *reuse, "-j", str(build_jobs()), "-Mdir", "obj", "array.v",

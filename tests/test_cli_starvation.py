@@ -408,6 +408,27 @@ def test_a_tool_killed_at_the_file_size_limit_is_named_so(tmp_path):
     assert_refused(done, "yosys failed: killed by SIGXFSZ", "ulimit -f: 307200 bytes")
 
 
+def test_a_full_temporary_folder_or_the_file_size_limit_names_the_tools_file(tmp_path):
+    """prove with $TMPDIR nearly full ended in "No space left on device" naming no file, or in
+    yosys-smtbmc's "gave no verdict: ## 0:00:00 Solver: z3"; under ``ulimit -f`` in "File too large"
+    naming none: the harness file a write failed on is named, and a tool's failure says its work
+    folder's file system is full."""
+    from tests.cli import run_tespike
+    args = ("prove", "--config", "te", "--only", "pixel", "--depth", "1", "--traces", tmp_path / "tr")
+    done = run_limited(ENTRY.format(args=[str(a) for a in args]), {resource.RLIMIT_FSIZE: 2 << 10})
+    assert_refused(done, "tespike-prove-", "top.il': File too large", "ulimit -f: 2048 bytes")
+    with small_tmpfs(tmp_path / "small", "2m") as mount:
+        (mount / "t").mkdir()
+        filler = mount / "filler"
+        for keep in (4096, 120_000):                         # the harness cannot be written; a tool cannot write
+            filler.write_bytes(b"\0" * (os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize - keep))
+            done = run_tespike(*args, env={"TMPDIR": str(mount / "t")})
+            assert_refused(done, str(mount / "t"))
+            assert "No space left on device" in done.stderr or "is full" in done.stderr, done.stderr
+            assert os.listdir(mount / "t") == [], "the run's temporaries were left"
+            filler.unlink()
+
+
 def test_a_full_disk_under_the_traces_or_the_build_cache_names_it(tmp_path):
     """A counterexample trace on a full disk named the solver's temporary (``shutil.copyfile`` names its
     source) and left an empty --traces folder; a cocotb build into a full cache named no file."""

@@ -74,12 +74,13 @@ class AbcError(RuntimeError):
 
 
 def _aiger(harness: Harness, work: Path, name: str) -> Path:
-    (work / f"{name}.v").write_text(harness.text)
+    children.write_work_file(work / f"{name}.v", harness.text)
     done = children.run(["yosys", "-q", "-p", f"read_verilog -formal {name}.v; {TO_AIGER}; "
                          f"write_aiger -zinit {name}.aig"], cwd=work, capture_output=True, text=True)
     if done.returncode != 0:
         lines = [line for line in (done.stderr + done.stdout).splitlines() if "ERROR" in line]
-        raise AbcError(f"yosys failed on the harness: {lines[0].strip() if lines else children.ended(done.returncode)}")
+        raise AbcError(f"yosys failed on the harness: {lines[0].strip() if lines else children.ended(done.returncode)}"
+                       f"{children.room_note(work)}")
     return work / f"{name}.aig"
 
 

@@ -85,11 +85,11 @@ def prove_equivalence(name: str, eq: Equivalence, trace_dir: Path) -> ProofResul
     config, registers = eq.config, eq.registers()
     with work_folder("tespike-prove-") as tmp:
         work = Path(tmp)
-        (work / "pixel.il").write_text(rtlil.convert(eq.pixel_factory(config, word_register=False),
-                                                     name="pixel"))
-        (work / "gold.v").write_text(_pixel_wrapper(config, registers))
+        children.write_work_file(work / "pixel.il", rtlil.convert(eq.pixel_factory(config, word_register=False),
+                                                                  name="pixel"))
+        children.write_work_file(work / "gold.v", _pixel_wrapper(config, registers))
         rule = stream_pixel_rule_verilog(config)
-        (work / "rule.v").write_text(rule)
+        children.write_work_file(work / "rule.v", rule)
         rule_name = re.search(r"^module (\w+)", rule, re.M).group(1)
         script = "; ".join([
             "read_rtlil pixel.il", "hierarchy -top pixel", "proc", "flatten", "opt_clean",
@@ -108,7 +108,8 @@ def prove_equivalence(name: str, eq: Equivalence, trace_dir: Path) -> ProofResul
             return ProofResult(name, True, time.perf_counter() - start)
         if "SAT proof finished - model found: FAIL!" not in log:
             errors = [line for line in log.splitlines() if "ERROR" in line] or log.strip().splitlines()[-1:]
-            raise ProofToolError(f"{name}: yosys failed: {errors[0] if errors else children.ended(done.returncode)}")
+            raise ProofToolError(f"{name}: yosys failed: {errors[0] if errors else children.ended(done.returncode)}"
+                                 f"{children.room_note(work)}")
         trace = keep_trace(work / "trace.vcd", trace_dir, name) if (work / "trace.vcd").exists() else None
         return ProofResult(name, False, time.perf_counter() - start,
                       f"equivalence check: {_counterexample(log)}", trace)

@@ -126,7 +126,7 @@ def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Pr
         work = Path(tmp)
         text = rtlil.convert(harness.m, ports=harness.inputs, name="top")
         text, messages = _yosys_checks(text)
-        (work / "top.il").write_text(text)
+        children.write_work_file(work / "top.il", text)
         # The streaming harness goes to gates (techmap): its word_select becomes a $shift by a
         # $mul, which z3 4.8 does not finish as words. The pixel harnesses solve faster as words.
         gates = "techmap; opt -fast; " if getattr(harness, "gate_level", False) else ""
@@ -135,7 +135,8 @@ def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Pr
         done = run_tool(["yosys", "-q", "-p", script], work)
         if done.returncode != 0:
             said = (done.stderr or done.stdout).strip().splitlines()[-1:]      # (nothing said: how it ended)
-            raise ProofToolError(f"{name}: yosys failed: {said[0] if said else children.ended(done.returncode)}")
+            raise ProofToolError(f"{name}: yosys failed: {said[0] if said else children.ended(done.returncode)}"
+                                 f"{children.room_note(work)}")
         for step, extra in (("base case", []), ("induction step", ["-i"])):
             vcd = work / "trace.vcd"
             done = run_tool(["yosys-smtbmc", "-s", solver, *extra, "-t", str(depth),
@@ -145,7 +146,7 @@ def prove(name: str, harness, *, depth: int, solver: str, trace_dir: Path) -> Pr
             if "Status: FAILED" not in done.stdout:
                 said = (done.stdout.strip().splitlines() or done.stderr.strip().splitlines())[-1:]
                 raise ProofToolError(f"{name}: yosys-smtbmc ({solver}) gave no verdict: "
-                                     f"{said[0] if said else children.ended(done.returncode)}")
+                                     f"{said[0] if said else children.ended(done.returncode)}{children.room_note(work)}")
             trace = keep_trace(vcd, trace_dir, name) if vcd.exists() else None
             return ProofResult(name, False, time.perf_counter() - start,
                           f"{step}: {_failed_assertion(done.stdout, messages)}", trace)
