@@ -372,7 +372,7 @@ def test_a_dataset_store_removed_during_the_run_is_said_so(capsys, monkeypatch, 
     import tespike.cosim.dataset.build as build
 
     def removed_midway(url, *args, starting=None, **kwargs):
-        os.makedirs(url)                        # the store made, the build started, then the folder removed
+        os.makedirs(url, exist_ok=True)         # the store made, the build started, then the folder removed
         starting()
         shutil.rmtree(url)
         raise RuntimeError(f"No array found in store file://{url} at path sun/light")
