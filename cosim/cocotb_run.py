@@ -112,7 +112,10 @@ def _children_end_with_us():
     """cocotb's runner starts the compiler, make and the simulator with ``subprocess.run``;
     within this block they run through :func:`tespike.cosim.children.run_group` instead, so that
     a command killed outright or interrupted leaves no simulator or compiler running."""
-    import cocotb.runner as module
+    import warnings
+    with warnings.catch_warnings():      # "Python runners ... are an experimental feature" (as _runner)
+        warnings.simplefilter("ignore", UserWarning)
+        import cocotb.runner as module
     real = module.subprocess
     module.subprocess = types.SimpleNamespace(**{name: getattr(real, name) for name in dir(real)
                                                  if not name.startswith("__")})
@@ -157,32 +160,34 @@ def build(verilog_path: Path, top: str, simulator: str, cache_root: Path | None 
     with cache_entry(root, key) as (final, done):
         if done:
             return final
-        if final.exists():
-            shutil.rmtree(final)
-        log = final / "build.log"
-        source = final / "array.v"
+        # built in a hidden folder of the cache renamed into place once done: a stop or a kill mid-build
+        # leaves no half-built entry (the folder goes with the run, by the janitor if it is killed)
         try:
-            final.mkdir(parents=True)
-            source.write_text(text)
-            with _outside_pytest(), _quiet(final / "commands.txt"), _children_end_with_us():
-                _runner(simulator).build(verilog_sources=[source], hdl_toplevel=top, build_dir=final,
-                                         build_args=BUILD_ARGS.get(simulator, []), always=True,
-                                         log_file=log)
-            (final / "done").write_text(key + "\n")
+            with work_folder(f".{key}.build-", root) as work:
+                log = work / "build.log"
+                source = work / "array.v"
+                try:
+                    children.write_work_file(source, text)
+                    with _outside_pytest(), _quiet(work / "commands.txt"), _children_end_with_us():
+                        _runner(simulator).build(verilog_sources=[source], hdl_toplevel=top, build_dir=work,
+                                                 build_args=BUILD_ARGS.get(simulator, []), always=True,
+                                                 log_file=log)
+                    (work / "done").write_text(key + "\n")
+                except SystemExit:
+                    failed = root / f"{key}.failed.log"
+                    shutil.copyfile(log, failed)
+                    line = first_error_line(failed.read_text(errors="replace"))   # about the cache's copy: the user's file
+                    raise SimulatorBuildError(f"cocotb {simulator} build of {top} failed: "
+                                              f"{line.replace(str(source), str(verilog_path))} "
+                                              f"(full log: {failed})") from None
+                if final.exists():
+                    shutil.rmtree(final)         # a stale entry without its "done" mark
+                os.rename(work, final)
         except OSError as exc:                  # (a full disk under the cache named no file)
-            shutil.rmtree(final, ignore_errors=True)
-            if exc.filename is not None and not str(exc.filename).startswith(str(final)):
+            if exc.filename is not None and not str(exc.filename).startswith(str(root)):
                 raise
             raise InputError(f"cannot write the {simulator} build {str(final)!r} (the build cache: $TESPIKE_CACHE, "
                              f"else ~/.cache/tespike): {exc.strerror or exc}") from None
-        except SystemExit:
-            failed = root / f"{key}.failed.log"
-            shutil.copyfile(log, failed)
-            shutil.rmtree(final, ignore_errors=True)
-            line = first_error_line(failed.read_text(errors="replace"))   # about the cache's copy: the user's file
-            raise SimulatorBuildError(f"cocotb {simulator} build of {top} failed: "
-                                      f"{line.replace(str(source), str(verilog_path))} "
-                                      f"(full log: {failed})") from None
     return final
 
 

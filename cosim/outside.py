@@ -225,10 +225,11 @@ def content_hash(*parts: str | bytes) -> str:
 def cache_entry(root: Path, key: str) -> Iterator[tuple[Path, bool]]:
     """Lock one cache entry; yield (final directory, already built).
 
-    A build happens in a temporary directory that is renamed into place only
-    when it succeeded, so an interrupted build never leaves a broken entry. The
-    lock (``flock`` on ``<key>.lock``) keeps two processes from building the
-    same thing at once.
+    The caller builds in a hidden folder of ``root`` (:func:`tespike.golden.atomic.work_folder`: removed
+    with the run, by the janitor if it is killed) renamed into place only when the build succeeded,
+    so an interrupted build never leaves a broken entry (the cocotb builds had run in the entry
+    itself). The lock (``flock`` on ``<key>.lock``) keeps two processes from building the same
+    thing at once.
     """
     root.mkdir(parents=True, exist_ok=True)
     final = root / key

@@ -226,3 +226,34 @@ def test_the_work_folder_is_one_runs_whole(tmp_path):
                          "--work-dir", work, env=env)
     assert_refused(result, "--work-dir", "'notes.txt'", "no cocotb run writes")
     assert (work / "notes.txt").read_text() == "mine"
+
+
+@needs("icarus")
+def test_a_build_stopped_midway_leaves_no_entry_in_the_cache(tmp_path, monkeypatch):
+    """The build ran in the cache entry itself: Ctrl-C, SIGTERM or SIGHUP mid-build (and a kill)
+    left a visible half-built entry (sources, objects, no "done"). It is built in a hidden folder
+    renamed into place once done, and a stop removes that folder."""
+    import types
+
+    import tespike.cosim.cocotb_run as cocotb_run
+    verilog = tmp_path / "a.v"
+    verilog.write_text("module top(input clk); endmodule\n")
+
+    def stopped(simulator):
+        def build(*, build_dir, **kwargs):
+            (build_dir / "sim.vvp").write_text("half")
+            raise KeyboardInterrupt
+        return types.SimpleNamespace(build=build)
+    monkeypatch.setattr(cocotb_run, "_runner", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        cocotb_run.build(verilog, "top", "icarus", cache_root=tmp_path / "cache")
+    assert [p.name for p in (tmp_path / "cache" / "cocotb").iterdir() if not p.name.endswith(".lock")] == []
+
+    def built(simulator):
+        def build(*, build_dir, **kwargs):
+            (build_dir / "sim.vvp").write_text("whole")
+        return types.SimpleNamespace(build=build)
+    monkeypatch.setattr(cocotb_run, "_runner", built)
+    final = cocotb_run.build(verilog, "top", "icarus", cache_root=tmp_path / "cache")
+    assert (final / "done").is_file() and (final / "sim.vvp").read_text() == "whole"
+    assert not final.name.startswith(".")
