@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import errno
 import importlib
+import os
 import sys
 
 from tespike.cosim.console import (StandardOutputError, closed_at_start, closed_pipe, drop_standard_output,
@@ -383,6 +384,20 @@ def _repeated_option(parser, argv: list[str]) -> str | None:
     return None
 
 
+def _python_code(filename) -> bool:
+    """Whether ``filename`` is a module of Python or of an installed library (a late import that
+    failed, out of file handles): naming it would point the user at a file that is not theirs."""
+    import sysconfig
+    try:
+        path = os.path.realpath(os.fsdecode(filename))
+    except (TypeError, ValueError):
+        return False
+    roots = {sys.prefix, sys.base_prefix, *(sysconfig.get_paths().get(k, "") for k in ("stdlib", "purelib",
+                                                                                       "platlib"))}
+    return path.endswith((".py", ".pyc", ".so")) and any(
+        root and path.startswith(os.path.realpath(root) + os.sep) for root in roots)
+
+
 def _run(args, prepare=lambda: None, ended=lambda code: None) -> tuple[int, bool]:
     """Run a sub-command after ``prepare``; return (exit code, whether it ended normally). ``ended``
     runs once the command has returned (the caller's signal handlers back: a stop after it ends
@@ -404,7 +419,7 @@ def _run(args, prepare=lambda: None, ended=lambda code: None) -> tuple[int, bool
     except StandardOutputError as exc:
         return _standard_output_failed(prefix, exc, f"{_notes(exc)}{_before(start, exc)}"), False
     except OSError as exc:
-        where = f" {exc.filename!r}:" if exc.filename else ""
+        where = f" {exc.filename!r}:" if exc.filename and not _python_code(exc.filename) else ""
         cause = one_line(exc.strerror or exc, 300)
         if "No usable temporary directory" in cause:       # tempfile's words hide the cause
             from tespike.golden.paths import temporary_directory_fault

@@ -25,6 +25,7 @@ import csv
 import dataclasses
 import functools
 import math
+import os
 import shutil
 import sys
 import time
@@ -452,6 +453,8 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
         made_weights = any(Path(written) == out for written in finished_outputs(start))
         if created and work.is_dir() and not (work / CHECKPOINT).exists() and not made_weights:
             shutil.rmtree(work, ignore_errors=True)        # nothing to resume or to explain: no empty folder
+            with contextlib.suppress(OSError):             # (out of file handles rmtree removes nothing:
+                os.rmdir(work)                             # it opens the folder it walks; rmdir opens none)
         raise                                              # (weights written: their logs and curves stay)
 
 
