@@ -373,16 +373,16 @@ def writing_local_store(url: str):
         with contextlib.suppress(FileExistsError):      # (another run made it just now: held, or refused, below)
             os.mkdir(url)
             made = "new"
-    if not os.path.isdir(url) or os.path.islink(url):  # (the store's own checks refuse it)
+    if not os.path.isdir(url):                         # (the store's own checks refuse it)
         yield None
         return
-    held = os.open(url, os.O_RDONLY | os.O_DIRECTORY)
+    held = os.open(url, os.O_RDONLY | os.O_DIRECTORY)  # (a link to a folder: the folder it names is held)
     try:
         try:
             fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise InputError(f"dataset store {url!r} is being written by another tespike dataset run: wait "
-                             "for it to end, or write another store") from None
+            raise InputError(f"dataset store {url!r} is held by another process (another tespike dataset run "
+                             "writing it): wait for it to end, or write another store") from None
         if made is None and not os.listdir(url):
             made = "empty"
         yield made
