@@ -176,12 +176,15 @@ def _simulate(run: RunPlan, verilog: str, what: str, work_dir, vcd_path=None) ->
         if compiled.returncode != 0:
             raise SimulatorBuildError(
                 f"iverilog -g2005 could not compile {what} (exit {compiled.returncode}): "
-                f"{first_error_line(compiled.stderr + compiled.stdout)}")
+                f"{first_error_line(compiled.stderr + compiled.stdout)}{children.room_note(work)}")
         ran = run_process([vvp, "-n", "sim.vvp"], cwd=work)
-        if ran.returncode != 0:
+        if ran.returncode != 0:                 # (iverilog cut short by a full disk exits 0: vvp then fails)
             raise SimulatorRunError(f"{what}: vvp failed (exit {ran.returncode}): "
-                                    f"{first_error_line(ran.stderr + ran.stdout)}")
-        captures = _parse_captures(work / _CAPTURES, what, top.word_port)
+                                    f"{first_error_line(ran.stderr + ran.stdout)}{children.room_note(work)}")
+        try:
+            captures = _parse_captures(work / _CAPTURES, what, top.word_port)
+        except SimulatorRunError as exc:
+            raise SimulatorRunError(f"{exc}{children.room_note(work)}") from None
         if vcd_path is not None:
             shutil.move(work / DUMP, vcd_path)
         return captures

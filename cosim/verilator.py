@@ -398,7 +398,8 @@ def build(verilog: str, top: str, charge_bits: int, frame_bits: int, *,
                 shutil.copyfile(work / "build.log", failed_log)
                 raise SimulatorBuildError(
                     f"Verilator build of {top} failed (exit {result.returncode}): "
-                    f"{first_error_line(result.stderr + result.stdout)} (full log: {failed_log})")
+                    f"{first_error_line(result.stderr + result.stdout)} (full log: {failed_log})"
+                    f"{children.room_note(work)}")
             shutil.move(str(work / "obj" / _EXECUTABLE), work / _EXECUTABLE)
             _keep_runtime(work / "obj", runtime, cxx_opt)
             shutil.rmtree(work / "obj")

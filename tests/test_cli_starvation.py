@@ -431,6 +431,19 @@ def test_a_full_temporary_folder_or_the_file_size_limit_names_the_tools_file(tmp
             assert "No space left on device" in done.stderr or "is full" in done.stderr, done.stderr
             assert os.listdir(mount / "t") == [], "the run's temporaries were left"
             filler.unlink()
+        if __import__("shutil").which("iverilog") is None:
+            return
+        # iverilog cut short by the full disk exits 0: vvp's "sim.vvp:832: syntax error" was the line
+        import json
+
+        from tests.test_cli_hardening import TINY
+        (tmp_path / "c.json").write_text(json.dumps(TINY.to_dict()))
+        np.save(tmp_path / "E.npy", np.full((TINY.clocks_per_readout * 40, 4, 4), 2, np.uint8))
+        filler.write_bytes(b"\0" * (os.statvfs(mount).f_bavail * os.statvfs(mount).f_frsize - 100_000))
+        done = run_tespike("rtl-sim", "--config", tmp_path / "c.json", "--stimulus", tmp_path / "E.npy",
+                           "--out", tmp_path / "S.npz", "--backend", "icarus", env={"TMPDIR": str(mount / "t")})
+        assert_refused(done, str(mount / "t"))
+        assert "No space left on device" in done.stderr or "is full" in done.stderr, done.stderr
 
 
 def test_a_full_disk_under_the_traces_or_the_build_cache_names_it(tmp_path):
