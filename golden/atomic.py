@@ -65,7 +65,11 @@ def held_mapping(path: str | os.PathLike, size: int, opened: int | None = None) 
     written over in place meanwhile (:func:`check_inputs_unchanged`). ``opened``: a descriptor of the
     file, open since before its bytes were first read (e.g. for a CRC), that this takes over."""
     if _Janitor._process is not None and _Janitor._owner == os.getpid():
-        _Janitor._send(b"m", path, b" %d" % size)
+        try:
+            changed = os.stat(path).st_mtime_ns      # (a file cut short, then written whole again, changed)
+        except OSError:
+            changed = -1
+        _Janitor._send(b"m", path, b" %d %d" % (size, changed))
     key = os.fspath(path)
     if _watched is None or key in _watched:
         return                         # (an ``opened`` not taken is the caller's to close)
@@ -134,8 +138,8 @@ def check_inputs_unchanged() -> None:
         except OSError:
             continue
         if now != seen:
-            raise InputError(f"input file {path!r} was written over while the command read it: no output "
-                             "written (run again on a file left alone)")
+            raise InputError(f"input file {path!r} was written over while the command read it (its size or "
+                             "modification time changed): no output written (run again on a file left alone)")
 
 
 def process_group_holder():
@@ -270,8 +274,9 @@ for line in sys.stdin.buffer:
         if line.startswith(b"Fatal Python error: "):  # its first line (report_faults)
             fault = fault or line[20:].decode(errors="replace").strip(": ")
         elif line[:1] == b"m":
-            path, _, size = line[1:].partition(b" ")
-            mapped[bytes.fromhex(path.decode())] = int(size)
+            path, _, rest = line[1:].partition(b" ")
+            size, _, changed = rest.partition(b" ")
+            mapped[bytes.fromhex(path.decode())] = (int(size), int(changed or -1))
         elif line[:1] == b"+":
             held.add(bytes.fromhex(line[1:].decode()))
         elif line[:1] == b"-":
@@ -296,15 +301,20 @@ for path in held:
         except OSError:
             pass
 if fault:
-    def size(path):
+    def now(path):
         try:
-            return os.path.getsize(path)
+            info = os.stat(path)
+            return info.st_size, info.st_mtime_ns
         except OSError:
-            return -1
-    cut = [path for path, was in mapped.items() if size(path) < was]
+            return -1, -1
+    cut = [path for path, (was, _) in mapped.items() if now(path)[0] < was]
+    changed = [path for path, (_, was) in mapped.items() if was != -1 and now(path)[1] not in (-1, was)]
     if cut:
         text = (f"tespike: error: input file {os.fsdecode(cut[0])!r} was cut short while it was read "
                 f"({fault}: it changed under the command; run again on a file left alone)")
+    elif changed:               # (cut short, then written whole again before this looked)
+        text = (f"tespike: error: input file {os.fsdecode(changed[0])!r} changed while it was read "
+                f"({fault}: another program wrote it; run again on a file left alone)")
     else:
         text = f"tespike: error: the process ended on a fatal signal ({fault})"
         try:                    # (the command's own limits, inherited: a library may die of one in C)

@@ -790,3 +790,21 @@ def test_evaluate_under_an_ascii_locale_prints_its_table_escaped(tmp_path):
     assert done.returncode == 0 and not done.stderr, done.stderr
     assert "PSNR-\\u03bc" in done.stdout and "| TFP_TE |" in done.stdout
     assert (tmp_path / "ev" / "table.md").read_text(encoding="utf-8").count("PSNR-μ") == 2
+
+
+def test_the_janitor_names_an_input_written_whole_again_after_the_fault(tmp_path):
+    """An input cut short and written whole again (``cp`` onto it) killed the command with a bus
+    error, and by the time the janitor looked the file had its size back: its line named no file
+    ("the process ended on a fatal signal (Bus error)"). It compares the modification time too."""
+    from tespike.golden.atomic import _JANITOR_CODE
+    path = tmp_path / "I.npy"
+    path.write_bytes(b"\0" * 4096)
+    seen = os.stat(path).st_mtime_ns
+    os.utime(path, ns=(seen, seen + 1_000_000_000))          # written again since it was mapped
+
+    def janitor(mtime):
+        lines = b"m%s %d %d\nFatal Python error: Bus error\n\n" % (os.fsencode(str(path)).hex().encode(), 4096, mtime)
+        return subprocess.run([sys.executable, "-I", "-S", "-c", _JANITOR_CODE], input=lines,
+                              capture_output=True, timeout=30).stderr.decode()
+    assert f"input file {str(path)!r} changed while it was read (Bus error" in janitor(seen)
+    assert "the process ended on a fatal signal (Bus error)" in janitor(seen + 1_000_000_000)
