@@ -142,6 +142,41 @@ def check_inputs_unchanged() -> None:
                              "modification time changed): no output written (run again on a file left alone)")
 
 
+#: Folders this process holds (:func:`folder_held`), by real path -> how many ``with`` blocks hold each.
+_HELD_FOLDERS: dict[str, int] = {}
+
+
+@contextlib.contextmanager
+def folder_held(path: str | os.PathLike, refusal: str) -> Iterator[None]:
+    """Hold the existing folder ``path`` for this process alone for the ``with`` (an exclusive ``flock``
+    on it; a link to a folder holds the folder): another process holding it is refused with
+    ``InputError(f"{refusal} is held by another process ...")``. Held again inside (a command and
+    the library function it calls), it is the same hold. The lock goes with the process however it ends."""
+    import fcntl
+    key = os.path.realpath(path)
+    if key in _HELD_FOLDERS:
+        _HELD_FOLDERS[key] += 1
+        try:
+            yield
+        finally:
+            _HELD_FOLDERS[key] -= 1
+        return
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InputError(f"{refusal} is held by another process (another run writing it): wait for it "
+                             "to end, or choose another") from None
+        _HELD_FOLDERS[key] = 1
+        try:
+            yield
+        finally:
+            del _HELD_FOLDERS[key]
+    finally:
+        os.close(fd)
+
+
 def process_group_holder():
     """A function for a child to call between fork and exec (``preexec_fn``, after it has made
     its own process group): it has the janitor kill that group should this process end before

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from tespike.golden.atomic import NO_ROOM, finished_outputs, stops_held
+from tespike.golden.atomic import NO_ROOM, finished_outputs, folder_held, stops_held
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError, check_flag, is_count, is_positive_number, one_line
 from tespike.golden.io import atomic_output, word_dtype
@@ -448,7 +448,10 @@ def train(options: TrainOptions, out: str | Path, *, work_dir: str | Path | None
     work.mkdir(parents=True, exist_ok=True)
     start = len(finished_outputs())
     try:
-        return _train(options, out, work, resume, progress, command)
+        # one run writes a run folder at a time: two into one --out had both exited 0 on a folder whose
+        # log, checkpoint and best weights mixed the two runs
+        with folder_held(work, f"run folder {str(work)!r}"):
+            return _train(options, out, work, resume, progress, command)
     except BaseException:
         made_weights = any(Path(written) == out for written in finished_outputs(start))
         if created and work.is_dir() and not (work / CHECKPOINT).exists() and not made_weights:

@@ -217,7 +217,7 @@ def test_a_store_another_run_writes_is_refused_and_left_alone(tmp_path, capsys):
     held = os.open(store, os.O_RDONLY | os.O_DIRECTORY)       # another run writing it
     try:
         fcntl.flock(held, fcntl.LOCK_EX)
-        refused(capsys, *args, "--seed", 2, "is held by another process (another tespike dataset run")
+        refused(capsys, *args, "--seed", 2, "is held by another process (another run writing it)")
         (tmp_path / "link.zarr").symlink_to(store)            # the same store through a link: held too
         refused(capsys, *args[:-1], tmp_path / "link.zarr", "--seed", 2, "is held by another process")
         assert {p.relative_to(store): p.read_bytes() for p in store.rglob("*") if p.is_file()} == before

@@ -367,3 +367,26 @@ def test_weights_whose_archive_end_is_damaged_are_called_damaged(tmp_path):
     with pytest.raises(InputError, match=r"\(a damaged archive: PytorchStreamReader failed reading zip archive: "
                                          r"not a ZIP archive\)$"):
         read_weights(tmp_path / "w.pt")
+
+
+def test_a_run_folder_another_run_writes_is_refused_and_left_alone(tmp_path, capsys):
+    """Two runs into one --out had both exited 0 on a run folder whose log, checkpoint and best weights
+    mixed the two: a run holds its folder (flock), and another is refused in one line, touching nothing."""
+    import fcntl
+    import os
+
+    from tespike.cosim.cli import main
+    run = tmp_path / "w.run"
+    run.mkdir()
+    (run / "log.csv").write_text("step,epoch,lr,loss,seconds\n1,0,0.0001,0.5,0.1\n")
+    held = os.open(run, os.O_RDONLY | os.O_DIRECTORY)         # another run writing it
+    try:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        for extra in ([], ["--force"], ["--resume"]):
+            assert main(["train", "--out", str(tmp_path / "w.pt"), "--crop", "32", "--batch", "1", "--pool", "2",
+                         "--validate-every", "0", "--workers", "0", "--steps", "1", "-q", *extra]) == 2
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and f"run folder {str(run)!r} is held by another process" in err[0], err
+            assert sorted(os.listdir(run)) == ["log.csv"] and not (tmp_path / "w.pt").exists()
+    finally:
+        os.close(held)

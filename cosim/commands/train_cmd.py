@@ -107,12 +107,11 @@ def _frame_files(folder: str) -> list:
 
 
 def run(args) -> int:
-    import shlex
-    import sys
+    import contextlib
     from pathlib import Path
 
+    from tespike.golden.atomic import folder_held
     from tespike.golden.config import PRESETS, load_config
-    from tespike.cosim.console import progress_wanted, report
     from tespike.golden.errors import InputError
     from tespike.golden.paths import check_distinct, check_output_dir, check_outputs
 
@@ -149,7 +148,7 @@ def run(args) -> int:
     if args.force and args.resume:
         raise InputError("--force starts a new run over an earlier one; --resume continues it: give one of them")
 
-    from tespike.recon.train import CHECKPOINT, RUN_FILES, TrainOptions, train
+    from tespike.recon.train import RUN_FILES, TrainOptions
 
     # --out and the run folder's files are never one of the files the run reads (or its folders hold)
     # (every file of the folders, the held-out panorama too; the shipped panoramas beside them)
@@ -175,6 +174,22 @@ def run(args) -> int:
     run_folder = out.with_suffix(".run")
     check_output_dir(run_folder, "--out's run folder")
     check_distinct(inputs, {f"the run folder's {name}": run_folder / name for name in RUN_FILES})
+    with contextlib.ExitStack() as held:      # (another run writing it: refused before its files are read)
+        if run_folder.is_dir():
+            held.enter_context(folder_held(run_folder, f"run folder {str(run_folder)!r}"))
+        return _checked_and_trained(args, options, out, run_folder, inputs)
+
+
+def _checked_and_trained(args, options, out, run_folder, inputs) -> int:
+    """The run folder's earlier run checked against --resume and --force (the folder held, where it
+    exists), then the run."""
+    import shlex
+    import sys
+    from pathlib import Path
+
+    from tespike.cosim.console import progress_wanted, report
+    from tespike.golden.errors import InputError
+    from tespike.recon.train import CHECKPOINT, RUN_FILES, train
     earlier = [name for name in RUN_FILES if (run_folder / name).exists()]
     if earlier and not args.resume and not args.force and not any(
             name in earlier for name in (CHECKPOINT, "best.pt")):

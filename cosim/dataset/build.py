@@ -39,7 +39,7 @@ from typing import Sequence
 
 import numpy as np
 
-from tespike.golden.atomic import NO_ROOM
+from tespike.golden.atomic import NO_ROOM, folder_held
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError, is_count
 from tespike.golden.paths import path_text
@@ -363,7 +363,6 @@ def writing_local_store(url: str):
     with an exclusive ``flock`` until the ``with`` ends: a second ``tespike dataset`` writing the same
     store is refused in one line. Unheld, two runs with other seeds had both ended with exit 0 on a
     store whose chunks mixed their streams, or one run had removed the store the other was writing."""
-    import fcntl
     url = os.fspath(url)
     if "://" in url:
         yield None
@@ -376,18 +375,10 @@ def writing_local_store(url: str):
     if not os.path.isdir(url):                         # (the store's own checks refuse it)
         yield None
         return
-    held = os.open(url, os.O_RDONLY | os.O_DIRECTORY)  # (a link to a folder: the folder it names is held)
-    try:
-        try:
-            fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise InputError(f"dataset store {url!r} is held by another process (another tespike dataset run "
-                             "writing it): wait for it to end, or write another store") from None
+    with folder_held(url, f"dataset store {url!r}"):
         if made is None and not os.listdir(url):
             made = "empty"
         yield made
-    finally:
-        os.close(held)
 
 
 #: The end of the note a failed build's error carries when its store keeps complete sequences.
