@@ -73,10 +73,22 @@ def check_input_file(path: str | os.PathLike, what: str = "input") -> Path:
     if not stat.S_ISREG(info.st_mode):
         raise InputError(f"{what} file {text!r} is {kind(info.st_mode)}, not a regular file")
     if info.st_size == 0:
-        raise InputError(f"{what} file {text!r} is empty (0 bytes)")
+        raise InputError(f"{what} file {text!r} " + ("is empty (0 bytes)" if _holds_nothing(text) else
+                         "is a pseudo-file its file system calls 0 bytes long (as /proc's are), "
+                         "not a file of data"))
     if not os.access(text, os.R_OK):
         raise InputError(f"{what} file {text!r}: permission denied")
     return Path(text)
+
+
+def _holds_nothing(text: str) -> bool:
+    """Whether a file ``stat`` calls 0 bytes long reads as nothing (a kernel pseudo-file, /proc's
+    or /sys's, is 0 bytes to ``stat`` and holds text)."""
+    try:
+        with open(text, "rb") as handle:
+            return not handle.read(1)
+    except OSError:
+        return True
 
 
 def resolve_output(path: str | os.PathLike) -> Path:

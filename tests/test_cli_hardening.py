@@ -386,6 +386,10 @@ def test_fifo_device_and_directory_inputs_are_refused_not_read(files):
         (golden_args(files, files / "o.npz", config="/dev/null"), ["/dev/null"]),
         (("reconstruct", "--stream", "/dev/null", "--method", "tfp", "--out", files / "o.npy"), ["/dev/null"]),
         (golden_args(files, files / "o.npz", stimulus=files), ["directory"]),
+        # a kernel pseudo-file is 0 bytes to stat and holds text: not called empty
+        (("simulate", "--config", "te", "--scene", "/proc/self/status", "--out", files / "o.npz"),
+         ["/proc/self/status", "pseudo-file", "not a file of data"]),
+        (golden_args(files, files / "o.npz", config="/proc/self/status"), ["/proc/self/status", "pseudo-file"]),
     ]
     for args, words in cases:
         refused_without_change(files, args, *words)
