@@ -277,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
         guard_imports()               # torch loads with the stops held (and, under ulimit -v, is tried in a child first)
         if whole_process:             # removes the run's temporaries should it be killed outright
             from tespike.golden.atomic import run_temporaries, start_janitor
-            start_janitor(report_faults=True)
+            start_janitor(report_faults=True, name=f"tespike {args.command}")
             run_temporaries()         # (the tools' and libraries' temporaries too: all in one held folder)
     import warnings
     code, ok = 1, False   # (what the finally below ends with, should _run itself be stopped)

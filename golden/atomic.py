@@ -44,16 +44,18 @@ NO_ROOM = (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)
 _FINISHED: list[str] = []
 
 
-def start_janitor(report_faults: bool = False) -> None:
+def start_janitor(report_faults: bool = False, name: str = "tespike") -> None:
     """Start the process that removes this process's temporaries should it be killed outright
     (:class:`_Janitor`; best effort, started anyway with the first temporary). ``report_faults``
     (a command's whole process): a fatal signal, e.g. the bus error of reading a memory-mapped
     input another program cut short, ends in the janitor's one line naming the file
     (:func:`held_mapping`) instead of the shell's bare "Bus error"; the fault handler's own
-    dump goes to the janitor, never to the terminal."""
+    dump goes to the janitor, never to the terminal. ``name`` starts that line, as the
+    command's own refusals start (``tespike simulate``)."""
     _Janitor.start()
     process = _Janitor._process
     if report_faults and process is not None:
+        _Janitor._line(b"n" + os.fsencode(name).hex().encode())
         import faulthandler
         faulthandler.enable(file=process.stdin, all_threads=False)
 
@@ -302,12 +304,14 @@ def finished_outputs(since: int = 0) -> list[str]:
 #: it to clean up.
 _JANITOR_CODE = r"""
 import os, shutil, signal, sys
-held, groups, mapped, fault = set(), set(), {}, None
+held, groups, mapped, fault, name = set(), set(), {}, None, "tespike"
 for line in sys.stdin.buffer:
     line = line.strip()
     try:                                              # (the fault handler's dump shares the pipe)
         if line.startswith(b"Fatal Python error: "):  # its first line (report_faults)
             fault = fault or line[20:].decode(errors="replace").strip(": ")
+        elif line[:1] == b"n":                        # (the command, as its refusals name it)
+            name = os.fsdecode(bytes.fromhex(line[1:].decode()))
         elif line[:1] == b"m":
             path, _, rest = line[1:].partition(b" ")
             size, _, changed = rest.partition(b" ")
@@ -345,13 +349,13 @@ if fault:
     cut = [path for path, (was, _) in mapped.items() if now(path)[0] < was]
     changed = [path for path, (_, was) in mapped.items() if was != -1 and now(path)[1] not in (-1, was)]
     if cut:
-        text = (f"tespike: error: input file {os.fsdecode(cut[0])!r} was cut short while it was read "
+        text = (f"{name}: error: input file {os.fsdecode(cut[0])!r} was cut short while it was read "
                 f"({fault}: it changed under the command; run again on a file left alone)")
     elif changed:               # (cut short, then written whole again before this looked)
-        text = (f"tespike: error: input file {os.fsdecode(changed[0])!r} changed while it was read "
+        text = (f"{name}: error: input file {os.fsdecode(changed[0])!r} changed while it was read "
                 f"({fault}: another program wrote it; run again on a file left alone)")
     else:
-        text = f"tespike: error: the process ended on a fatal signal ({fault})"
+        text = f"{name}: error: the process ended on a fatal signal ({fault})"
         try:                    # (the command's own limits, inherited: a library may die of one in C)
             import resource
             limit = resource.getrlimit(resource.RLIMIT_AS)[0]

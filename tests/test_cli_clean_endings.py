@@ -697,6 +697,7 @@ sys.exit(main())
 """)
     assert result.returncode in (-signal.SIGBUS, 128 + signal.SIGBUS), result
     assert_refused(result, f"input file {str(target)!r} was cut short while it was read", "Bus error")
+    assert result.stderr.startswith(f"tespike {command}: error: "), result.stderr   # (as its refusals start)
     assert sorted(os.listdir(tmp_path)) == sorted(["I.npy"] + (["S.npz"] if command == "reconstruct" else []))
 
 
