@@ -243,9 +243,15 @@ def run_temporaries(prefix: str = "tespike-run-") -> Path | None:
     _Janitor.start()
     if _Janitor._process is None or _Janitor._owner != os.getpid():
         return None
+    _remove_stale_run_folders(prefix)
     try:
-        with stops_held():              # (made and held as one step)
-            path = Path(tempfile.mkdtemp(prefix=prefix))
+        with stops_held():              # (made, locked and held as one step)
+            for _ in range(8):          # (another run's sweep may take a folder not yet locked)
+                path = Path(tempfile.mkdtemp(prefix=prefix))
+                if _lock_run_folder(path):
+                    break
+            else:
+                return None
             _Janitor.hold(path)
     except OSError:
         return None
@@ -258,6 +264,60 @@ def run_temporaries(prefix: str = "tespike-run-") -> Path | None:
     tempfile.tempdir = str(path)
     os.environ["TMPDIR"] = str(path)
     return path
+
+
+#: Descriptors of this process's run folders, each under its ``flock`` for the process's life.
+_RUN_FOLDER_LOCKS: list[int] = []
+
+
+def _lock_run_folder(path: Path) -> bool:
+    """Lock this process's new run folder (a shared ``flock`` on it, kept open until the process
+    ends, however it ends): the mark by which a later run tells a folder in use from one a killed
+    run left (:func:`_remove_stale_run_folders`), across process namespaces, where a pid would not.
+    False where another run's sweep removed it before the lock was taken (made again)."""
+    import fcntl
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH)  # (waits out a sweep holding it)
+        if os.fstat(fd).st_nlink == 0 or os.stat(path).st_ino != os.fstat(fd).st_ino:
+            os.close(fd)
+            return False
+    except OSError:
+        os.close(fd)
+        return False
+    _RUN_FOLDER_LOCKS.append(fd)
+    return True
+
+
+def _remove_stale_run_folders(prefix: str) -> None:
+    """Remove the run folders (``prefix`` + 8 characters, in the temporary directory) that no live
+    process holds: those of runs killed outright together with their janitor (a container's or the
+    out-of-memory killer's SIGKILL of every process), which nothing else would remove. A folder is
+    stale when its exclusive ``flock`` can be taken: every process of its run is gone. Only this
+    user's folders, never a link."""
+    import fcntl
+    pattern = re.compile(re.escape(prefix) + r"[A-Za-z0-9_]{8}")
+    try:
+        entries = [e for e in os.scandir(tempfile.gettempdir()) if e.name.startswith(prefix)]
+    except OSError:
+        return
+    for entry in entries:
+        try:
+            if (not pattern.fullmatch(entry.name) or not entry.is_dir(follow_symlinks=False)
+                    or entry.stat(follow_symlinks=False).st_uid != os.getuid()):
+                continue
+            fd = os.open(entry.path, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:                     # (held: its run is alive)
+            os.close(fd)
+            continue
+        try:
+            shutil.rmtree(entry.path, ignore_errors=True)
+        finally:
+            os.close(fd)
 
 
 def _remove_held(path: str | Path) -> None:

@@ -24,7 +24,7 @@ import pytest
 from tespike.golden.config import SensorConfig
 from tespike.golden.errors import InputError
 from tespike.recon.scenes.hdr_io import write_hdr
-from tests.cli import ROOT, assert_refused, run_tespike
+from tests.cli import ROOT, _checkout_env, assert_refused, run_tespike
 from tests.processes import interruptible
 
 TINY = SensorConfig(b1=1, b2=1, threshold=3, acc_bits=3)          # L = 2
@@ -249,6 +249,57 @@ def test_sigkill_leaves_no_temporary(files, group):
     process.communicate()
     assert _gone(files), _parts(files)
     assert set(os.listdir(files)) == before | {"long.npy"}
+
+
+def test_a_run_folder_left_by_a_kill_of_the_run_and_its_janitor_goes_with_the_next_run(tmp_path):
+    """Killed outright together with its janitor (a container's or the out-of-memory killer's
+    SIGKILL of every process), a run left its ``$TMPDIR/tespike-run-XXXXXXXX`` folder, which no later
+    run removed: they piled up. The next run removes every such folder no live run holds (flock), and
+    leaves a held one, another user's names, and links alone."""
+    temporary = tmp_path / "t"
+    temporary.mkdir()
+    env = {"TMPDIR": str(temporary)}
+    scene = tmp_path / "I.npy"
+    np.save(scene, np.full((2, 4, 4), 0.1, np.float32))
+    command = ["simulate", "--config", "te", "--scene", scene, "--seed", "1", "--out", tmp_path / "S.npz", "-q"]
+    process = subprocess.Popen([sys.executable, "-c", "import sys, time\n"
+                                "from tespike.golden.atomic import _Janitor, run_temporaries\n"
+                                "print(run_temporaries(), flush=True)\n"
+                                "print(_Janitor._process.pid, flush=True)\ntime.sleep(60)"],
+                               stdout=subprocess.PIPE, text=True, env={**_checkout_env(), **env})
+    try:
+        live = Path(process.stdout.readline().strip())
+        janitor = int(process.stdout.readline())
+        assert live.parent == temporary and live.name.startswith("tespike-run-"), live
+        (live / "work").write_text("in use")
+        stale = temporary / "tespike-run-ab_cd123"
+        (stale / "abc-folder").mkdir(parents=True)
+        (stale / "abc-folder" / "x").write_text("left")
+        (temporary / "tespike-run-other-name-kept").mkdir()
+        (temporary / "elsewhere").mkdir()
+        (temporary / "tespike-run-linklink").symlink_to(temporary / "elsewhere")
+        process.kill()                                  # the process and its janitor, both
+        os.kill(janitor, signal.SIGKILL)
+        process.wait()
+        time.sleep(0.2)
+        assert live.exists() and stale.exists()
+        (temporary / "tespike-run-held1234").mkdir()   # a live run's (held below)
+        holder = subprocess.Popen([sys.executable, "-c", "import fcntl, os, sys, time\n"
+                                   f"fd = os.open({str(temporary / 'tespike-run-held1234')!r}, os.O_RDONLY)\n"
+                                   "fcntl.flock(fd, fcntl.LOCK_SH); print(1, flush=True); time.sleep(60)"],
+                                  stdout=subprocess.PIPE, text=True)
+        try:
+            holder.stdout.readline()
+            done = run_tespike(*command, env=env)
+            assert done.returncode == 0, done.stderr
+        finally:
+            holder.kill()
+            holder.wait()
+    finally:
+        process.kill()
+        process.wait()
+    assert sorted(os.listdir(temporary)) == ["elsewhere", "tespike-run-held1234", "tespike-run-linklink",
+                                             "tespike-run-other-name-kept"]
 
 
 def test_sigkill_while_a_results_folder_is_built_keeps_the_previous_one(tmp_path):
