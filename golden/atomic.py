@@ -685,12 +685,14 @@ def raise_lost_stop() -> None:
 
 
 @contextlib.contextmanager
-def stops_held():
+def stops_held(again: bool = True):
     """Ctrl-C, SIGTERM and SIGHUP held while an output is renamed into place and recorded as
     written, then raised again through the handlers they would have met: a command stopped there
     reports the output as written (:func:`finished_outputs`), never a replaced file it does not
     name. A stop dropped earlier (:func:`raise_lost_stop`) is raised first: nothing is renamed. Only the
-    main thread can change the handlers (elsewhere nothing is held)."""
+    main thread can change the handlers (elsewhere nothing is held). ``again=False``: the stops held
+    are dropped, for work a stop being handled does on its way out (the checkpoint an interrupted
+    training saves: a second Ctrl-C, pressed while it was written, had lost the run)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -704,7 +706,7 @@ def stops_held():
     finally:
         for number, handler in previous.items():
             signal.signal(number, handler)
-        for number in held:
+        for number in held if again else ():
             signal.raise_signal(number)
 
 

@@ -676,7 +676,7 @@ class TrainingRun:
                 self.keep_if_best()
         except BaseException as exc:
             if not isinstance(exc, Exception) and self.step > first_step and self.work.is_dir():   # interrupted
-                with contextlib.suppress(Exception):
+                with contextlib.suppress(Exception), stops_held(again=False):   # (a second Ctrl-C waits)
                     _restore_random_states(self.generator, boundary)   # (a step cut short drew the next batch)
                     self._write_checkpoint()
                     exc.add_note(f"at step {self.step}: checkpoint {str(self.checkpoint)!r} saved "

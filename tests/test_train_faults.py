@@ -165,6 +165,31 @@ def test_a_stop_while_the_best_is_kept_leaves_a_run_that_resumes(tmp_path, monke
     assert log_steps(tmp_path / "w.run" / "validation.csv") == [1, 2, 3]
 
 
+def test_a_second_ctrl_c_while_the_checkpoint_is_saved_keeps_the_run(tmp_path, monkeypatch):
+    """Two quick Ctrl-Cs: the second stopped the checkpoint the first one was saving, and the run folder
+    (its log and its steps) was removed as one that made nothing, the line saying only "interrupted"."""
+    import tespike.recon.train as trainer
+    real_step, real_save = trainer.TrainingRun.one_step, trainer._save_checkpoint
+
+    def first_stop(run, first_step):
+        if run.step == 2:
+            raise KeyboardInterrupt
+        return real_step(run, first_step)
+
+    def second_stop(*args, **kwargs):                   # pressed again while the checkpoint is written
+        signal.raise_signal(signal.SIGINT)
+        return real_save(*args, **kwargs)
+    monkeypatch.setattr(trainer.TrainingRun, "one_step", first_stop)
+    monkeypatch.setattr(trainer, "_save_checkpoint", second_stop)
+    with pytest.raises(KeyboardInterrupt) as stopped:
+        train(options(steps=4), tmp_path / "w.pt")
+    monkeypatch.undo()
+    assert any("at step 2: checkpoint" in note for note in getattr(stopped.value, "__notes__", [])), stopped.value
+    assert (tmp_path / "w.run" / "checkpoint.pt").is_file()
+    train(options(steps=4), tmp_path / "w.pt", resume=True)
+    assert log_steps(tmp_path / "w.run" / "log.csv") == [1, 2, 3, 4]
+
+
 def test_a_run_folder_removed_during_training_keeps_the_weights(tmp_path, monkeypatch):
     import tespike.recon.train as trainer
     draw, calls = trainer.draw_batch, []
