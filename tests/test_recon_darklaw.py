@@ -119,12 +119,19 @@ def test_file_round_trip_old_format_and_refusals(tmp_path):
            "tail3.npz": ({"dark_tail": np.complex128(1)}, "dark_tail must be a finite number"),
            "tail4.npz": ({"dark_tail": np.array("abc")}, "dark_tail must be a finite number"),
            "nolaw.npz": ({"format": np.array("tespike-calibration-2"), "dark_law": None}, "lacks dark_law"),
-           "fmt.npz": ({"format": np.array("tespike-calibration-9")}, "has format")}
+           "fmt.npz": ({"format": np.array("tespike-calibration-9")}, "has format"),
+           "fmt2.npz": ({"format": np.array([b"x"])}, "'format' must be a 0-d string"),
+           "est.npz": ({"estimator": np.array(b"\xff")}, "'estimator' holds bytes that are not UTF-8")}
     for name, (change, message) in bad.items():
         written = {k: v for k, v in {**values, **change}.items() if v is not None}
         np.savez(tmp_path / name, **written)
         with pytest.raises(InputError, match=message):
             load_calibration(tmp_path / name)
+    # text stored as bytes reads as UTF-8, as a 'config' member's does (it had been refused with
+    # numpy's repr of the bytes as the format)
+    np.savez(tmp_path / "bytes.npz", **{**values, "format": np.array(b"tespike-calibration-2"),
+                                        "estimator": np.array(str(values["estimator"]).encode())})
+    assert np.array_equal(load_calibration(tmp_path / "bytes.npz").dark, c.dark)
 
 
 def test_a_learned_method_sees_the_law_input_and_without_dark_charge_the_mean_rate_input():
