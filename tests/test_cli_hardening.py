@@ -522,6 +522,9 @@ def test_corrupt_stream_files(files, kind):
     (("simulate", "--seed", " 7"), ["--seed", "invalid int value"]),
     (("prove", "--depth", "\u0661"), ["--depth", "invalid int value"]),            # an Arabic-Indic 1
     (("scene", "--peak", "1_0.5"), ["--peak", "invalid float value: '1_0.5'"]),
+    (("scene", "--peak", "1e400"), ["--peak", "invalid float value: '1e400'"]),     # (had been "--peak inf")
+    (("calibrate", "--dark", "d.npz", "--flat", "f.npz", "--flat-light=-1e999", "--out", "c.npz"),
+     ["--flat-light", "invalid float value: '-1e999'"]),
     (("nonsense",), ["nonsense", "--help"]),
     (("simulate", "--config", "ml", "--config=te", "--scene", "i.npy", "--out", "o.npz"),
      ["--config", "more than once"]),

@@ -220,10 +220,16 @@ def decimal(text: str) -> int:
 
 def number(text: str) -> float:
     """A number as typed on a command line: what Python's ``float`` reads, less the digit
-    separators (``1_0.5``), surrounding spaces and other scripts' digits it also reads."""
+    separators (``1_0.5``), surrounding spaces and other scripts' digits it also reads, and
+    numbers past the largest float (``1e400``, which it reads as inf: the refusal then named an
+    inf the user never typed)."""
+    import math
     if "_" in text or text != text.strip() or not text.isascii():
         raise ValueError(text)
-    return float(text)
+    value = float(text)
+    if math.isinf(value) and "inf" not in text.lower():
+        raise ValueError(text)
+    return value
 
 
 def frame_range(spec, count: int) -> range:
