@@ -248,8 +248,13 @@ def run_temporaries(prefix: str = "tespike-run-") -> Path | None:
         with stops_held():              # (made, locked and held as one step)
             for _ in range(8):          # (another run's sweep may take a folder not yet locked)
                 path = Path(tempfile.mkdtemp(prefix=prefix))
-                if _lock_run_folder(path):
-                    break
+                try:
+                    if _lock_run_folder(path):
+                        break
+                except OSError:         # (out of file handles: no folder rather than one unheld)
+                    with contextlib.suppress(OSError):
+                        os.rmdir(path)
+                    return None
             else:
                 return None
             _Janitor.hold(path)
@@ -276,7 +281,7 @@ def _lock_run_folder(path: Path) -> bool:
     run left (:func:`_remove_stale_run_folders`), across process namespaces, where a pid would not.
     False where another run's sweep removed it before the lock was taken (made again)."""
     import fcntl
-    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)    # (OSError: the caller's)
     try:
         fcntl.flock(fd, fcntl.LOCK_SH)  # (waits out a sweep holding it)
         if os.fstat(fd).st_nlink == 0 or os.stat(path).st_ino != os.fstat(fd).st_ino:

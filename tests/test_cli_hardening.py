@@ -302,6 +302,19 @@ def test_a_run_folder_left_by_a_kill_of_the_run_and_its_janitor_goes_with_the_ne
                                              "tespike-run-other-name-kept"]
 
 
+def test_a_run_folder_that_cannot_be_locked_is_not_left_behind(tmp_path):
+    """Out of file handles between making the run folder and locking it: the folder is removed and
+    the run goes on without one (an unlocked folder would be taken by another run's sweep)."""
+    done = subprocess.run([sys.executable, "-c", "import errno, os\n"
+                           "from tespike.golden import atomic\n"
+                           "def starved(path):\n    raise OSError(errno.EMFILE, 'Too many open files')\n"
+                           "atomic._lock_run_folder = starved\n"
+                           "print(atomic.run_temporaries())"],
+                          capture_output=True, text=True, env={**_checkout_env(), "TMPDIR": str(tmp_path)})
+    assert done.returncode == 0 and done.stdout.strip() == "None", done
+    assert os.listdir(tmp_path) == []
+
+
 def test_sigkill_while_a_results_folder_is_built_keeps_the_previous_one(tmp_path):
     """``atomic_folder`` (evaluate, demo) killed outright mid-build: the previous results stay
     whole and the half-built hidden folder goes."""
