@@ -518,17 +518,24 @@ def load_stream(path: str | Path, *, memory_map: bool = False) -> tuple[np.ndarr
     return words, config
 
 
-def config_member(value: np.ndarray, what: str) -> SensorConfig:
-    """The configuration an .npz file holds as its ``config`` member (a 0-d string of JSON; bytes are
-    read as UTF-8), or one line starting with ``what`` (the file)."""
+def text_member(value: np.ndarray, what: str, key: str) -> str:
+    """The text an .npz file holds as its member ``key`` (a 0-d string; bytes are read as UTF-8), or
+    one line starting with ``what`` (the file)."""
     if value.ndim != 0 or value.dtype.kind not in "US":
-        raise InputError(f"{what}: 'config' must be a 0-d string, not {value.dtype} {value.shape}")
+        raise InputError(f"{what}: {key!r} must be a 0-d string, not {value.dtype} {value.shape}")
     text = value.item()
     if isinstance(text, bytes):
         try:
             text = text.decode("utf-8")
         except UnicodeDecodeError:
-            raise InputError(f"{what}: 'config' holds bytes that are not UTF-8 text") from None
+            raise InputError(f"{what}: {key!r} holds bytes that are not UTF-8 text") from None
+    return text
+
+
+def config_member(value: np.ndarray, what: str) -> SensorConfig:
+    """The configuration an .npz file holds as its ``config`` member (a 0-d string of JSON; bytes are
+    read as UTF-8), or one line starting with ``what`` (the file)."""
+    text = text_member(value, what, "config")
     try:
         return SensorConfig.from_json(text, whole=True)
     except TespikeError as exc:

@@ -270,22 +270,9 @@ def save_calibration(path: str | Path, calibration: Calibration) -> None:
                      format=np.array(FORMAT))
 
 
-def _text_member(value: np.ndarray, key: str, shown: str) -> str:
-    """A calibration file's 0-d text member ``key`` (bytes read as UTF-8, as the 'config' member's are)."""
-    if value.ndim != 0 or value.dtype.kind not in "US":
-        raise InputError(f"calibration file {shown!r}: {key!r} must be a 0-d string, not {value.dtype} {value.shape}")
-    text = value.item()
-    if isinstance(text, bytes):
-        try:
-            text = text.decode("utf-8")
-        except UnicodeDecodeError:
-            raise InputError(f"calibration file {shown!r}: {key!r} holds bytes that are not UTF-8 text") from None
-    return text
-
-
 def load_calibration(path: str | Path) -> Calibration:
     """Read ``C.npz``, or one line naming the file and what is wrong."""
-    from tespike.golden.io import config_member, open_npz
+    from tespike.golden.io import config_member, open_npz, text_member
     shown = str(path)
     with open_npz(path, "calibration", "written by 'tespike calibrate'") as npz:
         keys = ("dark", "gain", "config", "dark_readouts", "flat_readouts", "flat_light", "estimator",
@@ -296,7 +283,7 @@ def load_calibration(path: str | Path) -> Calibration:
                              "(write it with 'tespike calibrate')")
         values = {k: npz[k] for k in keys}
         for key in ("format", "estimator"):             # text, bytes read as UTF-8 (as 'config' is)
-            values[key] = _text_member(values[key], key, shown)
+            values[key] = text_member(values[key], f"calibration file {shown!r}", key)
         version = values["format"]
         if version not in (FORMAT, FORMAT_MEAN_ONLY):
             raise InputError(f"calibration file {shown!r} has format {version!r}, not {FORMAT!r} "
