@@ -759,6 +759,22 @@ def folder_holds_files(path: str | Path) -> bool:
         return False
 
 
+def _check_same_folder(tmp: Path, made: int | None, shown: str) -> None:
+    """Refuse to move ``tmp`` into place unless it is still the folder made for the run (``made``: a
+    descriptor of it, open since; None: not checked): one removed during the run (with the folder
+    holding it) and made again by a writer's ``mkdir(parents=True)`` held only the files written
+    after, and had been moved into place, the command exiting 0."""
+    if made is None:
+        return
+    try:
+        now, then = os.stat(tmp), os.fstat(made)
+    except OSError:
+        now = then = None
+    if now is None or then.st_nlink == 0 or (now.st_dev, now.st_ino) != (then.st_dev, then.st_ino):
+        raise InputError(f"cannot write {shown!r}: the folder it was being built in "
+                         f"({str(tmp.parent)!r}) was removed during the run; nothing written")
+
+
 @contextlib.contextmanager
 def atomic_folder(path: str | Path, replace: bool = True) -> Iterator[Path]:
     """Yield a hidden temporary folder to fill; on success it becomes ``path`` whole, else it is removed.
@@ -779,7 +795,7 @@ def atomic_folder(path: str | Path, replace: bool = True) -> Iterator[Path]:
     target = Path(os.path.realpath(shown))
     stem = target.name[:_PART_NAME]
     _remove_stale_parts(target.parent, stem, folders=True)
-    tmp, inside = None, None
+    tmp, inside, made = None, None, None
     mark = len(_FINISHED)          # files written inside the temporary are not outputs yet
 
     def reworded(text: str) -> str:
@@ -794,9 +810,14 @@ def atomic_folder(path: str | Path, replace: bool = True) -> Iterator[Path]:
             os.chmod(tmp, 0o777 & ~_umask())
         except OSError as exc:
             raise _write_error(shown, exc) from None
+        try:                            # (held open, its inode cannot be another folder's while the run lasts)
+            made = os.open(tmp, os.O_RDONLY | os.O_DIRECTORY)
+        except OSError:                 # (out of file handles: not checked)
+            made = None
         try:
             yield tmp
             check_inputs_unchanged()
+            _check_same_folder(tmp, made, shown)
             with stops_held():                    # (the two renames below are one step to a stop)
                 if not replace and folder_holds_files(target):
                     raise InputError(f"folder {shown!r} was filled by another run while this one ran; it is kept: "
@@ -824,5 +845,7 @@ def atomic_folder(path: str | Path, replace: bool = True) -> Iterator[Path]:
     finally:
         if _FINISHED[mark:] != [shown]:
             del _FINISHED[mark:]
+        if made is not None:
+            os.close(made)
         if tmp is not None:
             _remove_held(tmp)

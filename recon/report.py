@@ -371,7 +371,10 @@ def write_outputs(evaluation: Evaluation, out: str | Path, *, plot: bool = True)
     out = Path(path_text(out, "results folder"))
     if out.exists() and not out.is_dir():                # (mkdir's FileExistsError)
         raise InputError(f"results folder {str(out)!r} is a file, not a folder")
-    out.mkdir(parents=True, exist_ok=True)
+    if not out.parent.is_dir():                          # (never made: a folder removed during a run, and the
+        raise InputError(f"results folder {str(out)!r}: its folder {str(out.parent)!r} does not exist "
+                         "(removed during the run?)")     # one holding it, had been made again, half-filled)
+    out.mkdir(exist_ok=True)
     (out / "strips").mkdir(exist_ok=True)
     paths = {"table.md": out / "table.md", "table.csv": out / "table.csv", "results.csv": out / "results.csv"}
     write_text(paths["table.md"], table_markdown(evaluation))

@@ -75,3 +75,37 @@ def test_a_stop_as_a_temporary_is_made_leaves_none_behind(tmp_path, monkeypatch)
     finally:
         signal.signal(signal.SIGINT, previous)
     assert os.listdir(tmp_path) == []
+
+
+def test_a_results_folder_removed_during_the_run_is_not_moved_into_place_half_filled(tmp_path):
+    """``demo --out X/DM`` with ``X`` removed mid-run: a writer's ``mkdir(parents=True)`` made the hidden
+    folder again, the files written after went into it, and it was moved into place, exit 0."""
+    import shutil
+
+    import pytest
+
+    from tespike.golden.atomic import atomic_folder
+    from tespike.golden.errors import InputError
+    holder = tmp_path / "X"
+    holder.mkdir()
+    with pytest.raises(InputError, match=r"cannot write '.*X/DM': the folder it was being built in "
+                                         r"\('.*X'\) was removed during the run; nothing written$"):
+        with atomic_folder(holder / "DM") as tmp:
+            (tmp / "first.txt").write_text("1")
+            shutil.rmtree(holder)                   # (another program, mid-run)
+            tmp.mkdir(parents=True)                 # (a writer that makes its folder)
+            (tmp / "second.txt").write_text("2")
+    assert not (holder / "DM").exists() and os.listdir(holder) == []
+
+
+def test_write_outputs_makes_no_folder_whose_holder_is_gone(tmp_path):
+    """write_outputs made its folder with ``parents=True``: a results folder whose holder was removed
+    during the run came back, holding only the files written after."""
+    import pytest
+
+    from tespike.golden.errors import InputError
+    from tespike.recon.report import write_outputs
+    from tests.test_recon_evaluate import _hand_made
+    with pytest.raises(InputError, match=r"its folder '.*gone' does not exist"):
+        write_outputs(_hand_made(), tmp_path / "gone" / "eval")
+    assert not (tmp_path / "gone").exists()
