@@ -458,6 +458,16 @@ def test_a_store_removed_while_it_is_read_is_named_gone(tmp_path, small_store):
     shutil.rmtree(store / "sun" / "streams" / "te")
     with pytest.raises(InputError, match=r"'sun/streams/te' is gone \(removed while the run read it"):
         opened.words("sun", "te")
+    # as a Dask worker sends it back: pickled with its context, which Zarr's ArrayNotFoundError (not
+    # unpickled) had turned into a bare Exception(repr), a traceback of evaluate --store --workers 2
+    from distributed.core import error_message
+    from distributed.protocol import pickle
+
+    from tespike.recon.dataset.store import open_array
+    with pytest.raises(InputError, match=r"'sun/streams/te' is gone \(removed while the run read it") as gone:
+        open_array(str(store), "sun/streams/te")
+    sent = pickle.loads(error_message(gone.value)["exception"].data)
+    assert type(sent) is InputError and str(sent) == str(gone.value)
     from tespike.recon.dataset.store import mark_complete
     with pytest.raises(InputError, match=r"'sun/streams/te' is gone \(removed while the run read it"):
         mark_complete(str(store), "sun/streams/te")      # (the last write of a part: Zarr's traceback)

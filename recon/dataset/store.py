@@ -504,11 +504,25 @@ def reading(url: str, path: str = ""):
             gone = _gone(str(url), path)
             if gone is None:
                 raise
-            raise InputError(gone) from None
-        cause = ("its CRC-32C does not match its bytes" if "checksum do not match" in str(exc)   # (Zarr shows
-                 else one_line(exc, 160))                                                      # both as bytes)
-        raise InputError(f"dataset store file {where!r} is damaged ({cause}); remove its sequence's "
-                         "folder and run tespike dataset again to rebuild it") from None
+            refusal = InputError(gone)
+        else:
+            cause = ("its CRC-32C does not match its bytes" if "checksum do not match" in str(exc)   # (Zarr shows
+                     else one_line(exc, 160))                                                      # both as bytes)
+            refusal = InputError(f"dataset store file {where!r} is damaged ({cause}); remove its sequence's "
+                                 "folder and run tespike dataset again to rebuild it")
+    else:
+        return
+    _raise_unchained(refusal)
+
+
+def _raise_unchained(error: BaseException):
+    """Raise ``error`` with no exception chained to it. A Dask worker sends an exception back pickled
+    with its context, and Zarr's errors do not unpickle: a refusal raised while one was handled (even
+    ``from None``, which keeps the context) came back as a bare ``Exception(repr)``, a traceback."""
+    try:
+        raise error
+    finally:
+        error.__context__ = error.__cause__ = None
 
 
 def _starved(exc: BaseException) -> bool:
