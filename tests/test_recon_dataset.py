@@ -233,6 +233,30 @@ def test_a_store_another_run_writes_is_refused_and_left_alone(tmp_path, capsys):
     assert code == 0, err
 
 
+def test_a_store_removed_and_made_again_during_the_run_is_no_success(tmp_path, capsys, monkeypatch):
+    """The store removed early in a run: Zarr's next writes made its folders again, under a root without
+    the dataset's attributes, and the run ended with exit 0 on a store every command then refused."""
+    import shutil
+
+    import zarr
+
+    from tespike.recon.dataset.store import DatasetStore
+    real = DatasetStore.create_or_resume.__func__
+
+    def removed_meanwhile(cls, url, **kwargs):
+        store = real(cls, url, **kwargs)
+        shutil.rmtree(url)                                # (another program, early in the run)
+        zarr.open_group(url, mode="w")                    # (a write making the group's folders again)
+        return store
+    monkeypatch.setattr(DatasetStore, "create_or_resume", classmethod(removed_meanwhile))
+    store = tmp_path / "s.zarr"
+    code, out, err = run_here(capsys, "dataset", "--scene", "lights", "--frames", 4, "--height", 16, "--width", 20,
+                              "--config", "te", "--out", store)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1, err
+    assert f"dataset store {str(store)!r} was removed during the run" in lines[0], err
+
+
 def refused(capsys, *args_and_word):
     *args, word = args_and_word
     code, out, err = run_here(capsys, *args)

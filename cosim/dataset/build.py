@@ -378,7 +378,17 @@ def writing_local_store(url: str):
     with folder_held(url, f"dataset store {url!r}"):
         if made is None and not os.listdir(url):
             made = "empty"
+        held = os.stat(url)                             # (held open: its inode is no other folder's meanwhile)
         yield made
+        try:
+            now = os.stat(url)
+        except OSError:
+            now = None
+        if now is None or (now.st_dev, now.st_ino) != (held.st_dev, held.st_ino):
+            # removed during the run and made again by a write (Zarr makes a missing group's folders):
+            # the store held a root without its dataset attributes, which every command refused, exit 0
+            raise InputError(f"dataset store {url!r} was removed during the run; what was written after "
+                             "is not a dataset store: remove it and run again")
 
 
 #: The end of the note a failed build's error carries when its store keeps complete sequences.
