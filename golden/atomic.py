@@ -251,7 +251,7 @@ def run_temporaries(prefix: str = "tespike-run-") -> Path | None:
                 try:
                     if _lock_run_folder(path):
                         break
-                except OSError:         # (out of file handles: no folder rather than one unheld)
+                except OSError:         # (out of file handles, no flock there: no folder rather than one unheld)
                     with contextlib.suppress(OSError):
                         os.rmdir(path)
                     return None
@@ -281,13 +281,18 @@ def _lock_run_folder(path: Path) -> bool:
     run left (:func:`_remove_stale_run_folders`), across process namespaces, where a pid would not.
     False where another run's sweep removed it before the lock was taken (made again)."""
     import fcntl
-    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)    # (OSError: the caller's)
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)    # (OSError, here or from flock: the caller's)
     try:
         fcntl.flock(fd, fcntl.LOCK_SH)  # (waits out a sweep holding it)
-        if os.fstat(fd).st_nlink == 0 or os.stat(path).st_ino != os.fstat(fd).st_ino:
-            os.close(fd)
-            return False
-    except OSError:
+        held = os.fstat(fd)
+        try:
+            same = held.st_nlink > 0 and os.stat(path).st_ino == held.st_ino
+        except FileNotFoundError:
+            same = False
+    except BaseException:
+        os.close(fd)
+        raise
+    if not same:
         os.close(fd)
         return False
     _RUN_FOLDER_LOCKS.append(fd)

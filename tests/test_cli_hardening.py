@@ -302,13 +302,17 @@ def test_a_run_folder_left_by_a_kill_of_the_run_and_its_janitor_goes_with_the_ne
                                              "tespike-run-other-name-kept"]
 
 
-def test_a_run_folder_that_cannot_be_locked_is_not_left_behind(tmp_path):
-    """Out of file handles between making the run folder and locking it: the folder is removed and
-    the run goes on without one (an unlocked folder would be taken by another run's sweep)."""
+@pytest.mark.parametrize("fault", ["handles", "no flock"])
+def test_a_run_folder_that_cannot_be_locked_is_not_left_behind(tmp_path, fault):
+    """Out of file handles between making the run folder and locking it, or on a file system without
+    ``flock``: the folder is removed and the run goes on without one (an unlocked folder would be
+    taken by another run's sweep; a failed lock had made eight folders and left them)."""
+    starve = ("def starved(path):\n    raise OSError(errno.EMFILE, 'Too many open files')\n"
+              "atomic._lock_run_folder = starved\n") if fault == "handles" else (
+              "import fcntl\ndef no_lock(fd, how):\n    raise OSError(errno.ENOLCK, 'No locks available')\n"
+              "fcntl.flock = no_lock\n")
     done = subprocess.run([sys.executable, "-c", "import errno, os\n"
-                           "from tespike.golden import atomic\n"
-                           "def starved(path):\n    raise OSError(errno.EMFILE, 'Too many open files')\n"
-                           "atomic._lock_run_folder = starved\n"
+                           "from tespike.golden import atomic\n" + starve +
                            "print(atomic.run_temporaries())"],
                           capture_output=True, text=True, env={**_checkout_env(), "TMPDIR": str(tmp_path)})
     assert done.returncode == 0 and done.stdout.strip() == "None", done
