@@ -284,15 +284,10 @@ def _lock_run_folder(path: Path) -> bool:
     fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)    # (OSError, here or from flock: the caller's)
     try:
         fcntl.flock(fd, fcntl.LOCK_SH)  # (waits out a sweep holding it)
-        held = os.fstat(fd)
-        try:
-            same = held.st_nlink > 0 and os.stat(path).st_ino == held.st_ino
-        except FileNotFoundError:
-            same = False
     except BaseException:
         os.close(fd)
         raise
-    if not same:
+    if not _still_named(path, fd):
         os.close(fd)
         return False
     _RUN_FOLDER_LOCKS.append(fd)
@@ -764,18 +759,22 @@ def folder_holds_files(path: str | Path) -> bool:
         return False
 
 
+def _still_named(path: str | Path, fd: int) -> bool:
+    """Whether ``path`` still names the folder open as ``fd`` (held open, its inode is no other
+    folder's meanwhile: one removed and made again at ``path`` is another)."""
+    try:
+        held, now = os.fstat(fd), os.stat(path)
+    except OSError:
+        return False
+    return held.st_nlink > 0 and (now.st_dev, now.st_ino) == (held.st_dev, held.st_ino)
+
+
 def _check_same_folder(tmp: Path, made: int | None, shown: str) -> None:
     """Refuse to move ``tmp`` into place unless it is still the folder made for the run (``made``: a
     descriptor of it, open since; None: not checked): one removed during the run (with the folder
     holding it) and made again by a writer's ``mkdir(parents=True)`` held only the files written
     after, and had been moved into place, the command exiting 0."""
-    if made is None:
-        return
-    try:
-        now, then = os.stat(tmp), os.fstat(made)
-    except OSError:
-        now = then = None
-    if now is None or then.st_nlink == 0 or (now.st_dev, now.st_ino) != (then.st_dev, then.st_ino):
+    if made is not None and not _still_named(tmp, made):
         raise InputError(f"cannot write {shown!r}: the folder it was being built in "
                          f"({str(tmp.parent)!r}) was removed during the run; nothing written")
 
