@@ -236,7 +236,10 @@ def law_input(words: np.ndarray, config: SensorConfig, calibration, window: int 
     readouts: that share of the readout loses the charge itself (:func:`tespike.recon.darklaw.tail_free_light`),
     where the mean rate left most of it for the method to read as light. Exactly
     the mean-rate input where the law has no tail. Held-out eq. 13 PSNR-mu +0.7 to +1.3 dB, every eq.
-    12 level within 0.06 dB (docs/reconstruction.md).
+    12 level within 0.06 dB (docs/reconstruction.md). The other readouts still lose the whole mean
+    rate, which counts the tail they do not hold: with eq. 13 they read 90 e- low, which costs the
+    moderately lit held-out scenes 4-5 dB and is what the shipped networks need on the buried pixels
+    of the high-range ones (``benchmarks/dark_cost.py --rest below-tail``).
 
     ``readouts``: ``(start, stop)``, only those readouts (their windows read the stream around them,
     so the values are the whole stream's to float rounding); the float64 work runs in blocks of pixels,
