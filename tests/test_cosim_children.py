@@ -205,3 +205,25 @@ def test_the_tools_temporaries_go_with_a_stopped_command(tmp_path, stop):
             break
         time.sleep(0.05)
     assert os.listdir(temporary) == []
+
+
+def test_a_failed_proof_pool_has_closed_its_wakeup_before_the_error_leaves():
+    """A proof that fails in a worker (``prove`` under ``ulimit -f``) ends the pool at once; the
+    pool's manager thread has closed its wakeup pipe before the error reaches the command. CPython
+    3.11's exit hook (``concurrent.futures.process._python_exit``) writes to that pipe without the
+    lock the manager thread closes it under: the command's one line was followed, once in a CI run,
+    by "Exception ignored in: <module 'threading'> ... OSError: [Errno 9] Bad file descriptor"."""
+    body = ("import concurrent.futures.process as process\n"
+            "from tespike.cosim.commands import prove_cmd\n"
+            "def failing(task, *settings):\n"
+            "    raise OSError(27, 'File too large')\n"
+            "prove_cmd.run_task = failing\n"
+            "try:\n"
+            "    list(prove_cmd._results(['a', 'b', 'c'], 2, ()))\n"
+            "except OSError as exc:\n"
+            "    print(exc.strerror)\n"
+            "print(all(wakeup._closed for wakeup in process._threads_wakeups.values()))\n")
+    for _ in range(3):
+        done = subprocess.run([sys.executable, "-c", body], capture_output=True, text=True, timeout=60)
+        assert done.returncode == 0 and done.stdout.split("\n")[:2] == ["File too large", "True"], done
+        assert done.stderr == "", done.stderr

@@ -161,11 +161,22 @@ def _results(tasks, workers: int, settings: tuple):
     except BaseException:
         # Ctrl-C, a signal or a failure: the workers go at once (a worker that the terminal's
         # Ctrl-C had interrupted inside the pool's queue lock left shutdown waiting forever)
+        manager = getattr(pool, "_executor_manager_thread", None)
         for child in multiprocessing.active_children():
             child.kill()
         pool.shutdown(wait=False, cancel_futures=True)
+        if manager is not None:
+            # the pool's manager thread sees its workers gone and closes its wakeup pipe, which
+            # CPython 3.11's exit hook (concurrent.futures.process._python_exit) writes to without
+            # the lock it is closed under: a command ending at once printed "Exception ignored ...
+            # Bad file descriptor" after its line. Bounded: the exit hook joins it in any case.
+            manager.join(MANAGER_EXIT_SECONDS)
         raise
     pool.shutdown(wait=True)
+
+
+#: Seconds a failed proof run waits for its pool's manager thread to close (milliseconds, measured).
+MANAGER_EXIT_SECONDS = 10.0
 
 
 def proof_worker_start(parent: int) -> None:
