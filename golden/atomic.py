@@ -13,6 +13,7 @@ from __future__ import annotations
 import atexit
 import contextlib
 import errno
+import functools
 import os
 import re
 import shutil
@@ -22,7 +23,7 @@ import sys
 import tempfile
 import threading
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 from .errors import InputError
 from .paths import check_folder_path, check_output_file, passes_through, path_text
@@ -144,24 +145,28 @@ def check_inputs_unchanged() -> None:
                              "modification time changed): no output written (run again on a file left alone)")
 
 
-#: Folders this process holds (:func:`folder_held`), by real path -> how many ``with`` blocks hold each.
-_HELD_FOLDERS: dict[str, int] = {}
+#: Folders this process holds (:func:`folder_held`), by real path -> [how many ``with`` blocks hold
+#: each, the descriptor the outermost holds it open with].
+_HELD_FOLDERS: dict[str, list[int]] = {}
 
 
 @contextlib.contextmanager
-def folder_held(path: str | os.PathLike, refusal: str) -> Iterator[None]:
+def folder_held(path: str | os.PathLike, refusal: str) -> Iterator[Callable[[], bool]]:
     """Hold the existing folder ``path`` for this process alone for the ``with`` (an exclusive ``flock``
     on it; a link to a folder holds the folder): another process holding it is refused with
     ``InputError(f"{refusal} is held by another process ...")``. Held again inside (a command and
-    the library function it calls), it is the same hold. The lock goes with the process however it ends."""
+    the library function it calls), it is the same hold. The lock goes with the process however it ends.
+    Yields a function that tells whether ``path`` still names the folder held (:func:`_still_named`:
+    one removed during the run and made again at ``path`` by a writer is another)."""
     import fcntl
     key = os.path.realpath(path)
     if key in _HELD_FOLDERS:
-        _HELD_FOLDERS[key] += 1
+        hold = _HELD_FOLDERS[key]
+        hold[0] += 1
         try:
-            yield
+            yield functools.partial(_still_named, path, hold[1])
         finally:
-            _HELD_FOLDERS[key] -= 1
+            hold[0] -= 1
         return
     fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
     try:
@@ -170,9 +175,9 @@ def folder_held(path: str | os.PathLike, refusal: str) -> Iterator[None]:
         except BlockingIOError:
             raise InputError(f"{refusal} is held by another process (another run writing it): wait for it "
                              "to end, or choose another") from None
-        _HELD_FOLDERS[key] = 1
+        _HELD_FOLDERS[key] = [1, fd]
         try:
-            yield
+            yield functools.partial(_still_named, path, fd)
         finally:
             del _HELD_FOLDERS[key]
     finally:

@@ -375,16 +375,11 @@ def writing_local_store(url: str):
     if not os.path.isdir(url):                         # (the store's own checks refuse it)
         yield None
         return
-    with folder_held(url, f"dataset store {url!r}"):
+    with folder_held(url, f"dataset store {url!r}") as still_named:
         if made is None and not os.listdir(url):
             made = "empty"
-        held = os.stat(url)                             # (held open: its inode is no other folder's meanwhile)
         yield made
-        try:
-            now = os.stat(url)
-        except OSError:
-            now = None
-        if now is None or (now.st_dev, now.st_ino) != (held.st_dev, held.st_ino):
+        if not still_named():
             # removed during the run and made again by a write (Zarr makes a missing group's folders):
             # the store held a root without its dataset attributes, which every command refused, exit 0
             raise InputError(f"dataset store {url!r} was removed during the run; what was written after "
